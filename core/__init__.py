@@ -1,0 +1,76 @@
+"""Pedestrian dead reckoning (PDR) engine: numpy only, runs on the phone.
+
+Everything in ``core/`` follows the conventions below. Importers and exporters
+convert to and from them at the edges; nothing inside converts again.
+
+Conventions
+===========
+
+Time
+    Every timestamp is an ``int`` (numpy ``int64``) count of **nanoseconds on
+    the sensor clock**, named ``t_ns``.  On Android that is
+    ``SensorEvent.timestamp`` (``elapsedRealtimeNanos`` base); for files
+    from other apps it is whatever monotonic clock the file uses, shifted
+    to integer nanoseconds.  Time differences used in filters are seconds
+    (``dt_s = (t_ns - t_prev_ns) * 1e-9``) and always come from the
+    measured timestamps, never from a nominal rate.
+
+Units (SI inside ``core/``)
+    ==============  ===========================================
+    acceleration    m/s^2, gravity included (Android ``TYPE_ACCELEROMETER``)
+    angular rate    rad/s
+    magnetic field  microtesla (uT), as Android reports it
+    angles          radians (degrees only in file headers, UI and exports)
+    lengths         metres
+    latitude etc.   degrees (WGS-84) -- only in GPS streams and exports
+    ==============  ===========================================
+
+Device (body) frame ``b``
+    The Android device frame: with the phone lying flat, screen up, in
+    portrait, **x points right, y points to the top edge (forward when the
+    phone is held in front of the chest), z points out of the screen (up)**.
+    Sensor vectors are always expressed in this frame.
+
+Navigation frame ``n``
+    Local **East-North-Up** (ENU), origin at the start of the walk.  Gravity
+    is ``(0, 0, -9.81)`` in ``n``; an accelerometer at rest reads the
+    specific force ``(0, 0, +g)`` rotated into ``b``.  The Earth's magnetic
+    field reference is ``h_n = (0, h_north, h_up)`` with ``h_up < 0`` in the
+    northern hemisphere (magnetic north = +y before the declination is
+    applied).
+
+Attitude quaternion
+    ``q = (w, x, y, z)``, scalar first, unit norm, rotating body vectors into
+    the navigation frame: ``v_n = R(q) v_b`` (``R`` = ``core.quaternion.to_matrix``).
+    This is the paper's ``Q`` (Tian et al. 2014, eq. 5: ``dQ/dt = Q (x) W / 2``
+    with ``W`` the body rate); the paper's ``T_n^b`` of eq. 8 is ``R(q).T``.
+
+Heading
+    ``heading_rad`` is the direction of walking in the ENU plane, measured
+    **counter-clockwise from East** (the mathematical angle), so that one
+    step moves ``(d cos(heading), d sin(heading))`` in (East, North) as in
+    eq. 1 of the paper.  The compass bearing (clockwise from North, degrees)
+    used by GPX and the UI is ``core.conventions.bearing_deg(heading_rad)``.
+    The walking direction of a hand-held phone is the horizontal projection
+    of the device y axis.
+
+Names
+    Vectors carry their frame as a suffix (``acc_b``, ``pos_n``), rotation
+    matrices both frames (``mat_nb`` maps ``b`` to ``n``), and parameters
+    their unit (``cutoff_hz``, ``min_step_interval_s``, ``gyro_noise_rad_s``).
+
+Pipeline (Tian et al. 2014, Fig. 2)
+===================================
+``core.recording``   sensor data model and the project's file format
+``core.dsp``         Butterworth design, biquad filters, rate tracking
+``core.steps``       acceleration norm (eq. 2), low-pass, peak step detection (eq. 3)
+``core.stride``      step length: Weinberg (eq. 4) with a pluggable coefficient model
+``core.attitude``    adaptive quaternion EKF (eqs. 5-18)
+``core.heading``     Butterworth smoothing of the rotation matrix (section 4.3)
+``core.deadreckoning``  position update (eq. 1)
+``core.pipeline``    the composition, streaming ``update()`` and batch ``run()``
+``core.simulator``   a hand-held walk simulator with ground truth
+``core.cli``         the ``pdr`` command
+"""
+
+__version__ = "0.1.0"

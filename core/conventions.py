@@ -1,0 +1,37 @@
+"""Constants and edge conversions for the conventions in :mod:`core` (see its docstring)."""
+
+from __future__ import annotations
+
+import math
+
+#: Standard gravity, m/s^2 (used only as a prior; the pipeline estimates local g).
+STANDARD_GRAVITY_M_S2 = 9.80665
+
+#: Stream names of a recording and the meaning of their value columns.
+ACC = "acc"  #: accelerometer, m/s^2, gravity included, device frame
+GYRO = "gyro"  #: gyroscope, rad/s, device frame
+MAG = "mag"  #: magnetometer, uT, device frame (calibrated: hard iron removed by the OS if it can)
+GPS = "gps"  #: GNSS fix: lat_deg, lon_deg, alt_m, horizontal accuracy m
+ROTVEC = "rotvec"  #: the phone's own attitude (Android rotation vector) as an ENU quaternion w, x, y, z
+
+NS_PER_S = 1_000_000_000
+
+
+def ns_to_s(t_ns) -> float:
+    """Nanoseconds to seconds (float)."""
+    return t_ns * 1e-9
+
+
+def wrap_angle(angle_rad: float) -> float:
+    """Wrap an angle to [-pi, pi)."""
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def bearing_deg(heading_rad: float) -> float:
+    """ENU heading (counter-clockwise from East, rad) to compass bearing (clockwise from North, deg, [0, 360))."""
+    return (90.0 - math.degrees(heading_rad)) % 360.0
+
+
+def heading_from_bearing_deg(bearing: float) -> float:
+    """Compass bearing (clockwise from North, deg) to ENU heading (counter-clockwise from East, rad, wrapped)."""
+    return wrap_angle(math.radians(90.0 - bearing))

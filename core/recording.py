@@ -1,0 +1,465 @@
+"""Sensor recordings: the in-memory data model and the project's file format.
+
+A recording is a set of per-sensor event streams, each with its own
+timestamps (phones do not sample their sensors together).  Units, axes and
+the time base follow :mod:`core` (SI, Android device frame, ``t_ns``).
+
+File format ``pdr-recording`` version 1
+---------------------------------------
+Plain UTF-8 text, optionally gzip-compressed (file name ending in ``.gz``)::
+
+    # pdr-recording 1
+    # {"format": "pdr-recording", "format_version": 1, "streams": {...}, "device": {...}, "metadata": {...}, ...}
+    acc,1000000000,0.12,4.51,8.63
+    gyro,1000200000,0.001,-0.02,0.003
+    mag,1001000000,12.5,-20.1,-40.3
+    gps,1001000000,47.3769,8.5417,420.0,5.0
+
+* line 1 is the magic line, line 2 the JSON header (one line).  The header
+  names every stream with its value ``columns``, ``unit`` and a note; it
+  also carries ``time`` (time base), ``axes`` (axis convention), ``device``
+  and free ``metadata``.
+* every further line is one sensor event: stream name, integer nanosecond
+  timestamp on the sensor clock, then the stream's values.  Floats are
+  written with :func:`repr`, so reading gives back exactly the written value.
+* rows may come in any order (a live recorder appends them as they arrive);
+  blank lines and further ``#`` comment lines are ignored.
+
+Readers reject what they cannot read with a :class:`RecordingError` naming
+the file, the line and the problem.  Timestamps that go backwards or repeat
+within a stream (real phones do this) are repaired: events are sorted by
+time and exact repeats dropped, with a :class:`TimestampRepairWarning` and a
+line in :attr:`Recording.repairs` saying how many.
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import json
+import math
+import os
+import warnings
+from dataclasses import dataclass, field
+from typing import IO, Iterable, Iterator
+
+import numpy as np
+
+from core import __version__
+from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
+
+MAGIC = "# pdr-recording"
+FORMAT_NAME = "pdr-recording"
+FORMAT_VERSION = 1
+
+TIME_BASE = "t_ns: integer nanoseconds on the sensor clock (Android SensorEvent.timestamp)"
+AXES = "android-device: x right, y towards the top edge, z out of the screen"
+
+#: Default description of the known streams (columns, unit, note).
+STREAM_SPECS: dict[str, dict] = {
+    ACC: {"columns": ["x", "y", "z"], "unit": "m/s^2", "note": "accelerometer, gravity included"},
+    GYRO: {"columns": ["x", "y", "z"], "unit": "rad/s", "note": "gyroscope"},
+    MAG: {"columns": ["x", "y", "z"], "unit": "uT", "note": "magnetometer"},
+    GPS: {
+        "columns": ["lat_deg", "lon_deg", "alt_m", "hacc_m"],
+        "unit": "deg,deg,m,m",
+        "note": "GNSS fix, WGS-84; hacc_m is the 68 % horizontal accuracy radius (nan if unknown)",
+    },
+    ROTVEC: {
+        "columns": ["w", "x", "y", "z"],
+        "unit": "1",
+        "note": "the phone's own attitude estimate as an ENU<-device quaternion (w, x, y, z)",
+    },
+}
+
+#: Order in which simultaneous events of different streams are processed.
+STREAM_ORDER = (GYRO, ACC, MAG, ROTVEC, GPS)
+
+
+class RecordingError(ValueError):
+    """Input that cannot be read; ``str()`` is one line naming file, line and problem."""
+
+    def __init__(self, message: str, path: str | None = None, line: int | None = None):
+        self.path = path
+        self.line = line
+        self.message = message
+        where = ""
+        if path is not None:
+            where = f"{path}:{line}: " if line is not None else f"{path}: "
+        super().__init__(where + message)
+
+
+class MissingSensorError(RecordingError):
+    """A stream that a stage needs is absent from the recording."""
+
+
+class TimestampRepairWarning(UserWarning):
+    """Timestamps went backwards or repeated and were repaired."""
+
+
+@dataclass
+class Stream:
+    """One sensor's events: ``t_ns`` (n,) int64 and ``values`` (n, k) float64."""
+
+    name: str
+    t_ns: np.ndarray
+    values: np.ndarray
+    columns: tuple[str, ...]
+    unit: str = ""
+    note: str = ""
+
+    def __post_init__(self):
+        self.t_ns = np.asarray(self.t_ns, dtype=np.int64).reshape(-1)
+        self.values = np.asarray(self.values, dtype=np.float64).reshape(len(self.t_ns), len(self.columns))
+        self.columns = tuple(self.columns)
+
+    def __len__(self) -> int:
+        return len(self.t_ns)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t_ns[-1] - self.t_ns[0]) * 1e-9 if len(self) > 1 else 0.0
+
+    @property
+    def rate_hz(self) -> float:
+        """Mean event rate (events per second), 0 for fewer than two events."""
+        return (len(self) - 1) / self.duration_s if self.duration_s > 0 else 0.0
+
+    def interval_stats_s(self) -> dict:
+        """Median interval, its jitter (std) and the number of gaps over 2.5 median intervals."""
+        if len(self) < 3:
+            return {"median_s": math.nan, "jitter_s": math.nan, "gaps": 0}
+        dt = np.diff(self.t_ns) * 1e-9
+        med = float(np.median(dt))
+        return {"median_s": med, "jitter_s": float(np.std(dt)), "gaps": int(np.sum(dt > 2.5 * med))}
+
+
+@dataclass
+class Recording:
+    """A set of sensor streams with the header information of the file format."""
+
+    streams: dict[str, Stream]
+    device: dict = field(default_factory=dict)
+    metadata: dict = field(default_factory=dict)
+    #: Human-readable lines describing repairs made while reading (diagnostics as data).
+    repairs: list[str] = field(default_factory=list)
+    #: Where the recording came from (path or description), for messages.
+    source: str = ""
+
+    def has(self, name: str) -> bool:
+        return name in self.streams and len(self.streams[name]) > 0
+
+    def stream(self, name: str, purpose: str = "") -> Stream:
+        """The stream ``name``, or :class:`MissingSensorError` naming it."""
+        if not self.has(name):
+            why = f" ({purpose})" if purpose else ""
+            have = ", ".join(sorted(k for k in self.streams if self.has(k))) or "none"
+            raise MissingSensorError(
+                f"recording has no '{name}' stream{why}; streams present: {have}", path=self.source or None
+            )
+        return self.streams[name]
+
+    @property
+    def t0_ns(self) -> int:
+        return int(min(s.t_ns[0] for s in self.streams.values() if len(s)))
+
+    @property
+    def t1_ns(self) -> int:
+        return int(max(s.t_ns[-1] for s in self.streams.values() if len(s)))
+
+    @property
+    def duration_s(self) -> float:
+        return (self.t1_ns - self.t0_ns) * 1e-9
+
+    def merged(self, names: Iterable[str] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """All events of ``names`` in time order.
+
+        Returns ``(t_ns, stream_index, row)``: for event ``i`` the value row is
+        ``self.streams[order[stream_index[i]]].values[row[i]]`` where ``order``
+        is :meth:`stream_order`.  Simultaneous events follow :data:`STREAM_ORDER`.
+        """
+        order = self.stream_order(names)
+        ts, si, rows = [], [], []
+        for k, name in enumerate(order):
+            s = self.streams[name]
+            ts.append(s.t_ns)
+            si.append(np.full(len(s), k, dtype=np.int64))
+            rows.append(np.arange(len(s), dtype=np.int64))
+        if not ts:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        t = np.concatenate(ts)
+        s_idx = np.concatenate(si)
+        r = np.concatenate(rows)
+        idx = np.lexsort((s_idx, t))
+        return t[idx], s_idx[idx], r[idx]
+
+    def stream_order(self, names: Iterable[str] | None = None) -> list[str]:
+        names = list(self.streams) if names is None else [n for n in names if n in self.streams]
+        rank = {n: i for i, n in enumerate(STREAM_ORDER)}
+        return sorted(names, key=lambda n: (rank.get(n, len(rank)), n))
+
+    def events(self, names: Iterable[str] | None = None) -> Iterator[tuple[str, int, tuple[float, ...]]]:
+        """Iterate ``(stream_name, t_ns, values)`` in time order, as a live source would deliver them."""
+        order = self.stream_order(names)
+        t, s_idx, rows = self.merged(order)
+        vals = [self.streams[n].values for n in order]
+        for ti, si, ri in zip(t.tolist(), s_idx.tolist(), rows.tolist()):
+            yield order[si], ti, tuple(vals[si][ri].tolist())
+
+    def slice_time(self, t_start_ns: int, t_end_ns: int) -> "Recording":
+        """A copy holding only events with ``t_start_ns <= t_ns < t_end_ns``."""
+        streams = {}
+        for name, s in self.streams.items():
+            m = (s.t_ns >= t_start_ns) & (s.t_ns < t_end_ns)
+            streams[name] = Stream(name, s.t_ns[m], s.values[m], s.columns, s.unit, s.note)
+        return Recording(streams, dict(self.device), dict(self.metadata), list(self.repairs), self.source)
+
+    def header(self) -> dict:
+        return {
+            "format": FORMAT_NAME,
+            "format_version": FORMAT_VERSION,
+            "time": TIME_BASE,
+            "axes": AXES,
+            "streams": {
+                n: {"columns": list(s.columns), "unit": s.unit, "note": s.note} for n, s in self.streams.items()
+            },
+            "device": self.device,
+            "metadata": self.metadata,
+            "writer": f"pdr {__version__}",
+        }
+
+
+def make_stream(name: str, t_ns, values, columns=None, unit=None, note=None) -> Stream:
+    """A :class:`Stream` with the default columns and unit of a known stream name."""
+    spec = STREAM_SPECS.get(name, {})
+    return Stream(
+        name,
+        t_ns,
+        values,
+        tuple(columns or spec["columns"]),
+        unit if unit is not None else spec.get("unit", ""),
+        note if note is not None else spec.get("note", ""),
+    )
+
+
+# ---------------------------------------------------------------------------
+# timestamp repair
+
+
+def repair_timestamps(stream: Stream) -> tuple[Stream, int, int]:
+    """Sort a stream by time and drop exact timestamp repeats.
+
+    Returns ``(stream, n_out_of_order, n_duplicates)``; the stream is returned
+    unchanged when nothing needed repair.  Of events sharing a timestamp the
+    first one in file order is kept.
+    """
+    t = stream.t_ns
+    if len(t) < 2:
+        return stream, 0, 0
+    d = np.diff(t)
+    n_back = int(np.sum(d < 0))
+    if n_back == 0 and not np.any(d == 0):
+        return stream, 0, 0
+    order = np.argsort(t, kind="stable")
+    ts = t[order]
+    keep = np.ones(len(ts), dtype=bool)
+    keep[1:] = np.diff(ts) != 0
+    n_dup = int(np.sum(~keep))
+    idx = order[keep]
+    return Stream(stream.name, t[idx], stream.values[idx], stream.columns, stream.unit, stream.note), n_back, n_dup
+
+
+def repair_recording(rec: Recording, warn: bool = True) -> Recording:
+    """Repair every stream of ``rec`` in place (see :func:`repair_timestamps`) and record what was done."""
+    for name in list(rec.streams):
+        fixed, n_back, n_dup = repair_timestamps(rec.streams[name])
+        if n_back or n_dup:
+            rec.streams[name] = fixed
+            msg = (
+                f"{rec.source or 'recording'}: stream '{name}': {n_back} timestamp(s) went backwards "
+                f"and {n_dup} repeated; events sorted by time and {n_dup} repeat(s) dropped"
+            )
+            rec.repairs.append(msg)
+            if warn:
+                warnings.warn(msg, TimestampRepairWarning, stacklevel=3)
+    return rec
+
+
+# ---------------------------------------------------------------------------
+# writing
+
+
+def _open_text(path: str, mode: str) -> IO[str]:
+    if str(path).endswith(".gz"):
+        return io.TextIOWrapper(gzip.open(path, mode + "b"), encoding="utf-8", newline="")
+    return open(path, mode, encoding="utf-8", newline="")
+
+
+def format_row(name: str, t_ns: int, values: Iterable[float]) -> str:
+    """One event as a line of the file format (with its newline)."""
+    return ",".join([name, str(int(t_ns))] + [repr(float(v)) for v in values]) + "\n"
+
+
+def write_recording(path: str, rec: Recording) -> None:
+    """Write ``rec`` to ``path`` (gzip if it ends in ``.gz``), events in time order."""
+    with _open_text(path, "w") as f:
+        f.write(f"{MAGIC} {FORMAT_VERSION}\n")
+        f.write("# " + json.dumps(rec.header(), sort_keys=True) + "\n")
+        for name, t, vals in rec.events():
+            f.write(format_row(name, t, vals))
+
+
+class RecordingWriter:
+    """Append-only writer for live sessions: header first, then each event as it arrives.
+
+    Each :meth:`add` appends one line; :meth:`flush` (called by the app at
+    least once a second) pushes buffered lines to the OS, so a crash loses at
+    most the events since the last flush.  Plain text only (gzip cannot be
+    read back after an abrupt stop).  The reader accepts a truncated last line
+    (see :func:`read_recording` ``allow_truncated_tail``).
+    """
+
+    def __init__(self, path: str, streams: dict[str, dict] | None = None, device=None, metadata=None):
+        if str(path).endswith(".gz"):
+            raise ValueError("live recordings are written as plain text; compress them after the session")
+        self.path = str(path)
+        specs = streams or {n: STREAM_SPECS[n] for n in (ACC, GYRO, MAG, GPS)}
+        rec = Recording({n: Stream(n, [], np.zeros((0, len(s["columns"]))), s["columns"], s.get("unit", ""),
+                                   s.get("note", "")) for n, s in specs.items()},
+                        device=dict(device or {}), metadata=dict(metadata or {}))
+        self._f = open(self.path, "w", encoding="utf-8", newline="")
+        self._f.write(f"{MAGIC} {FORMAT_VERSION}\n")
+        self._f.write("# " + json.dumps(rec.header(), sort_keys=True) + "\n")
+        self._f.flush()
+        self.count = 0
+
+    def add(self, name: str, t_ns: int, values: Iterable[float]) -> None:
+        self._f.write(format_row(name, t_ns, values))
+        self.count += 1
+
+    def flush(self) -> None:
+        self._f.flush()
+        os.fsync(self._f.fileno())
+
+    def close(self) -> None:
+        if not self._f.closed:
+            self.flush()
+            self._f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+# ---------------------------------------------------------------------------
+# reading
+
+
+def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool = True) -> Recording:
+    """Read a ``pdr-recording`` file.
+
+    Raises :class:`RecordingError` (naming file and line) for an empty file, a
+    wrong magic line or header, rows with missing or extra values, non-numeric
+    values and streams the header does not declare.  A last line without its
+    newline that does not parse (a recorder killed mid-write) is dropped and
+    noted in :attr:`Recording.repairs` when ``allow_truncated_tail`` is true.
+    """
+    path = str(path)
+    try:
+        f = _open_text(path, "r")
+    except OSError as e:
+        raise RecordingError(f"cannot open: {e.strerror or e}", path) from None
+    try:
+        with f:
+            text = f.read()
+    except (OSError, EOFError, UnicodeDecodeError) as e:
+        raise RecordingError(f"cannot read: {e}", path) from None
+    return parse_recording(text, path, allow_truncated_tail=allow_truncated_tail, warn=warn)
+
+
+def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: bool = True,
+                    warn: bool = True) -> Recording:
+    """Parse the text of a ``pdr-recording`` file (see :func:`read_recording`)."""
+    if not text.strip():
+        raise RecordingError("empty file: expected the line '# pdr-recording 1' and a JSON header", source, 1)
+    lines = text.split("\n")
+    first = lines[0].strip()
+    if not first.startswith(MAGIC):
+        raise RecordingError(f"not a pdr-recording: first line must be '{MAGIC} {FORMAT_VERSION}', "
+                             f"found {first[:40]!r}", source, 1)
+    try:
+        version = int(first[len(MAGIC):].strip())
+    except ValueError:
+        raise RecordingError(f"bad format version in {first!r}", source, 1) from None
+    if version != FORMAT_VERSION:
+        raise RecordingError(f"format version {version} is not supported (this reader reads version "
+                             f"{FORMAT_VERSION})", source, 1)
+    if len(lines) < 2 or not lines[1].startswith("#"):
+        raise RecordingError("missing JSON header line after the magic line", source, 2)
+    try:
+        header = json.loads(lines[1][1:])
+    except json.JSONDecodeError as e:
+        raise RecordingError(f"header is not valid JSON: {e.msg} at column {e.colno + 1}", source, 2) from None
+    if not isinstance(header, dict) or not isinstance(header.get("streams"), dict) or not header["streams"]:
+        raise RecordingError("header must be a JSON object with a non-empty 'streams' object", source, 2)
+    specs = {}
+    for name, spec in header["streams"].items():
+        cols = spec.get("columns") if isinstance(spec, dict) else None
+        if not isinstance(cols, list) or not cols or not all(isinstance(c, str) for c in cols):
+            raise RecordingError(f"header stream '{name}' needs a non-empty list of 'columns'", source, 2)
+        specs[name] = spec
+    ncols = {n: len(s["columns"]) for n, s in specs.items()}
+    data: dict[str, tuple[list[int], list[list[float]]]] = {n: ([], []) for n in specs}
+    repairs: list[str] = []
+    last = len(lines) - 1
+    # a file written completely ends with "\n", so its last split element is ""
+    for i in range(2, len(lines)):
+        raw = lines[i]
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        lineno = i + 1
+        try:
+            parts = line.split(",")
+            name = parts[0]
+            if name not in specs:
+                raise RecordingError(f"stream '{name}' is not declared in the header "
+                                     f"(declared: {', '.join(specs)})", source, lineno)
+            n = ncols[name]
+            if len(parts) != n + 2:
+                what = "missing" if len(parts) < n + 2 else "extra"
+                raise RecordingError(f"{what} columns: stream '{name}' rows have t_ns and {n} values "
+                                     f"({', '.join(specs[name]['columns'])}), found {len(parts) - 2}",
+                                     source, lineno)
+            try:
+                t = int(parts[1])
+            except ValueError:
+                raise RecordingError(f"timestamp {parts[1]!r} is not an integer nanosecond count",
+                                     source, lineno) from None
+            vals = []
+            for col, p in zip(specs[name]["columns"], parts[2:]):
+                try:
+                    vals.append(float(p))
+                except ValueError:
+                    raise RecordingError(f"value {p!r} of column '{col}' is not a number",
+                                         source, lineno) from None
+        except RecordingError:
+            if allow_truncated_tail and i == last and raw != "":
+                repairs.append(f"{source}: dropped an incomplete last line {lineno} (recording was cut off)")
+                break
+            raise
+        data[name][0].append(t)
+        data[name][1].append(vals)
+    streams = {}
+    for name, spec in specs.items():
+        ts, vs = data[name]
+        streams[name] = Stream(name, np.array(ts, dtype=np.int64),
+                               np.array(vs, dtype=np.float64).reshape(len(ts), ncols[name]),
+                               tuple(spec["columns"]), str(spec.get("unit", "")), str(spec.get("note", "")))
+    if not any(len(s) for s in streams.values()):
+        raise RecordingError("the file has a header but no sensor events", source)
+    rec = Recording(streams, device=dict(header.get("device") or {}), metadata=dict(header.get("metadata") or {}),
+                    repairs=repairs, source=source)
+    return repair_recording(rec, warn=warn)
