@@ -1,0 +1,1 @@
+"""Accuracy benchmark on real walks (desktop only; never imported by ``core``)."""

@@ -1,0 +1,67 @@
+"""The common shape of a benchmark trial, shared by every dataset reader.
+
+A dataset module exposes::
+
+    NAME: str                                  # folder name under the data root, e.g. "ipin2023_track3"
+    def available(root: Path) -> bool          # is the dataset present under root?
+    def trials(root: Path) -> list[Trial]      # cheap: recordings are loaded lazily
+
+Every trial's recording follows the conventions of :mod:`core` (converted at
+the edge by the reader or by ``core.importers``), and every ground-truth time
+is on the recording's own clock (``t_ns``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from core.recording import Recording
+
+
+def default_data_root() -> Path:
+    """``../shared/data`` beside the repository checkout."""
+    return Path(__file__).resolve().parents[2].parent / "shared" / "data"
+
+
+@dataclass
+class Landmarks:
+    """Surveyed positions the walker passed, on the recording clock, in a local ENU frame (m)."""
+
+    t_ns: np.ndarray
+    east_m: np.ndarray
+    north_m: np.ndarray
+    #: geodetic origin of the ENU frame (lat_deg, lon_deg) when the landmarks came from lat/lon
+    origin_lat_lon: tuple[float, float] | None = None
+
+
+@dataclass
+class Trial:
+    dataset: str
+    name: str
+    #: loads the recording (lazily: some are large)
+    load: Callable[[], Recording]
+    #: where the sensor was carried: "hand", "pocket", "waist", "foot", ...
+    placement: str = "hand"
+    #: ground-truth step instants (t_ns on the recording clock), if known
+    step_t_ns: np.ndarray | None = None
+    #: ground-truth step count, if known
+    step_count: int | None = None
+    #: ground-truth walked distance (m), if known
+    distance_m: float | None = None
+    landmarks: Landmarks | None = None
+    #: subject facts: height_m, weight_kg, age, sex, id ... (what the dataset gives)
+    subject: dict = field(default_factory=dict)
+    #: time window (t_ns) of the walk proper, if the dataset marks it
+    walk_t_ns: tuple[int, int] | None = None
+    #: other counters' step counts for comparison (name -> count)
+    peer_step_counts: dict = field(default_factory=dict)
+    notes: str = ""
+    #: magnetic declination at the site (rad, east positive) when the landmarks are in a
+    #: true-north frame: a magnetic heading h becomes h - declination_rad there
+    declination_rad: float | None = None
+    #: free facts for the report (phone, route, surface, ...), name -> short value
+    info: dict = field(default_factory=dict)

@@ -1,0 +1,401 @@
+"""Adaptive quaternion extended Kalman filter for the phone's attitude (Tian et al. 2014, section 4).
+
+State: the attitude quaternion ``q = (w, x, y, z)`` (body -> ENU, see
+:mod:`core`), covariance ``P`` (4 x 4).
+
+Prediction (eqs. 5-7, 11), on every gyroscope event with the measured time
+step ``T`` since the previous one::
+
+    q_k+1 = F q_k,   F = I cos(|w|T/2) + Omega(w T) sin(|w|T/2) / (|w|T)       (eq. 7)
+    P_k+1 = F P F^T + Q,   Q = (sigma_g^2 T / 4) Xi(q) Xi(q)^T
+
+``Omega`` is the matrix of eq. 6 (``dq/dt = q (x) (0, w) / 2``) and ``Xi(q)``
+maps a body-rate error to ``dq/dt``; ``sigma_g`` is the gyroscope's angle
+random walk (rad/sqrt(s)) widened to cover bias and timing errors.
+
+Measurement (eqs. 12-15): the normalised accelerometer and magnetometer are
+``h(q) = R(q)^T v`` for the reference directions ``v = g = (0, 0, 1)``
+(eq. 13) and ``v = h = (0, b_y, b_z)`` (eq. 14; with a declination ``D`` its
+horizontal part is turned to ``(b_y sin D, b_y cos D)``).  They arrive at
+their own times, so each is applied on its own, as three sequential scalar
+updates (``R`` is diagonal, eq. 15).  The Jacobian is derived for these
+conventions rather than taken from eq. 16: writing ``u = (x, y, z)``,
+``R^T v = (w^2 - u.u) v + 2 u (u.v) - 2 w (u x v)``, so::
+
+    d h / d w = 2 (w v - u x v)
+    d h / d u = 2 ((u.v) I + u v^T - v u^T + w [v]x)
+
+(``[v]x`` is the cross-product matrix).  On the unit sphere its first three
+rows agree with the paper's eq. 16 for ``v = g`` except the third, which the
+paper simplifies with ``|q| = 1``; a test checks ours by finite differences.
+
+Adaptive noise (eqs. 17-18)::
+
+    sigma_a^2 = s_a0^2 + k_a1 | |a| - |g| | + k_a2 var(|a| over the window)
+    sigma_m^2 = s_m0^2 + k_m1 | |m| - |h| | + k_m2 var(|m| over the window)
+
+The paper centres the variance window on the sample; a live filter cannot
+look ahead, so the window here is the trailing ``variance_window_s``.  The
+base terms ``s_a0, s_m0`` (not in the paper) keep the filter from trusting a
+measurement completely when the formula gives zero.  A magnetometer reading
+whose norm is off by more than ``mag_reject_ratio`` or whose dip angle
+(measured against the current gravity estimate) is off by more than
+``mag_reject_dip_rad`` is not used at all (flagged ``mag_rejected``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from core import quaternion as quat
+from core.conventions import STANDARD_GRAVITY_M_S2
+
+
+def measurement_jacobian(q, v) -> np.ndarray:
+    """``d (R(q)^T v) / d q`` (3 x 4) for ``q = (w, x, y, z)``; see the module docstring."""
+    w, x, y, z = q
+    v0, v1, v2 = v
+    udv = x * v0 + y * v1 + z * v2
+    # u x v
+    c0 = y * v2 - z * v1
+    c1 = z * v0 - x * v2
+    c2 = x * v1 - y * v0
+    return 2.0 * np.array([
+        [w * v0 - c0, udv + x * v0 - v0 * x, x * v1 - v0 * y - w * v2, x * v2 - v0 * z + w * v1],
+        [w * v1 - c1, y * v0 - v1 * x + w * v2, udv + y * v1 - v1 * y, y * v2 - v1 * z - w * v0],
+        [w * v2 - c2, z * v0 - v2 * x - w * v1, z * v1 - v2 * y + w * v0, udv + z * v2 - v2 * z],
+    ])
+
+
+def predicted_measurement(q, v):
+    """``R(q)^T v``: the reference direction ``v`` (navigation frame) seen in the body frame.
+
+    Written in the homogeneous form ``(w^2 - u.u) v + 2 u (u.v) - 2 w (u x v)``,
+    which equals ``R(q)^T v`` on the unit sphere and is the function whose
+    derivative :func:`measurement_jacobian` is.
+    """
+    w, x, y, z = q
+    v0, v1, v2 = v
+    s = w * w - (x * x + y * y + z * z)
+    udv2 = 2.0 * (x * v0 + y * v1 + z * v2)
+    w2 = 2.0 * w
+    return (
+        s * v0 + udv2 * x - w2 * (y * v2 - z * v1),
+        s * v1 + udv2 * y - w2 * (z * v0 - x * v2),
+        s * v2 + udv2 * z - w2 * (x * v1 - y * v0),
+    )
+
+
+def transition_matrix(wx: float, wy: float, wz: float, dt_s: float) -> np.ndarray:
+    """``F = exp(Omega(w T) / 2)`` of eq. 7 for a body rate held constant over ``dt_s``."""
+    ax, ay, az = wx * dt_s, wy * dt_s, wz * dt_s
+    theta = math.sqrt(ax * ax + ay * ay + az * az)
+    c = math.cos(0.5 * theta)
+    s = 0.5 if theta < 1e-9 else math.sin(0.5 * theta) / theta
+    return np.array([  # eq. 6 / eq. 7
+        [c, -s * ax, -s * ay, -s * az],
+        [s * ax, c, s * az, -s * ay],
+        [s * ay, -s * az, c, s * ax],
+        [s * az, s * ay, -s * ax, c],
+    ])
+
+
+class _WindowVariance:
+    """Variance of a scalar over a trailing time window, O(1) per sample."""
+
+    __slots__ = ("window_ns", "buf", "s1", "s2")
+
+    def __init__(self, window_s: float):
+        self.window_ns = int(window_s * 1e9)
+        self.buf: deque = deque()
+        self.s1 = self.s2 = 0.0
+
+    def update(self, t_ns: int, x: float) -> float:
+        buf = self.buf
+        buf.append((t_ns, x))
+        self.s1 += x
+        self.s2 += x * x
+        limit = t_ns - self.window_ns
+        while buf[0][0] < limit:
+            _, old = buf.popleft()
+            self.s1 -= old
+            self.s2 -= old * old
+        n = len(buf)
+        if n < 2:
+            return 0.0
+        mean = self.s1 / n
+        return max(self.s2 / n - mean * mean, 0.0)
+
+
+class AttitudeEKF:
+    """Quaternion EKF with adaptive accelerometer / magnetometer noise (eqs. 5-18).
+
+    Feed events in time order: :meth:`predict` (gyroscope), :meth:`update_acc`,
+    :meth:`update_mag`.  The filter initialises itself from the first
+    accelerometer and magnetometer readings (TRIAD) and owns all its state.
+
+    Parameters
+    ----------
+    gyro_noise_rad_sqrt_s : float
+        Angle random walk ``sigma_g`` of the prediction (rad/sqrt(s)),
+        widened to absorb gyroscope bias and timing errors.
+    acc_noise_base : float
+        ``s_a0``: base standard deviation of the normalised accelerometer (unitless).
+    k_a1 : float
+        Weight of ``| |a| - |g| |`` in eq. 17 (per m/s^2).
+    k_a2 : float
+        Weight of the windowed variance of ``|a|`` in eq. 17 (per (m/s^2)^2).
+    mag_noise_base : float
+        ``s_m0``: base standard deviation of the normalised magnetometer (unitless).
+    k_m1 : float
+        Weight of ``| |m| - |h| |`` in eq. 18 (per uT).
+    k_m2 : float
+        Weight of the windowed variance of ``|m|`` in eq. 18 (per uT^2).
+    variance_window_s : float
+        Length of the trailing window of eqs. 17-18 (s).
+    acc_reject_m_s2 : float
+        Accelerometer readings whose norm is further than this from ``|g|`` are not used (m/s^2).
+    mag_reject_ratio : float
+        Magnetometer readings with ``| |m| - |h| | > ratio |h|`` are not used.
+    mag_reject_dip_rad : float
+        Magnetometer readings whose dip angle differs from the reference by more than this are not used (rad).
+    reference_window_s : float
+        ``|g|``, ``|h|`` and the dip angle of ``h`` are the mean over this first stretch of the recording (s).
+    declination_rad : float
+        Magnetic declination (east of true north positive, rad); 0 gives headings relative to magnetic north.
+    initial_yaw_rad : float
+        Heading of the device y axis at the start when there is no magnetometer (rad, CCW from East).
+    use_magnetometer : bool
+        False ignores magnetometer events (heading relative to the start).
+    no_gyro_random_walk_rad_sqrt_s : float
+        Attitude random walk assumed between measurements when no gyroscope event has come for 0.1 s.
+    """
+
+    def __init__(self, *, gyro_noise_rad_sqrt_s: float = 0.03, acc_noise_base: float = 0.05, k_a1: float = 0.02,
+                 k_a2: float = 0.05, mag_noise_base: float = 0.05, k_m1: float = 0.01, k_m2: float = 0.01,
+                 variance_window_s: float = 0.5, acc_reject_m_s2: float = 4.0, mag_reject_ratio: float = 0.2,
+                 mag_reject_dip_rad: float = math.radians(12.0), reference_window_s: float = 2.0,
+                 declination_rad: float = 0.0, initial_yaw_rad: float = math.pi / 2,
+                 use_magnetometer: bool = True, no_gyro_random_walk_rad_sqrt_s: float = 0.5):
+        self.gyro_noise_rad_sqrt_s = gyro_noise_rad_sqrt_s
+        self.acc_noise_base = acc_noise_base
+        self.k_a1, self.k_a2 = k_a1, k_a2
+        self.mag_noise_base = mag_noise_base
+        self.k_m1, self.k_m2 = k_m1, k_m2
+        self.variance_window_s = variance_window_s
+        self.acc_reject_m_s2 = acc_reject_m_s2
+        self.mag_reject_ratio = mag_reject_ratio
+        self.mag_reject_dip_rad = mag_reject_dip_rad
+        self.reference_window_s = reference_window_s
+        self.declination_rad = declination_rad
+        self.initial_yaw_rad = initial_yaw_rad
+        self.use_magnetometer = use_magnetometer
+        self.no_gyro_random_walk_rad_sqrt_s = no_gyro_random_walk_rad_sqrt_s
+        self.reset()
+
+    def reset(self) -> None:
+        self.q = (1.0, 0.0, 0.0, 0.0)
+        self.P = np.eye(4) * 0.05
+        self.initialized = False
+        self.t_ns: int | None = None  # time of the state
+        self._t_gyro: int | None = None
+        self._last_acc = None
+        self._last_mag = None
+        self._acc_var = _WindowVariance(self.variance_window_s)
+        self._mag_var = _WindowVariance(self.variance_window_s)
+        self._ref_t0: int | None = None
+        self._ref_done = False
+        self._g_sum = 0.0
+        self._g_n = 0
+        self._h_sum = 0.0
+        self._dip_sum = 0.0
+        self._h_n = 0
+        self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
+        self.field_uT = math.nan
+        self.dip_rad = math.nan
+        self._h_ref = (0.0, 1.0, 0.0)
+        # diagnostics (latest values)
+        self.acc_sigma2 = math.nan
+        self.mag_sigma2 = math.nan
+        self.mag_rejected = False
+        self.acc_rejected = False
+        self.n_mag_used = 0
+        self.n_mag_rejected = 0
+        self.n_acc_rejected = 0
+        self.n_gyro = 0
+        self.acc_innovation = (0.0, 0.0, 0.0)
+        self.mag_innovation = (0.0, 0.0, 0.0)
+
+    # -- initialisation -------------------------------------------------------
+    def _try_initialize(self, t_ns: int) -> None:
+        acc = self._last_acc
+        if acc is None:
+            return
+        mag = self._last_mag if self.use_magnetometer else None
+        if self.use_magnetometer and mag is None:
+            return
+        try:
+            if mag is not None:
+                q = quat.from_two_vectors_enu(acc, mag)
+            else:
+                q = quat.from_gravity_yaw(acc, self.initial_yaw_rad)
+        except ValueError:
+            return
+        self.q = q
+        self.initialized = True
+        self.t_ns = t_ns
+        self._update_references()
+
+    def _accumulate_references(self, t_ns: int, acc=None, mag=None) -> None:
+        """Mean of |a|, |m| and the dip angle over the first ``reference_window_s``."""
+        if self._ref_done:
+            return
+        if self._ref_t0 is None:
+            self._ref_t0 = t_ns
+        if acc is not None:
+            self._g_sum += math.sqrt(acc[0] ** 2 + acc[1] ** 2 + acc[2] ** 2)
+            self._g_n += 1
+        if mag is not None and self._last_acc is not None:
+            a = self._last_acc
+            na = math.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
+            nm = math.sqrt(mag[0] ** 2 + mag[1] ** 2 + mag[2] ** 2)
+            if na > 0 and nm > 0:
+                sin_dip = -(a[0] * mag[0] + a[1] * mag[1] + a[2] * mag[2]) / (na * nm)
+                self._dip_sum += math.asin(max(-1.0, min(1.0, sin_dip)))
+                self._h_sum += nm
+                self._h_n += 1
+        self._update_references()
+        if t_ns - self._ref_t0 >= self.reference_window_s * 1e9 and self._g_n and (
+                self._h_n or not self.use_magnetometer):
+            self._ref_done = True
+
+    def _update_references(self) -> None:
+        if self._g_n:
+            self.gravity_m_s2 = self._g_sum / self._g_n
+        if self._h_n:
+            self.field_uT = self._h_sum / self._h_n
+            self.dip_rad = self._dip_sum / self._h_n
+            c, s = math.cos(self.dip_rad), math.sin(self.dip_rad)
+            d = self.declination_rad
+            # eq. 14, turned by the declination: magnetic north lies D east of true north
+            self._h_ref = (c * math.sin(d), c * math.cos(d), -s)
+
+    # -- prediction -------------------------------------------------------------
+    def predict(self, t_ns: int, wx: float, wy: float, wz: float) -> None:
+        """Propagate with one gyroscope event (rad/s) over the time since the previous one (eqs. 7, 11)."""
+        self.n_gyro += 1
+        if not self.initialized:
+            self._t_gyro = t_ns
+            return
+        t_prev = self._t_gyro if self._t_gyro is not None else self.t_ns
+        self._t_gyro = t_ns
+        dt = (t_ns - t_prev) * 1e-9
+        if dt <= 0.0:
+            return
+        if dt > 0.5:  # a gap: do not integrate a stale rate over it, only grow the uncertainty
+            self._random_walk(dt, self.no_gyro_random_walk_rad_sqrt_s)
+            self.t_ns = t_ns
+            return
+        F = transition_matrix(wx, wy, wz, dt)
+        q = F @ np.array(self.q)
+        self.q = quat.normalize(tuple(q.tolist()))
+        w, x, y, z = self.q
+        xi = np.array([[-x, -y, -z], [w, -z, y], [z, w, -x], [-y, x, w]])
+        Q = (self.gyro_noise_rad_sqrt_s ** 2 * dt * 0.25) * (xi @ xi.T)
+        self.P = F @ self.P @ F.T + Q
+        self.t_ns = t_ns
+
+    def _random_walk(self, dt: float, sigma: float) -> None:
+        w, x, y, z = self.q
+        xi = np.array([[-x, -y, -z], [w, -z, y], [z, w, -x], [-y, x, w]])
+        self.P = self.P + (sigma ** 2 * dt * 0.25) * (xi @ xi.T)
+
+    def _propagate_without_gyro(self, t_ns: int) -> None:
+        if self.t_ns is None:
+            self.t_ns = t_ns
+            return
+        last = self._t_gyro
+        if last is None or t_ns - last > 100_000_000:
+            dt = (t_ns - self.t_ns) * 1e-9
+            if dt > 0:
+                self._random_walk(dt, self.no_gyro_random_walk_rad_sqrt_s)
+        self.t_ns = max(self.t_ns, t_ns)
+
+    # -- measurement updates ---------------------------------------------------
+    def _vector_update(self, z, v, sigma2: float):
+        """Three sequential scalar updates of ``z = R(q)^T v + noise`` (eq. 12); returns the innovation."""
+        q = np.array(self.q)
+        hq = predicted_measurement(self.q, v)
+        H = measurement_jacobian(self.q, v)
+        P = self.P
+        innov = (z[0] - hq[0], z[1] - hq[1], z[2] - hq[2])
+        for i in range(3):
+            h = H[i]
+            ph = P @ h
+            s = float(h @ ph) + sigma2
+            k = ph / s
+            # the innovation of row i re-linearised at the current estimate
+            r = innov[i] - float(h @ (q - np.array(self.q)))
+            q = q + k * r
+            P = P - np.outer(k, ph)
+        P = 0.5 * (P + P.T)
+        n = math.sqrt(float(q @ q))
+        q = q / n
+        # keep P consistent with the normalisation (project out the radial direction)
+        J = np.eye(4) - np.outer(q, q)
+        self.P = J @ P @ J.T + np.eye(4) * 1e-12
+        self.q = tuple(q.tolist())
+        return innov
+
+    def update_acc(self, t_ns: int, ax: float, ay: float, az: float) -> None:
+        """Accelerometer update (m/s^2, gravity included) with the adaptive variance of eq. 17."""
+        self._last_acc = (ax, ay, az)
+        self._accumulate_references(t_ns, acc=self._last_acc)
+        if not self.initialized:
+            self._try_initialize(t_ns)
+            return
+        self._propagate_without_gyro(t_ns)
+        na = math.sqrt(ax * ax + ay * ay + az * az)
+        var = self._acc_var.update(t_ns, na)
+        dev = abs(na - self.gravity_m_s2)
+        self.acc_sigma2 = self.acc_noise_base ** 2 + self.k_a1 * dev + self.k_a2 * var  # eq. 17
+        if dev > self.acc_reject_m_s2 or na == 0.0:
+            self.acc_rejected = True
+            self.n_acc_rejected += 1
+            return
+        self.acc_rejected = False
+        self.acc_innovation = self._vector_update((ax / na, ay / na, az / na), (0.0, 0.0, 1.0), self.acc_sigma2)
+
+    def update_mag(self, t_ns: int, mx: float, my: float, mz: float) -> None:
+        """Magnetometer update (uT) with the adaptive variance of eq. 18 and outright rejection."""
+        if not self.use_magnetometer:
+            return
+        self._last_mag = (mx, my, mz)
+        self._accumulate_references(t_ns, mag=self._last_mag)
+        if not self.initialized:
+            self._try_initialize(t_ns)
+            return
+        self._propagate_without_gyro(t_ns)
+        nm = math.sqrt(mx * mx + my * my + mz * mz)
+        var = self._mag_var.update(t_ns, nm)
+        dev = abs(nm - self.field_uT)
+        self.mag_sigma2 = self.mag_noise_base ** 2 + self.k_m1 * dev + self.k_m2 * var  # eq. 18
+        # dip angle of this reading against the current estimate of "up" in the body frame
+        up_b = predicted_measurement(self.q, (0.0, 0.0, 1.0))
+        sin_dip = -(up_b[0] * mx + up_b[1] * my + up_b[2] * mz) / nm if nm > 0 else 0.0
+        dip = math.asin(max(-1.0, min(1.0, sin_dip)))
+        if nm == 0.0 or dev > self.mag_reject_ratio * self.field_uT or abs(dip - self.dip_rad) > self.mag_reject_dip_rad:
+            self.mag_rejected = True
+            self.n_mag_rejected += 1
+            return
+        self.mag_rejected = False
+        self.n_mag_used += 1
+        self.mag_innovation = self._vector_update((mx / nm, my / nm, mz / nm), self._h_ref, self.mag_sigma2)
+
+    # -- outputs ---------------------------------------------------------------
+    def matrix(self):
+        """Current rotation matrix body -> ENU (3 row tuples)."""
+        return quat.to_matrix(self.q)

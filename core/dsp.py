@@ -1,0 +1,126 @@
+"""Signal processing without scipy: Butterworth design, a per-sample biquad, a uniform-grid resampler.
+
+Phones deliver sensor events at uneven intervals and at rates from about 20
+to 400 Hz.  The pipeline therefore first brings the accelerometer onto a
+uniform time grid (:class:`GridResampler`, default 50 Hz) and runs every
+fixed-rate filter there, so that filter coefficients, thresholds in samples
+and the cost per second do not depend on the phone.
+"""
+
+from __future__ import annotations
+
+import math
+
+
+def butter2_lowpass(cutoff_hz: float, fs_hz: float) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """Second-order Butterworth low-pass ``(b, a)`` by the bilinear transform with prewarping.
+
+    Same result as ``scipy.signal.butter(2, cutoff_hz, fs=fs_hz)`` (a test
+    checks it): analogue prototype ``H(s) = 1 / (s^2 + sqrt(2) s + 1)``,
+    ``K = tan(pi fc / fs)``.
+    """
+    if not 0 < cutoff_hz < fs_hz / 2:
+        raise ValueError(f"cutoff {cutoff_hz} Hz must lie between 0 and the Nyquist frequency {fs_hz / 2} Hz")
+    k = math.tan(math.pi * cutoff_hz / fs_hz)
+    k2 = k * k
+    sq2 = math.sqrt(2.0)
+    norm = 1.0 / (1.0 + sq2 * k + k2)
+    b0 = k2 * norm
+    return (b0, 2.0 * b0, b0), (1.0, 2.0 * (k2 - 1.0) * norm, (1.0 - sq2 * k + k2) * norm)
+
+
+def butter2_group_delay_s(cutoff_hz: float) -> float:
+    """Low-frequency group delay of a second-order Butterworth low-pass: ``sqrt(2) / (2 pi fc)`` seconds."""
+    return math.sqrt(2.0) / (2.0 * math.pi * cutoff_hz)
+
+
+class Biquad:
+    """One second-order section in direct form II transposed, state carried between calls.
+
+    ``step(x)`` filters one sample; ``reset(x0)`` sets the state to the
+    steady state of a constant input ``x0`` (same as ``scipy.signal.lfilter_zi * x0``).
+    """
+
+    __slots__ = ("b0", "b1", "b2", "a1", "a2", "z1", "z2")
+
+    def __init__(self, b, a):
+        a0 = a[0]
+        self.b0, self.b1, self.b2 = b[0] / a0, b[1] / a0, b[2] / a0
+        self.a1, self.a2 = a[1] / a0, a[2] / a0
+        self.z1 = self.z2 = 0.0
+
+    def reset(self, x0: float = 0.0) -> None:
+        gain = (self.b0 + self.b1 + self.b2) / (1.0 + self.a1 + self.a2)
+        y0 = gain * x0
+        self.z1 = y0 - self.b0 * x0
+        self.z2 = self.b2 * x0 - self.a2 * y0
+
+    def step(self, x: float) -> float:
+        y = self.b0 * x + self.z1
+        self.z1 = self.b1 * x - self.a1 * y + self.z2
+        self.z2 = self.b2 * x - self.a2 * y
+        return y
+
+
+class GridResampler:
+    """Brings an unevenly sampled scalar signal onto a uniform grid, one event at a time.
+
+    Grid point ``t_g`` gets the mean of the events in ``(t_g - T, t_g]`` when
+    there are at least two (a box anti-alias filter for fast phones), else the
+    linear interpolation between the events around it (slow phones).  A gap
+    longer than ``max_gap_s`` restarts the grid at the next event; the caller
+    learns of it from :attr:`restarted`.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Grid rate (Hz).
+    max_gap_s : float
+        Longest gap between events bridged by interpolation (s).
+    """
+
+    def __init__(self, *, rate_hz: float = 50.0, max_gap_s: float = 0.5):
+        self.rate_hz = float(rate_hz)
+        self.period_ns = int(round(1e9 / rate_hz))
+        self.max_gap_ns = int(max_gap_s * 1e9)
+        self.next_t_ns: int | None = None
+        self._prev_t = 0
+        self._prev_x = 0.0
+        self._sum = 0.0
+        self._n = 0
+        #: True after an event that started a new grid (first event or after a gap)
+        self.restarted = False
+
+    def update(self, t_ns: int, x: float) -> list[tuple[int, float]]:
+        """Feed one event; returns the grid points ``(t_ns, value)`` completed by it."""
+        out = []
+        nxt = self.next_t_ns
+        if nxt is None or t_ns - self._prev_t > self.max_gap_ns:
+            self.restarted = True
+            out.append((t_ns, x))
+            self.next_t_ns = t_ns + self.period_ns
+            self._prev_t, self._prev_x = t_ns, x
+            self._sum, self._n = 0.0, 0
+            return out
+        self.restarted = False
+        if t_ns <= self._prev_t:  # not monotonic: ignore (recordings are repaired before replay)
+            return out
+        while t_ns >= nxt:
+            if self._n >= 2 and nxt == t_ns:
+                value = (self._sum + x) / (self._n + 1)
+            elif self._n >= 2:
+                value = self._sum / self._n
+            else:
+                w = (nxt - self._prev_t) / (t_ns - self._prev_t)
+                value = self._prev_x + w * (x - self._prev_x)
+            out.append((nxt, value))
+            self._sum, self._n = 0.0, 0
+            nxt += self.period_ns
+        self.next_t_ns = nxt
+        if out and out[-1][0] == t_ns:
+            pass  # the event sat exactly on the grid point and was used there
+        else:
+            self._sum += x
+            self._n += 1
+        self._prev_t, self._prev_x = t_ns, x
+        return out

@@ -1,0 +1,82 @@
+"""Heading correction: Butterworth low-pass of the rotation matrix (Tian et al. 2014, section 4.3).
+
+The hand swings the phone at the stride and step frequencies; the heading
+taken straight from the EKF attitude swings with it.  Low-pass filtering the
+heading *angle* breaks at the +-180 deg wrap (the paper's Fig. 5), so the
+filter runs on the elements of the rotation matrix instead, and the walking
+heading is read from the filtered matrix.
+
+Only the first two rows of ``R`` (the East and North components of the
+device axes) enter the heading, so only those six elements are filtered; the
+result is exactly what filtering all nine and then reading the heading would
+give.  The walking direction is the horizontal projection of the device axis
+``forward_b`` (the y axis for a phone held in front of the chest)::
+
+    f_n = R_filtered forward_b,   heading = atan2(f_n[North], f_n[East])
+
+The filter is causal (second order, ``cutoff_hz``), so the smoothed heading
+lags the truth by about its group delay ``sqrt(2) / (2 pi fc)``; the pipeline
+reads each step's heading that much after the step (see ``core.pipeline``).
+"""
+
+from __future__ import annotations
+
+import math
+
+from core.dsp import Biquad, butter2_group_delay_s, butter2_lowpass
+
+
+class RotationSmoother:
+    """Second-order Butterworth low-pass on the rotation matrix, run on a uniform grid.
+
+    Parameters
+    ----------
+    cutoff_hz : float
+        Cut-off frequency (Hz).  The hand sway sits at the stride frequency
+        (about 0.9 Hz) and above; 0.5 Hz leaves a third of it at 0.9 Hz.
+    grid_rate_hz : float
+        Rate at which :meth:`update` is called (Hz).
+    forward_b : tuple of 3 floats
+        Device axis that points in the walking direction.
+    """
+
+    def __init__(self, *, cutoff_hz: float = 0.5, grid_rate_hz: float = 50.0, forward_b=(0.0, 1.0, 0.0)):
+        self.cutoff_hz = float(cutoff_hz)
+        self.grid_rate_hz = float(grid_rate_hz)
+        self.forward_b = tuple(float(v) for v in forward_b)
+        self.reset()
+
+    @property
+    def delay_s(self) -> float:
+        """Low-frequency group delay of the smoother (s)."""
+        return butter2_group_delay_s(self.cutoff_hz)
+
+    def reset(self) -> None:
+        b, a = butter2_lowpass(self.cutoff_hz, self.grid_rate_hz)
+        self._filters = [Biquad(b, a) for _ in range(6)]
+        self._started = False
+        self.heading_rad = math.nan
+        #: horizontal length of the filtered forward vector (near 0: phone vertical, heading unreliable)
+        self.horizontal_norm = math.nan
+
+    def update(self, mat_nb) -> float:
+        """Filter one rotation matrix (3 row tuples, body -> ENU); returns the smoothed heading (rad)."""
+        r0, r1 = mat_nb[0], mat_nb[1]
+        elems = (r0[0], r0[1], r0[2], r1[0], r1[1], r1[2])
+        fs = self._filters
+        if not self._started:
+            for f, x in zip(fs, elems):
+                f.reset(x)
+            self._started = True
+        y = [f.step(x) for f, x in zip(fs, elems)]
+        fx, fy, fz = self.forward_b
+        east = y[0] * fx + y[1] * fy + y[2] * fz
+        north = y[3] * fx + y[4] * fy + y[5] * fz
+        self.horizontal_norm = math.hypot(east, north)
+        self.heading_rad = math.atan2(north, east)
+        return self.heading_rad
+
+    def run(self, mats) -> list[float]:
+        """Smoothed headings for a sequence of rotation matrices on the grid (same kernel as :meth:`update`)."""
+        self.reset()
+        return [self.update(m) for m in mats]

@@ -1,0 +1,120 @@
+"""The pdr-recording format: exact round trips, clear errors, timestamp repair."""
+
+import gzip
+import math
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from core.recording import (MissingSensorError, Recording, RecordingError, RecordingWriter, TimestampRepairWarning,
+                            make_stream, parse_recording, read_recording, write_recording)
+
+HEADER = ('# pdr-recording 1\n# {"format": "pdr-recording", "format_version": 1, "streams": '
+          '{"acc": {"columns": ["x", "y", "z"], "unit": "m/s^2"}, "gyro": {"columns": ["x", "y", "z"], '
+          '"unit": "rad/s"}}}\n')
+
+
+def _small_recording(rng, n=50):
+    t = 10**12 + np.cumsum(rng.integers(5_000_000, 15_000_000, n))
+    return Recording({
+        "acc": make_stream("acc", t, rng.normal(0, 5, (n, 3))),
+        "gyro": make_stream("gyro", t + 1234, rng.normal(0, 1, (n, 3))),
+        "gps": make_stream("gps", t[:3], [[47.1, 8.5, 400.0, 4.0], [47.2, 8.6, 401.0, math.nan], [47.3, 8.7, 402, 3]]),
+    }, device={"model": "test"}, metadata={"walker": "x", "height_m": 1.8})
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".csv.gz"])
+def test_round_trip_is_exact(tmp_path, suffix):
+    rec = _small_recording(np.random.default_rng(0))
+    path = tmp_path / f"r{suffix}"
+    write_recording(str(path), rec)
+    back = read_recording(str(path))
+    assert back.device == rec.device and back.metadata == rec.metadata
+    for name, s in rec.streams.items():
+        b = back.streams[name]
+        assert b.columns == s.columns and b.unit == s.unit
+        np.testing.assert_array_equal(b.t_ns, s.t_ns)
+        np.testing.assert_array_equal(b.values, s.values)  # repr() floats read back bit for bit
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@settings(max_examples=60, deadline=None)
+@given(rows=st.lists(st.tuples(st.integers(0, 2**62), finite, finite, finite), min_size=1, max_size=30, unique_by=lambda r: r[0]))
+def test_round_trip_property(rows):
+    rows = sorted(rows)
+    rec = Recording({"acc": make_stream("acc", [r[0] for r in rows], [r[1:] for r in rows])})
+    text = "# pdr-recording 1\n# " + __import__("json").dumps(rec.header()) + "\n" + "".join(
+        f"acc,{t},{x!r},{y!r},{z!r}\n" for t, x, y, z in rows)
+    back = parse_recording(text)
+    np.testing.assert_array_equal(back.streams["acc"].t_ns, [r[0] for r in rows])
+    np.testing.assert_array_equal(back.streams["acc"].values, [r[1:] for r in rows])
+
+
+@pytest.mark.parametrize("text,match,line", [
+    ("", "empty file", 1),
+    ("acc,1,2,3,4\n", "not a pdr-recording", 1),
+    ("# pdr-recording 2\n# {}\n", "version 2 is not supported", 1),
+    ("# pdr-recording 1\n# {not json\n", "not valid JSON", 2),
+    ("# pdr-recording 1\n# {\"streams\": {}}\n", "non-empty 'streams'", 2),
+    (HEADER + "acc,1000,1.0,2.0\nacc,2000,1,2,3\n", "missing columns.*found 2", 3),
+    (HEADER + "acc,1000,1.0,2.0,3.0,4.0\nacc,2000,1,2,3\n", "extra columns", 3),
+    (HEADER + "acc,1000,1.0,abc,3.0\nacc,2000,1,2,3\n", "'abc' of column 'y' is not a number", 3),
+    (HEADER + "acc,1.5e3,1.0,2.0,3.0\nacc,2000,1,2,3\n", "not an integer nanosecond", 3),
+    (HEADER + "mag,1000,1.0,2.0,3.0\nacc,2000,1,2,3\n", "stream 'mag' is not declared", 3),
+    (HEADER, "no sensor events", None),
+])
+def test_bad_input_gives_one_clear_line(text, match, line):
+    with pytest.raises(RecordingError, match=match) as e:
+        parse_recording(text, "walk.csv")
+    assert e.value.line == line
+    assert str(e.value).startswith("walk.csv:")
+    assert "\n" not in str(e.value)
+
+
+def test_unreadable_file_names_it(tmp_path):
+    with pytest.raises(RecordingError, match="cannot open"):
+        read_recording(str(tmp_path / "missing.csv"))
+    p = tmp_path / "bad.csv.gz"
+    p.write_bytes(b"not gzip at all")
+    with pytest.raises(RecordingError, match="bad.csv.gz"):
+        read_recording(str(p))
+
+
+def test_backwards_and_repeated_timestamps_are_repaired_with_a_count():
+    text = HEADER + "".join(f"acc,{t},1,2,3\n" for t in [1000, 2000, 2000, 1500, 3000, 3000, 4000])
+    with pytest.warns(TimestampRepairWarning, match="1 timestamp.*backwards and 2 repeated"):
+        rec = parse_recording(text, "x.csv")
+    np.testing.assert_array_equal(rec.streams["acc"].t_ns, [1000, 1500, 2000, 3000, 4000])
+    assert len(rec.repairs) == 1 and "2 repeat(s) dropped" in rec.repairs[0]
+
+
+def test_missing_sensor_names_it():
+    rec = parse_recording(HEADER + "gyro,1000,1,2,3\n")
+    with pytest.raises(MissingSensorError, match="no 'acc' stream.*step detection.*present: gyro"):
+        rec.stream("acc", "step detection")
+
+
+def test_writer_survives_an_abrupt_stop(tmp_path):
+    path = tmp_path / "live.csv"
+    w = RecordingWriter(str(path), device={"model": "phone"})
+    for k in range(100):
+        w.add("acc", 10**9 + k * 10_000_000, (0.1 * k, 9.8, 0.3))
+    w.flush()
+    w._f.write("acc,2000000000,1.0,9.")  # killed mid-line: no newline, no close
+    w._f.flush()
+    rec = read_recording(str(path))
+    assert len(rec.streams["acc"]) == 100
+    assert any("incomplete last line" in r for r in rec.repairs)
+    with pytest.raises(RecordingError):
+        read_recording(str(path), allow_truncated_tail=False)
+
+
+def test_events_are_merged_in_time_order():
+    rec = _small_recording(np.random.default_rng(1))
+    ts = [t for _, t, _ in rec.events()]
+    assert ts == sorted(ts)
+    assert len(ts) == sum(len(s) for s in rec.streams.values())
