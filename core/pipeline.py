@@ -263,19 +263,27 @@ class Pipeline:
                       a.acc_sigma2, a.mag_sigma2, self.labels())
 
     # -- batch -----------------------------------------------------------------
-    def run(self, recording: Recording) -> PipelineResult:
+    def run(self, recording: Recording, progress=None) -> PipelineResult:
         """Process a whole recording with the streaming kernel; returns track and diagnostics.
 
-        Raises :class:`core.recording.MissingSensorError` without an accelerometer.
+        ``progress``, if given, is called with the fraction done (0..1) every
+        few thousand events.  Raises :class:`core.recording.MissingSensorError`
+        without an accelerometer.
         """
         recording.stream(ACC, "step detection needs the accelerometer")
         log, self.log = self.log, True
         self.reset()
         use = [n for n in (GYRO, ACC, MAG) if recording.has(n)]
         try:
-            for name, t, vals in recording.events(use):
-                self.update(name, t, vals)
+            total = sum(len(recording.streams[n]) for n in use)
+            update = self.update
+            for k, (name, t, vals) in enumerate(recording.events(use)):
+                update(name, t, vals)
+                if progress is not None and k % 5000 == 0:
+                    progress(k / total)
             self.finish()
+            if progress is not None:
+                progress(1.0)
         finally:
             self.log = log
         rows = self._log

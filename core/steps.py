@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from core.dsp import Biquad, GridResampler, butter2_lowpass
+from core.dsp import Biquad, GridResampler, butter2_group_delay_s, butter2_lowpass
 from core.conventions import STANDARD_GRAVITY_M_S2
 
 
@@ -33,7 +33,7 @@ from core.conventions import STANDARD_GRAVITY_M_S2
 class StepEvent:
     """A detected step, before its length and heading are known."""
 
-    t_ns: int  #: time of the filtered-norm peak (sensor clock)
+    t_ns: int  #: time of the peak, corrected for the low-pass group delay (sensor clock)
     acc_max_m_s2: float  #: filtered norm at the peak
     acc_min_m_s2: float  #: lowest filtered norm since the previous step (or bout start)
     acc_var_m2_s4: float  #: variance of the filtered norm since the previous step
@@ -84,6 +84,8 @@ class StepDetector:
         self._lp = Biquad(b, a)
         self._alpha_g = 1.0 - math.exp(-1.0 / (self.grid_rate_hz * self.gravity_time_constant_s))
         self._min_dt_ns = int(self.min_step_interval_s * 1e9)
+        # the low-pass delays the peak; steps are time-stamped at the unfiltered instant
+        self._delay_ns = int(round(butter2_group_delay_s(self.cutoff_hz) * 1e9))
         self._max_dt_ns = int(self.max_step_interval_s * 1e9)
         self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
         self._y1 = self._y2 = None  # last two filtered values
@@ -145,7 +147,7 @@ class StepDetector:
                 var = max(self._seg_sum2 / n - mean * mean, 0.0) if n else 0.0
                 acc_min = self._seg_min if self._seg_min < math.inf else y1
                 duration = since * 1e-9 if since is not None and since <= self._max_dt_ns else math.nan
-                event = StepEvent(t_peak, y1, acc_min, var, duration, g)
+                event = StepEvent(t_peak - self._delay_ns, y1, acc_min, var, duration, g)
                 self._last_step_ns = t_peak
                 self._armed = not self.require_valley
                 self._seg_min = math.inf

@@ -1,0 +1,270 @@
+"""The ``pdr`` command: replay recordings through the pipeline, export tracks, make simulated walks.
+
+Errors in the input end in one line ``pdr: error: FILE:LINE: what is wrong``
+and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+import warnings
+from pathlib import Path
+
+from core import __version__
+from core.recording import Recording, RecordingError, read_recording, write_recording
+
+DEMO_PATH = Path(__file__).with_name("data") / "demo_walk.csv.gz"
+
+EXIT_INPUT = 2
+
+
+def load_any(path: str) -> Recording:
+    """Read a recording in any supported format (auto-detected)."""
+    try:
+        from core.importers import load_recording
+    except ImportError:  # importers not installed: only the native format
+        return read_recording(path)
+    return load_recording(path)
+
+
+def load_demo() -> Recording:
+    """The bundled simulated demo walk (a closed loop), regenerated if the file is missing."""
+    if DEMO_PATH.exists():
+        rec = read_recording(str(DEMO_PATH))
+    else:  # pragma: no cover - only in a checkout where the file was deleted
+        from core.simulator import demo_walk
+        rec = demo_walk().recording
+    rec.source = f"{DEMO_PATH.name} (bundled simulated demo walk)"
+    return rec
+
+
+def _parse_origin(text: str | None):
+    if not text:
+        return None
+    try:
+        lat, lon = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--origin wants LAT,LON in degrees, got {text!r}") from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+        raise argparse.ArgumentTypeError(f"--origin {text!r} is not a latitude,longitude in degrees")
+    return lat, lon
+
+
+def _first_gps_origin(rec: Recording):
+    s = rec.streams.get("gps")
+    if s is not None and len(s):
+        return float(s.values[0, 0]), float(s.values[0, 1])
+    return None
+
+
+def build_pipeline(args):
+    from core.pipeline import Pipeline
+    from core.stride import WeinbergStride
+
+    kw = {"height_m": args.height, "use_magnetometer": not args.no_mag}
+    if args.stride_c is not None:
+        kw["stride_model"] = WeinbergStride(coefficient=args.stride_c)
+    else:
+        try:  # the trained stride model (issue #4), when the package has it
+            from core.stride_models import default_stride_model
+            model = default_stride_model(height_m=args.height)
+            if model is not None:
+                kw["stride_model"] = model
+        except ImportError:
+            pass
+    p = Pipeline(**kw)
+    p.attitude.declination_rad = math.radians(args.declination)
+    p.attitude.reset()
+    return p
+
+
+class _Progress:
+    """Progress on stderr for long replays (only when stderr is a terminal, or forced)."""
+
+    def __init__(self, label: str, enabled: bool):
+        self.label = label
+        self.enabled = enabled
+        self.last = -1.0
+        self.t0 = time.monotonic()
+
+    def __call__(self, frac: float) -> None:
+        if not self.enabled or frac - self.last < 0.05 and frac < 1.0:
+            return
+        self.last = frac
+        el = time.monotonic() - self.t0
+        sys.stderr.write(f"\r{self.label}: {100 * frac:5.1f} %  ({el:.1f} s)")
+        if frac >= 1.0:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def summary_lines(res, rec: Recording) -> list[str]:
+    s = res.summary()
+    rates = ", ".join(f"{n} {hz:.1f} Hz" for n, hz in s["rates_hz"].items())
+    dist = s["distance_m"]
+    lines = [
+        f"recording     {rec.source}",
+        f"duration      {s['duration_s']:.1f} s",
+        f"sensors       {rates}",
+        f"steps         {s['n_steps']}",
+        f"distance      {dist:.1f} m",
+        f"final pos     E {s['final_east_m']:+.1f} m, N {s['final_north_m']:+.1f} m (start at 0, 0)",
+        f"start-to-end  {s['start_to_end_m']:.2f} m"
+        + (f" ({100 * s['start_to_end_m'] / dist:.2f} % of the distance walked)" if dist > 0 else ""),
+    ]
+    used, rej = s.get("mag_used", 0), s.get("mag_rejected", 0)
+    if used + rej:
+        lines.append(f"magnetometer  {used} readings used, {rej} rejected as disturbed "
+                     f"({100 * rej / (used + rej):.1f} %)")
+    truth = rec.metadata.get("truth") if isinstance(rec.metadata.get("truth"), dict) else None
+    if truth:
+        lines.append(f"truth         {truth.get('n_steps')} steps, {truth.get('path_length_m', float('nan')):.1f} m "
+                     f"(simulator)")
+    for lab in res.labels:
+        lines.append(f"degraded      {lab}")
+    for r in rec.repairs:
+        lines.append(f"repaired      {r}")
+    return lines
+
+
+def cmd_replay(args) -> int:
+    rec = load_demo() if args.recording is None else load_any(args.recording)
+    pipeline = build_pipeline(args)
+    big = sum(len(s) for s in rec.streams.values()) > 200_000
+    prog = _Progress("replay", args.progress or (big and sys.stderr.isatty()))
+    res = pipeline.run(rec, progress=prog)
+    if args.json:
+        print(json.dumps(res.summary(), indent=1, default=float))
+    else:
+        print("\n".join(summary_lines(res, rec)))
+    origin = args.origin or _first_gps_origin(rec)
+    offset = rec.metadata.get("unix_offset_ns")
+    written = []
+    from core import export
+    if args.csv:
+        export.write_track_csv(args.csv, res.track)
+        written.append(args.csv)
+    if args.geojson:
+        export.write_track_geojson(args.geojson, res.track, origin, {"source": rec.source})
+        written.append(args.geojson)
+    if args.gpx:
+        export.write_track_gpx(args.gpx, res.track, origin, offset if isinstance(offset, int) else None)
+        written.append(args.gpx)
+    if args.plot:
+        from core.plot import plot_track
+        truth_en = None
+        truth = rec.metadata.get("truth")
+        if isinstance(truth, dict) and truth.get("waypoints_en_m"):
+            truth_en = truth["waypoints_en_m"]
+        s = res.summary()
+        plot_track(args.plot, res.track, title=f"PDR: {Path(rec.source.split(' ')[0]).name}",
+                   truth_en=truth_en,
+                   subtitle=f"{s['n_steps']} steps, {s['distance_m']:.1f} m, start-to-end {s['start_to_end_m']:.2f} m")
+        written.append(args.plot)
+    for w in written:
+        print(f"wrote         {w}")
+    return 0
+
+
+def cmd_simulate(args) -> int:
+    from core import simulator
+
+    if args.shape == "demo":
+        walk = simulator.demo_walk(seed=args.seed)
+    else:
+        shapes = {"square": [(0, 0), (20, 0), (20, 20), (0, 20), (0, 0)], "line": [(0, 0), (0, 50)],
+                  "turn": [(0, 0), (0, 20), (20, 20)]}
+        walk = simulator.simulate_walk(shapes[args.shape], rate_hz=args.rate, seed=args.seed)
+    write_recording(args.out, walk.recording)
+    print(f"wrote {args.out}: {walk.recording.duration_s:.1f} s, {len(walk.truth.step_t_ns)} steps, "
+          f"{walk.truth.path_length_m:.1f} m")
+    return 0
+
+
+def cmd_info(args) -> int:
+    rec = load_any(args.recording)
+    print(f"recording  {rec.source}")
+    print(f"duration   {rec.duration_s:.1f} s")
+    for n, s in rec.streams.items():
+        st = s.interval_stats_s()
+        print(f"  {n:7s} {len(s):7d} events  {s.rate_hz:7.1f} Hz  jitter {1e3 * st['jitter_s']:.2f} ms  "
+              f"gaps {st['gaps']}  [{', '.join(s.columns)}] {s.unit}")
+    if rec.device:
+        print(f"device     {json.dumps(rec.device)}")
+    for r in rec.repairs:
+        print(f"repaired   {r}")
+    return 0
+
+
+def make_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="pdr", description="Pedestrian dead reckoning for smartphone sensor recordings "
+                                "(step detection, step length, adaptive EKF heading, track).")
+    p.add_argument("--version", action="version", version=f"pdr {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("replay", help="run the pipeline on a recording and print a summary",
+                       description="Run the PDR pipeline on a recording (pdr-recording, GetSensorData, Sensor Logger "
+                                   "or phyphox; detected from the content) and print a summary. Without RECORDING, "
+                                   "replays the bundled simulated demo walk (a closed loop).")
+    r.add_argument("recording", nargs="?", help="recording file or folder (default: the bundled demo walk)")
+    r.add_argument("--csv", metavar="PATH", help="write the track as CSV, one row per step (local metres)")
+    r.add_argument("--geojson", metavar="PATH", help="write the track as GeoJSON (WGS-84, needs --origin or GPS "
+                                                      "in the recording to be placed on the map)")
+    r.add_argument("--gpx", metavar="PATH", help="write the track as GPX 1.1 with time, step length and bearing "
+                                                 "per point (needs gpxpy)")
+    r.add_argument("--plot", metavar="PNG", help="draw the track to a PNG file (needs matplotlib)")
+    r.add_argument("--origin", type=_parse_origin, metavar="LAT,LON",
+                   help="geographic start point for GeoJSON/GPX (default: first GPS fix, else 0,0)")
+    r.add_argument("--height", type=float, metavar="M", help="walker's height in metres (for the stride model)")
+    r.add_argument("--stride-c", type=float, metavar="C", help="constant Weinberg coefficient C (overrides the "
+                                                                "stride model)")
+    r.add_argument("--declination", type=float, default=0.0, metavar="DEG",
+                   help="magnetic declination, east positive (default 0: headings relative to magnetic north)")
+    r.add_argument("--no-mag", action="store_true", help="ignore the magnetometer (heading relative to the start)")
+    r.add_argument("--json", action="store_true", help="print the summary as JSON")
+    r.add_argument("--progress", action="store_true", help="always show progress on stderr")
+    r.set_defaults(func=cmd_replay)
+
+    s = sub.add_parser("simulate", help="write a simulated hand-held walk with ground truth",
+                       description="Simulate a phone held in front of the chest on a walk and write it as a "
+                                   "pdr-recording (the truth goes into the header's metadata).")
+    s.add_argument("out", help="output file (.csv or .csv.gz)")
+    s.add_argument("--shape", choices=["demo", "square", "line", "turn"], default="demo", help="path to walk")
+    s.add_argument("--rate", type=float, default=100.0, help="accelerometer rate in Hz (default 100)")
+    s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    s.set_defaults(func=cmd_simulate)
+
+    i = sub.add_parser("info", help="describe a recording: streams, rates, jitter, gaps")
+    i.add_argument("recording")
+    i.set_defaults(func=cmd_info)
+    return p
+
+
+def main(argv=None) -> int:
+    parser = make_parser()
+    args = parser.parse_args(argv)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            code = args.func(args)
+        except RecordingError as e:
+            print(f"pdr: error: {e}", file=sys.stderr)
+            code = EXIT_INPUT
+        except (OSError, RuntimeError) as e:
+            print(f"pdr: error: {e}", file=sys.stderr)
+            code = 1
+        except KeyboardInterrupt:
+            print("pdr: interrupted", file=sys.stderr)
+            code = 130
+    for w in caught:
+        if issubclass(w.category, (UserWarning,)) and not issubclass(w.category, DeprecationWarning):
+            print(f"pdr: warning: {w.message}", file=sys.stderr)
+    return code
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,149 @@
+"""Track export: CSV (local metres), GeoJSON and GPX (WGS-84), converting at the edge.
+
+Geodesy: the ENU track is placed on the WGS-84 ellipsoid with a local
+tangent plane at ``origin = (lat0, lon0)``::
+
+    lat = lat0 + north / M(lat0),   lon = lon0 + east / (N(lat0) cos lat0)
+
+with the meridian and prime-vertical radii of curvature
+``M = a (1 - e^2) / (1 - e^2 sin^2 lat0)^1.5`` and ``N = a / sqrt(1 - e^2 sin^2 lat0)``.
+Over a walk of a few kilometres the error of this flat-Earth approximation
+is below a centimetre per 100 m, far below PDR errors.  :func:`enu_to_geodetic`
+and :func:`geodetic_to_enu` are inverses of each other.
+
+Without a known origin the track is placed at latitude/longitude (0, 0) and
+every file says so (``origin_known = false``): shape and size are right, the
+place is not.
+
+GPX needs absolute times: ``unix_offset_ns`` (Unix time minus sensor-clock
+time, from the recording's metadata when the importer knew it) converts
+``t_ns``; without it the times count from the Unix epoch and the file says so.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as _dt
+import json
+import math
+
+from core.conventions import bearing_deg
+
+WGS84_A_M = 6378137.0
+WGS84_E2 = 6.69437999014e-3
+
+
+def _radii(lat0_deg: float) -> tuple[float, float]:
+    s = math.sin(math.radians(lat0_deg))
+    d = 1.0 - WGS84_E2 * s * s
+    return WGS84_A_M * (1.0 - WGS84_E2) / d ** 1.5, WGS84_A_M / math.sqrt(d)
+
+
+def enu_to_geodetic(east_m, north_m, origin_lat_lon: tuple[float, float]):
+    """Local ENU metres to (lat_deg, lon_deg) around ``origin_lat_lon`` (see module docstring)."""
+    lat0, lon0 = origin_lat_lon
+    m, n = _radii(lat0)
+    lat = lat0 + (north_m / m) * (180 / math.pi)
+    lon = lon0 + (east_m / (n * math.cos(math.radians(lat0)))) * (180 / math.pi)
+    return lat, lon
+
+
+def geodetic_to_enu(lat_deg, lon_deg, origin_lat_lon: tuple[float, float]):
+    """(lat_deg, lon_deg) to local ENU metres (east, north) around ``origin_lat_lon``."""
+    lat0, lon0 = origin_lat_lon
+    m, n = _radii(lat0)
+    north = (lat_deg - lat0) * (math.pi / 180) * m
+    east = (lon_deg - lon0) * (math.pi / 180) * n * math.cos(math.radians(lat0))
+    return east, north
+
+
+def _points(track):
+    """Rows (t_ns, east, north, length, heading) with the start point (0, 0) first."""
+    rows = []
+    if len(track):
+        rows.append((int(track.t_ns[0]), 0.0, 0.0, 0.0, float(track.heading_rad[0])))
+    for i in range(len(track)):
+        rows.append((int(track.t_ns[i]), float(track.east_m[i]), float(track.north_m[i]),
+                     float(track.length_m[i]), float(track.heading_rad[i])))
+    return rows
+
+
+def write_track_csv(path: str, track) -> None:
+    """One row per step: ``t_ns, t_s, step_length_m, heading_rad, bearing_deg, east_m, north_m, distance_m``."""
+    t0 = int(track.t_ns[0]) if len(track) else 0
+    dist = 0.0
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(["t_ns", "t_s", "step_length_m", "heading_rad", "bearing_deg", "east_m", "north_m", "distance_m"])
+        for i in range(len(track)):
+            dist += float(track.length_m[i])
+            h = float(track.heading_rad[i])
+            w.writerow([int(track.t_ns[i]), f"{(int(track.t_ns[i]) - t0) * 1e-9:.3f}",
+                        f"{float(track.length_m[i]):.4f}", f"{h:.5f}", f"{bearing_deg(h):.2f}",
+                        f"{float(track.east_m[i]):.3f}", f"{float(track.north_m[i]):.3f}", f"{dist:.3f}"])
+
+
+def track_geojson(track, origin_lat_lon: tuple[float, float] | None = None, properties: dict | None = None) -> dict:
+    """The track as a GeoJSON FeatureCollection (RFC 7946: lon, lat order): a LineString and one Point per step."""
+    known = origin_lat_lon is not None
+    origin = origin_lat_lon if known else (0.0, 0.0)
+    pts = _points(track)
+    coords = []
+    feats = []
+    for k, (t, e, n, length, h) in enumerate(pts):
+        lat, lon = enu_to_geodetic(e, n, origin)
+        coords.append([round(lon, 8), round(lat, 8)])
+        if k > 0:
+            feats.append({"type": "Feature", "geometry": {"type": "Point", "coordinates": coords[-1]},
+                          "properties": {"step": k, "t_ns": t, "step_length_m": round(length, 4),
+                                         "bearing_deg": round(bearing_deg(h), 2), "east_m": round(e, 3),
+                                         "north_m": round(n, 3)}})
+    props = {"name": "PDR track", "n_steps": len(track), "origin_known": known,
+             "origin_lat_lon": list(origin), **(properties or {})}
+    line = {"type": "Feature", "geometry": {"type": "LineString", "coordinates": coords}, "properties": props}
+    return {"type": "FeatureCollection", "features": [line] + feats}
+
+
+def write_track_geojson(path: str, track, origin_lat_lon: tuple[float, float] | None = None,
+                        properties: dict | None = None) -> None:
+    with open(path, "w", encoding="utf-8") as f:
+        json.dump(track_geojson(track, origin_lat_lon, properties), f, indent=1)
+
+
+def write_track_gpx(path: str, track, origin_lat_lon: tuple[float, float] | None = None,
+                    unix_offset_ns: int | None = None, name: str = "PDR track") -> None:
+    """GPX 1.1 track (needs the ``gpxpy`` package) with per-point time, step length and bearing as extensions."""
+    try:
+        import gpxpy.gpx
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise RuntimeError("GPX export needs gpxpy: pip install gpxpy") from e
+    from xml.etree import ElementTree as ET
+
+    ns = "https://pdr.invalid/gpx/1"
+    known = origin_lat_lon is not None
+    origin = origin_lat_lon if known else (0.0, 0.0)
+    gpx = gpxpy.gpx.GPX()
+    gpx.nsmap["pdr"] = ns
+    gpx.creator = "pdr"
+    notes = []
+    if not known:
+        notes.append("origin unknown: track placed at 0,0")
+    if unix_offset_ns is None:
+        notes.append("absolute time unknown: times count from the sensor clock's zero")
+    gpx.description = "; ".join(notes) or None
+    trk = gpxpy.gpx.GPXTrack(name=name)
+    seg = gpxpy.gpx.GPXTrackSegment()
+    trk.segments.append(seg)
+    gpx.tracks.append(trk)
+    off = unix_offset_ns or 0
+    for t, e, n, length, h in _points(track):
+        lat, lon = enu_to_geodetic(e, n, origin)
+        when = _dt.datetime.fromtimestamp((t + off) * 1e-9, tz=_dt.timezone.utc)
+        p = gpxpy.gpx.GPXTrackPoint(latitude=lat, longitude=lon, time=when)
+        for tag, val in (("step_length_m", f"{length:.4f}"), ("bearing_deg", f"{bearing_deg(h):.2f}")):
+            el = ET.Element(f"{{{ns}}}{tag}")
+            el.text = val
+            p.extensions.append(el)
+        seg.points.append(p)
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(gpx.to_xml(version="1.1"))

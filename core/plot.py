@@ -1,0 +1,52 @@
+"""Track plots for the desktop (matplotlib is a desktop extra, imported only here, only when called)."""
+
+from __future__ import annotations
+
+import math
+
+
+def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, landmarks_en=None,
+               others: dict | None = None, subtitle: str = "") -> None:
+    """Write a PNG of the track (East/North metres, equal axes) with start and end marked.
+
+    ``truth_en``: optional (n, 2) reference path; ``landmarks_en``: optional (k, 2)
+    points; ``others``: optional ``{label: (east array, north array)}`` of other tracks.
+    """
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise RuntimeError("plots need matplotlib: pip install matplotlib (or the 'desktop' extra)") from e
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
+    e = np.concatenate([[0.0], np.asarray(track.east_m, float)])
+    n = np.concatenate([[0.0], np.asarray(track.north_m, float)])
+    if truth_en is not None:
+        t = np.asarray(truth_en, float)
+        ax.plot(t[:, 0], t[:, 1], "-", color="0.6", lw=3, alpha=0.6, label="reference path")
+    if landmarks_en is not None:
+        lm = np.asarray(landmarks_en, float)
+        ax.plot(lm[:, 0], lm[:, 1], "s", color="tab:green", ms=6, label="landmarks")
+    for label, (oe, on) in (others or {}).items():
+        ax.plot(oe, on, "-", lw=1, alpha=0.8, label=label)
+    ax.plot(e, n, "-", color="tab:blue", lw=1.6, label=f"PDR ({len(track)} steps)")
+    ax.plot(e[1:], n[1:], ".", color="tab:blue", ms=2)
+    ax.plot(e[0], n[0], "o", color="tab:green", ms=9, label="start")
+    ax.plot(e[-1], n[-1], "X", color="tab:red", ms=9, label="end")
+    if len(track):
+        # heading arrow at the end
+        h = float(track.heading_rad[-1])
+        span = max(np.ptp(e), np.ptp(n), 1.0)
+        ax.annotate("", xy=(e[-1] + 0.06 * span * math.cos(h), n[-1] + 0.06 * span * math.sin(h)),
+                    xytext=(e[-1], n[-1]), arrowprops={"arrowstyle": "->", "color": "tab:red", "lw": 1.5})
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("East (m)")
+    ax.set_ylabel("North (m)")
+    ax.set_title(title + (f"\n{subtitle}" if subtitle else ""), fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

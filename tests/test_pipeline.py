@@ -1,0 +1,105 @@
+"""The whole pipeline against simulator truth; streaming equals batch; degraded modes."""
+
+import math
+
+import numpy as np
+import pytest
+
+from core.conventions import wrap_angle
+from core.pipeline import Pipeline
+from core.recording import MissingSensorError, Recording
+from core.simulator import simulate_walk
+from core.steps import StepDetector
+
+
+def _heading_change(track, t_before_ns, t_after_ns):
+    t = track.t_ns
+    a = np.angle(np.mean(np.exp(1j * track.heading_rad[(t < t_before_ns)][-6:])))
+    b = np.angle(np.mean(np.exp(1j * track.heading_rad[(t > t_after_ns)][:6])))
+    return wrap_angle(b - a)
+
+
+def test_streaming_equals_batch():
+    walk = simulate_walk([(0, 0), (15, 0), (15, 10)], rate_hz=100.0, seed=11)
+    batch = Pipeline().run(walk.recording)
+    p = Pipeline()
+    steps = []
+    for name, t, v in walk.recording.events():
+        steps.extend(p.update(name, t, v))
+    steps.extend(p.finish())
+    assert len(steps) == len(batch.steps) > 10
+    np.testing.assert_array_equal([s.t_ns for s in steps], batch.track.t_ns)
+    np.testing.assert_allclose([s.east_m for s in steps], batch.track.east_m, rtol=0, atol=1e-9)
+    np.testing.assert_allclose([s.heading_rad for s in steps], batch.track.heading_rad, rtol=0, atol=1e-12)
+
+
+def test_step_detector_streaming_equals_batch():
+    walk = simulate_walk([(0, 0), (0, 20)], rate_hz=100.0, seed=12)
+    acc = walk.recording.streams["acc"]
+    det = StepDetector()
+    batch = det.run(acc.t_ns, acc.values)
+    det.reset()
+    stream = [e for t, v in zip(acc.t_ns.tolist(), acc.values.tolist()) for e in det.update(t, *v)]
+    assert stream == batch
+
+
+@pytest.mark.parametrize("rate", [20.0, 50.0, 100.0, 200.0, 400.0])
+def test_step_count_exact_on_the_simulator_at_any_rate(rate):
+    walk = simulate_walk([(0, 0), (0, 30), (20, 30)], rate_hz=rate, seed=3)
+    res = Pipeline().run(walk.recording)
+    assert len(res.steps) == len(walk.truth.step_t_ns)
+    # every detected step lies within 0.2 s of a true heel strike
+    d = np.abs(res.track.t_ns[:, None] - walk.truth.step_t_ns[None, :]).min(axis=1) * 1e-9
+    assert np.max(d) < 0.2
+
+
+@pytest.mark.parametrize("turn_deg", [90.0, -90.0])
+def test_a_90_degree_turn_gives_90_degrees(turn_deg):
+    a = math.radians(turn_deg)
+    # north for 25 m, then turn left (+) or right (-) by 90 deg for 25 m
+    walk = simulate_walk([(0, 0), (0, 25), (-25 * math.sin(a), 25)], rate_hz=100.0, seed=5)
+    res = Pipeline().run(walk.recording)
+    tr = walk.truth
+    # the turn happens around the corner; compare the straight parts before and after it
+    corner_t = tr.step_t_ns[np.argmin(np.hypot(tr.step_east_m - 0, tr.step_north_m - 25))]
+    got = math.degrees(_heading_change(res.track, corner_t - 2_000_000_000, corner_t + 3_000_000_000))
+    assert got == pytest.approx(turn_deg, abs=2.0)
+
+
+def test_loop_closes_within_two_percent():
+    wp = [(0, 0), (30, 0), (30, 20), (10, 20), (10, 35), (0, 35), (0, 0)]
+    walk = simulate_walk(wp, rate_hz=100.0, seed=8)
+    res = Pipeline().run(walk.recording)
+    s = res.summary()
+    assert s["start_to_end_m"] < 0.02 * walk.truth.path_length_m, s
+    # the walked distance is right to within the accuracy of the default (untrained) stride model
+    assert s["distance_m"] == pytest.approx(walk.truth.path_length_m, rel=0.10)
+
+
+def test_missing_accelerometer_is_a_clear_error():
+    walk = simulate_walk([(0, 0), (0, 10)], seed=1)
+    rec = Recording({k: v for k, v in walk.recording.streams.items() if k != "acc"}, source="x.csv")
+    with pytest.raises(MissingSensorError, match="no 'acc' stream"):
+        Pipeline().run(rec)
+
+
+def test_without_magnetometer_the_track_is_labelled_and_shape_kept():
+    walk = simulate_walk([(0, 0), (0, 20), (20, 20)], seed=2)
+    rec = Recording({k: v for k, v in walk.recording.streams.items() if k != "mag"})
+    res = Pipeline().run(rec)
+    assert any("no magnetometer" in lab for lab in res.labels)
+    assert len(res.steps) == len(walk.truth.step_t_ns)
+    # relative heading: first leg points North by definition, the turn is still right (90 deg right)
+    first = np.angle(np.mean(np.exp(1j * res.track.heading_rad[3:15])))
+    last = np.angle(np.mean(np.exp(1j * res.track.heading_rad[-10:])))
+    assert math.degrees(first) == pytest.approx(90.0, abs=5.0)
+    assert math.degrees(wrap_angle(last - first)) == pytest.approx(-90.0, abs=5.0)
+
+
+def test_without_gyroscope_the_track_is_labelled_and_still_usable():
+    walk = simulate_walk([(0, 0), (0, 20), (20, 20)], seed=2)
+    rec = Recording({k: v for k, v in walk.recording.streams.items() if k != "gyro"})
+    res = Pipeline().run(rec)
+    assert any("no gyroscope" in lab for lab in res.labels)
+    end = np.array([res.track.east_m[-1], res.track.north_m[-1]])
+    assert np.linalg.norm(end - [20, 20]) < 0.15 * walk.truth.path_length_m
