@@ -1,8 +1,6 @@
 """The pdr-recording format: exact round trips, clear errors, timestamp repair."""
 
-import gzip
 import math
-import warnings
 
 import numpy as np
 import pytest

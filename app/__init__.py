@@ -1,0 +1,17 @@
+"""The Kivy app: live sensors on Android, desktop replay, live track, recording.
+
+Layout (thin UI over :mod:`core`; only the modules marked *kivy* import Kivy,
+only :mod:`app.android` imports ``jnius``/``android``, and only lazily):
+
+``app.sources``     SensorSource interface, ReplaySource, AndroidSource, PlyerFallbackSource
+``app.session``     one tracking session: source -> reorder -> Pipeline, RecordingWriter, health
+``app.health``      per-sensor rate / jitter / dropped-event statistics
+``app.viewport``    metres <-> pixels, pan, zoom, follow, scale bar
+``app.settings``    persisted user settings (height, Weinberg C, sampling rate) and stride calibration
+``app.storage``     where settings, recordings and exports go (desktop and Android)
+``app.kivy_env``    environment for Kivy (no argv parsing, headless tests) -- no Kivy import
+``app.track_view``  *kivy* the track widget
+``app.main_app``    *kivy* the App, screens and lifecycle
+
+Desktop: ``python -m app RECORDING --speed 10`` or ``python main.py RECORDING``.
+"""

@@ -1,0 +1,154 @@
+"""Sensor health: actual rate, jitter and dropped events per stream (plain Python, no Kivy).
+
+Everything is computed from the events' own timestamps, so the same numbers
+come out live on the phone and when a recording is replayed:
+
+rate
+    events per second over the last ``window_s`` seconds of sensor time.
+jitter
+    standard deviation of the event intervals in that window (ms).
+gaps / missed
+    an interval longer than ``gap_factor`` times the nominal interval (the
+    running median interval) is a gap; ``round(dt / nominal) - 1`` events are
+    counted as *missed* (never delivered by the OS).
+out of order
+    events whose timestamp is not later than the previous one of the same
+    stream (the session drops them).
+queue drops
+    events the source discarded because the UI did not drain its queue in
+    time (reported by the source, added by :meth:`HealthMonitor.snapshot`).
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from collections import deque
+from dataclasses import dataclass
+
+
+@dataclass
+class StreamStats:
+    """One row of the health panel."""
+
+    stream: str
+    events: int
+    rate_hz: float
+    median_dt_ms: float
+    jitter_ms: float
+    gaps: int
+    missed: int
+    out_of_order: int
+    queue_drops: int = 0
+    accuracy: str = ""
+
+    @property
+    def dropped(self) -> int:
+        """Events lost: missed by the OS (timestamp gaps) plus discarded by the queue."""
+        return self.missed + self.queue_drops
+
+
+class StreamHealth:
+    """Running statistics of one stream's timestamps."""
+
+    def __init__(self, name: str, *, window_s: float = 5.0, max_window: int = 1000, gap_factor: float = 1.8,
+                 min_events_for_gaps: int = 10):
+        self.name = name
+        self.window_ns = int(window_s * 1e9)
+        self.gap_factor = float(gap_factor)
+        self.min_events_for_gaps = int(min_events_for_gaps)
+        self._t: deque = deque(maxlen=max_window)
+        self._dt: deque = deque(maxlen=max_window)
+        self.events = 0
+        self.gaps = 0
+        self.missed = 0
+        self.out_of_order = 0
+        self._nominal_ns: float | None = None
+        self._since_nominal = 0
+        self.last_t_ns: int | None = None
+
+    def accept(self, t_ns: int) -> bool:
+        """Account for one event; returns False (and counts it) if it is out of order."""
+        t_ns = int(t_ns)
+        last = self.last_t_ns
+        if last is not None and t_ns <= last:
+            self.out_of_order += 1
+            return False
+        self.events += 1
+        if last is not None:
+            dt = t_ns - last
+            nominal = self._nominal()
+            if nominal and dt > self.gap_factor * nominal:
+                self.gaps += 1
+                self.missed += max(int(round(dt / nominal)) - 1, 0)
+            self._dt.append(dt)
+        self._t.append(t_ns)
+        self.last_t_ns = t_ns
+        while len(self._t) > 2 and self._t[0] < t_ns - self.window_ns:
+            self._t.popleft()
+        return True
+
+    def _nominal(self) -> float | None:
+        """Running median interval (re-estimated every 50 events)."""
+        if len(self._dt) < self.min_events_for_gaps:
+            return None
+        self._since_nominal += 1
+        if self._nominal_ns is None or self._since_nominal >= 50:
+            self._nominal_ns = float(statistics.median(self._dt))
+            self._since_nominal = 0
+        return self._nominal_ns
+
+    def stats(self) -> StreamStats:
+        t = self._t
+        n = len(t)
+        rate = (n - 1) / ((t[-1] - t[0]) * 1e-9) if n > 1 and t[-1] > t[0] else 0.0
+        # intervals inside the rate window
+        k = max(n - 1, 0)
+        recent = list(self._dt)[-k:] if k else []
+        if len(recent) >= 2:
+            med = statistics.median(recent) * 1e-6
+            jit = statistics.pstdev(recent) * 1e-6
+        else:
+            med = jit = math.nan
+        return StreamStats(self.name, self.events, rate, med, jit, self.gaps, self.missed, self.out_of_order)
+
+
+class HealthMonitor:
+    """Health of every stream of a session, plus the magnetometer trust flag from the pipeline."""
+
+    def __init__(self, **stream_kwargs):
+        self._kw = stream_kwargs
+        self.streams: dict[str, StreamHealth] = {}
+        self.mag_trusted: bool | None = None
+
+    def accept(self, stream: str, t_ns: int) -> bool:
+        h = self.streams.get(stream)
+        if h is None:
+            h = self.streams[stream] = StreamHealth(stream, **self._kw)
+        return h.accept(t_ns)
+
+    def snapshot(self, queue_drops: dict | None = None, accuracy: dict | None = None) -> list[StreamStats]:
+        from app.sources import ACCURACY_NAMES  # noqa: PLC0415 - avoid a cycle at import time
+
+        rows = []
+        for name in sorted(self.streams):
+            s = self.streams[name].stats()
+            s.queue_drops = int((queue_drops or {}).get(name, 0))
+            if accuracy and name in accuracy:
+                s.accuracy = ACCURACY_NAMES.get(accuracy[name], str(accuracy[name]))
+            rows.append(s)
+        return rows
+
+    def format(self, queue_drops: dict | None = None, accuracy: dict | None = None) -> str:
+        """The health panel as monospace text."""
+        lines = [f"{'sensor':<7}{'rate Hz':>9}{'jitter ms':>11}{'dropped':>9}{'gaps':>6}{'order':>7}  accuracy"]
+        for s in self.snapshot(queue_drops, accuracy):
+            jit = f"{s.jitter_ms:.2f}" if math.isfinite(s.jitter_ms) else "-"
+            lines.append(f"{s.stream:<7}{s.rate_hz:>9.1f}{jit:>11}{s.dropped:>9d}{s.gaps:>6d}"
+                         f"{s.out_of_order:>7d}  {s.accuracy or '-'}")
+        if self.mag_trusted is None:
+            trust = "unknown"
+        else:
+            trust = "yes" if self.mag_trusted else "NO (rejected by the adaptive filter)"
+        lines.append(f"magnetometer trusted: {trust}")
+        return "\n".join(lines)

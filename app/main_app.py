@@ -1,0 +1,536 @@
+"""The Kivy app: thin UI over :class:`app.session.Session`.
+
+State shown on screen lives in Kivy properties of :class:`PDRApp` bound in
+``layout.kv``; all processing happens in the session (plain Python).  The
+Kivy clock calls :meth:`PDRApp._tick` 30 times a second: it drains the
+source and runs the pipeline (bounded time per tick), and updates the
+widgets at most 10 times a second, or when a step completes.
+
+Lifecycle (Android): ``on_pause`` stops the sensors (or pauses a replay),
+flushes the recording and saves the settings; ``on_resume`` restarts what
+was running.  ``on_stop`` finishes the track and closes the recording.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+
+from kivy.app import App
+from kivy.clock import Clock, mainthread
+from kivy.core.window import Window
+from kivy.lang import Builder
+from kivy.properties import BooleanProperty, ListProperty, NumericProperty, StringProperty
+from kivy.uix.boxlayout import BoxLayout
+from kivy.uix.button import Button
+from kivy.uix.filechooser import FileChooserListView
+from kivy.uix.popup import Popup
+
+import app.track_view  # noqa: F401 - registers TrackView for the kv file
+from app.session import Session, export_session, load_any_recording
+from app.settings import RATE_CHOICES, SETTINGS_FILE, CalibrationError, Settings
+from app.sources import REPLAY_SPEEDS, ReplaySource, SensorStartError, make_live_source
+from app.storage import is_android, new_recording_path, output_dir
+
+KV_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "layout.kv")
+RECORDING_PATTERNS = ["*.csv", "*.txt", "*.gz", "*.out", "*.dat"]
+UI_INTERVAL_S = 0.1
+
+
+def _fmt_time(s: float) -> str:
+    s = int(s)
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+
+class PDRApp(App):
+    """PDR Tracker.
+
+    Parameters (desktop / tests)
+    ----------------------------
+    recording : str, optional
+        Replay this file at start.
+    speed : str
+        Replay speed label ("1x", "10x", "max"); default from the settings.
+    out_dir : str, optional
+        Where recordings and exports go (default: see :mod:`app.storage`).
+    data_dir : str, optional
+        Where the settings live (default: Kivy's ``user_data_dir``; env ``PDR_APP_DATA``).
+    exit_at_end : bool
+        Quit when the replay has finished (after ``screenshot`` / ``report``).
+    screenshot, report : str, optional
+        At the end of the replay, save a PNG of the window / a JSON report.
+    """
+
+    title = "PDR Tracker"
+
+    steps_text = StringProperty("0")
+    distance_text = StringProperty("0.0 m")
+    heading_text = StringProperty("–")
+    time_text = StringProperty("0:00")
+    warning = StringProperty("")
+    message = StringProperty("")
+    health_text = StringProperty("")
+    source_text = StringProperty("no source")
+    mode = StringProperty("idle")  # idle | replay | live
+    playing = BooleanProperty(False)
+    speed_label = StringProperty("10x")
+    recording_label = StringProperty("")
+    progress = NumericProperty(0.0)
+    # settings screen
+    height_text = StringProperty("")
+    rate_text = StringProperty("100")
+    rate_choices = ListProperty([str(r) for r in RATE_CHOICES])
+    record_live = BooleanProperty(True)
+    c_text = StringProperty("")
+    settings_message = StringProperty("")
+    calibrating = BooleanProperty(False)
+    calib_text = StringProperty("")
+    calib_message = StringProperty("")
+
+    def __init__(self, *, recording: str | None = None, speed: str | None = None, out_dir: str | None = None,
+                 data_dir: str | None = None, exit_at_end: bool = False, screenshot: str | None = None,
+                 report: str | None = None, **kwargs):
+        super().__init__(**kwargs)
+        self.initial_recording = recording
+        self._speed_arg = speed
+        self._out_dir_arg = out_dir
+        self._data_dir_arg = data_dir
+        self.exit_at_end = exit_at_end
+        self.screenshot_path = screenshot
+        self.report_path = report
+        self.session: Session | None = None
+        self.raw_path: str | None = None
+        self._last_ui = 0.0
+        self._was_running = False
+        self._end_handled = False
+        self._calib_walked = None
+        self.frames = 0
+        self.paused_count = 0
+        self.resumed_count = 0
+
+    # -- build / settings ------------------------------------------------------------
+
+    @property
+    def data_dir(self) -> str:
+        d = self._data_dir_arg or os.environ.get("PDR_APP_DATA") or self.user_data_dir
+        os.makedirs(d, exist_ok=True)
+        return d
+
+    @property
+    def settings_path(self) -> str:
+        return os.path.join(self.data_dir, SETTINGS_FILE)
+
+    def out_dir(self) -> str:
+        return output_dir(self.data_dir, self._out_dir_arg)
+
+    def build(self):
+        self.settings = Settings.load(self.settings_path)
+        if self.settings.problems:
+            self.warning = "; ".join(self.settings.problems)
+        self.speed_label = self._speed_arg or self.settings.replay_speed
+        self._settings_to_ui()
+        Builder.load_file(KV_FILE)
+        from kivy.factory import Factory  # noqa: PLC0415
+
+        root = Factory.PDRRoot()
+        Window.bind(on_keyboard=self._on_key, on_flip=self._on_flip)
+        return root
+
+    def _settings_to_ui(self):
+        s = self.settings
+        self.height_text = f"{s.height_m * 100:.0f}" if s.height_m else ""
+        self.rate_text = f"{s.rate_hz:g}"
+        self.record_live = s.record_live
+        self.c_text = f"{s.stride_c:.3f}" + (f"  ({len(s.calibrations)} calibration(s))" if s.calibrations else "")
+
+    def save_settings(self, height_cm: str, rate: str, record_live: bool) -> None:
+        s = self.settings
+        try:
+            s.height_m = float(height_cm) / 100.0 if height_cm.strip() else None
+            s.rate_hz = float(rate)
+            s.record_live = bool(record_live)
+        except ValueError as e:
+            self.settings_message = f"not saved: {e}"
+            return
+        problems = s.validate()
+        s.save(self.settings_path)
+        self._settings_to_ui()
+        self.settings_message = ("; ".join(problems) if problems else "saved") + \
+            (" – applies to the next track" if self.session else "")
+
+    def _pipeline_factory(self):
+        from core.pipeline import Pipeline  # noqa: PLC0415
+
+        kw = self.settings.pipeline_kwargs()
+        return lambda: Pipeline(**kw)
+
+    @property
+    def track_view(self):
+        return self.root.ids.track
+
+    # -- lifecycle ---------------------------------------------------------------------
+
+    def on_start(self):
+        Clock.schedule_interval(self._tick, 1 / 30.0)
+        if self.initial_recording:
+            self.open_recording(self.initial_recording)
+        elif is_android():
+            self._request_android_permissions()
+        else:
+            self.message = "Open a recording to replay it"
+
+    def on_pause(self):
+        """Android is pausing the app: sensors off, recording flushed, settings saved."""
+        self.paused_count += 1
+        self._was_running = bool(self.session and self.session.running)
+        if self.session:
+            self.session.pause()
+        self.playing = False
+        self._save_settings_quietly()
+        return True
+
+    def on_resume(self):
+        self.resumed_count += 1
+        if self.session and self._was_running:
+            try:
+                self.session.resume()
+            except SensorStartError as e:
+                self.warning = f"sensors did not restart: {e}"
+            self.playing = self.session.running
+
+    def on_stop(self):
+        if self.session:
+            self.session.close()
+        self._save_settings_quietly()
+
+    def _save_settings_quietly(self):
+        try:
+            self.settings.save(self.settings_path)
+        except OSError as e:
+            self.warning = f"settings not saved: {e}"
+
+    def _on_key(self, window, key, *args):
+        if key == 27 and self.root.ids.screens.current != "track":  # Android back: to the track first
+            self.root.ids.screens.current = "track"
+            return True
+        return False
+
+    def _on_flip(self, *_):
+        self.frames += 1
+
+    # -- sessions ------------------------------------------------------------------------
+
+    def _replace_session(self, session: Session, mode: str, raw_path: str | None):
+        if self.session:
+            self.session.close()
+        self.session = session
+        self.mode = mode
+        self.raw_path = raw_path
+        self._end_handled = False
+        self.calibrating = False
+        self.track_view.follow = True
+        self.track_view.set_track([0.0], [0.0])
+        self.track_view.set_heading(math.nan)
+        self.source_text = session.source.describe()
+        self.warning = session.source.warning
+        self._update_ui(force=True)
+
+    def open_recording(self, path: str) -> bool:
+        try:
+            rec = load_any_recording(path)
+            source = ReplaySource(rec, speed=REPLAY_SPEEDS[self.speed_label])
+        except Exception as e:  # noqa: BLE001 - RecordingError, ValueError, OSError: show, don't crash
+            self.warning = f"cannot replay {os.path.basename(path)}: {e}"
+            return False
+        self._replace_session(Session(source, pipeline_factory=self._pipeline_factory()), "replay", path)
+        if rec.repairs:
+            self.warning = f"{len(rec.repairs)} repair(s) while reading: " + rec.repairs[0]
+        self.message = f"replaying {os.path.basename(path)} ({rec.duration_s:.0f} s)"
+        self.session.start()
+        self.playing = True
+        return True
+
+    def start_live(self) -> bool:
+        try:
+            source = make_live_source(rate_hz=self.settings.rate_hz)
+        except Exception as e:  # noqa: BLE001
+            self.warning = f"no sensors: {e}"
+            return False
+        path = None
+        if self.settings.record_live:
+            try:
+                path = new_recording_path(self.out_dir())
+            except OSError as e:
+                self.warning = f"not recording: {e}"
+        session = Session(source, pipeline_factory=self._pipeline_factory(), record_path=path,
+                          metadata=self._recording_metadata())
+        self._replace_session(session, "live", path)
+        session.start()
+        self.recording_label = os.path.basename(path) if path else ""
+        self.message = f"recording to {path}" if path else "live (not recording)"
+        self.playing = True
+        return True
+
+    def _recording_metadata(self) -> dict:
+        s = self.settings
+        from core import __version__  # noqa: PLC0415
+
+        return {"app": f"pdr-app {__version__}", "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "height_m": s.height_m, "stride_c": s.stride_c, "rate_hz": s.rate_hz}
+
+    def toggle_recording(self):
+        """Live: stop the running recording, or start a new one."""
+        ses = self.session
+        if not ses or self.mode != "live":
+            return
+        if ses.writer is not None:
+            ses.writer.close()
+            ses.writer = None
+            self.message = f"saved {ses.record_path}"
+            self.recording_label = ""
+        else:
+            ses.record_path = new_recording_path(self.out_dir())
+            ses._record_meta = (None, self._recording_metadata())
+            ses.start()
+            self.raw_path = ses.record_path
+            self.recording_label = os.path.basename(ses.record_path)
+            self.message = f"recording to {ses.record_path}"
+
+    @mainthread
+    def _request_android_permissions(self):
+        try:
+            from android.permissions import Permission, request_permissions  # noqa: PLC0415 - p4a module
+        except ImportError:
+            self.start_live()
+            return
+        perms = [Permission.ACCESS_FINE_LOCATION, Permission.ACCESS_COARSE_LOCATION]
+        try:
+            from jnius import autoclass  # noqa: PLC0415
+
+            if autoclass("android.os.Build$VERSION").SDK_INT <= 28:
+                perms.append(Permission.WRITE_EXTERNAL_STORAGE)
+        except Exception:  # noqa: BLE001
+            pass
+
+        def done(permissions, grants):  # called on the Android UI thread
+            Clock.schedule_once(lambda dt: self.start_live(), 0)
+
+        request_permissions(perms, done)
+
+    # -- replay controls -----------------------------------------------------------------
+
+    def toggle_play(self):
+        ses = self.session
+        if not ses:
+            return
+        if ses.running:
+            ses.pause()
+        else:
+            if self.mode == "replay" and ses.finished:
+                self.seek_start()
+            ses.resume()
+        self.playing = ses.running
+
+    def seek_start(self):
+        ses = self.session
+        if not ses or self.mode != "replay":
+            return
+        ses.source.seek_start()
+        ses.reset_track()
+        self._end_handled = False
+        self.track_view.follow = True
+        self.track_view.set_track([0.0], [0.0])
+        self._update_ui(force=True)
+
+    def set_speed(self, label: str):
+        if label not in REPLAY_SPEEDS:
+            return
+        self.speed_label = label
+        self.settings.replay_speed = label
+        if self.session and self.mode == "replay":
+            self.session.source.set_speed(REPLAY_SPEEDS[label])
+
+    def new_track(self):
+        """Start a new track with the current settings (live: the recording goes on)."""
+        ses = self.session
+        if not ses:
+            return
+        if self.mode == "replay":
+            ses.pipeline_factory = self._pipeline_factory()
+            self.seek_start()
+            return
+        ses.pipeline_factory = self._pipeline_factory()
+        ses.reset_track()
+        self.track_view.set_track([0.0], [0.0])
+        self._update_ui(force=True)
+
+    # -- calibration ---------------------------------------------------------------------
+
+    def toggle_calibration(self):
+        ses = self.session
+        if not ses:
+            self.calib_message = "start a live session (or a replay) first"
+            return
+        if not self.calibrating:
+            ses.start_calibration()
+            self.calibrating = True
+            self._calib_walked = None
+            self.calib_message = "walk the known distance, then stop"
+        else:
+            self._calib_walked = ses.stop_calibration()
+            self.calibrating = False
+            self.calib_text = f"measured {self._calib_walked:.1f} m"
+            self.calib_message = "enter the known distance and save"
+
+    def save_calibration(self, known_text: str):
+        walked = self._calib_walked
+        if walked is None:
+            self.calib_message = "do a calibration walk first"
+            return
+        try:
+            c = self.settings.apply_calibration(float(known_text), walked)
+        except (ValueError, CalibrationError) as e:
+            self.calib_message = str(e)
+            return
+        self.settings.save(self.settings_path)
+        self._settings_to_ui()
+        self.calib_message = f"C = {c:.3f} saved; press 'New track' to use it"
+        self._calib_walked = None
+
+    # -- export ----------------------------------------------------------------------------
+
+    def export(self):
+        ses = self.session
+        if not ses:
+            return None
+        base = os.path.splitext(os.path.basename(self.raw_path or "track"))[0]
+        if base.endswith((".csv", ".txt")):
+            base = os.path.splitext(base)[0]
+        out = export_session(ses, self.out_dir(), base, raw_path=self.raw_path)
+        written = [os.path.basename(v) for k, v in out.items() if k != "errors"]
+        self.message = f"exported to {self.out_dir()}: " + ", ".join(written)
+        if out["errors"]:
+            self.warning = "export: " + "; ".join(out["errors"])
+        return out
+
+    def show_file_chooser(self):
+        start = os.path.dirname(self.raw_path) if self.raw_path else os.path.expanduser("~")
+        chooser = FileChooserListView(path=start, filters=RECORDING_PATTERNS)
+        box = BoxLayout(orientation="vertical")
+        box.add_widget(chooser)
+        buttons = BoxLayout(size_hint_y=None, height="44dp")
+        popup = Popup(title="Open a recording", content=box, size_hint=(0.95, 0.9))
+
+        def _open(*_):
+            if chooser.selection:
+                popup.dismiss()
+                self.open_recording(chooser.selection[0])
+
+        ok = Button(text="Replay")
+        ok.bind(on_release=_open)
+        cancel = Button(text="Cancel")
+        cancel.bind(on_release=popup.dismiss)
+        buttons.add_widget(ok)
+        buttons.add_widget(cancel)
+        box.add_widget(buttons)
+        chooser.bind(on_submit=lambda *a: _open())
+        popup.open()
+        return popup
+
+    # -- the clock ---------------------------------------------------------------------------
+
+    def _tick(self, dt):
+        ses = self.session
+        if ses is None:
+            return
+        new = ses.tick()
+        now = time.monotonic()
+        if new or now - self._last_ui >= UI_INTERVAL_S:
+            self._update_ui(track_changed=bool(new))
+        if self.mode == "replay" and ses.finished and not self._end_handled:
+            self._end_handled = True
+            self._on_replay_end()
+
+    def _update_ui(self, force: bool = False, track_changed: bool = True):
+        ses = self.session
+        self._last_ui = time.monotonic()
+        if ses is None:
+            return
+        tv = self.track_view
+        if track_changed or force:
+            tv.set_track(ses.track_east, ses.track_north)
+        summ = ses.summary()
+        tv.set_heading(summ["heading_rad"])
+        self.steps_text = str(summ["steps"])
+        self.distance_text = f"{summ['distance_m']:.1f} m"
+        h = summ["heading_deg"]
+        self.heading_text = f"{h:.0f}°" if h == h else "–"
+        self.time_text = _fmt_time(summ["elapsed_s"])
+        if self.root.ids.screens.current == "health" or force:
+            self.health_text = ses.health_text()
+        if self.calibrating:
+            self.calib_text = f"walking: {ses.calibration_distance_m():.1f} m"
+        if self.mode == "replay":
+            self.progress = ses.source.progress
+        labels = summ["labels"]
+        if ses.errors:
+            self.warning = f"{ses.errors} pipeline error(s), last: {ses.last_error}"
+        elif labels and not ses.source.warning:
+            self.warning = "; ".join(labels)
+        self.playing = ses.running and not (self.mode == "replay" and ses.finished)
+
+    def _on_replay_end(self):
+        ses = self.session
+        self.playing = False
+        self._update_ui(force=True)
+        self.track_view.fit()
+        s = ses.summary()
+        self.message = f"replay finished: {s['steps']} steps, {s['distance_m']:.1f} m"
+        if self.screenshot_path or self.report_path or self.exit_at_end:
+            self._end_frames = self.frames
+            Clock.schedule_interval(self._wait_frames_then_finish, 0)
+
+    def _wait_frames_then_finish(self, dt):
+        # take the screenshot after a few rendered frames, not at a wall-clock time
+        if self.frames - self._end_frames < 6:
+            return True
+        if self.screenshot_path:
+            self.save_screenshot(self.screenshot_path)
+        if self.report_path:
+            self.write_report(self.report_path)
+        if self.exit_at_end:
+            self.stop()
+        return False
+
+    def save_screenshot(self, path: str) -> str:
+        """Window screenshot to exactly ``path`` (Kivy adds a counter to the name it is given)."""
+        base, ext = os.path.splitext(os.path.abspath(path))
+        written = Window.screenshot(name=base + "-tmp" + (ext or ".png"))
+        os.replace(written, path)
+        return path
+
+    def report(self) -> dict:
+        """What is on screen, for tests and scripts."""
+        ses = self.session
+        tv = self.track_view
+        vp = tv.vp
+        wx, wy = tv.to_window(tv.x, tv.y)  # the track screen is a RelativeLayout
+        out = {"mode": self.mode, "window_size": list(Window.size), "frames": self.frames,
+               "paused": self.paused_count, "resumed": self.resumed_count,
+               # the view rectangle in window pixels (y up), metres -> pixels by scale and center
+               "view": {"x": wx, "y": wy, "width": tv.width, "height": tv.height, "scale": vp.scale,
+                        "center": list(vp.center), "follow": tv.follow},
+               "status": {"steps": self.steps_text, "distance": self.distance_text,
+                          "heading": self.heading_text, "time": self.time_text},
+               "warning": self.warning, "message": self.message}
+        if ses:
+            out.update(summary={k: v for k, v in ses.summary().items() if k != "labels"},
+                       track_east=ses.track_east, track_north=ses.track_north, events=ses.events_in,
+                       errors=ses.errors, health=ses.health_text(), finished=ses.finished)
+        return out
+
+    def write_report(self, path: str) -> None:
+        with open(path, "w", encoding="utf-8") as f:
+            json.dump(self.report(), f, indent=1, default=float)

@@ -1,0 +1,341 @@
+"""One tracking session, without Kivy: source -> reorder -> Pipeline, recorder, health, track.
+
+The Kivy app calls :meth:`Session.tick` from its clock (about 30 times a
+second) and only draws what the session holds.  Everything here is plain
+Python so that it is tested without a window.
+
+Event flow per tick::
+
+    source.drain()  --(raw, as delivered)-->  RecordingWriter.add  (flushed every flush_interval_s)
+          |
+          v
+    reorder buffer (events held reorder_window_ns, released in time order,
+                    ties in core.recording.STREAM_ORDER)
+          |
+          v
+    HealthMonitor.accept  (drops events that still go backwards in their stream)
+          |
+          v
+    Pipeline.update  ->  new steps -> track
+
+At the end of a finite source the buffer is flushed and ``Pipeline.finish``
+completes the last steps, so a replay gives exactly the batch result of
+:meth:`core.pipeline.Pipeline.run`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import os
+import shutil
+import time
+from typing import Callable
+
+from core.conventions import GPS, bearing_deg
+from core.recording import STREAM_ORDER, STREAM_SPECS, RecordingWriter
+
+from app.health import HealthMonitor
+
+_RANK = {n: i for i, n in enumerate(STREAM_ORDER)}
+
+
+def load_any_recording(path: str):
+    """Read any recording ``core`` can read: ``core.importers.load_recording`` when it exists, else the
+    project format, else the GetSensorData importer if the file looks like one."""
+    try:
+        from core.importers import load_recording  # noqa: PLC0415 - the importers' dispatcher
+    except ImportError:
+        load_recording = None
+    if load_recording is not None:
+        return load_recording(path)
+    from core.recording import RecordingError, read_recording  # noqa: PLC0415
+
+    try:
+        return read_recording(path)
+    except RecordingError:
+        try:
+            from core.importers import getsensordata  # noqa: PLC0415
+            from core.importers._common import head_bytes, maybe_gunzip  # noqa: PLC0415
+
+            head = maybe_gunzip(head_bytes(path), path).decode("utf-8", "replace")
+            if getsensordata.looks_like(head):
+                return getsensordata.read_getsensordata(path)
+        except ImportError:
+            pass
+        raise
+
+
+def _good_fix(vals, max_hacc_m: float = 30.0) -> bool:
+    """A GNSS fix usable as the track's origin (finite, accuracy unknown or within ``max_hacc_m``)."""
+    lat, lon = vals[0], vals[1]
+    hacc = vals[3] if len(vals) > 3 else math.nan
+    return math.isfinite(lat) and math.isfinite(lon) and not (hacc > max_hacc_m)
+
+
+class Session:
+    """A live or replayed walk.
+
+    Parameters
+    ----------
+    source : app.sources.SensorSource
+    pipeline_factory : callable
+        ``() -> core.pipeline.Pipeline`` (called again on :meth:`reset_track`).
+    record_path : str, optional
+        Write every event (as delivered, before reordering) to this file.
+    flush_interval_s : float
+        The recording is flushed (and fsync'ed) at least this often while events come.
+    reorder_window_ns : int
+        How long events wait so that late events of other sensors can be put in order.
+    clock : callable
+        Wall clock in seconds (tests inject one).
+    """
+
+    def __init__(self, source, *, pipeline_factory: Callable, record_path: str | None = None,
+                 record_streams: dict | None = None, device: dict | None = None, metadata: dict | None = None,
+                 flush_interval_s: float = 0.5, reorder_window_ns: int = 50_000_000,
+                 clock: Callable[[], float] = time.monotonic):
+        self.source = source
+        self.pipeline_factory = pipeline_factory
+        self.flush_interval_s = float(flush_interval_s)
+        self.reorder_window_ns = int(reorder_window_ns)
+        self._clock = clock
+        self.writer: RecordingWriter | None = None
+        self.record_path = record_path
+        self._record_streams = record_streams
+        self._record_meta = (device, metadata)
+        self._last_flush = clock()
+        self.errors = 0
+        self.last_error = ""
+        self.events_in = 0
+        self.reset_track()
+
+    # -- track state ------------------------------------------------------------
+
+    def reset_track(self) -> None:
+        """Start a new track (new pipeline, empty track and health); the recording goes on."""
+        self.pipeline = self.pipeline_factory()
+        self.steps: list = []
+        self.track_east = [0.0]
+        self.track_north = [0.0]
+        self.health = HealthMonitor()
+        self._heap: list = []
+        self._seq = 0
+        self._max_t: int | None = None
+        self.first_t_ns: int | None = None
+        self.last_t_ns: int | None = None
+        self.gps_origin: tuple | None = None
+        self.finished = False
+        self._cal_start_m: float | None = None
+
+    # -- lifecycle ----------------------------------------------------------------
+
+    def start(self) -> None:
+        """Start the source, then (if asked) open the recording with the source's device description."""
+        self.source.start()
+        if self.record_path and self.writer is None:
+            device, metadata = self._record_meta
+            streams = self._record_streams or {n: STREAM_SPECS[n] for n in ("acc", "gyro", "mag", "gps")}
+            dev = dict(self.source.device)
+            dev.update(device or {})
+            meta = dict(metadata or {})
+            if self.source.unix_offset_ns is not None:
+                meta.setdefault("unix_offset_ns", int(self.source.unix_offset_ns))
+            self.writer = RecordingWriter(self.record_path, streams=streams, device=dev, metadata=meta)
+            self._last_flush = self._clock()
+
+    def pause(self) -> None:
+        """Stop the source (sensors off on Android, replay paused) and flush the recording."""
+        self.source.stop()
+        self.flush()
+
+    def resume(self) -> None:
+        self.source.start()
+
+    @property
+    def running(self) -> bool:
+        return bool(self.source.running)
+
+    def close(self) -> None:
+        """Stop the source, finish the track and close the recording."""
+        self.source.stop()
+        self._finish()
+        if self.writer is not None:
+            self.writer.close()
+
+    def flush(self) -> None:
+        if self.writer is not None:
+            self.writer.flush()
+        self._last_flush = self._clock()
+
+    # -- processing ---------------------------------------------------------------
+
+    def tick(self, budget_s: float = 0.025, chunk: int = 1000) -> list:
+        """Drain the source for at most ``budget_s`` of wall time; returns the steps completed."""
+        new: list = []
+        deadline = self._clock() + budget_s
+        while True:
+            events = self.source.drain(chunk)
+            if events:
+                self.ingest(events, new)
+            if not events or len(events) < chunk or self._clock() >= deadline:
+                break
+        if self.source.finished and not self.finished:
+            new.extend(self._finish())
+        if self.writer is not None and self._clock() - self._last_flush >= self.flush_interval_s:
+            self.flush()
+        return new
+
+    def ingest(self, events, new: list | None = None) -> list:
+        """Record, reorder and process ``events``; returns (or extends ``new`` with) completed steps."""
+        new = [] if new is None else new
+        writer = self.writer
+        heap = self._heap
+        for ev in events:
+            name, t = ev[0], ev[1]
+            if writer is not None:
+                writer.add(name, t, ev[2])
+            heapq.heappush(heap, (t, _RANK.get(name, len(_RANK)), self._seq, ev))
+            self._seq += 1
+            if self._max_t is None or t > self._max_t:
+                self._max_t = t
+        self.events_in += len(events)
+        if self._max_t is not None:
+            limit = self._max_t - self.reorder_window_ns
+            while heap and heap[0][0] <= limit:
+                self._process(heapq.heappop(heap)[3], new)
+        return new
+
+    def _process(self, ev, new: list) -> None:
+        name, t, vals = ev
+        if not self.health.accept(name, t):
+            return  # went backwards in its stream beyond the reorder window: dropped, counted
+        if self.first_t_ns is None:
+            self.first_t_ns = t
+        self.last_t_ns = t
+        if name == GPS and self.gps_origin is None and _good_fix(vals):
+            self.gps_origin = (float(vals[0]), float(vals[1]))
+        try:
+            steps = self.pipeline.update(name, t, vals)
+        except Exception as e:  # noqa: BLE001 - one bad event must not stop a live session
+            self.errors += 1
+            self.last_error = f"{type(e).__name__}: {e}"
+            return
+        if steps:
+            self._add_steps(steps, new)
+
+    def _add_steps(self, steps, new: list) -> None:
+        for s in steps:
+            self.steps.append(s)
+            self.track_east.append(float(s.east_m))
+            self.track_north.append(float(s.north_m))
+            new.append(s)
+
+    def _finish(self) -> list:
+        if self.finished:
+            return []
+        new: list = []
+        while self._heap:
+            self._process(heapq.heappop(self._heap)[3], new)
+        try:
+            steps = self.pipeline.finish()
+        except Exception as e:  # noqa: BLE001
+            self.errors += 1
+            self.last_error = f"{type(e).__name__}: {e}"
+            steps = []
+        self._add_steps(steps, new)
+        self.finished = True
+        return new
+
+    # -- what the UI shows ------------------------------------------------------------
+
+    def status(self):
+        return self.pipeline.status()
+
+    @property
+    def elapsed_s(self) -> float:
+        if self.first_t_ns is None or self.last_t_ns is None:
+            return 0.0
+        return (self.last_t_ns - self.first_t_ns) * 1e-9
+
+    def summary(self) -> dict:
+        """Numbers for the status strip."""
+        st = self.status()
+        heading = st.heading_rad
+        return {
+            "steps": len(self.steps),
+            "distance_m": float(sum(s.length_m for s in self.steps)),
+            "heading_deg": bearing_deg(heading) if heading == heading else math.nan,
+            "elapsed_s": self.elapsed_s,
+            "east_m": self.track_east[-1],
+            "north_m": self.track_north[-1],
+            "heading_rad": heading,
+            "mag_trusted": bool(st.mag_trusted),
+            "labels": tuple(st.labels),
+        }
+
+    def health_text(self) -> str:
+        self.health.mag_trusted = bool(self.status().mag_trusted) if self.last_t_ns is not None else None
+        return self.health.format(self.source.queue_drops(), self.source.accuracy())
+
+    def track(self):
+        from core.pipeline import Track  # noqa: PLC0415
+
+        return Track.from_steps(self.steps)
+
+    # -- calibration --------------------------------------------------------------------
+
+    def start_calibration(self) -> None:
+        self._cal_start_m = float(sum(s.length_m for s in self.steps))
+
+    @property
+    def calibrating(self) -> bool:
+        return self._cal_start_m is not None
+
+    def calibration_distance_m(self) -> float:
+        """Distance the pipeline measured since :meth:`start_calibration`."""
+        if self._cal_start_m is None:
+            return 0.0
+        return float(sum(s.length_m for s in self.steps)) - self._cal_start_m
+
+    def stop_calibration(self) -> float:
+        d = self.calibration_distance_m()
+        self._cal_start_m = None
+        return d
+
+
+def export_session(session: Session, out_dir: str, basename: str, raw_path: str | None = None) -> dict:
+    """Write the track as GeoJSON, GPX and CSV (``core.export``) and copy the raw recording as is.
+
+    Returns ``{"geojson": path, "gpx": path, "csv": path, "raw": path}`` for the
+    files written, and ``"errors"`` (a list) for what could not be written.
+    """
+    os.makedirs(out_dir, exist_ok=True)
+    out: dict = {"errors": []}
+    track = session.track()
+    origin = session.gps_origin
+    try:
+        from core import export  # noqa: PLC0415 - the lead's module
+    except ImportError as e:
+        out["errors"].append(f"track export unavailable: {e}")
+        export = None
+    if export is not None:
+        offset = session.source.unix_offset_ns
+        jobs = (("geojson", ".geojson", lambda p: export.write_track_geojson(p, track, origin_lat_lon=origin)),
+                ("gpx", ".gpx", lambda p: export.write_track_gpx(p, track, origin_lat_lon=origin,
+                                                                 unix_offset_ns=offset)),
+                ("csv", ".track.csv", lambda p: export.write_track_csv(p, track)))
+        for key, ext, fn in jobs:
+            path = os.path.join(out_dir, basename + ext)
+            try:
+                fn(path)
+                out[key] = path
+            except Exception as e:  # noqa: BLE001 - report, keep the other formats
+                out["errors"].append(f"{key}: {type(e).__name__}: {e}")
+    if raw_path and os.path.exists(raw_path):
+        session.flush()
+        dest = os.path.join(out_dir, os.path.basename(raw_path))
+        if os.path.abspath(dest) != os.path.abspath(raw_path):
+            shutil.copyfile(raw_path, dest)
+        out["raw"] = dest
+    return out

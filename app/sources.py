@@ -1,0 +1,738 @@
+"""Sensor sources: one interface that yields time-stamped events for the pipeline.
+
+Every source delivers *events* ``(stream, t_ns, values)`` exactly as
+:meth:`core.recording.Recording.events` does: ``stream`` is one of the names
+in :mod:`core.conventions` (``"acc"``, ``"gyro"``, ``"mag"``, ``"gps"``,
+``"rotvec"``), ``t_ns`` the integer nanosecond timestamp on the sensor clock,
+``values`` a tuple of floats in the units of :mod:`core`.
+
+The UI thread calls :meth:`SensorSource.drain` from the Kivy clock (about 30
+times a second) and hands the events to :class:`app.session.Session`.
+
+Sources
+-------
+:class:`ReplaySource`
+    Any :class:`core.recording.Recording`, played at 1x, 10x or as fast as
+    possible, with pause and seek-to-start.  Desktop replay and tests.
+:class:`AndroidSource`
+    The phone's accelerometer, gyroscope and magnetometer through our own
+    pyjnius ``SensorEventListener`` (one per sensor) registered at a
+    sampling period of ``1e6 / rate_hz`` microseconds on a background
+    ``HandlerThread``; every event keeps its ``SensorEvent.timestamp`` and is
+    pushed into a bounded :class:`EventQueue`.  GPS through our own
+    ``LocationListener`` stamped with ``Location.getElapsedRealtimeNanos()``
+    (the sensor clock), else plyer's GPS stamped with
+    ``SystemClock.elapsedRealtimeNanos()`` on arrival.  ``jnius`` is imported
+    lazily, only when the source starts (or injected, for tests).
+:class:`PlyerFallbackSource`
+    plyer's sensor facades (about 5 Hz, no timestamps: events are stamped
+    when polled).  Used only when the listener cannot start, with a visible
+    warning.
+
+Rates above 200 Hz are never requested: on Android 12+ that needs the
+``HIGH_SAMPLING_RATE_SENSORS`` permission and throws a SecurityException in
+debuggable builds without it.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import Counter, deque
+from typing import Callable, Iterable
+
+import numpy as np
+
+from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
+
+#: ``(stream, t_ns, values)``
+Event = tuple
+
+#: The streams the pipeline consumes (anything else in a recording is not replayed).
+PIPELINE_STREAMS = (ACC, GYRO, MAG, GPS, ROTVEC)
+
+#: Replay speeds offered by the UI: label -> factor (``inf`` = as fast as possible).
+REPLAY_SPEEDS = {"1x": 1.0, "10x": 10.0, "max": math.inf}
+
+#: Highest rate requested from Android without the HIGH_SAMPLING_RATE_SENSORS permission.
+MAX_RATE_HZ = 200.0
+
+#: ``android.hardware.Sensor.TYPE_*`` constants (fixed by the Android API).
+ANDROID_SENSOR_TYPES = {ACC: 1, MAG: 2, GYRO: 4, ROTVEC: 11}
+
+#: ``android.hardware.SensorManager.SENSOR_STATUS_*`` names for the health panel.
+ACCURACY_NAMES = {-1: "no contact", 0: "unreliable", 1: "low", 2: "medium", 3: "high"}
+
+
+class SensorStartError(RuntimeError):
+    """A source could not start (no jnius, no accelerometer, registration refused...)."""
+
+
+def sampling_period_us(rate_hz: float) -> int:
+    """Sampling period hint in microseconds for ``rate_hz``, never faster than :data:`MAX_RATE_HZ`."""
+    if not rate_hz > 0:
+        raise ValueError(f"sampling rate must be positive, got {rate_hz}")
+    return int(round(1e6 / min(float(rate_hz), MAX_RATE_HZ)))
+
+
+class EventQueue:
+    """Bounded FIFO between sensor callbacks (any thread) and the UI thread.
+
+    When full, the *oldest* event is discarded and counted in
+    :attr:`dropped` (per stream), so a stalled UI loses old data, never the
+    newest, and the loss is visible in the health panel.
+    """
+
+    def __init__(self, maxlen: int = 30000):
+        if maxlen < 1:
+            raise ValueError("queue length must be at least 1")
+        self.maxlen = int(maxlen)
+        self._q: deque = deque()
+        self._lock = threading.Lock()
+        self.dropped: Counter = Counter()
+        self.pushed = 0
+
+    def push(self, event: Event) -> None:
+        with self._lock:
+            if len(self._q) >= self.maxlen:
+                old = self._q.popleft()
+                self.dropped[old[0]] += 1
+            self._q.append(event)
+            self.pushed += 1
+
+    def drain(self, max_n: int | None = None) -> list:
+        """Remove and return up to ``max_n`` events (all if ``None``), oldest first."""
+        with self._lock:
+            if max_n is None or max_n >= len(self._q):
+                out = list(self._q)
+                self._q.clear()
+            else:
+                out = [self._q.popleft() for _ in range(max_n)]
+        return out
+
+    def clear(self) -> None:
+        with self._lock:
+            self._q.clear()
+
+    def __len__(self) -> int:
+        return len(self._q)
+
+
+class SensorSource:
+    """Interface of every source.
+
+    ``start()`` / ``stop()`` may be called repeatedly (the app stops sensors
+    in ``on_pause`` and restarts them in ``on_resume``); ``drain()`` returns
+    the events that arrived since the last call, oldest first.
+    """
+
+    #: short name shown in the UI
+    kind = "source"
+    #: True for sources fed by real sensors (recorded; never "finished")
+    live = False
+
+    def __init__(self):
+        #: a problem the user must see ('' when all is well)
+        self.warning = ""
+        #: device description for the recording header
+        self.device: dict = {}
+        self.running = False
+        #: Unix time minus sensor-clock time (ns), when known (GPX times)
+        self.unix_offset_ns: int | None = None
+
+    def start(self) -> None:
+        self.running = True
+
+    def stop(self) -> None:
+        self.running = False
+
+    def drain(self, max_events: int | None = None) -> list:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    @property
+    def finished(self) -> bool:
+        """True when a finite source has delivered all its events."""
+        return False
+
+    def queue_drops(self) -> dict:
+        """Events discarded by the source itself (queue overflow), per stream."""
+        return {}
+
+    def accuracy(self) -> dict:
+        """Last reported accuracy per stream (Android ``SENSOR_STATUS_*``), where known."""
+        return {}
+
+    def describe(self) -> str:
+        return self.kind
+
+
+# ---------------------------------------------------------------------------
+# desktop replay
+
+
+class ReplaySource(SensorSource):
+    """Play a :class:`~core.recording.Recording` in sensor-time order.
+
+    Parameters
+    ----------
+    recording : core.recording.Recording
+    speed : float
+        Replay speed factor; ``math.inf`` delivers as fast as the caller drains.
+    clock : callable
+        Wall clock in seconds (injectable for tests).
+    streams : iterable of str, optional
+        Streams to replay (default: those of :data:`PIPELINE_STREAMS` present).
+    max_chunk : int
+        Most events returned by one :meth:`drain` when no limit is given.
+    """
+
+    kind = "replay"
+
+    def __init__(self, recording, *, speed: float = 1.0, clock: Callable[[], float] = time.monotonic,
+                 streams: Iterable[str] | None = None, max_chunk: int = 2000):
+        super().__init__()
+        names = [n for n in (streams or PIPELINE_STREAMS) if recording.has(n)]
+        if not names:
+            raise ValueError(f"{recording.source or 'recording'}: nothing to replay "
+                             f"(no {', '.join(PIPELINE_STREAMS)} stream)")
+        self.recording = recording
+        self._order = recording.stream_order(names)
+        self._t, self._si, self._rows = recording.merged(self._order)
+        self._vals = [recording.streams[n].values.tolist() for n in self._order]
+        self._t_list = self._t.tolist()
+        self._si_list = self._si.tolist()
+        self._rows_list = self._rows.tolist()
+        self.t0_ns = int(self._t[0])
+        self.t1_ns = int(self._t[-1])
+        self._clock = clock
+        self.max_chunk = int(max_chunk)
+        self._pos = 0
+        self._elapsed_s = 0.0  # replay position (sensor seconds after t0) at the anchor
+        self._anchor: float | None = None
+        self.speed = float(speed)
+        self.device = dict(recording.device)
+        self.unix_offset_ns = recording.metadata.get("unix_offset_ns")
+
+    # -- position and control -------------------------------------------------
+
+    @property
+    def n_events(self) -> int:
+        return len(self._t_list)
+
+    @property
+    def delivered(self) -> int:
+        return self._pos
+
+    @property
+    def duration_s(self) -> float:
+        return (self.t1_ns - self.t0_ns) * 1e-9
+
+    def position_s(self) -> float:
+        """Replay position in sensor seconds after the first event."""
+        if self._anchor is not None and math.isfinite(self.speed):
+            return self._elapsed_s + (self._clock() - self._anchor) * self.speed
+        return self._elapsed_s
+
+    @property
+    def progress(self) -> float:
+        """Fraction of events delivered."""
+        return self._pos / self.n_events
+
+    @property
+    def finished(self) -> bool:
+        return self._pos >= self.n_events
+
+    def start(self) -> None:
+        if not self.running:
+            self.running = True
+            self._anchor = self._clock()
+
+    def stop(self) -> None:
+        """Pause: the position is kept; :meth:`start` continues from it."""
+        if self.running:
+            self._elapsed_s = self.position_s()
+            self._anchor = None
+            self.running = False
+
+    pause = stop
+    resume = start
+
+    def set_speed(self, speed: float) -> None:
+        if not speed > 0:
+            raise ValueError(f"replay speed must be positive, got {speed}")
+        if self.running:
+            self._elapsed_s = self.position_s()
+            self._anchor = self._clock()
+        if math.isinf(self.speed) and not math.isinf(speed):
+            self._elapsed_s = self._delivered_time_s()
+        self.speed = float(speed)
+
+    def seek_start(self) -> None:
+        """Back to the first event (the session starts a new track)."""
+        self._pos = 0
+        self._elapsed_s = 0.0
+        if self.running:
+            self._anchor = self._clock()
+
+    def _delivered_time_s(self) -> float:
+        return (self._t_list[self._pos - 1] - self.t0_ns) * 1e-9 if self._pos else 0.0
+
+    # -- events -------------------------------------------------------------------
+
+    def drain(self, max_events: int | None = None) -> list:
+        if not self.running or self.finished:
+            return []
+        n = self.max_chunk if max_events is None else int(max_events)
+        if math.isinf(self.speed):
+            end = min(self._pos + n, self.n_events)
+        else:
+            target = self.t0_ns + int(self.position_s() * 1e9)
+            end = int(np.searchsorted(self._t, target, side="right"))
+            end = min(max(end, self._pos), self._pos + n)
+        t, si, rows, order, vals = self._t_list, self._si_list, self._rows_list, self._order, self._vals
+        out = [(order[si[i]], t[i], tuple(vals[si[i]][rows[i]])) for i in range(self._pos, end)]
+        self._pos = end
+        if math.isinf(self.speed):
+            self._elapsed_s = self._delivered_time_s()
+        return out
+
+    def describe(self) -> str:
+        sp = "max" if math.isinf(self.speed) else f"{self.speed:g}x"
+        return f"replay {self.recording.source or ''} at {sp}".strip()
+
+
+# ---------------------------------------------------------------------------
+# Android: own pyjnius listeners
+
+
+_CLASS_CACHE: dict = {}
+
+
+def _java_classes(jnius):
+    """The PythonJavaClass listener classes, built once per ``jnius`` module.
+
+    They must subclass ``jnius.PythonJavaClass``, so they can only be defined
+    after ``jnius`` is imported (on the phone, or a fake one in tests).
+    """
+    key = id(jnius)
+    if key in _CLASS_CACHE:
+        return _CLASS_CACHE[key]
+    PythonJavaClass, java_method = jnius.PythonJavaClass, jnius.java_method
+
+    class SensorListener(PythonJavaClass):
+        """One listener per sensor, so the callback needs no ``event.sensor.getType()`` JNI calls."""
+
+        __javainterfaces__ = ["android/hardware/SensorEventListener"]
+        __javacontext__ = "app"
+
+        def __init__(self, stream, on_event, on_accuracy):
+            super().__init__()
+            self.stream = stream
+            self._on_event = on_event
+            self._on_accuracy = on_accuracy
+            self.errors = 0
+
+        @java_method("(Landroid/hardware/SensorEvent;)V")
+        def onSensorChanged(self, event):
+            # runs on the sensor HandlerThread: copy out, never raise into Java
+            try:
+                self._on_event(self.stream, event.timestamp, event.values)
+            except Exception:  # noqa: BLE001 - an exception here would crash the app in Java
+                self.errors += 1
+
+        @java_method("(Landroid/hardware/Sensor;I)V")
+        def onAccuracyChanged(self, sensor, accuracy):
+            try:
+                self._on_accuracy(self.stream, int(accuracy))
+            except Exception:  # noqa: BLE001
+                pass
+
+    class LocationListener(PythonJavaClass):
+        """GNSS fixes with ``Location.getElapsedRealtimeNanos()`` (the sensor clock)."""
+
+        __javainterfaces__ = ["android/location/LocationListener"]
+        __javacontext__ = "app"
+
+        def __init__(self, on_location):
+            super().__init__()
+            self._on_location = on_location
+
+        @java_method("(Landroid/location/Location;)V")
+        def onLocationChanged(self, location):
+            try:
+                self._on_location(location)
+            except Exception:  # noqa: BLE001
+                pass
+
+        # Android 12+ may deliver a batch (default method of the interface)
+        @java_method("(Ljava/util/List;)V", name="onLocationChanged")
+        def onLocationChangedList(self, locations):
+            try:
+                for i in range(locations.size()):
+                    self._on_location(locations.get(i))
+            except Exception:  # noqa: BLE001
+                pass
+
+        # abstract before API 29: must exist or Java calls raise NotImplementedError
+        @java_method("(Ljava/lang/String;)V")
+        def onProviderEnabled(self, provider):
+            pass
+
+        @java_method("(Ljava/lang/String;)V")
+        def onProviderDisabled(self, provider):
+            pass
+
+        @java_method("(Ljava/lang/String;ILandroid/os/Bundle;)V")
+        def onStatusChanged(self, provider, status, extras):
+            pass
+
+    _CLASS_CACHE[key] = (SensorListener, LocationListener)
+    return _CLASS_CACHE[key]
+
+
+def location_values(location) -> tuple:
+    """``(lat_deg, lon_deg, alt_m, hacc_m)`` of an ``android.location.Location`` (nan where unknown)."""
+    alt = float(location.getAltitude()) if location.hasAltitude() else math.nan
+    acc = float(location.getAccuracy()) if location.hasAccuracy() else math.nan
+    return (float(location.getLatitude()), float(location.getLongitude()), alt, acc)
+
+
+def rotvec_quaternion(values) -> tuple:
+    """Android ``TYPE_ROTATION_VECTOR`` values to an ENU<-device quaternion ``(w, x, y, z)``."""
+    x, y, z = float(values[0]), float(values[1]), float(values[2])
+    w = float(values[3]) if len(values) > 3 else math.sqrt(max(0.0, 1.0 - x * x - y * y - z * z))
+    return (w, x, y, z)
+
+
+class AndroidSource(SensorSource):
+    """Live sensors on Android through pyjnius listeners (see the module docstring).
+
+    Parameters
+    ----------
+    rate_hz : float
+        Requested sampling rate; a hint to Android, capped at :data:`MAX_RATE_HZ`.
+    streams : tuple of str
+        Sensor streams to register (``"acc"``, ``"gyro"``, ``"mag"``, optionally ``"rotvec"``).
+    gps : bool
+        Also start GNSS (needs the location permission granted at run time;
+        :meth:`start_gps` can be called again once it is).
+    jnius : module, optional
+        The ``jnius`` module; imported lazily when ``None`` (tests inject a fake).
+    queue_max : int
+        Capacity of the event queue (about 100 s at 3 x 100 Hz by default).
+    """
+
+    kind = "android"
+    live = True
+
+    def __init__(self, *, rate_hz: float = 100.0, streams=(ACC, GYRO, MAG), gps: bool = True,
+                 jnius=None, queue_max: int = 30000):
+        super().__init__()
+        self.rate_hz = float(rate_hz)
+        self.period_us = sampling_period_us(rate_hz)
+        self.streams = tuple(streams)
+        self.want_gps = gps
+        self.queue = EventQueue(queue_max)
+        self._jnius = jnius
+        self._accuracy: dict = {}
+        self.missing: list[str] = []
+        self.sensor_info: dict = {}
+        self.gps_status = "off"
+        self._listeners: list = []
+        self._location_listener = None
+        self._plyer_gps = None
+        self._sm = None
+        self._lm = None
+        self._thread = None
+        self.callback_errors = 0
+
+    # -- jnius access (lazy) -----------------------------------------------------
+
+    def _import_jnius(self):
+        if self._jnius is None:
+            try:
+                import jnius  # noqa: PLC0415 - Android only, deliberately lazy
+            except Exception as e:  # ImportError on the desktop; JVM errors on odd builds
+                raise SensorStartError(f"pyjnius not available: {e}") from e
+            self._jnius = jnius
+        return self._jnius
+
+    def _activity(self):
+        return self._jnius.autoclass("org.kivy.android.PythonActivity").mActivity
+
+    # -- callbacks (sensor thread) --------------------------------------------------
+
+    def _on_event(self, stream, t_ns, values):
+        if stream == ROTVEC:
+            vals = rotvec_quaternion(values)
+        else:
+            vals = (float(values[0]), float(values[1]), float(values[2]))
+        self.queue.push((stream, int(t_ns), vals))
+
+    def _on_accuracy(self, stream, accuracy):
+        self._accuracy[stream] = accuracy
+
+    def _on_location(self, location):
+        t_ns = int(location.getElapsedRealtimeNanos())
+        self.queue.push((GPS, t_ns, location_values(location)))
+
+    # -- lifecycle -------------------------------------------------------------------
+
+    def start(self) -> None:
+        if self.running:
+            return
+        jn = self._import_jnius()
+        try:
+            self._start_sensors(jn)
+        except SensorStartError:
+            self._unregister()
+            raise
+        except Exception as e:  # JavaException and friends
+            self._unregister()
+            raise SensorStartError(f"sensor listener failed to start: {e}") from e
+        self.running = True
+        if self.want_gps:
+            self.start_gps()
+
+    def _start_sensors(self, jn):
+        autoclass = jn.autoclass
+        Context = autoclass("android.content.Context")
+        activity = self._activity()
+        self._sm = activity.getSystemService(Context.SENSOR_SERVICE)
+        HandlerThread = autoclass("android.os.HandlerThread")
+        Handler = autoclass("android.os.Handler")
+        self._thread = HandlerThread("pdr-sensors")
+        self._thread.start()
+        handler = Handler(self._thread.getLooper())
+        SensorListener, _ = _java_classes(jn)
+        self.missing = []
+        for name in self.streams:
+            sensor = self._sm.getDefaultSensor(ANDROID_SENSOR_TYPES[name])
+            if sensor is None:
+                self.missing.append(name)
+                continue
+            listener = SensorListener(name, self._on_event, self._on_accuracy)
+            # (listener, sensor, samplingPeriodUs, maxReportLatencyUs=0: no batching, handler)
+            if not self._sm.registerListener(listener, sensor, self.period_us, 0, handler):
+                self.missing.append(name)
+                continue
+            self._listeners.append(listener)  # keep a Python reference while Java holds the proxy
+            self.sensor_info[name] = _sensor_info(sensor)
+        if ACC in self.missing or not self._listeners:
+            raise SensorStartError("no accelerometer could be registered")
+        self.warning = ("missing sensor(s): " + ", ".join(self.missing)) if self.missing else ""
+        self.device = {"platform": "android", "requested_rate_hz": min(self.rate_hz, MAX_RATE_HZ),
+                       "sampling_period_us": self.period_us, "sensors": dict(self.sensor_info)}
+        try:
+            clock = autoclass("android.os.SystemClock")
+            self.unix_offset_ns = int(time.time_ns() - int(clock.elapsedRealtimeNanos()))
+        except Exception:  # noqa: BLE001 - only used for absolute times in exports
+            self.unix_offset_ns = None
+        try:
+            Build = autoclass("android.os.Build")
+            VERSION = autoclass("android.os.Build$VERSION")
+            self.device.update(manufacturer=str(Build.MANUFACTURER), model=str(Build.MODEL),
+                               android_sdk=int(VERSION.SDK_INT))
+        except Exception:  # noqa: BLE001 - cosmetic
+            pass
+
+    def start_gps(self) -> bool:
+        """Start GNSS updates (own listener, else plyer); returns True when running."""
+        if self._location_listener is not None or self._plyer_gps is not None:
+            return True
+        jn = self._jnius
+        try:
+            autoclass = jn.autoclass
+            Context = autoclass("android.content.Context")
+            LocationManager = autoclass("android.location.LocationManager")
+            _, LocationListener = _java_classes(jn)
+            self._lm = self._activity().getSystemService(Context.LOCATION_SERVICE)
+            listener = LocationListener(self._on_location)
+            # (provider, minTimeMs, minDistanceM, listener, looper): fixes delivered on the sensor thread
+            self._lm.requestLocationUpdates(LocationManager.GPS_PROVIDER, 1000, 0.0, listener,
+                                            self._thread.getLooper())
+            self._location_listener = listener
+            self.gps_status = "on (LocationListener, elapsed-realtime timestamps)"
+            return True
+        except Exception as e:  # noqa: BLE001 - SecurityException without permission, etc.
+            own_error = e
+        try:
+            self._start_plyer_gps()
+            self.gps_status = "on (plyer, stamped on arrival)"
+            return True
+        except Exception as e:  # noqa: BLE001
+            self.gps_status = f"off ({own_error}; plyer: {e})"
+            return False
+
+    def _start_plyer_gps(self):
+        from plyer import gps  # noqa: PLC0415 - plyer only on the phone
+
+        SystemClock = self._jnius.autoclass("android.os.SystemClock")
+
+        def on_location(**kw):
+            t_ns = int(SystemClock.elapsedRealtimeNanos())
+            self.queue.push((GPS, t_ns, (float(kw["lat"]), float(kw["lon"]),
+                                         float(kw.get("altitude", math.nan)),
+                                         float(kw.get("accuracy", math.nan)))))
+
+        gps.configure(on_location=on_location)
+        gps.start(minTime=1000, minDistance=0)
+        self._plyer_gps = gps
+
+    def stop(self) -> None:
+        self._unregister()
+        self.running = False
+
+    def _unregister(self):
+        if self._sm is not None:
+            for listener in self._listeners:
+                try:
+                    self._sm.unregisterListener(listener)
+                except Exception:  # noqa: BLE001
+                    pass
+        self._listeners = []
+        if self._lm is not None and self._location_listener is not None:
+            try:
+                self._lm.removeUpdates(self._location_listener)
+            except Exception:  # noqa: BLE001
+                pass
+        self._location_listener = None
+        if self._plyer_gps is not None:
+            try:
+                self._plyer_gps.stop()
+            except Exception:  # noqa: BLE001
+                pass
+            self._plyer_gps = None
+        if self._thread is not None:
+            try:
+                self._thread.quitSafely()
+            except Exception:  # noqa: BLE001
+                pass
+            self._thread = None
+        self.gps_status = "off"
+
+    # -- consumer side -----------------------------------------------------------
+
+    def drain(self, max_events: int | None = None) -> list:
+        return self.queue.drain(max_events)
+
+    def queue_drops(self) -> dict:
+        return dict(self.queue.dropped)
+
+    def accuracy(self) -> dict:
+        return dict(self._accuracy)
+
+    @property
+    def listener_errors(self) -> int:
+        """Exceptions caught inside the sensor callbacks (each one lost an event)."""
+        return sum(getattr(lst, "errors", 0) for lst in self._listeners)
+
+    def describe(self) -> str:
+        return f"android sensors at {min(self.rate_hz, MAX_RATE_HZ):g} Hz (requested)"
+
+
+def _sensor_info(sensor) -> dict:
+    info = {}
+    for key, getter in (("name", "getName"), ("vendor", "getVendor"), ("min_delay_us", "getMinDelay"),
+                        ("resolution", "getResolution"), ("max_range", "getMaximumRange")):
+        try:
+            v = getattr(sensor, getter)()
+            info[key] = v if isinstance(v, (int, float)) else str(v)
+        except Exception:  # noqa: BLE001 - informational only
+            pass
+    return info
+
+
+# ---------------------------------------------------------------------------
+# plyer fallback
+
+
+PLYER_FALLBACK_WARNING = ("Sensor listener unavailable, using plyer at about 5 Hz without sensor timestamps: "
+                          "step timing and heading are unreliable")
+
+
+class PlyerFallbackSource(SensorSource):
+    """plyer's accelerometer / gyroscope / compass facades, polled from the UI clock.
+
+    plyer keeps only the latest value and no timestamp, so each *changed*
+    value is stamped with ``clock()`` when it is polled (a repeated value is
+    assumed to be the same event).  Always carries :data:`PLYER_FALLBACK_WARNING`.
+    """
+
+    kind = "plyer"
+    live = True
+
+    def __init__(self, *, plyer=None, clock: Callable[[], int] = time.monotonic_ns, reason: str = ""):
+        super().__init__()
+        self._plyer = plyer
+        self._clock = clock
+        self.reason = reason
+        self.warning = PLYER_FALLBACK_WARNING + (f" ({reason})" if reason else "")
+        self._facades: dict = {}
+        self._last: dict = {}
+        self.device = {"platform": "android", "source": "plyer (SENSOR_DELAY_NORMAL, poll-time stamps)"}
+
+    def start(self) -> None:
+        if self.running:
+            return
+        if self._plyer is None:
+            import plyer  # noqa: PLC0415
+
+            self._plyer = plyer
+        wanted = {ACC: ("accelerometer", "acceleration"), GYRO: ("gyroscope", "rotation"),
+                  MAG: ("compass", "field")}
+        self._facades = {}
+        for name, (facade, attr) in wanted.items():
+            try:
+                f = getattr(self._plyer, facade)
+                f.enable()
+                self._facades[name] = (f, attr)
+            except Exception:  # noqa: BLE001 - NotImplementedError on desktop, missing sensor
+                pass
+        if ACC not in self._facades:
+            raise SensorStartError("plyer accelerometer unavailable")
+        self.running = True
+
+    def stop(self) -> None:
+        for f, _ in self._facades.values():
+            try:
+                f.disable()
+            except Exception:  # noqa: BLE001
+                pass
+        self._facades = {}
+        self.running = False
+
+    def drain(self, max_events: int | None = None) -> list:
+        if not self.running:
+            return []
+        t = int(self._clock())
+        out = []
+        for name, (f, attr) in self._facades.items():
+            try:
+                v = getattr(f, attr)
+            except Exception:  # noqa: BLE001
+                continue
+            if v is None or len(v) < 3 or any(x is None for x in v[:3]):
+                continue
+            vals = (float(v[0]), float(v[1]), float(v[2]))
+            if self._last.get(name) == vals:
+                continue
+            self._last[name] = vals
+            out.append((name, t, vals))
+        return out
+
+
+def make_live_source(*, rate_hz: float = 100.0, gps: bool = True, jnius=None, plyer=None) -> SensorSource:
+    """Start the Android listener source, or plyer's facades with a visible warning.
+
+    Returns a *started* source.  Raises :class:`SensorStartError` if neither works.
+    """
+    src = AndroidSource(rate_hz=rate_hz, gps=gps, jnius=jnius)
+    try:
+        src.start()
+        return src
+    except SensorStartError as e:
+        fallback = PlyerFallbackSource(plyer=plyer, reason=str(e))
+        fallback.start()
+        return fallback

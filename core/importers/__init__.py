@@ -1,0 +1,167 @@
+"""Importers: recordings of other phone apps, converted once at the edge to :mod:`core`'s conventions.
+
+::
+
+    from core.importers import detect_format, load_recording
+    fmt = detect_format(path)        # "pdr-recording" | "getsensordata" | "sensorlogger" | "phyphox"
+    rec = load_recording(path)       # a core.recording.Recording (t_ns int64, SI, Android axes, ENU quaternions)
+
+Formats (name: input -> reader):
+
+* ``pdr-recording``: this project's file (``.gz`` allowed) -> :func:`core.recording.read_recording`
+* ``getsensordata``: GetSensorData / IPIN logfile (``.txt`` or ``.gz``) -> :func:`read_getsensordata`
+* ``sensorlogger``: Sensor Logger export, zip or folder (or a CSV inside it) -> :func:`read_sensorlogger`
+  (``platform="android"|"ios"`` when the export has no Metadata.csv)
+* ``phyphox``: phyphox CSV export, zip or folder (or one data CSV) -> :func:`read_phyphox`
+
+The format is recognised by content (magic line, record tags, CSV headers,
+archive members), never by the file name alone.  Every reader raises
+:class:`core.recording.RecordingError` -- one line naming the file and, where
+it applies, the line -- for input it cannot read, and finishes with
+:func:`core.recording.repair_recording` (timestamps sorted, repeats dropped,
+with a :class:`core.recording.TimestampRepairWarning`).
+
+Every recording carries ``metadata["source_format"]``, the app and its
+version where known, ``metadata["time_base"]`` (what ``t_ns`` is), and when
+absolute time is known ``metadata["unix_offset_ns"]`` (``unix_ns = t_ns +
+unix_offset_ns``; survives slicing) and ``metadata["t0_unix_ns"]`` (Unix time
+of the first event at import).  Streams besides ``acc``, ``gyro``, ``mag``,
+``rotvec`` and ``gps``: ``posi`` (GetSensorData ground-truth landmarks),
+``pressure`` (hPa), ``mag_uncal`` and ``gyro_uncal`` (Sensor Logger).
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+
+from core.recording import MAGIC, Recording, RecordingError, parse_recording, read_recording
+from core.importers import getsensordata as _gsd
+from core.importers import phyphox as _phy
+from core.importers import sensorlogger as _sl
+from core.importers._common import GZIP_MAGIC, FileSet, decode_text, head_bytes, read_bytes
+from core.importers.getsensordata import read_getsensordata
+from core.importers.phyphox import read_phyphox
+from core.importers.sensorlogger import read_sensorlogger
+
+PDR_RECORDING = "pdr-recording"
+GETSENSORDATA = _gsd.FORMAT
+SENSORLOGGER = _sl.FORMAT
+PHYPHOX = _phy.FORMAT
+
+#: format name -> what it is (for messages and the CLI's help)
+FORMATS = {
+    PDR_RECORDING: "this project's recording file (.txt/.gz starting '# pdr-recording')",
+    GETSENSORDATA: "GetSensorData / IPIN logfile (ACCE;... GYRO;... lines, .txt or .gz)",
+    SENSORLOGGER: "Sensor Logger export (zip or folder of Accelerometer.csv, Gyroscope.csv, ... with "
+                  "'time,seconds_elapsed' headers)",
+    PHYPHOX: "phyphox CSV export (zip or folder with 'Time (s)' CSVs and meta/, or one such CSV)",
+}
+
+
+_SHORT = {
+    PDR_RECORDING: "pdr-recording (this project's file)",
+    GETSENSORDATA: "getsensordata (GetSensorData/IPIN logfile)",
+    SENSORLOGGER: "sensorlogger (Sensor Logger zip or folder)",
+    PHYPHOX: "phyphox (phyphox CSV export)",
+}
+
+
+def _unknown(path: str, why: str) -> RecordingError:
+    return RecordingError(f"unrecognised recording format ({why}); supported: {', '.join(_SHORT.values())}", path)
+
+
+def _detect_text(head: str) -> str | None:
+    if head.startswith(MAGIC):
+        return PDR_RECORDING
+    if _gsd.looks_like(head):
+        return GETSENSORDATA
+    if _sl.looks_like_csv(head):
+        return SENSORLOGGER
+    if _phy.looks_like_csv(head):
+        return PHYPHOX
+    return None
+
+
+def _detect_fileset(fs: FileSet) -> str | None:
+    names = fs.names()
+    csvs = [n for n in names if n.lower().endswith(".csv")]
+    if _phy.looks_like_meta(names):
+        return PHYPHOX
+    for n in csvs:
+        if n.split("/")[-1].lower() == "metadata.csv" and _sl.looks_like_metadata(fs.head(n)):
+            return SENSORLOGGER
+    votes = {SENSORLOGGER: 0, PHYPHOX: 0}
+    for n in csvs[:40]:
+        head = fs.head(n, 2048)
+        if _sl.looks_like_csv(head):
+            votes[SENSORLOGGER] += 1
+        elif _phy.looks_like_csv(head):
+            votes[PHYPHOX] += 1
+    if votes[SENSORLOGGER] or votes[PHYPHOX]:
+        return max(votes, key=votes.get)
+    return None
+
+
+def detect_format(path) -> str:
+    """The format of ``path`` (file or folder), from its content; :class:`RecordingError` if unknown."""
+    path = str(path)
+    if not os.path.exists(path):
+        raise RecordingError("cannot open: no such file or folder", path)
+    if os.path.isdir(path):
+        with FileSet(path) as fs:
+            fmt = _detect_fileset(fs)
+        if fmt is None:
+            raise _unknown(path, "a folder without Sensor Logger or phyphox CSV files")
+        return fmt
+    try:
+        head = head_bytes(path, 65536)
+    except OSError as e:
+        raise RecordingError(f"cannot open: {e.strerror or e}", path) from None
+    if head[:4] in (b"PK\x03\x04", b"PK\x05\x06"):
+        try:
+            with FileSet(path) as fs:
+                fmt = _detect_fileset(fs)
+        except (zipfile.BadZipFile, OSError) as e:
+            raise RecordingError(f"unreadable zip archive: {e}", path) from None
+        if fmt is None:
+            raise _unknown(path, "a zip archive without Sensor Logger or phyphox CSV files")
+        return fmt
+    if not head.strip():
+        raise _unknown(path, "empty file")
+    if b"\x00" in head[:1024]:
+        raise _unknown(path, "binary data")
+    fmt = _detect_text(head.decode("utf-8", errors="replace").lstrip("\ufeff"))
+    if fmt is None:
+        raise _unknown(path, "the content matches none of them")
+    return fmt
+
+
+def load_recording(path, *, warn: bool = True, platform: str | None = None) -> Recording:
+    """Read any supported recording (see :data:`FORMATS`) into a :class:`Recording` in :mod:`core`'s conventions.
+
+    ``warn``: emit :class:`core.recording.TimestampRepairWarning` for repaired
+    timestamps (the repair is always listed in ``rec.repairs``).
+    ``platform``: "android" or "ios" for a Sensor Logger export without
+    Metadata.csv (ignored by the other formats).
+    """
+    path = str(path)
+    fmt = detect_format(path)
+    if fmt == PDR_RECORDING:
+        with open(path, "rb") as f:
+            gz = f.read(2) == GZIP_MAGIC
+        if gz == path.endswith(".gz"):
+            rec = read_recording(path, warn=warn)
+        else:  # read_recording decides on gzip by the name; this file's name says otherwise
+            rec = parse_recording(decode_text(read_bytes(path), path), path, warn=warn)
+        rec.metadata.setdefault("source_format", PDR_RECORDING)
+        return rec
+    if fmt == GETSENSORDATA:
+        return read_getsensordata(path, warn=warn)
+    if fmt == SENSORLOGGER:
+        return read_sensorlogger(path, platform=platform, warn=warn)
+    return read_phyphox(path, warn=warn)
+
+
+__all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",
+           "read_phyphox", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX"]

@@ -1,0 +1,362 @@
+"""Shared helpers of the importers: file access, fast numeric parsing, attitude checks.
+
+Nothing here knows a particular app's format; the format modules call these
+helpers and keep every unit, axis and sign conversion in their own code.
+"""
+
+from __future__ import annotations
+
+import gzip
+import math
+import os
+import zipfile
+
+import numpy as np
+
+from core.conventions import STANDARD_GRAVITY_M_S2
+from core.recording import Recording, RecordingError, repair_recording
+
+GZIP_MAGIC = b"\x1f\x8b"
+ZIP_MAGIC = b"PK\x03\x04"
+ZIP_EMPTY_MAGIC = b"PK\x05\x06"
+
+#: extra stream names the importers may add besides those of :mod:`core.conventions`
+POSI = "posi"  #: ground-truth landmarks (GetSensorData POSI lines)
+PRESSURE = "pressure"  #: barometer, hPa (= mbar, as Android reports it)
+MAG_UNCAL = "mag_uncal"  #: uncalibrated magnetometer, uT, device axes (hard iron not removed)
+GYRO_UNCAL = "gyro_uncal"  #: uncalibrated gyroscope, rad/s, device axes (bias not removed)
+
+EXTRA_STREAM_SPECS: dict[str, dict] = {
+    PRESSURE: {"columns": ["p_hpa"], "unit": "hPa", "note": "barometric pressure (hPa = mbar, as Android reports it)"},
+    MAG_UNCAL: {"columns": ["x", "y", "z"], "unit": "uT", "note": "magnetometer without the OS hard-iron correction"},
+    GYRO_UNCAL: {"columns": ["x", "y", "z"], "unit": "rad/s", "note": "gyroscope without the OS bias correction"},
+}
+
+
+# ---------------------------------------------------------------------------
+# reading files: plain, gzip, inside a folder or a zip archive
+
+
+def read_bytes(path: str) -> bytes:
+    """The bytes of ``path`` (gzip-decompressed when it starts with the gzip magic)."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as e:
+        raise RecordingError(f"cannot open: {e.strerror or e}", path) from None
+    return maybe_gunzip(data, path)
+
+
+def maybe_gunzip(data: bytes, source: str) -> bytes:
+    if data[:2] == GZIP_MAGIC:
+        try:
+            return gzip.decompress(data)
+        except (OSError, EOFError) as e:
+            raise RecordingError(f"corrupt gzip data: {e}", source) from None
+    return data
+
+
+def decode_text(data: bytes, source: str) -> str:
+    """UTF-8 text (a BOM is dropped; Latin-1 as a fallback: units like 'µT' are the only non-ASCII)."""
+    if data[:3] == b"\xef\xbb\xbf":
+        data = data[3:]
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")
+    if "\x00" in text[:4096]:
+        raise RecordingError("binary data where text was expected", source)
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    return text
+
+
+def head_bytes(path: str, n: int = 65536) -> bytes:
+    """The first ``n`` bytes of a file, decompressed when it is gzip (for format detection)."""
+    with open(path, "rb") as f:
+        raw = f.read(n)
+    if raw[:2] == GZIP_MAGIC:
+        try:
+            with gzip.open(path, "rb") as g:
+                return g.read(n)
+        except (OSError, EOFError):
+            return b""
+    return raw
+
+
+class FileSet:
+    """A folder or a zip archive of files, addressed by their path inside it ('/'-separated).
+
+    ``name.csv.gz`` is served as ``name.csv`` (decompressed), so a folder whose
+    large files were gzip-compressed reads like the original export.
+    """
+
+    def __init__(self, path: str):
+        self.path = str(path)
+        self._zip: zipfile.ZipFile | None = None
+        self._real: dict[str, str] = {}
+        if os.path.isdir(self.path):
+            for root, _dirs, files in os.walk(self.path):
+                for fn in files:
+                    full = os.path.join(root, fn)
+                    rel = os.path.relpath(full, self.path).replace(os.sep, "/")
+                    self._add(rel, full)
+        else:
+            try:
+                self._zip = zipfile.ZipFile(self.path)
+            except (OSError, zipfile.BadZipFile) as e:
+                raise RecordingError(f"not a folder or a readable zip archive: {e}", self.path) from None
+            for info in self._zip.infolist():
+                if not info.is_dir():
+                    self._add(info.filename, info.filename)
+
+    def _add(self, rel: str, real: str) -> None:
+        if rel.startswith("__MACOSX/") or rel.split("/")[-1].startswith("._"):
+            return  # resource forks added by macOS zip tools
+        name = rel[:-3] if rel.lower().endswith(".gz") else rel
+        self._real.setdefault(name, real)
+
+    def names(self) -> list[str]:
+        return sorted(self._real)
+
+    def where(self, name: str) -> str:
+        """A path for messages: ``archive.zip/inner.csv`` or the real file."""
+        real = self._real[name]
+        return f"{self.path}/{real}" if self._zip is not None else real
+
+    def read_bytes(self, name: str) -> bytes:
+        real = self._real[name]
+        try:
+            if self._zip is not None:
+                data = self._zip.read(real)
+            else:
+                with open(real, "rb") as f:
+                    data = f.read()
+        except (OSError, zipfile.BadZipFile, EOFError) as e:
+            raise RecordingError(f"cannot read: {e}", self.where(name)) from None
+        return maybe_gunzip(data, self.where(name))
+
+    def read_text(self, name: str) -> str:
+        return decode_text(self.read_bytes(name), self.where(name))
+
+    def head(self, name: str, n: int = 4096) -> str:
+        real = self._real[name]
+        try:
+            if self._zip is not None:
+                with self._zip.open(real) as f:
+                    raw = f.read(n)
+                if raw[:2] == GZIP_MAGIC:
+                    raw = maybe_gunzip(self._zip.read(real), real)[:n]
+            else:
+                raw = head_bytes(real, n)
+        except (OSError, zipfile.BadZipFile, EOFError, RecordingError):
+            return ""
+        return raw.decode("utf-8", errors="replace").lstrip("\ufeff")
+
+    def close(self) -> None:
+        if self._zip is not None:
+            self._zip.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+# ---------------------------------------------------------------------------
+# fast numeric tables
+
+
+def first_bad_number(fields: list[str]) -> int | None:
+    """Index of the first field that ``float()`` rejects, or ``None``."""
+    for j, s in enumerate(fields):
+        try:
+            float(s)
+        except ValueError:
+            return j
+    return None
+
+
+#: largest time (s) that fits int64 nanoseconds with room to spare
+MAX_TIME_S = 9.0e9
+
+
+def first_bad_time(t_s: np.ndarray) -> int | None:
+    """Index of the first time (s) that is not finite or does not fit int64 nanoseconds, or ``None``."""
+    bad = ~np.isfinite(t_s)
+    bad[~bad] = np.abs(t_s[~bad]) > MAX_TIME_S
+    idx = np.flatnonzero(bad)
+    return int(idx[0]) if len(idx) else None
+
+
+# ---------------------------------------------------------------------------
+# quaternions, vectorised (n, 4) arrays (w, x, y, z); R(q) rotates device vectors into ENU
+
+
+def quat_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Hamilton product of (n, 4) or (4,) arrays (broadcasting)."""
+    p = np.asarray(p, dtype=np.float64)
+    q = np.asarray(q, dtype=np.float64)
+    pw, px, py, pz = np.moveaxis(p, -1, 0)
+    qw, qx, qy, qz = np.moveaxis(q, -1, 0)
+    return np.stack([
+        pw * qw - px * qx - py * qy - pz * qz,
+        pw * qx + px * qw + py * qz - pz * qy,
+        pw * qy - px * qz + py * qw + pz * qx,
+        pw * qz + px * qy - py * qx + pz * qw,
+    ], axis=-1)
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotation matrices of (n, 4) unit quaternions (``v_n = R v_b``)."""
+    w, x, y, z = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+    ], axis=-2)
+
+
+def quat_about_axis(axis: int, angle_rad: np.ndarray) -> np.ndarray:
+    """Quaternions of rotations by ``angle_rad`` about the x (0), y (1) or z (2) axis."""
+    a = np.asarray(angle_rad, dtype=np.float64) * 0.5
+    q = np.zeros(a.shape + (4,))
+    q[..., 0] = np.cos(a)
+    q[..., 1 + axis] = np.sin(a)
+    return q
+
+
+def canonical_sign(q: np.ndarray) -> np.ndarray:
+    """The same rotations with ``w >= 0`` (q and -q are one rotation)."""
+    q = np.array(q, dtype=np.float64)
+    flip = q[..., 0] < 0
+    q[flip] = -q[flip]
+    return q
+
+
+def device_y_bearing_deg(mat_nb: np.ndarray) -> np.ndarray:
+    """Compass bearing (deg, clockwise from North) of the horizontal projection of the device y axis."""
+    return np.degrees(np.arctan2(mat_nb[..., 0, 1], mat_nb[..., 1, 1]))
+
+
+def wrap_deg(a):
+    return (np.asarray(a) + 180.0) % 360.0 - 180.0
+
+
+def tilt_compensated_bearing_deg(acc_b: np.ndarray, mag_b: np.ndarray) -> np.ndarray:
+    """Bearing (deg) of the device y axis from gravity and the magnetic field (both device frame).
+
+    ``up = acc/|acc|`` (Android sign: at rest the accelerometer points up),
+    ``east = mag x up``, ``north = up x east``; the bearing is
+    ``atan2(east . y_b, north . y_b)`` -- the same as Android's
+    ``getRotationMatrix`` + ``getOrientation`` azimuth.
+    """
+    with np.errstate(invalid="ignore", divide="ignore"):
+        up = acc_b / np.linalg.norm(acc_b, axis=-1, keepdims=True)
+        east = np.cross(mag_b, up)
+        east = east / np.linalg.norm(east, axis=-1, keepdims=True)
+        north = np.cross(up, east)
+    return np.degrees(np.arctan2(east[..., 1], north[..., 1]))
+
+
+def sample_at(t_src: np.ndarray, v_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
+    """Rows of ``v_src`` at times ``t_dst``: linear interpolation per column, clamped at the ends."""
+    ts = (t_src - t_src[0]).astype(np.float64)
+    td = (t_dst - t_src[0]).astype(np.float64)
+    return np.stack([np.interp(td, ts, v_src[:, j]) for j in range(v_src.shape[1])], axis=-1)
+
+
+def attitude_checks(t_q: np.ndarray, q: np.ndarray, t_acc: np.ndarray, acc: np.ndarray,
+                    t_mag: np.ndarray | None = None, mag: np.ndarray | None = None,
+                    max_samples: int = 5000) -> dict:
+    """How well an ENU<-device quaternion stream agrees with the raw sensors.
+
+    ``tilt_err_deg``: median angle between ``R(q) up_b`` and ENU up, over
+    samples where ``|acc|`` is within 1 m/s^2 of g (the accelerometer then
+    measures mostly gravity).  ``heading_diff_deg``: median absolute
+    difference between the bearing of the device y axis from ``q`` and from
+    the tilt-compensated magnetometer (``nan`` without a magnetometer).
+    """
+    out = {"tilt_err_deg": float("nan"), "heading_diff_deg": float("nan"), "n": 0}
+    if len(t_q) < 2 or len(t_acc) < 2:
+        return out
+    step = max(1, len(t_q) // max_samples)
+    tq = t_q[::step]
+    qq = q[::step]
+    a = sample_at(t_acc, acc, tq)
+    na = np.linalg.norm(a, axis=1)
+    calm = np.abs(na - STANDARD_GRAVITY_M_S2) < 1.0
+    if calm.sum() < 10:
+        return out
+    m = quat_to_matrix(qq[calm])
+    up_b = a[calm] / na[calm, None]
+    up_n = np.einsum("nij,nj->ni", m, up_b)
+    out["tilt_err_deg"] = float(np.median(np.degrees(np.arccos(np.clip(up_n[:, 2], -1.0, 1.0)))))
+    out["n"] = int(calm.sum())
+    if t_mag is not None and mag is not None and len(t_mag) >= 2:
+        mg = sample_at(t_mag, mag, tq[calm])
+        ok = np.linalg.norm(mg, axis=1) > 1.0
+        if ok.sum() >= 10:
+            d = wrap_deg(device_y_bearing_deg(m[ok]) - tilt_compensated_bearing_deg(up_b[ok], mg[ok]))
+            out["heading_diff_deg"] = float(np.median(np.abs(d)))
+    return out
+
+
+def magnetic_dip_deg(t_acc, acc, t_mag, mag) -> float:
+    """Median inclination (deg) of the field below the horizon, from gravity and the magnetometer.
+
+    Positive means the field points down, as in the northern hemisphere; a
+    sign error in the accelerometer or magnetometer axes flips it.
+    """
+    if t_acc is None or t_mag is None or len(t_acc) < 2 or len(t_mag) < 2:
+        return float("nan")
+    step = max(1, len(t_mag) // 5000)
+    tm = t_mag[::step]
+    mg = mag[::step]
+    a = sample_at(t_acc, acc, tm)
+    na = np.linalg.norm(a, axis=1)
+    nm = np.linalg.norm(mg, axis=1)
+    ok = (np.abs(na - STANDARD_GRAVITY_M_S2) < 1.0) & (nm > 1.0)
+    if ok.sum() < 10:
+        return float("nan")
+    s = -np.einsum("ij,ij->i", a[ok], mg[ok]) / (na[ok] * nm[ok])
+    return float(np.median(np.degrees(np.arcsin(np.clip(s, -1.0, 1.0)))))
+
+
+# ---------------------------------------------------------------------------
+# the end of every importer
+
+
+def acceleration_in_m_s2(acc: np.ndarray, what: str, source: str, repairs: list[str]) -> np.ndarray:
+    """Accelerometer values (gravity included) in m/s^2: values in g are converted, anything else is an error."""
+    m = float(np.median(np.linalg.norm(acc, axis=1)))
+    if 0.6 < m < 1.4:
+        repairs.append(f"{source}: acceleration median |a| = {m:.3f}: values are in g, converted to m/s^2")
+        return acc * STANDARD_GRAVITY_M_S2
+    if not (0.6 * STANDARD_GRAVITY_M_S2 < m < 1.4 * STANDARD_GRAVITY_M_S2):
+        raise RecordingError(f"acceleration ({what}) has median magnitude {m:.3g}, neither about 9.8 m/s^2 nor "
+                             "about 1 g: cannot establish its unit (is it linear acceleration without gravity?)",
+                             source)
+    return acc
+
+
+def finish(rec: Recording, *, warn: bool = True) -> Recording:
+    """Drop empty streams, check there is data, repair timestamps (with a warning)."""
+    rec.streams = {k: s for k, s in rec.streams.items() if len(s)}
+    if not rec.streams:
+        raise RecordingError("no sensor events found", rec.source or None)
+    return repair_recording(rec, warn=warn)
+
+
+def json_safe(obj):
+    """Metadata with non-finite floats replaced by ``None`` and numpy scalars by Python ones (valid JSON)."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj

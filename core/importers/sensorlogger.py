@@ -1,0 +1,415 @@
+"""Reader for Sensor Logger exports (the iOS/Android app by Kelvin Choi, tszheichoi).
+
+Input: the exported zip, or the folder it unpacks to (files may also be
+``name.csv.gz``), or any one CSV inside such a folder (the folder is read).
+One CSV per sensor, a header line, comma-separated numbers::
+
+    time,seconds_elapsed,z,y,x                     (Accelerometer, Gravity, Gyroscope, Magnetometer, ...)
+    time,seconds_elapsed,qz,qy,qx,qw,roll,pitch,yaw                              (Orientation)
+    time,seconds_elapsed,horizontalAccuracy,speed,bearing,altitude,longitude,latitude (Location; more
+                                                                                   columns in newer versions)
+    time,seconds_elapsed,relativeAltitude,pressure                              (Barometer)
+
+Columns are found by name, so their order does not matter.  ``Metadata.csv``
+(one header and one row: version, device name, recording time, platform,
+appVersion, ...) gives the platform.
+
+Facts used (Sensor Logger documentation, awesome-sensor-logger UNITS.md,
+COORDINATES.md, CROSSPLATFORM.md, ORIENTATION.md; checked on the v1.12
+Android recording in ``../shared/data/sensorlogger_gps_walk_ethz``)
+=====================================================================
+Time
+    ``time`` is integer nanoseconds since the Unix epoch, ``seconds_elapsed``
+    seconds since the recording started; on the ETH file ``time -
+    seconds_elapsed * 1e9`` is one constant (the start, with ms resolution)
+    within float rounding (+-250 ns) across all files, and every stream is
+    strictly increasing.  Here ``t_ns = time - start_ns`` (nanoseconds since
+    the recording started, keeping the exact ``time`` differences) and
+    ``metadata["unix_offset_ns"] = start_ns`` (``unix_ns = t_ns + unix_offset_ns``).
+Android (platform "android")
+    Every sensor is in the Android device frame and Android units.
+    ``TotalAcceleration.csv`` is ``TYPE_ACCELEROMETER`` (m/s^2 with gravity)
+    and is taken as ``acc`` unchanged; ``Accelerometer.csv`` is the linear
+    acceleration (gravity removed) and ``Gravity.csv`` the OS gravity
+    estimate -- their sum is used when TotalAcceleration is missing.
+    Gyroscope rad/s, Magnetometer uT, both calibrated by the OS; the
+    ``*Uncalibrated.csv`` files become ``gyro_uncal`` / ``mag_uncal``.
+    Orientation is ``TYPE_ROTATION_VECTOR``: ``(qw, qx, qy, qz)`` rotates
+    device vectors into East-North-Up (magnetic north); its ``yaw`` is the
+    Android azimuth (clockwise), ``pitch = asin(-R[2,1])``, ``roll =
+    atan2(-R[2,0], R[2,2])`` -- checked on a public Android sample row.
+iOS (platform "ios"), default settings
+    Accelerometer.csv is the user acceleration (gravity removed, CoreMotion
+    ``userAcceleration``) and Gravity.csv the gravity, both already
+    converted to m/s^2 by the app, but **with the opposite sign on all three
+    axes** (CoreMotion reports the inertial force: flat and still, gravity
+    reads -z on iOS and +z on Android).  So ``acc = -(Accelerometer +
+    Gravity)``.  AccelerometerUncalibrated.csv is in g, also negated:
+    ``acc = -9.80665 * raw`` (used only when nothing better exists).
+    Gyroscope (rad/s) and Magnetometer (uT) have the same axes and signs as
+    Android and are copied.  Orientation is CoreMotion's attitude in the
+    ``xTrueNorthZVertical`` frame: ``q`` rotates device vectors into a
+    North-West-Up frame referenced to **true** north (yaw 0 when the device x
+    axis points north, counter-clockwise positive).  ENU<-device is
+    ``qz(+90 deg) (x) q``.
+iOS with "Standardise Units & Frames" (app >= 1.29)
+    The app already converts to the Android definitions (acc sign, units).
+    It is recognised by a Metadata.csv column whose name contains
+    "standardis"/"standardiz" with a true value; otherwise the default is
+    assumed.
+Checks made on the data (results in ``metadata``)
+    * the acceleration magnitude must be about 1 g: a median |acc| near 1
+      means the values are in g (converted, noted in ``repairs``); anything
+      else not near 9.8 m/s^2 is a :class:`RecordingError`;
+    * the orientation convention is verified against the accelerometer (the
+      quaternion must turn the measured up vector to ENU up) and the
+      magnetometer (device-y bearing from the quaternion vs. the
+      tilt-compensated compass); if the platform's documented convention
+      fails and another (conjugate, or the other frame) passes, that one is
+      used and the switch is noted in ``repairs``;
+    * ``metadata["mag_dip_deg"]``: the field's inclination below the horizon
+      (positive in the northern hemisphere); a sign error would flip it.
+Cannot be converted (:class:`RecordingError`)
+    linear acceleration without gravity (Accelerometer.csv with no Gravity.csv
+    or TotalAcceleration.csv); an unknown platform when the signs depend on it
+    (no Metadata.csv and no TotalAcceleration.csv: pass ``platform=``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+
+import numpy as np
+
+from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC, STANDARD_GRAVITY_M_S2
+from core.recording import Recording, RecordingError, make_stream
+from core.importers._common import (acceleration_in_m_s2, 
+    EXTRA_STREAM_SPECS, GYRO_UNCAL, MAG_UNCAL, PRESSURE, FileSet, attitude_checks, canonical_sign, finish,
+    json_safe, magnetic_dip_deg, quat_about_axis, quat_multiply, sample_at,
+)
+from core.importers._csv import Table
+
+FORMAT = "sensorlogger"
+
+#: files this reader uses (lower-case base name without .csv)
+KNOWN = ("accelerometer", "totalacceleration", "gravity", "gyroscope", "gyroscopeuncalibrated", "magnetometer",
+         "magnetometeruncalibrated", "accelerometeruncalibrated", "orientation", "location", "barometer", "metadata")
+
+HEADER_START = "time,seconds_elapsed"
+
+
+def looks_like_csv(head: str) -> bool:
+    first = head.lstrip("\ufeff").split("\n", 1)[0].strip().lower()
+    return first.startswith(HEADER_START)
+
+
+def looks_like_metadata(head: str) -> bool:
+    first = head.lstrip("\ufeff").split("\n", 1)[0].strip().lower()
+    return "platform" in first and ("appversion" in first or "device name" in first)
+
+
+def _recording_files(fs: FileSet) -> dict[str, str]:
+    """lower-case base name -> name in the file set, for one recording."""
+    by_base: dict[str, list[str]] = {}
+    for name in fs.names():
+        base = name.split("/")[-1]
+        if base.lower().endswith(".csv"):
+            by_base.setdefault(base[:-4].lower(), []).append(name)
+    dup = {b: n for b, n in by_base.items() if len(n) > 1 and b in KNOWN}
+    if dup:
+        folders = sorted({n.rsplit("/", 1)[0] if "/" in n else "." for ns in dup.values() for n in ns})
+        raise RecordingError(f"holds several Sensor Logger recordings (folders {', '.join(folders)}); "
+                             f"read one folder at a time", fs.path)
+    return {b: n[0] for b, n in by_base.items()}
+
+
+def _read_metadata(fs: FileSet, name: str | None) -> dict:
+    """Metadata.csv: a header and one row (values may be quoted and contain commas)."""
+    if name is None:
+        return {}
+    rows = [r for r in csv.reader(io.StringIO(fs.read_text(name))) if r]
+    if len(rows) < 2:
+        return {}
+    head, row = rows[0], rows[1]
+    return {h.strip(): (row[i].strip() if i < len(row) else "") for i, h in enumerate(head)}
+
+
+class _Sensor:
+    """One Sensor Logger CSV: times and named value columns."""
+
+    def __init__(self, fs: FileSet, name: str):
+        self.where = fs.where(name)
+        text = fs.read_text(name)
+        self.empty = not text.strip()  # the app leaves a 0-byte file for a sensor that delivered nothing
+        if self.empty:
+            self.table = None
+            return
+        self.table = Table(text, self.where)
+        self.empty = len(self.table) == 0
+        if self.empty:
+            return
+        ti = self.table.require(["time"], "Sensor Logger file")[0]
+        self.time = self.table.columns([ti], dtype=np.int64)[:, 0]
+        si = self.table.index("seconds_elapsed")
+        # seconds_elapsed only fixes the recording start: the first rows suffice
+        self.elapsed = self.table.columns([si], max_rows=2000)[:, 0] if si is not None else None
+
+    def cols(self, names: list[str], optional: bool = False) -> np.ndarray:
+        idx = self.table.require(names, "Sensor Logger file")
+        return self.table.columns(idx, empty_ok=optional)
+
+    def xyz(self) -> np.ndarray:
+        # Sensor Logger writes z, y, x; take them by name
+        return self.cols(["x", "y", "z"])
+
+
+def read_sensorlogger(path: str, *, platform: str | None = None, warn: bool = True) -> Recording:
+    """Read a Sensor Logger export (zip, folder, or a CSV inside the folder); see the module doc.
+
+    ``platform`` ("android" or "ios") overrides or replaces Metadata.csv.
+    """
+    path = str(path)
+    if not os.path.exists(path):
+        raise RecordingError("cannot open: no such file or folder", path)
+    root = path
+    if os.path.isfile(path) and path.lower().endswith((".csv", ".csv.gz")):
+        root = os.path.dirname(os.path.abspath(path))
+    # non-finite values pass through as data, without numpy warnings
+    with FileSet(root) as fs, np.errstate(all="ignore"):
+        return _read(fs, root, platform, warn)
+
+
+def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Recording:
+    files = _recording_files(fs)
+    if not any(k in files for k in KNOWN if k != "metadata"):
+        raise RecordingError("no Sensor Logger sensor files (Accelerometer.csv, Gyroscope.csv, ...) found", source)
+    md = _read_metadata(fs, files.get("metadata"))
+    repairs: list[str] = []
+    sensors: dict[str, _Sensor] = {}
+    for base in KNOWN:
+        if base in files and base != "metadata":
+            s = _Sensor(fs, files[base])
+            if s.table is not None and s.table.dropped_tail:
+                repairs.append(f"{s.where}: dropped an incomplete last line {s.table.dropped_tail}")
+            if not s.empty:
+                sensors[base] = s
+    ignored = sorted(files[b].split("/")[-1] for b in files if b not in KNOWN)
+    empty = sorted(files[b].split("/")[-1] for b in files if b in KNOWN and b != "metadata" and b not in sensors)
+
+    # -- platform and sign convention
+    platform = (platform_arg or md.get("platform", "")).strip().lower()
+    if platform in ("iphone", "ipados", "watchos"):
+        platform = "ios"
+    if not platform:
+        if "totalacceleration" in sensors:
+            platform = "android"  # only the Android app writes TotalAcceleration.csv
+        else:
+            raise RecordingError("cannot tell whether this was recorded on iOS or Android (no Metadata.csv and no "
+                                 "TotalAcceleration.csv), and the acceleration sign depends on it; pass "
+                                 "platform='android' or platform='ios'", source)
+    if platform not in ("android", "ios"):
+        raise RecordingError(f"unknown platform {platform!r} in Metadata.csv (expected android or ios)", source)
+    standardised = any(("standardis" in k.lower() or "standardiz" in k.lower())
+                       and v.strip().lower() in ("true", "1", "yes", "on") for k, v in md.items())
+    ios_native = platform == "ios" and not standardised
+    # iOS (default settings) reports acceleration and gravity as inertial force: every axis negated
+    acc_sign = -1.0 if ios_native else 1.0
+
+    # -- time base: nanoseconds since the recording started
+    offsets = []
+    for s in sensors.values():
+        ok = np.isfinite(s.elapsed) & (np.abs(s.elapsed) < 1e9) if s.elapsed is not None else None
+        if ok is not None and ok.any():
+            d = s.time[:len(s.elapsed)][ok] - np.rint(s.elapsed[ok] * 1e9).astype(np.int64)
+            offsets.append(int(np.median(d - d.min())) + int(d.min()))
+    if offsets:
+        start_ns = int(np.median(np.array(offsets, dtype=np.int64) - min(offsets))) + min(offsets)
+        time_source = "time - seconds_elapsed (recording start, Unix ns)"
+    else:
+        start_ns = min(int(s.time[0]) for s in sensors.values())
+        time_source = "first 'time' value (no seconds_elapsed column)"
+
+    def t_of(s: _Sensor) -> np.ndarray:
+        return s.time - start_ns
+
+    streams = {}
+    notes = {}
+    # -- acceleration, gravity included, Android sign
+    if "totalacceleration" in sensors:
+        s = sensors["totalacceleration"]
+        acc_t, acc_v = t_of(s), acc_sign * s.xyz()
+        notes["acc_from"] = "TotalAcceleration.csv"
+    elif "accelerometer" in sensors and "gravity" in sensors:
+        s, g = sensors["accelerometer"], sensors["gravity"]
+        lin, grav = s.xyz(), g.xyz()
+        if len(g.time) == len(s.time) and np.array_equal(g.time, s.time):
+            grav_at = grav
+        else:
+            grav_at = sample_at(g.time, grav, s.time)  # gravity is smooth: interpolate to the acc times
+        acc_t, acc_v = t_of(s), acc_sign * (lin + grav_at)
+        notes["acc_from"] = "Accelerometer.csv + Gravity.csv"
+    elif "accelerometeruncalibrated" in sensors:
+        s = sensors["accelerometeruncalibrated"]
+        scale = -STANDARD_GRAVITY_M_S2 if ios_native else 1.0  # iOS: g and inertial sign
+        acc_t, acc_v = t_of(s), scale * s.xyz()
+        notes["acc_from"] = "AccelerometerUncalibrated.csv"
+    elif "accelerometer" in sensors:
+        s = sensors["accelerometer"]
+        v = s.xyz()
+        m = float(np.median(np.linalg.norm(v, axis=1)))
+        if not (0.6 * STANDARD_GRAVITY_M_S2 < m < 1.4 * STANDARD_GRAVITY_M_S2):
+            raise RecordingError("Accelerometer.csv is acceleration without gravity (median |a| = "
+                                 f"{m:.2f} m/s^2) and there is no Gravity.csv or TotalAcceleration.csv to "
+                                 "restore it; the pipeline needs acceleration including gravity", source)
+        acc_t, acc_v = t_of(s), acc_sign * v
+        notes["acc_from"] = "Accelerometer.csv (it includes gravity: median |a| = %.2f m/s^2)" % m
+    else:
+        acc_t = acc_v = None
+    if acc_v is not None and len(acc_v):
+        acc_v = acceleration_in_m_s2(acc_v, notes["acc_from"], source, repairs)
+        streams[ACC] = make_stream(ACC, acc_t, acc_v)
+
+    # -- gyroscope and magnetometer: same axes, signs and units on both platforms
+    for cal, uncal, name, extra in (("gyroscope", "gyroscopeuncalibrated", GYRO, GYRO_UNCAL),
+                                    ("magnetometer", "magnetometeruncalibrated", MAG, MAG_UNCAL)):
+        if cal in sensors:
+            s = sensors[cal]
+            v, t = s.xyz(), t_of(s)
+            if name == MAG:
+                # a magnetometer that has no calibration yet can deliver exact zeros: not a field reading
+                zero = np.all(v == 0.0, axis=1)
+                if zero.any():
+                    notes["mag_zero_rows_dropped"] = int(zero.sum())
+                    v, t = v[~zero], t[~zero]
+            streams[name] = make_stream(name, t, v)
+        if uncal in sensors:
+            s = sensors[uncal]
+            spec = EXTRA_STREAM_SPECS[extra]
+            streams[extra] = make_stream(extra, t_of(s), s.xyz(), spec["columns"], spec["unit"], spec["note"])
+            if cal not in sensors:
+                streams[name] = make_stream(name, t_of(s), s.xyz(),
+                                            note=f"uncalibrated ({os.path.basename(s.where)}): no calibrated file")
+                notes[f"{name}_from"] = "uncalibrated file"
+
+    # -- location
+    if "location" in sensors:
+        s = sensors["location"]
+        lat, lon = s.cols(["latitude", "longitude"]).T
+        alt = s.cols(["altitude"], optional=True)[:, 0] if s.table.index("altitude") is not None else \
+            np.full(len(lat), np.nan)
+        hacc = s.cols(["horizontalAccuracy"], optional=True)[:, 0] \
+            if s.table.index("horizontalAccuracy") is not None else np.full(len(lat), np.nan)
+        hacc = np.where(hacc > 0, hacc, np.nan)  # negative = invalid
+        streams[GPS] = make_stream(GPS, t_of(s), np.column_stack([lat, lon, alt, hacc]),
+                                   note="GNSS/fused location (Sensor Logger Location.csv); alt_m above the WGS-84 "
+                                        "ellipsoid; hacc_m = horizontalAccuracy")
+
+    # -- barometer
+    if "barometer" in sensors:
+        s = sensors["barometer"]
+        spec = EXTRA_STREAM_SPECS[PRESSURE]
+        streams[PRESSURE] = make_stream(PRESSURE, t_of(s), s.cols(["pressure"]), spec["columns"], spec["unit"],
+                                        spec["note"])
+
+    meta: dict = {}
+    # -- orientation
+    if "orientation" in sensors:
+        s = sensors["orientation"]
+        qw, qx, qy, qz = s.cols(["qw", "qx", "qy", "qz"]).T
+        q_raw = np.column_stack([qw, qx, qy, qz])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            q_raw = q_raw / np.linalg.norm(q_raw, axis=1, keepdims=True)
+        good = np.all(np.isfinite(q_raw), axis=1)
+        t_rot = t_of(s)[good]
+        q_raw = q_raw[good]
+        q_enu, label, check = _orientation_to_enu(platform, standardised, t_rot, q_raw, streams, repairs, source)
+        north = "true north" if (platform == "ios" and "NWU" in label) else "magnetic north"
+        streams[ROTVEC] = make_stream(ROTVEC, t_rot, q_enu,
+                                      note=f"Sensor Logger Orientation.csv as an ENU<-device quaternion "
+                                           f"(w, x, y, z); heading relative to {north}")
+        meta["rotvec_convention"] = label
+        meta["rotvec_north"] = north
+        meta["rotvec_check"] = check
+
+    if not streams:
+        raise RecordingError("no usable sensor data (all Sensor Logger files empty?)", source)
+    if ACC in streams and MAG in streams:
+        a, m = streams[ACC], streams[MAG]
+        meta["mag_dip_deg"] = magnetic_dip_deg(a.t_ns, a.values, m.t_ns, m.values)
+
+    device = {"platform": platform, "app": "Sensor Logger"}
+    if md.get("device name"):
+        device["model"] = md["device name"]
+    meta.update({
+        "source_format": FORMAT,
+        "app": "Sensor Logger",
+        "app_version": md.get("appVersion", ""),
+        "metadata_version": md.get("version", ""),
+        "recording_time": md.get("recording time", ""),
+        "standardised_units_frames": standardised,
+        "time_base": "t_ns = time - unix_offset_ns (ns since the recording started)",
+        "unix_offset_ns": start_ns,
+        "unix_time_source": time_source,
+        "files_read": sorted(os.path.basename(sensors[b].where) for b in sensors),
+        "files_empty": empty,
+        "ignored_files": ignored,
+        **notes,
+    })
+    if md.get("sensors") and md.get("sampleRateMs"):
+        names = md["sensors"].split("|")
+        rates = md["sampleRateMs"].split("|")
+        meta["sample_rate_ms"] = {n: r for n, r in zip(names, rates)}
+    rec = Recording(streams, device=device, metadata=meta, repairs=repairs, source=source)
+    rec = finish(rec, warn=warn)
+    rec.metadata["t0_unix_ns"] = rec.t0_ns + start_ns
+    rec.metadata = json_safe(rec.metadata)
+    return rec
+
+
+# ---------------------------------------------------------------------------
+# orientation conventions
+
+_QZ90 = quat_about_axis(2, np.array(math.pi / 2))  # ENU <- NWU: a +90 deg turn about up
+
+
+def _candidates(q: np.ndarray) -> dict[str, np.ndarray]:
+    conj = q * np.array([1.0, -1.0, -1.0, -1.0])
+    return {
+        "q is ENU<-device (Android rotation vector)": q,
+        "q is NWU<-device, x true north (iOS CoreMotion xTrueNorthZVertical)": quat_multiply(_QZ90, q),
+        "conjugate q is ENU<-device": conj,
+        "conjugate q is NWU<-device": quat_multiply(_QZ90, conj),
+    }
+
+
+def _orientation_to_enu(platform, standardised, t_rot, q_raw, streams, repairs, source):
+    cands = _candidates(q_raw)
+    keys = list(cands)
+    expected = keys[0] if (platform == "android" or standardised) else keys[1]
+    acc, mag = streams.get(ACC), streams.get(MAG)
+    if acc is None:
+        return canonical_sign(cands[expected]), expected + " (unverified: no accelerometer)", {}
+    checks = {k: attitude_checks(t_rot, v, acc.t_ns, acc.values, mag.t_ns if mag else None,
+                                 mag.values if mag else None) for k, v in cands.items()}
+
+    def ok(k, heading_tol):
+        c = checks[k]
+        tilt_ok = math.isfinite(c["tilt_err_deg"]) and c["tilt_err_deg"] < 15.0
+        h = c["heading_diff_deg"]
+        return tilt_ok and (not math.isfinite(h) or h < heading_tol)
+
+    chosen = expected
+    if not ok(expected, 45.0):
+        passing = [k for k in keys if ok(k, 20.0)]
+        if passing:
+            chosen = passing[0]
+            repairs.append(f"{source}: Orientation.csv does not fit the documented {platform} convention "
+                           f"({expected}: {checks[expected]}); used '{chosen}', which fits the accelerometer "
+                           f"and magnetometer ({checks[chosen]})")
+        else:
+            repairs.append(f"{source}: Orientation.csv could not be verified against the accelerometer and "
+                           f"magnetometer ({checks[expected]}); kept the documented {platform} convention")
+    return canonical_sign(cands[chosen]), chosen, checks[chosen]

@@ -1,0 +1,411 @@
+"""AndroidSource against a fake ``jnius``: sensor events at uneven intervals from a background thread.
+
+The fake reproduces what the source relies on: ``PythonJavaClass`` /
+``java_method``, ``autoclass`` for the activity, ``SensorManager`` (with the
+5-argument ``registerListener``), ``HandlerThread``/``Handler``,
+``LocationManager`` and ``SystemClock``.  A "hardware" thread calls the
+registered listeners' ``onSensorChanged`` with ``SensorEvent``-like objects,
+like Android's sensor thread does.
+"""
+
+import math
+import sys
+import threading
+import types
+
+import numpy as np
+import pytest
+
+from app.session import Session
+from app.sources import (PLYER_FALLBACK_WARNING, AndroidSource, PlyerFallbackSource, SensorStartError,
+                         make_live_source)
+from core.pipeline import Pipeline
+
+TYPES = {1: "acc", 2: "mag", 4: "gyro"}
+
+
+class FakeSensor:
+    def __init__(self, type_):
+        self.type = type_
+
+    def getType(self):
+        return self.type
+
+    def getName(self):
+        return f"fake {TYPES.get(self.type, self.type)}"
+
+    def getVendor(self):
+        return "tests"
+
+    def getMinDelay(self):
+        return 2500
+
+
+class FakeEvent:
+    def __init__(self, sensor, timestamp, values):
+        self.sensor = sensor
+        self.timestamp = timestamp
+        self.values = values  # pyjnius gives a Python list for float[]
+
+
+class FakeSensorManager:
+    def __init__(self, missing=()):
+        self.sensors = {t: FakeSensor(t) for t in (1, 2, 4) if t not in missing}
+        self.registered = {}  # listener -> (sensor, period_us, latency_us, handler)
+        self.register_calls = []
+        self.lock = threading.Lock()
+
+    def getDefaultSensor(self, type_):
+        return self.sensors.get(type_)
+
+    def registerListener(self, listener, sensor, period_us, latency_us, handler):
+        with self.lock:
+            self.registered[listener] = (sensor, period_us, latency_us, handler)
+            self.register_calls.append((sensor.getType(), period_us, latency_us))
+        return True
+
+    def unregisterListener(self, listener):
+        with self.lock:
+            self.registered.pop(listener, None)
+
+    def deliver(self, type_, t_ns, values):
+        """What Android's sensor thread does: call every listener registered for that sensor."""
+        with self.lock:
+            targets = [(lst, s) for lst, (s, *_rest) in self.registered.items() if s.getType() == type_]
+        for lst, s in targets:
+            lst.onSensorChanged(FakeEvent(s, t_ns, list(values)))
+        return len(targets)
+
+
+class FakeLocation:
+    def __init__(self, t_ns, lat, lon, acc=None):
+        self.t_ns, self.lat, self.lon, self.acc = t_ns, lat, lon, acc
+
+    def getElapsedRealtimeNanos(self):
+        return self.t_ns
+
+    def getLatitude(self):
+        return self.lat
+
+    def getLongitude(self):
+        return self.lon
+
+    def hasAltitude(self):
+        return False
+
+    def getAltitude(self):
+        return 0.0
+
+    def hasAccuracy(self):
+        return self.acc is not None
+
+    def getAccuracy(self):
+        return self.acc
+
+
+class FakeJavaList:
+    def __init__(self, items):
+        self.items = items
+
+    def size(self):
+        return len(self.items)
+
+    def get(self, i):
+        return self.items[i]
+
+
+class FakeLocationManager:
+    GPS_PROVIDER = "gps"
+
+    def __init__(self, allowed=True):
+        self.allowed = allowed
+        self.listeners = []
+
+    def requestLocationUpdates(self, provider, min_ms, min_m, listener, looper):
+        if not self.allowed:
+            raise RuntimeError("java.lang.SecurityException: missing ACCESS_FINE_LOCATION")
+        self.listeners.append((provider, min_ms, listener, looper))
+
+    def removeUpdates(self, listener):
+        self.listeners = [x for x in self.listeners if x[2] is not listener]
+
+
+def make_fake_jnius(sm, lm=None):
+    jn = types.ModuleType("jnius")
+    jn.threads = []
+
+    class PythonJavaClass:
+        def __init__(self, *args, **kwargs):
+            pass
+
+    def java_method(signature, name=None):
+        def deco(f):
+            f.__javasignature__ = signature
+            f.__javaname__ = name or f.__name__
+            return f
+        return deco
+
+    class Context:
+        SENSOR_SERVICE = "sensor"
+        LOCATION_SERVICE = "location"
+
+    class Activity:
+        def getSystemService(self, name):
+            return {"sensor": sm, "location": lm}[name]
+
+    class PythonActivity:
+        mActivity = Activity()
+
+    class Looper:
+        pass
+
+    class HandlerThread:
+        def __init__(self, name):
+            self.name = name
+            self.started = self.quit = False
+            jn.threads.append(self)
+
+        def start(self):
+            self.started = True
+
+        def getLooper(self):
+            return Looper()
+
+        def quitSafely(self):
+            self.quit = True
+
+    class Handler:
+        def __init__(self, looper):
+            self.looper = looper
+
+    class SystemClock:
+        @staticmethod
+        def elapsedRealtimeNanos():
+            return 10**12
+
+    class Build:
+        MANUFACTURER = "Fake"
+        MODEL = "Phone 1"
+
+    class VERSION:
+        SDK_INT = 34
+
+    classes = {"android.content.Context": Context, "org.kivy.android.PythonActivity": PythonActivity,
+               "android.os.HandlerThread": HandlerThread, "android.os.Handler": Handler,
+               "android.os.SystemClock": SystemClock, "android.os.Build": Build,
+               "android.os.Build$VERSION": VERSION, "android.location.LocationManager": FakeLocationManager}
+    jn.PythonJavaClass = PythonJavaClass
+    jn.java_method = java_method
+    jn.autoclass = lambda name: classes[name]
+    return jn
+
+
+def hardware_stream(seed=0, seconds=4.0):
+    """Per-sensor events at uneven intervals: 100 Hz acc/gyro, 50 Hz mag, jitter, bursts and gaps.
+
+    Returns a list of (type, t_ns, values) in delivery order (sensors interleaved, each in its own order).
+    """
+    rng = np.random.default_rng(seed)
+    out = []
+    t_start = 987_654_321_000
+    for type_, rate in ((1, 100.0), (4, 100.0), (2, 50.0)):
+        n = int(seconds * rate)
+        dt = (1e9 / rate) * rng.uniform(0.6, 1.4, n)  # uneven intervals
+        dt[rng.choice(n, 3, replace=False)] *= 4.0  # a few gaps (events the OS never delivered)
+        t = t_start + np.cumsum(dt).astype(np.int64) + int(rng.integers(0, 10**7))
+        for ti in t.tolist():
+            if type_ == 1:
+                v = [0.1 * rng.normal(), 0.1 * rng.normal(), 9.81 + 2.0 * math.sin(ti * 1e-9 * 2 * math.pi * 1.8)]
+            elif type_ == 4:
+                v = [0.01 * rng.normal(), 0.01 * rng.normal(), 0.01 * rng.normal()]
+            else:
+                v = [0.0, 20.0 + rng.normal(), -44.0]
+            out.append((type_, ti, v))
+    # delivery: sensors interleave by time, with per-sensor batches arriving up to 30 ms late
+    late = {1: 0, 4: 12_000_000, 2: 30_000_000}
+    out.sort(key=lambda e: e[1] + late[e[0]])
+    return out
+
+
+def run_hardware(sm, events, chunk=50, pause_every=0.0):
+    """Deliver ``events`` from a background thread (like Android's sensor thread)."""
+    delivered = []
+
+    def run():
+        for i, (type_, t, v) in enumerate(events):
+            if sm.deliver(type_, t, v):
+                delivered.append((TYPES[type_], t, tuple(v)))
+            if pause_every and i % chunk == 0:
+                threading.Event().wait(pause_every)
+
+    th = threading.Thread(target=run)
+    th.start()
+    return th, delivered
+
+
+@pytest.fixture(autouse=True)
+def no_real_jnius(monkeypatch):
+    """The source must never import a real jnius here; a test that forgets to inject the fake fails."""
+    monkeypatch.setitem(sys.modules, "jnius", None)
+
+
+def test_importing_the_sources_does_not_import_jnius():
+    import subprocess
+
+    code = "import sys, app.sources, app.session; print('jnius' in sys.modules, 'kivy' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["False", "False"]
+
+
+def test_listener_keeps_every_event_and_timestamp_at_uneven_intervals():
+    sm = FakeSensorManager()
+    src = AndroidSource(rate_hz=100, gps=False, jnius=make_fake_jnius(sm))
+    src.start()
+    # registered: one listener per sensor, 100 Hz hint, no batching, on our HandlerThread's handler
+    assert sorted(sm.register_calls) == [(1, 10000, 0), (2, 10000, 0), (4, 10000, 0)]
+    assert all(h.looper is not None for (_s, _p, _l, h) in sm.registered.values())
+    events = hardware_stream(seed=3)
+    th, delivered = run_hardware(sm, events)
+    got = []
+    while th.is_alive():  # the UI thread drains while the sensor thread delivers
+        got.extend(src.drain())
+    th.join()
+    got.extend(src.drain())
+    assert len(got) == len(events) == len(delivered)
+    assert got == delivered  # same order, exact int timestamps, values copied
+    assert all(isinstance(t, int) for _, t, _ in got)
+    for name in ("acc", "gyro", "mag"):
+        ts = [t for n, t, _ in got if n == name]
+        assert ts == sorted(ts) and len(ts) > 150
+    assert src.device["model"] == "Phone 1" and src.device["sampling_period_us"] == 10000
+    assert src.unix_offset_ns is not None and src.warning == ""
+
+
+def test_session_on_the_android_source_measures_rates_and_gaps():
+    sm = FakeSensorManager()
+    src = AndroidSource(rate_hz=100, gps=False, jnius=make_fake_jnius(sm))
+    ses = Session(src, pipeline_factory=Pipeline, reorder_window_ns=50_000_000)
+    ses.start()
+    events = hardware_stream(seed=4, seconds=6.0)
+    th, _ = run_hardware(sm, events, chunk=40, pause_every=0.002)
+    while th.is_alive():
+        ses.tick()
+    th.join()
+    ses.tick()
+    ses._finish()
+    rows = {s.stream: s for s in ses.health.snapshot()}
+    assert rows["acc"].events == 600 and rows["gyro"].events == 600 and rows["mag"].events == 300
+    assert all(r.out_of_order == 0 for r in rows.values())  # 30 ms late batches were put back in order
+    assert 85 < rows["acc"].rate_hz < 115 and 42 < rows["mag"].rate_hz < 58
+    assert all(r.gaps >= 3 and r.missed >= 3 for r in rows.values())
+    assert all(r.jitter_ms > 1.0 for r in rows.values())  # uneven intervals are visible
+
+
+def test_pause_unregisters_and_resume_registers_again():
+    sm = FakeSensorManager()
+    jn = make_fake_jnius(sm)
+    src = AndroidSource(rate_hz=50, gps=False, jnius=jn)
+    ses = Session(src, pipeline_factory=Pipeline)
+    ses.start()
+    assert len(sm.registered) == 3
+    events = hardware_stream(seed=5, seconds=1.0)
+    half = len(events) // 2
+    for type_, t, v in events[:half]:
+        sm.deliver(type_, t, v)
+    ses.tick()
+    n_before = ses.events_in
+    ses.pause()  # on_pause
+    assert sm.registered == {} and not src.running and jn.threads[0].quit
+    for type_, t, v in events[half:]:
+        assert sm.deliver(type_, t, v) == 0  # nobody listens while paused
+    ses.tick()
+    assert ses.events_in == n_before == half
+    ses.resume()  # on_resume
+    assert len(sm.registered) == 3 and src.running and len(jn.threads) == 2
+    assert [c[1] for c in sm.register_calls] == [20000] * 6
+    for type_, t, v in events[half:]:
+        sm.deliver(type_, t + 10**9, v)
+    ses.tick()
+    assert ses.events_in == len(events)
+
+
+def test_queue_is_bounded_and_counts_what_it_dropped():
+    sm = FakeSensorManager()
+    src = AndroidSource(gps=False, jnius=make_fake_jnius(sm), queue_max=100)
+    src.start()
+    events = [e for e in hardware_stream(seed=6, seconds=2.0) if e[0] == 1]  # 200 acc events
+    for type_, t, v in events:
+        sm.deliver(type_, t, v)
+    got = src.drain()
+    assert len(got) == 100 and [e[1] for e in got] == [e[1] for e in events[100:]]  # newest kept
+    assert src.queue_drops() == {"acc": 100}
+
+
+def test_exceptions_in_the_callback_never_reach_java():
+    sm = FakeSensorManager()
+    src = AndroidSource(gps=False, jnius=make_fake_jnius(sm))
+    src.start()
+    sm.deliver(1, 5, [1.0])  # too few values: would raise IndexError inside onSensorChanged
+    sm.deliver(1, 6, [1.0, 2.0, 3.0])
+    assert src.listener_errors == 1 and src.drain() == [("acc", 6, (1.0, 2.0, 3.0))]
+
+
+def test_missing_gyroscope_is_a_warning_missing_accelerometer_falls_back_to_plyer():
+    sm = FakeSensorManager(missing=(4,))
+    src = AndroidSource(gps=False, jnius=make_fake_jnius(sm))
+    src.start()
+    assert "gyro" in src.warning and src.running
+
+    class Facade:
+        def __init__(self, value):
+            self.value = value
+            self.enabled = False
+
+        def enable(self):
+            self.enabled = True
+
+        def disable(self):
+            self.enabled = False
+
+    plyer = types.SimpleNamespace(accelerometer=Facade(None), gyroscope=Facade(None), compass=Facade(None))
+    plyer.accelerometer.acceleration = (0.1, 0.2, 9.8)
+    plyer.gyroscope.rotation = (None, None, None)  # no event yet
+    plyer.compass.field = (1.0, 20.0, -40.0)
+    live = make_live_source(jnius=make_fake_jnius(FakeSensorManager(missing=(1,))), plyer=plyer, gps=False)
+    assert isinstance(live, PlyerFallbackSource) and live.running
+    assert live.warning.startswith(PLYER_FALLBACK_WARNING) and "accelerometer" in live.warning
+    first = live.drain()
+    assert sorted(e[0] for e in first) == ["acc", "mag"]
+    assert live.drain() == []  # unchanged values are not new events
+    plyer.accelerometer.acceleration = (0.2, 0.2, 9.8)
+    assert [e[0] for e in live.drain()] == ["acc"]
+    live.stop()
+    assert not plyer.accelerometer.enabled
+
+
+def test_without_jnius_the_source_refuses_to_start():
+    with pytest.raises(SensorStartError, match="pyjnius not available"):
+        AndroidSource(gps=False).start()
+
+
+def test_gps_fixes_keep_the_elapsed_realtime_timestamp():
+    sm, lm = FakeSensorManager(), FakeLocationManager()
+    src = AndroidSource(gps=True, jnius=make_fake_jnius(sm, lm))
+    src.start()
+    assert src.gps_status.startswith("on") and lm.listeners[0][:2] == ("gps", 1000)
+    listener = lm.listeners[0][2]
+    listener.onLocationChanged(FakeLocation(1_000_000_123, 47.5, 8.5, 4.0))
+    listener.onLocationChangedList(FakeJavaList([FakeLocation(2_000_000_456, 47.6, 8.6)]))
+    got = src.drain()
+    assert got[0][:2] == ("gps", 1_000_000_123) and got[0][2][:2] == (47.5, 8.5) and got[0][2][3] == 4.0
+    assert math.isnan(got[0][2][2])  # no altitude
+    assert got[1][:2] == ("gps", 2_000_000_456) and math.isnan(got[1][2][3])
+    src.stop()
+    assert lm.listeners == []
+
+
+def test_gps_without_permission_leaves_the_sensors_running():
+    sm, lm = FakeSensorManager(), FakeLocationManager(allowed=False)
+    src = AndroidSource(gps=True, jnius=make_fake_jnius(sm, lm))
+    src.start()
+    assert src.running and src.gps_status.startswith("off") and "SecurityException" in src.gps_status

@@ -1,0 +1,298 @@
+"""The app's plain-Python parts (no Kivy): replay source, session, health, settings, viewport, export."""
+
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+
+from app.health import HealthMonitor, StreamHealth
+from app.session import Session, export_session, load_any_recording
+from app.settings import CalibrationError, Settings, calibrate_coefficient
+from app.sources import ReplaySource, sampling_period_us
+from app.storage import new_recording_path, output_dir
+from app.viewport import Viewport, format_length, nice_length
+from core.pipeline import Pipeline
+from core.recording import Recording, make_stream, write_recording
+from core.simulator import simulate_walk
+
+WAYPOINTS = ((0.0, 0.0), (20.0, 0.0), (20.0, 12.0))
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return simulate_walk(WAYPOINTS, seed=11, still_start_s=1.5, still_end_s=1.5)
+
+
+class FakeClock:
+    def __init__(self, t=100.0):
+        self.t = t
+
+    def __call__(self):
+        return self.t
+
+
+# -- replay source ------------------------------------------------------------------------
+
+
+def _all(src, clock=None, dt=0.05):
+    out = []
+    for _ in range(100000):
+        if src.finished:
+            break
+        if clock is not None:
+            clock.t += dt
+        out.extend(src.drain())
+    return out
+
+
+def test_replay_delivers_every_event_once_in_order_with_exact_timestamps(walk):
+    rec = walk.recording
+    src = ReplaySource(rec, speed=math.inf, max_chunk=777)
+    src.start()
+    got = _all(src)
+    assert got == list(rec.events(["acc", "gyro", "mag"]))
+    assert src.finished and src.progress == 1.0
+    assert [e[1] for e in got if e[0] == "acc"] == rec.streams["acc"].t_ns.tolist()
+
+
+@pytest.mark.parametrize("speed", [1.0, 10.0])
+def test_replay_follows_the_wall_clock(walk, speed):
+    rec = walk.recording
+    clock = FakeClock()
+    src = ReplaySource(rec, speed=speed, clock=clock, max_chunk=10**9)
+    src.start()
+    clock.t += 2.0
+    first = src.drain()
+    # exactly the events within 2 s x speed of sensor time after the first event
+    limit = src.t0_ns + int(2.0 * speed * 1e9)
+    expected = [e for e in rec.events(["acc", "gyro", "mag"]) if e[1] <= limit]
+    assert first == expected
+    assert abs(src.position_s() - 2.0 * speed) < 1e-9
+
+
+def test_replay_pause_resume_and_seek(walk):
+    rec = walk.recording
+    clock = FakeClock()
+    src = ReplaySource(rec, speed=1.0, clock=clock, max_chunk=10**9)
+    src.start()
+    clock.t += 1.0
+    a = src.drain()
+    src.pause()
+    clock.t += 50.0  # paused: time passes, nothing is delivered
+    assert src.drain() == []
+    src.resume()
+    clock.t += 1.0
+    b = src.drain()
+    assert a and b and b[0][1] > a[-1][1]
+    assert abs((b[-1][1] - src.t0_ns) * 1e-9 - 2.0) < 0.02  # 2 s of sensor time in total, not 52
+    src.seek_start()
+    clock.t += 0.5
+    c = src.drain()
+    assert c[0] == a[0] and abs(src.position_s() - 0.5) < 1e-9
+    src.set_speed(math.inf)
+    rest = _all(src)
+    assert c + rest == list(rec.events(["acc", "gyro", "mag"]))
+
+
+def test_replay_rejects_a_recording_without_pipeline_streams():
+    rec = Recording({"pressure": make_stream("pressure", [1, 2], [[1.0], [2.0]], columns=["hpa"], unit="hPa")})
+    with pytest.raises(ValueError, match="nothing to replay"):
+        ReplaySource(rec)
+
+
+# -- session ---------------------------------------------------------------------------------
+
+
+def test_session_replay_gives_exactly_the_batch_track(walk):
+    rec = walk.recording
+    batch = Pipeline().run(rec)
+    src = ReplaySource(rec, speed=math.inf, max_chunk=500)
+    ses = Session(src, pipeline_factory=Pipeline)
+    ses.start()
+    for _ in range(1000):
+        ses.tick(budget_s=0.01)
+        if ses.finished:
+            break
+    assert ses.finished
+    assert len(ses.steps) == len(batch.steps) >= 40
+    np.testing.assert_allclose(ses.track_east[1:], batch.track.east_m, atol=1e-9)
+    np.testing.assert_allclose(ses.track_north[1:], batch.track.north_m, atol=1e-9)
+    # and the track is the walk: final position within 2 m of the last waypoint
+    assert math.hypot(ses.track_east[-1] - 20.0, ses.track_north[-1] - 12.0) < 2.0
+    s = ses.summary()
+    assert s["steps"] == len(batch.steps) and abs(s["elapsed_s"] - rec.duration_s) < 0.05
+
+
+def test_session_reorders_late_events_and_drops_hopeless_ones(walk):
+    rec = walk.recording.slice_time(walk.recording.t0_ns, walk.recording.t0_ns + 20 * 10**9)
+    events = list(rec.events(["acc", "gyro", "mag"]))
+    rng = np.random.default_rng(5)
+    # deliver in batches where each sensor's events arrive as a block (like per-sensor callbacks)
+    shuffled = []
+    for i in range(0, len(events), 12):
+        block = events[i:i + 12]
+        shuffled += sorted(block, key=lambda e: (e[0], rng.random()))
+    ref = Session(ReplaySource(rec, speed=math.inf), pipeline_factory=Pipeline)
+    ref.ingest(events)
+    ref._finish()
+    ses = Session(ReplaySource(rec, speed=math.inf), pipeline_factory=Pipeline)
+    ses.ingest(shuffled)
+    late = ("acc", events[100][1], events[100][2])  # 18 s too late: beyond any reorder window
+    ses.ingest([late])
+    ses._finish()
+    assert ses.health.streams["acc"].out_of_order == 1
+    assert [round(e, 9) for e in ses.track_east] == [round(e, 9) for e in ref.track_east]
+    assert len(ses.steps) == len(ref.steps) > 10
+
+
+def test_session_calibration_distance(walk):
+    ses = Session(ReplaySource(walk.recording, speed=math.inf), pipeline_factory=Pipeline)
+    ses.start()
+    events = ses.source.drain(10**9)
+    half = len(events) // 2
+    ses.ingest(events[:half])
+    d0 = sum(s.length_m for s in ses.steps)
+    ses.start_calibration()
+    ses.ingest(events[half:])
+    ses._finish()
+    walked = ses.stop_calibration()
+    assert walked > 5 and abs(walked - (sum(s.length_m for s in ses.steps) - d0)) < 1e-9
+
+
+# -- health ---------------------------------------------------------------------------------
+
+
+def test_health_rate_jitter_and_missed_events():
+    rng = np.random.default_rng(1)
+    period = 10_000_000
+    t = 10**12 + np.cumsum(period + rng.normal(0, 300_000, 2000).astype(np.int64))
+    drop = {300, 301, 302, 1200}  # 3 + 1 events never delivered
+    h = StreamHealth("acc", window_s=30.0, max_window=5000)
+    for i, ti in enumerate(t.tolist()):
+        if i not in drop:
+            assert h.accept(ti)
+    assert not h.accept(int(t[10]))  # backwards
+    s = h.stats()
+    assert s.missed == 4 and s.gaps == 2 and s.out_of_order == 1
+    assert abs(s.rate_hz - 100.0 * (2000 - 4) / 2000) < 1.0
+    assert 0.2 < s.jitter_ms < 1.5  # 0.3 ms interval noise, plus the gaps
+    assert abs(s.median_dt_ms - 10.0) < 0.1
+
+
+def test_health_panel_text_shows_queue_drops_and_mag_trust():
+    m = HealthMonitor()
+    for i in range(50):
+        m.accept("mag", 10**9 + i * 20_000_000)
+    m.mag_trusted = False
+    txt = m.format(queue_drops={"mag": 7}, accuracy={"mag": 1})
+    row = [line for line in txt.splitlines() if line.startswith("mag")][0]
+    assert "50.0" in row and " 7 " in row and "low" in row
+    assert "magnetometer trusted: NO" in txt
+
+
+# -- settings and calibration ------------------------------------------------------------------
+
+
+def test_settings_round_trip_and_atomic_save(tmp_path):
+    p = tmp_path / "d" / "settings.json"
+    s = Settings(height_m=1.82, stride_c=0.5, rate_hz=200.0, record_live=False, replay_speed="max")
+    s.save(str(p))
+    t = Settings.load(str(p))
+    assert t == s and not t.problems
+    assert os.listdir(p.parent) == ["settings.json"]  # no temporary file left behind
+
+
+def test_settings_survive_a_damaged_or_silly_file(tmp_path):
+    p = tmp_path / "settings.json"
+    p.write_text("{not json")
+    s = Settings.load(str(p))
+    assert s == Settings() and "could not read" in s.problems[0]
+    p.write_text(json.dumps({"height_m": 7.0, "rate_hz": 100, "stride_c": "x", "unknown": 1}))
+    s = Settings.load(str(p))
+    assert s.height_m is None and s.rate_hz == 100.0 and s.stride_c == Settings().stride_c
+    assert len(s.problems) == 2
+
+
+def test_calibrate_coefficient_rule_and_refusals():
+    assert calibrate_coefficient(0.47, 50.0, 47.0) == pytest.approx(0.47 * 50 / 47)
+    for args, msg in (((0.47, 2.0, 2.5), "at least"), ((0.47, 50.0, 0.0), "no steps"),
+                      ((0.47, 50.0, 10.0), "factor"), ((0.47, float("nan"), 10.0), "number")):
+        with pytest.raises(CalibrationError, match=msg):
+            calibrate_coefficient(*args)
+
+
+def test_calibration_makes_the_pipeline_measure_the_known_distance():
+    """A walker whose true C is 0.55 calibrates an app set to 0.47; afterwards the distance is right."""
+    w = simulate_walk(((0.0, 0.0), (40.0, 0.0)), seed=4, weinberg_c=0.55, step_length_m=0.75)
+    known = float(w.truth.path_length_m)
+    s = Settings()
+    before = Pipeline(**s.pipeline_kwargs()).run(w.recording).summary()["distance_m"]
+    assert abs(before - known) / known > 0.1
+    s.apply_calibration(known, before)
+    after = Pipeline(**s.pipeline_kwargs()).run(w.recording).summary()["distance_m"]
+    assert abs(after - known) / known < 0.02
+    assert s.calibrations[-1]["c_new"] == s.stride_c
+
+
+def test_sampling_period_is_capped_at_200_hz():
+    assert sampling_period_us(100) == 10000
+    assert sampling_period_us(500) == 5000
+    with pytest.raises(ValueError):
+        sampling_period_us(0)
+
+
+# -- viewport -----------------------------------------------------------------------------------
+
+
+def test_viewport_inverse_zoom_and_fit():
+    vp = Viewport(400, 300, x0=10, y0=20, scale=10.0, center=(5.0, -3.0))
+    e, n = vp.to_world(*vp.to_screen(12.5, 7.25))
+    assert (e, n) == pytest.approx((12.5, 7.25))
+    world = vp.to_world(300, 100)
+    vp.zoom_at(2.5, 300, 100)
+    assert vp.scale == 25.0 and vp.to_world(300, 100) == pytest.approx(world)
+    vp.pan(40, -20)
+    assert vp.to_world(340, 80) == pytest.approx(world)
+    east, north = [0, 50, 50, -10], [0, 0, 30, 30]
+    vp.fit(east, north, margin_px=20)
+    pts = np.array(vp.points(east, north)).reshape(-1, 2)
+    assert pts[:, 0].min() >= 10 + 20 - 1e-9 and pts[:, 0].max() <= 410 - 20 + 1e-9
+    assert pts[:, 1].min() >= 20 + 20 - 1e-9 and pts[:, 1].max() <= 320 - 20 + 1e-9
+    m, px = vp.scale_bar(120)
+    assert m in (1, 2, 5, 10, 20, 50) and px <= 120
+
+
+def test_nice_length():
+    assert [nice_length(x) for x in (0.7, 1, 3.3, 9.99, 12, 480)] == [0.5, 1, 2, 5, 10, 200]
+    assert format_length(0.5) == "50 cm" and format_length(2000) == "2 km"
+
+
+# -- export and storage -------------------------------------------------------------------------
+
+
+def test_export_writes_track_files_and_copies_the_raw_recording(tmp_path, walk):
+    raw = tmp_path / "walk.csv"
+    write_recording(str(raw), walk.recording)
+    rec = load_any_recording(str(raw))
+    ses = Session(ReplaySource(rec, speed=math.inf), pipeline_factory=Pipeline)
+    ses.start()
+    while not ses.finished:
+        ses.tick()
+    out = export_session(ses, str(tmp_path / "out"), "walk", raw_path=str(raw))
+    assert not out["errors"], out["errors"]
+    gj = json.load(open(out["geojson"]))
+    assert len(gj["features"][0]["geometry"]["coordinates"]) == len(ses.steps) + 1
+    gpx = open(out["gpx"]).read()
+    assert gpx.count("<trkpt") == len(ses.steps) + 1 and "<time>" in gpx
+    assert open(out["raw"], "rb").read() == raw.read_bytes()
+
+
+def test_storage_paths(tmp_path):
+    d = output_dir(str(tmp_path / "data"), str(tmp_path / "out"))
+    assert d == str(tmp_path / "out") and os.path.isdir(d)
+    a = new_recording_path(d, when=0)
+    open(a, "w").close()
+    b = new_recording_path(d, when=0)
+    assert a != b and b.endswith("-1.csv")

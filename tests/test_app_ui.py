@@ -1,0 +1,427 @@
+"""The Kivy app, headless (SDL offscreen driver on Mesa; no display, no Xvfb).
+
+Only one ``App.run()`` works per process, so the full app runs in
+subprocesses: one through the documented command line (replay to the end,
+screenshot, pixel checks along the expected path), one driving the app's
+lifecycle (pause/resume, export).  The track widget's touch handling is
+tested in this process on a bare window.
+"""
+
+import json
+import math
+import os
+import struct
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app import kivy_env
+
+kivy_env.prepare(headless=True)  # before anything imports kivy
+
+from core.pipeline import Pipeline  # noqa: E402
+from core.recording import write_recording  # noqa: E402
+from core.simulator import simulate_walk  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+WAYPOINTS = ((0.0, 0.0), (30.0, 0.0), (30.0, 20.0), (10.0, 20.0))
+SEED = 7
+SIZE = (480, 800)
+TRACK_RGB = np.array([0.15, 0.75, 1.0]) * 255
+START_RGB = np.array([0.2, 0.85, 0.3]) * 255
+POSITION_RGB = np.array([1.0, 0.55, 0.1]) * 255
+
+
+def read_png(path):
+    """Minimal PNG reader (8-bit RGB/RGBA, not interlaced) -> (h, w, 3) uint8 array; no Pillow needed."""
+    data = Path(path).read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    pos, idat, w = 8, b"", None
+    while pos < len(data):
+        n, kind = struct.unpack(">I4s", data[pos:pos + 8])
+        body = data[pos + 8:pos + 8 + n]
+        if kind == b"IHDR":
+            w, h, depth, ctype, _c, _f, interlace = struct.unpack(">IIBBBBB", body)
+            assert depth == 8 and ctype in (2, 6) and interlace == 0
+            bpp = 3 if ctype == 2 else 4
+        elif kind == b"IDAT":
+            idat += body
+        pos += 12 + n
+    raw = zlib.decompress(idat)
+    stride = w * bpp
+    img = np.zeros((h, stride), dtype=np.int32)
+    prev = np.zeros(stride, dtype=np.int32)
+    for r in range(h):
+        f = raw[r * (stride + 1)]
+        line = np.frombuffer(raw, np.uint8, stride, r * (stride + 1) + 1).astype(np.int32)
+        if f == 0:
+            cur = line
+        elif f == 2:
+            cur = (line + prev) & 255
+        else:  # sub / average / paeth need the running left neighbour
+            cur = np.zeros(stride, dtype=np.int32)
+            for i in range(stride):
+                a = cur[i - bpp] if i >= bpp else 0
+                b = prev[i]
+                c = prev[i - bpp] if i >= bpp else 0
+                if f == 1:
+                    p = a
+                elif f == 3:
+                    p = (a + b) // 2
+                else:
+                    pa, pb, pc = abs(b - c), abs(a - c), abs(a + b - 2 * c)
+                    p = a if pa <= pb and pa <= pc else (b if pb <= pc else c)
+                cur[i] = (line[i] + p) & 255
+        img[r] = cur
+        prev = cur
+    return img.reshape(h, w, bpp)[:, :, :3].astype(np.uint8)
+
+
+def _near_color(img, x, y, rgb, radius, tol=60.0):
+    """Is there a pixel of colour ``rgb`` within ``radius`` px of Kivy point (x, y) (y up)?"""
+    h, w, _ = img.shape
+    row, col = int(round(h - y)), int(round(x))
+    r0, r1 = max(row - radius, 0), min(row + radius + 1, h)
+    c0, c1 = max(col - radius, 0), min(col + radius + 1, w)
+    if r0 >= r1 or c0 >= c1:
+        return False
+    patch = img[r0:r1, c0:c1].astype(float)
+    return bool((np.linalg.norm(patch - rgb, axis=2) < tol).any())
+
+
+def _samples(xy, step_px=3.0):
+    out = []
+    for (x0, y0), (x1, y1) in zip(xy[:-1], xy[1:]):
+        n = max(int(math.hypot(x1 - x0, y1 - y0) / step_px), 1)
+        out += [(x0 + (x1 - x0) * k / n, y0 + (y1 - y0) * k / n) for k in range(n)]
+    return out
+
+
+def _to_screen(view, east, north):
+    cx, cy = view["center"]
+    s = view["scale"]
+    return [(view["x"] + view["width"] / 2 + (e - cx) * s, view["y"] + view["height"] / 2 + (n - cy) * s)
+            for e, n in zip(east, north)]
+
+
+def _run(args, timeout=60):
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.run([sys.executable] + args, cwd=ROOT, env=env, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def walk_file(tmp_path_factory):
+    w = simulate_walk(WAYPOINTS, seed=SEED, still_start_s=1.5, still_end_s=1.5)
+    path = tmp_path_factory.mktemp("walk") / "sim-walk.csv"
+    write_recording(str(path), w.recording)
+    return w, path
+
+
+def test_app_replays_to_the_end_and_the_screenshot_shows_the_track(walk_file, tmp_path):
+    w, path = walk_file
+    shot, report = tmp_path / "shot.png", tmp_path / "report.json"
+    r = _run(["-m", "app", str(path), "--speed", "max", "--headless", "--exit-at-end", "--size",
+              f"{SIZE[0]}x{SIZE[1]}", "--screenshot", str(shot), "--report", str(report),
+              "--data-dir", str(tmp_path / "data"), "--out", str(tmp_path / "out")])
+    assert r.returncode == 0, r.stderr[-3000:]
+    rep = json.loads(report.read_text())
+    batch = Pipeline().run(w.recording)
+    assert rep["finished"] and rep["errors"] == 0 and rep["mode"] == "replay"
+    assert rep["events"] == sum(len(s) for s in w.recording.streams.values())
+    assert rep["summary"]["steps"] == len(batch.steps) == int(rep["status"]["steps"])
+    assert rep["status"]["distance"] == f"{sum(s.length_m for s in batch.steps):.1f} m"
+    np.testing.assert_allclose(rep["track_east"][1:], batch.track.east_m, atol=1e-9)
+
+    img = read_png(shot)
+    assert img.shape[:2] == (SIZE[1], SIZE[0])
+    view = rep["view"]
+    assert not view["follow"]  # fitted at the end
+    # 1. the drawn track: every few pixels along the batch track there is track colour
+    east = [0.0] + batch.track.east_m.tolist()
+    north = [0.0] + batch.track.north_m.tolist()
+    xy = _to_screen(view, east, north)
+    start, end = xy[0], xy[-1]
+    pts = [p for p in _samples(xy) if math.dist(p, start) > 12 and math.dist(p, end) > 26]
+    hits = [_near_color(img, x, y, TRACK_RGB, radius=2) for x, y in pts]
+    assert len(pts) > 100 and np.mean(hits) > 0.97, np.mean(hits)
+    # 2. ... which is the walked path: the true path is within 2 m of drawn track almost everywhere
+    truth = w.truth
+    t_grid = np.linspace(truth.walk_start_t_ns, truth.walk_end_t_ns, 400).astype(np.int64)
+    p = truth.position_at(t_grid)
+    txy = _to_screen(view, p[:, 0], p[:, 1])
+    tol = max(4, int(round(2.0 * view["scale"])))
+    near = [_near_color(img, x, y, TRACK_RGB, radius=tol) for x, y in txy
+            if math.dist((x, y), start) > 12 and math.dist((x, y), end) > 26]
+    assert np.mean(near) > 0.9, np.mean(near)
+    # 3. markers: green start, orange current position
+    assert _near_color(img, *start, START_RGB, radius=4)
+    assert _near_color(img, *end, POSITION_RGB, radius=4)
+    # 4. away from the track there is no track colour (the check above can fail)
+    rng = np.random.default_rng(0)
+    seg = np.array(xy)
+    far = []
+    while len(far) < 300:
+        x = rng.uniform(view["x"] + 5, view["x"] + view["width"] - 5)
+        y = rng.uniform(view["y"] + 40, view["y"] + view["height"] - 45)
+        if np.min(np.hypot(seg[:, 0] - x, seg[:, 1] - y)) > 30 and min(
+                _dist_to_segments((x, y), xy)) > 20:
+            far.append((x, y))
+    assert not any(_near_color(img, x, y, TRACK_RGB, radius=1) for x, y in far)
+
+
+def _dist_to_segments(p, xy):
+    px, py = p
+    for (x0, y0), (x1, y1) in zip(xy[:-1], xy[1:]):
+        dx, dy = x1 - x0, y1 - y0
+        L = dx * dx + dy * dy
+        t = 0.0 if L == 0 else max(0.0, min(1.0, ((px - x0) * dx + (py - y0) * dy) / L))
+        yield math.hypot(px - x0 - t * dx, py - y0 - t * dy)
+
+
+LIFECYCLE = r"""
+import json, sys
+from app import kivy_env
+kivy_env.prepare(headless=True)
+from kivy.config import Config
+Config.set("graphics", "width", "360"); Config.set("graphics", "height", "640")
+from kivy.clock import Clock
+from app.main_app import PDRApp
+
+path, out, data, report, known = sys.argv[1:6]
+app = PDRApp(recording=path, speed="10x", out_dir=out, data_dir=data)
+log = {}
+
+def maybe_pause(dt):
+    ses = app.session
+    if ses is None or ses.source.delivered == 0:
+        return True  # not replaying yet
+    log.setdefault("ticks_replaying", 0)
+    log["ticks_replaying"] += 1
+    if log["ticks_replaying"] < 5:
+        return True
+    app.toggle_calibration()  # calibration walk starts here
+    log["steps_at_calibration_start"] = len(ses.steps)
+    pause()
+    return False
+
+def pause():
+    ses = app.session
+    log["before_pause_events"] = ses.events_in
+    log["pause_returned"] = app.on_pause()
+    log["running_after_pause"] = ses.running
+    log["delivered_at_pause"] = ses.source.delivered
+    Clock.schedule_once(resume, 0.6)
+
+def resume(dt):
+    ses = app.session
+    log["delivered_while_paused"] = ses.source.delivered - log["delivered_at_pause"]
+    app.on_resume()
+    log["running_after_resume"] = ses.running
+    app.set_speed("max")
+    Clock.schedule_interval(wait_end, 0.05)
+
+def wait_end(dt):
+    if not app.session.finished:
+        return True
+    app.toggle_calibration()  # ... and ends with the replay
+    log["calibration_walked_m"] = app._calib_walked
+    app.save_calibration(known)
+    log["calib_message"] = app.calib_message
+    log["export"] = app.export()
+    app.root.ids.screens.current = "health"
+    app._update_ui(force=True)
+    log["health"] = app.health_text
+    log["report"] = app.report()
+    popup = app.show_file_chooser()
+    chooser = popup.content.children[-1]
+    log["chooser"] = [chooser.path, list(chooser.filters)]
+    chooser.selection = [path]
+    popup.content.children[0].children[-1].dispatch("on_release")  # the "Replay" button
+    log["reopened"] = [app.mode, app.session.source.delivered, app.raw_path == path]
+    with open(report, "w") as f:
+        json.dump(log, f, default=float)
+    app.stop()
+    return False
+
+Clock.schedule_interval(maybe_pause, 0.05)
+app.run()
+"""
+
+
+def test_app_lifecycle_pause_resume_and_export(walk_file, tmp_path):
+    w, path = walk_file
+    report = tmp_path / "lifecycle.json"
+    known = 55.0
+    r = _run(["-c", LIFECYCLE, str(path), str(tmp_path / "out"), str(tmp_path / "data"), str(report), str(known)])
+    assert r.returncode == 0, r.stderr[-3000:]
+    log = json.loads(report.read_text())
+    assert log["pause_returned"] is True and log["running_after_pause"] is False
+    assert 0 < log["delivered_at_pause"] < 0.5 * sum(len(s) for s in w.recording.streams.values())
+    assert log["delivered_while_paused"] == 0
+    assert log["running_after_resume"] is True
+    rep = log["report"]
+    assert rep["finished"] and rep["paused"] == 1 and rep["resumed"] == 1
+    # pausing lost nothing: same track as the batch run
+    assert rep["summary"]["steps"] == len(Pipeline().run(w.recording).steps)
+    exp = log["export"]
+    assert not exp["errors"] and {"geojson", "gpx", "csv", "raw"} <= set(exp)
+    assert Path(exp["raw"]).read_bytes() == path.read_bytes()
+    assert "acc" in log["health"] and "magnetometer trusted: yes" in log["health"]
+    saved = json.loads((tmp_path / "data" / "settings.json").read_text())
+    assert saved["replay_speed"] == "max"
+    # calibration walk from the pause to the end of the replay, then saved with the known distance
+    walked = log["calibration_walked_m"]
+    batch_steps = Pipeline().run(w.recording).steps
+    assert walked == pytest.approx(sum(s.length_m for s in batch_steps[log["steps_at_calibration_start"]:]))
+    assert saved["stride_c"] == pytest.approx(0.47 * known / walked), log["calib_message"]
+    assert saved["calibrations"][-1]["known_m"] == known
+    # the file chooser opens where the recording is, and "Replay" starts it again
+    assert log["chooser"][0] == str(path.parent) and "*.csv" in log["chooser"][1]
+    assert log["reopened"] == ["replay", 0, True]
+
+
+def test_track_view_pan_zoom_follow():
+    from kivy.base import EventLoop
+    from kivy.core.window import Window
+    from kivy.tests.common import UnitTestTouch
+
+    from app.track_view import TrackView
+
+    EventLoop.ensure_window()
+    tv = TrackView(size=(400, 400), pos=(0, 0), size_hint=(None, None))
+    Window.add_widget(tv)
+    try:
+        tv.set_track([0, 10, 10], [0, 0, 5])
+        tv._redraw()
+        assert tv.follow and tv.vp.center == (10, 5)  # follow keeps the current position centred
+        scale = tv.vp.scale
+        # scroll wheel zooms (about the centre while following)
+        t = UnitTestTouch(200, 200)
+        t.profile.append("button")
+        t.button = "scrolldown"
+        t.touch_down()
+        assert tv.vp.scale == pytest.approx(scale * 1.25) and tv.follow
+        # a drag pans and turns follow off
+        world = tv.vp.to_world(100, 100)
+        t = UnitTestTouch(100, 100)
+        t.touch_down()
+        t.touch_move(150, 80)
+        t.touch_up()
+        assert not tv.follow and tv.vp.to_world(150, 80) == pytest.approx(world)
+        # pinch: two fingers moving apart zoom in about their midpoint
+        s0 = tv.vp.scale
+        a, b = UnitTestTouch(150, 200), UnitTestTouch(250, 200)
+        a.touch_down()
+        b.touch_down()
+        b.touch_move(350, 200)
+        assert tv.vp.scale == pytest.approx(s0 * 2.0)
+        a.touch_up()
+        b.touch_up()
+        # fit shows the whole track; the line has one point per track point
+        tv.fit()
+        tv._redraw()
+        pts = np.array(tv._line.points).reshape(-1, 2)
+        assert len(pts) == 3 and (pts >= 0).all() and (pts <= 400).all()
+        m, px = tv.vp.scale_bar(120)
+        assert tv._bar_label.text in (f"{m:g} m", f"{m * 100:g} cm")
+    finally:
+        Window.remove_widget(tv)
+
+
+LIVE = r"""
+import json, sys, threading, time
+sys.path.insert(0, sys.argv[4])  # tests/: the fake jnius lives in test_app_android_source
+from test_app_android_source import FakeSensorManager, hardware_stream, make_fake_jnius
+sm = FakeSensorManager()
+sys.modules["jnius"] = make_fake_jnius(sm)  # what "import jnius" finds on the "phone"
+from app import kivy_env
+kivy_env.prepare(headless=True)
+from kivy.config import Config
+Config.set("graphics", "width", "360"); Config.set("graphics", "height", "640")
+from kivy.clock import Clock
+from app.main_app import PDRApp
+
+out, data, report = sys.argv[1:4]
+app = PDRApp(out_dir=out, data_dir=data)
+events = hardware_stream(seed=9, seconds=8.0)
+half = len(events) // 2
+log = {"delivered": []}
+
+def deliver(chunk):
+    for i, (type_, t, v) in enumerate(chunk):
+        if sm.deliver(type_, t, v):
+            log["delivered"].append([t, type_])
+        if i % 30 == 0:
+            time.sleep(0.004)
+
+def start(dt):
+    log["started"] = app.start_live()
+    log["mode"] = app.mode
+    log["record_path"] = app.session.record_path
+    th = threading.Thread(target=deliver, args=(events[:half],))
+    th.start()
+    Clock.schedule_interval(lambda dt: pause(th), 0.05)
+
+def pause(th):
+    if th.is_alive():
+        return True
+    Clock.schedule_once(do_pause, 0.2)  # let the clock drain the queue first
+    return False
+
+def do_pause(dt):
+    app.on_pause()
+    log["registered_while_paused"] = len(sm.registered)
+    deliver(events[half:half + 50])  # nobody listens: lost, as on a phone in the background
+    app.on_resume()
+    log["registered_after_resume"] = len(sm.registered)
+    th = threading.Thread(target=deliver, args=(events[half + 50:],))
+    th.start()
+    Clock.schedule_interval(lambda dt: finish(th), 0.05)
+
+def finish(th):
+    if th.is_alive():
+        return True
+    Clock.schedule_once(do_finish, 0.3)
+    return False
+
+def do_finish(dt):
+    app.toggle_recording()  # stop recording: the file is closed
+    log["recording_label_after_stop"] = app.recording_label
+    log["events_in"] = app.session.events_in
+    log["health"] = app.session.health_text()
+    log["warning"] = app.warning
+    with open(report, "w") as f:
+        json.dump(log, f)
+    app.stop()
+    return False
+
+Clock.schedule_once(start, 0.3)
+app.run()
+"""
+
+
+def test_live_mode_records_every_event_through_the_app(tmp_path):
+    from core.recording import read_recording
+
+    report = tmp_path / "live.json"
+    r = _run(["-c", LIVE, str(tmp_path / "out"), str(tmp_path / "data"), str(report), str(ROOT / "tests")])
+    assert r.returncode == 0, r.stderr[-3000:]
+    log = json.loads(report.read_text())
+    assert log["started"] and log["mode"] == "live" and log["warning"] == ""
+    assert log["registered_while_paused"] == 0 and log["registered_after_resume"] == 3
+    assert log["recording_label_after_stop"] == ""
+    delivered = log["delivered"]
+    assert log["events_in"] == len(delivered) > 1500
+    rec = read_recording(log["record_path"], warn=False)
+    assert rec.device["model"] == "Phone 1" and rec.device["sampling_period_us"] == 10000
+    assert rec.metadata["stride_c"] == pytest.approx(0.47) and "unix_offset_ns" in rec.metadata
+    names = {1: "acc", 2: "mag", 4: "gyro"}
+    for type_, name in names.items():
+        want = sorted(t for t, ty in delivered if ty == type_)
+        assert rec.streams[name].t_ns.tolist() == want  # every event, exact timestamps
+    assert "acc" in log["health"] and "gyro" in log["health"]
