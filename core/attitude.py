@@ -130,6 +130,32 @@ class _WindowVariance:
         return max(self.s2 / n - mean * mean, 0.0)
 
 
+class _RunningMedian:
+    """Median of every value seen so far, from a fixed-bin histogram (O(1) to add, O(bins) to query)."""
+
+    __slots__ = ("lo", "width", "counts", "n")
+
+    def __init__(self, lo: float, hi: float, width: float):
+        self.lo, self.width = lo, width
+        self.counts = [0] * (int((hi - lo) / width) + 1)
+        self.n = 0
+
+    def add(self, x: float) -> None:
+        i = int((x - self.lo) / self.width)
+        if 0 <= i < len(self.counts):
+            self.counts[i] += 1
+            self.n += 1
+
+    def median(self) -> float:
+        half = 0.5 * self.n
+        c = 0
+        for i, k in enumerate(self.counts):
+            c += k
+            if c >= half:
+                return self.lo + (i + 0.5) * self.width
+        return math.nan
+
+
 class AttitudeEKF:
     """Quaternion EKF with adaptive accelerometer / magnetometer noise (eqs. 5-18).
 
@@ -162,8 +188,11 @@ class AttitudeEKF:
         Magnetometer readings with ``| |m| - |h| | > ratio |h|`` are not used.
     mag_reject_dip_rad : float
         Magnetometer readings whose dip angle differs from the reference by more than this are not used (rad).
-    reference_window_s : float
-        ``|g|``, ``|h|`` and the dip angle of ``h`` are the mean over this first stretch of the recording (s).
+    reference_update_s : float
+        ``|g|``, ``|h|`` and the dip angle of ``h`` are the running medians of
+        every reading so far (indoors the field is disturbed in places, so a
+        median over the whole walk beats the first seconds), refreshed this
+        often (s).
     declination_rad : float
         Magnetic declination (east of true north positive, rad); 0 gives headings relative to magnetic north.
     initial_yaw_rad : float
@@ -177,7 +206,7 @@ class AttitudeEKF:
     def __init__(self, *, gyro_noise_rad_sqrt_s: float = 0.03, acc_noise_base: float = 0.05, k_a1: float = 0.02,
                  k_a2: float = 0.05, mag_noise_base: float = 0.05, k_m1: float = 0.01, k_m2: float = 0.01,
                  variance_window_s: float = 0.5, acc_reject_m_s2: float = 4.0, mag_reject_ratio: float = 0.2,
-                 mag_reject_dip_rad: float = math.radians(12.0), reference_window_s: float = 2.0,
+                 mag_reject_dip_rad: float = math.radians(12.0), reference_update_s: float = 1.0,
                  declination_rad: float = 0.0, initial_yaw_rad: float = math.pi / 2,
                  use_magnetometer: bool = True, no_gyro_random_walk_rad_sqrt_s: float = 0.5):
         self.gyro_noise_rad_sqrt_s = gyro_noise_rad_sqrt_s
@@ -189,7 +218,7 @@ class AttitudeEKF:
         self.acc_reject_m_s2 = acc_reject_m_s2
         self.mag_reject_ratio = mag_reject_ratio
         self.mag_reject_dip_rad = mag_reject_dip_rad
-        self.reference_window_s = reference_window_s
+        self.reference_update_s = reference_update_s
         self.declination_rad = declination_rad
         self.initial_yaw_rad = initial_yaw_rad
         self.use_magnetometer = use_magnetometer
@@ -206,13 +235,10 @@ class AttitudeEKF:
         self._last_mag = None
         self._acc_var = _WindowVariance(self.variance_window_s)
         self._mag_var = _WindowVariance(self.variance_window_s)
-        self._ref_t0: int | None = None
-        self._ref_done = False
-        self._g_sum = 0.0
-        self._g_n = 0
-        self._h_sum = 0.0
-        self._dip_sum = 0.0
-        self._h_n = 0
+        self._ref_next_ns: int | None = None
+        self._g_med = _RunningMedian(0.0, 40.0, 0.01)
+        self._h_med = _RunningMedian(0.0, 200.0, 0.1)
+        self._dip_med = _RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
         self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
         self.field_uT = math.nan
         self.dip_rad = math.nan
@@ -250,34 +276,28 @@ class AttitudeEKF:
         self._update_references()
 
     def _accumulate_references(self, t_ns: int, acc=None, mag=None) -> None:
-        """Mean of |a|, |m| and the dip angle over the first ``reference_window_s``."""
-        if self._ref_done:
-            return
-        if self._ref_t0 is None:
-            self._ref_t0 = t_ns
+        """Collect |a|, |m| and the dip angle; refresh the references every ``reference_update_s``."""
         if acc is not None:
-            self._g_sum += math.sqrt(acc[0] ** 2 + acc[1] ** 2 + acc[2] ** 2)
-            self._g_n += 1
+            self._g_med.add(math.sqrt(acc[0] ** 2 + acc[1] ** 2 + acc[2] ** 2))
         if mag is not None and self._last_acc is not None:
             a = self._last_acc
             na = math.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
             nm = math.sqrt(mag[0] ** 2 + mag[1] ** 2 + mag[2] ** 2)
             if na > 0 and nm > 0:
                 sin_dip = -(a[0] * mag[0] + a[1] * mag[1] + a[2] * mag[2]) / (na * nm)
-                self._dip_sum += math.asin(max(-1.0, min(1.0, sin_dip)))
-                self._h_sum += nm
-                self._h_n += 1
-        self._update_references()
-        if t_ns - self._ref_t0 >= self.reference_window_s * 1e9 and self._g_n and (
-                self._h_n or not self.use_magnetometer):
-            self._ref_done = True
+                self._dip_med.add(math.asin(max(-1.0, min(1.0, sin_dip))))
+                self._h_med.add(nm)
+        if (self._ref_next_ns is None or t_ns >= self._ref_next_ns
+                or (self._h_med.n and self.field_uT != self.field_uT)):
+            self._ref_next_ns = t_ns + int(self.reference_update_s * 1e9)
+            self._update_references()
 
     def _update_references(self) -> None:
-        if self._g_n:
-            self.gravity_m_s2 = self._g_sum / self._g_n
-        if self._h_n:
-            self.field_uT = self._h_sum / self._h_n
-            self.dip_rad = self._dip_sum / self._h_n
+        if self._g_med.n:
+            self.gravity_m_s2 = self._g_med.median()
+        if self._h_med.n:
+            self.field_uT = self._h_med.median()
+            self.dip_rad = self._dip_med.median()
             c, s = math.cos(self.dip_rad), math.sin(self.dip_rad)
             d = self.declination_rad
             # eq. 14, turned by the declination: magnetic north lies D east of true north

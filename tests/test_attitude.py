@@ -93,7 +93,6 @@ def test_wrong_start_converges_to_the_truth():
     ekf.predict(events[0][1] - 10, 0, 0, 0)
     ekf.update_acc(events[0][1] - 5, 0.0, 0.0, 9.81)
     ekf.update_mag(events[0][1] - 4, 10.0, 10.0, -44.0)  # a wrong first attitude
-    ekf.reference_window_s = 0.0
     _run(ekf, events)
     assert math.degrees(_angle_between(ekf.q, q_true)) < 2.0
 
