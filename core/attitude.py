@@ -156,6 +156,39 @@ class _RunningMedian:
         return math.nan
 
 
+class _GyroStill:
+    """Mean and spread of the gyroscope over a trailing window, to learn its bias while the phone is still."""
+
+    __slots__ = ("window_ns", "buf", "s", "s2")
+
+    def __init__(self, window_s: float):
+        self.window_ns = int(window_s * 1e9)
+        self.buf: deque = deque()
+        self.s = [0.0, 0.0, 0.0]
+        self.s2 = [0.0, 0.0, 0.0]
+
+    def update(self, t_ns: int, w) -> None:
+        self.buf.append((t_ns, w))
+        s, s2 = self.s, self.s2
+        for i in range(3):
+            s[i] += w[i]
+            s2[i] += w[i] * w[i]
+        limit = t_ns - self.window_ns
+        buf = self.buf
+        while buf[0][0] < limit:
+            _, old = buf.popleft()
+            for i in range(3):
+                s[i] -= old[i]
+                s2[i] -= old[i] * old[i]
+
+    def stats(self):
+        """(mean (3), largest per-axis standard deviation, span in ns) of the window."""
+        n = len(self.buf)
+        mean = [v / n for v in self.s]
+        sd = max(math.sqrt(max(self.s2[i] / n - mean[i] * mean[i], 0.0)) for i in range(3))
+        return mean, sd, self.buf[-1][0] - self.buf[0][0]
+
+
 class AttitudeEKF:
     """Quaternion EKF with adaptive accelerometer / magnetometer noise (eqs. 5-18).
 
@@ -199,6 +232,18 @@ class AttitudeEKF:
         Heading of the device y axis at the start when there is no magnetometer (rad, CCW from East).
     use_magnetometer : bool
         False ignores magnetometer events (heading relative to the start).
+    mag_wait_s : float
+        How long to wait for a first magnetometer reading before starting from
+        the accelerometer alone with ``initial_yaw_rad`` (s).
+    still_window_s : float
+        The gyroscope bias is learnt as its mean over this long a window in
+        which the phone is still (s): accelerometer norm standard deviation
+        below ``still_acc_sd_m_s2``, gyroscope standard deviation below
+        ``still_gyro_sd_rad_s`` on every axis and mean rate below
+        ``max_gyro_bias_rad_s``.  Phones are put down or held still at the
+        start of most walks; the heading without magnetometer depends on it.
+    still_acc_sd_m_s2, still_gyro_sd_rad_s, max_gyro_bias_rad_s : float
+        Thresholds of the stillness test (m/s^2, rad/s, rad/s).
     no_gyro_random_walk_rad_sqrt_s : float
         Attitude random walk assumed between measurements when no gyroscope event has come for 0.1 s.
     """
@@ -208,7 +253,9 @@ class AttitudeEKF:
                  variance_window_s: float = 0.5, acc_reject_m_s2: float = 4.0, mag_reject_ratio: float = 0.2,
                  mag_reject_dip_rad: float = math.radians(12.0), reference_update_s: float = 1.0,
                  declination_rad: float = 0.0, initial_yaw_rad: float = math.pi / 2,
-                 use_magnetometer: bool = True, no_gyro_random_walk_rad_sqrt_s: float = 0.5):
+                 use_magnetometer: bool = True, mag_wait_s: float = 1.0, still_window_s: float = 1.0,
+                 still_acc_sd_m_s2: float = 0.1, still_gyro_sd_rad_s: float = 0.02, max_gyro_bias_rad_s: float = 0.05,
+                 no_gyro_random_walk_rad_sqrt_s: float = 0.5):
         self.gyro_noise_rad_sqrt_s = gyro_noise_rad_sqrt_s
         self.acc_noise_base = acc_noise_base
         self.k_a1, self.k_a2 = k_a1, k_a2
@@ -222,6 +269,11 @@ class AttitudeEKF:
         self.declination_rad = declination_rad
         self.initial_yaw_rad = initial_yaw_rad
         self.use_magnetometer = use_magnetometer
+        self.mag_wait_s = mag_wait_s
+        self.still_window_s = still_window_s
+        self.still_acc_sd_m_s2 = still_acc_sd_m_s2
+        self.still_gyro_sd_rad_s = still_gyro_sd_rad_s
+        self.max_gyro_bias_rad_s = max_gyro_bias_rad_s
         self.no_gyro_random_walk_rad_sqrt_s = no_gyro_random_walk_rad_sqrt_s
         self.reset()
 
@@ -233,6 +285,12 @@ class AttitudeEKF:
         self._t_gyro: int | None = None
         self._last_acc = None
         self._last_mag = None
+        self._first_acc_ns: int | None = None
+        self._gyro_still = _GyroStill(self.still_window_s)
+        self._acc_sd = math.inf
+        #: current gyroscope bias estimate (rad/s), subtracted before prediction
+        self.gyro_bias = (0.0, 0.0, 0.0)
+        self.n_bias_updates = 0
         self._acc_var = _WindowVariance(self.variance_window_s)
         self._mag_var = _WindowVariance(self.variance_window_s)
         self._ref_next_ns: int | None = None
@@ -262,7 +320,10 @@ class AttitudeEKF:
             return
         mag = self._last_mag if self.use_magnetometer else None
         if self.use_magnetometer and mag is None:
-            return
+            if self._first_acc_ns is None:
+                self._first_acc_ns = t_ns
+            if t_ns - self._first_acc_ns < self.mag_wait_s * 1e9:
+                return  # wait a little for a magnetometer reading; then start without one
         try:
             if mag is not None:
                 q = quat.from_two_vectors_enu(acc, mag)
@@ -307,6 +368,16 @@ class AttitudeEKF:
     def predict(self, t_ns: int, wx: float, wy: float, wz: float) -> None:
         """Propagate with one gyroscope event (rad/s) over the time since the previous one (eqs. 7, 11)."""
         self.n_gyro += 1
+        gs = self._gyro_still
+        gs.update(t_ns, (wx, wy, wz))
+        if self._acc_sd < self.still_acc_sd_m_s2:
+            mean, sd, span = gs.stats()
+            if (sd < self.still_gyro_sd_rad_s and span >= 0.9 * gs.window_ns
+                    and math.sqrt(mean[0] ** 2 + mean[1] ** 2 + mean[2] ** 2) < self.max_gyro_bias_rad_s):
+                self.gyro_bias = (mean[0], mean[1], mean[2])
+                self.n_bias_updates += 1
+        b = self.gyro_bias
+        wx, wy, wz = wx - b[0], wy - b[1], wz - b[2]
         if not self.initialized:
             self._t_gyro = t_ns
             return
@@ -380,6 +451,7 @@ class AttitudeEKF:
         self._propagate_without_gyro(t_ns)
         na = math.sqrt(ax * ax + ay * ay + az * az)
         var = self._acc_var.update(t_ns, na)
+        self._acc_sd = math.sqrt(var) if len(self._acc_var.buf) > 5 else math.inf
         dev = abs(na - self.gravity_m_s2)
         self.acc_sigma2 = self.acc_noise_base ** 2 + self.k_a1 * dev + self.k_a2 * var  # eq. 17
         if dev > self.acc_reject_m_s2 or na == 0.0:

@@ -11,11 +11,23 @@ Events go in one at a time, in time order, as the phone delivers them::
     mag   -> AttitudeEKF.update_mag                     (eq. 18)
     gps, rotvec, others -> kept for later stages, ignored by the core PDR
 
-A step is detected at its acceleration peak but completed only
-``heading_delay_s`` later, when the causal smoother has caught up with the
-heading the walker had at the peak.  The live app therefore sees each step
-about half a second after it happened; :meth:`Pipeline.status` gives the
-current position at any time.
+Two gates keep what is not walking out of the track (neither is in the paper;
+both were needed on real recordings, whose first minute is often spent waving
+the phone to calibrate its compass):
+
+* **rotation gate**: a peak while the phone turns faster than
+  ``max_rotation_rms_rad_s`` (RMS over the last second) is not a step -- a
+  phone held in front of the chest turns at well under 2 rad/s even in a
+  corner; waving it turns it at 3-8 rad/s;
+* **bout gate**: a step counts only as part of ``min_bout_steps``
+  consecutive steps (each within ``max_step_interval_s`` of the last); the
+  first steps of a bout are released once it is confirmed.
+
+A step is completed ``heading_delay_s`` after its peak, when the causal
+smoother has caught up with the heading the walker had at the peak, and once
+its bout is confirmed.  The live app therefore sees each step about a second
+after it happened; :meth:`Pipeline.status` gives the current position at any
+time.
 
 :meth:`Pipeline.update` (streaming, for the app) and :meth:`Pipeline.run`
 (batch, for files) share this one kernel; a test proves they agree.
@@ -24,6 +36,7 @@ current position at any time.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -155,6 +168,13 @@ class Pipeline:
         uses the smoother's group delay.
     use_magnetometer : bool
         False: heading from gyroscope and accelerometer only, relative to the start.
+    max_rotation_rms_rad_s : float
+        Peaks while the phone rotates faster than this (RMS over the last
+        ``rotation_window_s``) are not steps (rad/s); ``inf`` turns the gate off.
+    rotation_window_s : float
+        Window of the rotation gate (s).
+    min_bout_steps : int
+        Steps count only in runs of at least this many (1 turns the gate off).
     log : bool
         Keep an :class:`AttitudeLog` (batch runs turn it on).
     """
@@ -162,7 +182,9 @@ class Pipeline:
     def __init__(self, *, height_m: float | None = None, stride_model: StrideModel | None = None,
                  step_detector: StepDetector | None = None, attitude: AttitudeEKF | None = None,
                  smoother: RotationSmoother | None = None, grid_rate_hz: float = 50.0,
-                 heading_delay_s: float | None = None, use_magnetometer: bool = True, log: bool = False):
+                 heading_delay_s: float | None = None, use_magnetometer: bool = True,
+                 max_rotation_rms_rad_s: float = 2.5, rotation_window_s: float = 1.0, min_bout_steps: int = 3,
+                 log: bool = False):
         self.height_m = height_m
         self.stride_model = stride_model or WeinbergStride()
         self.grid_rate_hz = float(grid_rate_hz)
@@ -175,6 +197,9 @@ class Pipeline:
             if abs(stage.grid_rate_hz - self.grid_rate_hz) > 1e-9:
                 raise ValueError("step detector, smoother and pipeline must share one grid_rate_hz")
         self.heading_delay_s = self.smoother.delay_s if heading_delay_s is None else float(heading_delay_s)
+        self.max_rotation_rms_rad_s = float(max_rotation_rms_rad_s)
+        self.rotation_window_s = float(rotation_window_s)
+        self.min_bout_steps = max(1, int(min_bout_steps))
         self.log = log
         self.reset()
 
@@ -184,8 +209,15 @@ class Pipeline:
         self.smoother.reset()
         self.reckoner = DeadReckoner()
         self.grid = GridResampler(rate_hz=self.grid_rate_hz)
-        self._pending: list[tuple[int, StepEvent]] = []
+        # candidate steps in time order: [event, heading or None, confirmed]
+        self._candidates: list[list] = []
+        self._bout_len = 0
         self._delay_ns = int(self.heading_delay_s * 1e9)
+        self._rot = deque()  # (t_ns, |w|^2) of the gyroscope over the rotation window
+        self._rot_sum = 0.0
+        self._rot_window_ns = int(self.rotation_window_s * 1e9)
+        self.n_rejected_rotation = 0
+        self.n_rejected_bout = 0
         self.steps: list[Step] = []
         self.t_ns = 0
         self.seen: dict[str, int] = {}
@@ -197,7 +229,15 @@ class Pipeline:
         self.seen[stream] = self.seen.get(stream, 0) + 1
         self.t_ns = t_ns
         if stream == GYRO:
-            self.attitude.predict(t_ns, values[0], values[1], values[2])
+            wx, wy, wz = values[0], values[1], values[2]
+            self.attitude.predict(t_ns, wx, wy, wz)
+            w2 = wx * wx + wy * wy + wz * wz
+            rot = self._rot
+            rot.append((t_ns, w2))
+            self._rot_sum += w2
+            limit = t_ns - self._rot_window_ns
+            while rot[0][0] < limit:
+                self._rot_sum -= rot.popleft()[1]
             return []
         if stream == MAG:
             self.attitude.update_mag(t_ns, values[0], values[1], values[2])
@@ -213,7 +253,7 @@ class Pipeline:
                 self.detector.restart_bout()
             ev = self.detector.update_grid(tg, x)
             if ev is not None:
-                self._pending.append((ev.t_ns + self._delay_ns, ev))
+                self._candidate(ev)
             if self.attitude.initialized:
                 heading = self.smoother.update(self.attitude.matrix())
             else:
@@ -221,22 +261,63 @@ class Pipeline:
             if self.log:
                 a = self.attitude
                 self._log.append((tg, a.q, heading, a.acc_sigma2, a.mag_sigma2, a.mag_rejected))
-            while self._pending and self._pending[0][0] <= tg:
-                done.append(self._complete(self._pending.pop(0)[1]))
+            done.extend(self._release(tg))
+        return done
+
+    def rotation_rms_rad_s(self) -> float:
+        """RMS rotation rate of the phone over the last ``rotation_window_s`` (rad/s; 0 without gyroscope)."""
+        n = len(self._rot)
+        return math.sqrt(max(self._rot_sum, 0.0) / n) if n else 0.0
+
+    def _candidate(self, ev: StepEvent) -> None:
+        """A peak from the detector: apply the rotation and bout gates."""
+        if ev.duration_s != ev.duration_s:  # first step after a pause: a new bout
+            self._drop_unconfirmed()
+        if self.rotation_rms_rad_s() > self.max_rotation_rms_rad_s:
+            self.n_rejected_rotation += 1
+            self._drop_unconfirmed()
+            return
+        self._candidates.append([ev, None, False])
+        self._bout_len += 1
+        if self._bout_len >= self.min_bout_steps:
+            for c in self._candidates:
+                c[2] = True
+
+    def _drop_unconfirmed(self) -> None:
+        kept = [c for c in self._candidates if c[2]]
+        self.n_rejected_bout += len(self._candidates) - len(kept)
+        self._candidates = kept
+        self._bout_len = 0
+
+    def _release(self, t_grid_ns: int) -> list[Step]:
+        """Give due candidates their heading; complete confirmed ones from the front."""
+        cands = self._candidates
+        if not cands:
+            return []
+        heading = self.smoother.heading_rad
+        for c in cands:
+            if c[1] is None and c[0].t_ns + self._delay_ns <= t_grid_ns:
+                c[1] = heading
+        if not cands[0][2] and self._bout_len and t_grid_ns - cands[-1][0].t_ns > self.detector._max_dt_ns:
+            self._drop_unconfirmed()  # the bout ended too short
+        done = []
+        while cands and cands[0][2] and cands[0][1] is not None:
+            ev, h, _ = cands.pop(0)
+            done.append(self._complete(ev, h))
         return done
 
     def finish(self) -> list[Step]:
-        """End of data: complete the steps still waiting for their heading."""
-        done = [self._complete(ev) for _, ev in self._pending]
-        self._pending = []
+        """End of data: complete the confirmed steps still waiting for their heading; drop an unconfirmed bout."""
+        self._drop_unconfirmed()
+        done = [self._complete(ev, self.smoother.heading_rad if h is None else h) for ev, h, _ in self._candidates]
+        self._candidates = []
         return done
 
-    def _complete(self, ev: StepEvent) -> Step:
+    def _complete(self, ev: StepEvent, heading: float) -> Step:
         duration = ev.duration_s if ev.duration_s == ev.duration_s else DEFAULT_STEP_DURATION_S
         feats = StepFeatures(t_ns=ev.t_ns, duration_s=duration, acc_max_m_s2=ev.acc_max_m_s2,
                              acc_min_m_s2=ev.acc_min_m_s2, acc_var_m2_s4=ev.acc_var_m2_s4, height_m=self.height_m)
         length = self.stride_model.length_m(feats)  # eq. 4
-        heading = self.smoother.heading_rad
         if heading != heading:  # no attitude yet (no magnetometer reading so far)
             heading = self.attitude.initial_yaw_rad
         east, north = self.reckoner.update(length, heading)  # eq. 1
@@ -296,7 +377,8 @@ class Pipeline:
             np.array([r[4] for r in rows], dtype=float),
             np.array([r[5] for r in rows], dtype=bool),
         )
-        counters = {"mag_used": a.n_mag_used, "mag_rejected": a.n_mag_rejected, "acc_rejected": a.n_acc_rejected}
+        counters = {"mag_used": a.n_mag_used, "mag_rejected": a.n_mag_rejected, "acc_rejected": a.n_acc_rejected,
+                    "peaks_rejected_rotation": self.n_rejected_rotation, "peaks_rejected_bout": self.n_rejected_bout}
         return PipelineResult(list(self.steps), Track.from_steps(self.steps), att, self.labels(), recording,
                               counters)
 

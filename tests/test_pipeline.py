@@ -92,7 +92,7 @@ def test_without_magnetometer_the_track_is_labelled_and_shape_kept():
     # relative heading: first leg points North by definition, the turn is still right (90 deg right)
     first = np.angle(np.mean(np.exp(1j * res.track.heading_rad[3:15])))
     last = np.angle(np.mean(np.exp(1j * res.track.heading_rad[-10:])))
-    assert math.degrees(first) == pytest.approx(90.0, abs=5.0)
+    assert math.degrees(first) == pytest.approx(90.0, abs=10.0)  # the phone's pointing at start, +- hand sway
     assert math.degrees(wrap_angle(last - first)) == pytest.approx(-90.0, abs=5.0)
 
 
