@@ -69,13 +69,8 @@ def build_pipeline(args):
     if args.stride_c is not None:
         kw["stride_model"] = WeinbergStride(coefficient=args.stride_c)
     else:
-        try:  # the trained stride model (issue #4), when the package has it
-            from core.stride_models import default_stride_model
-            model = default_stride_model(height_m=args.height)
-            if model is not None:
-                kw["stride_model"] = model
-        except ImportError:
-            pass
+        from core.stride_models import load_stride_model
+        kw["stride_model"] = load_stride_model(args.stride_model)
     p = Pipeline(**kw)
     p.attitude.declination_rad = math.radians(args.declination)
     p.attitude.reset()
@@ -156,10 +151,7 @@ def cmd_replay(args) -> int:
         written.append(args.gpx)
     if args.plot:
         from core.plot import plot_track
-        truth_en = None
-        truth = rec.metadata.get("truth")
-        if isinstance(truth, dict) and truth.get("waypoints_en_m"):
-            truth_en = truth["waypoints_en_m"]
+        truth_en = rec.metadata.get("waypoints_en_m") if rec.metadata.get("simulator") else None
         s = res.summary()
         plot_track(args.plot, res.track, title=f"PDR: {Path(rec.source.split(' ')[0]).name}",
                    truth_en=truth_en,
@@ -220,8 +212,11 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--origin", type=_parse_origin, metavar="LAT,LON",
                    help="geographic start point for GeoJSON/GPX (default: first GPS fix, else 0,0)")
     r.add_argument("--height", type=float, metavar="M", help="walker's height in metres (for the stride model)")
-    r.add_argument("--stride-c", type=float, metavar="C", help="constant Weinberg coefficient C (overrides the "
-                                                                "stride model)")
+    r.add_argument("--stride-model", default="default", metavar="NAME|PATH",
+                   help="step length model: a shipped name (default, weinberg, weinberg_bp, chen_linear, chen_ann) "
+                        "or a model JSON file (default: %(default)s)")
+    r.add_argument("--stride-c", type=float, metavar="C", help="constant Weinberg coefficient C (overrides "
+                                                                "--stride-model)")
     r.add_argument("--declination", type=float, default=0.0, metavar="DEG",
                    help="magnetic declination, east positive (default 0: headings relative to magnetic north)")
     r.add_argument("--no-mag", action="store_true", help="ignore the magnetometer (heading relative to the start)")
@@ -252,6 +247,9 @@ def main(argv=None) -> int:
         try:
             code = args.func(args)
         except RecordingError as e:
+            print(f"pdr: error: {e}", file=sys.stderr)
+            code = EXIT_INPUT
+        except ValueError as e:  # e.g. a stride model file that cannot be used
             print(f"pdr: error: {e}", file=sys.stderr)
             code = EXIT_INPUT
         except (OSError, RuntimeError) as e:

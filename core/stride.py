@@ -64,14 +64,16 @@ class ConstantCoefficient(CoefficientModel):
     Parameters
     ----------
     c : float
-        Weinberg coefficient in m / (m/s^2)^(1/4).  The default 0.47 suits the
-        low-pass-filtered norm of a hand-held phone and was chosen on the
-        simulator and on real walks (see ``benchmarks/RESULTS.md``).
+        Weinberg coefficient in m / (m/s^2)^(1/4) for the low-pass-filtered
+        norm of :mod:`core.steps`.  The default is the shipped model
+        ``core/models/default.json`` (trained by ``tools/train_stride.py`` on
+        the IPOL walkers; the same fit on hand-held IPIN loops gives 0.456; a
+        test keeps the two equal).
     """
 
     name = "constant"
 
-    def __init__(self, *, c: float = 0.47):
+    def __init__(self, *, c: float = 0.455):
         if not c > 0:
             raise ValueError(f"Weinberg coefficient must be positive, got {c}")
         self.c = float(c)

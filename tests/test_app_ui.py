@@ -26,6 +26,7 @@ kivy_env.prepare(headless=True)  # before anything imports kivy
 from core.pipeline import Pipeline  # noqa: E402
 from core.recording import write_recording  # noqa: E402
 from core.simulator import simulate_walk  # noqa: E402
+from app.settings import DEFAULT_STRIDE_C  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 WAYPOINTS = ((0.0, 0.0), (30.0, 0.0), (30.0, 20.0), (10.0, 20.0))
@@ -278,7 +279,7 @@ def test_app_lifecycle_pause_resume_and_export(walk_file, tmp_path):
     walked = log["calibration_walked_m"]
     batch_steps = Pipeline().run(w.recording).steps
     assert walked == pytest.approx(sum(s.length_m for s in batch_steps[log["steps_at_calibration_start"]:]))
-    assert saved["stride_c"] == pytest.approx(0.47 * known / walked), log["calib_message"]
+    assert saved["stride_c"] == pytest.approx(DEFAULT_STRIDE_C * known / walked), log["calib_message"]
     assert saved["calibrations"][-1]["known_m"] == known
     # the file chooser opens where the recording is, and "Replay" starts it again
     assert log["chooser"][0] == str(path.parent) and "*.csv" in log["chooser"][1]
@@ -419,7 +420,7 @@ def test_live_mode_records_every_event_through_the_app(tmp_path):
     assert log["events_in"] == len(delivered) > 1500
     rec = read_recording(log["record_path"], warn=False)
     assert rec.device["model"] == "Phone 1" and rec.device["sampling_period_us"] == 10000
-    assert rec.metadata["stride_c"] == pytest.approx(0.47) and "unix_offset_ns" in rec.metadata
+    assert rec.metadata["stride_c"] == pytest.approx(DEFAULT_STRIDE_C) and "unix_offset_ns" in rec.metadata
     names = {1: "acc", 2: "mag", 4: "gyro"}
     for type_, name in names.items():
         want = sorted(t for t, ty in delivered if ty == type_)

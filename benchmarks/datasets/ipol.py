@@ -1,0 +1,176 @@
+"""IPOL healthy-gait dataset (Voisard et al., IPOL 2023): XSens on the lower back, 2 x 10 m walks.
+
+Folder ``ipol_healthy_gait_xsens/GaitData/`` under the data root (see its
+README.md).  Each trial: stand, walk 10 m, U-turn, walk 10 m back, stop.
+
+What the reader returns (one :class:`IpolTrial` per ``<subject>-<trial>.json``):
+
+* the recording of the **lower-back** sensor (``*_lb.txt.gz``, 5th lumbar
+  vertebra, the placement nearest to a belt-carried phone), placement
+  ``"waist"``.  Streams ``acc`` (m/s^2), ``gyro`` (rad/s) and ``mag``.
+  The axes are the XSens sensor axes, *not* the Android device axes (the
+  reader does not know how the sensor was strapped); the step detector and
+  the stride features only use the acceleration norm, which does not care.
+  The magnetometer is in XSens normalised units (1 = the field at the XSens
+  calibration site); it is scaled by :data:`NOMINAL_FIELD_UT` to look like
+  microtesla, good enough for a relative heading, not for an absolute field.
+* time: ``t_ns = PacketCounter * 10 ms`` (the sensors sample at 100 Hz).
+  The files drop packets (gaps of 1-5 samples); the recording keeps the real
+  counters, so the gaps stay gaps.  The annotations are sample indices into
+  the *gap-filled* signal that starts at the file's first counter (that is
+  how the authors' ``import_data.load_XSens`` reads the files), so
+  index ``i`` is at ``(first_counter + i) * 10 ms``.
+* ground truth: footstep events ([foot-off, foot-strike] per step, left and
+  right), trial and U-turn boundaries, subject height/weight/age/sex.
+  ``step_t_ns`` are the foot strikes (ends of the events), sorted.
+  ``distance_m`` is 20 m (the two straight legs; the path inside the U-turn
+  is not measured), ``walk_t_ns`` the trial boundaries.
+
+Caveats (stated again in the stride results): 10 m is the protocol's
+nominal leg length; where exactly the walker started, and where the U-turn
+began relative to the 10 m mark, is not annotated.  Step lengths derived from
+"20 m / steps on the straight legs" therefore carry a few per cent of common
+uncertainty.  Subject 10 has no height in its metadata.  Trial 9-4 repeats
+9-3: its lower-back file is 9-3's samples plus a longer tail, with the same
+footstep annotations (a defect of the source; the reader returns it as is).
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.datasets.base import Trial
+from core.conventions import ACC, GYRO, MAG
+from core.recording import Recording, make_stream
+
+NAME = "ipol_healthy_gait_xsens"
+
+SAMPLE_PERIOD_NS = 10_000_000  #: 100 Hz
+#: XSens normalised magnetic units -> uT (about the total field near Paris; only used for relative heading)
+NOMINAL_FIELD_UT = 47.0
+#: nominal length of each straight leg of the protocol (m)
+LEG_LENGTH_M = 10.0
+
+
+@dataclass
+class IpolTrial(Trial):
+    """A :class:`Trial` with the IPOL-specific annotations kept."""
+
+    #: U-turn window (t_ns) between the two 10 m legs
+    uturn_t_ns: tuple[int, int] | None = None
+    #: footstep events, (n, 2) int64 t_ns of [foot-off, foot-strike], per foot
+    left_steps_t_ns: np.ndarray | None = None
+    right_steps_t_ns: np.ndarray | None = None
+    #: the two straight legs as (t_start_ns, t_end_ns, length_m)
+    legs: tuple[tuple[int, int, float], ...] = ()
+
+
+def available(root: Path) -> bool:
+    return (Path(root) / NAME / "GaitData").is_dir()
+
+
+def _read_sensor(path: Path) -> np.ndarray:
+    """The numeric table of one XSens file: PacketCounter, Acc xyz, Gyr xyz, Mag xyz."""
+    with gzip.open(path, "rt") as fh:
+        first = fh.readline()
+        if "100 Hz" not in first:
+            raise ValueError(f"{path}: expected 'Acquisition frequency: 100 Hz', got {first.strip()!r}")
+        header = fh.readline().split()
+        if header[:4] != ["PacketCounter", "Acc_X", "Acc_Y", "Acc_Z"]:
+            raise ValueError(f"{path}: unexpected header {header}")
+        data = np.loadtxt(fh, ndmin=2)
+    if data.shape[1] != 10:
+        raise ValueError(f"{path}: expected 10 columns, got {data.shape[1]}")
+    return data
+
+
+def first_counter(path: Path) -> int:
+    """The first PacketCounter of a sensor file (the origin of the annotation indices)."""
+    with gzip.open(path, "rt") as fh:
+        fh.readline()
+        fh.readline()
+        return int(float(fh.readline().split()[0]))
+
+
+def load_recording(path: Path) -> Recording:
+    """The lower-back (or any) XSens file as a :class:`Recording` (see the module docstring)."""
+    data = _read_sensor(Path(path))
+    counter = data[:, 0].astype(np.int64)
+    keep = np.concatenate([[True], np.diff(counter) > 0])  # drop repeats / backwards counters if any
+    data, counter = data[keep], counter[keep]
+    t_ns = counter * SAMPLE_PERIOD_NS
+    streams = {
+        ACC: make_stream(ACC, t_ns, data[:, 1:4]),
+        GYRO: make_stream(GYRO, t_ns, data[:, 4:7]),
+        MAG: make_stream(MAG, t_ns, data[:, 7:10] * NOMINAL_FIELD_UT,
+                         note=f"XSens normalised units x {NOMINAL_FIELD_UT} (nominal, not a measured field)"),
+    }
+    return Recording(streams=streams, device={"model": "XSens MTw Awinda", "placement": "lower back (L5)",
+                                              "axes": "XSens sensor axes, not Android device axes"},
+                     metadata={"dataset": NAME}, source=str(path))
+
+
+def _finite(x):
+    return float(x) if isinstance(x, (int, float)) and math.isfinite(x) else None
+
+
+def _trial(meta_path: Path) -> IpolTrial:
+    meta = json.loads(meta_path.read_text())
+    name = meta_path.stem
+    lb = meta_path.with_name(f"{name}_lb.txt.gz")
+    c0 = first_counter(lb)
+
+    def t_of(i) -> np.ndarray:
+        return (np.asarray(i, dtype=np.int64) + c0) * SAMPLE_PERIOD_NS
+
+    left = t_of(np.asarray(meta.get("LeftFootEvents", []), dtype=np.int64).reshape(-1, 2))
+    right = t_of(np.asarray(meta.get("RightFootEvents", []), dtype=np.int64).reshape(-1, 2))
+    strikes = np.sort(np.concatenate([left[:, 1], right[:, 1]]))
+    tb = t_of(meta["TrialBoundaries"])
+    ub = t_of(meta["UTurnBoundaries"])
+    height_cm = meta.get("Height")
+    if height_cm is not None and not (isinstance(height_cm, (int, float)) and math.isfinite(height_cm) and height_cm > 0):
+        height_cm = None  # subject 10: NaN in the metadata
+    subject = {
+        "id": f"ipol-{meta['Subject']}",
+        "height_m": float(height_cm) / 100.0 if height_cm else None,
+        "weight_kg": _finite(meta.get("Weight")),
+        "age": meta.get("Age"),
+        "sex": meta.get("Gender"),
+    }
+    legs = ((int(tb[0]), int(ub[0]), LEG_LENGTH_M), (int(ub[1]), int(tb[1]), LEG_LENGTH_M))
+    return IpolTrial(
+        dataset=NAME,
+        name=name,
+        load=lambda p=lb: load_recording(p),
+        placement="waist",
+        step_t_ns=strikes,
+        step_count=int(len(strikes)),
+        distance_m=2 * LEG_LENGTH_M,
+        subject=subject,
+        walk_t_ns=(int(tb[0]), int(tb[1])),
+        notes="lower-back XSens; 10 m out, U-turn, 10 m back; distance_m counts the two straight legs only",
+        uturn_t_ns=(int(ub[0]), int(ub[1])),
+        left_steps_t_ns=left,
+        right_steps_t_ns=right,
+        legs=legs,
+    )
+
+
+def trials(root: Path) -> list[IpolTrial]:
+    folder = Path(root) / NAME / "GaitData"
+    if not folder.is_dir():
+        return []
+
+    def key(p: Path):
+        s, t = p.stem.split("-")
+        return int(s), int(t)
+
+    return [_trial(p) for p in sorted(folder.glob("*.json"), key=key)
+            if p.with_name(f"{p.stem}_lb.txt.gz").exists()]

@@ -1,0 +1,18 @@
+"""Regenerate the bundled demo recording ``core/data/demo_walk.csv.gz`` from the simulator.
+
+Usage: ``python tools/make_demo.py``.  The file is the simulator's
+``demo_walk(seed=0)`` written in the project's format (truth in the header).
+"""
+
+from pathlib import Path
+
+from core.recording import write_recording
+from core.simulator import demo_walk
+
+OUT = Path(__file__).resolve().parents[1] / "core" / "data" / "demo_walk.csv.gz"
+
+if __name__ == "__main__":
+    walk = demo_walk(seed=0)
+    write_recording(str(OUT), walk.recording)
+    print(f"wrote {OUT}: {walk.recording.duration_s:.1f} s, {walk.truth.n_steps} steps, "
+          f"{walk.truth.path_length_m:.1f} m")
