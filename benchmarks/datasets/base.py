@@ -6,6 +6,9 @@ A dataset module exposes::
     def available(root: Path) -> bool          # is the dataset present under root?
     def trials(root: Path) -> list[Trial]      # cheap: recordings are loaded lazily
 
+Harnesses load a trial with ``trial.open()`` (``load()`` plus the ground truth
+that needs the recording, see ``Trial.resolve``).
+
 Every trial's recording follows the conventions of :mod:`core` (converted at
 the edge by the reader or by ``core.importers``), and every ground-truth time
 is on the recording's own clock (``t_ns``).
@@ -65,3 +68,18 @@ class Trial:
     declination_rad: float | None = None
     #: free facts for the report (phone, route, surface, ...), name -> short value
     info: dict = field(default_factory=dict)
+    #: ground truth that can only be read with the recording (e.g. landmarks whose clock the
+    #: importer maps): called by :meth:`open`, returns the Trial fields to set (dict fields are updated)
+    resolve: Callable[[Recording], dict] | None = None
+
+    def open(self) -> Recording:
+        """Load the recording and fill in the ground truth that depends on it (see ``resolve``)."""
+        rec = self.load()
+        if self.resolve is not None:
+            for name, value in self.resolve(rec).items():
+                old = getattr(self, name, None)
+                if isinstance(old, dict) and isinstance(value, dict):
+                    old.update(value)
+                else:
+                    setattr(self, name, value)
+        return rec

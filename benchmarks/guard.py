@@ -1,0 +1,134 @@
+"""CI regression guard: the quick benchmark subset against thresholds recorded in the repository.
+
+``python -m benchmarks.guard [--data DIR] [--jobs N] [--thresholds FILE] [--update]``
+
+Runs :func:`benchmarks.run.run` on the quick subset (our pipeline only, no
+peers: they cannot regress our numbers), computes the headline numbers and
+compares each with ``benchmarks/thresholds.json``::
+
+    {"metrics": {"handheld_step_mae_pct": {"max": 2.1, "baseline": 1.5}, ...}}
+
+``max``: fails when the value is above it; ``min``: fails when below.  The
+thresholds are a regression guard, not the issue's targets: the baseline
+of the last accepted run plus a margin (:func:`margin`).  A headline with
+no value in this run (its dataset absent) is reported and skipped; a
+recording that raises fails the guard.
+
+Exit status: 0 passed (or no data folder: skipped), 1 a headline got worse
+or a recording failed, 2 bad usage.  ``--update`` rewrites the thresholds
+from this run's values (after an accepted improvement, or a deliberate
+trade-off the commit message explains).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from benchmarks.datasets.base import default_data_root
+from benchmarks.run import headline, run
+
+THRESHOLDS = Path(__file__).with_name("thresholds.json")
+
+#: headlines guarded when thresholds are (re)written; "min" for higher-is-better
+GUARDED = {
+    "handheld_step_mae_pct": "max",
+    "oxford_all_step_mae_pct": "max",
+    "oxford_step_f1_median": "min",
+    "brajdic_harle_step_mae_pct": "max",
+    "ipin_landmark_median_m": "max",
+    "ipin_landmark_fit_median_m": "max",
+    "ipin_loop_closure_median_pct": "max",
+    "ipin_segment_heading_median_deg": "max",
+    "ms_landmark_fit_median_m": "max",
+    "ipol_step_mae_pct": "max",
+    "ipol_distance_mae_pct": "max",
+    "trundlewheel_distance_mae_pct": "max",
+}
+
+
+def margin(name: str, value: float) -> float:
+    """Allowed slack around a baseline: 10 % of it, at least 0.5 (%), 0.3 m, 1 deg or 0.01 (F1)."""
+    if name.endswith("_f1_median"):
+        return 0.01
+    floor = 0.3 if name.endswith("_m") else 1.0 if name.endswith("_deg") else 0.5
+    return max(0.1 * abs(value), floor)
+
+
+def compare(values: dict, thresholds: dict) -> tuple[list[list[str]], bool]:
+    """Rows ``[metric, value, threshold, status]`` and whether everything passed."""
+    rows, ok = [], True
+    for name, spec in thresholds.items():
+        value = values.get(name)
+        if "max" in spec:
+            op, limit = "<=", spec["max"]
+        else:
+            op, limit = ">=", spec["min"]
+        if value is None:
+            rows.append([name, "-", f"{op} {limit:.3f}", "absent (skipped)"])
+            continue
+        good = value <= limit if op == "<=" else value >= limit
+        ok &= good
+        base = spec.get("baseline")
+        trend = "" if base is None else f" (baseline {base:.3f})"
+        rows.append([name, f"{value:.3f}", f"{op} {limit:.3f}", ("ok" if good else "WORSE") + trend])
+    return rows, ok
+
+
+def print_table(rows: list[list[str]], out=sys.stdout) -> None:
+    header = ["headline", "value", "threshold", "status"]
+    widths = [max(len(r[k]) for r in rows + [header]) for k in range(4)]
+    for r in [header, ["-" * w for w in widths]] + rows:
+        print("  ".join(c.ljust(w) for c, w in zip(r, widths)), file=out)
+
+
+def thresholds_from(values: dict) -> dict:
+    out = {}
+    for name, kind in GUARDED.items():
+        if name not in values:
+            continue
+        v = values[name]
+        limit = v + margin(name, v) if kind == "max" else v - margin(name, v)
+        out[name] = {kind: round(limit, 3), "baseline": round(v, 3)}
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.guard", description=__doc__.split("\n")[0])
+    ap.add_argument("--data", type=Path, default=None, help="data root (default: ../shared/data beside the repo)")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--thresholds", type=Path, default=THRESHOLDS)
+    ap.add_argument("--update", action="store_true", help="rewrite the thresholds from this run")
+    args = ap.parse_args(argv)
+    root = args.data or default_data_root()
+    if not root.is_dir():
+        print(f"benchmark guard: no data folder at {root}: skipped")
+        return 0
+    t0 = time.perf_counter()
+    info = run(root, quick=True, jobs=args.jobs, peer_names=())
+    values = headline(info["results"])
+    failed = [r for r in info["results"] if "error" in r]
+    if args.update:
+        doc = {"_about": "CI regression guard (benchmarks/guard.py): quick-subset headline numbers may not get "
+                         "worse than these limits (baseline + margin). Not the issue's targets.",
+               "metrics": thresholds_from(values)}
+        args.thresholds.write_text(json.dumps(doc, indent=2) + "\n")
+        print(f"benchmark guard: thresholds written to {args.thresholds}")
+    thresholds = json.loads(args.thresholds.read_text())["metrics"]
+    rows, ok = compare(values, thresholds)
+    print(f"benchmark guard: quick subset, {len(info['results'])} recordings in {time.perf_counter() - t0:.0f} s")
+    print_table(rows)
+    for r in failed:
+        print(f"FAILED recording {r['dataset']}/{r['name']}: {r['error']}")
+    if failed or not ok:
+        print("benchmark guard: FAILED (a headline got worse than its threshold, or a recording failed)")
+        return 1
+    print("benchmark guard: passed")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,258 @@
+"""Heading peers: other attitude estimators run on the same recording, dead-reckoned with OUR steps.
+
+Every peer produces an attitude time series ``q`` (w, x, y, z, body -> ENU,
+the :mod:`core` convention).  Its per-step heading is then made exactly as the
+pipeline makes ours, so that **only the attitude differs**:
+
+1. sample the peer's rotation matrix ``R(q)`` on the pipeline's uniform grid
+   (latest peer sample at or before each grid time);
+2. smooth it with the pipeline's own :class:`core.heading.RotationSmoother`
+   (same cut-off, same forward axis);
+3. read the smoothed heading at ``t_step + heading_delay_s``, the instant at
+   which the pipeline reads ours;
+4. dead-reckon with our step lengths (:func:`benchmarks.metrics.dead_reckon`).
+
+Peers (all optional; a missing package or stream just drops that peer):
+
+``rotvec``
+    The phone's own attitude: the Android rotation vector logged in the file
+    (``rotvec`` stream: GetSensorData ``AHRS`` lines, ``TYPE_ROTATION_VECTOR``).
+``imufusion``
+    x-io Technologies' Fusion AHRS (``pip install imufusion``): gain 0.5,
+    acceleration and magnetic rejection 10 deg, 5 s rejection timeout (the
+    Fusion README's recommendations), with its gyroscope bias estimator.  The
+    ENU convention is set through the settings attribute: imufusion 1.3.3's
+    ``AhrsSettings(convention=...)`` keyword is parsed but not applied.
+``madgwick``
+    ``ahrs.filters.Madgwick`` (``pip install ahrs``), MARG update with its
+    default gain.  It estimates body -> North-West-Up; we rotate its output to ENU.
+``ekf``
+    ``ahrs.filters.EKF`` in its ENU frame, fixed noises (its defaults), with
+    the magnetic reference dip angle measured from the recording itself.  Its
+    ENU model references gravity as ``(0, 0, -1)``, so it is given the
+    negated accelerometer (checked on a simulated tilted, turning phone in
+    ``tests/test_datasets.py``; fed the raw specific force it settles upside down).
+
+The gyro-based peers run on the gyroscope timestamps with ``dt`` from them;
+accelerometer and magnetometer are interpolated linearly to those instants.
+They start from the same TRIAD attitude (first accelerometer and magnetometer
+readings) except imufusion, which runs its own start-up.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from core import quaternion as quat
+from core.conventions import ACC, GYRO, MAG, ROTVEC
+from core.heading import RotationSmoother
+from core.recording import Recording
+
+ALL_PEERS = ("rotvec", "imufusion", "madgwick", "ekf")
+#: peers cheap enough for the quick run
+QUICK_PEERS = ("rotvec", "imufusion")
+
+STANDARD_GRAVITY = 9.80665
+#: rotation taking North-West-Up coordinates to East-North-Up (90 deg about Up)
+_Q_NWU_TO_ENU = quat.from_axis_angle((0.0, 0.0, 1.0), math.pi / 2)
+
+
+@dataclass
+class Attitude:
+    """An attitude time series: ``t_ns`` (n,) and ``q_wxyz`` (n, 4) body -> ENU."""
+
+    t_ns: np.ndarray
+    q_wxyz: np.ndarray
+
+
+def available_peers(names=ALL_PEERS) -> list[str]:
+    """The peers whose packages are importable."""
+    out = []
+    for name in names:
+        try:
+            if name == "imufusion":
+                import imufusion  # noqa: F401
+            elif name in ("madgwick", "ekf"):
+                import ahrs  # noqa: F401
+        except ImportError:
+            continue
+        out.append(name)
+    return out
+
+
+# ---------------------------------------------------------------------------
+# inputs
+
+
+def synced_imu(rec: Recording, with_mag: bool = True):
+    """Gyro timestamps and acc / mag linearly interpolated to them: ``t_ns, gyr, acc, mag``."""
+    g = rec.stream(GYRO, "gyro-based peers")
+    a = rec.stream(ACC, "gyro-based peers")
+    t = g.t_ns
+    lo = max(int(a.t_ns[0]), int(t[0]))
+    hi = min(int(a.t_ns[-1]), int(t[-1]))
+    m = None
+    if with_mag and rec.has(MAG):
+        s = rec.streams[MAG]
+        lo, hi = max(lo, int(s.t_ns[0])), min(hi, int(s.t_ns[-1]))
+    keep = (t >= lo) & (t <= hi)
+    t = t[keep]
+    gyr = g.values[keep]
+    x = (t - t[0]).astype(float)
+
+    def interp(stream):
+        xs = (stream.t_ns - t[0]).astype(float)
+        return np.column_stack([np.interp(x, xs, stream.values[:, k]) for k in range(3)])
+
+    acc = interp(a)
+    if with_mag and rec.has(MAG):
+        m = interp(rec.streams[MAG])
+    return t, gyr, acc, m
+
+
+def dip_angle_rad(acc: np.ndarray, mag: np.ndarray) -> float:
+    """Median magnetic dip (rad, positive down) from paired specific force and field readings."""
+    an = acc / np.linalg.norm(acc, axis=1, keepdims=True)
+    mn = mag / np.linalg.norm(mag, axis=1, keepdims=True)
+    return float(np.median(np.arcsin(np.clip(-np.sum(an * mn, axis=1), -1.0, 1.0))))
+
+
+def _dts(t_ns: np.ndarray) -> np.ndarray:
+    dt = np.diff(t_ns, prepend=t_ns[0]).astype(float) * 1e-9
+    if len(dt) > 1:
+        dt[0] = dt[1]
+    return np.clip(dt, 1e-4, 0.1)
+
+
+# ---------------------------------------------------------------------------
+# the peers' attitudes
+
+
+def attitude_rotvec(rec: Recording) -> Attitude:
+    s = rec.stream(ROTVEC, "the phone's rotation vector")
+    q = s.values / np.linalg.norm(s.values, axis=1, keepdims=True)
+    return Attitude(s.t_ns.copy(), q)
+
+
+def attitude_imufusion(rec: Recording) -> Attitude:
+    import imufusion
+
+    t, gyr, acc, mag = synced_imu(rec)
+    dt = _dts(t)
+    rate = 1.0 / float(np.median(dt))
+    settings = imufusion.AhrsSettings(sample_rate=rate, gain=0.5, gyroscope_range=2000.0,
+                                      acceleration_rejection=10.0, magnetic_rejection=10.0,
+                                      rejection_timeout=5.0)
+    settings.convention = imufusion.CONVENTION_ENU  # the constructor keyword is ignored (imufusion 1.3.3)
+    ahrs = imufusion.Ahrs()
+    ahrs.set_settings(settings)
+    bias = imufusion.Bias()
+    bias.set_settings(imufusion.BiasSettings(sample_rate=rate))
+    gyr_dps = np.degrees(gyr)
+    acc_g = acc / STANDARD_GRAVITY
+    out = np.empty((len(t), 4))
+    for i in range(len(t)):
+        g = bias.update(gyr_dps[i])
+        ahrs.set_sample_period(float(dt[i]))
+        if mag is None:
+            ahrs.update_no_magnetometer(g, acc_g[i])
+        else:
+            ahrs.update(g, acc_g[i], mag[i])
+        out[i] = ahrs.get_quaternion()
+    return Attitude(t, out)
+
+
+def _triad(acc, mag):
+    return quat.from_two_vectors_enu(tuple(acc), tuple(mag))
+
+
+def attitude_madgwick(rec: Recording) -> Attitude:
+    from ahrs.filters import Madgwick
+
+    t, gyr, acc, mag = synced_imu(rec)
+    if mag is None:
+        raise ValueError("madgwick peer needs a magnetometer")
+    dt = _dts(t)
+    f = Madgwick()
+    q = np.array(quat.multiply(quat.conjugate(_Q_NWU_TO_ENU), _triad(acc[0], mag[0])))  # start in NWU
+    out = np.empty((len(t), 4))
+    for i in range(len(t)):
+        q = f.updateMARG(q, gyr[i], acc[i], mag[i], dt=float(dt[i]))
+        out[i] = quat.multiply(_Q_NWU_TO_ENU, tuple(q))
+    return Attitude(t, out)
+
+
+def attitude_ekf(rec: Recording) -> Attitude:
+    from ahrs.filters import EKF
+
+    t, gyr, acc, mag = synced_imu(rec)
+    if mag is None:
+        raise ValueError("ekf peer needs a magnetometer")
+    dt = _dts(t)
+    f = EKF(frame="ENU", magnetic_ref=math.degrees(dip_angle_rad(acc, mag)))
+    f.mag = mag  # its per-sample update() predicts the magnetometer only when this attribute is set
+    q = np.array(_triad(acc[0], mag[0]))
+    out = np.empty((len(t), 4))
+    down = -acc  # its ENU model expects gravity (0, 0, -1), not the specific force the phone reports
+    for i in range(len(t)):
+        q = f.update(q, gyr[i], down[i], mag[i], dt=float(dt[i]))
+        out[i] = q
+    return Attitude(t, out)
+
+
+ATTITUDE = {"rotvec": attitude_rotvec, "imufusion": attitude_imufusion, "madgwick": attitude_madgwick,
+            "ekf": attitude_ekf}
+
+
+def can_run(name: str, rec: Recording) -> bool:
+    if name == "rotvec":
+        return rec.has(ROTVEC)
+    if name == "imufusion":
+        return rec.has(GYRO) and rec.has(ACC)
+    return rec.has(GYRO) and rec.has(ACC) and rec.has(MAG)
+
+
+# ---------------------------------------------------------------------------
+# per-step headings
+
+
+def step_headings(att: Attitude, step_t_ns, *, grid_rate_hz: float = 50.0, cutoff_hz: float = 0.5,
+                  delay_s: float | None = None, forward_b=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """Per-step walking heading (rad) from an attitude series, made as the pipeline makes ours.
+
+    The rotation matrices are sampled on a uniform ``grid_rate_hz`` grid,
+    low-passed by :class:`core.heading.RotationSmoother` and read at
+    ``t_step + delay_s`` (the smoother's group delay by default).  Steps before
+    the attitude series starts get its first smoothed heading.
+    """
+    steps = np.asarray(step_t_ns, dtype=np.int64)
+    smoother = RotationSmoother(cutoff_hz=cutoff_hz, grid_rate_hz=grid_rate_hz, forward_b=forward_b)
+    delay = smoother.delay_s if delay_s is None else float(delay_s)
+    if len(att.t_ns) == 0 or len(steps) == 0:
+        return np.full(len(steps), np.nan)
+    period_ns = int(round(1e9 / grid_rate_hz))
+    grid = np.arange(int(att.t_ns[0]), int(att.t_ns[-1]) + 1, period_ns, dtype=np.int64)
+    idx = np.searchsorted(att.t_ns, grid, side="right") - 1
+    heading = np.array([smoother.update(quat.to_matrix(tuple(att.q_wxyz[i]))) for i in idx])
+    read = steps + int(round(delay * 1e9))
+    k = np.clip(np.searchsorted(grid, read, side="left"), 0, len(grid) - 1)
+    return heading[k]
+
+
+def run_peers(rec: Recording, step_t_ns, names=ALL_PEERS, **heading_kw) -> tuple[dict, dict]:
+    """Per-step headings of every peer that can run: ``({name: headings}, {name: error message})``."""
+    out, errors = {}, {}
+    for name in names:
+        if not can_run(name, rec):
+            continue
+        try:
+            att = ATTITUDE[name](rec)
+            out[name] = step_headings(att, step_t_ns, **heading_kw)
+        except ImportError as e:
+            errors[name] = f"not installed ({e.name})"
+        except Exception as e:  # a peer failing must not stop the benchmark
+            errors[name] = f"{type(e).__name__}: {e}"
+    return out, errors

@@ -1,0 +1,356 @@
+"""The benchmark's Markdown report and trajectory plots (from :func:`benchmarks.run.run`'s output)."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import os
+import platform
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks import metrics as M
+from benchmarks.run import evaluate_targets, headline
+
+SOURCE_NAMES = {
+    "ours": "ours (adaptive EKF)",
+    "rotvec": "phone rotation vector",
+    "imufusion": "x-io Fusion (imufusion)",
+    "madgwick": "ahrs Madgwick",
+    "ekf": "ahrs EKF",
+}
+PEER_ORDER = ("ours", "rotvec", "imufusion", "madgwick", "ekf")
+COLOURS = {"ours": "tab:blue", "rotvec": "tab:orange", "imufusion": "tab:green", "madgwick": "tab:purple",
+           "ekf": "tab:brown"}
+
+
+def _fmt(v, nd=1, signed=False) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, str):
+        return v
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if not math.isfinite(v):
+        return ""
+    return f"{v:+.{nd}f}" if signed else f"{v:.{nd}f}"
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def _summary_rows(rows_num: list[list], n_label_cols: int, fmts: list) -> list[list[str]]:
+    """Mean and median rows over the numeric columns (label columns left blank)."""
+    out = []
+    for label, fn in (("**mean**", M.nanmean), ("**median**", M.nanmedian)):
+        row = [label] + [""] * (n_label_cols - 1)
+        for k, f in enumerate(fmts):
+            col = [r[n_label_cols + k] for r in rows_num]
+            if f is None:
+                row.append("")
+                continue
+            vals = [v for v in col if isinstance(v, (int, float, np.integer, np.floating))]
+            row.append(f(fn(vals)) if vals else "")
+        out.append(row)
+    return out
+
+
+def _render(header, rows_num, n_label_cols, fmts) -> str:
+    body = []
+    for r in rows_num:
+        body.append([str(x) for x in r[:n_label_cols]] +
+                    [("" if f is None and x is None else (f(x) if f is not None else str(x)))
+                     for f, x in zip(fmts, r[n_label_cols:])])
+    return _table(header, body + _summary_rows(rows_num, n_label_cols, fmts))
+
+
+def _f(nd=1, signed=False):
+    return lambda v: _fmt(v, nd, signed)
+
+
+# ---------------------------------------------------------------------------
+# per-dataset tables
+
+
+def step_table(results: list[dict]) -> str:
+    peers = sorted({p for r in results for p in r.get("peer_counts", {})})
+    has_f1 = any("step_f1" in r for r in results)
+    has_dist = any("distance_err_pct" in r for r in results)
+    header = ["recording", "placement", "true steps", "our steps", "error %"]
+    fmts = [_f(0), _f(0), _f(1, True)]
+    if has_f1:
+        header += ["F1 (+-0.2 s)", "precision", "recall", "lag s"]
+        fmts += [_f(3), _f(3), _f(3), _f(2, True)]
+    for p in peers:
+        header += [f"{p} count", f"{p} error %"]
+        fmts += [_f(0), _f(1, True)]
+    if has_dist:
+        header += ["true distance m", "our distance m", "distance error %"]
+        fmts += [_f(1), _f(1), _f(1, True)]
+    rows = []
+    for r in results:
+        if "error" in r:
+            continue
+        row = [r["name"], r["placement"], r.get("steps_true"), r.get("steps_ours"), r.get("step_err_pct")]
+        if has_f1:
+            row += [r.get("step_f1"), r.get("step_precision"), r.get("step_recall"), r.get("step_lag_s")]
+        for p in peers:
+            pc = r.get("peer_counts", {}).get(p)
+            row += [pc["count"] if pc else None, pc["err_pct"] if pc else None]
+        if has_dist:
+            row += [r.get("distance_true_m"), r.get("distance_ours_m"), r.get("distance_err_pct")]
+        rows.append(row)
+    text = _render(header, rows, 2, fmts)
+    mae = M.mean_abs([r.get("step_err_pct") for r in results])
+    n_err = sum(1 for r in results if r.get("step_err_pct") is not None and r.get("step_err_pct") == r.get("step_err_pct"))
+    lines = [text]
+    if n_err:
+        lines += ["", f"Step-count mean absolute error: **{_fmt(mae, 2)} %** over the {n_err} recordings "
+                      "with a true count."]
+    by_place = {}
+    for r in results:
+        if r.get("step_err_pct") is not None and "error" not in r:
+            by_place.setdefault(r["placement"], []).append(r["step_err_pct"])
+    if len(by_place) > 1:
+        lines.append("")
+        lines.append(_table(["placement", "recordings", "step MAE %", "mean signed error %"],
+                            [[p, str(len(v)), _fmt(M.mean_abs(v), 2), _fmt(M.nanmean(v), 2, True)]
+                             for p, v in sorted(by_place.items())]))
+    for p in peers:
+        pe = [r["peer_counts"][p]["err_pct"] for r in results if p in r.get("peer_counts", {})]
+        oe = [r["step_err_pct"] for r in results if p in r.get("peer_counts", {})]
+        if pe and any(x == x for x in pe):
+            lines.append("")
+            lines.append(f"Where `{p}` has a count ({len(pe)} recordings): its MAE {_fmt(M.mean_abs(pe), 2)} %, "
+                         f"ours {_fmt(M.mean_abs(oe), 2)} % on the same recordings.")
+    return "\n".join(lines)
+
+
+def landmark_tables(results: list[dict]) -> str:
+    rs = [r for r in results if "sources" in r]
+    if not rs:
+        return "_No landmark results._"
+    header = ["recording", "phone", "landmarks", "path m", "steps", "steps before first landmark", "distance error %",
+              "landmark error m", "best-fit landmark error m", "fit rotation deg", "final error m",
+              "loop closure %", "segment heading error deg", "mag rejected %"]
+    fmts = [_f(0), _f(1), _f(0), _f(0), _f(1, True), _f(2), _f(2), _f(1, True), _f(2), _f(2), _f(1), _f(0)]
+    rows = []
+    for r in rs:
+        s = r["sources"]["ours"]
+        rows.append([r["name"], r["info"].get("phone", ""), r["n_landmarks"], r["path_m"],
+                     r["steps_between_landmarks"], r.get("steps_before_first_landmark"), r["lm_distance_err_pct"],
+                     s["lm_mean_m"], s["lm_fit_mean_m"],
+                     s["fit_rotation_deg"], s["lm_final_m"], s["loop_pct"], s["seg_heading_deg"],
+                     r.get("mag_rejected_pct")])
+    out = ["**Ours** (landmark error = mean over the recording's landmarks after the first; "
+           "absolute heading unless 'best-fit'):", "", _render(header, rows, 2, fmts)]
+
+    sources = [p for p in PEER_ORDER if any(p in r["sources"] for r in rs)]
+    if len(sources) > 1:
+        header = ["recording"] + [f"landmark m: {p}" for p in sources] + \
+                 [f"heading deg: {p}" for p in sources] + [f"loop %: {p}" for p in sources] + ["best (landmark)"]
+        fmts = [_f(2)] * len(sources) + [_f(1)] * len(sources) + [_f(2)] * len(sources) + [None]
+        rows = []
+        for r in rs:
+            src = r["sources"]
+            lm = [src[p]["lm_mean_m"] if p in src else None for p in sources]
+            best = min((v, p) for v, p in zip(lm, sources) if v is not None and v == v)[1] if any(
+                v is not None and v == v for v in lm) else ""
+            rows.append([r["name"]] + lm + [src[p]["seg_heading_deg"] if p in src else None for p in sources] +
+                        [src[p]["loop_pct"] if p in src else None for p in sources] + [best])
+        out += ["", "**Heading side by side** (same steps and step lengths; only the attitude differs):", "",
+                _render(header, rows, 1, fmts)]
+        wins = []
+        for p in sources[1:]:
+            pairs = [(r["sources"]["ours"]["lm_mean_m"], r["sources"][p]["lm_mean_m"]) for r in rs if p in r["sources"]]
+            w = sum(1 for a, b in pairs if a < b)
+            wins.append(f"{SOURCE_NAMES[p]}: ours better on {w} of {len(pairs)}")
+        out += ["", "Per recording, our landmark error against each peer's: " + "; ".join(wins) + "."]
+        rot = [f"{p} {_fmt(M.nanmedian([r['sources'][p]['fit_rotation_deg'] for r in rs if p in r['sources']]), 1, True)}"
+               for p in sources]
+        out += ["", "Median best-fit rotation (deg; the heading offset a source had on the whole, "
+                "after the declination correction): " + ", ".join(rot) + "."]
+    return "\n".join(out)
+
+
+# ---------------------------------------------------------------------------
+# plots
+
+
+def plot_trajectory(r: dict, path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lm = r["plot"]["landmarks"]
+    fig, ax = plt.subplots(figsize=(7, 6), dpi=90)
+    ax.plot(lm[:, 0], lm[:, 1], "-", color="0.6", lw=1, zorder=1)
+    ax.scatter(lm[:, 0], lm[:, 1], c="k", s=18, zorder=3, label="landmarks (truth)")
+    for k, (x, y) in enumerate(lm):
+        ax.annotate(str(k), (x, y), textcoords="offset points", xytext=(3, 3), fontsize=7)
+    for name in PEER_ORDER:
+        tr = r["plot"]["tracks"].get(name)
+        if tr is None:
+            continue
+        xy = tr["xy"]
+        err = r["sources"][name]["lm_mean_m"]
+        lw, alpha = (2.0, 1.0) if name == "ours" else (1.0, 0.8)
+        ax.plot(xy[:, 0], xy[:, 1], color=COLOURS[name], lw=lw, alpha=alpha,
+                label=f"{SOURCE_NAMES[name]}: {err:.1f} m")
+        if name == "ours":
+            fit = M.rotate(xy - lm[0], tr["fit_rotation_rad"]) + lm[0]
+            ax.plot(fit[:, 0], fit[:, 1], "--", color=COLOURS[name], lw=1,
+                    label=f"ours, best-fit rotation: {r['sources']['ours']['lm_fit_mean_m']:.1f} m")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("East (m)")
+    ax.set_ylabel("North (m)")
+    ax.grid(alpha=0.3)
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def make_plots(results: list[dict], plots_dir: Path) -> dict:
+    """Worst and best trajectory of every landmark dataset (by our landmark error): ``{dataset: [(kind, path)]}``."""
+    out = {}
+    by_ds = {}
+    for r in results:
+        if "plot" in r and "sources" in r and r["sources"]["ours"]["lm_mean_m"] == r["sources"]["ours"]["lm_mean_m"]:
+            by_ds.setdefault(r["dataset"], []).append(r)
+    for ds, rs in by_ds.items():
+        rs = sorted(rs, key=lambda r: r["sources"]["ours"]["lm_mean_m"])
+        picks = [("best", rs[0]), ("worst", rs[-1])] if len(rs) > 1 else [("only", rs[0])]
+        for kind, r in picks:
+            p = plots_dir / f"{ds}_{kind}.png"
+            try:
+                plot_trajectory(r, p, f"{ds} {r['name']} ({kind}): landmark error "
+                                      f"{r['sources']['ours']['lm_mean_m']:.1f} m")
+            except ImportError:
+                return {}
+            out.setdefault(ds, []).append((kind, r["name"], p))
+    return out
+
+
+# ---------------------------------------------------------------------------
+# the report
+
+
+def _git_describe() -> str:
+    try:
+        here = Path(__file__).resolve().parents[1]
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here, capture_output=True, text=True,
+                             timeout=5).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+                               capture_output=True, text=True, timeout=5).stdout.strip()
+        return rev + (" + uncommitted changes" if dirty else "") if rev else "unknown"
+    except Exception:
+        return "unknown"
+
+
+DATASET_TITLES = {
+    "oxford_step_counter": "Oxford step counter (accelerometer only, foot-switch steps)",
+    "brajdic_harle_handheld": "Brajdic & Harle hand-held walks (manual step counts, counted inside the marked walk window)",
+    "ipin2023_track3": "IPIN 2023 Track 3 (hand-held, closed loops, surveyed landmarks)",
+    "ms_indoor_location_2020": "Microsoft indoor location 2020, site2/F3 (hand-held flat, surveyor waypoints, open paths)",
+    "ipol_healthy_gait_xsens": "IPOL healthy gait (lower-back XSens, 2 x 10 m)",
+    "trundlewheel_distance": "Trundle-wheel walks (web DeviceMotion, wheel distance)",
+}
+
+
+def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
+    results = run_info["results"]
+    h = headline(results)
+    lines = ["# Benchmark results", ""]
+    cmd = "python -m benchmarks" + ("" if not argv else " " + " ".join(str(a) for a in argv))
+    lines += [
+        f"Generated by `{cmd}` on {_dt.date.today().isoformat()}, code `{_git_describe()}`, "
+        f"{run_info['jobs']} processes on {platform.machine()} ({os.cpu_count()} cores): "
+        f"{len(results)} recordings in {run_info['wall_s']:.0f} s ({'quick subset' if run_info['quick'] else 'full run'}). "
+        f"Heading peers: {', '.join(run_info['peers']) or 'none'}.",
+        "",
+        "Data: `../shared/data` (recordings by other people; never copied into this repository). "
+        "Metric definitions: `benchmarks/metrics.py`; how each dataset is read: `benchmarks/datasets/`.",
+        "",
+        "## Targets",
+        "",
+    ]
+    rows = []
+    for t in evaluate_targets(h):
+        lim = t["limit"]
+        ref = f"{t['op']} {_fmt(lim, 2)}" + (f" (`{t['ref']}`)" if isinstance(t["ref"], str) else "")
+        status = {True: "met", False: "**missed**", None: "no data"}[t["met"]]
+        rows.append([t["text"], f"`{t['metric']}`", _fmt(t["value"], 2), ref, status])
+    lines += [_table(["target", "headline", "measured", "target", "status"], rows), ""]
+    lines += ["How the headlines are made: step-count MAE = mean over recordings of |our count - true count| / "
+              "true count; IPIN/MS landmark error = per recording, the mean distance between our position and "
+              "each landmark after the first (track placed at the first landmark at its time, absolute heading "
+              "from the magnetometer corrected by the site's declination, no rotation fitted), then the median "
+              "over recordings (`*_landmark_pooled_median_m` pools all landmarks instead); loop closure = "
+              "|end - start| of our track between the first and last landmark / landmark polyline length. "
+              "Formulas: `benchmarks/metrics.py`.", ""]
+    lines += ["## Headline numbers", "",
+              _table(["headline", "value"], [[f"`{k}`", _fmt(v, 3)] for k, v in h.items()]), ""]
+
+    errors = [r for r in results if "error" in r]
+    by_ds: dict = {}
+    for r in results:
+        by_ds.setdefault(r["dataset"], []).append(r)
+    for ds, info in run_info["datasets"].items():
+        rs = [r for r in by_ds.get(ds, []) if "error" not in r]
+        lines += [f"## {DATASET_TITLES.get(ds, ds)}", ""]
+        lines.append(f"`{ds}`: {info['n_run']} of {info['n_trials']} recordings run.")
+        lines.append("")
+        if any("steps_true" in r for r in rs):
+            lines += [step_table([r for r in rs if "steps_true" in r]), ""]
+            no_gt = [r["name"] for r in rs if "steps_true" not in r and "sources" not in r]
+            if no_gt:
+                lines += [f"Without step ground truth (run, not scored): {', '.join(no_gt)}.", ""]
+        elif any("distance_err_pct" in r for r in rs):
+            lines += [step_table(rs), ""]
+        if any("sources" in r for r in rs):
+            lines += [landmark_tables(rs), ""]
+        for kind, name, p in plots.get(ds, []):
+            rel = os.path.relpath(p, out_path.parent)
+            lines += [f"{kind.capitalize()} trajectory ({name}): ![{ds} {kind}]({rel})", ""]
+        labels = sorted({lab for r in rs for lab in r.get("labels", [])})
+        if labels:
+            lines += ["Pipeline labels seen: " + "; ".join(f"_{x}_" for x in labels), ""]
+        nan = [f"{r['name']} ({r['attitude_nan_pct']:.0f} %)" for r in rs if r.get("attitude_nan_pct", 0) > 0]
+        if nan:
+            lines += ["**Our attitude went NaN** (share of the attitude log) in: " + ", ".join(nan) +
+                      ". Those steps fall back to a fixed heading.", ""]
+        perr = sorted({f"{k}: {v}" for r in rs for k, v in r.get("peer_errors", {}).items()})
+        if perr:
+            lines += ["Peer failures: " + "; ".join(perr), ""]
+    if errors:
+        lines += ["## Recordings that failed", ""]
+        lines += [f"* {r['dataset']}/{r['name']}: {r['error']}" for r in errors]
+        lines.append("")
+    if run_info.get("import_errors"):
+        lines += ["## Dataset readers not available", ""]
+        lines += [f"* {k}: {v}" for k, v in run_info["import_errors"].items()]
+        lines.append("")
+    runtime = M.nanmean([r.get("pipeline_s") for r in results])
+    per_ev = [r["pipeline_s"] / r["events"] * 1e6 for r in results if r.get("events")]
+    lines += ["## Run time", "",
+              f"Pipeline: {_fmt(runtime, 2)} s per recording on average, "
+              f"median {_fmt(M.nanmedian(per_ev), 1)} us per sensor event (acc+gyro+mag); "
+              f"peers: {_fmt(M.nanmean([r.get('peer_runtime_s') for r in results]), 2)} s per landmark recording.", ""]
+    return "\n".join(lines)
+
+
+def write(run_info: dict, out_path: Path, plots_dir: Path, argv=None) -> None:
+    out_path = Path(out_path)
+    plots = make_plots(run_info["results"], Path(plots_dir))
+    text = build(run_info, plots, out_path, argv)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    out_path.write_text(text + "\n")
