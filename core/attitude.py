@@ -221,6 +221,11 @@ class AttitudeEKF:
         Magnetometer readings with ``| |m| - |h| | > ratio |h|`` are not used.
     mag_reject_dip_rad : float
         Magnetometer readings whose dip angle differs from the reference by more than this are not used (rad).
+    mag_valid_range_uT : tuple of 2 floats
+        Readings outside this range are not a geomagnetic field at all (the
+        Earth's is 22-67 uT; an uncalibrated phone can report 1700 uT) and are
+        used for nothing: not the references, not the initial attitude, not
+        the updates.
     reference_update_s : float
         ``|g|``, ``|h|`` and the dip angle of ``h`` are the running medians of
         every reading so far (indoors the field is disturbed in places, so a
@@ -248,10 +253,11 @@ class AttitudeEKF:
         Attitude random walk assumed between measurements when no gyroscope event has come for 0.1 s.
     """
 
-    def __init__(self, *, gyro_noise_rad_sqrt_s: float = 0.03, acc_noise_base: float = 0.05, k_a1: float = 0.02,
+    def __init__(self, *, gyro_noise_rad_sqrt_s: float = 0.015, acc_noise_base: float = 0.05, k_a1: float = 0.02,
                  k_a2: float = 0.05, mag_noise_base: float = 0.05, k_m1: float = 0.01, k_m2: float = 0.01,
-                 variance_window_s: float = 0.5, acc_reject_m_s2: float = 4.0, mag_reject_ratio: float = 0.2,
-                 mag_reject_dip_rad: float = math.radians(12.0), reference_update_s: float = 1.0,
+                 variance_window_s: float = 1.0, acc_reject_m_s2: float = 4.0, mag_reject_ratio: float = 0.2,
+                 mag_reject_dip_rad: float = math.radians(12.0), mag_valid_range_uT=(10.0, 150.0),
+                 reference_update_s: float = 1.0,
                  declination_rad: float = 0.0, initial_yaw_rad: float = math.pi / 2,
                  use_magnetometer: bool = True, mag_wait_s: float = 1.0, still_window_s: float = 1.0,
                  still_acc_sd_m_s2: float = 0.1, still_gyro_sd_rad_s: float = 0.02, max_gyro_bias_rad_s: float = 0.05,
@@ -265,6 +271,7 @@ class AttitudeEKF:
         self.acc_reject_m_s2 = acc_reject_m_s2
         self.mag_reject_ratio = mag_reject_ratio
         self.mag_reject_dip_rad = mag_reject_dip_rad
+        self.mag_valid_range_uT = (float(mag_valid_range_uT[0]), float(mag_valid_range_uT[1]))
         self.reference_update_s = reference_update_s
         self.declination_rad = declination_rad
         self.initial_yaw_rad = initial_yaw_rad
@@ -308,6 +315,8 @@ class AttitudeEKF:
         self.acc_rejected = False
         self.n_mag_used = 0
         self.n_mag_rejected = 0
+        self.n_mag_invalid = 0
+        self.n_numerical_resets = 0
         self.n_acc_rejected = 0
         self.n_gyro = 0
         self.acc_innovation = (0.0, 0.0, 0.0)
@@ -434,6 +443,9 @@ class AttitudeEKF:
             P = P - np.outer(k, ph)
         P = 0.5 * (P + P.T)
         n = math.sqrt(float(q @ q))
+        if not (n > 0.0 and math.isfinite(n) and np.all(np.isfinite(P))):
+            self.n_numerical_resets += 1  # keep the prior state rather than poison the filter
+            return innov
         q = q / n
         # keep P consistent with the normalisation (project out the radial direction)
         J = np.eye(4) - np.outer(q, q)
@@ -465,13 +477,19 @@ class AttitudeEKF:
         """Magnetometer update (uT) with the adaptive variance of eq. 18 and outright rejection."""
         if not self.use_magnetometer:
             return
+        nm = math.sqrt(mx * mx + my * my + mz * mz)
+        lo, hi = self.mag_valid_range_uT
+        if not lo <= nm <= hi:
+            self.mag_rejected = True
+            self.n_mag_rejected += 1
+            self.n_mag_invalid += 1
+            return
         self._last_mag = (mx, my, mz)
         self._accumulate_references(t_ns, mag=self._last_mag)
         if not self.initialized:
             self._try_initialize(t_ns)
             return
         self._propagate_without_gyro(t_ns)
-        nm = math.sqrt(mx * mx + my * my + mz * mz)
         var = self._mag_var.update(t_ns, nm)
         dev = abs(nm - self.field_uT)
         self.mag_sigma2 = self.mag_noise_base ** 2 + self.k_m1 * dev + self.k_m2 * var  # eq. 18
