@@ -226,6 +226,12 @@ class AttitudeEKF:
         Earth's is 22-67 uT; an uncalibrated phone can report 1700 uT) and are
         used for nothing: not the references, not the initial attitude, not
         the updates.
+    mag_heading_only : bool
+        Let the magnetometer correct the heading only: the reading is
+        replaced by the vector with the same horizontal direction (in the
+        current navigation-frame estimate) and the reference dip, so a
+        disturbed field cannot tilt the attitude.  Off: the paper's full
+        vector update (eq. 12).
     reference_update_s : float
         ``|g|``, ``|h|`` and the dip angle of ``h`` are the running medians of
         every reading so far (indoors the field is disturbed in places, so a
@@ -255,9 +261,9 @@ class AttitudeEKF:
 
     def __init__(self, *, gyro_noise_rad_sqrt_s: float = 0.015, acc_noise_base: float = 0.05, k_a1: float = 0.02,
                  k_a2: float = 0.05, mag_noise_base: float = 0.05, k_m1: float = 0.01, k_m2: float = 0.01,
-                 variance_window_s: float = 1.0, acc_reject_m_s2: float = 4.0, mag_reject_ratio: float = 0.2,
-                 mag_reject_dip_rad: float = math.radians(12.0), mag_valid_range_uT=(10.0, 150.0),
-                 reference_update_s: float = 1.0,
+                 variance_window_s: float = 1.0, acc_reject_m_s2: float = 4.0, mag_reject_ratio: float = 0.4,
+                 mag_reject_dip_rad: float = math.radians(23.0), mag_valid_range_uT=(10.0, 150.0),
+                 mag_heading_only: bool = True, reference_update_s: float = 1.0,
                  declination_rad: float = 0.0, initial_yaw_rad: float = math.pi / 2,
                  use_magnetometer: bool = True, mag_wait_s: float = 1.0, still_window_s: float = 1.0,
                  still_acc_sd_m_s2: float = 0.1, still_gyro_sd_rad_s: float = 0.02, max_gyro_bias_rad_s: float = 0.05,
@@ -273,6 +279,7 @@ class AttitudeEKF:
         self.mag_reject_dip_rad = mag_reject_dip_rad
         self.mag_valid_range_uT = (float(mag_valid_range_uT[0]), float(mag_valid_range_uT[1]))
         self.reference_update_s = reference_update_s
+        self.mag_heading_only = mag_heading_only
         self.declination_rad = declination_rad
         self.initial_yaw_rad = initial_yaw_rad
         self.use_magnetometer = use_magnetometer
@@ -503,7 +510,21 @@ class AttitudeEKF:
             return
         self.mag_rejected = False
         self.n_mag_used += 1
-        self.mag_innovation = self._vector_update((mx / nm, my / nm, mz / nm), self._h_ref, self.mag_sigma2)
+        z = (mx / nm, my / nm, mz / nm)
+        if self.mag_heading_only:
+            z = self._heading_only(z)
+        self.mag_innovation = self._vector_update(z, self._h_ref, self.mag_sigma2)
+
+    def _heading_only(self, m_b):
+        """The unit field with the measured horizontal direction and the reference dip, in the body frame."""
+        r = quat.to_matrix(self.q)
+        m_n = [r[i][0] * m_b[0] + r[i][1] * m_b[1] + r[i][2] * m_b[2] for i in range(3)]
+        hn = math.hypot(m_n[0], m_n[1])
+        if hn < 1e-6:
+            return m_b
+        c, s = math.cos(self.dip_rad), math.sin(self.dip_rad)
+        v = (c * m_n[0] / hn, c * m_n[1] / hn, -s)
+        return tuple(r[0][j] * v[0] + r[1][j] * v[1] + r[2][j] * v[2] for j in range(3))
 
     # -- outputs ---------------------------------------------------------------
     def matrix(self):
