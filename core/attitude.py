@@ -526,6 +526,24 @@ class AttitudeEKF:
         v = (c * m_n[0] / hn, c * m_n[1] / hn, -s)
         return tuple(r[0][j] * v[0] + r[1][j] * v[1] + r[2][j] * v[2] for j in range(3))
 
+    # -- batch -------------------------------------------------------------------
+    def run(self, recording) -> tuple[np.ndarray, np.ndarray]:
+        """Attitude after every event of a :class:`core.recording.Recording` (gyro, acc, mag in time order).
+
+        The same kernel as streaming; returns ``(t_ns (n,), q_wxyz (n, 4))``
+        with NaN rows before the filter has initialised.
+        """
+        self.reset()
+        names = [n for n in ("gyro", "acc", "mag") if recording.has(n)]
+        handlers = {"gyro": self.predict, "acc": self.update_acc, "mag": self.update_mag}
+        t_out, q_out = [], []
+        nan4 = (math.nan,) * 4
+        for name, t, v in recording.events(names):
+            handlers[name](t, v[0], v[1], v[2])
+            t_out.append(t)
+            q_out.append(self.q if self.initialized else nan4)
+        return np.array(t_out, dtype=np.int64), np.array(q_out, dtype=float).reshape(-1, 4)
+
     # -- outputs ---------------------------------------------------------------
     def matrix(self):
         """Current rotation matrix body -> ENU (3 row tuples)."""

@@ -216,6 +216,7 @@ class Pipeline:
         self._candidates: list[list] = []
         self._bout_len = 0
         self._delay_ns = int(self.heading_delay_s * 1e9)
+        self._bout_gap_ns = int(self.detector.max_step_interval_s * 1e9)
         self._rot = deque()  # (t_ns, |w|^2) of the gyroscope over the rotation window
         self._rot_sum = 0.0
         self._rot_window_ns = int(self.rotation_window_s * 1e9)
@@ -301,7 +302,7 @@ class Pipeline:
         for c in cands:
             if c[1] is None and c[0].t_ns + self._delay_ns <= t_grid_ns:
                 c[1] = heading
-        if not cands[0][2] and self._bout_len and t_grid_ns - cands[-1][0].t_ns > self.detector._max_dt_ns:
+        if not cands[-1][2] and t_grid_ns - cands[-1][0].t_ns > self._bout_gap_ns:
             self._drop_unconfirmed()  # the bout ended too short
         done = []
         while cands and cands[0][2] and cands[0][1] is not None:

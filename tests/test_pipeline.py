@@ -103,3 +103,36 @@ def test_without_gyroscope_the_track_is_labelled_and_still_usable():
     assert any("no gyroscope" in lab for lab in res.labels)
     end = np.array([res.track.east_m[-1], res.track.north_m[-1]])
     assert np.linalg.norm(end - [20, 20]) < 0.15 * walk.truth.path_length_m
+
+
+def test_every_stage_streaming_equals_batch():
+    """AttitudeEKF, RotationSmoother and DeadReckoner: run() over a walk equals update() event by event."""
+    from core import quaternion as quat
+    from core.attitude import AttitudeEKF
+    from core.deadreckoning import DeadReckoner
+    from core.heading import RotationSmoother
+
+    rec = simulate_walk([(0, 0), (10, 0), (10, 10)], rate_hz=50.0, seed=21).recording
+    ekf = AttitudeEKF()
+    t_b, q_b = ekf.run(rec)
+    ekf.reset()
+    q_s = []
+    for name, t, v in rec.events(["gyro", "acc", "mag"]):
+        {"gyro": ekf.predict, "acc": ekf.update_acc, "mag": ekf.update_mag}[name](t, *v)
+        q_s.append(ekf.q if ekf.initialized else (math.nan,) * 4)
+    np.testing.assert_array_equal(np.array(q_s), q_b)
+    assert np.isfinite(q_b[-1]).all() and len(t_b) == len(q_s)
+
+    mats = [quat.to_matrix(tuple(q)) for q in q_b[np.isfinite(q_b).all(axis=1)][::4]]
+    sm = RotationSmoother()
+    batch = sm.run(mats)
+    sm.reset()
+    np.testing.assert_array_equal([sm.update(m) for m in mats], batch)
+
+    rng = np.random.default_rng(0)
+    d, h = rng.uniform(0.5, 0.8, 50), rng.uniform(-math.pi, math.pi, 50)
+    dr = DeadReckoner()
+    batch = dr.run(d, h)
+    dr.reset()
+    np.testing.assert_array_equal([dr.update(a, b) for a, b in zip(d, h)], batch)
+    assert dr.distance_m == pytest.approx(d.sum())
