@@ -339,6 +339,8 @@ def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
         lines += ["## Dataset readers not available", ""]
         lines += [f"* {k}: {v}" for k, v in run_info["import_errors"].items()]
         lines.append("")
+    if run_info.get("stride_section"):
+        lines += [run_info["stride_section"].rstrip(), ""]
     runtime = M.nanmean([r.get("pipeline_s") for r in results])
     per_ev = [r["pipeline_s"] / r["events"] * 1e6 for r in results if r.get("events")]
     lines += ["## Run time", "",

@@ -395,6 +395,12 @@ def main(argv=None) -> int:
         return 2
     peer_names = tuple(p for p in args.peers.split(",") if p) if args.peers is not None else None
     run_info = run(root, quick=args.quick, only=args.only, jobs=args.jobs, peer_names=peer_names)
+    if not args.quick and not args.only:
+        # issue #4: leave-one-subject-out study of the stride models (trains them; about a minute)
+        from benchmarks.stride_eval import stride_section
+
+        print("benchmark: stride-model cross-validation ...", file=sys.stderr, flush=True)
+        run_info["stride_section"] = stride_section(root)
     from benchmarks import report
 
     report.write(run_info, args.out, args.plots, argv=sys.argv[1:] if argv is None else argv)
