@@ -7,7 +7,7 @@ only :mod:`app.android` imports ``jnius``/``android``, and only lazily):
 ``app.session``     one tracking session: source -> reorder -> Pipeline, RecordingWriter, health
 ``app.health``      per-sensor rate / jitter / dropped-event statistics
 ``app.viewport``    metres <-> pixels, pan, zoom, follow, scale bar
-``app.settings``    persisted user settings (height, Weinberg C, sampling rate) and stride calibration
+``app.settings``    persisted user settings and the user's stride profile (height, model, calibration)
 ``app.storage``     where settings, recordings and exports go (desktop and Android)
 ``app.kivy_env``    environment for Kivy (no argv parsing, headless tests) -- no Kivy import
 ``app.track_view``  *kivy* the track widget

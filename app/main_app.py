@@ -28,9 +28,12 @@ from kivy.uix.button import Button
 from kivy.uix.filechooser import FileChooserListView
 from kivy.uix.popup import Popup
 
+from core.calibration import CalibrationError
+from core.stride_models import StrideModelError
+
 import app.track_view  # noqa: F401 - registers TrackView for the kv file
 from app.session import Session, export_session, load_any_recording
-from app.settings import RATE_CHOICES, SETTINGS_FILE, CalibrationError, Settings
+from app.settings import RATE_CHOICES, SETTINGS_FILE, STRIDE_MODEL_CHOICES, Settings
 from app.sources import REPLAY_SPEEDS, ReplaySource, SensorStartError, make_live_source
 from app.storage import is_android, new_recording_path, output_dir
 
@@ -83,6 +86,8 @@ class PDRApp(App):
     rate_text = StringProperty("100")
     rate_choices = ListProperty([str(r) for r in RATE_CHOICES])
     record_live = BooleanProperty(True)
+    stride_model_text = StringProperty("default")
+    stride_model_choices = ListProperty(list(STRIDE_MODEL_CHOICES))
     c_text = StringProperty("")
     settings_message = StringProperty("")
     calibrating = BooleanProperty(False)
@@ -105,7 +110,6 @@ class PDRApp(App):
         self._last_ui = 0.0
         self._was_running = False
         self._end_handled = False
-        self._calib_walked = None
         self.frames = 0
         self.paused_count = 0
         self.resumed_count = 0
@@ -129,6 +133,7 @@ class PDRApp(App):
         self.settings = Settings.load(self.settings_path)
         if self.settings.problems:
             self.warning = "; ".join(self.settings.problems)
+        self.settings_message = "; ".join(self.settings.notes)
         self.speed_label = self._speed_arg or self.settings.replay_speed
         self._settings_to_ui()
         Builder.load_file(KV_FILE)
@@ -143,18 +148,35 @@ class PDRApp(App):
         self.height_text = f"{s.height_m * 100:.0f}" if s.height_m else ""
         self.rate_text = f"{s.rate_hz:g}"
         self.record_live = s.record_live
-        self.c_text = f"{s.stride_c:.3f}" + (f"  ({len(s.calibrations)} calibration(s))" if s.calibrations else "")
+        self.stride_model_text = s.stride_model_name
+        walks = s.calibration_walks()
+        scale = s.profile.c_scale
+        n = len(walks)
+        self.c_text = (f"step length x {scale:.3f} ({n} walk{'s' if n > 1 else ''})" if walks else
+                       f"step length x {scale:.3f} (older version)" if scale != 1.0 else "not calibrated")
 
-    def save_settings(self, height_cm: str, rate: str, record_live: bool) -> None:
+    def save_settings(self, height_cm: str, rate: str, record_live: bool, stride_model: str | None = None) -> None:
         s = self.settings
         try:
-            s.height_m = float(height_cm) / 100.0 if height_cm.strip() else None
-            s.rate_hz = float(rate)
-            s.record_live = bool(record_live)
+            height_m = float(height_cm) / 100.0 if height_cm.strip() else None
+            rate_hz = float(rate)
         except ValueError as e:
             self.settings_message = f"not saved: {e}"
             return
-        problems = s.validate()
+        try:
+            s.height_m = height_m
+        except CalibrationError:
+            self.settings_message = f"not saved: {height_cm.strip()} cm is not a plausible body height"
+            return
+        problems = []
+        try:
+            if stride_model:
+                s.set_stride_model(stride_model)
+        except StrideModelError as e:
+            problems.append(f"stride model not changed: {e}")
+        s.rate_hz = rate_hz
+        s.record_live = bool(record_live)
+        problems += s.validate()
         s.save(self.settings_path)
         self._settings_to_ui()
         self.settings_message = ("; ".join(problems) if problems else "saved") + \
@@ -229,7 +251,6 @@ class PDRApp(App):
         self.mode = mode
         self.raw_path = raw_path
         self._end_handled = False
-        self.calibrating = False
         self.track_view.follow = True
         self.track_view.set_track([0.0], [0.0])
         self.track_view.set_heading(math.nan)
@@ -278,7 +299,8 @@ class PDRApp(App):
         from core import __version__  # noqa: PLC0415
 
         return {"app": f"pdr-app {__version__}", "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                "height_m": s.height_m, "stride_c": s.stride_c, "rate_hz": s.rate_hz}
+                "height_m": s.height_m, "stride_model": s.stride_model_name, "c_scale": s.profile.c_scale,
+                "rate_hz": s.rate_hz}
 
     def toggle_recording(self):
         """Live: stop the running recording, or start a new one."""
@@ -373,31 +395,32 @@ class PDRApp(App):
         if not ses:
             self.calib_message = "start a live session (or a replay) first"
             return
-        if not self.calibrating:
+        if not ses.calibrating:
             ses.start_calibration()
             self.calibrating = True
-            self._calib_walked = None
             self.calib_message = "walk the known distance, then stop"
         else:
-            self._calib_walked = ses.stop_calibration()
+            walked = ses.stop_calibration()
             self.calibrating = False
-            self.calib_text = f"measured {self._calib_walked:.1f} m"
+            self.calib_text = f"measured {walked:.1f} m"
             self.calib_message = "enter the known distance and save"
 
     def save_calibration(self, known_text: str):
-        walked = self._calib_walked
-        if walked is None:
-            self.calib_message = "do a calibration walk first"
+        """Calibrate the profile with the calibration walk's steps (core.calibration) and save it."""
+        ses = self.session
+        if not ses or ses.calibration_range_ns is None or ses.calibrating:
+            self.calib_message = "do a calibration walk first (start, walk, stop)"
             return
         try:
-            c = self.settings.apply_calibration(float(known_text), walked)
-        except (ValueError, CalibrationError) as e:
+            res = self.settings.calibrate(ses.calibration_steps(), known_text.strip())
+        except CalibrationError as e:
             self.calib_message = str(e)
             return
         self.settings.save(self.settings_path)
         self._settings_to_ui()
-        self.calib_message = f"C = {c:.3f} saved; press 'New track' to use it"
-        self._calib_walked = None
+        saved = (f"saved: step length x {res.scale:.3f} ({res.n_steps} steps, the model said "
+                 f"{res.model_distance_m:.1f} m); press 'New track' to use it")
+        self.calib_message = "; ".join([saved, *res.warnings])
 
     # -- export ----------------------------------------------------------------------------
 
@@ -470,6 +493,7 @@ class PDRApp(App):
         self.time_text = _fmt_time(summ["elapsed_s"])
         if self.root.ids.screens.current == "health" or force:
             self.health_text = ses.health_text()
+        self.calibrating = ses.calibrating  # a new track ends a calibration walk
         if self.calibrating:
             self.calib_text = f"walking: {ses.calibration_distance_m():.1f} m"
         if self.mode == "replay":

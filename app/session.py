@@ -126,7 +126,7 @@ class Session:
         self.last_t_ns: int | None = None
         self.gps_origin: tuple | None = None
         self.finished = False
-        self._cal_start_m: float | None = None
+        self._cal_range: tuple | None = None
 
     # -- lifecycle ----------------------------------------------------------------
 
@@ -286,22 +286,44 @@ class Session:
     # -- calibration --------------------------------------------------------------------
 
     def start_calibration(self) -> None:
-        self._cal_start_m = float(sum(s.length_m for s in self.steps))
+        """The calibration walk starts now (at the newest sensor time received)."""
+        self._cal_range = (self._now_ns(), None)
+
+    def stop_calibration(self) -> float:
+        """The calibration walk ends now; returns the distance measured so far (steps still in the
+        pipeline's delay are added as they complete)."""
+        if self._cal_range is not None:
+            self._cal_range = (self._cal_range[0], self._now_ns())
+        return self.calibration_distance_m()
+
+    def _now_ns(self):
+        return self._max_t if self._max_t is not None else -math.inf
 
     @property
     def calibrating(self) -> bool:
-        return self._cal_start_m is not None
+        """A calibration walk is going on (started, not stopped)."""
+        return self._cal_range is not None and self._cal_range[1] is None
+
+    @property
+    def calibration_range_ns(self) -> tuple | None:
+        """(start, stop or None) of the calibration walk, sensor clock; None without one."""
+        return self._cal_range
+
+    def calibration_steps(self) -> list:
+        """The steps of the calibration walk: their peaks lie between start and stop.
+
+        Chosen by time, not by arrival: a step the pipeline completes after
+        *stop* (heading delay, bout confirmation) still counts, one completed
+        after *start* but walked before it does not.
+        """
+        if self._cal_range is None:
+            return []
+        t0, t1 = self._cal_range
+        return [s for s in self.steps if t0 <= s.t_ns and (t1 is None or s.t_ns <= t1)]
 
     def calibration_distance_m(self) -> float:
-        """Distance the pipeline measured since :meth:`start_calibration`."""
-        if self._cal_start_m is None:
-            return 0.0
-        return float(sum(s.length_m for s in self.steps)) - self._cal_start_m
-
-    def stop_calibration(self) -> float:
-        d = self.calibration_distance_m()
-        self._cal_start_m = None
-        return d
+        """Distance the pipeline measured for the calibration walk (with the stride model in use)."""
+        return float(sum(s.length_m for s in self.calibration_steps()))
 
 
 def export_session(session: Session, out_dir: str, basename: str, raw_path: str | None = None) -> dict:

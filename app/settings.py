@@ -1,10 +1,31 @@
-"""User settings that persist between runs, and the stride calibration rule.
+"""User settings that persist between runs, and the user's stride profile.
 
-Stored as JSON (``settings.json`` in the app's user data directory), written
-atomically (temporary file + rename) so a crash never leaves half a file.
+Two JSON files in the app's data directory, both written atomically
+(temporary file + rename), so a crash never leaves half a file:
+
+- ``settings.json``: sampling rate, whether live sessions are recorded,
+  replay speed;
+- ``profile.json``: the user's :class:`core.calibration.UserProfile`
+  (format ``pdr-user-profile``): body height, stride model, the per-user
+  factor ``c_scale`` and the calibration walks it was pooled from.
+
+The height lives only in the profile (:attr:`Settings.height_m` reads and
+writes it), so the settings and the profile cannot disagree.  The pipeline
+is built from the profile: ``profile.stride_model()`` (the chosen shipped
+model with the user's factor) and the profile's height.
+
 Loading never fails: a missing file gives the defaults, a damaged file or an
 out-of-range value falls back to the default and says so in
 :attr:`Settings.problems`, which the app shows.
+
+Migration: app versions before the profile stored ``height_m``,
+``stride_c`` (a Weinberg C from the app's own calibration rule) and
+``calibrations`` in ``settings.json``.  When there is no ``profile.json``
+yet, the height moves to the profile and ``stride_c`` becomes
+``c_scale = stride_c / C`` of the default model; the old calibration list
+is not converted (its walks were measured by an older pipeline).  What was
+done is in :attr:`Settings.notes`.  The next save writes ``profile.json``
+and drops the old keys.
 """
 
 from __future__ import annotations
@@ -13,58 +34,101 @@ import json
 import math
 import os
 import tempfile
-import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field, replace
 
-from core.stride import ConstantCoefficient, WeinbergStride
+from core.calibration import MAX_POOLED, CalibrationError, CalibrationResult, UserProfile, calibrate_known_distance
+from core.stride import StrideModel
+from core.stride_models import StrideModelError, load_stride_model
 
 SETTINGS_FILE = "settings.json"
-
-#: Weinberg coefficient used before any calibration (core's default).
-DEFAULT_STRIDE_C = ConstantCoefficient().c
+PROFILE_FILE = "profile.json"
 
 #: Valid ranges: name -> (low, high)
 RANGES = {
-    "height_m": (1.0, 2.5),
-    "stride_c": (0.1, 1.5),
     "rate_hz": (10.0, 200.0),
 }
 
 #: Sampling rates offered in the UI (Hz); 200 is the most without HIGH_SAMPLING_RATE_SENSORS.
 RATE_CHOICES = (50, 100, 200)
 
+#: Shipped stride models offered in the UI (``core/models``)
+STRIDE_MODEL_CHOICES = ("default", "weinberg_bp", "chen_linear", "chen_ann")
 
-class CalibrationError(ValueError):
-    """A calibration walk that cannot give a sensible coefficient."""
+
+def profile_path(settings_path: str) -> str:
+    """The profile file next to ``settings_path``."""
+    return os.path.join(os.path.dirname(os.path.abspath(settings_path)), PROFILE_FILE)
 
 
 @dataclass
 class Settings:
     """What the user sets; see the module docstring for persistence."""
 
-    #: the walker's body height (m); None = not given
-    height_m: float | None = None
-    #: Weinberg step-length coefficient C (eq. 4), from stride calibration
-    stride_c: float = DEFAULT_STRIDE_C
     #: sensor sampling rate requested from Android (Hz)
     rate_hz: float = 100.0
     #: record every live session to a file
     record_live: bool = True
     #: replay speed label ("1x", "10x", "max")
     replay_speed: str = "10x"
-    #: past calibrations, newest last: dicts with time, known_m, pdr_m, c_old, c_new
-    calibrations: list = field(default_factory=list)
-    #: what was wrong with the stored file (not saved)
+    #: height, stride model and calibration (saved to its own file, ``profile.json``)
+    profile: UserProfile = field(default_factory=UserProfile)
+    #: what was wrong with the stored files (not saved)
     problems: list = field(default_factory=list, compare=False, repr=False)
+    #: what loading did besides reading, e.g. a migration (not saved)
+    notes: list = field(default_factory=list, compare=False, repr=False)
 
-    # -- pipeline parameters --------------------------------------------------
+    # -- the profile --------------------------------------------------------------
 
-    def stride_model(self) -> WeinbergStride:
-        return WeinbergStride(coefficient=self.stride_c)
+    @property
+    def height_m(self) -> float | None:
+        """The walker's body height (m), None = not given; stored in the profile."""
+        return self.profile.height_m
+
+    @height_m.setter
+    def height_m(self, height_m: float | None) -> None:
+        self.profile = replace(self.profile, height_m=height_m)  # CalibrationError if implausible
+
+    @property
+    def stride_model_name(self) -> str:
+        return self.profile.model
+
+    def set_stride_model(self, name: str) -> None:
+        """Use another stride model.
+
+        The user's factor belongs to a model, so it is recomputed from the
+        calibration walks made with ``name`` (pooled as
+        :func:`core.calibration.calibrate_known_distance` pools them), or 1
+        if there are none.  Raises ``StrideModelError`` for an unknown model.
+        """
+        if name == self.profile.model:
+            return
+        walks = self.calibration_walks(name)
+        scale = (sum(c["known_distance_m"] for c in walks) / sum(c["model_distance_m"] for c in walks)
+                 if walks else 1.0)
+        self.profile = replace(self.profile, model=name, c_scale=scale)
+
+    def calibration_walks(self, model_name: str | None = None) -> list[dict]:
+        """The calibration walks the factor of ``model_name`` (default: the profile's model) is pooled from."""
+        model_id = getattr(load_stride_model(model_name or self.profile.model), "model_id", None)
+        return [c for c in self.profile.calibrations if c.get("model_id") == model_id][-MAX_POOLED:]
+
+    def stride_model(self) -> StrideModel:
+        """The profile's model with the user's factor."""
+        return self.profile.stride_model()
 
     def pipeline_kwargs(self) -> dict:
         """Keyword arguments for :class:`core.pipeline.Pipeline`."""
         return {"height_m": self.height_m, "stride_model": self.stride_model()}
+
+    def calibrate(self, steps, known_distance_m) -> CalibrationResult:
+        """Refine the profile from the steps of a walk of known length (:func:`calibrate_known_distance`).
+
+        Raises :class:`core.calibration.CalibrationError` with a message for
+        the user; the profile is unchanged then.
+        """
+        result = calibrate_known_distance(steps, known_distance_m, profile=self.profile)
+        self.profile = result.profile
+        return result
 
     # -- validation and persistence -----------------------------------------
 
@@ -74,8 +138,6 @@ class Settings:
         defaults = Settings()
         for name, (lo, hi) in RANGES.items():
             v = getattr(self, name)
-            if v is None and name == "height_m":
-                continue
             ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and lo <= v <= hi
             if not ok:
                 out.append(f"{name}={v!r} outside {lo:g}..{hi:g}; using {getattr(defaults, name)!r}")
@@ -88,37 +150,74 @@ class Settings:
         if self.replay_speed not in ("1x", "10x", "max"):
             out.append(f"replay_speed={self.replay_speed!r} unknown; using '10x'")
             self.replay_speed = "10x"
-        if not isinstance(self.calibrations, list):
-            self.calibrations = []
         return out
 
     def to_dict(self) -> dict:
-        d = asdict(self)
-        d.pop("problems")
-        return d
+        """What goes into ``settings.json`` (the profile has its own file)."""
+        return {"rate_hz": self.rate_hz, "record_live": self.record_live, "replay_speed": self.replay_speed}
 
     @classmethod
     def load(cls, path: str) -> "Settings":
+        """Settings from ``path`` and the profile next to it (see the module docstring)."""
         s = cls()
-        if not os.path.exists(path):
-            return s
-        try:
-            with open(path, encoding="utf-8") as f:
-                data = json.load(f)
-            if not isinstance(data, dict):
-                raise ValueError("not a JSON object")
-        except (OSError, ValueError) as e:
-            s.problems.append(f"{path}: could not read settings ({e}); using defaults")
-            return s
-        names = {f.name for f in fields(cls)} - {"problems"}
-        for k, v in data.items():
-            if k in names:
-                setattr(s, k, v)
+        data: dict = {}
+        if os.path.exists(path):
+            try:
+                with open(path, encoding="utf-8") as f:
+                    data = json.load(f)
+                if not isinstance(data, dict):
+                    raise ValueError("not a JSON object")
+            except (OSError, ValueError) as e:
+                s.problems.append(f"{path}: could not read settings ({e}); using defaults")
+                data = {}
+        for k in s.to_dict():
+            if k in data:
+                setattr(s, k, data[k])
         s.problems.extend(s.validate())
+        ppath = profile_path(path)
+        if os.path.exists(ppath):
+            try:
+                s.profile = UserProfile.load(ppath)
+            except CalibrationError as e:
+                s.problems.append(f"{e}; using an uncalibrated profile")
+        else:
+            s._migrate(data)
+        try:
+            load_stride_model(s.profile.model)
+        except StrideModelError as e:
+            s.problems.append(f"{e}; using the default stride model, uncalibrated")
+            s.profile = replace(s.profile, model="default", c_scale=1.0)
         return s
 
+    def _migrate(self, data: dict) -> None:
+        """Height and coefficient of a ``settings.json`` written before the profile existed."""
+        h = data.get("height_m")
+        if h is not None:
+            try:
+                self.height_m = float(h)
+            except (TypeError, ValueError) as e:
+                self.problems.append(f"old setting height_m={h!r} ignored: {e}")
+        c_old = data.get("stride_c")
+        if c_old is None:
+            return
+        c_default = getattr(getattr(load_stride_model("default"), "coefficient", None), "c", None)
+        try:
+            scale = float(c_old) / float(c_default)
+            self.profile = replace(self.profile, c_scale=scale)  # CalibrationError if out of range
+        except (TypeError, ValueError) as e:  # incl. CalibrationError, and a default model without a constant C
+            self.notes.append(f"step coefficient C={c_old!r} of an older app version ignored ({e}); "
+                              "please calibrate again")
+            return
+        if math.isclose(scale, 1.0, rel_tol=2e-3):  # the old default C: never calibrated
+            self.profile = replace(self.profile, c_scale=1.0)
+        else:
+            self.notes.append(f"step coefficient C={float(c_old):.3f} of an older app version converted to a "
+                              f"factor {scale:.3f} on the default model; a new calibration walk replaces it")
+
     def save(self, path: str) -> None:
+        """Write the profile (next to ``path``), then the settings."""
         self.validate()
+        self.profile.save(profile_path(path))
         d = os.path.dirname(os.path.abspath(path))
         os.makedirs(d, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=".settings-", suffix=".json", dir=d)
@@ -134,50 +233,3 @@ class Settings:
             except OSError:
                 pass
             raise
-
-    # -- calibration ---------------------------------------------------------
-
-    def apply_calibration(self, known_distance_m: float, pdr_distance_m: float) -> float:
-        """Set :attr:`stride_c` from a calibration walk (see :func:`calibrate_coefficient`); returns it."""
-        c_new = calibrate_coefficient(self.stride_c, known_distance_m, pdr_distance_m)
-        self.calibrations.append({"time": time.strftime("%Y-%m-%dT%H:%M:%S"), "known_m": float(known_distance_m),
-                                  "pdr_m": float(pdr_distance_m), "c_old": self.stride_c, "c_new": c_new})
-        self.stride_c = c_new
-        return c_new
-
-
-def calibrate_coefficient(c_old: float, known_distance_m: float, pdr_distance_m: float, *,
-                          min_distance_m: float = 5.0, max_ratio: float = 2.0) -> float:
-    """New Weinberg coefficient after walking a known distance.
-
-    Step length is proportional to ``C`` (eq. 4), so the distance the
-    pipeline measured with ``c_old`` scales to the known one with
-    ``C_new = C_old * known_distance / pdr_distance``.  (Per-user models from
-    ``core.calibration`` can replace this rule later; callers only see this
-    function.)
-
-    Raises :class:`CalibrationError` for a walk shorter than
-    ``min_distance_m``, a PDR distance of zero (no steps detected), or a
-    correction by more than ``max_ratio`` either way (a typo in the distance,
-    or the wrong walk).
-    """
-    for name, v in (("known distance", known_distance_m), ("measured distance", pdr_distance_m),
-                    ("current coefficient", c_old)):
-        if not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise CalibrationError(f"{name} must be a number, got {v!r}")
-    if c_old <= 0:
-        raise CalibrationError(f"current coefficient must be positive, got {c_old}")
-    if known_distance_m < min_distance_m:
-        raise CalibrationError(f"walk at least {min_distance_m:g} m for a calibration "
-                               f"(entered {known_distance_m:g} m)")
-    if pdr_distance_m <= 0:
-        raise CalibrationError("no steps were detected during the calibration walk")
-    ratio = known_distance_m / pdr_distance_m
-    if not 1.0 / max_ratio <= ratio <= max_ratio:
-        raise CalibrationError(f"known distance {known_distance_m:g} m and measured {pdr_distance_m:.1f} m differ "
-                               f"by more than a factor {max_ratio:g}; check the distance and walk again")
-    lo, hi = RANGES["stride_c"]
-    c_new = c_old * ratio
-    if not lo <= c_new <= hi:
-        raise CalibrationError(f"the new coefficient {c_new:.3f} is outside {lo:g}..{hi:g}")
-    return c_new

@@ -297,6 +297,9 @@ def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
               "over recordings (`*_landmark_pooled_median_m` pools all landmarks instead); loop closure = "
               "|end - start| of our track between the first and last landmark / landmark polyline length. "
               "Formulas: `benchmarks/metrics.py`.", ""]
+    discussion = Path(__file__).with_name("discussion.md")
+    if discussion.exists():  # hand-written: why targets are missed, what was tried (kept across runs)
+        lines += [discussion.read_text().rstrip(), ""]
     lines += ["## Headline numbers", "",
               _table(["headline", "value"], [[f"`{k}`", _fmt(v, 3)] for k, v in h.items()]), ""]
 

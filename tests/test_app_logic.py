@@ -9,13 +9,15 @@ import pytest
 
 from app.health import HealthMonitor, StreamHealth
 from app.session import Session, export_session, load_any_recording
-from app.settings import CalibrationError, Settings, calibrate_coefficient
+from app.settings import PROFILE_FILE, SETTINGS_FILE, STRIDE_MODEL_CHOICES, Settings
 from app.sources import ReplaySource, sampling_period_us
 from app.storage import new_recording_path, output_dir
 from app.viewport import Viewport, format_length, nice_length
+from core.calibration import CalibrationError, UserProfile
 from core.pipeline import Pipeline
 from core.recording import Recording, make_stream, write_recording
 from core.simulator import simulate_walk
+from core.stride_models import load_stride_model, with_scale
 
 WAYPOINTS = ((0.0, 0.0), (20.0, 0.0), (20.0, 12.0))
 
@@ -119,8 +121,10 @@ def test_session_replay_gives_exactly_the_batch_track(walk):
     assert len(ses.steps) == len(batch.steps) >= 40
     np.testing.assert_allclose(ses.track_east[1:], batch.track.east_m, atol=1e-9)
     np.testing.assert_allclose(ses.track_north[1:], batch.track.north_m, atol=1e-9)
-    # and the track is the walk: final position within 2 m of the last waypoint
-    assert math.hypot(ses.track_east[-1] - 20.0, ses.track_north[-1] - 12.0) < 2.0
+    # and the track is the walk: final position within 2.5 m of the last waypoint (a sanity check; the
+    # pipeline's accuracy is tested in tests/test_pipeline.py -- since the heading-only magnetometer update
+    # the initial heading offset of this walk, about 5 degrees, decays more slowly: 2.26 m here, was 1.51 m)
+    assert math.hypot(ses.track_east[-1] - 20.0, ses.track_north[-1] - 12.0) < 2.5
     s = ses.summary()
     assert s["steps"] == len(batch.steps) and abs(s["elapsed_s"] - rec.duration_s) < 0.05
 
@@ -147,18 +151,28 @@ def test_session_reorders_late_events_and_drops_hopeless_ones(walk):
     assert len(ses.steps) == len(ref.steps) > 10
 
 
-def test_session_calibration_distance(walk):
+def test_session_calibration_walk_is_chosen_by_step_time(walk):
     ses = Session(ReplaySource(walk.recording, speed=math.inf), pipeline_factory=Pipeline)
     ses.start()
     events = ses.source.drain(10**9)
-    half = len(events) // 2
+    half, three_q = len(events) // 2, 3 * len(events) // 4
     ses.ingest(events[:half])
-    d0 = sum(s.length_m for s in ses.steps)
     ses.start_calibration()
-    ses.ingest(events[half:])
-    ses._finish()
+    t0 = events[half - 1][1]
+    assert ses.calibrating and ses.calibration_range_ns == (t0, None)
+    ses.ingest(events[half:three_q])
     walked = ses.stop_calibration()
-    assert walked > 5 and abs(walked - (sum(s.length_m for s in ses.steps) - d0)) < 1e-9
+    t1 = events[three_q - 1][1]
+    assert not ses.calibrating and ses.calibration_range_ns == (t0, t1)
+    ses.ingest(events[three_q:])
+    ses._finish()
+    # steps completed after "stop" but walked before it count; none walked before "start"
+    want = [s for s in ses.steps if t0 <= s.t_ns <= t1]
+    assert ses.calibration_steps() == want and len(want) > 5
+    assert ses.calibration_distance_m() == pytest.approx(sum(s.length_m for s in want))
+    assert ses.calibration_distance_m() > walked  # the pipeline's delay: steps come after "stop"
+    ses.reset_track()
+    assert ses.calibration_range_ns is None and ses.calibration_steps() == []
 
 
 # -- health ---------------------------------------------------------------------------------
@@ -195,45 +209,110 @@ def test_health_panel_text_shows_queue_drops_and_mag_trust():
 # -- settings and calibration ------------------------------------------------------------------
 
 
-def test_settings_round_trip_and_atomic_save(tmp_path):
-    p = tmp_path / "d" / "settings.json"
-    s = Settings(height_m=1.82, stride_c=0.5, rate_hz=200.0, record_live=False, replay_speed="max")
+def test_settings_and_profile_round_trip_and_atomic_save(tmp_path):
+    p = tmp_path / "d" / SETTINGS_FILE
+    s = Settings(rate_hz=200.0, record_live=False, replay_speed="max")
+    s.height_m = 1.82
+    s.set_stride_model("chen_linear")
     s.save(str(p))
+    assert sorted(os.listdir(p.parent)) == [PROFILE_FILE, SETTINGS_FILE]  # no temporary file left behind
+    assert "height_m" not in json.loads(p.read_text())  # the height lives in the profile only
+    assert UserProfile.load(p.parent / PROFILE_FILE) == s.profile
     t = Settings.load(str(p))
-    assert t == s and not t.problems
-    assert os.listdir(p.parent) == ["settings.json"]  # no temporary file left behind
+    assert t == s and not t.problems and t.height_m == 1.82 and t.stride_model_name == "chen_linear"
 
 
-def test_settings_survive_a_damaged_or_silly_file(tmp_path):
-    p = tmp_path / "settings.json"
+def test_settings_survive_damaged_or_silly_files(tmp_path):
+    p = tmp_path / SETTINGS_FILE
     p.write_text("{not json")
     s = Settings.load(str(p))
     assert s == Settings() and "could not read" in s.problems[0]
-    p.write_text(json.dumps({"height_m": 7.0, "rate_hz": 100, "stride_c": "x", "unknown": 1}))
+    p.write_text(json.dumps({"rate_hz": 1000, "replay_speed": "1x", "unknown": 1}))
+    (tmp_path / PROFILE_FILE).write_text(json.dumps({"format": "pdr-user-profile", "format_version": 1,
+                                                     "height_m": 17.5, "c_scale": 1.1}))
     s = Settings.load(str(p))
-    assert s.height_m is None and s.rate_hz == 100.0 and s.stride_c == Settings().stride_c
-    assert len(s.problems) == 2
+    assert s.rate_hz == 100.0 and s.replay_speed == "1x" and s.profile == UserProfile()
+    assert len(s.problems) == 2 and "plausible body height" in s.problems[1]
+    (tmp_path / PROFILE_FILE).write_text(json.dumps(UserProfile(model="no_such_model", c_scale=1.2).to_dict()))
+    s = Settings.load(str(p))
+    assert s.stride_model_name == "default" and s.profile.c_scale == 1.0 and "no such model" in s.problems[-1]
 
 
-def test_calibrate_coefficient_rule_and_refusals():
-    assert calibrate_coefficient(0.47, 50.0, 47.0) == pytest.approx(0.47 * 50 / 47)
-    for args, msg in (((0.47, 2.0, 2.5), "at least"), ((0.47, 50.0, 0.0), "no steps"),
-                      ((0.47, 50.0, 10.0), "factor"), ((0.47, float("nan"), 10.0), "number")):
-        with pytest.raises(CalibrationError, match=msg):
-            calibrate_coefficient(*args)
+def test_old_settings_with_stride_c_migrate_to_the_profile(tmp_path):
+    p = tmp_path / SETTINGS_FILE
+    c_default = load_stride_model("default").coefficient.c
+    old = {"height_m": 1.8, "stride_c": 0.52, "rate_hz": 50.0, "record_live": True, "replay_speed": "10x",
+           "calibrations": [{"time": "2025-01-01T10:00:00", "known_m": 50.0, "pdr_m": 44.0, "c_old": 0.455,
+                             "c_new": 0.52}]}
+    p.write_text(json.dumps(old))
+    s = Settings.load(str(p))
+    assert not s.problems and "converted" in s.notes[0]
+    assert s.height_m == 1.8 and s.rate_hz == 50.0 and s.profile.c_scale == pytest.approx(0.52 / c_default)
+    feats = Pipeline().run(simulate_walk(((0.0, 0.0), (10.0, 0.0)), seed=2).recording).steps[3].features
+    assert s.stride_model().length_m(feats) == pytest.approx(0.52 * (feats.acc_max_m_s2 - feats.acc_min_m_s2) ** 0.25)
+    s.save(str(p))
+    assert set(json.loads(p.read_text())) == {"rate_hz", "record_live", "replay_speed"}  # old keys gone
+    t = Settings.load(str(p))
+    assert t == s and not t.notes
+    # an old file that was never calibrated (the old default C), or with a C no walker has
+    for c, scale, note in ((0.455, 1.0, None), (5.0, 1.0, "ignored")):
+        q = tmp_path / str(c) / SETTINGS_FILE
+        q.parent.mkdir()
+        q.write_text(json.dumps({"stride_c": c, "height_m": None}))
+        s = Settings.load(str(q))
+        assert s.profile == UserProfile(c_scale=scale) and not s.problems
+        assert (note in s.notes[0]) if note else not s.notes
 
 
-def test_calibration_makes_the_pipeline_measure_the_known_distance():
-    """A walker whose true C is 0.55 calibrates an app set to 0.47; afterwards the distance is right."""
-    w = simulate_walk(((0.0, 0.0), (40.0, 0.0)), seed=4, weinberg_c=0.55, step_length_m=0.75)
-    known = float(w.truth.path_length_m)
+def test_calibration_walk_corrects_the_distance_of_the_next_walk():
+    """A walker whose true C is 0.55 (the default model has 0.455) calibrates on a 40 m walk, through a
+    session as the app does it; afterwards a second, different walk measures within 2 %."""
+    cal = simulate_walk(((0.0, 0.0), (40.0, 0.0)), seed=4, weinberg_c=0.55, step_length_m=0.75)
+    walk2 = simulate_walk(((0.0, 0.0), (25.0, 0.0), (25.0, 15.0)), seed=8, weinberg_c=0.55, step_length_m=0.75)
+    known, known2 = float(cal.truth.path_length_m), float(walk2.truth.path_length_m)
     s = Settings()
-    before = Pipeline(**s.pipeline_kwargs()).run(w.recording).summary()["distance_m"]
-    assert abs(before - known) / known > 0.1
-    s.apply_calibration(known, before)
-    after = Pipeline(**s.pipeline_kwargs()).run(w.recording).summary()["distance_m"]
-    assert abs(after - known) / known < 0.02
-    assert s.calibrations[-1]["c_new"] == s.stride_c
+    s.height_m = 1.75
+    before = Pipeline(**s.pipeline_kwargs()).run(walk2.recording).summary()["distance_m"]
+    assert abs(before - known2) / known2 > 0.1
+    ses = Session(ReplaySource(cal.recording, speed=math.inf), pipeline_factory=lambda: Pipeline(**s.pipeline_kwargs()))
+    ses.start()
+    ses.start_calibration()
+    while not ses.finished:
+        ses.tick()
+    ses.stop_calibration()
+    res = s.calibrate(ses.calibration_steps(), known)
+    assert s.profile is res.profile and s.profile.c_scale == res.scale == pytest.approx(0.55 / 0.455, rel=0.03)
+    assert s.profile.height_m == 1.75 and len(s.profile.calibrations) == 1
+    after = Pipeline(**s.pipeline_kwargs()).run(walk2.recording).summary()["distance_m"]
+    assert abs(after - known2) / known2 < 0.02
+    # the factor belongs to its model: another model starts uncalibrated, switching back restores it
+    s.set_stride_model("weinberg_bp")
+    assert s.profile.c_scale == 1.0 and s.calibration_walks() == []
+    s.set_stride_model("default")
+    assert s.profile.c_scale == res.scale and len(s.calibration_walks()) == 1
+
+
+def test_calibration_refusals_are_messages_for_the_user(walk):
+    steps = Pipeline().run(walk.recording).steps
+    s = Settings()
+    for steps_, known, msg in ((steps, "abc", "must be a number of metres"), (steps, "3", "too short"),
+                               (steps, "", "must be a number"), (steps, "-30", "positive"),
+                               (steps[:5], "20", "only 5 steps"), (steps, "300", "check the distance"),
+                               (steps, "12", "factor")):
+        with pytest.raises(CalibrationError, match=msg):
+            s.calibrate(steps_, known)
+    assert s.profile == UserProfile()  # unchanged
+
+
+def test_stride_model_choices_are_shipped_models():
+    for name in STRIDE_MODEL_CHOICES:
+        load_stride_model(name)
+    s = Settings()
+    s.profile = UserProfile(height_m=1.7, c_scale=1.1)
+    kw = s.pipeline_kwargs()
+    ref = with_scale(load_stride_model("default"), 1.1)
+    f = Pipeline().run(simulate_walk(((0.0, 0.0), (10.0, 0.0)), seed=2).recording).steps[3].features
+    assert kw["height_m"] == 1.7 and kw["stride_model"].length_m(f) == ref.length_m(f)
 
 
 def test_sampling_period_is_capped_at_200_hz():

@@ -26,7 +26,9 @@ kivy_env.prepare(headless=True)  # before anything imports kivy
 from core.pipeline import Pipeline  # noqa: E402
 from core.recording import write_recording  # noqa: E402
 from core.simulator import simulate_walk  # noqa: E402
-from app.settings import DEFAULT_STRIDE_C  # noqa: E402
+from core.calibration import UserProfile  # noqa: E402
+from core.stride_models import load_stride_model, with_scale  # noqa: E402
+from app.settings import Settings  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 WAYPOINTS = ((0.0, 0.0), (30.0, 0.0), (30.0, 20.0), (10.0, 20.0))
@@ -124,14 +126,23 @@ def walk_file(tmp_path_factory):
 
 
 def test_app_replays_to_the_end_and_the_screenshot_shows_the_track(walk_file, tmp_path):
+    """... with the settings file of an older app version (Weinberg C = 0.47, the simulated walker's): the
+    app migrates it to a profile and its pipeline uses the profile's stride model and height."""
     w, path = walk_file
     shot, report = tmp_path / "shot.png", tmp_path / "report.json"
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "settings.json").write_text(json.dumps({"height_m": 1.8, "stride_c": 0.47, "rate_hz": 100.0}))
     r = _run(["-m", "app", str(path), "--speed", "max", "--headless", "--exit-at-end", "--size",
               f"{SIZE[0]}x{SIZE[1]}", "--screenshot", str(shot), "--report", str(report),
-              "--data-dir", str(tmp_path / "data"), "--out", str(tmp_path / "out")])
+              "--data-dir", str(data), "--out", str(tmp_path / "out")])
     assert r.returncode == 0, r.stderr[-3000:]
     rep = json.loads(report.read_text())
-    batch = Pipeline().run(w.recording)
+    scale = 0.47 / load_stride_model("default").coefficient.c
+    batch = Pipeline(height_m=1.8, stride_model=with_scale(load_stride_model("default"), scale)).run(w.recording)
+    # the migrated profile was saved on exit; the old keys are gone from the settings
+    assert UserProfile.load(data / "profile.json") == UserProfile(height_m=1.8, c_scale=scale)
+    assert "stride_c" not in json.loads((data / "settings.json").read_text())
     assert rep["finished"] and rep["errors"] == 0 and rep["mode"] == "replay"
     assert rep["events"] == sum(len(s) for s in w.recording.streams.values())
     assert rep["summary"]["steps"] == len(batch.steps) == int(rep["status"]["steps"])
@@ -205,8 +216,10 @@ def maybe_pause(dt):
     log["ticks_replaying"] += 1
     if log["ticks_replaying"] < 5:
         return True
+    app.save_calibration("50")
+    log["calib_message_no_walk"] = app.calib_message
     app.toggle_calibration()  # calibration walk starts here
-    log["steps_at_calibration_start"] = len(ses.steps)
+    log["calibration_range_at_start"] = ses.calibration_range_ns
     pause()
     return False
 
@@ -230,14 +243,22 @@ def wait_end(dt):
     if not app.session.finished:
         return True
     app.toggle_calibration()  # ... and ends with the replay
-    log["calibration_walked_m"] = app._calib_walked
+    log["calibration_range"] = app.session.calibration_range_ns
+    log["calib_text"] = app.calib_text
+    log["calib_errors"] = []
+    for bad in ("3", "abc"):
+        app.save_calibration(bad)
+        log["calib_errors"].append(app.calib_message)
     app.save_calibration(known)
     log["calib_message"] = app.calib_message
+    log["c_text"] = app.c_text
     log["export"] = app.export()
     app.root.ids.screens.current = "health"
     app._update_ui(force=True)
     log["health"] = app.health_text
     log["report"] = app.report()
+    app.new_track()  # the calibrated profile applies to the new track
+    log["new_track_scale"] = app.session.pipeline.stride_model.coefficient.scale
     popup = app.show_file_chooser()
     chooser = popup.content.children[-1]
     log["chooser"] = [chooser.path, list(chooser.filters)]
@@ -276,11 +297,19 @@ def test_app_lifecycle_pause_resume_and_export(walk_file, tmp_path):
     saved = json.loads((tmp_path / "data" / "settings.json").read_text())
     assert saved["replay_speed"] == "max"
     # calibration walk from the pause to the end of the replay, then saved with the known distance
-    walked = log["calibration_walked_m"]
-    batch_steps = Pipeline().run(w.recording).steps
-    assert walked == pytest.approx(sum(s.length_m for s in batch_steps[log["steps_at_calibration_start"]:]))
-    assert saved["stride_c"] == pytest.approx(DEFAULT_STRIDE_C * known / walked), log["calib_message"]
-    assert saved["calibrations"][-1]["known_m"] == known
+    assert "do a calibration walk first" in log["calib_message_no_walk"]
+    t0, t1 = log["calibration_range"]
+    assert t0 == log["calibration_range_at_start"][0] and t1 == w.recording.t1_ns
+    batch_steps = Pipeline(**Settings().pipeline_kwargs()).run(w.recording).steps
+    walked = sum(s.length_m for s in batch_steps if t0 <= s.t_ns)
+    assert log["calib_text"] == f"measured {walked:.1f} m"
+    assert "too short" in log["calib_errors"][0] and "must be a number of metres" in log["calib_errors"][1]
+    profile = UserProfile.load(tmp_path / "data" / "profile.json")
+    assert profile.c_scale == pytest.approx(known / walked), log["calib_message"]
+    assert profile.calibrations[-1]["known_distance_m"] == known
+    assert log["calib_message"].startswith(f"saved: step length x {known / walked:.3f}")
+    assert log["c_text"] == f"step length x {known / walked:.3f} (1 walk)"
+    assert log["new_track_scale"] == pytest.approx(known / walked)
     # the file chooser opens where the recording is, and "Replay" starts it again
     assert log["chooser"][0] == str(path.parent) and "*.csv" in log["chooser"][1]
     assert log["reopened"] == ["replay", 0, True]
@@ -420,7 +449,8 @@ def test_live_mode_records_every_event_through_the_app(tmp_path):
     assert log["events_in"] == len(delivered) > 1500
     rec = read_recording(log["record_path"], warn=False)
     assert rec.device["model"] == "Phone 1" and rec.device["sampling_period_us"] == 10000
-    assert rec.metadata["stride_c"] == pytest.approx(DEFAULT_STRIDE_C) and "unix_offset_ns" in rec.metadata
+    assert rec.metadata["stride_model"] == "default" and rec.metadata["c_scale"] == 1.0
+    assert "unix_offset_ns" in rec.metadata
     names = {1: "acc", 2: "mag", 4: "gyro"}
     for type_, name in names.items():
         want = sorted(t for t, ty in delivered if ty == type_)
