@@ -341,12 +341,20 @@ def acceleration_in_m_s2(acc: np.ndarray, what: str, source: str, repairs: list[
     return acc
 
 
-def finish(rec: Recording, *, warn: bool = True) -> Recording:
-    """Drop empty streams, check there is data, repair timestamps (with a warning)."""
+def finish(rec: Recording, *, warn: bool = True, unix_offset_ns: int | None = None) -> Recording:
+    """Drop empty streams, check there is data, repair timestamps (with a warning), make metadata JSON-safe.
+
+    With ``unix_offset_ns`` (Unix time minus sensor-clock time) the metadata
+    also gets ``t0_unix_ns``, the Unix time of the first event.
+    """
     rec.streams = {k: s for k, s in rec.streams.items() if len(s)}
     if not rec.streams:
         raise RecordingError("no sensor events found", rec.source or None)
-    return repair_recording(rec, warn=warn)
+    rec = repair_recording(rec, warn=warn)
+    if unix_offset_ns is not None:
+        rec.metadata["t0_unix_ns"] = rec.t0_ns + unix_offset_ns
+    rec.metadata = json_safe(rec.metadata)  # nan is not valid JSON
+    return rec
 
 
 def json_safe(obj):

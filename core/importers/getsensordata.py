@@ -93,7 +93,7 @@ from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
 from core.recording import Recording, RecordingError, make_stream
 from core.importers._common import (
     EXTRA_STREAM_SPECS, POSI, PRESSURE, attitude_checks, canonical_sign, decode_text, finish, first_bad_number,
-    first_bad_time, json_safe, magnetic_dip_deg, quat_about_axis, quat_multiply, read_bytes,
+    first_bad_time, magnetic_dip_deg, quat_about_axis, quat_multiply, read_bytes,
 )
 
 FORMAT = "getsensordata"
@@ -421,10 +421,5 @@ def _parse(text: str, source: str, warn: bool) -> Recording:
     if unix_offset_ns is not None:
         meta["unix_offset_ns"] = unix_offset_ns
     rec = Recording(streams, device=device, metadata=meta, repairs=repairs, source=source)
-    rec = finish(rec, warn=warn)
-    if unix_offset_ns is not None:
-        rec.metadata["t0_unix_ns"] = rec.t0_ns + unix_offset_ns
-    # JSON-safe metadata (nan is not valid JSON)
-    rec.metadata = json_safe(rec.metadata)
-    return rec
+    return finish(rec, warn=warn, unix_offset_ns=unix_offset_ns)
 

@@ -74,7 +74,7 @@ import numpy as np
 from core.conventions import ACC, GPS, GYRO, MAG
 from core.recording import Recording, RecordingError, make_stream
 from core.importers._common import (acceleration_in_m_s2, 
-    EXTRA_STREAM_SPECS, PRESSURE, FileSet, decode_text, finish, first_bad_time, json_safe, magnetic_dip_deg,
+    EXTRA_STREAM_SPECS, PRESSURE, FileSet, decode_text, finish, first_bad_time, magnetic_dip_deg,
     read_bytes,
 )
 from core.importers._csv import Table
@@ -351,8 +351,4 @@ def _build(files, meta, source, warn) -> Recording:
         a, m = streams[ACC], streams[MAG]
         meta_out["mag_dip_deg"] = magnetic_dip_deg(a.t_ns, a.values, m.t_ns, m.values)
     rec = Recording(streams, device=device, metadata=meta_out, repairs=repairs, source=source)
-    rec = finish(rec, warn=warn)
-    if unix_offset_ns is not None:
-        rec.metadata["t0_unix_ns"] = rec.t0_ns + unix_offset_ns
-    rec.metadata = json_safe(rec.metadata)
-    return rec
+    return finish(rec, warn=warn, unix_offset_ns=unix_offset_ns)

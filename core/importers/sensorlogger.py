@@ -88,7 +88,7 @@ from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC, STANDARD_GRAVITY_M_S2
 from core.recording import Recording, RecordingError, make_stream
 from core.importers._common import (acceleration_in_m_s2, 
     EXTRA_STREAM_SPECS, GYRO_UNCAL, MAG_UNCAL, PRESSURE, FileSet, attitude_checks, canonical_sign, finish,
-    json_safe, magnetic_dip_deg, quat_about_axis, quat_multiply, sample_at,
+    magnetic_dip_deg, quat_about_axis, quat_multiply, sample_at,
 )
 from core.importers._csv import Table
 
@@ -363,10 +363,7 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
         rates = md["sampleRateMs"].split("|")
         meta["sample_rate_ms"] = {n: r for n, r in zip(names, rates)}
     rec = Recording(streams, device=device, metadata=meta, repairs=repairs, source=source)
-    rec = finish(rec, warn=warn)
-    rec.metadata["t0_unix_ns"] = rec.t0_ns + start_ns
-    rec.metadata = json_safe(rec.metadata)
-    return rec
+    return finish(rec, warn=warn, unix_offset_ns=start_ns)
 
 
 # ---------------------------------------------------------------------------
