@@ -53,6 +53,9 @@ import numpy as np
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2
 
+_EYE4 = np.eye(4)
+_EYE4.flags.writeable = False
+
 
 def measurement_jacobian(q, v) -> np.ndarray:
     """``d (R(q)^T v) / d q`` (3 x 4) for ``q = (w, x, y, z)``; see the module docstring."""
@@ -434,7 +437,8 @@ class AttitudeEKF:
     # -- measurement updates ---------------------------------------------------
     def _vector_update(self, z, v, sigma2: float):
         """Three sequential scalar updates of ``z = R(q)^T v + noise`` (eq. 12); returns the innovation."""
-        q = np.array(self.q)
+        q0 = np.array(self.q)
+        q = q0
         hq = predicted_measurement(self.q, v)
         H = measurement_jacobian(self.q, v)
         P = self.P
@@ -445,7 +449,7 @@ class AttitudeEKF:
             s = float(h @ ph) + sigma2
             k = ph / s
             # the innovation of row i re-linearised at the current estimate
-            r = innov[i] - float(h @ (q - np.array(self.q)))
+            r = innov[i] - float(h @ (q - q0))
             q = q + k * r
             P = P - np.outer(k, ph)
         P = 0.5 * (P + P.T)
@@ -455,8 +459,8 @@ class AttitudeEKF:
             return innov
         q = q / n
         # keep P consistent with the normalisation (project out the radial direction)
-        J = np.eye(4) - np.outer(q, q)
-        self.P = J @ P @ J.T + np.eye(4) * 1e-12
+        J = _EYE4 - np.outer(q, q)
+        self.P = J @ P @ J.T + _EYE4 * 1e-12
         self.q = tuple(q.tolist())
         return innov
 

@@ -21,13 +21,19 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from core import quaternion
 from core.conventions import STANDARD_GRAVITY_M_S2 as G
 from core.importers import FORMATS, detect_format, load_recording
 from core.importers.getsensordata import parse_getsensordata, read_getsensordata
 from core.importers.phyphox import read_phyphox
 from core.importers.sensorlogger import read_sensorlogger
 from core.recording import (
-    Recording, RecordingError, TimestampRepairWarning, make_stream, read_recording, write_recording,
+    Recording,
+    RecordingError,
+    TimestampRepairWarning,
+    make_stream,
+    read_recording,
+    write_recording,
 )
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -49,17 +55,11 @@ def quat(axis, deg):
 
 
 def qmul(p, q):
-    pw, px, py, pz = p
-    qw, qx, qy, qz = q
-    return np.array([pw * qw - px * qx - py * qy - pz * qz, pw * qx + px * qw + py * qz - pz * qy,
-                     pw * qy - px * qz + py * qw + pz * qx, pw * qz + px * qy - py * qx + pz * qw])
+    return np.array(quaternion.multiply(p, q))
 
 
 def rot(q):
-    w, x, y, z = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return np.array(quaternion.to_matrix(q))
 
 
 def same_rotation(q1, q2, tol=1e-6):
