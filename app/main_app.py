@@ -28,8 +28,8 @@ from kivy.uix.button import Button
 from kivy.uix.filechooser import FileChooserListView
 from kivy.uix.popup import Popup
 
-from core.calibration import CalibrationError
-from core.stride_models import StrideModelError
+from core.pdr.calibration import CalibrationError
+from core.pdr.stride_models import StrideModelError
 
 import app.track_view  # noqa: F401 - registers TrackView for the kv file
 from app.session import Session, export_session, load_any_recording
@@ -183,7 +183,7 @@ class PDRApp(App):
             (" – applies to the next track" if self.session else "")
 
     def _pipeline_factory(self):
-        from core.pipeline import Pipeline  # noqa: PLC0415
+        from core.pdr.pipeline import Pipeline  # noqa: PLC0415
 
         kw = self.settings.pipeline_kwargs()
         return lambda: Pipeline(**kw)
@@ -406,7 +406,7 @@ class PDRApp(App):
             self.calib_message = "enter the known distance and save"
 
     def save_calibration(self, known_text: str):
-        """Calibrate the profile with the calibration walk's steps (core.calibration) and save it."""
+        """Calibrate the profile with the calibration walk's steps (core.pdr.calibration) and save it."""
         ses = self.session
         if not ses or ses.calibration_range_ns is None or ses.calibrating:
             self.calib_message = "do a calibration walk first (start, walk, stop)"

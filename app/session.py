@@ -20,7 +20,7 @@ Event flow per tick::
 
 At the end of a finite source the buffer is flushed and ``Pipeline.finish``
 completes the last steps, so a replay gives exactly the batch result of
-:meth:`core.pipeline.Pipeline.run`.
+:meth:`core.pdr.pipeline.Pipeline.run`.
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ class Session:
     ----------
     source : app.sources.SensorSource
     pipeline_factory : callable
-        ``() -> core.pipeline.Pipeline`` (called again on :meth:`reset_track`).
+        ``() -> core.pdr.pipeline.Pipeline`` (called again on :meth:`reset_track`).
     record_path : str, optional
         Write every event (as delivered, before reordering) to this file.
     flush_interval_s : float
@@ -279,7 +279,7 @@ class Session:
         return self.health.format(self.source.queue_drops(), self.source.accuracy())
 
     def track(self):
-        from core.pipeline import Track  # noqa: PLC0415
+        from core.pdr.pipeline import Track  # noqa: PLC0415
 
         return Track.from_steps(self.steps)
 

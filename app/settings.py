@@ -5,7 +5,7 @@ Two JSON files in the app's data directory, both written atomically
 
 - ``settings.json``: sampling rate, whether live sessions are recorded,
   replay speed;
-- ``profile.json``: the user's :class:`core.calibration.UserProfile`
+- ``profile.json``: the user's :class:`core.pdr.calibration.UserProfile`
   (format ``pdr-user-profile``): body height, stride model, the per-user
   factor ``c_scale`` and the calibration walks it was pooled from.
 
@@ -36,9 +36,9 @@ import os
 import tempfile
 from dataclasses import dataclass, field, replace
 
-from core.calibration import MAX_POOLED, CalibrationError, CalibrationResult, UserProfile, calibrate_known_distance
-from core.stride import StrideModel
-from core.stride_models import StrideModelError, load_stride_model
+from core.pdr.calibration import MAX_POOLED, CalibrationError, CalibrationResult, UserProfile, calibrate_known_distance
+from core.pdr.stride import StrideModel
+from core.pdr.stride_models import StrideModelError, load_stride_model
 
 SETTINGS_FILE = "settings.json"
 PROFILE_FILE = "profile.json"
@@ -51,7 +51,7 @@ RANGES = {
 #: Sampling rates offered in the UI (Hz); 200 is the most without HIGH_SAMPLING_RATE_SENSORS.
 RATE_CHOICES = (50, 100, 200)
 
-#: Shipped stride models offered in the UI (``core/models``)
+#: Shipped stride models offered in the UI (``core/pdr/models``)
 STRIDE_MODEL_CHOICES = ("default", "weinberg_bp", "chen_linear", "chen_ann")
 
 
@@ -97,7 +97,7 @@ class Settings:
 
         The user's factor belongs to a model, so it is recomputed from the
         calibration walks made with ``name`` (pooled as
-        :func:`core.calibration.calibrate_known_distance` pools them), or 1
+        :func:`core.pdr.calibration.calibrate_known_distance` pools them), or 1
         if there are none.  Raises ``StrideModelError`` for an unknown model.
         """
         if name == self.profile.model:
@@ -117,13 +117,13 @@ class Settings:
         return self.profile.stride_model()
 
     def pipeline_kwargs(self) -> dict:
-        """Keyword arguments for :class:`core.pipeline.Pipeline`."""
+        """Keyword arguments for :class:`core.pdr.pipeline.Pipeline`."""
         return {"height_m": self.height_m, "stride_model": self.stride_model()}
 
     def calibrate(self, steps, known_distance_m) -> CalibrationResult:
         """Refine the profile from the steps of a walk of known length (:func:`calibrate_known_distance`).
 
-        Raises :class:`core.calibration.CalibrationError` with a message for
+        Raises :class:`core.pdr.calibration.CalibrationError` with a message for
         the user; the profile is unchanged then.
         """
         result = calibrate_known_distance(steps, known_distance_m, profile=self.profile)

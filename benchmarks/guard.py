@@ -29,7 +29,8 @@ import time
 from pathlib import Path
 
 from benchmarks.datasets.base import default_data_root
-from benchmarks.run import headline, run
+from benchmarks.headline import headline
+from benchmarks.run import run
 
 THRESHOLDS = Path(__file__).with_name("thresholds.json")
 

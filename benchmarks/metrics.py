@@ -20,7 +20,7 @@ landmark error, best-fit (m)     the same after the 2-D Procrustes rotation abou
                                  ``L_0`` that minimises ``sum_k e_k^2`` (no scale)
 loop closure (%)                 ``100 |p(t_N) - p(t_0)| / sum_k |L_{k+1} - L_k|``
                                  for walks whose first and last landmark coincide
-segment heading error (deg)      ``wrap(circmean(h_i, t_k < t_i <= t_{k+1}) - bearing_k)``
+segment heading error (deg)      ``wrap_angle(circmean(h_i, t_k < t_i <= t_{k+1}) - bearing_k)``
                                  with ``bearing_k = atan2(dN_k, dE_k)``
 ===============================  ==========================================================
 """
@@ -32,6 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.conventions import wrap_angle
+from core.pdr.deadreckoning import DeadReckoner
+
 #: tolerance of the step timing match (s), from the issue
 STEP_MATCH_TOLERANCE_S = 0.2
 #: segments shorter than this (m) have no meaningful bearing and are skipped
@@ -42,11 +45,6 @@ MIN_SEGMENT_STEPS = 2
 LOOP_CLOSED_TOLERANCE_M = 1.0
 #: a step takes at most this long (s) when positions are interpolated between steps
 MAX_STEP_DURATION_S = 1.0
-
-
-def wrap(angle):
-    """Wrap angles (rad) to ``[-pi, pi)``; works on scalars and arrays."""
-    return (np.asarray(angle, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def circular_mean(angles) -> float:
@@ -153,9 +151,9 @@ def polyline_length(east_m, north_m) -> float:
 
 def dead_reckon(length_m, heading_rad) -> tuple[np.ndarray, np.ndarray]:
     """Positions after each step from (0, 0): ``p_i = sum_{j<=i} l_j (cos h_j, sin h_j)`` (eq. 1)."""
-    length = np.asarray(length_m, dtype=float)
-    h = np.asarray(heading_rad, dtype=float)
-    return np.cumsum(length * np.cos(h)), np.cumsum(length * np.sin(h))
+    pos = np.array(DeadReckoner().run(np.asarray(length_m, dtype=float), np.asarray(heading_rad, dtype=float)),
+                   dtype=float).reshape(-1, 2)
+    return pos[:, 0], pos[:, 1]
 
 
 def positions_at(track_t_ns, east_m, north_m, t_ns, start=(0.0, 0.0),
@@ -256,7 +254,7 @@ def segment_heading_errors(step_t_ns, step_heading_rad, lm_t_ns, lm_east_m, lm_n
     mean of the per-step headings ``h_i`` of the steps with
     ``t_k < t_i <= t_{k+1}``; the truth is the segment's bearing
     ``atan2(N_{k+1} - N_k, E_{k+1} - E_k)`` (CCW from East).  The error is
-    ``wrap(estimate - bearing)`` in ``[-pi, pi)``.  Segments shorter than
+    ``wrap_angle(estimate - bearing)`` in ``[-pi, pi)``.  Segments shorter than
     ``min_length_m`` or with fewer than ``min_steps`` steps give nan.
     """
     t = np.asarray(step_t_ns, dtype=np.int64)
@@ -272,7 +270,7 @@ def segment_heading_errors(step_t_ns, step_heading_rad, lm_t_ns, lm_east_m, lm_n
         m = (t > lt[k]) & (t <= lt[k + 1])
         if int(np.sum(m)) < min_steps:
             continue
-        out[k] = float(wrap(circular_mean(h[m]) - math.atan2(dn, de)))
+        out[k] = float(wrap_angle(circular_mean(h[m]) - math.atan2(dn, de)))
     return out
 
 

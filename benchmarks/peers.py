@@ -6,7 +6,7 @@ pipeline makes ours, so that **only the attitude differs**:
 
 1. sample the peer's rotation matrix ``R(q)`` on the pipeline's uniform grid
    (latest peer sample at or before each grid time);
-2. smooth it with the pipeline's own :class:`core.heading.RotationSmoother`
+2. smooth it with the pipeline's own :class:`core.pdr.heading.RotationSmoother`
    (same cut-off, same forward axis);
 3. read the smoothed heading at ``t_step + heading_delay_s``, the instant at
    which the pipeline reads ours;
@@ -48,7 +48,7 @@ import numpy as np
 
 from core import quaternion as quat
 from core.conventions import ACC, GYRO, MAG, ROTVEC
-from core.heading import RotationSmoother
+from core.pdr.heading import RotationSmoother
 from core.recording import Recording
 
 ALL_PEERS = ("rotvec", "imufusion", "madgwick", "ekf")
@@ -224,7 +224,7 @@ def step_headings(att: Attitude, step_t_ns, *, grid_rate_hz: float = 50.0, cutof
     """Per-step walking heading (rad) from an attitude series, made as the pipeline makes ours.
 
     The rotation matrices are sampled on a uniform ``grid_rate_hz`` grid,
-    low-passed by :class:`core.heading.RotationSmoother` and read at
+    low-passed by :class:`core.pdr.heading.RotationSmoother` and read at
     ``t_step + delay_s`` (the smoother's group delay by default).  Steps before
     the attitude series starts get its first smoothed heading.
     """

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import metrics as M
-from benchmarks.run import evaluate_targets, headline
+from benchmarks.headline import evaluate_targets, headline
 
 SOURCE_NAMES = {
     "ours": "ours (adaptive EKF)",

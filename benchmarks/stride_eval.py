@@ -1,8 +1,8 @@
 """Step-length benchmark: the four stride models on the same steps of real walkers (issue #4).
 
-* **Walks.**  Every recording is run through :class:`core.pipeline.Pipeline`
+* **Walks.**  Every recording is run through :class:`core.pdr.pipeline.Pipeline`
   (the step detector and the features the phone will compute); the detected
-  steps inside a stretch of known length form a :class:`tools.train_stride.Walk`.
+  steps inside a stretch of known length form a :class:`desktop.stride_training.Walk`.
 
   - IPOL (lower-back XSens, placement "waist"): per trial the two straight
     10 m legs (the U-turn is left out).  A leg's detected steps are those whose
@@ -22,7 +22,7 @@
   same steps.
 
 * **Calibration.**  For a held-out subject the fold's model is calibrated
-  (:func:`core.calibration.calibrate_known_distance`) on one of the subject's
+  (:func:`core.pdr.calibration.calibrate_known_distance`) on one of the subject's
   20 m trials and evaluated on each of the subject's other trials; every
   (calibration trial, test trial) pair counts.
 
@@ -39,11 +39,11 @@ from typing import Sequence
 
 import numpy as np
 
-from core.calibration import CalibrationError, calibrate_known_distance
-from core.pipeline import Pipeline
-from core.stride import StepFeatures
-from core.stride_models import lengths_of, save_stride_model, with_scale
-from tools.train_stride import MODEL_KINDS, TrainConfig, Walk, fit_model
+from core.pdr.calibration import CalibrationError, calibrate_known_distance
+from core.pdr.pipeline import Pipeline
+from core.pdr.stride import StepFeatures
+from core.pdr.stride_models import lengths_of, save_stride_model, with_scale
+from desktop.stride_training import MODEL_KINDS, TrainConfig, Walk, fit_model
 
 MODEL_LABELS = {
     "weinberg": "Weinberg, constant C",
@@ -288,7 +288,7 @@ def _bp_variants(cfg: TrainConfig):
 
 
 def _reference_floor(walks: Sequence[Walk]) -> float:
-    from core.stride_models import weinberg_root
+    from core.pdr.stride_models import weinberg_root
 
     pairs = []
     for g in {w.group for w in walks}:
@@ -299,7 +299,7 @@ def _reference_floor(walks: Sequence[Walk]) -> float:
 
 
 def _long_walks(study: Study, data_root: str) -> None:
-    from tools.train_stride import fit_constant
+    from desktop.stride_training import fit_constant
 
     longs = list(trundle_walks(data_root)) + list(ipin_walks(data_root))
     for lw in longs:
@@ -396,12 +396,12 @@ def render_markdown(study: Study) -> str:
         f"**Data.** IPOL healthy-gait trials, **lower-back XSens (placement: waist)**, {len(subjects)} subjects with a "
         f"known height ({min(w.meta['height_m'] for w in walks) * 100:.0f}-"
         f"{max(w.meta['height_m'] for w in walks) * 100:.0f} cm), {len(walks)} trials of 2 x 10 m, "
-        f"{n_steps} steps detected by `core.pipeline` on the straight legs ({n_ref} annotated; U-turns left out). "
+        f"{n_steps} steps detected by `core.pdr.pipeline` on the straight legs ({n_ref} annotated; U-turns left out). "
         + ("Left out: " + "; ".join(study.excluded) + ". " if study.excluded else "")
         + "**Leave-one-subject-out** cross-validation: each model is fitted on the other subjects (the networks keep "
         "a quarter of those for early stopping) and scored on the held-out one; all four models see the same "
         "steps. Distance error = (sum of the model's step lengths over the detected steps - 20 m) / 20 m. "
-        "'After calibration': the held-out subject's model is calibrated (`core.calibration."
+        "'After calibration': the held-out subject's model is calibrated (`core.pdr.calibration."
         "calibrate_known_distance`) on one of the subject's 20 m trials and scored on each of the others "
         "(all pairs).",
         "",
@@ -434,7 +434,7 @@ def render_markdown(study: Study) -> str:
                    f"{const['loso_max']:.1f} %: it is better by more than a point for {len(better)} subject(s) and "
                    f"worse by more than a point for {len(worse)}"
                    + (f" ({', '.join(worse)})" if worse else "") + ". "
-                   f"The shipped default (`core/models/default.json`) is therefore **constant-C Weinberg, C = "
+                   f"The shipped default (`core/pdr/models/default.json`) is therefore **constant-C Weinberg, C = "
                    f"{study.final['weinberg'].coefficient.c:.3f}**, fitted on all {len(subjects)} subjects. Why the "
                    "network cannot help here: a subject's C is steady from trial to trial, but differs between "
                    f"subjects by +-{100 * c_spread:.0f} % (SD of the subjects' C) in a way that height (and step "
@@ -565,7 +565,7 @@ def write_models(study: Study, out_dir: Path, cfg: TrainConfig, created: str = "
             "subjects": len(subjects), "walks": len(study.walks),
             "steps": int(sum(w.n_steps for w in study.walks)),
             "heights_m": sorted({w.meta["height_m"] for w in study.walks}),
-            "features": "core.pipeline StepFeatures (low-pass filtered acceleration norm)",
+            "features": "core.pdr.pipeline StepFeatures (low-pass filtered acceleration norm)",
             "objective": "mean squared relative walked-distance error per walk",
             "seed": cfg.seed, "tool": "tools/train_stride.py",
             "loso_cv_abs_distance_error_pct": {k: round(v, 3) for k, v in s[kind].items()},

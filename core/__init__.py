@@ -59,18 +59,29 @@ Names
     matrices both frames (``mat_nb`` maps ``b`` to ``n``), and parameters
     their unit (``cutoff_hz``, ``min_step_interval_s``, ``gyro_noise_rad_s``).
 
-Pipeline (Tian et al. 2014, Fig. 2)
-===================================
-``core.recording``   sensor data model and the project's file format
-``core.dsp``         Butterworth design, biquad filters, rate tracking
-``core.steps``       acceleration norm (eq. 2), low-pass, peak step detection (eq. 3)
-``core.stride``      step length: Weinberg (eq. 4) with a pluggable coefficient model
-``core.attitude``    adaptive quaternion EKF (eqs. 5-18)
-``core.heading``     Butterworth smoothing of the rotation matrix (section 4.3)
-``core.deadreckoning``  position update (eq. 1)
-``core.pipeline``    the composition, streaming ``update()`` and batch ``run()``
-``core.simulator``   a hand-held walk simulator with ground truth
-``core.cli``         the ``pdr`` command
+Layout
+======
+Everything under ``core/`` runs on the phone (numpy only at run time);
+nothing in it imports the desktop tools of ``desktop/``.
+
+Shared, at ``core/``'s top
+    ``core.conventions`` (constants, angle wrap, bearings), ``core.quaternion``
+    (the one quaternion module), ``core.dsp`` (Butterworth, biquads, uniform
+    grid), ``core.recording`` (data model and file format),
+    ``core.importers`` (other apps' files), ``core.export`` (CSV, GeoJSON, GPX).
+
+``core.pdr`` -- the hand-held step-and-heading chain (Tian et al. 2014, Fig. 2)
+    ``steps`` (eqs. 2-3), ``stride`` and ``stride_models`` (eq. 4),
+    ``calibration``, ``attitude`` (EKF), ``heading`` (rotation-matrix
+    smoothing, section 4.3), ``deadreckoning`` (eq. 1), ``pipeline``.
+
+``core.gnss``, ``core.foot``
+    GPS fusion (Chen 2010, Kubrak 2006) and foot-mounted INS (Song 2018), to come.
+
+``desktop/`` (not on the phone)
+    ``desktop.cli`` (the ``pdr`` command), ``desktop.plot``,
+    ``desktop.simulator`` (walks with exact truth, independent of the
+    pipeline's models).
 """
 
 __version__ = "0.1.0"

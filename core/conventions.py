@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 #: Standard gravity, m/s^2 (used only as a prior; the pipeline estimates local g).
 STANDARD_GRAVITY_M_S2 = 9.80665
 
@@ -22,9 +24,14 @@ def ns_to_s(t_ns) -> float:
     return t_ns * 1e-9
 
 
-def wrap_angle(angle_rad: float) -> float:
-    """Wrap an angle to [-pi, pi)."""
-    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+def wrap_angle(angle_rad):
+    """Wrap angles (rad) to [-pi, pi): a float gives a float, an array (or list) an array.
+
+    The project's one angle wrap.
+    """
+    if isinstance(angle_rad, (float, int)):
+        return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+    return (np.asarray(angle_rad, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def bearing_deg(heading_rad: float) -> float:

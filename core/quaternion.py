@@ -1,13 +1,17 @@
 """Unit quaternions ``q = (w, x, y, z)`` rotating body vectors into the navigation frame.
 
-Plain-float functions (tuples in, tuples out): on the per-sample path they
-are faster than numpy for 4-vectors.  ``v_n = R(q) v_b`` with ``R`` from
+Plain-float functions (tuples in, tuples out) for the per-sample path, where
+they are faster than numpy for 4-vectors, and their vectorised twins
+(``*_array``: numpy arrays ``(..., 4)``) for whole recordings.  This is the
+project's one quaternion module.  ``v_n = R(q) v_b`` with ``R`` from
 :func:`to_matrix`; the paper's ``T_n^b`` (Tian et al. 2014, eq. 8) is ``R.T``.
 """
 
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 
 def multiply(p, q):
@@ -119,3 +123,59 @@ def _unit(v):
     if n < 1e-9:
         raise ValueError("vector too short to normalise")
     return (v[0] / n, v[1] / n, v[2] / n)
+
+
+# ---------------------------------------------------------------------------
+# vectorised: arrays (..., 4) of quaternions (w, x, y, z), broadcasting
+
+
+def multiply_array(p, q) -> np.ndarray:
+    """Hamilton product of (..., 4) arrays (broadcasting)."""
+    p = np.asarray(p, dtype=np.float64)
+    q = np.asarray(q, dtype=np.float64)
+    pw, px, py, pz = np.moveaxis(p, -1, 0)
+    qw, qx, qy, qz = np.moveaxis(q, -1, 0)
+    return np.stack([
+        pw * qw - px * qx - py * qy - pz * qz,
+        pw * qx + px * qw + py * qz - pz * qy,
+        pw * qy - px * qz + py * qw + pz * qx,
+        pw * qz + px * qy - py * qx + pz * qw,
+    ], axis=-1)
+
+
+def to_matrix_array(q) -> np.ndarray:
+    """(..., 3, 3) rotation matrices of (..., 4) unit quaternions (``v_n = R v_b``)."""
+    w, x, y, z = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+    ], axis=-2)
+
+
+def about_axis_array(axis: int, angle_rad) -> np.ndarray:
+    """Quaternions (..., 4) of rotations by ``angle_rad`` (...) about the x (0), y (1) or z (2) axis."""
+    a = np.asarray(angle_rad, dtype=np.float64) * 0.5
+    q = np.zeros(a.shape + (4,))
+    q[..., 0] = np.cos(a)
+    q[..., 1 + axis] = np.sin(a)
+    return q
+
+
+def canonical_sign_array(q) -> np.ndarray:
+    """The same rotations with ``w >= 0`` (q and -q are one rotation)."""
+    q = np.array(q, dtype=np.float64)
+    flip = q[..., 0] < 0
+    q[flip] = -q[flip]
+    return q
+
+
+def to_rotation_vector_array(q) -> np.ndarray:
+    """Rotation vectors (n, 3) (axis * angle, angle in [0, pi]) of unit quaternions (n, 4)."""
+    q = canonical_sign_array(np.atleast_2d(q))
+    v = q[:, 1:]
+    n = np.linalg.norm(v, axis=1)
+    angle = 2.0 * np.arctan2(n, q[:, 0])
+    small = n < 1e-9
+    scale = np.where(small, 2.0 / np.maximum(q[:, 0], 0.5), angle / np.where(small, 1.0, n))
+    return v * scale[:, None]

@@ -19,7 +19,7 @@ import pytest
 from app.session import Session
 from app.sources import (PLYER_FALLBACK_WARNING, AndroidSource, PlyerFallbackSource, SensorStartError,
                          make_live_source)
-from core.pipeline import Pipeline
+from core.pdr.pipeline import Pipeline
 
 TYPES = {1: "acc", 2: "mag", 4: "gyro"}
 

@@ -143,7 +143,7 @@ def packaged():
 
 
 def test_tests_and_desktop_material_are_not_packaged(packaged):
-    for must in ("main.py", "app/main_app.py", "app/layout.kv", "app/sources.py", "core/pipeline.py",
+    for must in ("main.py", "app/main_app.py", "app/layout.kv", "app/sources.py", "core/pdr/pipeline.py",
                  "core/recording.py"):
         assert must in packaged
     for f in packaged:

@@ -13,11 +13,11 @@ from app.settings import PROFILE_FILE, SETTINGS_FILE, STRIDE_MODEL_CHOICES, Sett
 from app.sources import ReplaySource, sampling_period_us
 from app.storage import new_recording_path, output_dir
 from app.viewport import Viewport, format_length, nice_length
-from core.calibration import CalibrationError, UserProfile
-from core.pipeline import Pipeline
+from core.pdr.calibration import CalibrationError, UserProfile
+from core.pdr.pipeline import Pipeline
 from core.recording import Recording, make_stream, write_recording
-from core.simulator import simulate_walk
-from core.stride_models import load_stride_model, with_scale
+from desktop.simulator import simulate_walk
+from core.pdr.stride_models import load_stride_model, with_scale
 
 WAYPOINTS = ((0.0, 0.0), (20.0, 0.0), (20.0, 12.0))
 

@@ -14,7 +14,7 @@ import pytest
 
 from app.session import Session
 from core.recording import read_recording
-from core.simulator import simulate_walk
+from desktop.simulator import simulate_walk
 
 ROOT = Path(__file__).resolve().parents[1]
 WAYPOINTS = ((0.0, 0.0), (30.0, 0.0), (30.0, 20.0))
@@ -22,8 +22,8 @@ SEED = 2
 
 CHILD = r"""
 import sys, time
-from core.simulator import simulate_walk
-from core.pipeline import Pipeline
+from desktop.simulator import simulate_walk
+from core.pdr.pipeline import Pipeline
 from app.sources import ReplaySource
 from app.session import Session
 

@@ -23,11 +23,11 @@ from app import kivy_env
 
 kivy_env.prepare(headless=True)  # before anything imports kivy
 
-from core.pipeline import Pipeline  # noqa: E402
+from core.pdr.pipeline import Pipeline  # noqa: E402
 from core.recording import write_recording  # noqa: E402
-from core.simulator import simulate_walk  # noqa: E402
-from core.calibration import UserProfile  # noqa: E402
-from core.stride_models import load_stride_model, with_scale  # noqa: E402
+from desktop.simulator import simulate_walk  # noqa: E402
+from core.pdr.calibration import UserProfile  # noqa: E402
+from core.pdr.stride_models import load_stride_model, with_scale  # noqa: E402
 from app.settings import Settings  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

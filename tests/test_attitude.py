@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from core import quaternion as quat
-from core.attitude import AttitudeEKF, measurement_jacobian, predicted_measurement, transition_matrix
+from core.pdr.attitude import AttitudeEKF, measurement_jacobian, predicted_measurement, transition_matrix
 
 
 @pytest.mark.parametrize("v", [(0.0, 0.0, 1.0), (0.0, 0.41, -0.91), (0.3, 0.5, -0.81)])

@@ -7,13 +7,13 @@ from pathlib import Path
 
 import pytest
 
-from core.cli import main
+from desktop.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _run(*args):
-    return subprocess.run([sys.executable, "-m", "core", *args], capture_output=True, text=True, cwd=ROOT)
+    return subprocess.run([sys.executable, "-m", "desktop", *args], capture_output=True, text=True, cwd=ROOT)
 
 
 def test_demo_replay_prints_the_summary_and_writes_every_output(tmp_path):

@@ -10,7 +10,7 @@ import pytest
 from core.conventions import bearing_deg, heading_from_bearing_deg
 from core.export import (enu_to_geodetic, geodetic_to_enu, track_geojson, write_track_csv, write_track_geojson,
                          write_track_gpx)
-from core.pipeline import Track
+from core.pdr.pipeline import Track
 
 
 def _track():

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from benchmarks import metrics as m
+from core.conventions import wrap_angle
 
 NS = 1_000_000_000
 
@@ -57,9 +58,9 @@ def test_distance_error_and_polyline():
 
 
 def test_wrap_and_circular_mean_across_pi():
-    assert float(m.wrap(3 * math.pi / 2)) == pytest.approx(-math.pi / 2)
+    assert float(wrap_angle(3 * math.pi / 2)) == pytest.approx(-math.pi / 2)
     mean = m.circular_mean([math.pi - 0.1, -math.pi + 0.1])
-    assert abs(m.wrap(mean - math.pi)) < 1e-9
+    assert abs(wrap_angle(mean - math.pi)) < 1e-9
 
 
 def test_positions_at_interpolates_within_steps_not_pauses():

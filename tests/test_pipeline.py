@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from core.conventions import wrap_angle
-from core.pipeline import Pipeline
+from core.pdr.pipeline import Pipeline
 from core.recording import MissingSensorError, Recording
-from core.simulator import simulate_walk
-from core.steps import StepDetector
+from desktop.simulator import simulate_walk
+from core.pdr.steps import StepDetector
 
 
 def _heading_change(track, t_before_ns, t_after_ns):
@@ -108,9 +108,9 @@ def test_without_gyroscope_the_track_is_labelled_and_still_usable():
 def test_every_stage_streaming_equals_batch():
     """AttitudeEKF, RotationSmoother and DeadReckoner: run() over a walk equals update() event by event."""
     from core import quaternion as quat
-    from core.attitude import AttitudeEKF
-    from core.deadreckoning import DeadReckoner
-    from core.heading import RotationSmoother
+    from core.pdr.attitude import AttitudeEKF
+    from core.pdr.deadreckoning import DeadReckoner
+    from core.pdr.heading import RotationSmoother
 
     rec = simulate_walk([(0, 0), (10, 0), (10, 10)], rate_hz=50.0, seed=21).recording
     ekf = AttitudeEKF()

@@ -1,4 +1,4 @@
-"""core.simulator: self-consistent sensor physics, exact truth, sampling and reproducibility.
+"""desktop.simulator: self-consistent sensor physics, exact truth, sampling and reproducibility.
 
 Every simulation is seeded.  Tolerances are stated next to each assertion;
 noise-dependent ones are several standard errors wide, the others are set by
@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from core.recording import read_recording, write_recording
-from core.simulator import DisturbanceZone, SimulatedWalk, WalkTruth, demo_walk, simulate_walk
+from desktop.simulator import DisturbanceZone, SimulatedWalk, WalkTruth, demo_walk, simulate_walk
 
 G = 9.80665
 RECT = [(0, 0), (20, 0), (20, 10), (0, 10), (0, 0)]
@@ -171,7 +171,7 @@ def test_weinberg_relation_holds_for_the_low_passed_norm():
     """C (A_max - A_min)^(1/4) of the 3 Hz second-order Butterworth low-passed norm = truth step length.
 
     Per detected peak: A_max at the peak, A_min the lowest value since the previous peak (like
-    core.steps).  Tolerance 2 % on the median over the steady part of the walk, for a short and a long step
+    core.pdr.steps).  Tolerance 2 % on the median over the steady part of the walk, for a short and a long step
     (measured: 0.3 % and 0.1 %; an exponent of 3.8 instead of 4 in the simulator would be 3 % off at 0.9 m).
     """
     from scipy.signal import butter, lfilter

@@ -7,13 +7,13 @@ import time
 import numpy as np
 import pytest
 
-from core.calibration import CalibrationError, UserProfile, calibrate_known_distance
-from core.stride import ConstantCoefficient, StepFeatures, WeinbergStride
-from core.stride_models import (
+from core.pdr.calibration import CalibrationError, UserProfile, calibrate_known_distance
+from core.pdr.stride import ConstantCoefficient, StepFeatures, WeinbergStride
+from core.pdr.stride_models import (
     FORMAT_NAME, FORMAT_VERSION, MLP, ChenLinearStride, ChenNetworkStride, NetworkCoefficient, StrideModelError,
     lengths_of, load_stride_model, model_to_dict, save_stride_model, shipped_models, with_scale,
 )
-from tools.train_stride import (
+from desktop.stride_training import (
     TrainConfig, Walk, fit_bp, fit_chen_ann, fit_chen_linear, fit_constant, init_params, network_loss_and_grad,
 )
 
@@ -258,8 +258,8 @@ def test_training_is_reproducible():
 
 
 def _sim_steps(length_m, step_length_m=0.70, seed=21):
-    from core.pipeline import Pipeline
-    from core.simulator import simulate_walk
+    from core.pdr.pipeline import Pipeline
+    from desktop.simulator import simulate_walk
 
     walk = simulate_walk([(0, 0), (0, length_m)], step_length_m=step_length_m, seed=seed)
     return Pipeline(height_m=1.75).run(walk.recording).steps
@@ -328,9 +328,9 @@ def test_scaled_models_scale_every_kind():
 
 
 def test_constant_coefficient_default_is_the_shipped_model():
-    """core.stride's default C and core/models/default.json must not drift apart."""
-    from core.stride import ConstantCoefficient
-    from core.stride_models import load_stride_model
+    """core.pdr.stride's default C and core/pdr/models/default.json must not drift apart."""
+    from core.pdr.stride import ConstantCoefficient
+    from core.pdr.stride_models import load_stride_model
 
     shipped = load_stride_model("default")
     assert shipped.coefficient.c == pytest.approx(ConstantCoefficient().c, abs=5e-4)

@@ -1,4 +1,4 @@
-"""Regenerate the bundled demo recording ``core/data/demo_walk.csv.gz`` from the simulator.
+"""Regenerate the bundled demo recording ``desktop/data/demo_walk.csv.gz`` from the simulator.
 
 Usage: ``python tools/make_demo.py``.  The file is the simulator's
 ``demo_walk(seed=0)`` written in the project's format (truth in the header).
@@ -7,7 +7,7 @@ Usage: ``python tools/make_demo.py``.  The file is the simulator's
 from pathlib import Path
 
 from core.recording import write_recording
-from core.simulator import demo_walk
+from desktop.simulator import demo_walk
 
 OUT = Path(__file__).resolve().parents[1] / "core" / "data" / "demo_walk.csv.gz"
 

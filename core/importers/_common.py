@@ -13,7 +13,8 @@ import zipfile
 
 import numpy as np
 
-from core.conventions import STANDARD_GRAVITY_M_S2
+from core import quaternion as quat
+from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
 from core.recording import Recording, RecordingError, repair_recording
 
 GZIP_MAGIC = b"\x1f\x8b"
@@ -190,58 +191,9 @@ def first_bad_time(t_s: np.ndarray) -> int | None:
     return int(idx[0]) if len(idx) else None
 
 
-# ---------------------------------------------------------------------------
-# quaternions, vectorised (n, 4) arrays (w, x, y, z); R(q) rotates device vectors into ENU
-
-
-def quat_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton product of (n, 4) or (4,) arrays (broadcasting)."""
-    p = np.asarray(p, dtype=np.float64)
-    q = np.asarray(q, dtype=np.float64)
-    pw, px, py, pz = np.moveaxis(p, -1, 0)
-    qw, qx, qy, qz = np.moveaxis(q, -1, 0)
-    return np.stack([
-        pw * qw - px * qx - py * qy - pz * qz,
-        pw * qx + px * qw + py * qz - pz * qy,
-        pw * qy - px * qz + py * qw + pz * qx,
-        pw * qz + px * qy - py * qx + pz * qw,
-    ], axis=-1)
-
-
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) rotation matrices of (n, 4) unit quaternions (``v_n = R v_b``)."""
-    w, x, y, z = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-    ], axis=-2)
-
-
-def quat_about_axis(axis: int, angle_rad: np.ndarray) -> np.ndarray:
-    """Quaternions of rotations by ``angle_rad`` about the x (0), y (1) or z (2) axis."""
-    a = np.asarray(angle_rad, dtype=np.float64) * 0.5
-    q = np.zeros(a.shape + (4,))
-    q[..., 0] = np.cos(a)
-    q[..., 1 + axis] = np.sin(a)
-    return q
-
-
-def canonical_sign(q: np.ndarray) -> np.ndarray:
-    """The same rotations with ``w >= 0`` (q and -q are one rotation)."""
-    q = np.array(q, dtype=np.float64)
-    flip = q[..., 0] < 0
-    q[flip] = -q[flip]
-    return q
-
-
 def device_y_bearing_deg(mat_nb: np.ndarray) -> np.ndarray:
     """Compass bearing (deg, clockwise from North) of the horizontal projection of the device y axis."""
     return np.degrees(np.arctan2(mat_nb[..., 0, 1], mat_nb[..., 1, 1]))
-
-
-def wrap_deg(a):
-    return (np.asarray(a) + 180.0) % 360.0 - 180.0
 
 
 def tilt_compensated_bearing_deg(acc_b: np.ndarray, mag_b: np.ndarray) -> np.ndarray:
@@ -289,7 +241,7 @@ def attitude_checks(t_q: np.ndarray, q: np.ndarray, t_acc: np.ndarray, acc: np.n
     calm = np.abs(na - STANDARD_GRAVITY_M_S2) < 1.0
     if calm.sum() < 10:
         return out
-    m = quat_to_matrix(qq[calm])
+    m = quat.to_matrix_array(qq[calm])
     up_b = a[calm] / na[calm, None]
     up_n = np.einsum("nij,nj->ni", m, up_b)
     out["tilt_err_deg"] = float(np.median(np.degrees(np.arccos(np.clip(up_n[:, 2], -1.0, 1.0)))))
@@ -298,7 +250,7 @@ def attitude_checks(t_q: np.ndarray, q: np.ndarray, t_acc: np.ndarray, acc: np.n
         mg = sample_at(t_mag, mag, tq[calm])
         ok = np.linalg.norm(mg, axis=1) > 1.0
         if ok.sum() >= 10:
-            d = wrap_deg(device_y_bearing_deg(m[ok]) - tilt_compensated_bearing_deg(up_b[ok], mg[ok]))
+            d = np.degrees(wrap_angle(np.radians(device_y_bearing_deg(m[ok]) - tilt_compensated_bearing_deg(up_b[ok], mg[ok]))))
             out["heading_diff_deg"] = float(np.median(np.abs(d)))
     return out
 

@@ -89,11 +89,12 @@ from datetime import datetime
 
 import numpy as np
 
+from core import quaternion as quat
 from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
 from core.recording import Recording, RecordingError, make_stream
 from core.importers._common import (
-    EXTRA_STREAM_SPECS, POSI, PRESSURE, attitude_checks, canonical_sign, decode_text, finish, first_bad_number,
-    first_bad_time, magnetic_dip_deg, quat_about_axis, quat_multiply, read_bytes,
+    EXTRA_STREAM_SPECS, POSI, PRESSURE, attitude_checks, decode_text, finish, first_bad_number,
+    first_bad_time, magnetic_dip_deg, read_bytes,
 )
 
 FORMAT = "getsensordata"
@@ -339,9 +340,9 @@ def _parse(text: str, source: str, warn: bool) -> Recording:
         t_rot = _sec_to_ns(v[:, 1])
         pitch, roll, yaw = (np.radians(v[:, k]) for k in (2, 3, 4))
         # R = Rz(yaw) Rx(pitch) Ry(roll)  <=>  q = qz(yaw) (x) qx(pitch) (x) qy(roll)
-        q_angles = quat_multiply(quat_multiply(quat_about_axis(2, yaw), quat_about_axis(0, pitch)),
-                                 quat_about_axis(1, roll))
-        q_angles = canonical_sign(q_angles)
+        q_angles = quat.multiply_array(quat.multiply_array(quat.about_axis_array(2, yaw), quat.about_axis_array(0, pitch)),
+                                 quat.about_axis_array(1, roll))
+        q_angles = quat.canonical_sign_array(q_angles)
         vec = v[:, 5:8]
         has_vec = np.all(np.isfinite(vec), axis=1)
         q = q_angles.copy()

@@ -84,11 +84,12 @@ import os
 
 import numpy as np
 
+from core import quaternion as quat
 from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC, STANDARD_GRAVITY_M_S2
 from core.recording import Recording, RecordingError, make_stream
 from core.importers._common import (acceleration_in_m_s2, 
-    EXTRA_STREAM_SPECS, GYRO_UNCAL, MAG_UNCAL, PRESSURE, FileSet, attitude_checks, canonical_sign, finish,
-    magnetic_dip_deg, quat_about_axis, quat_multiply, sample_at,
+    EXTRA_STREAM_SPECS, GYRO_UNCAL, MAG_UNCAL, PRESSURE, FileSet, attitude_checks, finish,
+    magnetic_dip_deg, sample_at,
 )
 from core.importers._csv import Table
 
@@ -369,16 +370,16 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
 # ---------------------------------------------------------------------------
 # orientation conventions
 
-_QZ90 = quat_about_axis(2, np.array(math.pi / 2))  # ENU <- NWU: a +90 deg turn about up
+_QZ90 = quat.about_axis_array(2, np.array(math.pi / 2))  # ENU <- NWU: a +90 deg turn about up
 
 
 def _candidates(q: np.ndarray) -> dict[str, np.ndarray]:
     conj = q * np.array([1.0, -1.0, -1.0, -1.0])
     return {
         "q is ENU<-device (Android rotation vector)": q,
-        "q is NWU<-device, x true north (iOS CoreMotion xTrueNorthZVertical)": quat_multiply(_QZ90, q),
+        "q is NWU<-device, x true north (iOS CoreMotion xTrueNorthZVertical)": quat.multiply_array(_QZ90, q),
         "conjugate q is ENU<-device": conj,
-        "conjugate q is NWU<-device": quat_multiply(_QZ90, conj),
+        "conjugate q is NWU<-device": quat.multiply_array(_QZ90, conj),
     }
 
 
@@ -388,7 +389,7 @@ def _orientation_to_enu(platform, standardised, t_rot, q_raw, streams, repairs, 
     expected = keys[0] if (platform == "android" or standardised) else keys[1]
     acc, mag = streams.get(ACC), streams.get(MAG)
     if acc is None:
-        return canonical_sign(cands[expected]), expected + " (unverified: no accelerometer)", {}
+        return quat.canonical_sign_array(cands[expected]), expected + " (unverified: no accelerometer)", {}
     checks = {k: attitude_checks(t_rot, v, acc.t_ns, acc.values, mag.t_ns if mag else None,
                                  mag.values if mag else None) for k, v in cands.items()}
 
@@ -409,4 +410,4 @@ def _orientation_to_enu(platform, standardised, t_rot, q_raw, streams, repairs, 
         else:
             repairs.append(f"{source}: Orientation.csv could not be verified against the accelerometer and "
                            f"magnetometer ({checks[expected]}); kept the documented {platform} convention")
-    return canonical_sign(cands[chosen]), chosen, checks[chosen]
+    return quat.canonical_sign_array(cands[chosen]), chosen, checks[chosen]

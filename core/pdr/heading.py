@@ -16,7 +16,7 @@ give.  The walking direction is the horizontal projection of the device axis
 
 The filter is causal (second order, ``cutoff_hz``), so the smoothed heading
 lags the truth by about its group delay ``sqrt(2) / (2 pi fc)``; the pipeline
-reads each step's heading that much after the step (see ``core.pipeline``).
+reads each step's heading that much after the step (see ``core.pdr.pipeline``).
 """
 
 from __future__ import annotations

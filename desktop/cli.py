@@ -36,7 +36,7 @@ def load_demo() -> Recording:
     if DEMO_PATH.exists():
         rec = read_recording(str(DEMO_PATH))
     else:  # pragma: no cover - only in a checkout where the file was deleted
-        from core.simulator import demo_walk
+        from desktop.simulator import demo_walk
         rec = demo_walk().recording
     rec.source = f"{DEMO_PATH.name} (bundled simulated demo walk)"
     return rec
@@ -62,14 +62,14 @@ def _first_gps_origin(rec: Recording):
 
 
 def build_pipeline(args):
-    from core.pipeline import Pipeline
-    from core.stride import WeinbergStride
+    from core.pdr.pipeline import Pipeline
+    from core.pdr.stride import WeinbergStride
 
     kw = {"height_m": args.height, "use_magnetometer": not args.no_mag}
     if args.stride_c is not None:
         kw["stride_model"] = WeinbergStride(coefficient=args.stride_c)
     else:
-        from core.stride_models import load_stride_model
+        from core.pdr.stride_models import load_stride_model
         kw["stride_model"] = load_stride_model(args.stride_model)
     p = Pipeline(**kw)
     p.attitude.declination_rad = math.radians(args.declination)
@@ -150,7 +150,7 @@ def cmd_replay(args) -> int:
         export.write_track_gpx(args.gpx, res.track, origin, offset if isinstance(offset, int) else None)
         written.append(args.gpx)
     if args.plot:
-        from core.plot import plot_track
+        from desktop.plot import plot_track
         truth_en = rec.metadata.get("waypoints_en_m") if rec.metadata.get("simulator") else None
         s = res.summary()
         plot_track(args.plot, res.track, title=f"PDR: {Path(rec.source.split(' ')[0]).name}",
@@ -163,7 +163,7 @@ def cmd_replay(args) -> int:
 
 
 def cmd_simulate(args) -> int:
-    from core import simulator
+    from desktop import simulator
 
     if args.shape == "demo":
         walk = simulator.demo_walk(seed=args.seed)

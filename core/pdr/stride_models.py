@@ -1,6 +1,6 @@
 """Trained step-length models and their file format (Tian et al. 2014 section 3; Chen et al. 2010 section III).
 
-Four models sit behind the one interface of :mod:`core.stride`
+Four models sit behind the one interface of :mod:`core.pdr.stride`
 (``StrideModel.length_m(features)``), so the pipeline, the calibration and
 the benchmark treat them alike:
 
@@ -16,7 +16,7 @@ kind                step length                                                s
 
 (SF = step frequency 1/duration in Hz, SV = variance of the filtered
 acceleration norm over the step; all features come from
-:class:`core.stride.StepFeatures`.)
+:class:`core.pdr.stride.StepFeatures`.)
 
 Inference is plain Python/numpy on one step at a time (the networks are
 small: a few microseconds per step).  Training lives in the desktop tool
@@ -61,14 +61,14 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from core.stride import CoefficientModel, ConstantCoefficient, StepFeatures, StrideModel, WeinbergStride
+from core.pdr.stride import CoefficientModel, ConstantCoefficient, StepFeatures, StrideModel, WeinbergStride
 
 FORMAT_NAME = "pdr-stride-model"
 FORMAT_VERSION = 1
 
 KINDS = ("weinberg", "weinberg_bp", "chen_linear", "chen_ann")
 
-#: folder of the shipped model files (package data ``core/models/*.json``)
+#: folder of the shipped model files (package data ``core/pdr/models/*.json``)
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 
 #: the model the pipeline uses when the user gives a height (a file in MODELS_DIR, without ``.json``)
@@ -467,7 +467,7 @@ def model_to_dict(model: StrideModel, **meta) -> dict:
         d.update(kind="chen_ann", inputs=[{"name": n, "unit": INPUTS[n][0]} for n in model.INPUT_NAMES],
                  output={"name": "step_length_m", "unit": "m"}, **model.net.to_dict())
     else:
-        raise ValueError(f"cannot save a {type(model).__name__} (only the models of core.stride_models)")
+        raise ValueError(f"cannot save a {type(model).__name__} (only the models of core.pdr.stride_models)")
     d["length_clip_m"] = [model.min_length_m, model.max_length_m]
     d.update(meta)
     return d
@@ -555,5 +555,5 @@ def load_stride_model(path_or_name: str | Path = "default") -> StrideModel:
 
 
 def shipped_models() -> list[str]:
-    """Names of the model files shipped in ``core/models``."""
+    """Names of the model files shipped in ``core/pdr/models``."""
     return sorted(p.stem for p in MODELS_DIR.glob("*.json")) if MODELS_DIR.is_dir() else []

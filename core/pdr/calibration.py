@@ -35,8 +35,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Iterable
 
-from core.stride import StepFeatures, StrideModel
-from core.stride_models import lengths_of, load_stride_model, with_scale
+from core.pdr.stride import StepFeatures, StrideModel
+from core.pdr.stride_models import lengths_of, load_stride_model, with_scale
 
 FORMAT_NAME = "pdr-user-profile"
 FORMAT_VERSION = 1
@@ -180,7 +180,7 @@ def calibrate_known_distance(steps_or_features: Iterable, known_distance_m: floa
 
     Parameters
     ----------
-    steps_or_features : iterable of core.pipeline.Step or core.stride.StepFeatures
+    steps_or_features : iterable of core.pdr.pipeline.Step or core.pdr.stride.StepFeatures
         The steps of the calibration walk (from pressing start to pressing stop).
     known_distance_m : float
         The distance actually walked (m).

@@ -89,7 +89,7 @@ Phone position and linear acceleration
     the first step and fades out over one step after the walker stops; the
     first and last steps (half steps, ``l / 2``) have 1/16 of the gait
     amplitude, their norm peaks come mostly from the walker's own start and
-    stop acceleration (``core.steps`` still detects every step of the demo,
+    stop acceleration (``core.pdr.steps`` still detects every step of the demo,
     with ``A_max - A_min`` of about 0.8 and 2 m/s^2 for those two).  The
     acceleration of the phone in ENU is the exact second derivative of this
     position (central difference over +-0.5 ms, error < 1e-4 m/s^2),
@@ -125,7 +125,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core import __version__
-from core.conventions import ACC, GYRO, MAG, STANDARD_GRAVITY_M_S2
+from core import quaternion as quat
+from core.conventions import ACC, GYRO, MAG, STANDARD_GRAVITY_M_S2, wrap_angle
 from core.recording import Recording, make_stream
 
 __all__ = ["simulate_walk", "demo_walk", "SimulatedWalk", "WalkTruth", "DisturbanceZone", "SIMULATOR_VERSION"]
@@ -246,52 +247,9 @@ class SimulatedWalk:
 # rotation helpers (private; quaternions (w, x, y, z), arrays (..., 4))
 
 
-def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    pw, px, py, pz = np.moveaxis(p, -1, 0)
-    qw, qx, qy, qz = np.moveaxis(q, -1, 0)
-    return np.stack([pw * qw - px * qx - py * qy - pz * qz,
-                     pw * qx + px * qw + py * qz - pz * qy,
-                     pw * qy - px * qz + py * qw + pz * qx,
-                     pw * qz + px * qy - py * qx + pz * qw], axis=-1)
-
-
-def _qaxis(angle: np.ndarray, axis: int) -> np.ndarray:
-    """Quaternions of rotations by ``angle`` (n,) about the coordinate axis ``axis`` (0 x, 1 y, 2 z)."""
-    angle = np.asarray(angle, float)
-    q = np.zeros(angle.shape + (4,))
-    q[..., 0] = np.cos(0.5 * angle)
-    q[..., 1 + axis] = np.sin(0.5 * angle)
-    return q
-
-
-def _qmat(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices (n, 3, 3) of unit quaternions (n, 4): ``v_n = R v_b``."""
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-    ], axis=-2)
-
-
-def _qrotvec(q: np.ndarray) -> np.ndarray:
-    """Rotation vectors (n, 3) (axis * angle, angle in [0, pi]) of unit quaternions (n, 4)."""
-    q = np.where(q[:, :1] < 0, -q, q)
-    v = q[:, 1:]
-    n = np.linalg.norm(v, axis=1)
-    angle = 2.0 * np.arctan2(n, q[:, 0])
-    small = n < 1e-9
-    scale = np.where(small, 2.0 / np.maximum(q[:, 0], 0.5), angle / np.where(small, 1.0, n))
-    return v * scale[:, None]
-
-
 def _rotate_to_body(mat_nb: np.ndarray, v_n: np.ndarray) -> np.ndarray:
     """``R^T v`` for stacks of matrices (n, 3, 3) and vectors (n, 3)."""
     return np.einsum("nji,nj->ni", mat_nb, v_n)
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 # ---------------------------------------------------------------------------
@@ -411,7 +369,7 @@ class _Path:
             tan_half = np.zeros(nseg + 1)  # tan(|turn| / 2): tangent length of the arc = radius * tan_half
             vc = np.zeros(nseg + 1)  # speed through each vertex; 0 at the ends (start and stop at rest)
             for k in range(1, nseg):
-                turn[k] = _wrap(th[k] - th[k - 1])
+                turn[k] = wrap_angle(th[k] - th[k - 1])
                 a = abs(turn[k])
                 share = 0.5 * min(lengths[k - 1], lengths[k])  # each corner may use half of each adjacent segment
                 if a < 1e-12:
@@ -610,13 +568,13 @@ class _WalkModel:
         yaw = h - 0.5 * np.pi + k * self.sway[0] * np.sin(np.pi * phi + 0.3) + self._wander(t, 0)
         pitch = self.pitch + k * self.sway[1] * np.sin(2.0 * np.pi * phi + 1.0) + self._wander(t, 1)
         roll = self.roll + k * self.sway[2] * np.sin(np.pi * phi - 0.5) + self._wander(t, 2)
-        q = _qmul(_qmul(_qaxis(yaw, 2), _qaxis(pitch, 0)), _qaxis(roll, 1))
+        q = quat.multiply_array(quat.multiply_array(quat.about_axis_array(2, yaw), quat.about_axis_array(0, pitch)), quat.about_axis_array(1, roll))
         if self.cal_s > 0:
             w = self._cal_window(t) * (0.5 * np.pi)
-            qc = _qmul(_qmul(_qaxis(w * np.sin(2 * np.pi * 0.11 * t), 2),
-                             _qaxis(w * np.sin(2 * np.pi * 0.30 * t + 0.6), 0)),
-                       _qaxis(w * np.sin(2 * np.pi * 0.15 * t + 1.3), 1))
-            q = _qmul(q, qc)
+            qc = quat.multiply_array(quat.multiply_array(quat.about_axis_array(2, w * np.sin(2 * np.pi * 0.11 * t)),
+                             quat.about_axis_array(0, w * np.sin(2 * np.pi * 0.30 * t + 0.6))),
+                       quat.about_axis_array(1, w * np.sin(2 * np.pi * 0.15 * t + 1.3)))
+            q = quat.multiply_array(q, qc)
         return q
 
     def body_rate(self, t: np.ndarray) -> np.ndarray:
@@ -624,7 +582,7 @@ class _WalkModel:
         d = _GYRO_DIFF_S
         q_a, q_b = self.quat(t - d), self.quat(t + d)
         q_a[:, 1:] *= -1.0  # conjugate
-        return _qrotvec(_qmul(q_a, q_b)) / (2.0 * d)
+        return quat.to_rotation_vector_array(quat.multiply_array(q_a, q_b)) / (2.0 * d)
 
     def linear_acc(self, t: np.ndarray) -> np.ndarray:
         """Phone acceleration (n, 3) in ENU (m/s^2): second central difference of :meth:`position`."""
@@ -839,7 +797,7 @@ def simulate_walk(
     # accelerometer
     t_acc = _sample_times_ns(rng_t_acc, rate_hz, timestamp_jitter, total_s, clock0)
     ta = rel(t_acc)
-    mat = _qmat(model.quat(ta))
+    mat = quat.to_matrix_array(model.quat(ta))
     f_n = model.linear_acc(ta) + np.array([0.0, 0.0, _G])
     acc = _rotate_to_body(mat, f_n) + np.asarray(acc_bias) + acc_noise_m_s2 * rng_n_acc.standard_normal((len(ta), 3))
 
@@ -856,7 +814,7 @@ def simulate_walk(
         pos = model.position(tm)
         for z in zones:
             h_n = h_n + z.field_at(pos[:, 0], pos[:, 1])
-    mag = (_rotate_to_body(_qmat(model.quat(tm)), h_n) + np.asarray(hard_iron)
+    mag = (_rotate_to_body(quat.to_matrix_array(model.quat(tm)), h_n) + np.asarray(hard_iron)
            + mag_noise_uT * rng_n_mag.standard_normal((len(tm), 3)))
 
     # truth
@@ -898,7 +856,7 @@ def simulate_walk(
 
     metadata = {
         "simulator": SIMULATOR_VERSION,
-        "simulator_module": f"core.simulator (pdr {__version__})",
+        "simulator_module": f"desktop.simulator (pdr {__version__})",
         "waypoints_en_m": [[float(x), float(y)] for x, y in np.asarray(waypoints_en_m, float).reshape(-1, 2)],
         "rate_hz": rate_hz, "gyro_rate_hz": gyro_rate_hz, "mag_rate_hz": mag_rate_hz,
         "timestamp_jitter": timestamp_jitter,

@@ -65,8 +65,8 @@ class ConstantCoefficient(CoefficientModel):
     ----------
     c : float
         Weinberg coefficient in m / (m/s^2)^(1/4) for the low-pass-filtered
-        norm of :mod:`core.steps`.  The default is the shipped model
-        ``core/models/default.json`` (trained by ``tools/train_stride.py`` on
+        norm of :mod:`core.pdr.steps`.  The default is the shipped model
+        ``core/pdr/models/default.json`` (trained by ``tools/train_stride.py`` on
         the IPOL walkers; the same fit on hand-held IPIN loops gives 0.456; a
         test keeps the two equal).
     """

@@ -44,14 +44,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.attitude import AttitudeEKF
+from core.pdr.attitude import AttitudeEKF
 from core.conventions import ACC, GYRO, MAG
-from core.deadreckoning import DeadReckoner
+from core.pdr.deadreckoning import DeadReckoner
 from core.dsp import GridResampler
-from core.heading import RotationSmoother
+from core.pdr.heading import RotationSmoother
 from core.recording import Recording, RecordingError
-from core.steps import StepDetector, StepEvent
-from core.stride import StepFeatures, StrideModel, WeinbergStride
+from core.pdr.steps import StepDetector, StepEvent
+from core.pdr.stride import StepFeatures, StrideModel, WeinbergStride
 
 #: Step duration assumed for the first step of a walking bout (s).
 DEFAULT_STEP_DURATION_S = 0.55
@@ -159,8 +159,8 @@ class Pipeline:
     ----------
     height_m : float or None
         The walker's height (m), passed to the stride model with every step.
-    stride_model : core.stride.StrideModel or None
-        Step length model; default :class:`core.stride.WeinbergStride` with a constant coefficient.
+    stride_model : core.pdr.stride.StrideModel or None
+        Step length model; default :class:`core.pdr.stride.WeinbergStride` with a constant coefficient.
     step_detector, attitude, smoother : optional
         Pre-configured stages (:class:`StepDetector`, :class:`AttitudeEKF`,
         :class:`RotationSmoother`); defaults suit a hand-held phone.
