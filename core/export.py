@@ -1,15 +1,9 @@
 """Track export: CSV (local metres), GeoJSON and GPX (WGS-84), converting at the edge.
 
 Geodesy: the ENU track is placed on the WGS-84 ellipsoid with a local
-tangent plane at ``origin = (lat0, lon0)``::
-
-    lat = lat0 + north / M(lat0),   lon = lon0 + east / (N(lat0) cos lat0)
-
-with the meridian and prime-vertical radii of curvature
-``M = a (1 - e^2) / (1 - e^2 sin^2 lat0)^1.5`` and ``N = a / sqrt(1 - e^2 sin^2 lat0)``.
-Over a walk of a few kilometres the error of this flat-Earth approximation
-is below a centimetre per 100 m, far below PDR errors.  :func:`enu_to_geodetic`
-and :func:`geodetic_to_enu` are inverses of each other.
+tangent plane at ``origin = (lat0, lon0)`` by :mod:`core.geodesy` (the
+project's one geodesy; :func:`enu_to_geodetic` and :func:`geodetic_to_enu`
+are re-exported here for the exporters' callers).
 
 Without a known origin the track is placed at latitude/longitude (0, 0) and
 every file says so (``origin_known = false``): shape and size are right, the
@@ -25,36 +19,9 @@ from __future__ import annotations
 import csv
 import datetime as _dt
 import json
-import math
 
 from core.conventions import bearing_deg
-
-WGS84_A_M = 6378137.0
-WGS84_E2 = 6.69437999014e-3
-
-
-def _radii(lat0_deg: float) -> tuple[float, float]:
-    s = math.sin(math.radians(lat0_deg))
-    d = 1.0 - WGS84_E2 * s * s
-    return WGS84_A_M * (1.0 - WGS84_E2) / d ** 1.5, WGS84_A_M / math.sqrt(d)
-
-
-def enu_to_geodetic(east_m, north_m, origin_lat_lon: tuple[float, float]):
-    """Local ENU metres to (lat_deg, lon_deg) around ``origin_lat_lon`` (see module docstring)."""
-    lat0, lon0 = origin_lat_lon
-    m, n = _radii(lat0)
-    lat = lat0 + (north_m / m) * (180 / math.pi)
-    lon = lon0 + (east_m / (n * math.cos(math.radians(lat0)))) * (180 / math.pi)
-    return lat, lon
-
-
-def geodetic_to_enu(lat_deg, lon_deg, origin_lat_lon: tuple[float, float]):
-    """(lat_deg, lon_deg) to local ENU metres (east, north) around ``origin_lat_lon``."""
-    lat0, lon0 = origin_lat_lon
-    m, n = _radii(lat0)
-    north = (lat_deg - lat0) * (math.pi / 180) * m
-    east = (lon_deg - lon0) * (math.pi / 180) * n * math.cos(math.radians(lat0))
-    return east, north
+from core.geodesy import WGS84_A_M, WGS84_E2, enu_to_geodetic, geodetic_to_enu  # noqa: F401 (re-exported)
 
 
 def _points(track):
