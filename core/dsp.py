@@ -10,6 +10,7 @@ and the cost per second do not depend on the phone.
 from __future__ import annotations
 
 import math
+from collections import deque
 
 
 def butter2_lowpass(cutoff_hz: float, fs_hz: float) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
@@ -124,3 +125,93 @@ class GridResampler:
             self._n += 1
         self._prev_t, self._prev_x = t_ns, x
         return out
+
+
+class WindowVariance:
+    """Variance of a scalar over a trailing time window, O(1) per sample."""
+
+    __slots__ = ("window_ns", "buf", "s1", "s2")
+
+    def __init__(self, window_s: float):
+        self.window_ns = int(window_s * 1e9)
+        self.buf: deque = deque()
+        self.s1 = self.s2 = 0.0
+
+    def update(self, t_ns: int, x: float) -> float:
+        buf = self.buf
+        buf.append((t_ns, x))
+        self.s1 += x
+        self.s2 += x * x
+        limit = t_ns - self.window_ns
+        while buf[0][0] < limit:
+            _, old = buf.popleft()
+            self.s1 -= old
+            self.s2 -= old * old
+        return self.variance()
+
+    def variance(self) -> float:
+        """Variance of the values in the window (0 with fewer than two)."""
+        n = len(self.buf)
+        if n < 2:
+            return 0.0
+        mean = self.s1 / n
+        return max(self.s2 / n - mean * mean, 0.0)
+
+
+class RunningMedian:
+    """Median of every value seen so far, from a fixed-bin histogram (O(1) to add, O(bins) to query)."""
+
+    __slots__ = ("lo", "width", "counts", "n")
+
+    def __init__(self, lo: float, hi: float, width: float):
+        self.lo, self.width = lo, width
+        self.counts = [0] * (int((hi - lo) / width) + 1)
+        self.n = 0
+
+    def add(self, x: float) -> None:
+        i = int((x - self.lo) / self.width)
+        if 0 <= i < len(self.counts):
+            self.counts[i] += 1
+            self.n += 1
+
+    def median(self) -> float:
+        half = 0.5 * self.n
+        c = 0
+        for i, k in enumerate(self.counts):
+            c += k
+            if c >= half:
+                return self.lo + (i + 0.5) * self.width
+        return math.nan
+
+
+class WindowMeanSpread:
+    """Mean and largest per-axis spread of a 3-vector over a trailing time window (O(1) per sample)."""
+
+    __slots__ = ("window_ns", "buf", "s", "s2")
+
+    def __init__(self, window_s: float):
+        self.window_ns = int(window_s * 1e9)
+        self.buf: deque = deque()
+        self.s = [0.0, 0.0, 0.0]
+        self.s2 = [0.0, 0.0, 0.0]
+
+    def update(self, t_ns: int, w) -> None:
+        self.buf.append((t_ns, w))
+        s, s2 = self.s, self.s2
+        for i in range(3):
+            s[i] += w[i]
+            s2[i] += w[i] * w[i]
+        limit = t_ns - self.window_ns
+        buf = self.buf
+        while buf[0][0] < limit:
+            _, old = buf.popleft()
+            for i in range(3):
+                s[i] -= old[i]
+                s2[i] -= old[i] * old[i]
+
+    def stats(self):
+        """(mean (3), largest per-axis standard deviation, span in ns) of the window."""
+        n = len(self.buf)
+        mean = [v / n for v in self.s]
+        sd = max(math.sqrt(max(self.s2[i] / n - mean[i] * mean[i], 0.0)) for i in range(3))
+        return mean, sd, self.buf[-1][0] - self.buf[0][0]

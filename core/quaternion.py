@@ -81,6 +81,16 @@ def from_axis_angle(axis, angle_rad):
     return (math.cos(0.5 * angle_rad), ax * s, ay * s, az * s)
 
 
+def from_rotation_vector(v):
+    """Unit quaternion of the rotation vector ``v`` (axis times angle, rad): ``exp(v / 2)``."""
+    ax, ay, az = v
+    theta = math.sqrt(ax * ax + ay * ay + az * az)
+    if theta < 1e-12:
+        return normalize((1.0, 0.5 * ax, 0.5 * ay, 0.5 * az))
+    s = math.sin(0.5 * theta) / theta
+    return (math.cos(0.5 * theta), ax * s, ay * s, az * s)
+
+
 def from_two_vectors_enu(acc_b, mag_b):
     """Attitude (body -> ENU) from one accelerometer and one magnetometer vector (TRIAD).
 

@@ -1,4 +1,7 @@
-"""Adaptive quaternion extended Kalman filter for the phone's attitude (Tian et al. 2014, section 4).
+"""The paper's adaptive quaternion EKF (Tian et al. 2014, section 4), kept for comparison.
+
+The product's filter is :class:`core.pdr.attitude.AttitudeEKF` (error state with gyro bias);
+this one is selectable with ``Pipeline(attitude=QuaternionEKF())`` and in the benchmark.
 
 State: the attitude quaternion ``q = (w, x, y, z)`` (body -> ENU, see
 :mod:`core`), covariance ``P`` (4 x 4).
@@ -46,12 +49,12 @@ whose norm is off by more than ``mag_reject_ratio`` or whose dip angle
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2
+from core.dsp import RunningMedian, WindowMeanSpread, WindowVariance
 
 _EYE4 = np.eye(4)
 _EYE4.flags.writeable = False
@@ -106,93 +109,7 @@ def transition_matrix(wx: float, wy: float, wz: float, dt_s: float) -> np.ndarra
     ])
 
 
-class _WindowVariance:
-    """Variance of a scalar over a trailing time window, O(1) per sample."""
-
-    __slots__ = ("window_ns", "buf", "s1", "s2")
-
-    def __init__(self, window_s: float):
-        self.window_ns = int(window_s * 1e9)
-        self.buf: deque = deque()
-        self.s1 = self.s2 = 0.0
-
-    def update(self, t_ns: int, x: float) -> float:
-        buf = self.buf
-        buf.append((t_ns, x))
-        self.s1 += x
-        self.s2 += x * x
-        limit = t_ns - self.window_ns
-        while buf[0][0] < limit:
-            _, old = buf.popleft()
-            self.s1 -= old
-            self.s2 -= old * old
-        n = len(buf)
-        if n < 2:
-            return 0.0
-        mean = self.s1 / n
-        return max(self.s2 / n - mean * mean, 0.0)
-
-
-class _RunningMedian:
-    """Median of every value seen so far, from a fixed-bin histogram (O(1) to add, O(bins) to query)."""
-
-    __slots__ = ("lo", "width", "counts", "n")
-
-    def __init__(self, lo: float, hi: float, width: float):
-        self.lo, self.width = lo, width
-        self.counts = [0] * (int((hi - lo) / width) + 1)
-        self.n = 0
-
-    def add(self, x: float) -> None:
-        i = int((x - self.lo) / self.width)
-        if 0 <= i < len(self.counts):
-            self.counts[i] += 1
-            self.n += 1
-
-    def median(self) -> float:
-        half = 0.5 * self.n
-        c = 0
-        for i, k in enumerate(self.counts):
-            c += k
-            if c >= half:
-                return self.lo + (i + 0.5) * self.width
-        return math.nan
-
-
-class _GyroStill:
-    """Mean and spread of the gyroscope over a trailing window, to learn its bias while the phone is still."""
-
-    __slots__ = ("window_ns", "buf", "s", "s2")
-
-    def __init__(self, window_s: float):
-        self.window_ns = int(window_s * 1e9)
-        self.buf: deque = deque()
-        self.s = [0.0, 0.0, 0.0]
-        self.s2 = [0.0, 0.0, 0.0]
-
-    def update(self, t_ns: int, w) -> None:
-        self.buf.append((t_ns, w))
-        s, s2 = self.s, self.s2
-        for i in range(3):
-            s[i] += w[i]
-            s2[i] += w[i] * w[i]
-        limit = t_ns - self.window_ns
-        buf = self.buf
-        while buf[0][0] < limit:
-            _, old = buf.popleft()
-            for i in range(3):
-                s[i] -= old[i]
-                s2[i] -= old[i] * old[i]
-
-    def stats(self):
-        """(mean (3), largest per-axis standard deviation, span in ns) of the window."""
-        n = len(self.buf)
-        mean = [v / n for v in self.s]
-        sd = max(math.sqrt(max(self.s2[i] / n - mean[i] * mean[i], 0.0)) for i in range(3))
-        return mean, sd, self.buf[-1][0] - self.buf[0][0]
-
-
-class AttitudeEKF:
+class QuaternionEKF:
     """Quaternion EKF with adaptive accelerometer / magnetometer noise (eqs. 5-18).
 
     Feed events in time order: :meth:`predict` (gyroscope), :meth:`update_acc`,
@@ -303,17 +220,17 @@ class AttitudeEKF:
         self._last_acc = None
         self._last_mag = None
         self._first_acc_ns: int | None = None
-        self._gyro_still = _GyroStill(self.still_window_s)
+        self._gyro_still = WindowMeanSpread(self.still_window_s)
         self._acc_sd = math.inf
         #: current gyroscope bias estimate (rad/s), subtracted before prediction
         self.gyro_bias = (0.0, 0.0, 0.0)
         self.n_bias_updates = 0
-        self._acc_var = _WindowVariance(self.variance_window_s)
-        self._mag_var = _WindowVariance(self.variance_window_s)
+        self._acc_var = WindowVariance(self.variance_window_s)
+        self._mag_var = WindowVariance(self.variance_window_s)
         self._ref_next_ns: int | None = None
-        self._g_med = _RunningMedian(0.0, 40.0, 0.01)
-        self._h_med = _RunningMedian(0.0, 200.0, 0.1)
-        self._dip_med = _RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
+        self._g_med = RunningMedian(0.0, 40.0, 0.01)
+        self._h_med = RunningMedian(0.0, 200.0, 0.1)
+        self._dip_med = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
         self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
         self.field_uT = math.nan
         self.dip_rad = math.nan

@@ -26,9 +26,15 @@ the phone to calibrate its compass):
   consecutive steps (each within ``max_step_interval_s`` of the last); the
   first steps of a bout are released once it is confirmed.
 
-A step is completed ``heading_delay_s`` after its peak, when the causal
-smoother has caught up with the heading the walker had at the peak, and once
-its bout is confirmed.  The live app therefore sees each step about a second
+A step's heading is the mean smoothed walking direction over the step
+interval, compensated for the smoother's delay
+(:func:`core.pdr.heading.interval_heading`): the step is completed
+``heading_delay_s`` after its peak, when the causal smoother has caught up
+with the whole interval, and once its bout is confirmed.
+
+Non-finite sensor values (NaN, inf) are skipped before any stage sees them
+and counted per stream (:attr:`Pipeline.n_nonfinite`, the summary and the
+labels report them).  The live app therefore sees each step about a second
 after it happened; :meth:`Pipeline.status` gives the current position at any
 time.
 
@@ -48,7 +54,7 @@ from core.pdr.attitude import AttitudeEKF
 from core.conventions import ACC, GYRO, MAG
 from core.pdr.deadreckoning import DeadReckoner
 from core.dsp import GridResampler
-from core.pdr.heading import RotationSmoother
+from core.pdr.heading import RotationSmoother, interval_heading
 from core.recording import Recording, RecordingError
 from core.pdr.steps import StepDetector, StepEvent
 from core.pdr.stride import StepFeatures, StrideModel, WeinbergStride
@@ -167,8 +173,9 @@ class Pipeline:
     grid_rate_hz : float
         Uniform grid rate for the step detector and the heading smoother (Hz).
     heading_delay_s : float or None
-        How long after its peak a step's heading is read (s); ``None``
-        uses the smoother's group delay.
+        Delay compensation of the smoothed heading (s): a step's heading is
+        the mean over ``[t_prev + delay, t_step + delay]``; ``None`` uses the
+        smoother's group delay.
     use_magnetometer : bool
         False: heading from gyroscope and accelerometer only, relative to the start.
     max_rotation_rms_rad_s : float
@@ -223,6 +230,11 @@ class Pipeline:
         self.n_rejected_rotation = 0
         self.n_rejected_bout = 0
         self.steps: list[Step] = []
+        #: smoothed forward vector on the grid, (t_ns, east, north), the last few seconds
+        self._fwd = deque()
+        self._fwd_keep_ns = self._bout_gap_ns + self._delay_ns + 1_000_000_000
+        #: non-finite sensor values skipped, per stream
+        self.n_nonfinite: dict[str, int] = {}
         self.t_ns = 0
         self.seen: dict[str, int] = {}
         self._log: list[tuple] = []
@@ -231,6 +243,10 @@ class Pipeline:
     def update(self, stream: str, t_ns: int, values) -> list[Step]:
         """Process one sensor event; returns the steps it completed (usually none)."""
         self.seen[stream] = self.seen.get(stream, 0) + 1
+        if stream in (GYRO, ACC, MAG) and not (math.isfinite(values[0]) and math.isfinite(values[1])
+                                               and math.isfinite(values[2])):
+            self.n_nonfinite[stream] = self.n_nonfinite.get(stream, 0) + 1
+            return []
         self.t_ns = t_ns
         if stream == GYRO:
             wx, wy, wz = values[0], values[1], values[2]
@@ -260,6 +276,10 @@ class Pipeline:
                 self._candidate(ev)
             if self.attitude.initialized:
                 heading = self.smoother.update(self.attitude.matrix())
+                fwd = self._fwd
+                fwd.append((tg, self.smoother.forward_east, self.smoother.forward_north))
+                while fwd[0][0] < tg - self._fwd_keep_ns:
+                    fwd.popleft()
             else:
                 heading = math.nan
             if self.log:
@@ -298,10 +318,9 @@ class Pipeline:
         cands = self._candidates
         if not cands:
             return []
-        heading = self.smoother.heading_rad
         for c in cands:
             if c[1] is None and c[0].t_ns + self._delay_ns <= t_grid_ns:
-                c[1] = heading
+                c[1] = self._step_heading(c[0])
         if not cands[-1][2] and t_grid_ns - cands[-1][0].t_ns > self._bout_gap_ns:
             self._drop_unconfirmed()  # the bout ended too short
         done = []
@@ -310,10 +329,21 @@ class Pipeline:
             done.append(self._complete(ev, h))
         return done
 
+    def _step_heading(self, ev: StepEvent) -> float:
+        """Mean smoothed heading over the delay-compensated step interval (nan before the attitude starts)."""
+        fwd = self._fwd
+        if not fwd:
+            return math.nan
+        duration = ev.duration_s if ev.duration_s == ev.duration_s else DEFAULT_STEP_DURATION_S
+        t1 = ev.t_ns + self._delay_ns
+        t0 = t1 - int(duration * 1e9)
+        t, e, n = zip(*fwd)
+        return interval_heading(t, e, n, t0, t1)
+
     def finish(self) -> list[Step]:
         """End of data: complete the confirmed steps still waiting for their heading; drop an unconfirmed bout."""
         self._drop_unconfirmed()
-        done = [self._complete(ev, self.smoother.heading_rad if h is None else h) for ev, h, _ in self._candidates]
+        done = [self._complete(ev, self._step_heading(ev) if h is None else h) for ev, h, _ in self._candidates]
         self._candidates = []
         return done
 
@@ -332,6 +362,9 @@ class Pipeline:
 
     def labels(self) -> tuple[str, ...]:
         out = []
+        if self.n_nonfinite:
+            what = ", ".join(f"{k} {v}" for k, v in sorted(self.n_nonfinite.items()))
+            out.append(f"non-finite sensor values skipped ({what})")
         if not self.seen.get(GYRO) and self.seen.get(ACC):
             out.append("no gyroscope: heading from accelerometer and magnetometer only (noisy while walking)")
         if not self.attitude.use_magnetometer:
@@ -382,7 +415,10 @@ class Pipeline:
             np.array([r[5] for r in rows], dtype=bool),
         )
         counters = {"mag_used": a.n_mag_used, "mag_rejected": a.n_mag_rejected, "acc_rejected": a.n_acc_rejected,
-                    "peaks_rejected_rotation": self.n_rejected_rotation, "peaks_rejected_bout": self.n_rejected_bout}
+                    "peaks_rejected_rotation": self.n_rejected_rotation, "peaks_rejected_bout": self.n_rejected_bout,
+                    "nonfinite_skipped": dict(self.n_nonfinite)}
+        if hasattr(a, "counters"):
+            counters["attitude"] = a.counters()
         return PipelineResult(list(self.steps), Track.from_steps(self.steps), att, self.labels(), recording,
                               counters)
 

@@ -1,0 +1,782 @@
+"""Attitude and gyroscope bias of the phone: an error-state (multiplicative) EKF.
+
+This is the product's attitude filter.  It keeps the measurement ideas of
+Tian et al. 2014, section 4 -- gyroscope prediction (eqs. 5-7, 11), the
+accelerometer and magnetometer as direction measurements (eqs. 12-15), the
+adaptive noise of eqs. 17-18 -- but estimates the error of the attitude
+instead of the quaternion itself, and adds the gyroscope bias to the state.
+The paper's 4-state quaternion EKF stays available for comparison as
+:class:`core.pdr.attitude_qekf.QuaternionEKF`.
+
+State
+=====
+Nominal state: the attitude quaternion ``q`` (body -> ENU, see :mod:`core`)
+and the gyroscope bias ``b`` (rad/s, body frame).  Error state (6)::
+
+    dx = (dtheta_n, db),   R_true = exp([dtheta_n]x) R(q),   b_true = b + db
+
+``dtheta_n`` is a small rotation expressed in the **navigation frame**, so
+its third component is the heading error about Up and the first two are the
+tilt: the magnetometer can be made to correct the heading alone, and the
+accelerometer sees only the tilt.  (The paper's state is the quaternion
+itself, whose 4 x 4 covariance is singular along ``q`` and mixes heading and
+tilt.)  After each update the error is folded into the nominal state,
+``q <- exp(dtheta_n / 2) (x) q``, ``b <- b + db``, and reset to zero.
+
+Prediction (eqs. 5-7 with the bias removed), on every gyroscope event with
+the measured time step ``T``::
+
+    q <- q (x) exp((w_meas - b) T / 2)
+    F = [[I, -R T], [0, I]],   Q = diag(sigma_g^2 T I, sigma_bw^2 T I)
+    P <- F P F^T + Q
+
+since ``d(dtheta_n)/dt = -R db - R n_g`` and ``d(db)/dt = n_bw``.  ``sigma_g``
+is the angle random walk (rad/sqrt(s)), ``sigma_bw`` the bias random walk
+(rad/s/sqrt(s)).
+
+Accelerometer (eqs. 12-13, 17): the unit specific force ``z = a / |a|``
+against ``h = R^T u``, ``u = (0, 0, 1)``.  With the error above
+``R_true^T u = R^T (I - [dtheta]x) u = h + R^T [u]x dtheta``, so::
+
+    H = [R^T [u]x, 0]    (3 x 6; [u]x dtheta = u x dtheta)
+
+``R = sigma_a^2 I`` with the adaptive ``sigma_a^2`` of eq. 17.  A direction
+has two degrees of freedom: the innovation along ``h`` is second order, so
+the expected normalised innovation squared (NIS) is 2.
+
+Magnetometer, heading only (default, ``mag_mode="heading"``): the field is
+rotated into the navigation frame, ``m_n = R m_b = (E, N, U)``, and its
+horizontal direction ``alpha = atan2(N, E)`` is compared with that of the
+reference ``h_n`` (eq. 14 turned by the declination).  Since
+``m_n = h_n - dtheta x h_n`` to first order::
+
+    y = wrap(alpha_ref - alpha_meas) = H dtheta,
+    H = [-E U / (E^2 + N^2), -N U / (E^2 + N^2), 1, 0, 0, 0]
+
+with noise ``sigma_m^2 / c^2`` (eq. 18's ``sigma_m^2`` of the unit vector,
+``c`` = horizontal fraction of ``m_n``: the angle is that much noisier than
+the vector).  The first two entries say how a tilt error moves the measured
+azimuth (large at a steep dip); they enter the innovation covariance ``S``,
+but the update is a *consider* (Schmidt) update: the gain's tilt rows are set
+to zero and its bias rows are projected on the body-frame vertical, so a
+magnetometer reading corrects the heading and the bias about the vertical,
+never roll or pitch, however the field is bent.  The covariance uses the
+Joseph form, which is right for any gain.  ``mag_mode="full"`` is the
+paper's vector update (eq. 12 with ``v = h``; Jacobian as for the
+accelerometer), kept for comparison.
+
+Zero-rate update: when the phone has been truly still for
+``still_window_s`` (accelerometer norm and direction steady, gyroscope spread
+at its noise floor), the mean gyroscope reading over the window is a
+measurement of the bias, ``z = b + n`` with ``H = [0, I]``.  A hand that
+drifts slowly fails the direction test; the residual motion that passes is
+covered by ``zero_rate_noise_rad_s``.
+
+Magnetometer trust: a reading is used only if its norm is geomagnetic
+(``mag_valid_range_uT``), its norm and dip are near the running references,
+the field is quasi-static in the navigation frame (optional detector, see
+:mod:`core.pdr.magcal`) and its NIS passes the gate.  Readings pass through
+the online hard/soft-iron calibration first where one is given.  Every
+rejection is counted by reason (:attr:`AttitudeEKF.mag_reasons`).
+
+Bad numbers: a non-finite input is skipped and counted; an update whose
+correction or covariance would not be finite is discarded (the prior state
+is kept) and counted.  Nothing non-finite ever enters the state.
+
+Sign conventions: ENU with heading counter-clockwise from East, so a positive
+``dtheta_n[2]`` turns the phone to the left and increases the heading.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from core import quaternion as quat
+from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
+from core.dsp import RunningMedian, WindowMeanSpread, WindowVariance
+
+_I3 = np.eye(3)
+_I6 = np.eye(6)
+for _m in (_I3, _I6):
+    _m.flags.writeable = False
+
+
+def skew(v) -> np.ndarray:
+    """Cross-product matrix ``[v]x`` (``[v]x w = v x w``)."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def direction_jacobian(mat_nb, v_n) -> np.ndarray:
+    """``d (R_true^T v) / d dtheta_n`` = ``R^T [v]x`` (3 x 3) for ``R_true = exp([dtheta]x) R``."""
+    return np.asarray(mat_nb).T @ skew(v_n)
+
+
+def heading_jacobian(m_n) -> np.ndarray:
+    """``d alpha / d dtheta_n`` (3,) of the horizontal azimuth ``alpha = atan2(N, E)`` of ``R_true m_b``.
+
+    ``alpha_meas = alpha_ref - H dtheta`` for ``m_n = R m_b`` (see the module docstring).
+    """
+    e, n, u = m_n
+    h2 = e * e + n * n
+    return np.array([-e * u / h2, -n * u / h2, 1.0])
+
+
+@dataclass(frozen=True)
+class AttitudeSettings:
+    """Settings of :class:`AttitudeEKF` (units in the names; unitless noise is of unit vectors).
+
+    The defaults were chosen on the simulator and on the tuning split of the
+    benchmark only (IPIN 2023 routes 01, 02, 21, 22; odd Microsoft traces):
+    see ``benchmarks/RESULTS.md``.
+    """
+
+    #: angle random walk of the gyroscope, widened for timing and vibration (rad/sqrt(s))
+    gyro_noise_rad_sqrt_s: float = 0.004
+    #: rate-proportional angle random walk (scale-factor and timing errors), per rad/s of rate (1/sqrt(s))
+    gyro_scale_noise_sqrt_s: float = 0.01
+    #: random walk of the gyroscope bias (rad/s/sqrt(s))
+    gyro_bias_walk_rad_s_sqrt_s: float = 2e-5
+    #: prior standard deviation of each bias component (rad/s)
+    gyro_bias_sd_rad_s: float = 0.01
+    #: the bias estimate is clamped to this magnitude per axis (rad/s)
+    max_gyro_bias_rad_s: float = 0.1
+    #: prior standard deviation of roll and pitch after initialisation (rad)
+    initial_tilt_sd_rad: float = math.radians(3.0)
+    #: prior standard deviation of the heading after initialisation from the magnetometer (rad)
+    initial_yaw_sd_rad: float = math.radians(15.0)
+    #: accelerometer and magnetometer readings are averaged over this long per update (s)
+    update_interval_s: float = 0.1
+    #: eq. 17: s_a0 (base sd of the unit accelerometer vector), k_a1 (per m/s^2), k_a2 (per (m/s^2)^2)
+    acc_noise_base: float = 0.0025
+    k_a1: float = 0.001
+    k_a2: float = 0.002
+    #: eq. 18: s_m0 (base sd of the unit magnetometer vector), k_m1 (per uT), k_m2 (per uT^2)
+    mag_noise_base: float = 0.019
+    k_m1: float = 0.00045
+    k_m2: float = 0.0009
+    #: trailing window of the variances of eqs. 17-18 (s)
+    variance_window_s: float = 1.0
+    #: accelerometer readings whose norm is further than this from |g| are not used (m/s^2)
+    acc_reject_m_s2: float = 4.0
+    #: accelerometer updates with a larger NIS (2 dof) are not used
+    acc_gate_nis: float = 50.0
+    #: "heading": the magnetometer corrects heading and vertical bias only; "full": the paper's eq. 12
+    mag_mode: str = "heading"
+    #: magnetometer readings with | |m| - |h| | > ratio |h| are not used
+    mag_reject_ratio: float = 0.25
+    #: magnetometer readings whose dip differs from the reference by more than this are not used (rad)
+    mag_reject_dip_rad: float = math.radians(10.0)
+    #: readings outside this range are no geomagnetic field at all (the Earth's is 22-67 uT) (uT)
+    mag_valid_range_uT: tuple = (10.0, 150.0)
+    #: heading updates with a larger NIS (1 dof) are not used
+    mag_gate_nis: float = 16.0
+    #: when every heading update of this long was gated and their innovations agree within
+    #: ``mag_relock_spread_rad``, the heading estimate (not the field) is wrong: the heading is
+    #: released (its variance set to pi^2) so the next reading sets it (s)
+    mag_relock_s: float = 3.0
+    mag_relock_spread_rad: float = math.radians(10.0)
+    #: the references |g|, |h| and dip are running medians of every reading, refreshed this often (s)
+    reference_update_s: float = 1.0
+    #: magnetic declination, east of true north positive (rad); 0: headings relative to magnetic north
+    declination_rad: float = 0.0
+    #: heading of the device y axis at the start when there is no magnetometer (rad, CCW from East)
+    initial_yaw_rad: float = math.pi / 2
+    #: False ignores magnetometer events (heading relative to the start)
+    use_magnetometer: bool = True
+    #: wait this long for a first magnetometer reading before starting without one (s)
+    mag_wait_s: float = 1.0
+    #: a zero-rate update needs the phone still for this long (s)
+    still_window_s: float = 2.0
+    #: stillness: accelerometer norm sd (m/s^2), direction spread (rad), gyroscope per-axis sd (rad/s)
+    still_acc_sd_m_s2: float = 0.05
+    still_acc_direction_rad: float = math.radians(0.3)
+    still_gyro_sd_rad_s: float = 0.005
+    #: motion left in a "still" phone that the zero-rate update allows for (rad/s)
+    zero_rate_noise_rad_s: float = 0.002
+    #: gyroscope gaps longer than this are not integrated, only the uncertainty grows (s)
+    max_gyro_gap_s: float = 0.5
+    #: attitude random walk assumed while no gyroscope event comes (rad/sqrt(s))
+    no_gyro_random_walk_rad_sqrt_s: float = 0.5
+
+    def __post_init__(self):
+        if self.mag_mode not in ("heading", "full"):
+            raise ValueError(f"mag_mode must be 'heading' or 'full', not {self.mag_mode!r}")
+        for name in ("gyro_noise_rad_sqrt_s", "acc_noise_base", "mag_noise_base", "variance_window_s",
+                     "still_window_s", "reference_update_s"):
+            v = getattr(self, name)
+            if not (v > 0 and math.isfinite(v)):
+                raise ValueError(f"{name} must be a positive number, not {v!r}")
+
+
+@dataclass(frozen=True)
+class UpdateFlags:
+    """What one measurement did (returned by every ``update_*`` call)."""
+
+    kind: str  #: "acc", "mag" or "zero_rate"
+    t_ns: int
+    used: bool
+    reason: str  #: "used" or why not (see :attr:`AttitudeEKF.mag_reasons`)
+    nis: float = math.nan  #: normalised innovation squared (nan when not computed)
+    dof: int = 0  #: its expected value when the filter is consistent
+    sigma2: float = math.nan  #: measurement variance used (eqs. 17-18; heading: of the angle, rad^2)
+    innovation: tuple = ()
+
+
+@dataclass(frozen=True)
+class AttitudeStatus:
+    """A snapshot of the filter: state, uncertainty and counters."""
+
+    t_ns: int | None
+    initialized: bool
+    q_wxyz: tuple
+    gyro_bias_rad_s: tuple
+    gyro_bias_sd_rad_s: tuple
+    tilt_sd_rad: float  #: sqrt of the larger tilt variance
+    heading_sd_rad: float
+    mag_trusted: bool  #: whether the last magnetometer reading was used
+    counters: dict = field(default_factory=dict)
+
+
+class AttitudeEKF:
+    """Error-state EKF of the attitude and gyroscope bias (see the module docstring).
+
+    Feed events in time order: :meth:`predict` (gyroscope), :meth:`update_acc`,
+    :meth:`update_mag`.  The filter initialises itself from the first
+    accelerometer and magnetometer readings (TRIAD) and owns its state.
+
+    Parameters
+    ----------
+    settings : AttitudeSettings, optional
+        All settings; keyword arguments override single fields
+        (``AttitudeEKF(declination_rad=0.04)``).
+    mag_calibrator : optional
+        Online hard/soft-iron calibration (:class:`core.pdr.magcal.MagCalibrator`):
+        each magnetometer reading goes through its ``update`` first.
+    field_detector : optional
+        Quasi-static field detector (:class:`core.pdr.magcal.QuasiStaticField`):
+        readings it does not call steady are not used.
+    """
+
+    def __init__(self, settings: AttitudeSettings | None = None, *, mag_calibrator=None, field_detector=None,
+                 **overrides):
+        s = settings or AttitudeSettings()
+        if overrides:
+            s = replace(s, **overrides)
+        self.settings = s
+        self.mag_calibrator = mag_calibrator
+        self.field_detector = field_detector
+        self.reset()
+
+    # -- read-only views of settings that the pipeline asks for -------------------------------
+    @property
+    def use_magnetometer(self) -> bool:
+        return self.settings.use_magnetometer
+
+    @use_magnetometer.setter
+    def use_magnetometer(self, on: bool) -> None:
+        self.settings = replace(self.settings, use_magnetometer=bool(on))
+
+    @property
+    def initial_yaw_rad(self) -> float:
+        return self.settings.initial_yaw_rad
+
+    @property
+    def declination_rad(self) -> float:
+        return self.settings.declination_rad
+
+    @declination_rad.setter
+    def declination_rad(self, d: float) -> None:
+        self.settings = replace(self.settings, declination_rad=float(d))
+        self._update_references()
+
+    def reset(self) -> None:
+        s = self.settings
+        self.q = (1.0, 0.0, 0.0, 0.0)
+        self.b = [0.0, 0.0, 0.0]
+        self.P = np.diag([s.initial_tilt_sd_rad ** 2] * 2 + [s.initial_yaw_sd_rad ** 2]
+                         + [s.gyro_bias_sd_rad_s ** 2] * 3)
+        self.initialized = False
+        self.t_ns: int | None = None
+        self._t_gyro: int | None = None
+        self._last_acc = None
+        self._last_mag = None
+        self._first_acc_ns: int | None = None
+        self._acc_var = WindowVariance(s.variance_window_s)
+        self._mag_var = WindowVariance(s.variance_window_s)
+        self._gyro_win = WindowMeanSpread(s.still_window_s)
+        self._accdir_win = WindowMeanSpread(s.still_window_s)
+        self._acc_norm_win = WindowVariance(s.still_window_s)
+        self._next_zero_rate_ns: int | None = None
+        self._ref_next_ns: int | None = None
+        self._g_med = RunningMedian(0.0, 40.0, 0.01)
+        self._h_med = RunningMedian(0.0, 200.0, 0.1)
+        self._dip_med = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
+        self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
+        self.field_uT = math.nan
+        self.dip_rad = math.nan
+        self._h_ref = (0.0, 1.0, 0.0)
+        self._alpha_ref = math.pi / 2
+        self._yaw_from_mag = False
+        self._acc_sum = [0.0, 0.0, 0.0, 0.0, 0, 0]  # sum of f_n (3), of sigma^2, count, first t_ns
+        self._mag_sum = [0.0, 0.0, 0.0, 0.0, 0, 0]
+        self._gated = []  # (t_ns, innovation) of heading updates gated since the last one used
+        self.n_heading_relocks = 0
+        # diagnostics
+        self.acc_sigma2 = math.nan
+        self.mag_sigma2 = math.nan
+        self.mag_rejected = False
+        self.acc_rejected = False
+        self.last_acc = UpdateFlags("acc", 0, False, "none yet")
+        self.last_mag = UpdateFlags("mag", 0, False, "none yet")
+        self.mag_reasons: dict[str, int] = {}
+        self.acc_reasons: dict[str, int] = {}
+        self.n_gyro = 0
+        self.n_zero_rate = 0
+        self.n_skipped_nonfinite = 0
+        self.n_numerical_rejects = 0
+        self._nis_sum = {"acc": 0.0, "mag": 0.0, "zero_rate": 0.0}
+        self._nis_n = {"acc": 0, "mag": 0, "zero_rate": 0}
+
+    # -- counters kept for the pipeline's summary -----------------------------------------------
+    @property
+    def n_mag_used(self) -> int:
+        return self.mag_reasons.get("used", 0)
+
+    @property
+    def n_mag_rejected(self) -> int:
+        return sum(v for k, v in self.mag_reasons.items() if k != "used")
+
+    @property
+    def n_acc_rejected(self) -> int:
+        return sum(v for k, v in self.acc_reasons.items() if k != "used")
+
+    @property
+    def gyro_bias(self) -> tuple:
+        return tuple(self.b)
+
+    def mean_nis(self) -> dict:
+        """Mean NIS per measurement kind over the updates computed so far (nan where none)."""
+        return {k: (self._nis_sum[k] / n if n else math.nan) for k, n in self._nis_n.items()}
+
+    def counters(self) -> dict:
+        c = {"mag_used": self.n_mag_used, "mag_rejected": self.n_mag_rejected,
+             "acc_rejected": self.n_acc_rejected, "zero_rate_updates": self.n_zero_rate,
+             "nonfinite_skipped_by_filter": self.n_skipped_nonfinite,
+             "numerical_rejects": self.n_numerical_rejects, "heading_relocks": self.n_heading_relocks,
+             "mag_reasons": dict(self.mag_reasons), "mean_nis": self.mean_nis()}
+        if self.mag_calibrator is not None:
+            st = self.mag_calibrator.status
+            c["mag_calibration"] = getattr(st, "state", str(st))
+        return c
+
+    def status(self) -> AttitudeStatus:
+        P = self.P
+        return AttitudeStatus(self.t_ns, self.initialized, self.q, tuple(self.b),
+                              tuple(math.sqrt(max(P[i, i], 0.0)) for i in (3, 4, 5)),
+                              math.sqrt(max(P[0, 0], P[1, 1], 0.0)), math.sqrt(max(P[2, 2], 0.0)),
+                              not self.mag_rejected and self.n_mag_used > 0, self.counters())
+
+    # -- initialisation ---------------------------------------------------------------------------
+    def _try_initialize(self, t_ns: int) -> None:
+        s = self.settings
+        acc = self._last_acc
+        if acc is None:
+            return
+        mag = self._last_mag if s.use_magnetometer else None
+        if s.use_magnetometer and mag is None:
+            if self._first_acc_ns is None:
+                self._first_acc_ns = t_ns
+            if t_ns - self._first_acc_ns < s.mag_wait_s * 1e9:
+                return
+        try:
+            if mag is not None:
+                q = quat.from_two_vectors_enu(acc, mag)
+                # TRIAD gives magnetic north along +y; turn by the declination (true north)
+                q = quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), -s.declination_rad), q)
+            else:
+                q = quat.from_gravity_yaw(acc, s.initial_yaw_rad)
+        except ValueError:
+            return
+        self.q = q
+        self.initialized = True
+        self.t_ns = t_ns
+        # without a magnetometer reading the heading is relative to initial_yaw_rad by definition; a
+        # magnetometer that starts later is let in by the relock (see _relock)
+        yaw_sd = s.initial_yaw_sd_rad if mag is not None else 1e-3
+        self._yaw_from_mag = mag is not None
+        self.P[2, 2] = yaw_sd ** 2
+        self._update_references()
+
+    def _accumulate_references(self, t_ns: int, acc=None, mag=None) -> None:
+        if acc is not None:
+            self._g_med.add(math.sqrt(acc[0] ** 2 + acc[1] ** 2 + acc[2] ** 2))
+        if mag is not None and self._last_acc is not None:
+            a = self._last_acc
+            na = math.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
+            nm = math.sqrt(mag[0] ** 2 + mag[1] ** 2 + mag[2] ** 2)
+            if na > 0 and nm > 0:
+                sin_dip = -(a[0] * mag[0] + a[1] * mag[1] + a[2] * mag[2]) / (na * nm)
+                self._dip_med.add(math.asin(max(-1.0, min(1.0, sin_dip))))
+                self._h_med.add(nm)
+        if (self._ref_next_ns is None or t_ns >= self._ref_next_ns
+                or (self._h_med.n and self.field_uT != self.field_uT)):
+            self._ref_next_ns = t_ns + int(self.settings.reference_update_s * 1e9)
+            self._update_references()
+
+    def _update_references(self) -> None:
+        if self._g_med.n:
+            self.gravity_m_s2 = self._g_med.median()
+        if self._h_med.n:
+            self.field_uT = self._h_med.median()
+            self.dip_rad = self._dip_med.median()
+        dip = self.dip_rad if self.dip_rad == self.dip_rad else math.radians(60.0)
+        c, sn = math.cos(dip), math.sin(dip)
+        d = self.settings.declination_rad
+        # eq. 14, turned by the declination: magnetic north lies D east of true north
+        self._h_ref = (c * math.sin(d), c * math.cos(d), -sn)
+        self._alpha_ref = math.atan2(math.cos(d), math.sin(d))
+
+    # -- prediction -------------------------------------------------------------------------------
+    def predict(self, t_ns: int, wx: float, wy: float, wz: float) -> None:
+        """Propagate with one gyroscope event (rad/s) over the time since the previous one."""
+        if not (math.isfinite(wx) and math.isfinite(wy) and math.isfinite(wz)):
+            self.n_skipped_nonfinite += 1
+            return
+        self.n_gyro += 1
+        self._gyro_win.update(t_ns, (wx, wy, wz))
+        if not self.initialized:
+            self._t_gyro = t_ns
+            return
+        s = self.settings
+        t_prev = self._t_gyro if self._t_gyro is not None else self.t_ns
+        self._t_gyro = t_ns
+        dt = (t_ns - t_prev) * 1e-9
+        if dt <= 0.0:
+            return
+        if dt > s.max_gyro_gap_s:  # a gap: do not integrate a stale rate over it
+            self._random_walk(dt)
+            self.t_ns = t_ns
+            return
+        b = self.b
+        w = ((wx - b[0]) * dt, (wy - b[1]) * dt, (wz - b[2]) * dt)
+        R = np.array(quat.to_matrix(self.q))
+        self.q = quat.normalize(quat.multiply(self.q, quat.from_rotation_vector(w)))  # eq. 7
+        P = self.P
+        # F = [[I, -R dt], [0, I]] written out: P <- F P F^T + Q
+        Rdt = R * dt
+        A = P[0:3, 0:3] - Rdt @ P[3:6, 0:3]
+        B = P[0:3, 3:6] - Rdt @ P[3:6, 3:6]
+        Ptt = A - B @ Rdt.T
+        w2 = (wx - b[0]) ** 2 + (wy - b[1]) ** 2 + (wz - b[2]) ** 2
+        qg = (s.gyro_noise_rad_sqrt_s ** 2 + s.gyro_scale_noise_sqrt_s ** 2 * w2) * dt
+        qb = s.gyro_bias_walk_rad_s_sqrt_s ** 2 * dt
+        Pn = np.empty((6, 6))
+        Pn[0:3, 0:3] = Ptt + qg * _I3
+        Pn[0:3, 3:6] = B
+        Pn[3:6, 0:3] = B.T
+        Pn[3:6, 3:6] = P[3:6, 3:6] + qb * _I3
+        self.P = Pn
+        self.t_ns = t_ns
+
+    def _random_walk(self, dt: float) -> None:
+        self.P = self.P.copy()
+        self.P[0:3, 0:3] += (self.settings.no_gyro_random_walk_rad_sqrt_s ** 2 * dt) * _I3
+
+    def _propagate_without_gyro(self, t_ns: int) -> None:
+        if self.t_ns is None:
+            self.t_ns = t_ns
+            return
+        last = self._t_gyro
+        if last is None or t_ns - last > 100_000_000:
+            dt = (t_ns - self.t_ns) * 1e-9
+            if dt > 0:
+                self._random_walk(dt)
+        self.t_ns = max(self.t_ns, t_ns)
+
+    # -- the update kernel ----------------------------------------------------------------------
+    def _correct(self, y: np.ndarray, H: np.ndarray, Rm: np.ndarray, gate: float, *, consider_tilt=False,
+                 bias_axis=None):
+        """Kalman update of the error state; returns (used, reason, nis).  ``H`` (m x 6), ``Rm`` (m x m)."""
+        P = self.P
+        PHt = P @ H.T
+        S = H @ PHt + Rm
+        try:
+            Sinv = np.linalg.inv(S)
+        except np.linalg.LinAlgError:
+            self.n_numerical_rejects += 1
+            return False, "numerical", math.nan
+        nis = float(y @ Sinv @ y)
+        if not math.isfinite(nis):
+            self.n_numerical_rejects += 1
+            return False, "numerical", nis
+        if nis > gate:
+            return False, "gate", nis
+        K = PHt @ Sinv
+        if consider_tilt:  # Schmidt update: roll and pitch are not corrected by this measurement
+            K[0:2, :] = 0.0
+        if bias_axis is not None:  # only the bias component about this body axis
+            K[3:6, :] = np.outer(bias_axis, bias_axis @ K[3:6, :])
+        dx = K @ y
+        IKH = _I6 - K @ H
+        Pn = IKH @ P @ IKH.T + K @ Rm @ K.T  # Joseph form: valid for any gain
+        if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(Pn))):
+            self.n_numerical_rejects += 1
+            return False, "numerical", nis
+        self._inject(dx, Pn)
+        return True, "used", nis
+
+    def _inject(self, dx: np.ndarray, Pn: np.ndarray) -> None:
+        dth = dx[0:3]
+        self.q = quat.normalize(quat.multiply(quat.from_rotation_vector(tuple(dth.tolist())), self.q))
+        lim = self.settings.max_gyro_bias_rad_s
+        self.b = [min(lim, max(-lim, self.b[i] + float(dx[3 + i]))) for i in range(3)]
+        # reset of the error to zero: G = blockdiag(I - [dtheta / 2]x, I)
+        G = _I6.copy()
+        G[0:3, 0:3] -= 0.5 * skew(dth)
+        Pn = G @ Pn @ G.T
+        self.P = 0.5 * (Pn + Pn.T)
+
+    def _record(self, kind: str, used: bool, nis: float) -> None:
+        if nis == nis:
+            self._nis_sum[kind] += nis
+            self._nis_n[kind] += 1
+
+    # -- accelerometer ----------------------------------------------------------------------------
+    def update_acc(self, t_ns: int, ax: float, ay: float, az: float) -> UpdateFlags:
+        """Accelerometer reading (m/s^2, gravity included): eq. 17, averaged over ``update_interval_s``.
+
+        Each reading is rotated into the navigation frame with the current
+        attitude and summed; once per interval the mean specific force
+        ``f_n`` gives one direction update ``z = R^T f_n / |f_n|``.  The
+        linear acceleration of a walking hand is correlated over a step, so
+        updating with every reading at 50-400 Hz would count it as hundreds
+        of independent measurements: one update per interval keeps the NIS
+        meaningful and the filter the same at every sample rate.
+        """
+        if not (math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az)):
+            self.n_skipped_nonfinite += 1
+            return self._acc_flags(t_ns, False, "non-finite")
+        s = self.settings
+        self._last_acc = (ax, ay, az)
+        self._accumulate_references(t_ns, acc=self._last_acc)
+        na = math.sqrt(ax * ax + ay * ay + az * az)
+        if na > 0:
+            self._accdir_win.update(t_ns, (ax / na, ay / na, az / na))
+        self._acc_norm_win.update(t_ns, na)
+        if not self.initialized:
+            self._try_initialize(t_ns)
+            return self._acc_flags(t_ns, False, "initialising")
+        self._propagate_without_gyro(t_ns)
+        self._maybe_zero_rate(t_ns)
+        var = self._acc_var.update(t_ns, na)
+        dev = abs(na - self.gravity_m_s2)
+        sigma2 = s.acc_noise_base ** 2 + s.k_a1 * dev + s.k_a2 * var  # eq. 17
+        self.acc_sigma2 = sigma2
+        if dev > s.acc_reject_m_s2 or na == 0.0:
+            return self._acc_flags(t_ns, False, "norm off", sigma2=sigma2)
+        acc = self._acc_sum
+        R = quat.to_matrix(self.q)
+        f_n = [R[i][0] * ax + R[i][1] * ay + R[i][2] * az for i in range(3)]
+        if acc[4] == 0:
+            acc[5] = t_ns
+        acc[0] += f_n[0]
+        acc[1] += f_n[1]
+        acc[2] += f_n[2]
+        acc[3] += sigma2
+        acc[4] += 1
+        if (t_ns - acc[5]) * 1e-9 < s.update_interval_s:
+            return self._acc_flags(t_ns, True, "pending", sigma2=sigma2)
+        n = acc[4]
+        fx, fy, fz = acc[0] / n, acc[1] / n, acc[2] / n
+        sigma2 = acc[3] / n
+        self._acc_sum = [0.0, 0.0, 0.0, 0.0, 0, 0]
+        nf = math.sqrt(fx * fx + fy * fy + fz * fz)
+        if nf == 0.0:
+            return self._acc_flags(t_ns, False, "norm off", sigma2=sigma2)
+        z = tuple(R[0][j] * fx + R[1][j] * fy + R[2][j] * fz for j in range(3))  # R^T f_n
+        h = (R[2][0], R[2][1], R[2][2])  # R^T u: the third row of R
+        y = np.array((z[0] / nf - h[0], z[1] / nf - h[1], z[2] / nf - h[2]))
+        H = np.zeros((3, 6))
+        H[:, 0:3] = direction_jacobian(R, (0.0, 0.0, 1.0))
+        used, reason, nis = self._correct(y, H, sigma2 * _I3, s.acc_gate_nis)
+        self._record("acc", used, nis)
+        return self._acc_flags(t_ns, used, reason, nis=nis, sigma2=sigma2, innovation=tuple(y.tolist()))
+
+    def _acc_flags(self, t_ns, used, reason, **kw) -> UpdateFlags:
+        self.acc_rejected = not used
+        self.acc_reasons[reason] = self.acc_reasons.get(reason, 0) + 1
+        self.last_acc = UpdateFlags("acc", t_ns, used, reason, dof=2, **kw)
+        return self.last_acc
+
+    def _maybe_zero_rate(self, t_ns: int) -> None:
+        """Zero-rate update from the mean gyroscope reading when the phone is truly still."""
+        s = self.settings
+        g = self._gyro_win
+        if not g.buf or (self._next_zero_rate_ns is not None and t_ns < self._next_zero_rate_ns):
+            return
+        mean, sd, span = g.stats()
+        if span < 0.95 * g.window_ns or sd > s.still_gyro_sd_rad_s:
+            return
+        _, dir_sd, dspan = self._accdir_win.stats()
+        if dspan < 0.95 * g.window_ns or dir_sd > s.still_acc_direction_rad:
+            return
+        if len(self._acc_norm_win.buf) < 5 or math.sqrt(self._acc_norm_win.variance()) > s.still_acc_sd_m_s2:
+            return
+        n = len(g.buf)
+        r2 = sd * sd / n + s.zero_rate_noise_rad_s ** 2
+        y = np.array([mean[i] - self.b[i] for i in range(3)])
+        H = np.zeros((3, 6))
+        H[:, 3:6] = _I3
+        used, _, nis = self._correct(y, H, r2 * _I3, math.inf)
+        self._record("zero_rate", used, nis)
+        if used:
+            self.n_zero_rate += 1
+        self._next_zero_rate_ns = t_ns + g.window_ns  # independent windows
+
+    # -- magnetometer -----------------------------------------------------------------------------
+    def update_mag(self, t_ns: int, mx: float, my: float, mz: float) -> UpdateFlags:
+        """Magnetometer reading (uT): calibration, trust tests, then one heading (or full) update per interval.
+
+        Trusted readings are rotated into the navigation frame and averaged
+        over ``update_interval_s``, as for the accelerometer.
+        """
+        s = self.settings
+        if not s.use_magnetometer:
+            return self._mag_flags(t_ns, False, "magnetometer off")
+        if not (math.isfinite(mx) and math.isfinite(my) and math.isfinite(mz)):
+            self.n_skipped_nonfinite += 1
+            return self._mag_flags(t_ns, False, "non-finite")
+        if self.mag_calibrator is not None:
+            m = self.mag_calibrator.update(t_ns, (mx, my, mz))
+            if m is None:
+                return self._mag_flags(t_ns, False, "calibrating")
+            mx, my, mz = float(m[0]), float(m[1]), float(m[2])
+        nm = math.sqrt(mx * mx + my * my + mz * mz)
+        lo, hi = s.mag_valid_range_uT
+        if not lo <= nm <= hi:
+            return self._mag_flags(t_ns, False, "invalid range")
+        self._last_mag = (mx, my, mz)
+        self._accumulate_references(t_ns, mag=self._last_mag)
+        if not self.initialized:
+            self._try_initialize(t_ns)
+            return self._mag_flags(t_ns, False, "initialising")
+        self._propagate_without_gyro(t_ns)
+        var = self._mag_var.update(t_ns, nm)
+        dev = abs(nm - self.field_uT)
+        sigma2 = s.mag_noise_base ** 2 + s.k_m1 * dev + s.k_m2 * var  # eq. 18
+        self.mag_sigma2 = sigma2
+        R = quat.to_matrix(self.q)
+        up_b = (R[2][0], R[2][1], R[2][2])
+        sin_dip = -(up_b[0] * mx + up_b[1] * my + up_b[2] * mz) / nm
+        dip = math.asin(max(-1.0, min(1.0, sin_dip)))
+        if self.field_detector is not None:
+            st = self.field_detector.update(t_ns, (mx, my, mz), self.q)
+            if not st.trusted:
+                return self._mag_flags(t_ns, False, "not quasi-static: " + st.reason, sigma2=sigma2)
+        if dev > s.mag_reject_ratio * self.field_uT:
+            return self._mag_flags(t_ns, False, "norm off", sigma2=sigma2)
+        if abs(dip - self.dip_rad) > s.mag_reject_dip_rad:
+            return self._mag_flags(t_ns, False, "dip off", sigma2=sigma2)
+        acc = self._mag_sum
+        if acc[4] == 0:
+            acc[5] = t_ns
+        inv = 1.0 / nm
+        for i in range(3):
+            acc[i] += (R[i][0] * mx + R[i][1] * my + R[i][2] * mz) * inv  # unit field, navigation frame
+        acc[3] += sigma2
+        acc[4] += 1
+        if (t_ns - acc[5]) * 1e-9 < s.update_interval_s:
+            return self._mag_flags(t_ns, True, "used", sigma2=sigma2)
+        n = acc[4]
+        m_n = (acc[0] / n, acc[1] / n, acc[2] / n)
+        sigma2 = acc[3] / n
+        self._mag_sum = [0.0, 0.0, 0.0, 0.0, 0, 0]
+        if s.mag_mode == "full":
+            h = self._h_ref
+            nmn = math.sqrt(m_n[0] ** 2 + m_n[1] ** 2 + m_n[2] ** 2)
+            hb = tuple(R[0][j] * h[0] + R[1][j] * h[1] + R[2][j] * h[2] for j in range(3))  # R^T h
+            zb = tuple((R[0][j] * m_n[0] + R[1][j] * m_n[1] + R[2][j] * m_n[2]) / nmn for j in range(3))
+            y = np.array((zb[0] - hb[0], zb[1] - hb[1], zb[2] - hb[2]))
+            H = np.zeros((3, 6))
+            H[:, 0:3] = direction_jacobian(R, h)
+            used, reason, nis = self._correct(y, H, sigma2 * _I3, s.mag_gate_nis + 4.0)
+            self._record("mag", used, nis)
+            return self._mag_interval_done(t_ns, n, used, reason, nis=nis, dof=2, sigma2=sigma2,
+                                           innovation=tuple(y.tolist()))
+        h2 = m_n[0] ** 2 + m_n[1] ** 2
+        c2 = h2 / (h2 + m_n[2] ** 2)
+        if c2 < 0.01:  # field nearly vertical: no azimuth to measure
+            return self._mag_interval_done(t_ns, n, False, "field vertical", sigma2=sigma2)
+        y = np.array([wrap_angle(self._alpha_ref - math.atan2(m_n[1], m_n[0]))])
+        H = np.zeros((1, 6))
+        H[0, 0:3] = heading_jacobian(m_n)
+        r_angle = sigma2 / c2
+        used, reason, nis = self._correct(y, H, np.array([[r_angle]]), s.mag_gate_nis, consider_tilt=True,
+                                          bias_axis=np.array(up_b))
+        self._record("mag", used, nis)
+        if used:
+            self._yaw_from_mag = True
+            self._gated = []
+        elif reason == "gate":
+            self._relock(t_ns, float(y[0]))
+        return self._mag_interval_done(t_ns, n, used, reason, nis=nis, dof=1, sigma2=r_angle,
+                                       innovation=(float(y[0]),))
+
+    def _mag_interval_done(self, t_ns, n, used, reason, **kw) -> UpdateFlags:
+        """Flags of the reading that closed an interval; its ``n - 1`` earlier readings are re-counted if unused."""
+        if not used and n > 1:
+            r = self.mag_reasons
+            r["used"] = r.get("used", 0) - (n - 1)
+            r[reason] = r.get(reason, 0) + (n - 1)
+        return self._mag_flags(t_ns, used, reason, **kw)
+
+    def _relock(self, t_ns: int, innovation: float) -> None:
+        """Release the heading when the gate has rejected agreeing readings for ``mag_relock_s``."""
+        s = self.settings
+        g = self._gated
+        g.append((t_ns, innovation))
+        if (g[-1][0] - g[0][0]) * 1e-9 < s.mag_relock_s:
+            return
+        c = sum(math.cos(v) for _, v in g) / len(g)
+        sn = sum(math.sin(v) for _, v in g) / len(g)
+        spread = math.sqrt(max(-2.0 * math.log(max(math.hypot(c, sn), 1e-12)), 0.0))  # circular sd
+        self._gated = []
+        if spread < s.mag_relock_spread_rad:
+            P = self.P.copy()
+            P[2, :] = 0.0
+            P[:, 2] = 0.0
+            P[2, 2] = math.pi ** 2
+            self.P = P
+            self.n_heading_relocks += 1
+
+    def _mag_flags(self, t_ns, used, reason, dof=1, **kw) -> UpdateFlags:
+        self.mag_rejected = not used
+        key = reason.split(":")[0] if reason.startswith("not quasi-static") else reason
+        self.mag_reasons[key] = self.mag_reasons.get(key, 0) + 1
+        self.last_mag = UpdateFlags("mag", t_ns, used, reason, dof=dof, **kw)
+        return self.last_mag
+
+    # -- batch -------------------------------------------------------------------------------------
+    def run(self, recording) -> tuple[np.ndarray, np.ndarray]:
+        """Attitude after every event of a :class:`core.recording.Recording` (gyro, acc, mag in time order).
+
+        The same kernel as streaming; returns ``(t_ns (n,), q_wxyz (n, 4))``
+        with NaN rows before the filter has initialised.
+        """
+        self.reset()
+        names = [n for n in ("gyro", "acc", "mag") if recording.has(n)]
+        handlers = {"gyro": self.predict, "acc": self.update_acc, "mag": self.update_mag}
+        t_out, q_out = [], []
+        nan4 = (math.nan,) * 4
+        for name, t, v in recording.events(names):
+            handlers[name](t, v[0], v[1], v[2])
+            t_out.append(t)
+            q_out.append(self.q if self.initialized else nan4)
+        return np.array(t_out, dtype=np.int64), np.array(q_out, dtype=float).reshape(-1, 4)
+
+    def matrix(self):
+        """Current rotation matrix body -> ENU (3 row tuples)."""
+        return quat.to_matrix(self.q)
