@@ -22,6 +22,10 @@ loop closure (%)                 ``100 |p(t_N) - p(t_0)| / sum_k |L_{k+1} - L_k|
                                  for walks whose first and last landmark coincide
 segment heading error (deg)      ``wrap_angle(circmean(h_i, t_k < t_i <= t_{k+1}) - bearing_k)``
                                  with ``bearing_k = atan2(dN_k, dE_k)``
+distance from a GPS track (m)    ``d_k = |p(t_k) - p(t_0) + G_0 - G_k|`` for every fix ``k >= 1``
+                                 (track placed at the first fix at its time, absolute
+                                 heading); the headline is the median over the fixes
+the same, best-fit (m)           after the rotation about ``G_0`` minimising ``sum_k d_k^2``
 ===============================  ==========================================================
 """
 
@@ -303,6 +307,56 @@ def landmark_errors(track_t_ns, east_m, north_m, step_heading_rad, lm_t_ns, lm_e
     seg = segment_heading_errors(track_t_ns, step_heading_rad, lt, L[:, 0], L[:, 1])
     return LandmarkErrors(errors_m=err, errors_fit_m=err_fit, fit_rotation_rad=theta, loop_closure_pct=loop,
                           segment_heading_err_rad=seg, est_at_landmarks=placed, path_length_m=path)
+
+
+@dataclass
+class TrackErrors:
+    """Distances of one track from a dense reference track (see :func:`reference_track_errors`)."""
+
+    #: per reference fix (the first excluded: 0 by construction), absolute heading, m
+    errors_m: np.ndarray
+    #: the same after the best-fit rotation about the start, m
+    errors_fit_m: np.ndarray
+    fit_rotation_rad: float
+    #: our positions at the fix times, placed at the first fix (absolute heading), (n, 2)
+    est_at_fixes: np.ndarray
+
+    @property
+    def median_m(self) -> float:
+        return float(np.median(self.errors_m)) if len(self.errors_m) else math.nan
+
+    @property
+    def median_fit_m(self) -> float:
+        return float(np.median(self.errors_fit_m)) if len(self.errors_fit_m) else math.nan
+
+    @property
+    def p90_m(self) -> float:
+        return float(np.percentile(self.errors_m, 90)) if len(self.errors_m) else math.nan
+
+
+def reference_track_errors(track_t_ns, east_m, north_m, ref_t_ns, ref_east_m, ref_north_m,
+                           start=(0.0, 0.0)) -> TrackErrors:
+    """A track against a dense, time-stamped reference track (e.g. GPS fixes), time-aligned.
+
+    1. ``p(t)`` = our position at time ``t`` (:func:`positions_at`; before the
+       first step it is ``start``).
+    2. Place it at the first fix: ``p'(t_k) = p(t_k) - p(t_0) + G_0``.
+    3. ``d_k = |p'(t_k) - G_k|`` for every fix ``k >= 1``.
+    4. Shape error: the same after the rotation about ``G_0``
+       (:func:`best_fit_rotation`) that minimises ``sum_k d_k^2``.
+    """
+    rt = np.asarray(ref_t_ns, dtype=np.int64)
+    G = np.column_stack([np.asarray(ref_east_m, dtype=float), np.asarray(ref_north_m, dtype=float)])
+    if len(rt) < 2:
+        empty = np.zeros(0)
+        return TrackErrors(empty, empty, 0.0, np.zeros((len(rt), 2)))
+    p = positions_at(track_t_ns, east_m, north_m, rt, start=start)
+    rel = p - p[0]
+    placed = rel + G[0]
+    err = np.hypot(*(placed - G).T)[1:]
+    theta = best_fit_rotation(rel[1:], (G - G[0])[1:])
+    err_fit = np.hypot(*(rotate(rel, theta) + G[0] - G).T)[1:]
+    return TrackErrors(errors_m=err, errors_fit_m=err_fit, fit_rotation_rad=theta, est_at_fixes=placed)
 
 
 # ---------------------------------------------------------------------------

@@ -149,7 +149,7 @@ def test_ipin_real_landmarks_are_closed_loops_on_the_sensor_clock():
         assert abs(first_s - float(row["first_posi_s"])) < 1.0
         assert rec.has("rotvec") and rec.has("gyro") and rec.has("mag")
         assert t.info["phone"] == row["phone"]
-        assert t.declination_rad == pytest.approx(math.radians(4.02))
+        assert math.degrees(t.declination_rad) == pytest.approx(4.01, abs=0.01) and t.site is ipin2023.SITE
 
 
 @needs(ms_indoor)
@@ -170,3 +170,117 @@ def test_ms_real_traces():
             assert 45 < rec.streams[s].rate_hz < 55, s
         np.testing.assert_allclose(np.linalg.norm(rec.streams["rotvec"].values, axis=1), 1.0, atol=1e-6)
         assert rec.t0_ns - 1_000_000_000 <= lm.t_ns[0] <= rec.t1_ns
+
+
+# ---------------------------------------------------------------------------
+# splits
+
+
+def test_split_declarations():
+    from benchmarks import splits as S
+
+    assert [S.split_of("ipin2023_track3", {"route": r}) for r in ("01", "02", "21", "22")] == ["tuning"] * 4
+    assert [S.split_of("ipin2023_track3", {"route": r}) for r in ("04", "05", "23", "24")] == ["report"] * 4
+    with pytest.raises(ValueError, match="no declared split"):
+        S.split_of("ipin2023_track3", {"route": "03"})
+    assert [S.split_of("ms_indoor_location_2020", {"file_no": k}) for k in (1, 2, 3, 4)] == \
+        ["tuning", "report", "tuning", "report"]
+    for ds in ("oxford_step_counter", "brajdic_harle_handheld", "trundlewheel_distance", "sensorlogger_gps_walk_ethz"):
+        assert S.split_of(ds) == "report"
+    assert S.split_of("ipol_healthy_gait_xsens") == "tuning"
+    with pytest.raises(ValueError, match="declare it"):
+        S.split_of("some_new_dataset")
+    from benchmarks.run import DATASET_MODULES
+    import importlib
+
+    for mod in DATASET_MODULES:  # every dataset the benchmark runs has a declaration
+        name = importlib.import_module(f"benchmarks.datasets.{mod}").NAME
+        assert name in S.WHOLE_DATASET or name in ("ipin2023_track3", "ms_indoor_location_2020"), name
+
+
+def test_ms_split_numbers_files_in_the_sorted_folder(tmp_path):
+    folder = tmp_path / ms_indoor.NAME / "site9" / "F1" / "path_data_files"
+    folder.mkdir(parents=True)
+    wp = "".join(f"{1000 + 100 * k}\tTYPE_WAYPOINT\t{k}.0\t0.0\n" for k in range(3))
+    for name, text in (("b.txt", wp), ("a.txt", "1000\tTYPE_WAYPOINT\t0.0\t0.0\n"), ("c.txt", wp)):
+        (folder / name).write_text(text)
+    trials = ms_indoor.trials(tmp_path)
+    # a.txt (file 1) has too few waypoints and is skipped, but still counts for the numbering
+    assert [(t.name.split("/")[-1], t.info["file_no"]) for t in trials] == [("b", 2), ("c", 3)]
+    from benchmarks.splits import trial_split
+
+    assert [trial_split(t) for t in trials] == ["report", "tuning"]
+
+
+def test_site_declinations_come_from_the_world_magnetic_model():
+    pytest.importorskip("pygeomag")
+    # WMM2020 at Nuremberg 2023-06 and WMM2015v2 at Hangzhou 2019-11 (NOAA's calculator: +4.0 and -5.7 deg)
+    assert math.degrees(ipin2023.SITE.magnetic_field()[0]) == pytest.approx(4.01, abs=0.01)
+    assert math.degrees(ms_indoor.SITE.magnetic_field()[0]) == pytest.approx(-5.68, abs=0.01)
+
+
+def test_eth_reader_takes_the_gps_out_of_the_recording():
+    from benchmarks.datasets import eth_walk
+    from core.recording import Recording, make_stream
+
+    t = np.array([0, 1, 2, 3], dtype=np.int64) * 1_000_000_000 + 500_000_000
+    gps = np.array([[47.0, 8.0, 500.0, 24.0],  # a coarse first fix: not reference
+                    [47.0, 8.0, 500.0, 5.0], [47.0001, 8.0, 500.0, 4.0], [47.0002, 8.0, 500.0, np.nan]])
+    acc = make_stream("acc", t, np.tile([0.0, 0.0, 9.81], (4, 1)))
+    rec = Recording({"acc": acc, "gps": make_stream("gps", t, gps)}, metadata={"unix_offset_ns": 1679068247199000000})
+    fields = eth_walk.split_off_gps(rec)
+    assert not rec.has("gps") and rec.has("acc")
+    ref = fields["reference_track"]
+    np.testing.assert_array_equal(ref.t_ns, t[1:])
+    np.testing.assert_allclose(ref.north_m, [0.0, 11.12, 22.24], atol=0.01)
+    np.testing.assert_allclose(ref.east_m, 0.0, atol=1e-9)
+    assert fields["site"].lat_deg == 47.0 and fields["site"].alt_m == 500.0
+    assert fields["site"].when.year == 2023
+    assert math.degrees(fields["declination_rad"]) == pytest.approx(3.2, abs=0.3)  # WMM2020 near Zurich
+    assert fields["info"]["gps_fixes_dropped"] == 1
+    with pytest.raises(ValueError, match="no GPS"):
+        eth_walk.split_off_gps(rec)
+
+
+@needs(__import__("benchmarks.datasets.eth_walk", fromlist=["NAME"]))
+def test_eth_real_walk():
+    from benchmarks.datasets import eth_walk
+
+    trials = eth_walk.trials(ROOT)
+    assert len(trials) == 1
+    t = trials[0]
+    rec = t.open()
+    assert not rec.has("gps") and rec.has("acc") and rec.has("gyro") and rec.has("mag")
+    ref = t.reference_track
+    assert len(ref.t_ns) > 1000 and np.all(np.diff(ref.t_ns) > 0)
+    assert np.nanmax(ref.hacc_m) <= eth_walk.MAX_HACC_M
+    # README: GPS path about 694 m, of which ~65 m is the jump from the dropped coarse first fixes
+    assert 600 < polyline_length(ref.east_m, ref.north_m) < 700
+    assert rec.t0_ns <= ref.t_ns[0] and ref.t_ns[-1] <= rec.t1_ns + 1_000_000_000
+    assert math.degrees(t.declination_rad) == pytest.approx(3.26, abs=0.02)
+    assert t.placement == "hand_flat"
+
+
+@needs(ipin2023)
+def test_ipin_real_splits_by_route():
+    from benchmarks.splits import trial_split
+
+    trials = ipin2023.trials(ROOT)
+    by = {}
+    for t in trials:
+        by.setdefault(trial_split(t), set()).add(t.info["route"])
+    assert by == {"tuning": {"01", "02", "21", "22"}, "report": {"04", "05", "23", "24"}}
+
+
+@needs(ms_indoor)
+def test_ms_real_splits_alternate_over_the_sorted_files():
+    from benchmarks.splits import trial_split
+
+    trials = ms_indoor.trials(ROOT)
+    folder = ROOT / ms_indoor.NAME / "site2" / "F3" / "path_data_files"
+    files = sorted(p.name.split(".")[0] for p in folder.glob("*.txt*"))
+    for t in trials:
+        k = files.index(t.name.split("/")[-1]) + 1
+        assert t.info["file_no"] == k and trial_split(t) == ("tuning" if k % 2 else "report")
+    n = {s: sum(trial_split(t) == s for t in trials) for s in ("tuning", "report")}
+    assert n["tuning"] >= 15 and n["report"] >= 15

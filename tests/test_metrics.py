@@ -139,3 +139,23 @@ def test_summaries_ignore_nan():
     assert m.nanmedian([1.0, float("nan"), 3.0, 10.0]) == pytest.approx(3.0)
     assert m.nanmean([1.0, None, 3.0]) == pytest.approx(2.0)
     assert math.isnan(m.nanmean([]))
+
+
+def test_reference_track_errors_time_aligned_and_rotation_fitted():
+    # walk 10 m East in 10 one-metre steps (one per second from t = 1 s); the GPS says the walk went North
+    t_steps = (np.arange(1, 11) * 1e9).astype(np.int64)
+    east, north = m.dead_reckon(np.ones(10), np.zeros(10))
+    ref_t = (np.arange(0, 11) * 1e9).astype(np.int64)
+    ref_e = np.full(11, 100.0)
+    ref_n = 50.0 + np.arange(11.0)
+    te = m.reference_track_errors(t_steps, east, north, ref_t, ref_e, ref_n)
+    # at fix k the track is k m East of the start, the fix k m North: |(k, -k)| = k sqrt 2
+    np.testing.assert_allclose(te.errors_m, np.arange(1, 11) * math.sqrt(2), atol=1e-9)
+    assert te.median_m == pytest.approx(5.5 * math.sqrt(2))
+    assert math.degrees(te.fit_rotation_rad) == pytest.approx(90.0)
+    np.testing.assert_allclose(te.errors_fit_m, 0.0, atol=1e-9)
+    np.testing.assert_allclose(te.est_at_fixes[0], [100.0, 50.0])
+    # a fix between two steps sees the position interpolated within the step
+    te = m.reference_track_errors(t_steps, east, north, [0, 2_500_000_000], [0.0, 0.0], [0.0, 0.0])
+    assert te.errors_m[0] == pytest.approx(2.5)
+    assert math.isnan(m.reference_track_errors(t_steps, east, north, [0], [0.0], [0.0]).median_m)

@@ -42,6 +42,42 @@ class Landmarks:
 
 
 @dataclass
+class ReferenceTrack:
+    """A dense reference track (e.g. the recording's own GNSS fixes) on the recording clock, local ENU metres.
+
+    It is truth for the metrics only: readers remove its stream from the
+    recording before any estimator sees it.
+    """
+
+    t_ns: np.ndarray
+    east_m: np.ndarray
+    north_m: np.ndarray
+    #: geodetic origin (lat_deg, lon_deg) of the ENU frame: the first fix
+    origin_lat_lon: tuple[float, float]
+    #: horizontal accuracy of each fix (m, nan when unknown)
+    hacc_m: np.ndarray | None = None
+    #: where it comes from, e.g. "GPS (Sensor Logger Location.csv)"
+    source: str = ""
+
+
+@dataclass(frozen=True)
+class Site:
+    """Where and when a dataset was recorded: what a live app knows from a coarse location fix and its clock."""
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    #: a ``datetime.date`` / ``datetime.datetime`` (UTC) of the recording
+    when: object
+
+    def magnetic_field(self) -> tuple[float, float, float]:
+        """World Magnetic Model at the site: ``(declination_rad, inclination_rad, total_uT)`` (:mod:`core.geodesy`)."""
+        from core.geodesy import magnetic_field
+
+        return magnetic_field(self.lat_deg, self.lon_deg, self.alt_m, self.when)
+
+
+@dataclass
 class Trial:
     dataset: str
     name: str
@@ -64,8 +100,13 @@ class Trial:
     peer_step_counts: dict = field(default_factory=dict)
     notes: str = ""
     #: magnetic declination at the site (rad, east positive) when the landmarks are in a
-    #: true-north frame: a magnetic heading h becomes h - declination_rad there
+    #: true-north frame: a magnetic heading h becomes h - declination_rad there.  Our pipeline is
+    #: given it (``benchmarks.run.make_pipeline``); the peers' headings are corrected by it afterwards
     declination_rad: float | None = None
+    #: where and when the recording was made (the World Magnetic Model there), if known
+    site: Site | None = None
+    #: a dense reference track (GNSS) for the metrics, if the dataset has one
+    reference_track: ReferenceTrack | None = None
     #: free facts for the report (phone, route, surface, ...), name -> short value
     info: dict = field(default_factory=dict)
     #: ground truth that can only be read with the recording (e.g. landmarks whose clock the

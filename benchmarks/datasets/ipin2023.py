@@ -9,7 +9,7 @@ the app clock onto the sensor clock (see that module's docstring).
 
 Landmarks to metres.  The ``POSI`` latitude/longitude become local East/North
 metres on a tangent plane at the **first landmark** (WGS-84 radii of
-curvature, :func:`core.export.geodetic_to_enu`; error < 1 cm per 100 m).
+curvature, :func:`core.geodesy.geodetic_to_enu`; error < 1 cm per 100 m).
 The first landmark is the start of the walk proper: every file begins with
 20-40 s of arbitrary "calibration" motion and 20-40 s standing, and the
 first landmark comes about 61 s in.  The metrics place our track at that
@@ -19,26 +19,28 @@ filters run through it and must settle.
 Every training file is a closed loop (first and last landmark coincide).
 Placement: hand-held in front of face or chest ("reading/typing";
 ``hand``).  Magnetic declination at the Museum Industriekultur, Nuremberg
-(49.461 N, 11.111 E, 2023-06): +4.02 deg (WMM via ``ahrs.utils.WMM``); the
-landmarks are in a true-north frame.
+(49.461 N, 11.111 E, about 310 m, 2023-06-14): +4.01 deg (WMM2020 via
+:func:`core.geodesy.declination_rad`); the landmarks are in a true-north frame.
+
+Splits (:mod:`benchmarks.splits`): by route, ``info["route"]``.
 """
 
 from __future__ import annotations
 
-import math
+import datetime
 import re
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.datasets.base import Landmarks, Trial
-from core.export import geodetic_to_enu
+from benchmarks.datasets.base import Landmarks, Site, Trial
+from core.geodesy import geodetic_to_enu
 from core.recording import Recording
 
 NAME = "ipin2023_track3"
 
-#: magnetic declination at the site (deg, east positive): WMM at 49.461 N 11.111 E, 2023-06-14
-DECLINATION_DEG = 4.02
+#: the competition site, Museum Industriekultur, Nuremberg, at the IPIN 2023 training-data time
+SITE = Site(lat_deg=49.461, lon_deg=11.111, alt_m=310.0, when=datetime.date(2023, 6, 14))
 
 _FILE = re.compile(r"TrainingTrial(\d+)_repetition(\d+)")
 
@@ -77,12 +79,13 @@ def _resolve(rec: Recording) -> dict:
 
 def trials(root: Path) -> list[Trial]:
     out = []
+    declination = SITE.magnetic_field()[0]
     for path in sorted((Path(root) / NAME / "logfiles").glob("*.txt*")):
         m = _FILE.search(path.name)
         route, rep = (m.group(1), m.group(2)) if m else ("?", "?")
         out.append(Trial(
             dataset=NAME, name=f"T{route}r{rep}", load=(lambda p=path: load(p)), placement="hand",
-            declination_rad=math.radians(DECLINATION_DEG), info={"route": route, "repetition": rep},
+            declination_rad=declination, site=SITE, info={"route": route, "repetition": rep},
             resolve=_resolve,
         ))
     return out

@@ -20,28 +20,34 @@ from the south-west corner of the floor's GeoJSON bounding box: the map's
 width and height equal the box's extent in metres (checked on site2/F3:
 236.71 x 219.75 m both ways), so x is East and y is North and absolute
 headings can be compared.  The site (Hangzhou, 30.30 N 120.13 E, Nov 2019)
-has a magnetic declination of -5.65 deg (WMM via ``ahrs.utils.WMM``).
+has a magnetic declination of -5.68 deg (WMM2015v2 via
+:func:`core.geodesy.declination_rad`).
 The phone is "held flat in front of the body" (source README): placement
 ``hand_flat``.  The traces are short open paths (6-75 s); the filters get no
 time to settle before the first waypoint.
+
+Splits (:mod:`benchmarks.splits`): by ``info["file_no"]``, the 1-based number
+of the trace file in its folder sorted by file name (every trace file counts,
+also those skipped for having fewer than 3 waypoints).
 """
 
 from __future__ import annotations
 
+import datetime
 import gzip
 import math
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.datasets.base import Landmarks, Trial
+from benchmarks.datasets.base import Landmarks, Site, Trial
 from core.conventions import ACC, GYRO, MAG, ROTVEC
 from core.recording import Recording, make_stream, repair_recording
 
 NAME = "ms_indoor_location_2020"
 
-#: magnetic declination at the site (deg, east positive): WMM at 30.302 N 120.131 E, 2019-11-19
-DECLINATION_DEG = -5.65
+#: the site (Hangzhou) and the date of the site2 traces
+SITE = Site(lat_deg=30.302, lon_deg=120.131, alt_m=10.0, when=datetime.date(2019, 11, 19))
 
 _TYPES = {"TYPE_ACCELEROMETER": ACC, "TYPE_GYROSCOPE": GYRO, "TYPE_MAGNETIC_FIELD": MAG,
           "TYPE_ROTATION_VECTOR": ROTVEC}
@@ -142,16 +148,17 @@ def _waypoints_only(path: Path) -> Landmarks:
 def trials(root: Path, min_waypoints: int = 3) -> list[Trial]:
     """One trial per trace with at least ``min_waypoints`` waypoints (fewer give no segment to turn on)."""
     out = []
+    declination = SITE.magnetic_field()[0]
     for folder in sorted((Path(root) / NAME).glob("site*/*/path_data_files")):
         site, floor = folder.parent.parent.name, folder.parent.name
-        for path in sorted(folder.glob("*.txt*")):
+        for file_no, path in enumerate(sorted(folder.glob("*.txt*"), key=lambda p: p.name), start=1):
             lm = _waypoints_only(path)
             if len(lm.t_ns) < min_waypoints:
                 continue
             out.append(Trial(
                 dataset=NAME, name=f"{site}/{floor}/{path.name.split('.')[0]}",
                 load=(lambda p=path: parse_trace(p)[0]), placement="hand_flat", landmarks=lm,
-                declination_rad=math.radians(DECLINATION_DEG), info={"site": site, "floor": floor},
+                declination_rad=declination, site=SITE, info={"site": site, "floor": floor, "file_no": file_no},
                 resolve=lambda rec: {"info": {"phone": rec.device.get("Model", "")}},
             ))
     return out
