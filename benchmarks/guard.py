@@ -3,10 +3,11 @@
 ``python -m benchmarks.guard [--data DIR] [--jobs N] [--thresholds FILE] [--update]``
 
 Runs :func:`benchmarks.run.run` on the quick subset (our pipeline only, no
-peers: they cannot regress our numbers), computes the headline numbers and
-compares each with ``benchmarks/thresholds.json``::
+peers: they cannot regress our numbers), computes the headline numbers per
+split (:mod:`benchmarks.headline`; the quick subset holds recordings of both
+splits) and compares each with ``benchmarks/thresholds.json``::
 
-    {"metrics": {"handheld_step_mae_pct": {"max": 2.1, "baseline": 1.5}, ...}}
+    {"metrics": {"handheld_report_step_mae_pct": {"max": 2.1, "baseline": 1.5}, ...}}
 
 ``max``: fails when the value is above it; ``min``: fails when below.  The
 thresholds are a regression guard, not the issue's targets: the baseline
@@ -31,24 +32,30 @@ from pathlib import Path
 from benchmarks.datasets.base import default_data_root
 from benchmarks.headline import headline
 from benchmarks.run import run
+from benchmarks.splits import SPLITS
 
 THRESHOLDS = Path(__file__).with_name("thresholds.json")
 
-#: headlines guarded when thresholds are (re)written; "min" for higher-is-better
-GUARDED = {
-    "handheld_step_mae_pct": "max",
-    "oxford_all_step_mae_pct": "max",
-    "oxford_step_f1_median": "min",
-    "brajdic_harle_step_mae_pct": "max",
-    "ipin_landmark_median_m": "max",
-    "ipin_landmark_fit_median_m": "max",
-    "ipin_loop_closure_median_pct": "max",
-    "ipin_segment_heading_median_deg": "max",
-    "ms_landmark_fit_median_m": "max",
-    "ipol_step_mae_pct": "max",
-    "ipol_distance_mae_pct": "max",
-    "trundlewheel_distance_mae_pct": "max",
+#: headline metrics guarded when thresholds are (re)written, with ``*`` for the split; "min" for higher-is-better
+GUARDED_METRICS = {
+    "handheld_*_step_mae_pct": "max",
+    "oxford_*_all_step_mae_pct": "max",
+    "oxford_*_step_f1_median": "min",
+    "brajdic_harle_*_step_mae_pct": "max",
+    "ipin2023_*_landmark_median_m": "max",
+    "ipin2023_*_landmark_fit_median_m": "max",
+    "ipin2023_*_loop_closure_median_pct": "max",
+    "ipin2023_*_segment_heading_median_deg": "max",
+    "ms_indoor_*_landmark_median_m": "max",
+    "ms_indoor_*_landmark_fit_median_m": "max",
+    "eth_walk_*_gps_median_m": "max",
+    "eth_walk_*_gps_fit_median_m": "max",
+    "ipol_*_step_mae_pct": "max",
+    "ipol_*_distance_mae_pct": "max",
+    "trundlewheel_*_distance_mae_pct": "max",
 }
+#: every split's name of every guarded metric (a dataset has names only for the splits it has recordings in)
+GUARDED = {m.replace("*", sp): kind for m, kind in GUARDED_METRICS.items() for sp in SPLITS}
 
 
 def margin(name: str, value: float) -> float:

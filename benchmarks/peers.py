@@ -12,26 +12,39 @@ pipeline makes ours, so that **only the attitude differs**:
    which the pipeline reads ours;
 4. dead-reckon with our step lengths (:func:`benchmarks.metrics.dead_reckon`).
 
-Peers (all optional; a missing package or stream just drops that peer):
+Peers (all optional; a missing package or stream just drops that peer).
+Same treatment as ours (issue #8): every peer runs on its documented
+settings, none is tuned on any split, and none is given anything a live
+filter could not know -- a peer sees the recording causally (sample by
+sample) plus, at most, what a phone knows before the walk from a coarse
+location fix and its clock (the site's World Magnetic Model, through
+:mod:`core.geodesy`), exactly as our pipeline gets the site's declination.
 
 ``rotvec``
     The phone's own attitude: the Android rotation vector logged in the file
     (``rotvec`` stream: GetSensorData ``AHRS`` lines, ``TYPE_ROTATION_VECTOR``).
 ``imufusion``
     x-io Technologies' Fusion AHRS (``pip install imufusion``): gain 0.5,
-    acceleration and magnetic rejection 10 deg, 5 s rejection timeout (the
-    Fusion README's recommendations), with its gyroscope bias estimator.  The
-    ENU convention is set through the settings attribute: imufusion 1.3.3's
-    ``AhrsSettings(convention=...)`` keyword is parsed but not applied.
+    gyroscope range 2000 deg/s, acceleration and magnetic rejection 10 deg,
+    5 s rejection timeout -- the settings of the Fusion README's example
+    (its recommended use; the bare constructor defaults switch rejection
+    off), with its gyroscope bias estimator on its defaults.  Not tuned by
+    us.  The ENU convention is set through the settings attribute: imufusion
+    1.3.3's ``AhrsSettings(convention=...)`` keyword is parsed but not applied.
 ``madgwick``
     ``ahrs.filters.Madgwick`` (``pip install ahrs``), MARG update with its
     default gain.  It estimates body -> North-West-Up; we rotate its output to ENU.
 ``ekf``
-    ``ahrs.filters.EKF`` in its ENU frame, fixed noises (its defaults), with
-    the magnetic reference dip angle measured from the recording itself.  Its
+    ``ahrs.filters.EKF`` in its ENU frame, fixed noises (its defaults).  Its
+    magnetic reference is the one thing its documentation asks the user for
+    (its default is the World Magnetic Model at Munich): it gets the **WMM
+    dip angle at the recording's site and date** (``magnetic_dip_rad``), what
+    a live filter with a location fix knows before the first sample.  Until
+    issue #8 it was given the median dip of the whole recording, which no
+    live filter can know; without a site it keeps its own default.  Its
     ENU model references gravity as ``(0, 0, -1)``, so it is given the
     negated accelerometer (checked on a simulated tilted, turning phone in
-    ``tests/test_datasets.py``; fed the raw specific force it settles upside down).
+    ``tests/test_peers.py``; fed the raw specific force it settles upside down).
 
 The gyro-based peers run on the gyroscope timestamps with ``dt`` from them;
 accelerometer and magnetometer are interpolated linearly to those instants.
@@ -114,7 +127,10 @@ def synced_imu(rec: Recording, with_mag: bool = True):
 
 
 def dip_angle_rad(acc: np.ndarray, mag: np.ndarray) -> float:
-    """Median magnetic dip (rad, positive down) from paired specific force and field readings."""
+    """Median magnetic dip (rad, positive down) from paired specific force and field readings.
+
+    A diagnostic: over a whole recording it is hindsight, so no peer is given it.
+    """
     an = acc / np.linalg.norm(acc, axis=1, keepdims=True)
     mn = mag / np.linalg.norm(mag, axis=1, keepdims=True)
     return float(np.median(np.arcsin(np.clip(-np.sum(an * mn, axis=1), -1.0, 1.0))))
@@ -131,13 +147,13 @@ def _dts(t_ns: np.ndarray) -> np.ndarray:
 # the peers' attitudes
 
 
-def attitude_rotvec(rec: Recording) -> Attitude:
+def attitude_rotvec(rec: Recording, **_site) -> Attitude:
     s = rec.stream(ROTVEC, "the phone's rotation vector")
     q = s.values / np.linalg.norm(s.values, axis=1, keepdims=True)
     return Attitude(s.t_ns.copy(), q)
 
 
-def attitude_imufusion(rec: Recording) -> Attitude:
+def attitude_imufusion(rec: Recording, **_site) -> Attitude:
     import imufusion
 
     t, gyr, acc, mag = synced_imu(rec)
@@ -169,7 +185,7 @@ def _triad(acc, mag):
     return quat.from_two_vectors_enu(tuple(acc), tuple(mag))
 
 
-def attitude_madgwick(rec: Recording) -> Attitude:
+def attitude_madgwick(rec: Recording, **_site) -> Attitude:
     from ahrs.filters import Madgwick
 
     t, gyr, acc, mag = synced_imu(rec)
@@ -185,14 +201,16 @@ def attitude_madgwick(rec: Recording) -> Attitude:
     return Attitude(t, out)
 
 
-def attitude_ekf(rec: Recording) -> Attitude:
+def attitude_ekf(rec: Recording, magnetic_dip_rad: float | None = None, **_site) -> Attitude:
+    """ahrs' EKF; ``magnetic_dip_rad``: the site's WMM dip (None: the library's default reference, Munich)."""
     from ahrs.filters import EKF
 
     t, gyr, acc, mag = synced_imu(rec)
     if mag is None:
         raise ValueError("ekf peer needs a magnetometer")
     dt = _dts(t)
-    f = EKF(frame="ENU", magnetic_ref=math.degrees(dip_angle_rad(acc, mag)))
+    ref = None if magnetic_dip_rad is None else math.degrees(float(magnetic_dip_rad))
+    f = EKF(frame="ENU", magnetic_ref=ref)
     f.mag = mag  # its per-sample update() predicts the magnetometer only when this attribute is set
     q = np.array(_triad(acc[0], mag[0]))
     out = np.empty((len(t), 4))
@@ -242,14 +260,20 @@ def step_headings(att: Attitude, step_t_ns, *, grid_rate_hz: float = 50.0, cutof
     return heading[k]
 
 
-def run_peers(rec: Recording, step_t_ns, names=ALL_PEERS, **heading_kw) -> tuple[dict, dict]:
-    """Per-step headings of every peer that can run: ``({name: headings}, {name: error message})``."""
+def run_peers(rec: Recording, step_t_ns, names=ALL_PEERS, magnetic_dip_rad: float | None = None,
+              **heading_kw) -> tuple[dict, dict]:
+    """Per-step headings of every peer that can run: ``({name: headings}, {name: error message})``.
+
+    ``magnetic_dip_rad``: the site's World Magnetic Model dip, for the peers
+    that take a magnetic reference (``ekf``); ``heading_kw`` go to
+    :func:`step_headings`.
+    """
     out, errors = {}, {}
     for name in names:
         if not can_run(name, rec):
             continue
         try:
-            att = ATTITUDE[name](rec)
+            att = ATTITUDE[name](rec, magnetic_dip_rad=magnetic_dip_rad)
             out[name] = step_headings(att, step_t_ns, **heading_kw)
         except ImportError as e:
             errors[name] = f"not installed ({e.name})"

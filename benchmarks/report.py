@@ -11,8 +11,14 @@ from pathlib import Path
 
 import numpy as np
 
+import json
+
 from benchmarks import metrics as M
-from benchmarks.headline import evaluate_targets, headline
+from benchmarks.headline import PEERS, evaluate_targets, headline
+from benchmarks.splits import SPLITS
+
+#: the "before" column of issue #8 (headlines of the code before it, per split)
+BASELINE = Path(__file__).with_name("baseline_before.json")
 
 SOURCE_NAMES = {
     "ours": "ours (adaptive EKF)",
@@ -178,6 +184,32 @@ def landmark_tables(results: list[dict]) -> str:
     return "\n".join(out)
 
 
+def reference_tables(results: list[dict]) -> str:
+    """Tables of the recordings scored against a reference track (GPS)."""
+    rs = [r for r in results if "ref_sources" in r]
+    if not rs:
+        return "_No reference-track results._"
+    out = []
+    for r in rs:
+        out += [f"**{r['name']}** ({r['info'].get('phone', '')}): {r['n_fixes']} reference fixes over "
+                f"{r['ref_time_s'] / 60:.1f} min ({r.get('ref_source', '')}; median reported accuracy "
+                f"{_fmt(r.get('ref_hacc_median_m'), 1)} m, {r['info'].get('gps_fixes_dropped', 0)} fixes dropped), "
+                f"GPS path {r['ref_path_m']:.0f} m, our steps {r['steps_between_fixes']} covering "
+                f"{r['ref_distance_ours_m']:.0f} m; declination {r['declination_deg']:+.2f} deg (WMM). "
+                "Track placed at the first reference fix at its time, absolute heading; distances at every fix:", ""]
+        header = ["heading source", "median m", "best-rotation median m", "90th percentile m", "at the last fix m",
+                  "best rotation deg"]
+        rows = []
+        for name in PEER_ORDER:
+            s = r["ref_sources"].get(name)
+            if s is None:
+                continue
+            rows.append([SOURCE_NAMES[name], _fmt(s["median_m"], 1), _fmt(s["fit_median_m"], 1), _fmt(s["p90_m"], 1),
+                         _fmt(s["final_m"], 1), _fmt(s["fit_rotation_deg"], 1, True)])
+        out += [_table(header, rows), ""]
+    return "\n".join(out).rstrip()
+
+
 # ---------------------------------------------------------------------------
 # plots
 
@@ -219,9 +251,53 @@ def plot_trajectory(r: dict, path: Path, title: str) -> None:
     plt.close(fig)
 
 
+def plot_reference(r: dict, path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ref = r["ref_plot"]["reference"]
+    fig, ax = plt.subplots(figsize=(7, 6), dpi=90)
+    ax.plot(ref[:, 0], ref[:, 1], ".", color="k", ms=2, zorder=3, label="GPS fixes (reference, not used)")
+    ax.plot(ref[:1, 0], ref[:1, 1], "o", color="k", ms=6, zorder=4)
+    for name in PEER_ORDER:
+        tr = r["ref_plot"]["tracks"].get(name)
+        if tr is None:
+            continue
+        xy = tr["xy"]
+        lw, alpha = (2.0, 1.0) if name == "ours" else (1.0, 0.8)
+        ax.plot(xy[:, 0], xy[:, 1], color=COLOURS[name], lw=lw, alpha=alpha,
+                label=f"{SOURCE_NAMES[name]}: median {r['ref_sources'][name]['median_m']:.1f} m")
+        if name == "ours":
+            fit = M.rotate(xy - ref[0], tr["fit_rotation_rad"]) + ref[0]
+            ax.plot(fit[:, 0], fit[:, 1], "--", color=COLOURS[name], lw=1,
+                    label=f"ours, best rotation: median {r['ref_sources']['ours']['fit_median_m']:.1f} m")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("East (m)")
+    ax.set_ylabel("North (m)")
+    ax.grid(alpha=0.3)
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+
+
 def make_plots(results: list[dict], plots_dir: Path) -> dict:
-    """Worst and best trajectory of every landmark dataset (by our landmark error): ``{dataset: [(kind, path)]}``."""
+    """Worst and best trajectory of every landmark dataset (by our landmark error), and every
+    reference-track recording: ``{dataset: [(kind, name, path)]}``."""
     out = {}
+    for r in results:
+        if "ref_plot" in r and "ref_sources" in r:
+            p = plots_dir / f"{r['dataset']}.png"
+            try:
+                plot_reference(r, p, f"{r['dataset']} {r['name']} ({r.get('split', '')} split): median distance "
+                                     f"from GPS {r['ref_sources']['ours']['median_m']:.1f} m")
+            except ImportError:
+                return {}
+            out.setdefault(r["dataset"], []).append(("track", r["name"], p))
     by_ds = {}
     for r in results:
         if "plot" in r and "sources" in r and r["sources"]["ours"]["lm_mean_m"] == r["sources"]["ours"]["lm_mean_m"]:
@@ -232,7 +308,7 @@ def make_plots(results: list[dict], plots_dir: Path) -> dict:
         for kind, r in picks:
             p = plots_dir / f"{ds}_{kind}.png"
             try:
-                plot_trajectory(r, p, f"{ds} {r['name']} ({kind}): landmark error "
+                plot_trajectory(r, p, f"{ds} {r['name']} ({kind}, {r.get('split', '')} split): landmark error "
                                       f"{r['sources']['ours']['lm_mean_m']:.1f} m")
             except ImportError:
                 return {}
@@ -261,9 +337,67 @@ DATASET_TITLES = {
     "brajdic_harle_handheld": "Brajdic & Harle hand-held walks (manual step counts, counted inside the marked walk window)",
     "ipin2023_track3": "IPIN 2023 Track 3 (hand-held, closed loops, surveyed landmarks)",
     "ms_indoor_location_2020": "Microsoft indoor location 2020, site2/F3 (hand-held flat, surveyor waypoints, open paths)",
+    "sensorlogger_gps_walk_ethz": "ETH Zurich Sensor Logger walk (12 min outdoors, flat in hand; scored against its own "
+                                  "GPS, which the pipeline never sees)",
     "ipol_healthy_gait_xsens": "IPOL healthy gait (lower-back XSens, 2 x 10 m)",
     "trundlewheel_distance": "Trundle-wheel walks (web DeviceMotion, wheel distance)",
 }
+
+
+def _split_name(name: str):
+    """``ipin2023_report_landmark_median_m`` -> ``("ipin2023_*_landmark_median_m", "report")``."""
+    for sp in SPLITS:
+        tag = f"_{sp}_"
+        if tag in name:
+            a, b = name.split(tag, 1)
+            return f"{a}_*_{b}", sp
+    return name, None
+
+
+def headline_table(h: dict) -> str:
+    """All headlines, one row per metric, one column per split."""
+    rows: dict = {}
+    for name, v in h.items():
+        base, sp = _split_name(name)
+        rows.setdefault(base, {})[sp] = v
+    return _table(["headline (`*` = split)"] + [f"{sp} split" for sp in SPLITS],
+                  [[f"`{base}`"] + [_fmt(vals.get(sp), 3) for sp in SPLITS] for base, vals in rows.items()])
+
+
+def load_baseline(path: Path | None = None) -> dict | None:
+    try:
+        return json.loads(Path(BASELINE if path is None else path).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _is_peer(base: str) -> bool:
+    return any(f"_{p}_" in base for p in PEERS)
+
+
+def before_after_table(h: dict, baseline: dict, peers: bool = False) -> str:
+    """Headlines of the code before issue #8 (``baseline_before.json``) against this run, both splits.
+
+    ``peers``: the peers' headlines instead of ours.  Rows in headline order.
+    """
+    before = baseline.get("headline", {})
+    rows: dict = {}
+    for name in list(h) + [n for n in before if n not in h]:
+        base, sp = _split_name(name)
+        if sp is None or _is_peer(base) != peers:
+            continue
+        rows.setdefault(base, {})[sp] = (before.get(name), h.get(name))
+    header = ["headline (`*` = split)"]
+    for sp in SPLITS:
+        header += [f"{sp}: before", f"{sp}: now", f"{sp}: change"]
+    body = []
+    for base, vals in rows.items():
+        row = [f"`{base}`"]
+        for sp in SPLITS:
+            b, a = vals.get(sp, (None, None))
+            row += [_fmt(b, 3), _fmt(a, 3), _fmt(a - b, 3, True) if a is not None and b is not None else ""]
+        body.append(row)
+    return _table(header, body)
 
 
 def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
@@ -274,13 +408,20 @@ def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
     lines += [
         f"Generated by `{cmd}` on {_dt.date.today().isoformat()}, code `{_git_describe()}`, "
         f"{run_info['jobs']} processes on {platform.machine()} ({os.cpu_count()} cores): "
-        f"{len(results)} recordings in {run_info['wall_s']:.0f} s ({'quick subset' if run_info['quick'] else 'full run'}). "
+        f"{len(results)} recordings in {run_info['wall_s']:.0f} s ({'quick subset' if run_info['quick'] else 'full run'}"
+        f"{'' if not run_info.get('split') else ', ' + run_info['split'] + ' split only'}). "
         f"Heading peers: {', '.join(run_info['peers']) or 'none'}.",
         "",
         "Data: `../shared/data` (recordings by other people; never copied into this repository). "
         "Metric definitions: `benchmarks/metrics.py`; how each dataset is read: `benchmarks/datasets/`.",
         "",
-        "## Targets",
+        "**Splits** (`benchmarks/splits.py`): every recording is in the *tuning* split (parameters may be "
+        "chosen on it) or the *report* split (nothing is tuned on it; the targets are checked on it). "
+        "IPIN 2023: routes 01, 02, 21, 22 tuning, 04, 05, 23, 24 report; Microsoft traces: odd-numbered files "
+        "(sorted by name) tuning, even report; the ETH walk, Oxford, Brajdic-Harle and the trundle wheel: report; "
+        "IPOL: tuning (the stride model was fitted on it). Every number below names its split.",
+        "",
+        "## Targets (report split)",
         "",
     ]
     rows = []
@@ -290,37 +431,64 @@ def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
         status = {True: "met", False: "**missed**", None: "no data"}[t["met"]]
         rows.append([t["text"], f"`{t['metric']}`", _fmt(t["value"], 2), ref, status])
     lines += [_table(["target", "headline", "measured", "target", "status"], rows), ""]
-    lines += ["How the headlines are made: step-count MAE = mean over recordings of |our count - true count| / "
-              "true count; IPIN/MS landmark error = per recording, the mean distance between our position and "
-              "each landmark after the first (track placed at the first landmark at its time, absolute heading "
-              "from the magnetometer corrected by the site's declination, no rotation fitted), then the median "
-              "over recordings (`*_landmark_pooled_median_m` pools all landmarks instead); loop closure = "
-              "|end - start| of our track between the first and last landmark / landmark polyline length. "
+    lines += ["How the headlines are made (each over the recordings of its split only): step-count MAE = mean over "
+              "recordings of |our count - true count| / true count; IPIN/MS landmark error = per recording, the "
+              "mean distance between our position and each landmark after the first (track placed at the first "
+              "landmark at its time, absolute heading from the magnetometer and the site's declination from the "
+              "World Magnetic Model, no rotation fitted), then the median over recordings "
+              "(`*_landmark_pooled_median_m` pools all landmarks instead); loop closure = |end - start| of our "
+              "track between the first and last landmark / landmark polyline length; ETH walk = median over the "
+              "GPS fixes of the distance between the fix and our position at its time (track placed at the first "
+              "fix, absolute heading; `*_gps_fit_median_m` after the best rotation about the start). Peers: the "
+              "same steps and step lengths with their attitude (`benchmarks/peers.py`). "
               "Formulas: `benchmarks/metrics.py`.", ""]
+    baseline = load_baseline()
+    if baseline is not None:
+        lines += ["## Before and after issue #8", "",
+                  f"Before: the code before issue #8 (commit `{baseline.get('code', '?')}`, "
+                  f"`benchmarks/baseline_before.json`, made {baseline.get('generated', '?')}); now: this run. "
+                  "Same split definitions on both sides. In the before column the ahrs EKF peer was still given "
+                  "the median magnetic dip of its whole recording (hindsight; now the site's WMM dip), and the ETH "
+                  "walk row was made with the issue #8 reader on the old code.", ""]
+        if run_info.get("quick") or run_info.get("split"):
+            lines += ["_This run is not a full run: its numbers are over fewer recordings than the before "
+                      "column's._", ""]
+        lines += ["Ours:", "", before_after_table(h, baseline), "",
+                  "The peers (same steps and step lengths, their attitude):", "",
+                  before_after_table(h, baseline, peers=True), ""]
     discussion = Path(__file__).with_name("discussion.md")
     if discussion.exists():  # hand-written: why targets are missed, what was tried (kept across runs)
         lines += [discussion.read_text().rstrip(), ""]
-    lines += ["## Headline numbers", "",
-              _table(["headline", "value"], [[f"`{k}`", _fmt(v, 3)] for k, v in h.items()]), ""]
+    lines += ["## Headline numbers", "", headline_table(h), ""]
 
     errors = [r for r in results if "error" in r]
     by_ds: dict = {}
     for r in results:
         by_ds.setdefault(r["dataset"], []).append(r)
     for ds, info in run_info["datasets"].items():
-        rs = [r for r in by_ds.get(ds, []) if "error" not in r]
+        rs_all = [r for r in by_ds.get(ds, []) if "error" not in r]
         lines += [f"## {DATASET_TITLES.get(ds, ds)}", ""]
-        lines.append(f"`{ds}`: {info['n_run']} of {info['n_trials']} recordings run.")
+        per = ", ".join(f"{n} {sp}" for sp, n in info.get("splits", {}).items() if n)
+        lines.append(f"`{ds}`: {info['n_run']} of {info['n_trials']} recordings run ({per}).")
         lines.append("")
-        if any("steps_true" in r for r in rs):
-            lines += [step_table([r for r in rs if "steps_true" in r]), ""]
-            no_gt = [r["name"] for r in rs if "steps_true" not in r and "sources" not in r]
-            if no_gt:
-                lines += [f"Without step ground truth (run, not scored): {', '.join(no_gt)}.", ""]
-        elif any("distance_err_pct" in r for r in rs):
-            lines += [step_table(rs), ""]
-        if any("sources" in r for r in rs):
-            lines += [landmark_tables(rs), ""]
+        for sp in SPLITS:
+            rs = [r for r in rs_all if r.get("split") == sp]
+            if not rs:
+                continue
+            lines += [f"### {ds}: {sp} split ({len(rs)} recordings)", ""]
+            if any("steps_true" in r for r in rs):
+                lines += [step_table([r for r in rs if "steps_true" in r]), ""]
+                no_gt = [r["name"] for r in rs if "steps_true" not in r and "sources" not in r
+                         and "ref_sources" not in r]
+                if no_gt:
+                    lines += [f"Without step ground truth (run, not scored): {', '.join(no_gt)}.", ""]
+            elif any("distance_err_pct" in r for r in rs):
+                lines += [step_table(rs), ""]
+            if any("sources" in r for r in rs):
+                lines += [landmark_tables(rs), ""]
+            if any("ref_sources" in r for r in rs):
+                lines += [reference_tables(rs), ""]
+        rs = rs_all
         for kind, name, p in plots.get(ds, []):
             rel = os.path.relpath(p, out_path.parent)
             lines += [f"{kind.capitalize()} trajectory ({name}): ![{ds} {kind}]({rel})", ""]
@@ -343,7 +511,10 @@ def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
         lines += [f"* {k}: {v}" for k, v in run_info["import_errors"].items()]
         lines.append("")
     if run_info.get("stride_section"):
-        lines += [run_info["stride_section"].rstrip(), ""]
+        lines += [run_info["stride_section"].rstrip(), "",
+                  "_Splits of the step-length study: the IPOL walks are the tuning split (the models are fitted on "
+                  "them; the numbers above are leave-one-subject-out); its IPIN 2023 rows pool both IPIN splits "
+                  "(tuning and report routes) and its trundle-wheel rows are report split._", ""]
     runtime = M.nanmean([r.get("pipeline_s") for r in results])
     per_ev = [r["pipeline_s"] / r["events"] * 1e6 for r in results if r.get("events")]
     lines += ["## Run time", "",

@@ -1,20 +1,28 @@
 """The benchmark run: every dataset present, our pipeline and the peers on each recording.
 
-``python -m benchmarks [--data DIR] [--quick] [--out FILE] [--plots DIR] [--only DATASET] [--jobs N]``
+``python -m benchmarks [--data DIR] [--quick] [--out FILE] [--plots DIR] [--only DATASET] [--jobs N] [--split S]``
 
 For every trial of every dataset module found under the data root:
 
-1. load it (``Trial.open``) and run :class:`core.pdr.pipeline.Pipeline` once
-   (with the walker's height when the dataset gives it);
+1. load it (``Trial.open``) and run our pipeline once, built by
+   :func:`make_pipeline` (the walker's height when the dataset gives it, the
+   site's magnetic declination; the one construction the normal run and the
+   tuning harness :mod:`benchmarks.tune` share);
 2. steps: count in the walk window (the whole recording when the dataset
    marks none), step-count error, step timing F1 against the true instants;
    other counters' counts as peers;
 3. distance: sum of our step lengths in the walk window (or in the trial's
    measured ``legs``) against the truth;
 4. landmarks: our track and every heading peer's (:mod:`benchmarks.peers`:
-   same steps, same lengths, only the attitude differs), corrected by the
-   site's magnetic declination, against the landmarks
-   (:func:`benchmarks.metrics.landmark_errors`).
+   same steps, same lengths, only the attitude differs; the peers' magnetic
+   headings corrected by the site's declination afterwards), against the
+   landmarks (:func:`benchmarks.metrics.landmark_errors`);
+5. reference track (the ETH walk's own GPS, removed from the recording
+   before anything runs): the same tracks against every fix, time-aligned
+   (:func:`benchmarks.metrics.reference_track_errors`).
+
+Every result row carries its split (``"split"``: ``tuning`` or ``report``,
+declared in :mod:`benchmarks.splits`); ``--split`` runs one split only.
 
 Trials run in parallel processes (``--jobs``, default 2); progress goes to
 stderr, one line per recording.  The Markdown report and the plots are made
@@ -36,11 +44,14 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import metrics as M
+from benchmarks import splits as S
 from benchmarks.datasets.base import Trial, default_data_root
 from benchmarks.headline import evaluate_targets, headline
 
 #: dataset modules in report order (ipol and trundlewheel belong to the stride-length work; optional)
-DATASET_MODULES = ("oxford", "brajdic_harle", "ipin2023", "ms_indoor", "ipol", "trundlewheel")
+DATASET_MODULES = ("oxford", "brajdic_harle", "ipin2023", "ms_indoor", "eth_walk", "ipol", "trundlewheel")
+#: dataset modules with long recordings, started first
+LONG_FIRST = ("eth_walk", "trundlewheel")
 
 
 def dataset_modules(only: list[str] | None = None) -> tuple[list, dict]:
@@ -70,7 +81,10 @@ def quick_subset(dataset: str, trials: list[Trial]) -> list[int]:
     * Brajdic-Harle: all (short);
     * IPIN 2023: repetitions 01 and 03 of every route (one per phone);
     * MS indoor: every other trace;
+    * the ETH walk: its one recording;
     * IPOL, trundle wheel: the first four.
+
+    The subset mixes both splits; the guard's headlines are per split.
     """
     idx = list(range(len(trials)))
     if dataset == "oxford_step_counter":
@@ -90,6 +104,42 @@ def quick_subset(dataset: str, trials: list[Trial]) -> list[int]:
 
 
 # ---------------------------------------------------------------------------
+# our pipeline, built in one place
+
+
+def set_declination(pipeline, declination_rad: float) -> None:
+    """Give our attitude filter the site's magnetic declination (rad, east positive).
+
+    The one place the benchmark sets it: today ``AttitudeEKF.declination_rad``
+    (read at every magnetometer update, so setting it after construction is
+    the same as passing it to the constructor).
+    """
+    att = pipeline.attitude
+    if not hasattr(att, "declination_rad"):
+        raise TypeError(f"{type(att).__name__} has no declination_rad setting: adapt benchmarks.run.set_declination")
+    att.declination_rad = float(declination_rad)
+
+
+def make_pipeline(trial: Trial, **overrides):
+    """Our pipeline for one trial: ``core.pdr.pipeline.Pipeline(**defaults, **overrides)``.
+
+    Defaults from the trial: ``height_m`` (when the dataset knows the
+    walker's height).  ``overrides`` go to ``Pipeline`` unchanged (e.g.
+    ``attitude=SomeFilter(...)``, ``stride_model=...``) and win over the
+    defaults.  Then the site's magnetic declination (a fact of the trial, not
+    a setting) is given to whatever attitude filter the pipeline has
+    (:func:`set_declination`), so our headings are true-north headings.
+    """
+    from core.pdr.pipeline import Pipeline
+
+    kwargs = {"height_m": trial.subject.get("height_m") if trial.subject else None}
+    kwargs.update(overrides)
+    pipe = Pipeline(**kwargs)
+    set_declination(pipe, trial.declination_rad or 0.0)
+    return pipe
+
+
+# ---------------------------------------------------------------------------
 # one trial
 
 
@@ -99,21 +149,49 @@ def _in_window(t_ns: np.ndarray, window) -> np.ndarray:
     return (t_ns >= window[0]) & (t_ns <= window[1])
 
 
-def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True) -> dict:
-    """Run the pipeline (and peers) on one trial; every metric its ground truth allows, as a dict."""
-    from core.pdr.pipeline import Pipeline
-
+def _peer_headings(trial: Trial, rec, pipe, tr, peer_names, r: dict) -> dict:
+    """The peers' per-step headings, magnetic, as our pipeline would smooth and read them (``{name: h}``)."""
     from benchmarks import peers as P
 
+    if not peer_names or not len(tr):
+        return {}
+    dip = trial.site.magnetic_field()[1] if trial.site is not None else None
+    t_peer = time.perf_counter()
+    ph, perr = P.run_peers(rec, tr.t_ns, names=peer_names, magnetic_dip_rad=dip, grid_rate_hz=pipe.grid_rate_hz,
+                           cutoff_hz=pipe.smoother.cutoff_hz, delay_s=pipe.heading_delay_s,
+                           forward_b=pipe.smoother.forward_b)
+    r["peer_runtime_s"] = r.get("peer_runtime_s", 0.0) + time.perf_counter() - t_peer
+    if perr:
+        r["peer_errors"] = perr
+    return ph
+
+
+def _finite_headings(h) -> np.ndarray:
+    h = np.asarray(h, dtype=float)
+    if len(h) and not np.all(np.isfinite(h)):
+        h = np.where(np.isfinite(h), h, np.nanmean(h) if np.any(np.isfinite(h)) else 0.0)
+    return h
+
+
+def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True, pipeline_overrides=None) -> dict:
+    """Run the pipeline (and peers) on one trial; every metric its ground truth allows, as a dict.
+
+    ``pipeline_overrides``: keyword arguments for :func:`make_pipeline`
+    (passed on to ``Pipeline``).
+    """
     t0 = time.perf_counter()
+    split = S.trial_split(trial)
     rec = trial.open()
     t_load = time.perf_counter() - t0
-    height = trial.subject.get("height_m") if trial.subject else None
-    res = Pipeline(height_m=height).run(rec)
+    if trial.reference_track is not None and rec.has("gps"):
+        raise RuntimeError(f"{trial.name}: the GPS used as reference is still in the recording")
+    pipe = make_pipeline(trial, **(pipeline_overrides or {}))
+    res = pipe.run(rec)
     t_run = time.perf_counter() - t0 - t_load
     tr = res.track
     r: dict = {
-        "dataset": trial.dataset, "name": trial.name, "placement": trial.placement, "info": dict(trial.info),
+        "dataset": trial.dataset, "name": trial.name, "split": split, "placement": trial.placement,
+        "info": dict(trial.info), "declination_deg": math.degrees(trial.declination_rad or 0.0),
         "labels": list(res.labels), "duration_s": rec.duration_s,
         "events": int(sum(len(s) for n, s in rec.streams.items() if n in ("acc", "gyro", "mag"))),
         "n_steps_total": len(tr), "counters": dict(res.counters), "notes": trial.notes,
@@ -149,21 +227,18 @@ def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True) -> dic
     if "distance_true_m" in r:
         r["distance_err_pct"] = M.distance_error_pct(r["distance_ours_m"], r["distance_true_m"])
 
-    # -- landmarks
+    # -- headings of every source, true north: ours has the declination inside, the peers' get it here
     lm = trial.landmarks
-    if lm is not None and len(lm.t_ns) >= 2:
+    ref = trial.reference_track
+    headings = {}
+    if (lm is not None and len(lm.t_ns) >= 2) or (ref is not None and len(ref.t_ns) >= 2):
         decl = trial.declination_rad or 0.0
-        headings = {"ours": tr.heading_rad}
-        t_peer = time.perf_counter()
-        if peer_names and len(tr):
-            pipe = Pipeline()
-            ph, perr = P.run_peers(rec, tr.t_ns, names=peer_names, grid_rate_hz=pipe.grid_rate_hz,
-                                   cutoff_hz=pipe.smoother.cutoff_hz, delay_s=pipe.heading_delay_s,
-                                   forward_b=pipe.smoother.forward_b)
-            headings.update(ph)
-            if perr:
-                r["peer_errors"] = perr
-        r["peer_runtime_s"] = time.perf_counter() - t_peer
+        headings = {"ours": _finite_headings(tr.heading_rad)}
+        for name, h in _peer_headings(trial, rec, pipe, tr, peer_names, r).items():
+            headings[name] = _finite_headings(np.asarray(h, dtype=float) - decl)
+
+    # -- landmarks
+    if lm is not None and len(lm.t_ns) >= 2:
         lt = lm.t_ns
         seg = (tr.t_ns > lt[0]) & (tr.t_ns <= lt[-1])
         path = M.polyline_length(lm.east_m, lm.north_m)
@@ -175,9 +250,6 @@ def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True) -> dic
         r["sources"] = {}
         tracks = {}
         for name, h in headings.items():
-            h = np.asarray(h, dtype=float) - decl
-            if len(h) and not np.all(np.isfinite(h)):
-                h = np.where(np.isfinite(h), h, np.nanmean(h) if np.any(np.isfinite(h)) else 0.0)
             e, n = M.dead_reckon(tr.length_m, h)
             le = M.landmark_errors(tr.t_ns, e, n, h, lt, lm.east_m, lm.north_m)
             r["sources"][name] = {
@@ -193,6 +265,30 @@ def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True) -> dic
                 tracks[name] = {"xy": xy, "fit_rotation_rad": le.fit_rotation_rad}
         if keep_tracks:
             r["plot"] = {"landmarks": np.column_stack([lm.east_m, lm.north_m]), "tracks": tracks}
+
+    # -- a dense reference track (GPS): distance from it at every fix, time-aligned
+    if ref is not None and len(ref.t_ns) >= 2:
+        rt = ref.t_ns
+        seg = (tr.t_ns > rt[0]) & (tr.t_ns <= rt[-1])
+        r.update(n_fixes=len(rt), ref_path_m=M.polyline_length(ref.east_m, ref.north_m),
+                 ref_source=ref.source, ref_hacc_median_m=M.nanmedian(ref.hacc_m) if ref.hacc_m is not None else None,
+                 ref_distance_ours_m=float(np.sum(tr.length_m[seg])), ref_time_s=(rt[-1] - rt[0]) * 1e-9,
+                 steps_between_fixes=int(np.sum(seg)))
+        r["ref_sources"] = {}
+        tracks = {}
+        for name, h in headings.items():
+            e, n = M.dead_reckon(tr.length_m, h)
+            te = M.reference_track_errors(tr.t_ns, e, n, rt, ref.east_m, ref.north_m)
+            r["ref_sources"][name] = {"median_m": te.median_m, "fit_median_m": te.median_fit_m, "p90_m": te.p90_m,
+                                      "final_m": float(te.errors_m[-1]) if len(te.errors_m) else math.nan,
+                                      "fit_rotation_deg": math.degrees(te.fit_rotation_rad)}
+            if keep_tracks:
+                start = M.positions_at(tr.t_ns, e, n, rt[:1])[0]
+                xy = np.column_stack([e[seg], n[seg]]) - start
+                xy = np.vstack([[0.0, 0.0], xy]) + [ref.east_m[0], ref.north_m[0]]
+                tracks[name] = {"xy": xy, "fit_rotation_rad": te.fit_rotation_rad}
+        if keep_tracks:
+            r["ref_plot"] = {"reference": np.column_stack([ref.east_m, ref.north_m]), "tracks": tracks}
     r["runtime_s"] = time.perf_counter() - t0
     r["load_s"] = t_load
     r["pipeline_s"] = t_run
@@ -204,6 +300,13 @@ def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True) -> dic
 
 
 _TRIALS: dict = {}
+#: keyword-argument factory for our pipeline in this process (set in the workers by the pool initializer)
+_FACTORY = None
+
+
+def _set_factory(factory) -> None:
+    global _FACTORY
+    _FACTORY = factory
 
 
 def _trials_of(module_name: str, root: str) -> list[Trial]:
@@ -214,24 +317,35 @@ def _trials_of(module_name: str, root: str) -> list[Trial]:
     return _TRIALS[key]
 
 
-def _task(module_name: str, root: str, index: int, peer_names) -> dict:
+def _task(module_name: str, root: str, index: int, peer_names, keep_tracks: bool = True) -> dict:
     trial = _trials_of(module_name, root)[index]
     try:
-        return evaluate_trial(trial, peer_names)
+        overrides = _FACTORY() if _FACTORY is not None else None
+        return evaluate_trial(trial, peer_names, keep_tracks=keep_tracks, pipeline_overrides=overrides)
     except Exception as e:  # one bad recording must not stop the run
         import traceback
 
-        return {"dataset": trial.dataset, "name": trial.name, "placement": trial.placement,
-                "info": dict(trial.info), "error": f"{type(e).__name__}: {e}",
+        return {"dataset": trial.dataset, "name": trial.name, "split": S.trial_split(trial),
+                "placement": trial.placement, "info": dict(trial.info), "error": f"{type(e).__name__}: {e}",
                 "traceback": traceback.format_exc(limit=3)}
 
 
-def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names=None,
-        log=sys.stderr) -> dict:
-    """Evaluate every trial present; returns ``{"results": [...], "datasets": {...}, ...}``."""
+def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names=None, split: str | None = None,
+        pipeline_kwargs_factory=None, keep_tracks: bool = True, log=sys.stderr) -> dict:
+    """Evaluate every trial present; returns ``{"results": [...], "datasets": {...}, ...}``.
+
+    ``split``: only the recordings of this split (:mod:`benchmarks.splits`).
+    ``pipeline_kwargs_factory``: a callable with no arguments returning the
+    keyword overrides for our pipeline (:func:`make_pipeline`), called once
+    per recording so that every recording gets fresh filter objects.  With
+    ``jobs > 1`` it reaches the worker processes through the pool's
+    initializer (Linux forks them, so a lambda or closure works).
+    """
     from benchmarks import peers as P
 
     root = Path(root)
+    if split is not None:
+        S.check_split(split)
     if peer_names is None:
         peer_names = P.QUICK_PEERS if quick else P.ALL_PEERS
     peer_names = tuple(P.available_peers(peer_names))
@@ -243,12 +357,19 @@ def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names
             continue
         trials = _trials_of(short, str(root))
         idx = quick_subset(mod.NAME, trials) if quick else list(range(len(trials)))
+        if split is not None:
+            idx = [i for i in idx if S.trial_split(trials[i]) == split]
+            if not idx:
+                continue
         datasets[mod.NAME] = {"module": short, "n_trials": len(trials), "n_run": len(idx),
+                              "splits": {sp: sum(1 for i in idx if S.trial_split(trials[i]) == sp) for sp in S.SPLITS},
                               "doc": (mod.__doc__ or "").strip().split("\n")[0]}
-        tasks += [(short, str(root), i, peer_names) for i in idx]
+        tasks += [(short, str(root), i, peer_names, keep_tracks) for i in idx]
     print(f"benchmark: {len(tasks)} recordings in {len(datasets)} datasets under {root} "
-          f"({'quick' if quick else 'full'} run, {jobs} processes, peers: {', '.join(peer_names) or 'none'})",
-          file=log, flush=True)
+          f"({'quick' if quick else 'full'} run{'' if split is None else ', ' + split + ' split'}, {jobs} processes, "
+          f"peers: {', '.join(peer_names) or 'none'})", file=log, flush=True)
+    # the longest recordings first, so that the two processes finish together
+    tasks.sort(key=lambda task: task[0] not in LONG_FIRST)
     t0 = time.perf_counter()
     results = []
     done = 0
@@ -260,10 +381,16 @@ def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names
         print(f"[{done:3d}/{len(tasks)}] {r['dataset']}/{r['name']}: {_progress_line(r)}", file=log, flush=True)
 
     if jobs <= 1:
-        for task in tasks:
-            report(_task(*task))
+        previous = _FACTORY
+        _set_factory(pipeline_kwargs_factory)
+        try:
+            for task in tasks:
+                report(_task(*task))
+        finally:
+            _set_factory(previous)
     else:
-        with ProcessPoolExecutor(max_workers=jobs) as ex:
+        with ProcessPoolExecutor(max_workers=jobs, initializer=_set_factory,
+                                 initargs=(pipeline_kwargs_factory,)) as ex:
             futures = [ex.submit(_task, *task) for task in tasks]
             for f in as_completed(futures):
                 report(f.result())
@@ -272,7 +399,7 @@ def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names
     results.sort(key=lambda r: (rank.get(r["dataset"], len(rank)), r["name"]))
     print(f"benchmark: done in {wall:.0f} s", file=log, flush=True)
     return {"results": results, "datasets": datasets, "import_errors": import_errors, "wall_s": wall,
-            "quick": quick, "jobs": jobs, "peers": list(peer_names), "root": str(root)}
+            "quick": quick, "jobs": jobs, "peers": list(peer_names), "root": str(root), "split": split}
 
 
 def _progress_line(r: dict) -> str:
@@ -292,6 +419,9 @@ def _progress_line(r: dict) -> str:
             parts.append(f"loop {s['loop_pct']:.1f} %")
         if "rotvec" in r["sources"]:
             parts.append(f"rotvec {r['sources']['rotvec']['lm_mean_m']:.1f} m")
+    if "ref_sources" in r:
+        s = r["ref_sources"]["ours"]
+        parts.append(f"from GPS: median {s['median_m']:.1f} m (best rotation {s['fit_median_m']:.1f} m)")
     return ", ".join(parts)
 
 
@@ -309,6 +439,8 @@ def parse_args(argv=None):
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), help="parallel processes (default 2)")
     ap.add_argument("--peers", default=None,
                     help="comma-separated heading peers (default: all installed; quick: rotvec,imufusion)")
+    ap.add_argument("--split", choices=S.SPLITS, default=None,
+                    help="run only this split (default: both; see benchmarks/splits.py)")
     return ap.parse_args(argv)
 
 
@@ -319,8 +451,8 @@ def main(argv=None) -> int:
         print(f"benchmark: no data folder at {root}", file=sys.stderr)
         return 2
     peer_names = tuple(p for p in args.peers.split(",") if p) if args.peers is not None else None
-    run_info = run(root, quick=args.quick, only=args.only, jobs=args.jobs, peer_names=peer_names)
-    if not args.quick and not args.only:
+    run_info = run(root, quick=args.quick, only=args.only, jobs=args.jobs, peer_names=peer_names, split=args.split)
+    if not args.quick and not args.only and args.split is None:
         # issue #4: leave-one-subject-out study of the stride models (trains them; about a minute)
         from benchmarks.stride_eval import stride_section
 

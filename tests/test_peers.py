@@ -32,7 +32,8 @@ def test_every_peer_tracks_the_heading_of_a_tilted_turning_phone(name):
         pytest.skip(f"{name} not installed")
     rec, tn, heading = turning_phone()
     steps = tn[::50][10:-2]
-    out, errors = peers.run_peers(rec, steps, names=(name,), delay_s=0.0, cutoff_hz=5.0)
+    dip = math.atan2(40.0, 20.0)  # the simulated site's field (0, 20, -40) uT
+    out, errors = peers.run_peers(rec, steps, names=(name,), magnetic_dip_rad=dip, delay_s=0.0, cutoff_hz=5.0)
     assert not errors
     err = np.degrees((out[name] - heading[::50][10:-2] + np.pi) % (2 * np.pi) - np.pi)
     assert np.max(np.abs(err[5:])) < 2.0  # what is left is the smoother's lag at 17 deg/s
@@ -54,21 +55,137 @@ def test_dip_angle():
 
 def test_headline_targets_and_guard_compare():
     results = [
-        {"dataset": "oxford_step_counter", "name": "a", "placement": "hand", "step_err_pct": 1.0, "step_f1": 0.99},
-        {"dataset": "oxford_step_counter", "name": "b", "placement": "bag", "step_err_pct": -5.0, "step_f1": 0.9},
-        {"dataset": "brajdic_harle_handheld", "name": "c", "placement": "hand", "step_err_pct": -3.0},
-        {"dataset": "ipin2023_track3", "name": "d", "placement": "hand", "lm_distance_err_pct": 2.0,
-         "sources": {"ours": {"lm_mean_m": 2.0, "lm_fit_mean_m": 1.0, "loop_pct": 1.5, "seg_heading_deg": 5.0},
+        {"dataset": "oxford_step_counter", "name": "a", "split": "report", "placement": "hand", "step_err_pct": 1.0,
+         "step_f1": 0.99},
+        {"dataset": "oxford_step_counter", "name": "b", "split": "report", "placement": "bag", "step_err_pct": -5.0,
+         "step_f1": 0.9},
+        {"dataset": "brajdic_harle_handheld", "name": "c", "split": "report", "placement": "hand",
+         "step_err_pct": -3.0},
+        {"dataset": "ipin2023_track3", "name": "d", "split": "report", "placement": "hand", "lm_distance_err_pct": 2.0,
+         "sources": {"ours": {"lm_mean_m": 1.5, "lm_fit_mean_m": 1.0, "loop_pct": 1.5, "seg_heading_deg": 5.0},
                      "rotvec": {"lm_mean_m": 4.0, "lm_fit_mean_m": 1.0, "loop_pct": 3.0, "seg_heading_deg": 5.0}}},
+        # a tuning-split recording must not move the report numbers
+        {"dataset": "ipin2023_track3", "name": "e", "split": "tuning", "placement": "hand", "lm_distance_err_pct": 9.0,
+         "sources": {"ours": {"lm_mean_m": 9.0, "lm_fit_mean_m": 9.0, "loop_pct": 9.0, "seg_heading_deg": 9.0}}},
+        {"dataset": "ms_indoor_location_2020", "name": "f", "split": "report", "placement": "hand_flat",
+         "lm_distance_err_pct": 1.0,
+         "sources": {"ours": {"lm_mean_m": 2.0, "lm_fit_mean_m": 1.0, "loop_pct": math.nan, "seg_heading_deg": 5.0},
+                     "rotvec": {"lm_mean_m": 2.5, "lm_fit_mean_m": 1.0, "loop_pct": math.nan, "seg_heading_deg": 5.0},
+                     "ekf": {"lm_mean_m": 2.2, "lm_fit_mean_m": 1.0, "loop_pct": math.nan, "seg_heading_deg": 5.0}}},
+        {"dataset": "sensorlogger_gps_walk_ethz", "name": "g", "split": "report", "placement": "hand_flat",
+         "ref_sources": {"ours": {"median_m": 12.0, "fit_median_m": 5.0}}},
+        {"dataset": "ipin2023_track3", "name": "h", "split": "report", "error": "ValueError: broken"},
     ]
     h = run.headline(results)
-    assert h["handheld_step_mae_pct"] == pytest.approx(2.0)
-    assert h["oxford_all_step_mae_pct"] == pytest.approx(3.0)
-    assert h["ipin_rotvec_landmark_median_m"] == pytest.approx(4.0)
-    assert all(t["met"] for t in run.evaluate_targets(h))
-    rows, ok = guard.compare(h, {"handheld_step_mae_pct": {"max": 1.5}, "oxford_step_f1_median": {"min": 0.9},
-                                 "ms_landmark_fit_median_m": {"max": 3.0}})
+    assert h["handheld_report_step_mae_pct"] == pytest.approx(2.0)
+    assert h["oxford_report_all_step_mae_pct"] == pytest.approx(3.0)
+    assert h["ipin2023_report_landmark_median_m"] == pytest.approx(1.5)
+    assert h["ipin2023_tuning_landmark_median_m"] == pytest.approx(9.0)
+    assert h["ipin2023_report_rotvec_landmark_median_m"] == pytest.approx(4.0)
+    assert "ipin2023_tuning_rotvec_landmark_median_m" not in h  # the peer did not run on every tuning recording
+    assert h["eth_walk_report_gps_median_m"] == 12.0 and h["eth_walk_report_gps_fit_median_m"] == 5.0
+    assert not any("handheld_tuning" in k or "eth_walk_tuning" in k for k in h)
+    targets = {(t["metric"], t["ref"]): t for t in run.evaluate_targets(h)}
+    assert all(t["met"] for t in targets.values()), targets
+    ms = targets[("ms_indoor_report_landmark_median_m", "ms_indoor_report_ekf_landmark_median_m")]
+    assert ms["limit"] == 2.2  # better than every peer: the best peer is the limit
+    h2 = dict(h, ms_indoor_report_landmark_median_m=2.3, ipin2023_report_loop_closure_median_pct=3.01)
+    missed = {t["metric"] for t in run.evaluate_targets(h2) if t["met"] is False}
+    assert missed == {"ms_indoor_report_landmark_median_m", "ipin2023_report_loop_closure_median_pct"}
+    assert all(t["met"] is None for t in run.evaluate_targets({}))
+    rows, ok = guard.compare(h, {"handheld_report_step_mae_pct": {"max": 1.5},
+                                 "oxford_report_step_f1_median": {"min": 0.9},
+                                 "ms_indoor_tuning_landmark_fit_median_m": {"max": 3.0}})
     assert not ok
     assert [r[3].split()[0] for r in rows] == ["WORSE", "ok", "absent"]
     th = guard.thresholds_from(h)
-    assert th["handheld_step_mae_pct"] == {"max": 2.5, "baseline": 2.0}
+    assert th["handheld_report_step_mae_pct"] == {"max": 2.5, "baseline": 2.0}
+    assert th["ipin2023_tuning_landmark_median_m"] == {"max": 9.9, "baseline": 9.0}
+    assert "ipin2023_report_rotvec_landmark_median_m" not in th  # peers are not guarded
+
+
+def test_ekf_peer_gets_the_site_dip_not_the_recordings():
+    if "ekf" not in peers.available_peers(("ekf",)):
+        pytest.skip("ahrs not installed")
+    from unittest import mock
+
+    rec, tn, _ = turning_phone(duration_s=3.0)
+    seen = []
+    import ahrs.filters
+
+    real = ahrs.filters.EKF
+
+    def spy(*a, **kw):
+        seen.append(kw.get("magnetic_ref"))
+        return real(*a, **kw)
+
+    with mock.patch.object(ahrs.filters, "EKF", spy):
+        peers.attitude_ekf(rec, magnetic_dip_rad=math.radians(50.0))
+        peers.attitude_ekf(rec)
+    # the simulated field dips 63.4 deg: the peer must get the site's 50 deg, or its own default (None)
+    assert seen == [pytest.approx(50.0), None]
+
+
+def test_make_pipeline_passes_overrides_and_sets_the_declination():
+    from core.pdr.pipeline import Pipeline
+
+    from benchmarks.datasets.base import Trial
+
+    trial = Trial(dataset="d", name="n", load=lambda: None, subject={"height_m": 1.8}, declination_rad=0.07)
+    pipe = run.make_pipeline(trial)
+    assert isinstance(pipe, Pipeline) and pipe.height_m == 1.8
+    assert pipe.attitude.declination_rad == pytest.approx(0.07)
+    custom = type(pipe.attitude)()
+    pipe = run.make_pipeline(trial, attitude=custom, height_m=None, min_bout_steps=1)
+    assert pipe.attitude is custom and custom.declination_rad == pytest.approx(0.07)
+    assert pipe.height_m is None and pipe.min_bout_steps == 1
+
+    class NoDeclination:
+        pass
+
+    p = type("P", (), {"attitude": NoDeclination()})()
+    with pytest.raises(TypeError, match="declination_rad"):
+        run.set_declination(p, 0.1)
+
+
+def test_tuning_harness_refuses_the_report_split(tmp_path):
+    from benchmarks import tune
+
+    with pytest.raises(tune.ReportSplitError):
+        tune.evaluate(split="report", data_root=tmp_path)
+    with pytest.raises(ValueError):
+        tune.evaluate(split="everything", data_root=tmp_path)
+    # allowed explicitly, it gets as far as looking for the data
+    with pytest.raises(FileNotFoundError):
+        tune.evaluate(split="report", allow_report=True, data_root=tmp_path / "missing")
+    assert tune.main(["--split", "report", "--data", str(tmp_path)]) == 2
+    assert tune._parse_set(["min_bout_steps=2", "grid_rate_hz=50.0"]) == {"min_bout_steps": 2, "grid_rate_hz": 50.0}
+
+
+def test_report_labels_splits_and_compares_with_the_baseline(tmp_path, monkeypatch):
+    from benchmarks import report
+
+    base = {"dataset": "oxford_step_counter", "placement": "hand", "steps_true": 100, "info": {},
+            "labels": [], "duration_s": 60.0, "events": 1000, "pipeline_s": 0.1}
+    results = [dict(base, name="a", split="report", steps_ours=101, step_err_pct=1.0),
+               {"dataset": "sensorlogger_gps_walk_ethz", "name": "walk", "split": "report", "placement": "hand_flat",
+                "info": {"phone": "X", "gps_fixes_dropped": 3}, "labels": [], "n_fixes": 100, "ref_time_s": 600.0,
+                "ref_source": "GPS", "ref_hacc_median_m": 4.7, "ref_path_m": 600.0, "steps_between_fixes": 700,
+                "ref_distance_ours_m": 500.0, "declination_deg": 3.26,
+                "ref_sources": {"ours": {"median_m": 12.0, "fit_median_m": 5.0, "p90_m": 20.0, "final_m": 30.0,
+                                         "fit_rotation_deg": 10.0}}}]
+    baseline = tmp_path / "baseline.json"
+    baseline.write_text('{"code": "abc1234", "headline": {"oxford_report_all_step_mae_pct": 2.0, '
+                        '"eth_walk_report_gps_median_m": 70.0, "ipin2023_tuning_landmark_median_m": 2.5}}')
+    monkeypatch.setattr(report, "BASELINE", baseline)
+    run_info = {"results": results, "jobs": 2, "wall_s": 1.0, "quick": False, "peers": [], "split": None,
+                "datasets": {"oxford_step_counter": {"n_run": 1, "n_trials": 1, "splits": {"tuning": 0, "report": 1}},
+                             "sensorlogger_gps_walk_ethz": {"n_run": 1, "n_trials": 1,
+                                                            "splits": {"tuning": 0, "report": 1}}}}
+    text = report.build(run_info, {}, tmp_path / "RESULTS.md")
+    assert "## Targets (report split)" in text and "### oxford_step_counter: report split (1 recordings)" in text
+    assert "| `oxford_*_all_step_mae_pct` |  |  |  | 2.000 | 1.000 | -1.000 |" in text
+    assert "| `eth_walk_*_gps_median_m` |  |  |  | 70.000 | 12.000 | -58.000 |" in text
+    assert "| `ipin2023_*_landmark_median_m` | 2.500 |  |  |  |  |  |" in text
+    assert "median distance from its own GPS track" in text and "| ours (adaptive EKF) | 12.0 | 5.0 |" in text
+    assert "tuning split" in text  # the headline table has a column per split
