@@ -2,107 +2,146 @@
 
 :func:`simulate_walk` turns a polyline of waypoints into a
 :class:`~core.recording.Recording` (streams ``acc``, ``gyro``, ``mag``, each on
-its own jittered clock) plus a :class:`WalkTruth` (heel strikes, positions,
-step lengths, headings, dense attitude).  :func:`demo_walk` is the bundled
-demo.  All quantities follow the conventions of :mod:`core` (ENU, Android
-device frame, quaternion ``(w, x, y, z)`` body -> ENU, ``t_ns`` int64, SI, uT).
+its own jittered clock) plus a :class:`WalkTruth` (heel strikes, per-step
+lengths, positions, walking and device headings, dense attitude, sensor
+biases, the true magnetic field).  :func:`demo_walk` is the bundled demo.  All
+quantities follow the conventions of :mod:`core` (ENU, Android device frame,
+quaternion ``(w, x, y, z)`` body -> ENU, ``t_ns`` int64, SI, uT).
+
+The simulator is deliberately built from its own models, none of the
+pipeline's: no low-pass filter, no step-length model and no step detector of
+:mod:`core.pdr` is used to make the signals, so a test of the pipeline
+against this truth can fail.
 
 The model
 =========
-Everything is a closed-form function of time ``t``; each sensor is sampled
-by evaluating those functions at its own (integer-nanosecond) sample times,
-so every sensor is consistent with the truth by construction.
+Everything is a closed-form (or spline) function of time ``t``; each sensor
+is sampled by evaluating those functions at its own integer-nanosecond sample
+times, so every sensor is consistent with the truth by construction.
 
 Timeline
     ``[calibration_motion_s]`` (optional phone waving while standing) ->
     ``[still_start_s]`` standing, phone in the walking pose -> walking ->
     ``[still_end_s]`` standing.
 
-Walker (the truth path)
+Cadence and step length
+    The mean step length follows the *walk ratio* (step length / step rate),
+    which is nearly constant for a person over the range of normal walking
+    speeds: about 0.0064 m/(steps/min) for young adults of about 1.72 m
+    (Sekiya & Nagasaki 1998, "Reproducibility of the walking patterns of
+    normal young adults: test-retest reliability of the walk ratio",
+    Gait & Posture 7(3):225-227).  Scaled with body height here:
+    ``step_length = WALK_RATIO_PER_HEIGHT * height * 60 * step_frequency``
+    with ``WALK_RATIO_PER_HEIGHT = 0.00372 /min``, i.e. 0.70 m for 1.75 m at
+    1.8 steps/s (``step_length_m`` overrides it).
+
+The plan (walker's path)
     The walker follows the polyline at the cruise speed
     ``v = step_frequency_hz * step_length_m``.  Each corner is rounded by a
-    circular arc walked at exactly ``turn_rate_deg_s``, so its radius is
-    ``r = v / turn_rate`` and it cuts ``r (2 tan(|turn|/2) - |turn|)`` off the
-    polyline (0.34 m for a 90 deg corner with the defaults).  A corner may use
-    half of each adjacent segment; where the full-speed arc does not fit,
-    the walker slows down to the speed whose arc fits, down to turning on
-    the spot (U-turn).  Speed changes are cosine ramps that last one step
-    period for a change of ``v`` (shorter changes proportionally, so the
-    peak acceleration is always ``pi v f / 2``, 3.6 m/s^2 with the
-    defaults); a forward and a backward pass make every corner speed
-    reachable, and segments too short to reach ``v`` peak lower.  Walking
-    starts and ends at rest.  Position and speed are continuous; heading
-    rate and path acceleration jump at the ends of arcs.
+    circular arc walked at ``turn_rate_deg_s``, radius ``r = v / turn_rate``,
+    cutting ``r (2 tan(|turn|/2) - |turn|)`` off the polyline.  A corner may
+    use half of each adjacent segment; where the full-speed arc does not fit,
+    the walker slows down to the speed whose arc fits, down to turning on the
+    spot (U-turn).  Speed changes are cosine ramps lasting 1.5 step periods
+    for a change of ``v`` (a peak acceleration of ``pi v f / 3``, 2.4 m/s^2 with
+    the defaults); walking starts and ends at rest, so ``n_steps`` is about
+    ``path_length / step_length + 1.5``.  The plan lasts a whole
+    number ``n_steps`` of nominal step periods (stretched in time by a factor
+    within ``1 +- 0.5 / n_steps``); its heel strikes would be at
+    ``walk_start + k / step_frequency_hz``.
 
-    The walk lasts an exact whole number ``n_steps`` of step periods: the
-    plan is stretched in time by a factor within ``1 +- 0.5 / n_steps`` (speed
-    and turn rate scaled by its inverse).  Heel strike ``k = 1..n_steps`` is
-    at ``walk_start + k / step_frequency_hz``; the first one ends the first
-    (half-length, accelerating) step, the last one coincides with the end of
-    the walk, so the position after the last step is the last waypoint.
-    ``n_steps = round(path_length / step_length + 1)`` when the walker never
-    has to slow down for a corner.
+Step-to-step variability (the actual walk)
+    * Heel strike times: ``t_k = walk_start + k / f + d_k``, ``d_k`` i.i.d.
+      normal with ``std = step_time_cv / (f sqrt 2)`` (clipped at 15 % of a
+      period), so each step's duration has the coefficient of variation
+      ``step_time_cv``; the first and last heel strikes are not moved.
+    * Distance along the path at heel strike ``k``:
+      ``S_k = s_plan(k / f) + e_k`` with ``e_k`` a stationary AR(1) process
+      (coefficient 0.7) scaled so that the step lengths ``S_k - S_{k-1}``
+      have the coefficient of variation ``step_length_cv`` (lag-one
+      correlation -0.15); ``e`` is 0 at the ends and is clipped to 30 % of
+      the adjacent plan steps, so the walker never drifts off the plan by more
+      than a few cm and ends exactly at the last waypoint.
+    * The walker at time ``t`` is at the plan's state at the warped time
+      ``w(t)``, a C2 quintic spline through ``(t_k, w_k)`` with
+      ``s_plan(w_k) = S_k`` (``w_k`` kept within 10 % of a period of
+      ``k / f``, so a turn on the spot is not skipped).  So the truth step
+      lengths are exactly the distances walked between heel strikes and they
+      sum to the path length; speed and turn rate vary by up to ~10-25 %
+      around the plan's within and between steps.
+
+Gait: centre of mass as an inverted pendulum, hand coupled to it
+    Leg length ``L = 0.53 height``.  The vertical excursion (peak to peak) of
+    the centre of mass (COM) over step ``k`` is the inverted pendulum's,
+    ``h_k = L - sqrt(L^2 - (l_k / 2K)^2)`` with ``K = 1.25`` (Zijlstra & Hof
+    2003, "Assessment of spatio-temporal gait parameters from trunk
+    accelerations during human walking", Gait & Posture 18(2):1-10: step
+    length = ``K 2 sqrt(2 L h - h^2)``): 4.3 cm for a 0.7 m step of a 1.75 m
+    walker, growing like ``l_k^2``.  So at a fixed cadence the acceleration
+    grows like ``l^2 f^2``; Weinberg's fourth-root law is not built in (it
+    only comes out where step length grows with cadence, as the walk ratio
+    says).  The COM height over a step is ``-(cos th + b cos 2 th) / 2`` with
+    ``th = 2 pi (phi - ds/2)``, ``ds = 1 - 1/K`` the double-support fraction
+    (lowest in the middle of double support, just after the heel strike,
+    highest in mid-stance; ``b = COM_SECOND_HARMONIC`` = 0.1 makes the trough
+    sharper than the crest).  Standing height is the crest: walking starts by
+    dropping into the first double support and ends by rising out of the
+    last one (the vertical phase is softly clamped at the crests before the
+    first and after the last heel strike).  The first and last steps vault
+    over a full mean step (``END_STEP_FOOT_RATIO``: the feet land a normal
+    step apart although the body moves less).  The hand follows the COM's
+    vertical motion with the gain ``HAND_VERTICAL_GAIN`` = 0.85 and the lag
+    ``HAND_LAG_S`` = 30 ms, times ``bounce_scale``.  The forward speed of the
+    body swings by +-``FORE_AFT_SPEED_SWING`` (8 %) around its mean (fastest
+    in double support), the body sways ``LATERAL_SWAY_M`` (2 cm) left/right
+    at the stride frequency, and every heel strike adds a short impact
+    transient at the phone (a Gaussian dip of the displacement: 12 ms,
+    ``HEEL_STRIKE_M_S2`` = 1.5 m/s^2 up and 0.6 m/s^2 backwards at the mean
+    step length, 10 ms after the heel strike).  The amplitudes follow the
+    actual step lengths through C2 envelopes (knots in the middle of each
+    step, zero at rest).  With the defaults the raw acceleration norm swings
+    by about 5 m/s^2 per step (4-7 m/s^2 for a phone held in front of the
+    chest).  The phone's position is ``walker + (0, 0, 0.75 height) +
+    Rz(heading_s) (forward, left, up)``; its acceleration in ENU is the exact
+    second derivative of that position (central difference over +-0.5 ms,
+    error < 2e-3 m/s^2).
 
 Phone attitude (body -> ENU)
-    ``R = Rz(yaw) Rx(pitch) Ry(roll)`` (Android's ZXY order: yaw about ENU up,
-    then pitch about the device x axis, then roll about the device y axis)
-    with
+    ``R = Rz(yaw) Rx(pitch) Ry(roll)`` (Android's ZXY order) with
 
-    * ``yaw = heading_s - 90 deg + sway_yaw w sin(pi phi + 0.3) + wander_yaw(t)``,
-    * ``pitch = phone_pitch_deg + sway_pitch w sin(2 pi phi + 1) + wander_pitch(t)``,
-    * ``roll = phone_roll_deg + sway_roll w sin(pi phi - 0.5) + wander_roll(t)``,
+    * ``yaw = heading_s - 90 deg + phone_yaw_offset + k sway_yaw sin(pi phi + 0.3) + drift_yaw(t)``,
+    * ``pitch = phone_pitch + k sway_pitch sin(2 pi phi + 1) + drift_pitch(t)``,
+    * ``roll = phone_roll + k sway_roll sin(pi phi - 0.5) + drift_roll(t)``,
 
-    where ``phi`` is the step phase (heel strike ``k`` at ``phi = k``), ``w``
-    the walking speed averaged over the last step divided by ``v`` and
-    ``heading_s`` the walking heading averaged over 0.3 s (equal to it on
-    straight parts; it gives the hand a continuous turn rate that ramps in
-    and out over 0.3 s at the ends of each arc).  So the device y axis
-    points along the walking direction, tilted up by the pitch; its
-    horizontal projection is exactly ``heading_s + sway + wander_yaw``, and
-    its average over a stride is the walking heading up to the yaw wander
-    (bounded by ``hand_wander_deg[0]``, 0.6 deg by default).  The wander is
-    a sum of three slow sinusoids (0.03-0.15 Hz) per axis whose peak is
-    bounded by ``hand_wander_deg``; it is present while standing too.  The
-    calibration motion multiplies the pose on the right by
-    ``Rz(a) Rx(b) Ry(c)`` with ``a, b, c`` up to +-90 deg (0.11, 0.30 and
-    0.15 Hz: a tumbling figure-8), tapered in and out over 1.5 s.
-
-Phone position and linear acceleration
-    phone = path point + (0, 0, 0.75 height) + ``Rz(heading_s) gait(t)`` (+ a
-    few cm of hand motion during calibration).  ``gait`` is a periodic hand
-    displacement in the walking frame (forward, left, up) given by its
-    Fourier series in the step phase (48 harmonics of the stride frequency)
-    times an amplitude ``E``: the vertical acceleration is an asymmetric
-    step-frequency wave with two harmonics, a 4 % left/right difference and
-    a sharp heel-strike bump (~14 ms wide, just after each heel strike);
-    fore-aft is a braking/propulsion wave at the step frequency (0.4 x
-    vertical); lateral is a stride-frequency sway (0.2 x vertical).  ``E``
-    follows the step length ``l = (speed averaged over the last step) / f``
-    -- at a heel strike exactly the length of the step just completed -- so
-    that Weinberg's model holds: the steady-state ``A_max - A_min`` (per
-    step, peak minus the lowest value since the previous peak) of the
-    acceleration norm after a Butterworth low-pass (order
-    ``weinberg_filter_order``, cut-off ``weinberg_cutoff_hz``) equals
-    ``(l / weinberg_c) ** 4``.  With the defaults (0.7 m, 1.8 Hz, C = 0.47,
-    2nd order, 3 Hz) that is 4.97 m/s^2 and the raw norm swings between
-    about 7.8 and 14 m/s^2.  Consequences: ``E`` is zero at rest, grows over
-    the first step and fades out over one step after the walker stops; the
-    first and last steps (half steps, ``l / 2``) have 1/16 of the gait
-    amplitude, their norm peaks come mostly from the walker's own start and
-    stop acceleration (``core.pdr.steps`` still detects every step of the demo,
-    with ``A_max - A_min`` of about 0.8 and 2 m/s^2 for those two).  The
-    acceleration of the phone in ENU is the exact second derivative of this
-    position (central difference over +-0.5 ms, error < 1e-4 m/s^2),
-    including the walker's own acceleration along the path and the
-    centripetal acceleration in corners.
+    where ``phi`` is the step phase (a C2 spline through heel strike ``k`` at
+    ``phi = k``), ``k`` the step-length envelope relative to the mean step
+    length and ``heading_s`` the plan heading averaged over 0.3 s at the warped
+    time (a continuous turn rate).  With ``phone_yaw_offset_deg != 0`` the
+    device y axis does not point along the walking direction;
+    ``truth.device_heading_at`` gives its horizontal projection.  The hand
+    drift is a band-limited random process (16 sinusoids per axis, frequencies
+    log-uniform in 0.03-0.3 Hz, random phases) with the RMS angular rate
+    ``hand_drift_deg_s`` per axis, present while standing too: a one-second
+    mean of a still phone's gyroscope is not its bias.  The calibration motion
+    multiplies the pose on the right by ``Rz(a) Rx(b) Ry(c)`` with ``a, b, c``
+    up to +-90 deg (0.11, 0.30 and 0.15 Hz), tapered in and out over 1.5 s.
 
 Sensors
     * accelerometer: ``R^T (a_n + (0, 0, g)) + acc_bias + noise``, g = 9.80665;
     * gyroscope: ``vee(log(R(t - d)^T R(t + d))) / 2d`` with d = 10 us (the
-      exact body rate to ~1e-10 rad/s) ``+ gyro_bias + noise``;
-    * magnetometer: ``R^T (h_earth + sum of zones) + hard_iron + noise``;
-      a :class:`DisturbanceZone` adds its field with the taper
-      ``(1 + cos(pi d / radius)) / 2`` inside its radius and nothing outside.
+      exact body rate to ~1e-10 rad/s) ``+ b(t) + noise``; the bias
+      ``b(t) = gyro_bias_rad_s + random walk`` (``gyro_bias_walk_rad_s_sqrt_s``
+      per sqrt(s), on a 2 Hz grid, linearly interpolated; 0 by default);
+    * magnetometer: ``S R^T h_n(p) + hard_iron + noise`` with ``S`` the
+      soft-iron matrix and ``h_n(p)`` the Earth field changed by each
+      :class:`DisturbanceZone` at the phone's horizontal position ``p``
+      (in order): it can turn the horizontal field in azimuth, change the
+      dip and the strength, and add a field, all weighted by
+      ``(1 + cos(pi d / radius)) / 2`` inside its radius.  A pure rotation
+      keeps the norm and the dip, so no gate on either can see it.  With
+      ``mag_uncalibrated_stream`` set, that stream carries the readings above
+      and ``mag`` carries ``R^T h_n + noise`` (the iron removed, as the OS
+      calibration would).
 
     Noise is white Gaussian with the given per-sample standard deviation.
     Each stream starts at a random phase within its first interval; each
@@ -127,16 +166,34 @@ import numpy as np
 from core import __version__
 from core import quaternion as quat
 from core.conventions import ACC, GYRO, MAG, STANDARD_GRAVITY_M_S2, wrap_angle
-from core.recording import Recording, make_stream
+from core.recording import Recording, Stream, make_stream
 
-__all__ = ["simulate_walk", "demo_walk", "SimulatedWalk", "WalkTruth", "DisturbanceZone", "SIMULATOR_VERSION"]
+__all__ = ["simulate_walk", "demo_walk", "SimulatedWalk", "WalkTruth", "DisturbanceZone", "SIMULATOR_VERSION",
+           "WALK_RATIO_PER_HEIGHT", "default_step_length_m"]
 
 #: Version of the simulation model (stored in ``metadata["simulator"]``); bumped when the same
 #: parameters and seed no longer give the same recording.
-SIMULATOR_VERSION = "1"
+SIMULATOR_VERSION = "2"
 
 #: Default start of the simulated sensor clock (ns), large like Android's ``elapsedRealtimeNanos``.
 DEFAULT_CLOCK_START_NS = 10**12
+
+#: Walk ratio (step length / step rate) per metre of body height, m / (steps/min) / m: 0.0064 m/(steps/min)
+#: for young adults of about 1.72 m (Sekiya & Nagasaki 1998), assumed proportional to height.
+WALK_RATIO_PER_HEIGHT = 0.00372
+LEG_LENGTH_RATIO = 0.53  #: leg length / body height (anthropometric, e.g. Winter's tables)
+PENDULUM_CORRECTION = 1.25  #: Zijlstra & Hof (2003): step length = 1.25 x the inverted-pendulum step
+DOUBLE_SUPPORT = 1.0 - 1.0 / PENDULUM_CORRECTION  #: fraction of a step in double support (just after heel strike)
+COM_SECOND_HARMONIC = 0.1  #: second harmonic of the COM height: the double-support trough is sharper than the crest
+HAND_VERTICAL_GAIN = 0.85  #: the phone's vertical gait motion / the COM's (the elbow gives a little)
+HAND_LAG_S = 0.03  #: lag of the hand behind the COM
+FORE_AFT_SPEED_SWING = 0.08  #: relative swing of the forward speed of the body within a step
+LATERAL_SWAY_M = 0.02  #: left/right sway of the body at the stride frequency (amplitude, m)
+END_STEP_FOOT_RATIO = 1.0  #: foot-to-foot distance of the first and last steps / mean step length
+HEEL_STRIKE_M_S2 = 1.5  #: peak upward impact acceleration at the phone per heel strike (full step)
+HEEL_STRIKE_BRAKE = 0.4  #: backward impact acceleration / upward
+HEEL_STRIKE_SIGMA_S = 0.012  #: width of the impact transient
+HEEL_STRIKE_DELAY_S = 0.010  #: delay of the impact transient after the heel strike
 
 _G = STANDARD_GRAVITY_M_S2
 _GYRO_DIFF_S = 1e-5  # half-width of the central difference for the body rate
@@ -144,6 +201,17 @@ _ACC_DIFF_S = 5e-4  # half-width of the second difference for the linear acceler
 _HAND_HEIGHT_RATIO = 0.75  # phone height above the ground / body height (in front of the chest)
 _CAL_TAPER_S = 1.5  # taper of the calibration motion at either end (s)
 _TURN_SMOOTH_S = 0.3  # the hand's yaw follows the heading averaged over this window (continuous turn rate)
+_DRIFT_TERMS = 16  # sinusoids per axis of the hand drift
+_DRIFT_BAND_HZ = (0.03, 0.3)
+_BIAS_GRID_HZ = 2.0
+_RAMP_STEPS = 1.5  # a change of speed by the cruise speed takes this many step periods (start, stop, corners)
+_STEP_AR = 0.7  # AR(1) coefficient of the walker's offset from the plan at heel strikes
+
+
+def default_step_length_m(height_m: float, step_frequency_hz: float) -> float:
+    """Mean step length (m) of a walker of ``height_m`` at ``step_frequency_hz`` from the walk ratio
+    (Sekiya & Nagasaki 1998): ``WALK_RATIO_PER_HEIGHT * height * 60 * step_frequency``."""
+    return WALK_RATIO_PER_HEIGHT * float(height_m) * 60.0 * float(step_frequency_hz)
 
 
 # ---------------------------------------------------------------------------
@@ -152,16 +220,28 @@ _TURN_SMOOTH_S = 0.3  # the hand's yaw follows the heading averaged over this wi
 
 @dataclass(frozen=True)
 class DisturbanceZone:
-    """A local magnetic disturbance (e.g. a steel pillar) added to the Earth field.
+    """A local magnetic disturbance (e.g. a steel pillar, a radiator, rebar) near ``center_en_m``.
 
-    Inside ``radius_m`` of ``center_en_m`` (horizontal distance) the field
-    ``field_enu_uT`` is added with the weight ``(1 + cos(pi d / radius)) / 2``
-    (full at the centre, zero with zero slope at the edge); outside nothing.
+    Inside ``radius_m`` (horizontal distance ``d``) it changes the field ``h`` that reaches it, with the weight
+    ``w = (1 + cos(pi d / radius)) / 2`` (1 at the centre, 0 with zero slope at the edge), in this order:
+
+    * ``rotation_deg``: turns the horizontal part of ``h`` by ``w * rotation_deg`` counter-clockwise about
+      Up (seen from above).  Norm and dip are kept, so a norm/dip gate cannot see it; a compass heading
+      read inside the zone is off by ``-w * rotation_deg``;
+    * ``dip_change_deg``: makes the field point ``w * dip_change_deg`` further down (inclination), norm kept;
+    * ``strength_scale``: multiplies the norm by ``1 + w (strength_scale - 1)``;
+    * ``field_enu_uT``: adds ``w * field_enu_uT`` (ENU, uT).
+
+    Outside the radius it does nothing.  With only ``field_enu_uT`` it is the additive zone of simulator
+    version 1.
     """
 
     center_en_m: tuple[float, float]
     radius_m: float
-    field_enu_uT: tuple[float, float, float]
+    field_enu_uT: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation_deg: float = 0.0
+    dip_change_deg: float = 0.0
+    strength_scale: float = 1.0
 
     def __post_init__(self):
         c = tuple(float(x) for x in self.center_en_m)
@@ -170,38 +250,67 @@ class DisturbanceZone:
             raise ValueError("DisturbanceZone needs center_en_m=(east, north) and field_enu_uT=(e, n, u), finite")
         if not (math.isfinite(self.radius_m) and self.radius_m > 0):
             raise ValueError(f"DisturbanceZone radius_m must be positive, got {self.radius_m}")
+        for name in ("rotation_deg", "dip_change_deg", "strength_scale"):
+            if not math.isfinite(float(getattr(self, name))):
+                raise ValueError(f"DisturbanceZone {name} must be finite")
+        if not float(self.strength_scale) > 0:
+            raise ValueError(f"DisturbanceZone strength_scale must be positive, got {self.strength_scale}")
         object.__setattr__(self, "center_en_m", c)
         object.__setattr__(self, "field_enu_uT", f)
         object.__setattr__(self, "radius_m", float(self.radius_m))
+        for name in ("rotation_deg", "dip_change_deg", "strength_scale"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+
+    def weight(self, east_m, north_m) -> np.ndarray:
+        """The taper ``(1 + cos(pi d / radius)) / 2`` inside the radius, 0 outside (same shape as the input)."""
+        d = np.hypot(np.asarray(east_m, float) - self.center_en_m[0], np.asarray(north_m, float) - self.center_en_m[1])
+        return np.where(d < self.radius_m, 0.5 * (1.0 + np.cos(np.pi * np.minimum(d / self.radius_m, 1.0))), 0.0)
 
     def field_at(self, east_m, north_m) -> np.ndarray:
-        """The added field (n, 3) in ENU (uT) at horizontal positions ``east_m``, ``north_m`` (n,)."""
-        d = np.hypot(np.asarray(east_m, float) - self.center_en_m[0], np.asarray(north_m, float) - self.center_en_m[1])
-        w = np.where(d < self.radius_m, 0.5 * (1.0 + np.cos(np.pi * np.minimum(d / self.radius_m, 1.0))), 0.0)
-        return w[..., None] * np.asarray(self.field_enu_uT)
+        """The *added* field ``w * field_enu_uT`` (n, 3) in ENU (uT) at horizontal positions (n,)."""
+        return self.weight(east_m, north_m)[..., None] * np.asarray(self.field_enu_uT)
+
+    def apply(self, field_enu_uT, east_m, north_m) -> np.ndarray:
+        """The field (n, 3) ENU (uT) after this zone, for the incoming field (n, 3) at positions (n,)."""
+        h = np.array(np.broadcast_to(np.asarray(field_enu_uT, float), np.shape(east_m) + (3,)))
+        w = self.weight(east_m, north_m)
+        if self.rotation_deg:
+            rot = quat.to_matrix_array(quat.about_axis_array(2, w * math.radians(self.rotation_deg)))
+            h = np.einsum("nij,nj->ni", rot, h)
+        if self.dip_change_deg:
+            horiz = np.hypot(h[:, 0], h[:, 1])
+            norm = np.linalg.norm(h, axis=1)
+            incl = np.arctan2(-h[:, 2], horiz) + w * math.radians(self.dip_change_deg)
+            az = np.arctan2(h[:, 1], h[:, 0])
+            h = np.stack([norm * np.cos(incl) * np.cos(az), norm * np.cos(incl) * np.sin(az),
+                          -norm * np.sin(incl)], axis=1)
+        if self.strength_scale != 1.0:
+            h = h * (1.0 + w * (self.strength_scale - 1.0))[:, None]
+        return h + w[:, None] * np.asarray(self.field_enu_uT)
 
     def as_dict(self) -> dict:
         return {"center_en_m": list(self.center_en_m), "radius_m": self.radius_m,
-                "field_enu_uT": list(self.field_enu_uT)}
+                "field_enu_uT": list(self.field_enu_uT), "rotation_deg": self.rotation_deg,
+                "dip_change_deg": self.dip_change_deg, "strength_scale": self.strength_scale}
 
 
 @dataclass(frozen=True, eq=False)
 class WalkTruth:
     """Exact ground truth of a simulated walk (times on the recording's sensor clock).
 
-    Step ``k`` (0-based here) ends with the heel strike at ``step_t_ns[k]``;
-    heel strikes are exactly ``1 / step_frequency_hz`` apart, the first one
-    step period after ``walk_start_t_ns`` and the last one at
-    ``walk_end_t_ns``.  Positions are the walker's (stride-averaged phone)
-    position in ENU metres.
+    Step ``k`` (0-based here) ends with the heel strike at ``step_t_ns[k]``; the
+    heel strikes are about ``1 / step_frequency_hz`` apart (``step_time_cv``),
+    the last one at ``walk_end_t_ns``.  Positions are the walker's
+    (stride-averaged phone) position in ENU metres; ``phone_position_at`` is
+    the phone's.  Headings are radians CCW from East.
     """
 
-    n_steps: int  #: number of steps = (walk_end - walk_start) * step_frequency, an exact integer
+    n_steps: int  #: number of steps (= heel strikes)
     step_t_ns: np.ndarray  #: (n,) int64 heel-strike times
     step_east_m: np.ndarray  #: (n,) East position after each step (m)
     step_north_m: np.ndarray  #: (n,) North position after each step (m)
-    step_length_m: np.ndarray  #: (n,) distance walked along the path during each step (m)
-    step_heading_rad: np.ndarray  #: (n,) direction of each step's displacement (speed-weighted mean heading), CCW from East
+    step_length_m: np.ndarray  #: (n,) distance walked along the path during each step (m), exact
+    step_heading_rad: np.ndarray  #: (n,) direction of each step's displacement (chord), CCW from East
     start_east_m: float  #: position before the first step (the first waypoint)
     start_north_m: float
     path_length_m: float  #: length of the walked path (polyline with rounded corners) = sum of step_length_m
@@ -212,27 +321,61 @@ class WalkTruth:
     calibration_end_t_ns: int
     att_t_ns: np.ndarray  #: (m,) int64 uniform grid at ``truth_rate_hz`` over the whole recording
     att_q_wxyz: np.ndarray  #: (m, 4) phone attitude body -> ENU, sign-continuous
+    att_walk_heading_rad: np.ndarray  #: (m,) walking heading on the grid (unwrapped)
+    att_device_heading_rad: np.ndarray  #: (m,) heading of the device y axis' horizontal projection (unwrapped)
+    att_gyro_bias_rad_s: np.ndarray  #: (m, 3) true gyroscope bias on the grid (device frame)
+    step_device_heading_rad: np.ndarray  #: (n,) device y heading at each heel strike (wrapped)
+    phone_yaw_offset_rad: float  #: mean yaw of the device y axis relative to the walking direction (CCW)
+    gyro_bias_rad_s: np.ndarray  #: (3,) constant part of the gyroscope bias (device frame)
+    acc_bias_m_s2: np.ndarray  #: (3,) accelerometer bias (device frame)
+    mag_t_ns: np.ndarray  #: (k,) magnetometer sample times (= recording ``mag`` timestamps)
+    mag_field_enu_uT: np.ndarray  #: (k, 3) true field in ENU at the phone at each magnetometer sample (uT)
+    mag_hard_iron_uT: np.ndarray  #: (3,) hard-iron offset (device frame, uT)
+    mag_soft_iron: np.ndarray  #: (3, 3) soft-iron matrix S (reading = S R^T h_n + hard iron + noise)
     _model: "_WalkModel" = field(repr=False)
 
     def _t(self, t_ns) -> np.ndarray:
         return (np.asarray(t_ns, dtype=np.int64) - self._model.clock0_ns) * 1e-9
 
+    def _out(self, t_ns, a):
+        return a[0] if np.ndim(t_ns) == 0 else a
+
     def heading_at(self, t_ns):
         """Walking heading (rad, CCW from East, unwrapped) at ``t_ns`` (scalar or array): the direction of
         motion of the path; while standing, the direction the walker faces."""
-        h = self._model.path.state(np.atleast_1d(self._t(t_ns)))[2]
+        h = self._model.walker(np.atleast_1d(self._t(t_ns)))[2]
+        return float(h[0]) if np.ndim(t_ns) == 0 else h
+
+    def device_heading_at(self, t_ns):
+        """Heading (rad, CCW from East, wrapped) of the horizontal projection of the device y axis at ``t_ns``."""
+        y = quat.to_matrix_array(self._model.quat(np.atleast_1d(self._t(t_ns))))[:, :, 1]
+        h = np.arctan2(y[:, 1], y[:, 0])
         return float(h[0]) if np.ndim(t_ns) == 0 else h
 
     def position_at(self, t_ns) -> np.ndarray:
         """Walker position ``(east_m, north_m)`` at ``t_ns``: shape (2,) for a scalar, (n, 2) for an array."""
-        x, y = self._model.path.state(np.atleast_1d(self._t(t_ns)))[:2]
-        p = np.stack([x, y], axis=-1)
-        return p[0] if np.ndim(t_ns) == 0 else p
+        x, y = self._model.walker(np.atleast_1d(self._t(t_ns)))[:2]
+        return self._out(t_ns, np.stack([x, y], axis=-1))
+
+    def phone_position_at(self, t_ns) -> np.ndarray:
+        """Phone position ``(east, north, up)`` (m, up above the ground): (3,) or (n, 3)."""
+        return self._out(t_ns, self._model.position(np.atleast_1d(self._t(t_ns))))
 
     def attitude_at(self, t_ns) -> np.ndarray:
         """Exact phone attitude quaternion ``(w, x, y, z)`` body -> ENU at ``t_ns``: (4,) or (n, 4)."""
-        q = self._model.quat(np.atleast_1d(self._t(t_ns)))
-        return q[0] if np.ndim(t_ns) == 0 else q
+        return self._out(t_ns, self._model.quat(np.atleast_1d(self._t(t_ns))))
+
+    def body_rate_at(self, t_ns) -> np.ndarray:
+        """Exact body angular rate (rad/s, device frame) at ``t_ns``, without bias or noise: (3,) or (n, 3)."""
+        return self._out(t_ns, self._model.body_rate(np.atleast_1d(self._t(t_ns))))
+
+    def gyro_bias_at(self, t_ns) -> np.ndarray:
+        """True gyroscope bias (rad/s, device frame) at ``t_ns``: (3,) or (n, 3)."""
+        return self._out(t_ns, self._model.gyro_bias(np.atleast_1d(self._t(t_ns))))
+
+    def mag_field_at(self, t_ns) -> np.ndarray:
+        """True magnetic field in ENU (uT) at the phone at ``t_ns``: (3,) or (n, 3)."""
+        return self._out(t_ns, self._model.field_n(np.atleast_1d(self._t(t_ns))))
 
 
 @dataclass(frozen=True, eq=False)
@@ -244,7 +387,7 @@ class SimulatedWalk:
 
 
 # ---------------------------------------------------------------------------
-# rotation helpers (private; quaternions (w, x, y, z), arrays (..., 4))
+# small helpers
 
 
 def _rotate_to_body(mat_nb: np.ndarray, v_n: np.ndarray) -> np.ndarray:
@@ -252,79 +395,70 @@ def _rotate_to_body(mat_nb: np.ndarray, v_n: np.ndarray) -> np.ndarray:
     return np.einsum("nji,nj->ni", mat_nb, v_n)
 
 
+class _Quintic:
+    """C2 piecewise quintic Hermite curve through knots ``(x_k, y_k)`` with slopes ``d_k`` and second
+    derivatives ``c_k`` (0 by default); outside the knots it continues linearly with the end slopes (so
+    pass ``c = 0`` at the ends for C2 there too)."""
+
+    def __init__(self, x, y, d, c=None):
+        self.x = np.asarray(x, float)
+        self.y = np.asarray(y, float)
+        self.d = np.asarray(d, float)
+        self.c = np.zeros_like(self.x) if c is None else np.asarray(c, float)
+        if len(self.x) < 2 or np.any(np.diff(self.x) <= 0):
+            raise ValueError("knots must be increasing")  # pragma: no cover - internal
+
+    def __call__(self, t) -> np.ndarray:
+        t = np.asarray(t, float)
+        x, y, d, c = self.x, self.y, self.d, self.c
+        j = np.clip(np.searchsorted(x, t, side="right") - 1, 0, len(x) - 2)
+        h = x[j + 1] - x[j]
+        s = np.clip((t - x[j]) / h, 0.0, 1.0)
+        s2 = s * s
+        s3 = s2 * s
+        s4 = s3 * s
+        s5 = s4 * s
+        out = (y[j] * (1 - 10 * s3 + 15 * s4 - 6 * s5) + h * d[j] * (s - 6 * s3 + 8 * s4 - 3 * s5)
+               + h * h * c[j] * (0.5 * s2 - 1.5 * s3 + 1.5 * s4 - 0.5 * s5)
+               + h * h * c[j + 1] * (0.5 * s3 - s4 + 0.5 * s5)
+               + h * d[j + 1] * (-4 * s3 + 7 * s4 - 3 * s5) + y[j + 1] * (10 * s3 - 15 * s4 + 6 * s5))
+        out = np.where(t < x[0], y[0] + d[0] * (t - x[0]), out)
+        return np.where(t > x[-1], y[-1] + d[-1] * (t - x[-1]), out)
+
+
+#: C2 soft ramp: 0 for s <= -1, s for s >= 1, monotone in between (a soft ``max(s, 0)``)
+_SOFT_RAMP = _Quintic([-1.0, 1.0], [0.0, 1.0], [0.0, 1.0])
+_PHASE_CLAMP_WIDTH = 0.2  # half-width (step phase) of the soft clamp of the vertical phase at the ends
+
+
+def _central_slopes(x: np.ndarray, y: np.ndarray, d_first: float, d_last: float) -> np.ndarray:
+    d = np.empty_like(y)
+    d[1:-1] = (y[2:] - y[:-2]) / (x[2:] - x[:-2])
+    d[0], d[-1] = d_first, d_last
+    return d
+
+
 # ---------------------------------------------------------------------------
-# gait waveform: hand acceleration in the walking frame over one stride (two steps)
+# gait: the vertical motion of the centre of mass over one step (inverted pendulum with double support)
 
-_GAIT_HARMONICS = 48  # harmonics of the stride frequency kept (24 of the step frequency)
-_GAIT_GRID = 1024  # samples per stride for the Fourier analysis
+def _pendulum_excursion(step_length_m, leg_m: float):
+    """Vertical excursion (m, peak to peak) of the centre of mass over a step of ``step_length_m``: the inverted
+    pendulum of Zijlstra & Hof (2003), ``step = K 2 sqrt(2 L h - h^2)``, solved for ``h``."""
+    a = np.asarray(step_length_m, float) / (2.0 * PENDULUM_CORRECTION)
+    return leg_m - np.sqrt(np.maximum(leg_m * leg_m - a * a, 0.0))
 
 
-def _gait_acc_shape(phi: np.ndarray) -> np.ndarray:
-    """Hand acceleration (n, 3) = (forward, left, up) per unit vertical amplitude at step phase ``phi``.
+def _vertical_coefficients(step_frequency_hz: float) -> np.ndarray:
+    """Complex coefficients (2,) in harmonics 1, 2 of the step frequency of the phone's vertical displacement
+    per metre of COM excursion: ``z(u) = Re(sum_m c_m exp(2 pi i m u))``, ``u`` the step phase.
 
-    Heel strikes are at integer ``phi`` (left foot at even, right at odd).
+    The COM height is ``-(cos th + b cos 2 th) / 2`` with ``th = 2 pi (u - ds / 2)`` (peak to peak 1, lowest
+    in the middle of double support, highest in mid-stance; ``b = COM_SECOND_HARMONIC`` makes the trough
+    sharper than the crest); the hand follows with gain ``HAND_VERTICAL_GAIN`` and the lag ``HAND_LAG_S``.
     """
-    w = 2.0 * np.pi * phi
-    sigma, centre = 0.025, 0.04  # heel-strike transient: width and delay, in steps
-    bump = sum(np.exp(-0.5 * ((phi - centre - j) / sigma) ** 2) for j in range(-1, 4))
-    bump = 0.45 * (bump - sigma * math.sqrt(2.0 * math.pi))  # zero mean over a step
-    up = np.cos(w) + 0.30 * np.cos(2 * w - 0.7) + 0.08 * np.cos(3 * w - 1.4) + 0.04 * np.cos(0.5 * w) + bump
-    fwd = 0.40 * (-np.sin(w - 0.3) + 0.25 * np.sin(2 * w + 0.5))
-    left = 0.20 * (np.sin(0.5 * w) + 0.15 * np.sin(1.5 * w))
-    return np.stack([fwd, left, up], axis=-1)
-
-
-def _gait_coefficients() -> np.ndarray:
-    """Complex Fourier coefficients (3, M) of the gait acceleration in harmonics ``m = 1..M`` of the stride
-    frequency: ``a(phi) = Re(sum_m c_m exp(i pi m phi))``."""
-    phi = 2.0 * np.arange(_GAIT_GRID) / _GAIT_GRID
-    spec = np.fft.rfft(_gait_acc_shape(phi), axis=0) / _GAIT_GRID
-    return (2.0 * spec[1:_GAIT_HARMONICS + 1]).T
-
-
-_GAIT_ACC_COEF = _gait_coefficients()
-_GAIT_M = np.arange(1, _GAIT_HARMONICS + 1)
-
-
-def _gait_series(phi: np.ndarray, coef: np.ndarray) -> np.ndarray:
-    """Evaluate ``Re(sum_m coef[:, m] exp(i pi m phi))`` -> (n, 3)."""
-    base = np.exp(1j * np.pi * np.mod(phi, 2.0))  # the series has period 2 in phi
-    powers = np.cumprod(np.broadcast_to(base[:, None], (len(base), _GAIT_HARMONICS)), axis=1)  # exp(i pi m phi)
-    return (powers @ coef.T).real
-
-
-def _butterworth_response(freq_hz: np.ndarray, cutoff_hz: float, order: int) -> np.ndarray:
-    """Complex response of the analogue Butterworth low-pass of ``order`` at ``freq_hz``."""
-    k = np.arange(1, order + 1)
-    poles = np.exp(1j * np.pi * (2 * k + order - 1) / (2 * order))
-    s = 1j * np.asarray(freq_hz, float)[:, None] / cutoff_hz
-    return 1.0 / np.prod(s - poles[None, :], axis=1)
-
-
-def _weinberg_table(step_frequency_hz: float, cutoff_hz: float, order: int, max_pp: float):
-    """Steady-state per-step ``A_max - A_min`` of the low-passed acceleration norm as a function of the gait
-    amplitude ``E``: returns increasing arrays ``(pp, E)`` for interpolation."""
-    phi = 2.0 * np.arange(_GAIT_GRID) / _GAIT_GRID
-    a_unit = _gait_series(phi, _GAIT_ACC_COEF)
-    freq = np.arange(_GAIT_GRID // 2 + 1) * step_frequency_hz / 2.0  # stride period = 2 / f
-    h = _butterworth_response(freq, cutoff_hz, order)
-
-    def pp_of(e: float) -> float:
-        norm = np.linalg.norm(e * a_unit + np.array([0.0, 0.0, _G]), axis=1)
-        y = np.fft.irfft(np.fft.rfft(norm) * h, n=_GAIT_GRID)
-        y = np.roll(y, -int(np.argmax(y)))  # the higher peak at index 0
-        j2 = _GAIT_GRID // 4 + int(np.argmax(y[_GAIT_GRID // 4: 3 * _GAIT_GRID // 4]))  # the other step's peak
-        pp1 = y[j2] - y[:j2 + 1].min()
-        pp2 = y[0] - y[j2:].min()
-        return 0.5 * (pp1 + pp2)
-
-    slope = pp_of(1.0)
-    e_max = 2.0 * max_pp / slope + 1.0
-    es = np.linspace(0.0, e_max, 121)
-    pps = np.array([pp_of(e) for e in es])
-    if np.any(np.diff(pps) <= 0):  # pragma: no cover - the shape is fixed; guards edits of it
-        raise RuntimeError("gait amplitude table is not monotonic")
-    return pps, es
+    u0 = 0.5 * DOUBLE_SUPPORT + HAND_LAG_S * step_frequency_hz
+    c = np.array([-0.5 * np.exp(-2j * np.pi * u0), -0.5 * COM_SECOND_HARMONIC * np.exp(-4j * np.pi * u0)])
+    return HAND_VERTICAL_GAIN * c
 
 
 # ---------------------------------------------------------------------------
@@ -488,48 +622,134 @@ class _Path:
 
 
 class _WalkModel:
-    """Closed-form phone position (ENU, m) and attitude (body -> ENU) as functions of simulation time (s)."""
+    """Phone position (ENU, m), attitude (body -> ENU), gyro bias and magnetic field as functions of
+    simulation time (s), built once from the plan and the random draws."""
 
-    def __init__(self, *, path: _Path, clock0_ns: int, step_frequency_hz: float, height_m: float,
-                 pitch_rad: float, roll_rad: float, sway_rad: Sequence[float], wander: np.ndarray,
-                 calibration_s: float, weinberg_c: float, weinberg_cutoff_hz: float, weinberg_order: int):
+    def __init__(self, *, path: _Path, clock0_ns: int, step_frequency_hz: float, step_length_m: float,
+                 height_m: float, pitch_rad: float, roll_rad: float, yaw_offset_rad: float,
+                 sway_rad: Sequence[float], drift: np.ndarray, calibration_s: float, step_length_cv: float,
+                 step_time_cv: float, bounce_scale: float, rng_gait: np.random.Generator,
+                 gyro_bias: Sequence[float], bias_grid_s: np.ndarray, bias_walk: np.ndarray,
+                 earth_field_enu_uT: Sequence[float], zones: Sequence[DisturbanceZone]):
         self.path = path
         self.clock0_ns = int(clock0_ns)
-        self.f = float(step_frequency_hz)
+        self.f = f = float(step_frequency_hz)
+        self.step_length_m = float(step_length_m)
         self.hand_height_m = _HAND_HEIGHT_RATIO * float(height_m)
-        self.pitch, self.roll = float(pitch_rad), float(roll_rad)
+        self.leg_m = LEG_LENGTH_RATIO * float(height_m)
+        self.pitch, self.roll, self.yaw_offset = float(pitch_rad), float(roll_rad), float(yaw_offset_rad)
         self.sway = np.asarray(sway_rad, float)
-        self.wander = wander  # (3 axes, 3 terms, [amplitude rad, frequency Hz, phase rad])
+        self.drift = drift  # (3 axes, terms, [amplitude rad, frequency Hz, phase rad])
         self.cal_s = float(calibration_s)
-        self.weinberg_c = float(weinberg_c)
-        # gait displacement coefficients: a / (i pi m f)^2 -> -a / (pi m f)^2
-        self.disp_coef = -_GAIT_ACC_COEF / (np.pi * _GAIT_M * self.f) ** 2
-        max_len = path.cruise_speed_m_s / self.f * 1.05
-        self.pp_table, self.e_table = _weinberg_table(self.f, weinberg_cutoff_hz, weinberg_order,
-                                                      (max_len / self.weinberg_c) ** 4)
+        self.bounce_scale = float(bounce_scale)
+        self.gyro_bias0 = np.asarray(gyro_bias, float)
+        self.bias_grid_s, self.bias_walk = bias_grid_s, bias_walk
+        self.h_earth = np.asarray(earth_field_enu_uT, float)
+        self.zones = tuple(zones)
 
-    # -- helpers -------------------------------------------------------------
-    def gait_amplitude(self, speed: np.ndarray) -> np.ndarray:
-        """Gait amplitude ``E`` (m/s^2 per unit of :func:`_gait_acc_shape`) for a walking speed: the one whose
-        low-passed acceleration norm gives ``A_max - A_min = (speed / f / C) ** 4`` (Weinberg)."""
-        target = (speed / self.f / self.weinberg_c) ** 4
-        slope = (self.e_table[-1] - self.e_table[-2]) / (self.pp_table[-1] - self.pp_table[-2])
-        return np.where(target <= self.pp_table[-1], np.interp(target, self.pp_table, self.e_table),
-                        self.e_table[-1] + slope * (target - self.pp_table[-1]))
+        n = path.n_steps
+        self.n_steps = n
+        t_plan = path.t_start_s + np.arange(n + 1) / f  # the plan's heel strikes; k = 0 is the start of walking
+        s_plan = path.state(t_plan)[4]
+        if n >= 1:
+            # heel-strike timing: i.i.d. offsets, the first and the last kept
+            d = rng_gait.standard_normal(n + 1) * step_time_cv / (f * math.sqrt(2.0))
+            d = np.clip(d, -0.15 / f, 0.15 / f)
+            d[0] = d[-1] = 0.0
+            t_hs = t_plan + d
+            # distance offsets from the plan: stationary AR(1), 0 at the ends, clipped to 30 % of adjacent steps
+            l_plan = np.diff(s_plan)
+            sd_e = step_length_cv * self.step_length_m / math.sqrt(2.0 * (1.0 - _STEP_AR))
+            eps = rng_gait.standard_normal(n + 1)
+            e = np.empty(n + 1)
+            e[0] = sd_e * eps[0]
+            for k in range(1, n + 1):
+                e[k] = _STEP_AR * e[k - 1] + math.sqrt(1.0 - _STEP_AR ** 2) * sd_e * eps[k]
+            e[0] = e[-1] = 0.0
+            if n >= 2:
+                lim = 0.3 * np.minimum(l_plan[:-1], l_plan[1:])
+                e[1:-1] = np.clip(e[1:-1], -lim, lim)
+            target = s_plan + e
+            # warped (plan) time of each heel strike: s_plan(w_k) = S_k, by bisection within the adjacent steps
+            w = t_plan.copy()
+            idx = np.flatnonzero(e != 0.0)
+            if len(idx):
+                lo, hi = t_plan[idx - 1].copy(), t_plan[idx + 1].copy()
+                for _ in range(60):
+                    mid = 0.5 * (lo + hi)
+                    below = path.state(mid)[4] < target[idx]
+                    lo = np.where(below, mid, lo)
+                    hi = np.where(below, hi, mid)
+                w[idx] = 0.5 * (lo + hi)
+            # where the plan stands still (turning on the spot) a small offset would skip the whole turn: the
+            # warped heel strikes stay within 10 % of a period of the plan's (the distance follows from them)
+            w = np.clip(w, t_plan - 0.1 / f, t_plan + 0.1 / f)
+            self.step_s = path.state(w)[4]  # exact distances along the path at the heel strikes
+            self.t_hs = t_hs
+            self.warp = _Quintic(t_hs, w, _central_slopes(t_hs, w, 1.0, 1.0))
+            self.phase_curve = _Quintic(t_hs, np.arange(n + 1, dtype=float),
+                                        _central_slopes(t_hs, np.arange(n + 1, dtype=float), f, f))
+            lengths = np.diff(self.step_s)
+            # step-length envelope (sway, fore-aft, lateral): knots at the middle of each step, zero at rest
+            tk = np.concatenate([[t_hs[0]], 0.5 * (t_hs[1:] + t_hs[:-1]), [t_hs[-1] + 0.5 / f]])
+            rel = np.concatenate([[0.0], lengths / self.step_length_m, [0.0]])
+            self.env_rel = _Quintic(tk, rel, _central_slopes(tk, rel, 0.0, 0.0))
+            # vertical excursion envelope: knots at the middle of each step too.  In gait initiation and
+            # termination the feet land about a normal step apart although the body moves less: those two
+            # steps vault over END_STEP_FOOT_RATIO of a mean step.  The excursion fades over one step after
+            # the last heel strike (the vertical phase is clamped at the crest by then).
+            foot = lengths.copy()
+            foot[[0, -1]] = np.maximum(foot[[0, -1]], END_STEP_FOOT_RATIO * self.step_length_m)
+            te = np.concatenate([[t_hs[0]], 0.5 * (t_hs[1:] + t_hs[:-1]), [t_hs[-1] + 1.0 / f]])
+            exc = np.concatenate([[0.0], _pendulum_excursion(foot, self.leg_m), [0.0]])
+            self.env_exc = _Quintic(te, exc, _central_slopes(te, exc, 0.0, 0.0))
+            self.step_lengths = lengths
+        else:
+            self.t_hs = t_plan
+            self.step_s = s_plan
+            self.warp = self.phase_curve = self.env_rel = self.env_exc = None
+            self.step_lengths = np.zeros(0)
+        self.walk_start_s = float(self.t_hs[0])
+        self.walk_end_s = float(self.t_hs[-1])
+        # vertical gait: the phone's motion per metre of COM excursion (hand gain and lag included)
+        self.vert_coef = _vertical_coefficients(f)
+        self.vert_crest_phase = self._crest_phase(f)
+        self.vert_crest = float(self._vertical_unit(np.array([self.vert_crest_phase]))[0])
+        lag = np.exp(-2j * np.pi * HAND_LAG_S * f)  # the hand's lag, as a phase at the step frequency
+        self.fwd_amp = FORE_AFT_SPEED_SWING * self.step_length_m / (2.0 * np.pi) * lag
+        self.lat_amp = LATERAL_SWAY_M * np.sqrt(lag)
+        # heel-strike transients: one per heel strike k = 1..n, scaled by the step just completed
+        self.hs_t = self.t_hs[1:] + HEEL_STRIKE_DELAY_S
+        self.hs_amp = HEEL_STRIKE_M_S2 * self.bounce_scale * self.step_lengths / self.step_length_m
 
-    def smooth_speed(self, t: np.ndarray) -> np.ndarray:
-        """Walking speed averaged over the last step period (m/s).
+    @staticmethod
+    def _crest_phase(f: float) -> float:
+        """Step phase (in [0, 1)) of the crest of the phone's vertical gait motion."""
+        u = np.arange(4096) / 4096
+        c = _vertical_coefficients(f)
+        return float(u[np.argmax((c[0] * np.exp(2j * np.pi * u) + c[1] * np.exp(4j * np.pi * u)).real)])
 
-        The gait amplitude and the hand sway follow it, so they change smoothly even where the speed changes
-        quickly; at a heel strike it is exactly the length of the step just completed times the cadence, and
-        it is zero until walking starts and fades out over one step after the walker stops.
-        """
-        w = 1.0 / self.f
-        return (self.path.state(t)[4] - self.path.state(t - w)[4]) / w
+    def _vertical_unit(self, u: np.ndarray) -> np.ndarray:
+        base = np.exp(2j * np.pi * np.mod(u, 1.0))
+        return (self.vert_coef[0] * base + self.vert_coef[1] * base * base).real
+
+    # -- the walker --------------------------------------------------------------
+    def warped(self, t: np.ndarray) -> np.ndarray:
+        return np.asarray(t, float) if self.warp is None else self.warp(t)
+
+    def walker(self, t: np.ndarray):
+        """Walker state at simulation times ``t``: east, north, heading, plan speed, distance along the path."""
+        return self.path.state(self.warped(t))
 
     def phase(self, t: np.ndarray) -> np.ndarray:
-        """Step phase: heel strike ``k`` at phase ``k``."""
-        return (t - self.path.t_start_s) * self.f
+        """Step phase: heel strike ``k`` at phase ``k`` (C2)."""
+        if self.phase_curve is None:
+            return (np.asarray(t, float) - self.walk_start_s) * self.f
+        return self.phase_curve(t)
+
+    def rel_length(self, t: np.ndarray) -> np.ndarray:
+        """Step-length envelope / mean step length (0 at rest)."""
+        return np.zeros_like(t) if self.env_rel is None else np.maximum(self.env_rel(t), 0.0)
 
     def _cal_window(self, t: np.ndarray) -> np.ndarray:
         c = self.cal_s
@@ -540,40 +760,78 @@ class _WalkModel:
         down = np.clip((c - t) / taper, 0.0, 1.0)
         return 0.25 * (1.0 - np.cos(np.pi * up)) * (1.0 - np.cos(np.pi * down))
 
-    def _wander(self, t: np.ndarray, axis: int) -> np.ndarray:
-        amp, freq, ph = self.wander[axis].T
+    def _drift(self, t: np.ndarray, axis: int) -> np.ndarray:
+        amp, freq, ph = self.drift[axis].T
         return np.sin(2.0 * np.pi * np.outer(t, freq) + ph) @ amp
+
+    def _gait(self, t: np.ndarray) -> np.ndarray:
+        """Phone displacement (n, 3) from the gait in the walking frame (forward, left, up), m."""
+        n = len(t)
+        out = np.zeros((n, 3))
+        if self.env_exc is None:
+            return out
+        u = self.phase(t)
+        k = self.rel_length(t)
+        exc = np.maximum(self.env_exc(t), 0.0) * self.bounce_scale
+        # relative to the crest: standing height is the crest of the walking motion (legs together).  The
+        # vertical phase stays at the crest of the first step until the body drops into the first double
+        # support, and stops at the crest after the last one: walking starts by dropping into the first
+        # trough and ends by rising out of the last one, with no further oscillation.
+        lo, hi = self.vert_crest_phase, self.n_steps + self.vert_crest_phase
+        v = lo + _PHASE_CLAMP_WIDTH * _SOFT_RAMP((u - lo) / _PHASE_CLAMP_WIDTH)
+        v = hi - _PHASE_CLAMP_WIDTH * _SOFT_RAMP((hi - v) / _PHASE_CLAMP_WIDTH)
+        out[:, 2] = exc * (self._vertical_unit(v) - self.vert_crest)
+        ds2 = 0.5 * DOUBLE_SUPPORT
+        out[:, 0] = k * (self.fwd_amp * np.exp(2j * np.pi * (u - ds2))).imag
+        out[:, 1] = k * (self.lat_amp * np.exp(1j * np.pi * (u - ds2))).imag
+        # heel-strike transients: the heel strikes just before and after t are enough (12 ms wide, ~0.5 s apart)
+        if len(self.hs_t):
+            j = np.searchsorted(self.hs_t, t)
+            sig2 = HEEL_STRIKE_SIGMA_S ** 2
+            for off in (-1, 0):
+                jj = np.clip(j + off, 0, len(self.hs_t) - 1)
+                valid = (j + off >= 0) & (j + off < len(self.hs_t))
+                x2 = np.minimum((t - self.hs_t[jj]) ** 2 / sig2, 200.0)
+                bump = np.where(valid, self.hs_amp[jj] * sig2 * np.exp(-0.5 * x2), 0.0)
+                out[:, 2] -= bump  # a dip in displacement: an upward acceleration peak of hs_amp
+                out[:, 0] += HEEL_STRIKE_BRAKE * bump  # and a backward one
+        return out
 
     # -- the model -------------------------------------------------------------
     def position(self, t: np.ndarray) -> np.ndarray:
         """Phone position (n, 3) in ENU (m)."""
-        x, y = self.path.state(t)[:2]
-        h = self.path.smooth_heading(t, _TURN_SMOOTH_S)
-        e = self.gait_amplitude(self.smooth_speed(t))
-        d = _gait_series(self.phase(t), self.disp_coef) * e[:, None]  # (fwd, left, up)
+        t = np.asarray(t, float)
+        w = self.warped(t)
+        x, y = self.path.state(w)[:2]
+        h = self.path.smooth_heading(w, _TURN_SMOOTH_S)
+        d = self._gait(t)
         c, s = np.cos(h), np.sin(h)
         pos = np.stack([x + c * d[:, 0] - s * d[:, 1], y + s * d[:, 0] + c * d[:, 1],
                         self.hand_height_m + d[:, 2]], axis=1)
         if self.cal_s > 0:
-            w = self._cal_window(t)
-            pos += w[:, None] * np.stack([0.06 * np.sin(2 * np.pi * 0.30 * t), 0.04 * np.sin(2 * np.pi * 0.60 * t),
-                                          0.04 * np.sin(2 * np.pi * 0.45 * t)], axis=1)
+            wc = self._cal_window(t)
+            pos += wc[:, None] * np.stack([0.06 * np.sin(2 * np.pi * 0.30 * t), 0.04 * np.sin(2 * np.pi * 0.60 * t),
+                                           0.04 * np.sin(2 * np.pi * 0.45 * t)], axis=1)
         return pos
 
     def quat(self, t: np.ndarray) -> np.ndarray:
         """Phone attitude quaternions (n, 4), body -> ENU."""
-        h = self.path.smooth_heading(t, _TURN_SMOOTH_S)
+        t = np.asarray(t, float)
+        h = self.path.smooth_heading(self.warped(t), _TURN_SMOOTH_S)
         phi = self.phase(t)
-        k = self.smooth_speed(t) / self.path.cruise_speed_m_s  # sway follows the walking speed
-        yaw = h - 0.5 * np.pi + k * self.sway[0] * np.sin(np.pi * phi + 0.3) + self._wander(t, 0)
-        pitch = self.pitch + k * self.sway[1] * np.sin(2.0 * np.pi * phi + 1.0) + self._wander(t, 1)
-        roll = self.roll + k * self.sway[2] * np.sin(np.pi * phi - 0.5) + self._wander(t, 2)
-        q = quat.multiply_array(quat.multiply_array(quat.about_axis_array(2, yaw), quat.about_axis_array(0, pitch)), quat.about_axis_array(1, roll))
+        k = self.rel_length(t)  # the sway follows the step length
+        yaw = (h - 0.5 * np.pi + self.yaw_offset + k * self.sway[0] * np.sin(np.pi * phi + 0.3)
+               + self._drift(t, 0))
+        pitch = self.pitch + k * self.sway[1] * np.sin(2.0 * np.pi * phi + 1.0) + self._drift(t, 1)
+        roll = self.roll + k * self.sway[2] * np.sin(np.pi * phi - 0.5) + self._drift(t, 2)
+        q = quat.multiply_array(quat.multiply_array(quat.about_axis_array(2, yaw), quat.about_axis_array(0, pitch)),
+                                quat.about_axis_array(1, roll))
         if self.cal_s > 0:
-            w = self._cal_window(t) * (0.5 * np.pi)
-            qc = quat.multiply_array(quat.multiply_array(quat.about_axis_array(2, w * np.sin(2 * np.pi * 0.11 * t)),
-                             quat.about_axis_array(0, w * np.sin(2 * np.pi * 0.30 * t + 0.6))),
-                       quat.about_axis_array(1, w * np.sin(2 * np.pi * 0.15 * t + 1.3)))
+            wc = self._cal_window(t) * (0.5 * np.pi)
+            qa = quat.about_axis_array(2, wc * np.sin(2 * np.pi * 0.11 * t))
+            qb = quat.about_axis_array(0, wc * np.sin(2 * np.pi * 0.30 * t + 0.6))
+            qc = quat.multiply_array(quat.multiply_array(qa, qb),
+                                     quat.about_axis_array(1, wc * np.sin(2 * np.pi * 0.15 * t + 1.3)))
             q = quat.multiply_array(q, qc)
         return q
 
@@ -590,6 +848,22 @@ class _WalkModel:
         n = len(t)
         p = self.position(np.concatenate([t - d, t, t + d]))
         return (p[:n] - 2.0 * p[n:2 * n] + p[2 * n:]) / (d * d)
+
+    def gyro_bias(self, t: np.ndarray) -> np.ndarray:
+        """True gyroscope bias (n, 3), rad/s."""
+        t = np.asarray(t, float)
+        walk = np.stack([np.interp(t, self.bias_grid_s, self.bias_walk[:, i]) for i in range(3)], axis=1)
+        return self.gyro_bias0 + walk
+
+    def field_n(self, t: np.ndarray) -> np.ndarray:
+        """True magnetic field (n, 3) in ENU at the phone, uT."""
+        t = np.asarray(t, float)
+        h = np.tile(self.h_earth, (len(t), 1))
+        if self.zones:
+            pos = self.position(t)
+            for z in self.zones:
+                h = z.apply(h, pos[:, 0], pos[:, 1])
+        return h
 
 
 # ---------------------------------------------------------------------------
@@ -617,7 +891,10 @@ def _readonly(a) -> np.ndarray:
 
 
 def _vec3(name: str, value) -> tuple[float, float, float]:
-    v = tuple(float(x) for x in value)
+    try:
+        v = tuple(float(x) for x in value)
+    except TypeError:
+        raise ValueError(f"{name} must be three finite numbers, got {value!r}") from None
     if len(v) != 3 or not all(map(math.isfinite, v)):
         raise ValueError(f"{name} must be three finite numbers, got {value!r}")
     return v
@@ -637,6 +914,13 @@ def _non_negative(name: str, value) -> float:
     return value
 
 
+def _finite(name: str, value) -> float:
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return value
+
+
 # ---------------------------------------------------------------------------
 # public entry points
 
@@ -649,27 +933,32 @@ def simulate_walk(
     mag_rate_hz: float | None = None,
     timestamp_jitter: float = 0.05,
     step_frequency_hz: float = 1.8,
-    step_length_m: float = 0.70,
+    step_length_m: float | None = None,
+    step_length_cv: float = 0.03,
+    step_time_cv: float = 0.02,
     still_start_s: float = 2.0,
     still_end_s: float = 2.0,
     turn_rate_deg_s: float = 90.0,
     height_m: float = 1.75,
+    bounce_scale: float = 1.0,
     gyro_noise_rad_s: float = 0.003,
     gyro_bias_rad_s: Sequence[float] = (0.002, -0.0015, 0.001),
+    gyro_bias_walk_rad_s_sqrt_s: float = 0.0,
     acc_noise_m_s2: float = 0.02,
     acc_bias_m_s2: Sequence[float] = (0.0, 0.0, 0.0),
     mag_noise_uT: float = 0.4,
     mag_hard_iron_uT: Sequence[float] = (0.0, 0.0, 0.0),
+    mag_soft_iron: Sequence[Sequence[float]] | None = None,
+    mag_uncalibrated_stream: str | None = None,
     earth_field_enu_uT: Sequence[float] = (0.0, 20.0, -44.0),
     disturbance_zones: Sequence[DisturbanceZone] = (),
     calibration_motion_s: float = 0.0,
     phone_pitch_deg: float = 25.0,
     phone_roll_deg: float = 0.0,
+    phone_yaw_offset_deg: float = 3.0,
     hand_sway_deg: Sequence[float] = (3.0, 1.5, 3.0),
-    hand_wander_deg: Sequence[float] = (0.6, 3.0, 3.0),
-    weinberg_c: float = 0.47,
-    weinberg_cutoff_hz: float = 3.0,
-    weinberg_filter_order: int = 2,
+    hand_drift_deg_s: Sequence[float] = (0.3, 0.5, 0.5),
+    weinberg_c: float | None = None,
     truth_rate_hz: float = 200.0,
     clock_start_ns: int = DEFAULT_CLOCK_START_NS,
     seed: int = 0,
@@ -686,50 +975,70 @@ def simulate_walk(
         (one IMU chip), the magnetometer to ``min(rate_hz, 50)``.
     timestamp_jitter : float
         Relative standard deviation of each sampling interval (0 to 0.5).
-    step_frequency_hz, step_length_m : float
-        Cadence and step length; the cruise speed is their product.
+    step_frequency_hz : float
+        Mean cadence (steps/s).
+    step_length_m : float or None
+        Mean step length (m); ``None``: from the walk ratio, :func:`default_step_length_m` (0.70 m for
+        1.75 m at 1.8 steps/s).  The cruise speed is ``step_frequency_hz * step_length_m``.
+    step_length_cv, step_time_cv : float
+        Coefficients of variation of the individual step lengths and step durations (0 to 0.1).
     still_start_s, still_end_s : float
         Standing still (phone in the walking pose) before and after walking (s).
     turn_rate_deg_s : float
-        Heading rate while walking around a corner (deg/s).
+        Planned heading rate while walking around a corner (deg/s).
     height_m : float
-        Walker's body height (m); the phone is held at 0.75 of it (metadata for stride models).
+        Walker's body height (m): leg length ``0.53 height``, phone at ``0.75 height``, default step length.
+    bounce_scale : float
+        Vertical excursion of the centre of mass (and heel-strike transients) relative to the inverted
+        pendulum's (1: the model; stiffer or more compliant walkers 0.5-1.5).
     gyro_noise_rad_s, acc_noise_m_s2, mag_noise_uT : float
         Per-sample standard deviation of the white noise of each sensor.
     gyro_bias_rad_s, acc_bias_m_s2 : 3 floats
-        Constant sensor biases in the device frame.
+        Constant sensor biases in the device frame (rad/s, m/s^2).
+    gyro_bias_walk_rad_s_sqrt_s : float
+        Random walk of the gyroscope bias (rad/s per sqrt(s)), 0 for a constant bias.
     mag_hard_iron_uT : 3 floats
         Constant magnetometer offset in the device frame (uT).
+    mag_soft_iron : 3x3 floats or None
+        Soft-iron matrix ``S`` (reading = ``S R^T h + hard iron``), identity if None; ``det(S) > 0``.
+    mag_uncalibrated_stream : str or None
+        If a name (e.g. ``"mag_uncal"``), that stream carries the iron-affected readings and ``mag`` the
+        readings without hard and soft iron (as an OS calibration would give them); None: ``mag`` carries
+        the iron-affected readings.
     earth_field_enu_uT : 3 floats
         Local geomagnetic field (east, north, up) in uT.
     disturbance_zones : sequence of DisturbanceZone
-        Local fields added to the Earth field near given positions.
+        Local disturbances (azimuth rotation, dip/strength change, added field), applied in order.
     calibration_motion_s : float
         Duration of a tumbling figure-8 phone motion (+-90 deg about every
         axis, a few cm of hand motion) at the very start, before
         ``still_start_s``; the phone returns to the walking pose (s).
     phone_pitch_deg, phone_roll_deg : float
         Mean pitch (device y axis up from horizontal) and roll of the held phone (deg).
-        ``phone_pitch_deg=0`` with ``hand_wander_deg=(0, 0, 0)`` holds the phone flat, screen up.
+    phone_yaw_offset_deg : float
+        Mean yaw of the device y axis relative to the walking direction (deg, counter-clockwise seen from
+        above): the phone is not pointed exactly where the walker goes.
     hand_sway_deg : 3 floats
-        Amplitudes (deg) at full walking speed of the yaw (stride frequency), pitch (step
-        frequency) and roll (stride frequency) oscillations of the hand.
-    hand_wander_deg : 3 floats
-        Peak (deg) of the slow random wander of yaw, pitch and roll (present also when standing).
-    weinberg_c, weinberg_cutoff_hz, weinberg_filter_order : float, float, int
-        The gait amplitude is set so that ``weinberg_c * (A_max - A_min) ** 0.25`` of the acceleration
-        norm after a Butterworth low-pass of this cut-off and order reproduces the step length.
+        Amplitudes (deg) at the mean step length of the yaw (stride frequency), pitch (step frequency) and
+        roll (stride frequency) oscillations of the hand while walking.
+    hand_drift_deg_s : 3 floats
+        RMS angular rate (deg/s) of the slow random drift of the hand's yaw, pitch and roll (0.03-0.3 Hz),
+        while standing and walking.  ``(0, 0, 0)`` with ``phone_pitch_deg=0`` holds a phone flat and still.
+    weinberg_c : float or None
+        Deprecated, kept for old callers: multiplies ``bounce_scale`` by ``(0.47 / weinberg_c) ** 4``, which
+        changes the walker's apparent Weinberg constant by about ``weinberg_c / 0.47`` relative to its
+        natural one.  The simulator does not make Weinberg's model hold.
     truth_rate_hz : float
-        Rate of the dense attitude truth grid ``truth.att_t_ns`` (Hz).
+        Rate of the dense truth grid ``truth.att_t_ns`` (Hz).
     clock_start_ns : int
         Sensor clock value at the start of the simulation (ns).
     seed : int
-        Seed of all randomness (timestamps, noise, hand wander).
+        Seed of all randomness (timestamps, noise, gait variability, hand drift, bias walk).
 
     Returns
     -------
     SimulatedWalk
-        ``recording`` with streams ``acc``, ``gyro``, ``mag`` and ``truth``.
+        ``recording`` with streams ``acc``, ``gyro``, ``mag`` (and ``mag_uncalibrated_stream``) and ``truth``.
     """
     rate_hz = _positive("rate_hz", rate_hz)
     gyro_rate_hz = rate_hz if gyro_rate_hz is None else _positive("gyro_rate_hz", gyro_rate_hz)
@@ -738,58 +1047,80 @@ def simulate_walk(
     if timestamp_jitter > 0.5:
         raise ValueError(f"timestamp_jitter must be at most 0.5, got {timestamp_jitter}")
     f = _positive("step_frequency_hz", step_frequency_hz)
-    step_length_m = _positive("step_length_m", step_length_m)
+    height_m = _positive("height_m", height_m)
+    step_length_m = (default_step_length_m(height_m, f) if step_length_m is None
+                     else _positive("step_length_m", step_length_m))
+    step_length_cv = _non_negative("step_length_cv", step_length_cv)
+    step_time_cv = _non_negative("step_time_cv", step_time_cv)
+    if step_length_cv > 0.1 or step_time_cv > 0.1:
+        raise ValueError("step_length_cv and step_time_cv must be at most 0.1")
     still_start_s = _non_negative("still_start_s", still_start_s)
     still_end_s = _non_negative("still_end_s", still_end_s)
     calibration_motion_s = _non_negative("calibration_motion_s", calibration_motion_s)
     turn_rate = math.radians(_positive("turn_rate_deg_s", turn_rate_deg_s))
-    height_m = _positive("height_m", height_m)
+    bounce_scale = _non_negative("bounce_scale", bounce_scale)
+    if weinberg_c is not None:
+        bounce_scale *= (0.47 / _positive("weinberg_c", weinberg_c)) ** 4
     for name, val in (("gyro_noise_rad_s", gyro_noise_rad_s), ("acc_noise_m_s2", acc_noise_m_s2),
                       ("mag_noise_uT", mag_noise_uT)):
         _non_negative(name, val)
+    bias_walk_sd = _non_negative("gyro_bias_walk_rad_s_sqrt_s", gyro_bias_walk_rad_s_sqrt_s)
     gyro_bias = _vec3("gyro_bias_rad_s", gyro_bias_rad_s)
     acc_bias = _vec3("acc_bias_m_s2", acc_bias_m_s2)
     hard_iron = _vec3("mag_hard_iron_uT", mag_hard_iron_uT)
+    soft_iron = np.eye(3) if mag_soft_iron is None else np.array(mag_soft_iron, dtype=float)
+    if soft_iron.shape != (3, 3) or not np.all(np.isfinite(soft_iron)) or not np.linalg.det(soft_iron) > 1e-6:
+        raise ValueError("mag_soft_iron must be a finite 3x3 matrix with a positive determinant")
+    if mag_uncalibrated_stream is not None and (not isinstance(mag_uncalibrated_stream, str)
+                                                or mag_uncalibrated_stream in (ACC, GYRO, MAG, "")):
+        raise ValueError(f"mag_uncalibrated_stream must be a new stream name, got {mag_uncalibrated_stream!r}")
     h_earth = _vec3("earth_field_enu_uT", earth_field_enu_uT)
     sway = _vec3("hand_sway_deg", hand_sway_deg)
-    wander_deg = _vec3("hand_wander_deg", hand_wander_deg)
+    drift_deg_s = _vec3("hand_drift_deg_s", hand_drift_deg_s)
+    if min(drift_deg_s) < 0:
+        raise ValueError(f"hand_drift_deg_s must be non-negative, got {hand_drift_deg_s!r}")
     zones = tuple(disturbance_zones)
     if not all(isinstance(z, DisturbanceZone) for z in zones):
         raise ValueError("disturbance_zones must be DisturbanceZone instances")
-    weinberg_c = _positive("weinberg_c", weinberg_c)
-    weinberg_cutoff_hz = _positive("weinberg_cutoff_hz", weinberg_cutoff_hz)
-    if int(weinberg_filter_order) != weinberg_filter_order or not 1 <= weinberg_filter_order <= 8:
-        raise ValueError(f"weinberg_filter_order must be an integer from 1 to 8, got {weinberg_filter_order!r}")
     truth_rate_hz = _positive("truth_rate_hz", truth_rate_hz)
-    phone_pitch_deg, phone_roll_deg = float(phone_pitch_deg), float(phone_roll_deg)
-    if not (math.isfinite(phone_pitch_deg) and math.isfinite(phone_roll_deg)):
-        raise ValueError("phone_pitch_deg and phone_roll_deg must be finite")
+    phone_pitch_deg = _finite("phone_pitch_deg", phone_pitch_deg)
+    phone_roll_deg = _finite("phone_roll_deg", phone_roll_deg)
+    phone_yaw_offset_deg = _finite("phone_yaw_offset_deg", phone_yaw_offset_deg)
     clock0 = operator.index(clock_start_ns)
     seed = operator.index(seed)  # an explicit integer: the recording must be reproducible
 
-    rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(7)]
-    rng_t_acc, rng_t_gyro, rng_t_mag, rng_n_acc, rng_n_gyro, rng_n_mag, rng_wander = rngs
+    rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(9)]
+    rng_t_acc, rng_t_gyro, rng_t_mag, rng_n_acc, rng_n_gyro, rng_n_mag, rng_drift, rng_gait, rng_bias = rngs
 
     speed = f * step_length_m
     walk_start_s = calibration_motion_s + still_start_s
-    path = _Path(waypoints_en_m, speed_m_s=speed, turn_rate_rad_s=turn_rate, ramp_s=1.0 / f,
+    path = _Path(waypoints_en_m, speed_m_s=speed, turn_rate_rad_s=turn_rate, ramp_s=_RAMP_STEPS / f,
                  t_start_s=walk_start_s, step_frequency_hz=f)
     walk_end_s = walk_start_s + path.walk_duration_s
     total_s = walk_end_s + still_end_s
     if total_s <= 0:
         raise ValueError("nothing to simulate: no walking and no standing time")
 
-    # slow hand wander: per axis three sinusoids, amplitudes summing to the peak bound
-    weights = rng_wander.uniform(0.5, 1.0, (3, 3))
-    weights /= weights.sum(axis=1, keepdims=True)
-    wander = np.stack([weights * np.radians(wander_deg)[:, None], rng_wander.uniform(0.03, 0.15, (3, 3)),
-                       rng_wander.uniform(0.0, 2.0 * np.pi, (3, 3))], axis=-1)
+    # slow hand drift: per axis _DRIFT_TERMS sinusoids, log-uniform frequencies, RMS rate as asked
+    lo, hi = _DRIFT_BAND_HZ
+    freq = np.exp(rng_drift.uniform(math.log(lo), math.log(hi), (3, _DRIFT_TERMS)))
+    phases = rng_drift.uniform(0.0, 2.0 * np.pi, (3, _DRIFT_TERMS))
+    amp = np.radians(drift_deg_s)[:, None] * math.sqrt(2.0 / _DRIFT_TERMS) / (2.0 * np.pi * freq)
+    drift = np.stack([amp, freq, phases], axis=-1)
 
-    model = _WalkModel(path=path, clock0_ns=clock0, step_frequency_hz=f, height_m=height_m,
-                       pitch_rad=math.radians(phone_pitch_deg), roll_rad=math.radians(phone_roll_deg),
-                       sway_rad=np.radians(sway), wander=wander, calibration_s=calibration_motion_s,
-                       weinberg_c=weinberg_c, weinberg_cutoff_hz=weinberg_cutoff_hz,
-                       weinberg_order=int(weinberg_filter_order))
+    # gyro bias random walk on a coarse grid
+    bias_grid = np.arange(0.0, total_s + 2.0 / _BIAS_GRID_HZ, 1.0 / _BIAS_GRID_HZ)
+    incr = rng_bias.standard_normal((len(bias_grid), 3)) * bias_walk_sd * math.sqrt(1.0 / _BIAS_GRID_HZ)
+    incr[0] = 0.0
+    bias_walk = np.cumsum(incr, axis=0)
+
+    model = _WalkModel(path=path, clock0_ns=clock0, step_frequency_hz=f, step_length_m=step_length_m,
+                       height_m=height_m, pitch_rad=math.radians(phone_pitch_deg),
+                       roll_rad=math.radians(phone_roll_deg), yaw_offset_rad=math.radians(phone_yaw_offset_deg),
+                       sway_rad=np.radians(sway), drift=drift, calibration_s=calibration_motion_s,
+                       step_length_cv=step_length_cv, step_time_cv=step_time_cv, bounce_scale=bounce_scale,
+                       rng_gait=rng_gait, gyro_bias=gyro_bias, bias_grid_s=bias_grid, bias_walk=bias_walk,
+                       earth_field_enu_uT=h_earth, zones=zones)
 
     def rel(t_ns):
         return (t_ns - clock0) * 1e-9
@@ -803,43 +1134,44 @@ def simulate_walk(
 
     # gyroscope
     t_gyro = _sample_times_ns(rng_t_gyro, gyro_rate_hz, timestamp_jitter, total_s, clock0)
-    gyro = (model.body_rate(rel(t_gyro)) + np.asarray(gyro_bias)
-            + gyro_noise_rad_s * rng_n_gyro.standard_normal((len(t_gyro), 3)))
+    tg = rel(t_gyro)
+    gyro = model.body_rate(tg) + model.gyro_bias(tg) + gyro_noise_rad_s * rng_n_gyro.standard_normal((len(tg), 3))
 
     # magnetometer
     t_mag = _sample_times_ns(rng_t_mag, mag_rate_hz, timestamp_jitter, total_s, clock0)
     tm = rel(t_mag)
-    h_n = np.tile(np.asarray(h_earth), (len(tm), 1))
-    if zones:
-        pos = model.position(tm)
-        for z in zones:
-            h_n = h_n + z.field_at(pos[:, 0], pos[:, 1])
-    mag = (_rotate_to_body(quat.to_matrix_array(model.quat(tm)), h_n) + np.asarray(hard_iron)
-           + mag_noise_uT * rng_n_mag.standard_normal((len(tm), 3)))
+    h_n = model.field_n(tm)
+    m_b = _rotate_to_body(quat.to_matrix_array(model.quat(tm)), h_n)
+    mag_noise = mag_noise_uT * rng_n_mag.standard_normal((len(tm), 3))
+    mag_raw = m_b @ soft_iron.T + np.asarray(hard_iron) + mag_noise
 
     # truth
     def ns(t_s):
         return clock0 + np.round(np.asarray(t_s) * 1e9).astype(np.int64)
 
-    k = np.arange(1, path.n_steps + 1)
-    t_steps = walk_start_s + k / f
-    xs, ys, hs, _, ss = path.state(t_steps)
-    x_prev = np.concatenate([[path.x0[0]], xs[:-1]])
-    y_prev = np.concatenate([[path.y0[0]], ys[:-1]])
-    s_prev = np.concatenate([[0.0], ss[:-1]])
+    t_steps = model.t_hs[1:]
+    xs, ys, hs = model.walker(t_steps)[:3]
+    x0, y0 = model.walker(np.array([model.walk_start_s]))[:2]
+    x_prev = np.concatenate([x0, xs[:-1]])
+    y_prev = np.concatenate([y0, ys[:-1]])
     dx, dy = xs - x_prev, ys - y_prev
     chord = np.hypot(dx, dy)
     step_heading = np.where(chord > 1e-9, np.arctan2(dy, dx), hs)
     # keep the step headings on the same branch as the (unwrapped) path heading
     step_heading = hs + (step_heading - hs + np.pi) % (2.0 * np.pi) - np.pi
     att_t_ns = ns(np.arange(0.0, total_s, 1.0 / truth_rate_hz))
+    ta_truth = rel(att_t_ns)
+    q_truth = model.quat(ta_truth)
+    y_axis = quat.to_matrix_array(q_truth)[:, :, 1]
+    dev_heading = np.unwrap(np.arctan2(y_axis[:, 1], y_axis[:, 0]))
+    y_steps = quat.to_matrix_array(model.quat(t_steps))[:, :, 1]
     frozen = _readonly
     truth = WalkTruth(
         n_steps=int(path.n_steps),
         step_t_ns=frozen(ns(t_steps)),
         step_east_m=frozen(xs),
         step_north_m=frozen(ys),
-        step_length_m=frozen(ss - s_prev),
+        step_length_m=frozen(model.step_lengths),
         step_heading_rad=frozen(step_heading),
         start_east_m=float(path.points[0, 0]),
         start_north_m=float(path.points[0, 1]),
@@ -850,7 +1182,18 @@ def simulate_walk(
         calibration_start_t_ns=int(clock0),
         calibration_end_t_ns=int(ns(calibration_motion_s)),
         att_t_ns=frozen(att_t_ns),
-        att_q_wxyz=frozen(model.quat(rel(att_t_ns))),
+        att_q_wxyz=frozen(q_truth),
+        att_walk_heading_rad=frozen(model.walker(ta_truth)[2]),
+        att_device_heading_rad=frozen(dev_heading),
+        att_gyro_bias_rad_s=frozen(model.gyro_bias(ta_truth)),
+        step_device_heading_rad=frozen(np.arctan2(y_steps[:, 1], y_steps[:, 0])),
+        phone_yaw_offset_rad=math.radians(phone_yaw_offset_deg),
+        gyro_bias_rad_s=frozen(gyro_bias),
+        acc_bias_m_s2=frozen(acc_bias),
+        mag_t_ns=frozen(t_mag),
+        mag_field_enu_uT=frozen(h_n),
+        mag_hard_iron_uT=frozen(hard_iron),
+        mag_soft_iron=frozen(soft_iron),
         _model=model,
     )
 
@@ -861,30 +1204,37 @@ def simulate_walk(
         "rate_hz": rate_hz, "gyro_rate_hz": gyro_rate_hz, "mag_rate_hz": mag_rate_hz,
         "timestamp_jitter": timestamp_jitter,
         "step_frequency_hz": f, "step_length_m": step_length_m,
+        "step_length_cv": step_length_cv, "step_time_cv": step_time_cv,
         "still_start_s": still_start_s, "still_end_s": still_end_s, "turn_rate_deg_s": float(turn_rate_deg_s),
-        "height_m": height_m,
+        "height_m": height_m, "bounce_scale": bounce_scale,
         "gyro_noise_rad_s": float(gyro_noise_rad_s), "gyro_bias_rad_s": list(gyro_bias),
+        "gyro_bias_walk_rad_s_sqrt_s": bias_walk_sd,
         "acc_noise_m_s2": float(acc_noise_m_s2), "acc_bias_m_s2": list(acc_bias),
         "mag_noise_uT": float(mag_noise_uT), "mag_hard_iron_uT": list(hard_iron),
+        "mag_soft_iron": soft_iron.tolist(), "mag_uncalibrated_stream": mag_uncalibrated_stream,
         "earth_field_enu_uT": list(h_earth),
         "disturbance_zones": [z.as_dict() for z in zones],
         "calibration_motion_s": calibration_motion_s,
         "phone_pitch_deg": phone_pitch_deg, "phone_roll_deg": phone_roll_deg,
-        "hand_sway_deg": list(sway), "hand_wander_deg": list(wander_deg),
-        "weinberg_c": weinberg_c, "weinberg_cutoff_hz": weinberg_cutoff_hz,
-        "weinberg_filter_order": int(weinberg_filter_order),
+        "phone_yaw_offset_deg": phone_yaw_offset_deg,
+        "hand_sway_deg": list(sway), "hand_drift_deg_s": list(drift_deg_s),
         "truth_rate_hz": truth_rate_hz, "clock_start_ns": clock0, "seed": seed,
         "truth": {"n_steps": truth.n_steps, "path_length_m": truth.path_length_m,
                   "walk_start_t_ns": truth.walk_start_t_ns, "walk_end_t_ns": truth.walk_end_t_ns,
                   "start_en_m": [truth.start_east_m, truth.start_north_m],
                   "end_en_m": [float(path.end[0]), float(path.end[1])]},
     }
-    recording = Recording(
-        {ACC: make_stream(ACC, t_acc, acc), GYRO: make_stream(GYRO, t_gyro, gyro), MAG: make_stream(MAG, t_mag, mag)},
-        device={"model": "simulator"},
-        metadata=metadata,
-        source=f"simulate_walk(seed={seed})",
-    )
+    if weinberg_c is not None:
+        metadata["weinberg_c"] = float(weinberg_c)
+    streams = {ACC: make_stream(ACC, t_acc, acc), GYRO: make_stream(GYRO, t_gyro, gyro)}
+    if mag_uncalibrated_stream is None:
+        streams[MAG] = make_stream(MAG, t_mag, mag_raw)
+    else:
+        streams[MAG] = make_stream(MAG, t_mag, m_b + mag_noise)
+        streams[mag_uncalibrated_stream] = Stream(mag_uncalibrated_stream, t_mag, mag_raw, ("x", "y", "z"), "uT",
+                                                  "magnetometer, uncalibrated (hard and soft iron included)")
+    recording = Recording(streams, device={"model": "simulator"}, metadata=metadata,
+                          source=f"simulate_walk(seed={seed})")
     return SimulatedWalk(recording=recording, truth=truth)
 
 
@@ -895,7 +1245,11 @@ DEMO_WAYPOINTS_EN_M = ((0.0, 0.0), (50.0, 0.0), (50.0, 15.0), (35.0, 15.0), (35.
 def demo_walk(seed: int = 0) -> SimulatedWalk:
     """The bundled demo: a closed 160 m loop with six turns at 100 Hz, about 2 min 15 s.
 
-    Default noise, a small gyro bias (about 0.1 deg/s per axis), no magnetic
-    disturbance, 3 s standing at either end.
+    Moderately hard: the phone is held 6 deg to the left of the walking direction, pitched up 25 deg and
+    rolled 4 deg, the hand drifts while standing (0.3/0.5/0.5 deg/s RMS), the gyroscope has a true bias of
+    (2, -1.5, 1) mrad/s; default sensor noise, step variability and gait; no magnetic disturbance; 3 s
+    standing at either end.
     """
-    return simulate_walk(DEMO_WAYPOINTS_EN_M, rate_hz=100.0, still_start_s=3.0, still_end_s=3.0, seed=seed)
+    return simulate_walk(DEMO_WAYPOINTS_EN_M, rate_hz=100.0, still_start_s=3.0, still_end_s=3.0,
+                         phone_yaw_offset_deg=6.0, phone_pitch_deg=25.0, phone_roll_deg=4.0,
+                         hand_drift_deg_s=(0.3, 0.5, 0.5), gyro_bias_rad_s=(0.002, -0.0015, 0.001), seed=seed)
