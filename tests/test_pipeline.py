@@ -9,7 +9,6 @@ from core.conventions import wrap_angle
 from core.pdr.pipeline import Pipeline
 from core.recording import MissingSensorError, Recording
 from desktop.simulator import simulate_walk
-from core.pdr.steps import StepDetector
 
 
 def _heading_change(track, t_before_ns, t_after_ns):
@@ -17,30 +16,6 @@ def _heading_change(track, t_before_ns, t_after_ns):
     a = np.angle(np.mean(np.exp(1j * track.heading_rad[(t < t_before_ns)][-6:])))
     b = np.angle(np.mean(np.exp(1j * track.heading_rad[(t > t_after_ns)][:6])))
     return wrap_angle(b - a)
-
-
-def test_streaming_equals_batch():
-    walk = simulate_walk([(0, 0), (15, 0), (15, 10)], rate_hz=100.0, seed=11)
-    batch = Pipeline().run(walk.recording)
-    p = Pipeline()
-    steps = []
-    for name, t, v in walk.recording.events():
-        steps.extend(p.update(name, t, v))
-    steps.extend(p.finish())
-    assert len(steps) == len(batch.steps) > 10
-    np.testing.assert_array_equal([s.t_ns for s in steps], batch.track.t_ns)
-    np.testing.assert_allclose([s.east_m for s in steps], batch.track.east_m, rtol=0, atol=1e-9)
-    np.testing.assert_allclose([s.heading_rad for s in steps], batch.track.heading_rad, rtol=0, atol=1e-12)
-
-
-def test_step_detector_streaming_equals_batch():
-    walk = simulate_walk([(0, 0), (0, 20)], rate_hz=100.0, seed=12)
-    acc = walk.recording.streams["acc"]
-    det = StepDetector()
-    batch = det.run(acc.t_ns, acc.values)
-    det.reset()
-    stream = [e for t, v in zip(acc.t_ns.tolist(), acc.values.tolist()) for e in det.update(t, *v)]
-    assert stream == batch
 
 
 @pytest.mark.parametrize("rate", [20.0, 50.0, 100.0, 200.0, 400.0])
@@ -103,36 +78,3 @@ def test_without_gyroscope_the_track_is_labelled_and_still_usable():
     assert any("no gyroscope" in lab for lab in res.labels)
     end = np.array([res.track.east_m[-1], res.track.north_m[-1]])
     assert np.linalg.norm(end - [20, 20]) < 0.15 * walk.truth.path_length_m
-
-
-def test_every_stage_streaming_equals_batch():
-    """AttitudeEKF, RotationSmoother and DeadReckoner: run() over a walk equals update() event by event."""
-    from core import quaternion as quat
-    from core.pdr.attitude import AttitudeEKF
-    from core.pdr.deadreckoning import DeadReckoner
-    from core.pdr.heading import RotationSmoother
-
-    rec = simulate_walk([(0, 0), (10, 0), (10, 10)], rate_hz=50.0, seed=21).recording
-    ekf = AttitudeEKF()
-    t_b, q_b = ekf.run(rec)
-    ekf.reset()
-    q_s = []
-    for name, t, v in rec.events(["gyro", "acc", "mag"]):
-        {"gyro": ekf.predict, "acc": ekf.update_acc, "mag": ekf.update_mag}[name](t, *v)
-        q_s.append(ekf.q if ekf.initialized else (math.nan,) * 4)
-    np.testing.assert_array_equal(np.array(q_s), q_b)
-    assert np.isfinite(q_b[-1]).all() and len(t_b) == len(q_s)
-
-    mats = [quat.to_matrix(tuple(q)) for q in q_b[np.isfinite(q_b).all(axis=1)][::4]]
-    sm = RotationSmoother()
-    batch = sm.run(mats)
-    sm.reset()
-    np.testing.assert_array_equal([sm.update(m) for m in mats], batch)
-
-    rng = np.random.default_rng(0)
-    d, h = rng.uniform(0.5, 0.8, 50), rng.uniform(-math.pi, math.pi, 50)
-    dr = DeadReckoner()
-    batch = dr.run(d, h)
-    dr.reset()
-    np.testing.assert_array_equal([dr.update(a, b) for a, b in zip(d, h)], batch)
-    assert dr.distance_m == pytest.approx(d.sum())
