@@ -21,7 +21,7 @@ from benchmarks.splits import SPLITS
 BASELINE = Path(__file__).with_name("baseline_before.json")
 
 SOURCE_NAMES = {
-    "ours": "ours (adaptive EKF)",
+    "ours": "ours",
     "rotvec": "phone rotation vector",
     "imufusion": "x-io Fusion (imufusion)",
     "madgwick": "ahrs Madgwick",
@@ -293,8 +293,8 @@ def make_plots(results: list[dict], plots_dir: Path) -> dict:
         if "ref_plot" in r and "ref_sources" in r:
             p = plots_dir / f"{r['dataset']}.png"
             try:
-                plot_reference(r, p, f"{r['dataset']} {r['name']} ({r.get('split', '')} split): median distance "
-                                     f"from GPS {r['ref_sources']['ours']['median_m']:.1f} m")
+                plot_reference(r, p, f"{r['dataset']} ({r.get('split', '')} split): "
+                                     f"median {r['ref_sources']['ours']['median_m']:.1f} m from GPS")
             except ImportError:
                 return {}
             out.setdefault(r["dataset"], []).append(("track", r["name"], p))
@@ -325,7 +325,9 @@ def _git_describe() -> str:
         here = Path(__file__).resolve().parents[1]
         rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here, capture_output=True, text=True,
                              timeout=5).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+        # the report's own outputs (this file and the plots, rewritten by the run) do not make the code dirty
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".",
+                                ":(exclude)benchmarks/RESULTS.md", ":(exclude)benchmarks/plots"], cwd=here,
                                capture_output=True, text=True, timeout=5).stdout.strip()
         return rev + (" + uncommitted changes" if dirty else "") if rev else "unknown"
     except Exception:
