@@ -22,7 +22,7 @@ SPEC = ROOT / "buildozer.spec"
 P4A_RECIPES = {"python3", "hostpython3", "kivy", "pyjnius", "numpy", "sdl2", "android", "setuptools", "libffi",
                "openssl", "sqlite3"}
 #: pure-Python packages the spec may list (installed by p4a with pip --no-deps)
-PURE_PYTHON = {"plyer", "gpxpy"}
+PURE_PYTHON = {"plyer", "gpxpy", "pygeomag"}  # pygeomag: WMM in pure Python, its WMM.COF inside the wheel
 #: modules the phone provides without a requirement (p4a's own ``android`` module)
 PROVIDED = {"android"}
 #: import name -> requirement name

@@ -1,4 +1,4 @@
-"""The whole pipeline against simulator truth; streaming equals batch; degraded modes."""
+"""The whole pipeline against simulator truth; degraded modes (streaming vs batch: tests/test_streaming_batch.py)."""
 
 import math
 
@@ -37,8 +37,15 @@ def test_a_90_degree_turn_gives_90_degrees(turn_deg):
     tr = walk.truth
     # the turn happens around the corner; compare the straight parts before and after it
     corner_t = tr.step_t_ns[np.argmin(np.hypot(tr.step_east_m - 0, tr.step_north_m - 25))]
-    got = math.degrees(_heading_change(res.track, corner_t - 2_000_000_000, corner_t + 3_000_000_000))
-    assert got == pytest.approx(turn_deg, abs=2.0)
+    before, after = corner_t - 2_000_000_000, corner_t + 3_000_000_000
+    got = math.degrees(_heading_change(res.track, before, after))
+    # what the phone really turned over the same steps (the hand drifts 0.3 deg/s in yaw while walking)
+    k_before = np.nonzero(tr.step_t_ns < before)[0][-6:]
+    k_after = np.nonzero(tr.step_t_ns > after)[0][:6]
+    dev = np.unwrap(tr.step_device_heading_rad)
+    phone = math.degrees(np.mean(dev[k_after]) - np.mean(dev[k_before]))
+    assert phone == pytest.approx(turn_deg, abs=6.0)
+    assert got == pytest.approx(phone, abs=2.0)
 
 
 def test_loop_closes_within_two_percent():

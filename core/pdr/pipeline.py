@@ -51,6 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.pdr.attitude import AttitudeEKF
+from core.pdr.magcal import MagCalibrator
 from core.conventions import ACC, GYRO, MAG
 from core.pdr.deadreckoning import DeadReckoner
 from core.dsp import GridResampler
@@ -169,7 +170,9 @@ class Pipeline:
         Step length model; default :class:`core.pdr.stride.WeinbergStride` with a constant coefficient.
     step_detector, attitude, smoother : optional
         Pre-configured stages (:class:`StepDetector`, :class:`AttitudeEKF`,
-        :class:`RotationSmoother`); defaults suit a hand-held phone.
+        :class:`RotationSmoother`); defaults suit a hand-held phone.  The
+        default attitude filter runs the magnetometer through an online
+        hard/soft-iron calibration (:class:`core.pdr.magcal.MagCalibrator`).
     grid_rate_hz : float
         Uniform grid rate for the step detector and the heading smoother (Hz).
     heading_delay_s : float or None
@@ -185,6 +188,11 @@ class Pipeline:
         Window of the rotation gate (s).
     min_bout_steps : int
         Steps count only in runs of at least this many (1 turns the gate off).
+    mag_stream : str
+        Which stream feeds the attitude filter's magnetometer: ``"mag"``
+        (the phone's calibrated field) or an uncalibrated one such as
+        ``"mag_uncal"``, for a filter with a calibrator
+        (``AttitudeEKF(mag_calibrator=MagCalibrator(), mag_requires_calibration=True)``).
     log : bool
         Keep an :class:`AttitudeLog` (batch runs turn it on).
     """
@@ -194,12 +202,13 @@ class Pipeline:
                  smoother: RotationSmoother | None = None, grid_rate_hz: float = 50.0,
                  heading_delay_s: float | None = None, use_magnetometer: bool = True,
                  max_rotation_rms_rad_s: float = 3.0, rotation_window_s: float = 1.0, min_bout_steps: int = 3,
-                 log: bool = False):
+                 mag_stream: str = MAG, log: bool = False):
+        self.mag_stream = str(mag_stream)
         self.height_m = height_m
         self.stride_model = stride_model or WeinbergStride()
         self.grid_rate_hz = float(grid_rate_hz)
         self.detector = step_detector or StepDetector(grid_rate_hz=grid_rate_hz)
-        self.attitude = attitude or AttitudeEKF(use_magnetometer=use_magnetometer)
+        self.attitude = attitude or AttitudeEKF(use_magnetometer=use_magnetometer, mag_calibrator=MagCalibrator())
         if not use_magnetometer:
             self.attitude.use_magnetometer = False
         self.smoother = smoother or RotationSmoother(grid_rate_hz=grid_rate_hz)
@@ -243,7 +252,7 @@ class Pipeline:
     def update(self, stream: str, t_ns: int, values) -> list[Step]:
         """Process one sensor event; returns the steps it completed (usually none)."""
         self.seen[stream] = self.seen.get(stream, 0) + 1
-        if stream in (GYRO, ACC, MAG) and not (math.isfinite(values[0]) and math.isfinite(values[1])
+        if stream in (GYRO, ACC, self.mag_stream) and not (math.isfinite(values[0]) and math.isfinite(values[1])
                                                and math.isfinite(values[2])):
             self.n_nonfinite[stream] = self.n_nonfinite.get(stream, 0) + 1
             return []
@@ -259,7 +268,7 @@ class Pipeline:
             while rot[0][0] < limit:
                 self._rot_sum -= rot.popleft()[1]
             return []
-        if stream == MAG:
+        if stream == self.mag_stream:
             self.attitude.update_mag(t_ns, values[0], values[1], values[2])
             return []
         if stream != ACC:
@@ -369,7 +378,7 @@ class Pipeline:
             out.append("no gyroscope: heading from accelerometer and magnetometer only (noisy while walking)")
         if not self.attitude.use_magnetometer:
             out.append("magnetometer off: heading is relative to the start (first step points North)")
-        elif not self.seen.get(MAG) and self.seen.get(ACC):
+        elif not self.seen.get(self.mag_stream) and self.seen.get(ACC):
             out.append("no magnetometer: heading is relative to the start (first step points North)")
         return tuple(out)
 
@@ -391,7 +400,7 @@ class Pipeline:
         recording.stream(ACC, "step detection needs the accelerometer")
         log, self.log = self.log, True
         self.reset()
-        use = [n for n in (GYRO, ACC, MAG) if recording.has(n)]
+        use = [n for n in (GYRO, ACC, self.mag_stream) if recording.has(n)]
         try:
             total = sum(len(recording.streams[n]) for n in use)
             update = self.update
