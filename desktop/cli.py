@@ -71,10 +71,12 @@ def build_pipeline(args):
     else:
         from core.pdr.stride_models import load_stride_model
         kw["stride_model"] = load_stride_model(args.stride_model)
-    p = Pipeline(**kw)
-    p.attitude.declination_rad = math.radians(args.declination)
-    p.attitude.reset()
-    return p
+    from core.pdr.attitude import AttitudeEKF
+    from core.pdr.magcal import MagCalibrator
+
+    kw["attitude"] = AttitudeEKF(declination_rad=math.radians(args.declination), use_magnetometer=not args.no_mag,
+                                 mag_calibrator=MagCalibrator())
+    return Pipeline(**kw)
 
 
 class _Progress:
@@ -112,9 +114,19 @@ def summary_lines(res, rec: Recording) -> list[str]:
         + (f" ({100 * s['start_to_end_m'] / dist:.2f} % of the distance walked)" if dist > 0 else ""),
     ]
     used, rej = s.get("mag_used", 0), s.get("mag_rejected", 0)
+    att = s.get("attitude") or {}
     if used + rej:
-        lines.append(f"magnetometer  {used} readings used, {rej} rejected as disturbed "
-                     f"({100 * rej / (used + rej):.1f} %)")
+        why = {k: v for k, v in (att.get("mag_reasons") or {}).items() if k != "used" and v > 0}
+        top = ", ".join(f"{k} {v}" for k, v in sorted(why.items(), key=lambda kv: -kv[1])[:3])
+        lines.append(f"magnetometer  {used} readings used, {rej} rejected ({100 * rej / (used + rej):.1f} %)"
+                     + (f": {top}" if top else ""))
+    if att.get("gyro_bias_rad_s"):
+        b = att["gyro_bias_rad_s"]
+        lines.append(f"gyro bias     ({1e3 * b[0]:+.2f}, {1e3 * b[1]:+.2f}, {1e3 * b[2]:+.2f}) mrad/s, "
+                     f"heading +- {math.degrees(att.get('heading_sd_rad', math.nan)):.1f} deg at the end")
+    bad = s.get("nonfinite_skipped") or {}
+    if bad:
+        lines.append("skipped       " + ", ".join(f"{v} non-finite {k} value(s)" for k, v in sorted(bad.items())))
     truth = rec.metadata.get("truth") if isinstance(rec.metadata.get("truth"), dict) else None
     if truth:
         lines.append(f"truth         {truth.get('n_steps')} steps, {truth.get('path_length_m', float('nan')):.1f} m "

@@ -360,7 +360,7 @@ class AttitudeEKF:
 
     @property
     def n_mag_rejected(self) -> int:
-        return sum(v for k, v in self.mag_reasons.items() if k != "used")
+        return sum(v for k, v in self.mag_reasons.items() if k not in ("used", "initialising"))
 
     @property
     def n_acc_rejected(self) -> int:
@@ -379,7 +379,8 @@ class AttitudeEKF:
              "acc_rejected": self.n_acc_rejected, "zero_rate_updates": self.n_zero_rate,
              "nonfinite_skipped_by_filter": self.n_skipped_nonfinite,
              "numerical_rejects": self.n_numerical_rejects, "heading_relocks": self.n_heading_relocks,
-             "mag_reasons": dict(self.mag_reasons), "mean_nis": self.mean_nis()}
+             "mag_reasons": dict(self.mag_reasons), "mean_nis": self.mean_nis(),
+             "gyro_bias_rad_s": list(self.b), "heading_sd_rad": math.sqrt(max(float(self.P[2, 2]), 0.0))}
         if self.mag_calibrator is not None:
             st = self.mag_calibrator.status
             c["mag_calibration"] = getattr(st, "state", str(st))

@@ -369,8 +369,16 @@ class Pipeline:
         self.steps.append(step)
         return step
 
+    #: share of rejected magnetometer readings above which the summary warns
+    MAG_REJECTED_WARN = 0.3
+
     def labels(self) -> tuple[str, ...]:
         out = []
+        a = self.attitude
+        used, rej = getattr(a, "n_mag_used", 0), getattr(a, "n_mag_rejected", 0)
+        if a.use_magnetometer and used + rej > 100 and rej > self.MAG_REJECTED_WARN * (used + rej):
+            out.append(f"magnetometer {100 * rej / (used + rej):.0f} % rejected: the heading leans on the "
+                       f"gyroscope (bent or miscalibrated field)")
         if self.n_nonfinite:
             what = ", ".join(f"{k} {v}" for k, v in sorted(self.n_nonfinite.items()))
             out.append(f"non-finite sensor values skipped ({what})")
