@@ -238,26 +238,41 @@ def can_run(name: str, rec: Recording) -> bool:
 
 
 def step_headings(att: Attitude, step_t_ns, *, grid_rate_hz: float = 50.0, cutoff_hz: float = 0.5,
-                  delay_s: float | None = None, forward_b=(0.0, 1.0, 0.0)) -> np.ndarray:
-    """Per-step walking heading (rad) from an attitude series, made as the pipeline makes ours.
+                  delay_s: float | None = None, forward_b=(0.0, 1.0, 0.0), step_duration_s=None) -> np.ndarray:
+    """Per-step walking heading (rad) from an attitude series, made exactly as the pipeline makes ours.
 
     The rotation matrices are sampled on a uniform ``grid_rate_hz`` grid,
-    low-passed by :class:`core.pdr.heading.RotationSmoother` and read at
-    ``t_step + delay_s`` (the smoother's group delay by default).  Steps before
-    the attitude series starts get its first smoothed heading.
+    low-passed by :class:`core.pdr.heading.RotationSmoother`, and each step
+    gets :func:`core.pdr.heading.interval_heading` over its delay-compensated
+    interval ``[t - duration + delay, t + delay]`` (the pipeline's rule).
+    ``step_duration_s`` defaults to the time since the previous step, or
+    :data:`core.pdr.pipeline.DEFAULT_STEP_DURATION_S` for the first step of a
+    bout (a gap over 1.5 s, the detector's ``max_step_interval_s``).
     """
+    from core.pdr.heading import interval_heading
+    from core.pdr.pipeline import DEFAULT_STEP_DURATION_S
+
     steps = np.asarray(step_t_ns, dtype=np.int64)
     smoother = RotationSmoother(cutoff_hz=cutoff_hz, grid_rate_hz=grid_rate_hz, forward_b=forward_b)
     delay = smoother.delay_s if delay_s is None else float(delay_s)
     if len(att.t_ns) == 0 or len(steps) == 0:
         return np.full(len(steps), np.nan)
+    if step_duration_s is None:
+        d = np.diff(steps, prepend=steps[0]) * 1e-9
+        d[(d <= 0) | (d > 1.5)] = DEFAULT_STEP_DURATION_S
+    else:
+        d = np.asarray(step_duration_s, dtype=float)
     period_ns = int(round(1e9 / grid_rate_hz))
     grid = np.arange(int(att.t_ns[0]), int(att.t_ns[-1]) + 1, period_ns, dtype=np.int64)
     idx = np.searchsorted(att.t_ns, grid, side="right") - 1
-    heading = np.array([smoother.update(quat.to_matrix(tuple(att.q_wxyz[i]))) for i in idx])
-    read = steps + int(round(delay * 1e9))
-    k = np.clip(np.searchsorted(grid, read, side="left"), 0, len(grid) - 1)
-    return heading[k]
+    east = np.empty(len(grid))
+    north = np.empty(len(grid))
+    for j, i in enumerate(idx):
+        smoother.update(quat.to_matrix(tuple(att.q_wxyz[i])))
+        east[j], north[j] = smoother.forward_east, smoother.forward_north
+    delay_ns = int(round(delay * 1e9))
+    return np.array([interval_heading(grid, east, north, int(t) + delay_ns - int(dk * 1e9), int(t) + delay_ns)
+                     for t, dk in zip(steps, d)])
 
 
 def run_peers(rec: Recording, step_t_ns, names=ALL_PEERS, magnetic_dip_rad: float | None = None,

@@ -26,6 +26,10 @@ def turning_phone(duration_s=40.0, rate_hz=100.0, yaw_rate=0.3, pitch=math.radia
     return rec, tn, heading
 
 
+def yaw_rate_of_turning_phone():
+    return 0.3  # the default of turning_phone (rad/s)
+
+
 @pytest.mark.parametrize("name", peers.ALL_PEERS)
 def test_every_peer_tracks_the_heading_of_a_tilted_turning_phone(name):
     if name not in peers.available_peers((name,)):
@@ -35,16 +39,21 @@ def test_every_peer_tracks_the_heading_of_a_tilted_turning_phone(name):
     dip = math.atan2(40.0, 20.0)  # the simulated site's field (0, 20, -40) uT
     out, errors = peers.run_peers(rec, steps, names=(name,), magnetic_dip_rad=dip, delay_s=0.0, cutoff_hz=5.0)
     assert not errors
-    err = np.degrees((out[name] - heading[::50][10:-2] + np.pi) % (2 * np.pi) - np.pi)
+    # a step's heading is the mean over its interval (0.5 s here): the heading 0.25 s before the step
+    truth = heading[::50][10:-2] - yaw_rate_of_turning_phone() * 0.25
+    err = np.degrees((out[name] - truth + np.pi) % (2 * np.pi) - np.pi)
     assert np.max(np.abs(err[5:])) < 2.0  # what is left is the smoother's lag at 17 deg/s
 
 
-def test_step_headings_read_after_the_delay():
+def test_step_headings_are_the_mean_over_the_delay_compensated_interval():
     t = np.arange(0, 10_000_000_000, 10_000_000, dtype=np.int64)
     yaw = np.where(t < 5_000_000_000, 0.0, math.pi / 2)  # device y East, then North
     q = np.array([quat.from_axis_angle((0, 0, 1), y - math.pi / 2) for y in yaw])
-    h = peers.step_headings(peers.Attitude(t, q), [4_000_000_000, 9_000_000_000], cutoff_hz=2.0)
-    np.testing.assert_allclose(h, [0.0, math.pi / 2], atol=1e-3)
+    h = peers.step_headings(peers.Attitude(t, q), [4_000_000_000, 5_100_000_000, 9_000_000_000], cutoff_hz=2.0,
+                            step_duration_s=[0.5, 0.2, 0.5])
+    # before the turn; 0.1 s after it (mean over [4.9, 5.1] s after the delay: still turning); well after it
+    np.testing.assert_allclose(h[[0, 2]], [0.0, math.pi / 2], atol=1e-3)
+    assert 0.05 < h[1] < math.pi / 2 - 0.05
 
 
 def test_dip_angle():
