@@ -192,6 +192,8 @@ class AttitudeSettings:
     mag_relock_spread_rad: float = math.radians(10.0)
     #: the references |g|, |h| and dip are running medians of every reading, refreshed this often (s)
     reference_update_s: float = 1.0
+    #: while the phone is still, magnetometer readings enter the references at most this often (Hz)
+    reference_still_rate_hz: float = 1.0
     #: magnetic declination, east of true north positive (rad); 0: headings relative to magnetic north
     declination_rad: float = 0.0
     #: heading of the device y axis at the start when there is no magnetometer (rad, CCW from East)
@@ -323,6 +325,7 @@ class AttitudeEKF:
         self._acc_norm_win = WindowVariance(s.still_window_s)
         self._next_zero_rate_ns: int | None = None
         self._ref_next_ns: int | None = None
+        self._ref_still_next_ns: int | None = None
         self._g_med = RunningMedian(0.0, 40.0, 0.01)
         self._h_med = RunningMedian(0.0, 200.0, 0.1)
         self._dip_med = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
@@ -427,7 +430,7 @@ class AttitudeEKF:
     def _accumulate_references(self, t_ns: int, acc=None, mag=None) -> None:
         if acc is not None:
             self._g_med.add(math.sqrt(acc[0] ** 2 + acc[1] ** 2 + acc[2] ** 2))
-        if mag is not None and self._last_acc is not None:
+        if mag is not None and self._last_acc is not None and self._reference_sample_due(t_ns):
             a = self._last_acc
             na = math.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
             nm = math.sqrt(mag[0] ** 2 + mag[1] ** 2 + mag[2] ** 2)
@@ -439,6 +442,23 @@ class AttitudeEKF:
                 or (self._h_med.n and self.field_uT != self.field_uT)):
             self._ref_next_ns = t_ns + int(self.settings.reference_update_s * 1e9)
             self._update_references()
+
+    def _reference_sample_due(self, t_ns: int) -> bool:
+        """Magnetometer readings of a still phone enter the references at most ``reference_still_rate_hz``.
+
+        A phone left on a table for minutes would otherwise set |h| and the dip
+        to the table's field (the ETH walk starts with 100 s of that, at 13 uT
+        against the 22 uT of the walk, and the walk's readings were then
+        rejected as "norm off").
+        """
+        w = self._acc_norm_win
+        still = len(w.buf) >= 5 and w.variance() < self.settings.still_acc_sd_m_s2 ** 2
+        if not still or self._h_med.n == 0:
+            return True
+        if self._ref_still_next_ns is not None and t_ns < self._ref_still_next_ns:
+            return False
+        self._ref_still_next_ns = t_ns + int(1e9 / self.settings.reference_still_rate_hz)
+        return True
 
     def _update_references(self) -> None:
         if self._g_med.n:
