@@ -67,13 +67,17 @@ nothing in it imports the desktop tools of ``desktop/``.
 Shared, at ``core/``'s top
     ``core.conventions`` (constants, angle wrap, bearings), ``core.quaternion``
     (the one quaternion module), ``core.dsp`` (Butterworth, biquads, uniform
-    grid), ``core.recording`` (data model and file format),
+    grid, windowed statistics), ``core.geodesy`` (WGS-84 <-> local ENU,
+    distances, magnetic declination), ``core.recording`` (data model and file format),
     ``core.importers`` (other apps' files), ``core.export`` (CSV, GeoJSON, GPX).
 
 ``core.pdr`` -- the hand-held step-and-heading chain (Tian et al. 2014, Fig. 2)
     ``steps`` (eqs. 2-3), ``stride`` and ``stride_models`` (eq. 4),
-    ``calibration``, ``attitude`` (EKF), ``heading`` (rotation-matrix
-    smoothing, section 4.3), ``deadreckoning`` (eq. 1), ``pipeline``.
+    ``calibration``, ``attitude`` (error-state EKF of attitude and gyro bias),
+    ``attitude_qekf`` (the paper's quaternion EKF, for comparison), ``magcal``
+    (magnetometer calibration, quasi-static field), ``heading``
+    (rotation-matrix smoothing, section 4.3; a step's heading),
+    ``deadreckoning`` (eq. 1), ``pipeline``.
 
 ``core.gnss``, ``core.foot``
     GPS fusion (Chen 2010, Kubrak 2006) and foot-mounted INS (Song 2018), to come.

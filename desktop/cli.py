@@ -116,7 +116,7 @@ def summary_lines(res, rec: Recording) -> list[str]:
     used, rej = s.get("mag_used", 0), s.get("mag_rejected", 0)
     att = s.get("attitude") or {}
     if used + rej:
-        why = {k: v for k, v in (att.get("mag_reasons") or {}).items() if k != "used" and v > 0}
+        why = {k: v for k, v in (att.get("mag_reasons") or {}).items() if k not in ("used", "initialising") and v > 0}
         top = ", ".join(f"{k} {v}" for k, v in sorted(why.items(), key=lambda kv: -kv[1])[:3])
         lines.append(f"magnetometer  {used} readings used, {rej} rejected ({100 * rej / (used + rej):.1f} %)"
                      + (f": {top}" if top else ""))
@@ -152,6 +152,9 @@ def cmd_replay(args) -> int:
     offset = rec.metadata.get("unix_offset_ns")
     written = []
     from core import export
+    for out in (args.csv, args.geojson, args.gpx, args.plot):
+        if out:  # outputs may go into a folder that does not exist yet (out/ by default in the README)
+            Path(out).parent.mkdir(parents=True, exist_ok=True)
     if args.csv:
         export.write_track_csv(args.csv, res.track)
         written.append(args.csv)

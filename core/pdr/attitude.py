@@ -254,6 +254,26 @@ class AttitudeStatus:
     counters: dict = field(default_factory=dict)
 
 
+def run_attitude_filter(filt, recording) -> tuple[np.ndarray, np.ndarray]:
+    """Attitude after every event of a :class:`core.recording.Recording` (gyro, acc, mag in time order).
+
+    Works for any filter with ``reset``, ``predict``, ``update_acc``,
+    ``update_mag``, ``q`` and ``initialized``; the same kernel as streaming.
+    Returns ``(t_ns (n,), q_wxyz (n, 4))`` with NaN rows before the filter has
+    initialised.
+    """
+    filt.reset()
+    names = [n for n in ("gyro", "acc", "mag") if recording.has(n)]
+    handlers = {"gyro": filt.predict, "acc": filt.update_acc, "mag": filt.update_mag}
+    t_out, q_out = [], []
+    nan4 = (math.nan,) * 4
+    for name, t, v in recording.events(names):
+        handlers[name](t, v[0], v[1], v[2])
+        t_out.append(t)
+        q_out.append(filt.q if filt.initialized else nan4)
+    return np.array(t_out, dtype=np.int64), np.array(q_out, dtype=float).reshape(-1, 4)
+
+
 class AttitudeEKF:
     """Error-state EKF of the attitude and gyroscope bias (see the module docstring).
 
@@ -798,21 +818,8 @@ class AttitudeEKF:
 
     # -- batch -------------------------------------------------------------------------------------
     def run(self, recording) -> tuple[np.ndarray, np.ndarray]:
-        """Attitude after every event of a :class:`core.recording.Recording` (gyro, acc, mag in time order).
-
-        The same kernel as streaming; returns ``(t_ns (n,), q_wxyz (n, 4))``
-        with NaN rows before the filter has initialised.
-        """
-        self.reset()
-        names = [n for n in ("gyro", "acc", "mag") if recording.has(n)]
-        handlers = {"gyro": self.predict, "acc": self.update_acc, "mag": self.update_mag}
-        t_out, q_out = [], []
-        nan4 = (math.nan,) * 4
-        for name, t, v in recording.events(names):
-            handlers[name](t, v[0], v[1], v[2])
-            t_out.append(t)
-            q_out.append(self.q if self.initialized else nan4)
-        return np.array(t_out, dtype=np.int64), np.array(q_out, dtype=float).reshape(-1, 4)
+        """Attitude after every event of a recording: :func:`run_attitude_filter` (the streaming kernel)."""
+        return run_attitude_filter(self, recording)
 
     def matrix(self):
         """Current rotation matrix body -> ENU (3 row tuples)."""

@@ -449,21 +449,10 @@ class QuaternionEKF:
 
     # -- batch -------------------------------------------------------------------
     def run(self, recording) -> tuple[np.ndarray, np.ndarray]:
-        """Attitude after every event of a :class:`core.recording.Recording` (gyro, acc, mag in time order).
+        """Attitude after every event of a recording (:func:`core.pdr.attitude.run_attitude_filter`)."""
+        from core.pdr.attitude import run_attitude_filter
 
-        The same kernel as streaming; returns ``(t_ns (n,), q_wxyz (n, 4))``
-        with NaN rows before the filter has initialised.
-        """
-        self.reset()
-        names = [n for n in ("gyro", "acc", "mag") if recording.has(n)]
-        handlers = {"gyro": self.predict, "acc": self.update_acc, "mag": self.update_mag}
-        t_out, q_out = [], []
-        nan4 = (math.nan,) * 4
-        for name, t, v in recording.events(names):
-            handlers[name](t, v[0], v[1], v[2])
-            t_out.append(t)
-            q_out.append(self.q if self.initialized else nan4)
-        return np.array(t_out, dtype=np.int64), np.array(q_out, dtype=float).reshape(-1, 4)
+        return run_attitude_filter(self, recording)
 
     # -- outputs ---------------------------------------------------------------
     def matrix(self):
