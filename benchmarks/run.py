@@ -136,6 +136,11 @@ def make_pipeline(trial: Trial, **overrides):
     kwargs.update(overrides)
     pipe = Pipeline(**kwargs)
     set_declination(pipe, trial.declination_rad or 0.0)
+    site = getattr(trial, "site", None)
+    if site is not None and hasattr(pipe.attitude, "set_site_field"):
+        # the site's WMM field strength and dip: what a live app knows from its location
+        _, dip, total = site.magnetic_field()
+        pipe.attitude.set_site_field(total, dip)
     return pipe
 
 

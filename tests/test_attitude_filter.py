@@ -271,3 +271,56 @@ def test_batch_run_restarts_and_matches_a_fresh_stream_fed_in_chunks():
     assert len(t_run) == len(ordered)
     np.testing.assert_allclose(q_run[-1], fresh.q, atol=1e-12)
     np.testing.assert_allclose(used.gyro_bias, fresh.gyro_bias, atol=1e-12)
+
+
+def _flat_turning_events(seconds, *, z_offset_uT, seed=21, rate=50.0, t0=10**12):
+    """A phone held nearly flat (tilt wobbling +-8 deg), turning slowly about the vertical; mag with a z offset."""
+    rng = np.random.default_rng(seed)
+    t = t0
+    dt = 1.0 / rate
+    yaw_rate = 0.25
+    for k in range(int(seconds * rate)):
+        t += int(1e9 * dt)
+        tau = k * dt
+        yaw = yaw_rate * tau
+        roll = math.radians(8.0) * math.sin(0.7 * tau)
+        pitch = math.radians(6.0) * math.sin(0.45 * tau + 1.0)
+        q = quat.multiply(quat.multiply(quat.from_axis_angle((0, 0, 1), yaw), quat.from_axis_angle((1, 0, 0), pitch)),
+                          quat.from_axis_angle((0, 1, 0), roll))
+        R = _rot(q)
+        # body rate by finite difference of the attitude
+        tau2 = tau + 1e-4
+        q2 = quat.multiply(quat.multiply(quat.from_axis_angle((0, 0, 1), yaw_rate * tau2),
+                                         quat.from_axis_angle((1, 0, 0), math.radians(6.0) * math.sin(0.45 * tau2 + 1.0))),
+                           quat.from_axis_angle((0, 1, 0), math.radians(8.0) * math.sin(0.7 * tau2)))
+        dq = quat.multiply(quat.conjugate(q), q2)
+        w = np.array(dq[1:]) * 2.0 / 1e-4
+        yield "gyro", t, tuple(w + rng.normal(0, 0.002, 3))
+        yield "acc", t + 1000, tuple(R.T @ np.array([0.0, 0.0, G]) + rng.normal(0, 0.02, 3))
+        yield "mag", t + 2000, tuple(R.T @ FIELD_N + np.array([0.0, 0.0, z_offset_uT]) + rng.normal(0, 0.3, 3))
+    return q
+
+
+def test_the_sites_field_removes_a_vertical_offset_no_rotation_can_see():
+    """ETH-like: a flat phone's calibration 40 uT off in z gives heading errors as it wobbles; the WMM field fixes it."""
+    def run(with_site):
+        ekf = AttitudeEKF()
+        if with_site:
+            ekf.set_site_field(48.0, DIP)
+        events = list(_flat_turning_events(150.0, z_offset_uT=40.0))
+        errs = []
+        t_end = events[-1][1]
+        for name, t, v in events:
+            _feed(ekf, [(name, t, v)])
+            if name == "gyro" and t > t_end - 30e9:
+                tau = (t - 10**12) * 1e-9
+                errs.append(abs(math.degrees(wrap_angle(_yaw(ekf.q) - (0.25 * tau + math.pi / 2)))))
+        return ekf, float(np.median(errs))
+
+    plain, err_plain = run(False)
+    fixed, err_fixed = run(True)
+    assert fixed.vertical_offset_uT[2] == pytest.approx(40.0, abs=3.0)
+    assert abs(fixed.vertical_offset_uT[0]) < 5.0 and abs(fixed.vertical_offset_uT[1]) < 5.0
+    assert plain.vertical_offset_uT == (0.0, 0.0, 0.0)
+    assert err_fixed < 2.0
+    assert err_plain > 2 * err_fixed

@@ -196,6 +196,17 @@ class AttitudeSettings:
     reference_still_rate_hz: float = 1.0
     #: magnetic declination, east of true north positive (rad); 0: headings relative to magnetic north
     declination_rad: float = 0.0
+    #: the site's field strength (uT) and dip (rad, below the horizontal positive), e.g. from the World
+    #: Magnetic Model (core.geodesy.magnetic_field) where the location is known; nan: unknown.  With
+    #: them, an offset along the never-rotated (vertical) body axis is estimated (see _vertical_offset)
+    site_field_uT: float = math.nan
+    site_dip_rad: float = math.nan
+    #: the vertical offset is removed only while the readings' median dip is this far off the site's (rad)
+    vertical_offset_dip_error_rad: float = math.radians(30.0)
+    #: ... and only after this long with readings (s): a short stretch determines no offset
+    vertical_offset_min_s: float = 60.0
+    #: ridge of the vertical-offset least squares, as a fraction of the mean excitation
+    vertical_offset_ridge: float = 0.01
     #: heading of the device y axis at the start when there is no magnetometer (rad, CCW from East)
     initial_yaw_rad: float = math.pi / 2
     #: False ignores magnetometer events (heading relative to the start)
@@ -326,6 +337,10 @@ class AttitudeEKF:
         self.settings = replace(self.settings, declination_rad=float(d))
         self._update_references()
 
+    def set_site_field(self, field_uT: float, dip_rad: float) -> None:
+        """The site's field strength (uT) and dip (rad), e.g. from the World Magnetic Model (see the settings)."""
+        self.settings = replace(self.settings, site_field_uT=float(field_uT), site_dip_rad=float(dip_rad))
+
     def reset(self) -> None:
         s = self.settings
         self.q = (1.0, 0.0, 0.0, 0.0)
@@ -346,6 +361,15 @@ class AttitudeEKF:
         self._next_zero_rate_ns: int | None = None
         self._ref_next_ns: int | None = None
         self._ref_still_next_ns: int | None = None
+        # vertical hard-iron offset from the site's field (see _vertical_offset)
+        self._vo_S = [[0.0] * 3 for _ in range(3)]
+        self._vo_r = [0.0, 0.0, 0.0]
+        self._vo_next_ns: int | None = None
+        self._vo_t0_ns: int | None = None
+        self._vo_active = False
+        self._raw_dip_med = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
+        #: hard-iron offset removed by :meth:`_vertical_offset` (uT, body frame; zero while inactive)
+        self.vertical_offset_uT = (0.0, 0.0, 0.0)
         self._g_med = RunningMedian(0.0, 40.0, 0.01)
         self._h_med = RunningMedian(0.0, 200.0, 0.1)
         self._dip_med = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
@@ -403,7 +427,7 @@ class AttitudeEKF:
              "nonfinite_skipped_by_filter": self.n_skipped_nonfinite,
              "numerical_rejects": self.n_numerical_rejects, "heading_relocks": self.n_heading_relocks,
              "mag_reasons": dict(self.mag_reasons), "mean_nis": self.mean_nis(),
-             "gyro_bias_rad_s": list(self.b), "heading_sd_rad": math.sqrt(max(float(self.P[2, 2]), 0.0))}
+             "gyro_bias_rad_s": list(self.b), "vertical_offset_uT": list(self.vertical_offset_uT), "heading_sd_rad": math.sqrt(max(float(self.P[2, 2]), 0.0))}
         if self.mag_calibrator is not None:
             st = self.mag_calibrator.status
             c["mag_calibration"] = getattr(st, "state", str(st))
@@ -713,6 +737,9 @@ class AttitudeEKF:
         lo, hi = s.mag_valid_range_uT
         if not lo <= nm <= hi:
             return self._mag_flags(t_ns, False, "invalid range")
+        if self.initialized and s.site_field_uT == s.site_field_uT and s.site_dip_rad == s.site_dip_rad:
+            mx, my, mz = self._vertical_offset(t_ns, mx, my, mz)
+            nm = math.sqrt(mx * mx + my * my + mz * mz)
         self._last_mag = (mx, my, mz)
         self._accumulate_references(t_ns, mag=self._last_mag)
         if not self.initialized:
@@ -781,6 +808,58 @@ class AttitudeEKF:
             self._relock(t_ns, float(y[0]))
         return self._mag_interval_done(t_ns, n, used, reason, nis=nis, dof=1, sigma2=r_angle,
                                        innovation=(float(y[0]),))
+
+    def _vertical_offset(self, t_ns: int, mx: float, my: float, mz: float):
+        """Remove a hard-iron offset along the directions the phone held vertical, from the site's field.
+
+        A phone held flat never turns its z axis, so no calibration from
+        rotations can see an offset along it (the ETH walk: Android's
+        calibration is about 50 uT off in z; the dip reads -24 deg where the
+        World Magnetic Model says +63 deg).  The site's field (strength ``F``
+        and dip ``d``, from the WMM where the location is known) fixes it: the
+        true field's vertical component is ``up_b . (m - b) = -F sin d``.
+        Ridge least squares over every reading, ``(sum u u^T + lambda I) b =
+        sum u (u . m + F sin d)``, shrinks the directions that were never
+        vertical to no correction.  It is applied only while the readings'
+        own median dip is off the site's by more than
+        ``vertical_offset_dip_error_rad`` -- a miscalibration; a building's
+        bent field moves the dip by 10-20 deg, and is left alone -- and only
+        after ``vertical_offset_min_s`` of readings (a short stretch
+        determines no offset).
+        """
+        s = self.settings
+        R = quat.to_matrix(self.q)
+        u = (R[2][0], R[2][1], R[2][2])  # up in the body frame
+        nm = math.sqrt(mx * mx + my * my + mz * mz)
+        self._raw_dip_med.add(math.asin(max(-1.0, min(1.0, -(u[0] * mx + u[1] * my + u[2] * mz) / nm))))
+        rhs = u[0] * mx + u[1] * my + u[2] * mz + s.site_field_uT * math.sin(s.site_dip_rad)
+        S, r = self._vo_S, self._vo_r
+        for i in range(3):
+            r[i] += u[i] * rhs
+            for j in range(3):
+                S[i][j] += u[i] * u[j]
+        if self._vo_next_ns is None or t_ns >= self._vo_next_ns:
+            self._vo_next_ns = t_ns + 1_000_000_000
+            if self._vo_t0_ns is None:
+                self._vo_t0_ns = t_ns
+            active = (abs(self._raw_dip_med.median() - s.site_dip_rad) > s.vertical_offset_dip_error_rad
+                      and (t_ns - self._vo_t0_ns) * 1e-9 >= s.vertical_offset_min_s)
+            if active:
+                A = np.array(S) + (s.vertical_offset_ridge * (S[0][0] + S[1][1] + S[2][2]) / 3.0) * _I3
+                b = np.linalg.solve(A, np.array(r))
+                if np.all(np.isfinite(b)):
+                    self.vertical_offset_uT = tuple(float(v) for v in b)
+            if active != self._vo_active:  # the references were of the other field: start them again
+                self._vo_active = active
+                self._h_med = RunningMedian(0.0, 200.0, 0.1)
+                self._dip_med = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
+                self.field_uT = self.dip_rad = math.nan
+                if not active:
+                    self.vertical_offset_uT = (0.0, 0.0, 0.0)
+        if not self._vo_active:
+            return mx, my, mz
+        b = self.vertical_offset_uT
+        return mx - b[0], my - b[1], mz - b[2]
 
     def _mag_interval_done(self, t_ns, n, used, reason, **kw) -> UpdateFlags:
         """Flags of the reading that closed an interval; its ``n - 1`` earlier readings are re-counted if unused."""
