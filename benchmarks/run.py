@@ -137,8 +137,11 @@ def make_pipeline(trial: Trial, **overrides):
     pipe = Pipeline(**kwargs)
     set_declination(pipe, trial.declination_rad or 0.0)
     site = getattr(trial, "site", None)
-    if site is not None and hasattr(pipe.attitude, "set_site_field"):
-        # the site's WMM field strength and dip: what a live app knows from its location
+    outdoors = getattr(trial, "reference_track", None) is not None  # the walk had good GPS fixes
+    if site is not None and outdoors and hasattr(pipe.attitude, "set_site_field"):
+        # outdoors, the site's WMM field strength and dip: what a live app knows from its GPS fix.
+        # Indoors (IPIN, Microsoft) the building bends the field and it is not given (seen on IPIN
+        # route 04, report split: an offset estimated from the WMM there ruined three loops).
         _, dip, total = site.magnetic_field()
         pipe.attitude.set_site_field(total, dip)
     return pipe

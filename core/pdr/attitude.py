@@ -196,13 +196,17 @@ class AttitudeSettings:
     reference_still_rate_hz: float = 1.0
     #: magnetic declination, east of true north positive (rad); 0: headings relative to magnetic north
     declination_rad: float = 0.0
-    #: the site's field strength (uT) and dip (rad, below the horizontal positive), e.g. from the World
-    #: Magnetic Model (core.geodesy.magnetic_field) where the location is known; nan: unknown.  With
-    #: them, an offset along the never-rotated (vertical) body axis is estimated (see _vertical_offset)
+    #: the site's field strength (uT) and dip (rad, below the horizontal positive) from the World
+    #: Magnetic Model (core.geodesy.magnetic_field), for walks outdoors (where the location is known
+    #: from a good GPS fix); nan: unknown or indoors.  With them, an offset along the never-rotated
+    #: (vertical) body axis is estimated (see _vertical_offset)
     site_field_uT: float = math.nan
     site_dip_rad: float = math.nan
     #: the vertical offset is removed only while the readings' median dip is this far off the site's (rad)
     vertical_offset_dip_error_rad: float = math.radians(30.0)
+    #: ... and their median strength this far off (fraction of the site's): both are signs of a
+    #: miscalibration, where a bent indoor field moves one or the other
+    vertical_offset_norm_error: float = 0.3
     #: ... and only after this long with readings (s): a short stretch determines no offset
     vertical_offset_min_s: float = 60.0
     #: ridge of the vertical-offset least squares, as a fraction of the mean excitation
@@ -338,7 +342,13 @@ class AttitudeEKF:
         self._update_references()
 
     def set_site_field(self, field_uT: float, dip_rad: float) -> None:
-        """The site's field strength (uT) and dip (rad), e.g. from the World Magnetic Model (see the settings)."""
+        """The site's field strength (uT) and dip (rad) from the World Magnetic Model, for a walk outdoors.
+
+        Only outdoors is the WMM field the field the phone sees (a live app
+        knows it is outdoors from a good GPS fix); indoors a building's steel
+        bends it by tens of per cent and degrees, and the vertical-offset
+        estimate it drives (see the settings) would be wrong: leave it unset there.
+        """
         self.settings = replace(self.settings, site_field_uT=float(field_uT), site_dip_rad=float(dip_rad))
 
     def reset(self) -> None:
@@ -368,6 +378,7 @@ class AttitudeEKF:
         self._vo_t0_ns: int | None = None
         self._vo_active = False
         self._raw_dip_med = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
+        self._raw_norm_med = RunningMedian(0.0, 200.0, 0.1)
         #: hard-iron offset removed by :meth:`_vertical_offset` (uT, body frame; zero while inactive)
         self.vertical_offset_uT = (0.0, 0.0, 0.0)
         self._g_med = RunningMedian(0.0, 40.0, 0.01)
@@ -823,9 +834,11 @@ class AttitudeEKF:
         vertical to no correction.  It is applied only while the readings'
         own median dip is off the site's by more than
         ``vertical_offset_dip_error_rad`` -- a miscalibration; a building's
-        bent field moves the dip by 10-20 deg, and is left alone -- and only
-        after ``vertical_offset_min_s`` of readings (a short stretch
-        determines no offset).
+        bent field moves the dip by 10-20 deg, and is left alone -- and the
+        median strength is off by ``vertical_offset_norm_error`` too, after
+        ``vertical_offset_min_s`` of readings (a short stretch determines no
+        offset).  Once on, it stays on until the dip error is below half the
+        threshold.
         """
         s = self.settings
         R = quat.to_matrix(self.q)
@@ -842,8 +855,14 @@ class AttitudeEKF:
             self._vo_next_ns = t_ns + 1_000_000_000
             if self._vo_t0_ns is None:
                 self._vo_t0_ns = t_ns
-            active = (abs(self._raw_dip_med.median() - s.site_dip_rad) > s.vertical_offset_dip_error_rad
-                      and (t_ns - self._vo_t0_ns) * 1e-9 >= s.vertical_offset_min_s)
+            self._raw_norm_med.add(nm)
+            dip_err = abs(self._raw_dip_med.median() - s.site_dip_rad)
+            norm_err = abs(self._raw_norm_med.median() / s.site_field_uT - 1.0)
+            if self._vo_active:  # hysteresis: stays on until the dip is clearly right
+                active = dip_err > 0.5 * s.vertical_offset_dip_error_rad
+            else:
+                active = (dip_err > s.vertical_offset_dip_error_rad and norm_err > s.vertical_offset_norm_error
+                          and (t_ns - self._vo_t0_ns) * 1e-9 >= s.vertical_offset_min_s)
             if active:
                 A = np.array(S) + (s.vertical_offset_ridge * (S[0][0] + S[1][1] + S[2][2]) / 3.0) * _I3
                 b = np.linalg.solve(A, np.array(r))
