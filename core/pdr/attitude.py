@@ -269,6 +269,33 @@ class AttitudeStatus:
     counters: dict = field(default_factory=dict)
 
 
+class FieldReferences:
+    """|g|, |h| and the magnetic dip as running medians of the readings (used by both attitude filters)."""
+
+    def __init__(self):
+        self.reset()
+
+    def reset(self) -> None:
+        self.g = RunningMedian(0.0, 40.0, 0.01)
+        self.reset_field()
+
+    def reset_field(self) -> None:
+        self.h = RunningMedian(0.0, 200.0, 0.1)
+        self.dip = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
+
+    def add_acc(self, acc) -> None:
+        self.g.add(math.sqrt(acc[0] ** 2 + acc[1] ** 2 + acc[2] ** 2))
+
+    def add_mag(self, acc, mag) -> None:
+        """A magnetometer reading and the accelerometer reading beside it (dip against the measured "up")."""
+        na = math.sqrt(acc[0] ** 2 + acc[1] ** 2 + acc[2] ** 2)
+        nm = math.sqrt(mag[0] ** 2 + mag[1] ** 2 + mag[2] ** 2)
+        if na > 0 and nm > 0:
+            sin_dip = -(acc[0] * mag[0] + acc[1] * mag[1] + acc[2] * mag[2]) / (na * nm)
+            self.dip.add(math.asin(max(-1.0, min(1.0, sin_dip))))
+            self.h.add(nm)
+
+
 def run_attitude_filter(filt, recording) -> tuple[np.ndarray, np.ndarray]:
     """Attitude after every event of a :class:`core.recording.Recording` (gyro, acc, mag in time order).
 
@@ -381,9 +408,7 @@ class AttitudeEKF:
         self._raw_norm_med = RunningMedian(0.0, 200.0, 0.1)
         #: hard-iron offset removed by :meth:`_vertical_offset` (uT, body frame; zero while inactive)
         self.vertical_offset_uT = (0.0, 0.0, 0.0)
-        self._g_med = RunningMedian(0.0, 40.0, 0.01)
-        self._h_med = RunningMedian(0.0, 200.0, 0.1)
-        self._dip_med = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
+        self._refs = FieldReferences()
         self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
         self.field_uT = math.nan
         self.dip_rad = math.nan
@@ -484,17 +509,11 @@ class AttitudeEKF:
 
     def _accumulate_references(self, t_ns: int, acc=None, mag=None) -> None:
         if acc is not None:
-            self._g_med.add(math.sqrt(acc[0] ** 2 + acc[1] ** 2 + acc[2] ** 2))
+            self._refs.add_acc(acc)
         if mag is not None and self._last_acc is not None and self._reference_sample_due(t_ns):
-            a = self._last_acc
-            na = math.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
-            nm = math.sqrt(mag[0] ** 2 + mag[1] ** 2 + mag[2] ** 2)
-            if na > 0 and nm > 0:
-                sin_dip = -(a[0] * mag[0] + a[1] * mag[1] + a[2] * mag[2]) / (na * nm)
-                self._dip_med.add(math.asin(max(-1.0, min(1.0, sin_dip))))
-                self._h_med.add(nm)
+            self._refs.add_mag(self._last_acc, mag)
         if (self._ref_next_ns is None or t_ns >= self._ref_next_ns
-                or (self._h_med.n and self.field_uT != self.field_uT)):
+                or (self._refs.h.n and self.field_uT != self.field_uT)):
             self._ref_next_ns = t_ns + int(self.settings.reference_update_s * 1e9)
             self._update_references()
 
@@ -508,7 +527,7 @@ class AttitudeEKF:
         """
         w = self._acc_norm_win
         still = len(w.buf) >= 5 and w.variance() < self.settings.still_acc_sd_m_s2 ** 2
-        if not still or self._h_med.n == 0:
+        if not still or self._refs.h.n == 0:
             return True
         if self._ref_still_next_ns is not None and t_ns < self._ref_still_next_ns:
             return False
@@ -516,11 +535,11 @@ class AttitudeEKF:
         return True
 
     def _update_references(self) -> None:
-        if self._g_med.n:
-            self.gravity_m_s2 = self._g_med.median()
-        if self._h_med.n:
-            self.field_uT = self._h_med.median()
-            self.dip_rad = self._dip_med.median()
+        if self._refs.g.n:
+            self.gravity_m_s2 = self._refs.g.median()
+        if self._refs.h.n:
+            self.field_uT = self._refs.h.median()
+            self.dip_rad = self._refs.dip.median()
         dip = self.dip_rad if self.dip_rad == self.dip_rad else math.radians(60.0)
         c, sn = math.cos(dip), math.sin(dip)
         d = self.settings.declination_rad
@@ -870,8 +889,7 @@ class AttitudeEKF:
                     self.vertical_offset_uT = tuple(float(v) for v in b)
             if active != self._vo_active:  # the references were of the other field: start them again
                 self._vo_active = active
-                self._h_med = RunningMedian(0.0, 200.0, 0.1)
-                self._dip_med = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
+                self._refs.reset_field()
                 self.field_uT = self.dip_rad = math.nan
                 if not active:
                     self.vertical_offset_uT = (0.0, 0.0, 0.0)

@@ -54,7 +54,8 @@ import numpy as np
 
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2
-from core.dsp import RunningMedian, WindowMeanSpread, WindowVariance
+from core.dsp import WindowMeanSpread, WindowVariance
+from core.pdr.attitude import FieldReferences
 
 _EYE4 = np.eye(4)
 _EYE4.flags.writeable = False
@@ -228,9 +229,7 @@ class QuaternionEKF:
         self._acc_var = WindowVariance(self.variance_window_s)
         self._mag_var = WindowVariance(self.variance_window_s)
         self._ref_next_ns: int | None = None
-        self._g_med = RunningMedian(0.0, 40.0, 0.01)
-        self._h_med = RunningMedian(0.0, 200.0, 0.1)
-        self._dip_med = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
+        self._refs = FieldReferences()
         self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
         self.field_uT = math.nan
         self.dip_rad = math.nan
@@ -275,26 +274,20 @@ class QuaternionEKF:
     def _accumulate_references(self, t_ns: int, acc=None, mag=None) -> None:
         """Collect |a|, |m| and the dip angle; refresh the references every ``reference_update_s``."""
         if acc is not None:
-            self._g_med.add(math.sqrt(acc[0] ** 2 + acc[1] ** 2 + acc[2] ** 2))
+            self._refs.add_acc(acc)
         if mag is not None and self._last_acc is not None:
-            a = self._last_acc
-            na = math.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
-            nm = math.sqrt(mag[0] ** 2 + mag[1] ** 2 + mag[2] ** 2)
-            if na > 0 and nm > 0:
-                sin_dip = -(a[0] * mag[0] + a[1] * mag[1] + a[2] * mag[2]) / (na * nm)
-                self._dip_med.add(math.asin(max(-1.0, min(1.0, sin_dip))))
-                self._h_med.add(nm)
+            self._refs.add_mag(self._last_acc, mag)
         if (self._ref_next_ns is None or t_ns >= self._ref_next_ns
-                or (self._h_med.n and self.field_uT != self.field_uT)):
+                or (self._refs.h.n and self.field_uT != self.field_uT)):
             self._ref_next_ns = t_ns + int(self.reference_update_s * 1e9)
             self._update_references()
 
     def _update_references(self) -> None:
-        if self._g_med.n:
-            self.gravity_m_s2 = self._g_med.median()
-        if self._h_med.n:
-            self.field_uT = self._h_med.median()
-            self.dip_rad = self._dip_med.median()
+        if self._refs.g.n:
+            self.gravity_m_s2 = self._refs.g.median()
+        if self._refs.h.n:
+            self.field_uT = self._refs.h.median()
+            self.dip_rad = self._refs.dip.median()
             c, s = math.cos(self.dip_rad), math.sin(self.dip_rad)
             d = self.declination_rad
             # eq. 14, turned by the declination: magnetic north lies D east of true north
