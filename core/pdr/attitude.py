@@ -76,8 +76,20 @@ Magnetometer trust: a reading is used only if its norm is geomagnetic
 (``mag_valid_range_uT``), its norm and dip are near the running references,
 the field is quasi-static in the navigation frame (optional detector, see
 :mod:`core.pdr.magcal`) and its NIS passes the gate.  Readings pass through
-the online hard/soft-iron calibration first where one is given.  Every
+the online hard/soft-iron calibration first where one is given, and, outdoors
+with the site's World Magnetic Model field, the removal of an offset along the
+never-rotated vertical axis (:meth:`AttitudeEKF._vertical_offset`).  The
+running references take a still phone's readings at most once a second.  When
+the gate has rejected agreeing readings for ``mag_relock_s``, the estimate is
+what is wrong: the heading is released and the next reading sets it.  Every
 rejection is counted by reason (:attr:`AttitudeEKF.mag_reasons`).
+
+Accelerometer and magnetometer readings are averaged over
+``update_interval_s`` (0.1 s) into one update each: the walking hand's
+linear acceleration and the bent field are correlated over a step, so one
+update per reading would count them as hundreds of independent measurements.
+The accelerometer noise adds a turn term ``k_a3 |w|^2`` to eq. 17 (the
+centripetal acceleration of a turning walker).
 
 Bad numbers: a non-finite input is skipped and counted; an update whose
 correction or covariance would not be finite is discarded (the prior state
