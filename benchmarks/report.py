@@ -214,31 +214,26 @@ def reference_tables(results: list[dict]) -> str:
 # plots
 
 
-def plot_trajectory(r: dict, path: Path, title: str) -> None:
+def _tracks_figure(title: str, path: Path, draw_reference, tracks: dict, anchor, label_of, fit_label: str) -> None:
+    """One track plot: the reference (``draw_reference(ax)``), every source's track, ours also after its
+    best rotation about ``anchor``; ``label_of(name)`` is a source's legend text."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    lm = r["plot"]["landmarks"]
     fig, ax = plt.subplots(figsize=(7, 6), dpi=90)
-    ax.plot(lm[:, 0], lm[:, 1], "-", color="0.6", lw=1, zorder=1)
-    ax.scatter(lm[:, 0], lm[:, 1], c="k", s=18, zorder=3, label="landmarks (truth)")
-    for k, (x, y) in enumerate(lm):
-        ax.annotate(str(k), (x, y), textcoords="offset points", xytext=(3, 3), fontsize=7)
+    draw_reference(ax)
     for name in PEER_ORDER:
-        tr = r["plot"]["tracks"].get(name)
+        tr = tracks.get(name)
         if tr is None:
             continue
         xy = tr["xy"]
-        err = r["sources"][name]["lm_mean_m"]
         lw, alpha = (2.0, 1.0) if name == "ours" else (1.0, 0.8)
-        ax.plot(xy[:, 0], xy[:, 1], color=COLOURS[name], lw=lw, alpha=alpha,
-                label=f"{SOURCE_NAMES[name]}: {err:.1f} m")
+        ax.plot(xy[:, 0], xy[:, 1], color=COLOURS[name], lw=lw, alpha=alpha, label=label_of(name))
         if name == "ours":
-            fit = M.rotate(xy - lm[0], tr["fit_rotation_rad"]) + lm[0]
-            ax.plot(fit[:, 0], fit[:, 1], "--", color=COLOURS[name], lw=1,
-                    label=f"ours, best-fit rotation: {r['sources']['ours']['lm_fit_mean_m']:.1f} m")
+            fit = M.rotate(xy - anchor, tr["fit_rotation_rad"]) + anchor
+            ax.plot(fit[:, 0], fit[:, 1], "--", color=COLOURS[name], lw=1, label=fit_label)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("East (m)")
     ax.set_ylabel("North (m)")
@@ -249,40 +244,32 @@ def plot_trajectory(r: dict, path: Path, title: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     plt.close(fig)
+
+
+def plot_trajectory(r: dict, path: Path, title: str) -> None:
+    lm = r["plot"]["landmarks"]
+
+    def landmarks(ax):
+        ax.plot(lm[:, 0], lm[:, 1], "-", color="0.6", lw=1, zorder=1)
+        ax.scatter(lm[:, 0], lm[:, 1], c="k", s=18, zorder=3, label="landmarks (truth)")
+        for k, (x, y) in enumerate(lm):
+            ax.annotate(str(k), (x, y), textcoords="offset points", xytext=(3, 3), fontsize=7)
+
+    _tracks_figure(title, path, landmarks, r["plot"]["tracks"], lm[0],
+                   lambda name: f"{SOURCE_NAMES[name]}: {r['sources'][name]['lm_mean_m']:.1f} m",
+                   f"ours, best-fit rotation: {r['sources']['ours']['lm_fit_mean_m']:.1f} m")
 
 
 def plot_reference(r: dict, path: Path, title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     ref = r["ref_plot"]["reference"]
-    fig, ax = plt.subplots(figsize=(7, 6), dpi=90)
-    ax.plot(ref[:, 0], ref[:, 1], ".", color="k", ms=2, zorder=3, label="GPS fixes (reference, not used)")
-    ax.plot(ref[:1, 0], ref[:1, 1], "o", color="k", ms=6, zorder=4)
-    for name in PEER_ORDER:
-        tr = r["ref_plot"]["tracks"].get(name)
-        if tr is None:
-            continue
-        xy = tr["xy"]
-        lw, alpha = (2.0, 1.0) if name == "ours" else (1.0, 0.8)
-        ax.plot(xy[:, 0], xy[:, 1], color=COLOURS[name], lw=lw, alpha=alpha,
-                label=f"{SOURCE_NAMES[name]}: median {r['ref_sources'][name]['median_m']:.1f} m")
-        if name == "ours":
-            fit = M.rotate(xy - ref[0], tr["fit_rotation_rad"]) + ref[0]
-            ax.plot(fit[:, 0], fit[:, 1], "--", color=COLOURS[name], lw=1,
-                    label=f"ours, best rotation: median {r['ref_sources']['ours']['fit_median_m']:.1f} m")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("East (m)")
-    ax.set_ylabel("North (m)")
-    ax.grid(alpha=0.3)
-    ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=7, loc="best")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
+
+    def fixes(ax):
+        ax.plot(ref[:, 0], ref[:, 1], ".", color="k", ms=2, zorder=3, label="GPS fixes (reference, not used)")
+        ax.plot(ref[:1, 0], ref[:1, 1], "o", color="k", ms=6, zorder=4)
+
+    _tracks_figure(title, path, fixes, r["ref_plot"]["tracks"], ref[0],
+                   lambda name: f"{SOURCE_NAMES[name]}: median {r['ref_sources'][name]['median_m']:.1f} m",
+                   f"ours, best rotation: median {r['ref_sources']['ours']['fit_median_m']:.1f} m")
 
 
 def make_plots(results: list[dict], plots_dir: Path) -> dict:

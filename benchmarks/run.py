@@ -181,6 +181,13 @@ def _finite_headings(h) -> np.ndarray:
     return h
 
 
+def _placed_track(t_ns, east_m, north_m, seg, t_anchor_ns: int, anchor_en) -> np.ndarray:
+    """The track's positions of the steps ``seg`` for a plot, shifted so it is at ``anchor_en`` at ``t_anchor_ns``."""
+    start = M.positions_at(t_ns, east_m, north_m, np.array([t_anchor_ns], dtype=np.int64))[0]
+    xy = np.column_stack([east_m[seg], north_m[seg]]) - start
+    return np.vstack([[0.0, 0.0], xy]) + list(anchor_en)
+
+
 def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True, pipeline_overrides=None) -> dict:
     """Run the pipeline (and peers) on one trial; every metric its ground truth allows, as a dict.
 
@@ -267,10 +274,8 @@ def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True, pipeli
                 "lm_errors_m": [float(x) for x in le.errors_m],
             }
             if keep_tracks:
-                start = M.positions_at(tr.t_ns, e, n, lt[:1])[0]
-                xy = np.column_stack([e[seg], n[seg]]) - start
-                xy = np.vstack([[0.0, 0.0], xy]) + [lm.east_m[0], lm.north_m[0]]
-                tracks[name] = {"xy": xy, "fit_rotation_rad": le.fit_rotation_rad}
+                tracks[name] = {"xy": _placed_track(tr.t_ns, e, n, seg, lt[0], (lm.east_m[0], lm.north_m[0])),
+                                "fit_rotation_rad": le.fit_rotation_rad}
         if keep_tracks:
             r["plot"] = {"landmarks": np.column_stack([lm.east_m, lm.north_m]), "tracks": tracks}
 
@@ -291,10 +296,8 @@ def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True, pipeli
                                       "final_m": float(te.errors_m[-1]) if len(te.errors_m) else math.nan,
                                       "fit_rotation_deg": math.degrees(te.fit_rotation_rad)}
             if keep_tracks:
-                start = M.positions_at(tr.t_ns, e, n, rt[:1])[0]
-                xy = np.column_stack([e[seg], n[seg]]) - start
-                xy = np.vstack([[0.0, 0.0], xy]) + [ref.east_m[0], ref.north_m[0]]
-                tracks[name] = {"xy": xy, "fit_rotation_rad": te.fit_rotation_rad}
+                tracks[name] = {"xy": _placed_track(tr.t_ns, e, n, seg, rt[0], (ref.east_m[0], ref.north_m[0])),
+                                "fit_rotation_rad": te.fit_rotation_rad}
         if keep_tracks:
             r["ref_plot"] = {"reference": np.column_stack([ref.east_m, ref.north_m]), "tracks": tracks}
     r["runtime_s"] = time.perf_counter() - t0
