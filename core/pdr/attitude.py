@@ -308,27 +308,117 @@ class FieldReferences:
             self.h.add(nm)
 
 
-def run_attitude_filter(filt, recording) -> tuple[np.ndarray, np.ndarray]:
-    """Attitude after every event of a :class:`core.recording.Recording` (gyro, acc, mag in time order).
+class AttitudeFilterBase:
+    """What both attitude filters share: the start from TRIAD, the field references, time keeping, ``run``.
 
-    Works for any filter with ``reset``, ``predict``, ``update_acc``,
-    ``update_mag``, ``q`` and ``initialized``; the same kernel as streaming.
-    Returns ``(t_ns (n,), q_wxyz (n, 4))`` with NaN rows before the filter has
-    initialised.
+    A subclass provides ``_param(name)`` (its setting ``mag_wait_s``,
+    ``reference_update_s``, ``initial_yaw_rad``, ``use_magnetometer``),
+    ``_random_walk(dt)`` (covariance growth without a gyroscope),
+    ``_set_field_reference()`` (its reference field from ``field_uT`` and
+    ``dip_rad``) and may override ``_start_heading(q, from_mag)`` and
+    ``_mag_reference_due(t_ns)``.
     """
-    filt.reset()
-    names = [n for n in ("gyro", "acc", "mag") if recording.has(n)]
-    handlers = {"gyro": filt.predict, "acc": filt.update_acc, "mag": filt.update_mag}
-    t_out, q_out = [], []
-    nan4 = (math.nan,) * 4
-    for name, t, v in recording.events(names):
-        handlers[name](t, v[0], v[1], v[2])
-        t_out.append(t)
-        q_out.append(filt.q if filt.initialized else nan4)
-    return np.array(t_out, dtype=np.int64), np.array(q_out, dtype=float).reshape(-1, 4)
+
+    def _reset_common(self) -> None:
+        self.initialized = False
+        self.t_ns: int | None = None  # time of the state
+        self._t_gyro: int | None = None
+        self._last_acc = None
+        self._last_mag = None
+        self._first_acc_ns: int | None = None
+        self._ref_next_ns: int | None = None
+        self._refs = FieldReferences()
+        self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
+        self.field_uT = math.nan
+        self.dip_rad = math.nan
+
+    def _start_heading(self, q, from_mag: bool):
+        """The initial attitude as the filter keeps it (default: as TRIAD gives it)."""
+        return q
+
+    def _try_initialize(self, t_ns: int) -> None:
+        """Start from the latest accelerometer and magnetometer readings (TRIAD), or after ``mag_wait_s``
+        without a magnetometer from gravity and ``initial_yaw_rad``."""
+        acc = self._last_acc
+        if acc is None:
+            return
+        use_mag = self._param("use_magnetometer")
+        mag = self._last_mag if use_mag else None
+        if use_mag and mag is None:
+            if self._first_acc_ns is None:
+                self._first_acc_ns = t_ns
+            if t_ns - self._first_acc_ns < self._param("mag_wait_s") * 1e9:
+                return  # wait a little for a magnetometer reading; then start without one
+        try:
+            if mag is not None:
+                q = quat.from_two_vectors_enu(acc, mag)
+            else:
+                q = quat.from_gravity_yaw(acc, self._param("initial_yaw_rad"))
+        except ValueError:
+            return
+        self.q = self._start_heading(q, mag is not None)
+        self.initialized = True
+        self.t_ns = t_ns
+        self._update_references()
+
+    def _mag_reference_due(self, t_ns: int) -> bool:
+        return True
+
+    def _accumulate_references(self, t_ns: int, acc=None, mag=None) -> None:
+        """Collect |a|, |m| and the dip angle; refresh the references every ``reference_update_s``."""
+        if acc is not None:
+            self._refs.add_acc(acc)
+        if mag is not None and self._last_acc is not None and self._mag_reference_due(t_ns):
+            self._refs.add_mag(self._last_acc, mag)
+        if (self._ref_next_ns is None or t_ns >= self._ref_next_ns
+                or (self._refs.h.n and self.field_uT != self.field_uT)):
+            self._ref_next_ns = t_ns + int(self._param("reference_update_s") * 1e9)
+            self._update_references()
+
+    def _update_references(self) -> None:
+        refs = self._refs
+        if refs.g.n:
+            self.gravity_m_s2 = refs.g.median()
+        if refs.h.n:
+            self.field_uT = refs.h.median()
+            self.dip_rad = refs.dip.median()
+        self._set_field_reference()
+
+    def _propagate_without_gyro(self, t_ns: int) -> None:
+        """A measurement at ``t_ns``: without a gyroscope event for 0.1 s, only the uncertainty grows."""
+        if self.t_ns is None:
+            self.t_ns = t_ns
+            return
+        last = self._t_gyro
+        if last is None or t_ns - last > 100_000_000:
+            dt = (t_ns - self.t_ns) * 1e-9
+            if dt > 0:
+                self._random_walk(dt)
+        self.t_ns = max(self.t_ns, t_ns)
+
+    def run(self, recording) -> tuple[np.ndarray, np.ndarray]:
+        """Attitude after every event of a :class:`core.recording.Recording` (gyro, acc, mag in time order).
+
+        The same kernel as streaming; returns ``(t_ns (n,), q_wxyz (n, 4))``
+        with NaN rows before the filter has initialised.
+        """
+        self.reset()
+        names = [n for n in ("gyro", "acc", "mag") if recording.has(n)]
+        handlers = {"gyro": self.predict, "acc": self.update_acc, "mag": self.update_mag}
+        t_out, q_out = [], []
+        nan4 = (math.nan,) * 4
+        for name, t, v in recording.events(names):
+            handlers[name](t, v[0], v[1], v[2])
+            t_out.append(t)
+            q_out.append(self.q if self.initialized else nan4)
+        return np.array(t_out, dtype=np.int64), np.array(q_out, dtype=float).reshape(-1, 4)
+
+    def matrix(self):
+        """Current rotation matrix body -> ENU (3 row tuples)."""
+        return quat.to_matrix(self.q)
 
 
-class AttitudeEKF:
+class AttitudeEKF(AttitudeFilterBase):
     """Error-state EKF of the attitude and gyroscope bias (see the module docstring).
 
     Feed events in time order: :meth:`predict` (gyroscope), :meth:`update_acc`,
@@ -396,19 +486,13 @@ class AttitudeEKF:
         self.b = [0.0, 0.0, 0.0]
         self.P = np.diag([s.initial_tilt_sd_rad ** 2] * 2 + [s.initial_yaw_sd_rad ** 2]
                          + [s.gyro_bias_sd_rad_s ** 2] * 3)
-        self.initialized = False
-        self.t_ns: int | None = None
-        self._t_gyro: int | None = None
-        self._last_acc = None
-        self._last_mag = None
-        self._first_acc_ns: int | None = None
+        self._reset_common()
         self._acc_var = WindowVariance(s.variance_window_s)
         self._mag_var = WindowVariance(s.variance_window_s)
         self._gyro_win = WindowMeanSpread(s.still_window_s)
         self._accdir_win = WindowMeanSpread(s.still_window_s)
         self._acc_norm_win = WindowVariance(s.still_window_s)
         self._next_zero_rate_ns: int | None = None
-        self._ref_next_ns: int | None = None
         self._ref_still_next_ns: int | None = None
         # vertical hard-iron offset from the site's field (see _vertical_offset)
         self._vo_S = [[0.0] * 3 for _ in range(3)]
@@ -420,13 +504,8 @@ class AttitudeEKF:
         self._raw_norm_med = RunningMedian(0.0, 200.0, 0.1)
         #: hard-iron offset removed by :meth:`_vertical_offset` (uT, body frame; zero while inactive)
         self.vertical_offset_uT = (0.0, 0.0, 0.0)
-        self._refs = FieldReferences()
-        self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
-        self.field_uT = math.nan
-        self.dip_rad = math.nan
         self._h_ref = (0.0, 1.0, 0.0)
         self._alpha_ref = math.pi / 2
-        self._yaw_from_mag = False
         self._w2 = 0.0  # squared rotation rate of the last gyroscope event ((rad/s)^2)
         self._acc_sum = [0.0, 0.0, 0.0, 0.0, 0, 0]  # sum of f_n (3), of sigma^2, count, first t_ns
         self._mag_sum = [0.0, 0.0, 0.0, 0.0, 0, 0]
@@ -489,47 +568,19 @@ class AttitudeEKF:
                               not self.mag_rejected and self.n_mag_used > 0, self.counters())
 
     # -- initialisation ---------------------------------------------------------------------------
-    def _try_initialize(self, t_ns: int) -> None:
-        s = self.settings
-        acc = self._last_acc
-        if acc is None:
-            return
-        mag = self._last_mag if s.use_magnetometer else None
-        if s.use_magnetometer and mag is None:
-            if self._first_acc_ns is None:
-                self._first_acc_ns = t_ns
-            if t_ns - self._first_acc_ns < s.mag_wait_s * 1e9:
-                return
-        try:
-            if mag is not None:
-                q = quat.from_two_vectors_enu(acc, mag)
-                # TRIAD gives magnetic north along +y; turn by the declination (true north)
-                q = quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), -s.declination_rad), q)
-            else:
-                q = quat.from_gravity_yaw(acc, s.initial_yaw_rad)
-        except ValueError:
-            return
-        self.q = q
-        self.initialized = True
-        self.t_ns = t_ns
+    def _param(self, name: str):
+        return getattr(self.settings, name)
+
+    def _start_heading(self, q, from_mag: bool):
+        """Turn TRIAD's magnetic north to true north; the heading's prior variance."""
         # without a magnetometer reading the heading is relative to initial_yaw_rad by definition; a
         # magnetometer that starts later is let in by the relock (see _relock)
-        yaw_sd = s.initial_yaw_sd_rad if mag is not None else 1e-3
-        self._yaw_from_mag = mag is not None
-        self.P[2, 2] = yaw_sd ** 2
-        self._update_references()
+        self.P[2, 2] = (self.settings.initial_yaw_sd_rad if from_mag else 1e-3) ** 2
+        if not from_mag:
+            return q
+        return quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), -self.settings.declination_rad), q)
 
-    def _accumulate_references(self, t_ns: int, acc=None, mag=None) -> None:
-        if acc is not None:
-            self._refs.add_acc(acc)
-        if mag is not None and self._last_acc is not None and self._reference_sample_due(t_ns):
-            self._refs.add_mag(self._last_acc, mag)
-        if (self._ref_next_ns is None or t_ns >= self._ref_next_ns
-                or (self._refs.h.n and self.field_uT != self.field_uT)):
-            self._ref_next_ns = t_ns + int(self.settings.reference_update_s * 1e9)
-            self._update_references()
-
-    def _reference_sample_due(self, t_ns: int) -> bool:
+    def _mag_reference_due(self, t_ns: int) -> bool:
         """Magnetometer readings of a still phone enter the references at most ``reference_still_rate_hz``.
 
         A phone left on a table for minutes would otherwise set |h| and the dip
@@ -546,12 +597,7 @@ class AttitudeEKF:
         self._ref_still_next_ns = t_ns + int(1e9 / self.settings.reference_still_rate_hz)
         return True
 
-    def _update_references(self) -> None:
-        if self._refs.g.n:
-            self.gravity_m_s2 = self._refs.g.median()
-        if self._refs.h.n:
-            self.field_uT = self._refs.h.median()
-            self.dip_rad = self._refs.dip.median()
+    def _set_field_reference(self) -> None:
         dip = self.dip_rad if self.dip_rad == self.dip_rad else math.radians(60.0)
         c, sn = math.cos(dip), math.sin(dip)
         d = self.settings.declination_rad
@@ -605,17 +651,6 @@ class AttitudeEKF:
     def _random_walk(self, dt: float) -> None:
         self.P = self.P.copy()
         self.P[0:3, 0:3] += (self.settings.no_gyro_random_walk_rad_sqrt_s ** 2 * dt) * _I3
-
-    def _propagate_without_gyro(self, t_ns: int) -> None:
-        if self.t_ns is None:
-            self.t_ns = t_ns
-            return
-        last = self._t_gyro
-        if last is None or t_ns - last > 100_000_000:
-            dt = (t_ns - self.t_ns) * 1e-9
-            if dt > 0:
-                self._random_walk(dt)
-        self.t_ns = max(self.t_ns, t_ns)
 
     # -- the update kernel ----------------------------------------------------------------------
     def _correct(self, y: np.ndarray, H: np.ndarray, Rm: np.ndarray, gate: float, *, consider_tilt=False,
@@ -844,7 +879,6 @@ class AttitudeEKF:
                                           bias_axis=np.array(up_b))
         self._record("mag", used, nis)
         if used:
-            self._yaw_from_mag = True
             self._gated = []
         elif reason == "gate":
             self._relock(t_ns, float(y[0]))
@@ -943,12 +977,3 @@ class AttitudeEKF:
         self.mag_reasons[key] = self.mag_reasons.get(key, 0) + 1
         self.last_mag = UpdateFlags("mag", t_ns, used, reason, dof=dof, **kw)
         return self.last_mag
-
-    # -- batch -------------------------------------------------------------------------------------
-    def run(self, recording) -> tuple[np.ndarray, np.ndarray]:
-        """Attitude after every event of a recording: :func:`run_attitude_filter` (the streaming kernel)."""
-        return run_attitude_filter(self, recording)
-
-    def matrix(self):
-        """Current rotation matrix body -> ENU (3 row tuples)."""
-        return quat.to_matrix(self.q)

@@ -53,9 +53,8 @@ import math
 import numpy as np
 
 from core import quaternion as quat
-from core.conventions import STANDARD_GRAVITY_M_S2
 from core.dsp import WindowMeanSpread, WindowVariance
-from core.pdr.attitude import FieldReferences
+from core.pdr.attitude import AttitudeFilterBase
 
 _EYE4 = np.eye(4)
 _EYE4.flags.writeable = False
@@ -110,7 +109,7 @@ def transition_matrix(wx: float, wy: float, wz: float, dt_s: float) -> np.ndarra
     ])
 
 
-class QuaternionEKF:
+class QuaternionEKF(AttitudeFilterBase):
     """Quaternion EKF with adaptive accelerometer / magnetometer noise (eqs. 5-18).
 
     Feed events in time order: :meth:`predict` (gyroscope), :meth:`update_acc`,
@@ -215,12 +214,7 @@ class QuaternionEKF:
     def reset(self) -> None:
         self.q = (1.0, 0.0, 0.0, 0.0)
         self.P = np.eye(4) * 0.05
-        self.initialized = False
-        self.t_ns: int | None = None  # time of the state
-        self._t_gyro: int | None = None
-        self._last_acc = None
-        self._last_mag = None
-        self._first_acc_ns: int | None = None
+        self._reset_common()
         self._gyro_still = WindowMeanSpread(self.still_window_s)
         self._acc_sd = math.inf
         #: current gyroscope bias estimate (rad/s), subtracted before prediction
@@ -228,11 +222,6 @@ class QuaternionEKF:
         self.n_bias_updates = 0
         self._acc_var = WindowVariance(self.variance_window_s)
         self._mag_var = WindowVariance(self.variance_window_s)
-        self._ref_next_ns: int | None = None
-        self._refs = FieldReferences()
-        self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
-        self.field_uT = math.nan
-        self.dip_rad = math.nan
         self._h_ref = (0.0, 1.0, 0.0)
         # diagnostics (latest values)
         self.acc_sigma2 = math.nan
@@ -249,45 +238,11 @@ class QuaternionEKF:
         self.mag_innovation = (0.0, 0.0, 0.0)
 
     # -- initialisation -------------------------------------------------------
-    def _try_initialize(self, t_ns: int) -> None:
-        acc = self._last_acc
-        if acc is None:
-            return
-        mag = self._last_mag if self.use_magnetometer else None
-        if self.use_magnetometer and mag is None:
-            if self._first_acc_ns is None:
-                self._first_acc_ns = t_ns
-            if t_ns - self._first_acc_ns < self.mag_wait_s * 1e9:
-                return  # wait a little for a magnetometer reading; then start without one
-        try:
-            if mag is not None:
-                q = quat.from_two_vectors_enu(acc, mag)
-            else:
-                q = quat.from_gravity_yaw(acc, self.initial_yaw_rad)
-        except ValueError:
-            return
-        self.q = q
-        self.initialized = True
-        self.t_ns = t_ns
-        self._update_references()
+    def _param(self, name: str):
+        return getattr(self, name)
 
-    def _accumulate_references(self, t_ns: int, acc=None, mag=None) -> None:
-        """Collect |a|, |m| and the dip angle; refresh the references every ``reference_update_s``."""
-        if acc is not None:
-            self._refs.add_acc(acc)
-        if mag is not None and self._last_acc is not None:
-            self._refs.add_mag(self._last_acc, mag)
-        if (self._ref_next_ns is None or t_ns >= self._ref_next_ns
-                or (self._refs.h.n and self.field_uT != self.field_uT)):
-            self._ref_next_ns = t_ns + int(self.reference_update_s * 1e9)
-            self._update_references()
-
-    def _update_references(self) -> None:
-        if self._refs.g.n:
-            self.gravity_m_s2 = self._refs.g.median()
+    def _set_field_reference(self) -> None:
         if self._refs.h.n:
-            self.field_uT = self._refs.h.median()
-            self.dip_rad = self._refs.dip.median()
             c, s = math.cos(self.dip_rad), math.sin(self.dip_rad)
             d = self.declination_rad
             # eq. 14, turned by the declination: magnetic north lies D east of true north
@@ -316,7 +271,7 @@ class QuaternionEKF:
         if dt <= 0.0:
             return
         if dt > 0.5:  # a gap: do not integrate a stale rate over it, only grow the uncertainty
-            self._random_walk(dt, self.no_gyro_random_walk_rad_sqrt_s)
+            self._random_walk(dt)
             self.t_ns = t_ns
             return
         F = transition_matrix(wx, wy, wz, dt)
@@ -328,21 +283,11 @@ class QuaternionEKF:
         self.P = F @ self.P @ F.T + Q
         self.t_ns = t_ns
 
-    def _random_walk(self, dt: float, sigma: float) -> None:
+    def _random_walk(self, dt: float) -> None:
+        sigma = self.no_gyro_random_walk_rad_sqrt_s
         w, x, y, z = self.q
         xi = np.array([[-x, -y, -z], [w, -z, y], [z, w, -x], [-y, x, w]])
         self.P = self.P + (sigma ** 2 * dt * 0.25) * (xi @ xi.T)
-
-    def _propagate_without_gyro(self, t_ns: int) -> None:
-        if self.t_ns is None:
-            self.t_ns = t_ns
-            return
-        last = self._t_gyro
-        if last is None or t_ns - last > 100_000_000:
-            dt = (t_ns - self.t_ns) * 1e-9
-            if dt > 0:
-                self._random_walk(dt, self.no_gyro_random_walk_rad_sqrt_s)
-        self.t_ns = max(self.t_ns, t_ns)
 
     # -- measurement updates ---------------------------------------------------
     def _vector_update(self, z, v, sigma2: float):
@@ -439,15 +384,3 @@ class QuaternionEKF:
         c, s = math.cos(self.dip_rad), math.sin(self.dip_rad)
         v = (c * m_n[0] / hn, c * m_n[1] / hn, -s)
         return tuple(r[0][j] * v[0] + r[1][j] * v[1] + r[2][j] * v[2] for j in range(3))
-
-    # -- batch -------------------------------------------------------------------
-    def run(self, recording) -> tuple[np.ndarray, np.ndarray]:
-        """Attitude after every event of a recording (:func:`core.pdr.attitude.run_attitude_filter`)."""
-        from core.pdr.attitude import run_attitude_filter
-
-        return run_attitude_filter(self, recording)
-
-    # -- outputs ---------------------------------------------------------------
-    def matrix(self):
-        """Current rotation matrix body -> ENU (3 row tuples)."""
-        return quat.to_matrix(self.q)
