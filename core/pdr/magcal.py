@@ -181,17 +181,24 @@ class EllipsoidFitError(ValueError):
     """The samples do not determine an ellipsoid; ``str()`` says why (short, for a status line)."""
 
 
-def _fit(samples: np.ndarray):
-    """Kernel of :func:`fit_ellipsoid` on finite samples; also returns the axis ratio."""
+def _centred(samples: np.ndarray, n_min: int):
+    """``(centre, scale, (samples - centre) / scale)`` with the RMS distance as the scale: a well-conditioned fit."""
     n = len(samples)
-    if n < 9:
-        raise EllipsoidFitError(f"too few samples ({n} < 9)")
+    if n < n_min:
+        raise EllipsoidFitError(f"too few samples ({n} < {n_min})")
     c = samples.mean(axis=0)
     d = samples - c
     s = math.sqrt(float(np.mean(np.sum(d * d, axis=1))))
     if not s > 1e-9:
         raise EllipsoidFitError("samples coincide")
-    x, y, z = (d / s).T
+    return c, s, d / s
+
+
+def _fit(samples: np.ndarray):
+    """Kernel of :func:`fit_ellipsoid` on finite samples; also returns the axis ratio."""
+    c, s, u = _centred(samples, 9)
+    n = len(u)
+    x, y, z = u.T
     design = np.stack([x * x - z * z, y * y - z * z, 2 * x * y, 2 * x * z, 2 * y * z, x, y, z, np.ones(n)], axis=1)
     rhs = -(x * x + y * y + z * z)
     theta, _, rank, _ = np.linalg.lstsq(design, rhs, rcond=None)
@@ -219,15 +226,8 @@ def _fit(samples: np.ndarray):
 
 def _fit_sphere(samples: np.ndarray):
     """Hard iron only: the best sphere ``|m - b| = F`` (linear: ``|m|^2 = 2 b.m + F^2 - |b|^2``)."""
-    n = len(samples)
-    if n < 4:
-        raise EllipsoidFitError(f"too few samples ({n} < 4)")
-    c = samples.mean(axis=0)
-    d = samples - c
-    s = math.sqrt(float(np.mean(np.sum(d * d, axis=1))))
-    if not s > 1e-9:
-        raise EllipsoidFitError("samples coincide")
-    x = d / s
+    c, s, x = _centred(samples, 4)
+    n = len(x)
     design = np.concatenate([2.0 * x, np.ones((n, 1))], axis=1)
     theta, _, rank, _ = np.linalg.lstsq(design, np.sum(x * x, axis=1), rcond=None)
     if rank < 4:
