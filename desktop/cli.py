@@ -71,12 +71,9 @@ def build_pipeline(args):
     else:
         from core.pdr.stride_models import load_stride_model
         kw["stride_model"] = load_stride_model(args.stride_model)
-    from core.pdr.attitude import AttitudeEKF
-    from core.pdr.magcal import MagCalibrator
-
-    kw["attitude"] = AttitudeEKF(declination_rad=math.radians(args.declination), use_magnetometer=not args.no_mag,
-                                 mag_calibrator=MagCalibrator())
-    return Pipeline(**kw)
+    p = Pipeline(**kw)  # the default filter, with its magnetometer calibration
+    p.attitude.declination_rad = math.radians(args.declination)
+    return p
 
 
 class _Progress:

@@ -814,8 +814,9 @@ class AttitudeEKF(AttitudeFilterBase):
         lo, hi = s.mag_valid_range_uT
         if not lo <= nm <= hi:
             return self._mag_flags(t_ns, False, "invalid range")
+        R = quat.to_matrix(self.q)
         if self.initialized and s.site_field_uT == s.site_field_uT and s.site_dip_rad == s.site_dip_rad:
-            mx, my, mz = self._vertical_offset(t_ns, mx, my, mz)
+            mx, my, mz = self._vertical_offset(t_ns, R, mx, my, mz)
             nm = math.sqrt(mx * mx + my * my + mz * mz)
         self._last_mag = (mx, my, mz)
         self._accumulate_references(t_ns, mag=self._last_mag)
@@ -827,7 +828,6 @@ class AttitudeEKF(AttitudeFilterBase):
         dev = abs(nm - self.field_uT)
         sigma2 = s.mag_noise_base ** 2 + s.k_m1 * dev + s.k_m2 * var  # eq. 18
         self.mag_sigma2 = sigma2
-        R = quat.to_matrix(self.q)
         up_b = (R[2][0], R[2][1], R[2][2])
         sin_dip = -(up_b[0] * mx + up_b[1] * my + up_b[2] * mz) / nm
         dip = math.asin(max(-1.0, min(1.0, sin_dip)))
@@ -885,7 +885,7 @@ class AttitudeEKF(AttitudeFilterBase):
         return self._mag_interval_done(t_ns, n, used, reason, nis=nis, dof=1, sigma2=r_angle,
                                        innovation=(float(y[0]),))
 
-    def _vertical_offset(self, t_ns: int, mx: float, my: float, mz: float):
+    def _vertical_offset(self, t_ns: int, R, mx: float, my: float, mz: float):
         """Remove a hard-iron offset along the directions the phone held vertical, from the site's field.
 
         A phone held flat never turns its z axis, so no calibration from
@@ -906,8 +906,7 @@ class AttitudeEKF(AttitudeFilterBase):
         threshold.
         """
         s = self.settings
-        R = quat.to_matrix(self.q)
-        u = (R[2][0], R[2][1], R[2][2])  # up in the body frame
+        u = (R[2][0], R[2][1], R[2][2])  # up in the body frame (R: the current attitude's matrix)
         nm = math.sqrt(mx * mx + my * my + mz * mz)
         self._raw_dip_med.add(math.asin(max(-1.0, min(1.0, -(u[0] * mx + u[1] * my + u[2] * mz) / nm))))
         rhs = u[0] * mx + u[1] * my + u[2] * mz + s.site_field_uT * math.sin(s.site_dip_rad)
