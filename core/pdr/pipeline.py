@@ -30,16 +30,17 @@ A step's heading is the mean smoothed walking direction over the step
 interval, compensated for the smoother's delay
 (:func:`core.pdr.heading.interval_heading`): the step is completed
 ``heading_delay_s`` after its peak, when the causal smoother has caught up
-with the whole interval, and once its bout is confirmed.
+with the whole interval, and once its bout is confirmed.  The live app
+therefore sees each step about a second after it happened;
+:meth:`Pipeline.status` gives the current position at any time.
 
 Non-finite sensor values (NaN, inf) are skipped before any stage sees them
 and counted per stream (:attr:`Pipeline.n_nonfinite`, the summary and the
-labels report them).  The live app therefore sees each step about a second
-after it happened; :meth:`Pipeline.status` gives the current position at any
-time.
+labels report them).
 
 :meth:`Pipeline.update` (streaming, for the app) and :meth:`Pipeline.run`
-(batch, for files) share this one kernel; a test proves they agree.
+(batch, for files) share this one kernel; ``tests/test_streaming_batch.py``
+checks them against each other where they could differ (chunked feeding, the app's drain).
 """
 
 from __future__ import annotations
@@ -50,15 +51,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.pdr.attitude import AttitudeEKF
-from core.pdr.magcal import MagCalibrator
 from core.conventions import ACC, GYRO, MAG
-from core.pdr.deadreckoning import DeadReckoner
 from core.dsp import GridResampler
+from core.pdr.attitude import AttitudeEKF
+from core.pdr.deadreckoning import DeadReckoner
 from core.pdr.heading import RotationSmoother, interval_heading
-from core.recording import Recording, RecordingError
+from core.pdr.magcal import MagCalibrator
 from core.pdr.steps import StepDetector, StepEvent
 from core.pdr.stride import StepFeatures, StrideModel, WeinbergStride
+from core.recording import Recording, RecordingError
 
 #: Step duration assumed for the first step of a walking bout (s).
 DEFAULT_STEP_DURATION_S = 0.55
