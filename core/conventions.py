@@ -13,7 +13,7 @@ STANDARD_GRAVITY_M_S2 = 9.80665
 ACC = "acc"  #: accelerometer, m/s^2, gravity included, device frame
 GYRO = "gyro"  #: gyroscope, rad/s, device frame
 MAG = "mag"  #: magnetometer, uT, device frame (calibrated: hard iron removed by the OS if it can)
-GPS = "gps"  #: GNSS fix: lat_deg, lon_deg, alt_m, horizontal accuracy m
+GPS = "gps"  #: GNSS fix: lat_deg, lon_deg, alt_m, horizontal accuracy m, speed m/s, course deg (bearing)
 ROTVEC = "rotvec"  #: the phone's own attitude (Android rotation vector) as an ENU quaternion w, x, y, z
 
 NS_PER_S = 1_000_000_000

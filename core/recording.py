@@ -13,7 +13,7 @@ Plain UTF-8 text, optionally gzip-compressed (file name ending in ``.gz``)::
     acc,1000000000,0.12,4.51,8.63
     gyro,1000200000,0.001,-0.02,0.003
     mag,1001000000,12.5,-20.1,-40.3
-    gps,1001000000,47.3769,8.5417,420.0,5.0
+    gps,1001000000,47.3769,8.5417,420.0,5.0,1.3,87.0
 
 * line 1 is the magic line, line 2 the JSON header (one line).  The header
   names every stream with its value ``columns``, ``unit`` and a note; it
@@ -61,9 +61,11 @@ STREAM_SPECS: dict[str, dict] = {
     GYRO: {"columns": ["x", "y", "z"], "unit": "rad/s", "note": "gyroscope"},
     MAG: {"columns": ["x", "y", "z"], "unit": "uT", "note": "magnetometer"},
     GPS: {
-        "columns": ["lat_deg", "lon_deg", "alt_m", "hacc_m"],
-        "unit": "deg,deg,m,m",
-        "note": "GNSS fix, WGS-84; hacc_m is the 68 % horizontal accuracy radius (nan if unknown)",
+        "columns": ["lat_deg", "lon_deg", "alt_m", "hacc_m", "speed_m_s", "course_deg"],
+        "unit": "deg,deg,m,m,m/s,deg",
+        "note": "GNSS fix, WGS-84; hacc_m is the 68 % horizontal accuracy radius; speed_m_s the ground speed "
+                "and course_deg its compass bearing (clockwise from true north) where the receiver gives them; "
+                "nan if unknown",
     },
     ROTVEC: {
         "columns": ["w", "x", "y", "z"],
@@ -229,9 +231,30 @@ class Recording:
         }
 
 
+#: The GPS columns of files written before speed and course were added (read as if speed/course were nan).
+GPS_COLUMNS_V1 = ("lat_deg", "lon_deg", "alt_m", "hacc_m")
+
+
+def _pad_gps(values, columns):
+    """GPS values with the older 4 columns -> the current ones, speed and course nan."""
+    full = tuple(STREAM_SPECS[GPS]["columns"])
+    v = np.asarray(values, dtype=np.float64).reshape(-1, len(columns))
+    out = np.full((len(v), len(full)), np.nan)
+    out[:, :len(columns)] = v
+    return out, full
+
+
 def make_stream(name: str, t_ns, values, columns=None, unit=None, note=None) -> Stream:
-    """A :class:`Stream` with the default columns and unit of a known stream name."""
+    """A :class:`Stream` with the default columns and unit of a known stream name.
+
+    GPS values with only the first four columns (no speed, no course) are
+    padded with nan, so that every GPS stream in memory has the same columns.
+    """
     spec = STREAM_SPECS.get(name, {})
+    if name == GPS and columns is None:
+        v = np.asarray(values, dtype=np.float64)
+        if v.ndim == 2 and v.shape[1] == len(GPS_COLUMNS_V1):
+            values, _ = _pad_gps(v, GPS_COLUMNS_V1)
     return Stream(
         name,
         t_ns,
@@ -455,9 +478,13 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
     streams = {}
     for name, spec in specs.items():
         ts, vs = data[name]
-        streams[name] = Stream(name, np.array(ts, dtype=np.int64),
-                               np.array(vs, dtype=np.float64).reshape(len(ts), ncols[name]),
-                               tuple(spec["columns"]), str(spec.get("unit", "")), str(spec.get("note", "")))
+        cols = tuple(spec["columns"])
+        vals = np.array(vs, dtype=np.float64).reshape(len(ts), ncols[name])
+        unit, note = str(spec.get("unit", "")), str(spec.get("note", ""))
+        if name == GPS and cols == GPS_COLUMNS_V1:  # a file from before speed/course: same meaning, two nan columns
+            vals, cols = _pad_gps(vals, cols)
+            unit, note = STREAM_SPECS[GPS]["unit"], STREAM_SPECS[GPS]["note"]
+        streams[name] = Stream(name, np.array(ts, dtype=np.int64), vals, cols, unit, note)
     if not any(len(s) for s in streams.values()):
         raise RecordingError("the file has a header but no sensor events", source)
     rec = Recording(streams, device=dict(header.get("device") or {}), metadata=dict(header.get("metadata") or {}),
