@@ -2,7 +2,7 @@
 
 :func:`simulate_walk` turns a polyline of waypoints into a
 :class:`~core.recording.Recording` (streams ``acc``, ``gyro``, ``mag``, each on
-its own jittered clock) plus a :class:`WalkTruth` (heel strikes, per-step
+its own jittered clock, and optionally ``gps``) plus a :class:`WalkTruth` (heel strikes, per-step
 lengths, positions, walking and device headings, dense attitude, sensor
 biases, the true magnetic field).  :func:`demo_walk` is the bundled demo.  All
 quantities follow the conventions of :mod:`core` (ENU, Android device frame,
@@ -143,6 +143,12 @@ Sensors
       and ``mag`` carries ``R^T h_n + noise`` (the iron removed, as the OS
       calibration would).
 
+    * GPS (``gps=GpsModel(...)``): fixes at ``rate_hz`` of the phone's true position plus white noise, a
+      Gauss-Markov bias, multipath episodes (under-reported in ``hacc_m``) and optionally a cold start;
+      speed and course from the noisy mean velocity; converted to WGS-84 by
+      :func:`core.geodesy.enu_to_geodetic` about ``origin_lat_lon`` (ENU +y is true north).  See
+      :class:`GpsModel`; ``truth.gps`` (:class:`GpsTruth`) holds every injected error.
+
     Noise is white Gaussian with the given per-sample standard deviation.
     Each stream starts at a random phase within its first interval; each
     interval is ``(1 + timestamp_jitter * N(0, 1)) / rate`` (clipped at 10 %
@@ -152,10 +158,13 @@ Sensors
     instants.  All randomness comes from ``numpy.random.SeedSequence(seed)``
     (one child generator per purpose, so the same seed gives the same
     recording and e.g. changing a noise level does not move the timestamps).
+    The GPS draws from a tenth child of its own, so adding or changing the GPS leaves
+    every other stream unchanged.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import operator
 from collections.abc import Sequence
@@ -165,11 +174,12 @@ import numpy as np
 
 from core import __version__
 from core import quaternion as quat
-from core.conventions import ACC, GYRO, MAG, STANDARD_GRAVITY_M_S2, wrap_angle
+from core.conventions import ACC, GPS, GYRO, MAG, STANDARD_GRAVITY_M_S2, bearing_deg, wrap_angle
+from core.geodesy import enu_to_geodetic
 from core.recording import Recording, Stream, make_stream
 
-__all__ = ["simulate_walk", "demo_walk", "SimulatedWalk", "WalkTruth", "DisturbanceZone", "SIMULATOR_VERSION",
-           "WALK_RATIO_PER_HEIGHT", "default_step_length_m"]
+__all__ = ["simulate_walk", "demo_walk", "SimulatedWalk", "WalkTruth", "GpsModel",
+           "GpsTruth", "DisturbanceZone", "SIMULATOR_VERSION", "WALK_RATIO_PER_HEIGHT", "default_step_length_m"]
 
 #: Version of the simulation model (stored in ``metadata["simulator"]``); bumped when the same
 #: parameters and seed no longer give the same recording.
@@ -177,6 +187,9 @@ SIMULATOR_VERSION = "2"
 
 #: Default start of the simulated sensor clock (ns), large like Android's ``elapsedRealtimeNanos``.
 DEFAULT_CLOCK_START_NS = 10**12
+#: Default ENU origin (WGS-84 deg): Helsinki's centre, and the ground's height there above the ellipsoid (m).
+DEFAULT_ORIGIN_LAT_LON = (60.1699, 24.9384)
+DEFAULT_ORIGIN_ALT_M = 30.0
 
 #: Walk ratio (step length / step rate) per metre of body height, m / (steps/min) / m: 0.0064 m/(steps/min)
 #: for young adults of about 1.72 m (Sekiya & Nagasaki 1998), assumed proportional to height.
@@ -206,6 +219,7 @@ _DRIFT_BAND_HZ = (0.03, 0.3)
 _BIAS_GRID_HZ = 2.0
 _RAMP_STEPS = 1.5  # a change of speed by the cruise speed takes this many step periods (start, stop, corners)
 _STEP_AR = 0.7  # AR(1) coefficient of the walker's offset from the plan at heel strikes
+HACC_PROBABILITY = 0.68  #: the reported horizontal accuracy is the radius holding the true position this often
 
 
 def default_step_length_m(height_m: float, step_frequency_hz: float) -> float:
@@ -294,6 +308,140 @@ class DisturbanceZone:
                 "dip_change_deg": self.dip_change_deg, "strength_scale": self.strength_scale}
 
 
+@dataclass(frozen=True)
+class GpsModel:
+    """A phone GNSS receiver: the fixes it reports and how wrong they are (SI units, settings named by unit).
+
+    The antenna is the phone: each fix starts from the phone's true position at the fix time.  Per
+    horizontal axis (East, North) the reported position is off by
+
+    * white noise, ``noise_sd_m`` per fix;
+    * a bias that wanders: a first-order Gauss-Markov process of standard deviation ``bias_sd_m`` and
+      correlation time ``bias_tau_s`` (``b_k+1 = a b_k + sqrt(1 - a^2) bias_sd w``, ``a = exp(-dt/tau)``,
+      started from its stationary distribution), the slowly changing satellite geometry and atmosphere;
+    * multipath episodes (a reflected signal taken for the direct one, in a street canyon): they start as
+      a Poisson process of ``multipath_per_min`` per minute, each shifts the fixes by a constant offset
+      of uniform magnitude in ``multipath_jump_m`` and uniform direction for a uniform duration in
+      ``multipath_duration_s``; overlapping episodes add;
+    * optionally a cold start: the first ``cold_start_fixes`` fixes are off by a further
+      ``cold_start_error_m`` in a random direction, shrinking linearly to 0 over those fixes.
+
+    The reported accuracy ``hacc_m`` (Android's 68 % horizontal accuracy radius) is honest for the
+    normal errors: ``c sqrt(noise_sd^2 + bias_sd^2) J`` with a log-normal jitter ``J`` (median 1,
+    coefficient of variation ``hacc_jitter_cv``) and ``c`` chosen so that 68 % of the normal fixes lie
+    within it (``c = 1.51``, the 68 % radius of a circular Gaussian, without jitter).  During multipath
+    the receiver under-reports: it gives the same value times ``hacc_multipath_factor``, far below the
+    10-40 m it is off (real receivers do this: a consistently reflected signal does not show in the
+    solution's residuals, so the accuracy estimate does not grow).  During a cold start it adds the
+    cold-start error to the reported accuracy (a large, roughly honest radius).
+
+    Speed and course are Doppler-like: the phone's mean horizontal velocity over the last
+    ``velocity_window_s`` plus white noise ``speed_noise_m_s`` per axis (multipath and the position
+    bias do not affect them); ``speed_m_s`` is the norm of that noisy velocity and ``course_deg`` its
+    compass bearing (clockwise from true north = the simulator's +y), nan below
+    ``course_min_speed_m_s``.  ``alt_m`` is the ground's ellipsoidal height plus the phone's height
+    plus its own Gauss-Markov bias (``alt_bias_sd_m``, same ``bias_tau_s``) and white noise
+    ``alt_noise_sd_m``.
+
+    Fixes come at ``rate_hz`` from ``first_fix_s`` after the start of the recording (time to first
+    fix), each time stamp (sensor clock) off its nominal grid by white jitter ``time_jitter_s``
+    (clipped at 30 % of the interval).  The position is the one at the time stamp (no latency).
+    """
+
+    rate_hz: float = 1.0  #: fixes per second
+    noise_sd_m: float = 1.5  #: white position noise per horizontal axis per fix (m)
+    bias_sd_m: float = 3.0  #: standard deviation of the wandering bias per horizontal axis (m)
+    bias_tau_s: float = 120.0  #: correlation time of the bias (s)
+    multipath_per_min: float = 0.2  #: rate of multipath episodes (per minute of fixes)
+    multipath_jump_m: tuple[float, float] = (10.0, 40.0)  #: range of the offset of an episode (m, uniform)
+    multipath_duration_s: tuple[float, float] = (5.0, 20.0)  #: range of the duration of an episode (s, uniform)
+    hacc_jitter_cv: float = 0.2  #: coefficient of variation of the reported accuracy's log-normal jitter
+    hacc_multipath_factor: float = 1.5  #: reported accuracy during multipath / the normal one (under-reported)
+    speed_noise_m_s: float = 0.1  #: white velocity noise per horizontal axis (m/s)
+    course_min_speed_m_s: float = 0.3  #: below this reported speed the course is nan
+    velocity_window_s: float = 1.0  #: the velocity is the phone's mean velocity over this window before the fix
+    alt_noise_sd_m: float = 3.0  #: white altitude noise per fix (m)
+    alt_bias_sd_m: float = 4.0  #: standard deviation of the wandering altitude bias (m)
+    first_fix_s: float = 3.0  #: time from the start of the recording to the first fix (s)
+    cold_start_fixes: int = 0  #: number of first fixes with the cold-start error (0: a warm start)
+    cold_start_error_m: float = 50.0  #: extra error of the first fix of a cold start (m)
+    time_jitter_s: float = 0.005  #: white jitter of the fix time stamps around their 1/rate grid (s)
+
+    def __post_init__(self):
+        for name in ("rate_hz", "bias_tau_s", "velocity_window_s"):
+            object.__setattr__(self, name, _positive(f"GpsModel.{name}", getattr(self, name)))
+        for name in ("noise_sd_m", "bias_sd_m", "multipath_per_min", "hacc_jitter_cv", "speed_noise_m_s",
+                     "course_min_speed_m_s", "alt_noise_sd_m", "alt_bias_sd_m", "first_fix_s",
+                     "cold_start_error_m", "time_jitter_s"):
+            object.__setattr__(self, name, _non_negative(f"GpsModel.{name}", getattr(self, name)))
+        object.__setattr__(self, "hacc_multipath_factor",
+                           _positive("GpsModel.hacc_multipath_factor", self.hacc_multipath_factor))
+        for name in ("multipath_jump_m", "multipath_duration_s"):
+            lo, hi = (_non_negative(f"GpsModel.{name}", v) for v in getattr(self, name))
+            if hi < lo:
+                raise ValueError(f"GpsModel.{name} must be (low, high) with low <= high")
+            object.__setattr__(self, name, (lo, hi))
+        if self.multipath_per_min > 0 and not self.multipath_duration_s[1] > 0:
+            raise ValueError("GpsModel.multipath_duration_s must allow episodes of positive length")
+        if isinstance(self.cold_start_fixes, bool) or operator.index(self.cold_start_fixes) < 0:
+            raise ValueError(f"GpsModel.cold_start_fixes must be a non-negative integer, got {self.cold_start_fixes!r}")
+        if self.noise_sd_m == 0 and self.bias_sd_m == 0:
+            raise ValueError("GpsModel needs some position error (noise_sd_m or bias_sd_m) for hacc_m")
+
+    @property
+    def hacc_scale(self) -> float:
+        """``c``: the normal fixes lie within ``c sqrt(noise_sd^2 + bias_sd^2) J`` 68 % of the time.
+
+        The normal horizontal error is circular Gaussian, its radius Rayleigh: ``P(r < x s) = 1 - exp(-x^2/2)``.
+        ``c`` solves ``E_J[1 - exp(-(c J)^2 / 2)] = 0.68`` (Gauss-Hermite over the log-normal ``J``, bisection).
+        """
+        sigma = math.sqrt(math.log1p(self.hacc_jitter_cv ** 2))
+        z, w = np.polynomial.hermite_e.hermegauss(40)
+        jit = np.exp(sigma * z)
+        w = w / w.sum()
+        lo, hi = 0.0, 20.0
+        for _ in range(80):
+            mid = 0.5 * (lo + hi)
+            if float(np.dot(w, 1.0 - np.exp(-0.5 * (mid * jit) ** 2))) < HACC_PROBABILITY:
+                lo = mid
+            else:
+                hi = mid
+        return 0.5 * (lo + hi)
+
+    def as_dict(self) -> dict:
+        """The settings as JSON-ready values (for the recording's metadata)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+
+
+@dataclass(frozen=True, eq=False)
+class GpsTruth:
+    """What went into each GPS fix (row ``k`` = fix ``k`` of the recording's ``gps`` stream).
+
+    The reported horizontal position is exactly ``pos_enu_m[:, :2] + bias_en_m + multipath_en_m +
+    cold_start_en_m + white noise`` (ENU, converted to latitude/longitude by :func:`core.geodesy.enu_to_geodetic`
+    about ``WalkTruth.origin_lat_lon``); the white noise is what is left.  The reported altitude is
+    ``origin_alt_m + pos_enu_m[:, 2] + alt_bias_m + white noise``.
+    """
+
+    model: GpsModel  #: the receiver model
+    t_ns: np.ndarray  #: (n,) int64 fix times (= the ``gps`` stream's timestamps)
+    pos_enu_m: np.ndarray  #: (n, 3) true phone position at each fix (ENU m, up above the ground)
+    vel_en_m_s: np.ndarray  #: (n, 2) true mean horizontal phone velocity over ``velocity_window_s`` before the fix
+    bias_en_m: np.ndarray  #: (n, 2) the Gauss-Markov bias (m)
+    alt_bias_m: np.ndarray  #: (n,) the altitude's Gauss-Markov bias (m)
+    multipath: np.ndarray  #: (n,) bool: the fix is inside a multipath episode
+    multipath_en_m: np.ndarray  #: (n, 2) summed offset of the episodes the fix is in (m; 0 outside)
+    cold_start_en_m: np.ndarray  #: (n, 2) cold-start offset (m; 0 after the cold start)
+    hacc_normal_m: np.ndarray  #: (n,) honest 68 % radius of the normal errors, before the jitter (m)
+    multipath_t_ns: np.ndarray  #: (k, 2) int64 start and end of each multipath episode (those touching a fix)
+    multipath_offset_en_m: np.ndarray  #: (k, 2) each episode's offset (m)
+
+    @property
+    def error_model_en_m(self) -> np.ndarray:
+        """(n, 2) the injected horizontal error without the white noise: bias + multipath + cold start (m)."""
+        return self.bias_en_m + self.multipath_en_m + self.cold_start_en_m
+
+
 @dataclass(frozen=True, eq=False)
 class WalkTruth:
     """Exact ground truth of a simulated walk (times on the recording's sensor clock).
@@ -332,6 +480,9 @@ class WalkTruth:
     mag_field_enu_uT: np.ndarray  #: (k, 3) true field in ENU at the phone at each magnetometer sample (uT)
     mag_hard_iron_uT: np.ndarray  #: (3,) hard-iron offset (device frame, uT)
     mag_soft_iron: np.ndarray  #: (3, 3) soft-iron matrix S (reading = S R^T h_n + hard iron + noise)
+    origin_lat_lon: tuple[float, float]  #: WGS-84 latitude, longitude (deg) of the ENU origin
+    origin_alt_m: float  #: ellipsoidal height of the ground at the origin (m; the ground is flat)
+    gps: GpsTruth | None  #: what went into the GPS fixes (None without a GPS stream)
     _model: "_WalkModel" = field(repr=False)
 
     def _t(self, t_ns) -> np.ndarray:
@@ -376,6 +527,17 @@ class WalkTruth:
     def mag_field_at(self, t_ns) -> np.ndarray:
         """True magnetic field in ENU (uT) at the phone at ``t_ns``: (3,) or (n, 3)."""
         return self._out(t_ns, self._model.field_n(np.atleast_1d(self._t(t_ns))))
+
+    def phone_velocity_at(self, t_ns) -> np.ndarray:
+        """Phone velocity ``(east, north, up)`` (m/s, central difference over +-0.5 ms): (3,) or (n, 3)."""
+        return self._out(t_ns, self._model.velocity(np.atleast_1d(self._t(t_ns))))
+
+    def phone_geodetic_at(self, t_ns) -> np.ndarray:
+        """Phone position ``(lat_deg, lon_deg, alt_m)`` (WGS-84, ellipsoidal height; via
+        :func:`core.geodesy.enu_to_geodetic` about ``origin_lat_lon``): (3,) or (n, 3)."""
+        p = self._model.position(np.atleast_1d(self._t(t_ns)))
+        lat, lon = enu_to_geodetic(p[:, 0], p[:, 1], self.origin_lat_lon)
+        return self._out(t_ns, np.stack([lat, lon, self.origin_alt_m + p[:, 2]], axis=-1))
 
 
 @dataclass(frozen=True, eq=False)
@@ -842,6 +1004,13 @@ class _WalkModel:
         q_a[:, 1:] *= -1.0  # conjugate
         return quat.to_rotation_vector_array(quat.multiply_array(q_a, q_b)) / (2.0 * d)
 
+    def velocity(self, t: np.ndarray) -> np.ndarray:
+        """Phone velocity (n, 3) in ENU (m/s): central difference of :meth:`position`."""
+        d = _ACC_DIFF_S
+        n = len(t)
+        p = self.position(np.concatenate([t - d, t + d]))
+        return (p[n:] - p[:n]) / (2.0 * d)
+
     def linear_acc(self, t: np.ndarray) -> np.ndarray:
         """Phone acceleration (n, 3) in ENU (m/s^2): second central difference of :meth:`position`."""
         d = _ACC_DIFF_S
@@ -882,6 +1051,84 @@ def _sample_times_ns(rng: np.random.Generator, rate_hz: float, jitter: float, du
         raise RuntimeError("not enough samples drawn")
     t = t[t <= duration_s]
     return clock0_ns + np.round(t * 1e9).astype(np.int64)
+
+
+def _gauss_markov(rng: np.random.Generator, t_s: np.ndarray, sd: np.ndarray, tau_s: float) -> np.ndarray:
+    """First-order Gauss-Markov processes (n, len(sd)) at the times ``t_s``, stationary from the start:
+    ``x_k+1 = a x_k + sqrt(1 - a^2) sd w_k`` with ``a = exp(-(t_k+1 - t_k) / tau)``."""
+    sd = np.asarray(sd, float)
+    w = rng.standard_normal((len(t_s), len(sd))) * sd
+    out = np.zeros_like(w)
+    if len(t_s):
+        a = np.exp(-np.diff(t_s) / tau_s)
+        b = np.sqrt(1.0 - a * a)
+        out[0] = w[0]
+        for k in range(1, len(t_s)):
+            out[k] = a[k - 1] * out[k - 1] + b[k - 1] * w[k]
+    return out
+
+
+def _simulate_gps(gps: GpsModel, model: _WalkModel, seeds: np.random.SeedSequence, total_s: float,
+                  origin_lat_lon: tuple[float, float], origin_alt_m: float) -> tuple[Stream, GpsTruth]:
+    """The ``gps`` stream and its :class:`GpsTruth` (see :class:`GpsModel`); all draws from ``seeds``' children."""
+    rng_t, rng_noise, rng_bias, rng_mp, rng_hacc, rng_vel, rng_alt, rng_cold = (
+        np.random.default_rng(s) for s in seeds.spawn(8))
+    clock0 = model.clock0_ns
+    dt = 1.0 / gps.rate_hz
+    n = int(math.floor((total_s - gps.first_fix_s) * gps.rate_hz)) + 1 if total_s >= gps.first_fix_s else 0
+    jitter = np.clip(gps.time_jitter_s * rng_t.standard_normal(n), -0.3 * dt, 0.3 * dt)
+    t_s = gps.first_fix_s + np.arange(n) * dt + jitter
+    t_s = t_s[(t_s >= 0.0) & (t_s <= total_s)]
+    t_ns = clock0 + np.round(t_s * 1e9).astype(np.int64)
+    t = (t_ns - clock0) * 1e-9  # the physics at exactly the time stamps, as for the other sensors
+    n = len(t)
+
+    pos = model.position(t)
+    vel = (pos[:, :2] - model.position(t - gps.velocity_window_s)[:, :2]) / gps.velocity_window_s
+    bias = _gauss_markov(rng_bias, t, (gps.bias_sd_m, gps.bias_sd_m, gps.alt_bias_sd_m), gps.bias_tau_s)
+
+    # multipath: a Poisson process of episodes, started one longest episode before the first fix (stationary)
+    lo_s, hi_s = (t[0] - gps.multipath_duration_s[1], t[-1]) if n else (0.0, 0.0)
+    k = int(rng_mp.poisson(gps.multipath_per_min / 60.0 * (hi_s - lo_s)))
+    starts = np.sort(rng_mp.uniform(lo_s, hi_s, k))
+    ends = starts + rng_mp.uniform(*gps.multipath_duration_s, k)
+    jump = rng_mp.uniform(*gps.multipath_jump_m, k)
+    ang = rng_mp.uniform(0.0, 2.0 * np.pi, k)
+    offsets = np.stack([jump * np.cos(ang), jump * np.sin(ang)], axis=1)
+    inside = (t[:, None] >= starts) & (t[:, None] < ends)
+    touching = inside.any(axis=0)
+    multipath = inside.any(axis=1)
+    mp_en = inside @ offsets
+
+    # cold start: a random direction, shrinking linearly to 0 over the first cold_start_fixes fixes
+    n_cold = int(gps.cold_start_fixes)
+    cold_ang = rng_cold.uniform(0.0, 2.0 * np.pi)
+    cold_mag = gps.cold_start_error_m * np.clip(1.0 - np.arange(n) / max(n_cold, 1), 0.0, 1.0) * (np.arange(n) < n_cold)
+    cold_en = cold_mag[:, None] * np.array([math.cos(cold_ang), math.sin(cold_ang)])
+
+    white = gps.noise_sd_m * rng_noise.standard_normal((n, 2))
+    east, north = (pos[:, :2] + bias[:, :2] + mp_en + cold_en + white).T
+    lat, lon = enu_to_geodetic(east, north, origin_lat_lon)
+    alt = origin_alt_m + pos[:, 2] + bias[:, 2] + gps.alt_noise_sd_m * rng_alt.standard_normal(n)
+
+    hacc_normal = np.full(n, gps.hacc_scale * math.hypot(gps.noise_sd_m, gps.bias_sd_m))
+    jit = np.exp(math.sqrt(math.log1p(gps.hacc_jitter_cv ** 2)) * rng_hacc.standard_normal(n))
+    hacc = hacc_normal * jit * np.where(multipath, gps.hacc_multipath_factor, 1.0) + cold_mag
+
+    v_meas = vel + gps.speed_noise_m_s * rng_vel.standard_normal((n, 2))
+    speed = np.hypot(v_meas[:, 0], v_meas[:, 1])
+    bearing = np.array([bearing_deg(h) for h in np.arctan2(v_meas[:, 1], v_meas[:, 0]).tolist()])
+    course = np.where(speed >= gps.course_min_speed_m_s, bearing, np.nan)
+
+    stream = make_stream(GPS, t_ns, np.stack([lat, lon, alt, hacc, speed, course], axis=1))
+    frozen = _readonly
+    truth = GpsTruth(
+        model=gps, t_ns=frozen(t_ns), pos_enu_m=frozen(pos), vel_en_m_s=frozen(vel), bias_en_m=frozen(bias[:, :2]),
+        alt_bias_m=frozen(bias[:, 2]), multipath=frozen(multipath), multipath_en_m=frozen(mp_en),
+        cold_start_en_m=frozen(cold_en), hacc_normal_m=frozen(hacc_normal),
+        multipath_t_ns=frozen((clock0 + np.round(np.stack([starts, ends], axis=1) * 1e9).astype(np.int64))[touching]),
+        multipath_offset_en_m=frozen(offsets[touching]))
+    return stream, truth
 
 
 def _readonly(a) -> np.ndarray:
@@ -961,6 +1208,9 @@ def simulate_walk(
     weinberg_c: float | None = None,
     truth_rate_hz: float = 200.0,
     clock_start_ns: int = DEFAULT_CLOCK_START_NS,
+    gps: GpsModel | None = None,
+    origin_lat_lon: tuple[float, float] = DEFAULT_ORIGIN_LAT_LON,
+    origin_alt_m: float = DEFAULT_ORIGIN_ALT_M,
     seed: int = 0,
 ) -> SimulatedWalk:
     """Simulate a walk along ``waypoints_en_m`` with a phone held in front of the chest.
@@ -1032,13 +1282,23 @@ def simulate_walk(
         Rate of the dense truth grid ``truth.att_t_ns`` (Hz).
     clock_start_ns : int
         Sensor clock value at the start of the simulation (ns).
+    gps : GpsModel or None
+        If given, the recording gains a ``gps`` stream (the columns of ``core.recording.STREAM_SPECS["gps"]``)
+        from this receiver model and ``truth.gps`` what went into each fix.  Its random numbers come from
+        generators of their own: the other streams are the same with and without it.
+    origin_lat_lon : 2 floats
+        WGS-84 latitude and longitude (deg) of the ENU origin (default: Helsinki's centre); the ENU +y
+        axis is true north.
+    origin_alt_m : float
+        Height of the (flat) ground above the WGS-84 ellipsoid at the origin (m), for the GPS altitude.
     seed : int
-        Seed of all randomness (timestamps, noise, gait variability, hand drift, bias walk).
+        Seed of all randomness (timestamps, noise, gait variability, hand drift, bias walk, GPS errors).
 
     Returns
     -------
     SimulatedWalk
-        ``recording`` with streams ``acc``, ``gyro``, ``mag`` (and ``mag_uncalibrated_stream``) and ``truth``.
+        ``recording`` with streams ``acc``, ``gyro``, ``mag`` (and ``mag_uncalibrated_stream``, ``gps``) and
+        ``truth``.
     """
     rate_hz = _positive("rate_hz", rate_hz)
     gyro_rate_hz = rate_hz if gyro_rate_hz is None else _positive("gyro_rate_hz", gyro_rate_hz)
@@ -1088,9 +1348,17 @@ def simulate_walk(
     phone_yaw_offset_deg = _finite("phone_yaw_offset_deg", phone_yaw_offset_deg)
     clock0 = operator.index(clock_start_ns)
     seed = operator.index(seed)  # an explicit integer: the recording must be reproducible
+    if gps is not None and not isinstance(gps, GpsModel):
+        raise ValueError(f"gps must be a GpsModel or None, got {type(gps).__name__}")
+    origin = tuple(_finite("origin_lat_lon", v) for v in origin_lat_lon)
+    if len(origin) != 2 or not (abs(origin[0]) <= 85.0 and abs(origin[1]) <= 180.0):
+        raise ValueError(f"origin_lat_lon must be (lat, lon) in degrees, |lat| <= 85, got {origin_lat_lon!r}")
+    origin_alt_m = _finite("origin_alt_m", origin_alt_m)
 
-    rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(9)]
+    seeds = np.random.SeedSequence(seed)
+    rngs = [np.random.default_rng(s) for s in seeds.spawn(9)]
     rng_t_acc, rng_t_gyro, rng_t_mag, rng_n_acc, rng_n_gyro, rng_n_mag, rng_drift, rng_gait, rng_bias = rngs
+    gps_seeds = seeds.spawn(1)[0]  # the tenth child: the GPS never moves a draw of the nine above
 
     speed = f * step_length_m
     walk_start_s = calibration_motion_s + still_start_s
@@ -1165,6 +1433,8 @@ def simulate_walk(
     y_axis = quat.to_matrix_array(q_truth)[:, :, 1]
     dev_heading = np.unwrap(np.arctan2(y_axis[:, 1], y_axis[:, 0]))
     y_steps = quat.to_matrix_array(model.quat(t_steps))[:, :, 1]
+    gps_stream, gps_truth = (None, None) if gps is None else _simulate_gps(gps, model, gps_seeds, total_s, origin,
+                                                                          origin_alt_m)
     frozen = _readonly
     truth = WalkTruth(
         n_steps=int(path.n_steps),
@@ -1194,6 +1464,9 @@ def simulate_walk(
         mag_field_enu_uT=frozen(h_n),
         mag_hard_iron_uT=frozen(hard_iron),
         mag_soft_iron=frozen(soft_iron),
+        origin_lat_lon=origin,
+        origin_alt_m=origin_alt_m,
+        gps=gps_truth,
         _model=model,
     )
 
@@ -1226,6 +1499,8 @@ def simulate_walk(
     }
     if weinberg_c is not None:
         metadata["weinberg_c"] = float(weinberg_c)
+    if gps is not None:  # only then: recordings without GPS keep their header
+        metadata.update(gps=gps.as_dict(), origin_lat_lon=list(origin), origin_alt_m=origin_alt_m)
     streams = {ACC: make_stream(ACC, t_acc, acc), GYRO: make_stream(GYRO, t_gyro, gyro)}
     if mag_uncalibrated_stream is None:
         streams[MAG] = make_stream(MAG, t_mag, mag_raw)
@@ -1233,6 +1508,8 @@ def simulate_walk(
         streams[MAG] = make_stream(MAG, t_mag, m_b + mag_noise)
         streams[mag_uncalibrated_stream] = Stream(mag_uncalibrated_stream, t_mag, mag_raw, ("x", "y", "z"), "uT",
                                                   "magnetometer, uncalibrated (hard and soft iron included)")
+    if gps_stream is not None:
+        streams[GPS] = gps_stream
     recording = Recording(streams, device={"model": "simulator"}, metadata=metadata,
                           source=f"simulate_walk(seed={seed})")
     return SimulatedWalk(recording=recording, truth=truth)
@@ -1240,6 +1517,10 @@ def simulate_walk(
 
 #: The demo loop: a 50 m x 30 m rectangle with a dog-leg in its north-east corner (160 m, 6 turns).
 DEMO_WAYPOINTS_EN_M = ((0.0, 0.0), (50.0, 0.0), (50.0, 15.0), (35.0, 15.0), (35.0, 30.0), (0.0, 30.0), (0.0, 0.0))
+
+#: The demo's settings besides the waypoints and the seed.
+DEMO_WALK_KW = dict(rate_hz=100.0, still_start_s=3.0, still_end_s=3.0, phone_yaw_offset_deg=6.0, phone_pitch_deg=25.0,
+                    phone_roll_deg=4.0, hand_drift_deg_s=(0.3, 0.5, 0.5), gyro_bias_rad_s=(0.002, -0.0015, 0.001))
 
 
 def demo_walk(seed: int = 0) -> SimulatedWalk:
@@ -1250,6 +1531,5 @@ def demo_walk(seed: int = 0) -> SimulatedWalk:
     (2, -1.5, 1) mrad/s; default sensor noise, step variability and gait; no magnetic disturbance; 3 s
     standing at either end.
     """
-    return simulate_walk(DEMO_WAYPOINTS_EN_M, rate_hz=100.0, still_start_s=3.0, still_end_s=3.0,
-                         phone_yaw_offset_deg=6.0, phone_pitch_deg=25.0, phone_roll_deg=4.0,
-                         hand_drift_deg_s=(0.3, 0.5, 0.5), gyro_bias_rad_s=(0.002, -0.0015, 0.001), seed=seed)
+    return simulate_walk(DEMO_WAYPOINTS_EN_M, **DEMO_WALK_KW, seed=seed)
+
