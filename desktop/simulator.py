@@ -160,6 +160,12 @@ Sensors
     recording and e.g. changing a noise level does not move the timestamps).
     The GPS draws from a tenth child of its own, so adding or changing the GPS leaves
     every other stream unchanged.
+
+Outdoor walks
+    :func:`street_route` makes a polyline of city streets (blocks of 40-120 m, mostly 90 deg turns, some
+    gentle bends, no reversals); :func:`outdoor_walk` walks one for 10-20 minutes with GPS, a per-seed
+    walker and phone pose, a residual hard iron and the site's WMM field (a 20-minute walk takes a few
+    seconds to simulate).
 """
 
 from __future__ import annotations
@@ -175,10 +181,10 @@ import numpy as np
 from core import __version__
 from core import quaternion as quat
 from core.conventions import ACC, GPS, GYRO, MAG, STANDARD_GRAVITY_M_S2, bearing_deg, wrap_angle
-from core.geodesy import enu_to_geodetic
+from core.geodesy import enu_to_geodetic, magnetic_field
 from core.recording import Recording, Stream, make_stream
 
-__all__ = ["simulate_walk", "demo_walk", "SimulatedWalk", "WalkTruth", "GpsModel",
+__all__ = ["simulate_walk", "demo_walk", "street_route", "outdoor_walk", "SimulatedWalk", "WalkTruth", "GpsModel",
            "GpsTruth", "DisturbanceZone", "SIMULATOR_VERSION", "WALK_RATIO_PER_HEIGHT", "default_step_length_m"]
 
 #: Version of the simulation model (stored in ``metadata["simulator"]``); bumped when the same
@@ -1533,3 +1539,108 @@ def demo_walk(seed: int = 0) -> SimulatedWalk:
     """
     return simulate_walk(DEMO_WAYPOINTS_EN_M, **DEMO_WALK_KW, seed=seed)
 
+
+# ---------------------------------------------------------------------------
+# long outdoor walks
+
+
+def street_route(length_m: float, *, seed: int, block_m: tuple[float, float] = (40.0, 120.0),
+                 straight_prob: float = 0.25, bend_prob: float = 0.2, bend_deg: tuple[float, float] = (10.0, 30.0),
+                 start_en_m: tuple[float, float] = (0.0, 0.0), start_heading_deg: float | None = None) -> np.ndarray:
+    """Waypoints (n, 2) ENU m of a walk along city streets, ``length_m`` of polyline in all.
+
+    Straight legs along blocks joined by junctions.  A block is uniform in ``block_m``; at the end of a block
+    the walker goes straight on with ``straight_prob`` (the leg goes on for another block), else the
+    junction is a gentle bend of uniform ``bend_deg`` left or right with ``bend_prob``, else a 90 deg turn
+    left or right.  No reversals: no turn is larger than 90 deg, and after two 90 deg turns the same way
+    (round a block) the next one goes the other way, so the walk does not circle a block.  The last leg
+    ends where ``length_m`` is reached; it absorbs a remainder shorter than half the shortest block, so
+    that no leg is a stub.  The first heading is uniform (the street grid's orientation) unless
+    ``start_heading_deg`` (CCW from East) is given.  One seed, one route (its own generator, distinct from
+    :func:`simulate_walk`'s for the same seed).
+    """
+    length_m = _positive("length_m", length_m)
+    lo, hi = (_positive("block_m", v) for v in block_m)
+    b_lo, b_hi = (_non_negative("bend_deg", v) for v in bend_deg)
+    if hi < lo or b_hi < b_lo or b_hi >= 90.0:
+        raise ValueError("block_m and bend_deg must be (low, high) with low <= high, bends below 90 deg")
+    for name, p in (("straight_prob", straight_prob), ("bend_prob", bend_prob)):
+        if not 0.0 <= float(p) < 1.0:
+            raise ValueError(f"{name} must be in [0, 1), got {p!r}")
+    rng = np.random.default_rng([operator.index(seed), _ROUTE_SEED_TAG])
+    heading = rng.uniform(0.0, 2.0 * np.pi) if start_heading_deg is None else math.radians(
+        _finite("start_heading_deg", start_heading_deg))
+    points = [np.array([_finite("start_en_m", v) for v in start_en_m])]
+    left, last_turns = length_m, []
+    while left > 0.0:
+        leg = rng.uniform(lo, hi)
+        while rng.random() < straight_prob:
+            leg += rng.uniform(lo, hi)
+        if left - leg < 0.5 * lo:
+            leg = left
+        points.append(points[-1] + leg * np.array([math.cos(heading), math.sin(heading)]))
+        left -= leg
+        if rng.random() < bend_prob:
+            heading += math.radians(rng.uniform(b_lo, b_hi)) * rng.choice((-1.0, 1.0))
+        else:
+            side = float(rng.choice((-1.0, 1.0)))
+            if last_turns[-2:] == [side, side]:
+                side = -side
+            last_turns.append(side)
+            heading += side * 0.5 * math.pi
+    return np.array(points)
+
+
+#: outdoor_walk's per-seed walker and phone: uniform ranges
+OUTDOOR_HEIGHT_M = (1.55, 1.95)
+OUTDOOR_CADENCE_HZ = (1.65, 2.0)
+OUTDOOR_YAW_OFFSET_DEG = (-8.0, 8.0)
+OUTDOOR_PITCH_DEG = (15.0, 40.0)
+#: per-axis standard deviation of the residual hard iron left by the phone's own calibration (uT)
+OUTDOOR_HARD_IRON_SD_UT = 1.0
+_ROUTE_SEED_TAG = 0x5743  # street_route's generator: [seed, tag], distinct from simulate_walk's SeedSequence(seed)
+_OUTDOOR_SEED_TAG = 0x4F57  # outdoor_walk's walker draws
+
+
+def outdoor_walk(seed: int, minutes: float = 15.0, *, year: float = 2025.5, **kw) -> SimulatedWalk:
+    """A ``minutes`` long walk along city streets (:func:`street_route`) with GPS, for GPS fusion tests.
+
+    Per seed (a generator of its own) the walker is drawn: height uniform in ``OUTDOOR_HEIGHT_M``, cadence
+    in ``OUTDOOR_CADENCE_HZ`` (step length from the walk ratio), the phone's yaw offset in
+    ``OUTDOOR_YAW_OFFSET_DEG`` and its pitch in ``OUTDOOR_PITCH_DEG``, and a residual hard iron of
+    ``OUTDOOR_HARD_IRON_SD_UT`` per axis (what an OS calibration leaves; the magnetometer is otherwise
+    clean: outdoors there are no indoor disturbance zones).  The Earth's field is the World Magnetic
+    Model's at the origin (:func:`core.geodesy.magnetic_field`, decimal ``year``), so magnetic north is
+    off true north (+y) by the site's declination (about +10 deg in Helsinki in 2025): a compass heading
+    needs the declination to meet the GPS course.  The GPS is :class:`GpsModel` () at 1 Hz.  Sensors,
+    gait variability and hand drift are :func:`simulate_walk`'s defaults at 100 Hz, 2 s standing at
+    either end.  The route is as long as the walker's cruise speed covers in the walking time (corners
+    at 90 deg/s cost almost nothing), so the recording lasts ``minutes`` to within a few seconds.
+
+    Any keyword of :func:`simulate_walk` overrides these (e.g. ``gps=GpsModel(cold_start_fixes=10)``,
+    ``height_m``, ``origin_lat_lon``); the choices made are in ``metadata["outdoor_walk"]``.
+    """
+    minutes = _positive("minutes", minutes)
+    rng = np.random.default_rng([operator.index(seed), _OUTDOOR_SEED_TAG])
+    params = dict(height_m=rng.uniform(*OUTDOOR_HEIGHT_M), step_frequency_hz=rng.uniform(*OUTDOOR_CADENCE_HZ),
+                  phone_yaw_offset_deg=rng.uniform(*OUTDOOR_YAW_OFFSET_DEG),
+                  phone_pitch_deg=rng.uniform(*OUTDOOR_PITCH_DEG),
+                  mag_hard_iron_uT=tuple(OUTDOOR_HARD_IRON_SD_UT * rng.standard_normal(3)),
+                  gps=GpsModel(), origin_lat_lon=DEFAULT_ORIGIN_LAT_LON, origin_alt_m=DEFAULT_ORIGIN_ALT_M,
+                  rate_hz=100.0, still_start_s=2.0, still_end_s=2.0)
+    params.update(kw)
+    if "earth_field_enu_uT" not in kw:
+        lat, lon = params["origin_lat_lon"]
+        dec, inc, total = magnetic_field(lat, lon, params["origin_alt_m"], year)
+        params["earth_field_enu_uT"] = (total * math.cos(inc) * math.sin(dec), total * math.cos(inc) * math.cos(dec),
+                                        -total * math.sin(inc))
+    step_m = params.get("step_length_m") or default_step_length_m(params["height_m"], params["step_frequency_hz"])
+    walking_s = max(minutes * 60.0 - params["still_start_s"] - params["still_end_s"], 1.0)
+    route = street_route(params["step_frequency_hz"] * step_m * walking_s, seed=seed)
+    walk = simulate_walk(route, seed=seed, **params)
+    walk.recording.metadata["outdoor_walk"] = {
+        "seed": operator.index(seed), "minutes": minutes, "year": float(year),
+        "route_length_m": float(np.hypot(*np.diff(route, axis=0).T).sum()),
+        "declination_deg": math.degrees(math.atan2(params["earth_field_enu_uT"][0], params["earth_field_enu_uT"][1])),
+    }
+    return walk
