@@ -8,6 +8,7 @@ checkout and are skipped when it is absent.
 
 from __future__ import annotations
 
+import csv
 import gzip
 import json
 import math
@@ -123,9 +124,11 @@ def make_gsd(n=200, sensor0=5000.0, app0=0.05, offset=None, extra_lines=()):
         if i % 50 == 25:
             # each fix twice (as the app does), Unix fix time 1686729678 + k
             k = i // 50
+            # fix 1 has no bearing: Android's getBearing() is then 0.0, and GetSensorData logs it as such
+            bearing, speed = ("0.000", "0.0") if k == 1 else ("79.500", "0.1")
             for d in (0.0, 0.01):
-                lines.append(f"GNSS;{app + d:.4f};{1686729678 + k:.4f};49.461269;11.111049;346.000;79.500;9.0;0.1;"
-                             "22;19\n")
+                lines.append(f"GNSS;{app + d:.4f};{1686729678 + k:.4f};49.461269;11.111049;346.000;{bearing};9.0;"
+                             f"{speed};22;19\n")
     lines.append("POSI;1.0500;1;49.461316433032;11.110964442580;0;100\n")
     lines.append("POSI;3.0500;2;49.461275602490;11.110988346746;0;100\n")
     lines.extend(extra_lines)
@@ -155,10 +158,13 @@ def test_getsensordata_synthetic_units_time_and_attitude():
     assert posi.columns == ("lat_deg", "lon_deg", "floor", "building_id", "counter")
     assert posi.t_ns[0] == int(round(1.05e9)) + off
     assert posi.values[1, 4] == 2 and posi.values[0, 3] == 100
-    # GNSS: repeats dropped, hacc from Accuracy(m), Unix time from the fix times
+    # GNSS: repeats dropped, hacc from Accuracy(m), speed from Speed(m/s), course from Bearing(deg), Unix time
+    # from the fix times
     gps = rec.streams["gps"]
     assert len(gps) == 4 and rec.metadata["gnss_repeats_dropped"] == 4
-    assert np.allclose(gps.values[0], [49.461269, 11.111049, 346.0, 9.0])
+    assert gps.columns == ("lat_deg", "lon_deg", "alt_m", "hacc_m", "speed_m_s", "course_deg")
+    assert np.allclose(gps.values[0], [49.461269, 11.111049, 346.0, 9.0, 0.1, 79.5], rtol=0, atol=1e-9)
+    assert gps.values[1, 4] == pytest.approx(0.0, abs=1e-12) and np.isnan(gps.values[1, 5])  # no bearing
     assert abs(rec.metadata["unix_offset_ns"] + gps.t_ns[0] - 1686729678 * 10**9) < 2 * 10**9
     assert rec.metadata["t0_unix_ns"] == rec.t0_ns + rec.metadata["unix_offset_ns"]
     assert rec.streams["pressure"].values[0, 0] == pytest.approx(976.2273)
@@ -167,6 +173,13 @@ def test_getsensordata_synthetic_units_time_and_attitude():
     assert rec.device["model"] == "SM-TEST" and rec.device["android_api"] == 26
     assert rec.metadata["app_version"] == "2.21" and rec.metadata["source_format"] == "getsensordata"
     assert rec.repairs == []
+
+
+def test_getsensordata_gnss_without_speed_field_reads_speed_as_nan():
+    text = make_gsd(n=10) + "GNSS;0.5000;1686729690.0000;49.4613;11.1111;346.0;123.4;7.0\n"
+    gps = parse_getsensordata(text, "old.txt").streams["gps"]
+    assert np.isnan(gps.values[-1, 4])
+    assert gps.values[-1, 5] == pytest.approx(123.4, abs=1e-9) and gps.values[-1, 3] == pytest.approx(7.0, abs=1e-9)
 
 
 def test_getsensordata_ahrs_without_quaternion_uses_angles():
@@ -374,12 +387,40 @@ def test_sensorlogger_android_folder(tmp_path):
     gps = rec.streams["gps"]
     assert np.isnan(gps.values[0, 3]) and gps.values[1, 3] == pytest.approx(4.7)  # negative accuracy = invalid
     assert np.allclose(gps.values[1, :3], [47.41, 8.51, 500.0])
+    assert np.allclose(gps.values[:, 4:], [[1.0, 90.0]] * 3, rtol=0, atol=1e-12)  # speed, bearing
+    assert rec.metadata["gps_speedAccuracy_median"] == pytest.approx(0.5, abs=1e-12)
     assert np.allclose(rec.streams["mag_uncal"].values, MAG_B + 30.0)
     assert rec.streams["pressure"].values[0, 0] == pytest.approx(947.77)
     assert "Annotation.csv" in rec.metadata["ignored_files"]
     assert rec.metadata["mag_dip_deg"] == pytest.approx(math.degrees(math.atan2(40, 20)), abs=0.01)
     # a CSV inside the folder reads the whole folder
     assert set(read_sensorlogger(root / "Accelerometer.csv").streams) == set(rec.streams)
+
+
+@pytest.mark.parametrize("platform", ["android", "ios"])
+def test_sensorlogger_location_invalid_values_and_cached_fixes(tmp_path, platform):
+    files = sl_files(platform)
+    start = 1_700_000_000_123_000_000
+    #          seconds_elapsed, speedAccuracy, horizontalAccuracy, speed, bearing, bearingAccuracy
+    fixes = [(-20.0, 0.5, 4.0, 0.8, 190.0, 10.0),  # cached before the start: dropped
+             (1.0, 0.5, 4.0, -1.0, -1.0, -1.0),  # iOS: invalid speed and course
+             (2.0, -1.0, 4.0, 1.2, 45.0, 10.0),  # invalid speed accuracy: speed unknown
+             (3.0, 0.5, 0.0, 0.0, 0.0, 0.0),  # Android without hasBearing(): bearing 0.0
+             (4.0, 0.4, 3.0, 1.4, 359.5, 8.0)]
+    files["Location.csv"] = sl_csv(
+        "time,seconds_elapsed,altitude,speedAccuracy,bearingAccuracy,latitude,bearing,horizontalAccuracy,longitude,"
+        "speed",
+        [(start + int(el * 1e9), el, 500.0, sa, ba, 47.41, b, h, 8.51, sp) for el, sa, h, sp, b, ba in fixes])
+    rec = read_sensorlogger(write_folder(tmp_path / platform, files))
+    gps = rec.streams["gps"]
+    assert list(gps.t_ns) == [1_000_000_000, 2_000_000_000, 3_000_000_000, 4_000_000_000]
+    assert any("dropped 1 fix(es) stamped before the recording started" in r for r in rec.repairs)
+    expect = [[np.nan, np.nan], [np.nan, 45.0], [0.0, np.nan], [1.4, 359.5]]
+    assert np.allclose(gps.values[:, 4:], expect, rtol=0, atol=1e-12, equal_nan=True)
+    assert np.isnan(gps.values[2, 3]) and gps.values[3, 3] == pytest.approx(3.0, abs=1e-12)  # hacc 0: unknown
+    assert rec.metadata["gps_bearingAccuracy_median"] == pytest.approx(9.0, abs=1e-12)  # of 10, 10, 0, 8
+    assert "bearingAccuracy are not in the stream" in gps.note
+    assert rec.t0_ns >= 0
 
 
 def test_sensorlogger_android_without_total_acceleration_adds_gravity(tmp_path):
@@ -453,12 +494,36 @@ def test_sensorlogger_acceleration_in_g_is_converted(tmp_path):
     assert any("in g" in r for r in rec.repairs)
 
 
+def test_sensorlogger_acceleration_of_a_swinging_phone_is_accepted_linear_acceleration_is_not(tmp_path):
+    n = 400
+    t = np.arange(n) * 0.01
+    files = sl_files("android")
+    # gravity plus an arm's centripetal acceleration of 6-12 m/s^2 towards the shoulder: median |a| ~ 1.5 g
+    swing = np.column_stack([6.0 + 6.0 * np.abs(np.sin(2 * np.pi * t)), np.zeros(n), np.full(n, G)])
+    files["TotalAcceleration.csv"] = sl_csv("time,seconds_elapsed,z,y,x",
+                                            [(i + 1, t[i], *swing[i, ::-1]) for i in range(n)])
+    rec = read_sensorlogger(write_folder(tmp_path / "swing", files))
+    med = float(np.median(np.linalg.norm(swing, axis=1)))
+    assert 1.4 * G < med < 2.5 * G
+    assert np.allclose(rec.streams["acc"].values, swing, rtol=0, atol=1e-9)  # unchanged: already m/s^2
+    assert "swinging" in rec.metadata["acc_unit_check"]
+    # the same magnitude without gravity passes through zero: not a unit that can be established
+    lin = np.column_stack([20.0 * np.sin(2 * np.pi * t), np.zeros(n), np.zeros(n)])
+    files["TotalAcceleration.csv"] = sl_csv("time,seconds_elapsed,z,y,x",
+                                            [(i + 1, t[i], *lin[i, ::-1]) for i in range(n)])
+    assert 1.4 * G < np.median(np.linalg.norm(lin, axis=1)) < 2.5 * G
+    with pytest.raises(RecordingError, match="cannot establish its unit"):
+        read_sensorlogger(write_folder(tmp_path / "lin", files))
+
+
 # ---------------------------------------------------------------------------
 # phyphox
 
 
 def phyphox_csv(heads, rows, delim=",", decimal_comma=False):
     def num(v):
+        if v != v:
+            return "NaN"  # phyphox's missing value (GPS velocity before the first fix)
         mantissa, exp = f"{v:.9E}".split("E")
         s = f"{mantissa}E{int(exp)}"  # phyphox (Java) writes 9.364549000E-3
         return s.replace(".", ",") if decimal_comma else s
@@ -539,6 +604,28 @@ def test_phyphox_single_csv_and_ios_device(tmp_path):
     assert np.allclose(rec.streams["acc"].values, ACC_B, atol=1e-8)  # phyphox iOS already uses Android's sign
 
 
+def test_phyphox_location_speed_and_direction(tmp_path):
+    files = phyphox_files()
+    # the iOS header of phyphox 1.1.16 (vertical accuracy with a degree sign, as phyphox writes it)
+    heads = ["Time (s)", "Latitude (°)", "Longitude (°)", "Height (m)", "Velocity (m/s)", "Direction (°)",
+             "Horizontal Accuracy (m)", "Vertical Accuracy (°)"]
+    nan = float("nan")
+    rows = [(0.5, 52.36, 4.92, 1.0, nan, nan, 35.0, 20.0),  # before the first fix with a velocity
+            (1.5, 52.36001, 4.92001, 1.1, 0.27, nan, 12.0, 20.0),
+            (2.5, 52.36002, 4.92002, 1.2, 1.31, 241.5, 5.0, 10.0),
+            (3.5, 52.36003, 4.92003, 1.3, 1.25, 359.9, 4.9, 10.0)]
+    files["Location.csv"] = phyphox_csv(heads, rows)
+    rec = read_phyphox(write_zip(tmp_path / "loc.zip", files))
+    gps = rec.streams["gps"]
+    assert rec.metadata["files_used"]["gps"] == "Location.csv"
+    assert np.allclose(gps.values[:, 4:], [[nan, nan], [0.27, nan], [1.31, 241.5], [1.25, 359.9]],
+                       rtol=0, atol=1e-6, equal_nan=True)
+    assert np.allclose(gps.values[:, 3], [35.0, 12.0, 5.0, 4.9], rtol=0, atol=1e-6)
+    # the second run (after the pause at experiment time 2 s) starts 12.5 s after the first START
+    assert list(gps.t_ns) == [500_000_000, 1_500_000_000, 13_000_000_000, 14_000_000_000]
+    assert "mean sea level" in gps.note
+
+
 def test_phyphox_errors(tmp_path):
     files = phyphox_files()
     files["Raw Data.csv"] = files["Raw Data.csv"].replace("Acceleration", "Linear Acceleration")
@@ -579,6 +666,33 @@ def test_phyphox_any_rows_give_a_recording_or_a_recording_error(tmp_path, rows):
         read_phyphox(f, warn=False)
     except RecordingError as e:
         assert "fuzz.csv" in str(e) and "\n" not in str(e)
+
+
+def test_gps_check_compares_reported_speed_and_course_with_the_track():
+    from core.importers._common import gps_check, gps_values
+
+    n = 120
+    t_ns = np.arange(n, dtype=np.int64) * 1_000_000_000
+    dist = 1.3 * np.arange(n)  # 1.3 m/s towards bearing 60 deg
+    lat0, lon0 = 52.0, 4.9
+    lat = lat0 + dist * math.cos(math.radians(60)) / 111_320.0
+    lon = lon0 + dist * math.sin(math.radians(60)) / (111_320.0 * math.cos(math.radians(lat0)))
+    speed = np.full(n, 1.3)
+    speed[:10] = 0.0  # a receiver that reports 0 while the fixes move
+    vals = gps_values(lat, lon, None, np.full(n, 4.0), speed, np.full(n, 60.0))
+    chk = gps_check(t_ns, vals)
+    assert chk["n"] == n and chk["speed_median_m_s"] == pytest.approx(1.3, abs=1e-9)
+    assert chk["track_speed_median_m_s"] == pytest.approx(1.3, rel=0.01)
+    assert chk["course_vs_track_deg"] < 1.0
+    assert chk["zero_speed_while_moving"] == 10
+    flipped = gps_values(lat, lon, None, None, speed, np.full(n, 240.0))  # a course 180 deg off
+    assert gps_check(t_ns, flipped)["course_vs_track_deg"] > 179.0
+    assert math.isnan(gps_check(t_ns[:3], vals[:3])["course_vs_track_deg"])  # 2 s of fixes: no 5 s baseline
+    # markers of unknown values: hacc <= 0, negative speed/course, a course of exactly 0; 360 wraps to 0
+    v = gps_values([1.0] * 4, [2.0] * 4, None, [0.0, -1.0, 3.0, 5.0], [-1.0, 0.0, 1.0, 2.0], [0.0, -1.0, 360.0, 90.0])
+    assert np.allclose(v[:, 3:], [[np.nan, np.nan, np.nan], [np.nan, 0.0, np.nan], [3.0, 1.0, 0.0], [5.0, 2.0, 90.0]],
+                       rtol=0, atol=1e-12, equal_nan=True)
+    assert np.isnan(v[:, 2]).all()
 
 
 # ---------------------------------------------------------------------------
@@ -754,3 +868,173 @@ def test_eth_sensorlogger_walk_loads_with_sane_values():
     # Metadata.csv's "recording time" 2023-03-17_15-50-47 is the start in UTC (Zurich was UTC+1)
     start = datetime.fromtimestamp(rec.metadata["unix_offset_ns"] * 1e-9, tz=timezone.utc)
     assert start.strftime("%Y-%m-%d_%H-%M-%S") == rec.metadata["recording_time"] == "2023-03-17_15-50-47"
+
+
+# ---------------------------------------------------------------------------
+# real outdoor walks with GPS (../shared/data/gps_walks_phone and the ETH walk)
+
+GPS_WALKS = DATA / "gps_walks_phone"
+needs_gps_walks = pytest.mark.skipif(not GPS_WALKS.is_dir(), reason="../shared/data/gps_walks_phone not present")
+
+PHY_LOC = ("Time (s)", "Latitude (°)", "Longitude (°)", "Velocity (m/s)", "Direction (°)")
+SL_LOC = ("seconds_elapsed", "latitude", "longitude", "speed", "bearing")
+#: walk -> (folder, format, location columns (time, lat, lon, speed, course), has a magnetometer, |acc| median range)
+WALKS = {
+    "bahramib_walk_stan1": (GPS_WALKS / "bahramib_walk_stan1", "phyphox", PHY_LOC, True, (9.5, 11.6)),
+    "babur_walking": (GPS_WALKS / "babur_walking", "phyphox", PHY_LOC, True, (9.5, 11.6)),
+    # Android, swinging in the hand: the arm's centripetal acceleration lifts the median to ~15 m/s^2
+    "liatoutou_walk2": (GPS_WALKS / "liatoutou_walk2", "phyphox", PHY_LOC, False, (14.0, 16.5)),
+    "bahramib_walk_beni1": (GPS_WALKS / "bahramib_walk_beni1", "phyphox", PHY_LOC, False, (9.5, 11.6)),
+    "siberiawolfp_walking2": (GPS_WALKS / "siberiawolfp_walking2", "sensorlogger", SL_LOC, True, (9.5, 11.6)),
+    "eth": (ETH, "sensorlogger", SL_LOC, True, (9.5, 11.6)),
+}
+
+
+def read_csv_columns(folder: Path, name: str) -> dict:
+    """``name`` (or ``name.gz``) in ``folder`` as {header: float array}, read with the csv module."""
+    path = folder / name if (folder / name).exists() else folder / (name + ".gz")
+    opener = gzip.open if path.suffix == ".gz" else open
+    with opener(path, "rt", encoding="utf-8", newline="") as f:
+        rows = [r for r in csv.reader(f) if r]
+    return {h.strip(): np.array([float(r[i]) for r in rows[1:]]) for i, h in enumerate(rows[0])}
+
+
+def csv_fixes(walk: str) -> dict:
+    """The walk's Location.csv by the apps' documented rules: time, lat, lon, valid speed and course (nan else)."""
+    folder, _fmt, (tc, la, lo, sp, co), _mag, _acc = WALKS[walk]
+    c = read_csv_columns(folder, "Location.csv")
+    keep = c[tc] >= 0  # Sensor Logger: fixes cached before the start have negative seconds_elapsed
+    speed, course = c[sp].copy(), c[co].copy()
+    speed[~(speed >= 0) | (c.get("speedAccuracy", speed * 0) < 0)] = np.nan
+    course[~(course > 0) | (c.get("bearingAccuracy", course * 0) < 0)] = np.nan  # 0.0 = Android's no bearing
+    return {"t": c[tc][keep], "lat": c[la][keep], "lon": c[lo][keep], "speed": speed[keep], "course": course[keep]}
+
+
+def course_vs_track_deg(f: dict, baseline_s=5.0, moving_m_s=0.7) -> float:
+    """Median |reported course - bearing of the track to the fix >= baseline_s later| while moving (sphere)."""
+    diffs = []
+    r = 6_371_000.0
+    for i in range(len(f["t"])):
+        j = int(np.searchsorted(f["t"], f["t"][i] + baseline_s))
+        if j >= len(f["t"]) or not np.isfinite(f["course"][i]):
+            continue
+        north = math.radians(f["lat"][j] - f["lat"][i]) * r
+        east = math.radians(f["lon"][j] - f["lon"][i]) * r * math.cos(math.radians(f["lat"][i]))
+        if math.hypot(east, north) / (f["t"][j] - f["t"][i]) > moving_m_s:
+            track = math.degrees(math.atan2(east, north))
+            diffs.append(abs((f["course"][i] - track + 180.0) % 360.0 - 180.0))
+    return float(np.median(diffs))
+
+
+def gyro_explains_mag(rec, smooth_s=0.1) -> tuple[float, float]:
+    """Slope and correlation of dm/dt against -w x m (a rotating phone sees the field turn the other way).
+
+    Holds for a magnetometer and a gyroscope in the same axes, the gyroscope
+    in rad/s; not affected by the walker's accelerations.
+    """
+    m, g = rec.streams["mag"], rec.streams["gyro"]
+    n = max(3, int(round(smooth_s * m.rate_hz)))
+    k = np.ones(n) / n
+
+    def smooth(x):
+        return np.column_stack([np.convolve(x[:, j], k, mode="same") for j in range(3)])[n:-n]
+
+    w = smooth(np.column_stack([np.interp(m.t_ns, g.t_ns, g.values[:, j]) for j in range(3)]))
+    mm = smooth(m.values)
+    t = m.t_ns[n:-n] * 1e-9
+    x = -np.cross(w, mm)[1:-1].ravel()
+    y = ((mm[2:] - mm[:-2]) / (t[2:] - t[:-2])[:, None]).ravel()
+    return float(x @ y / (x @ x)), float(np.corrcoef(x, y)[0, 1])
+
+
+@needs_gps_walks
+@pytest.mark.parametrize("walk", list(WALKS))
+def test_real_walk_units_signs_and_gps_speed_course(walk):
+    folder, fmt, _cols, has_mag, (acc_lo, acc_hi) = WALKS[walk]
+    assert detect_format(folder) == fmt
+    rec = load_recording(folder, warn=False)  # babur, liatoutou: repeated timestamps (listed in rec.repairs)
+    acc, gyro = rec.streams["acc"], rec.streams["gyro"]
+    an = np.linalg.norm(acc.values, axis=1)
+    assert acc_lo < np.median(an) < acc_hi
+    # Android sign: the phone faces up while the walker taps start and stop, so +z reads most of +g
+    first, last = acc.t_ns < acc.t_ns[0] + 500_000_000, acc.t_ns > acc.t_ns[-1] - 1_000_000_000
+    assert np.median(acc.values[first, 2]) > 5.0 and np.median(acc.values[last, 2]) > 5.0
+    assert 0.1 < np.median(np.linalg.norm(gyro.values, axis=1)) < 6.0  # rad/s (deg/s would be 57 times more)
+    if has_mag and walk != "eth":  # the ETH walk: calibrated field of 22 uT, phone hardly turns (see its test)
+        mag = rec.streams["mag"]
+        assert 40.0 < np.median(np.linalg.norm(mag.values, axis=1)) < 60.0  # the Netherlands: ~49 uT
+        assert rec.metadata["mag_dip_deg"] > 30.0  # the field points down: acc and mag signs agree
+        slope, corr = gyro_explains_mag(rec)
+        assert 0.85 < slope < 1.1 and corr > 0.8, (slope, corr)
+    # GPS: six columns; speed and course as the app reported them, times on the sensors' clock
+    gps = rec.streams["gps"]
+    assert gps.columns == ("lat_deg", "lon_deg", "alt_m", "hacc_m", "speed_m_s", "course_deg")
+    f = csv_fixes(walk)
+    speed_median = float(np.nanmedian(f["speed"]))
+    assert 0.9 < speed_median < 1.6  # walking
+    assert np.nanmedian(gps.values[:, 4]) == pytest.approx(speed_median, abs=0.005)
+    assert np.isfinite(gps.values[:, 4]).sum() == np.isfinite(f["speed"]).sum()
+    assert np.isfinite(gps.values[:, 5]).sum() == np.isfinite(f["course"]).sum()
+    assert np.nanmedian(gps.values[:, 5]) == pytest.approx(np.nanmedian(f["course"]), abs=0.01)
+    disagreement = course_vs_track_deg(f)
+    assert disagreement < 20.0  # clockwise from north, like the track (a sign or origin error gives ~90-180)
+    assert rec.metadata["gps_check"]["course_vs_track_deg"] == pytest.approx(disagreement, abs=3.0)
+    assert acc.t_ns[0] - 1_000_000_000 < gps.t_ns[0] and gps.t_ns[-1] < acc.t_ns[-1] + 1_000_000_000
+
+
+@needs_gps_walks
+def test_real_walk_fix_times_are_the_files_times_on_the_sensor_clock():
+    # phyphox without a pause: t_ns is the experiment time
+    f = csv_fixes("bahramib_walk_stan1")
+    gps = load_recording(WALKS["bahramib_walk_stan1"][0]).streams["gps"]
+    assert np.array_equal(gps.t_ns, np.rint(f["t"] * 1e9).astype(np.int64))
+    # Sensor Logger: t_ns + unix_offset_ns is the file's 'time' (Unix ns), the cached fixes left out
+    folder = WALKS["siberiawolfp_walking2"][0]
+    c = read_csv_columns(folder, "Location.csv")
+    with open(folder / "Location.csv", encoding="utf-8", newline="") as fh:
+        unix_ns = np.array([int(r[0]) for r in list(csv.reader(fh))[1:] if r])
+    rec = load_recording(folder)
+    gps = rec.streams["gps"]
+    kept = c["seconds_elapsed"] >= 0
+    assert (~kept).sum() == 2 and len(gps) == kept.sum() == 265
+    assert np.array_equal(gps.t_ns + rec.metadata["unix_offset_ns"], unix_ns[kept])
+    assert any("before the recording started" in r for r in rec.repairs)
+    assert rec.t0_ns >= 0 and gps.t_ns[0] == pytest.approx(0.131e9, abs=1e6)
+
+
+@needs_gps_walks
+def test_real_ios_sensorlogger_acceleration_matches_the_raw_accelerometer():
+    """iOS 1.15: Accelerometer.csv (no gravity) + Gravity.csv, both with the iOS sign, against the raw sensor in g."""
+    folder = WALKS["siberiawolfp_walking2"][0]
+    rec = load_recording(folder)
+    acc = rec.streams["acc"]
+    assert rec.device["platform"] == "ios" and rec.metadata["acc_from"] == "Accelerometer.csv + Gravity.csv"
+    raw = read_csv_columns(folder, "AccelerometerUncalibrated.csv")
+    t_raw = (raw["seconds_elapsed"] * 1e9).astype(np.int64)
+    raw_ms2 = np.column_stack([np.interp(acc.t_ns, t_raw, -G * raw[a]) for a in "xyz"])  # iOS: -g units
+    assert np.median(np.linalg.norm(acc.values - raw_ms2, axis=1)) < 0.3
+    assert np.median(np.linalg.norm(acc.values + raw_ms2, axis=1)) > 15.0  # the other sign would not fit
+
+
+@needs_gps_walks
+def test_real_android_phyphox_walk_with_a_pause_and_a_swinging_phone():
+    folder = WALKS["liatoutou_walk2"][0]
+    rec = load_recording(folder, warn=False)
+    assert rec.device["platform"] == "android" and rec.metadata["pauses"] == 1
+    assert "swinging" in rec.metadata["acc_unit_check"]
+    # phyphox wrote some samples twice (same time, same values) and three 10 ms steps back: repaired
+    assert any("stream 'acc': 3 timestamp(s) went backwards and 61 repeated" in r for r in rec.repairs)
+    # the pause: real time between PAUSE and the next START, in meta/time.csv
+    with open(folder / "meta" / "time.csv", encoding="utf-8", newline="") as fh:
+        events = [r for r in csv.reader(fh)][1:]
+    pause_s = float(events[2][2]) - float(events[1][2])
+    assert pause_s == pytest.approx(228.9, abs=0.1)
+    acc, gps = rec.streams["acc"], rec.streams["gps"]
+    dt = np.diff(acc.t_ns) * 1e-9
+    i = int(np.argmax(dt))
+    assert dt[i] == pytest.approx(pause_s, abs=0.1)  # one gap in the acceleration, the length of the pause
+    j = int(np.searchsorted(gps.t_ns, acc.t_ns[i]))  # and the fixes around it: 155.3 s and 163.9 s experiment time
+    assert gps.t_ns[j - 1] <= acc.t_ns[i] and gps.t_ns[j] >= acc.t_ns[i + 1]
+    assert (gps.t_ns[j] - gps.t_ns[j - 1]) * 1e-9 == pytest.approx(pause_s + 163.87 - 155.29, abs=0.2)
+    # this receiver reports a speed of 0 for minutes of walking: kept as reported, counted in the metadata
+    assert rec.metadata["gps_check"]["zero_speed_while_moving"] > 100

@@ -21,6 +21,13 @@ it applies, the line -- for input it cannot read, and finishes with
 :func:`core.recording.repair_recording` (timestamps sorted, repeats dropped,
 with a :class:`core.recording.TimestampRepairWarning`).
 
+Every importer's ``gps`` stream has the six columns of
+:data:`core.recording.STREAM_SPECS` -- ``lat_deg, lon_deg, alt_m, hacc_m,
+speed_m_s, course_deg`` (course clockwise from true north) -- with nan where
+the app has no value or marks it invalid (one rule for all:
+:func:`core.importers._common.gps_values`), and ``metadata["gps_check"]``
+compares the reported speed and course with the fixes' own track.
+
 Every recording carries ``metadata["source_format"]``, the app and its
 version where known, ``metadata["time_base"]`` (what ``t_ns`` is), and when
 absolute time is known ``metadata["unix_offset_ns"]`` (``unix_ns = t_ns +

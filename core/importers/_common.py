@@ -15,6 +15,7 @@ import numpy as np
 
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
+from core.geodesy import geodetic_to_enu
 from core.recording import Recording, RecordingError, repair_recording
 
 GZIP_MAGIC = b"\x1f\x8b"
@@ -280,17 +281,113 @@ def magnetic_dip_deg(t_acc, acc, t_mag, mag) -> float:
 # the end of every importer
 
 
-def acceleration_in_m_s2(acc: np.ndarray, what: str, source: str, repairs: list[str]) -> np.ndarray:
-    """Accelerometer values (gravity included) in m/s^2: values in g are converted, anything else is an error."""
-    m = float(np.median(np.linalg.norm(acc, axis=1)))
+def acceleration_in_m_s2(acc: np.ndarray, what: str, source: str, repairs: list[str],
+                         notes: dict | None = None) -> np.ndarray:
+    """Accelerometer values (gravity included) in m/s^2: values in g are converted, anything else is an error.
+
+    The median ``|a|`` decides: about 1 means g (converted, noted in
+    ``repairs``), about 9.8 means m/s^2.  A phone swinging in a hand adds
+    the centripetal acceleration of the arm to gravity, which lifts the
+    median well above g (15 m/s^2 on a real Android walk); such a median,
+    up to 2.5 g, is accepted as m/s^2 when 90 % of the samples still exceed
+    0.6 g -- linear acceleration without gravity keeps passing near zero --
+    and ``notes["acc_unit_check"]`` says so.
+    """
+    norm = np.linalg.norm(acc, axis=1)
+    m = float(np.median(norm))
     if 0.6 < m < 1.4:
         repairs.append(f"{source}: acceleration median |a| = {m:.3f}: values are in g, converted to m/s^2")
         return acc * STANDARD_GRAVITY_M_S2
-    if not (0.6 * STANDARD_GRAVITY_M_S2 < m < 1.4 * STANDARD_GRAVITY_M_S2):
-        raise RecordingError(f"acceleration ({what}) has median magnitude {m:.3g}, neither about 9.8 m/s^2 nor "
-                             "about 1 g: cannot establish its unit (is it linear acceleration without gravity?)",
-                             source)
-    return acc
+    g = STANDARD_GRAVITY_M_S2
+    if 0.6 * g < m < 1.4 * g:
+        return acc
+    low = float(np.percentile(norm, 10))
+    if 1.4 * g <= m < 2.5 * g and low > 0.6 * g:
+        if notes is not None:
+            notes["acc_unit_check"] = (f"median |a| = {m:.2f} m/s^2 ({m / g:.2f} g) with 90 % of the samples above "
+                                       f"{low:.2f} m/s^2: gravity plus strong motion (a swinging phone), taken "
+                                       "as m/s^2")
+        return acc
+    raise RecordingError(f"acceleration ({what}) has median magnitude {m:.3g}, neither about 9.8 m/s^2 nor "
+                         "about 1 g: cannot establish its unit (is it linear acceleration without gravity?)",
+                         source)
+
+
+# ---------------------------------------------------------------------------
+# GPS fixes
+
+
+def gps_values(lat, lon, alt=None, hacc=None, speed=None, course=None) -> np.ndarray:
+    """The six ``gps`` columns (lat_deg, lon_deg, alt_m, hacc_m, speed_m_s, course_deg) from an app's fields.
+
+    A field the app does not have is ``None`` (all nan).  The phone APIs'
+    markers of an unknown value become nan here, once for every importer:
+
+    * ``hacc <= 0``: Android's ``getAccuracy()`` is 0 without
+      ``hasAccuracy()``, iOS and Sensor Logger write -1;
+    * a negative speed or course: iOS (CoreLocation) writes -1;
+    * a course of exactly 0.0: Android's ``getBearing()`` returns 0.0 without
+      ``hasBearing()``, and apps that log it unconditionally (GetSensorData,
+      Sensor Logger on Android) leave no other trace of it -- on real files
+      it comes with a speed near 0; a true course of exactly 0.0 is lost.
+
+    A speed of exactly 0 is kept (a standing receiver reports it too).
+    Courses are wrapped to [0, 360).
+    """
+    lat = np.asarray(lat, dtype=np.float64)
+    n = len(lat)
+
+    def col(v):
+        return np.full(n, np.nan) if v is None else np.asarray(v, dtype=np.float64).reshape(n)
+
+    hacc, speed, course = col(hacc), col(speed), col(course)
+    with np.errstate(invalid="ignore"):
+        hacc = np.where(hacc > 0, hacc, np.nan)
+        speed = np.where(speed >= 0, speed, np.nan)
+        course = np.where(course > 0, np.mod(course, 360.0), np.nan)
+    return np.column_stack([lat, col(lon), col(alt), hacc, speed, course])
+
+
+def gps_check(t_ns: np.ndarray, values: np.ndarray, baseline_s: float = 5.0, moving_m_s: float = 0.7) -> dict:
+    """The reported speed and course against the fixes' own track (diagnostics: nothing is changed).
+
+    The track is taken between each fix and the first one at least
+    ``baseline_s`` later (over one second GPS noise dwarfs a walker's
+    progress).  ``speed_median_m_s``: median reported speed;
+    ``track_speed_median_m_s``: median speed along the track;
+    ``course_vs_track_deg``: median angle between the reported course and
+    the track's bearing where the track moves faster than ``moving_m_s``
+    (a few degrees to 15 on real walks; about 180 would be a sign error);
+    ``zero_speed_while_moving``: fixes reporting a speed of 0 there.
+    """
+    order = np.argsort(np.asarray(t_ns, dtype=np.int64), kind="stable")
+    v = np.asarray(values, dtype=np.float64)[order]
+    t = (np.asarray(t_ns, dtype=np.int64)[order] - int(np.min(t_ns))) * 1e-9 if len(v) else np.zeros(0)
+    out = {"n": int(len(v)), "speed_median_m_s": math.nan, "track_speed_median_m_s": math.nan,
+           "course_vs_track_deg": math.nan, "zero_speed_while_moving": 0}
+    speed, course = v[:, 4], v[:, 5]
+    if np.isfinite(speed).any():
+        out["speed_median_m_s"] = float(np.nanmedian(speed))
+    ok = np.isfinite(v[:, 0]) & np.isfinite(v[:, 1])
+    if ok.sum() < 2:
+        return out
+    t, lat, lon, speed, course = t[ok], v[ok, 0], v[ok, 1], speed[ok], course[ok]
+    j = np.searchsorted(t, t + baseline_s)
+    i = np.flatnonzero(j < len(t))
+    if not len(i):
+        return out
+    j = j[i]
+    east, north = geodetic_to_enu(lat, lon, (float(lat[0]), float(lon[0])))
+    de, dn = east[j] - east[i], north[j] - north[i]
+    track_speed = np.hypot(de, dn) / (t[j] - t[i])
+    out["track_speed_median_m_s"] = float(np.median(track_speed))
+    moving = track_speed > moving_m_s
+    out["zero_speed_while_moving"] = int(np.sum(moving & (speed[i] == 0.0)))
+    use = moving & np.isfinite(course[i])
+    if use.any():
+        d = np.degrees(wrap_angle(np.radians(course[i][use] - np.degrees(np.arctan2(de[use], dn[use])))))
+        out["course_vs_track_deg"] = float(np.median(np.abs(d)))
+    return out
 
 
 def finish(rec: Recording, *, warn: bool = True, unix_offset_ns: int | None = None) -> Recording:

@@ -76,8 +76,22 @@ heading within 1-3 deg (median) while the walker stands.  The ``rotvec``
 stream is ``(w, x, y, z)`` ENU<-device (the convention of :mod:`core`);
 lines without quaternion fields are converted from the angles.
 
+GNSS
+====
+The header documents ``GNSS;AppTimestamp(s);SensorTimeStamp(s);Latit(deg);
+Long(deg);Altitude(m);Bearing(deg);Accuracy(m);Speed(m/s);SatInView;SatInUse``
+and all 32 IPIN logfiles have these 11 fields on every GNSS line (Speed in
+0.1 m/s steps, Bearing with 3 decimals).  The app logs
+``Location.getBearing()`` unconditionally: a Bearing of exactly 0 is
+Android's "no bearing" (nan; 2728 of the 9912 IPIN lines, 98 % of them with
+a speed of 0, none above 0.6 m/s); a speed of 0 is kept.
+Lines without the Speed field read it as nan.  The IPIN walks are indoors:
+the speeds there are receiver noise (median 0-0.6 m/s), not walking.
+
 Streams: ``acc``, ``gyro``, ``mag``, ``rotvec``, ``gps`` (from GNSS: lat_deg,
-lon_deg, alt_m, hacc_m = the ``Accuracy(m)`` field), ``pressure`` and
+lon_deg, alt_m, hacc_m = the ``Accuracy(m)`` field, speed_m_s = ``Speed``,
+course_deg = ``Bearing``; ``metadata["gps_check"]`` compares the last two
+with the fixes' track), ``pressure`` and
 ``posi`` (lat_deg, lon_deg, floor, building_id, counter: the surveyed
 ground-truth landmarks), each only when the file has such lines.
 """
@@ -94,7 +108,7 @@ from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
 from core.recording import Recording, RecordingError, make_stream
 from core.importers._common import (
     EXTRA_STREAM_SPECS, POSI, PRESSURE, attitude_checks, decode_text, finish, first_bad_number,
-    first_bad_time, magnetic_dip_deg, read_bytes,
+    first_bad_time, gps_check, gps_values, magnetic_dip_deg, read_bytes,
 )
 
 FORMAT = "getsensordata"
@@ -106,7 +120,8 @@ RECORDS: dict[str, tuple[tuple[str, ...], int]] = {
     "MAGN": (("AppTimestamp", "SensorTimestamp", "Mag_X", "Mag_Y", "Mag_Z", "Accuracy"), 5),
     "AHRS": (("AppTimestamp", "SensorTimestamp", "PitchX", "RollY", "YawZ", "Quat(2)", "Quat(3)", "Quat(4)"), 5),
     "PRES": (("AppTimestamp", "SensorTimestamp", "Pres"), 3),
-    "GNSS": (("AppTimestamp", "SensorTimeStamp", "Latitude", "Longitude", "Altitude", "Bearing", "Accuracy"), 7),
+    "GNSS": (("AppTimestamp", "SensorTimeStamp", "Latitude", "Longitude", "Altitude", "Bearing", "Accuracy",
+              "Speed"), 7),
     "POSI": (("Timestamp", "Counter", "Latitude", "Longitude", "FloorID", "BuildingID"), 4),
 }
 
@@ -372,10 +387,11 @@ def _parse(text: str, source: str, warn: bool) -> Recording:
         meta["gnss_repeats_dropped"] = int((~keep).sum())
         v = v[keep]
         t_gps = app_to_t_ns(v[:, 0])
-        hacc = np.where(v[:, 6] > 0, v[:, 6], np.nan)
-        streams[GPS] = make_stream(GPS, t_gps, np.column_stack([v[:, 2], v[:, 3], v[:, 4], hacc]),
+        streams[GPS] = make_stream(GPS, t_gps, gps_values(v[:, 2], v[:, 3], v[:, 4], v[:, 6], v[:, 7], v[:, 5]),
                                    note="GNSS fix (GetSensorData GNSS), time of reception; hacc_m = Android "
-                                        "Location accuracy (68 %)")
+                                        "Location accuracy (68 %); speed_m_s = Speed(m/s) (0.1 m/s steps), "
+                                        "course_deg = Bearing(deg) (exactly 0 = Android's 'no bearing' = nan)")
+        meta["gps_check"] = gps_check(t_gps, streams[GPS].values)
         fix_ok = np.isfinite(v[:, 1]) & (v[:, 1] > 1e9) & (v[:, 1] < 1e10)  # a Unix time after 2001
         if fix_ok.sum() >= 1:
             d = _sec_to_ns(v[fix_ok, 1]) - t_gps[fix_ok]

@@ -1,9 +1,10 @@
 """Reader for phyphox CSV exports (RWTH Aachen's phyphox app, Android and iOS).
 
 What this reader assumes -- from phyphox's public documentation and source,
-not from recordings (none are in ``../shared/data``); the tests use a
-synthetic export written to these assumptions
-==========================================================================
+checked on the four real exports in ``../shared/data/gps_walks_phone``
+(phyphox 1.1.16 on three iPhones, 1.1.13 on a Samsung SM-A325F, Android 12);
+the synthetic tests are written to these assumptions
+==============================================================================
 Layout
     "Export data" -> "CSV" writes a zip holding one CSV per export set of the
     experiment (names vary: ``Raw Data.csv`` in the classic sensor
@@ -23,12 +24,16 @@ Data files
     "Acceleration with g" experiment; names with "Linear" -- "Acceleration
     without g" -- are not usable and are reported), ``(rad/s)`` gyroscope
     ("Gyroscope rotation rate"), ``(µT)`` magnetometer ("Magnetometer");
-    ``Latitude (°)``, ``Longitude (°)``, ``Height (m)``, ``Horizontal
-    Accuracy (m)`` location; ``Pressure (hPa)`` barometer.  "Absolute ..."
-    columns are ignored.  Rows whose values are empty or NaN (buffers of
-    different lengths in one file, or NaN where phyphox had no value) are
-    dropped; a line with some but not all of a sensor's fields is a "missing
-    fields" :class:`RecordingError`.
+    ``Latitude (°)``, ``Longitude (°)``, ``Height (m)``, ``Velocity (m/s)``,
+    ``Direction (°)``, ``Horizontal Accuracy (m)`` location (``gps``: speed_m_s
+    and course_deg from Velocity and Direction, NaN where the phone had none,
+    e.g. before its first fix with a velocity; ``Vertical Accuracy`` is not
+    read -- its unit is "(°)" in the iOS header, "(m)" in Android's);
+    ``Pressure (hPa)`` barometer.  "Absolute ..." columns are ignored.  Rows
+    whose time or required values are empty or NaN (buffers of different
+    lengths in one file, or NaN where phyphox had no value) are dropped; a
+    line with some but not all of a sensor's fields is a "missing fields"
+    :class:`RecordingError`.
     The export's dialect can be comma-separated with decimal points (the
     default), tab-separated, or semicolon/tab-separated with decimal commas;
     it is recognised from the header and first data line.
@@ -38,8 +43,17 @@ Units and axes
     g-valued inertial-force readings by -9.81), rad/s, uT, in the device frame
     (x right, y up the screen, z out of it).  So values are copied unchanged,
     after a check that the acceleration magnitude is about 9.8 m/s^2
-    (about 1 g means g units: converted and noted; anything else is a
-    :class:`RecordingError`).
+    (about 1 g means g units: converted and noted; a phone swinging in the
+    hand may read a median of 1.5 g, accepted and noted in
+    ``metadata["acc_unit_check"]``; anything else is a
+    :class:`RecordingError`).  ``Height (m)`` is above mean sea level, not
+    the WGS-84 ellipsoid of the other importers: phyphox for Android
+    subtracts the EGM84 geoid height, and the iOS walks read about 1 m in
+    the Netherlands, where a Sensor Logger walk gives 42 m above the
+    ellipsoid and -0.5 m above sea level.  Checked on the real walks: the
+    phones face up (+z) at start and stop, the gyroscope explains how the
+    magnetometer's field turns (slope 0.95: rad/s, same axes), and the
+    field points down (dip 54-64 deg).
 Time
     ``Time (s)`` is the *experiment time*: seconds since the measurement
     first started, **not counting pauses**.  ``meta/time.csv`` lists the
@@ -54,7 +68,10 @@ Time
     ``t = (system_k - system_0) + (experiment_time - experiment_k)``, and
     ``t_ns = round(t * 1e9)``; ``metadata["unix_offset_ns"] = system_0`` (the
     Unix time of ``t_ns = 0``).  Without ``meta/time.csv`` ``t_ns`` is the
-    experiment time and absolute time is unknown.
+    experiment time and absolute time is unknown.  The Android walk of
+    ``gps_walks_phone`` gets its 228.9 s pause back this way; its sensor
+    files also repeat some samples (same time, same values) and step back
+    10 ms three times, which the timestamp repair sorts out (with a warning).
 Device
     ``meta/device.csv`` has ``"property","value"`` rows (``version``,
     ``deviceModel``, ``deviceBrand``, ``deviceManufacturer``, ``deviceRelease``
@@ -73,9 +90,9 @@ import numpy as np
 
 from core.conventions import ACC, GPS, GYRO, MAG
 from core.recording import Recording, RecordingError, make_stream
-from core.importers._common import (acceleration_in_m_s2, 
-    EXTRA_STREAM_SPECS, PRESSURE, FileSet, decode_text, finish, first_bad_time, magnetic_dip_deg,
-    read_bytes,
+from core.importers._common import (
+    EXTRA_STREAM_SPECS, PRESSURE, FileSet, acceleration_in_m_s2, decode_text, finish, first_bad_time, gps_check,
+    gps_values, magnetic_dip_deg, read_bytes,
 )
 from core.importers._csv import Table
 
@@ -127,6 +144,10 @@ def _classify(name: str, file_name: str) -> tuple[str, str] | None:
         return ("gps", "alt")
     if "horizontal accuracy" in low:
         return ("gps", "hacc")
+    if low.startswith("velocity") and unit == "m/s" and not _AXIS.search(label):
+        return ("gps", "speed")
+    if low.startswith("direction") and unit in ("°", "deg"):
+        return ("gps", "course")
     if "pressure" in low and unit in ("hpa", "mbar"):
         return ("pressure", "p")
     a = _AXIS.search(label)
@@ -241,7 +262,7 @@ def _build(files, meta, source, warn) -> Recording:
                 if not all(n in cols for n in need):
                     unused.append(f"{name.split('/')[-1]}: {sensor} without {'/'.join(need)} columns")
                     continue
-                order = list(need) + [n for n in ("alt", "hacc") if sensor == "gps" and n in cols]
+                order = list(need) + [n for n in ("alt", "hacc", "speed", "course") if sensor == "gps" and n in cols]
                 vals = table.columns([ti] + [cols[n] for n in order], empty_ok=True)
                 # a shorter value buffer leaves all its fields empty (the row is dropped); a value without a
                 # time, or some but not all of a sensor's values, is a damaged line
@@ -289,6 +310,7 @@ def _build(files, meta, source, warn) -> Recording:
 
     streams = {}
     used = {}
+    notes: dict = {}
     for sensor, items in found.items():
         items.sort(key=lambda it: -it[0])  # the longest record of a sensor wins
         n, where, order, vals = items[0]
@@ -297,7 +319,7 @@ def _build(files, meta, source, warn) -> Recording:
             unused.extend(f"{it[1].split('/')[-1]}: second {sensor} record" for it in items[1:])
         t_ns = to_t_ns(vals[:, 0])
         if sensor == "acc":
-            v = acceleration_in_m_s2(vals[:, 1:4], used[sensor], source, repairs)
+            v = acceleration_in_m_s2(vals[:, 1:4], used[sensor], source, repairs, notes)
             streams[ACC] = make_stream(ACC, t_ns, v)
         elif sensor == "gyro":
             streams[GYRO] = make_stream(GYRO, t_ns, vals[:, 1:4])
@@ -307,12 +329,13 @@ def _build(files, meta, source, warn) -> Recording:
             streams[MAG] = make_stream(MAG, t_ns[~zero], vals[~zero, 1:4])
         elif sensor == "gps":
             cols = {c: vals[:, 1 + i] for i, c in enumerate(order)}
-            nan = np.full(len(vals), np.nan)
-            hacc = cols.get("hacc", nan)
-            hacc = np.where(hacc > 0, hacc, np.nan)
-            streams[GPS] = make_stream(GPS, t_ns, np.column_stack([cols["lat"], cols["lon"], cols.get("alt", nan),
-                                                                   hacc]),
-                                       note="phyphox location; alt_m = 'Height (m)' (WGS-84 per phyphox)")
+            streams[GPS] = make_stream(GPS, t_ns, gps_values(cols["lat"], cols["lon"], cols.get("alt"),
+                                                             cols.get("hacc"), cols.get("speed"), cols.get("course")),
+                                       note="phyphox location; alt_m = 'Height (m)', which phyphox gives above "
+                                            "mean sea level (the geoid), not the WGS-84 ellipsoid; speed_m_s = "
+                                            "'Velocity (m/s)', course_deg = 'Direction (°)' (nan where the phone "
+                                            "gave none)")
+            notes["gps_check"] = gps_check(t_ns, streams[GPS].values)
         elif sensor == "pressure":
             spec = EXTRA_STREAM_SPECS[PRESSURE]
             streams[PRESSURE] = make_stream(PRESSURE, t_ns, vals[:, 1:2], spec["columns"], spec["unit"],
@@ -343,6 +366,7 @@ def _build(files, meta, source, warn) -> Recording:
         "unused": unused,
         "rows_dropped_empty": dropped_rows,
         "phyphox_device": props,
+        **notes,
     }
     if unix_offset_ns is not None:
         meta_out["unix_offset_ns"] = unix_offset_ns

@@ -6,8 +6,8 @@ One CSV per sensor, a header line, comma-separated numbers::
 
     time,seconds_elapsed,z,y,x                     (Accelerometer, Gravity, Gyroscope, Magnetometer, ...)
     time,seconds_elapsed,qz,qy,qx,qw,roll,pitch,yaw                              (Orientation)
-    time,seconds_elapsed,horizontalAccuracy,speed,bearing,altitude,longitude,latitude (Location; more
-                                                                                   columns in newer versions)
+    time,seconds_elapsed,horizontalAccuracy,speed,bearing,altitude,longitude,latitude (Location; newer
+            versions add speedAccuracy, bearingAccuracy, verticalAccuracy, altitudeAboveMeanSeaLevel)
     time,seconds_elapsed,relativeAltitude,pressure                              (Barometer)
 
 Columns are found by name, so their order does not matter.  ``Metadata.csv``
@@ -16,8 +16,9 @@ appVersion, ...) gives the platform.
 
 Facts used (Sensor Logger documentation, awesome-sensor-logger UNITS.md,
 COORDINATES.md, CROSSPLATFORM.md, ORIENTATION.md; checked on the v1.12
-Android recording in ``../shared/data/sensorlogger_gps_walk_ethz``)
-=====================================================================
+Android recording in ``../shared/data/sensorlogger_gps_walk_ethz`` and the
+v1.15.2 iOS walk ``siberiawolfp_walking2`` in ``../shared/data/gps_walks_phone``)
+================================================================================
 Time
     ``time`` is integer nanoseconds since the Unix epoch, ``seconds_elapsed``
     seconds since the recording started; on the ETH file ``time -
@@ -47,20 +48,36 @@ iOS (platform "ios"), default settings
     Gravity)``.  AccelerometerUncalibrated.csv is in g, also negated:
     ``acc = -9.80665 * raw`` (used only when nothing better exists).
     Gyroscope (rad/s) and Magnetometer (uT) have the same axes and signs as
-    Android and are copied.  Orientation is CoreMotion's attitude in the
-    ``xTrueNorthZVertical`` frame: ``q`` rotates device vectors into a
-    North-West-Up frame referenced to **true** north (yaw 0 when the device x
-    axis points north, counter-clockwise positive).  ENU<-device is
-    ``qz(+90 deg) (x) q``.
+    Android and are copied.  Checked on the 1.15.2 walk: the result matches
+    ``-9.80665 * AccelerometerUncalibrated`` within 0.15 m/s^2 (median), the
+    gyroscope explains how the magnetometer's field turns (slope 0.99) and
+    the field points down (dip 57 deg, the Netherlands).  Orientation is
+    CoreMotion's attitude in the ``xTrueNorthZVertical`` frame: ``q`` rotates
+    device vectors into a North-West-Up frame referenced to **true** north
+    (yaw 0 when the device x axis points north, counter-clockwise positive).
+    ENU<-device is ``qz(+90 deg) (x) q``.
 iOS with "Standardise Units & Frames" (app >= 1.29)
     The app already converts to the Android definitions (acc sign, units).
     It is recognised by a Metadata.csv column whose name contains
     "standardis"/"standardiz" with a true value; otherwise the default is
     assumed.
+Location (both platforms)
+    ``gps`` = latitude, longitude, altitude (WGS-84 ellipsoid), horizontalAccuracy,
+    speed (m/s), bearing (deg clockwise from true north).  A negative value
+    means invalid (nan), as does a speed or bearing whose ``speedAccuracy``
+    / ``bearingAccuracy`` is negative; a bearing of exactly 0 is Android's
+    "no bearing" (nan; on the ETH walk it comes only with speeds near 0).
+    The two accuracies are not stream columns: their medians are
+    ``metadata["gps_speedAccuracy_median"]`` / ``["gps_bearingAccuracy_median"]``.
+    Fixes stamped before the recording started (negative
+    ``seconds_elapsed``: the phone's cached last location, two on the iOS
+    1.15 walk of ``../shared/data/gps_walks_phone``) are dropped and noted in
+    ``repairs``.
 Checks made on the data (results in ``metadata``)
     * the acceleration magnitude must be about 1 g: a median |acc| near 1
       means the values are in g (converted, noted in ``repairs``); anything
-      else not near 9.8 m/s^2 is a :class:`RecordingError`;
+      else not near 9.8 m/s^2 is a :class:`RecordingError`, except a swinging
+      phone's (see :func:`core.importers._common.acceleration_in_m_s2`);
     * the orientation convention is verified against the accelerometer (the
       quaternion must turn the measured up vector to ENU up) and the
       magnetometer (device-y bearing from the quaternion vs. the
@@ -68,7 +85,9 @@ Checks made on the data (results in ``metadata``)
       fails and another (conjugate, or the other frame) passes, that one is
       used and the switch is noted in ``repairs``;
     * ``metadata["mag_dip_deg"]``: the field's inclination below the horizon
-      (positive in the northern hemisphere); a sign error would flip it.
+      (positive in the northern hemisphere); a sign error would flip it;
+    * ``metadata["gps_check"]``: reported speed and course against the
+      fixes' own track (:func:`core.importers._common.gps_check`).
 Cannot be converted (:class:`RecordingError`)
     linear acceleration without gravity (Accelerometer.csv with no Gravity.csv
     or TotalAcceleration.csv); an unknown platform when the signs depend on it
@@ -87,9 +106,9 @@ import numpy as np
 from core import quaternion as quat
 from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC, STANDARD_GRAVITY_M_S2
 from core.recording import Recording, RecordingError, make_stream
-from core.importers._common import (acceleration_in_m_s2, 
-    EXTRA_STREAM_SPECS, GYRO_UNCAL, MAG_UNCAL, PRESSURE, FileSet, attitude_checks, finish,
-    magnetic_dip_deg, sample_at,
+from core.importers._common import (
+    EXTRA_STREAM_SPECS, GYRO_UNCAL, MAG_UNCAL, PRESSURE, FileSet, acceleration_in_m_s2, attitude_checks, finish,
+    gps_check, gps_values, magnetic_dip_deg, sample_at,
 )
 from core.importers._csv import Table
 
@@ -165,6 +184,44 @@ class _Sensor:
     def xyz(self) -> np.ndarray:
         # Sensor Logger writes z, y, x; take them by name
         return self.cols(["x", "y", "z"])
+
+
+def _location(s: _Sensor, t_ns: np.ndarray, notes: dict, repairs: list[str]):
+    """Location.csv -> the ``gps`` stream (speed and course from ``speed`` and ``bearing``).
+
+    A negative value is invalid (Sensor Logger's documentation; iOS writes
+    -1), and so is a speed or bearing whose ``speedAccuracy`` /
+    ``bearingAccuracy`` is negative.  The two accuracies have no column in
+    the stream: their medians go to ``notes``.  Fixes stamped before the
+    recording started (the phone's cached last location, delivered at the
+    start: two on an iOS 1.15 walk, 24 and 14 s early) are dropped.
+    """
+    def opt(name):
+        return s.cols([name], optional=True)[:, 0] if s.table.index(name) is not None else None
+
+    lat, lon = s.cols(["latitude", "longitude"]).T
+    speed, course = opt("speed"), opt("bearing")
+    for value, acc_name in ((speed, "speedAccuracy"), (course, "bearingAccuracy")):
+        acc = opt(acc_name)
+        if acc is not None:
+            if value is not None:
+                value[acc < 0] = np.nan
+            good = acc[acc >= 0]
+            notes[f"gps_{acc_name}_median"] = float(np.median(good)) if len(good) else None
+    values = gps_values(lat, lon, opt("altitude"), opt("horizontalAccuracy"), speed, course)
+    early = t_ns < 0
+    if early.any():
+        repairs.append(f"{s.where}: dropped {int(early.sum())} fix(es) stamped before the recording started "
+                       f"({t_ns[early].min() * 1e-9:.1f} to {t_ns[early].max() * 1e-9:.1f} s: the phone's cached "
+                       "last location)")
+        t_ns, values = t_ns[~early], values[~early]
+    kept = [n for n in ("speedAccuracy", "bearingAccuracy") if s.table.index(n) is not None]
+    note = ("GNSS/fused location (Sensor Logger Location.csv); alt_m above the WGS-84 ellipsoid; hacc_m = "
+            "horizontalAccuracy; speed_m_s = speed, course_deg = bearing (negative = invalid = nan; a bearing "
+            "of exactly 0 is Android's 'no bearing' = nan)")
+    if kept:
+        note += f"; {' and '.join(kept)} are not in the stream (medians in the metadata)"
+    return make_stream(GPS, t_ns, values, note=note)
 
 
 def read_sensorlogger(path: str, *, platform: str | None = None, warn: bool = True) -> Recording:
@@ -270,7 +327,7 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
     else:
         acc_t = acc_v = None
     if acc_v is not None and len(acc_v):
-        acc_v = acceleration_in_m_s2(acc_v, notes["acc_from"], source, repairs)
+        acc_v = acceleration_in_m_s2(acc_v, notes["acc_from"], source, repairs, notes)
         streams[ACC] = make_stream(ACC, acc_t, acc_v)
 
     # -- gyroscope and magnetometer: same axes, signs and units on both platforms
@@ -298,15 +355,7 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
     # -- location
     if "location" in sensors:
         s = sensors["location"]
-        lat, lon = s.cols(["latitude", "longitude"]).T
-        alt = s.cols(["altitude"], optional=True)[:, 0] if s.table.index("altitude") is not None else \
-            np.full(len(lat), np.nan)
-        hacc = s.cols(["horizontalAccuracy"], optional=True)[:, 0] \
-            if s.table.index("horizontalAccuracy") is not None else np.full(len(lat), np.nan)
-        hacc = np.where(hacc > 0, hacc, np.nan)  # negative = invalid
-        streams[GPS] = make_stream(GPS, t_of(s), np.column_stack([lat, lon, alt, hacc]),
-                                   note="GNSS/fused location (Sensor Logger Location.csv); alt_m above the WGS-84 "
-                                        "ellipsoid; hacc_m = horizontalAccuracy")
+        streams[GPS] = _location(s, t_of(s), notes, repairs)
 
     # -- barometer
     if "barometer" in sensors:
@@ -340,6 +389,8 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
     if ACC in streams and MAG in streams:
         a, m = streams[ACC], streams[MAG]
         meta["mag_dip_deg"] = magnetic_dip_deg(a.t_ns, a.values, m.t_ns, m.values)
+    if GPS in streams and len(streams[GPS]):
+        meta["gps_check"] = gps_check(streams[GPS].t_ns, streams[GPS].values)
 
     device = {"platform": platform, "app": "Sensor Logger"}
     if md.get("device name"):
