@@ -66,10 +66,20 @@ def load_any_recording(path: str):
         raise
 
 
+#: where each value of a ``gps`` event is (the columns of the stream spec; events carry no names)
+_GPS_COLUMN = {c: i for i, c in enumerate(STREAM_SPECS[GPS]["columns"])}
+
+
+def _gps_value(vals, column: str) -> float:
+    """The value of ``column`` in a ``gps`` event's values, nan if the event is shorter (an older source)."""
+    i = _GPS_COLUMN[column]
+    return float(vals[i]) if len(vals) > i else math.nan
+
+
 def _good_fix(vals, max_hacc_m: float = 30.0) -> bool:
     """A GNSS fix usable as the track's origin (finite, accuracy unknown or within ``max_hacc_m``)."""
-    lat, lon = vals[0], vals[1]
-    hacc = vals[3] if len(vals) > 3 else math.nan
+    lat, lon = _gps_value(vals, "lat_deg"), _gps_value(vals, "lon_deg")
+    hacc = _gps_value(vals, "hacc_m")
     return math.isfinite(lat) and math.isfinite(lon) and not (hacc > max_hacc_m)
 
 
@@ -101,6 +111,7 @@ class Session:
         self.reorder_window_ns = int(reorder_window_ns)
         self._clock = clock
         self.writer: RecordingWriter | None = None
+        self._record_width: dict = {}
         self.record_path = record_path
         self._record_streams = record_streams
         self._record_meta = (device, metadata)
@@ -142,6 +153,7 @@ class Session:
             if self.source.unix_offset_ns is not None:
                 meta.setdefault("unix_offset_ns", int(self.source.unix_offset_ns))
             self.writer = RecordingWriter(self.record_path, streams=streams, device=dev, metadata=meta)
+            self._record_width = {n: len(spec["columns"]) for n, spec in streams.items()}
             self._last_flush = self._clock()
 
     def pause(self) -> None:
@@ -191,10 +203,14 @@ class Session:
         new = [] if new is None else new
         writer = self.writer
         heap = self._heap
+        width = self._record_width
         for ev in events:
             name, t = ev[0], ev[1]
             if writer is not None:
-                writer.add(name, t, ev[2])
+                vals = ev[2]
+                if len(vals) < width.get(name, 0):  # e.g. GPS without speed/course: nan, so the file reads back
+                    vals = tuple(vals) + (math.nan,) * (width[name] - len(vals))
+                writer.add(name, t, vals)
             heapq.heappush(heap, (t, _RANK.get(name, len(_RANK)), self._seq, ev))
             self._seq += 1
             if self._max_t is None or t > self._max_t:
@@ -214,7 +230,7 @@ class Session:
             self.first_t_ns = t
         self.last_t_ns = t
         if name == GPS and self.gps_origin is None and _good_fix(vals):
-            self.gps_origin = (float(vals[0]), float(vals[1]))
+            self.gps_origin = (_gps_value(vals, "lat_deg"), _gps_value(vals, "lon_deg"))
         try:
             steps = self.pipeline.update(name, t, vals)
         except Exception as e:  # noqa: BLE001 - one bad event must not stop a live session

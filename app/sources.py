@@ -22,7 +22,9 @@ Sources
     pushed into a bounded :class:`EventQueue`.  GPS through our own
     ``LocationListener`` stamped with ``Location.getElapsedRealtimeNanos()``
     (the sensor clock), else plyer's GPS stamped with
-    ``SystemClock.elapsedRealtimeNanos()`` on arrival.  ``jnius`` is imported
+    ``SystemClock.elapsedRealtimeNanos()`` on arrival; either way a fix's
+    values are the six ``gps`` columns with speed and course
+    (:func:`location_values`).  ``jnius`` is imported
     lazily, only when the source starts (or injected, for tests).
 :class:`PlyerFallbackSource`
     plyer's sensor facades (about 5 Hz, no timestamps: events are stamped
@@ -392,10 +394,38 @@ def _java_classes(jnius):
 
 
 def location_values(location) -> tuple:
-    """``(lat_deg, lon_deg, alt_m, hacc_m)`` of an ``android.location.Location`` (nan where unknown)."""
+    """The ``gps`` values of an ``android.location.Location`` (nan where the fix has no such value).
+
+    ``(lat_deg, lon_deg, alt_m, hacc_m, speed_m_s, course_deg)``, the columns
+    of :data:`core.recording.STREAM_SPECS`: ``getSpeed()`` when ``hasSpeed()``,
+    ``getBearing()`` (degrees clockwise from true north, the direction of
+    travel, not the phone's) when ``hasBearing()``.
+    """
     alt = float(location.getAltitude()) if location.hasAltitude() else math.nan
     acc = float(location.getAccuracy()) if location.hasAccuracy() else math.nan
-    return (float(location.getLatitude()), float(location.getLongitude()), alt, acc)
+    speed = float(location.getSpeed()) if location.hasSpeed() else math.nan
+    course = float(location.getBearing()) if location.hasBearing() else math.nan
+    return (float(location.getLatitude()), float(location.getLongitude()), alt, acc, speed, course)
+
+
+def plyer_location_values(kw: dict) -> tuple:
+    """The ``gps`` values of a plyer ``on_location`` call (see :func:`location_values`).
+
+    plyer passes ``getSpeed()``, ``getBearing()`` and ``getAccuracy()``
+    without their ``has...()`` flags, so their "none" values -- 0.0 -- are
+    read as the importers read them (:func:`core.importers._common.gps_values`):
+    an accuracy of 0 and a bearing of exactly 0 are unknown (nan), a speed of 0
+    is kept (a standing receiver).
+    """
+    from core.importers._common import gps_values  # noqa: PLC0415 - the importers' one rule, only on plyer's path
+
+    def num(key):
+        v = kw.get(key)
+        return math.nan if v is None else float(v)
+
+    row = gps_values([num("lat")], [num("lon")], [num("altitude")], [num("accuracy")], [num("speed")],
+                     [num("bearing")])[0]
+    return tuple(float(v) for v in row)
 
 
 def rotvec_quaternion(values) -> tuple:
@@ -572,9 +602,7 @@ class AndroidSource(SensorSource):
 
         def on_location(**kw):
             t_ns = int(SystemClock.elapsedRealtimeNanos())
-            self.queue.push((GPS, t_ns, (float(kw["lat"]), float(kw["lon"]),
-                                         float(kw.get("altitude", math.nan)),
-                                         float(kw.get("accuracy", math.nan)))))
+            self.queue.push((GPS, t_ns, plyer_location_values(kw)))
 
         gps.configure(on_location=on_location)
         gps.start(minTime=1000, minDistance=0)

@@ -18,8 +18,9 @@ import pytest
 
 from app.session import Session
 from app.sources import (PLYER_FALLBACK_WARNING, AndroidSource, PlyerFallbackSource, SensorStartError,
-                         make_live_source)
+                         make_live_source, plyer_location_values)
 from core.pdr.pipeline import Pipeline
+from core.recording import read_recording
 
 TYPES = {1: "acc", 2: "mag", 4: "gyro"}
 
@@ -78,8 +79,11 @@ class FakeSensorManager:
 
 
 class FakeLocation:
-    def __init__(self, t_ns, lat, lon, acc=None):
+    """``android.location.Location``: a getter returns 0.0 when its ``has...()`` is false, as on Android."""
+
+    def __init__(self, t_ns, lat, lon, acc=None, speed=None, bearing=None):
         self.t_ns, self.lat, self.lon, self.acc = t_ns, lat, lon, acc
+        self.speed, self.bearing = speed, bearing
 
     def getElapsedRealtimeNanos(self):
         return self.t_ns
@@ -100,7 +104,19 @@ class FakeLocation:
         return self.acc is not None
 
     def getAccuracy(self):
-        return self.acc
+        return 0.0 if self.acc is None else self.acc
+
+    def hasSpeed(self):
+        return self.speed is not None
+
+    def getSpeed(self):
+        return 0.0 if self.speed is None else self.speed
+
+    def hasBearing(self):
+        return self.bearing is not None
+
+    def getBearing(self):
+        return 0.0 if self.bearing is None else self.bearing
 
 
 class FakeJavaList:
@@ -409,3 +425,81 @@ def test_gps_without_permission_leaves_the_sensors_running():
     src = AndroidSource(gps=True, jnius=make_fake_jnius(sm, lm))
     src.start()
     assert src.running and src.gps_status.startswith("off") and "SecurityException" in src.gps_status
+
+
+GPS_COLUMNS = ("lat_deg", "lon_deg", "alt_m", "hacc_m", "speed_m_s", "course_deg")
+
+
+def test_gps_fixes_carry_speed_and_course_where_the_fix_has_them():
+    sm, lm = FakeSensorManager(), FakeLocationManager()
+    src = AndroidSource(gps=True, jnius=make_fake_jnius(sm, lm))
+    src.start()
+    listener = lm.listeners[0][2]
+    listener.onLocationChanged(FakeLocation(1_000_000_000, 47.5, 8.5, 4.0, speed=1.35, bearing=87.5))
+    listener.onLocationChanged(FakeLocation(2_000_000_000, 47.5, 8.5, 4.0, speed=0.0))  # standing: no bearing
+    listener.onLocationChanged(FakeLocation(3_000_000_000, 47.5, 8.5))  # neither
+    (_, _, v1), (_, _, v2), (_, _, v3) = src.drain()
+    assert len(v1) == len(v2) == len(v3) == len(GPS_COLUMNS)
+    assert v1[4] == pytest.approx(1.35, abs=1e-12) and v1[5] == pytest.approx(87.5, abs=1e-12)
+    assert v2[4] == pytest.approx(0.0, abs=1e-12) and math.isnan(v2[5])
+    assert math.isnan(v3[3]) and math.isnan(v3[4]) and math.isnan(v3[5])
+
+
+def test_live_recording_of_android_gps_has_the_six_columns(tmp_path):
+    sm, lm = FakeSensorManager(), FakeLocationManager()
+    src = AndroidSource(gps=True, jnius=make_fake_jnius(sm, lm))
+    path = tmp_path / "live.csv"
+    ses = Session(src, pipeline_factory=Pipeline, record_path=str(path))
+    ses.start()
+    listener = lm.listeners[0][2]
+    fixes = [FakeLocation(987_654_321_000 + k * 10**9, 47.5 + 1e-5 * k, 8.5, 3.0 + k, speed=1.2 + 0.1 * k,
+                          bearing=None if k == 0 else 10.0 * k) for k in range(3)]
+    for fix in fixes:
+        listener.onLocationChanged(fix)
+    for type_, t, v in hardware_stream(seed=7, seconds=3.0):
+        sm.deliver(type_, t, v)
+    ses.tick()
+    ses.close()
+    gps = read_recording(str(path), warn=False).streams["gps"]
+    assert gps.columns == GPS_COLUMNS
+    assert list(gps.t_ns) == [f.t_ns for f in fixes]
+    want = [[f.lat, f.lon, np.nan, f.acc, f.speed, np.nan if f.bearing is None else f.bearing] for f in fixes]
+    np.testing.assert_allclose(gps.values, want, rtol=0, atol=1e-12)  # nan where nan
+    assert ses.gps_origin == pytest.approx((47.5, 8.5), abs=1e-12)
+
+
+def test_session_records_a_four_value_gps_event_with_nan_speed_and_course(tmp_path):
+    """A source that still sends (lat, lon, alt, hacc) must not make the recording unreadable."""
+    sm = FakeSensorManager()
+    src = AndroidSource(gps=False, jnius=make_fake_jnius(sm))
+    path = tmp_path / "old.csv"
+    ses = Session(src, pipeline_factory=Pipeline, record_path=str(path))
+    ses.start()
+    ses.ingest([("gps", 5_000_000_000, (47.5, 8.5, 400.0, 35.0)), ("acc", 5_000_000_001, (0.0, 0.0, 9.81)),
+                ("gps", 6_000_000_000, (47.6, 8.6, 400.0, 5.0))])
+    ses.close()
+    gps = read_recording(str(path), warn=False).streams["gps"]
+    np.testing.assert_allclose(gps.values, [[47.5, 8.5, 400.0, 35.0, np.nan, np.nan],
+                                            [47.6, 8.6, 400.0, 5.0, np.nan, np.nan]], rtol=0, atol=1e-12)
+    assert ses.gps_origin == pytest.approx((47.6, 8.6), abs=1e-12)  # the first fix's 35 m is too coarse
+
+
+def test_plyer_gps_fixes_read_androids_none_values_as_unknown(monkeypatch):
+    # plyer passes getSpeed()/getBearing()/getAccuracy() without their has...() flags: 0.0 when there is none
+    v = plyer_location_values(dict(lat=47.5, lon=8.5, speed=0.0, bearing=0.0, altitude=420.0, accuracy=0.0))
+    assert v[:3] == (47.5, 8.5, 420.0) and v[4] == pytest.approx(0.0, abs=1e-12)
+    assert math.isnan(v[3]) and math.isnan(v[5])
+    v = plyer_location_values(dict(lat=47.5, lon=8.5, speed=1.3, bearing=271.0, altitude=420.0, accuracy=6.0))
+    assert v == pytest.approx((47.5, 8.5, 420.0, 6.0, 1.3, 271.0), abs=1e-12)
+    # the fallback path: own listener refused, plyer's GPS delivers
+    sm, lm = FakeSensorManager(), FakeLocationManager(allowed=False)
+    fake_gps = types.SimpleNamespace(configure=lambda on_location: setattr(fake_gps, "cb", on_location),
+                                     start=lambda **kw: None, stop=lambda: None)
+    monkeypatch.setitem(sys.modules, "plyer", types.SimpleNamespace(gps=fake_gps))
+    src = AndroidSource(gps=True, jnius=make_fake_jnius(sm, lm))
+    src.start()
+    assert src.gps_status.startswith("on (plyer")
+    fake_gps.cb(lat=47.5, lon=8.5, speed=1.1, bearing=45.0, altitude=420.0, accuracy=4.0)
+    (name, t, vals), = src.drain()
+    assert name == "gps" and t == 10**12  # stamped on arrival (the fake SystemClock)
+    assert vals == pytest.approx((47.5, 8.5, 420.0, 4.0, 1.1, 45.0), abs=1e-12)
