@@ -1,0 +1,102 @@
+"""PyShoe / University of Toronto foot-mounted dataset, VICON subset (processed .mat, see its README.md).
+
+Folder ``pyshoe_vicon/processed/`` under the data root: one
+``<YYYY-MM-DD-hh-mm-ss>.mat.gz`` per trial (MicroStrain 3DM-GX3-25 on the
+foot, 200 Hz, VICON position at every sample).
+
+What the reader returns (one :class:`PyshoeTrial` per file):
+
+* a recording whose primary device is the foot IMU (``acc``, ``gyro``;
+  placement ``"foot"``), ``t_ns`` from the file's ``ts`` (seconds).  The axes
+  are the sensor's own (z points down: the accelerometer reads about
+  ``(0, 0, -g)`` at rest, which *is* the specific force in a z-down frame),
+  not the Android device axes; the foot filter does not need them.
+* ``truth_t_ns``, ``truth_pos_m`` (n, 3): the VICON foot position at every
+  sample (metres), turned into a local ENU frame.  The files' ``gt`` is in a
+  z-down frame like the IMU's (``x, y, z`` = north, east, down of an arbitrary
+  yaw): ENU is ``(y, x, -z)``.  Checked on the first trial: read as z-up,
+  our track fits only as a mirror image of it.
+* ``zv_reference``: the VICON-derived zero-velocity labels (1 = stationary)
+  shipped with the file (``zv_vicon_opt``), and the other detectors' labels
+  ``zv_labels`` (``shoe``, ``ared``, ``amvd``, ``mbgtd``, ``vicon``).
+* ``pyshoe_errors_m``: PyShoe's own position RMSE per detector
+  (``trial_error``, in the order shoe, ared, amvd, mbgtd, vicon), and its best
+  detector and error.
+
+Reading needs scipy (benchmark side only).
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.datasets.base import Trial
+from benchmarks.foot_splits import pyshoe_is_walking, pyshoe_split
+from core.conventions import ACC, GYRO
+from core.recording import Recording, make_stream
+
+NAME = "pyshoe_vicon"
+#: order of the detectors in the files' ``trial_error``
+PYSHOE_DETECTORS = ("shoe", "ared", "amvd", "mbgtd", "vicon")
+
+
+@dataclass
+class PyshoeTrial(Trial):
+    truth_t_ns: np.ndarray | None = None
+    truth_pos_m: np.ndarray | None = None
+    zv_reference: np.ndarray | None = None
+    zv_labels: dict = field(default_factory=dict)
+    pyshoe_errors_m: dict = field(default_factory=dict)
+    pyshoe_best: tuple = ("", float("nan"))
+
+
+def available(root: Path) -> bool:
+    return (Path(root) / NAME / "processed").is_dir()
+
+
+def _load_mat(path: Path) -> dict:
+    import scipy.io
+
+    with gzip.open(path, "rb") as fh:
+        return scipy.io.loadmat(io.BytesIO(fh.read()))
+
+
+def _fill(trial: "PyshoeTrial", path: Path) -> Recording:
+    d = _load_mat(path)
+    ts = np.asarray(d["ts"], dtype=float).ravel()
+    t_ns = np.round(ts * 1e9).astype(np.int64)
+    imu = np.asarray(d["imu"], dtype=float)
+    trial.truth_t_ns = t_ns
+    gt = np.asarray(d["gt"], dtype=float)
+    trial.truth_pos_m = np.column_stack([gt[:, 1], gt[:, 0], -gt[:, 2]])  # z-down frame -> ENU
+    trial.zv_labels = {k[3:-4]: np.asarray(d[k]).ravel().astype(bool) for k in d if k.startswith("zv_")}
+    trial.zv_reference = trial.zv_labels.get("vicon")
+    err = np.asarray(d["trial_error"], dtype=float).ravel()
+    trial.pyshoe_errors_m = dict(zip(PYSHOE_DETECTORS, err.tolist()))
+    trial.pyshoe_best = (str(np.asarray(d["best_detector"]).ravel()[0]).strip(),
+                         float(np.asarray(d["best_error"]).ravel()[0]))
+    streams = {ACC: make_stream(ACC, t_ns, imu[:, 0:3], note="accelerometer, sensor axes (z down)"),
+               GYRO: make_stream(GYRO, t_ns, imu[:, 3:6], note="gyroscope, sensor axes (z down)")}
+    return Recording(streams, device={"model": "LORD MicroStrain 3DM-GX3-25", "placement": "foot",
+                                      "axes": "sensor axes, z down"},
+                     metadata={"dataset": NAME, "trial": trial.name}, source=str(path))
+
+
+def trials(root: Path) -> list[PyshoeTrial]:
+    folder = Path(root) / NAME / "processed"
+    if not folder.is_dir():
+        return []
+    files = sorted(folder.glob("*.mat.gz"))
+    out = []
+    for i, p in enumerate(files, start=1):
+        name = p.name[: -len(".mat.gz")]
+        tr = PyshoeTrial(dataset=NAME, name=name, load=lambda: None, placement="foot",
+                         info={"position": i, "split": pyshoe_split(i), "walking": pyshoe_is_walking(name)})
+        tr.load = lambda tr=tr, p=p: _fill(tr, p)
+        out.append(tr)
+    return out

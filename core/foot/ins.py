@@ -1,0 +1,305 @@
+"""Strapdown INS of a foot-mounted IMU with an error-state EKF and zero-velocity updates (INS-EKF-ZUPT).
+
+Song & Park 2018, section 2, eqs. 7-10, in the project's conventions (ENU,
+quaternion body -> ENU, errors "true minus estimate"; see :mod:`core`).
+
+Nominal state: attitude ``q``, velocity ``v_n``, position ``p_n``, gyroscope
+bias ``b_g`` and accelerometer bias ``b_a`` (body frame).  Error state (15)::
+
+    dx = (dtheta_n, dv_n, dp_n, db_g, db_a)
+    R_true = exp([dtheta_n]x) R(q),  v_true = v + dv,  p_true = p + dp,  b_true = b + db
+
+The paper's eq. 7 has 12 states (no position: ZUPT does not observe it); we
+carry the position error too, so that the position covariance is known (for
+the course measurements and the consistency tests).  It changes nothing else:
+the position block only receives.
+
+Mechanisation, every accelerometer sample with the measured ``T`` (s)::
+
+    w = w_meas - b_g ;  q <- q (x) exp(w T)
+    f_n = R(q) (f_meas - b_a)   (the new attitude: the reading's own time) ;  a_n = f_n + g_n,  g_n = (0, 0, -g)
+    p <- p + v T + a_n T^2 / 2 ;  v <- v + a_n T
+
+Error dynamics (eq. 8 in ENU, errors true - estimate)::
+
+    dtheta' = -R db_g - R n_g
+    dv'     = -[f_n]x dtheta - R db_a - R n_a          (eq. 10: S = [f_n]x)
+    dp'     = dv
+    db_g'   = -beta_g db_g + w_g ,  db_a' = -beta_a db_a + w_a   (first-order Gauss-Markov)
+
+Where the paper's signs differ: its eq. 8 has ``+S`` and ``+C`` for the
+velocity row and ``-C`` for the attitude row because its errors are
+"estimate minus true" with the attitude error of Titterton's
+``C_est = (I - [phi]x) C``; with "true minus estimate" every sign of that row
+flips and the attitude row's ``-C`` stays.  In NED the specific force at rest
+is ``(0, 0, -g)``, here ``(0, 0, +g)``: ``S`` is built from ENU components.
+Heading in ENU is counter-clockwise about Up, in NED clockwise about Down:
+the paper's yaw row of eq. 22 (``[.., .., -1]`` on ``dphi_D``) is
+``[0, 0, +1]`` on ``dtheta_U`` here.
+
+The transition matrix ``Phi`` is the exact first-order error propagation of
+the discrete mechanisation above (tested by finite differences).
+
+Measurements (eq. 9 and the options):
+
+* zero velocity during stance: ``z = 0 = v + dv`` -> ``y = -v``, ``H = [0 I 0 0 0]``, ``R = sigma_z^2 I``;
+* zero angular rate during stance (option): ``y = w_meas - b_g``, ``H = [0 0 0 I 0]``;
+* a heading angle: ``y = wrap(psi_meas - psi_est) = h . dtheta``, ``H = [h 0 0 0 0]``.
+
+Every update returns its innovation and normalised innovation squared (NIS);
+an update whose result would not be finite is discarded and counted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from core import quaternion as quat
+from core.conventions import STANDARD_GRAVITY_M_S2
+
+N_STATES = 15
+ATT, VEL, POS, BG, BA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
+
+
+@dataclass(frozen=True)
+class InsSettings:
+    """Noise, bias model and priors of :class:`ZuptEKF` (units in the names)."""
+
+    #: angle random walk of the gyroscope (rad/sqrt(s))
+    gyro_noise_rad_sqrt_s: float = 0.002
+    #: velocity random walk of the accelerometer (m/s/sqrt(s))
+    acc_noise_m_s_sqrt_s: float = 0.02
+    #: Gauss-Markov gyroscope bias: steady-state sd (rad/s) and time constant 1/beta_g (s)
+    gyro_bias_sd_rad_s: float = 0.002
+    gyro_bias_tau_s: float = 300.0
+    #: Gauss-Markov accelerometer bias: steady-state sd (m/s^2) and time constant 1/beta_a (s)
+    acc_bias_sd_m_s2: float = 0.05
+    acc_bias_tau_s: float = 300.0
+    #: zero-velocity measurement noise sigma_z (m/s)
+    zupt_noise_m_s: float = 0.01
+    #: zero-rate measurement noise (rad/s), used when ``zero_rate_update`` is on
+    zaru_noise_rad_s: float = 0.01
+    zero_rate_update: bool = False
+    #: prior sd of roll/pitch and heading after the initial alignment (rad)
+    initial_tilt_sd_rad: float = math.radians(1.0)
+    initial_heading_sd_rad: float = math.radians(1.0)
+    #: prior sd of the velocity after the initial alignment (m/s)
+    initial_velocity_sd_m_s: float = 0.01
+    #: gravity magnitude (m/s^2); nan: the norm of the mean specific force during the alignment
+    gravity_m_s2: float = math.nan
+    #: a sample interval longer than this is not integrated (s): the covariance grows, the state is held
+    max_dt_s: float = 0.1
+
+
+@dataclass(frozen=True)
+class Update:
+    """What one measurement update did."""
+
+    kind: str  #: "zupt", "zaru" or "heading"
+    used: bool
+    innovation: tuple
+    nis: float
+    dof: int
+
+
+def skew(v) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+class ZuptEKF:
+    """The INS-EKF-ZUPT kernel (see the module docstring): :meth:`align`, :meth:`propagate`, updates.
+
+    ``ZuptEKF(settings)`` or ``ZuptEKF(zupt_noise_m_s=0.02)`` (keyword overrides of :class:`InsSettings`).
+    """
+
+    def __init__(self, settings: InsSettings | None = None, **overrides):
+        s = settings or InsSettings()
+        self.settings = replace(s, **overrides) if overrides else s
+        s = self.settings
+        self.initialized = False
+        #: nominal state: plain float tuples (fast per sample); v, p in ENU (m/s, m), biases in the body frame
+        self.q = (1.0, 0.0, 0.0, 0.0)
+        self.v = (0.0, 0.0, 0.0)
+        self.p = (0.0, 0.0, 0.0)
+        self.bg = (0.0, 0.0, 0.0)
+        self.ba = (0.0, 0.0, 0.0)
+        self.P = np.zeros((N_STATES, N_STATES))
+        self.g = STANDARD_GRAVITY_M_S2
+        self.n_rejected = 0
+        self.last_dx = np.zeros(N_STATES)
+        self._phi = np.eye(N_STATES)
+        self._eye3 = np.eye(3)
+        self._phi_bg = self._phi[BG, BG]  # views of the bias blocks
+        self._phi_ba = self._phi[BA, BA]
+        self._r_zupt = np.eye(3) * s.zupt_noise_m_s ** 2
+        self._r_zaru = np.eye(3) * s.zaru_noise_rad_s ** 2
+        # Q = q1 T + q2 T^2 + q3 T^3: gyro and accelerometer white noise integrated into attitude, velocity
+        # and position; Gauss-Markov bias driving noise 2 sd^2 / tau per second
+        qv = s.acc_noise_m_s_sqrt_s ** 2
+        self._q1 = np.diag([s.gyro_noise_rad_sqrt_s ** 2] * 3 + [qv] * 3 + [0.0] * 3
+                           + [2.0 * s.gyro_bias_sd_rad_s ** 2 / s.gyro_bias_tau_s] * 3
+                           + [2.0 * s.acc_bias_sd_m_s2 ** 2 / s.acc_bias_tau_s] * 3)
+        self._q2 = np.zeros((N_STATES, N_STATES))
+        self._q2[VEL, POS] = self._q2[POS, VEL] = np.eye(3) * (qv / 2.0)
+        self._q3 = np.zeros((N_STATES, N_STATES))
+        self._q3[POS, POS] = np.eye(3) * (qv / 3.0)
+
+    # -- start --------------------------------------------------------------------------------
+    def align(self, acc_mean_b, gyro_mean_b, *, heading_axis_b=None, heading_rad: float = 0.0,
+              mag_mean_b=None) -> None:
+        """Initial alignment from a still period: tilt from the mean specific force, gyroscope bias from
+        the mean rate, heading either from the magnetometer (``mag_mean_b``: magnetic north is +y) or
+        ``heading_rad`` for the body axis ``heading_axis_b`` (default: the most horizontal body axis)."""
+        s = self.settings
+        f = np.asarray(acc_mean_b, dtype=float)
+        if mag_mean_b is not None:
+            q = quat.from_two_vectors_enu(tuple(f), tuple(mag_mean_b))
+        else:
+            up_b = f / np.linalg.norm(f)
+            axis = np.asarray(heading_axis_b if heading_axis_b is not None else horizontal_axis(up_b), float)
+            # TRIAD with a pseudo "north" along the chosen axis, then turned to the wanted heading
+            q0 = quat.from_two_vectors_enu(tuple(f), tuple(axis))
+            q = quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), heading_rad - math.pi / 2), q0)
+        self.q = quat.normalize(q)
+        self.g = float(np.linalg.norm(f)) if math.isnan(s.gravity_m_s2) else s.gravity_m_s2
+        self.v = (0.0, 0.0, 0.0)
+        self.p = (0.0, 0.0, 0.0)
+        self.bg = tuple(float(x) for x in gyro_mean_b)
+        self.ba = (0.0, 0.0, 0.0)
+        self.P = np.diag([s.initial_tilt_sd_rad ** 2] * 2 + [s.initial_heading_sd_rad ** 2]
+                         + [s.initial_velocity_sd_m_s ** 2] * 3 + [0.0] * 3
+                         + [s.gyro_bias_sd_rad_s ** 2] * 3 + [s.acc_bias_sd_m_s2 ** 2] * 3)
+        self.initialized = True
+
+    # -- prediction ---------------------------------------------------------------------------
+    def transition(self, acc_b, gyro_b, dt_s: float):
+        """``(Phi, q_new, v_new, p_new)`` of one mechanisation step, without changing the state.
+
+        ``Phi`` is a buffer reused by the next call (copy it to keep it).
+        """
+        bg, ba, v, p = self.bg, self.ba, self.v, self.p
+        q_new = quat.normalize(quat.multiply(self.q, quat.from_rotation_vector(
+            ((gyro_b[0] - bg[0]) * dt_s, (gyro_b[1] - bg[1]) * dt_s, (gyro_b[2] - bg[2]) * dt_s))))
+        m = quat.to_matrix(q_new)  # the attitude at the accelerometer's sample time
+        fb = (acc_b[0] - ba[0], acc_b[1] - ba[1], acc_b[2] - ba[2])
+        f0 = m[0][0] * fb[0] + m[0][1] * fb[1] + m[0][2] * fb[2]
+        f1 = m[1][0] * fb[0] + m[1][1] * fb[1] + m[1][2] * fb[2]
+        f2 = m[2][0] * fb[0] + m[2][1] * fb[1] + m[2][2] * fb[2]
+        a = (f0, f1, f2 - self.g)
+        h = 0.5 * dt_s * dt_s
+        p_new = (p[0] + v[0] * dt_s + a[0] * h, p[1] + v[1] * dt_s + a[1] * h, p[2] + v[2] * dt_s + a[2] * h)
+        v_new = (v[0] + a[0] * dt_s, v[1] + a[1] * dt_s, v[2] + a[2] * dt_s)
+        mat = np.array(m)
+        sf = np.array(((0.0, -f2, f1), (f2, 0.0, -f0), (-f1, f0, 0.0)))
+        sfm = sf @ mat
+        phi = self._phi
+        phi[ATT, BG] = mat * (-dt_s)
+        phi[VEL, ATT] = sf * (-dt_s)
+        phi[VEL, BG] = sfm * (dt_s * dt_s)
+        phi[VEL, BA] = mat * (-dt_s)
+        phi[POS, VEL] = self._eye3 * dt_s
+        phi[POS, ATT] = sf * (-h)
+        phi[POS, BG] = sfm * (dt_s * h)
+        phi[POS, BA] = mat * (-h)
+        np.fill_diagonal(self._phi_bg, math.exp(-dt_s / self.settings.gyro_bias_tau_s))
+        np.fill_diagonal(self._phi_ba, math.exp(-dt_s / self.settings.acc_bias_tau_s))
+        return phi, q_new, v_new, p_new
+
+    def process_noise(self, dt_s: float) -> np.ndarray:
+        """Discrete process noise ``Q`` of one step of ``dt_s`` (white noise integrated over the step)."""
+        return self._q1 * dt_s + self._q2 * (dt_s * dt_s) + self._q3 * (dt_s * dt_s * dt_s)
+
+    def propagate(self, acc_b, gyro_b, dt_s: float) -> None:
+        """One strapdown step (measured ``dt_s``) and the covariance propagation ``P <- Phi P Phi^T + Q``."""
+        s = self.settings
+        if not (dt_s > 0):
+            return
+        if dt_s > s.max_dt_s:  # a gap: hold the state, let the uncertainty grow
+            self.P = self.P + self._q1 * dt_s
+            return
+        phi, q_new, v_new, p_new = self.transition(acc_b, gyro_b, dt_s)
+        if not all(map(math.isfinite, v_new + p_new + q_new)):
+            self.n_rejected += 1
+            return
+        self.P = phi @ self.P @ phi.T + self.process_noise(dt_s)
+        self.q, self.v, self.p = q_new, v_new, p_new
+
+    # -- updates ------------------------------------------------------------------------------
+    def _apply(self, kind: str, y, K, P_new, nis: float) -> Update:
+        dx = K @ y
+        if not (all(map(math.isfinite, dx.tolist())) and math.isfinite(float(P_new.sum()))):
+            self.n_rejected += 1
+            return Update(kind, False, tuple(float(v) for v in y), nis, len(y))
+        self.P = 0.5 * (P_new + P_new.T)
+        self.correct(dx)
+        self.last_dx = dx
+        return Update(kind, True, tuple(float(v) for v in y), nis, len(y))
+
+    def _update_block(self, kind: str, y: np.ndarray, sl: slice, Rm: np.ndarray) -> Update:
+        """Update with ``H`` selecting the states ``sl``: ``P H^T = P[:, sl]``, ``P <- P - K (P H^T)^T``."""
+        return self._kalman(kind, y, self.P[:, sl], self.P[sl, sl] + Rm, Rm, None)
+
+    def _update(self, kind: str, y: np.ndarray, H: np.ndarray, Rm: np.ndarray) -> Update:
+        """General update, Joseph form."""
+        PHt = self.P @ H.T
+        return self._kalman(kind, y, PHt, H @ PHt + Rm, Rm, H)
+
+    def _kalman(self, kind, y, PHt, S, Rm, H) -> Update:
+        try:
+            Sinv = np.linalg.inv(S)
+        except np.linalg.LinAlgError:
+            self.n_rejected += 1
+            return Update(kind, False, tuple(y), math.nan, len(y))
+        K = PHt @ Sinv
+        if H is None:
+            P_new = self.P - K @ PHt.T
+        else:
+            ikh = np.eye(N_STATES) - K @ H
+            P_new = ikh @ self.P @ ikh.T + K @ Rm @ K.T
+        return self._apply(kind, y, K, P_new, float(y @ Sinv @ y))
+
+    def correct(self, dx) -> None:
+        """Fold an error estimate into the nominal state (and reset it to zero)."""
+        self.q = quat.normalize(quat.multiply(quat.from_rotation_vector(tuple(dx[ATT])), self.q))
+        d = dx.tolist()
+        v, p, bg, ba = self.v, self.p, self.bg, self.ba
+        self.v = (v[0] + d[3], v[1] + d[4], v[2] + d[5])
+        self.p = (p[0] + d[6], p[1] + d[7], p[2] + d[8])
+        self.bg = (bg[0] + d[9], bg[1] + d[10], bg[2] + d[11])
+        self.ba = (ba[0] + d[12], ba[1] + d[13], ba[2] + d[14])
+
+    def update_zero_velocity(self) -> Update:
+        """eq. 9: ``z = 0`` during stance (``H = [0 I 0 0 0]``)."""
+        y = np.array((-self.v[0], -self.v[1], -self.v[2]))
+        return self._update_block("zupt", y, VEL, self._r_zupt)
+
+    def update_zero_rate(self, gyro_b) -> Update:
+        """Zero angular rate during stance: the reading is the bias (``H = [0 0 0 I 0]``)."""
+        y = np.array((gyro_b[0] - self.bg[0], gyro_b[1] - self.bg[1], gyro_b[2] - self.bg[2]))
+        return self._update_block("zaru", y, BG, self._r_zaru)
+
+    def update_heading(self, innovation_rad: float, h_att, variance_rad2: float) -> Update:
+        """A heading measurement: ``innovation = wrap(psi_meas - psi_est) = h_att . dtheta + v``."""
+        H = np.zeros((1, N_STATES))
+        H[0, ATT] = h_att
+        return self._update("heading", np.array([float(innovation_rad)]), H, np.array([[float(variance_rad2)]]))
+
+    # -- views --------------------------------------------------------------------------------
+    def matrix(self) -> np.ndarray:
+        return np.array(quat.to_matrix(self.q))
+
+    def heading_of(self, axis_b) -> float:
+        """Azimuth (rad, CCW from East) of a body axis in the navigation frame."""
+        a = self.matrix() @ np.asarray(axis_b, dtype=float)
+        return math.atan2(a[1], a[0])
+
+
+def horizontal_axis(up_b) -> np.ndarray:
+    """The body unit axis most perpendicular to ``up_b`` (a heading reference when there is no magnetometer)."""
+    k = int(np.argmin(np.abs(np.asarray(up_b, dtype=float))))
+    e = np.zeros(3)
+    e[k] = 1.0
+    return e

@@ -1,0 +1,558 @@
+"""Foot-mounted navigation, composed: stance detection, INS-EKF-ZUPT and the heading aids of Song & Park 2018.
+
+:class:`FootNavigator` runs one foot-mounted IMU (and, for the course aids, a
+waist-mounted magnetometer) with one of the four cases of the paper's
+Tables 2-3 (``aid``):
+
+``"zupt"``
+    ZUPT only.
+``"foot_mag"``
+    ZUPT + the foot magnetometer's heading ("ZUPT + sensor heading"): at the
+    end of each stance the mean field of the stance, rotated into ENU, is
+    compared with its direction at the alignment.
+``"course"``
+    ZUPT + the waist magnetometer heading as the foot's heading, with the
+    foot-to-waist angle of the initial standstill ("ZUPT + course": the toe
+    angle is ignored).
+``"tckf"``
+    The two cascaded filters: :class:`core.foot.course.CourseErrorFilter`
+    estimates the course-angle error from the waist heading and the course of
+    successive stances (eqs. 11-19); its estimate is the heading-error
+    measurement of the ZUPT filter with its variance (eqs. 22-25).
+
+Samples are the foot accelerometer's events, each with the latest gyroscope
+reading (a recording with simultaneous rows pairs them exactly, see
+:data:`core.recording.STREAM_ORDER`).  The filter starts with the initial
+alignment at the end of the first stance of at least ``align_min_s``; samples
+of that stance get its attitude, zero velocity and the origin, samples before
+it NaN.  Heading aids are applied at the end of each stance (the state is then
+that of the stance's last sample).
+
+Batch :meth:`FootNavigator.run` detects stance over the whole recording at
+once (vectorised) and runs the per-sample kernel; streaming
+:meth:`FootNavigator.update` detects stance with :class:`core.foot.stance.StanceStream`
+(half a window late) and runs the same kernel, so both give the same result.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from core.conventions import ACC, GYRO, MAG, wrap_angle
+from core.foot.course import CourseErrorFilter, CourseSettings, body_heading
+from core.foot.devices import stream_name
+from core.foot.ins import InsSettings, ZuptEKF, horizontal_axis
+from core.foot.stance import StanceDetector, StanceSettings, infer_foot_axes
+from core.pdr.attitude import heading_jacobian
+from core.recording import MissingSensorError, Recording
+
+AIDS = ("zupt", "foot_mag", "course", "tckf")
+
+
+@dataclass(frozen=True)
+class FootSettings:
+    """Settings of :class:`FootNavigator` (units in the names)."""
+
+    #: one of :data:`AIDS`
+    aid: str = "zupt"
+    stance: StanceSettings = field(default_factory=StanceSettings)
+    ins: InsSettings = field(default_factory=InsSettings)
+    course: CourseSettings = field(default_factory=CourseSettings)
+    #: "song" detector axes: "auto" (:func:`core.foot.stance.infer_foot_axes`, batch only) or as in ``stance``
+    song_axes: str = "auto"
+    #: the alignment needs a first still period at least this long (s) ...
+    align_min_s: float = 0.3
+    #: ... in which gaps of non-stance up to this long do not count as motion (s)
+    align_max_gap_s: float = 0.1
+    #: the mean rate of the still period is the initial gyroscope bias only if it lasted this long (s);
+    #: a shorter one (a foot that barely stopped) starts from zero bias
+    align_gyro_bias_min_s: float = 1.0
+    #: initial heading from the foot magnetometer when there is one (else ``initial_heading_rad``)
+    initial_heading_from_mag: bool = True
+    #: heading (rad, CCW from East) of the foot's most horizontal body axis at the start without magnetometer
+    initial_heading_rad: float = math.pi / 2
+    #: "foot_mag": sd of the foot magnetometer heading of one stance (rad)
+    foot_mag_heading_sd_rad: float = math.radians(10.0)
+    #: "course": sd of the waist heading used as the foot heading (rad)
+    course_heading_sd_rad: float = math.radians(5.0)
+
+    def __post_init__(self):
+        if self.aid not in AIDS:
+            raise ValueError(f"unknown aid {self.aid!r}: one of {', '.join(AIDS)}")
+
+
+@dataclass(frozen=True)
+class Stride:
+    """One stance phase of the foot and the stride that ended in it."""
+
+    t_start_ns: int  #: first stance sample
+    t_end_ns: int  #: last stance sample
+    position_n: tuple  #: ENU position at the end of the stance (m)
+    length_m: float  #: horizontal distance from the previous stance (nan for the first)
+    course_rad: float  #: direction of that displacement (rad, CCW from East)
+    waist_heading_rad: float  #: waist magnetometer heading over the stride (nan without waist)
+    aid: str  #: what heading aid was applied at this stance ("" none)
+    aid_innovation_rad: float = math.nan
+    aid_nis: float = math.nan
+    course_error_rad: float = math.nan  #: TCKF: first-filter estimate after this stride
+    course_error_var_rad2: float = math.nan
+
+
+@dataclass
+class FootResult:
+    """Everything a run produced: per-sample states, strides, diagnostics."""
+
+    t_ns: np.ndarray
+    position_n: np.ndarray  #: (n, 3) ENU, NaN before the alignment
+    velocity_n: np.ndarray
+    q_wxyz: np.ndarray
+    stance: np.ndarray  #: (n,) bool
+    strides: list
+    zupt_nis: np.ndarray  #: NIS (3 dof) of every zero-velocity update
+    heading_updates: list  #: core.foot.ins.Update of every heading aid
+    course_updates: list  #: core.foot.course.CourseUpdate (TCKF)
+    counters: dict
+    settings: FootSettings
+    recording: Recording | None = None
+    #: position sd (m) of every sample (sqrt of the largest eigenvalue of the horizontal block)
+    position_sd_m: np.ndarray | None = None
+
+    def stride_positions(self) -> np.ndarray:
+        return np.array([s.position_n for s in self.strides], dtype=float).reshape(-1, 3)
+
+    def summary(self) -> dict:
+        ok = np.isfinite(self.position_n[:, 0])
+        last = self.position_n[ok][-1] if np.any(ok) else np.zeros(3)
+        lengths = [s.length_m for s in self.strides if math.isfinite(s.length_m)]
+        used = sum(1 for u in self.heading_updates if u.used)
+        dur = (self.t_ns[-1] - self.t_ns[0]) * 1e-9 if len(self.t_ns) > 1 else 0.0
+        return {
+            "mode": "foot",
+            "aid": self.settings.aid,
+            "detector": self.settings.stance.detector,
+            "duration_s": float(dur),
+            "rate_hz": float((len(self.t_ns) - 1) / dur) if dur > 0 else 0.0,
+            "n_strides": len(self.strides),
+            "distance_m": float(np.sum(lengths)) if lengths else 0.0,
+            "final_east_m": float(last[0]),
+            "final_north_m": float(last[1]),
+            "final_up_m": float(last[2]),
+            "start_to_end_m": float(math.hypot(last[0], last[1])),
+            "stance_fraction": float(np.mean(self.stance)) if len(self.stance) else 0.0,
+            "zupt_nis_median": float(np.median(self.zupt_nis)) if len(self.zupt_nis) else math.nan,
+            "heading_updates_used": used,
+            "heading_updates_total": len(self.heading_updates),
+            **self.counters,
+        }
+
+
+class _Window:
+    """Timestamped readings kept until a window consumes them (mean over ``(t0, t1]``)."""
+
+    def __init__(self):
+        self._buf: deque = deque()
+
+    def add(self, t_ns: int, v) -> None:
+        self._buf.append((t_ns, v))
+
+    def mean(self, t0_ns: int, t1_ns: int):
+        """Mean of the readings with ``t0 < t <= t1``; drops everything up to ``t1``; None if none."""
+        acc = [0.0, 0.0, 0.0]
+        n = 0
+        while self._buf and self._buf[0][0] <= t1_ns:
+            t, v = self._buf.popleft()
+            if t > t0_ns and all(map(math.isfinite, v)):
+                acc[0] += v[0]
+                acc[1] += v[1]
+                acc[2] += v[2]
+                n += 1
+        return (acc[0] / n, acc[1] / n, acc[2] / n) if n else None
+
+
+class FootNavigator:
+    """Foot-mounted INS with stance detection and a heading aid (see the module docstring).
+
+    Parameters (keyword only)
+    -------------------------
+    settings : FootSettings, optional
+    foot_device : str
+        Device whose IMU is on the foot ("" = the recording's primary device; see :mod:`core.foot.devices`).
+    waist_device : str or None
+        Device with the waist magnetometer for ``"course"`` and ``"tckf"`` (needs ``acc`` and ``mag``).
+    **overrides
+        Fields of :class:`FootSettings` (``aid="tckf"``).
+    """
+
+    def __init__(self, settings: FootSettings | None = None, *, foot_device: str = "",
+                 waist_device: str | None = "waist", **overrides):
+        s = settings or FootSettings()
+        self.settings = replace(s, **overrides) if overrides else s
+        self.foot_device = foot_device
+        self.waist_device = waist_device
+        self.names = {k: stream_name(k, foot_device) for k in (ACC, GYRO, MAG)}
+        self.waist_names = ({k: stream_name(k, waist_device) for k in (ACC, MAG)}
+                            if waist_device is not None else {})
+        self.reset()
+
+    # -- state --------------------------------------------------------------------------------
+    def reset(self, stance_settings: StanceSettings | None = None) -> None:
+        s = self.settings
+        self.stance_settings = stance_settings or s.stance
+        self.ins = ZuptEKF(s.ins)
+        self.course = CourseErrorFilter(s.course)
+        self._stream = None
+        self._gyro = None
+        self._pending: deque = deque()  # streaming: samples waiting for their stance decision
+        self._foot_mag = _Window()
+        self._waist_acc = _Window()
+        self._waist_mag = _Window()
+        self._t_prev: int | None = None
+        self._prev_stance = False
+        self._stance_start: int | None = None
+        self._align = [np.zeros(3), np.zeros(3), 0, None, None]  # sum acc, sum gyro, n, t_first, t_last
+        self._held: list = []  # samples of the alignment stance (t_ns) waiting for their state
+        self._gap: list = []  # samples of a gap in the alignment stance (t, acc, gyro, stance)
+        self._last_stride_t: int | None = None
+        self._last_stride_pos = None
+        self._foot_axis = None
+        self._waist_axis = None
+        self._mag_ref_rad = math.nan
+        self._course_c0 = math.nan
+        self._prev_course = math.nan
+        self._prev_waist = math.nan
+        self.out_t, self.out_p, self.out_v, self.out_q, self.out_st, self.out_sd = [], [], [], [], [], []
+        self.strides: list[Stride] = []
+        self.zupt_nis: list[float] = []
+        self.heading_updates: list = []
+        self.course_updates: list = []
+        self.counters = {"skipped_nonfinite": 0, "aid_unavailable": 0, "aid_gated": 0, "alignments_rejected": 0}
+
+    # -- the per-sample kernel ----------------------------------------------------------------
+    def _sample(self, t: int, acc, gyro, stance: bool) -> None:
+        if not (all(map(math.isfinite, acc)) and all(map(math.isfinite, gyro))):
+            self.counters["skipped_nonfinite"] += 1
+            stance = False
+            if not self.ins.initialized:
+                self._emit_nan(t)
+                return
+            acc, gyro = None, None
+        ins = self.ins
+        if not ins.initialized:
+            self._align_step(t, acc, gyro, stance)
+            return
+        if self._prev_stance and not stance:
+            self._end_stance()
+        if acc is not None:
+            if self._t_prev is not None:
+                ins.propagate(acc, gyro, (t - self._t_prev) * 1e-9)
+            self._t_prev = t
+        if stance:
+            if not self._prev_stance:
+                self._stance_start = t
+            u = ins.update_zero_velocity()
+            if u.used:
+                self.zupt_nis.append(u.nis)
+            if ins.settings.zero_rate_update and gyro is not None:
+                ins.update_zero_rate(gyro)
+            self._stance_end = t
+        self._prev_stance = stance
+        self._emit(t, stance)
+
+    def _emit(self, t, stance) -> None:
+        ins = self.ins
+        self.out_t.append(t)
+        self.out_p.append(ins.p)
+        self.out_v.append(ins.v)
+        self.out_q.append(ins.q)
+        self.out_st.append(bool(stance))
+        self.out_sd.append(math.sqrt(max(ins.P[6, 6], ins.P[7, 7], 0.0)))
+
+    def _emit_nan(self, t) -> None:
+        nan3 = (math.nan,) * 3
+        self.out_t.append(t)
+        self.out_p.append(nan3)
+        self.out_v.append(nan3)
+        self.out_q.append((math.nan,) * 4)
+        self.out_st.append(False)
+        self.out_sd.append(math.nan)
+
+    def _align_step(self, t, acc, gyro, stance) -> None:
+        """Collect the first still period: stance samples, with gaps up to ``align_max_gap_s`` bridged."""
+        a = self._align
+        s = self.settings
+        if stance:
+            if a[2] == 0:
+                a[3] = t
+            a[0] += acc
+            a[1] += gyro
+            a[2] += 1
+            a[4] = t
+            for g in self._gap:  # a short gap inside the still period: its samples count as still
+                self._held.append(g[0])
+            self._gap = []
+            self._held.append(t)
+            return
+        if a[2] == 0:
+            self._emit_nan(t)
+            return
+        self._gap.append((t, acc, gyro, stance))
+        if (t - a[4]) * 1e-9 <= s.align_max_gap_s:
+            return
+        gap, self._gap = self._gap, []
+        if (a[4] - a[3]) * 1e-9 >= s.align_min_s:
+            self._do_align()
+            for th in self._held:
+                self._emit(th, True)
+            self._held = []
+            self._t_prev = a[4]
+            self._prev_stance = False  # the alignment stance is already the first stride
+            self._stance_start = a[3]
+            self._stance_end = a[4]
+            for g in gap:  # the motion that ended the still period, from its first sample
+                self._sample(*g)
+            return
+        self.counters["alignments_rejected"] += 1
+        for th in self._held:
+            self._emit_nan(th)
+        self._held = []
+        self._align = [np.zeros(3), np.zeros(3), 0, None, None]
+        for g in gap:
+            self._emit_nan(g[0])
+
+    def _do_align(self) -> None:
+        s = self.settings
+        a = self._align
+        acc_m, gyro_m = a[0] / a[2], a[1] / a[2]
+        up_b = acc_m / np.linalg.norm(acc_m)
+        self._foot_axis = horizontal_axis(up_b)
+        mag = self._foot_mag.mean(a[3] - 1, a[4]) if (self.names[MAG] is not None) else None
+        use_mag = mag is not None and s.initial_heading_from_mag
+        if (a[4] - a[3]) * 1e-9 < s.align_gyro_bias_min_s:
+            gyro_m = np.zeros(3)
+        self.ins.align(acc_m, gyro_m, heading_axis_b=self._foot_axis, heading_rad=s.initial_heading_rad,
+                       mag_mean_b=mag if use_mag else None)
+        if mag is not None:
+            self._mag_ref_rad = self._azimuth(self.ins.matrix() @ np.asarray(mag))
+        wacc = self._waist_acc.mean(a[3] - 1, a[4])
+        wmag = self._waist_mag.mean(a[3] - 1, a[4])
+        if wacc is not None and wmag is not None:
+            wup = np.asarray(wacc) / np.linalg.norm(wacc)
+            self._waist_axis = horizontal_axis(wup)
+            psi_w = body_heading(wacc, wmag, self._waist_axis)
+            self._course_c0 = wrap_angle(self.ins.heading_of(self._foot_axis) - psi_w)
+        self._last_stride_t = a[4]
+        self._last_stride_pos = np.array(self.ins.p)
+        self.strides.append(Stride(a[3], a[4], tuple(self.ins.p), math.nan, math.nan, math.nan, ""))
+
+    @staticmethod
+    def _azimuth(v) -> float:
+        return math.atan2(v[1], v[0])
+
+    def _end_stance(self) -> None:
+        """The stance that ended with the previous sample: a stride, and the heading aid."""
+        s = self.settings
+        ins = self.ins
+        t0, t1 = self._stance_start, self._stance_end
+        pos = np.array(ins.p)
+        d = pos - self._last_stride_pos
+        length = math.hypot(d[0], d[1])
+        course = math.atan2(d[1], d[0])
+        psi_w = math.nan
+        wacc = self._waist_acc.mean(self._last_stride_t, t1)
+        wmag = self._waist_mag.mean(self._last_stride_t, t1)
+        if wacc is not None and wmag is not None:
+            if self._waist_axis is None:
+                self._waist_axis = horizontal_axis(np.asarray(wacc) / np.linalg.norm(wacc))
+            psi_w = body_heading(wacc, wmag, self._waist_axis)
+        foot_mag = self._foot_mag.mean(t0 - 1, t1)
+        aid, innov, nis, x1, p1 = "", math.nan, math.nan, math.nan, math.nan
+        if s.aid == "foot_mag":
+            if foot_mag is not None and math.isfinite(self._mag_ref_rad):
+                m_n = ins.matrix() @ np.asarray(foot_mag)
+                innov = wrap_angle(self._mag_ref_rad - self._azimuth(m_n))
+                u = ins.update_heading(innov, heading_jacobian(m_n), s.foot_mag_heading_sd_rad ** 2)
+                self.heading_updates.append(u)
+                aid, nis = "foot_mag", u.nis
+            else:
+                self.counters["aid_unavailable"] += 1
+        elif s.aid == "course":
+            reason = self._stride_gate(length, course, psi_w)
+            if reason == "" and math.isfinite(self._course_c0):
+                fwd_n = ins.matrix() @ self._foot_axis
+                innov = wrap_angle(psi_w + self._course_c0 - self._azimuth(fwd_n))
+                u = ins.update_heading(innov, heading_jacobian(fwd_n), s.course_heading_sd_rad ** 2)
+                self.heading_updates.append(u)
+                aid, nis = "course", u.nis
+            else:
+                self.counters["aid_unavailable" if reason in ("", "no waist heading") else "aid_gated"] += 1
+        elif s.aid == "tckf":
+            cu = self.course.update(t1, psi_w, d[0], d[1])
+            self.course_updates.append(cu)
+            if cu.used:
+                before = ins.heading_of(self._foot_axis)
+                u = ins.update_heading(cu.x_rad, (0.0, 0.0, 1.0), cu.p_rad2)  # eqs. 22-25
+                self.heading_updates.append(u)
+                if u.used:
+                    self.course.applied(wrap_angle(ins.heading_of(self._foot_axis) - before))
+                aid, innov, nis = "tckf", cu.x_rad, u.nis
+            elif cu.reason not in ("boresight",):
+                self.counters["aid_gated" if cu.reason in ("gated", "turning", "short stride")
+                              else "aid_unavailable"] += 1
+            x1, p1 = self.course.x, self.course.p
+        self._prev_course, self._prev_waist = course, psi_w
+        self.strides.append(Stride(t0, t1, tuple(ins.p), length, course, psi_w, aid, innov, nis, x1, p1))
+        self._last_stride_t = t1
+        self._last_stride_pos = np.array(ins.p)
+
+    def _stride_gate(self, length, course, psi_w) -> str:
+        """Why a stride gives no course-type measurement ("" if it does): the gates of :mod:`core.foot.course`."""
+        c = self.settings.course
+        if not math.isfinite(psi_w):
+            return "no waist heading"
+        if length < c.min_stride_m:
+            return "short stride"
+        if math.isnan(self._prev_course) or math.isnan(self._prev_waist):
+            return "turning"
+        turn = max(abs(wrap_angle(course - self._prev_course)), abs(wrap_angle(psi_w - self._prev_waist)))
+        return "turning" if turn > c.max_turn_rad else ""
+
+    # -- other streams --------------------------------------------------------------------------
+    def _other(self, name: str, t: int, v) -> None:
+        if name == self.names[MAG]:
+            self._foot_mag.add(t, v)
+        elif self.waist_names and name == self.waist_names[ACC]:
+            self._waist_acc.add(t, v)
+        elif self.waist_names and name == self.waist_names[MAG]:
+            self._waist_mag.add(t, v)
+
+    def _input_names(self, recording: Recording) -> list[str]:
+        names = [self.names[GYRO], self.names[ACC], self.names[MAG]] + list(self.waist_names.values())
+        return [n for n in names if recording.has(n)]
+
+    # -- batch ----------------------------------------------------------------------------------
+    def run(self, recording: Recording, stance=None) -> FootResult:
+        """The whole recording: vectorised stance detection, then the per-sample kernel in time order.
+
+        ``stance``: optional per-sample labels (bool, one per foot accelerometer sample) used instead of
+        the detector (e.g. reference zero-velocity labels, for a best case).
+        """
+        acc_s = recording.stream(self.names[ACC], "foot-mounted navigation")
+        gyr_s = recording.stream(self.names[GYRO], "foot-mounted navigation")
+        t = acc_s.t_ns
+        gi = np.searchsorted(gyr_s.t_ns, t, side="right") - 1  # latest gyroscope reading at each sample
+        valid = gi >= 0
+        gyro = np.where(valid[:, None], gyr_s.values[np.maximum(gi, 0)], np.nan)
+        st = self.settings.stance
+        if st.detector == "song" and self.settings.song_axes == "auto":
+            ax = infer_foot_axes(acc_s.values[valid], gyro[valid])
+            st = replace(st, acc_axes=ax["acc_axes"], gyro_axes=ax["gyro_axes"])
+        self.reset(st)
+        det = StanceDetector(st)
+        finite = valid & np.all(np.isfinite(acc_s.values), axis=1) & np.all(np.isfinite(gyro), axis=1)
+        if stance is not None:
+            labels = np.asarray(stance, dtype=bool).reshape(-1)
+            if len(labels) != len(t):
+                raise ValueError(f"{len(labels)} stance labels for {len(t)} accelerometer samples")
+            stance = labels & finite
+        else:
+            stance = np.zeros(len(t), dtype=bool)
+            if np.any(finite):
+                stance[finite] = det.detect(t[finite], acc_s.values[finite], gyro[finite]).stance
+        acc_name, gyro_name = self.names[ACC], self.names[GYRO]
+        k = 0
+        acc_v, gyro_v = acc_s.values, gyro
+        for name, tt, v in recording.events(self._input_names(recording)):
+            if name == acc_name:
+                self._sample(tt, tuple(acc_v[k]), tuple(gyro_v[k]), bool(stance[k]))
+                k += 1
+            elif name != gyro_name:
+                self._other(name, tt, v)
+        return self._finish(recording)
+
+    # -- streaming ------------------------------------------------------------------------------
+    def update(self, stream: str, t_ns: int, values) -> list:
+        """One sensor event; returns the samples whose state became known, as ``(t_ns, position_n)``.
+
+        Stance is decided ``stance.window_s / 2`` late (the centred window), so
+        the positions come that late.  The "song" detector needs its axes set
+        in the settings (``song_axes`` other than "auto") for streaming.
+        """
+        if self._stream is None:
+            if self.stance_settings.detector == "song" and self.settings.song_axes == "auto":
+                raise ValueError("streaming with the 'song' detector needs song_axes='fixed' and the axes in "
+                                 "StanceSettings (acc_axes, gyro_axes); 'auto' looks at the whole recording")
+            self._stream = StanceDetector(self.stance_settings).stream()
+        n0 = len(self.out_t)
+        if stream == self.names[GYRO]:
+            self._gyro = tuple(values)
+        elif stream == self.names[ACC]:
+            if self._gyro is None:
+                return []
+            acc = tuple(values)
+            if all(map(math.isfinite, acc)) and all(map(math.isfinite, self._gyro)):
+                self._pending.append((t_ns, acc, self._gyro))
+                self._feed(self._stream.update(t_ns, acc, self._gyro))
+            else:
+                self._pending.append((t_ns, acc, self._gyro, "bad"))
+                self._drain_bad()
+        else:
+            self._other(stream, t_ns, values)
+        return list(zip(self.out_t[n0:], self.out_p[n0:]))
+
+    def _feed(self, decisions) -> None:
+        for td, st, _ in decisions:
+            self._drain_bad()
+            t, acc, gyro = self._pending.popleft()[:3]
+            assert t == td
+            self._sample(t, acc, gyro, st)
+        self._drain_bad()
+
+    def _drain_bad(self) -> None:
+        while self._pending and len(self._pending[0]) == 4:
+            t, acc, gyro, _ = self._pending.popleft()
+            self._sample(t, acc, gyro, False)
+
+    def finish(self) -> FootResult:
+        """End of a stream: decide the last samples and return the result."""
+        if self._stream is not None:
+            self._feed(self._stream.flush())
+        return self._finish(None)
+
+    def _finish(self, recording) -> FootResult:
+        if self.ins.initialized and self._prev_stance and self._stance_start is not None:
+            if not self.strides or self.strides[-1].t_end_ns != self._stance_end:
+                self._end_stance()  # the recording ended standing: the last stance is a stride too
+            self._prev_stance = False
+        if self._held or self._gap:  # the recording ended during the alignment stance
+            for th in self._held:
+                self._emit_nan(th)
+            for g in self._gap:
+                self._emit_nan(g[0])
+            self._held, self._gap = [], []
+        return FootResult(
+            t_ns=np.array(self.out_t, dtype=np.int64),
+            position_n=np.array(self.out_p, dtype=float).reshape(-1, 3),
+            velocity_n=np.array(self.out_v, dtype=float).reshape(-1, 3),
+            q_wxyz=np.array(self.out_q, dtype=float).reshape(-1, 4),
+            stance=np.array(self.out_st, dtype=bool),
+            strides=list(self.strides),
+            zupt_nis=np.array(self.zupt_nis, dtype=float),
+            heading_updates=list(self.heading_updates),
+            course_updates=list(self.course_updates),
+            counters={**self.counters, "ins_rejected": self.ins.n_rejected},
+            settings=self.settings,
+            recording=recording,
+            position_sd_m=np.array(self.out_sd, dtype=float),
+        )
+
+
+def run_foot(recording: Recording, **kwargs) -> FootResult:
+    """``FootNavigator(**kwargs).run(recording)``; raises :class:`MissingSensorError` without a foot IMU."""
+    return FootNavigator(**kwargs).run(recording)
+
+
+__all__ = ["AIDS", "FootNavigator", "FootResult", "FootSettings", "Stride", "run_foot", "MissingSensorError"]
