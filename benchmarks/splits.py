@@ -24,6 +24,13 @@ Microsoft indoor location 2020 (``ms_indoor_location_2020``)
     depends on the reader's filter.
 ETH Sensor Logger walk (``sensorlogger_gps_walk_ethz``)
     Its one recording is **report**.
+Outdoor phone walks with GPS (``gps_walks_phone``)
+    All **report** (declared with issue #9, before any GPS number was seen on
+    them): nothing is tuned on them.
+GPS fusion on the simulator (``sim_gps``, :mod:`benchmarks.gnss_eval`)
+    Seeds 0-19 of :func:`desktop.simulator.outdoor_walk` are **tuning** (the
+    GPS fusion's defaults were set looking at seeds 0-5), seeds 1000-1019
+    **report**.
 Oxford step counter, Brajdic-Harle, trundle wheel
     All **report**: nothing will be tuned on them.  Honest caveat: the step
     detector's thresholds and gates were developed before this split existed
@@ -52,12 +59,16 @@ SPLITS = (TUNING, REPORT)
 IPIN_TUNING_ROUTES = ("01", "02", "21", "22")
 IPIN_REPORT_ROUTES = ("04", "05", "23", "24")
 
+#: simulator seeds of the GPS fusion benchmark
+SIM_GPS_SEEDS = {TUNING: tuple(range(0, 20)), REPORT: tuple(range(1000, 1020))}
+
 #: datasets whose every recording is in one split
 WHOLE_DATASET = {
     "oxford_step_counter": REPORT,
     "brajdic_harle_handheld": REPORT,
     "trundlewheel_distance": REPORT,
     "sensorlogger_gps_walk_ethz": REPORT,
+    "gps_walks_phone": REPORT,
     "ipol_healthy_gait_xsens": TUNING,
 }
 

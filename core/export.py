@@ -50,8 +50,14 @@ def write_track_csv(path: str, track) -> None:
                         f"{float(track.east_m[i]):.3f}", f"{float(track.north_m[i]):.3f}", f"{dist:.3f}"])
 
 
-def track_geojson(track, origin_lat_lon: tuple[float, float] | None = None, properties: dict | None = None) -> dict:
-    """The track as a GeoJSON FeatureCollection (RFC 7946: lon, lat order): a LineString and one Point per step."""
+def track_geojson(track, origin_lat_lon: tuple[float, float] | None = None, properties: dict | None = None,
+                  point_properties: dict | None = None) -> dict:
+    """The track as a GeoJSON FeatureCollection (RFC 7946: lon, lat order): a LineString and one Point per step.
+
+    ``point_properties``: optional ``{name: list}`` of per-step values (one per
+    step, e.g. the fused track's ``sigma_m`` and ``source``) added to each Point.
+    """
+    extra = point_properties or {}
     known = origin_lat_lon is not None
     origin = origin_lat_lon if known else (0.0, 0.0)
     pts = _points(track)
@@ -64,7 +70,8 @@ def track_geojson(track, origin_lat_lon: tuple[float, float] | None = None, prop
             feats.append({"type": "Feature", "geometry": {"type": "Point", "coordinates": coords[-1]},
                           "properties": {"step": k, "t_ns": t, "step_length_m": round(length, 4),
                                          "bearing_deg": round(bearing_deg(h), 2), "east_m": round(e, 3),
-                                         "north_m": round(n, 3)}})
+                                         "north_m": round(n, 3),
+                                         **{name: vals[k - 1] for name, vals in extra.items()}}})
     props = {"name": "PDR track", "n_steps": len(track), "origin_known": known,
              "origin_lat_lon": list(origin), **(properties or {})}
     line = {"type": "Feature", "geometry": {"type": "LineString", "coordinates": coords}, "properties": props}
@@ -72,14 +79,20 @@ def track_geojson(track, origin_lat_lon: tuple[float, float] | None = None, prop
 
 
 def write_track_geojson(path: str, track, origin_lat_lon: tuple[float, float] | None = None,
-                        properties: dict | None = None) -> None:
+                        properties: dict | None = None, point_properties: dict | None = None) -> None:
     with open(path, "w", encoding="utf-8") as f:
-        json.dump(track_geojson(track, origin_lat_lon, properties), f, indent=1)
+        json.dump(track_geojson(track, origin_lat_lon, properties, point_properties), f, indent=1)
 
 
 def write_track_gpx(path: str, track, origin_lat_lon: tuple[float, float] | None = None,
-                    unix_offset_ns: int | None = None, name: str = "PDR track") -> None:
-    """GPX 1.1 track (needs the ``gpxpy`` package) with per-point time, step length and bearing as extensions."""
+                    unix_offset_ns: int | None = None, name: str = "PDR track",
+                    point_properties: dict | None = None) -> None:
+    """GPX 1.1 track (needs the ``gpxpy`` package) with per-point time, step length and bearing as extensions.
+
+    ``point_properties``: optional ``{name: list}`` of per-step values written as
+    further extensions of each point after the start point (e.g. ``sigma_m``, ``source``).
+    """
+    extra = point_properties or {}
     try:
         import gpxpy.gpx
     except ImportError as e:  # pragma: no cover - depends on the environment
@@ -103,11 +116,14 @@ def write_track_gpx(path: str, track, origin_lat_lon: tuple[float, float] | None
     trk.segments.append(seg)
     gpx.tracks.append(trk)
     off = unix_offset_ns or 0
-    for t, e, n, length, h in _points(track):
+    for k, (t, e, n, length, h) in enumerate(_points(track)):
         lat, lon = enu_to_geodetic(e, n, origin)
         when = _dt.datetime.fromtimestamp((t + off) * 1e-9, tz=_dt.timezone.utc)
         p = gpxpy.gpx.GPXTrackPoint(latitude=lat, longitude=lon, time=when)
-        for tag, val in (("step_length_m", f"{length:.4f}"), ("bearing_deg", f"{bearing_deg(h):.2f}")):
+        tags = [("step_length_m", f"{length:.4f}"), ("bearing_deg", f"{bearing_deg(h):.2f}")]
+        if k > 0:
+            tags += [(name, str(vals[k - 1])) for name, vals in extra.items()]
+        for tag, val in tags:
             el = ET.Element(f"{{{ns}}}{tag}")
             el.text = val
             p.extensions.append(el)

@@ -61,7 +61,46 @@ def _first_gps_origin(rec: Recording):
     return None
 
 
-def build_pipeline(args):
+GPS_MODES = ("auto", "off", "chen", "kubrak")
+
+
+def _parse_outage(text: str):
+    try:
+        start, length = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--gps-outage wants START_S:LENGTH_S (seconds), got {text!r}") from None
+    if not (math.isfinite(start) and math.isfinite(length) and start >= 0 and length > 0):
+        raise argparse.ArgumentTypeError(f"--gps-outage {text!r}: START_S >= 0 and LENGTH_S > 0 seconds")
+    return start, length
+
+
+def build_gnss(args, rec: Recording, profile=None):
+    """The GPS fusion stage for ``--gps`` (None when off or when the recording has no fixes)."""
+    mode = getattr(args, "gps", "auto")
+    has_gps = rec.has("gps")
+    if mode == "kubrak":
+        raise ValueError("--gps kubrak (Kubrak et al. 2006 real-time fusion) is not built yet (issue #10); "
+                         "use --gps chen")
+    if mode == "off" or (mode == "auto" and not has_gps):
+        if getattr(args, "gps_outage", None):
+            raise ValueError("--gps-outage needs GPS fusion: the recording has no gps stream" if not has_gps
+                             else "--gps-outage has no effect with --gps off")
+        return None
+    if not has_gps:
+        raise ValueError(f"--gps {mode}: the recording has no gps stream "
+                         f"(streams: {', '.join(sorted(rec.streams))})")
+    from core.gnss.fusion import GpsFusion
+
+    t0 = rec.t0_ns
+    hidden = [(t0 + int(a * 1e9), t0 + int((a + b) * 1e9)) for a, b in (args.gps_outage or [])]
+    kw = {}
+    if profile is not None:
+        from core.gnss.training import fusion_settings_from_profile
+        kw = fusion_settings_from_profile(profile)
+    return GpsFusion(hidden_ns=hidden, **kw)
+
+
+def build_pipeline(args, gnss=None):
     from core.pdr.pipeline import Pipeline
     from core.pdr.stride import WeinbergStride
 
@@ -71,9 +110,15 @@ def build_pipeline(args):
     else:
         from core.pdr.stride_models import load_stride_model
         kw["stride_model"] = load_stride_model(args.stride_model)
-    p = Pipeline(**kw)  # the default filter, with its magnetometer calibration
+    p = Pipeline(gnss=gnss, **kw)  # the default filter, with its magnetometer calibration
     p.attitude.declination_rad = math.radians(args.declination)
     return p
+
+
+def _load_profile(path: str):
+    from core.pdr.calibration import UserProfile
+
+    return UserProfile.load(path) if Path(path).exists() else UserProfile()
 
 
 class _Progress:
@@ -128,6 +173,8 @@ def summary_lines(res, rec: Recording) -> list[str]:
     if truth:
         lines.append(f"truth         {truth.get('n_steps')} steps, {truth.get('path_length_m', float('nan')):.1f} m "
                      f"(simulator)")
+    if res.fusion is not None:
+        lines.extend(gps_lines(res))
     for lab in res.labels:
         lines.append(f"degraded      {lab}")
     for r in rec.repairs:
@@ -135,9 +182,37 @@ def summary_lines(res, rec: Recording) -> list[str]:
     return lines
 
 
+def gps_lines(res) -> list[str]:
+    """Summary lines of the GPS fusion: fixes, what was learnt, outages."""
+    fu = res.fusion
+    c = fu.counters
+    tr = c.get("training", {})
+    hm = tr.get("heading_model", {})
+    lines = [(f"gps           {c['fixes']} fixes: {c['fixes_accepted']} used, {c['fixes_screened_out']} screened out, "
+             f"{c['fixes_gated']} rejected by the filter, {c['fixes_hidden']} hidden (outages)")]
+    if fu.origin_lat_lon is not None:
+        lines.append(f"start         {fu.origin_lat_lon[0]:.6f}, {fu.origin_lat_lon[1]:.6f} (WGS-84, from GPS)")
+    coef = hm.get("coefficients_deg") or []
+    lines.append(f"learnt        stride x{tr.get('stride_scale', 1.0):.3f} ({tr.get('stride_samples', 0)} windows); "
+                 f"heading offset {coef[0] if coef else 0.0:+.1f} deg"
+                 + (" + harmonics" if hm.get("harmonics_trusted") else " (one-term: headings not yet spread)")
+                 + f" ({tr.get('heading_samples', 0)} windows)")
+    if fu.steps:
+        last = fu.track()
+        lines.append(f"fused end     E {last.east_m[-1]:+.1f} m, N {last.north_m[-1]:+.1f} m, +- {last.sigma_m[-1]:.1f} m"
+                     f" (1 sigma); {sum(1 for s in last.source if s == 'dr')} of {len(last)} steps dead reckoning only")
+    for o in fu.outages:
+        lines.append(f"outage        {o.start_s:.0f} s + {o.length_s:.0f} s: {o.walked_m:.0f} m walked, error at the "
+                     f"end {o.end_error_m:.1f} m ({o.end_error_pct:.1f} %), +- {o.sigma_m:.1f} m; rejoined GPS with a "
+                     f"{o.jump_m:.1f} m jump")
+    return lines
+
+
 def cmd_replay(args) -> int:
     rec = load_demo() if args.recording is None else load_any(args.recording)
-    pipeline = build_pipeline(args)
+    profile = _load_profile(args.profile) if getattr(args, "profile", None) else None
+    gnss = build_gnss(args, rec, profile)
+    pipeline = build_pipeline(args, gnss)
     big = sum(len(s) for s in rec.streams.values()) > 200_000
     prog = _Progress("replay", args.progress or (big and sys.stderr.isatty()))
     res = pipeline.run(rec, progress=prog)
@@ -145,7 +220,9 @@ def cmd_replay(args) -> int:
         print(json.dumps(res.summary(), indent=1, default=float))
     else:
         print("\n".join(summary_lines(res, rec)))
-    origin = args.origin or _first_gps_origin(rec)
+    fused = res.fusion is not None and res.fusion.origin_lat_lon is not None and len(res.fusion.steps)
+    origin = args.origin or (res.fusion.origin_lat_lon if fused else None) or _first_gps_origin(rec)
+    track, extra = (res.fusion.track(), res.fusion.track().point_properties()) if fused else (res.track, None)
     offset = rec.metadata.get("unix_offset_ns")
     written = []
     from core import export
@@ -153,22 +230,36 @@ def cmd_replay(args) -> int:
         if out:  # outputs may go into a folder that does not exist yet (out/ by default in the README)
             Path(out).parent.mkdir(parents=True, exist_ok=True)
     if args.csv:
-        export.write_track_csv(args.csv, res.track)
+        export.write_track_csv(args.csv, track)
         written.append(args.csv)
     if args.geojson:
-        export.write_track_geojson(args.geojson, res.track, origin, {"source": rec.source})
+        export.write_track_geojson(args.geojson, track, origin,
+                                   {"source": rec.source, "track": "fused with GPS" if fused else "dead reckoning"},
+                                   extra)
         written.append(args.geojson)
     if args.gpx:
-        export.write_track_gpx(args.gpx, res.track, origin, offset if isinstance(offset, int) else None)
+        export.write_track_gpx(args.gpx, track, origin, offset if isinstance(offset, int) else None,
+                               point_properties=extra)
         written.append(args.gpx)
     if args.plot:
         from desktop.plot import plot_track
         truth_en = rec.metadata.get("waypoints_en_m") if rec.metadata.get("simulator") else None
         s = res.summary()
-        plot_track(args.plot, res.track, title=f"PDR: {Path(rec.source.split(' ')[0]).name}",
-                   truth_en=truth_en,
+        others, fixes = {}, None
+        if fused:
+            others["dead reckoning only"] = (res.track.east_m, res.track.north_m)
+            fx = [f for f in res.fusion.fixes if f.east_m == f.east_m]
+            fixes = ([f.east_m for f in fx], [f.north_m for f in fx], [f.accepted for f in fx])
+        plot_track(args.plot, track, title=f"PDR: {Path(rec.source.split(' ')[0]).name}",
+                   truth_en=truth_en, others=others, fixes=fixes,
                    subtitle=f"{s['n_steps']} steps, {s['distance_m']:.1f} m, start-to-end {s['start_to_end_m']:.2f} m")
         written.append(args.plot)
+    if profile is not None and res.fusion is not None:
+        from core.gnss.training import profile_with_gps_training
+        new = profile_with_gps_training(profile, pipeline.gnss.trainer)
+        if new is not profile:
+            new.save(args.profile)
+            written.append(args.profile)
     for w in written:
         print(f"wrote         {w}")
     return 0
@@ -232,6 +323,14 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--declination", type=float, default=0.0, metavar="DEG",
                    help="magnetic declination, east positive (default 0: headings relative to magnetic north)")
     r.add_argument("--no-mag", action="store_true", help="ignore the magnetometer (heading relative to the start)")
+    r.add_argument("--gps", choices=GPS_MODES, default="auto",
+                   help="GPS fusion: auto (fuse when the recording has fixes), off, chen (Chen et al. 2010: "
+                        "calibration while GPS is good, the PDR Kalman filter), kubrak (not yet)")
+    r.add_argument("--gps-outage", type=_parse_outage, action="append", metavar="START_S:LENGTH_S",
+                   help="hide the GPS fixes from START_S (seconds from the first sensor event) for LENGTH_S; "
+                        "repeatable; the error at the end of each is reported")
+    r.add_argument("--profile", metavar="PATH", help="user profile (JSON): its stride scale and heading model start "
+                   "the GPS training, and what the walk taught is saved back into it")
     r.add_argument("--json", action="store_true", help="print the summary as JSON")
     r.add_argument("--progress", action="store_true", help="always show progress on stderr")
     r.set_defaults(func=cmd_replay)

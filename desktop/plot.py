@@ -6,11 +6,12 @@ import math
 
 
 def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, landmarks_en=None,
-               others: dict | None = None, subtitle: str = "") -> None:
+               others: dict | None = None, subtitle: str = "", fixes=None) -> None:
     """Write a PNG of the track (East/North metres, equal axes) with start and end marked.
 
     ``truth_en``: optional (n, 2) reference path; ``landmarks_en``: optional (k, 2)
-    points; ``others``: optional ``{label: (east array, north array)}`` of other tracks.
+    points; ``others``: optional ``{label: (east array, north array)}`` of other tracks;
+    ``fixes``: optional ``(east, north, accepted)`` GPS fixes (used ones filled, rejected ones hollow).
     """
     try:
         import matplotlib
@@ -29,6 +30,13 @@ def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, lan
     if landmarks_en is not None:
         lm = np.asarray(landmarks_en, float)
         ax.plot(lm[:, 0], lm[:, 1], "s", color="tab:green", ms=6, label="landmarks")
+    if fixes is not None and len(fixes[0]):
+        fe, fn, ok = (np.asarray(v) for v in fixes)
+        ok = ok.astype(bool)
+        ax.plot(fe[ok], fn[ok], ".", color="tab:orange", ms=3, alpha=0.6, label=f"GPS fixes used ({int(ok.sum())})")
+        if (~ok).any():
+            ax.plot(fe[~ok], fn[~ok], "o", mfc="none", color="tab:red", ms=4, alpha=0.6,
+                    label=f"GPS fixes not used ({int((~ok).sum())})")
     for label, (oe, on) in (others or {}).items():
         ax.plot(oe, on, "-", lw=1, alpha=0.8, label=label)
     ax.plot(e, n, "-", color="tab:blue", lw=1.6, label=f"PDR ({len(track)} steps)")

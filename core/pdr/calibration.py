@@ -30,10 +30,10 @@ import json
 import math
 import os
 import tempfile
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Iterable
 
 from core.pdr.stride import StepFeatures, StrideModel
 from core.pdr.stride_models import lengths_of, load_stride_model, with_scale
@@ -75,12 +75,18 @@ class UserProfile:
         The stride model (shipped name or file path) the scale belongs to.
     calibrations : list of dict
         The calibration walks (known and model distance, steps, model id, time), newest last.
+    gps : dict
+        What walks with good GPS taught: ``stride_scale`` (on top of ``c_scale``), ``stride_gps_m``
+        (metres of GPS behind it), ``heading_model`` (coefficients in degrees), ``updated``.
     """
 
     height_m: float | None = None
     c_scale: float = 1.0
     model: str = "default"
     calibrations: list[dict] = field(default_factory=list)
+    #: what GPS taught (core.gnss.training.profile_with_gps_training): stride scale on top of the model and
+    #: the heading error model (eq. 12 of Chen et al. 2010); empty until a walk with good GPS
+    gps: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if self.height_m is not None:
@@ -110,7 +116,7 @@ class UserProfile:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict, source: str = "<dict>") -> "UserProfile":
+    def from_dict(cls, d: dict, source: str = "<dict>") -> UserProfile:
         if not isinstance(d, dict) or d.get("format") != FORMAT_NAME:
             raise CalibrationError(f"{source}: not a {FORMAT_NAME} file")
         ver = d.get("format_version")
@@ -118,7 +124,8 @@ class UserProfile:
             raise CalibrationError(f"{source}: format_version {ver!r} not supported")
         try:
             return cls(height_m=d.get("height_m"), c_scale=float(d.get("c_scale", 1.0)),
-                       model=str(d.get("model", "default")), calibrations=list(d.get("calibrations", [])))
+                       model=str(d.get("model", "default")), calibrations=list(d.get("calibrations", [])),
+                       gps=dict(d.get("gps") or {}))
         except (TypeError, ValueError) as e:
             raise CalibrationError(f"{source}: {e}") from None
 
@@ -138,7 +145,7 @@ class UserProfile:
             raise
 
     @classmethod
-    def load(cls, path: str | Path) -> "UserProfile":
+    def load(cls, path: str | Path) -> UserProfile:
         path = Path(path)
         try:
             d = json.loads(path.read_text(encoding="utf-8"))

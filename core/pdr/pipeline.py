@@ -9,7 +9,9 @@ Events go in one at a time, in time order, as the phone delivers them::
                -> RotationSmoother.update(R of the EKF) (section 4.3)
                -> steps whose heading is due: stride model (eq. 4), DeadReckoner (eq. 1)
     mag   -> AttitudeEKF.update_mag                     (eq. 18)
-    gps, rotvec, others -> kept for later stages, ignored by the core PDR
+    gps   -> GpsFusion (core.gnss.fusion), when the pipeline has one: each
+             completed step goes through it too, giving the fused track
+    rotvec, others -> ignored by the core PDR
 
 Two gates keep what is not walking out of the track (neither is in the paper;
 both were needed on real recordings, whose first minute is often spent waving
@@ -51,7 +53,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.conventions import ACC, GYRO, MAG
+from core.conventions import ACC, GPS, GYRO, MAG
 from core.dsp import GridResampler
 from core.pdr.attitude import AttitudeEKF
 from core.pdr.deadreckoning import DeadReckoner
@@ -109,7 +111,7 @@ class Track:
         return len(self.t_ns)
 
     @classmethod
-    def from_steps(cls, steps: list[Step]) -> "Track":
+    def from_steps(cls, steps: list[Step]) -> Track:
         return cls(
             np.array([s.t_ns for s in steps], dtype=np.int64),
             np.array([s.length_m for s in steps], dtype=float),
@@ -140,6 +142,8 @@ class PipelineResult:
     recording: Recording
     #: counts of what the attitude filter used and rejected
     counters: dict = field(default_factory=dict)
+    #: the GPS fusion's track, fixes and outages (None without a fusion stage)
+    fusion: object = None
 
     def summary(self) -> dict:
         rec = self.recording
@@ -157,6 +161,8 @@ class PipelineResult:
             "start_to_end_m": math.hypot(fe, fn),
             "labels": list(self.labels),
             **self.counters,
+            **({"gps": self.fusion.counters, "outages": [o.as_dict() for o in self.fusion.outages]}
+               if self.fusion is not None else {}),
         }
 
 
@@ -196,6 +202,10 @@ class Pipeline:
         (``AttitudeEKF(mag_calibrator=MagCalibrator(), mag_requires_calibration=True)``).
     log : bool
         Keep an :class:`AttitudeLog` (batch runs turn it on).
+    gnss : core.gnss.fusion.GpsFusion or None
+        GPS fusion after the steps (Chen et al. 2010): fixes of the ``gps``
+        stream and every completed step go through it; :attr:`fused` holds the
+        fused steps, :meth:`run` returns them in ``result.fusion``.
     """
 
     def __init__(self, *, height_m: float | None = None, stride_model: StrideModel | None = None,
@@ -203,7 +213,8 @@ class Pipeline:
                  smoother: RotationSmoother | None = None, grid_rate_hz: float = 50.0,
                  heading_delay_s: float | None = None, use_magnetometer: bool = True,
                  max_rotation_rms_rad_s: float = 3.0, rotation_window_s: float = 1.0, min_bout_steps: int = 3,
-                 mag_stream: str = MAG, log: bool = False):
+                 mag_stream: str = MAG, log: bool = False, gnss=None):
+        self.gnss = gnss
         self.mag_stream = str(mag_stream)
         self.height_m = height_m
         self.stride_model = stride_model or WeinbergStride()
@@ -240,6 +251,10 @@ class Pipeline:
         self.n_rejected_rotation = 0
         self.n_rejected_bout = 0
         self.steps: list[Step] = []
+        #: fused steps (core.gnss.fusion.FusedStep), one per step, when there is a GPS fusion stage
+        self.fused: list = []
+        if self.gnss is not None:
+            self.gnss.reset()
         #: smoothed forward vector on the grid, (t_ns, east, north), the last few seconds
         self._fwd = deque()
         self._fwd_keep_ns = self._bout_gap_ns + self._delay_ns + 1_000_000_000
@@ -273,7 +288,9 @@ class Pipeline:
             self.attitude.update_mag(t_ns, values[0], values[1], values[2])
             return []
         if stream != ACC:
-            return []  # gps, rotvec, ...: not used by the core PDR
+            if stream == GPS and self.gnss is not None:
+                self.gnss.add_fix(t_ns, values)
+            return []  # rotvec, ...: not used by the core PDR
         ax, ay, az = values[0], values[1], values[2]
         self.attitude.update_acc(t_ns, ax, ay, az)
         done: list[Step] = []
@@ -355,6 +372,8 @@ class Pipeline:
         self._drop_unconfirmed()
         done = [self._complete(ev, self._step_heading(ev) if h is None else h) for ev, h, _ in self._candidates]
         self._candidates = []
+        if self.gnss is not None:
+            self.gnss.finish()
         return done
 
     def _complete(self, ev: StepEvent, heading: float) -> Step:
@@ -368,6 +387,8 @@ class Pipeline:
         step = Step(len(self.steps), ev.t_ns, length, heading, east, north, feats,
                     not self.attitude.mag_rejected and self.attitude.use_magnetometer)
         self.steps.append(step)
+        if self.gnss is not None:
+            self.fused.append(self.gnss.add_step(step))
         return step
 
     #: share of rejected magnetometer readings above which the summary warns
@@ -410,6 +431,9 @@ class Pipeline:
         log, self.log = self.log, True
         self.reset()
         use = [n for n in (GYRO, ACC, self.mag_stream) if recording.has(n)]
+        if self.gnss is not None and recording.has(GPS):
+            use.append(GPS)
+            self.gnss.set_time_zero(recording.t0_ns)
         try:
             total = sum(len(recording.streams[n]) for n in use)
             update = self.update
@@ -437,8 +461,9 @@ class Pipeline:
                     "nonfinite_skipped": dict(self.n_nonfinite)}
         if hasattr(a, "counters"):
             counters["attitude"] = a.counters()
+        fusion = self.gnss.result() if self.gnss is not None else None
         return PipelineResult(list(self.steps), Track.from_steps(self.steps), att, self.labels(), recording,
-                              counters)
+                              counters, fusion)
 
 
 def run_recording(recording: Recording, **params) -> PipelineResult:

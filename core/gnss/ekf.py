@@ -1,0 +1,287 @@
+"""The PDR extended Kalman filter of Chen et al. (2010), eq. 13, with GPS updates.
+
+State ``x = [E, N, l, psi, b, k]`` (the last two are consider states, below): East and North position (m, the walk's local
+ENU frame), step length (m) and walking heading (rad, counter-clockwise from
+East as everywhere in :mod:`core`).  The paper writes eq. 13 with a compass
+bearing ``a`` (clockwise from North)::
+
+    E_{k+1} = E_k + l_k sin a_k,   N_{k+1} = N_k + l_k cos a_k,
+    l_{k+1} = l_k + w_l,           a_{k+1} = a_k + w_a
+
+which with ``psi = pi/2 - a`` is ``E += l cos psi, N += l sin psi``: the sign
+of the heading's random walk and of every heading derivative changes with the
+convention; the filter below is written in ours.
+
+Per step (:meth:`PdrEkf.step`)
+    1. the random walk of eq. 13 on ``l`` and ``psi``; the heading's process
+       noise has, beside the paper's constant ``heading_walk_rad``, a term for
+       the walker's own turn ``turn_gain * (psi_meas_k - psi_meas_{k-1})`` --
+       without it a filter tuned for straight walking cuts every corner (a
+       90-degree turn with a per-step walk of 2 deg and a 4-deg measurement
+       lags by about 5 steps, ~3 m of track); not in the paper;
+    2. the measurement update with the step's length from the stride model and
+       its heading compensated by the unified error model (eq. 12), the
+       paper's "measurement vector";
+    3. the position moves by eq. 13 with the updated ``l`` and ``psi``;
+       ``F = d f / d x`` (a test checks it by finite differences).
+
+GPS (:meth:`PdrEkf.update_position`, :meth:`PdrEkf.update_course`)
+    A fix at time ``t`` between step ``k`` (at ``t_k``) and the next is
+    compared with the position after step ``k`` plus the part of the next
+    step already walked, ``f = (t - t_k) / T`` of it (``T`` the last step's
+    duration, ``f`` clipped to [0, 1], 0 after a pause)::
+
+        h(x) = [E + f l cos psi,  N + f l sin psi]
+
+    so that a 1 Hz fix is not compared with a position up to a step old.
+    Updates pass a chi-square gate on their normalised innovation squared
+    (NIS); rejected ones leave the state untouched and are returned as flags.
+    The course of a moving receiver is a direct measurement of ``psi``.
+
+Honest uncertainty: two consider states
+    The paper's filter treats each step's heading error as white noise
+    (``omega``).  It is not: what the error model has not learnt (a few
+    degrees of offset, a harmonic not yet trusted) and the stride scale's
+    residual error repeat at every step, so a white-noise filter's position
+    uncertainty grows with the square root of the steps while the error grows
+    with the steps -- after a 3-minute outage on the ETH walk it claimed
+    1.3 m for an error of 50 m.  The state therefore carries two *consider*
+    (Schmidt) states: ``b``, the bias of the compensated heading, and ``k``,
+    the relative error of the step length, with ``z_psi = psi + b`` and
+    ``z_l = l (1 + k)``.  They are never estimated here (their gain rows are
+    zero: training their values is :mod:`core.gnss.training`'s job, from
+    windows it can trust), but their variances -- set from the training's own
+    uncertainty by :meth:`PdrEkf.set_consider_sd`, plus a slow random walk --
+    make the position covariance grow with the distance walked, as the error
+    does.
+
+Every update uses the Joseph form (valid for the Schmidt gain too) and
+refuses non-finite input, so the state never holds a NaN or an inf.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from core.conventions import wrap_angle
+
+#: chi-square 99.9 % points for 1 and 2 degrees of freedom
+CHI2_999 = {1: 10.83, 2: 13.82}
+
+#: state indices: East, North, step length, heading, and the consider states heading bias, length scale error
+E, N, L, PSI, B, K = range(6)
+NX = 6
+CONSIDER = (B, K)
+
+
+@dataclass(frozen=True)
+class UpdateResult:
+    """Diagnostics of one measurement update (data, not logs)."""
+
+    accepted: bool
+    innovation: tuple  #: measurement minus prediction (m or rad)
+    nis: float  #: normalised innovation squared
+    correction_m: float = 0.0  #: how far the position moved (m); 0 when rejected
+    sigma_before_m: float = math.nan  #: sqrt of the largest eigenvalue of the position covariance before
+    reason: str = ""
+
+
+class PdrEkf:
+    """Eq. 13 with the step-length and heading measurements of each step and GPS updates.
+
+    Parameters
+    ----------
+    length_walk_m : float
+        Random walk of the step length per step (the paper's ``delta_l``, m).
+    heading_walk_rad : float
+        Random walk of the heading per step (the paper's ``delta_a``, rad).
+    turn_gain : float
+        Extra heading process noise per step: this factor times the change of the
+        measured heading since the last step (see the module docstring).
+    length_sd_m : float
+        SD of a step length measurement (the stride model's per-step error, m).
+    heading_sd_rad : float
+        SD of a step heading measurement (the body's oscillation, the paper's ``omega``, rad).
+    gate_nis_2d, gate_nis_1d : float
+        Chi-square gates on the NIS of position (2 dof) and course (1 dof) updates.
+    bias_walk_rad, scale_walk : float
+        Random walk per step of the consider states (heading bias, rad; relative length error).
+    """
+
+    def __init__(self, *, length_walk_m: float = 0.03, heading_walk_rad: float = math.radians(1.5),
+                 turn_gain: float = 1.0, length_sd_m: float = 0.08, heading_sd_rad: float = math.radians(4.0),
+                 gate_nis_2d: float = CHI2_999[2], gate_nis_1d: float = CHI2_999[1],
+                 bias_walk_rad: float = math.radians(0.05), scale_walk: float = 0.0005):
+        self.length_walk_m = float(length_walk_m)
+        self.heading_walk_rad = float(heading_walk_rad)
+        self.turn_gain = float(turn_gain)
+        self.length_sd_m = float(length_sd_m)
+        self.heading_sd_rad = float(heading_sd_rad)
+        self.gate_nis_2d = float(gate_nis_2d)
+        self.gate_nis_1d = float(gate_nis_1d)
+        self.bias_walk_rad = float(bias_walk_rad)
+        self.scale_walk = float(scale_walk)
+        self.initialized = False
+        self.x = np.zeros(NX)
+        self.P = np.eye(NX)
+        self._last_heading_meas = math.nan
+        self.n_steps = 0
+
+    def initialize(self, east_m: float, north_m: float, pos_sd_m: float, length_m: float, heading_rad: float,
+                   *, length_sd_m: float = 0.15, heading_sd_rad: float = math.radians(10.0),
+                   bias_sd_rad: float = math.radians(3.0), scale_sd: float = 0.03) -> None:
+        """Start the filter at a position (a GPS fix or the walk's origin) with the given uncertainties."""
+        vals = (east_m, north_m, pos_sd_m, length_m, heading_rad)
+        if not all(math.isfinite(v) for v in vals):
+            raise ValueError(f"PdrEkf.initialize needs finite values, got {vals}")
+        self.x = np.array([east_m, north_m, length_m, wrap_angle(float(heading_rad)), 0.0, 0.0], dtype=float)
+        self.P = np.diag([pos_sd_m ** 2, pos_sd_m ** 2, length_sd_m ** 2, heading_sd_rad ** 2, bias_sd_rad ** 2,
+                          scale_sd ** 2])
+        self._last_heading_meas = math.nan
+        self.initialized = True
+
+    # -- helpers --------------------------------------------------------------
+    @property
+    def position_cov_m2(self) -> np.ndarray:
+        return self.P[:2, :2].copy()
+
+    def position_sigma_m(self) -> float:
+        """sqrt of the largest eigenvalue of the position covariance (m)."""
+        return math.sqrt(max(float(np.linalg.eigvalsh(self.P[:2, :2])[-1]), 0.0))
+
+    def _update(self, innov: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float) -> tuple[bool, float]:
+        S = H @ self.P @ H.T + R
+        try:
+            Si = np.linalg.inv(S)
+        except np.linalg.LinAlgError:
+            return False, math.inf
+        nis = float(innov @ Si @ innov)
+        if not math.isfinite(nis) or nis > gate:
+            return False, nis
+        K = self.P @ H.T @ Si
+        K[list(CONSIDER), :] = 0.0  # Schmidt: the consider states are not estimated
+        dx = K @ innov
+        if not np.all(np.isfinite(dx)):
+            return False, nis
+        self.x = self.x + dx
+        self.x[3] = wrap_angle(float(self.x[3]))
+        ikh = np.eye(NX) - K @ H
+        P = ikh @ self.P @ ikh.T + K @ R @ K.T  # Joseph form
+        self.P = 0.5 * (P + P.T)
+        return True, nis
+
+    # -- per step ---------------------------------------------------------------
+    def step(self, length_m: float, heading_rad: float) -> UpdateResult:
+        """One step: random walk (eq. 13), update with the step's length and heading, move the position."""
+        if not self.initialized:
+            raise RuntimeError("PdrEkf.step before initialize")
+        if not (math.isfinite(length_m) and math.isfinite(heading_rad)):
+            return UpdateResult(False, (math.nan, math.nan), math.nan, reason="not finite")
+        turn = 0.0 if self._last_heading_meas != self._last_heading_meas else \
+            wrap_angle(heading_rad - self._last_heading_meas)
+        self._last_heading_meas = float(heading_rad)
+        # eq. 13: l and psi as random walks (+ the walker's own turn)
+        self.P[L, L] += self.length_walk_m ** 2
+        self.P[PSI, PSI] += self.heading_walk_rad ** 2 + (self.turn_gain * turn) ** 2
+        self.P[B, B] += self.bias_walk_rad ** 2
+        self.P[K, K] += self.scale_walk ** 2
+        # z_l = l (1 + k), z_psi = psi + b, with the consider states at 0
+        innov = np.array([length_m - self.x[L], wrap_angle(heading_rad - self.x[PSI])])
+        H = np.zeros((2, NX))
+        H[0, L], H[0, K] = 1.0, self.x[L]
+        H[1, PSI], H[1, B] = 1.0, 1.0
+        R = np.diag([self.length_sd_m ** 2, self.heading_sd_rad ** 2])
+        ok, nis = self._update(innov, H, R, math.inf)
+        # eq. 13: the position moves by the step
+        F = self.transition_jacobian(self.x[L], self.x[PSI])
+        self.x = self.transition(self.x)
+        P = F @ self.P @ F.T
+        self.P = 0.5 * (P + P.T)
+        self.n_steps += 1
+        return UpdateResult(ok, (float(innov[0]), float(innov[1])), nis)
+
+    @staticmethod
+    def transition(x: np.ndarray) -> np.ndarray:
+        """eq. 13 (in ENU, CCW heading): the state after a step of length ``x[2]`` along ``x[3]``."""
+        out = np.array(x, dtype=float)
+        out[E] += x[L] * math.cos(x[PSI])
+        out[N] += x[L] * math.sin(x[PSI])
+        return out
+
+    @staticmethod
+    def transition_jacobian(length_m: float, heading_rad: float) -> np.ndarray:
+        """``d transition / d x`` at ``(l, psi)``."""
+        c, s = math.cos(heading_rad), math.sin(heading_rad)
+        F = np.eye(NX)
+        F[E, L], F[E, PSI] = c, -length_m * s
+        F[N, L], F[N, PSI] = s, length_m * c
+        return F
+
+    # -- GPS ----------------------------------------------------------------------
+    @staticmethod
+    def fix_prediction(x: np.ndarray, fraction: float) -> np.ndarray:
+        """``h(x)``: the position ``fraction`` of a step beyond the state's."""
+        return np.array([x[E] + fraction * x[L] * math.cos(x[PSI]), x[N] + fraction * x[L] * math.sin(x[PSI])])
+
+    @staticmethod
+    def fix_jacobian(x: np.ndarray, fraction: float) -> np.ndarray:
+        """``d h / d x``."""
+        l, psi = x[L], x[PSI]
+        c, s = math.cos(psi), math.sin(psi)
+        H = np.zeros((2, NX))
+        H[0, E], H[0, L], H[0, PSI] = 1.0, fraction * c, -fraction * l * s
+        H[1, N], H[1, L], H[1, PSI] = 1.0, fraction * s, fraction * l * c
+        return H
+
+    def update_position(self, east_m: float, north_m: float, sigma_m: float, fraction: float = 0.0,
+                        *, gate: bool = True) -> UpdateResult:
+        """A GPS position (local ENU, m) with its per-axis SD (m)."""
+        sig_before = self.position_sigma_m()
+        if not (math.isfinite(east_m) and math.isfinite(north_m) and sigma_m > 0 and math.isfinite(sigma_m)):
+            return UpdateResult(False, (math.nan, math.nan), math.nan, 0.0, sig_before, "not finite")
+        f = min(max(float(fraction), 0.0), 1.0)
+        innov = np.array([east_m, north_m]) - self.fix_prediction(self.x, f)
+        H = self.fix_jacobian(self.x, f)
+        before = self.x[:2].copy()
+        ok, nis = self._update(innov, H, np.eye(2) * sigma_m ** 2, self.gate_nis_2d if gate else math.inf)
+        moved = float(np.hypot(*(self.x[:2] - before))) if ok else 0.0
+        reason = "" if ok else f"innovation gate: NIS {nis:.1f} > {self.gate_nis_2d:.1f}"
+        return UpdateResult(ok, (float(innov[0]), float(innov[1])), nis, moved, sig_before, reason)
+
+    def update_course(self, course_rad: float, sigma_rad: float) -> UpdateResult:
+        """A GPS course (rad, CCW from East) as a direct measurement of the heading."""
+        if not (math.isfinite(course_rad) and sigma_rad > 0 and math.isfinite(sigma_rad)):
+            return UpdateResult(False, (math.nan,), math.nan, reason="not finite")
+        innov = np.array([wrap_angle(course_rad - self.x[3])])
+        H = np.zeros((1, NX))
+        H[0, PSI] = 1.0
+        ok, nis = self._update(innov, H, np.array([[sigma_rad ** 2]]), self.gate_nis_1d)
+        return UpdateResult(ok, (float(innov[0]),), nis, reason="" if ok else f"course gate: NIS {nis:.1f}")
+
+    def reset_position(self, east_m: float, north_m: float, sigma_m: float) -> None:
+        """Put the position on a fix (the paper's architecture: GPS is the solution while it is there)."""
+        if math.isfinite(east_m) and math.isfinite(north_m) and sigma_m > 0:
+            self.x[0], self.x[1] = east_m, north_m
+            self.P[:2, :] = 0.0
+            self.P[:, :2] = 0.0
+            self.P[0, 0] = self.P[1, 1] = sigma_m ** 2
+
+    def set_consider_sd(self, heading_bias_sd_rad: float, scale_sd: float) -> None:
+        """Set the consider states' SDs (from the training's uncertainty), keeping ``P`` positive semi-definite.
+
+        A smaller SD scales the state's row and column (a congruence, so the
+        correlations stay); a larger one adds to its variance.
+        """
+        for i, sd in ((B, heading_bias_sd_rad), (K, scale_sd)):
+            if not (sd > 0 and math.isfinite(sd)):
+                continue
+            var = self.P[i, i]
+            if sd * sd < var:
+                f = sd / math.sqrt(var)
+                self.P[i, :] *= f
+                self.P[:, i] *= f
+            else:
+                self.P[i, i] = sd * sd

@@ -1,0 +1,267 @@
+"""The unified heading error model of Chen et al. (2010), eq. 12, learnt online from GPS course.
+
+The paper writes the deviation between the true heading and the raw compass
+heading ``xi'`` as five terms (eq. 12)::
+
+    delta = A + B sin(xi') + C cos(xi') + D sin(2 xi') + E cos(2 xi') + omega
+
+and fits ``A..E`` by least squares against GPS course during a one- or
+two-minute calibration walk.  Here the fit is recursive and weighted, and runs
+whenever GPS is good (:class:`core.gnss.training.OnlineTrainer` feeds it), so
+no separate calibration walk is needed: the paper's "future work".
+
+Conventions (:mod:`core`)
+    Our heading ``psi`` is counter-clockwise from East; the paper's ``xi`` is
+    a compass bearing, clockwise from North: ``xi = pi/2 - psi``.  The model is
+    fitted in our convention, ``delta = course_psi - psi`` (true minus ours),
+    with the regressors ``(1, sin psi, cos psi, sin 2psi, cos 2psi)``.
+    Substituting ``xi = pi/2 - psi`` (``sin xi = cos psi``, ``cos xi = sin psi``,
+    ``sin 2xi = sin 2psi``, ``cos 2xi = -cos 2psi``) and ``delta_xi = -delta_psi``
+    gives the paper's coefficients from ours::
+
+        A = -a,  B = -c,  C = -b,  D = -d,  E = +e
+
+    (:meth:`HeadingErrorModel.paper_coefficients_deg`, for a table like the
+    paper's Table II).
+
+What the terms absorb here
+    The paper's compass is a 2-axis one with no tilt compensation; its
+    harmonics mostly model tilt and the platform's hard and soft iron.  Our
+    heading comes from a tilt-compensated 3-axis filter
+    (:mod:`core.pdr.attitude`) with an online hard/soft-iron calibration, so:
+
+    * ``A`` (constant): the phone's yaw offset to the walking direction (the
+      paper's misalignment ``beta``, a few degrees for a hand-held phone,
+      tens of degrees or 180 deg in a pocket), the magnetic declination when
+      it was not applied, and the mean of any steady local field;
+    * the first harmonics (``sin psi``, ``cos psi``): residual hard iron the
+      online calibration has not removed (a hard-iron offset ``b`` in a field
+      of horizontal strength ``H`` gives a heading error ``~ |b|/H sin(psi - phase)``);
+    * the second harmonics: residual soft iron;
+    * ``omega``: the body's oscillation, step-to-step noise of a few degrees.
+
+    A magnetometer-free heading (gyro only) has no harmonic error; ``A`` then
+    absorbs the unknown initial yaw and the fit of the harmonics is refused
+    until the headings are spread (see below), which a fixed offset never
+    needs.
+
+Spread of headings
+    With one walking direction only, the five regressors are collinear (the
+    harmonics are constants too) and a least-squares fit is meaningless.  The
+    model therefore keeps two estimates side by side: ``A`` alone (a weighted
+    mean) and the full five-term fit, and predicts with the full fit only
+    once the accepted samples cover at least ``min_quadrants`` of the four
+    90-degree quadrants and their mean resultant length is below
+    ``max_resultant``.  The full fit has a ridge prior on the harmonics
+    (``harmonic_prior_sd_rad``), so that barely observed terms stay near zero.
+
+Outliers
+    A sample whose residual against the current prediction exceeds
+    ``max(outlier_k * sd, outlier_floor_rad)`` is rejected once
+    ``min_samples`` have been accepted (``sd`` is the running weighted
+    residual SD); rejections are counted and returned as flags.
+
+Forgetting
+    A hand-held phone is re-gripped now and then, which changes ``A``: every
+    accepted sample scales the old information by ``forgetting`` (0.98 keeps
+    an effective memory of about 50 samples).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from core.conventions import wrap_angle
+
+#: Names of the five coefficients in our convention (radians).
+TERMS = ("a", "b_sin", "c_cos", "d_sin2", "e_cos2")
+
+
+def regressors(heading_rad: float) -> np.ndarray:
+    """``(1, sin psi, cos psi, sin 2psi, cos 2psi)`` of eq. 12 in our convention."""
+    s, c = math.sin(heading_rad), math.cos(heading_rad)
+    return np.array([1.0, s, c, 2.0 * s * c, c * c - s * s])
+
+
+@dataclass(frozen=True)
+class SampleFlags:
+    """What :meth:`HeadingErrorModel.add` did with one sample."""
+
+    accepted: bool
+    residual_rad: float  #: sample minus the prediction before it (rad)
+    reason: str = ""  #: why it was rejected ("" when accepted)
+
+
+class HeadingErrorModel:
+    """Recursive weighted least squares of eq. 12 with a spread check and outlier rejection.
+
+    Parameters
+    ----------
+    offset_prior_sd_rad : float
+        Prior SD of ``A`` (rad); large: the offset is unknown at the start.
+    harmonic_prior_sd_rad : float
+        Prior SD (ridge) of the four harmonic coefficients (rad).
+    min_quadrants : int
+        The harmonics are used only when the accepted samples' headings fall in at
+        least this many of the four 90-degree quadrants ...
+    max_resultant : float
+        ... and their mean resultant length (1: one direction) is below this.
+    outlier_k, outlier_floor_rad : float
+        Rejection threshold ``max(outlier_k * sd, outlier_floor_rad)`` on the residual.
+    min_samples : int
+        Samples accepted before outliers are rejected (the model must know something first).
+    forgetting : float
+        Factor (0 < f <= 1) on the old information per accepted sample.
+    coefficients_rad : sequence of 5 floats or None
+        A starting model (a persisted profile); None: zeros.
+    """
+
+    def __init__(self, *, offset_prior_sd_rad: float = math.radians(45.0),
+                 harmonic_prior_sd_rad: float = math.radians(8.0), min_quadrants: int = 3,
+                 max_resultant: float = 0.6, outlier_k: float = 3.0, outlier_floor_rad: float = math.radians(12.0),
+                 min_samples: int = 4, forgetting: float = 0.98, coefficients_rad=None):
+        if not 0.0 < forgetting <= 1.0:
+            raise ValueError(f"forgetting must be in (0, 1], got {forgetting}")
+        self.offset_prior_sd_rad = float(offset_prior_sd_rad)
+        self.harmonic_prior_sd_rad = float(harmonic_prior_sd_rad)
+        self.min_quadrants = int(min_quadrants)
+        self.max_resultant = float(max_resultant)
+        self.outlier_k = float(outlier_k)
+        self.outlier_floor_rad = float(outlier_floor_rad)
+        self.min_samples = int(min_samples)
+        self.forgetting = float(forgetting)
+        self._start = np.zeros(5) if coefficients_rad is None else np.asarray(coefficients_rad, dtype=float).copy()
+        if self._start.shape != (5,) or not np.all(np.isfinite(self._start)):
+            raise ValueError("coefficients_rad must be 5 finite numbers (a, b_sin, c_cos, d_sin2, e_cos2)")
+        self.reset()
+
+    def reset(self) -> None:
+        prior = np.array([self.offset_prior_sd_rad] + [self.harmonic_prior_sd_rad] * 4) ** -2
+        #: information matrix and vector of the full fit (ridge prior about the start model)
+        self._info = np.diag(prior)
+        self._vec = self._info @ self._start
+        # A alone: weighted mean (sum of weights, weighted sum), started from the start model's A
+        self._w_a = 0.0
+        self._sum_a = 0.0
+        self._quadrant_w = np.zeros(4)
+        self._sum_cos = 0.0
+        self._sum_sin = 0.0
+        self._sum_w = 0.0
+        self._res_w = 0.0
+        self._res_sq = 0.0
+        self.n_accepted = 0
+        self.n_rejected = 0
+
+    # -- the estimate ---------------------------------------------------------
+    @property
+    def harmonics_trusted(self) -> bool:
+        """Whether the samples' headings are spread enough to use the harmonic terms."""
+        if self._sum_w <= 0:
+            return False
+        quadrants = int(np.sum(self._quadrant_w > 0.05 * self._sum_w))
+        resultant = math.hypot(self._sum_cos, self._sum_sin) / self._sum_w
+        return quadrants >= self.min_quadrants and resultant < self.max_resultant
+
+    def coefficients_rad(self) -> np.ndarray:
+        """The five coefficients in use: the full fit, or ``(A, 0, 0, 0, 0)`` before the spread check passes."""
+        if self.harmonics_trusted:
+            return np.linalg.solve(self._info, self._vec)
+        a = self._start[0] if self._w_a <= 0 else self._sum_a / self._w_a
+        out = self._start.copy() if self._w_a <= 0 else np.zeros(5)
+        out[0] = a
+        return out
+
+    def correction_rad(self, heading_rad: float) -> float:
+        """``delta(psi)`` of eq. 12: add it to our heading to get the course."""
+        return float(regressors(heading_rad) @ self.coefficients_rad())
+
+    def _effective_n(self) -> float:
+        return min(float(self.n_accepted), 1.0 / (1.0 - self.forgetting) if self.forgetting < 1.0 else math.inf)
+
+    def _scatter(self) -> float:
+        """Residual variance relative to what the sample weights claim (>= 1)."""
+        if self._res_w <= 0 or self._sum_w <= 0:
+            return 1.0
+        return max(1.0, self.residual_sd_rad() ** 2 * self._sum_w / max(self._effective_n(), 1.0))
+
+    def full_fit_variance_rad2(self, heading_rad: float) -> float:
+        """Predictive variance of the five-term fit at a heading (rad^2): large where no sample was."""
+        x = regressors(heading_rad)
+        return float(x @ np.linalg.solve(self._info, x)) * self._scatter()
+
+    def correction_sd_rad(self, heading_rad: float) -> float:
+        """Standard deviation of :meth:`correction_rad` (rad).
+
+        With the full fit, its predictive SD; with ``A`` alone, the SD of ``A``
+        plus what the untrusted harmonics could still be (their prior), so that
+        a heading never walked before is honestly uncertain.
+        """
+        if self.harmonics_trusted:
+            return math.sqrt(self.full_fit_variance_rad2(heading_rad))
+        x = regressors(heading_rad)
+        if self._w_a > 0:
+            var_a = self._scatter() / self._w_a
+        else:
+            var_a = self.offset_prior_sd_rad ** 2
+        var_h = self.harmonic_prior_sd_rad ** 2 * float(np.sum(x[1:] ** 2))
+        return math.sqrt(var_a + var_h)
+
+    def residual_sd_rad(self) -> float:
+        """Weighted RMS of the accepted samples' residuals (rad); nan before any."""
+        return math.sqrt(self._res_sq / self._res_w) if self._res_w > 0 else math.nan
+
+    def paper_coefficients_deg(self) -> dict:
+        """The coefficients in the paper's convention (compass bearing, true minus raw), degrees (Table II)."""
+        a, b, c, d, e = (math.degrees(v) for v in self.coefficients_rad())
+        return {"A": -a, "B": -c, "C": -b, "D": -d, "E": e}
+
+    # -- learning ---------------------------------------------------------------
+    def add(self, heading_rad: float, deviation_rad: float, weight: float = 1.0) -> SampleFlags:
+        """One sample: our heading ``psi`` and ``delta = course - psi`` (rad), with a weight (1/rad^2 scale)."""
+        if not (math.isfinite(heading_rad) and math.isfinite(deviation_rad) and weight > 0 and math.isfinite(weight)):
+            self.n_rejected += 1
+            return SampleFlags(False, math.nan, "not finite")
+        dev = wrap_angle(float(deviation_rad))
+        pred = self.correction_rad(heading_rad)
+        res = wrap_angle(dev - pred)
+        if self.n_accepted >= self.min_samples:
+            # the gate knows what the model can know: the full fit's predictive variance is large at a
+            # heading never walked before (a one-direction A is no prediction for the opposite direction)
+            full = float(regressors(heading_rad) @ np.linalg.solve(self._info, self._vec))
+            r_full = wrap_angle(dev - full)
+            limit = max(self.outlier_k * math.sqrt(1.0 / weight + self.full_fit_variance_rad2(heading_rad)),
+                        self.outlier_floor_rad)
+            if abs(r_full) > limit:
+                self.n_rejected += 1
+                return SampleFlags(False, res, f"residual {math.degrees(r_full):.1f} deg > "
+                                               f"{math.degrees(limit):.1f} deg")
+        f = self.forgetting
+        # unwrap the sample next to the prediction, so that +-180 deg offsets average correctly
+        dev = pred + res
+        x = regressors(heading_rad)
+        self._info = f * self._info + weight * np.outer(x, x)
+        self._vec = f * self._vec + weight * dev * x
+        a_now = self._sum_a / self._w_a if self._w_a > 0 else dev
+        self._sum_a = f * self._sum_a + weight * (a_now + wrap_angle(dev - a_now))
+        self._w_a = f * self._w_a + weight
+        q = int((heading_rad % (2.0 * math.pi)) // (math.pi / 2.0)) % 4
+        self._quadrant_w *= f
+        self._quadrant_w[q] += weight
+        self._sum_cos = f * self._sum_cos + weight * math.cos(heading_rad)
+        self._sum_sin = f * self._sum_sin + weight * math.sin(heading_rad)
+        self._sum_w = f * self._sum_w + weight
+        self._res_w = f * self._res_w + weight
+        self._res_sq = f * self._res_sq + weight * res * res
+        self.n_accepted += 1
+        return SampleFlags(True, res)
+
+    # -- persistence ------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """The learnt model for a profile: coefficients (deg, our convention), whether harmonics were trusted."""
+        return {"coefficients_deg": [math.degrees(v) for v in self.coefficients_rad()],
+                "terms": list(TERMS), "harmonics_trusted": self.harmonics_trusted,
+                "n_samples": self.n_accepted, "residual_sd_deg": math.degrees(self.residual_sd_rad())
+                if self._res_w > 0 else None}

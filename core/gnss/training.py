@@ -1,0 +1,376 @@
+"""Online training of the walker's stride and the heading error model while GPS is good.
+
+Chen et al. (2010) calibrate in a sports field before the walk and leave
+real-time training as future work; Kubrak et al. (2006) train their velocity
+model online and show what goes wrong: noisy GPS just before an outage ruins
+the coefficients the outage then has to live with.  :class:`OnlineTrainer`
+learns continuously, but only from windows that deserve it.
+
+A training window
+    Every ``window_s`` seconds of good GPS (non-overlapping windows, ending at
+    a fix) is one candidate.  It is used only if
+
+    * every fix in it reports ``hacc_m <= max_hacc_m`` and the fixes cover
+      the window without gaps longer than ``max_fix_gap_s``;
+    * the walker walks: at least ``min_steps`` steps and a GPS speed between
+      ``min_speed_m_s`` and ``max_speed_m_s``;
+    * straight: the circular SD of our step headings is below
+      ``straight_sd_rad`` (a turn mixes headings and smears the course);
+    * at steady speed: the coefficient of variation of the fixes' speed is
+      below ``max_speed_cv``.
+
+What a window gives
+    *Stride*: ``scale = GPS distance / model distance``, where the GPS
+    distance is the integral of the receivers' Doppler speed where it is
+    reported (far steadier than differences of 5-metre positions) and the
+    chord between the first and last fix otherwise (straight walking, so the
+    chord is the path; at least ``min_chord_m``), and the model distance is
+    the sum of the stride model's step lengths over the same time span (a
+    step counts with the part of its interval inside the window).
+
+    *Heading*: ``delta = course - mean(our heading)`` for eq. 12
+    (:class:`core.gnss.heading_model.HeadingErrorModel`), the course being the
+    circular mean of the Doppler courses or the chord's bearing.
+
+Safeguards (flags returned with every window)
+    * a stride sample more than ``scale_gate`` (relative) from the current
+      estimate is rejected once ``min_samples`` have been accepted;
+    * **variability check** (Kubrak et al.): when the spread (coefficient of
+      variation) of the last ``noisy_window`` raw stride samples exceeds
+      ``noisy_cv``, GPS is called noisy and nothing is learnt until it
+      settles: the estimate keeps the mean of the samples before, instead of
+      following noise into the outage that often comes next;
+    * the estimate is clipped to ``scale_limits``.
+
+The stride estimate is a distance-weighted mean of the accepted samples
+with exponential forgetting (``forgetting`` per sample), started from a prior
+(``scale_prior``, worth ``scale_prior_weight_m`` metres of walking: the
+user's profile from earlier walks).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from core.conventions import wrap_angle
+from core.gnss.heading_model import HeadingErrorModel
+
+
+@dataclass(frozen=True)
+class WindowFlags:
+    """What one training window gave (diagnostics as data)."""
+
+    t_ns: int  #: end of the window (the fix that closed it)
+    used_stride: bool
+    used_heading: bool
+    scale_sample: float  #: GPS / model distance of this window (nan if not computed)
+    deviation_rad: float  #: course minus our mean heading (nan if not computed)
+    heading_rad: float  #: our mean heading over the window
+    gps_distance_m: float
+    reason: str = ""  #: why the window (or a part of it) was not used
+
+
+def _circ_mean_sd(angles, weights=None) -> tuple[float, float]:
+    a = np.asarray(angles, dtype=float)
+    w = np.ones(len(a)) if weights is None else np.asarray(weights, dtype=float)
+    c, s = float(np.sum(w * np.cos(a))), float(np.sum(w * np.sin(a)))
+    sw = float(np.sum(w))
+    if sw <= 0:
+        return math.nan, math.nan
+    r = min(math.hypot(c, s) / sw, 1.0)
+    sd = math.sqrt(-2.0 * math.log(r)) if r > 1e-12 else math.inf
+    return math.atan2(s, c), sd
+
+
+class OnlineTrainer:
+    """Learns a stride scale and the heading error model from good GPS windows.
+
+    Parameters
+    ----------
+    window_s : float
+        Length of a training window (s).
+    min_steps : int
+        Steps a window must hold.
+    max_hacc_m : float
+        Worst reported horizontal accuracy of a fix in a usable window (m).
+    max_fix_gap_s : float
+        Longest gap between the window's fixes (s).
+    min_speed_m_s, max_speed_m_s : float
+        Walking speeds (GPS) a window may have (m/s).
+    max_speed_cv : float
+        Steady speed: coefficient of variation of the fixes' speed in the window.
+    straight_sd_rad : float
+        Straight walking: circular SD of the step headings in the window (rad).
+    min_chord_m : float
+        Shortest chord when positions, not Doppler speed, give the distance (m).
+    position_sd_m : float
+        Per-axis SD assumed for a fix position when the chord gives the course (m).
+    course_sd_rad : float
+        SD of a window's mean Doppler course (rad).
+    step_heading_sd_rad : float
+        Per-step SD of our heading about its window mean (rad), for the sample weight.
+    scale_prior, scale_prior_weight_m : float
+        Starting stride scale and its weight in metres of walking.
+    scale_limits : (float, float)
+        The stride scale is kept within these.
+    scale_gate : float
+        Relative distance from the estimate beyond which a stride sample is an outlier.
+    min_samples : int
+        Accepted stride samples before the gate applies.
+    noisy_window : int
+        Raw stride samples in the variability check.
+    noisy_cv : float
+        Their coefficient of variation above which GPS is noisy (nothing learnt).
+    forgetting : float
+        Factor on the old samples' weight per accepted sample (0 < f <= 1).
+    prior_scale_sd, min_scale_sd : float
+        Relative uncertainty of the stride scale before training, and its floor after.
+    learn_stride, learn_heading : bool
+        What to learn (the benchmark switches them to isolate each part).
+    heading_model : HeadingErrorModel or None
+        The model to refine (a persisted one); a new one if None.
+    """
+
+    def __init__(self, *, window_s: float = 10.0, min_steps: int = 8, max_hacc_m: float = 12.0,
+                 max_fix_gap_s: float = 3.0, min_speed_m_s: float = 0.5, max_speed_m_s: float = 2.5,
+                 max_speed_cv: float = 0.25, straight_sd_rad: float = math.radians(7.0), min_chord_m: float = 8.0,
+                 position_sd_m: float = 2.5, course_sd_rad: float = math.radians(4.0),
+                 step_heading_sd_rad: float = math.radians(5.0), scale_prior: float = 1.0,
+                 scale_prior_weight_m: float = 30.0, scale_limits: tuple[float, float] = (0.6, 1.7),
+                 scale_gate: float = 0.3, min_samples: int = 3, noisy_window: int = 4, noisy_cv: float = 0.15,
+                 forgetting: float = 0.98, prior_scale_sd: float = 0.08, min_scale_sd: float = 0.015,
+                 learn_stride: bool = True, learn_heading: bool = True,
+                 heading_model: HeadingErrorModel | None = None):
+        self.window_s = float(window_s)
+        self.min_steps = int(min_steps)
+        self.max_hacc_m = float(max_hacc_m)
+        self.max_fix_gap_s = float(max_fix_gap_s)
+        self.min_speed_m_s = float(min_speed_m_s)
+        self.max_speed_m_s = float(max_speed_m_s)
+        self.max_speed_cv = float(max_speed_cv)
+        self.straight_sd_rad = float(straight_sd_rad)
+        self.min_chord_m = float(min_chord_m)
+        self.position_sd_m = float(position_sd_m)
+        self.course_sd_rad = float(course_sd_rad)
+        self.step_heading_sd_rad = float(step_heading_sd_rad)
+        self.scale_prior = float(scale_prior)
+        self.scale_prior_weight_m = float(scale_prior_weight_m)
+        self.scale_limits = (float(scale_limits[0]), float(scale_limits[1]))
+        self.scale_gate = float(scale_gate)
+        self.min_samples = int(min_samples)
+        self.noisy_window = int(noisy_window)
+        self.noisy_cv = float(noisy_cv)
+        self.forgetting = float(forgetting)
+        self.prior_scale_sd = float(prior_scale_sd)
+        self.min_scale_sd = float(min_scale_sd)
+        self.learn_stride = bool(learn_stride)
+        self.learn_heading = bool(learn_heading)
+        self.heading_model = heading_model if heading_model is not None else HeadingErrorModel()
+        self.reset()
+
+    def reset(self) -> None:
+        self._steps: deque = deque()  # (t_ns, t_prev_ns, length_m, heading_rad)
+        self._fixes: deque = deque()  # (t_ns, east, north, hacc, speed, course_rad)
+        self._window_start_ns: int | None = None
+        self._w = self.scale_prior_weight_m
+        self._ws = self.scale_prior * self.scale_prior_weight_m
+        self._wss = 0.0  # weighted sum of squared deviations of the accepted samples
+        self._n_eff = 0.0
+        self._recent: deque = deque(maxlen=max(self.noisy_window, 2))
+        self.n_stride_samples = 0
+        self.n_heading_samples = 0
+        self.windows: list[WindowFlags] = []
+        self.noisy = False
+
+    @property
+    def stride_scale(self) -> float:
+        """The learnt factor on the stride model's step length."""
+        s = self._ws / self._w if self._w > 0 else self.scale_prior
+        return min(max(s, self.scale_limits[0]), self.scale_limits[1])
+
+    @property
+    def stride_scale_sd(self) -> float:
+        """Uncertainty of :attr:`stride_scale` (relative): ``prior_scale_sd`` until samples say better."""
+        if self._n_eff < 2:
+            return self.prior_scale_sd
+        spread = math.sqrt(self._wss / (self._w - self.scale_prior_weight_m * self.forgetting ** self.n_stride_samples))
+        return max(min(spread / math.sqrt(self._n_eff), self.prior_scale_sd), self.min_scale_sd)
+
+    @property
+    def stride_gps_distance_m(self) -> float:
+        """Metres of GPS walking behind the stride estimate (its weight, after forgetting)."""
+        return self._w - self.scale_prior_weight_m * self.forgetting ** self.n_stride_samples
+
+    def add_step(self, t_ns: int, t_prev_ns: int, length_m: float, heading_rad: float) -> None:
+        """A step of the raw track: its time, the previous step's time, model length and our heading."""
+        if math.isfinite(length_m) and math.isfinite(heading_rad):
+            self._steps.append((int(t_ns), int(t_prev_ns), float(length_m), float(heading_rad)))
+        keep = int(t_ns) - int(3 * self.window_s * 1e9)
+        while self._steps and self._steps[0][0] < keep:
+            self._steps.popleft()
+
+    def add_fix(self, t_ns: int, east_m: float, north_m: float, hacc_m: float, speed_m_s: float,
+                course_rad: float) -> WindowFlags | None:
+        """A fix the fusion accepted (local ENU); returns the window it closed, if any."""
+        fixes = self._fixes
+        if fixes and t_ns - fixes[-1][0] > self.max_fix_gap_s * 1e9:
+            fixes.clear()  # a gap: a new window starts here
+            self._window_start_ns = None
+        fixes.append((int(t_ns), float(east_m), float(north_m), float(hacc_m), float(speed_m_s), float(course_rad)))
+        if self._window_start_ns is None:
+            self._window_start_ns = int(t_ns)
+        if t_ns - self._window_start_ns < self.window_s * 1e9:
+            return None
+        window = [f for f in fixes if f[0] >= self._window_start_ns]
+        fixes.clear()
+        fixes.append(window[-1])
+        self._window_start_ns = int(t_ns)
+        flags = self._window(window)
+        self.windows.append(flags)
+        return flags
+
+    # -- one window ------------------------------------------------------------
+    def _window(self, fx) -> WindowFlags:
+        t0, t1 = fx[0][0], fx[-1][0]
+        nan = math.nan
+
+        def refuse(reason, heading=nan, dist=nan):
+            return WindowFlags(t1, False, False, nan, nan, heading, dist, reason)
+
+        hacc = np.array([f[3] for f in fx])
+        if not np.all(hacc <= self.max_hacc_m):
+            return refuse(f"fix accuracy up to {np.nanmax(hacc):.0f} m > {self.max_hacc_m:.0f} m")
+        # steps with the part of their interval inside [t0, t1]
+        parts, heads = [], []
+        for ts, tp, ln, hd in self._steps:
+            lo, hi = max(tp, t0), min(ts, t1)
+            if hi > lo and ts > tp:
+                parts.append(ln * (hi - lo) / (ts - tp))
+                heads.append(hd)
+        n_steps = sum(1 for ts, _, _, _ in self._steps if t0 < ts <= t1)
+        if n_steps < self.min_steps:
+            return refuse(f"{n_steps} steps < {self.min_steps}: not walking")
+        mean_h, sd_h = _circ_mean_sd(heads, parts)
+        if not sd_h <= self.straight_sd_rad:
+            return refuse(f"turning: heading SD {math.degrees(sd_h):.1f} deg", mean_h)
+        model_d = float(sum(parts))
+        dur = (t1 - t0) * 1e-9
+        speeds = np.array([f[4] for f in fx])
+        courses = np.array([f[5] for f in fx])
+        doppler = np.isfinite(speeds).mean() >= 0.8
+        chord = math.hypot(fx[-1][1] - fx[0][1], fx[-1][2] - fx[0][2])
+        if doppler:
+            sp = speeds[np.isfinite(speeds)]
+            mean_sp = float(np.mean(sp))
+            if not self.min_speed_m_s <= mean_sp <= self.max_speed_m_s:
+                return refuse(f"GPS speed {mean_sp:.2f} m/s is not walking", mean_h)
+            if float(np.std(sp)) > self.max_speed_cv * mean_sp:
+                return refuse(f"unsteady speed (CV {np.std(sp) / mean_sp:.2f})", mean_h)
+            ts = np.array([f[0] for f in fx], dtype=float) * 1e-9
+            v = np.where(np.isfinite(speeds), speeds, mean_sp)
+            gps_d = float(np.sum(0.5 * (v[1:] + v[:-1]) * np.diff(ts)))
+        else:
+            if chord < self.min_chord_m:
+                return refuse(f"chord {chord:.1f} m < {self.min_chord_m:.0f} m", mean_h, chord)
+            gps_d = chord
+            if not self.min_speed_m_s <= chord / dur <= self.max_speed_m_s:
+                return refuse(f"GPS speed {chord / dur:.2f} m/s is not walking", mean_h, chord)
+        reasons = []
+        # -- stride
+        used_s = False
+        scale = gps_d / model_d if model_d > 0 else nan
+        if self.learn_stride and math.isfinite(scale):
+            self._recent.append(scale)
+            rec = np.array(self._recent)
+            cv = float(np.std(rec) / np.mean(rec)) if len(rec) >= 3 else 0.0
+            self.noisy = cv > self.noisy_cv
+            est = self.stride_scale
+            if self.noisy:
+                reasons.append(f"GPS too variable (stride samples CV {cv:.2f}): keeping the recent mean")
+            elif self.n_stride_samples >= self.min_samples and abs(scale - est) > self.scale_gate * est:
+                reasons.append(f"stride sample {scale:.2f} too far from {est:.2f}")
+            else:
+                f = self.forgetting
+                est0 = self.stride_scale
+                self._w = f * self._w + gps_d
+                self._ws = f * self._ws + gps_d * scale
+                self._wss = f * self._wss + gps_d * (scale - est0) ** 2
+                self._n_eff = f * self._n_eff + 1.0
+                self.n_stride_samples += 1
+                used_s = True
+        # -- heading
+        used_h = False
+        dev = nan
+        if self.learn_heading:
+            good_c = np.isfinite(courses) & np.isfinite(speeds) & (speeds >= self.min_speed_m_s)
+            if good_c.mean() >= 0.8:
+                course, csd = _circ_mean_sd(courses[good_c])
+                ref_sd = self.course_sd_rad
+                if csd > 3.0 * self.straight_sd_rad:
+                    course = nan
+                    reasons.append(f"GPS course scattered (SD {math.degrees(csd):.0f} deg)")
+            elif chord >= self.min_chord_m:
+                course = math.atan2(fx[-1][2] - fx[0][2], fx[-1][1] - fx[0][1])
+                ref_sd = math.atan2(math.sqrt(2.0) * self.position_sd_m, chord)
+            else:
+                course, ref_sd = nan, nan
+                reasons.append("no course: neither Doppler course nor a long enough chord")
+            if math.isfinite(course):
+                dev = wrap_angle(course - mean_h)
+                var = ref_sd ** 2 + self.step_heading_sd_rad ** 2 / max(len(heads), 1)
+                fl = self.heading_model.add(mean_h, dev, 1.0 / var)
+                used_h = fl.accepted
+                if used_h:
+                    self.n_heading_samples += 1
+                else:
+                    reasons.append(f"heading sample rejected: {fl.reason}")
+        return WindowFlags(t1, used_s, used_h, scale, dev, mean_h, gps_d, "; ".join(reasons))
+
+    def counters(self) -> dict:
+        return {"windows": len(self.windows), "stride_samples": self.n_stride_samples,
+                "heading_samples": self.n_heading_samples, "stride_scale": self.stride_scale,
+                "gps_noisy": self.noisy, "heading_model": self.heading_model.to_dict()}
+
+
+# ---------------------------------------------------------------------------
+# the user's profile: the next walk starts calibrated
+
+#: a GPS stride scale learnt over less than this (m) is not saved
+MIN_PROFILE_GPS_M = 100.0
+
+
+def fusion_settings_from_profile(profile) -> dict:
+    """``GpsFusion`` keywords that start from what earlier walks taught (:attr:`UserProfile.gps`)."""
+    g = getattr(profile, "gps", None) or {}
+    kw = {}
+    scale = g.get("stride_scale")
+    if isinstance(scale, (int, float)) and 0.5 <= scale <= 2.0:
+        kw["stride_scale"] = float(scale)
+    coef = (g.get("heading_model") or {}).get("coefficients_deg")
+    if isinstance(coef, list) and len(coef) == 5 and all(isinstance(c, (int, float)) for c in coef):
+        kw["heading_model"] = HeadingErrorModel(coefficients_rad=[math.radians(c) for c in coef])
+    return kw
+
+
+def profile_with_gps_training(profile, trainer: OnlineTrainer, now=None):
+    """A new profile with what ``trainer`` learnt (the input unchanged); ``profile`` itself if it learnt too little."""
+    from dataclasses import replace
+    from datetime import datetime, timezone
+
+    gps = dict(getattr(profile, "gps", None) or {})
+    changed = False
+    if trainer.learn_stride and trainer.stride_gps_distance_m >= MIN_PROFILE_GPS_M:
+        gps["stride_scale"] = round(trainer.stride_scale, 4)
+        gps["stride_gps_m"] = round(trainer.stride_gps_distance_m, 1)
+        changed = True
+    if trainer.learn_heading and trainer.n_heading_samples >= trainer.heading_model.min_samples:
+        gps["heading_model"] = trainer.heading_model.to_dict()
+        changed = True
+    if not changed:
+        return profile
+    gps["updated"] = (now or datetime.now(timezone.utc)).isoformat(timespec="seconds")
+    return replace(profile, gps=gps)

@@ -1,0 +1,324 @@
+"""GPS fusion (issue #9, Chen et al. 2010): heading error model, PDR EKF, training, the fusion stage, CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from core.gnss.ekf import PdrEkf
+from core.gnss.fusion import GpsFusion
+from core.gnss.heading_model import HeadingErrorModel, regressors
+from core.gnss.training import (
+    OnlineTrainer,
+    fusion_settings_from_profile,
+    profile_with_gps_training,
+)
+from core.pdr.calibration import UserProfile
+from core.pdr.pipeline import Pipeline
+
+
+# -- the EKF ---------------------------------------------------------------------------------------
+def _num_jac(f, x, eps=1e-6):
+    y0 = f(x)
+    J = np.zeros((len(y0), len(x)))
+    for i in range(len(x)):
+        d = np.zeros(len(x))
+        d[i] = eps
+        J[:, i] = (f(x + d) - f(x - d)) / (2 * eps)
+    return J
+
+
+@pytest.mark.parametrize("psi", [-2.5, -0.3, 0.0, 1.2, 3.0])
+def test_ekf_jacobians_match_finite_differences(psi):
+    x = np.array([3.0, -4.0, 0.72, psi, 0.01, 0.02])
+    J = PdrEkf.transition_jacobian(x[2], x[3])
+    np.testing.assert_allclose(J, _num_jac(PdrEkf.transition, x), atol=1e-7)
+    for frac in (0.0, 0.4, 1.0):
+        H = PdrEkf.fix_jacobian(x, frac)
+        np.testing.assert_allclose(H, _num_jac(lambda v, f=frac: PdrEkf.fix_prediction(v, f), x), atol=1e-7)
+
+
+def test_ekf_step_moves_along_enu_heading_and_refuses_nonfinite():
+    ekf = PdrEkf()
+    ekf.initialize(0.0, 0.0, 0.1, 0.7, math.pi / 2)  # CCW from East: pi/2 is North
+    for _ in range(10):
+        ekf.step(0.7, math.pi / 2)
+    assert abs(ekf.x[0]) < 1e-6 and ekf.x[1] == pytest.approx(7.0, rel=1e-6)
+    before = ekf.x.copy()
+    assert not ekf.step(math.nan, 0.0).accepted
+    assert not ekf.update_position(math.inf, 0.0, 3.0).accepted
+    assert not ekf.update_course(math.nan, 0.1).accepted
+    np.testing.assert_allclose(ekf.x, before)
+    assert np.all(np.isfinite(ekf.P))
+
+
+def test_ekf_consider_states_are_not_estimated_but_widen_the_track():
+    """A heading-bias consider SD makes the position SD grow with distance, not with its square root."""
+    def sigma_after(n, bias_sd):
+        ekf = PdrEkf()
+        ekf.initialize(0.0, 0.0, 0.1, 0.7, 0.0, bias_sd_rad=bias_sd)
+        for _ in range(n):
+            ekf.step(0.7, 0.0)
+        return ekf.position_sigma_m(), ekf.x[4]
+    s100, b = sigma_after(100, math.radians(3.0))
+    s400, _ = sigma_after(400, math.radians(3.0))
+    assert b == 0.0  # never estimated
+    assert s400 / s100 == pytest.approx(4.0, rel=0.15)  # linear in distance
+    assert s400 == pytest.approx(400 * 0.7 * math.radians(3.0), rel=0.15)
+
+
+def test_ekf_position_update_nis_is_chi2_on_consistent_data():
+    """Fixes drawn from the filter's own measurement model: mean NIS near 2 (2 dof)."""
+    rng = np.random.default_rng(1)
+    ekf = PdrEkf(heading_sd_rad=math.radians(2.0))
+    ekf.initialize(0.0, 0.0, 3.0, 0.7, 0.3, bias_sd_rad=1e-6, scale_sd=1e-6)
+    truth = np.zeros(2)
+    nis = []
+    for k in range(2000):
+        ekf.step(0.7, 0.3)
+        truth += 0.7 * np.array([math.cos(0.3), math.sin(0.3)])
+        if k % 2 == 0:
+            z = truth + rng.normal(0.0, 3.0, 2)
+            r = ekf.update_position(z[0], z[1], 3.0, gate=False)
+            nis.append(r.nis)
+    assert 1.8 < np.mean(nis) < 2.2
+
+
+# -- the heading error model ----------------------------------------------------------------------------
+def test_heading_model_recovers_eq12_coefficients_from_spread_headings():
+    rng = np.random.default_rng(2)
+    true = np.radians([6.0, -4.0, 3.0, 1.5, -2.0])
+    hm = HeadingErrorModel(forgetting=1.0)
+    for _ in range(300):
+        psi = rng.uniform(-math.pi, math.pi)
+        hm.add(psi, float(regressors(psi) @ true) + rng.normal(0.0, math.radians(3.0)), 1.0 / math.radians(3.0) ** 2)
+    assert hm.harmonics_trusted
+    np.testing.assert_allclose(np.degrees(hm.coefficients_rad()), np.degrees(true), atol=0.6)
+    assert math.degrees(hm.residual_sd_rad()) == pytest.approx(3.0, rel=0.15)
+
+
+def test_paper_coefficients_are_our_model_in_bearing_convention():
+    rng = np.random.default_rng(3)
+    hm = HeadingErrorModel(forgetting=1.0)
+    true = np.radians([5.0, 2.0, -3.0, 1.0, 2.5])
+    for _ in range(200):
+        psi = rng.uniform(-math.pi, math.pi)
+        hm.add(psi, float(regressors(psi) @ true), 1e4)
+    p = hm.paper_coefficients_deg()
+    for psi in np.linspace(-3.0, 3.0, 13):
+        xi = math.pi / 2 - psi  # the paper's compass bearing of our heading
+        d_paper = p["A"] + p["B"] * math.sin(xi) + p["C"] * math.cos(xi) + p["D"] * math.sin(2 * xi) \
+            + p["E"] * math.cos(2 * xi)
+        assert d_paper == pytest.approx(-math.degrees(hm.correction_rad(psi)), abs=1e-6)
+
+
+def test_heading_model_with_one_direction_fits_the_offset_alone():
+    hm = HeadingErrorModel()
+    for k in range(30):
+        hm.add(0.8 + 0.01 * (k % 3), math.radians(12.0), 100.0)
+    assert not hm.harmonics_trusted
+    c = hm.coefficients_rad()
+    assert math.degrees(c[0]) == pytest.approx(12.0, abs=0.1) and np.allclose(c[1:], 0.0)
+    # honest: a heading never walked is uncertain by about the harmonics' prior
+    assert hm.correction_sd_rad(0.8 + math.pi) > 3 * hm.correction_sd_rad(0.8) or \
+        hm.correction_sd_rad(0.8 + math.pi) > math.radians(8.0)
+
+
+def test_heading_model_rejects_an_outlier_but_accepts_a_new_direction():
+    rng = np.random.default_rng(4)
+    hm = HeadingErrorModel()
+    for _ in range(20):
+        hm.add(0.5 + rng.normal(0, 0.02), math.radians(10.0) + rng.normal(0, 0.03), 1.0 / 0.03 ** 2)
+    assert not hm.add(0.5, math.radians(70.0), 1.0 / 0.03 ** 2).accepted  # multipath course at a known heading
+    assert hm.add(0.5 + math.pi, math.radians(-8.0), 1.0 / 0.03 ** 2).accepted  # a real harmonic elsewhere
+
+
+# -- training -------------------------------------------------------------------------------------
+def _feed_straight(tr, scale_truth=1.1, seconds=200, speed_noise=0.0, rng=None, heading=0.4, dev=0.1):
+    """Steps of 0.7 m model length at 1.8 Hz, GPS at 1 Hz measuring scale_truth * model distance.
+
+    In the fusion's order: a step, then the fixes up to its time.
+    """
+    rng = rng or np.random.default_rng(0)
+    dt = 1 / 1.8
+    v = scale_truth * 0.7 / dt
+    k = 0
+    for i in range(1, int(seconds / dt)):
+        t = i * dt
+        tr.add_step(int(t * 1e9), int((t - dt) * 1e9), 0.7, heading)
+        while k + 1 <= t:
+            k += 1
+            d = v * k
+            tr.add_fix(int(k * 1e9), d * math.cos(heading + dev), d * math.sin(heading + dev), 4.0,
+                       v + rng.normal(0.0, speed_noise), heading + dev)
+    return tr
+
+
+def test_trainer_learns_stride_scale_and_offset_from_good_gps():
+    tr = _feed_straight(OnlineTrainer(), scale_truth=1.12)
+    assert tr.stride_scale == pytest.approx(1.12, rel=0.01)
+    assert math.degrees(tr.heading_model.correction_rad(0.4)) == pytest.approx(math.degrees(0.1), abs=0.3)
+    assert tr.n_stride_samples >= 15
+
+
+def test_trainer_refuses_to_learn_from_noisy_gps():
+    """Kubrak et al.: noisy GPS speed must not drag the stride scale: the estimate keeps the recent mean."""
+    tr = _feed_straight(OnlineTrainer(), scale_truth=1.0, seconds=120)
+    before = tr.stride_scale
+    rng = np.random.default_rng(5)
+    n0 = tr.n_stride_samples
+    for w in range(6):
+        t0 = 130 + 10 * w
+        for i in range(18):
+            t = t0 + i / 1.8
+            tr.add_step(int(t * 1e9), int((t - 1 / 1.8) * 1e9), 0.7, 0.4)
+        for i in range(11):
+            v = abs(1.3 * 1.26 * (1 + rng.choice([-0.4, 0.4])))
+            tr.add_fix(int((t0 + i) * 1e9), 0.0, 0.0, 4.0, v, 0.5)
+    assert any("too variable" in w.reason or "unsteady" in w.reason for w in tr.windows[-6:])
+    assert tr.stride_scale == pytest.approx(before, abs=0.03)
+    assert tr.n_stride_samples - n0 <= 2
+
+
+def test_profile_keeps_what_gps_taught_and_the_next_walk_starts_from_it(tmp_path):
+    tr = _feed_straight(OnlineTrainer(), scale_truth=1.08)
+    prof = profile_with_gps_training(UserProfile(height_m=1.8), tr)
+    path = tmp_path / "p.json"
+    prof.save(path)
+    back = UserProfile.load(path)
+    assert back.gps["stride_scale"] == pytest.approx(1.08, rel=0.01)
+    kw = fusion_settings_from_profile(back)
+    fu = GpsFusion(**kw)
+    assert fu.trainer.stride_scale == pytest.approx(1.08, rel=0.01)
+    assert math.degrees(fu.heading_model.correction_rad(0.4)) == pytest.approx(math.degrees(0.1), abs=0.5)
+    assert profile_with_gps_training(UserProfile(), OnlineTrainer()) == UserProfile()  # nothing learnt: unchanged
+
+
+# -- the fusion on simulated walks ----------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def sim_walk():
+    from desktop.simulator import outdoor_walk
+
+    walk = outdoor_walk(7, minutes=6)
+    steps = Pipeline().run(walk.recording).steps
+    return walk, steps
+
+
+def _truth_error(walk, fused_step):
+    from core.geodesy import geodetic_to_enu
+
+    e, n = geodetic_to_enu(fused_step.lat_deg, fused_step.lon_deg, walk.truth.origin_lat_lon)
+    p = walk.truth.phone_position_at(fused_step.t_ns)
+    return math.hypot(e - p[0], n - p[1])
+
+
+def test_streaming_pipeline_and_batch_fusion_agree(sim_walk):
+    walk, steps = sim_walk
+    rec = walk.recording
+    streamed = Pipeline(gnss=GpsFusion()).run(rec).fusion
+    batch = GpsFusion().run(steps, rec.streams["gps"], rec.t0_ns)
+    assert len(streamed.steps) == len(batch.steps) > 300
+    d = [math.hypot(a.east_m - b.east_m, a.north_m - b.north_m) for a, b in zip(streamed.steps, batch.steps)]
+    assert max(d) < 0.05
+    assert streamed.origin_lat_lon == pytest.approx(batch.origin_lat_lon, abs=1e-9)
+
+
+def test_calibrated_fusion_beats_dead_reckoning_through_an_outage_and_stays_honest(sim_walk):
+    walk, steps = sim_walk
+    rec = walk.recording
+    t0 = rec.t0_ns
+    hid = [(t0 + int(200e9), t0 + int(320e9))]
+    errs = {}
+    for name, kw in {"pdr": {"filter": "reset", "learn_stride": False, "learn_heading": False}, "ekf": {}}.items():
+        fr = GpsFusion(hidden_ns=hid, **kw).run(steps, rec.streams["gps"], t0)
+        last = [s for s in fr.steps if s.t_ns < hid[0][1]][-1]
+        errs[name] = _truth_error(walk, last)
+        if name == "ekf":
+            sigma = math.sqrt(max(np.linalg.eigvalsh(np.array([[last.cov_en_m2[0], last.cov_en_m2[1]],
+                                                               [last.cov_en_m2[1], last.cov_en_m2[2]]]))[-1], 0))
+            assert errs[name] < 3.0 * sigma  # the uncertainty covers the error
+            assert fr.outages and fr.outages[0].walked_m > 100
+            o = fr.outages[0]
+            assert o.jump_m <= 3.0 * o.sigma_m  # rejoining GPS: no jump beyond 3 sigma
+            assert sum(1 for s in fr.steps if hid[0][0] <= s.t_ns < hid[0][1] and s.source == "dr") > 100
+    assert errs["ekf"] < 0.5 * errs["pdr"]
+
+
+def test_fused_track_follows_gps_without_outage(sim_walk):
+    walk, steps = sim_walk
+    fr = GpsFusion().run(steps, walk.recording.streams["gps"], walk.recording.t0_ns)
+    err = [_truth_error(walk, s) for s in fr.steps[100:]]
+    assert np.median(err) < 3.0  # GPS alone: 1.5 m white + 3 m wandering bias
+    assert fr.counters["fixes_accepted"] > 0.9 * fr.counters["fixes"] - 10
+
+
+def test_bad_fixes_are_screened_and_never_reach_the_state(sim_walk):
+    walk, steps = sim_walk
+    g = walk.recording.streams["gps"]
+    vals = g.values.copy()
+    vals[50:60, 0] = np.nan  # no position
+    vals[60:70, 3] = 80.0  # accuracy 80 m
+    vals[70:80, 4] = 15.0  # a car
+    from core.recording import Stream
+
+    bad = Stream("gps", g.t_ns, vals, g.columns, g.unit, g.note)
+    fr = GpsFusion().run(steps, bad, walk.recording.t0_ns)
+    reasons = [f.reason for f in fr.fixes[50:80]]
+    assert all(r for r in reasons)
+    assert sum("accuracy" in r for r in reasons) == 10 and sum("walking" in r for r in reasons) == 10
+    assert all(math.isfinite(s.east_m) and math.isfinite(s.cov_en_m2[0]) for s in fr.steps)
+
+
+# -- the command line -----------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def gps_file(tmp_path_factory, sim_walk):
+    from core.recording import write_recording
+
+    path = tmp_path_factory.mktemp("gps") / "walk.csv.gz"
+    write_recording(str(path), sim_walk[0].recording)
+    return str(path)
+
+
+def test_cli_replay_with_gps_outage_reports_the_outage(gps_file, tmp_path, capsys):
+    from desktop.cli import main
+
+    gj = tmp_path / "t.geojson"
+    assert main(["replay", gps_file, "--gps-outage", "200:60", "--gps-outage", "260:30", "--json",
+                 "--geojson", str(gj)]) == 0
+    out = capsys.readouterr().out
+    s = json.loads(out[:out.rindex("}") + 1])
+    assert [o["start_s"] for o in s["outages"]] == pytest.approx([200.0, 260.0])
+    assert all(o["walked_m"] > 20 and o["end_error_m"] >= 0 for o in s["outages"])
+    feats = json.loads(gj.read_text())["features"]
+    pts = [f for f in feats if f["geometry"]["type"] == "Point"]
+    assert {p["properties"]["source"] for p in pts} == {"fused", "dr"}
+    assert all(p["properties"]["sigma_m"] > 0 for p in pts)
+    lon, lat = pts[0]["geometry"]["coordinates"]
+    assert lat == pytest.approx(60.17, abs=0.02) and lon == pytest.approx(24.94, abs=0.05)  # the simulator's site
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--gps", "kubrak"], "issue #10"),
+    (["--gps-outage", "10-20"], "START_S:LENGTH_S"),
+    (["--gps-outage", "10:-5"], "LENGTH_S > 0"),
+])
+def test_cli_gps_errors_are_one_line(gps_file, capsys, argv, message):
+    from desktop.cli import main
+
+    try:
+        code = main(["replay", gps_file] + argv)
+    except SystemExit as e:  # argparse errors
+        code = e.code
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and "Traceback" not in err
+
+
+def test_cli_gps_on_a_recording_without_fixes_says_so(capsys):
+    from desktop.cli import main
+
+    assert main(["replay", "--gps", "chen"]) == 2  # the bundled demo has no GPS
+    assert "no gps stream" in capsys.readouterr().err
+
