@@ -513,9 +513,18 @@ def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
     return "\n".join(lines)
 
 
+#: markdown sections other benchmark modules write, appended to RESULTS.md
+SECTIONS = ("GNSS_RESULTS.md", "FOOT_RESULTS.md")
+
+
 def write(run_info: dict, out_path: Path, plots_dir: Path, argv=None) -> None:
     out_path = Path(out_path)
     plots = make_plots(run_info["results"], Path(plots_dir))
     text = build(run_info, plots, out_path, argv)
+    # sections written by the benchmarks of their own (GPS outages, foot-mounted INS), kept when this file is rebuilt
+    for extra in SECTIONS:
+        f = Path(__file__).with_name(extra)
+        if f.exists():
+            text += "\n\n" + f.read_text().strip()
     out_path.parent.mkdir(parents=True, exist_ok=True)
     out_path.write_text(text + "\n")

@@ -79,8 +79,13 @@ Shared, at ``core/``'s top
     (rotation-matrix smoothing, section 4.3; a step's heading),
     ``deadreckoning`` (eq. 1), ``pipeline``.
 
-``core.gnss``, ``core.foot``
-    GPS fusion (Chen 2010, Kubrak 2006) and foot-mounted INS (Song 2018), to come.
+``core.gnss`` -- GPS fusion (Chen et al. 2010; Kubrak et al. 2006 to come)
+    ``heading_model`` (eq. 12), ``ekf`` (eq. 13 with GPS updates),
+    ``training`` (online stride and heading training), ``fusion`` (the stage
+    ``Pipeline(gnss=...)`` runs).
+
+``core.foot``
+    Foot-mounted INS with zero-velocity updates (Song & Park 2018).
 
 ``desktop/`` (not on the phone)
     ``desktop.cli`` (the ``pdr`` command), ``desktop.plot``,

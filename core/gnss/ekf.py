@@ -109,12 +109,16 @@ class PdrEkf:
         Chi-square gates on the NIS of position (2 dof) and course (1 dof) updates.
     bias_walk_rad, scale_walk : float
         Random walk per step of the consider states (heading bias, rad; relative length error).
+    position_updates_heading : bool
+        Whether GPS positions correct the heading state (through its correlation with the
+        position); False leaves the heading to the step measurements and the GPS course.
     """
 
     def __init__(self, *, length_walk_m: float = 0.03, heading_walk_rad: float = math.radians(1.5),
                  turn_gain: float = 1.0, length_sd_m: float = 0.08, heading_sd_rad: float = math.radians(4.0),
                  gate_nis_2d: float = CHI2_999[2], gate_nis_1d: float = CHI2_999[1],
-                 bias_walk_rad: float = math.radians(0.05), scale_walk: float = 0.0005):
+                 bias_walk_rad: float = math.radians(0.05), scale_walk: float = 0.0005,
+                 position_updates_heading: bool = True):
         self.length_walk_m = float(length_walk_m)
         self.heading_walk_rad = float(heading_walk_rad)
         self.turn_gain = float(turn_gain)
@@ -124,6 +128,7 @@ class PdrEkf:
         self.gate_nis_1d = float(gate_nis_1d)
         self.bias_walk_rad = float(bias_walk_rad)
         self.scale_walk = float(scale_walk)
+        self.position_updates_heading = bool(position_updates_heading)
         self.initialized = False
         self.x = np.zeros(NX)
         self.P = np.eye(NX)
@@ -152,7 +157,8 @@ class PdrEkf:
         """sqrt of the largest eigenvalue of the position covariance (m)."""
         return math.sqrt(max(float(np.linalg.eigvalsh(self.P[:2, :2])[-1]), 0.0))
 
-    def _update(self, innov: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float) -> tuple[bool, float]:
+    def _update(self, innov: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float,
+                frozen: tuple = ()) -> tuple[bool, float]:
         S = H @ self.P @ H.T + R
         try:
             Si = np.linalg.inv(S)
@@ -162,7 +168,7 @@ class PdrEkf:
         if not math.isfinite(nis) or nis > gate:
             return False, nis
         K = self.P @ H.T @ Si
-        K[list(CONSIDER), :] = 0.0  # Schmidt: the consider states are not estimated
+        K[list(CONSIDER) + list(frozen), :] = 0.0  # Schmidt: the consider (and frozen) states are not estimated
         dx = K @ innov
         if not np.all(np.isfinite(dx)):
             return False, nis
@@ -246,7 +252,8 @@ class PdrEkf:
         innov = np.array([east_m, north_m]) - self.fix_prediction(self.x, f)
         H = self.fix_jacobian(self.x, f)
         before = self.x[:2].copy()
-        ok, nis = self._update(innov, H, np.eye(2) * sigma_m ** 2, self.gate_nis_2d if gate else math.inf)
+        frozen = () if self.position_updates_heading else (PSI,)
+        ok, nis = self._update(innov, H, np.eye(2) * sigma_m ** 2, self.gate_nis_2d if gate else math.inf, frozen)
         moved = float(np.hypot(*(self.x[:2] - before))) if ok else 0.0
         reason = "" if ok else f"innovation gate: NIS {nis:.1f} > {self.gate_nis_2d:.1f}"
         return UpdateResult(ok, (float(innov[0]), float(innov[1])), nis, moved, sig_before, reason)

@@ -272,7 +272,8 @@ class GpsFusion:
         self.ekf = PdrEkf() if proto is None else PdrEkf(
             length_walk_m=proto.length_walk_m, heading_walk_rad=proto.heading_walk_rad, turn_gain=proto.turn_gain,
             length_sd_m=proto.length_sd_m, heading_sd_rad=proto.heading_sd_rad, gate_nis_2d=proto.gate_nis_2d,
-            gate_nis_1d=proto.gate_nis_1d)
+            gate_nis_1d=proto.gate_nis_1d, bias_walk_rad=proto.bias_walk_rad, scale_walk=proto.scale_walk,
+            position_updates_heading=proto.position_updates_heading)
         if self._trainer_proto is not None:
             self.trainer = self._trainer_proto
             self.trainer.reset()
