@@ -22,7 +22,8 @@ SPEC = ROOT / "buildozer.spec"
 P4A_RECIPES = {"python3", "hostpython3", "kivy", "pyjnius", "numpy", "sdl2", "android", "setuptools", "libffi",
                "openssl", "sqlite3"}
 #: pure-Python packages the spec may list (installed by p4a with pip --no-deps)
-PURE_PYTHON = {"plyer", "gpxpy", "pygeomag"}  # pygeomag: WMM in pure Python, its WMM.COF inside the wheel
+PURE_PYTHON = {"plyer", "gpxpy", "pygeomag", "pymap3d"}  # pygeomag: WMM in pure Python, its WMM.COF inside the wheel;
+# pymap3d: WGS-84 <-> ENU, no dependencies
 #: modules the phone provides without a requirement (p4a's own ``android`` module)
 PROVIDED = {"android"}
 #: import name -> requirement name

@@ -36,12 +36,13 @@ def test_enu_round_trip_and_arrays():
     east = np.array([0.0, 120.0, -250.5])
     north = np.array([0.0, -80.0, 310.25])
     lat, lon = G.enu_to_geodetic(east, north, origin)
-    assert lat.shape == (3,) and lat[0] == origin[0] and lon[0] == origin[1]
+    assert lat.shape == (3,)
+    assert lat[0] == pytest.approx(origin[0], abs=1e-12) and lon[0] == pytest.approx(origin[1], abs=1e-12)
     e2, n2 = G.geodetic_to_enu(lat, lon, origin)
     np.testing.assert_allclose(e2, east, atol=1e-9)
     np.testing.assert_allclose(n2, north, atol=1e-9)
     e, n = G.geodetic_to_enu(49.461, 11.111, origin)
-    assert isinstance(e, float) and e == 0.0 and n == 0.0
+    assert isinstance(e, float) and abs(e) < 1e-9 and abs(n) < 1e-9
 
 
 def test_longitude_wraps_across_the_antimeridian():
@@ -56,7 +57,24 @@ def test_tangent_plane_agrees_with_the_geodesic_over_a_walk():
     lat, lon = G.enu_to_geodetic(60.0, -80.0, origin)
     assert G.distance_m(*origin, lat, lon) == pytest.approx(100.0, abs=0.001)
     lat, lon = G.enu_to_geodetic(600.0, -800.0, origin)
-    assert G.distance_m(*origin, lat, lon) == pytest.approx(1000.0, abs=0.05)  # flat-plane error ~ distance^2
+    assert G.distance_m(*origin, lat, lon) == pytest.approx(1000.0, abs=0.001)
+
+
+@pytest.mark.parametrize("lat0", [0.0, 47.4, 60.17, 78.2])
+def test_tangent_plane_is_exact_over_a_long_walk(lat0):
+    """Points 5 km out in every direction: distances from the origin and between them are the geodesic's
+    (Vincenty) to a few millimetres; the old flat plane was 3.8 m off at 60 deg."""
+    origin = (lat0, 8.5)
+    b = np.linspace(0.0, 2 * np.pi, 12, endpoint=False)
+    lat, lon = G.enu_to_geodetic(5000.0 * np.cos(b), 5000.0 * np.sin(b), origin)
+    for la, lo in zip(lat, lon):
+        assert G.distance_m(*origin, la, lo) == pytest.approx(5000.0, abs=0.005)
+    for i in range(0, 12, 3):  # points 3 apart are 90 deg apart as seen from the origin
+        e1, n1 = G.geodetic_to_enu(lat[i], lon[i], origin)
+        e2, n2 = G.geodetic_to_enu(lat[(i + 3) % 12], lon[(i + 3) % 12], origin)
+        assert np.hypot(e2 - e1, n2 - n1) == pytest.approx(5000.0 * np.sqrt(2), abs=0.01)
+        assert G.distance_m(lat[i], lon[i], lat[(i + 3) % 12], lon[(i + 3) % 12]) == pytest.approx(
+            np.hypot(e2 - e1, n2 - n1), abs=0.01)
 
 
 # ---------------------------------------------------------------------------

@@ -8,8 +8,8 @@ stream (lat_deg, lon_deg, floor, building_id, counter), already mapped from
 the app clock onto the sensor clock (see that module's docstring).
 
 Landmarks to metres.  The ``POSI`` latitude/longitude become local East/North
-metres on a tangent plane at the **first landmark** (WGS-84 radii of
-curvature, :func:`core.geodesy.geodetic_to_enu`; error < 1 cm per 100 m).
+metres on the WGS-84 tangent plane at the **first landmark**
+(:func:`core.geodesy.geodetic_to_enu`).
 The first landmark is the start of the walk proper: every file begins with
 20-40 s of arbitrary "calibration" motion and 20-40 s standing, and the
 first landmark comes about 61 s in.  The metrics place our track at that
