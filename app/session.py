@@ -17,10 +17,20 @@ Event flow per tick::
           |
           v
     Pipeline.update  ->  new steps -> track
+                         GPS fusion (when the pipeline has one): fused track, fixes, uncertainty
 
 At the end of a finite source the buffer is flushed and ``Pipeline.finish``
 completes the last steps, so a replay gives exactly the batch result of
 :meth:`core.pdr.pipeline.Pipeline.run`.
+
+GPS fusion
+    A pipeline built with ``gnss=GpsFusion()`` (:meth:`app.settings.Settings.pipeline_factory`
+    with "Use GPS" on) gives a fused track, one :class:`core.gnss.fusion.FusedStep` per step.
+    The session keeps what the track view draws as plain lists, appended as steps and fixes
+    come (never rebuilt): :meth:`Session.gps_overlay` hands them out as a :class:`GpsOverlay`.
+    Fixes the fusion screened out (bad accuracy) carry no local position in their record;
+    once the walk is anchored they are placed from their latitude/longitude, so the view can
+    show them as rejected.
 """
 
 from __future__ import annotations
@@ -30,9 +40,11 @@ import math
 import os
 import shutil
 import time
+from dataclasses import dataclass
 from typing import Callable
 
 from core.conventions import GPS, bearing_deg
+from core.geodesy import geodetic_to_enu
 from core.recording import STREAM_ORDER, STREAM_SPECS, RecordingWriter
 
 from app.health import HealthMonitor
@@ -81,6 +93,27 @@ def _good_fix(vals, max_hacc_m: float = 30.0) -> bool:
     lat, lon = _gps_value(vals, "lat_deg"), _gps_value(vals, "lon_deg")
     hacc = _gps_value(vals, "hacc_m")
     return math.isfinite(lat) and math.isfinite(lon) and not (hacc > max_hacc_m)
+
+
+@dataclass(frozen=True)
+class GpsOverlay:
+    """What the track view draws of the GPS fusion (plain data; lists are the session's own, append-only).
+
+    Point ``k + 1`` of the fused track is the position after step ``k`` (point 0 is the start,
+    like the dead-reckoned track); ``fused_source[k]`` is step ``k``'s ``"fused"`` or ``"dr"``.
+    """
+
+    fused_east: list  #: local ENU (m), the start (0, 0) first
+    fused_north: list
+    fused_source: list  #: one per step
+    fix_east: list  #: fixes with a position, local ENU (m)
+    fix_north: list
+    fix_hacc: list  #: reported 68 % accuracy radius (m), nan if none
+    fix_accepted: list  #: bool
+    n_fixes: int  #: every fix the fusion saw (also those without a position)
+    n_used: int  #: accepted fixes
+    cov_en_m2: tuple | None  #: (var_e, cov_en, var_n) of the last fused step (m^2), None before a step
+    anchored: bool  #: a good fix placed the walk on the map (the fused track is GPS-aided from then on)
 
 
 class Session:
@@ -138,6 +171,16 @@ class Session:
         self.gps_origin: tuple | None = None
         self.finished = False
         self._cal_range: tuple | None = None
+        # the GPS fusion's output, as the view draws it (see GpsOverlay)
+        self.fused_east = [0.0]
+        self.fused_north = [0.0]
+        self.fused_source: list = []
+        self.fix_east: list = []
+        self.fix_north: list = []
+        self.fix_hacc: list = []
+        self.fix_accepted: list = []
+        self._fixes_seen = 0
+        self._fixes_used = 0
 
     # -- lifecycle ----------------------------------------------------------------
 
@@ -228,6 +271,8 @@ class Session:
             return  # went backwards in its stream beyond the reorder window: dropped, counted
         if self.first_t_ns is None:
             self.first_t_ns = t
+            if self.gnss is not None:
+                self.gnss.set_time_zero(t)  # outage times count from here, as in a batch run
         self.last_t_ns = t
         if name == GPS and self.gps_origin is None and _good_fix(vals):
             self.gps_origin = (_gps_value(vals, "lat_deg"), _gps_value(vals, "lon_deg"))
@@ -239,6 +284,8 @@ class Session:
             return
         if steps:
             self._add_steps(steps, new)
+        if name == GPS:
+            self._sync_fixes()
 
     def _add_steps(self, steps, new: list) -> None:
         for s in steps:
@@ -246,6 +293,32 @@ class Session:
             self.track_east.append(float(s.east_m))
             self.track_north.append(float(s.north_m))
             new.append(s)
+        fused = getattr(self.pipeline, "fused", ())
+        for f in fused[len(self.fused_source):]:
+            self.fused_east.append(float(f.east_m))
+            self.fused_north.append(float(f.north_m))
+            self.fused_source.append(f.source)
+        self._sync_fixes()  # fixes wait in the fusion for the step after them
+
+    def _sync_fixes(self) -> None:
+        """Append the fusion's new fix records to the view's lists (from the anchoring on: before it, no
+        fix has a place in the local frame)."""
+        g = self.gnss
+        origin = g.origin_lat_lon if g is not None else None
+        if origin is None:
+            return
+        fixes = g.fixes
+        for f in fixes[self._fixes_seen:]:
+            e, n = f.east_m, f.north_m
+            if not (math.isfinite(e) and math.isfinite(n)) and math.isfinite(f.lat_deg) and math.isfinite(f.lon_deg):
+                e, n = geodetic_to_enu(f.lat_deg, f.lon_deg, origin)  # screened out: placed for the view only
+            if math.isfinite(e) and math.isfinite(n):
+                self.fix_east.append(float(e))
+                self.fix_north.append(float(n))
+                self.fix_hacc.append(float(f.hacc_m))
+                self.fix_accepted.append(bool(f.accepted))
+            self._fixes_used += bool(f.accepted)
+        self._fixes_seen = len(fixes)
 
     def _finish(self) -> list:
         if self.finished:
@@ -260,6 +333,7 @@ class Session:
             self.last_error = f"{type(e).__name__}: {e}"
             steps = []
         self._add_steps(steps, new)
+        self._sync_fixes()  # finish() flushed the fixes still waiting
         self.finished = True
         return new
 
@@ -267,6 +341,37 @@ class Session:
 
     def status(self):
         return self.pipeline.status()
+
+    # -- GPS fusion ---------------------------------------------------------------------------
+
+    @property
+    def gnss(self):
+        """The pipeline's :class:`core.gnss.fusion.GpsFusion`, None when GPS is off."""
+        return getattr(self.pipeline, "gnss", None)
+
+    @property
+    def gps_anchored(self) -> bool:
+        """A good fix has placed the walk on the map (the fusion's origin is known)."""
+        g = self.gnss
+        return g is not None and g.origin_lat_lon is not None
+
+    def position_covariance(self) -> tuple | None:
+        """The 2x2 position covariance of the last fused step, ``((var_e, cov), (cov, var_n))`` (m^2), or None."""
+        fused = getattr(self.pipeline, "fused", None)
+        if not fused:
+            return None
+        ve, c, vn = fused[-1].cov_en_m2
+        return ((ve, c), (c, vn))
+
+    def gps_overlay(self) -> GpsOverlay | None:
+        """The fused track, the fixes and the current uncertainty for the view; None when GPS is off."""
+        g = self.gnss
+        if g is None:
+            return None
+        fused = self.pipeline.fused
+        return GpsOverlay(self.fused_east, self.fused_north, self.fused_source, self.fix_east, self.fix_north,
+                          self.fix_hacc, self.fix_accepted, len(g.fixes), self._fixes_used,
+                          fused[-1].cov_en_m2 if fused else None, g.origin_lat_lon is not None)
 
     @property
     def elapsed_s(self) -> float:
@@ -351,7 +456,10 @@ def export_session(session: Session, out_dir: str, basename: str, raw_path: str 
     os.makedirs(out_dir, exist_ok=True)
     out: dict = {"errors": []}
     track = session.track()
-    origin = session.gps_origin
+    # with GPS fusion: the fusion's origin, the walk's start as the first good fix and the dead-reckoned
+    # position at that moment place it; without: the first good fix is taken as the start
+    gnss = session.gnss
+    origin = gnss.origin_lat_lon if gnss is not None and gnss.origin_lat_lon is not None else session.gps_origin
     try:
         from core import export  # noqa: PLC0415 - the lead's module
     except ImportError as e:

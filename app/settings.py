@@ -4,7 +4,7 @@ Two JSON files in the app's data directory, both written atomically
 (temporary file + rename), so a crash never leaves half a file:
 
 - ``settings.json``: sampling rate, whether live sessions are recorded,
-  replay speed;
+  replay speed, whether GPS is fused into the track ("Use GPS");
 - ``profile.json``: the user's :class:`core.pdr.calibration.UserProfile`
   (format ``pdr-user-profile``): body height, stride model, the per-user
   factor ``c_scale`` and the calibration walks it was pooled from.
@@ -12,7 +12,10 @@ Two JSON files in the app's data directory, both written atomically
 The height lives only in the profile (:attr:`Settings.height_m` reads and
 writes it), so the settings and the profile cannot disagree.  The pipeline
 is built from the profile: ``profile.stride_model()`` (the chosen shipped
-model with the user's factor) and the profile's height.
+model with the user's factor) and the profile's height; with "Use GPS" on
+(the default) it also runs the GPS fusion stage,
+``Pipeline(..., gnss=core.gnss.fusion.GpsFusion())``
+(:meth:`Settings.pipeline_factory`).
 
 Loading never fails: a missing file gives the defaults, a damaged file or an
 out-of-range value falls back to the default and says so in
@@ -35,6 +38,7 @@ import math
 import os
 import tempfile
 from dataclasses import dataclass, field, replace
+from typing import Callable
 
 from core.pdr.calibration import MAX_POOLED, CalibrationError, CalibrationResult, UserProfile, calibrate_known_distance
 from core.pdr.stride import StrideModel
@@ -70,6 +74,8 @@ class Settings:
     record_live: bool = True
     #: replay speed label ("1x", "10x", "max")
     replay_speed: str = "10x"
+    #: fuse GPS fixes into the track (core.gnss.fusion.GpsFusion after the steps)
+    use_gps: bool = True
     #: height, stride model and calibration (saved to its own file, ``profile.json``)
     profile: UserProfile = field(default_factory=UserProfile)
     #: what was wrong with the stored files (not saved)
@@ -117,8 +123,21 @@ class Settings:
         return self.profile.stride_model()
 
     def pipeline_kwargs(self) -> dict:
-        """Keyword arguments for :class:`core.pdr.pipeline.Pipeline`."""
+        """Keyword arguments for :class:`core.pdr.pipeline.Pipeline` (without the GPS stage)."""
         return {"height_m": self.height_m, "stride_model": self.stride_model()}
+
+    def pipeline_factory(self) -> Callable:
+        """``() -> Pipeline`` with the settings as they are now (a later change needs a new factory).
+
+        Each pipeline gets its own :class:`core.gnss.fusion.GpsFusion` when :attr:`use_gps` is on, so
+        a new track starts the fusion afresh (unanchored, stride and heading models untrained).
+        """
+        from core.gnss.fusion import GpsFusion  # noqa: PLC0415 - the app imports core's stages on use
+        from core.pdr.pipeline import Pipeline  # noqa: PLC0415
+
+        kw = self.pipeline_kwargs()
+        use_gps = bool(self.use_gps)
+        return lambda: Pipeline(**kw, gnss=GpsFusion() if use_gps else None)
 
     def calibrate(self, steps, known_distance_m) -> CalibrationResult:
         """Refine the profile from the steps of a walk of known length (:func:`calibrate_known_distance`).
@@ -144,9 +163,10 @@ class Settings:
                 setattr(self, name, getattr(defaults, name))
             else:
                 setattr(self, name, float(v))
-        if not isinstance(self.record_live, bool):
-            out.append(f"record_live={self.record_live!r} is not true/false; using True")
-            self.record_live = True
+        for name in ("record_live", "use_gps"):
+            if not isinstance(getattr(self, name), bool):
+                out.append(f"{name}={getattr(self, name)!r} is not true/false; using True")
+                setattr(self, name, True)
         if self.replay_speed not in ("1x", "10x", "max"):
             out.append(f"replay_speed={self.replay_speed!r} unknown; using '10x'")
             self.replay_speed = "10x"
@@ -154,7 +174,8 @@ class Settings:
 
     def to_dict(self) -> dict:
         """What goes into ``settings.json`` (the profile has its own file)."""
-        return {"rate_hz": self.rate_hz, "record_live": self.record_live, "replay_speed": self.replay_speed}
+        return {"rate_hz": self.rate_hz, "record_live": self.record_live, "replay_speed": self.replay_speed,
+                "use_gps": self.use_gps}
 
     @classmethod
     def load(cls, path: str) -> "Settings":
