@@ -86,6 +86,7 @@ class PDRApp(App):
     rate_text = StringProperty("100")
     rate_choices = ListProperty([str(r) for r in RATE_CHOICES])
     record_live = BooleanProperty(True)
+    use_gps = BooleanProperty(True)
     stride_model_text = StringProperty("default")
     stride_model_choices = ListProperty(list(STRIDE_MODEL_CHOICES))
     c_text = StringProperty("")
@@ -148,6 +149,7 @@ class PDRApp(App):
         self.height_text = f"{s.height_m * 100:.0f}" if s.height_m else ""
         self.rate_text = f"{s.rate_hz:g}"
         self.record_live = s.record_live
+        self.use_gps = s.use_gps
         self.stride_model_text = s.stride_model_name
         walks = s.calibration_walks()
         scale = s.profile.c_scale
@@ -155,7 +157,8 @@ class PDRApp(App):
         self.c_text = (f"step length x {scale:.3f} ({n} walk{'s' if n > 1 else ''})" if walks else
                        f"step length x {scale:.3f} (older version)" if scale != 1.0 else "not calibrated")
 
-    def save_settings(self, height_cm: str, rate: str, record_live: bool, stride_model: str | None = None) -> None:
+    def save_settings(self, height_cm: str, rate: str, record_live: bool, stride_model: str | None = None,
+                      use_gps: bool | None = None) -> None:
         s = self.settings
         try:
             height_m = float(height_cm) / 100.0 if height_cm.strip() else None
@@ -176,6 +179,8 @@ class PDRApp(App):
             problems.append(f"stride model not changed: {e}")
         s.rate_hz = rate_hz
         s.record_live = bool(record_live)
+        if use_gps is not None:
+            s.use_gps = bool(use_gps)
         problems += s.validate()
         s.save(self.settings_path)
         self._settings_to_ui()
@@ -183,10 +188,7 @@ class PDRApp(App):
             (" – applies to the next track" if self.session else "")
 
     def _pipeline_factory(self):
-        from core.pdr.pipeline import Pipeline  # noqa: PLC0415
-
-        kw = self.settings.pipeline_kwargs()
-        return lambda: Pipeline(**kw)
+        return self.settings.pipeline_factory()
 
     @property
     def track_view(self):
@@ -300,7 +302,7 @@ class PDRApp(App):
 
         return {"app": f"pdr-app {__version__}", "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                 "height_m": s.height_m, "stride_model": s.stride_model_name, "c_scale": s.profile.c_scale,
-                "rate_hz": s.rate_hz}
+                "rate_hz": s.rate_hz, "use_gps": s.use_gps}
 
     def toggle_recording(self):
         """Live: stop the running recording, or start a new one."""
@@ -484,6 +486,7 @@ class PDRApp(App):
         tv = self.track_view
         if track_changed or force:
             tv.set_track(ses.track_east, ses.track_north)
+        tv.set_gps(ses.gps_overlay())  # copies only what is new
         summ = ses.summary()
         tv.set_heading(summ["heading_rad"])
         self.steps_text = str(summ["steps"])
@@ -553,6 +556,14 @@ class PDRApp(App):
             out.update(summary={k: v for k, v in ses.summary().items() if k != "labels"},
                        track_east=ses.track_east, track_north=ses.track_north, events=ses.events_in,
                        errors=ses.errors, health=ses.health_text(), finished=ses.finished)
+            gps = ses.gps_overlay()
+            if gps is not None:
+                out["gps"] = {"fused_east": gps.fused_east, "fused_north": gps.fused_north,
+                              "fused_source": gps.fused_source, "fix_east": gps.fix_east,
+                              "fix_north": gps.fix_north, "fix_hacc": gps.fix_hacc,
+                              "fix_accepted": gps.fix_accepted, "n_fixes": gps.n_fixes, "n_used": gps.n_used,
+                              "cov_en_m2": gps.cov_en_m2, "anchored": gps.anchored,
+                              "legend": tv._legend.text, "shows_fused": tv.shows_fused}
         return out
 
     def write_report(self, path: str) -> None:

@@ -1,4 +1,4 @@
-"""The live track widget (Kivy): track line, start marker, position and heading arrow, scale bar.
+"""The live track widget (Kivy): track line, start marker, position and heading arrow, scale bar, GPS layer.
 
 Pan with one finger (or the mouse), pinch with two fingers or the scroll
 wheel to zoom, double-tap to fit the whole track.  Panning turns *follow*
@@ -10,27 +10,64 @@ The track is kept in metres and mapped to pixels by an
 stays constant on screen.  Redraws are coalesced with a Clock trigger: the
 line is rebuilt only when the track or the view changed, the position
 marker on every update.
+
+GPS layer (:meth:`TrackView.set_gps`, an :class:`app.session.GpsOverlay`)
+    Once a fix has anchored the walk: the fused track (gold; its
+    dead-reckoning-only stretches, ``source == "dr"``, violet), the raw PDR
+    track thin and faint under it, the fixes as small squares (light grey;
+    rejected ones red) with faint accuracy circles of radius ``hacc_m`` for
+    the last :data:`MAX_ACCURACY_CIRCLES` fixes, the **2-sigma** uncertainty
+    ellipse of the last fused step at the current position
+    (:data:`app.overlay.ELLIPSE_SIGMA`), and a legend with
+    "GPS: n fixes, m used · ±X m (2σ)", X the ellipse's semi-major axis.
+    The number of canvas instructions hardly grows with the walk: all
+    circles are one mesh per colour; the fixes are meshes of
+    :data:`FIX_CHUNK` fixes each, under one ``Translate`` (the last
+    :data:`MAX_FIX_CHUNKS` chunks), so a pan, and following the walker,
+    moves them without touching a vertex, and a new fix rebuilds only its
+    own chunk (the squares are rebuilt only when the zoom changes); the
+    violet stretches are one line each.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
 from kivy.clock import Clock
-from kivy.graphics import Color, Ellipse, Line, Mesh, Rectangle, Triangle
+from kivy.graphics import (Color, Ellipse, InstructionGroup, Line, Mesh, PopMatrix, PushMatrix, Rectangle, Translate,
+                           Triangle)
 from kivy.metrics import dp, sp
 from kivy.properties import BooleanProperty, NumericProperty
 from kivy.uix.label import Label
 from kivy.uix.widget import Widget
 
+from app.overlay import (ELLIPSE_SIGMA, circles_mesh, covariance_ellipse, ellipse_points, fan_mesh,
+                         gps_status_text, runs, squares_mesh)
 from app.viewport import Viewport, format_length
 
 BACKGROUND = (0.07, 0.08, 0.10, 1)
-TRACK_COLOR = (0.15, 0.75, 1.0, 1)
+TRACK_COLOR = (0.15, 0.75, 1.0, 1)  #: the PDR (dead-reckoned) track
 START_COLOR = (0.2, 0.85, 0.3, 1)
 POSITION_COLOR = (1.0, 0.55, 0.1, 1)
 BAR_COLOR = (0.92, 0.92, 0.92, 1)
 GRID_COLOR = (0.16, 0.17, 0.20, 1)
+FUSED_COLOR = (1.0, 0.84, 0.2, 1)  #: fused track, a fix accepted within the last few seconds
+FUSED_DR_COLOR = (0.78, 0.45, 1.0, 1)  #: fused track, dead reckoning only (no fix accepted lately)
+FIX_COLOR = (0.88, 0.90, 0.95, 1)  #: an accepted GPS fix
+REJECTED_COLOR = (1.0, 0.25, 0.3, 1)  #: a fix the fusion did not use (screened out or gated)
+RAW_UNDER_FUSED_ALPHA = 0.45  #: the PDR track's opacity under a fused track
+CIRCLE_ALPHA = 0.22  #: accuracy circles
+ELLIPSE_FILL_ALPHA = 0.2
+MAX_ACCURACY_CIRCLES = 60  #: accuracy circles of the last fixes only (a minute at 1 Hz)
+FIX_CHUNK = 500  #: fixes per mesh (per colour)
+MAX_FIX_CHUNKS = 20  #: fix squares of the last 20 chunks only (10000 fixes: 2.8 h at 1 Hz)
+
+
+def _hex(rgba, alpha: float | None = None) -> str:
+    r, g, b = (round(255 * v) for v in rgba[:3])
+    a = round(255 * (rgba[3] if alpha is None else alpha))
+    return f"#{r:02x}{g:02x}{b:02x}{a:02x}"
 
 
 class TrackView(Widget):
@@ -49,16 +86,48 @@ class TrackView(Widget):
         self.heading_rad = math.nan
         self._touches: dict = {}
         self._line_dirty = True
+        self._fixes_dirty = True
+        self.gps = None  # the last GpsOverlay given, None: GPS off
+        self._fused_e = self._fused_n = np.zeros(1)
+        self._fused_dr_runs: list = []
+        self._fix = {"e": np.zeros(0), "n": np.zeros(0), "hacc": np.zeros(0), "ok": np.zeros(0, bool)}
         with self.canvas.before:
             Color(*BACKGROUND)
             self._bg = Rectangle(pos=self.pos, size=self.size)
             Color(*GRID_COLOR)
             self._grid = Mesh(vertices=[], indices=[], mode="lines")
         with self.canvas:
-            Color(*TRACK_COLOR)
+            # accuracy circles (faint), one mesh per colour
+            self._circles, self._circle_colors, self._dots, self._dot_colors = {}, {}, {}, {}
+            for key, rgba in (("accepted", FIX_COLOR), ("rejected", REJECTED_COLOR)):
+                self._circle_colors[key] = Color(*rgba[:3], CIRCLE_ALPHA)
+                self._circles[key] = Mesh(vertices=[], indices=[], mode="lines")
+            self._line_color = Color(*TRACK_COLOR)
             self._line = Line(points=[], width=self.line_width, joint="round", cap="round")
+            # the fixes: small squares, chunks of FIX_CHUNK fixes per mesh and colour, shifted by _fix_shift
+            PushMatrix()
+            self._fix_shift = Translate(0, 0)
+            self._fix_groups = {}
+            for key, rgba in (("accepted", FIX_COLOR), ("rejected", REJECTED_COLOR)):
+                self._dot_colors[key] = Color(*rgba)
+                self._fix_groups[key] = InstructionGroup()
+                self._dots[key] = []  # one Mesh per chunk
+            PopMatrix()
+            self._fix_built = None  # (scale, x, y): the scale and screen position of (0, 0) the squares are built at
+            self._fix_first = 0  # the first chunk drawn
+            self._fix_chunks_built = 0  # chunks up to date (all but the last, which takes the new fixes)
+            self._fused_color = Color(*FUSED_COLOR)
+            self._fused = Line(points=[], width=self.line_width, joint="round", cap="round")
+            self._fused_dr_color = Color(*FUSED_DR_COLOR)
+            self._fused_dr = InstructionGroup()  # one Line per dead-reckoning stretch (a pool, reused)
+            self._fused_dr_lines: list = []
             Color(*START_COLOR)
             self._start = Ellipse(size=(0, 0))
+            # the uncertainty ellipse (ELLIPSE_SIGMA, 2-sigma), under the position marker
+            self._ellipse_fill_color = Color(*POSITION_COLOR[:3], ELLIPSE_FILL_ALPHA)
+            self._ellipse_fill = Mesh(vertices=[], indices=[], mode="triangle_fan")
+            self._ellipse_color = Color(*POSITION_COLOR)
+            self._ellipse = Line(points=[], width=dp(1.2), close=True)
             Color(*POSITION_COLOR)
             self._arrow = Triangle(points=[0, 0, 0, 0, 0, 0])
             self._dot = Ellipse(size=(0, 0))
@@ -66,6 +135,12 @@ class TrackView(Widget):
             self._bar = Line(points=[], width=dp(1.5))
         self._bar_label = Label(text="", font_size=sp(12), color=BAR_COLOR, size_hint=(None, None))
         self.add_widget(self._bar_label)
+        self._legend = Label(text="", font_size=sp(12), color=BAR_COLOR, size_hint=(None, None), markup=True,
+                             halign="left", valign="top")
+        with self._legend.canvas.before:
+            Color(*BACKGROUND[:3], 0.75)
+            self._legend_bg = Rectangle(size=(0, 0))
+        self.add_widget(self._legend)
         self._trigger = Clock.create_trigger(self._redraw, 0)
         self.bind(pos=self._view_changed, size=self._view_changed, follow=self._view_changed)
 
@@ -83,15 +158,64 @@ class TrackView(Widget):
         self.heading_rad = heading_rad
         self._trigger()
 
+    def set_gps(self, gps) -> None:
+        """The GPS layer: an :class:`app.session.GpsOverlay`, or None (GPS off).
+
+        Cheap to call on every UI update: the overlay's lists only grow, and only what grew is
+        copied and marked for redrawing.
+        """
+        old, self.gps = self.gps, gps
+        if gps is None:
+            self._fused_e = self._fused_n = np.zeros(1)
+            self._fused_dr_runs = []
+            self._fix = {"e": np.zeros(0), "n": np.zeros(0), "hacc": np.zeros(0), "ok": np.zeros(0, bool)}
+            self._line_dirty = self._fixes_dirty = True
+            self._fix_built = None
+        else:
+            n_steps = len(gps.fused_source)
+            new_track = old is None or old.fused_source is not gps.fused_source  # a new session or track
+            if new_track or n_steps != len(self._fused_e) - 1 or old.anchored != gps.anchored:
+                self._fused_e = np.array(gps.fused_east[:n_steps + 1], dtype=float)
+                self._fused_n = np.array(gps.fused_north[:n_steps + 1], dtype=float)
+                self._fused_dr_runs = runs([s == "dr" for s in gps.fused_source[:n_steps]])
+                self._line_dirty = True
+            n_fix = len(gps.fix_accepted)
+            if new_track or n_fix < len(self._fix["ok"]):
+                self._fix_built = None  # not the same fixes: every chunk anew
+            if new_track or n_fix != len(self._fix["ok"]):
+                self._fix = {"e": np.array(gps.fix_east[:n_fix], dtype=float),
+                             "n": np.array(gps.fix_north[:n_fix], dtype=float),
+                             "hacc": np.array(gps.fix_hacc[:n_fix], dtype=float),
+                             "ok": np.array(gps.fix_accepted[:n_fix], dtype=bool)}
+                self._fixes_dirty = True
+        self._set_legend(self._legend_text())
+        self._trigger()
+
+    @property
+    def shows_fused(self) -> bool:
+        """A fused track is drawn (GPS on, the walk anchored by a fix, at least one step)."""
+        return self.gps is not None and self.gps.anchored and len(self._fused_e) > 1
+
+    @property
+    def current_position(self) -> tuple[float, float]:
+        """Where the position marker is: the fused track's end when there is one, else the PDR track's."""
+        if self.shows_fused:
+            return float(self._fused_e[-1]), float(self._fused_n[-1])
+        return self.position
+
     def fit(self, *_) -> None:
-        """Show the whole track; turns follow off."""
+        """Show the whole track (and the fused one); turns follow off."""
         self.follow = False
         self.vp.set_rect(self.x, self.y, self.width, self.height)
-        self.vp.fit(self.east, self.north, margin_px=dp(48))  # clear of the button bar and scale bar
+        east, north = self.east, self.north
+        if self.shows_fused:
+            east, north = np.concatenate([east, self._fused_e]), np.concatenate([north, self._fused_n])
+        self.vp.fit(east, north, margin_px=dp(48))  # clear of the button bar and scale bar
         self._view_changed()
 
     def _view_changed(self, *_):
         self._line_dirty = True
+        self._fixes_dirty = True
         self._trigger()
 
     # -- drawing ----------------------------------------------------------------------
@@ -100,20 +224,28 @@ class TrackView(Widget):
         vp = self.vp
         vp.set_rect(self.x, self.y, self.width, self.height)
         self._bg.pos, self._bg.size = self.pos, self.size
+        position = self.current_position
         if self.follow:
             old = vp.center
-            vp.follow(*self.position)
+            vp.follow(*position)
             if old != vp.center:
-                self._line_dirty = True
+                self._line_dirty = self._fixes_dirty = True
         if self._line_dirty:
-            self._line.width = self.line_width
+            fused = self.shows_fused
+            self._line.width = dp(1) if fused else self.line_width
+            self._line_color.a = RAW_UNDER_FUSED_ALPHA if fused else 1.0
             self._line.points = vp.points(self.east, self.north)
+            self._draw_fused(fused)
             self._draw_grid()
             self._line_dirty = False
+        if self._fixes_dirty:
+            self._draw_fixes()
+            self._fixes_dirty = False
         r = dp(6)
         sx, sy = vp.to_screen(self.east[0], self.north[0])
         self._start.pos, self._start.size = (sx - r, sy - r), (2 * r, 2 * r)
-        px, py = vp.to_screen(*self.position)
+        px, py = vp.to_screen(*position)
+        self._draw_ellipse(px, py)
         r = dp(5)
         self._dot.pos, self._dot.size = (px - r, py - r), (2 * r, 2 * r)
         h = self.heading_rad
@@ -126,6 +258,120 @@ class TrackView(Widget):
         else:
             self._arrow.points = [px, py, px, py, px, py]
         self._draw_scale_bar()
+        self._place_legend()
+
+    def _draw_fused(self, shown: bool) -> None:
+        """The fused track, and its dead-reckoning-only stretches over it in their own colour."""
+        vp = self.vp
+        self._fused.width = self.line_width
+        self._fused.points = vp.points(self._fused_e, self._fused_n) if shown else []
+        stretches = self._fused_dr_runs if shown else []
+        lines = self._fused_dr_lines
+        while len(lines) < len(stretches):
+            line = Line(points=[], width=self.line_width, joint="round", cap="round")
+            self._fused_dr.add(line)
+            lines.append(line)
+        for k, line in enumerate(lines):
+            if k < len(stretches):
+                i0, i1 = stretches[k]
+                line.width = self.line_width
+                line.points = vp.points(self._fused_e[i0:i1 + 1], self._fused_n[i0:i1 + 1])
+            elif line.points:
+                line.points = []
+
+    def _draw_fixes(self) -> None:
+        """Accuracy circles (the last MAX_ACCURACY_CIRCLES) and fix squares (see :meth:`_draw_fix_squares`)."""
+        f = self._fix
+        shown = self.shows_fused
+        ok, hacc = f["ok"], f["hacc"]
+        n = len(ok)
+        recent = (np.arange(n) >= n - MAX_ACCURACY_CIRCLES) & np.isfinite(hacc) & (hacc > 0)
+        if not shown:
+            recent[:] = False
+        x, y = self.vp.to_screen_arrays(f["e"][recent], f["n"][recent])
+        for key, mask in (("accepted", ok[recent]), ("rejected", ~ok[recent])):
+            self._circles[key].vertices, self._circles[key].indices = circles_mesh(
+                x[mask], y[mask], hacc[recent][mask] * self.vp.scale, n=32)
+        self._draw_fix_squares(shown)
+
+    def _draw_fix_squares(self, shown: bool) -> None:
+        """The fixes as squares, FIX_CHUNK fixes per mesh and colour (the last MAX_FIX_CHUNKS chunks).
+
+        The squares are built in the screen frame of the view when they were built (``_fix_built``);
+        ``_fix_shift`` moves them to the current one.  A new zoom rebuilds them all, a new fix only the
+        chunks from the last complete one on, a pan none.
+        """
+        vp, f = self.vp, self._fix
+        n = len(f["ok"]) if shown else 0
+        n_chunks = -(-n // FIX_CHUNK)
+        first = max(n_chunks - MAX_FIX_CHUNKS, 0)
+        ox, oy = vp.to_screen(0.0, 0.0)
+        built = self._fix_built
+        if built is None or built[0] != vp.scale or self._fix_first != first:
+            built = self._fix_built = (vp.scale, ox, oy)
+            self._fix_chunks_built = 0
+            self._fix_first = first
+        s, bx, by = built
+        self._fix_shift.xy = (ox - bx, oy - by)
+        for key, mask in (("accepted", f["ok"]), ("rejected", ~f["ok"])):
+            meshes, group = self._dots[key], self._fix_groups[key]
+            while len(meshes) < n_chunks - first:
+                meshes.append(Mesh(vertices=[], indices=[], mode="triangles"))
+                group.add(meshes[-1])
+            for c in range(len(meshes)):
+                k = first + c
+                if k < self._fix_chunks_built and c < n_chunks - first:
+                    continue  # complete and built at this scale
+                sl = slice(k * FIX_CHUNK, min((k + 1) * FIX_CHUNK, n))
+                m = mask[sl]
+                x, y = bx + f["e"][sl][m] * s, by + f["n"][sl][m] * s
+                drawn = c < n_chunks - first
+                meshes[c].vertices, meshes[c].indices = squares_mesh(x, y, dp(1.6)) if drawn else ([], [])
+        self._fix_chunks_built = max(n // FIX_CHUNK, first)  # the last, incomplete chunk is rebuilt next time
+
+    def _draw_ellipse(self, px: float, py: float) -> None:
+        """The ELLIPSE_SIGMA (2-sigma) ellipse of the last fused step's position covariance, in pixels."""
+        cov = self.gps.cov_en_m2 if self.gps is not None else None
+        if not self.shows_fused or cov is None:
+            self._ellipse.points = []
+            self._ellipse_fill.vertices, self._ellipse_fill.indices = [], []
+            return
+        a, b, angle = covariance_ellipse(cov, ELLIPSE_SIGMA)
+        s = self.vp.scale
+        outline = ellipse_points(px, py, a * s, b * s, angle, n=48)
+        self._ellipse.points = outline
+        self._ellipse_fill.vertices, self._ellipse_fill.indices = fan_mesh(px, py, outline)
+
+    # -- the legend ---------------------------------------------------------------------
+
+    def _legend_text(self) -> str:
+        g = self.gps
+        if g is None:
+            return "GPS off"
+        text = gps_status_text(g.n_fixes, g.n_used, g.cov_en_m2, g.anchored, ELLIPSE_SIGMA)
+        if g.anchored:
+            def key(rgba, mark, label, alpha=None):
+                return f"[color={_hex(rgba, alpha)}]{mark}[/color] {label}"
+            text += "\n" + "   ".join((key(FUSED_COLOR, "—", "fused"), key(FUSED_DR_COLOR, "—", "no GPS"),
+                                       key(TRACK_COLOR, "—", "PDR only", RAW_UNDER_FUSED_ALPHA)))
+            text += "\n" + "   ".join((key(FIX_COLOR, "•", "fix, accuracy circle"),
+                                       key(REJECTED_COLOR, "•", "rejected"),
+                                       key(POSITION_COLOR, "o", f"{ELLIPSE_SIGMA:g}σ ellipse")))
+        return text
+
+    def _set_legend(self, text: str) -> None:
+        lbl = self._legend
+        if lbl.text != text:
+            lbl.text = text
+            lbl.texture_update()
+            lbl.size = lbl.texture_size
+
+    def _place_legend(self) -> None:
+        lbl = self._legend
+        lbl.pos = (self.x + dp(8), self.top - dp(46) - lbl.height)  # below the message bar of layout.kv
+        pad = dp(3)
+        self._legend_bg.pos = (lbl.x - pad, lbl.y - pad)
+        self._legend_bg.size = (lbl.width + 2 * pad, lbl.height + 2 * pad) if lbl.text else (0, 0)
 
     def _draw_grid(self):
         """Faint lines every scale-bar length, aligned to the start (East/North axes)."""

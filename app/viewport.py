@@ -55,13 +55,19 @@ class Viewport:
         return (self.center[0] + (x - self.x0 - self.width / 2) / self.scale,
                 self.center[1] + (y - self.y0 - self.height / 2) / self.scale)
 
-    def points(self, east, north) -> list:
-        """Interleaved screen coordinates ``[x0, y0, x1, y1, ...]`` for a Kivy ``Line``."""
+    def to_screen_arrays(self, east, north) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`to_screen` of whole arrays: ``(x, y)`` pixel arrays."""
         e = np.asarray(east, dtype=float)
         n = np.asarray(north, dtype=float)
-        xy = np.empty(2 * len(e))
-        xy[0::2] = self.x0 + self.width / 2 + (e - self.center[0]) * self.scale
-        xy[1::2] = self.y0 + self.height / 2 + (n - self.center[1]) * self.scale
+        return (self.x0 + self.width / 2 + (e - self.center[0]) * self.scale,
+                self.y0 + self.height / 2 + (n - self.center[1]) * self.scale)
+
+    def points(self, east, north) -> list:
+        """Interleaved screen coordinates ``[x0, y0, x1, y1, ...]`` for a Kivy ``Line``."""
+        x, y = self.to_screen_arrays(east, north)
+        xy = np.empty(2 * len(x))
+        xy[0::2] = x
+        xy[1::2] = y
         return xy.tolist()
 
     def pan(self, dx_px: float, dy_px: float) -> None:

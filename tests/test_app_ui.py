@@ -4,9 +4,11 @@ Only one ``App.run()`` works per process, so the full app runs in
 subprocesses: one through the documented command line (replay to the end,
 screenshot, pixel checks along the expected path), one driving the app's
 lifecycle (pause/resume, export).  The track widget's touch handling is
-tested in this process on a bare window.
+tested in this process on a bare window, and so is its GPS layer (canvas instructions
+against the session's fused track, fixes and covariance).
 """
 
+import dataclasses
 import json
 import math
 import os
@@ -29,6 +31,8 @@ from desktop.simulator import simulate_walk  # noqa: E402
 from core.pdr.calibration import UserProfile  # noqa: E402
 from core.pdr.stride_models import load_stride_model, with_scale  # noqa: E402
 from app.settings import Settings  # noqa: E402
+from core.gnss.fusion import GpsFusion  # noqa: E402
+from test_app_logic import gps_walk, replay_session  # noqa: E402 - tests/ is on sys.path, as for the LIVE script
 
 ROOT = Path(__file__).resolve().parents[1]
 WAYPOINTS = ((0.0, 0.0), (30.0, 0.0), (30.0, 20.0), (10.0, 20.0))
@@ -37,6 +41,10 @@ SIZE = (480, 800)
 TRACK_RGB = np.array([0.15, 0.75, 1.0]) * 255
 START_RGB = np.array([0.2, 0.85, 0.3]) * 255
 POSITION_RGB = np.array([1.0, 0.55, 0.1]) * 255
+FUSED_RGB = np.array([1.0, 0.84, 0.2]) * 255
+FUSED_DR_RGB = np.array([0.78, 0.45, 1.0]) * 255
+FIX_RGB = np.array([0.88, 0.90, 0.95]) * 255
+REJECTED_RGB = np.array([1.0, 0.25, 0.3]) * 255
 
 
 def read_png(path):
@@ -456,3 +464,181 @@ def test_live_mode_records_every_event_through_the_app(tmp_path):
         want = sorted(t for t, ty in delivered if ty == type_)
         assert rec.streams[name].t_ns.tolist() == want  # every event, exact timestamps
     assert "acc" in log["health"] and "gyro" in log["health"]
+
+
+@pytest.fixture(scope="module")
+def gps_file(tmp_path_factory):
+    """The GPS walk of tests/test_app_logic.py (outdoor, 2 min, a 25 s GPS gap, multipath) as a file."""
+    w = gps_walk()
+    path = tmp_path_factory.mktemp("gps") / "gps-walk.csv"
+    write_recording(str(path), w.recording)
+    return w, path
+
+
+def test_track_view_draws_the_gps_layer(gps_file):
+    """Instructions, not pixels: the fix squares sit on the fixes, the accuracy circles have radius hacc (the
+    last MAX_ACCURACY_CIRCLES only), the violet lines are the "dr" stretches, the ellipse is the 2-sigma one of
+    the last step's covariance, in the colours of the legend.  More fixes add no top-level instructions, a
+    pan moves the squares by their Translate without rebuilding them, a new fix rebuilds only its chunk."""
+    from kivy.base import EventLoop
+    from kivy.core.window import Window
+    from kivy.metrics import dp
+
+    from app import track_view as T
+    from app.overlay import runs
+
+    w, _ = gps_file
+    ses = replay_session(w.recording, Settings().pipeline_factory())
+    g = ses.gps_overlay()
+    EventLoop.ensure_window()
+    tv = T.TrackView(size=(480, 640), pos=(0, 0), size_hint=(None, None))
+    Window.add_widget(tv)
+    try:
+        tv.set_track(ses.track_east, ses.track_north)
+        tv.set_gps(g)
+        tv.fit()
+        tv._redraw()
+        vp = tv.vp
+        n_instructions = len(tv.canvas.children)
+        # the raw PDR track thin and faint under the fused one, which has every step
+        assert tv.shows_fused and tv.current_position == (g.fused_east[-1], g.fused_north[-1])
+        assert tv._line.width == pytest.approx(dp(1)) and tv._line_color.a == pytest.approx(T.RAW_UNDER_FUSED_ALPHA)
+        np.testing.assert_allclose(tv._fused.points, vp.points(g.fused_east, g.fused_north), atol=0.01)
+        assert tv._fused_color.rgba == pytest.approx(list(T.FUSED_COLOR))
+        # fixes: one square per fix, centred on it, in its colour; circles of the last 60, radius hacc
+        ok = np.array(g.fix_accepted)
+        fe, fn, hacc = (np.array(v) for v in (g.fix_east, g.fix_north, g.fix_hacc))
+        last = np.arange(len(ok)) >= len(ok) - T.MAX_ACCURACY_CIRCLES
+        assert 1 <= (~ok).sum() and ok.sum() == g.n_used and len(ok) > T.MAX_ACCURACY_CIRCLES
+        for key, mask, rgba in (("accepted", ok, T.FIX_COLOR), ("rejected", ~ok, T.REJECTED_COLOR)):
+            x, y = vp.to_screen_arrays(fe[mask], fn[mask])
+            sq = squares(tv, key)
+            assert len(sq) == mask.sum() and sum(len(m.indices) for m in tv._dots[key]) == 6 * mask.sum()
+            np.testing.assert_allclose(sq.mean(axis=1), np.c_[x, y], atol=0.01)
+            assert tv._dot_colors[key].rgba == pytest.approx(list(rgba))
+            m = mask & last
+            ring = np.array(tv._circles[key].vertices).reshape(m.sum(), -1, 4)[:, :, :2]
+            centre = ring.mean(axis=1)
+            x, y = vp.to_screen_arrays(fe[m], fn[m])
+            np.testing.assert_allclose(centre, np.c_[x, y], atol=0.01)
+            radius = np.hypot(*(ring - centre[:, None, :]).transpose(2, 0, 1))
+            np.testing.assert_allclose(radius, np.repeat((hacc[m] * vp.scale)[:, None], ring.shape[1], 1), rtol=1e-4)
+            assert tv._circle_colors[key].rgba == pytest.approx([*rgba[:3], T.CIRCLE_ALPHA])
+        # the dead-reckoning stretches of the fused track, each its own violet line
+        stretches = runs(np.array(g.fused_source) == "dr")
+        drawn = [ln for ln in tv._fused_dr_lines if ln.points]
+        assert len(drawn) == len(stretches) >= 2  # before the first fix, the gap (and the multipath)
+        for line, (i0, i1) in zip(drawn, stretches):
+            np.testing.assert_allclose(line.points, vp.points(g.fused_east[i0:i1 + 1], g.fused_north[i0:i1 + 1]),
+                                       atol=0.01)
+        assert tv._fused_dr_color.rgba == pytest.approx(list(T.FUSED_DR_COLOR))
+        # the ellipse: its outline, back in metres about the position, is p^T C^-1 p = 2^2
+        px, py = vp.to_screen(g.fused_east[-1], g.fused_north[-1])
+        p = (np.array(tv._ellipse.points).reshape(-1, 2) - (px, py)) / vp.scale
+        ve, c, vn = g.cov_en_m2
+        q = np.einsum("ij,jk,ik->i", p, np.linalg.inv([[ve, c], [c, vn]]), p)
+        np.testing.assert_allclose(q, T.ELLIPSE_SIGMA ** 2, rtol=1e-3)
+        sigma = ses.gnss.status()["sigma_m"]  # the fusion's own: sqrt of the largest eigenvalue
+        assert np.max(np.hypot(p[:, 0], p[:, 1])) == pytest.approx(2.0 * sigma, rel=1e-3)
+        assert len(tv._ellipse_fill.indices) == len(p) + 2 and tv._ellipse_color.rgba == pytest.approx(
+            list(T.POSITION_COLOR))
+        assert f"GPS: {g.n_fixes} fixes, {g.n_used} used · ±{2.0 * sigma:.1f} m (2σ)" in tv._legend.text
+        assert "2σ ellipse" in tv._legend.text
+        # twelve times the fixes (three chunks): the same top-level instructions, still 60 circles
+        def more(k, extra=0):
+            return dataclasses.replace(g, fix_east=g.fix_east * k + [0.0] * extra,
+                                       fix_north=g.fix_north * k + [0.0] * extra,
+                                       fix_hacc=g.fix_hacc * k + [3.0] * extra,
+                                       fix_accepted=g.fix_accepted * k + [True] * extra)
+        tv.set_gps(more(12))
+        tv._redraw()
+        assert len(tv.canvas.children) == n_instructions
+        assert len(ok) * 12 > 2 * T.FIX_CHUNK and len(tv._dots["accepted"]) == 3
+        n_circles = sum(len(tv._circles[k].vertices) for k in tv._circles) // (4 * 32)
+        assert n_circles == T.MAX_ACCURACY_CIRCLES
+        assert sum(len(squares(tv, k)) for k in tv._dots) == 12 * len(ok)
+        before = [m.vertices for m in tv._dots["accepted"]]
+        tv.set_gps(more(12, extra=1))  # one fix more: only the last chunk is rebuilt
+        tv._redraw()
+        after = [m.vertices for m in tv._dots["accepted"]]
+        assert after[:2] == before[:2] and len(after[2]) == len(before[2]) + 16
+        shift = tuple(tv._fix_shift.xy)
+        tv.vp.pan(37.0, -21.0)  # a pan: no square is rebuilt, the Translate moves them
+        tv._view_changed()
+        tv._redraw()
+        assert [m.vertices for m in tv._dots["accepted"]] == after
+        assert tuple(tv._fix_shift.xy) == pytest.approx((shift[0] + 37.0, shift[1] - 21.0))
+        x, y = tv.vp.to_screen_arrays(fe[ok], fn[ok])
+        np.testing.assert_allclose(squares(tv, "accepted")[:ok.sum()].mean(axis=1), np.c_[x, y], atol=0.01)
+        # GPS off: the PDR track as before, nothing of the GPS layer
+        tv.set_gps(None)
+        tv._redraw()
+        assert tv._legend.text == "GPS off" and tv._fused.points == [] and tv._ellipse.points == []
+        assert all(not len(squares(tv, k)) and not tv._circles[k].vertices for k in tv._dots)
+        assert not any(ln.points for ln in tv._fused_dr_lines)
+        assert tv._line.width == tv.line_width and tv._line_color.a == 1.0
+    finally:
+        Window.remove_widget(tv)
+
+
+def squares(tv, key):
+    """The fix squares of colour ``key`` as drawn: (n, 4 corners, xy) in screen pixels, the Translate applied."""
+    v = np.array([x for m in tv._dots[key] for x in m.vertices]).reshape(-1, 4, 4)[:, :, :2]
+    return v + np.array(tv._fix_shift.xy)
+
+
+def test_app_replay_with_gps_shows_fused_track_and_fixes(gps_file, tmp_path):
+    """The app with its default settings (Use GPS on) replays the GPS walk: its fused track is the batch
+    fusion's, and the screenshot shows it gold where fused and violet through the gap, and the fixes off the
+    track as light squares (rejected ones red)."""
+    w, path = gps_file
+    shot, report = tmp_path / "shot.png", tmp_path / "report.json"
+    r = _run(["-m", "app", str(path), "--speed", "max", "--headless", "--exit-at-end", "--size",
+              f"{SIZE[0]}x{SIZE[1]}", "--screenshot", str(shot), "--report", str(report),
+              "--data-dir", str(tmp_path / "data"), "--out", str(tmp_path / "out")])
+    assert r.returncode == 0, r.stderr[-3000:]
+    rep = json.loads(report.read_text())
+    g = rep["gps"]
+    batch = Pipeline(**Settings().pipeline_kwargs(), gnss=GpsFusion()).run(w.recording).fusion
+    assert rep["finished"] and rep["errors"] == 0 and g["anchored"] and g["shows_fused"]
+    np.testing.assert_allclose(g["fused_east"][1:], [s.east_m for s in batch.steps], rtol=0, atol=1e-9)
+    assert g["fused_source"] == [s.source for s in batch.steps]
+    assert g["legend"].startswith(f"GPS: {batch.counters['fixes']} fixes, {batch.counters['fixes_accepted']} used")
+
+    img = read_png(shot)
+    view = rep["view"]
+    xy = _to_screen(view, g["fused_east"], g["fused_north"])
+    src = g["fused_source"]
+    end = xy[-1]
+
+    def along(kind):
+        """Samples of the fused track's segments of ``kind``, 6 px clear of the other kind and of the end."""
+        segs = [(xy[k], xy[k + 1]) for k in range(len(src)) if src[k] == kind]
+        foreign = np.array([p for k in range(len(src)) if src[k] != kind for p in _samples([xy[k], xy[k + 1]])])
+        pts = [p for a, b in segs for p in _samples([a, b]) if math.dist(p, end) > 30]
+        return [p for p in pts if not len(foreign) or np.min(np.hypot(*(foreign - p).T)) > 6]
+
+    for kind, rgb in (("fused", FUSED_RGB), ("dr", FUSED_DR_RGB)):
+        pts = along(kind)
+        hits = [_near_color(img, x, y, rgb, radius=2) for x, y in pts]
+        assert len(pts) > 30 and np.mean(hits) > 0.95, (kind, len(pts), np.mean(hits))
+    # fixes at least 8 px off the fused track (elsewhere the track is drawn over them): 13 accepted, 5 rejected
+    # at this writing; at least one of each, so that retuning the fusion does not break the test
+    track = np.array(_samples(xy, step_px=1.0))
+    for accepted, rgb in ((True, FIX_RGB), (False, REJECTED_RGB)):
+        fxy = _to_screen(view, *zip(*[(e, n) for e, n, a in zip(g["fix_east"], g["fix_north"], g["fix_accepted"])
+                                      if a == accepted]))
+        off = [p for p in fxy if np.min(np.hypot(*(track - p).T)) > 8 and math.dist(p, end) > 30]
+        hits = [_near_color(img, x, y, rgb, radius=1, tol=40) for x, y in off]
+        assert len(off) >= 1 and np.mean(hits) > 0.9, (accepted, len(off), np.mean(hits))
+    # and the colours are not everywhere: none of the fused or fix colours far from the track and fixes
+    rng = np.random.default_rng(1)
+    allfix = np.array(_to_screen(view, g["fix_east"], g["fix_north"]))
+    far = []
+    while len(far) < 200:
+        x = rng.uniform(view["x"] + 5, view["x"] + view["width"] - 5)
+        y = rng.uniform(view["y"] + 40, view["y"] + view["height"] - 140)  # below the legend
+        if np.min(np.hypot(*(track - (x, y)).T)) > 25 and np.min(np.hypot(*(allfix - (x, y)).T)) > 40:
+            far.append((x, y))
+    for rgb in (FUSED_RGB, FUSED_DR_RGB, REJECTED_RGB):
+        assert not any(_near_color(img, x, y, rgb, radius=1) for x, y in far)
