@@ -450,16 +450,23 @@ class Session:
 def export_session(session: Session, out_dir: str, basename: str, raw_path: str | None = None) -> dict:
     """Write the track as GeoJSON, GPX and CSV (``core.export``) and copy the raw recording as is.
 
+    With GPS fusion and an anchored walk the fused track is written (points carry ``sigma_m``
+    and ``source``), else the dead-reckoned one.
+
     Returns ``{"geojson": path, "gpx": path, "csv": path, "raw": path}`` for the
     files written, and ``"errors"`` (a list) for what could not be written.
     """
     os.makedirs(out_dir, exist_ok=True)
     out: dict = {"errors": []}
     track = session.track()
-    # with GPS fusion: the fusion's origin, the walk's start as the first good fix and the dead-reckoned
-    # position at that moment place it; without: the first good fix is taken as the start
+    extra = None
+    # with GPS fusion: the fused track (with its per-step uncertainty and source), placed by the fusion's
+    # origin; without: the dead-reckoned track, the first good fix taken as the start
     gnss = session.gnss
     origin = gnss.origin_lat_lon if gnss is not None and gnss.origin_lat_lon is not None else session.gps_origin
+    if gnss is not None and gnss.origin_lat_lon is not None and gnss.steps:
+        fused = gnss.result().track()
+        track, extra = fused, fused.point_properties()
     try:
         from core import export  # noqa: PLC0415 - the lead's module
     except ImportError as e:
@@ -467,9 +474,10 @@ def export_session(session: Session, out_dir: str, basename: str, raw_path: str 
         export = None
     if export is not None:
         offset = session.source.unix_offset_ns
-        jobs = (("geojson", ".geojson", lambda p: export.write_track_geojson(p, track, origin_lat_lon=origin)),
+        jobs = (("geojson", ".geojson", lambda p: export.write_track_geojson(p, track, origin_lat_lon=origin,
+                                                                              point_properties=extra)),
                 ("gpx", ".gpx", lambda p: export.write_track_gpx(p, track, origin_lat_lon=origin,
-                                                                 unix_offset_ns=offset)),
+                                                                 unix_offset_ns=offset, point_properties=extra)),
                 ("csv", ".track.csv", lambda p: export.write_track_csv(p, track)))
         for key, ext, fn in jobs:
             path = os.path.join(out_dir, basename + ext)

@@ -78,8 +78,12 @@ REAL = (("sensorlogger_gps_walk_ethz", "20*"), ("gps_walks_phone", "*"))
 
 
 def _site_declination(rec, pipe) -> float | None:
-    """Give the pipeline's attitude filter the WMM declination at the first good fix (None without a date)."""
-    from core.geodesy import declination_rad, unix_ns_to_datetime
+    """Give the attitude filter the WMM declination and field at the first good fix (None without a date).
+
+    What ``Pipeline(gnss=GpsFusion())`` does itself when its first fix anchors the walk
+    (``site_from_gps``); done here before the run so that one pipeline run serves every variant.
+    """
+    from core.geodesy import magnetic_field, unix_ns_to_datetime
 
     g = rec.streams[GPS]
     cols = list(g.columns)
@@ -90,9 +94,10 @@ def _site_declination(rec, pipe) -> float | None:
         return None
     i = int(np.argmax(ok))
     alt = g.values[i, cols.index("alt_m")]
-    d = declination_rad(g.values[i, 0], g.values[i, 1], alt if math.isfinite(alt) else 0.0,
-                        unix_ns_to_datetime(off + int(g.t_ns[i])))
+    d, dip, total = magnetic_field(g.values[i, 0], g.values[i, 1], alt if math.isfinite(alt) else 0.0,
+                                   unix_ns_to_datetime(off + int(g.t_ns[i])))
     pipe.attitude.declination_rad = d
+    pipe.attitude.set_site_field(total, dip)
     return d
 
 
@@ -314,6 +319,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-real", action="store_true")
     ap.add_argument("--out", type=Path, default=RESULTS_JSON)
     ap.add_argument("--markdown-only", action="store_true", help="rewrite GNSS_RESULTS.md from the JSON of a run")
+    ap.add_argument("--keep-sim", action="store_true", help="reuse the simulator results of the last run (real walks only)")
     args = ap.parse_args(argv)
     if args.markdown_only:
         RESULTS_MD.write_text(markdown(json.loads(args.out.read_text())))
@@ -322,7 +328,10 @@ def main(argv=None) -> int:
     t = time.time()
     real = [] if args.no_real or root is None or not Path(root).is_dir() else real_walks(Path(root))
     splits = (TUNING, REPORT) if args.split == "both" else (args.split,)
-    sim = {sp: sim_walks(SIM_GPS_SEEDS[sp][:args.sim_walks]) for sp in splits}
+    if args.keep_sim:
+        sim = json.loads(args.out.read_text())["sim"]
+    else:
+        sim = {sp: sim_walks(SIM_GPS_SEEDS[sp][:args.sim_walks]) for sp in splits}
     h = headlines(real, sim)
     args.out.write_text(json.dumps({"headlines": h, "real": real, "sim": sim, "seconds": time.time() - t},
                                    indent=1, default=float))

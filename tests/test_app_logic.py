@@ -525,6 +525,12 @@ def test_export_places_the_track_with_the_fusion_origin(gps_run, tmp_path):
 
     start = gpxpy.parse(Path(out["gpx"]).read_text()).tracks[0].segments[0].points[0]
     assert (start.latitude, start.longitude) == pytest.approx(batch.fusion.origin_lat_lon, abs=1e-9)
+    # the fused track is what is written: its points carry the uncertainty and the source, and the last
+    # point is the batch fusion's last step
+    pts = [f for f in json.loads(Path(out["geojson"]).read_text())["features"] if f["geometry"]["type"] == "Point"]
+    assert len(pts) == len(batch.fusion.steps) and {p["properties"]["source"] for p in pts} == {"fused", "dr"}
+    last = batch.fusion.steps[-1]
+    assert pts[-1]["geometry"]["coordinates"][::-1] == pytest.approx([last.lat_deg, last.lon_deg], abs=1e-7)
 
 
 # -- GPS layer geometry (app.overlay) ---------------------------------------------------------

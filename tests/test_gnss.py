@@ -322,3 +322,24 @@ def test_cli_gps_on_a_recording_without_fixes_says_so(capsys):
     assert main(["replay", "--gps", "chen"]) == 2  # the bundled demo has no GPS
     assert "no gps stream" in capsys.readouterr().err
 
+
+
+def test_first_fix_gives_the_attitude_filter_the_site_declination_and_field(sim_walk):
+    """What a live app knows from its first fix: the WMM declination and field there (with the date)."""
+    from core.geodesy import magnetic_field, unix_ns_to_datetime
+    from core.recording import Recording
+
+    walk, _ = sim_walk
+    rec = walk.recording
+    dated = Recording(dict(rec.streams), dict(rec.device), {**rec.metadata, "unix_offset_ns": 1_750_000_000 * 10 ** 9},
+                      list(rec.repairs), rec.source)
+    p = Pipeline(gnss=GpsFusion())
+    res = p.run(dated)
+    t, lat, lon, alt = p.gnss.anchor
+    decl, dip, total = magnetic_field(lat, lon, alt, unix_ns_to_datetime(1_750_000_000 * 10 ** 9 + t))
+    assert res.fusion.counters["site"]["applied"]
+    assert math.degrees(p.attitude.declination_rad) == pytest.approx(math.degrees(decl), abs=1e-9)
+    assert 5.0 < math.degrees(decl) < 15.0  # Helsinki, 2025
+    undated = Pipeline(gnss=GpsFusion())
+    undated.run(rec)
+    assert undated.attitude.declination_rad == 0.0 and not undated.site["applied"]

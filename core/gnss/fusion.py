@@ -283,6 +283,8 @@ class GpsFusion:
             self.trainer = OnlineTrainer(learn_stride=self.learn_stride, learn_heading=self.learn_heading,
                                          scale_prior=self._stride_scale0, heading_model=model)
         self.origin_lat_lon: tuple[float, float] | None = None
+        #: the fix that anchored the walk: (t_ns, lat_deg, lon_deg, alt_m); None before
+        self.anchor: tuple | None = None
         self.fixes: list[FixRecord] = []
         self.steps: list[FusedStep] = []
         self.outages: list[OutageResult] = []
@@ -410,6 +412,7 @@ class GpsFusion:
             e0, n0 = (float(ekf.x[0]), float(ekf.x[1])) if ekf.initialized else (0.0, 0.0)
             lat0, lon0 = enu_to_geodetic(-e0, -n0, (lat, lon))
             self.origin_lat_lon = (float(lat0), float(lon0))
+            self.anchor = (int(t_ns), float(lat), float(lon), float(v[2]) if len(v) > 2 else math.nan)
             if not ekf.initialized:
                 ekf.initialize(0.0, 0.0, sigma, 0.7, 0.0, heading_sd_rad=math.pi)
             ekf.P[:2, :] = 0.0

@@ -206,6 +206,15 @@ class Pipeline:
         GPS fusion after the steps (Chen et al. 2010): fixes of the ``gps``
         stream and every completed step go through it; :attr:`fused` holds the
         fused steps, :meth:`run` returns them in ``result.fusion``.
+    site_from_gps : bool
+        When the fusion's first good fix anchors the walk, give the attitude
+        filter the site's magnetic declination (unless one was set) and, as the
+        walk is then outdoors, its World Magnetic Model field strength and dip
+        (:meth:`core.pdr.attitude.AttitudeEKF.set_site_field`): what a live app
+        knows from its first fix.  Needs the date: ``unix_offset_ns``.
+    unix_offset_ns : int or None
+        Unix time minus sensor-clock time (ns); :meth:`run` takes it from the
+        recording's metadata when not given.
     """
 
     def __init__(self, *, height_m: float | None = None, stride_model: StrideModel | None = None,
@@ -213,8 +222,11 @@ class Pipeline:
                  smoother: RotationSmoother | None = None, grid_rate_hz: float = 50.0,
                  heading_delay_s: float | None = None, use_magnetometer: bool = True,
                  max_rotation_rms_rad_s: float = 3.0, rotation_window_s: float = 1.0, min_bout_steps: int = 3,
-                 mag_stream: str = MAG, log: bool = False, gnss=None):
+                 mag_stream: str = MAG, log: bool = False, gnss=None, site_from_gps: bool = True,
+                 unix_offset_ns: int | None = None):
         self.gnss = gnss
+        self.site_from_gps = bool(site_from_gps)
+        self.unix_offset_ns = unix_offset_ns
         self.mag_stream = str(mag_stream)
         self.height_m = height_m
         self.stride_model = stride_model or WeinbergStride()
@@ -253,6 +265,8 @@ class Pipeline:
         self.steps: list[Step] = []
         #: fused steps (core.gnss.fusion.FusedStep), one per step, when there is a GPS fusion stage
         self.fused: list = []
+        #: the site the GPS gave the attitude filter (declination, field), or why not
+        self.site: dict | None = None
         if self.gnss is not None:
             self.gnss.reset()
         #: smoothed forward vector on the grid, (t_ns, east, north), the last few seconds
@@ -290,6 +304,8 @@ class Pipeline:
         if stream != ACC:
             if stream == GPS and self.gnss is not None:
                 self.gnss.add_fix(t_ns, values)
+                if self.site is None and self.site_from_gps and self.gnss.anchor is not None:
+                    self._apply_site(self.gnss.anchor)
             return []  # rotvec, ...: not used by the core PDR
         ax, ay, az = values[0], values[1], values[2]
         self.attitude.update_acc(t_ns, ax, ay, az)
@@ -314,6 +330,29 @@ class Pipeline:
                 self._log.append((tg, a.q, heading, a.acc_sigma2, a.mag_sigma2, a.mag_rejected))
             done.extend(self._release(tg))
         return done
+
+    def _apply_site(self, anchor) -> None:
+        """The anchoring fix's magnetic declination and field for the attitude filter (see ``site_from_gps``)."""
+        t_ns, lat, lon, alt = anchor
+        if self.unix_offset_ns is None:
+            self.site = {"applied": False, "why": "no date for the magnetic model"}
+            return
+        try:
+            from core.geodesy import magnetic_field, unix_ns_to_datetime
+
+            decl, dip, total = magnetic_field(lat, lon, alt if alt == alt else 0.0,
+                                              unix_ns_to_datetime(int(self.unix_offset_ns) + int(t_ns)))
+        except (ImportError, ValueError) as e:
+            self.site = {"applied": False, "why": str(e)}
+            return
+        a = self.attitude
+        set_decl = hasattr(a, "declination_rad") and a.declination_rad == 0.0
+        if set_decl:
+            a.declination_rad = decl
+        if hasattr(a, "set_site_field"):
+            a.set_site_field(total, dip)
+        self.site = {"applied": True, "declination_deg": math.degrees(decl) if set_decl else None,
+                     "dip_deg": math.degrees(dip), "field_uT": total}
 
     def rotation_rms_rad_s(self) -> float:
         """RMS rotation rate of the phone over the last ``rotation_window_s`` (rad/s; 0 without gyroscope)."""
@@ -434,6 +473,9 @@ class Pipeline:
         if self.gnss is not None and recording.has(GPS):
             use.append(GPS)
             self.gnss.set_time_zero(recording.t0_ns)
+            off = recording.metadata.get("unix_offset_ns")
+            if self.unix_offset_ns is None and isinstance(off, int):
+                self.unix_offset_ns = off
         try:
             total = sum(len(recording.streams[n]) for n in use)
             update = self.update
@@ -462,6 +504,8 @@ class Pipeline:
         if hasattr(a, "counters"):
             counters["attitude"] = a.counters()
         fusion = self.gnss.result() if self.gnss is not None else None
+        if fusion is not None:
+            fusion.counters["site"] = self.site
         return PipelineResult(list(self.steps), Track.from_steps(self.steps), att, self.labels(), recording,
                               counters, fusion)
 
