@@ -109,11 +109,13 @@ def median(values) -> float:
 # settings of the benchmark (fixed; thresholds chosen on the tuning split, see docs/foot.md)
 
 
-def foot_settings(detector: str = "shoe", aid: str = "zupt", **stance_overrides) -> FootSettings:
+def foot_settings(detector: str = "shoe", aid: str = "zupt", gyro_delay_s: float = 0.0,
+                  **stance_overrides) -> FootSettings:
     """One fixed configuration per detector: the tuned defaults; "song" with the paper's 0.15 s window."""
     if detector == "song":
         stance_overrides.setdefault("window_s", 0.15)
-    return FootSettings(aid=aid, stance=StanceSettings(detector=detector, **stance_overrides))
+    return FootSettings(aid=aid, gyro_delay_s=gyro_delay_s, stance=StanceSettings(detector=detector,
+                                                                                  **stance_overrides))
 
 
 # ---------------------------------------------------------------------------
@@ -134,7 +136,7 @@ def run_pyshoe(root: Path, detectors=DETECTORS, split=None, names=None, settings
         row = {"trial": tr.name, "split": tr.info["split"], "walking": tr.info["walking"],
                "pyshoe_errors_m": tr.pyshoe_errors_m, "pyshoe_best": list(tr.pyshoe_best), "cases": {}}
         for det in list(detectors) + ["reference"]:
-            fs = settings_of(detector="shoe" if det == "reference" else det)
+            fs = settings_of(detector="shoe" if det == "reference" else det, gyro_delay_s=tr.info["gyro_delay_s"])
             nav = FootNavigator(fs)
             t0 = time.perf_counter()
             res = nav.run(rec, stance=tr.zv_reference if det == "reference" else None)
@@ -150,8 +152,12 @@ def run_pyshoe(root: Path, detectors=DETECTORS, split=None, names=None, settings
     return rows
 
 
+def _of_split(rows, split) -> list:
+    return [r for r in rows if r["split"] == split]
+
+
 def summarise_pyshoe(rows, split) -> dict:
-    rs = [r for r in rows if r["split"] == split]
+    rs = _of_split(rows, split)
     if not rs:
         return {}
     cases = list(rs[0]["cases"])
@@ -159,6 +165,7 @@ def summarise_pyshoe(rows, split) -> dict:
     for c in cases:
         out["cases"][c] = {
             "rmse_3d_median_m": median([r["cases"][c]["rmse_3d_m"] for r in rs]),
+            "rmse_2d_median_m": median([r["cases"][c]["rmse_2d_m"] for r in rs]),
             "final_3d_median_m": median([r["cases"][c]["final_3d_m"] for r in rs]),
             "us_per_sample_median": median([r["cases"][c]["us_per_sample"] for r in rs]),
         }
@@ -172,14 +179,197 @@ def summarise_pyshoe(rows, split) -> dict:
     return out
 
 
+# ---------------------------------------------------------------------------
+# IPOL: lower back + both feet, the four cases of Table 2
+
+
+#: each foot's track is turned so that its course over the first this much path points along +x (m)
+LR_ALIGN_PATH_M = 2.0
+
+
+def _early_turn(sp) -> float:
+    """Angle (rad) by which a stance track must turn so that its first ``LR_ALIGN_PATH_M`` point along +x."""
+    d = np.hypot(sp[:, 0], sp[:, 1])
+    far = np.flatnonzero(d >= LR_ALIGN_PATH_M)
+    if not len(far):
+        return 0.0
+    return -math.atan2(sp[far[0], 1], sp[far[0], 0])
+
+
+def _lr_difference(left, right) -> tuple[float, float]:
+    """RMS horizontal distance of the left stances to the right stance track (interpolated in time), and
+    RMS difference of the stride courses (deg, right interpolated in time).
+
+    The two feet start in frames whose headings differ by their initial-heading errors (the paper set
+    the initial heading in advance): each track is first turned about its start so that its course over
+    the first ``LR_ALIGN_PATH_M`` of path is +x (the protocol's first leg; nothing later is used).
+    """
+    tl = np.array([s.t_end_ns for s in left.strides], dtype=float)
+    tr_ = np.array([s.t_end_ns for s in right.strides], dtype=float)
+    pl, pr = left.stride_positions(), right.stride_positions()
+    al, ar = _early_turn(pl), _early_turn(pr)
+    pl = np.column_stack([rotate(pl[:, :2], al), pl[:, 2]])
+    pr = np.column_stack([rotate(pr[:, :2], ar), pr[:, 2]])
+    m = (tl >= tr_[0]) & (tl <= tr_[-1])
+    if m.sum() < 2:
+        return math.nan, math.nan
+    ri = np.column_stack([np.interp(tl[m], tr_, pr[:, k]) for k in range(2)])
+    pos = float(np.sqrt(np.mean(np.sum((pl[m, :2] - ri) ** 2, axis=1))))
+    cl = np.array([s.course_rad for s in left.strides]) + al
+    cr = np.unwrap(np.nan_to_num(np.array([s.course_rad for s in right.strides]) + ar))
+    okc = m & np.isfinite(cl)
+    dc = wrap_angle(cl[okc] - np.interp(tl[okc], tr_, cr))
+    return pos, float(math.degrees(np.sqrt(np.mean(dc ** 2)))) if len(dc) else math.nan
+
+
+def run_ipol(root: Path, split=None, detector: str = "shoe") -> list[dict]:
+    from benchmarks.datasets import ipol_feet
+
+    rows = []
+    for tr in ipol_feet.trials(root):
+        if split is not None and tr.info["split"] != split:
+            continue
+        rec = tr.open()
+        row = {"trial": tr.name, "split": tr.info["split"], "cases": {}}
+        for aid in AIDS:
+            res = {f: FootNavigator(foot_settings(detector, aid), foot_device=f, waist_device="").run(rec)
+                   for f in ("left_foot", "right_foot")}
+            case = {}
+            for f, r in res.items():
+                sp = r.stride_positions()
+                case[f"return_{f}_m"] = float(math.hypot(sp[-1, 0], sp[-1, 1])) if len(sp) else math.nan
+                case[f"distance_{f}_m"] = r.summary()["distance_m"]
+            case["lr_difference_m"], case["course_difference_deg"] = _lr_difference(res["left_foot"],
+                                                                                  res["right_foot"])
+            row["cases"][aid] = case
+        rows.append(row)
+    return rows
+
+
+def summarise_ipol(rows, split) -> dict:
+    out = {"n_trials": len(_of_split(rows, split)), "cases": {}}
+    if not out["n_trials"]:
+        return {}
+    for aid in AIDS:
+        c = [r["cases"][aid] for r in _of_split(rows, split)]
+        out["cases"][aid] = {
+            "return_median_m": median([x["return_left_foot_m"] for x in c] + [x["return_right_foot_m"] for x in c]),
+            "return_left_median_m": median([x["return_left_foot_m"] for x in c]),
+            "return_right_median_m": median([x["return_right_foot_m"] for x in c]),
+            "lr_difference_median_m": median([x["lr_difference_m"] for x in c]),
+            "course_difference_median_deg": median([x["course_difference_deg"] for x in c]),
+        }
+    return out
+
+
+# ---------------------------------------------------------------------------
+# x-io foot loops
+
+
+def run_xio(root: Path) -> dict:
+    from benchmarks.datasets import xio_foot
+
+    rows = []
+    for tr in xio_foot.trials(root):
+        rec = tr.open()
+        t0 = time.perf_counter()
+        res = FootNavigator(foot_settings("shoe")).run(rec)
+        us = (time.perf_counter() - t0) / max(len(res.t_ns), 1) * 1e6
+        s = res.summary()
+        rows.append({"trial": tr.name, "kind": tr.info["kind"], "split": tr.info["split"], "rate_hz": s["rate_hz"],
+                     "n_strides": s["n_strides"], "distance_m": s["distance_m"], "final_up_m": s["final_up_m"],
+                     "loop_closure_pct": xio_foot.loop_closure_pct(res.stride_positions(), s["distance_m"])
+                     if tr.info["kind"] == "loop" else math.nan, "us_per_sample": us})
+    loops = [r["loop_closure_pct"] for r in rows if r["kind"] == "loop"]
+    return {"trials": rows, "loop_closure_median_pct": median(loops)}
+
+
+def _git_rev() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                              cwd=HERE).stdout.strip()
+    except OSError:
+        return ""
+
+
+def headlines(out) -> dict:
+    ps = out["pyshoe"][REPORT]
+    ip = out["ipol"][REPORT]
+    h = {"split": REPORT,
+         "pyshoe_rmse_median_m": ps["cases"]["shoe"]["rmse_3d_median_m"],
+         "pyshoe_rmse_median_m_reference_labels": ps["cases"]["reference"]["rmse_3d_median_m"],
+         "pyshoe_own_best_per_trial_median_m": ps["pyshoe_best_per_trial_median_m"],
+         "stance_f1_median_walking": ps["cases"]["shoe"]["stance_f1_median_walking"],
+         "ipol_foot_return_median_m": {a: ip["cases"][a]["return_median_m"] for a in AIDS},
+         "ipol_foot_lr_difference_median_m": {a: ip["cases"][a]["lr_difference_median_m"] for a in AIDS},
+         "xio_loop_closure_median_pct": out.get("xio", {}).get("loop_closure_median_pct", math.nan),
+         "us_per_sample_median": ps["cases"]["shoe"]["us_per_sample_median"]}
+    return h
+
+
+def write_markdown(out, path=RESULTS_MD) -> None:
+    L = ["## Foot-mounted navigation (issue #11)", "",
+         f"Code {out['rev']}. Splits: `benchmarks/foot_splits.py` (declared before tuning). "
+         "Headline numbers are on the **report** split; the tuning split is shown for comparison.", ""]
+    for split in (REPORT, TUNING):
+        ps = out["pyshoe"][split]
+        if not ps:
+            continue
+        L += [f"### PyShoe VICON, {split} split ({ps['n_trials']} trials)", "",
+              "| case | 3-D RMSE median (m) | 2-D RMSE median (m) | final 3-D error median (m) | "
+              "stance F1 median (walking) | us/sample |",
+              "|---|---|---|---|---|---|"]
+        for c, v in ps["cases"].items():
+            L.append(f"| {c} | {v['rmse_3d_median_m']:.3f} | {v['rmse_2d_median_m']:.3f} | {v['final_3d_median_m']:.3f} | "
+                     f"{v.get('stance_f1_median_walking', float('nan')):.3f} | {v['us_per_sample_median']:.0f} |")
+        L += ["", f"PyShoe's own errors (median over the same trials): best detector per trial "
+              f"{ps['pyshoe_best_per_trial_median_m']:.3f} m (chosen after the fact); per detector "
+              + ", ".join(f"{d} {e:.3f}" for d, e in ps["pyshoe_per_detector_median_m"].items()) + " m.", ""]
+    L += ["Per trial (report split), 3-D RMSE in m: ours (SHOE, fixed) / ours (reference labels) / PyShoe best", "",
+          "| trial | ours shoe | ours reference | PyShoe best |", "|---|---|---|---|"]
+    for r in out["pyshoe"]["trials"]:
+        if r["split"] == REPORT:
+            L.append(f"| {r['trial']} | {r['cases']['shoe']['rmse_3d_m']:.3f} | "
+                     f"{r['cases']['reference']['rmse_3d_m']:.3f} | {r['pyshoe_best'][1]:.3f} ({r['pyshoe_best'][0]}) |")
+    for split in (REPORT, TUNING):
+        ip = out["ipol"].get(split)
+        if not ip:
+            continue
+        L += ["", f"### IPOL 10 m out and back, {split} split ({ip['n_trials']} trials, both feet)", "",
+              "| | " + " | ".join(AIDS) + " |", "|---|" + "---|" * len(AIDS)]
+        for key, label in (("return_left_median_m", "return error left foot, median (m)"),
+                           ("return_right_median_m", "return error right foot, median (m)"),
+                           ("lr_difference_median_m", "left-right position difference, median (m)"),
+                           ("course_difference_median_deg", "left-right course difference, median (deg)")):
+            L.append(f"| {label} | " + " | ".join(f"{ip['cases'][a][key]:.2f}" for a in AIDS) + " |")
+    xio = out.get("xio")
+    if xio:
+        L += ["", "### x-io foot IMU (report only)", "",
+              "| recording | rate (Hz) | strides | distance (m) | loop closure (% of path) | final height (m) |",
+              "|---|---|---|---|---|---|"]
+        for r in xio["trials"]:
+            lc = f"{r['loop_closure_pct']:.2f}" if math.isfinite(r["loop_closure_pct"]) else "(not a loop)"
+            L.append(f"| {r['trial']} | {r['rate_hz']:.0f} | {r['n_strides']} | {r['distance_m']:.1f} | {lc} | "
+                     f"{r['final_up_m']:.2f} |")
+    L += ["", "Headlines (foot_results.json): " + json.dumps(out["headlines"]), ""]
+    Path(path).write_text("\n".join(L))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data-root", type=Path, default=default_data_root())
-    ap.add_argument("--split", choices=[TUNING, REPORT], default=None, help="only this split (default both)")
+    ap.add_argument("--pyshoe-rows", type=Path, default=None, help="reuse PyShoe rows from a JSON file")
     args = ap.parse_args(argv)
-    rows = run_pyshoe(args.data_root, split=args.split)
-    out = {"pyshoe": {"trials": rows, TUNING: summarise_pyshoe(rows, TUNING), REPORT: summarise_pyshoe(rows, REPORT)}}
-    print(json.dumps({k: out["pyshoe"][k] for k in (TUNING, REPORT)}, indent=1))
+    rows = (json.loads(args.pyshoe_rows.read_text()) if args.pyshoe_rows else run_pyshoe(args.data_root))
+    irows = run_ipol(args.data_root)
+    xio = run_xio(args.data_root)
+    out = {"rev": _git_rev(), "xio": xio,
+           "pyshoe": {"trials": rows, TUNING: summarise_pyshoe(rows, TUNING), REPORT: summarise_pyshoe(rows, REPORT)},
+           "ipol": {"trials": irows, TUNING: summarise_ipol(irows, TUNING), REPORT: summarise_ipol(irows, REPORT)}}
+    out["headlines"] = headlines(out)
+    RESULTS_JSON.write_text(json.dumps(out, indent=1, default=float))
+    write_markdown(out)
+    print(json.dumps(out["headlines"], indent=1))
     return 0
 
 

@@ -12,16 +12,22 @@ What the reader returns (one :class:`PyshoeTrial` per file):
   ``(0, 0, -g)`` at rest, which *is* the specific force in a z-down frame),
   not the Android device axes; the foot filter does not need them.
 * ``truth_t_ns``, ``truth_pos_m`` (n, 3): the VICON foot position at every
-  sample (metres), turned into a local ENU frame.  The files' ``gt`` is in a
-  z-down frame like the IMU's (``x, y, z`` = north, east, down of an arbitrary
-  yaw): ENU is ``(y, x, -z)``.  Checked on the first trial: read as z-up,
-  our track fits only as a mirror image of it.
+  sample (metres), turned into a local ENU frame.  The files' ``gt`` has z up
+  (the foot rises in the swing, the floor is near z = 0) but its horizontal
+  axes are mirrored against a right-handed z-up frame: read as ``(x, y, z)``
+  our track fits only as a mirror image (checked on the first tuning trial),
+  so ENU is ``(y, x, z)``.
 * ``zv_reference``: the VICON-derived zero-velocity labels (1 = stationary)
   shipped with the file (``zv_vicon_opt``), and the other detectors' labels
   ``zv_labels`` (``shoe``, ``ared``, ``amvd``, ``mbgtd``, ``vicon``).
 * ``pyshoe_errors_m``: PyShoe's own position RMSE per detector
   (``trial_error``, in the order shoe, ared, amvd, mbgtd, vicon), and its best
   detector and error.
+
+The 3DM-GX3's gyroscope readings lag its accelerometer's in these files: the
+benchmark runs the navigator with ``gyro_delay_s = GYRO_DELAY_S`` (chosen on
+the tuning split from 0, 2.5, 5, 7.5, 10 ms; without it the stance positions
+climb by about 1 cm per stride).
 
 Reading needs scipy (benchmark side only).
 """
@@ -43,6 +49,8 @@ from core.recording import Recording, make_stream
 NAME = "pyshoe_vicon"
 #: order of the detectors in the files' ``trial_error``
 PYSHOE_DETECTORS = ("shoe", "ared", "amvd", "mbgtd", "vicon")
+#: the gyroscope's lag behind the accelerometer (s), chosen on the tuning split (see above)
+GYRO_DELAY_S = 0.005
 
 
 @dataclass
@@ -73,7 +81,7 @@ def _fill(trial: "PyshoeTrial", path: Path) -> Recording:
     imu = np.asarray(d["imu"], dtype=float)
     trial.truth_t_ns = t_ns
     gt = np.asarray(d["gt"], dtype=float)
-    trial.truth_pos_m = np.column_stack([gt[:, 1], gt[:, 0], -gt[:, 2]])  # z-down frame -> ENU
+    trial.truth_pos_m = np.column_stack([gt[:, 1], gt[:, 0], gt[:, 2]])  # mirrored horizontal axes -> ENU
     trial.zv_labels = {k[3:-4]: np.asarray(d[k]).ravel().astype(bool) for k in d if k.startswith("zv_")}
     trial.zv_reference = trial.zv_labels.get("vicon")
     err = np.asarray(d["trial_error"], dtype=float).ravel()
@@ -96,7 +104,8 @@ def trials(root: Path) -> list[PyshoeTrial]:
     for i, p in enumerate(files, start=1):
         name = p.name[: -len(".mat.gz")]
         tr = PyshoeTrial(dataset=NAME, name=name, load=lambda: None, placement="foot",
-                         info={"position": i, "split": pyshoe_split(i), "walking": pyshoe_is_walking(name)})
+                         info={"position": i, "split": pyshoe_split(i), "walking": pyshoe_is_walking(name),
+                               "gyro_delay_s": GYRO_DELAY_S})
         tr.load = lambda tr=tr, p=p: _fill(tr, p)
         out.append(tr)
     return out

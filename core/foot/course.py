@@ -42,7 +42,7 @@ class CourseSettings:
     #: sigma_1 of eq. 15: random walk of the course error (rad/sqrt(s)), "slightly larger than sigma_g"
     process_noise_rad_sqrt_s: float = 0.003
     #: sigma_mag of eq. 19: noise of the waist magnetometer heading over a stride (rad)
-    mag_heading_sd_rad: float = math.radians(5.0)
+    mag_heading_sd_rad: float = math.radians(10.0)
     #: gamma of eq. 19
     gamma: float = 1.0
     #: prior sd of x1 when the filter starts (rad)

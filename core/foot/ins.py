@@ -14,11 +14,15 @@ carry the position error too, so that the position covariance is known (for
 the course measurements and the consistency tests).  It changes nothing else:
 the position block only receives.
 
-Mechanisation, every accelerometer sample with the measured ``T`` (s)::
+Mechanisation, every accelerometer sample with the measured ``T`` (s), trapezoidal between the previous
+reading (index 0) and this one (1), each rotated with the attitude of its own time::
 
-    w = w_meas - b_g ;  q <- q (x) exp(w T)
-    f_n = R(q) (f_meas - b_a)   (the new attitude: the reading's own time) ;  a_n = f_n + g_n,  g_n = (0, 0, -g)
-    p <- p + v T + a_n T^2 / 2 ;  v <- v + a_n T
+    w = (w0 + w1) / 2 - b_g ;  q1 = q0 (x) exp(w T)
+    a_i = R(q_i) (f_i - b_a) + g_n,  g_n = (0, 0, -g)
+    v <- v + (a0 + a1) T / 2 ;  p <- p + v T + (2 a0 + a1) T^2 / 6
+
+(a first-order version drifts vertically by about 0.7 cm per stride at 200 Hz on the simulator: the
+foot's acceleration jumps at lift-off and strike).
 
 Error dynamics (eq. 8 in ENU, errors true - estimate)::
 
@@ -105,8 +109,16 @@ class Update:
     dof: int
 
 
-def skew(v) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+def _skew(v) -> np.ndarray:
+    """``[v]x`` (``[v]x w = v x w``)."""
+    return np.array(((0.0, -v[2], v[1]), (v[2], 0.0, -v[0]), (-v[1], v[0], 0.0)))
+
+
+def _mv(m, v) -> tuple:
+    """Matrix (3 row tuples) times vector, plain floats."""
+    return (m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
+            m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
+            m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2])
 
 
 class ZuptEKF:
@@ -130,6 +142,8 @@ class ZuptEKF:
         self.g = STANDARD_GRAVITY_M_S2
         self.n_rejected = 0
         self.last_dx = np.zeros(N_STATES)
+        self._f_prev = (0.0, 0.0, STANDARD_GRAVITY_M_S2)
+        self._w_prev = (0.0, 0.0, 0.0)
         self._phi = np.eye(N_STATES)
         self._eye3 = np.eye(3)
         self._phi_bg = self._phi[BG, BG]  # views of the bias blocks
@@ -169,6 +183,8 @@ class ZuptEKF:
         self.p = (0.0, 0.0, 0.0)
         self.bg = tuple(float(x) for x in gyro_mean_b)
         self.ba = (0.0, 0.0, 0.0)
+        self._f_prev = tuple(float(x) for x in f)  # the previous reading (trapezoidal mechanisation)
+        self._w_prev = self.bg
         self.P = np.diag([s.initial_tilt_sd_rad ** 2] * 2 + [s.initial_heading_sd_rad ** 2]
                          + [s.initial_velocity_sd_m_s ** 2] * 3 + [0.0] * 3
                          + [s.gyro_bias_sd_rad_s ** 2] * 3 + [s.acc_bias_sd_m_s2 ** 2] * 3)
@@ -178,32 +194,40 @@ class ZuptEKF:
     def transition(self, acc_b, gyro_b, dt_s: float):
         """``(Phi, q_new, v_new, p_new)`` of one mechanisation step, without changing the state.
 
-        ``Phi`` is a buffer reused by the next call (copy it to keep it).
+        Second order (trapezoidal) between the previous reading (``_f_prev``, ``_w_prev``, taken with
+        the attitude of its own time, ``q``) and this one (taken with the new attitude).  ``Phi`` is a
+        buffer reused by the next call (copy it to keep it).
         """
         bg, ba, v, p = self.bg, self.ba, self.v, self.p
+        wp = self._w_prev
         q_new = quat.normalize(quat.multiply(self.q, quat.from_rotation_vector(
-            ((gyro_b[0] - bg[0]) * dt_s, (gyro_b[1] - bg[1]) * dt_s, (gyro_b[2] - bg[2]) * dt_s))))
-        m = quat.to_matrix(q_new)  # the attitude at the accelerometer's sample time
-        fb = (acc_b[0] - ba[0], acc_b[1] - ba[1], acc_b[2] - ba[2])
-        f0 = m[0][0] * fb[0] + m[0][1] * fb[1] + m[0][2] * fb[2]
-        f1 = m[1][0] * fb[0] + m[1][1] * fb[1] + m[1][2] * fb[2]
-        f2 = m[2][0] * fb[0] + m[2][1] * fb[1] + m[2][2] * fb[2]
-        a = (f0, f1, f2 - self.g)
-        h = 0.5 * dt_s * dt_s
-        p_new = (p[0] + v[0] * dt_s + a[0] * h, p[1] + v[1] * dt_s + a[1] * h, p[2] + v[2] * dt_s + a[2] * h)
-        v_new = (v[0] + a[0] * dt_s, v[1] + a[1] * dt_s, v[2] + a[2] * dt_s)
-        mat = np.array(m)
-        sf = np.array(((0.0, -f2, f1), (f2, 0.0, -f0), (-f1, f0, 0.0)))
-        sfm = sf @ mat
+            ((0.5 * (gyro_b[0] + wp[0]) - bg[0]) * dt_s, (0.5 * (gyro_b[1] + wp[1]) - bg[1]) * dt_s,
+             (0.5 * (gyro_b[2] + wp[2]) - bg[2]) * dt_s))))
+        m0 = quat.to_matrix(self.q)  # attitude at the previous reading
+        m1 = quat.to_matrix(q_new)  # ... and at this one
+        fp = self._f_prev
+        f0 = _mv(m0, (fp[0] - ba[0], fp[1] - ba[1], fp[2] - ba[2]))
+        f1 = _mv(m1, (acc_b[0] - ba[0], acc_b[1] - ba[1], acc_b[2] - ba[2]))
+        g = self.g
+        a0 = (f0[0], f0[1], f0[2] - g)
+        a1 = (f1[0], f1[1], f1[2] - g)
+        h = dt_s * dt_s / 6.0
+        p_new = tuple(p[i] + v[i] * dt_s + (2.0 * a0[i] + a1[i]) * h for i in range(3))
+        v_new = tuple(v[i] + 0.5 * (a0[i] + a1[i]) * dt_s for i in range(3))
+        mat0, mat1 = np.array(m0), np.array(m1)
+        sf0 = _skew(f0)
+        sf1 = _skew(f1)
+        sfm1 = sf1 @ mat1
         phi = self._phi
-        phi[ATT, BG] = mat * (-dt_s)
-        phi[VEL, ATT] = sf * (-dt_s)
-        phi[VEL, BG] = sfm * (dt_s * dt_s)
-        phi[VEL, BA] = mat * (-dt_s)
+        half = 0.5 * dt_s
+        phi[ATT, BG] = mat1 * (-dt_s)
+        phi[VEL, ATT] = (sf0 + sf1) * (-half)
+        phi[VEL, BG] = sfm1 * (half * dt_s)
+        phi[VEL, BA] = (mat0 + mat1) * (-half)
         phi[POS, VEL] = self._eye3 * dt_s
-        phi[POS, ATT] = sf * (-h)
-        phi[POS, BG] = sfm * (dt_s * h)
-        phi[POS, BA] = mat * (-h)
+        phi[POS, ATT] = (2.0 * sf0 + sf1) * (-h)
+        phi[POS, BG] = sfm1 * (h * dt_s)
+        phi[POS, BA] = (2.0 * mat0 + mat1) * (-h)
         np.fill_diagonal(self._phi_bg, math.exp(-dt_s / self.settings.gyro_bias_tau_s))
         np.fill_diagonal(self._phi_ba, math.exp(-dt_s / self.settings.acc_bias_tau_s))
         return phi, q_new, v_new, p_new
@@ -219,6 +243,7 @@ class ZuptEKF:
             return
         if dt_s > s.max_dt_s:  # a gap: hold the state, let the uncertainty grow
             self.P = self.P + self._q1 * dt_s
+            self._f_prev, self._w_prev = tuple(acc_b), tuple(gyro_b)
             return
         phi, q_new, v_new, p_new = self.transition(acc_b, gyro_b, dt_s)
         if not all(map(math.isfinite, v_new + p_new + q_new)):
@@ -226,6 +251,7 @@ class ZuptEKF:
             return
         self.P = phi @ self.P @ phi.T + self.process_noise(dt_s)
         self.q, self.v, self.p = q_new, v_new, p_new
+        self._f_prev, self._w_prev = tuple(acc_b), tuple(gyro_b)
 
     # -- updates ------------------------------------------------------------------------------
     def _apply(self, kind: str, y, K, P_new, nis: float) -> Update:

@@ -20,9 +20,9 @@ Tables 2-3 (``aid``):
     successive stances (eqs. 11-19); its estimate is the heading-error
     measurement of the ZUPT filter with its variance (eqs. 22-25).
 
-Samples are the foot accelerometer's events, each with the latest gyroscope
-reading (a recording with simultaneous rows pairs them exactly, see
-:data:`core.recording.STREAM_ORDER`).  The filter starts with the initial
+Samples are the foot accelerometer's events, each with the gyroscope reading
+interpolated at its time (plus ``gyro_delay_s``, a sensor's inter-sensor
+latency; a recording with simultaneous rows pairs them exactly).  The filter starts with the initial
 alignment at the end of the first stance of at least ``align_min_s``; samples
 of that stance get its attitude, zero velocity and the origin, samples before
 it NaN.  Heading aids are applied at the end of each stance (the state is then
@@ -64,13 +64,17 @@ class FootSettings:
     course: CourseSettings = field(default_factory=CourseSettings)
     #: "song" detector axes: "auto" (:func:`core.foot.stance.infer_foot_axes`, batch only) or as in ``stance``
     song_axes: str = "auto"
+    #: the gyroscope's readings lag the accelerometer's by this much (s): each accelerometer sample is
+    #: paired with the gyroscope interpolated at its time plus this (a property of the sensor)
+    gyro_delay_s: float = 0.0
     #: the alignment needs a first still period at least this long (s) ...
     align_min_s: float = 0.3
     #: ... in which gaps of non-stance up to this long do not count as motion (s)
     align_max_gap_s: float = 0.1
     #: the mean rate of the still period is the initial gyroscope bias only if it lasted this long (s);
-    #: a shorter one (a foot that barely stopped) starts from zero bias
-    align_gyro_bias_min_s: float = 1.0
+    #: after a shorter one the filter starts from zero bias (on the PyShoe tuning split the 1-4 s at the
+    #: start of a trial gave worse tracks than zero: the foot is not quite still)
+    align_gyro_bias_min_s: float = 5.0
     #: initial heading from the foot magnetometer when there is one (else ``initial_heading_rad``)
     initial_heading_from_mag: bool = True
     #: heading (rad, CCW from East) of the foot's most horizontal body axis at the start without magnetometer
@@ -78,7 +82,7 @@ class FootSettings:
     #: "foot_mag": sd of the foot magnetometer heading of one stance (rad)
     foot_mag_heading_sd_rad: float = math.radians(10.0)
     #: "course": sd of the waist heading used as the foot heading (rad)
-    course_heading_sd_rad: float = math.radians(5.0)
+    course_heading_sd_rad: float = math.radians(10.0)
 
     def __post_init__(self):
         if self.aid not in AIDS:
@@ -205,7 +209,8 @@ class FootNavigator:
         self.ins = ZuptEKF(s.ins)
         self.course = CourseErrorFilter(s.course)
         self._stream = None
-        self._gyro = None
+        self._gyros: deque = deque()  # streaming: recent gyroscope readings (t_ns, values)
+        self._acc_wait: deque = deque()  # streaming: accelerometer readings waiting for their gyroscope
         self._pending: deque = deque()  # streaming: samples waiting for their stance decision
         self._foot_mag = _Window()
         self._waist_acc = _Window()
@@ -443,9 +448,8 @@ class FootNavigator:
         acc_s = recording.stream(self.names[ACC], "foot-mounted navigation")
         gyr_s = recording.stream(self.names[GYRO], "foot-mounted navigation")
         t = acc_s.t_ns
-        gi = np.searchsorted(gyr_s.t_ns, t, side="right") - 1  # latest gyroscope reading at each sample
-        valid = gi >= 0
-        gyro = np.where(valid[:, None], gyr_s.values[np.maximum(gi, 0)], np.nan)
+        gyro = gyro_at(gyr_s.t_ns, gyr_s.values, t + int(round(self.settings.gyro_delay_s * 1e9)))
+        valid = np.ones(len(t), dtype=bool)
         st = self.settings.stance
         if st.detector == "song" and self.settings.song_axes == "auto":
             ax = infer_foot_axes(acc_s.values[valid], gyro[valid])
@@ -488,20 +492,40 @@ class FootNavigator:
             self._stream = StanceDetector(self.stance_settings).stream()
         n0 = len(self.out_t)
         if stream == self.names[GYRO]:
-            self._gyro = tuple(values)
+            self._gyros.append((int(t_ns), tuple(values)))
+            self._pair(final=False)
         elif stream == self.names[ACC]:
-            if self._gyro is None:
-                return []
-            acc = tuple(values)
-            if all(map(math.isfinite, acc)) and all(map(math.isfinite, self._gyro)):
-                self._pending.append((t_ns, acc, self._gyro))
-                self._feed(self._stream.update(t_ns, acc, self._gyro))
-            else:
-                self._pending.append((t_ns, acc, self._gyro, "bad"))
-                self._drain_bad()
+            self._acc_wait.append((int(t_ns), tuple(values)))
+            self._pair(final=False)
         else:
             self._other(stream, t_ns, values)
         return list(zip(self.out_t[n0:], self.out_p[n0:]))
+
+    def _pair(self, final: bool) -> None:
+        """Give each waiting accelerometer reading the gyroscope reading interpolated at its time plus
+        ``gyro_delay_s`` (as :func:`gyro_at` does for a whole recording), once the gyroscope has passed it."""
+        delay = int(round(self.settings.gyro_delay_s * 1e9))
+        g = self._gyros
+        while self._acc_wait and g:
+            t, acc = self._acc_wait[0]
+            tq = t + delay
+            if g[-1][0] < tq and not final:
+                return
+            while len(g) > 1 and g[1][0] <= tq:
+                g.popleft()
+            if tq <= g[0][0] or len(g) == 1:
+                gyro = g[0][1]
+            else:
+                (ta, va), (tb, vb) = g[0], g[1]
+                w = (tq - ta) / (tb - ta)
+                gyro = tuple(va[i] + w * (vb[i] - va[i]) for i in range(3))
+            self._acc_wait.popleft()
+            if all(map(math.isfinite, acc)) and all(map(math.isfinite, gyro)):
+                self._pending.append((t, acc, gyro))
+                self._feed(self._stream.update(t, acc, gyro))
+            else:
+                self._pending.append((t, acc, gyro, "bad"))
+                self._drain_bad()
 
     def _feed(self, decisions) -> None:
         for td, st, _ in decisions:
@@ -519,6 +543,7 @@ class FootNavigator:
     def finish(self) -> FootResult:
         """End of a stream: decide the last samples and return the result."""
         if self._stream is not None:
+            self._pair(final=True)
             self._feed(self._stream.flush())
         return self._finish(None)
 
@@ -548,6 +573,15 @@ class FootNavigator:
             recording=recording,
             position_sd_m=np.array(self.out_sd, dtype=float),
         )
+
+
+def gyro_at(t_gyro_ns, gyro_values, t_ns) -> np.ndarray:
+    """Gyroscope readings linearly interpolated at ``t_ns`` (held at the first/last reading outside)."""
+    tg = np.asarray(t_gyro_ns, dtype=np.int64)
+    x = (np.asarray(t_ns, dtype=np.int64) - tg[0]).astype(float)
+    xp = (tg - tg[0]).astype(float)
+    v = np.asarray(gyro_values, dtype=float)
+    return np.column_stack([np.interp(x, xp, v[:, k]) for k in range(v.shape[1])])
 
 
 def run_foot(recording: Recording, **kwargs) -> FootResult:

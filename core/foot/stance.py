@@ -43,9 +43,9 @@ from core.conventions import STANDARD_GRAVITY_M_S2
 
 DETECTORS = ("song", "shoe", "amv", "are")
 
-#: default threshold of each detector (chosen on the PyShoe tuning split with window_s = 0.05, "song" with
+#: default threshold of each detector (chosen on the PyShoe tuning split with window_s = 0.1, "song" with
 #: the paper's 0.15 s; see docs/foot.md).  The paper's own J <= 1 marks almost nothing as stance on PyShoe.
-DEFAULT_THRESHOLDS = {"song": 300.0, "shoe": 1.0e5, "amv": 0.05, "are": 0.1}
+DEFAULT_THRESHOLDS = {"song": 100.0, "shoe": 1.0e5, "amv": 0.02, "are": 0.2}
 
 #: eq. 6 weights (w1 .. w5) of the paper
 SONG_WEIGHTS = (50.0, 100.0, 100.0, 3.0, 5.0)
@@ -57,8 +57,8 @@ class StanceSettings:
 
     #: one of :data:`DETECTORS`
     detector: str = "shoe"
-    #: width of the centred window (s); the paper's is 15 samples at 100 Hz (0.15 s), the tuned default 0.05 s
-    window_s: float = 0.05
+    #: width of the centred window (s); the paper's is 15 samples at 100 Hz (0.15 s), the tuned default 0.1 s
+    window_s: float = 0.1
     #: stance when the statistic <= threshold; nan: the detector's entry of :data:`DEFAULT_THRESHOLDS`
     threshold: float = math.nan
     #: "song": eq. 6 weights
