@@ -134,7 +134,9 @@ def run_pyshoe(root: Path, detectors=DETECTORS, split=None, names=None, settings
         rec = tr.open()
         acc, gyr = rec.streams["acc"], rec.streams["gyro"]
         row = {"trial": tr.name, "split": tr.info["split"], "walking": tr.info["walking"],
-               "pyshoe_errors_m": tr.pyshoe_errors_m, "pyshoe_best": list(tr.pyshoe_best), "cases": {}}
+               "pyshoe_errors_m": tr.pyshoe_errors_m, "pyshoe_best": list(tr.pyshoe_best), "cases": {},
+               "pyshoe_labels_f1": {k: stance_scores(v, tr.zv_reference)["f1"] for k, v in tr.zv_labels.items()
+                                    if k != "vicon"}}
         for det in list(detectors) + ["reference"]:
             fs = settings_of(detector="shoe" if det == "reference" else det, gyro_delay_s=tr.info["gyro_delay_s"])
             nav = FootNavigator(fs)
@@ -174,6 +176,9 @@ def summarise_pyshoe(rows, split) -> dict:
                 [r["cases"][c]["stance_f1"] for r in rs if r["walking"]])
             out["cases"][c]["stance_f1_median_all"] = median([r["cases"][c]["stance_f1"] for r in rs])
     out["pyshoe_best_per_trial_median_m"] = median([r["pyshoe_best"][1] for r in rs])
+    if "pyshoe_labels_f1" in rs[0]:
+        out["pyshoe_labels_f1_median_walking"] = {d: median([r["pyshoe_labels_f1"][d] for r in rs if r["walking"]])
+                                                  for d in rs[0]["pyshoe_labels_f1"]}
     out["pyshoe_per_detector_median_m"] = {d: median([r["pyshoe_errors_m"][d] for r in rs])
                                            for d in rs[0]["pyshoe_errors_m"]}
     return out
@@ -230,7 +235,16 @@ def run_ipol(root: Path, split=None, detector: str = "shoe") -> list[dict]:
         if split is not None and tr.info["split"] != split:
             continue
         rec = tr.open()
-        row = {"trial": tr.name, "split": tr.info["split"], "cases": {}}
+        row = {"trial": tr.name, "split": tr.info["split"], "cases": {}, "stance_f1": {}}
+        for f, events in (("left_foot", tr.left_steps_t_ns), ("right_foot", tr.right_steps_t_ns)):
+            acc, gyr = rec.streams[f"acc@{f}"], rec.streams[f"gyro@{f}"]
+            t = acc.t_ns
+            truth = (t >= tr.walk_t_ns[0]) & (t <= tr.walk_t_ns[1])
+            for a, b in events:  # the annotated foot-off .. foot-strike: swing
+                truth &= ~((t >= a) & (t <= b))
+            walk = (t >= tr.walk_t_ns[0]) & (t <= tr.walk_t_ns[1])
+            st = StanceDetector(foot_settings(detector).stance).detect(t, acc.values, gyr.values).stance
+            row["stance_f1"][f] = stance_scores(st[walk], truth[walk])["f1"]
         for aid in AIDS:
             res = {f: FootNavigator(foot_settings(detector, aid), foot_device=f, waist_device="").run(rec)
                    for f in ("left_foot", "right_foot")}
@@ -250,6 +264,7 @@ def summarise_ipol(rows, split) -> dict:
     out = {"n_trials": len(_of_split(rows, split)), "cases": {}}
     if not out["n_trials"]:
         return {}
+    out["stance_f1_median"] = median([v for r in _of_split(rows, split) for v in r["stance_f1"].values()])
     for aid in AIDS:
         c = [r["cases"][aid] for r in _of_split(rows, split)]
         out["cases"][aid] = {
@@ -284,6 +299,50 @@ def run_xio(root: Path) -> dict:
     return {"trials": rows, "loop_closure_median_pct": median(loops)}
 
 
+# ---------------------------------------------------------------------------
+# mode detection (core.foot.mounting)
+
+
+def run_mounting(root: Path) -> dict:
+    """Foot or hand-held on recordings of known placement.  The two thresholds of
+    :class:`core.foot.mounting.MountingSettings` were chosen on the tuning split (IPOL odd subjects,
+    PyShoe odd trials); accuracy is reported on the rest (IPOL even subjects, PyShoe even trials, x-io,
+    Brajdic-Harle hand-held walks: a report-split dataset of :mod:`benchmarks.splits`)."""
+    from benchmarks.datasets import brajdic_harle, ipol_feet, pyshoe, xio_foot
+    from core.foot.mounting import detect_mounting
+
+    rows = []
+
+    def add(dataset, name, rec, device, truth, split):
+        m = detect_mounting(rec, device)
+        rows.append({"dataset": dataset, "recording": name, "device": device or "primary", "truth": truth,
+                     "mode": m.mode, "confidence": m.confidence, "peak_rate_rad_s": m.peak_rate_rad_s,
+                     "stance_fraction": m.stance_fraction, "split": split})
+
+    for tr in pyshoe.trials(root):
+        add("pyshoe_vicon", tr.name, tr.open(), "", "foot", tr.info["split"])
+    for tr in xio_foot.trials(root):
+        add("xio_foot_imu", tr.name, tr.open(), "", "foot", REPORT)
+    for tr in ipol_feet.trials(root):
+        rec = tr.open()
+        add("ipol", tr.name, rec, "left_foot", "foot", tr.info["split"])
+        add("ipol", tr.name, rec, "right_foot", "foot", tr.info["split"])
+        add("ipol", tr.name, rec, "", "handheld", tr.info["split"])
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for tr in brajdic_harle.trials(root):
+            rec = tr.open()
+            if rec.has("gyro"):
+                add("brajdic_harle_handheld", tr.name, rec, "", "handheld", REPORT)
+    rep = _of_split(rows, REPORT)
+    return {"rows": rows, "accuracy_report": float(np.mean([r["mode"] == r["truth"] for r in rep])) if rep
+            else math.nan, "n_report": len(rep),
+            "accuracy_tuning": float(np.mean([r["mode"] == r["truth"] for r in _of_split(rows, TUNING)])),
+            "errors": [r for r in rows if r["mode"] != r["truth"]]}
+
+
 def _git_rev() -> str:
     try:
         return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
@@ -300,10 +359,13 @@ def headlines(out) -> dict:
          "pyshoe_rmse_median_m_reference_labels": ps["cases"]["reference"]["rmse_3d_median_m"],
          "pyshoe_own_best_per_trial_median_m": ps["pyshoe_best_per_trial_median_m"],
          "stance_f1_median_walking": ps["cases"]["shoe"]["stance_f1_median_walking"],
+         "pyshoe_own_shoe_labels_f1_median_walking": ps.get("pyshoe_labels_f1_median_walking", {}).get("shoe"),
+         "ipol_stance_f1_median": ip.get("stance_f1_median"),
          "ipol_foot_return_median_m": {a: ip["cases"][a]["return_median_m"] for a in AIDS},
          "ipol_foot_lr_difference_median_m": {a: ip["cases"][a]["lr_difference_median_m"] for a in AIDS},
          "xio_loop_closure_median_pct": out.get("xio", {}).get("loop_closure_median_pct", math.nan),
-         "us_per_sample_median": ps["cases"]["shoe"]["us_per_sample_median"]}
+         "us_per_sample_median": ps["cases"]["shoe"]["us_per_sample_median"],
+         "mounting_accuracy": out.get("mounting", {}).get("accuracy_report")}
     return h
 
 
@@ -322,6 +384,9 @@ def write_markdown(out, path=RESULTS_MD) -> None:
         for c, v in ps["cases"].items():
             L.append(f"| {c} | {v['rmse_3d_median_m']:.3f} | {v['rmse_2d_median_m']:.3f} | {v['final_3d_median_m']:.3f} | "
                      f"{v.get('stance_f1_median_walking', float('nan')):.3f} | {v['us_per_sample_median']:.0f} |")
+        if "pyshoe_labels_f1_median_walking" in ps:
+            L += ["", "Stance F1 of PyShoe's own per-trial-optimal labels against the same reference (walking "
+                  "trials, median): " + ", ".join(f"{d} {v:.3f}" for d, v in ps["pyshoe_labels_f1_median_walking"].items())]
         L += ["", f"PyShoe's own errors (median over the same trials): best detector per trial "
               f"{ps['pyshoe_best_per_trial_median_m']:.3f} m (chosen after the fact); per detector "
               + ", ".join(f"{d} {e:.3f}" for d, e in ps["pyshoe_per_detector_median_m"].items()) + " m.", ""]
@@ -336,6 +401,7 @@ def write_markdown(out, path=RESULTS_MD) -> None:
         if not ip:
             continue
         L += ["", f"### IPOL 10 m out and back, {split} split ({ip['n_trials']} trials, both feet)", "",
+              f"Stance F1 against the annotated swing phases (both feet, median): {ip['stance_f1_median']:.3f}", "",
               "| | " + " | ".join(AIDS) + " |", "|---|" + "---|" * len(AIDS)]
         for key, label in (("return_left_median_m", "return error left foot, median (m)"),
                            ("return_right_median_m", "return error right foot, median (m)"),
@@ -351,6 +417,22 @@ def write_markdown(out, path=RESULTS_MD) -> None:
             lc = f"{r['loop_closure_pct']:.2f}" if math.isfinite(r["loop_closure_pct"]) else "(not a loop)"
             L.append(f"| {r['trial']} | {r['rate_hz']:.0f} | {r['n_strides']} | {r['distance_m']:.1f} | {lc} | "
                      f"{r['final_up_m']:.2f} |")
+    mt = out.get("mounting")
+    if mt:
+        rows = mt["rows"]
+        L += ["", "### Mode detection (foot or hand-held)", "",
+              f"Report-split recordings: {mt['n_report']}, correct {100 * mt['accuracy_report']:.1f} % "
+              f"(tuning split: {100 * mt['accuracy_tuning']:.1f} %).", "",
+              "| dataset | device | truth | n | correct | median confidence |", "|---|---|---|---|---|---|"]
+        rows = _of_split(rows, REPORT)
+        keys = sorted({(r["dataset"], r["device"], r["truth"]) for r in rows})
+        for k in keys:
+            rr = [r for r in rows if (r["dataset"], r["device"], r["truth"]) == k]
+            L.append(f"| {k[0]} | {k[1]} | {k[2]} | {len(rr)} | {sum(r['mode'] == r['truth'] for r in rr)} | "
+                     f"{np.median([r['confidence'] for r in rr]):.2f} |")
+        for r in mt["errors"]:
+            L.append(f"\nWrong ({r['split']}): {r['dataset']} {r['recording']} {r['device']} -> {r['mode']} "
+                     f"(peak {r['peak_rate_rad_s']:.2f} rad/s, stance {r['stance_fraction']:.2f})")
     L += ["", "Headlines (foot_results.json): " + json.dumps(out["headlines"]), ""]
     Path(path).write_text("\n".join(L))
 
@@ -363,7 +445,8 @@ def main(argv=None) -> int:
     rows = (json.loads(args.pyshoe_rows.read_text()) if args.pyshoe_rows else run_pyshoe(args.data_root))
     irows = run_ipol(args.data_root)
     xio = run_xio(args.data_root)
-    out = {"rev": _git_rev(), "xio": xio,
+    mounting = run_mounting(args.data_root)
+    out = {"rev": _git_rev(), "xio": xio, "mounting": mounting,
            "pyshoe": {"trials": rows, TUNING: summarise_pyshoe(rows, TUNING), REPORT: summarise_pyshoe(rows, REPORT)},
            "ipol": {"trials": irows, TUNING: summarise_ipol(irows, TUNING), REPORT: summarise_ipol(irows, REPORT)}}
     out["headlines"] = headlines(out)

@@ -93,3 +93,22 @@ def test_navigator_streaming_equals_batch():
     assert np.array_equal(ok, np.isfinite(stream.position_n[:, 0]))
     assert np.allclose(stream.position_n[ok], batch.position_n[ok], atol=1e-9)
     assert len(stream.strides) == len(batch.strides)
+
+
+def test_streaming_equals_batch_with_separate_gyro_clock_and_delay():
+    """Android-like: gyroscope events at their own times (offset 2 ms), paired by interpolation with a delay."""
+    from core.recording import Recording, make_stream
+
+    w = _walk()
+    rec = w.recording
+    g = rec.streams["gyro"]
+    rec2 = Recording({"acc": rec.streams["acc"], "gyro": make_stream("gyro", g.t_ns + 2_000_000, g.values)})
+    fs = FootSettings(stance=StanceSettings(threshold=1e5), gyro_delay_s=0.003)
+    batch = FootNavigator(fs).run(rec2)
+    nav = FootNavigator(fs)
+    for name, t, v in rec2.events():
+        nav.update(name, t, v)
+    stream = nav.finish()
+    ok = np.isfinite(batch.position_n[:, 0])
+    assert np.array_equal(stream.t_ns, batch.t_ns)
+    assert np.allclose(stream.position_n[ok], batch.position_n[ok], atol=1e-9)

@@ -145,6 +145,10 @@ class ZuptEKF:
         self._f_prev = (0.0, 0.0, STANDARD_GRAVITY_M_S2)
         self._w_prev = (0.0, 0.0, 0.0)
         self._phi = np.eye(N_STATES)
+        self._dt_phi = math.nan
+        self._dt_q = math.nan
+        self._q = None
+        self._m_cache = None
         self._eye3 = np.eye(3)
         self._phi_bg = self._phi[BG, BG]  # views of the bias blocks
         self._phi_ba = self._phi[BA, BA]
@@ -203,8 +207,15 @@ class ZuptEKF:
         q_new = quat.normalize(quat.multiply(self.q, quat.from_rotation_vector(
             ((0.5 * (gyro_b[0] + wp[0]) - bg[0]) * dt_s, (0.5 * (gyro_b[1] + wp[1]) - bg[1]) * dt_s,
              (0.5 * (gyro_b[2] + wp[2]) - bg[2]) * dt_s))))
-        m0 = quat.to_matrix(self.q)  # attitude at the previous reading
+        c = self._m_cache  # the previous step's new attitude is this step's old one (unless corrected since)
+        if c is not None and c[0] is self.q:
+            m0, mat0 = c[1], c[2]
+        else:
+            m0 = quat.to_matrix(self.q)  # attitude at the previous reading
+            mat0 = np.array(m0)
         m1 = quat.to_matrix(q_new)  # ... and at this one
+        mat1 = np.array(m1)
+        self._m_cache = (q_new, m1, mat1)
         fp = self._f_prev
         f0 = _mv(m0, (fp[0] - ba[0], fp[1] - ba[1], fp[2] - ba[2]))
         f1 = _mv(m1, (acc_b[0] - ba[0], acc_b[1] - ba[1], acc_b[2] - ba[2]))
@@ -214,7 +225,6 @@ class ZuptEKF:
         h = dt_s * dt_s / 6.0
         p_new = tuple(p[i] + v[i] * dt_s + (2.0 * a0[i] + a1[i]) * h for i in range(3))
         v_new = tuple(v[i] + 0.5 * (a0[i] + a1[i]) * dt_s for i in range(3))
-        mat0, mat1 = np.array(m0), np.array(m1)
         sf0 = _skew(f0)
         sf1 = _skew(f1)
         sfm1 = sf1 @ mat1
@@ -224,17 +234,22 @@ class ZuptEKF:
         phi[VEL, ATT] = (sf0 + sf1) * (-half)
         phi[VEL, BG] = sfm1 * (half * dt_s)
         phi[VEL, BA] = (mat0 + mat1) * (-half)
-        phi[POS, VEL] = self._eye3 * dt_s
         phi[POS, ATT] = (2.0 * sf0 + sf1) * (-h)
         phi[POS, BG] = sfm1 * (h * dt_s)
         phi[POS, BA] = (2.0 * mat0 + mat1) * (-h)
-        np.fill_diagonal(self._phi_bg, math.exp(-dt_s / self.settings.gyro_bias_tau_s))
-        np.fill_diagonal(self._phi_ba, math.exp(-dt_s / self.settings.acc_bias_tau_s))
+        if dt_s != self._dt_phi:  # the parts that depend on the time step alone
+            self._dt_phi = dt_s
+            phi[POS, VEL] = self._eye3 * dt_s
+            np.fill_diagonal(self._phi_bg, math.exp(-dt_s / self.settings.gyro_bias_tau_s))
+            np.fill_diagonal(self._phi_ba, math.exp(-dt_s / self.settings.acc_bias_tau_s))
         return phi, q_new, v_new, p_new
 
     def process_noise(self, dt_s: float) -> np.ndarray:
         """Discrete process noise ``Q`` of one step of ``dt_s`` (white noise integrated over the step)."""
-        return self._q1 * dt_s + self._q2 * (dt_s * dt_s) + self._q3 * (dt_s * dt_s * dt_s)
+        if dt_s != self._dt_q:
+            self._dt_q = dt_s
+            self._q = self._q1 * dt_s + self._q2 * (dt_s * dt_s) + self._q3 * (dt_s * dt_s * dt_s)
+        return self._q
 
     def propagate(self, acc_b, gyro_b, dt_s: float) -> None:
         """One strapdown step (measured ``dt_s``) and the covariance propagation ``P <- Phi P Phi^T + Q``."""
