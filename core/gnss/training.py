@@ -10,7 +10,8 @@ A training window
     Every ``window_s`` seconds of good GPS (non-overlapping windows, ending at
     a fix) is one candidate.  It is used only if
 
-    * every fix in it reports ``hacc_m <= max_hacc_m`` and the fixes cover
+    * every fix in it reports ``hacc_m <= max_hacc_m`` (``max_hacc_doppler_m``
+      where the receiver gives speed and course) and the fixes cover
       the window without gaps longer than ``max_fix_gap_s``;
     * the walker walks: at least ``min_steps`` steps and a GPS speed between
       ``min_speed_m_s`` and ``max_speed_m_s``;
@@ -96,7 +97,10 @@ class OnlineTrainer:
     min_steps : int
         Steps a window must hold.
     max_hacc_m : float
-        Worst reported horizontal accuracy of a fix in a usable window (m).
+        Worst reported horizontal accuracy of a fix in a usable window (m) ...
+    max_hacc_doppler_m : float
+        ... and in one whose distance and course come from the receivers' Doppler
+        speed and course, which stay good when the position is only 10-20 m good.
     max_fix_gap_s : float
         Longest gap between the window's fixes (s).
     min_speed_m_s, max_speed_m_s : float
@@ -136,6 +140,7 @@ class OnlineTrainer:
     """
 
     def __init__(self, *, window_s: float = 10.0, min_steps: int = 8, max_hacc_m: float = 12.0,
+                 max_hacc_doppler_m: float = 20.0,
                  max_fix_gap_s: float = 3.0, min_speed_m_s: float = 0.5, max_speed_m_s: float = 2.5,
                  max_speed_cv: float = 0.25, straight_sd_rad: float = math.radians(7.0), min_chord_m: float = 8.0,
                  position_sd_m: float = 2.5, course_sd_rad: float = math.radians(4.0),
@@ -148,6 +153,7 @@ class OnlineTrainer:
         self.window_s = float(window_s)
         self.min_steps = int(min_steps)
         self.max_hacc_m = float(max_hacc_m)
+        self.max_hacc_doppler_m = float(max_hacc_doppler_m)
         self.max_fix_gap_s = float(max_fix_gap_s)
         self.min_speed_m_s = float(min_speed_m_s)
         self.max_speed_m_s = float(max_speed_m_s)
@@ -242,8 +248,11 @@ class OnlineTrainer:
             return WindowFlags(t1, False, False, nan, nan, heading, dist, reason)
 
         hacc = np.array([f[3] for f in fx])
-        if not np.all(hacc <= self.max_hacc_m):
-            return refuse(f"fix accuracy up to {np.nanmax(hacc):.0f} m > {self.max_hacc_m:.0f} m")
+        speeds = np.array([f[4] for f in fx])
+        doppler = np.isfinite(speeds).mean() >= 0.8
+        limit = self.max_hacc_doppler_m if doppler else self.max_hacc_m
+        if not np.all(hacc <= limit):
+            return refuse(f"fix accuracy up to {np.nanmax(hacc):.0f} m > {limit:.0f} m")
         # steps with the part of their interval inside [t0, t1]
         parts, heads = [], []
         for ts, tp, ln, hd in self._steps:
@@ -259,9 +268,7 @@ class OnlineTrainer:
             return refuse(f"turning: heading SD {math.degrees(sd_h):.1f} deg", mean_h)
         model_d = float(sum(parts))
         dur = (t1 - t0) * 1e-9
-        speeds = np.array([f[4] for f in fx])
         courses = np.array([f[5] for f in fx])
-        doppler = np.isfinite(speeds).mean() >= 0.8
         chord = math.hypot(fx[-1][1] - fx[0][1], fx[-1][2] - fx[0][2])
         if doppler:
             sp = speeds[np.isfinite(speeds)]

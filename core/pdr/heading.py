@@ -71,14 +71,32 @@ class RotationSmoother:
         (about 0.9 Hz) and above; 0.5 Hz leaves a third of it at 0.9 Hz.
     grid_rate_hz : float
         Rate at which :meth:`update` is called (Hz).
-    forward_b : tuple of 3 floats
-        Device axis that points in the walking direction.
+    forward_b : tuple of 3 floats or "auto"
+        Device axis that points in the walking direction.  ``"auto"``: the y axis
+        (the top edge: a phone held in front of the chest), but the back of the
+        phone (``-z``) while the phone stands upright -- its top edge within
+        about 27 degrees of the vertical (a trouser pocket, a hand hanging at the
+        side), where y has no horizontal direction left.  The back's direction
+        is off the walking direction by a constant that only GPS (the heading
+        error model of :mod:`core.gnss.heading_model`, its offset ``A``) or the
+        carry-mode work of issue #17 can tell; without either the heading is
+        consistent but not the walking direction.
+    upright_enter, upright_exit : float
+        ``"auto"``: the horizontal length of the filtered y axis below which the
+        phone counts as upright, and above which it counts as not upright again
+        (hysteresis, so the axis does not flicker).
     """
 
-    def __init__(self, *, cutoff_hz: float = 0.5, grid_rate_hz: float = 50.0, forward_b=(0.0, 1.0, 0.0)):
+    def __init__(self, *, cutoff_hz: float = 0.5, grid_rate_hz: float = 50.0, forward_b=(0.0, 1.0, 0.0),
+                 upright_enter: float = 0.45, upright_exit: float = 0.65):
         self.cutoff_hz = float(cutoff_hz)
         self.grid_rate_hz = float(grid_rate_hz)
-        self.forward_b = tuple(float(v) for v in forward_b)
+        self.auto_axis = isinstance(forward_b, str)
+        if self.auto_axis and forward_b != "auto":
+            raise ValueError(f"forward_b must be 3 floats or 'auto', got {forward_b!r}")
+        self.forward_b = (0.0, 1.0, 0.0) if self.auto_axis else tuple(float(v) for v in forward_b)
+        self.upright_enter = float(upright_enter)
+        self.upright_exit = float(upright_exit)
         self.reset()
 
     @property
@@ -96,6 +114,12 @@ class RotationSmoother:
         self.forward_north = math.nan
         #: horizontal length of the filtered forward vector (near 0: phone vertical, heading unreliable)
         self.horizontal_norm = math.nan
+        #: ``forward_b="auto"``: whether the back of the phone is the forward axis now, switches, grid samples so
+        self.upright = False
+        self.n_axis_switches = 0
+        self.n_upright = 0
+        if self.auto_axis:
+            self.forward_b = (0.0, 1.0, 0.0)
 
     def update(self, mat_nb) -> float:
         """Filter one rotation matrix (3 row tuples, body -> ENU); returns the smoothed heading (rad)."""
@@ -107,6 +131,15 @@ class RotationSmoother:
                 f.reset(x)
             self._started = True
         y = [f.step(x) for f, x in zip(fs, elems)]
+        if self.auto_axis:
+            y_norm = math.hypot(y[1], y[4])
+            if not self.upright and y_norm < self.upright_enter:
+                self.upright, self.forward_b = True, (0.0, 0.0, -1.0)
+                self.n_axis_switches += 1
+            elif self.upright and y_norm > self.upright_exit:
+                self.upright, self.forward_b = False, (0.0, 1.0, 0.0)
+                self.n_axis_switches += 1
+            self.n_upright += self.upright
         fx, fy, fz = self.forward_b
         east = y[0] * fx + y[1] * fy + y[2] * fz
         north = y[3] * fx + y[4] * fy + y[5] * fz

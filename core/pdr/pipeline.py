@@ -177,7 +177,9 @@ class Pipeline:
         Step length model; default :class:`core.pdr.stride.WeinbergStride` with a constant coefficient.
     step_detector, attitude, smoother : optional
         Pre-configured stages (:class:`StepDetector`, :class:`AttitudeEKF`,
-        :class:`RotationSmoother`); defaults suit a hand-held phone.  The
+        :class:`RotationSmoother`); defaults suit a hand-held phone (the
+        smoother's walking axis is the top edge, the back of the phone while it
+        stands upright: ``forward_b="auto"``).  The
         default attitude filter runs the magnetometer through an online
         hard/soft-iron calibration (:class:`core.pdr.magcal.MagCalibrator`).
     grid_rate_hz : float
@@ -235,7 +237,7 @@ class Pipeline:
         self.attitude = attitude or AttitudeEKF(use_magnetometer=use_magnetometer, mag_calibrator=MagCalibrator())
         if not use_magnetometer:
             self.attitude.use_magnetometer = False
-        self.smoother = smoother or RotationSmoother(grid_rate_hz=grid_rate_hz)
+        self.smoother = smoother or RotationSmoother(grid_rate_hz=grid_rate_hz, forward_b="auto")
         for stage in (self.detector, self.smoother):
             if abs(stage.grid_rate_hz - self.grid_rate_hz) > 1e-9:
                 raise ValueError("step detector, smoother and pipeline must share one grid_rate_hz")
@@ -440,6 +442,10 @@ class Pipeline:
         if a.use_magnetometer and used + rej > 100 and rej > self.MAG_REJECTED_WARN * (used + rej):
             out.append(f"magnetometer {100 * rej / (used + rej):.0f} % rejected: the heading leans on the "
                        f"gyroscope (bent or miscalibrated field)")
+        sm = self.smoother
+        if getattr(sm, "auto_axis", False) and sm.n_upright > 0.5 * max(self.detector.n_grid, 1):
+            out.append("phone upright most of the time (pocket or hanging hand): walking direction from the back "
+                       "of the phone, off by an unknown constant without GPS")
         if self.n_nonfinite:
             what = ", ".join(f"{k} {v}" for k, v in sorted(self.n_nonfinite.items()))
             out.append(f"non-finite sensor values skipped ({what})")

@@ -1,0 +1,52 @@
+"""The walking axis of the heading smoother (core.pdr.heading.RotationSmoother, forward_b="auto")."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from core import quaternion as quat
+from core.pdr.heading import RotationSmoother
+
+
+def _phone(heading_rad: float, pitch_rad: float):
+    """Rotation body -> ENU of a phone whose top edge points along ``heading`` (CCW from East), pitched up by
+    ``pitch`` (0 flat, pi/2 upright with the back of the phone facing ``heading``)."""
+    q_yaw = quat.from_axis_angle((0.0, 0.0, 1.0), heading_rad - math.pi / 2)  # device y -> heading
+    q_pitch = quat.from_axis_angle((1.0, 0.0, 0.0), pitch_rad)  # top edge up about device x
+    return quat.to_matrix(quat.multiply(q_yaw, q_pitch))
+
+
+def _run(mats):
+    sm = RotationSmoother(forward_b="auto")
+    return sm, [sm.update(m) for m in mats]
+
+
+@pytest.mark.parametrize("heading", [-2.0, 0.3, 1.5, 3.0])
+def test_flat_and_tilted_phone_walks_along_its_top_edge(heading):
+    sm, h = _run([_phone(heading, math.radians(40.0))] * 200)
+    assert h[-1] == pytest.approx(heading, abs=1e-6) and not sm.upright and sm.n_axis_switches == 0
+
+
+@pytest.mark.parametrize("heading", [-2.0, 0.3, 1.5, 3.0])
+def test_upright_phone_walks_along_its_back(heading):
+    """Held up in front of the face (or in a pocket): the top edge is vertical, the back faces the walking direction."""
+    sm, h = _run([_phone(heading, math.radians(85.0))] * 200)
+    assert sm.upright and h[-1] == pytest.approx(heading, abs=1e-6)
+    fixed = RotationSmoother()  # the top edge alone: its tiny horizontal part points the other way
+    hf = [fixed.update(m) for m in [_phone(heading, math.radians(95.0))] * 200]
+    assert abs(math.remainder(hf[-1] - heading, 2 * math.pi)) > 3.0
+
+
+def test_the_axis_does_not_flicker_near_the_threshold():
+    """Pitch wandering around the switching point: hysteresis keeps one axis."""
+    rng = np.random.default_rng(0)
+    enter = math.degrees(math.acos(0.45))  # the pitch at which the top edge's horizontal length is 0.45
+    mats = [_phone(0.7, math.radians(enter + 2.0 + rng.normal(0.0, 3.0))) for _ in range(2000)]
+    sm, _ = _run(mats)
+    assert sm.n_axis_switches <= 2
+    sm2, _ = _run([_phone(0.7, math.radians(30.0))] * 100 + [_phone(0.7, math.radians(88.0))] * 400
+                  + [_phone(0.7, math.radians(30.0))] * 400)
+    assert sm2.n_axis_switches == 2 and not sm2.upright
