@@ -313,9 +313,17 @@ class GpsFusion:
         return self.trainer.heading_model
 
     def _heading_sd(self, heading_rad: float) -> float:
-        """What the heading model does not know at this heading (rad)."""
+        """What the heading model does not know at this heading (rad).
+
+        Its coefficients' uncertainty, and the scatter of its training windows
+        about it: that scatter is not white at the time scale of an outage (on
+        the ETH walk the deviation wanders by 10 degrees over minutes), so it
+        is no smaller for having many windows.
+        """
         if self.learn_heading or self._heading_model0 is not None:
-            return self.heading_model.correction_sd_rad(heading_rad)
+            hm = self.heading_model
+            res = hm.residual_sd_rad()
+            return math.hypot(hm.correction_sd_rad(heading_rad), res if res == res else 0.0)
         return self.uncalibrated_heading_sd_rad
 
     def compensated_heading(self, heading_rad: float) -> float:
