@@ -226,8 +226,14 @@ class PDRApp(App):
 
     def on_stop(self):
         if self.session:
+            self._learn_from(self.session)
             self.session.close()
         self._save_settings_quietly()
+
+    def _learn_from(self, session) -> None:
+        """A live walk's GPS training goes into the profile (a replayed file is someone else's walk: not kept)."""
+        if self.mode == "live" and self.settings.learn_from_gps(session.pipeline):
+            self._save_settings_quietly()
 
     def _save_settings_quietly(self):
         try:
@@ -248,6 +254,7 @@ class PDRApp(App):
 
     def _replace_session(self, session: Session, mode: str, raw_path: str | None):
         if self.session:
+            self._learn_from(self.session)
             self.session.close()
         self.session = session
         self.mode = mode

@@ -130,14 +130,29 @@ class Settings:
         """``() -> Pipeline`` with the settings as they are now (a later change needs a new factory).
 
         Each pipeline gets its own :class:`core.gnss.fusion.GpsFusion` when :attr:`use_gps` is on, so
-        a new track starts the fusion afresh (unanchored, stride and heading models untrained).
+        a new track starts the fusion afresh (unanchored), but from what earlier walks with GPS taught:
+        the profile's GPS stride scale and heading model (:meth:`learn_from_gps` keeps them).
         """
         from core.gnss.fusion import GpsFusion  # noqa: PLC0415 - the app imports core's stages on use
+        from core.gnss.training import fusion_settings_from_profile  # noqa: PLC0415
         from core.pdr.pipeline import Pipeline  # noqa: PLC0415
 
         kw = self.pipeline_kwargs()
         use_gps = bool(self.use_gps)
-        return lambda: Pipeline(**kw, gnss=GpsFusion() if use_gps else None)
+        gkw = fusion_settings_from_profile(self.profile)
+        return lambda: Pipeline(**kw, gnss=GpsFusion(**gkw) if use_gps else None)
+
+    def learn_from_gps(self, pipeline) -> bool:
+        """Keep in the profile what a live walk's GPS taught (stride scale, heading model); True if anything."""
+        from core.gnss.training import profile_with_gps_training  # noqa: PLC0415
+
+        gnss = getattr(pipeline, "gnss", None)
+        if gnss is None:
+            return False
+        new = profile_with_gps_training(self.profile, gnss.trainer)
+        changed = new is not self.profile
+        self.profile = new
+        return changed
 
     def calibrate(self, steps, known_distance_m) -> CalibrationResult:
         """Refine the profile from the steps of a walk of known length (:func:`calibrate_known_distance`).

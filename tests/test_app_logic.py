@@ -565,3 +565,20 @@ def test_overlay_meshes_runs_and_status():
     assert runs([True, True, False, False, True]) == [(0, 2), (4, 5)] and runs([False]) == [] and runs([]) == []
     assert gps_status_text(118, 92, (0.25, 0.0, 0.09), True) == "GPS: 118 fixes, 92 used · ±1.0 m (2σ)"
     assert gps_status_text(1, 0, None, False) == "GPS: 1 fix, 0 used · waiting for a good fix"
+
+
+def test_a_live_walk_with_gps_teaches_the_profile_and_the_next_track_starts_from_it(gps_run, tmp_path):
+    _, _, ses = gps_run
+    s = Settings()
+    trainer = ses.pipeline.gnss.trainer
+    learnt = s.learn_from_gps(ses.pipeline)
+    assert learnt == (trainer.stride_gps_distance_m >= 100.0 or trainer.n_heading_samples >= 4)
+    assert learnt, "the 2-minute GPS walk should teach at least the heading model"
+    path = tmp_path / "settings.json"
+    s.save(str(path))
+    back = Settings.load(str(path))
+    assert back.profile.gps == s.profile.gps
+    fusion = back.pipeline_factory()().gnss
+    got = fusion.heading_model.coefficients_rad()[0]
+    assert math.degrees(got) == pytest.approx(math.degrees(trainer.heading_model.coefficients_rad()[0]), abs=1e-6)
+    assert not Settings().learn_from_gps(Pipeline())  # no GPS fusion: nothing to learn
