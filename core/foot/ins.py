@@ -63,6 +63,7 @@ import numpy as np
 
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2
+from core.pdr.attitude import skew
 
 N_STATES = 15
 ATT, VEL, POS, BG, BA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
@@ -107,11 +108,6 @@ class Update:
     innovation: tuple
     nis: float
     dof: int
-
-
-def _skew(v) -> np.ndarray:
-    """``[v]x`` (``[v]x w = v x w``)."""
-    return np.array(((0.0, -v[2], v[1]), (v[2], 0.0, -v[0]), (-v[1], v[0], 0.0)))
 
 
 def _mv(m, v) -> tuple:
@@ -225,8 +221,8 @@ class ZuptEKF:
         h = dt_s * dt_s / 6.0
         p_new = tuple(p[i] + v[i] * dt_s + (2.0 * a0[i] + a1[i]) * h for i in range(3))
         v_new = tuple(v[i] + 0.5 * (a0[i] + a1[i]) * dt_s for i in range(3))
-        sf0 = _skew(f0)
-        sf1 = _skew(f1)
+        sf0 = skew(f0)
+        sf1 = skew(f1)
         sfm1 = sf1 @ mat1
         phi = self._phi
         half = 0.5 * dt_s
