@@ -22,6 +22,9 @@ Plain UTF-8 text, optionally gzip-compressed (file name ending in ``.gz``)::
 * every further line is one sensor event: stream name, integer nanosecond
   timestamp on the sensor clock, then the stream's values.  Floats are
   written with :func:`repr`, so reading gives back exactly the written value.
+* a recording may carry several devices: the recording phone's streams have
+  the plain names, another device's are ``<kind>@<device>`` (``acc@left_foot``,
+  ``mag@waist``: the columns and units of ``<kind>``); see :mod:`core.foot.devices`;
 * rows may come in any order (a live recorder appends them as they arrive);
   blank lines and further ``#`` comment lines are ignored.
 
@@ -245,12 +248,12 @@ def _pad_gps(values, columns):
 
 
 def make_stream(name: str, t_ns, values, columns=None, unit=None, note=None) -> Stream:
-    """A :class:`Stream` with the default columns and unit of a known stream name.
+    """A :class:`Stream` with the default columns and unit of a known stream name (or ``kind@device``).
 
     GPS values with only the first four columns (no speed, no course) are
     padded with nan, so that every GPS stream in memory has the same columns.
     """
-    spec = STREAM_SPECS.get(name, {})
+    spec = STREAM_SPECS.get(name) or STREAM_SPECS.get(name.partition("@")[0], {})  # "acc@left_foot": an acc
     if name == GPS and columns is None:
         v = np.asarray(values, dtype=np.float64)
         if v.ndim == 2 and v.shape[1] == len(GPS_COLUMNS_V1):

@@ -14,6 +14,8 @@ import time
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from core import __version__
 from core.recording import Recording, RecordingError, read_recording, write_recording
 
@@ -208,21 +210,77 @@ def gps_lines(res) -> list[str]:
     return lines
 
 
-def cmd_replay(args) -> int:
-    rec = load_demo() if args.recording is None else load_any(args.recording)
-    profile = _load_profile(args.profile) if getattr(args, "profile", None) else None
-    gnss = build_gnss(args, rec, profile)
-    pipeline = build_pipeline(args, gnss)
-    big = sum(len(s) for s in rec.streams.values()) > 200_000
-    prog = _Progress("replay", args.progress or (big and sys.stderr.isatty()))
-    res = pipeline.run(rec, progress=prog)
+MODES = ("auto", "handheld", "foot")
+
+
+def choose_mode(args, rec: Recording) -> tuple[str, str]:
+    """``--mode``: the mode to run and why (auto: the foot IMU's signals, :func:`core.foot.mounting.detect_mounting`)."""
+    mode = getattr(args, "mode", "handheld")
+    if mode != "auto":
+        return mode, "chosen with --mode"
+    from core.foot.devices import has_imu
+    from core.foot.mounting import FOOT, detect_mounting
+
+    dev = args.foot_device or ""
+    if not has_imu(rec, dev):
+        return "handheld", "no accelerometer and gyroscope pair" + (f" for device {dev!r}" if dev else "")
+    m = detect_mounting(rec, dev)
+    why = (f"detected: peak rate {m.peak_rate_rad_s:.1f} rad/s, stance {100 * m.stance_fraction:.0f} % of walking "
+           f"({100 * m.confidence:.0f} % sure)")
+    return ("foot" if m.mode == FOOT else "handheld"), why
+
+
+def cmd_replay_foot(args, rec: Recording, why: str) -> int:
+    """``pdr replay --mode foot``: the foot-mounted INS (Song & Park 2018, :mod:`core.foot`)."""
+    if args.gps == "chen" or args.gps == "kubrak" or args.gps_outage:
+        raise ValueError("GPS fusion with the foot-mounted INS is not built; use --gps off (or auto) with --mode foot")
+    from core.foot.navigator import FootNavigator, FootSettings
+    from core.foot.stance import StanceSettings
+
+    waist = args.waist_device or None
+    if waist is not None and not rec.has(f"acc@{waist}"):
+        waist = None  # no waist IMU in this recording
+    aid = args.aid or ("tckf" if waist and rec.has(f"mag@{waist}") else "zupt")
+    settings = FootSettings(aid=aid, stance=StanceSettings(detector=args.detector),
+                            gyro_delay_s=args.gyro_delay_ms * 1e-3)
+    res = FootNavigator(settings, foot_device=args.foot_device or "", waist_device=waist).run(rec)
+    s = res.summary()
+    s["mode_reason"] = why
     if args.json:
-        print(json.dumps(res.summary(), indent=1, default=float))
+        print(json.dumps(s, indent=1, default=float))
     else:
-        print("\n".join(summary_lines(res, rec)))
-    fused = res.fusion is not None and res.fusion.origin_lat_lon is not None and len(res.fusion.steps)
-    origin = args.origin or (res.fusion.origin_lat_lon if fused else None) or _first_gps_origin(rec)
-    track, extra = (res.fusion.track(), res.fusion.track().point_properties()) if fused else (res.track, None)
+        print("\n".join([
+            f"recording     {rec.source}",
+            f"mode          foot-mounted INS ({why})",
+            f"filter        ZUPT EKF, heading aid {s['aid']}, stance detector {s['detector']}",
+            f"duration      {s['duration_s']:.1f} s at {s['rate_hz']:.0f} Hz",
+            f"strides       {s['n_strides']} (stance {100 * s['stance_fraction']:.0f} % of the time)",
+            f"distance      {s['distance_m']:.1f} m",
+            f"final pos     E {s['final_east_m']:+.2f} m, N {s['final_north_m']:+.2f} m, U {s['final_up_m']:+.2f} m",
+            f"start-to-end  {s['start_to_end_m']:.2f} m"
+            + (f" ({100 * s['start_to_end_m'] / s['distance_m']:.2f} % of the distance)" if s["distance_m"] > 0
+               else ""),
+        ]))
+    track = _stride_track(res)
+    written = _write_outputs(args, rec, track, None, None, title_extra="foot INS")
+    for w in written:
+        print(f"wrote         {w}")
+    return 0
+
+
+def _stride_track(res):
+    """The foot track as one row per stride (the arrays core.export and the plot take)."""
+    from core.pdr.pipeline import Track
+
+    st = [x for x in res.strides if x.length_m == x.length_m]
+    return Track(np.array([x.t_end_ns for x in st], dtype=np.int64), np.array([x.length_m for x in st]),
+                 np.array([x.course_rad for x in st]), np.array([x.position_n[0] for x in st]),
+                 np.array([x.position_n[1] for x in st]))
+
+
+def _write_outputs(args, rec, track, origin, extra, title_extra: str = "", others=None, fixes=None,
+                   subtitle: str = "") -> list:
+    origin = args.origin or origin or _first_gps_origin(rec)
     offset = rec.metadata.get("unix_offset_ns")
     written = []
     from core import export
@@ -233,9 +291,7 @@ def cmd_replay(args) -> int:
         export.write_track_csv(args.csv, track)
         written.append(args.csv)
     if args.geojson:
-        export.write_track_geojson(args.geojson, track, origin,
-                                   {"source": rec.source, "track": "fused with GPS" if fused else "dead reckoning"},
-                                   extra)
+        export.write_track_geojson(args.geojson, track, origin, {"source": rec.source, "track": title_extra}, extra)
         written.append(args.geojson)
     if args.gpx:
         export.write_track_gpx(args.gpx, track, origin, offset if isinstance(offset, int) else None,
@@ -244,16 +300,41 @@ def cmd_replay(args) -> int:
     if args.plot:
         from desktop.plot import plot_track
         truth_en = rec.metadata.get("waypoints_en_m") if rec.metadata.get("simulator") else None
-        s = res.summary()
-        others, fixes = {}, None
-        if fused:
-            others["dead reckoning only"] = (res.track.east_m, res.track.north_m)
-            fx = [f for f in res.fusion.fixes if f.east_m == f.east_m]
-            fixes = ([f.east_m for f in fx], [f.north_m for f in fx], [f.accepted for f in fx])
-        plot_track(args.plot, track, title=f"PDR: {Path(rec.source.split(' ')[0]).name}",
-                   truth_en=truth_en, others=others, fixes=fixes,
-                   subtitle=f"{s['n_steps']} steps, {s['distance_m']:.1f} m, start-to-end {s['start_to_end_m']:.2f} m")
+        plot_track(args.plot, track, title=f"PDR: {Path(rec.source.split(' ')[0]).name}" +
+                   (f" ({title_extra})" if title_extra else ""), truth_en=truth_en, others=others, fixes=fixes,
+                   subtitle=subtitle)
         written.append(args.plot)
+    return written
+
+
+def cmd_replay(args) -> int:
+    rec = load_demo() if args.recording is None else load_any(args.recording)
+    mode, why = choose_mode(args, rec)
+    if mode == "foot":
+        return cmd_replay_foot(args, rec, why)
+    profile = _load_profile(args.profile) if getattr(args, "profile", None) else None
+    gnss = build_gnss(args, rec, profile)
+    pipeline = build_pipeline(args, gnss)
+    big = sum(len(s) for s in rec.streams.values()) > 200_000
+    prog = _Progress("replay", args.progress or (big and sys.stderr.isatty()))
+    res = pipeline.run(rec, progress=prog)
+    if args.json:
+        print(json.dumps({**res.summary(), "mode": "handheld", "mode_reason": why}, indent=1, default=float))
+    else:
+        lines = summary_lines(res, rec)
+        print("\n".join(lines[:1] + [f"mode          hand-held PDR ({why})"] + lines[1:]))
+    fused = res.fusion is not None and res.fusion.origin_lat_lon is not None and len(res.fusion.steps)
+    track, extra = (res.fusion.track(), res.fusion.track().point_properties()) if fused else (res.track, None)
+    others, fixes = {}, None
+    if fused and args.plot:
+        others["dead reckoning only"] = (res.track.east_m, res.track.north_m)
+        fx = [f for f in res.fusion.fixes if f.east_m == f.east_m]
+        fixes = ([f.east_m for f in fx], [f.north_m for f in fx], [f.accepted for f in fx])
+    s = res.summary()
+    written = _write_outputs(args, rec, track, res.fusion.origin_lat_lon if fused else None, extra,
+                             "fused with GPS" if fused else "", others, fixes,
+                             f"{s['n_steps']} steps, {s['distance_m']:.1f} m, start-to-end "
+                             f"{s['start_to_end_m']:.2f} m")
     if profile is not None and res.fusion is not None:
         from core.gnss.training import profile_with_gps_training
         new = profile_with_gps_training(profile, pipeline.gnss.trainer)
@@ -331,6 +412,20 @@ def make_parser() -> argparse.ArgumentParser:
                         "repeatable; the error at the end of each is reported")
     r.add_argument("--profile", metavar="PATH", help="user profile (JSON): its stride scale and heading model start "
                    "the GPS training, and what the walk taught is saved back into it")
+    r.add_argument("--mode", choices=MODES, default="auto",
+                   help="hand-held PDR or foot-mounted INS (Song & Park 2018); auto (default): detected from the "
+                        "IMU's signals (a foot shows long still stances and peak rates of several rad/s)")
+    r.add_argument("--foot-device", default="", metavar="NAME",
+                   help="foot mode: the device whose streams are the foot IMU ('' = the primary acc/gyro; "
+                        "'left_foot' reads acc@left_foot, gyro@left_foot)")
+    r.add_argument("--waist-device", default="waist", metavar="NAME",
+                   help="foot mode: the device with the waist magnetometer for the course filter (default waist)")
+    r.add_argument("--aid", choices=("zupt", "foot_mag", "course", "tckf"), default=None,
+                   help="foot mode: heading aid (default tckf with a waist magnetometer, else zupt only)")
+    r.add_argument("--detector", choices=("shoe", "song", "amv", "are"), default="shoe",
+                   help="foot mode: stance detector (default shoe)")
+    r.add_argument("--gyro-delay-ms", type=float, default=0.0, metavar="MS",
+                   help="foot mode: the gyroscope lags the accelerometer by this much (ms)")
     r.add_argument("--json", action="store_true", help="print the summary as JSON")
     r.add_argument("--progress", action="store_true", help="always show progress on stderr")
     r.set_defaults(func=cmd_replay)
