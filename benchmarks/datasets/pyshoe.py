@@ -20,9 +20,18 @@ What the reader returns (one :class:`PyshoeTrial` per file):
 * ``zv_reference``: the VICON-derived zero-velocity labels (1 = stationary)
   shipped with the file (``zv_vicon_opt``), and the other detectors' labels
   ``zv_labels`` (``shoe``, ``ared``, ``amvd``, ``mbgtd``, ``vicon``).
-* ``pyshoe_errors_m``: PyShoe's own position RMSE per detector
-  (``trial_error``, in the order shoe, ared, amvd, mbgtd, vicon), and its best
-  detector and error.
+* ``pyshoe_errors_m``: PyShoe's own error per detector (``trial_error``, in
+  the order shoe, ared, amvd, mbgtd, vicon), and its best detector and error.
+  **Each is at that detector's per-trial optimal threshold** (``G_<det>_opt``,
+  ``pyshoe_thresholds``: SHOE's spans 4.75e5 to 9.75e7 over the trials, the
+  VICON speed threshold 0.015 to 0.975 m/s), chosen per trial by a grid search
+  on that same error with PyShoe's filter; none is a fixed configuration.  The
+  error is not an RMSE: PyShoe's evaluation turns the track to VICON by one
+  sample 0.8 m from the start and averages ``|e_xy| / sqrt(2)`` over samples
+  (:func:`benchmarks.foot.pyshoe_metric` reproduces it).
+* so ``zv_reference`` (``zv_vicon_opt``) is a VICON speed below a per-trial
+  threshold chosen for the smallest error, not a stance truth: with 0.975 m/s
+  (2017-11-22-11-30-14) 57 % of the samples are "still".
 
 The 3DM-GX3's gyroscope readings lag its accelerometer's in these files: the
 benchmark runs the navigator with ``gyro_delay_s = GYRO_DELAY_S`` (chosen on
@@ -61,6 +70,8 @@ class PyshoeTrial(Trial):
     zv_labels: dict = field(default_factory=dict)
     pyshoe_errors_m: dict = field(default_factory=dict)
     pyshoe_best: tuple = ("", float("nan"))
+    #: each detector's per-trial threshold behind its labels and error (``G_<detector>_opt``)
+    pyshoe_thresholds: dict = field(default_factory=dict)
 
 
 def available(root: Path) -> bool:
@@ -84,6 +95,8 @@ def _fill(trial: "PyshoeTrial", path: Path) -> Recording:
     trial.truth_pos_m = np.column_stack([gt[:, 1], gt[:, 0], gt[:, 2]])  # mirrored horizontal axes -> ENU
     trial.zv_labels = {k[3:-4]: np.asarray(d[k]).ravel().astype(bool) for k in d if k.startswith("zv_")}
     trial.zv_reference = trial.zv_labels.get("vicon")
+    trial.pyshoe_thresholds = {k[2:-4]: float(np.asarray(d[k]).ravel()[0]) for k in d
+                               if k.startswith("G_") and k.endswith("_opt")}
     err = np.asarray(d["trial_error"], dtype=float).ravel()
     trial.pyshoe_errors_m = dict(zip(PYSHOE_DETECTORS, err.tolist()))
     trial.pyshoe_best = (str(np.asarray(d["best_detector"]).ravel()[0]).strip(),
