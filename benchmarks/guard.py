@@ -3,7 +3,9 @@
 ``python -m benchmarks.guard [--data DIR] [--jobs N] [--thresholds FILE] [--update]``
 
 Runs :func:`benchmarks.run.run` on the quick subset (our pipeline only, no
-peers: they cannot regress our numbers), computes the headline numbers per
+peers: they cannot regress our numbers) and the GPS fusion's quick subset
+(:func:`benchmarks.gnss_eval.quick`: three simulated walks, the ETH walk's
+3-minute outages), computes the headline numbers per
 split (:mod:`benchmarks.headline`; the quick subset holds recordings of both
 splits) and compares each with ``benchmarks/thresholds.json``::
 
@@ -53,6 +55,9 @@ GUARDED_METRICS = {
     "ipol_*_step_mae_pct": "max",
     "ipol_*_distance_mae_pct": "max",
     "trundlewheel_*_distance_mae_pct": "max",
+    # GPS fusion (issue #9): benchmarks.gnss_eval.quick
+    "gps_outage_sim_quick_5min_pct": "max",
+    "gps_outage_eth_quick_3min_pct": "max",
 }
 #: every split's name of every guarded metric (a dataset has names only for the splits it has recordings in)
 GUARDED = {m.replace("*", sp): kind for m, kind in GUARDED_METRICS.items() for sp in SPLITS}
@@ -118,6 +123,9 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     info = run(root, quick=True, jobs=args.jobs, peer_names=())
     values = headline(info["results"])
+    from benchmarks.gnss_eval import quick as gnss_quick
+
+    values.update(gnss_quick(root))
     failed = [r for r in info["results"] if "error" in r]
     if args.update:
         doc = {"_about": "CI regression guard (benchmarks/guard.py): quick-subset headline numbers may not get "

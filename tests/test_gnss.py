@@ -343,3 +343,22 @@ def test_first_fix_gives_the_attitude_filter_the_site_declination_and_field(sim_
     undated = Pipeline(gnss=GpsFusion())
     undated.run(rec)
     assert undated.attitude.declination_rad == 0.0 and not undated.site["applied"]
+
+
+def test_heading_model_uses_the_predictor_that_predicts_best_out_of_sample():
+    """A real harmonic: the full fit wins; a deviation that only wanders in time: the harmonics are not used."""
+    rng = np.random.default_rng(6)
+    harmonic = HeadingErrorModel()
+    for _ in range(120):
+        psi = rng.uniform(-math.pi, math.pi)
+        harmonic.add(psi, math.radians(5.0) + math.radians(6.0) * math.sin(psi) + rng.normal(0, 0.02), 2500.0)
+    assert harmonic.selected == "full"
+    offset = HeadingErrorModel()
+    for _ in range(60):  # a pure offset: never the (zero) start model, and the offset alone at least ties
+        offset.add(rng.uniform(-math.pi, math.pi), math.radians(20.0) + rng.normal(0, 0.05), 400.0)
+    assert offset.selected in ("offset", "full") and offset._pq["start"] > 10 * offset._pq["offset"]
+    persisted = HeadingErrorModel(coefficients_rad=np.radians([-4.0, 2.0, 0.0, 0.0, 0.0]))
+    for _ in range(30):  # the profile's model is right: it keeps being used (no worse than refitting)
+        psi = rng.uniform(-math.pi, math.pi)
+        persisted.add(psi, math.radians(-4.0 + 2.0 * math.sin(psi)), 400.0)
+    assert abs(math.degrees(persisted.correction_rad(1.0)) - (-4.0 + 2.0 * math.sin(1.0))) < 0.5

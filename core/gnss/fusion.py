@@ -323,7 +323,7 @@ class GpsFusion:
         if self.learn_heading or self._heading_model0 is not None:
             hm = self.heading_model
             res = hm.residual_sd_rad()
-            return math.hypot(hm.correction_sd_rad(heading_rad), res if res == res else 0.0)
+            return math.hypot(hm.correction_sd_rad(heading_rad), res if math.isfinite(res) else 0.0)
         return self.uncalibrated_heading_sd_rad
 
     def compensated_heading(self, heading_rad: float) -> float:

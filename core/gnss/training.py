@@ -73,6 +73,8 @@ class WindowFlags:
     heading_rad: float  #: our mean heading over the window
     gps_distance_m: float
     reason: str = ""  #: why the window (or a part of it) was not used
+    #: the deviation minus the heading model's prediction *before* this window (out-of-sample residual, rad)
+    heading_residual_rad: float = float("nan")
 
 
 def _circ_mean_sd(angles, weights=None) -> tuple[float, float]:
@@ -312,6 +314,7 @@ class OnlineTrainer:
         # -- heading
         used_h = False
         dev = nan
+        res_h = nan
         if self.learn_heading:
             good_c = np.isfinite(courses) & np.isfinite(speeds) & (speeds >= self.min_speed_m_s)
             if good_c.mean() >= 0.8:
@@ -331,11 +334,12 @@ class OnlineTrainer:
                 var = ref_sd ** 2 + self.step_heading_sd_rad ** 2 / max(len(heads), 1)
                 fl = self.heading_model.add(mean_h, dev, 1.0 / var)
                 used_h = fl.accepted
+                res_h = fl.residual_rad
                 if used_h:
                     self.n_heading_samples += 1
                 else:
                     reasons.append(f"heading sample rejected: {fl.reason}")
-        return WindowFlags(t1, used_s, used_h, scale, dev, mean_h, gps_d, "; ".join(reasons))
+        return WindowFlags(t1, used_s, used_h, scale, dev, mean_h, gps_d, "; ".join(reasons), res_h)
 
     def counters(self) -> dict:
         return {"windows": len(self.windows), "stride_samples": self.n_stride_samples,
