@@ -336,7 +336,7 @@ def test_first_fix_gives_the_attitude_filter_the_site_declination_and_field(sim_
     p = Pipeline(gnss=GpsFusion())
     res = p.run(dated)
     t, lat, lon, alt = p.gnss.anchor
-    decl, dip, total = magnetic_field(lat, lon, alt, unix_ns_to_datetime(1_750_000_000 * 10 ** 9 + t))
+    decl, _, _ = magnetic_field(lat, lon, alt, unix_ns_to_datetime(1_750_000_000 * 10 ** 9 + t))
     assert res.fusion.counters["site"]["applied"]
     assert math.degrees(p.attitude.declination_rad) == pytest.approx(math.degrees(decl), abs=1e-9)
     assert 5.0 < math.degrees(decl) < 15.0  # Helsinki, 2025
