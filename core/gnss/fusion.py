@@ -7,7 +7,11 @@ step.  :class:`core.pdr.pipeline.Pipeline` runs it when built with
 ``gnss=GpsFusion(...)``; the app and ``pdr replay --gps`` do so.
 
 Per step
-    step length ``l = scale * l_model`` (``scale`` learnt from GPS by
+    step length ``l = scale * l_model`` (``l_model`` from the pipeline's stride
+    model: Chen's one-parameter nonlinear model, eq. 3 ``K (A_max - A_min)^(1/4)``,
+    is :class:`core.pdr.stride.WeinbergStride` with a constant coefficient; the
+    Weinberg/BP and Chen linear/ANN models of :mod:`core.pdr.stride_models`
+    plug in the same way) (``scale`` learnt from GPS by
     :class:`core.gnss.training.OnlineTrainer`, starting from the user's
     profile) and heading ``psi_c = psi + delta(psi)`` (eq. 12,
     :class:`core.gnss.heading_model.HeadingErrorModel`) are the measurements
