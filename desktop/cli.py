@@ -124,22 +124,39 @@ def _load_profile(path: str):
 
 
 class _Progress:
-    """Progress on stderr for long replays (only when stderr is a terminal, or forced)."""
+    """Progress on stderr for long work: shown once it has taken ``after_s``, tty or not.
 
-    def __init__(self, label: str, enabled: bool):
+    On a terminal one line is rewritten (every 5 %); otherwise (a log, CI) a
+    line is printed every 10 %, so a pipe is not flooded.  ``--progress``
+    shows it from the start, ``--no-progress`` never.
+    """
+
+    def __init__(self, label: str, enabled: bool = True, *, after_s: float = 2.0, tty: bool | None = None,
+                 clock=time.monotonic):
         self.label = label
         self.enabled = enabled
+        self.after_s = float(after_s)
+        self.tty = sys.stderr.isatty() if tty is None else bool(tty)
+        self.clock = clock
         self.last = -1.0
-        self.t0 = time.monotonic()
+        self.t0 = clock()
+        self.shown = False
 
     def __call__(self, frac: float) -> None:
-        if not self.enabled or frac - self.last < 0.05 and frac < 1.0:
+        if not self.enabled:
             return
+        el = self.clock() - self.t0
+        if el < self.after_s and not self.shown:
+            return
+        step = 0.05 if self.tty else 0.10
+        if frac - self.last < step and frac < 1.0:
+            return
+        if frac >= 1.0 and not self.shown:
+            return  # finished before it was worth showing
         self.last = frac
-        el = time.monotonic() - self.t0
-        sys.stderr.write(f"\r{self.label}: {100 * frac:5.1f} %  ({el:.1f} s)")
-        if frac >= 1.0:
-            sys.stderr.write("\n")
+        self.shown = True
+        end = "\n" if (frac >= 1.0 or not self.tty) else ""
+        sys.stderr.write(("\r" if self.tty else "") + f"{self.label}: {100 * frac:5.1f} %  ({el:.1f} s)" + end)
         sys.stderr.flush()
 
 
@@ -315,8 +332,7 @@ def cmd_replay(args) -> int:
     profile = _load_profile(args.profile) if getattr(args, "profile", None) else None
     gnss = build_gnss(args, rec, profile)
     pipeline = build_pipeline(args, gnss)
-    big = sum(len(s) for s in rec.streams.values()) > 200_000
-    prog = _Progress("replay", args.progress or (big and sys.stderr.isatty()))
+    prog = _Progress("replay", not args.no_progress, after_s=0.0 if args.progress else 2.0)
     res = pipeline.run(rec, progress=prog)
     if args.json:
         print(json.dumps({**res.summary(), "mode": "handheld", "mode_reason": why}, indent=1, default=float))
@@ -427,7 +443,9 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--gyro-delay-ms", type=float, default=0.0, metavar="MS",
                    help="foot mode: the gyroscope lags the accelerometer by this much (ms)")
     r.add_argument("--json", action="store_true", help="print the summary as JSON")
-    r.add_argument("--progress", action="store_true", help="always show progress on stderr")
+    r.add_argument("--progress", action="store_true", help="show progress on stderr from the start "
+                   "(default: once the replay has taken 2 s, on a terminal or not)")
+    r.add_argument("--no-progress", action="store_true", help="never show progress")
     r.set_defaults(func=cmd_replay)
 
     s = sub.add_parser("simulate", help="write a simulated hand-held walk with ground truth",

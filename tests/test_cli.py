@@ -76,7 +76,8 @@ def test_help_explains_every_option():
     r = _run("replay", "--help")
     assert r.returncode == 0
     for opt in ("--csv", "--geojson", "--gpx", "--plot", "--origin", "--height", "--stride-c", "--declination",
-                "--no-mag", "--json", "--progress"):
+                "--no-mag", "--json", "--progress", "--no-progress", "--gps", "--gps-outage", "--profile", "--mode",
+                "--aid", "--detector", "--foot-device", "--waist-device", "--gyro-delay-ms"):
         assert opt in r.stdout
 
 
@@ -88,3 +89,24 @@ def test_simulate_then_replay_round_trip(tmp_path):
     r = _run("replay", str(p), "--json")
     s = json.loads(r.stdout)
     assert s["start_to_end_m"] < 0.03 * s["distance_m"]
+
+
+def test_progress_shows_after_two_seconds_tty_or_not(capsys):
+    from desktop.cli import _Progress
+
+    now = [0.0]
+    log = _Progress("replay", tty=False, clock=lambda: now[0])
+    for k in range(0, 101):
+        now[0] = 0.05 * k  # 5 s in all
+        log(k / 100)
+    err = capsys.readouterr().err.splitlines()
+    assert err and all(line.startswith("replay:") for line in err)
+    assert float(err[0].split()[1]) >= 40.0  # nothing before 2 s (40 %)
+    assert len(err) <= 8 and err[-1].split()[1] == "100.0"  # a line per 10 % in a log, and the end
+    quick = _Progress("replay", tty=True, clock=lambda: 0.5)
+    quick(0.5)
+    quick(1.0)
+    assert capsys.readouterr().err == ""  # done in half a second: nothing shown
+    off = _Progress("replay", enabled=False, clock=lambda: 100.0)
+    off(0.5)
+    assert capsys.readouterr().err == ""
