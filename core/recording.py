@@ -29,7 +29,15 @@ Plain UTF-8 text, optionally gzip-compressed (file name ending in ``.gz``)::
   blank lines and further ``#`` comment lines are ignored.
 
 Readers reject what they cannot read with a :class:`RecordingError` naming
-the file, the line and the problem.  Timestamps that go backwards or repeat
+the file, the line and the problem.  Damage is repaired where the rest of
+the walk can be trusted, each repair with a :class:`DamagedFileWarning` and a
+line in :attr:`Recording.repairs`: a gzip stream cut off part-way (what
+came before the damage is kept), a last line without its newline (dropped:
+a recorder killed mid-write), and a few bad event lines (skipped and
+counted; more than :data:`MAX_BAD_LINES` or 1 % of the event lines reject the
+file naming the first).  Header fields are type-checked, and the header's
+``format`` and ``format_version`` (when present) must agree with the magic
+line.  Timestamps that go backwards or repeat
 within a stream (real phones do this) are repaired: events are sorted by
 time and exact repeats dropped, with a :class:`TimestampRepairWarning` and a
 line in :attr:`Recording.repairs` saying how many.
@@ -100,6 +108,51 @@ class MissingSensorError(RecordingError):
 
 class TimestampRepairWarning(UserWarning):
     """Timestamps went backwards or repeated and were repaired."""
+
+
+class DamagedFileWarning(UserWarning):
+    """Part of a damaged file was dropped (a cut gzip, a cut last line, a few bad lines); the rest was read."""
+
+
+#: bad event lines skipped rather than rejecting the file: at most this fraction of the event lines ...
+MAX_BAD_LINE_FRACTION = 0.01
+#: ... and at most this many (more is a :class:`RecordingError` naming the first bad line)
+MAX_BAD_LINES = 100
+
+
+def bad_lines_tolerated(n_bad: int, n_lines: int) -> bool:
+    """True if ``n_bad`` damaged lines out of ``n_lines`` may be skipped (see :data:`MAX_BAD_LINES`)."""
+    return n_bad <= MAX_BAD_LINES and n_bad <= MAX_BAD_LINE_FRACTION * n_lines
+
+
+def gunzip_partial(data: bytes) -> tuple[bytes, str | None]:
+    """Decompress gzip ``data``; a truncated or corrupt stream gives what came before the damage.
+
+    Returns ``(bytes, problem)`` with ``problem`` ``None`` when the stream was whole.
+    """
+    import zlib
+    out = []
+    pos = 0
+    problem = None
+    while pos < len(data):
+        d = zlib.decompressobj(16 + zlib.MAX_WBITS)
+        try:
+            out.append(d.decompress(data[pos:]))
+            out.append(d.flush())
+        except zlib.error as e:
+            problem = f"corrupt gzip data ({e})"
+            break
+        if not d.eof:
+            problem = "the gzip stream is truncated"
+            break
+        rest = d.unused_data
+        if not rest.strip(b"\x00"):
+            break
+        if rest[:2] != b"\x1f\x8b":
+            problem = "trailing garbage after the gzip stream"
+            break
+        pos = len(data) - len(rest)  # another gzip member follows
+    return b"".join(out), problem
 
 
 @dataclass
@@ -387,27 +440,101 @@ def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool =
     """Read a ``pdr-recording`` file.
 
     Raises :class:`RecordingError` (naming file and line) for an empty file, a
-    wrong magic line or header, rows with missing or extra values, non-numeric
-    values and streams the header does not declare.  A last line without its
-    newline that does not parse (a recorder killed mid-write) is dropped and
-    noted in :attr:`Recording.repairs` when ``allow_truncated_tail`` is true.
+    wrong magic line or header, and for damage beyond what is repaired.
+    Repaired, with a :class:`DamagedFileWarning` and a line in
+    :attr:`Recording.repairs` (when ``allow_truncated_tail`` is true): a gzip
+    stream cut off or corrupt part-way (what came before the damage is
+    kept), a last line without its newline (a recorder killed mid-write: it
+    is dropped even when it parses, since ``2.586e-0`` may be a cut
+    ``2.586e-05``), and a few bad event lines (see :func:`parse_recording`).
     """
     path = str(path)
     try:
-        f = _open_text(path, "r")
+        with open(path, "rb") as f:
+            data = f.read()
     except OSError as e:
         raise RecordingError(f"cannot open: {e.strerror or e}", path) from None
+    repairs = []
+    if path.endswith(".gz") or data[:2] == b"\x1f\x8b":
+        raw, problem = gunzip_partial(data)
+        if problem is not None:
+            if not raw or not allow_truncated_tail:
+                raise RecordingError(f"cannot read: {problem}", path)
+            repairs.append(f"{path}: {problem}; kept the {len(raw)} bytes before the damage")
+        data = raw
+    text = decode_utf8(data, path)
+    return parse_recording(text, path, allow_truncated_tail=allow_truncated_tail, warn=warn, _repairs=repairs)
+
+
+def decode_utf8(data: bytes, source: str) -> str:
+    """UTF-8 text; bytes that are not UTF-8 become U+FFFD and make their line a bad line (see parse_recording)."""
+    if data[:3] == b"\xef\xbb\xbf":
+        data = data[3:]
     try:
-        with f:
-            text = f.read()
-    except (OSError, EOFError, UnicodeDecodeError) as e:
-        raise RecordingError(f"cannot read: {e}", path) from None
-    return parse_recording(text, path, allow_truncated_tail=allow_truncated_tail, warn=warn)
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        return data.decode("utf-8", errors="replace")
+
+
+def _line_error(msg: str, source: str, lineno: int) -> RecordingError:
+    return RecordingError(msg, source, lineno)
+
+
+def _check_header(header, version: int, source: str) -> dict:
+    """The header's stream specs, after checking every field's type (a clear error, never a traceback)."""
+    if not isinstance(header, dict) or not isinstance(header.get("streams"), dict) or not header["streams"]:
+        raise RecordingError("header must be a JSON object with a non-empty 'streams' object", source, 2)
+    if "format" in header and header["format"] != FORMAT_NAME:
+        raise RecordingError(f"header 'format' is {header['format']!r}, the magic line says {FORMAT_NAME!r}",
+                             source, 2)
+    if "format_version" in header:
+        fv = header["format_version"]
+        if isinstance(fv, bool) or not isinstance(fv, int) or fv != version:
+            raise RecordingError(f"header 'format_version' is {fv!r}, the magic line says {version}", source, 2)
+    for key in ("device", "metadata"):
+        if header.get(key) is not None and not isinstance(header[key], dict):
+            raise RecordingError(f"header '{key}' must be a JSON object, found {type(header[key]).__name__}",
+                                 source, 2)
+    specs = {}
+    for name, spec in header["streams"].items():
+        if not isinstance(spec, dict):
+            raise RecordingError(f"header stream '{name}' must be a JSON object with 'columns', found "
+                                 f"{type(spec).__name__}", source, 2)
+        cols = spec.get("columns")
+        if not isinstance(cols, list) or not cols or not all(isinstance(c, str) for c in cols):
+            raise RecordingError(f"header stream '{name}' needs a non-empty list of 'columns'", source, 2)
+        if "," in name or not name.strip() or name != name.strip():
+            raise RecordingError(f"header stream name {name!r} cannot be used in rows", source, 2)
+        for key in ("unit", "note"):
+            if spec.get(key) is not None and not isinstance(spec[key], str):
+                raise RecordingError(f"header stream '{name}': '{key}' must be a string, found "
+                                     f"{type(spec[key]).__name__}", source, 2)
+        kind = name.partition("@")[0]
+        if kind in STREAM_SPECS:
+            want = len(STREAM_SPECS[kind]["columns"])
+            allowed = {want, len(GPS_COLUMNS_V1)} if kind == GPS else {want}
+            if len(cols) not in allowed:
+                raise RecordingError(f"header stream '{name}' declares {len(cols)} columns; a '{kind}' stream has "
+                                     f"{' or '.join(str(a) for a in sorted(allowed))} "
+                                     f"({', '.join(STREAM_SPECS[kind]['columns'])})", source, 2)
+        specs[name] = spec
+    return specs
 
 
 def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: bool = True,
-                    warn: bool = True) -> Recording:
-    """Parse the text of a ``pdr-recording`` file (see :func:`read_recording`)."""
+                    warn: bool = True, _repairs: list[str] | None = None) -> Recording:
+    """Parse the text of a ``pdr-recording`` file (see :func:`read_recording`).
+
+    A bad event line (unknown stream, wrong number of values, a value that is
+    not a number, a timestamp that is not an int64 nanosecond count, bytes
+    that are not UTF-8) is skipped and counted in :attr:`Recording.repairs`
+    with a :class:`DamagedFileWarning` as long as the bad lines are at most
+    :data:`MAX_BAD_LINES` (100) and at most :data:`MAX_BAD_LINE_FRACTION`
+    (1 %) of the event lines; beyond that the file is rejected with a
+    :class:`RecordingError` naming the first bad line.  With
+    ``allow_truncated_tail=False`` every bad line is an error.
+    """
+    repairs: list[str] = list(_repairs or [])
     if not text.strip():
         raise RecordingError("empty file: expected the line '# pdr-recording 1' and a JSON header", source, 1)
     lines = text.split("\n")
@@ -418,72 +545,65 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
     try:
         version = int(first[len(MAGIC):].strip())
     except ValueError:
-        raise RecordingError(f"bad format version in {first!r}", source, 1) from None
+        raise RecordingError(f"bad format version in {first[:60]!r}", source, 1) from None
     if version != FORMAT_VERSION:
         raise RecordingError(f"format version {version} is not supported (this reader reads version "
                              f"{FORMAT_VERSION})", source, 1)
     if len(lines) < 2 or not lines[1].startswith("#"):
         raise RecordingError("missing JSON header line after the magic line", source, 2)
+    if "\ufffd" in lines[1]:
+        raise RecordingError("header line holds bytes that are not UTF-8", source, 2)
     try:
         header = json.loads(lines[1][1:])
     except json.JSONDecodeError as e:
         raise RecordingError(f"header is not valid JSON: {e.msg} at column {e.colno + 1}", source, 2) from None
-    if not isinstance(header, dict) or not isinstance(header.get("streams"), dict) or not header["streams"]:
-        raise RecordingError("header must be a JSON object with a non-empty 'streams' object", source, 2)
-    specs = {}
-    for name, spec in header["streams"].items():
-        cols = spec.get("columns") if isinstance(spec, dict) else None
-        if not isinstance(cols, list) or not cols or not all(isinstance(c, str) for c in cols):
-            raise RecordingError(f"header stream '{name}' needs a non-empty list of 'columns'", source, 2)
-        specs[name] = spec
+    except RecursionError:
+        raise RecordingError("header is not valid JSON: nested too deeply", source, 2) from None
+    specs = _check_header(header, version, source)
     ncols = {n: len(s["columns"]) for n, s in specs.items()}
-    data: dict[str, tuple[list[int], list[list[float]]]] = {n: ([], []) for n in specs}
-    repairs: list[str] = []
+    data: dict[str, tuple[list[int], list[list[float]], list[int]]] = {n: ([], [], []) for n in specs}
     last = len(lines) - 1
     # a file written completely ends with "\n", so its last split element is ""
+    if allow_truncated_tail and last >= 2 and lines[last].strip() and not lines[last].lstrip().startswith("#"):
+        repairs.append(f"{source}: dropped an incomplete last line {last + 1}: no newline (the recording was cut "
+                       "off mid-write; its last number may be cut short)")
+        lines = lines[:last]
+    bad: list[RecordingError] = []
+    n_events = 0
     for i in range(2, len(lines)):
-        raw = lines[i]
-        line = raw.strip()
+        line = lines[i].strip()
         if not line or line.startswith("#"):
-            continue
+            continue  # a bad byte in a comment does not matter
+        n_events += 1
         lineno = i + 1
         try:
-            parts = line.split(",")
-            name = parts[0]
-            if name not in specs:
-                raise RecordingError(f"stream '{name}' is not declared in the header "
-                                     f"(declared: {', '.join(specs)})", source, lineno)
-            n = ncols[name]
-            if len(parts) != n + 2:
-                what = "missing" if len(parts) < n + 2 else "extra"
-                raise RecordingError(f"{what} columns: stream '{name}' rows have t_ns and {n} values "
-                                     f"({', '.join(specs[name]['columns'])}), found {len(parts) - 2}",
-                                     source, lineno)
-            try:
-                t = int(parts[1])
-            except ValueError:
-                raise RecordingError(f"timestamp {parts[1]!r} is not an integer nanosecond count",
-                                     source, lineno) from None
-            vals = []
-            for col, p in zip(specs[name]["columns"], parts[2:]):
-                try:
-                    vals.append(float(p))
-                except ValueError:
-                    raise RecordingError(f"value {p!r} of column '{col}' is not a number",
-                                         source, lineno) from None
-        except RecordingError:
-            if allow_truncated_tail and i == last and raw != "":
-                repairs.append(f"{source}: dropped an incomplete last line {lineno} (recording was cut off)")
+            name, t, vals = _parse_row(line, specs, ncols, source, lineno)
+        except RecordingError as e:
+            if not allow_truncated_tail:
+                raise
+            bad.append(e)
+            if len(bad) > MAX_BAD_LINES:
                 break
-            raise
-        data[name][0].append(t)
-        data[name][1].append(vals)
+            continue
+        d = data[name]
+        d[0].append(t)
+        d[1].append(vals)
+        d[2].append(lineno)
+    if bad:
+        if not bad_lines_tolerated(len(bad), n_events):
+            e = bad[0]
+            more = (f" ({len(bad) if len(bad) <= MAX_BAD_LINES else 'over %d' % MAX_BAD_LINES} bad lines of "
+                    f"{n_events}: too many to skip; at most {MAX_BAD_LINES} and 1 % are skipped)"
+                    if len(bad) > 1 else "")
+            raise RecordingError(e.message + more, source, e.line)
+        repairs.append(f"{source}: skipped {len(bad)} bad line(s) of {n_events} (first: line {bad[0].line}: "
+                       f"{bad[0].message})")
     streams = {}
     for name, spec in specs.items():
-        ts, vs = data[name]
+        ts, vs, _ = data[name]
         cols = tuple(spec["columns"])
         vals = np.array(vs, dtype=np.float64).reshape(len(ts), ncols[name])
-        unit, note = str(spec.get("unit", "")), str(spec.get("note", ""))
+        unit, note = str(spec.get("unit") or ""), str(spec.get("note") or "")
         if name == GPS and cols == GPS_COLUMNS_V1:  # a file from before speed/course: same meaning, two nan columns
             vals, cols = _pad_gps(vals, cols)
             unit, note = STREAM_SPECS[GPS]["unit"], STREAM_SPECS[GPS]["note"]
@@ -492,4 +612,39 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
         raise RecordingError("the file has a header but no sensor events", source)
     rec = Recording(streams, device=dict(header.get("device") or {}), metadata=dict(header.get("metadata") or {}),
                     repairs=repairs, source=source)
+    if warn:
+        for r in repairs:
+            warnings.warn(r, DamagedFileWarning, stacklevel=2)
     return repair_recording(rec, warn=warn)
+
+
+_INT64_MAX = 2**63 - 1
+
+
+def _parse_row(line: str, specs, ncols, source: str, lineno: int):
+    if "\ufffd" in line:
+        raise RecordingError("bytes that are not UTF-8 in an event line", source, lineno)
+    parts = line.split(",")
+    name = parts[0]
+    if name not in specs:
+        raise RecordingError(f"stream '{name[:40]}' is not declared in the header "
+                             f"(declared: {', '.join(specs)})", source, lineno)
+    n = ncols[name]
+    if len(parts) != n + 2:
+        what = "missing" if len(parts) < n + 2 else "extra"
+        raise RecordingError(f"{what} columns: stream '{name}' rows have t_ns and {n} values "
+                             f"({', '.join(specs[name]['columns'])}), found {len(parts) - 2}", source, lineno)
+    try:
+        t = int(parts[1])
+    except ValueError:
+        raise RecordingError(f"timestamp {parts[1][:40]!r} is not an integer nanosecond count",
+                             source, lineno) from None
+    if not -_INT64_MAX - 1 <= t <= _INT64_MAX:
+        raise RecordingError(f"timestamp {parts[1][:40]} does not fit a 64-bit nanosecond count", source, lineno)
+    vals = []
+    for col, p in zip(specs[name]["columns"], parts[2:]):
+        try:
+            vals.append(float(p))
+        except ValueError:
+            raise RecordingError(f"value {p[:40]!r} of column '{col}' is not a number", source, lineno) from None
+    return name, t, vals

@@ -16,7 +16,7 @@ import numpy as np
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
 from core.geodesy import geodetic_to_enu
-from core.recording import Recording, RecordingError, repair_recording
+from core.recording import Recording, RecordingError, gunzip_partial, repair_recording
 
 GZIP_MAGIC = b"\x1f\x8b"
 ZIP_MAGIC = b"PK\x03\x04"
@@ -39,22 +39,29 @@ EXTRA_STREAM_SPECS: dict[str, dict] = {
 # reading files: plain, gzip, inside a folder or a zip archive
 
 
-def read_bytes(path: str) -> bytes:
-    """The bytes of ``path`` (gzip-decompressed when it starts with the gzip magic)."""
+def read_bytes(path: str, repairs: list[str] | None = None) -> bytes:
+    """The bytes of ``path`` (gzip-decompressed when it starts with the gzip magic).
+
+    With a ``repairs`` list, a gzip stream cut off or corrupt part-way gives
+    the bytes before the damage and a line in ``repairs``; without one it is
+    a :class:`RecordingError`.
+    """
     try:
         with open(path, "rb") as f:
             data = f.read()
     except OSError as e:
         raise RecordingError(f"cannot open: {e.strerror or e}", path) from None
-    return maybe_gunzip(data, path)
+    return maybe_gunzip(data, path, repairs)
 
 
-def maybe_gunzip(data: bytes, source: str) -> bytes:
+def maybe_gunzip(data: bytes, source: str, repairs: list[str] | None = None) -> bytes:
     if data[:2] == GZIP_MAGIC:
-        try:
-            return gzip.decompress(data)
-        except (OSError, EOFError) as e:
-            raise RecordingError(f"corrupt gzip data: {e}", source) from None
+        raw, problem = gunzip_partial(data)
+        if problem is not None:
+            if repairs is None or not raw:
+                raise RecordingError(f"corrupt gzip data: {problem}", source)
+            repairs.append(f"{source}: {problem}; kept the {len(raw)} bytes before the damage")
+        return raw
     return data
 
 

@@ -99,13 +99,14 @@ ground-truth landmarks), each only when the file has such lines.
 from __future__ import annotations
 
 import re
+import warnings
 from datetime import datetime
 
 import numpy as np
 
 from core import quaternion as quat
 from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
-from core.recording import Recording, RecordingError, make_stream
+from core.recording import MAX_BAD_LINES, DamagedFileWarning, Recording, RecordingError, bad_lines_tolerated, make_stream
 from core.importers._common import (
     EXTRA_STREAM_SPECS, POSI, PRESSURE, attitude_checks, decode_text, finish, first_bad_number,
     first_bad_time, gps_check, gps_values, magnetic_dip_deg, read_bytes,
@@ -145,8 +146,9 @@ def looks_like(head: str) -> bool:
 def read_getsensordata(path: str, *, warn: bool = True) -> Recording:
     """Read a GetSensorData logfile (plain or gzip) into a :class:`Recording` (see the module doc)."""
     path = str(path)
-    text = decode_text(read_bytes(path), path)
-    return parse_getsensordata(text, path, warn=warn)
+    repairs: list[str] = []
+    text = decode_text(read_bytes(path, repairs), path)
+    return parse_getsensordata(text, path, warn=warn, _repairs=repairs)
 
 
 class _Lines:
@@ -214,6 +216,25 @@ def _table(tag: str, rows: list[str], ctx: _Lines) -> np.ndarray:
     return out
 
 
+def _split_bad_rows(tag: str, rows: list[str], ctx: _Lines) -> tuple[list[str], list[RecordingError]]:
+    """The rows of one record type that parse, and an error (with its line) for each one that does not."""
+    names, required = RECORDS[tag]
+    good, bad = [], []
+    for j, r in enumerate(rows):
+        f = r.split(";")[1:1 + len(names)]
+        if len(f) < required:
+            bad.append((j, _missing_msg(tag, len(f))))
+            continue
+        k = first_bad_number(f)
+        if k is not None:
+            bad.append((j, f"{tag} field {k + 2} ({names[k]}) is not a number: {f[k][:40]!r}"))
+            continue
+        good.append(r)
+    if len(bad) > MAX_BAD_LINES:
+        bad = bad[:MAX_BAD_LINES + 1]
+    return good, [ctx.error(tag, j, msg) for j, msg in bad]
+
+
 def _missing_msg(tag: str, have: int) -> str:
     names, required = RECORDS[tag]
     return (f"missing fields: {tag} needs {required} fields after the tag "
@@ -269,14 +290,24 @@ def _sec_to_ns(s: np.ndarray) -> np.ndarray:
     return np.rint(s * 1e9).astype(np.int64)
 
 
-def parse_getsensordata(text: str, source: str = "<text>", *, warn: bool = True) -> Recording:
-    """Parse the text of a GetSensorData logfile (see the module doc)."""
+def parse_getsensordata(text: str, source: str = "<text>", *, warn: bool = True,
+                        _repairs: list[str] | None = None) -> Recording:
+    """Parse the text of a GetSensorData logfile (see the module doc).
+
+    Damage that is repaired, each with a line in ``repairs`` and a
+    :class:`core.recording.DamagedFileWarning`: a gzip stream cut part-way
+    (the part before the damage is read), a last line without its newline
+    (dropped even when it parses), and bad record lines (fields missing or
+    not numbers) when they are at most 100 and at most 1 % of the lines
+    (:func:`core.recording.bad_lines_tolerated`; beyond that a
+    :class:`RecordingError` names the first).
+    """
     # times are validated explicitly; non-finite sensor values pass through as data, without numpy warnings
     with np.errstate(all="ignore"):
-        return _parse(text, source, warn)
+        return _parse(text, source, warn, list(_repairs or []))
 
 
-def _parse(text: str, source: str, warn: bool) -> Recording:
+def _parse(text: str, source: str, warn: bool, repairs: list[str]) -> Recording:
     lines = text.split("\n")
     comments = []
     buckets: dict[str, list[str]] = {}
@@ -302,27 +333,49 @@ def _parse(text: str, source: str, warn: bool) -> Recording:
                 if tag:
                     records.setdefault(tag, []).append(r)
     ctx = _Lines(lines, source)
-    repairs: list[str] = []
     # a last line without its newline that does not parse: the logger was cut off
     if lines and lines[-1] and lines[-1][0] != "%":
         last = lines[-1]
         tag = last.partition(";")[0]
         if tag in RECORDS:
             names, required = RECORDS[tag]
-            f = last.split(";")
-            if len(f) - 1 < required or first_bad_number(f[1:1 + required]) is not None:
+            # dropped even when it parses: "2.586e-0" may be a cut "2.586e-05"
+            if records.get(tag) and records[tag][-1] == last:
                 records[tag].pop()
                 if not records[tag]:
                     del records[tag]
                 repairs.append(f"{source}: dropped an incomplete last line {len(lines)} (logging was cut off)")
     counts = {tag: len(rows) for tag, rows in sorted(records.items())}
-    tables = {tag: _table(tag, rows, ctx) for tag, rows in records.items() if tag in RECORDS}
+    tables = {}
+    bad: list[RecordingError] = []
+    for tag, rows in records.items():
+        if tag in RECORDS:
+            try:
+                tables[tag] = _table(tag, rows, ctx)
+            except RecordingError:
+                good, errs = _split_bad_rows(tag, rows, ctx)
+                bad.extend(errs)
+                if good:
+                    records[tag] = good
+                    tables[tag] = _table(tag, good, _Lines([], source))
+    if bad:
+        bad.sort(key=lambda e: e.line or 0)
+        n_lines = sum(counts.values())
+        if not bad_lines_tolerated(len(bad), n_lines):
+            more = (f" ({len(bad)} bad lines of {n_lines}: too many to skip; at most {MAX_BAD_LINES} and 1 % are "
+                    "skipped)" if len(bad) > 1 else "")
+            raise RecordingError(bad[0].message + more, source, bad[0].line)
+        repairs.append(f"{source}: skipped {len(bad)} bad line(s) of {n_lines} (first: line {bad[0].line}: "
+                       f"{bad[0].message})")
     for tag, v in tables.items():
         names = RECORDS[tag][0]
         for c in ((0,) if tag in ("GNSS", "POSI") else (0, 1)):  # the columns used as times
             j = first_bad_time(v[:, c])
             if j is not None:
                 raise ctx.error(tag, j, f"{tag} {names[c]} is not a usable time: {float(v[j, c])!r}")
+    if warn:
+        for r in repairs:
+            warnings.warn(r, DamagedFileWarning, stacklevel=3)
     if not any(t in tables for t in ("ACCE", "GYRO", "MAGN", "AHRS")):
         raise RecordingError("no ACCE, GYRO, MAGN or AHRS records: not a GetSensorData logfile, or an empty one",
                              source)

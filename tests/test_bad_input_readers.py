@@ -1,0 +1,250 @@
+"""Issue #12, the readers: damaged files, wrong units, wrong time bases, Sensor Logger exports with parts missing.
+
+Each test feeds one class of bad input to the project-format reader or an
+importer and checks the outcome: a :class:`RecordingError` naming the file,
+the line and the problem, or a partial read listed in ``Recording.repairs``.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from core.importers import load_recording
+from core.importers.getsensordata import parse_getsensordata, read_getsensordata
+from core.recording import (DamagedFileWarning, Recording, RecordingError, make_stream, parse_recording,
+                            read_recording, write_recording)
+
+G = 9.80665
+
+
+def _walk(n=400, rate_hz=100.0, seed=0, t0_ns=10**12):
+    """A plausible hand-held recording: acc near g with a step rhythm, small gyro, a field of 45 uT."""
+    rng = np.random.default_rng(seed)
+    t = t0_ns + np.round(np.arange(n) * 1e9 / rate_hz).astype(np.int64)
+    ph = 2 * np.pi * 2.0 * np.arange(n) / rate_hz
+    acc = np.column_stack([0.5 * np.sin(ph), 0.3 * np.cos(ph), G + 1.5 * np.sin(ph)]) + rng.normal(0, 0.05, (n, 3))
+    gyro = np.column_stack([0.4 * np.sin(ph), 0.2 * np.cos(ph), 0.1 * np.sin(ph / 2)]) + rng.normal(0, 0.01, (n, 3))
+    mag = np.tile([20.0, 5.0, -40.0], (n, 1)) + rng.normal(0, 0.3, (n, 3))
+    return Recording({"acc": make_stream("acc", t, acc), "gyro": make_stream("gyro", t + 500, gyro),
+                      "mag": make_stream("mag", t + 900, mag)}, device={"model": "test"})
+
+
+def _text(rec: Recording) -> str:
+    from core.recording import FORMAT_VERSION, MAGIC, format_row
+    return (f"{MAGIC} {FORMAT_VERSION}\n# " + json.dumps(rec.header(), sort_keys=True) + "\n"
+            + "".join(format_row(n, t, v) for n, t, v in rec.events()))
+
+
+def _quiet(fn, *a, **k):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fn(*a, **k)
+
+
+# ---------------------------------------------------------------------------
+# class 4: damaged files
+
+
+def test_truncated_gzip_keeps_what_came_before_the_damage(tmp_path):
+    rec = _walk(3000)
+    path = tmp_path / "walk.csv.gz"
+    write_recording(str(path), rec)
+    data = path.read_bytes()
+    cut = tmp_path / "cut.csv.gz"
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.warns(DamagedFileWarning, match="truncated"):
+        back = read_recording(str(cut))
+    n = sum(len(s) for s in back.streams.values())
+    assert 0.3 * 9000 < n < 9000  # a good part of the walk, not all of it
+    assert any("gzip stream is truncated" in r for r in back.repairs)
+    # what was kept is exactly what was written
+    for name, s in back.streams.items():
+        orig = rec.streams[name]
+        np.testing.assert_array_equal(s.t_ns, orig.t_ns[: len(s)])
+        np.testing.assert_array_equal(s.values, orig.values[: len(s)])
+    # the same through load_recording
+    assert sum(len(s) for s in _quiet(load_recording, str(cut)).streams.values()) == n
+
+
+def test_truncated_gzip_getsensordata_keeps_the_start(tmp_path):
+    lines = ["% GetSensorData test"] + [f"ACCE;{k * 0.01:.3f};{100 + k * 0.01:.4f};0.1;0.2;9.8;3"
+                                         for k in range(3000)]
+    data = gzip.compress(("\n".join(lines) + "\n").encode())
+    p = tmp_path / "log.txt.gz"
+    p.write_bytes(data[: len(data) // 2])
+    with pytest.warns(DamagedFileWarning, match="truncated"):
+        rec = read_getsensordata(str(p))
+    assert 100 < len(rec.streams["acc"]) < 3000
+    np.testing.assert_allclose(rec.streams["acc"].values[:, 2], 9.8)
+
+
+def test_last_line_cut_inside_a_number_is_dropped_not_read_as_another_number():
+    rec = _walk(200)
+    text = _text(rec) + "acc,99999999999999,0.1,0.2,2.586e-0"  # a cut 2.586e-05: parses, but is wrong
+    with pytest.warns(DamagedFileWarning, match="incomplete last line"):
+        back = parse_recording(text, "walk.csv")
+    assert len(back.streams["acc"]) == 200
+    assert 2.586 not in back.streams["acc"].values
+    gsd = "% GetSensorData\n" + "".join(f"ACCE;{k * 0.01:.2f};{k * 0.01:.2f};0.1;0.2;9.8;3\n" for k in range(50))
+    g = _quiet(parse_getsensordata, gsd + "ACCE;0.50;0.50;0.1;0.2;2.586e-0", "log.txt")
+    assert len(g.streams["acc"]) == 50 and not np.any(g.streams["acc"].values == 2.586)
+
+
+@pytest.mark.parametrize("bad", ["acc,1000000500000,0.1,zz,9.8", "acc,1000000500000,0.1,9.8",
+                                 "acc,10000x0500000,0.1,0.2,9.8", "acx,1000000500000,0.1,0.2,9.8",
+                                 "acc,99999999999999999999999,0.1,0.2,9.8"])
+def test_one_bad_line_in_the_middle_is_skipped_and_counted(bad):
+    rec = _walk(300)
+    lines = _text(rec).split("\n")
+    lines.insert(200, bad)
+    with pytest.warns(DamagedFileWarning, match="skipped 1 bad line"):
+        back = parse_recording("\n".join(lines), "walk.csv")
+    assert sum(len(s) for s in back.streams.values()) == 900
+    assert any("skipped 1 bad line(s) of 901 (first: line 201" in r for r in back.repairs)
+
+
+def test_many_bad_lines_reject_the_file_naming_the_first():
+    rec = _walk(300)
+    lines = _text(rec).split("\n")
+    for k in range(10):  # 10 of 910 lines: over 1 %
+        lines.insert(100 + 50 * k, "acc,1000,0.1,zz,9.8")
+    with pytest.raises(RecordingError, match=r"'zz' of column 'y' is not a number \(10 bad lines of 910: too many") as e:
+        parse_recording("\n".join(lines), "walk.csv")
+    assert e.value.line == 101
+
+
+def test_getsensordata_one_bad_line_is_skipped_many_reject():
+    rows = [f"ACCE;{k * 0.01:.2f};{k * 0.01:.2f};0.1;0.2;9.8;3" for k in range(300)]
+    bad = list(rows)
+    bad[150] = "ACCE;1.50;1.5#;0.1;0.2;9.8;3"
+    rec = _quiet(parse_getsensordata, "% GetSensorData\n" + "\n".join(bad) + "\n", "log.txt")
+    assert len(rec.streams["acc"]) == 299
+    assert any("skipped 1 bad line(s) of 300 (first: line 152" in r for r in rec.repairs)
+    for k in range(0, 300, 30):
+        bad[k] = "ACCE;1.50;0.1"
+    with pytest.raises(RecordingError, match="missing fields.*bad lines of 300") as e:
+        parse_getsensordata("% GetSensorData\n" + "\n".join(bad) + "\n", "log.txt")
+    assert e.value.line == 2
+
+
+def test_non_utf8_bytes_get_a_line_number_and_a_comment_does_not_matter(tmp_path):
+    rec = _walk(300)
+    lines = _text(rec).encode().split(b"\n")
+    lines.insert(5, b"# comment with a Latin-1 byte: \xb5T")
+    p = tmp_path / "walk.csv"
+    p.write_bytes(b"\n".join(lines))
+    back = read_recording(str(p))
+    assert sum(len(s) for s in back.streams.values()) == 900 and not back.repairs
+    lines[100] = b"acc,1000000000000,0.1,\xff\xfe,9.8"
+    p.write_bytes(b"\n".join(lines))
+    with pytest.warns(DamagedFileWarning, match="line 101: bytes that are not UTF-8"):
+        back = read_recording(str(p))
+    assert sum(len(s) for s in back.streams.values()) == 899
+    lines[1] = lines[1].replace(b'"model"', b'"mod\xffel"')
+    p.write_bytes(b"\n".join(lines))
+    with pytest.raises(RecordingError, match="walk.csv:2: header line holds bytes that are not UTF-8"):
+        read_recording(str(p))
+
+
+def _with_header(change):
+    rec = _walk(50)
+    h = rec.header()
+    change(h)
+    return "# pdr-recording 1\n# " + json.dumps(h) + "\n" + _text(rec).split("\n", 2)[2]
+
+
+@pytest.mark.parametrize("change,match", [
+    (lambda h: h.update(streams=[["acc"]]), "non-empty 'streams' object"),
+    (lambda h: h["streams"].update(acc=["x", "y", "z"]), "stream 'acc' must be a JSON object"),
+    (lambda h: h.update(device=["phone"]), "'device' must be a JSON object, found list"),
+    (lambda h: h.update(metadata="walker"), "'metadata' must be a JSON object, found str"),
+    (lambda h: h["streams"]["acc"].update(unit=9.81), "'unit' must be a string, found float"),
+    (lambda h: h["streams"]["acc"].update(columns=["x", "y"]), "stream 'acc' declares 2 columns; a 'acc' stream has 3"),
+    (lambda h: h["streams"]["acc"].update(columns=[1, 2, 3]), "needs a non-empty list of 'columns'"),
+    (lambda h: h.update(format_version="1"), "'format_version' is '1', the magic line says 1"),
+    (lambda h: h.update(format_version=2), "'format_version' is 2, the magic line says 1"),
+    (lambda h: h.update(format="other-format"), "'format' is 'other-format'"),
+])
+def test_header_fields_of_the_wrong_type_are_a_clear_error(change, match):
+    with pytest.raises(RecordingError, match=match) as e:
+        parse_recording(_with_header(change), "walk.csv")
+    assert e.value.line == 2 and str(e.value).startswith("walk.csv:2:")
+
+
+# ---------------------------------------------------------------------------
+# property tests of the project-format reader
+
+_finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@st.composite
+def _recordings(draw):
+    streams = {}
+    for name, k in (("acc", 3), ("gyro", 3), ("gps", 6), ("pressure", 1)):
+        if name != "acc" and not draw(st.booleans()):
+            continue
+        ts = sorted(draw(st.lists(st.integers(-2**63, 2**63 - 1), min_size=1 if name == "acc" else 0, max_size=12,
+                                  unique=True)))
+        vals = [[draw(_finite) for _ in range(k)] for _ in ts]
+        cols = ["v%d" % j for j in range(k)] if name == "pressure" else None
+        streams[name] = make_stream(name, ts, np.array(vals, dtype=np.float64).reshape(len(ts), k), columns=cols,
+                                    unit="hPa" if name == "pressure" else None)
+    meta = draw(st.dictionaries(st.text(max_size=5), st.one_of(st.integers(-10**6, 10**6), st.text(max_size=8)),
+                                max_size=3))
+    return Recording(streams, device={"model": draw(st.text(max_size=10))}, metadata=meta)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(rec=_recordings())
+def test_valid_recordings_round_trip_exactly(rec):
+    back = parse_recording(_text(rec), "r.csv", warn=False)
+    assert back.device == rec.device and back.metadata == rec.metadata and not back.repairs
+    for name, s in rec.streams.items():
+        b = back.streams[name]
+        assert b.columns == s.columns and b.unit == s.unit
+        np.testing.assert_array_equal(b.t_ns, s.t_ns)
+        np.testing.assert_array_equal(b.values, s.values)
+
+
+@st.composite
+def _corrupted(draw):
+    data = bytearray(_text(draw(_recordings())).encode())
+    for _ in range(draw(st.integers(1, 4))):
+        what = draw(st.sampled_from(["flip", "cut", "insert", "delete"]))
+        if not data:
+            break
+        i = draw(st.integers(0, len(data) - 1))
+        if what == "flip":
+            data[i] = draw(st.integers(0, 255))
+        elif what == "cut":
+            del data[i:]
+        elif what == "delete":
+            del data[i:i + draw(st.integers(1, 20))]
+        else:
+            data[i:i] = draw(st.sampled_from([b"\n", b",", b"acc,1,2,3\n", b"gyro,5,x,1,2\n", b"# c\n", b"\xff",
+                                              b"1e999", b"nan", b"-", b"\"", b"{", b"]"]))
+    return bytes(data)
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=_corrupted(), gz=st.booleans())
+def test_corrupted_recordings_read_with_repairs_or_raise_a_recording_error(tmp_path_factory, data, gz):
+    p = tmp_path_factory.mktemp("c") / ("r.csv.gz" if gz else "r.csv")
+    if gz:  # a corrupted text, compressed, then the compressed bytes cut short
+        raw = gzip.compress(data)
+        p.write_bytes(raw[: max(10, len(raw) * 3 // 4)])
+    else:
+        p.write_bytes(data)
+    try:
+        rec = read_recording(str(p), warn=False)
+    except RecordingError as e:
+        assert "\n" not in str(e) and str(p) in str(e)
+        return
+    assert sum(len(s) for s in rec.streams.values()) > 0
