@@ -57,7 +57,7 @@ from typing import IO, Iterable, Iterator
 import numpy as np
 
 from core import __version__
-from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
+from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC, STANDARD_GRAVITY_M_S2
 
 MAGIC = "# pdr-recording"
 FORMAT_NAME = "pdr-recording"
@@ -84,6 +84,23 @@ STREAM_SPECS: dict[str, dict] = {
         "note": "the phone's own attitude estimate as an ENU<-device quaternion (w, x, y, z)",
     },
 }
+
+#: Units a file may declare per stream kind, with the factor to the unit used inside :mod:`core`
+#: (the first one of each kind).  An empty or missing unit means the first one.
+UNITS: dict[str, dict[str, float]] = {
+    ACC: {"m/s^2": 1.0, "m/s2": 1.0, "g": STANDARD_GRAVITY_M_S2},
+    GYRO: {"rad/s": 1.0, "deg/s": math.pi / 180.0},
+    MAG: {"uT": 1.0, "\u00b5T": 1.0, "\u03bcT": 1.0, "mT": 1000.0, "nT": 1e-3, "G": 100.0},
+    GPS: {STREAM_SPECS[GPS]["unit"]: 1.0, "deg,deg,m,m": 1.0},
+    ROTVEC: {"1": 1.0},
+}
+
+#: fewest events of a stream for the checks of its values against its unit
+MIN_EVENTS_FOR_UNIT_CHECK = 50
+#: a gyroscope in rad/s whose 99th percentile of |w| exceeds this is taken to be in deg/s
+#: (2000 deg/s, the largest range of phone gyroscopes, is 34.9 rad/s; a walking phone turns at 0.5-5 rad/s)
+GYRO_P99_MAX_RAD_S = 35.0
+
 
 #: Order in which simultaneous events of different streams are processed.
 STREAM_ORDER = (GYRO, ACC, MAG, ROTVEC, GPS)
@@ -322,6 +339,114 @@ def make_stream(name: str, t_ns, values, columns=None, unit=None, note=None) -> 
 
 
 # ---------------------------------------------------------------------------
+# units
+
+
+def acc_unit_guess(median_norm: float, low_norm: float) -> str | None:
+    """The unit an accelerometer (gravity included) looks like from its median and 10th-percentile ``|a|``.
+
+    About 1 (0.6-1.4) is ``"g"``; 0.6-1.4 g is ``"m/s^2"``, and so is a median
+    up to 2.5 g when 90 % of the samples exceed 0.6 g (a phone swinging in a
+    hand adds the arm's centripetal acceleration to gravity; linear
+    acceleration without gravity keeps passing near zero); anything else is
+    ``None`` (unknown).  One rule for the project format and the importers.
+    """
+    g = STANDARD_GRAVITY_M_S2
+    if 0.6 < median_norm < 1.4:
+        return "g"
+    if 0.6 * g < median_norm < 1.4 * g:
+        return "m/s^2"
+    if 1.4 * g <= median_norm < 2.5 * g and low_norm > 0.6 * g:
+        return "m/s^2"
+    return None
+
+
+def _stillish_median_norm(v: np.ndarray, window: int = 25) -> float:
+    """Median ``|v|`` over the calmest quarter of windows of ``window`` samples (the phone still-ish)."""
+    norm = np.linalg.norm(v, axis=1)
+    norm = norm[np.isfinite(norm)]
+    n = len(norm) // window
+    if n < 2:
+        return float(np.median(norm)) if len(norm) else math.nan
+    w = norm[:n * window].reshape(n, window)
+    sd = w.std(axis=1)
+    calm = sd <= np.percentile(sd, 25)
+    return float(np.median(w[calm]))
+
+
+def convert_units(name: str, unit: str, values: np.ndarray, source: str, repairs: list[str]) -> tuple[np.ndarray, str]:
+    """Values of stream ``name`` declared in ``unit`` -> the unit of :mod:`core`; unknown units are an error."""
+    kind = name.partition("@")[0]
+    table = UNITS.get(kind)
+    if table is None:
+        return values, unit
+    canonical = next(iter(table))
+    if not unit:
+        return values, canonical
+    if unit not in table:
+        raise RecordingError(f"stream '{name}' declares unit {unit!r}; a '{kind}' stream takes "
+                             f"{', '.join(repr(u) for u in table)}", source, 2)
+    factor = table[unit]
+    if factor != 1.0:
+        repairs.append(f"{source}: stream '{name}' converted from {unit} to {canonical} (x {factor:.6g})")
+        values = values * factor
+    return values, canonical
+
+
+def check_values_against_units(stream: Stream, source: str) -> None:
+    """A :class:`RecordingError` when a stream's values do not fit its unit (says which unit they look like).
+
+    Only for streams of at least :data:`MIN_EVENTS_FOR_UNIT_CHECK` events, and
+    only when the values clearly fit another unit: ``acc`` whose median |a|
+    while still-ish is about 1 (g) or above 300 (cm/s^2 or mg), ``gyro``
+    whose 99th percentile |w| is above :data:`GYRO_P99_MAX_RAD_S` (deg/s),
+    ``mag`` whose median |B| is above 2000 (nT) or below 1.5 but not 0
+    (gauss or mT).  A dead sensor (all zeros) is not a unit problem.
+    """
+    kind = stream.name.partition("@")[0]
+    if len(stream) < MIN_EVENTS_FOR_UNIT_CHECK or kind not in (ACC, GYRO, MAG):
+        return
+    v = stream.values
+    with np.errstate(all="ignore"):
+        if kind == ACC:
+            m = _stillish_median_norm(v)
+            if not math.isfinite(m):
+                return
+            norm = np.linalg.norm(v, axis=1)
+            low = float(np.nanpercentile(norm, 10))
+            if acc_unit_guess(m, low) == "g":
+                raise RecordingError(f"stream '{stream.name}' is declared in m/s^2 but its magnitude while "
+                                     f"still-ish is {m:.3g}, about 1: it looks like g; declare \"unit\": \"g\" "
+                                     f"(or multiply the values by 9.80665)", source)
+            if m > 300.0:
+                raise RecordingError(f"stream '{stream.name}' is declared in m/s^2 but its magnitude while "
+                                     f"still-ish is {m:.4g}, not about 9.8: it looks like cm/s^2 or mg "
+                                     "(divide by 100 or by 101.97)", source)
+        elif kind == GYRO:
+            norm = np.linalg.norm(v, axis=1)
+            norm = norm[np.isfinite(norm)]
+            if len(norm) and (p99 := float(np.percentile(norm, 99))) > GYRO_P99_MAX_RAD_S:
+                raise RecordingError(f"stream '{stream.name}' is declared in rad/s but 1 % of its samples turn "
+                                     f"faster than {p99:.4g} rad/s (over {GYRO_P99_MAX_RAD_S:g}, the range of phone "
+                                     "gyroscopes; a walking phone shows 50-300 deg/s): it looks like deg/s; "
+                                     "declare \"unit\": \"deg/s\"", source)
+        else:
+            norm = np.linalg.norm(v, axis=1)
+            norm = norm[np.isfinite(norm)]
+            med = float(np.median(norm)) if len(norm) else 0.0
+            if med > 2000.0:
+                raise RecordingError(f"stream '{stream.name}' is declared in uT but its median |B| is {med:.4g} "
+                                     "(the Earth's field is 25-65 uT): it looks like nT; declare \"unit\": \"nT\"",
+                                     source)
+            if 0.0 < med < 1.5:
+                like = "gauss" if med > 0.1 else "mT"
+                unit = "G" if med > 0.1 else "mT"
+                raise RecordingError(f"stream '{stream.name}' is declared in uT but its median |B| is {med:.4g} "
+                                     f"(the Earth's field is 25-65 uT): it looks like {like}; declare "
+                                     f"\"unit\": \"{unit}\"", source)
+
+
+# ---------------------------------------------------------------------------
 # timestamp repair
 
 
@@ -335,14 +460,14 @@ def repair_timestamps(stream: Stream) -> tuple[Stream, int, int]:
     t = stream.t_ns
     if len(t) < 2:
         return stream, 0, 0
-    d = np.diff(t)
-    n_back = int(np.sum(d < 0))
-    if n_back == 0 and not np.any(d == 0):
+    # comparisons, not np.diff: a difference of two int64 timestamps can overflow
+    n_back = int(np.sum(t[1:] < t[:-1]))
+    if n_back == 0 and not np.any(t[1:] == t[:-1]):
         return stream, 0, 0
     order = np.argsort(t, kind="stable")
     ts = t[order]
     keep = np.ones(len(ts), dtype=bool)
-    keep[1:] = np.diff(ts) != 0
+    keep[1:] = ts[1:] != ts[:-1]
     n_dup = int(np.sum(~keep))
     idx = order[keep]
     return Stream(stream.name, t[idx], stream.values[idx], stream.columns, stream.unit, stream.note), n_back, n_dup
@@ -436,7 +561,8 @@ class RecordingWriter:
 # reading
 
 
-def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool = True) -> Recording:
+def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool = True,
+                   check_units: bool = True) -> Recording:
     """Read a ``pdr-recording`` file.
 
     Raises :class:`RecordingError` (naming file and line) for an empty file, a
@@ -463,7 +589,8 @@ def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool =
             repairs.append(f"{path}: {problem}; kept the {len(raw)} bytes before the damage")
         data = raw
     text = decode_utf8(data, path)
-    return parse_recording(text, path, allow_truncated_tail=allow_truncated_tail, warn=warn, _repairs=repairs)
+    return parse_recording(text, path, allow_truncated_tail=allow_truncated_tail, warn=warn,
+                           check_units=check_units, _repairs=repairs)
 
 
 def decode_utf8(data: bytes, source: str) -> str:
@@ -522,7 +649,7 @@ def _check_header(header, version: int, source: str) -> dict:
 
 
 def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: bool = True,
-                    warn: bool = True, _repairs: list[str] | None = None) -> Recording:
+                    warn: bool = True, check_units: bool = True, _repairs: list[str] | None = None) -> Recording:
     """Parse the text of a ``pdr-recording`` file (see :func:`read_recording`).
 
     A bad event line (unknown stream, wrong number of values, a value that is
@@ -533,6 +660,13 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
     (1 %) of the event lines; beyond that the file is rejected with a
     :class:`RecordingError` naming the first bad line.  With
     ``allow_truncated_tail=False`` every bad line is an error.
+
+    Units: each stream of a known kind must declare one of :data:`UNITS`
+    (or none: the unit of :mod:`core`); ``g``, ``deg/s``, ``mT``, ``nT`` and
+    ``G`` are converted (noted in ``repairs``), anything else is a
+    :class:`RecordingError` naming the stream, its unit and the accepted
+    ones.  With ``check_units`` the values are then checked against the
+    unit (:func:`check_values_against_units`).
     """
     repairs: list[str] = list(_repairs or [])
     if not text.strip():
@@ -598,22 +732,27 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
             raise RecordingError(e.message + more, source, e.line)
         repairs.append(f"{source}: skipped {len(bad)} bad line(s) of {n_events} (first: line {bad[0].line}: "
                        f"{bad[0].message})")
+    n_damage = len(repairs)
     streams = {}
     for name, spec in specs.items():
         ts, vs, _ = data[name]
         cols = tuple(spec["columns"])
         vals = np.array(vs, dtype=np.float64).reshape(len(ts), ncols[name])
         unit, note = str(spec.get("unit") or ""), str(spec.get("note") or "")
+        vals, unit = convert_units(name, unit, vals, source, repairs)
         if name == GPS and cols == GPS_COLUMNS_V1:  # a file from before speed/course: same meaning, two nan columns
             vals, cols = _pad_gps(vals, cols)
             unit, note = STREAM_SPECS[GPS]["unit"], STREAM_SPECS[GPS]["note"]
         streams[name] = Stream(name, np.array(ts, dtype=np.int64), vals, cols, unit, note)
     if not any(len(s) for s in streams.values()):
         raise RecordingError("the file has a header but no sensor events", source)
+    if check_units:
+        for s in streams.values():
+            check_values_against_units(s, source)
     rec = Recording(streams, device=dict(header.get("device") or {}), metadata=dict(header.get("metadata") or {}),
                     repairs=repairs, source=source)
     if warn:
-        for r in repairs:
+        for r in repairs[:n_damage]:
             warnings.warn(r, DamagedFileWarning, stacklevel=2)
     return repair_recording(rec, warn=warn)
 

@@ -248,3 +248,64 @@ def test_corrupted_recordings_read_with_repairs_or_raise_a_recording_error(tmp_p
         assert "\n" not in str(e) and str(p) in str(e)
         return
     assert sum(len(s) for s in rec.streams.values()) > 0
+
+
+# ---------------------------------------------------------------------------
+# class 2: units
+
+
+def _with_units(rec: Recording, **units) -> str:
+    for name, u in units.items():
+        rec.streams[name].unit = u
+    return _text(rec)
+
+
+@pytest.mark.parametrize("name,unit,factor", [("acc", "g", G), ("gyro", "deg/s", math.pi / 180), ("mag", "mT", 1000.0),
+                                              ("mag", "nT", 1e-3), ("mag", "G", 100.0), ("mag", "\u00b5T", 1.0)])
+def test_known_units_are_converted_and_noted(name, unit, factor):
+    rec = _walk(200)
+    si = rec.streams[name].values.copy()
+    rec.streams[name].values = si / factor
+    back = parse_recording(_with_units(rec, **{name: unit}), "walk.csv")
+    s = back.streams[name]
+    np.testing.assert_allclose(s.values, si, rtol=1e-12)
+    assert s.unit == {"acc": "m/s^2", "gyro": "rad/s", "mag": "uT"}[name]
+    assert factor == 1.0 or any(f"'{name}' converted from {unit}" in r for r in back.repairs)
+
+
+def test_unknown_unit_is_refused_naming_stream_unit_and_the_accepted_ones():
+    with pytest.raises(RecordingError, match=r"walk.csv:2: stream 'acc' declares unit 'furlong/fortnight\^2'; "
+                                             r"a 'acc' stream takes 'm/s\^2', 'm/s2', 'g'"):
+        parse_recording(_with_units(_walk(60), acc="furlong/fortnight^2"), "walk.csv")
+    with pytest.raises(RecordingError, match="stream 'gyro@left_foot' declares unit 'rpm'"):
+        rec = _walk(60)
+        rec.streams["gyro@left_foot"] = make_stream("gyro@left_foot", rec.streams["gyro"].t_ns,
+                                                    rec.streams["gyro"].values, unit="rpm")
+        parse_recording(_text(rec), "walk.csv")
+
+
+@pytest.mark.parametrize("name,scale,match", [
+    ("acc", 1 / G, "stream 'acc' is declared in m/s\\^2 but its magnitude while still-ish is 0.9[0-9]*, about 1: it looks like g"),
+    ("acc", 100.0, "looks like cm/s\\^2 or mg"),
+    ("gyro", 180 / math.pi * 20, "stream 'gyro' is declared in rad/s.*it looks like deg/s"),
+    ("mag", 1000.0, "stream 'mag' is declared in uT.*looks like nT"),
+    ("mag", 0.01, "looks like gauss"),
+    ("mag", 0.001, "looks like mT"),
+])
+def test_values_that_do_not_fit_their_declared_unit_are_refused(name, scale, match):
+    rec = _walk(300)
+    rec.streams[name].values = rec.streams[name].values * scale
+    with pytest.raises(RecordingError, match=match):
+        parse_recording(_text(rec), "walk.csv")
+    back = parse_recording(_text(rec), "walk.csv", check_units=False)  # the check can be turned off
+    assert len(back.streams[name]) == 300
+
+
+def test_a_dead_sensor_and_a_short_file_are_not_unit_errors():
+    rec = _walk(300)
+    rec.streams["acc"].values[:] = 0.0
+    rec.streams["mag"].values[:] = 0.0
+    assert len(parse_recording(_text(rec), "walk.csv").streams["acc"]) == 300
+    short = _walk(30)
+    short.streams["acc"].values /= G
+    assert len(parse_recording(_text(short), "walk.csv").streams["acc"]) == 30

@@ -16,7 +16,7 @@ import numpy as np
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
 from core.geodesy import geodetic_to_enu
-from core.recording import Recording, RecordingError, gunzip_partial, repair_recording
+from core.recording import Recording, RecordingError, acc_unit_guess, gunzip_partial, repair_recording
 
 GZIP_MAGIC = b"\x1f\x8b"
 ZIP_MAGIC = b"PK\x03\x04"
@@ -302,15 +302,14 @@ def acceleration_in_m_s2(acc: np.ndarray, what: str, source: str, repairs: list[
     """
     norm = np.linalg.norm(acc, axis=1)
     m = float(np.median(norm))
-    if 0.6 < m < 1.4:
+    low = float(np.percentile(norm, 10))
+    guess = acc_unit_guess(m, low)
+    if guess == "g":
         repairs.append(f"{source}: acceleration median |a| = {m:.3f}: values are in g, converted to m/s^2")
         return acc * STANDARD_GRAVITY_M_S2
     g = STANDARD_GRAVITY_M_S2
-    if 0.6 * g < m < 1.4 * g:
-        return acc
-    low = float(np.percentile(norm, 10))
-    if 1.4 * g <= m < 2.5 * g and low > 0.6 * g:
-        if notes is not None:
+    if guess == "m/s^2":
+        if m >= 1.4 * g and notes is not None:
             notes["acc_unit_check"] = (f"median |a| = {m:.2f} m/s^2 ({m / g:.2f} g) with 90 % of the samples above "
                                        f"{low:.2f} m/s^2: gravity plus strong motion (a swinging phone), taken "
                                        "as m/s^2")
