@@ -91,7 +91,8 @@ update per reading would count them as hundreds of independent measurements.
 The accelerometer noise adds a turn term ``k_a3 |w|^2`` to eq. 17 (the
 centripetal acceleration of a turning walker).
 
-Bad numbers: a non-finite input is skipped and counted; an update whose
+Bad numbers: a non-finite input, or one no phone sensor gives (beyond 1e4 m/s^2,
+1e3 rad/s, 1e6 uT), is skipped and counted; an update whose
 correction or covariance would not be finite is discarded (the prior state
 is kept) and counted.  Nothing non-finite ever enters the state.
 
@@ -112,6 +113,17 @@ from core.dsp import RunningMedian, WindowMeanSpread, WindowVariance
 
 _I3 = np.eye(3)
 _I6 = np.eye(6)
+
+#: per-component magnitudes no phone sensor reports (m/s^2, rad/s, uT): such readings are skipped like
+#: non-finite ones (squared, they would overflow to inf and poison the running windows)
+_ACC_IMPOSSIBLE = 1e4
+_GYRO_IMPOSSIBLE = 1e3
+_MAG_IMPOSSIBLE = 1e6
+
+
+def _plausible(x: float, y: float, z: float, lim: float) -> bool:
+    """All three finite and within +-lim (False for NaN too)."""
+    return -lim <= x <= lim and -lim <= y <= lim and -lim <= z <= lim
 for _m in (_I3, _I6):
     _m.flags.writeable = False
 
@@ -511,6 +523,9 @@ class AttitudeEKF(AttitudeFilterBase):
         self._mag_sum = [0.0, 0.0, 0.0, 0.0, 0, 0]
         self._gated = []  # (t_ns, innovation) of heading updates gated since the last one used
         self.n_heading_relocks = 0
+        #: no magnetometer reading has corrected the heading since the start without one: the heading is
+        #: a consider state of the other updates (see _correct)
+        self.yaw_unobserved = False
         # diagnostics
         self.acc_sigma2 = math.nan
         self.mag_sigma2 = math.nan
@@ -576,6 +591,7 @@ class AttitudeEKF(AttitudeFilterBase):
         # without a magnetometer reading the heading is relative to initial_yaw_rad by definition; a
         # magnetometer that starts later is let in by the relock (see _relock)
         self.P[2, 2] = (self.settings.initial_yaw_sd_rad if from_mag else 1e-3) ** 2
+        self.yaw_unobserved = not from_mag
         if not from_mag:
             return q
         return quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), -self.settings.declination_rad), q)
@@ -608,7 +624,7 @@ class AttitudeEKF(AttitudeFilterBase):
     # -- prediction -------------------------------------------------------------------------------
     def predict(self, t_ns: int, wx: float, wy: float, wz: float) -> None:
         """Propagate with one gyroscope event (rad/s) over the time since the previous one."""
-        if not (math.isfinite(wx) and math.isfinite(wy) and math.isfinite(wz)):
+        if not _plausible(wx, wy, wz, _GYRO_IMPOSSIBLE):
             self.n_skipped_nonfinite += 1
             return
         self.n_gyro += 1
@@ -654,8 +670,15 @@ class AttitudeEKF(AttitudeFilterBase):
 
     # -- the update kernel ----------------------------------------------------------------------
     def _correct(self, y: np.ndarray, H: np.ndarray, Rm: np.ndarray, gate: float, *, consider_tilt=False,
-                 bias_axis=None):
-        """Kalman update of the error state; returns (used, reason, nis).  ``H`` (m x 6), ``Rm`` (m x m)."""
+                 bias_axis=None, measures_yaw=False):
+        """Kalman update of the error state; returns (used, reason, nis).  ``H`` (m x 6), ``Rm`` (m x m).
+
+        While :attr:`yaw_unobserved` (started without a magnetometer, none used since), an update that
+        does not measure the heading (``measures_yaw`` False: accelerometer, zero rate) leaves the
+        heading a consider state: its gain row is zero, so neither the heading nor its variance moves.
+        Its Jacobian is zero, but its correlation with the tilt and the bias would otherwise let every
+        tilt or bias correction shrink the heading's variance, where nothing observes the heading.
+        """
         P = self.P
         PHt = P @ H.T
         S = H @ PHt + Rm
@@ -673,6 +696,9 @@ class AttitudeEKF(AttitudeFilterBase):
         K = PHt @ Sinv
         if consider_tilt:  # Schmidt update: roll and pitch are not corrected by this measurement
             K[0:2, :] = 0.0
+        yaw_consider = self.yaw_unobserved and not measures_yaw
+        if yaw_consider:  # Schmidt update: the heading is not corrected (see the docstring)
+            K[2, :] = 0.0
         if bias_axis is not None:  # only the bias component about this body axis
             K[3:6, :] = np.outer(bias_axis, bias_axis @ K[3:6, :])
         dx = K @ y
@@ -681,10 +707,12 @@ class AttitudeEKF(AttitudeFilterBase):
         if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(Pn))):
             self.n_numerical_rejects += 1
             return False, "numerical", nis
-        self._inject(dx, Pn)
+        self._inject(dx, Pn, keep_yaw=yaw_consider)
+        if measures_yaw:
+            self.yaw_unobserved = False
         return True, "used", nis
 
-    def _inject(self, dx: np.ndarray, Pn: np.ndarray) -> None:
+    def _inject(self, dx: np.ndarray, Pn: np.ndarray, keep_yaw: bool = False) -> None:
         dth = dx[0:3]
         self.q = quat.normalize(quat.multiply(quat.from_rotation_vector(tuple(dth.tolist())), self.q))
         lim = self.settings.max_gyro_bias_rad_s
@@ -692,6 +720,8 @@ class AttitudeEKF(AttitudeFilterBase):
         # reset of the error to zero: G = blockdiag(I - [dtheta / 2]x, I)
         G = _I6.copy()
         G[0:3, 0:3] -= 0.5 * skew(dth)
+        if keep_yaw:  # a consider heading is carried, not re-linearised: its row stays the identity's
+            G[2, 0:2] = 0.0
         Pn = G @ Pn @ G.T
         self.P = 0.5 * (Pn + Pn.T)
 
@@ -712,7 +742,7 @@ class AttitudeEKF(AttitudeFilterBase):
         of independent measurements: one update per interval keeps the NIS
         meaningful and the filter the same at every sample rate.
         """
-        if not (math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az)):
+        if not _plausible(ax, ay, az, _ACC_IMPOSSIBLE):
             self.n_skipped_nonfinite += 1
             return self._acc_flags(t_ns, False, "non-finite")
         s = self.settings
@@ -802,7 +832,7 @@ class AttitudeEKF(AttitudeFilterBase):
         s = self.settings
         if not s.use_magnetometer:
             return self._mag_flags(t_ns, False, "magnetometer off")
-        if not (math.isfinite(mx) and math.isfinite(my) and math.isfinite(mz)):
+        if not _plausible(mx, my, mz, _MAG_IMPOSSIBLE):
             self.n_skipped_nonfinite += 1
             return self._mag_flags(t_ns, False, "non-finite")
         if self.mag_calibrator is not None:
@@ -863,7 +893,7 @@ class AttitudeEKF(AttitudeFilterBase):
             y = np.array((zb[0] - hb[0], zb[1] - hb[1], zb[2] - hb[2]))
             H = np.zeros((3, 6))
             H[:, 0:3] = direction_jacobian(R, h)
-            used, reason, nis = self._correct(y, H, sigma2 * _I3, s.mag_gate_nis + 4.0)
+            used, reason, nis = self._correct(y, H, sigma2 * _I3, s.mag_gate_nis + 4.0, measures_yaw=True)
             self._record("mag", used, nis)
             return self._mag_interval_done(t_ns, n, used, reason, nis=nis, dof=2, sigma2=sigma2,
                                            innovation=tuple(y.tolist()))
@@ -876,7 +906,7 @@ class AttitudeEKF(AttitudeFilterBase):
         H[0, 0:3] = heading_jacobian(m_n)
         r_angle = sigma2 / c2
         used, reason, nis = self._correct(y, H, np.array([[r_angle]]), s.mag_gate_nis, consider_tilt=True,
-                                          bias_axis=np.array(up_b))
+                                          bias_axis=np.array(up_b), measures_yaw=True)
         self._record("mag", used, nis)
         if used:
             self._gated = []

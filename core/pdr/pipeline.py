@@ -36,9 +36,15 @@ with the whole interval, and once its bout is confirmed.  The live app
 therefore sees each step about a second after it happened;
 :meth:`Pipeline.status` gives the current position at any time.
 
-Non-finite sensor values (NaN, inf) are skipped before any stage sees them
-and counted per stream (:attr:`Pipeline.n_nonfinite`, the summary and the
-labels report them).
+Non-finite sensor values (NaN, inf) and impossible ones (beyond any phone
+sensor's range, :data:`IMPOSSIBLE`) are skipped before any stage sees them and
+counted per stream (:attr:`Pipeline.n_nonfinite`, :attr:`Pipeline.n_impossible`;
+the summary and the labels report them).  Sensors that misbehave within their
+range are watched by :class:`SensorHealth` at O(1) cost per event and reported
+as degraded modes in :meth:`Pipeline.labels`: a component stuck at the same
+extreme value (saturation at the range limit), a sensor whose three values do
+not change for seconds (dead: zeros or frozen), a magnetometer whose every
+reading was rejected.  They only add labels and counters; the track is the same.
 
 :meth:`Pipeline.update` (streaming, for the app) and :meth:`Pipeline.run`
 (batch, for files) share this one kernel; ``tests/test_streaming_batch.py``
@@ -65,6 +71,104 @@ from core.recording import Recording, RecordingError
 
 #: Step duration assumed for the first step of a walking bout (s).
 DEFAULT_STEP_DURATION_S = 0.55
+
+#: Readings beyond these magnitudes per component are no phone sensor's (the widest ranges are about
+#: 16 g, 70 rad/s and 5000 uT): skipped and counted like non-finite ones.  acc m/s^2, gyro rad/s, mag uT
+IMPOSSIBLE = {ACC: 2000.0, GYRO: 200.0, MAG: 10000.0}
+
+_SENSOR_NAMES = {ACC: "accelerometer", GYRO: "gyroscope", MAG: "magnetometer"}
+
+
+class SensorHealth:
+    """Saturation and dead-sensor detector of one 3-axis stream, O(1) time and memory per reading.
+
+    * **saturation**: a component that keeps exactly the same value, at least
+      ``floor`` in magnitude, over ``min_run_s`` or longer (and 3 readings or
+      more) is at its range limit: a real signal near its peak changes from
+      one reading to the next, a clipped one sits on the rail.  Each such run
+      is one episode; ``saturated_s`` adds their durations and ``level`` is
+      the largest magnitude seen on a rail.
+    * **dead**: all three components unchanged from one reading to the next for
+      ``dead_s`` or longer (zeros, or a frozen driver).  ``dead_runs`` counts
+      the episodes, ``dead_s`` their total time, ``dead_zero`` whether any was
+      all zeros.
+    """
+
+    def __init__(self, floor: float, *, min_run_s: float = 0.06, dead_s: float = 2.0):
+        self.floor = float(floor)
+        self._min_run_ns = int(min_run_s * 1e9)
+        self._dead_ns = int(dead_s * 1e9)
+        self.n = 0
+        self.saturated_runs = 0
+        self.saturated_s = 0.0
+        self.level = 0.0
+        self.dead_runs = 0
+        self.dead_s = 0.0
+        self.dead_zero = False
+        self._prev = None
+        self._prev_t = 0
+        self._rail_t0 = [None, None, None]  # start of the current run of one value >= floor, per component
+        self._rail_n = [0, 0, 0]
+        self._rail_counted = [False, False, False]
+        self._same_t0 = None  # start of the current run of identical readings
+        self._same_counted = False
+
+    def update(self, t_ns: int, x: float, y: float, z: float) -> None:
+        self.n += 1
+        prev = self._prev
+        v = (x, y, z)
+        if prev is None:
+            self._prev, self._prev_t = v, t_ns
+            return
+        dt = (t_ns - self._prev_t) * 1e-9
+        f = self.floor
+        if not (x >= f or -x >= f or y >= f or -y >= f or z >= f or -z >= f):
+            rail = self._rail_t0
+            rail[0] = rail[1] = rail[2] = None  # no component on a rail
+        else:
+            self._rails(t_ns, v, prev, dt)
+        if v == prev:
+            if self._same_t0 is None:
+                self._same_t0, self._same_counted = self._prev_t, False
+            if self._same_counted:
+                self.dead_s += dt
+            elif t_ns - self._same_t0 >= self._dead_ns:
+                self._same_counted = True
+                self.dead_runs += 1
+                self.dead_s += (t_ns - self._same_t0) * 1e-9
+                if x == 0.0 and y == 0.0 and z == 0.0:
+                    self.dead_zero = True
+        else:
+            self._same_t0 = None
+        self._prev, self._prev_t = v, t_ns
+
+    def _rails(self, t_ns: int, v, prev, dt: float) -> None:
+        for i in range(3):
+            vi = v[i]
+            if vi == prev[i] and (vi >= self.floor or -vi >= self.floor):
+                if self._rail_t0[i] is None:
+                    self._rail_t0[i], self._rail_n[i], self._rail_counted[i] = self._prev_t, 1, False
+                self._rail_n[i] += 1
+                if self._rail_counted[i]:
+                    self.saturated_s += dt
+                elif self._rail_n[i] >= 3 and t_ns - self._rail_t0[i] >= self._min_run_ns:
+                    self._rail_counted[i] = True
+                    self.saturated_runs += 1
+                    self.saturated_s += (t_ns - self._rail_t0[i]) * 1e-9
+                    self.level = max(self.level, abs(vi))
+            else:
+                self._rail_t0[i] = None
+
+    def as_dict(self) -> dict:
+        return {"saturated_runs": self.saturated_runs, "saturated_s": round(self.saturated_s, 3),
+                "saturation_level": self.level, "dead_runs": self.dead_runs, "dead_s": round(self.dead_s, 3),
+                "dead_zero": self.dead_zero}
+
+
+#: magnitude from which a component stuck at one value counts as saturated (acc m/s^2: +-1.6 g and up,
+#: the smallest phone range being +-2 g; gyro rad/s: the smallest range is +-250 deg/s = 4.4 rad/s;
+#: mag uT: far beyond the Earth's field)
+SATURATION_FLOOR = {ACC: 15.5, GYRO: 4.0, MAG: 300.0}
 
 
 @dataclass(frozen=True)
@@ -204,6 +308,12 @@ class Pipeline:
         (``AttitudeEKF(mag_calibrator=MagCalibrator(), mag_requires_calibration=True)``).
     log : bool
         Keep an :class:`AttitudeLog` (batch runs turn it on).
+    keep_steps : bool or int
+        Keep every completed step in :attr:`steps` (True, the default; batch
+        runs need it), none (False) or the last ``n`` (an int): a live session
+        that keeps its own track gives False or a small number, and the
+        pipeline's memory stays flat however long the walk.  The steps returned
+        by :meth:`update` and the track are the same either way.
     gnss : core.gnss.fusion.GpsFusion or None
         GPS fusion after the steps (Chen et al. 2010): fixes of the ``gps``
         stream and every completed step go through it; :attr:`fused` holds the
@@ -225,7 +335,8 @@ class Pipeline:
                  heading_delay_s: float | None = None, use_magnetometer: bool = True,
                  max_rotation_rms_rad_s: float = 3.0, rotation_window_s: float = 1.0, min_bout_steps: int = 3,
                  mag_stream: str = MAG, log: bool = False, gnss=None, site_from_gps: bool = True,
-                 unix_offset_ns: int | None = None):
+                 unix_offset_ns: int | None = None, keep_steps: bool | int = True):
+        self.keep_steps = keep_steps
         self.gnss = gnss
         self.site_from_gps = bool(site_from_gps)
         self.unix_offset_ns = unix_offset_ns
@@ -264,7 +375,11 @@ class Pipeline:
         self._rot_window_ns = int(self.rotation_window_s * 1e9)
         self.n_rejected_rotation = 0
         self.n_rejected_bout = 0
-        self.steps: list[Step] = []
+        ks = self.keep_steps
+        #: completed steps (all of them, or the last few: see ``keep_steps``)
+        self.steps: list[Step] | deque = [] if ks is True else deque(maxlen=0 if ks is False else max(0, int(ks)))
+        #: completed steps so far (``len(steps)`` unless ``keep_steps`` bounds the list)
+        self.n_steps = 0
         #: fused steps (core.gnss.fusion.FusedStep), one per step, when there is a GPS fusion stage
         self.fused: list = []
         #: the site the GPS gave the attitude filter (declination, field), or why not
@@ -276,6 +391,11 @@ class Pipeline:
         self._fwd_keep_ns = self._bout_gap_ns + self._delay_ns + 1_000_000_000
         #: non-finite sensor values skipped, per stream
         self.n_nonfinite: dict[str, int] = {}
+        #: finite values beyond any phone sensor's range (IMPOSSIBLE) skipped, per stream
+        self.n_impossible: dict[str, int] = {}
+        #: saturation and dead-sensor detectors, per stream
+        self.health = {GYRO: SensorHealth(SATURATION_FLOOR[GYRO]), ACC: SensorHealth(SATURATION_FLOOR[ACC]),
+                       self.mag_stream: SensorHealth(SATURATION_FLOOR[MAG])}
         self.t_ns = 0
         self.seen: dict[str, int] = {}
         self._log: list[tuple] = []
@@ -284,10 +404,17 @@ class Pipeline:
     def update(self, stream: str, t_ns: int, values) -> list[Step]:
         """Process one sensor event; returns the steps it completed (usually none)."""
         self.seen[stream] = self.seen.get(stream, 0) + 1
-        if stream in (GYRO, ACC, self.mag_stream) and not (math.isfinite(values[0]) and math.isfinite(values[1])
-                                               and math.isfinite(values[2])):
-            self.n_nonfinite[stream] = self.n_nonfinite.get(stream, 0) + 1
-            return []
+        health = self.health.get(stream)
+        if health is not None:
+            x, y, z = values[0], values[1], values[2]
+            if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+                self.n_nonfinite[stream] = self.n_nonfinite.get(stream, 0) + 1
+                return []
+            lim = IMPOSSIBLE[stream if stream in IMPOSSIBLE else MAG]
+            if not (-lim <= x <= lim and -lim <= y <= lim and -lim <= z <= lim):
+                self.n_impossible[stream] = self.n_impossible.get(stream, 0) + 1
+                return []
+            health.update(t_ns, x, y, z)
         self.t_ns = t_ns
         if stream == GYRO:
             wx, wy, wz = values[0], values[1], values[2]
@@ -425,9 +552,10 @@ class Pipeline:
         if heading != heading:  # no attitude yet (no magnetometer reading so far)
             heading = self.attitude.initial_yaw_rad
         east, north = self.reckoner.update(length, heading)  # eq. 1
-        step = Step(len(self.steps), ev.t_ns, length, heading, east, north, feats,
+        step = Step(self.n_steps, ev.t_ns, length, heading, east, north, feats,
                     not self.attitude.mag_rejected and self.attitude.use_magnetometer)
         self.steps.append(step)
+        self.n_steps += 1
         if self.gnss is not None:
             self.fused.append(self.gnss.add_step(step))
         return step
@@ -439,7 +567,13 @@ class Pipeline:
         out = []
         a = self.attitude
         used, rej = getattr(a, "n_mag_used", 0), getattr(a, "n_mag_rejected", 0)
-        if a.use_magnetometer and used + rej > 100 and rej > self.MAG_REJECTED_WARN * (used + rej):
+        if self.mag_all_rejected():
+            top = sorted(((v, k) for k, v in a.mag_reasons.items() if k not in ("used", "initialising")),
+                         reverse=True)[:2]
+            why = ", ".join(f"{k} {v}" for v, k in top)
+            out.append(f"magnetometer rejected 100 % of the time ({why}): no absolute heading, the heading is "
+                       f"relative to the start as without one")
+        elif a.use_magnetometer and used + rej > 100 and rej > self.MAG_REJECTED_WARN * (used + rej):
             out.append(f"magnetometer {100 * rej / (used + rej):.0f} % rejected: the heading leans on the "
                        f"gyroscope (bent or miscalibrated field)")
         sm = self.smoother
@@ -449,6 +583,10 @@ class Pipeline:
         if self.n_nonfinite:
             what = ", ".join(f"{k} {v}" for k, v in sorted(self.n_nonfinite.items()))
             out.append(f"non-finite sensor values skipped ({what})")
+        if self.n_impossible:
+            what = ", ".join(f"{k} {v}" for k, v in sorted(self.n_impossible.items()))
+            out.append(f"impossible sensor values (beyond any phone sensor's range) skipped ({what})")
+        out.extend(self._health_labels())
         if not self.seen.get(GYRO) and self.seen.get(ACC):
             out.append("no gyroscope: heading from accelerometer and magnetometer only (noisy while walking)")
         if not self.attitude.use_magnetometer:
@@ -456,6 +594,46 @@ class Pipeline:
         elif not self.seen.get(self.mag_stream) and self.seen.get(ACC):
             out.append("no magnetometer: heading is relative to the start (first step points North)")
         return tuple(out)
+
+    #: a stream counts as saturated from this many runs on a rail, or this long on one (s)
+    SATURATED_MIN_RUNS = 2
+    SATURATED_MIN_S = 0.5
+
+    _SATURATION_EFFECT = {ACC: "peaks clipped: steps and step lengths unreliable",
+                          GYRO: "turns faster than its range are lost from the heading",
+                          MAG: "the heading leans on the gyroscope"}
+    _DEAD_EFFECT = {ACC: "no steps are detected there", GYRO: "the heading does not follow turns there",
+                    MAG: "its readings carry no heading"}
+    _UNIT = {ACC: "m/s^2", GYRO: "rad/s", MAG: "uT"}
+
+    def _health_labels(self) -> list[str]:
+        out = []
+        for stream, h in self.health.items():
+            kind = MAG if stream == self.mag_stream else stream
+            name = _SENSOR_NAMES[kind] + ("" if stream == kind else f" ({stream})")
+            if h.saturated_runs >= self.SATURATED_MIN_RUNS or h.saturated_s >= self.SATURATED_MIN_S:
+                out.append(f"{name} saturated: stuck at +-{h.level:.4g} {self._UNIT[kind]} (its range limit) for "
+                           f"{h.saturated_s:.1f} s in {h.saturated_runs} run(s); {self._SATURATION_EFFECT[kind]}")
+            if h.dead_runs:
+                what = "all zeros" if h.dead_zero else "frozen at one value"
+                out.append(f"{name} dead: {what} for {h.dead_s:.0f} s in {h.dead_runs} stretch(es); "
+                           f"{self._DEAD_EFFECT[kind]}")
+        return out
+
+    def mag_all_rejected(self) -> bool:
+        """The magnetometer is on and gave readings, and the attitude filter rejected every one of them."""
+        a = self.attitude
+        used, rej = getattr(a, "n_mag_used", 0), getattr(a, "n_mag_rejected", 0)
+        return bool(a.use_magnetometer and used == 0 and rej >= self.MAG_ALL_REJECTED_MIN)
+
+    #: readings rejected before "rejected 100 % of the time" is said (2 s at 50 Hz)
+    MAG_ALL_REJECTED_MIN = 100
+
+    def health_counters(self) -> dict:
+        """Counters of the degraded-mode detectors, for the summary."""
+        return {"impossible_skipped": dict(self.n_impossible),
+                "sensor_health": {k: h.as_dict() for k, h in self.health.items() if h.n},
+                "mag_all_rejected": self.mag_all_rejected()}
 
     def status(self) -> Status:
         a = self.attitude
@@ -506,7 +684,7 @@ class Pipeline:
         )
         counters = {"mag_used": a.n_mag_used, "mag_rejected": a.n_mag_rejected, "acc_rejected": a.n_acc_rejected,
                     "peaks_rejected_rotation": self.n_rejected_rotation, "peaks_rejected_bout": self.n_rejected_bout,
-                    "nonfinite_skipped": dict(self.n_nonfinite)}
+                    "nonfinite_skipped": dict(self.n_nonfinite), **self.health_counters()}
         if hasattr(a, "counters"):
             counters["attitude"] = a.counters()
         fusion = self.gnss.result() if self.gnss is not None else None
