@@ -200,13 +200,40 @@ class Stream:
         """Mean event rate (events per second), 0 for fewer than two events."""
         return (len(self) - 1) / self.duration_s if self.duration_s > 0 else 0.0
 
-    def interval_stats_s(self) -> dict:
-        """Median interval, its jitter (std) and the number of gaps over 2.5 median intervals."""
+    def interval_stats_s(self, block: int = 64) -> dict:
+        """Median interval, its jitter (std), gaps, and changes of the sampling rate.
+
+        A gap is an interval over 2.5 times the *local* median interval (the
+        largest median of its block of ``block`` intervals and the two
+        neighbouring blocks), so a rate that changes mid-file is not counted
+        as thousands of gaps; ``rate_changes`` counts the places where the
+        block median changes by more than a factor 1.5 and ``rates_hz``
+        lists the rates in file order (one entry per stretch).
+        """
         if len(self) < 3:
-            return {"median_s": math.nan, "jitter_s": math.nan, "gaps": 0}
-        dt = np.diff(self.t_ns) * 1e-9
+            return {"median_s": math.nan, "jitter_s": math.nan, "gaps": 0, "rate_changes": 0, "rates_hz": []}
+        dt = (self.t_ns[1:].astype(np.float64) - self.t_ns[:-1].astype(np.float64)) * 1e-9
         med = float(np.median(dt))
-        return {"median_s": med, "jitter_s": float(np.std(dt)), "gaps": int(np.sum(dt > 2.5 * med))}
+        nb = max(1, len(dt) // block)
+        edges = np.linspace(0, len(dt), nb + 1).astype(np.int64)
+        bmed = np.array([np.median(dt[a:b]) for a, b in zip(edges[:-1], edges[1:])])
+        ref_b = bmed.copy()
+        ref_b[1:] = np.maximum(ref_b[1:], bmed[:-1])
+        ref_b[:-1] = np.maximum(ref_b[:-1], bmed[1:])
+        ref = np.repeat(ref_b, np.diff(edges))
+        gaps = int(np.sum(dt > 2.5 * ref))
+        # rate stretches: consecutive blocks whose medians agree within a factor 1.5
+        rates, start = [], 0
+        changes = 0
+        for k in range(1, nb + 1):
+            if k == nb or not (bmed[k] > 0 and bmed[start] > 0 and 1 / 1.5 < bmed[k] / bmed[start] < 1.5):
+                m = float(np.median(bmed[start:k]))
+                rates.append(round(1.0 / m, 3) if m > 0 else math.inf)
+                if k < nb:
+                    changes += 1
+                start = k
+        return {"median_s": med, "jitter_s": float(np.std(dt)), "gaps": gaps, "rate_changes": changes,
+                "rates_hz": rates[:20]}
 
 
 @dataclass
@@ -447,6 +474,68 @@ def check_values_against_units(stream: Stream, source: str) -> None:
 
 
 # ---------------------------------------------------------------------------
+# time bases
+
+#: a sensor stream whose median interval is below this (in "nanoseconds") runs above 20 kHz: its clock is
+#: not in nanoseconds (phone sensors run at 1-2000 Hz)
+MIN_SENSOR_INTERVAL_NS = 50_000
+#: a clock that goes back by more than this within a stream is refused (sorting would interleave two stretches)
+MAX_BACKWARDS_S = 1.0
+#: fewest events of a stream for the time-base checks
+MIN_EVENTS_FOR_TIME_CHECK = 20
+
+
+def check_time_base(name: str, t_ns: np.ndarray, source: str, lines: list[int] | None = None) -> None:
+    """A :class:`RecordingError` when a stream's timestamps are not nanoseconds or jump back by over a second.
+
+    Timestamps in ms or us (or whole seconds) are refused rather than
+    converted: at 500-1000 a median interval fits both ms (1-2 kHz) and us
+    (1-2 kHz), and a wrong guess would give a confident wrong walk, while
+    the writer of the file knows its unit.  A backwards jump of more than
+    :data:`MAX_BACKWARDS_S` is refused naming the line (``lines``: the file
+    line of each event): sorting would interleave two stretches of the walk.
+    """
+    t = np.asarray(t_ns, dtype=np.int64)
+    if len(t) < 2:
+        return
+    tf = t.astype(np.float64)
+    back = np.flatnonzero(tf[:-1] - tf[1:] > MAX_BACKWARDS_S * 1e9)
+    if len(back):
+        j = int(back[0]) + 1
+        where = lines[j] if lines is not None else None
+        prev = f" (line {lines[j - 1]})" if lines is not None else ""
+        raise RecordingError(f"stream '{name}': the clock jumps back by {(tf[j - 1] - tf[j]) * 1e-9:.1f} s, from "
+                             f"t_ns {int(t[j - 1])}{prev} to {int(t[j])}; sorting would interleave two stretches of "
+                             f"the walk: split the file where the clock jumps (or fix the clock)", source, where)
+    kind = name.partition("@")[0]
+    if kind not in (ACC, GYRO, MAG) or len(t) < MIN_EVENTS_FOR_TIME_CHECK:
+        return
+    ts = np.sort(tf)
+    d = ts[1:] - ts[:-1]
+    zero = float(np.mean(d == 0))
+    pos = d[d > 0]
+    if not len(pos):
+        raise RecordingError(f"stream '{name}': all {len(t)} events have the same timestamp: t_ns must be "
+                             "integer nanoseconds on the sensor clock", source)
+    med = float(np.median(pos))
+    if zero > 0.5:
+        raise RecordingError(f"stream '{name}': {zero:.0%} of the events repeat the previous timestamp and the "
+                             f"distinct ones are a median {med:.6g} apart: the clock is too coarse (whole seconds or "
+                             "milliseconds?); t_ns must be integer nanoseconds", source)
+    if float(np.median(d)) < MIN_SENSOR_INTERVAL_NS:
+        m = float(np.median(d))
+        looks = []
+        if 0.5 <= m <= 1000:
+            looks.append(f"milliseconds ({1e3 / m:.4g} Hz; multiply by 1000000)")
+        if 500 <= m < MIN_SENSOR_INTERVAL_NS:
+            looks.append(f"microseconds ({1e6 / m:.4g} Hz; multiply by 1000)")
+        guess = " or ".join(looks) if looks else "not nanoseconds"
+        raise RecordingError(f"stream '{name}': the median interval is {m:.6g} t_ns units, {1e9 / m:.4g} Hz if they "
+                             f"were nanoseconds (phone sensors run at 1-2000 Hz): the timestamps look like {guess}; "
+                             "t_ns must be integer nanoseconds", source)
+
+
+# ---------------------------------------------------------------------------
 # timestamp repair
 
 
@@ -562,7 +651,7 @@ class RecordingWriter:
 
 
 def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool = True,
-                   check_units: bool = True) -> Recording:
+                   check_units: bool = True, check_time: bool = True) -> Recording:
     """Read a ``pdr-recording`` file.
 
     Raises :class:`RecordingError` (naming file and line) for an empty file, a
@@ -590,7 +679,7 @@ def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool =
         data = raw
     text = decode_utf8(data, path)
     return parse_recording(text, path, allow_truncated_tail=allow_truncated_tail, warn=warn,
-                           check_units=check_units, _repairs=repairs)
+                           check_units=check_units, check_time=check_time, _repairs=repairs)
 
 
 def decode_utf8(data: bytes, source: str) -> str:
@@ -649,7 +738,8 @@ def _check_header(header, version: int, source: str) -> dict:
 
 
 def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: bool = True,
-                    warn: bool = True, check_units: bool = True, _repairs: list[str] | None = None) -> Recording:
+                    warn: bool = True, check_units: bool = True, check_time: bool = True,
+                    _repairs: list[str] | None = None) -> Recording:
     """Parse the text of a ``pdr-recording`` file (see :func:`read_recording`).
 
     A bad event line (unknown stream, wrong number of values, a value that is
@@ -666,7 +756,10 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
     ``G`` are converted (noted in ``repairs``), anything else is a
     :class:`RecordingError` naming the stream, its unit and the accepted
     ones.  With ``check_units`` the values are then checked against the
-    unit (:func:`check_values_against_units`).
+    unit (:func:`check_values_against_units`).  With ``check_time`` the
+    time base is checked (:func:`check_time_base`): timestamps that are not
+    nanoseconds, or a clock that jumps back by more than a second, are a
+    :class:`RecordingError`.
     """
     repairs: list[str] = list(_repairs or [])
     if not text.strip():
@@ -746,6 +839,9 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
         streams[name] = Stream(name, np.array(ts, dtype=np.int64), vals, cols, unit, note)
     if not any(len(s) for s in streams.values()):
         raise RecordingError("the file has a header but no sensor events", source)
+    if check_time:
+        for name, s in streams.items():
+            check_time_base(name, s.t_ns, source, data[name][2])
     if check_units:
         for s in streams.values():
             check_values_against_units(s, source)

@@ -309,3 +309,63 @@ def test_a_dead_sensor_and_a_short_file_are_not_unit_errors():
     short = _walk(30)
     short.streams["acc"].values /= G
     assert len(parse_recording(_text(short), "walk.csv").streams["acc"]) == 30
+
+
+# ---------------------------------------------------------------------------
+# class 3: time bases
+
+
+def _retime(rec: Recording, fn) -> Recording:
+    for s in rec.streams.values():
+        s.t_ns = fn(s.t_ns)
+    return rec
+
+
+@pytest.mark.parametrize("divisor,looks", [(10**6, "milliseconds"), (10**3, "microseconds")])
+def test_timestamps_in_ms_or_us_are_refused_saying_which(divisor, looks):
+    rec = _retime(_walk(300), lambda t: t // divisor)
+    with pytest.raises(RecordingError, match=f"stream 'acc': the median interval is .* if they were nanoseconds.*"
+                                             f"look like {looks}") as e:
+        parse_recording(_text(rec), "walk.csv")
+    assert "1-2000 Hz" in str(e.value)
+
+
+def test_timestamps_in_whole_seconds_are_refused():
+    rec = _retime(_walk(300), lambda t: t // 10**9)
+    with pytest.raises(RecordingError, match="repeat the previous timestamp.*too coarse"):
+        parse_recording(_text(rec), "walk.csv")
+
+
+def test_timestamps_beyond_int64_are_a_clean_error():
+    text = _text(_walk(30)).replace("acc,1000", "acc,99999999999999999999")
+    with pytest.raises(RecordingError, match=r"walk.csv:3: timestamp 99999999999999999999\d+ does not fit a 64-bit"):
+        parse_recording(text, "walk.csv")
+
+
+def test_a_clock_that_jumps_back_a_minute_is_refused_naming_the_line():
+    rec = _walk(600)
+    for s in rec.streams.values():
+        s.t_ns = np.where(np.arange(len(s)) >= 300, s.t_ns - 63 * 10**9, s.t_ns)  # back 63 s after 3 s
+    text = "# pdr-recording 1\n# " + json.dumps(rec.header()) + "\n" + "".join(
+        f"{n},{t},{','.join(map(repr, v.tolist()))}\n" for n in ("acc",) for t, v in zip(rec.streams[n].t_ns,
+                                                                                        rec.streams[n].values))
+    with pytest.raises(RecordingError, match=r"walk.csv:303: stream 'acc': the clock jumps back by 63.0 s.*\(line "
+                                             r"302\).*interleave"):
+        parse_recording(text, "walk.csv")
+    # small backwards steps (real phones) are still repaired by sorting
+    lines = text.split("\n")
+    lines[10], lines[11] = lines[11], lines[10]
+    back = _quiet(parse_recording, "\n".join(lines[:200]) + "\n", "walk.csv")
+    assert any("went backwards" in r for r in back.repairs)
+
+
+def test_a_rate_change_is_not_thousands_of_gaps():
+    t1 = np.arange(3000) * 5_000_000  # 200 Hz for 15 s
+    t2 = t1[-1] + 20_000_000 + np.arange(3000) * 20_000_000  # then 50 Hz
+    t = np.concatenate([t1, t2, t2[-1] + 5 * 10**9 + np.arange(500) * 20_000_000])  # and one 5 s gap
+    s = make_stream("acc", t, np.zeros((len(t), 3)))
+    st_ = s.interval_stats_s()
+    assert st_["gaps"] == 1
+    assert st_["rate_changes"] == 1 and st_["rates_hz"] == pytest.approx([200.0, 50.0])
+    steady = make_stream("acc", t1, np.zeros((len(t1), 3))).interval_stats_s()
+    assert steady["gaps"] == 0 and steady["rate_changes"] == 0 and steady["median_s"] == pytest.approx(0.005)

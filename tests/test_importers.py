@@ -495,13 +495,14 @@ def test_sensorlogger_acceleration_in_g_is_converted(tmp_path):
 
 
 def test_sensorlogger_acceleration_of_a_swinging_phone_is_accepted_linear_acceleration_is_not(tmp_path):
+    T0_NS = 1_700_000_000_000_000_000  # Sensor Logger's 'time': Unix nanoseconds
     n = 400
     t = np.arange(n) * 0.01
     files = sl_files("android")
     # gravity plus an arm's centripetal acceleration of 6-12 m/s^2 towards the shoulder: median |a| ~ 1.5 g
     swing = np.column_stack([6.0 + 6.0 * np.abs(np.sin(2 * np.pi * t)), np.zeros(n), np.full(n, G)])
     files["TotalAcceleration.csv"] = sl_csv("time,seconds_elapsed,z,y,x",
-                                            [(i + 1, t[i], *swing[i, ::-1]) for i in range(n)])
+                                            [(T0_NS + i * 10_000_000, t[i], *swing[i, ::-1]) for i in range(n)])
     rec = read_sensorlogger(write_folder(tmp_path / "swing", files))
     med = float(np.median(np.linalg.norm(swing, axis=1)))
     assert 1.4 * G < med < 2.5 * G
@@ -510,7 +511,7 @@ def test_sensorlogger_acceleration_of_a_swinging_phone_is_accepted_linear_accele
     # the same magnitude without gravity passes through zero: not a unit that can be established
     lin = np.column_stack([20.0 * np.sin(2 * np.pi * t), np.zeros(n), np.zeros(n)])
     files["TotalAcceleration.csv"] = sl_csv("time,seconds_elapsed,z,y,x",
-                                            [(i + 1, t[i], *lin[i, ::-1]) for i in range(n)])
+                                            [(T0_NS + i * 10_000_000, t[i], *lin[i, ::-1]) for i in range(n)])
     assert 1.4 * G < np.median(np.linalg.norm(lin, axis=1)) < 2.5 * G
     with pytest.raises(RecordingError, match="cannot establish its unit"):
         read_sensorlogger(write_folder(tmp_path / "lin", files))

@@ -47,7 +47,7 @@ def test_round_trip_property(rows):
     rec = Recording({"acc": make_stream("acc", [r[0] for r in rows], [r[1:] for r in rows])})
     text = "# pdr-recording 1\n# " + __import__("json").dumps(rec.header()) + "\n" + "".join(
         f"acc,{t},{x!r},{y!r},{z!r}\n" for t, x, y, z in rows)
-    back = parse_recording(text)
+    back = parse_recording(text, check_time=False, check_units=False)  # the number format, not plausibility
     np.testing.assert_array_equal(back.streams["acc"].t_ns, [r[0] for r in rows])
     np.testing.assert_array_equal(back.streams["acc"].values, [r[1:] for r in rows])
 

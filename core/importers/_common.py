@@ -16,7 +16,7 @@ import numpy as np
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
 from core.geodesy import geodetic_to_enu
-from core.recording import Recording, RecordingError, acc_unit_guess, gunzip_partial, repair_recording
+from core.recording import Recording, RecordingError, acc_unit_guess, check_time_base, gunzip_partial, repair_recording
 
 GZIP_MAGIC = b"\x1f\x8b"
 ZIP_MAGIC = b"PK\x03\x04"
@@ -405,6 +405,8 @@ def finish(rec: Recording, *, warn: bool = True, unix_offset_ns: int | None = No
     rec.streams = {k: s for k, s in rec.streams.items() if len(s)}
     if not rec.streams:
         raise RecordingError("no sensor events found", rec.source or None)
+    for name, s in rec.streams.items():
+        check_time_base(name, s.t_ns, rec.source)
     rec = repair_recording(rec, warn=warn)
     if unix_offset_ns is not None:
         rec.metadata["t0_unix_ns"] = rec.t0_ns + unix_offset_ns
