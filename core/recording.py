@@ -127,6 +127,10 @@ class TimestampRepairWarning(UserWarning):
     """Timestamps went backwards or repeated and were repaired."""
 
 
+class SensorSubstitutedWarning(UserWarning):
+    """A sensor's usual source was missing and another one stands in for it (e.g. the uncalibrated gyroscope)."""
+
+
 class DamagedFileWarning(UserWarning):
     """Part of a damaged file was dropped (a cut gzip, a cut last line, a few bad lines); the rest was read."""
 

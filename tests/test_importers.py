@@ -485,6 +485,38 @@ def test_sensorlogger_errors(tmp_path):
         read_sensorlogger(write_folder(tmp_path / "f", files))
 
 
+def test_sensorlogger_platform_message_names_something_a_user_can_set(tmp_path, monkeypatch):
+    # issue #12 class 6: the message named only a Python keyword, which the command line does not have
+    from core.importers.sensorlogger import PLATFORM_ENV
+    root = write_folder(tmp_path / "a", sl_files("android", with_total=False, metadata=False))
+    monkeypatch.delenv(PLATFORM_ENV, raising=False)
+    with pytest.raises(RecordingError, match=f"set the environment variable {PLATFORM_ENV}=android or "
+                                             f"{PLATFORM_ENV}=ios"):
+        load_recording(root)
+    monkeypatch.setenv(PLATFORM_ENV, "android")
+    assert load_recording(root).device["platform"] == "android"
+    monkeypatch.setenv(PLATFORM_ENV, "windows")
+    with pytest.raises(RecordingError, match=f"unknown platform 'windows' in {PLATFORM_ENV}"):
+        load_recording(root)
+    # it stands in for a missing Metadata.csv, never overrides one
+    monkeypatch.setenv(PLATFORM_ENV, "ios")
+    assert load_recording(write_folder(tmp_path / "b", sl_files("android"))).device["platform"] == "android"
+
+
+def test_sensorlogger_missing_gyroscope_uses_the_uncalibrated_one_and_says_so(tmp_path):
+    from core.recording import SensorSubstitutedWarning
+    files = sl_files("android")
+    files["GyroscopeUncalibrated.csv"] = files.pop("Gyroscope.csv")
+    with pytest.warns(SensorSubstitutedWarning, match="no calibrated Gyroscope.csv.*GyroscopeUncalibrated.csv"):
+        rec = read_sensorlogger(write_folder(tmp_path / "r", files))
+    assert len(rec.streams["gyro"]) == 150
+    assert any("'gyro' stream is GyroscopeUncalibrated.csv instead (the OS gyro bias is not removed)" in r
+               for r in rec.repairs)
+    # with the calibrated file present nothing is said
+    rec = read_sensorlogger(write_folder(tmp_path / "s", sl_files("android")))
+    assert not any("no calibrated" in r for r in rec.repairs)
+
+
 def test_sensorlogger_acceleration_in_g_is_converted(tmp_path):
     files = sl_files("android")
     files["TotalAcceleration.csv"] = sl_csv("time,seconds_elapsed,z,y,x",

@@ -91,7 +91,11 @@ Checks made on the data (results in ``metadata``)
 Cannot be converted (:class:`RecordingError`)
     linear acceleration without gravity (Accelerometer.csv with no Gravity.csv
     or TotalAcceleration.csv); an unknown platform when the signs depend on it
-    (no Metadata.csv and no TotalAcceleration.csv: pass ``platform=``).
+    (no Metadata.csv and no TotalAcceleration.csv: pass ``platform=`` or set the environment variable
+    ``PDR_SENSORLOGGER_PLATFORM``).
+A missing (or empty) Gyroscope.csv or Magnetometer.csv
+    The uncalibrated file is used for ``gyro`` / ``mag``, with a line in
+    ``repairs`` and a :class:`core.recording.SensorSubstitutedWarning`.
 """
 
 from __future__ import annotations
@@ -100,12 +104,13 @@ import csv
 import io
 import math
 import os
+import warnings
 
 import numpy as np
 
 from core import quaternion as quat
 from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC, STANDARD_GRAVITY_M_S2
-from core.recording import Recording, RecordingError, make_stream
+from core.recording import Recording, RecordingError, SensorSubstitutedWarning, make_stream
 from core.importers._common import (
     EXTRA_STREAM_SPECS, GYRO_UNCAL, MAG_UNCAL, PRESSURE, FileSet, acceleration_in_m_s2, attitude_checks, finish,
     gps_check, gps_values, magnetic_dip_deg, sample_at,
@@ -113,6 +118,10 @@ from core.importers._common import (
 from core.importers._csv import Table
 
 FORMAT = "sensorlogger"
+
+#: environment variable naming the platform ("android" or "ios") of an export without Metadata.csv
+#: (the ``platform`` argument of :func:`read_sensorlogger` takes precedence)
+PLATFORM_ENV = "PDR_SENSORLOGGER_PLATFORM"
 
 #: files this reader uses (lower-case base name without .csv)
 KNOWN = ("accelerometer", "totalacceleration", "gravity", "gyroscope", "gyroscopeuncalibrated", "magnetometer",
@@ -227,7 +236,10 @@ def _location(s: _Sensor, t_ns: np.ndarray, notes: dict, repairs: list[str]):
 def read_sensorlogger(path: str, *, platform: str | None = None, warn: bool = True) -> Recording:
     """Read a Sensor Logger export (zip, folder, or a CSV inside the folder); see the module doc.
 
-    ``platform`` ("android" or "ios") overrides or replaces Metadata.csv.
+    ``platform`` ("android" or "ios") overrides or replaces Metadata.csv;
+    the environment variable ``PDR_SENSORLOGGER_PLATFORM`` stands in for a
+    Metadata.csv without a platform (so that the command line can say it),
+    never overriding one.
     """
     path = str(path)
     if not os.path.exists(path):
@@ -258,7 +270,10 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
     empty = sorted(files[b].split("/")[-1] for b in files if b in KNOWN and b != "metadata" and b not in sensors)
 
     # -- platform and sign convention
-    platform = (platform_arg or md.get("platform", "")).strip().lower()
+    # the argument overrides Metadata.csv; the environment variable only stands in for a missing one
+    env = os.environ.get(PLATFORM_ENV, "").strip()
+    md_platform = md.get("platform", "").strip()
+    platform = (platform_arg or md_platform or env).strip().lower()
     if platform in ("iphone", "ipados", "watchos"):
         platform = "ios"
     if not platform:
@@ -266,10 +281,12 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
             platform = "android"  # only the Android app writes TotalAcceleration.csv
         else:
             raise RecordingError("cannot tell whether this was recorded on iOS or Android (no Metadata.csv and no "
-                                 "TotalAcceleration.csv), and the acceleration sign depends on it; pass "
-                                 "platform='android' or platform='ios'", source)
+                                 "TotalAcceleration.csv), and the acceleration sign depends on it; set the "
+                                 f"environment variable {PLATFORM_ENV}=android or {PLATFORM_ENV}=ios (from Python: "
+                                 "read_sensorlogger/load_recording(..., platform='android'|'ios'))", source)
     if platform not in ("android", "ios"):
-        raise RecordingError(f"unknown platform {platform!r} in Metadata.csv (expected android or ios)", source)
+        where = "the platform argument" if platform_arg else ("Metadata.csv" if md_platform else PLATFORM_ENV)
+        raise RecordingError(f"unknown platform {platform!r} in {where} (expected android or ios)", source)
     standardised = any(("standardis" in k.lower() or "standardiz" in k.lower())
                        and v.strip().lower() in ("true", "1", "yes", "on") for k, v in md.items())
     ios_native = platform == "ios" and not standardised
@@ -351,6 +368,12 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
                 streams[name] = make_stream(name, t_of(s), s.xyz(),
                                             note=f"uncalibrated ({os.path.basename(s.where)}): no calibrated file")
                 notes[f"{name}_from"] = "uncalibrated file"
+                what = "the OS gyro bias is not removed" if name == GYRO else "the OS hard-iron correction is missing"
+                msg = (f"{source}: no calibrated {cal.capitalize()}.csv (missing or empty): the '{name}' stream is "
+                       f"{os.path.basename(s.where)} instead ({what})")
+                repairs.append(msg)
+                if warn:
+                    warnings.warn(msg, SensorSubstitutedWarning, stacklevel=3)
 
     # -- location
     if "location" in sensors:
