@@ -8,7 +8,7 @@ import pytest
 from core.conventions import wrap_angle
 from core.pdr.pipeline import Pipeline
 from core.recording import MissingSensorError, Recording
-from desktop.simulator import simulate_walk
+from desktop.simulator import simulate_walk, street_route
 
 
 def _heading_change(track, t_before_ns, t_after_ns):
@@ -85,3 +85,60 @@ def test_without_gyroscope_the_track_is_labelled_and_still_usable():
     assert any("no gyroscope" in lab for lab in res.labels)
     end = np.array([res.track.east_m[-1], res.track.north_m[-1]])
     assert np.linalg.norm(end - [20, 20]) < 0.15 * walk.truth.path_length_m
+
+
+# -- long walks through the streaming kernel (issue #12; the 24-hour version: benchmarks/long_walk.py) --------
+
+def test_keep_steps_false_streams_the_same_steps_as_the_batch_run():
+    walk = simulate_walk([(0, 0), (0, 30), (20, 30)], rate_hz=50.0, seed=4)
+    batch = Pipeline().run(walk.recording)
+    for keep in (False, 5):
+        p = Pipeline(keep_steps=keep)
+        got = []
+        for name, t, v in walk.recording.events(["gyro", "acc", "mag"]):
+            got.extend(p.update(name, t, v))
+        got.extend(p.finish())
+        assert got == batch.steps  # same steps, same indices, same positions
+        assert p.n_steps == len(batch.steps)
+        assert list(p.steps) == ([] if keep is False else batch.steps[-5:])
+
+
+def test_an_hour_of_streaming_keeps_the_filter_sound_the_memory_flat_and_the_heading_bounded():
+    """One hour at 50 Hz along city streets (about 25 s): quaternion unit, covariance symmetric positive
+    definite at every 5-minute checkpoint, no container growing with the walk, heading error as the
+    magnetometer bounds it (the same in the last 10 minutes as in the first)."""
+    from core.pdr.attitude import AttitudeEKF
+
+    walk = simulate_walk(street_route(1.26 * 3600.0, seed=7), rate_hz=50.0, seed=7)
+    assert walk.recording.duration_s > 3500.0
+    p = Pipeline(keep_steps=False)
+    assert isinstance(p.attitude, AttitudeEKF)
+    steps, sizes = [], []
+    next_check = walk.recording.streams["acc"].t_ns[0] + 300_000_000_000
+    for name, t, v in walk.recording.events(["gyro", "acc", "mag"]):
+        steps.extend(p.update(name, t, v))
+        if t >= next_check:
+            next_check += 300_000_000_000
+            a = p.attitude
+            assert abs(math.sqrt(sum(c * c for c in a.q)) - 1.0) < 1e-9
+            P = a.P
+            assert np.allclose(P, P.T, rtol=0.0, atol=1e-12 * np.abs(P).max())
+            assert np.linalg.eigvalsh(0.5 * (P + P.T)).min() > 0.0
+            sizes.append(p.held_items())
+    steps.extend(p.finish())
+    assert len(sizes) >= 11
+    # memory flat: what the pipeline holds after an hour is what it held after 10 minutes (within noise)
+    assert max(sizes[2:]) <= 1.05 * sizes[1] + 100, sizes
+    assert len(p.steps) == 0 and p.n_steps == len(steps)
+    assert len(steps) == pytest.approx(len(walk.truth.step_t_ns), rel=0.01)
+    # heading error against the true walking direction, per 10-minute block (the phone points 3 deg off it)
+    t = np.array([s.t_ns for s in steps])
+    err = np.degrees(np.angle(np.exp(1j * (np.array([s.heading_rad for s in steps]) - walk.truth.heading_at(t)))))
+    block = (t - t[0]) // 600_000_000_000
+    p95 = [np.percentile(np.abs(err[block == b]), 95) for b in np.unique(block)]
+    med = [np.median(np.abs(err[block == b])) for b in np.unique(block)]
+    assert len(p95) == 6
+    assert max(p95) < 7.0 and max(med) < 4.5, (p95, med)
+    assert p95[-1] < p95[0] + 1.5 and med[-1] < med[0] + 1.0
+    assert p.attitude.counters()["heading_sd_rad"] < math.radians(3.0)
+    assert not p.labels()

@@ -65,6 +65,15 @@ Joseph form, which is right for any gain.  ``mag_mode="full"`` is the
 paper's vector update (eq. 12 with ``v = h``; Jacobian as for the
 accelerometer), kept for comparison.
 
+Heading without a magnetometer: started without one (``use_magnetometer=False``
+or no reading within ``mag_wait_s``), the heading is relative to
+``initial_yaw_rad`` and nothing observes it.  The accelerometer's Jacobian with
+respect to it is zero, but its correlation with the tilt and the bias would
+let every tilt or zero-rate correction shrink its variance; so until a
+magnetometer reading corrects it (:attr:`AttitudeEKF.yaw_unobserved`) those
+updates treat it as a consider state: its gain row is zero and its variance
+only grows.
+
 Zero-rate update: when the phone has been truly still for
 ``still_window_s`` (accelerometer norm and direction steady, gyroscope spread
 at its noise floor), the mean gyroscope reading over the window is a

@@ -635,6 +635,15 @@ class Pipeline:
                 "sensor_health": {k: h.as_dict() for k, h in self.health.items() if h.n},
                 "mag_all_rejected": self.mag_all_rejected()}
 
+    def held_items(self) -> int:
+        """How many items the pipeline holds in its lists, deques, dicts and arrays (a few levels deep).
+
+        A memory diagnostic: in streaming mode with ``keep_steps`` bounded it
+        stays flat however long the walk (``tests/test_pipeline.py``,
+        ``benchmarks/long_walk.py``).
+        """
+        return _held_items(self, 3, set())
+
     def status(self) -> Status:
         a = self.attitude
         return Status(self.t_ns, self.reckoner.n_steps, self.reckoner.distance_m, self.reckoner.east_m,
@@ -692,6 +701,20 @@ class Pipeline:
             fusion.counters["site"] = self.site
         return PipelineResult(list(self.steps), Track.from_steps(self.steps), att, self.labels(), recording,
                               counters, fusion)
+
+
+def _held_items(obj, depth: int, seen: set) -> int:
+    if id(obj) in seen or depth < 0:
+        return 0
+    seen.add(id(obj))
+    if isinstance(obj, np.ndarray):
+        return int(obj.size)
+    if isinstance(obj, (list, tuple, deque, set, dict)):
+        items = list(obj.values() if isinstance(obj, dict) else obj)
+        return len(items) + sum(_held_items(x, depth - 1, seen) for x in items[:64])
+    if hasattr(obj, "__dict__") and type(obj).__module__.startswith("core"):
+        return sum(_held_items(x, depth - 1, seen) for x in vars(obj).values())
+    return 0
 
 
 def run_recording(recording: Recording, **params) -> PipelineResult:

@@ -1,0 +1,115 @@
+"""A very long simulated walk through the streaming pipeline (issue #12): 24 hours by default.
+
+    python -m benchmarks.long_walk                 # 24 h, about 10-15 min on one core
+    python -m benchmarks.long_walk --hours 0.5     # a quick look
+
+The walk is simulated one segment at a time (``--segment-min``, an hour by
+default: one simulated day at once would need tens of GB) along city streets
+(:func:`desktop.simulator.street_route`), each segment starting where and when
+the last one ended, with its own gyroscope bias and a short stop between them
+(traffic lights).  Everything goes through one :class:`core.pdr.pipeline.Pipeline`
+in streaming mode (``keep_steps=False``, as the app runs it).  After every
+segment it prints and checks what ``tests/test_pipeline.py`` checks for one
+hour: the quaternion's norm, the covariance symmetric and positive definite,
+the items the pipeline holds (flat), the process's peak memory, and the
+heading error against the simulator's truth (the magnetometer bounds it: it
+must not grow with time).  ``--json`` writes the rows.  Exit status 1 when a
+check fails.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import resource
+import sys
+import time
+
+import numpy as np
+
+from core.pdr.pipeline import Pipeline
+from desktop.simulator import simulate_walk, street_route
+
+#: checks per segment: heading error 95th percentile (deg), its growth over the first segment's (deg),
+#: held items' growth over the first segment's (fraction)
+MAX_P95_DEG = 8.0
+MAX_P95_GROWTH_DEG = 2.0
+MAX_HELD_GROWTH = 0.05
+
+
+def _segment(k: int, seed: int, minutes: float, start_en, heading_deg, clock_ns: int):
+    route = street_route(1.26 * 60.0 * minutes, seed=seed * 1000 + k, start_en_m=start_en,
+                         start_heading_deg=heading_deg)
+    rng = np.random.default_rng([seed, k])
+    walk = simulate_walk(route, rate_hz=50.0, seed=seed * 1000 + k, clock_start_ns=clock_ns,
+                         gyro_bias_rad_s=tuple(rng.normal(0.0, 0.003, 3)))
+    last = route[-1] - route[-2]
+    return walk, tuple(route[-1]), math.degrees(math.atan2(last[1], last[0]))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--hours", type=float, default=24.0)
+    ap.add_argument("--segment-min", type=float, default=60.0)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--json", help="write the per-segment rows here")
+    args = ap.parse_args(argv)
+    n_seg = max(1, math.ceil(args.hours * 60.0 / args.segment_min))
+    p = Pipeline(keep_steps=False)
+    start_en, heading_deg, clock = (0.0, 0.0), None, 10 ** 12
+    rows, failures = [], []
+    t_wall = time.time()
+    for k in range(n_seg):
+        walk, start_en, heading_deg = _segment(k, args.seed, args.segment_min, start_en, heading_deg, clock)
+        steps = []
+        for name, t, v in walk.recording.events(["gyro", "acc", "mag"]):
+            steps.extend(p.update(name, t, v))
+            clock = t
+        clock += 20_000_000
+        a = p.attitude
+        P = a.P
+        ts = np.array([s.t_ns for s in steps], dtype=np.int64)
+        if len(ts):
+            err = np.degrees(np.angle(np.exp(1j * (np.array([s.heading_rad for s in steps])
+                                                   - walk.truth.heading_at(ts)))))
+        else:
+            err = np.array([math.nan])
+        row = {"segment": k, "hours": round((k + 1) * args.segment_min / 60.0, 3), "steps": len(steps),
+               "true_steps": int(len(walk.truth.step_t_ns)),
+               "heading_err_median_deg": float(np.median(np.abs(err))),
+               "heading_err_p95_deg": float(np.percentile(np.abs(err), 95)),
+               "heading_sd_deg": math.degrees(math.sqrt(max(float(P[2, 2]), 0.0))),
+               "q_norm_error": abs(math.sqrt(sum(c * c for c in a.q)) - 1.0),
+               "P_asymmetry": float(np.abs(P - P.T).max() / np.abs(P).max()),
+               "P_min_eig": float(np.linalg.eigvalsh(0.5 * (P + P.T)).min()),
+               "held_items": p.held_items(), "kept_steps": len(p.steps),
+               "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+               "labels": list(p.labels()), "wall_s": round(time.time() - t_wall, 1)}
+        rows.append(row)
+        print(" ".join(f"{k_}={v:.4g}" if isinstance(v, float) else f"{k_}={v}" for k_, v in row.items()), flush=True)
+        first = rows[0]
+        if row["q_norm_error"] > 1e-9:
+            failures.append(f"segment {k}: quaternion norm off by {row['q_norm_error']:.2g}")
+        if row["P_asymmetry"] > 1e-12 or not row["P_min_eig"] > 0.0:
+            failures.append(f"segment {k}: covariance not symmetric positive definite")
+        if row["heading_err_p95_deg"] > MAX_P95_DEG:
+            failures.append(f"segment {k}: heading error p95 {row['heading_err_p95_deg']:.1f} deg")
+        if row["heading_err_p95_deg"] > first["heading_err_p95_deg"] + MAX_P95_GROWTH_DEG:
+            failures.append(f"segment {k}: heading error grew to {row['heading_err_p95_deg']:.1f} deg")
+        if k and row["held_items"] > (1.0 + MAX_HELD_GROWTH) * rows[0]["held_items"] + 100:
+            failures.append(f"segment {k}: the pipeline holds {row['held_items']} items "
+                            f"(after the first segment: {rows[0]['held_items']})")
+        del walk, steps
+    p.finish()
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"rows": rows, "failures": failures}, f, indent=1)
+    for msg in failures:
+        print("FAIL", msg, file=sys.stderr)
+    print("ok" if not failures else f"{len(failures)} check(s) failed", flush=True)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
