@@ -700,6 +700,28 @@ def _line_error(msg: str, source: str, lineno: int) -> RecordingError:
     return RecordingError(msg, source, lineno)
 
 
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+#: metadata keys that the product reads, with the type they must have (checked when the file is read,
+#: not after a full run)
+_METADATA_TYPES = (
+    ("unix_offset_ns", _is_int, "an integer (nanoseconds)"),
+    ("t0_unix_ns", _is_int, "an integer (nanoseconds)"),
+    ("devices", lambda v: isinstance(v, dict) and all(isinstance(d, dict) for d in v.values()),
+     "an object of objects (one per device)"),
+    ("truth", lambda v: isinstance(v, dict), "an object"),
+    ("waypoints_en_m", lambda v: isinstance(v, list) and all(isinstance(p, list) and len(p) == 2
+                                                            and all(_is_number(c) for c in p) for p in v),
+     "a list of [east, north] number pairs"),
+)
+
+
 def _check_header(header, version: int, source: str) -> dict:
     """The header's stream specs, after checking every field's type (a clear error, never a traceback)."""
     if not isinstance(header, dict) or not isinstance(header.get("streams"), dict) or not header["streams"]:
@@ -714,6 +736,11 @@ def _check_header(header, version: int, source: str) -> dict:
     for key in ("device", "metadata"):
         if header.get(key) is not None and not isinstance(header[key], dict):
             raise RecordingError(f"header '{key}' must be a JSON object, found {type(header[key]).__name__}",
+                                 source, 2)
+    meta = header.get("metadata") or {}
+    for key, ok, want in _METADATA_TYPES:
+        if key in meta and meta[key] is not None and not ok(meta[key]):
+            raise RecordingError(f"header metadata '{key}' must be {want}, found {json.dumps(meta[key])[:60]}",
                                  source, 2)
     specs = {}
     for name, spec in header["streams"].items():

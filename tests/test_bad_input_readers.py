@@ -171,6 +171,9 @@ def _with_header(change):
     (lambda h: h.update(format_version="1"), "'format_version' is '1', the magic line says 1"),
     (lambda h: h.update(format_version=2), "'format_version' is 2, the magic line says 1"),
     (lambda h: h.update(format="other-format"), "'format' is 'other-format'"),
+    (lambda h: h.update(metadata={"unix_offset_ns": "1700000000000000000"}), "'unix_offset_ns' must be an integer"),
+    (lambda h: h.update(metadata={"waypoints_en_m": [[0, 0], ["10", 5]]}), "'waypoints_en_m' must be a list of"),
+    (lambda h: h.update(metadata={"devices": {"left_foot": "shoe"}}), "'devices' must be an object of objects"),
 ])
 def test_header_fields_of_the_wrong_type_are_a_clear_error(change, match):
     with pytest.raises(RecordingError, match=match) as e:
