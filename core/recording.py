@@ -51,6 +51,7 @@ import json
 import math
 import os
 import warnings
+from array import array
 from dataclasses import dataclass, field
 from typing import IO, Iterable, Iterator
 
@@ -819,7 +820,8 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
         raise RecordingError("header is not valid JSON: nested too deeply", source, 2) from None
     specs = _check_header(header, version, source)
     ncols = {n: len(s["columns"]) for n, s in specs.items()}
-    data: dict[str, tuple[list[int], list[list[float]], list[int]]] = {n: ([], [], []) for n in specs}
+    # per stream: timestamps, value rows, file line of each event (an int64 array: 8 bytes an event)
+    data: dict[str, tuple[list[int], list[list[float]], array]] = {n: ([], [], array("q")) for n in specs}
     last = len(lines) - 1
     # a file written completely ends with "\n", so its last split element is ""
     if allow_truncated_tail and last >= 2 and lines[last].strip() and not lines[last].lstrip().startswith("#"):
@@ -828,22 +830,37 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
         lines = lines[:last]
     bad: list[RecordingError] = []
     n_events = 0
+    suspect = "\ufffd" in text  # bytes that were not UTF-8 somewhere
     for i in range(2, len(lines)):
         line = lines[i].strip()
         if not line or line.startswith("#"):
             continue  # a bad byte in a comment does not matter
         n_events += 1
         lineno = i + 1
-        try:
-            name, t, vals = _parse_row(line, specs, ncols, source, lineno)
-        except RecordingError as e:
-            if not allow_truncated_tail:
-                raise
-            bad.append(e)
-            if len(bad) > MAX_BAD_LINES:
-                break
-            continue
-        d = data[name]
+        # fast path; anything unusual goes to _parse_row, which names the problem
+        parts = line.split(",")
+        name = parts[0]
+        d = data.get(name)
+        ok = d is not None and len(parts) == ncols[name] + 2 and not (suspect and "\ufffd" in line)
+        if ok:
+            try:
+                t = int(parts[1])
+                vals = [float(p) for p in parts[2:]]
+            except ValueError:
+                ok = False
+            else:
+                ok = _INT64_MIN <= t <= _INT64_MAX
+        if not ok:
+            try:
+                name, t, vals = _parse_row(line, specs, ncols, source, lineno)
+            except RecordingError as e:
+                if not allow_truncated_tail:
+                    raise
+                bad.append(e)
+                if len(bad) > MAX_BAD_LINES:
+                    break
+                continue
+            d = data[name]
         d[0].append(t)
         d[1].append(vals)
         d[2].append(lineno)
@@ -885,6 +902,7 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
 
 
 _INT64_MAX = 2**63 - 1
+_INT64_MIN = -2**63
 
 
 def _parse_row(line: str, specs, ncols, source: str, lineno: int):
@@ -905,7 +923,7 @@ def _parse_row(line: str, specs, ncols, source: str, lineno: int):
     except ValueError:
         raise RecordingError(f"timestamp {parts[1][:40]!r} is not an integer nanosecond count",
                              source, lineno) from None
-    if not -_INT64_MAX - 1 <= t <= _INT64_MAX:
+    if not _INT64_MIN <= t <= _INT64_MAX:
         raise RecordingError(f"timestamp {parts[1][:40]} does not fit a 64-bit nanosecond count", source, lineno)
     vals = []
     for col, p in zip(specs[name]["columns"], parts[2:]):
