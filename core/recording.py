@@ -148,7 +148,7 @@ def bad_lines_tolerated(n_bad: int, n_lines: int) -> bool:
 
 
 def gunzip_partial(data: bytes) -> tuple[bytes, str | None]:
-    """Decompress gzip ``data``; a truncated or corrupt stream gives what came before the damage.
+    """Decompress gzip ``data``; a truncated or corrupt stream gives the complete lines before the damage.
 
     Returns ``(bytes, problem)`` with ``problem`` ``None`` when the stream was whole.
     """
@@ -174,7 +174,11 @@ def gunzip_partial(data: bytes) -> tuple[bytes, str | None]:
             problem = "trailing garbage after the gzip stream"
             break
         pos = len(data) - len(rest)  # another gzip member follows
-    return b"".join(out), problem
+    raw = b"".join(out)
+    if problem is not None:  # the last line was cut by the damage: keep complete lines only
+        raw = raw[:raw.rfind(b"\n") + 1]
+        problem += " (its cut last line dropped)"
+    return raw, problem
 
 
 @dataclass
@@ -675,7 +679,7 @@ def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool =
     except OSError as e:
         raise RecordingError(f"cannot open: {e.strerror or e}", path) from None
     repairs = []
-    if path.endswith(".gz") or data[:2] == b"\x1f\x8b":
+    if data[:2] == b"\x1f\x8b":  # gzip by content, whatever the name says
         raw, problem = gunzip_partial(data)
         if problem is not None:
             if not raw or not allow_truncated_tail:

@@ -517,6 +517,21 @@ def test_sensorlogger_missing_gyroscope_uses_the_uncalibrated_one_and_says_so(tm
     assert not any("no calibrated" in r for r in rec.repairs)
 
 
+def test_sensorlogger_gzip_member_cut_part_way_keeps_its_complete_lines(tmp_path):
+    # issue #12 class 4: a cut gzip keeps what came before the damage
+    from core.recording import DamagedFileWarning
+    files = sl_files("android", n=3000)
+    root = write_folder(tmp_path / "rec", files, gz=("Gyroscope.csv",))
+    gz = root / "Gyroscope.csv.gz"
+    data = gz.read_bytes()
+    gz.write_bytes(data[: len(data) // 2])
+    with pytest.warns(DamagedFileWarning, match="Gyroscope.csv.gz: the gzip stream is truncated"):
+        rec = read_sensorlogger(root)
+    n = len(rec.streams["gyro"])
+    assert 100 < n < 3000 and len(rec.streams["acc"]) == 3000
+    np.testing.assert_allclose(rec.streams["gyro"].values, [[0.001, 0.002, -0.003]] * n)
+
+
 def test_sensorlogger_acceleration_in_g_is_converted(tmp_path):
     files = sl_files("android")
     files["TotalAcceleration.csv"] = sl_csv("time,seconds_elapsed,z,y,x",

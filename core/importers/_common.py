@@ -102,6 +102,8 @@ class FileSet:
 
     def __init__(self, path: str):
         self.path = str(path)
+        #: damage repaired while reading members (a gzip member cut part-way: its complete lines are kept)
+        self.repairs: list[str] = []
         self._zip: zipfile.ZipFile | None = None
         self._real: dict[str, str] = {}
         if os.path.isdir(self.path):
@@ -143,7 +145,7 @@ class FileSet:
                     data = f.read()
         except (OSError, zipfile.BadZipFile, EOFError) as e:
             raise RecordingError(f"cannot read: {e}", self.where(name)) from None
-        return maybe_gunzip(data, self.where(name))
+        return maybe_gunzip(data, self.where(name), self.repairs)
 
     def read_text(self, name: str) -> str:
         return decode_text(self.read_bytes(name), self.where(name))

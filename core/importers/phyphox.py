@@ -85,11 +85,12 @@ import csv
 import io
 import os
 import re
+import warnings
 
 import numpy as np
 
 from core.conventions import ACC, GPS, GYRO, MAG
-from core.recording import Recording, RecordingError, make_stream
+from core.recording import DamagedFileWarning, Recording, RecordingError, make_stream
 from core.importers._common import (
     EXTRA_STREAM_SPECS, PRESSURE, FileSet, acceleration_in_m_s2, decode_text, finish, first_bad_time, gps_check,
     gps_values, magnetic_dip_deg, read_bytes,
@@ -220,11 +221,16 @@ def read_phyphox(path: str, *, warn: bool = True) -> Recording:
                     meta["device"] = (fs.where(n), fs.read_text(n))
                 elif low.endswith("meta/time.csv"):
                     meta["time"] = (fs.where(n), fs.read_text(n))
+            damage = list(fs.repairs)
     else:
-        files = [(os.path.basename(path), path, decode_text(read_bytes(path), path))]
+        damage = []
+        files = [(os.path.basename(path), path, decode_text(read_bytes(path, damage), path))]
         meta = {}
+    if warn:
+        for r in damage:  # a gzip file cut part-way: its complete lines are kept
+            warnings.warn(r, DamagedFileWarning, stacklevel=2)
     with np.errstate(all="ignore"):  # non-finite values pass through as data, without numpy warnings
-        return _build(files, meta, path, warn)
+        return _build(files, meta, path, warn, damage)
 
 
 def _is_zip(path: str) -> bool:
@@ -232,11 +238,11 @@ def _is_zip(path: str) -> bool:
         return f.read(4) in (b"PK\x03\x04", b"PK\x05\x06")
 
 
-def _build(files, meta, source, warn) -> Recording:
+def _build(files, meta, source, warn, damage=()) -> Recording:
     found: dict[str, list] = {}
     unused: list[str] = []
     dropped_rows = 0
-    repairs: list[str] = []
+    repairs: list[str] = list(damage)
     for name, where, text in files:
         if not text.strip():
             continue

@@ -110,7 +110,7 @@ import numpy as np
 
 from core import quaternion as quat
 from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC, STANDARD_GRAVITY_M_S2
-from core.recording import Recording, RecordingError, SensorSubstitutedWarning, make_stream
+from core.recording import DamagedFileWarning, Recording, RecordingError, SensorSubstitutedWarning, make_stream
 from core.importers._common import (
     EXTRA_STREAM_SPECS, GYRO_UNCAL, MAG_UNCAL, PRESSURE, FileSet, acceleration_in_m_s2, attitude_checks, finish,
     gps_check, gps_values, magnetic_dip_deg, sample_at,
@@ -266,6 +266,10 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
                 repairs.append(f"{s.where}: dropped an incomplete last line {s.table.dropped_tail}")
             if not s.empty:
                 sensors[base] = s
+    for r in fs.repairs:  # gzip members cut part-way
+        repairs.append(r)
+        if warn:
+            warnings.warn(r, DamagedFileWarning, stacklevel=3)
     ignored = sorted(files[b].split("/")[-1] for b in files if b not in KNOWN)
     empty = sorted(files[b].split("/")[-1] for b in files if b in KNOWN and b != "metadata" and b not in sensors)
 
