@@ -871,7 +871,8 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
     if bad:
         if not bad_lines_tolerated(len(bad), n_events):
             e = bad[0]
-            more = (f" ({len(bad) if len(bad) <= MAX_BAD_LINES else 'over %d' % MAX_BAD_LINES} bad lines of "
+            count = len(bad) if len(bad) <= MAX_BAD_LINES else f"over {MAX_BAD_LINES}"
+            more = (f" ({count} bad lines of "
                     f"{n_events}: too many to skip; at most {MAX_BAD_LINES} and 1 % are skipped)"
                     if len(bad) > 1 else "")
             raise RecordingError(e.message + more, source, e.line)

@@ -115,7 +115,8 @@ def test_many_bad_lines_reject_the_file_naming_the_first():
     lines = _text(rec).split("\n")
     for k in range(10):  # 10 of 910 lines: over 1 %
         lines.insert(100 + 50 * k, "acc,1000,0.1,zz,9.8")
-    with pytest.raises(RecordingError, match=r"'zz' of column 'y' is not a number \(10 bad lines of 910: too many") as e:
+    with pytest.raises(RecordingError,
+                       match=r"'zz' of column 'y' is not a number \(10 bad lines of 910: too many") as e:
         parse_recording("\n".join(lines), "walk.csv")
     assert e.value.line == 101
 
@@ -196,7 +197,7 @@ def _recordings(draw):
         ts = sorted(draw(st.lists(st.integers(-2**63, 2**63 - 1), min_size=1 if name == "acc" else 0, max_size=12,
                                   unique=True)))
         vals = [[draw(_finite) for _ in range(k)] for _ in ts]
-        cols = ["v%d" % j for j in range(k)] if name == "pressure" else None
+        cols = [f"v{j}" for j in range(k)] if name == "pressure" else None
         streams[name] = make_stream(name, ts, np.array(vals, dtype=np.float64).reshape(len(ts), k), columns=cols,
                                     unit="hPa" if name == "pressure" else None)
     meta = draw(st.dictionaries(st.text(max_size=5), st.one_of(st.integers(-10**6, 10**6), st.text(max_size=8)),
@@ -288,7 +289,8 @@ def test_unknown_unit_is_refused_naming_stream_unit_and_the_accepted_ones():
 
 
 @pytest.mark.parametrize("name,scale,match", [
-    ("acc", 1 / G, "stream 'acc' is declared in m/s\\^2 but its magnitude while still-ish is 0.9[0-9]*, about 1: it looks like g"),
+    ("acc", 1 / G, "stream 'acc' is declared in m/s\\^2 but its magnitude while still-ish is 0.9[0-9]*, about 1: "
+                   "it looks like g"),
     ("acc", 100.0, "looks like cm/s\\^2 or mg"),
     ("gyro", 180 / math.pi * 20, "stream 'gyro' is declared in rad/s.*it looks like deg/s"),
     ("mag", 1000.0, "stream 'mag' is declared in uT.*looks like nT"),

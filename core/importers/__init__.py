@@ -11,7 +11,8 @@ Formats (name: input -> reader):
 * ``pdr-recording``: this project's file (``.gz`` allowed) -> :func:`core.recording.read_recording`
 * ``getsensordata``: GetSensorData / IPIN logfile (``.txt`` or ``.gz``) -> :func:`read_getsensordata`
 * ``sensorlogger``: Sensor Logger export, zip or folder (or a CSV inside it) -> :func:`read_sensorlogger`
-  (``platform="android"|"ios"`` when the export has no Metadata.csv)
+  (``platform="android"|"ios"``, or the environment variable ``PDR_SENSORLOGGER_PLATFORM``, when the
+  export has no Metadata.csv)
 * ``phyphox``: phyphox CSV export, zip or folder (or one data CSV) -> :func:`read_phyphox`
 
 The format is recognised by content (magic line, record tags, CSV headers,
@@ -42,11 +43,11 @@ from __future__ import annotations
 import os
 import zipfile
 
-from core.recording import MAGIC, Recording, RecordingError, parse_recording, read_recording
+from core.recording import MAGIC, Recording, RecordingError, read_recording
 from core.importers import getsensordata as _gsd
 from core.importers import phyphox as _phy
 from core.importers import sensorlogger as _sl
-from core.importers._common import GZIP_MAGIC, FileSet, decode_text, head_bytes, read_bytes
+from core.importers._common import FileSet, head_bytes
 from core.importers.getsensordata import read_getsensordata
 from core.importers.phyphox import read_phyphox
 from core.importers.sensorlogger import read_sensorlogger
@@ -150,17 +151,13 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None) -> R
     ``warn``: emit :class:`core.recording.TimestampRepairWarning` for repaired
     timestamps (the repair is always listed in ``rec.repairs``).
     ``platform``: "android" or "ios" for a Sensor Logger export without
-    Metadata.csv (ignored by the other formats).
+    Metadata.csv (ignored by the other formats); without it the environment
+    variable ``PDR_SENSORLOGGER_PLATFORM`` is used for such an export.
     """
     path = str(path)
     fmt = detect_format(path)
     if fmt == PDR_RECORDING:
-        with open(path, "rb") as f:
-            gz = f.read(2) == GZIP_MAGIC
-        if gz == path.endswith(".gz"):
-            rec = read_recording(path, warn=warn)
-        else:  # read_recording decides on gzip by the name; this file's name says otherwise
-            rec = parse_recording(decode_text(read_bytes(path), path), path, warn=warn)
+        rec = read_recording(path, warn=warn)  # gzip or not by content, whatever the name says
         rec.metadata.setdefault("source_format", PDR_RECORDING)
         return rec
     if fmt == GETSENSORDATA:

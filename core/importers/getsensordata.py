@@ -106,7 +106,9 @@ import numpy as np
 
 from core import quaternion as quat
 from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
-from core.recording import MAX_BAD_LINES, DamagedFileWarning, Recording, RecordingError, bad_lines_tolerated, make_stream
+from core.recording import (
+    MAX_BAD_LINES, DamagedFileWarning, Recording, RecordingError, bad_lines_tolerated, make_stream,
+)
 from core.importers._common import (
     EXTRA_STREAM_SPECS, POSI, PRESSURE, attitude_checks, decode_text, finish, first_bad_number,
     first_bad_time, gps_check, gps_values, magnetic_dip_deg, read_bytes,
@@ -333,18 +335,16 @@ def _parse(text: str, source: str, warn: bool, repairs: list[str]) -> Recording:
                 if tag:
                     records.setdefault(tag, []).append(r)
     ctx = _Lines(lines, source)
-    # a last line without its newline that does not parse: the logger was cut off
+    # a last line without its newline: the logger was cut off; dropped even when it parses ("2.586e-0" may be
+    # a cut "2.586e-05")
     if lines and lines[-1] and lines[-1][0] != "%":
         last = lines[-1]
         tag = last.partition(";")[0]
-        if tag in RECORDS:
-            names, required = RECORDS[tag]
-            # dropped even when it parses: "2.586e-0" may be a cut "2.586e-05"
-            if records.get(tag) and records[tag][-1] == last:
-                records[tag].pop()
-                if not records[tag]:
-                    del records[tag]
-                repairs.append(f"{source}: dropped an incomplete last line {len(lines)} (logging was cut off)")
+        if tag in RECORDS and records.get(tag) and records[tag][-1] == last:
+            records[tag].pop()
+            if not records[tag]:
+                del records[tag]
+            repairs.append(f"{source}: dropped an incomplete last line {len(lines)} (logging was cut off)")
     counts = {tag: len(rows) for tag, rows in sorted(records.items())}
     tables = {}
     bad: list[RecordingError] = []
