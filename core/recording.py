@@ -660,7 +660,7 @@ class RecordingWriter:
 
 
 def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool = True,
-                   check_units: bool = True, check_time: bool = True) -> Recording:
+                   check_units: bool = True, check_time: bool = True, allow_empty: bool = False) -> Recording:
     """Read a ``pdr-recording`` file.
 
     Raises :class:`RecordingError` (naming file and line) for an empty file, a
@@ -688,7 +688,8 @@ def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool =
         data = raw
     text = decode_utf8(data, path)
     return parse_recording(text, path, allow_truncated_tail=allow_truncated_tail, warn=warn,
-                           check_units=check_units, check_time=check_time, _repairs=repairs)
+                           check_units=check_units, check_time=check_time, allow_empty=allow_empty,
+                           _repairs=repairs)
 
 
 def decode_utf8(data: bytes, source: str) -> str:
@@ -699,10 +700,6 @@ def decode_utf8(data: bytes, source: str) -> str:
         return data.decode("utf-8")
     except UnicodeDecodeError:
         return data.decode("utf-8", errors="replace")
-
-
-def _line_error(msg: str, source: str, lineno: int) -> RecordingError:
-    return RecordingError(msg, source, lineno)
 
 
 def _is_int(v) -> bool:
@@ -775,7 +772,7 @@ def _check_header(header, version: int, source: str) -> dict:
 
 def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: bool = True,
                     warn: bool = True, check_units: bool = True, check_time: bool = True,
-                    _repairs: list[str] | None = None) -> Recording:
+                    allow_empty: bool = False, _repairs: list[str] | None = None) -> Recording:
     """Parse the text of a ``pdr-recording`` file (see :func:`read_recording`).
 
     A bad event line (unknown stream, wrong number of values, a value that is
@@ -795,7 +792,9 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
     unit (:func:`check_values_against_units`).  With ``check_time`` the
     time base is checked (:func:`check_time_base`): timestamps that are not
     nanoseconds, or a clock that jumps back by more than a second, are a
-    :class:`RecordingError`.
+    :class:`RecordingError`.  With ``allow_empty`` a file with a header but
+    no events (a live recording killed before its first flush) gives a
+    recording with empty streams (noted in ``repairs``) instead of an error.
     """
     repairs: list[str] = list(_repairs or [])
     if not text.strip():
@@ -891,7 +890,10 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
             unit, note = STREAM_SPECS[GPS]["unit"], STREAM_SPECS[GPS]["note"]
         streams[name] = Stream(name, np.array(ts, dtype=np.int64), vals, cols, unit, note)
     if not any(len(s) for s in streams.values()):
-        raise RecordingError("the file has a header but no sensor events", source)
+        if not allow_empty:
+            raise RecordingError("the file has a header but no sensor events", source)
+        repairs.append(f"{source}: the file has a header but no sensor events (a recording stopped before its "
+                       "first events were written)")
     if check_time:
         for name, s in streams.items():
             check_time_base(name, s.t_ns, source, data[name][2])

@@ -374,3 +374,14 @@ def test_a_rate_change_is_not_thousands_of_gaps():
     assert st_["rate_changes"] == 1 and st_["rates_hz"] == pytest.approx([200.0, 50.0])
     steady = make_stream("acc", t1, np.zeros((len(t1), 3))).interval_stats_s()
     assert steady["gaps"] == 0 and steady["rate_changes"] == 0 and steady["median_s"] == pytest.approx(0.005)
+
+
+def test_a_header_only_file_is_an_error_or_with_allow_empty_an_empty_recording(tmp_path):
+    from core.recording import RecordingWriter
+    p = tmp_path / "live.csv"
+    RecordingWriter(str(p), device={"model": "phone"}).close()  # as if killed before the first event
+    with pytest.raises(RecordingError, match="header but no sensor events"):
+        read_recording(str(p))
+    rec = read_recording(str(p), allow_empty=True, warn=False)
+    assert set(rec.streams) == {"acc", "gyro", "mag", "gps"} and not any(len(s) for s in rec.streams.values())
+    assert rec.device == {"model": "phone"} and any("no sensor events" in r for r in rec.repairs)
