@@ -6,7 +6,8 @@ Python so that it is tested without a window.
 
 Event flow per tick::
 
-    source.drain()  --(raw, as delivered)-->  RecordingWriter.add  (flushed every flush_interval_s)
+    source.drain()  --(raw, as delivered)-->  BackgroundRecorder.add  (one batch per tick to its writer
+          |                                                           thread; fsync'ed every flush_interval_s)
           |
           v
     reorder buffer (events held reorder_window_ns, released in time order,
@@ -45,9 +46,10 @@ from typing import Callable
 
 from core.conventions import GPS, bearing_deg
 from core.geodesy import geodetic_to_enu
-from core.recording import STREAM_ORDER, STREAM_SPECS, RecordingWriter
+from core.recording import STREAM_ORDER, STREAM_SPECS
 
 from app.health import HealthMonitor
+from app.recorder import BackgroundRecorder
 
 _RANK = {n: i for i, n in enumerate(STREAM_ORDER)}
 
@@ -127,7 +129,9 @@ class Session:
     record_path : str, optional
         Write every event (as delivered, before reordering) to this file.
     flush_interval_s : float
-        The recording is flushed (and fsync'ed) at least this often while events come.
+        The recording is written and fsync'ed at least this often while events come (by the
+        recorder's writer thread, :mod:`app.recorder`).  A write error stops the recording
+        (what was written stays) and is kept in :attr:`record_error`.
     reorder_window_ns : int
         How long events wait so that late events of other sensors can be put in order.
     clock : callable
@@ -137,13 +141,15 @@ class Session:
     def __init__(self, source, *, pipeline_factory: Callable, record_path: str | None = None,
                  record_streams: dict | None = None, device: dict | None = None, metadata: dict | None = None,
                  flush_interval_s: float = 0.5, reorder_window_ns: int = 50_000_000,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic, recorder_factory: Callable = BackgroundRecorder):
         self.source = source
         self.pipeline_factory = pipeline_factory
         self.flush_interval_s = float(flush_interval_s)
         self.reorder_window_ns = int(reorder_window_ns)
         self._clock = clock
-        self.writer: RecordingWriter | None = None
+        self.writer: BackgroundRecorder | None = None
+        self._recorder_factory = recorder_factory
+        self.record_error = ""  #: why the recording stopped by itself ("" while it has not)
         self._record_width: dict = {}
         self.record_path = record_path
         self._record_streams = record_streams
@@ -195,7 +201,9 @@ class Session:
             meta = dict(metadata or {})
             if self.source.unix_offset_ns is not None:
                 meta.setdefault("unix_offset_ns", int(self.source.unix_offset_ns))
-            self.writer = RecordingWriter(self.record_path, streams=streams, device=dev, metadata=meta)
+            self.writer = self._recorder_factory(self.record_path, streams, dev, meta,
+                                                 flush_interval_s=self.flush_interval_s)
+            self.record_error = ""
             self._record_width = {n: len(spec["columns"]) for n, spec in streams.items()}
             self._last_flush = self._clock()
 
@@ -215,13 +223,32 @@ class Session:
         """Stop the source, finish the track and close the recording."""
         self.source.stop()
         self._finish()
-        if self.writer is not None:
-            self.writer.close()
+        self.stop_recording()
 
-    def flush(self) -> None:
+    def stop_recording(self) -> int:
+        """Close the recording (what is queued is written and fsync'ed); returns the events in the file."""
+        w, self.writer = self.writer, None
+        if w is None:
+            return 0
+        w.close()
+        if w.error and not self.record_error:
+            self.record_error = f"recording stopped: {w.error} ({w.events_written} events kept)"
+        return w.events_written
+
+    def flush(self, wait_s: float = 2.0) -> None:
+        """Write and fsync the recording now (waits up to ``wait_s`` for the writer thread; never raises)."""
         if self.writer is not None:
-            self.writer.flush()
+            self.writer.flush(wait_s)
+            self._check_recorder()
         self._last_flush = self._clock()
+
+    def _check_recorder(self) -> None:
+        """A write error stops the recording: kept in :attr:`record_error`, the file keeps what was written."""
+        w = self.writer
+        if w is not None and w.error:
+            self.record_error = f"recording stopped: {w.error} ({w.events_written} events kept)"
+            self.writer = None
+            w.close(wait_s=1.0)
 
     # -- processing ---------------------------------------------------------------
 
@@ -237,8 +264,9 @@ class Session:
                 break
         if self.source.finished and not self.finished:
             new.extend(self._finish())
-        if self.writer is not None and self._clock() - self._last_flush >= self.flush_interval_s:
-            self.flush()
+        if self.writer is not None:
+            self.writer.push()  # one batch per tick; the writer thread writes and fsyncs it
+            self._check_recorder()
         return new
 
     def ingest(self, events, new: list | None = None) -> list:
