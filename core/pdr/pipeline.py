@@ -571,8 +571,8 @@ class Pipeline:
             top = sorted(((v, k) for k, v in a.mag_reasons.items() if k not in ("used", "initialising")),
                          reverse=True)[:2]
             why = ", ".join(f"{k} {v}" for v, k in top)
-            out.append(f"magnetometer rejected 100 % of the time ({why}): no absolute heading, the heading is "
-                       f"relative to the start as without one")
+            out.append(f"magnetometer rejected 100 % of the time ({why}): no compass correction, the heading "
+                       f"rests on the gyroscope from the start and its absolute direction is not to be trusted")
         elif a.use_magnetometer and used + rej > 100 and rej > self.MAG_REJECTED_WARN * (used + rej):
             out.append(f"magnetometer {100 * rej / (used + rej):.0f} % rejected: the heading leans on the "
                        f"gyroscope (bent or miscalibrated field)")
