@@ -24,13 +24,17 @@ DEMO_PATH = Path(__file__).with_name("data") / "demo_walk.csv.gz"
 EXIT_INPUT = 2
 
 
-def load_any(path: str) -> Recording:
-    """Read a recording in any supported format (auto-detected)."""
+def load_any(path: str, platform: str | None = None) -> Recording:
+    """Read a recording in any supported format (auto-detected); ``platform`` for a Sensor Logger export
+    that does not say whether it came from Android or iOS."""
+    p = Path(path)
+    if p.exists() and not (p.is_file() or p.is_dir()):
+        raise RecordingError("not a regular file or folder (a FIFO or a device?): give a recording file", str(path))
     try:
         from core.importers import load_recording
     except ImportError:  # importers not installed: only the native format
         return read_recording(path)
-    return load_recording(path)
+    return load_recording(path, platform=platform)
 
 
 def load_demo() -> Recording:
@@ -325,7 +329,7 @@ def _write_outputs(args, rec, track, origin, extra, title_extra: str = "", other
 
 
 def cmd_replay(args) -> int:
-    rec = load_demo() if args.recording is None else load_any(args.recording)
+    rec = load_demo() if args.recording is None else load_any(args.recording, args.platform)
     mode, why = choose_mode(args, rec)
     if mode == "foot":
         return cmd_replay_foot(args, rec, why)
@@ -442,6 +446,9 @@ def make_parser() -> argparse.ArgumentParser:
                    help="foot mode: stance detector (default shoe)")
     r.add_argument("--gyro-delay-ms", type=float, default=0.0, metavar="MS",
                    help="foot mode: the gyroscope lags the accelerometer by this much (ms)")
+    r.add_argument("--platform", choices=("android", "ios"), default=None,
+                   help="for a Sensor Logger export without Metadata.csv: the phone it came from "
+                        "(or set PDR_SENSORLOGGER_PLATFORM)")
     r.add_argument("--json", action="store_true", help="print the summary as JSON")
     r.add_argument("--progress", action="store_true", help="show progress on stderr from the start "
                    "(default: once the replay has taken 2 s, on a terminal or not)")

@@ -110,3 +110,15 @@ def test_progress_shows_after_two_seconds_tty_or_not(capsys):
     off = _Progress("replay", enabled=False, clock=lambda: 100.0)
     off(0.5)
     assert capsys.readouterr().err == ""
+
+
+def test_a_fifo_is_refused_in_one_line(tmp_path, capsys):
+    import os
+
+    from desktop.cli import main
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    assert main(["replay", str(fifo)]) == 2
+    err = capsys.readouterr().err
+    assert "not a regular file" in err and str(fifo) in err
