@@ -55,3 +55,18 @@ def test_the_cli_summary_reports_the_skipped_values(tmp_path, demo):
                          cwd=ROOT)
     assert out.returncode == 0, out.stderr
     assert "1 non-finite gyro value(s)" in out.stdout
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf, 1e300])
+def test_the_papers_quaternion_ekf_skips_bad_numbers_too(bad):
+    from core.pdr.attitude_qekf import QuaternionEKF
+
+    f = QuaternionEKF()
+    t = 0
+    for k in range(300):
+        t += 10_000_000
+        f.predict(t, 0.01, bad if k == 150 else 0.0, 0.0)
+        f.update_acc(t, 0.0, bad if k == 160 else 0.3, 9.8)
+        if k % 2 == 0:
+            f.update_mag(t, 0.0, 20.0 if k != 170 else bad, -40.0)
+    assert all(math.isfinite(v) for v in f.q) and f.n_skipped_nonfinite == 3

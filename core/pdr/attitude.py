@@ -342,6 +342,8 @@ class AttitudeFilterBase:
 
     def _reset_common(self) -> None:
         self.initialized = False
+        #: readings skipped as non-finite or beyond any phone sensor's range
+        self.n_skipped_nonfinite = 0
         self.t_ns: int | None = None  # time of the state
         self._t_gyro: int | None = None
         self._last_acc = None
@@ -546,7 +548,6 @@ class AttitudeEKF(AttitudeFilterBase):
         self.acc_reasons: dict[str, int] = {}
         self.n_gyro = 0
         self.n_zero_rate = 0
-        self.n_skipped_nonfinite = 0
         self.n_numerical_rejects = 0
         self._nis_sum = {"acc": 0.0, "mag": 0.0, "zero_rate": 0.0}
         self._nis_n = {"acc": 0, "mag": 0, "zero_rate": 0}

@@ -54,7 +54,7 @@ import numpy as np
 
 from core import quaternion as quat
 from core.dsp import WindowMeanSpread, WindowVariance
-from core.pdr.attitude import AttitudeFilterBase
+from core.pdr.attitude import _ACC_IMPOSSIBLE, _GYRO_IMPOSSIBLE, _MAG_IMPOSSIBLE, AttitudeFilterBase, _plausible
 
 _EYE4 = np.eye(4)
 _EYE4.flags.writeable = False
@@ -251,6 +251,9 @@ class QuaternionEKF(AttitudeFilterBase):
     # -- prediction -------------------------------------------------------------
     def predict(self, t_ns: int, wx: float, wy: float, wz: float) -> None:
         """Propagate with one gyroscope event (rad/s) over the time since the previous one (eqs. 7, 11)."""
+        if not _plausible(wx, wy, wz, _GYRO_IMPOSSIBLE):  # NaN, inf or beyond any phone gyroscope: skipped
+            self.n_skipped_nonfinite += 1
+            return
         self.n_gyro += 1
         gs = self._gyro_still
         gs.update(t_ns, (wx, wy, wz))
@@ -321,6 +324,9 @@ class QuaternionEKF(AttitudeFilterBase):
 
     def update_acc(self, t_ns: int, ax: float, ay: float, az: float) -> None:
         """Accelerometer update (m/s^2, gravity included) with the adaptive variance of eq. 17."""
+        if not _plausible(ax, ay, az, _ACC_IMPOSSIBLE):
+            self.n_skipped_nonfinite += 1
+            return
         self._last_acc = (ax, ay, az)
         self._accumulate_references(t_ns, acc=self._last_acc)
         if not self.initialized:
@@ -342,6 +348,9 @@ class QuaternionEKF(AttitudeFilterBase):
     def update_mag(self, t_ns: int, mx: float, my: float, mz: float) -> None:
         """Magnetometer update (uT) with the adaptive variance of eq. 18 and outright rejection."""
         if not self.use_magnetometer:
+            return
+        if not _plausible(mx, my, mz, _MAG_IMPOSSIBLE):
+            self.n_skipped_nonfinite += 1
             return
         nm = math.sqrt(mx * mx + my * my + mz * mz)
         lo, hi = self.mag_valid_range_uT
