@@ -388,7 +388,8 @@ def cmd_info(args) -> int:
     for n, s in rec.streams.items():
         st = s.interval_stats_s()
         print(f"  {n:7s} {len(s):7d} events  {s.rate_hz:7.1f} Hz  jitter {1e3 * st['jitter_s']:.2f} ms  "
-              f"gaps {st['gaps']}  [{', '.join(s.columns)}] {s.unit}")
+              f"gaps {st['gaps']}" + (f"  rate changes {st['rate_changes']}" if st.get("rate_changes") else "")
+              + f"  [{', '.join(s.columns)}] {s.unit}")
     if rec.device:
         print(f"device     {json.dumps(rec.device)}")
     for r in rec.repairs:
