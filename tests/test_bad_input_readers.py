@@ -10,6 +10,7 @@ from __future__ import annotations
 import gzip
 import json
 import math
+import os
 import warnings
 
 import numpy as np
@@ -20,6 +21,9 @@ from core.importers import load_recording
 from core.importers.getsensordata import parse_getsensordata, read_getsensordata
 from core.recording import (DamagedFileWarning, Recording, RecordingError, make_stream, parse_recording,
                             read_recording, write_recording)
+
+#: examples of the reader fuzz tests: 200 in CI; the long fuzz run (README, Development) sets PDR_FUZZ_EXAMPLES
+FUZZ_EXAMPLES = int(os.environ.get("PDR_FUZZ_EXAMPLES", "200"))
 
 G = 9.80665
 
@@ -205,7 +209,7 @@ def _recordings(draw):
     return Recording(streams, device={"model": draw(st.text(max_size=10))}, metadata=meta)
 
 
-@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=max(100, FUZZ_EXAMPLES // 2), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(rec=_recordings())
 def test_valid_recordings_round_trip_exactly(rec):
     back = parse_recording(_text(rec), "r.csv", warn=False)
@@ -237,7 +241,7 @@ def _corrupted(draw):
     return bytes(data)
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=FUZZ_EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=_corrupted(), gz=st.booleans())
 def test_corrupted_recordings_read_with_repairs_or_raise_a_recording_error(tmp_path_factory, data, gz):
     p = tmp_path_factory.mktemp("c") / ("r.csv.gz" if gz else "r.csv")
