@@ -54,9 +54,12 @@ def main(argv=None) -> int:
         Config.set("graphics", "height", str(a.size[1]))
     from app.main_app import PDRApp  # noqa: PLC0415 - creates the window
 
-    PDRApp(recording=a.recording, speed=a.speed, out_dir=a.out, data_dir=a.data_dir, exit_at_end=a.exit_at_end,
-           screenshot=a.screenshot, report=a.report).run()
-    return 0
+    app = PDRApp(recording=a.recording, speed=a.speed, out_dir=a.out, data_dir=a.data_dir,
+                 exit_at_end=a.exit_at_end, screenshot=a.screenshot, report=a.report)
+    app.run()
+    if app.exit_code:
+        print(f"python -m app: error: {app.error}", file=sys.stderr)
+    return app.exit_code
 
 
 if __name__ == "__main__":

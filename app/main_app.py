@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import tempfile
 import time
 
 from kivy.app import App
@@ -112,6 +113,10 @@ class PDRApp(App):
         self._was_running = False
         self._end_handled = False
         self.frames = 0
+        self.exit_code = 0  #: non-zero when the file given on the command line could not be replayed
+        self.error = ""
+        self._data_dir: str | None = None
+        self.data_dir_problem = ""
         self.paused_count = 0
         self.resumed_count = 0
 
@@ -119,9 +124,19 @@ class PDRApp(App):
 
     @property
     def data_dir(self) -> str:
-        d = self._data_dir_arg or os.environ.get("PDR_APP_DATA") or self.user_data_dir
-        os.makedirs(d, exist_ok=True)
-        return d
+        """The settings folder (created); if it cannot be created, a temporary one for this run (and
+        :attr:`data_dir_problem` says why: the app starts with default settings instead of crashing)."""
+        if self._data_dir is None:
+            d = self._data_dir_arg or os.environ.get("PDR_APP_DATA") or self.user_data_dir
+            try:
+                os.makedirs(d, exist_ok=True)
+            except OSError as e:
+                tmp = tempfile.mkdtemp(prefix="pdr-app-settings-")
+                self.data_dir_problem = (f"settings folder {d} cannot be created ({e.strerror or e}): "
+                                         f"settings are kept for this run only")
+                d = tmp
+            self._data_dir = d
+        return self._data_dir
 
     @property
     def settings_path(self) -> str:
@@ -132,9 +147,11 @@ class PDRApp(App):
 
     def build(self):
         self.settings = Settings.load(self.settings_path)
-        if self.settings.problems:
-            self.warning = "; ".join(self.settings.problems)
-        self.settings_message = "; ".join(self.settings.notes)
+        problems = ([self.data_dir_problem] if self.data_dir_problem else []) + list(self.settings.problems)
+        if problems:
+            self.warning = "; ".join(problems)
+        self.settings_message = "; ".join(([self.data_dir_problem] if self.data_dir_problem else []) +
+                                          list(self.settings.notes))  # the settings screen keeps saying it
         self.speed_label = self._speed_arg or self.settings.replay_speed
         self._settings_to_ui()
         Builder.load_file(KV_FILE)
@@ -199,11 +216,22 @@ class PDRApp(App):
     def on_start(self):
         Clock.schedule_interval(self._tick, 1 / 30.0)
         if self.initial_recording:
-            self.open_recording(self.initial_recording)
+            if not self.open_recording(self.initial_recording):
+                self._initial_recording_failed()
         elif is_android():
             self._request_android_permissions()
         else:
             self.message = "Open a recording to replay it"
+
+    def _initial_recording_failed(self):
+        """The file of the command line cannot be replayed: the error is shown, and with --exit-at-end (or
+        --report) it goes into the report and the app exits with status 2 instead of waiting forever."""
+        self.exit_code = 2
+        self.error = self.warning
+        self.message = self.warning
+        if self.screenshot_path or self.report_path or self.exit_at_end:
+            self._end_frames = self.frames
+            Clock.schedule_interval(self._wait_frames_then_finish, 0)
 
     def on_pause(self):
         """Android is pausing the app: sensors off, recording flushed, settings saved."""
@@ -317,9 +345,9 @@ class PDRApp(App):
         if not ses or self.mode != "live":
             return
         if ses.writer is not None:
-            ses.writer.close()
-            ses.writer = None
-            self.message = f"saved {ses.record_path}"
+            n = ses.stop_recording()
+            self.message = (ses.record_error or f"saved {ses.record_path} ({n} events)") if n else \
+                "nothing recorded (no sensor event yet): no file written"
             self.recording_label = ""
         else:
             ses.record_path = new_recording_path(self.out_dir())
@@ -477,7 +505,17 @@ class PDRApp(App):
         ses = self.session
         if ses is None:
             return
-        new = ses.tick()
+        try:
+            new = ses.tick()
+        except Exception as e:  # noqa: BLE001 - an error in a clock callback would close the app
+            ses.source.stop()
+            self.playing = False
+            self.warning = f"stopped: {type(e).__name__}: {e}"
+            return
+        if ses.record_error and self.recording_label:
+            self.recording_label = ""
+            self.warning = ses.record_error
+            self.message = ses.record_error
         now = time.monotonic()
         if new or now - self._last_ui >= UI_INTERVAL_S:
             self._update_ui(track_changed=bool(new))
@@ -513,6 +551,8 @@ class PDRApp(App):
             self.warning = f"{ses.errors} pipeline error(s), last: {ses.last_error}"
         elif labels and not ses.source.warning:
             self.warning = "; ".join(labels)
+        if ses.record_error and not self.warning.startswith(ses.record_error):
+            self.warning = ses.record_error + ("; " + self.warning if self.warning else "")  # stays on screen
         self.playing = ses.running and not (self.mode == "replay" and ses.finished)
 
     def _on_replay_end(self):
@@ -527,8 +567,11 @@ class PDRApp(App):
             Clock.schedule_interval(self._wait_frames_then_finish, 0)
 
     def _wait_frames_then_finish(self, dt):
-        # take the screenshot after a few rendered frames, not at a wall-clock time
-        if self.frames - self._end_frames < 6:
+        # take the screenshot after a few rendered frames, not at a wall-clock time; a window with nothing new
+        # to draw does not flip (e.g. the file could not be opened): ask for redraws, and go on after 300 calls
+        self._end_waits = getattr(self, "_end_waits", 0) + 1
+        if self.frames - self._end_frames < 6 and self._end_waits < 300:
+            Window.canvas.ask_update()
             return True
         if self.screenshot_path:
             self.save_screenshot(self.screenshot_path)
@@ -558,7 +601,8 @@ class PDRApp(App):
                         "center": list(vp.center), "follow": tv.follow},
                "status": {"steps": self.steps_text, "distance": self.distance_text,
                           "heading": self.heading_text, "time": self.time_text},
-               "warning": self.warning, "message": self.message}
+               "warning": self.warning, "message": self.message, "exit_code": self.exit_code,
+               "error": self.error, "settings_problem": self.data_dir_problem}
         if ses:
             out.update(summary={k: v for k, v in ses.summary().items() if k != "labels"},
                        track_east=ses.track_east, track_north=ses.track_north, events=ses.events_in,
