@@ -12,7 +12,8 @@ Why a thread
 
 Never a header-only file
     The file is created at the first write that has events in it: header and first rows go in
-    one ``os.write``.  A kill before that leaves no file at all (nothing is lost but less than
+    one ``os.write`` (to ``NAME.part``, renamed to ``NAME`` at once, so ``NAME`` never exists
+    empty).  A kill before that leaves no recording at all (nothing is lost but less than
     a second of events), instead of a header the reader rejects ("the file has a header but no
     sensor events").  A recording stopped before any event leaves no file either
     (:attr:`BackgroundRecorder.events_written` is 0).
@@ -44,19 +45,20 @@ _FLUSH, _CLOSE = object(), object()
 
 
 class AppendFile:
-    """The file the recorder writes: created exclusively, append-only, raw file descriptor (no buffering)."""
+    """The file the recorder writes: append-only, raw file descriptor (no buffering).
+
+    It is created as ``path + ".part"`` and renamed to ``path`` right after its first write (the
+    header and the first rows), so ``path`` never exists empty: a kill between the creation and
+    the first write leaves at most an empty ``.part`` file, not an empty recording.
+    """
 
     def __init__(self, path: str):
-        self.fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
+        self.path = path
+        self.part = path + ".part"
+        if os.path.exists(path):
+            raise FileExistsError(17, "the recording exists already", path)
+        self.fd = os.open(self.part, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
         self.size = 0
-        try:  # the new name survives a power cut too (a kill -9 does not need this)
-            dfd = os.open(os.path.dirname(os.path.abspath(path)), os.O_RDONLY)
-            try:
-                os.fsync(dfd)
-            finally:
-                os.close(dfd)
-        except OSError:
-            pass
 
     def write(self, data: bytes) -> None:
         """Write all of ``data`` or raise ``OSError`` (a short write is cut back and raised)."""
@@ -64,13 +66,31 @@ class AppendFile:
         if n != len(data):
             os.ftruncate(self.fd, self.size)
             raise OSError(28, f"short write ({n} of {len(data)} bytes): storage full?")
+        if self.size == 0:
+            os.rename(self.part, self.path)  # the recording appears with its header and first rows
+            self._sync_dir()
         self.size += n
+
+    def _sync_dir(self) -> None:
+        try:  # the new name survives a power cut too (a kill -9 does not need this)
+            dfd = os.open(os.path.dirname(os.path.abspath(self.path)), os.O_RDONLY)
+            try:
+                os.fsync(dfd)
+            finally:
+                os.close(dfd)
+        except OSError:
+            pass
 
     def sync(self) -> None:
         os.fsync(self.fd)
 
     def close(self) -> None:
         os.close(self.fd)
+        if self.size == 0:  # nothing was ever written: no file
+            try:
+                os.unlink(self.part)
+            except OSError:
+                pass
 
 
 def header_text(streams: dict, device: dict | None, metadata: dict | None) -> str:

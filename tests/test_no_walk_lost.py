@@ -229,6 +229,24 @@ def test_the_real_file_survives_a_failing_disk(tmp_path, monkeypatch):
     assert events_in(rec) == [event(0)] and rec.repairs == []
 
 
+def test_the_recording_never_exists_empty(tmp_path):
+    from app.recorder import AppendFile
+
+    path = tmp_path / "e.csv"
+    f = AppendFile(str(path))
+    assert not path.exists()  # a kill now leaves no recording (an empty e.csv.part at most)
+    f.write(b"abc\n")
+    assert path.read_bytes() == b"abc\n" and not (tmp_path / "e.csv.part").exists()
+    f.write(b"def\n")
+    f.close()
+    assert path.read_bytes() == b"abc\ndef\n"
+    g = AppendFile(str(tmp_path / "never.csv"))
+    g.close()
+    assert list(tmp_path.iterdir()) == [path]  # closed before any write: nothing left
+    with pytest.raises(FileExistsError):
+        AppendFile(str(path))
+
+
 def test_a_header_only_file_from_an_older_recorder_gets_a_clear_message(tmp_path):
     path = tmp_path / "old.csv"
     from app.recorder import header_text
