@@ -147,8 +147,9 @@ from app.main_app import PDRApp
 
 real_write, writes = app.recorder.AppendFile.write, []
 
-def write(self, data):  # the storage fills up after the fifth batch
-    if len(writes) >= 5:
+def write(self, data):  # the storage fills up after the first write, once 8 kB are on it (a byte count, not a
+    # number of writes: how many events the writer thread batches per write depends on the machine's load)
+    if writes and sum(writes) + len(data) > 8000:
         raise OSError(errno.ENOSPC, "No space left on device")
     writes.append(len(data))
     real_write(self, data)
@@ -162,7 +163,7 @@ def deliver():
     for i, (type_, t, v) in enumerate(hardware_stream(seed=9, seconds=4.0)):
         sm.deliver(type_, t, v)
         if i % 30 == 0:
-            time.sleep(0.004)
+            time.sleep(0.03)  # about a second of delivery: several ticks, several writes
 
 def start(dt):
     log["started"] = a.start_live()
@@ -199,7 +200,7 @@ def test_a_full_disk_while_recording_live_is_shown_and_the_app_goes_on(tmp_path)
                         str(ROOT / "tests")], cwd=ROOT, env=env, capture_output=True, text=True, timeout=90)
     assert r.returncode == 0, r.stderr[-3000:]
     log = json.loads(report.read_text())
-    assert log["started"] and log["writes"] == 5 and log["writer"] and log["running"]
+    assert log["started"] and log["writes"] >= 1 and log["writer"] and log["running"]
     assert log["record_error"].startswith("recording stopped: cannot write")
     assert "No space left on device" in log["record_error"] and log["warning"].startswith(log["record_error"])
     assert log["label"] == ""  # no longer shown as recording
