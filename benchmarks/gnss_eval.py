@@ -49,6 +49,7 @@ import numpy as np
 from benchmarks.datasets.base import default_data_root
 from benchmarks.splits import REPORT, SIM_GPS_SEEDS, TUNING
 from core.conventions import GPS
+from core.gnss.ekf import sigma_max_m
 from core.gnss.fusion import GpsFusion
 
 VARIANTS = {
@@ -86,8 +87,6 @@ def _site_declination(rec, pipe) -> float | None:
     What ``Pipeline(gnss=GpsFusion())`` does itself when its first fix anchors the walk
     (``site_from_gps``); done here before the run so that one pipeline run serves every variant.
     """
-    from core.geodesy import magnetic_field, unix_ns_to_datetime
-
     g = rec.streams[GPS]
     cols = list(g.columns)
     hacc = g.values[:, cols.index("hacc_m")]
@@ -96,12 +95,8 @@ def _site_declination(rec, pipe) -> float | None:
     if not ok.any() or not isinstance(off, int):
         return None
     i = int(np.argmax(ok))
-    alt = g.values[i, cols.index("alt_m")]
-    d, dip, total = magnetic_field(g.values[i, 0], g.values[i, 1], alt if math.isfinite(alt) else 0.0,
-                                   unix_ns_to_datetime(off + int(g.t_ns[i])))
-    pipe.attitude.declination_rad = d
-    pipe.attitude.set_site_field(total, dip)
-    return d
+    pipe.set_site(g.values[i, 0], g.values[i, 1], g.values[i, cols.index("alt_m")], off + int(g.t_ns[i]))
+    return pipe.attitude.declination_rad
 
 
 def walking_start_s(steps, t0_ns: int) -> float:
@@ -261,8 +256,7 @@ def sim_walks(seeds, minutes: float = 15.0, start_s: float = 360.0, length_s: fl
             p = truth.phone_position_at(last.t_ns)
             err = math.hypot(e - p[0], n - p[1])
             walked = sum(s.length_m for s in inside)
-            sig = math.sqrt(max(np.linalg.eigvalsh(np.array([[last.cov_en_m2[0], last.cov_en_m2[1]],
-                                                             [last.cov_en_m2[1], last.cov_en_m2[2]]]))[-1], 0.0))
+            sig = sigma_max_m(last.cov_en_m2)
             if v == "ekf" and seed == plot_seed:
                 PLOTS.mkdir(exist_ok=True)
                 tt = np.linspace(rec.t0_ns, rec.t1_ns, 4000).astype(np.int64)

@@ -344,7 +344,8 @@ def cmd_replay(args) -> int:
         lines = summary_lines(res, rec)
         print("\n".join(lines[:1] + [f"mode          hand-held PDR ({why})"] + lines[1:]))
     fused = res.fusion is not None and res.fusion.origin_lat_lon is not None and len(res.fusion.steps)
-    track, extra = (res.fusion.track(), res.fusion.track().point_properties()) if fused else (res.track, None)
+    track = res.fusion.track() if fused else res.track
+    extra = track.point_properties() if fused else None
     others, fixes = {}, None
     if fused and args.plot:
         others["dead reckoning only"] = (res.track.east_m, res.track.north_m)

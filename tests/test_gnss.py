@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from core.gnss.ekf import PdrEkf
+from core.gnss.ekf import PdrEkf, sigma_max_m
 from core.gnss.fusion import GpsFusion
 from core.gnss.heading_model import HeadingErrorModel, regressors
 from core.gnss.training import (
@@ -237,8 +237,7 @@ def test_calibrated_fusion_beats_dead_reckoning_through_an_outage_and_stays_hone
         last = [s for s in fr.steps if s.t_ns < hid[0][1]][-1]
         errs[name] = _truth_error(walk, last)
         if name == "ekf":
-            sigma = math.sqrt(max(np.linalg.eigvalsh(np.array([[last.cov_en_m2[0], last.cov_en_m2[1]],
-                                                               [last.cov_en_m2[1], last.cov_en_m2[2]]]))[-1], 0))
+            sigma = sigma_max_m(last.cov_en_m2)
             assert errs[name] < 3.0 * sigma  # the uncertainty covers the error
             assert fr.outages and fr.outages[0].walked_m > 100
             o = fr.outages[0]

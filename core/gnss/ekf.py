@@ -77,6 +77,13 @@ NX = 6
 CONSIDER = (B, K)
 
 
+def sigma_max_m(cov_en_m2) -> float:
+    """sqrt of the largest eigenvalue of a 2x2 position covariance given as ``(var_e, cov_en, var_n)`` (m)."""
+    a, b, c = cov_en_m2
+    tr, det = a + c, a * c - b * b
+    return math.sqrt(max(0.5 * tr + math.sqrt(max(0.25 * tr * tr - det, 0.0)), 0.0))
+
+
 @dataclass(frozen=True)
 class UpdateResult:
     """Diagnostics of one measurement update (data, not logs)."""
@@ -129,6 +136,10 @@ class PdrEkf:
         self.bias_walk_rad = float(bias_walk_rad)
         self.scale_walk = float(scale_walk)
         self.position_updates_heading = bool(position_updates_heading)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the state (the settings stay): :meth:`initialize` starts it again."""
         self.initialized = False
         self.x = np.zeros(NX)
         self.P = np.eye(NX)
@@ -155,7 +166,8 @@ class PdrEkf:
 
     def position_sigma_m(self) -> float:
         """sqrt of the largest eigenvalue of the position covariance (m)."""
-        return math.sqrt(max(float(np.linalg.eigvalsh(self.P[:2, :2])[-1]), 0.0))
+        P = self.P
+        return sigma_max_m((P[0, 0], P[0, 1], P[1, 1]))
 
     def _update(self, innov: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float,
                 frozen: tuple = ()) -> tuple[bool, float]:

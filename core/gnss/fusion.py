@@ -55,6 +55,7 @@ output, exports) through :mod:`core.geodesy`.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -63,7 +64,7 @@ import numpy as np
 
 from core.conventions import heading_from_bearing_deg
 from core.geodesy import enu_to_geodetic, geodetic_to_enu
-from core.gnss.ekf import PdrEkf
+from core.gnss.ekf import PdrEkf, sigma_max_m
 from core.gnss.heading_model import HeadingErrorModel
 from core.gnss.training import OnlineTrainer
 
@@ -162,12 +163,6 @@ class FusedTrack:
         return {"sigma_m": [round(float(v), 3) for v in self.sigma_m], "source": list(self.source)}
 
 
-def _sigma_max(cov) -> float:
-    a, b, c = cov
-    tr, det = a + c, a * c - b * b
-    return math.sqrt(max(0.5 * tr + math.sqrt(max(0.25 * tr * tr - det, 0.0)), 0.0))
-
-
 @dataclass
 class FusionResult:
     steps: list
@@ -180,7 +175,7 @@ class FusionResult:
         st = self.steps
         return FusedTrack(np.array([s.t_ns for s in st], dtype=np.int64), np.array([s.length_m for s in st]),
                           np.array([s.heading_rad for s in st]), np.array([s.east_m for s in st]),
-                          np.array([s.north_m for s in st]), np.array([_sigma_max(s.cov_en_m2) for s in st]),
+                          np.array([s.north_m for s in st]), np.array([sigma_max_m(s.cov_en_m2) for s in st]),
                           [s.source for s in st])
 
 
@@ -272,12 +267,9 @@ class GpsFusion:
         self.reset()
 
     def reset(self) -> None:
-        proto = self._ekf_proto
-        self.ekf = PdrEkf() if proto is None else PdrEkf(
-            length_walk_m=proto.length_walk_m, heading_walk_rad=proto.heading_walk_rad, turn_gain=proto.turn_gain,
-            length_sd_m=proto.length_sd_m, heading_sd_rad=proto.heading_sd_rad, gate_nis_2d=proto.gate_nis_2d,
-            gate_nis_1d=proto.gate_nis_1d, bias_walk_rad=proto.bias_walk_rad, scale_walk=proto.scale_walk,
-            position_updates_heading=proto.position_updates_heading)
+        # the given filter is a prototype of settings: each run starts a copy of it afresh
+        self.ekf = PdrEkf() if self._ekf_proto is None else copy.copy(self._ekf_proto)
+        self.ekf.reset()
         if self._trainer_proto is not None:
             self.trainer = self._trainer_proto
             self.trainer.reset()

@@ -467,21 +467,28 @@ class Pipeline:
             self.site = {"applied": False, "why": "no date for the magnetic model"}
             return
         try:
-            from core.geodesy import magnetic_field, unix_ns_to_datetime
-
-            decl, dip, total = magnetic_field(lat, lon, alt if alt == alt else 0.0,
-                                              unix_ns_to_datetime(int(self.unix_offset_ns) + int(t_ns)))
+            self.site = self.set_site(lat, lon, alt, int(self.unix_offset_ns) + int(t_ns))
         except (ImportError, ValueError) as e:
             self.site = {"applied": False, "why": str(e)}
-            return
+
+    def set_site(self, lat_deg: float, lon_deg: float, alt_m: float, unix_ns: int) -> dict:
+        """Give the attitude filter a place's WMM declination (unless one is set) and field strength and dip.
+
+        What the first GPS fix does (``site_from_gps``); callers that know the place before the
+        run (the GPS benchmark) call it directly.  Returns what was applied.
+        """
+        from core.geodesy import magnetic_field, unix_ns_to_datetime
+
+        decl, dip, total = magnetic_field(lat_deg, lon_deg, alt_m if math.isfinite(alt_m) else 0.0,
+                                          unix_ns_to_datetime(int(unix_ns)))
         a = self.attitude
         set_decl = hasattr(a, "declination_rad") and a.declination_rad == 0.0
         if set_decl:
             a.declination_rad = decl
         if hasattr(a, "set_site_field"):
             a.set_site_field(total, dip)
-        self.site = {"applied": True, "declination_deg": math.degrees(decl) if set_decl else None,
-                     "dip_deg": math.degrees(dip), "field_uT": total}
+        return {"applied": True, "declination_deg": math.degrees(decl) if set_decl else None,
+                "dip_deg": math.degrees(dip), "field_uT": total}
 
     def rotation_rms_rad_s(self) -> float:
         """RMS rotation rate of the phone over the last ``rotation_window_s`` (rad/s; 0 without gyroscope)."""
