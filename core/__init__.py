@@ -79,7 +79,7 @@ Shared, at ``core/``'s top
     (rotation-matrix smoothing, section 4.3; a step's heading),
     ``deadreckoning`` (eq. 1), ``pipeline``.
 
-``core.gnss`` -- GPS fusion (Chen et al. 2010; Kubrak et al. 2006 to come)
+``core.gnss`` -- GPS fusion (Chen et al. 2010; Kubrak et al. 2006)
     ``heading_model`` (eq. 12), ``ekf`` (eq. 13 with GPS updates),
     ``training`` (online stride and heading training), ``fusion`` (the stage
     ``Pipeline(gnss=...)`` runs).

@@ -15,6 +15,8 @@ GYRO = "gyro"  #: gyroscope, rad/s, device frame
 MAG = "mag"  #: magnetometer, uT, device frame (calibrated: hard iron removed by the OS if it can)
 GPS = "gps"  #: GNSS fix: lat_deg, lon_deg, alt_m, horizontal accuracy m, speed m/s, course deg (bearing)
 ROTVEC = "rotvec"  #: the phone's own attitude (Android rotation vector) as an ENU quaternion w, x, y, z
+#: GNSS receiver status per fix: satellites used in the fix, C/N0 of the 4th strongest of them (dB-Hz, nan if < 4)
+GNSS_STATUS = "gnss_status"
 
 NS_PER_S = 1_000_000_000
 

@@ -58,7 +58,7 @@ from typing import IO, Iterable, Iterator
 import numpy as np
 
 from core import __version__
-from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC, STANDARD_GRAVITY_M_S2
+from core.conventions import ACC, GNSS_STATUS, GPS, GYRO, MAG, ROTVEC, STANDARD_GRAVITY_M_S2
 
 MAGIC = "# pdr-recording"
 FORMAT_NAME = "pdr-recording"
@@ -84,6 +84,12 @@ STREAM_SPECS: dict[str, dict] = {
         "unit": "1",
         "note": "the phone's own attitude estimate as an ENU<-device quaternion (w, x, y, z)",
     },
+    GNSS_STATUS: {
+        "columns": ["n_used", "cn0_4th_dbhz"],
+        "unit": "1,dB-Hz",
+        "note": "GNSS receiver status at a fix (Android GnssStatus or NMEA GSA/GSV): satellites used in the fix "
+                "and the carrier-to-noise density of the 4th strongest of them (nan with fewer than 4)",
+    },
 }
 
 #: Units a file may declare per stream kind, with the factor to the unit used inside :mod:`core`
@@ -94,6 +100,7 @@ UNITS: dict[str, dict[str, float]] = {
     MAG: {"uT": 1.0, "\u00b5T": 1.0, "\u03bcT": 1.0, "mT": 1000.0, "nT": 1e-3, "G": 100.0},
     GPS: {STREAM_SPECS[GPS]["unit"]: 1.0, "deg,deg,m,m": 1.0},
     ROTVEC: {"1": 1.0},
+    GNSS_STATUS: {"1,dB-Hz": 1.0},
 }
 
 #: fewest events of a stream for the checks of its values against its unit
@@ -104,7 +111,7 @@ GYRO_P99_MAX_RAD_S = 35.0
 
 
 #: Order in which simultaneous events of different streams are processed.
-STREAM_ORDER = (GYRO, ACC, MAG, ROTVEC, GPS)
+STREAM_ORDER = (GYRO, ACC, MAG, ROTVEC, GNSS_STATUS, GPS)
 
 
 class RecordingError(ValueError):

@@ -5,3 +5,22 @@ PDR EKF of eq. 13 with GPS position and course updates), ``training``
 (online stride and heading training with the safeguards against noisy GPS),
 ``fusion`` (the stage the pipeline runs: fix screening, anchoring, outages).
 """
+
+#: the GPS fusion filters by name (``pdr replay --gps``, the app's setting, the benchmark)
+FUSIONS = ("chen", "kubrak")
+
+
+def make_fusion(name: str, **settings):
+    """A GPS fusion stage by name: ``"chen"`` (:class:`core.gnss.fusion.GpsFusion`, Chen et al. 2010) or
+    ``"kubrak"`` (:class:`core.gnss.kubrak.KubrakFusion`, Kubrak et al. 2006), with its keyword settings.
+
+    Both take ``hidden_ns`` (simulated outages) and ``start`` (a known start: ``(lat_deg, lon_deg, sd_m)``),
+    stream through ``add_fix``/``add_step``/``finish`` and batch-run with ``run(steps, gps_stream, t0_ns)``.
+    """
+    if name == "chen":
+        from core.gnss.fusion import GpsFusion
+        return GpsFusion(**settings)
+    if name == "kubrak":
+        from core.gnss.kubrak import KubrakFusion
+        return KubrakFusion(**settings)
+    raise ValueError(f"unknown GPS fusion {name!r}: one of {', '.join(FUSIONS)}")
