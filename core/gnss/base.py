@@ -1,0 +1,574 @@
+"""What every GPS fusion filter shares: fix screening, anchoring, hidden windows, verdicts, the fused track.
+
+:class:`FixFusion` is the base of the two fusion stages, :class:`core.gnss.fusion.GpsFusion`
+(Chen et al. 2010: calibration while GPS is good and the step-wise PDR EKF of eq. 13) and
+:class:`core.gnss.kubrak.KubrakFusion` (Kubrak et al. 2006: the velocity-model Kalman filter of
+Fig. 8 with bad-GPS detection).  It takes the pipeline's steps and the GPS fixes, in the order a
+live pipeline gives them, and leaves the filtering to the subclass through a few hooks.
+
+Per fix, in this order; every fix gets a verdict (:class:`FixRecord`: used, or rejected and why)
+    1. hidden: inside a hidden window (``hidden_ns``: the benchmark's and ``--gps-outage``'s
+       simulated outages), measured but never used;
+    2. screening: finite position, reported accuracy ``hacc_m <= max_hacc_m`` (a fix without one
+       is given ``default_hacc_m``), speed at most ``max_speed_m_s`` (a vehicle, not a walker);
+    3. the receiver's own signal quality where the recording carries it (the ``gnss_status``
+       stream: Android ``GnssStatus`` or NMEA GSA/GSV): the rule of Kubrak et al. -- a fix whose
+       4th-strongest satellite in use is below ``min_cn0_4th_dbhz`` (25 dB-Hz), or with fewer than
+       4 satellites in use, is not used;
+    4. the filter's own verdict (the subclass: the bad-GPS detector of Kubrak et al.);
+    5. the first good fix anchors the walk (unless a known ``start`` was given): the local frame
+       keeps its origin at the walk's start, whose latitude/longitude follow from the fix and the
+       dead-reckoned position at that moment;
+    6. the filter's position update, with a chi-square gate on its normalised innovation (NIS):
+       a fix that disagrees with the track beyond what both uncertainties allow is rejected;
+       fixes that keep being rejected but agree among themselves for ``relock_s`` are taken,
+       with the covariance widened (after a long outage the track is more likely off than a
+       steady GPS);
+    7. the subclass's extra use of an accepted fix (course, velocity, training).
+
+Fix times and step times
+    Steps leave the pipeline about a second after they happen (the heading
+    smoother's delay), fixes arrive at once.  A fix waits until the first
+    step after it has been processed (or until ``hold_s`` has passed without
+    one: the walker stands), so that fixes and steps meet the filter in time
+    order, as in a batch run.
+
+Outages
+    For every hidden window the first screened fix after it gives the
+    end-of-outage error (the prediction against the fix, before the update),
+    the distance walked in the window, the position uncertainty before the
+    update and the jump the update made (:class:`OutageResult`).
+
+Everything is in the walk's local ENU frame of :mod:`core` (metres about the
+start point); latitude/longitude only at the edges (fix input, FusedStep
+output, exports) through :mod:`core.geodesy`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core.geodesy import enu_to_geodetic, geodetic_to_enu
+from core.gnss.ekf import UpdateResult, sigma_max_m
+
+#: 68 % radius of a circular 2-D Gaussian, in units of its per-axis SD: hacc = 1.515 sigma
+HACC_PER_SIGMA = math.sqrt(-2.0 * math.log(1.0 - 0.68))
+
+
+@dataclass(frozen=True)
+class FixRecord:
+    """One GPS fix as the fusion saw it."""
+
+    t_ns: int
+    lat_deg: float
+    lon_deg: float
+    east_m: float  #: local frame (nan before the walk is anchored)
+    north_m: float
+    hacc_m: float
+    speed_m_s: float
+    course_deg: float
+    accepted: bool
+    reason: str = ""  #: why it was not used ("" when accepted)
+    nis: float = math.nan
+    correction_m: float = 0.0  #: how far the fused position moved
+
+
+@dataclass(frozen=True)
+class FusedStep:
+    """One step of the fused track."""
+
+    index: int
+    t_ns: int
+    east_m: float  #: local ENU (m) about the walk's start, like the dead-reckoned track
+    north_m: float
+    lat_deg: float  #: nan until a fix anchors the walk (batch results fill every step)
+    lon_deg: float
+    length_m: float  #: fused step length (m)
+    heading_rad: float  #: fused heading (rad, CCW from East)
+    cov_en_m2: tuple  #: (var_east, cov_east_north, var_north) of the position (m^2)
+    source: str  #: "fused" (a fix was accepted within ``fused_timeout_s``) or "dr" (dead reckoning only)
+
+
+@dataclass(frozen=True)
+class OutageResult:
+    """The end of one hidden window, measured at the first screened fix after it."""
+
+    start_s: float  #: from the first sensor event (as given)
+    length_s: float
+    walked_m: float  #: fused distance walked inside the window
+    end_error_m: float  #: prediction minus that fix (m)
+    end_error_pct: float  #: of ``walked_m``
+    sigma_m: float  #: position uncertainty (sqrt of the largest eigenvalue) before the fix
+    jump_m: float  #: how far the first accepted fix after the window moved the position (nan: none was)
+    fix_t_ns: int  #: the fix that measured the end error
+    fix_accepted: bool  #: whether that fix was accepted at once (else GPS was taken back later)
+    rejoin_s: float = math.nan  #: from that fix to the first accepted one (s)
+
+    def as_dict(self) -> dict:
+        return {"start_s": self.start_s, "length_s": self.length_s, "walked_m": self.walked_m,
+                "end_error_m": self.end_error_m, "end_error_pct": self.end_error_pct, "sigma_m": self.sigma_m,
+                "jump_m": self.jump_m, "jump_over_3sigma": bool(self.jump_m > 3.0 * self.sigma_m),
+                "fix_accepted": self.fix_accepted, "rejoin_s": self.rejoin_s}
+
+
+@dataclass
+class _Window:
+    """A hidden window while the fusion runs."""
+
+    start_ns: int
+    end_ns: int
+    walked_m: float = 0.0
+    end_error_m: float | None = None
+    sigma_m: float = math.nan
+    fix_t_ns: int | None = None
+    done: bool = False
+
+
+@dataclass
+class FusedTrack:
+    """The fused track as arrays (the shape :mod:`core.export` and the plots take)."""
+
+    t_ns: np.ndarray
+    length_m: np.ndarray
+    heading_rad: np.ndarray
+    east_m: np.ndarray
+    north_m: np.ndarray
+    sigma_m: np.ndarray  #: sqrt of the largest eigenvalue of the position covariance (m)
+    source: list  #: "fused" / "dr" per step
+
+    def __len__(self) -> int:
+        return len(self.t_ns)
+
+    def point_properties(self) -> dict:
+        """Per-step extras for the exports: uncertainty and source."""
+        return {"sigma_m": [round(float(v), 3) for v in self.sigma_m], "source": list(self.source)}
+
+
+@dataclass
+class FusionResult:
+    steps: list
+    fixes: list
+    outages: list
+    origin_lat_lon: tuple | None
+    counters: dict = field(default_factory=dict)
+
+    def track(self) -> FusedTrack:
+        st = self.steps
+        return FusedTrack(np.array([s.t_ns for s in st], dtype=np.int64), np.array([s.length_m for s in st]),
+                          np.array([s.heading_rad for s in st]), np.array([s.east_m for s in st]),
+                          np.array([s.north_m for s in st]), np.array([sigma_max_m(s.cov_en_m2) for s in st]),
+                          [s.source for s in st])
+
+
+
+class FixFusion:
+    """The fix handling both fusion filters share (see the module docstring); a subclass filters.
+
+    Parameters (shared by both filters)
+    -----------------------------------
+    max_hacc_m : float
+        Fixes reporting a worse horizontal accuracy are not used (m).
+    default_hacc_m : float
+        Accuracy assumed for a fix that reports none (m).
+    max_speed_m_s : float
+        Fixes reporting a higher speed are not a walker's (m/s).
+    hacc_scale : float
+        Factor on the reported accuracy for the measurement noise (phones are often optimistic).
+    min_sigma_m : float
+        Floor on the per-axis SD of a fix position (m).
+    fused_timeout_s : float
+        A step is "fused" when a fix was accepted within this time before it (s).
+    hold_s : float
+        Longest time a fix waits for the step after it (s).
+    hidden_ns : sequence of (t_start_ns, t_end_ns)
+        Windows whose fixes are hidden (simulated outages).
+    relock_s : float
+        Fixes rejected by the gate for this long, agreeing among themselves (their
+        innovations' SD within twice a fix's SD), are taken (s).
+    anchor_max_hacc_m, anchor_max_waits : float, int
+        The first fix used (the anchor) must report at most this accuracy (m), unless this
+        many screened fixes came without one (then any fix within ``max_hacc_m`` anchors).
+    start : (lat_deg, lon_deg, sd_m) or None
+        A known start position (the user said where the walk starts, a competition gives it):
+        the walk is placed there with this per-axis SD, and fixes only correct.
+    min_cn0_4th_dbhz : float
+        Kubrak et al.'s rule, applied where the recording has a ``gnss_status`` stream: fixes
+        whose 4th-strongest satellite in use is weaker than this are not used (dB-Hz; 0 turns
+        it off).
+    status_max_age_s : float
+        A ``gnss_status`` reading older than this does not describe a fix (s).
+    """
+
+    #: the filter's name (``make_fusion``, summaries)
+    name = "fusion"
+
+    def __init__(self, *, max_hacc_m: float = 25.0, default_hacc_m: float = 10.0, max_speed_m_s: float = 3.0,
+                 hacc_scale: float = 1.0, min_sigma_m: float = 1.0, fused_timeout_s: float = 5.0,
+                 hold_s: float = 3.0, hidden_ns=(), relock_s: float = 8.0, anchor_max_hacc_m: float = 12.0,
+                 anchor_max_waits: int = 30, start: tuple | None = None, min_cn0_4th_dbhz: float = 25.0,
+                 status_max_age_s: float = 2.0):
+        self.max_hacc_m = float(max_hacc_m)
+        self.default_hacc_m = float(default_hacc_m)
+        self.max_speed_m_s = float(max_speed_m_s)
+        self.hacc_scale = float(hacc_scale)
+        self.min_sigma_m = float(min_sigma_m)
+        self.fused_timeout_ns = int(fused_timeout_s * 1e9)
+        self.hold_ns = int(hold_s * 1e9)
+        self.relock_ns = int(relock_s * 1e9)
+        self.anchor_max_hacc_m = float(anchor_max_hacc_m)
+        self.anchor_max_waits = int(anchor_max_waits)
+        self.hidden_ns = [(int(a), int(b)) for a, b in hidden_ns]
+        if start is not None:
+            lat, lon, sd = (float(v) for v in start)
+            if not (math.isfinite(lat) and math.isfinite(lon) and -90.0 <= lat <= 90.0 and sd > 0):
+                raise ValueError(f"start must be (lat_deg, lon_deg, sd_m) with a finite position and sd_m > 0, "
+                                 f"got {start!r}")
+            start = (lat, lon, sd)
+        self.start = start
+        self.min_cn0_4th_dbhz = float(min_cn0_4th_dbhz)
+        self.status_max_age_ns = int(status_max_age_s * 1e9)
+
+    def reset(self) -> None:
+        self.origin_lat_lon: tuple[float, float] | None = None
+        #: the fix that anchored the walk (or the first used, after a known start): (t_ns, lat, lon, alt); None before
+        self.anchor: tuple | None = None
+        self.fixes: list[FixRecord] = []
+        self.steps: list[FusedStep] = []
+        self.outages: list[OutageResult] = []
+        self._queue: deque = deque()
+        self._last_step_ns: int | None = None
+        self._last_step_dur_ns = int(0.55e9)
+        self._last_accept_ns: int | None = None
+        self._windows = [_Window(a, b) for a, b in self.hidden_ns]
+        self._t_first_ns: int | None = None
+        self.n_screened_out = 0
+        self.n_gated = 0
+        self.n_relocked = 0
+        self.n_cn0 = 0
+        self.n_filter_rejected = 0
+        self._anchor_waits = 0
+        self._rejected_run: deque = deque()
+        self._nis_sum = 0.0
+        self._nis_n = 0
+        self._status: tuple | None = None  # last gnss_status: (t_ns, n_used, cn0_4th_dbhz)
+        if self.start is not None:
+            self.origin_lat_lon = (self.start[0], self.start[1])
+        self._reset_filter()
+
+    # -- the subclass's filter -----------------------------------------------------
+    def _reset_filter(self) -> None:
+        raise NotImplementedError
+
+    @property
+    def filt(self):
+        """The Kalman filter: ``x[0:2]`` is the position (E, N), ``P[:2, :2]`` its covariance."""
+        raise NotImplementedError
+
+    def _init_filter_at(self, sigma_m: float) -> None:
+        """Start the filter at (0, 0) with this position SD when a fix comes before any step."""
+        raise NotImplementedError
+
+    def _step(self, step, t_prev_ns: int, dur_ns: int) -> float:
+        """One step through the filter; returns the distance it walked (m)."""
+        raise NotImplementedError
+
+    def _predict_fix(self, t_ns: int) -> np.ndarray:
+        """The filter's position at a fix's time (E, N)."""
+        raise NotImplementedError
+
+    def _update_position(self, t_ns: int, east: float, north: float, sigma_m: float, gate: bool) -> UpdateResult:
+        raise NotImplementedError
+
+    def _filter_verdict(self, t_ns: int) -> str:
+        """Why the filter will not use a screened fix now ("" to go on)."""
+        return ""
+
+    def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
+        """An accepted fix's further use (course, velocity, training)."""
+
+    def _step_output(self) -> tuple[float, float]:
+        """(length_m, heading_rad) of the step just filtered, for the fused track."""
+        raise NotImplementedError
+
+    # -- input ------------------------------------------------------------------------
+    def add_fix(self, t_ns: int, values) -> None:
+        """A GPS event (``values`` as the ``gps`` stream: lat, lon, alt, hacc, speed, course)."""
+        self._queue.append((int(t_ns), tuple(float(v) for v in values)))
+        last = self._last_step_ns
+        while self._queue and ((last is not None and self._queue[0][0] <= last)
+                               or self._queue[0][0] < int(t_ns) - self.hold_ns):
+            self._fix(*self._queue.popleft())
+
+    def add_status(self, t_ns: int, values) -> None:
+        """A ``gnss_status`` event: satellites used, C/N0 of the 4th strongest (dB-Hz)."""
+        n_used = float(values[0]) if len(values) > 0 else math.nan
+        cn0 = float(values[1]) if len(values) > 1 else math.nan
+        self._status = (int(t_ns), n_used, cn0)
+
+    def _step_times(self, step) -> tuple[int, int]:
+        """(start of the step's interval, its duration) in ns."""
+        prev = self._last_step_ns
+        d = step.features.duration_s
+        dur = int(d * 1e9) if d == d else self._last_step_dur_ns
+        t_prev = step.t_ns - dur if prev is None else max(prev, step.t_ns - 3 * dur)
+        return t_prev, dur
+
+    def _before_fixes(self, step, t_prev_ns: int) -> None:
+        """Called with each step before the fixes inside its interval are processed."""
+
+    def add_step(self, step) -> FusedStep:
+        """A completed :class:`core.pdr.pipeline.Step`; returns its fused counterpart."""
+        t_prev, dur = self._step_times(step)
+        self._before_fixes(step, t_prev)
+        while self._queue and self._queue[0][0] <= step.t_ns:
+            self._fix(*self._queue.popleft())
+        walked = self._step(step, t_prev, dur)
+        self._last_step_ns = step.t_ns
+        self._last_step_dur_ns = dur
+        for w in self._windows:
+            if w.start_ns <= step.t_ns < w.end_ns:
+                w.walked_m += walked
+        fused = self._emit(step.index, step.t_ns)
+        self.steps.append(fused)
+        return fused
+
+    def finish(self) -> None:
+        while self._queue:
+            self._fix(*self._queue.popleft())
+        for w in self._windows:
+            if w.fix_t_ns is not None and not w.done:
+                self._close_window(w, math.nan, None)
+
+    # -- fixes ----------------------------------------------------------------------------
+    def _hidden(self, t_ns: int) -> bool:
+        return any(a <= t_ns < b for a, b in self.hidden_ns)
+
+    def _screen(self, t_ns, lat, lon, hacc, speed) -> str:
+        if not (math.isfinite(lat) and math.isfinite(lon)) or not (-90.0 <= lat <= 90.0):
+            return "no position"
+        if hacc > self.max_hacc_m:
+            return f"accuracy {hacc:.0f} m > {self.max_hacc_m:.0f} m"
+        if speed > self.max_speed_m_s:
+            return f"speed {speed:.1f} m/s is not walking"
+        return ""
+
+    def _cn0_verdict(self, t_ns: int) -> str:
+        """Kubrak et al.'s C/N0 rule on the receiver status of this fix ("" when none or when it passes)."""
+        st = self._status
+        if st is None or self.min_cn0_4th_dbhz <= 0 or abs(t_ns - st[0]) > self.status_max_age_ns:
+            return ""
+        n_used, cn0 = st[1], st[2]
+        if n_used == n_used and n_used < 4:
+            return f"{n_used:.0f} satellites in use (< 4)"
+        if cn0 == cn0 and cn0 < self.min_cn0_4th_dbhz:
+            return f"C/N0 of the 4th satellite {cn0:.0f} dB-Hz < {self.min_cn0_4th_dbhz:.0f}"
+        return ""
+
+    def _record(self, t_ns, v, east, north, accepted, reason, nis=math.nan, moved=0.0) -> None:
+        self.fixes.append(FixRecord(t_ns, v[0], v[1], east, north, v[3] if len(v) > 3 else math.nan,
+                                    v[4] if len(v) > 4 else math.nan, v[5] if len(v) > 5 else math.nan,
+                                    accepted, reason, nis, moved))
+
+    def _fix(self, t_ns: int, v: tuple) -> None:
+        lat, lon = v[0], v[1]
+        hacc = v[3] if len(v) > 3 else math.nan
+        speed = v[4] if len(v) > 4 else math.nan
+        course = v[5] if len(v) > 5 else math.nan
+        nan = math.nan
+        hacc_eff = hacc if hacc > 0 else self.default_hacc_m
+        if self._hidden(t_ns):
+            self._record(t_ns, v, nan, nan, False, "hidden (outage)")
+            return
+        reason = self._screen(t_ns, lat, lon, hacc, speed)
+        if not reason:
+            reason = self._cn0_verdict(t_ns)
+            self.n_cn0 += bool(reason)
+        if reason:
+            self.n_screened_out += 1
+            self._record(t_ns, v, nan, nan, False, reason)
+            return
+        filt = self.filt
+        sigma = max(hacc_eff * self.hacc_scale / HACC_PER_SIGMA, self.min_sigma_m)
+        if self.origin_lat_lon is None and hacc_eff > self.anchor_max_hacc_m and \
+                self._anchor_waits < self.anchor_max_waits:
+            # a phone's first fixes are often coarse (the ETH walk's first three are 65 m off): wait for a good one
+            self._anchor_waits += 1
+            self.n_screened_out += 1
+            self._record(t_ns, v, nan, nan, False, f"waiting for a first fix within {self.anchor_max_hacc_m:.0f} m")
+            return
+        if self.origin_lat_lon is None:
+            # anchor: the walk's start lies where dead reckoning says, seen from this fix
+            e0, n0 = (float(filt.x[0]), float(filt.x[1])) if filt.initialized else (0.0, 0.0)
+            lat0, lon0 = enu_to_geodetic(-e0, -n0, (lat, lon))
+            self.origin_lat_lon = (float(lat0), float(lon0))
+            self.anchor = (int(t_ns), float(lat), float(lon), float(v[2]) if len(v) > 2 else math.nan)
+            if not filt.initialized:
+                self._init_filter_at(sigma)
+                filt = self.filt
+            filt.P[:2, :] = 0.0
+            filt.P[:, :2] = 0.0
+            filt.P[0, 0] = filt.P[1, 1] = sigma ** 2
+            self._accepted(t_ns, v, e0, n0, hacc, speed, course, nan, 0.0)
+            return
+        if not filt.initialized:  # a known start, and a fix before the first step
+            self._init_filter_at(self.start[2] if self.start is not None else sigma)
+            filt = self.filt
+        east, north = geodetic_to_enu(lat, lon, self.origin_lat_lon)
+        pred = self._predict_fix(t_ns)
+        self._outage_end(t_ns, east, north, pred, filt.position_sigma_m())
+        reason = self._filter_verdict(t_ns)
+        if reason:
+            self.n_filter_rejected += 1
+            self._record(t_ns, v, east, north, False, reason)
+            return
+        res = self._update_position(t_ns, east, north, sigma, True)
+        if not res.accepted and self._relock(t_ns, res.innovation, sigma):
+            # the track, not the GPS, is wrong: take the fix with the position uncertainty widened by
+            # the disagreement (so its NIS is acceptable) instead of rejecting GPS for ever
+            d = np.array(res.innovation)
+            filt.P[:2, :2] += np.outer(d, d)
+            res = self._update_position(t_ns, east, north, sigma, False)
+            self.n_relocked += 1
+        if not res.accepted:
+            self.n_gated += 1
+            self._record(t_ns, v, east, north, False, res.reason, res.nis)
+            return
+        self._rejected_run.clear()
+        if res.nis == res.nis:
+            self._nis_sum += res.nis
+            self._nis_n += 1
+        self._outage_jump(t_ns, res.correction_m)
+        if self.anchor is None:
+            self.anchor = (int(t_ns), float(lat), float(lon), float(v[2]) if len(v) > 2 else math.nan)
+        self._accepted(t_ns, v, east, north, hacc, speed, course, res.nis, res.correction_m)
+
+    def _relock(self, t_ns: int, innovation, sigma_m: float) -> bool:
+        """Consecutive gated fixes that agree among themselves for ``relock_s``: the track is off, not GPS."""
+        run = self._rejected_run
+        run.append((t_ns, innovation[0], innovation[1]))
+        while run and run[0][0] < t_ns - 2 * self.relock_ns:
+            run.popleft()
+        if len(run) < 3 or t_ns - run[0][0] < self.relock_ns:
+            return False
+        d = np.array([(r[1], r[2]) for r in run])
+        if float(np.max(np.std(d, axis=0))) > 2.0 * sigma_m:
+            return False  # they disagree with each other too: bad GPS, keep rejecting
+        run.clear()
+        return True
+
+    def _accepted(self, t_ns, v, east, north, hacc, speed, course, nis, moved) -> None:
+        self._last_accept_ns = t_ns
+        self._record(t_ns, v, east, north, True, "", nis, moved)
+        self._after_accept(t_ns, east, north, hacc if hacc > 0 else self.default_hacc_m, speed, course)
+
+    def _outage_end(self, t_ns, east, north, pred, sigma) -> None:
+        """The first screened fix after a hidden window: the error before the update."""
+        for w in self._windows:
+            if w.end_error_m is None and t_ns >= w.end_ns:
+                w.end_error_m = math.hypot(east - pred[0], north - pred[1])
+                w.sigma_m = sigma
+                w.fix_t_ns = t_ns
+
+    def _outage_jump(self, t_ns, moved) -> None:
+        """... and the jump at the first fix after it that the filter accepts (the track rejoining GPS)."""
+        for w in self._windows:
+            if w.fix_t_ns is not None and not w.done:
+                self._close_window(w, moved, t_ns)
+
+    def _close_window(self, w, jump_m: float, accept_t_ns: int | None) -> None:
+        w.done = True
+        t0 = self._t_first_ns if self._t_first_ns is not None else 0
+        pct = 100.0 * w.end_error_m / w.walked_m if w.walked_m > 0 else math.nan
+        self.outages.append(OutageResult((w.start_ns - t0) * 1e-9, (w.end_ns - w.start_ns) * 1e-9, w.walked_m,
+                                         w.end_error_m, pct, w.sigma_m, jump_m, w.fix_t_ns,
+                                         accept_t_ns == w.fix_t_ns,
+                                         (accept_t_ns - w.fix_t_ns) * 1e-9 if accept_t_ns is not None else math.nan))
+
+    def set_time_zero(self, t0_ns: int) -> None:
+        """The first sensor event's time, for outage start times in seconds."""
+        self._t_first_ns = int(t0_ns)
+
+    # -- output ------------------------------------------------------------------------------
+    def _emit(self, index: int, t_ns: int) -> FusedStep:
+        filt = self.filt
+        e, n = float(filt.x[0]), float(filt.x[1])
+        lat = lon = math.nan
+        if self.origin_lat_lon is not None:
+            lat, lon = enu_to_geodetic(e, n, self.origin_lat_lon)
+        fused = self._last_accept_ns is not None and t_ns - self._last_accept_ns <= self.fused_timeout_ns
+        P = filt.P
+        length, heading = self._step_output()
+        return FusedStep(index, t_ns, e, n, float(lat), float(lon), float(length), float(heading),
+                         (float(P[0, 0]), float(P[0, 1]), float(P[1, 1])), "fused" if fused else "dr")
+
+    def status(self) -> dict:
+        """Live position and uncertainty for the app (local ENU)."""
+        filt = self.filt
+        return {"east_m": float(filt.x[0]), "north_m": float(filt.x[1]),
+                "sigma_m": filt.position_sigma_m() if filt.initialized else math.nan,
+                "anchored": self.origin_lat_lon is not None, "filter": self.name}
+
+    def counters(self) -> dict:
+        n_acc = sum(1 for f in self.fixes if f.accepted)
+        return {"fixes": len(self.fixes), "fixes_accepted": n_acc, "fixes_screened_out": self.n_screened_out,
+                "fixes_cn0": self.n_cn0, "fixes_filter_rejected": self.n_filter_rejected,
+                "fixes_gated": self.n_gated, "fixes_relocked": self.n_relocked,
+                "fixes_hidden": sum(1 for f in self.fixes if f.reason == "hidden (outage)"),
+                "position_nis_mean": self._nis_sum / self._nis_n if self._nis_n else math.nan,
+                "fusion": self.name}
+
+    def run(self, steps, gps_stream=None, t0_ns: int | None = None, status_stream=None) -> FusionResult:
+        """Batch: fuse a finished walk's steps (:class:`core.pdr.pipeline.Step`) with its ``gps`` stream.
+
+        The same kernel as streaming: fixes and steps meet the filter in the order a
+        live pipeline gives them (each fix before the first step after it), so
+        ``Pipeline(gnss=F()).run(rec)`` and ``F().run(Pipeline().run(rec).steps,
+        rec.streams["gps"])`` agree (a test checks it); this one is much faster for sweeps.
+        ``status_stream`` is the recording's ``gnss_status`` stream, if any.
+        """
+        self.reset()
+        if t0_ns is not None:
+            self.set_time_zero(t0_ns)
+        if gps_stream is not None and len(gps_stream):
+            ft, fv = gps_stream.t_ns, gps_stream.values
+        else:
+            ft, fv = np.zeros(0, np.int64), np.zeros((0, 6))
+        if status_stream is not None and len(status_stream):
+            st, sv = status_stream.t_ns, status_stream.values
+        else:
+            st, sv = np.zeros(0, np.int64), np.zeros((0, 2))
+        j = k = 0
+
+        def fixes_until(t):
+            nonlocal j, k
+            while j < len(ft) and ft[j] <= t:
+                while k < len(st) and st[k] <= ft[j]:  # a status at a fix's time comes before it (STREAM_ORDER)
+                    self.add_status(int(st[k]), sv[k].tolist())
+                    k += 1
+                self.add_fix(int(ft[j]), fv[j].tolist())
+                j += 1
+
+        for s in steps:
+            fixes_until(s.t_ns)
+            self.add_step(s)
+        fixes_until(np.iinfo(np.int64).max)
+        self.finish()
+        return self.result()
+
+    def result(self) -> FusionResult:
+        """Everything so far, with latitude/longitude filled for every step once the walk is anchored."""
+        steps = self.steps
+        if self.origin_lat_lon is not None:
+            out = []
+            for s in steps:
+                if s.lat_deg != s.lat_deg:
+                    lat, lon = enu_to_geodetic(s.east_m, s.north_m, self.origin_lat_lon)
+                    s = FusedStep(s.index, s.t_ns, s.east_m, s.north_m, float(lat), float(lon), s.length_m,
+                                  s.heading_rad, s.cov_en_m2, s.source)
+                out.append(s)
+            steps = out
+        return FusionResult(steps, list(self.fixes), list(self.outages), self.origin_lat_lon, self.counters())
