@@ -147,7 +147,9 @@ Sensors
       Gauss-Markov bias, multipath episodes (under-reported in ``hacc_m``) and optionally a cold start;
       speed and course from the noisy mean velocity; converted to WGS-84 by
       :func:`core.geodesy.enu_to_geodetic` about ``origin_lat_lon`` (ENU +y is true north).  See
-      :class:`GpsModel`; ``truth.gps`` (:class:`GpsTruth`) holds every injected error.
+      :class:`GpsModel`; ``truth.gps`` (:class:`GpsTruth`) holds every injected error.  Faults a benchmark
+      switches on (``GpsModel(faults=(GpsFault(...), ...))``): multipath jumps, a slow drift, a noisy stretch,
+      an outage (no fixes), fixes whose reported accuracy lies; each with its exact truth per fix.
 
     Noise is white Gaussian with the given per-sample standard deviation.
     Each stream starts at a random phase within its first interval; each
@@ -185,7 +187,7 @@ from core.geodesy import enu_to_geodetic, magnetic_field
 from core.recording import Recording, Stream, make_stream
 
 __all__ = ["simulate_walk", "demo_walk", "street_route", "outdoor_walk", "SimulatedWalk", "WalkTruth", "GpsModel",
-           "GpsTruth", "DisturbanceZone", "SIMULATOR_VERSION", "WALK_RATIO_PER_HEIGHT", "default_step_length_m"]
+           "GpsFault", "GpsTruth", "DisturbanceZone", "SIMULATOR_VERSION", "WALK_RATIO_PER_HEIGHT", "default_step_length_m"]
 
 #: Version of the simulation model (stored in ``metadata["simulator"]``); bumped when the same
 #: parameters and seed no longer give the same recording.
@@ -314,6 +316,100 @@ class DisturbanceZone:
                 "dip_change_deg": self.dip_change_deg, "strength_scale": self.strength_scale}
 
 
+#: the kinds of :class:`GpsFault`
+GPS_FAULT_KINDS = ("jump", "drift", "noise", "outage", "lying")
+#: what a fault's receiver reports as its accuracy unless told (see :class:`GpsFault`)
+_FAULT_HACC_DEFAULT = {"jump": "under", "drift": "normal", "noise": "honest", "outage": "normal", "lying": (3.0, 5.0)}
+_FAULT_OFFSET_DEFAULT_M = {"jump": (20.0, 200.0), "lying": (30.0, 80.0)}
+_FAULT_HACC_WORDS = ("honest", "normal", "under")
+
+
+@dataclass(frozen=True)
+class GpsFault:
+    """One injected GPS fault over ``[start_s, start_s + duration_s)`` of simulation time.
+
+    Times are seconds from the start of the simulation (the sensor clock's ``clock_start_ns``, within
+    one sample interval of the recording's first event), like ``GpsModel.first_fix_s``.
+
+    On top of the receiver's normal errors (:class:`GpsModel`), per fix inside the window:
+
+    ``"jump"``
+        multipath taken for the direct signal near a wall: one constant offset for the whole window, of
+        uniform magnitude in ``offset_m`` (default 20-200 m) and uniform direction; the receiver
+        under-reports its accuracy (``hacc="under"``: the normal value times ``hacc_multipath_factor``).
+    ``"drift"``
+        the solution slides away at ``drift_m_per_min`` (default 5 m/min) in a uniform direction, from 0 at
+        the start of the window to ``drift_m_per_min * duration_s / 60`` at its end, and snaps back after
+        it; the reported accuracy stays normal (``hacc="normal"``).
+    ``"noise"``
+        very noisy fixes: white noise of ``noise_sd_m`` per axis per fix (default 30 m) on the position
+        and of ``velocity_sd_m_s`` per axis (default 1 m/s) on the Doppler velocity (so speed and course
+        scatter too); the reported accuracy is honest by default (``hacc="honest"``: ``c sqrt(noise_sd^2
+        + bias_sd^2 + noise_sd_fault^2) J``, the 68 % radius of the total error) or lies with
+        ``hacc="normal"`` (the receiver's usual value, as if nothing were wrong).
+    ``"outage"``
+        no fixes at all: the receiver gives none (the walker keeps walking).
+    ``"lying"``
+        isolated wrong fixes that claim to be good: each fix in the window lies with probability
+        ``fraction`` (default 1: all of them), then it is off by its own offset of uniform magnitude in
+        ``offset_m`` (default 30-80 m) and uniform direction, and reports an accuracy uniform in
+        ``hacc`` (default 3-5 m).
+
+    ``hacc`` (the reported accuracy during the fault; ``None``: the kind's default above) is one of
+    ``"honest"`` (noise: as above; jump, drift, lying: the normal value plus the fault's offset, like a
+    cold start), ``"normal"`` (the normal value with its jitter), ``"under"`` (the normal value times
+    ``GpsModel.hacc_multipath_factor``), or ``(low, high)``: uniform per fix; it replaces whatever the
+    fix would have reported (a random multipath episode's or a cold start's).  Speed and course are
+    affected only by ``"noise"``.  Faults may not overlap.  Each fault draws from a generator of its
+    own (the ``i``-th child of the GPS generator's fault child), so switching one on or off, or
+    changing it, moves no other draw.
+    """
+
+    kind: str  #: one of ``GPS_FAULT_KINDS``
+    start_s: float  #: start of the window (s of simulation time)
+    duration_s: float  #: length of the window (s)
+    offset_m: tuple[float, float] | None = None  #: jump, lying: range of the offset's magnitude (m, uniform)
+    drift_m_per_min: float = 5.0  #: drift: speed of the drift (m/min)
+    noise_sd_m: float = 30.0  #: noise: white position noise per axis per fix (m)
+    velocity_sd_m_s: float = 1.0  #: noise: white velocity noise per axis per fix (m/s)
+    fraction: float = 1.0  #: lying: probability that a fix in the window lies
+    hacc: str | tuple[float, float] | None = None  #: the reported accuracy during the fault (see above)
+
+    def __post_init__(self):
+        if self.kind not in GPS_FAULT_KINDS:
+            raise ValueError(f"GpsFault.kind must be one of {', '.join(GPS_FAULT_KINDS)}, got {self.kind!r}")
+        object.__setattr__(self, "start_s", _non_negative("GpsFault.start_s", self.start_s))
+        object.__setattr__(self, "duration_s", _positive("GpsFault.duration_s", self.duration_s))
+        for name in ("drift_m_per_min", "noise_sd_m", "velocity_sd_m_s"):
+            object.__setattr__(self, name, _non_negative(f"GpsFault.{name}", getattr(self, name)))
+        if not 0.0 <= float(self.fraction) <= 1.0:
+            raise ValueError(f"GpsFault.fraction must be in [0, 1], got {self.fraction!r}")
+        object.__setattr__(self, "fraction", float(self.fraction))
+        off = self.offset_m if self.offset_m is not None else _FAULT_OFFSET_DEFAULT_M.get(self.kind, (0.0, 0.0))
+        lo, hi = (_non_negative("GpsFault.offset_m", v) for v in off)
+        if hi < lo:
+            raise ValueError("GpsFault.offset_m must be (low, high) with low <= high")
+        object.__setattr__(self, "offset_m", (lo, hi))
+        h = _FAULT_HACC_DEFAULT[self.kind] if self.hacc is None else self.hacc
+        if isinstance(h, str):
+            if h not in _FAULT_HACC_WORDS:
+                raise ValueError(f"GpsFault.hacc must be one of {', '.join(_FAULT_HACC_WORDS)} or (low, high), "
+                                 f"got {h!r}")
+        else:
+            lo, hi = (_positive("GpsFault.hacc", v) for v in h)
+            if hi < lo:
+                raise ValueError("GpsFault.hacc must be (low, high) with low <= high")
+            h = (lo, hi)
+        object.__setattr__(self, "hacc", h)
+
+    @property
+    def end_s(self) -> float:
+        return self.start_s + self.duration_s
+
+    def as_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+
+
 @dataclass(frozen=True)
 class GpsModel:
     """A phone GNSS receiver: the fixes it reports and how wrong they are (SI units, settings named by unit).
@@ -352,6 +448,11 @@ class GpsModel:
     Fixes come at ``rate_hz`` from ``first_fix_s`` after the start of the recording (time to first
     fix), each time stamp (sensor clock) off its nominal grid by white jitter ``time_jitter_s``
     (clipped at 30 % of the interval).  The position is the one at the time stamp (no latency).
+
+    ``faults`` (:class:`GpsFault`) add what a benchmark of bad-fix handling needs on top: multipath
+    jumps, a slow drift, noisy fixes, outages and lying fixes in given windows.  Every normal draw is
+    made as without them (a fix an outage removes is drawn and dropped), so the fixes outside the
+    faults are exactly the fixes of the same model and seed without faults.
     """
 
     rate_hz: float = 1.0  #: fixes per second
@@ -372,6 +473,7 @@ class GpsModel:
     cold_start_fixes: int = 0  #: number of first fixes with the cold-start error (0: a warm start)
     cold_start_error_m: float = 50.0  #: extra error of the first fix of a cold start (m)
     time_jitter_s: float = 0.005  #: white jitter of the fix time stamps around their 1/rate grid (s)
+    faults: tuple[GpsFault, ...] = ()  #: injected faults (:class:`GpsFault`), none by default
 
     def __post_init__(self):
         for name in ("rate_hz", "bias_tau_s", "velocity_window_s"):
@@ -393,6 +495,13 @@ class GpsModel:
             raise ValueError(f"GpsModel.cold_start_fixes must be a non-negative integer, got {self.cold_start_fixes!r}")
         if self.noise_sd_m == 0 and self.bias_sd_m == 0:
             raise ValueError("GpsModel needs some position error (noise_sd_m or bias_sd_m) for hacc_m")
+        faults = tuple(self.faults)
+        if not all(isinstance(f, GpsFault) for f in faults):
+            raise ValueError("GpsModel.faults must be GpsFault instances")
+        spans = sorted((f.start_s, f.end_s) for f in faults)
+        if any(b[0] < a[1] for a, b in zip(spans, spans[1:])):
+            raise ValueError("GpsModel.faults must not overlap")
+        object.__setattr__(self, "faults", faults)
 
     @property
     def hacc_scale(self) -> float:
@@ -415,8 +524,11 @@ class GpsModel:
         return 0.5 * (lo + hi)
 
     def as_dict(self) -> dict:
-        """The settings as JSON-ready values (for the recording's metadata)."""
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+        """The settings as JSON-ready values (for the recording's metadata; ``faults`` only when there are some)."""
+        d = {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items() if k != "faults"}
+        if self.faults:
+            d["faults"] = [f.as_dict() for f in self.faults]
+        return d
 
 
 @dataclass(frozen=True, eq=False)
@@ -424,9 +536,11 @@ class GpsTruth:
     """What went into each GPS fix (row ``k`` = fix ``k`` of the recording's ``gps`` stream).
 
     The reported horizontal position is exactly ``pos_enu_m[:, :2] + bias_en_m + multipath_en_m +
-    cold_start_en_m + white noise`` (ENU, converted to latitude/longitude by :func:`core.geodesy.enu_to_geodetic`
-    about ``WalkTruth.origin_lat_lon``); the white noise is what is left.  The reported altitude is
-    ``origin_alt_m + pos_enu_m[:, 2] + alt_bias_m + white noise``.
+    cold_start_en_m + fault_en_m + white noise`` (ENU, converted to latitude/longitude by
+    :func:`core.geodesy.enu_to_geodetic` about ``WalkTruth.origin_lat_lon``); the white noise is what is
+    left, and ``error_en_m`` is the sum (reported minus true, before the conversion).  The reported
+    altitude is ``origin_alt_m + pos_enu_m[:, 2] + alt_bias_m + white noise``.  Fixes inside an
+    ``"outage"`` fault are not in the stream and not here.
     """
 
     model: GpsModel  #: the receiver model
@@ -441,11 +555,22 @@ class GpsTruth:
     hacc_normal_m: np.ndarray  #: (n,) honest 68 % radius of the normal errors, before the jitter (m)
     multipath_t_ns: np.ndarray  #: (k, 2) int64 start and end of each multipath episode (those touching a fix)
     multipath_offset_en_m: np.ndarray  #: (k, 2) each episode's offset (m)
+    error_en_m: np.ndarray  #: (n, 2) the fix's true horizontal error: reported minus true position (m), all included
+    fault_index: np.ndarray  #: (n,) int: index in ``model.faults`` of the fault the fix is in (-1: none)
+    fault_kind: np.ndarray  #: (n,) str: that fault's kind ("" outside faults and for a lying window's honest fixes)
+    fault_en_m: np.ndarray  #: (n, 2) the fault's offset (jump, drift, lying) or noise (noise) on the fix (m; 0 outside)
+    fault_t_ns: np.ndarray  #: (f, 2) int64 start and end of each of ``model.faults`` on the sensor clock
+    fault_offset_en_m: np.ndarray  #: (f, 2) a jump's offset, a drift's offset at its end (m); 0 for the other kinds
 
     @property
     def error_model_en_m(self) -> np.ndarray:
-        """(n, 2) the injected horizontal error without the white noise: bias + multipath + cold start (m)."""
-        return self.bias_en_m + self.multipath_en_m + self.cold_start_en_m
+        """(n, 2) the injected horizontal error without the white noise: bias + multipath + cold start + fault (m)."""
+        return self.bias_en_m + self.multipath_en_m + self.cold_start_en_m + self.fault_en_m
+
+    @property
+    def error_m(self) -> np.ndarray:
+        """(n,) the fix's true horizontal error (m)."""
+        return np.hypot(self.error_en_m[:, 0], self.error_en_m[:, 1])
 
 
 @dataclass(frozen=True, eq=False)
@@ -1113,8 +1238,6 @@ def _simulate_gps(gps: GpsModel, model: _WalkModel, seeds: np.random.SeedSequenc
     cold_en = cold_mag[:, None] * np.array([math.cos(cold_ang), math.sin(cold_ang)])
 
     white = gps.noise_sd_m * rng_noise.standard_normal((n, 2))
-    east, north = (pos[:, :2] + bias[:, :2] + mp_en + cold_en + white).T
-    lat, lon = enu_to_geodetic(east, north, origin_lat_lon)
     alt = origin_alt_m + pos[:, 2] + bias[:, 2] + gps.alt_noise_sd_m * rng_alt.standard_normal(n)
 
     hacc_normal = np.full(n, gps.hacc_scale * math.hypot(gps.noise_sd_m, gps.bias_sd_m))
@@ -1122,19 +1245,92 @@ def _simulate_gps(gps: GpsModel, model: _WalkModel, seeds: np.random.SeedSequenc
     hacc = hacc_normal * jit * np.where(multipath, gps.hacc_multipath_factor, 1.0) + cold_mag
 
     v_meas = vel + gps.speed_noise_m_s * rng_vel.standard_normal((n, 2))
+    faults = _gps_faults(gps, seeds, t, hacc_normal * jit)
+    if faults is not None:  # only then: the fixes of a model without faults are computed exactly as before
+        hacc = np.where(faults["hacc"] == faults["hacc"], faults["hacc"], hacc)
+        v_meas = v_meas + faults["vel_en"]
+    fault_en = faults["en"] if faults is not None else np.zeros((n, 2))
+    err_en = bias[:, :2] + mp_en + cold_en + white + fault_en
+    east, north = (pos[:, :2] + bias[:, :2] + mp_en + cold_en + white + fault_en).T  # + 0.0 without faults: exact
+    lat, lon = enu_to_geodetic(east, north, origin_lat_lon)
     speed = np.hypot(v_meas[:, 0], v_meas[:, 1])
     bearing = np.array([bearing_deg(h) for h in np.arctan2(v_meas[:, 1], v_meas[:, 0]).tolist()])
     course = np.where(speed >= gps.course_min_speed_m_s, bearing, np.nan)
 
-    stream = make_stream(GPS, t_ns, np.stack([lat, lon, alt, hacc, speed, course], axis=1))
+    keep = np.ones(n, dtype=bool) if faults is None else faults["keep"]
+    stream = make_stream(GPS, t_ns[keep], np.stack([lat, lon, alt, hacc, speed, course], axis=1)[keep])
     frozen = _readonly
+    nf = len(gps.faults)
     truth = GpsTruth(
-        model=gps, t_ns=frozen(t_ns), pos_enu_m=frozen(pos), vel_en_m_s=frozen(vel), bias_en_m=frozen(bias[:, :2]),
-        alt_bias_m=frozen(bias[:, 2]), multipath=frozen(multipath), multipath_en_m=frozen(mp_en),
-        cold_start_en_m=frozen(cold_en), hacc_normal_m=frozen(hacc_normal),
+        model=gps, t_ns=frozen(t_ns[keep]), pos_enu_m=frozen(pos[keep]), vel_en_m_s=frozen(vel[keep]),
+        bias_en_m=frozen(bias[keep, :2]), alt_bias_m=frozen(bias[keep, 2]), multipath=frozen(multipath[keep]),
+        multipath_en_m=frozen(mp_en[keep]), cold_start_en_m=frozen(cold_en[keep]),
+        hacc_normal_m=frozen(hacc_normal[keep]),
         multipath_t_ns=frozen((clock0 + np.round(np.stack([starts, ends], axis=1) * 1e9).astype(np.int64))[touching]),
-        multipath_offset_en_m=frozen(offsets[touching]))
+        multipath_offset_en_m=frozen(offsets[touching]), error_en_m=frozen(err_en[keep]),
+        fault_index=frozen(faults["index"][keep] if faults is not None else np.full(n, -1)),
+        fault_kind=frozen(faults["kind"][keep] if faults is not None else np.full(n, "", dtype="<U6")),
+        fault_en_m=frozen(fault_en[keep]),
+        fault_t_ns=frozen(clock0 + np.round(np.array([(f.start_s, f.end_s) for f in gps.faults],
+                                                     dtype=float).reshape(nf, 2) * 1e9).astype(np.int64)),
+        fault_offset_en_m=frozen(faults["offset"] if faults is not None else np.zeros((0, 2))))
     return stream, truth
+
+
+def _gps_faults(gps: GpsModel, seeds: np.random.SeedSequence, t: np.ndarray, hacc_jittered: np.ndarray):
+    """The :class:`GpsFault` s of ``gps`` on the fixes at times ``t`` (s): None without faults, else a dict of
+    ``en`` (n, 2) position offsets, ``vel_en`` (n, 2) velocity noise, ``hacc`` (n,) reported accuracy (nan:
+    unchanged), ``keep`` (n,) bool (False inside an outage), ``index`` (n,) int, ``kind`` (n,) str and
+    ``offset`` (f, 2) per fault.  Fault ``i`` draws from child ``i`` of the GPS generator's ninth child.
+    ``hacc_jittered``: the normal reported accuracy of each fix (before multipath and cold start)."""
+    if not gps.faults:
+        return None
+    n = len(t)
+    out = {"en": np.zeros((n, 2)), "vel_en": np.zeros((n, 2)), "hacc": np.full(n, np.nan),
+           "keep": np.ones(n, dtype=bool), "index": np.full(n, -1), "kind": np.full(n, "", dtype="<U6"),
+           "offset": np.zeros((len(gps.faults), 2))}
+    for i, (f, fs) in enumerate(zip(gps.faults, seeds.spawn(1)[0].spawn(len(gps.faults)))):
+        rng = np.random.default_rng(fs)
+        idx = np.flatnonzero((t >= f.start_s) & (t < f.end_s))
+        m = len(idx)
+        if f.kind == "outage":
+            out["keep"][idx] = False
+            continue
+        if f.kind == "jump":
+            mag, ang = rng.uniform(*f.offset_m), rng.uniform(0.0, 2.0 * np.pi)
+            out["offset"][i] = (mag * math.cos(ang), mag * math.sin(ang))
+            en, extra = np.tile(out["offset"][i], (m, 1)), np.full(m, mag)
+        elif f.kind == "drift":
+            ang = rng.uniform(0.0, 2.0 * np.pi)
+            unit = np.array([math.cos(ang), math.sin(ang)])
+            out["offset"][i] = f.drift_m_per_min * f.duration_s / 60.0 * unit
+            extra = f.drift_m_per_min / 60.0 * (t[idx] - f.start_s)
+            en = extra[:, None] * unit
+        elif f.kind == "noise":
+            en = f.noise_sd_m * rng.standard_normal((m, 2))
+            out["vel_en"][idx] = f.velocity_sd_m_s * rng.standard_normal((m, 2))
+            extra = np.zeros(m)
+        else:  # lying: every draw made for every fix in the window, then the liars kept
+            lies = rng.random(m) < f.fraction
+            extra, ang = rng.uniform(*f.offset_m, m), rng.uniform(0.0, 2.0 * np.pi, m)
+            en = np.stack([extra * np.cos(ang), extra * np.sin(ang)], axis=1)
+            idx, en, extra = idx[lies], en[lies], extra[lies]
+        u = rng.uniform(0.0, 1.0, m)[:len(idx)]  # for a (low, high) reported accuracy
+        out["en"][idx] = en
+        out["index"][idx], out["kind"][idx] = i, f.kind
+        h = hacc_jittered[idx]
+        if f.hacc == "honest" and f.kind == "noise":
+            normal_sd = math.hypot(gps.noise_sd_m, gps.bias_sd_m)
+            out["hacc"][idx] = h / normal_sd * math.hypot(normal_sd, f.noise_sd_m)
+        elif f.hacc == "honest":
+            out["hacc"][idx] = h + extra
+        elif f.hacc == "normal":
+            out["hacc"][idx] = h
+        elif f.hacc == "under":
+            out["hacc"][idx] = h * gps.hacc_multipath_factor
+        else:
+            out["hacc"][idx] = f.hacc[0] + (f.hacc[1] - f.hacc[0]) * u
+    return out
 
 
 def _readonly(a) -> np.ndarray:
