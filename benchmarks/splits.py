@@ -31,6 +31,13 @@ GPS fusion on the simulator (``sim_gps``, :mod:`benchmarks.gnss_eval`)
     Seeds 0-19 of :func:`desktop.simulator.outdoor_walk` are **tuning** (the
     GPS fusion's defaults were set looking at seeds 0-5), seeds 1000-1019
     **report**.
+GPS fusion with injected faults (``sim_gps_faults``, :mod:`benchmarks.gnss_faults`, issue #10)
+    Seeds 0-9 of :func:`desktop.simulator.outdoor_walk` with the faults of
+    :func:`benchmarks.gnss_faults.fault_schedule` are **tuning**, seeds 2000-2009
+    **report** (declared before any number of this benchmark was seen; the
+    fault walks are other walks than ``sim_gps``'s: longer, 50 Hz, faults).
+    Its real walks keep their splits above (the ETH walk and ``gps_walks_phone``
+    report, IPIN 2023 by route).
 Oxford step counter, Brajdic-Harle, trundle wheel
     All **report**: nothing will be tuned on them.  Honest caveat: the step
     detector's thresholds and gates were developed before this split existed
@@ -61,6 +68,8 @@ IPIN_REPORT_ROUTES = ("04", "05", "23", "24")
 
 #: simulator seeds of the GPS fusion benchmark
 SIM_GPS_SEEDS = {TUNING: tuple(range(0, 20)), REPORT: tuple(range(1000, 1020))}
+#: simulator seeds of the GPS fault benchmark (issue #10, :mod:`benchmarks.gnss_faults`)
+SIM_GPS_FAULT_SEEDS = {TUNING: tuple(range(0, 10)), REPORT: tuple(range(2000, 2010))}
 
 #: datasets whose every recording is in one split
 WHOLE_DATASET = {
