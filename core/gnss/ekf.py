@@ -84,6 +84,37 @@ def sigma_max_m(cov_en_m2) -> float:
     return math.sqrt(max(0.5 * tr + math.sqrt(max(0.25 * tr * tr - det, 0.0)), 0.0))
 
 
+def kalman_update(x: np.ndarray, P: np.ndarray, innov: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float, *,
+                  zero_gain_rows=(), angle_index: int | None = None) -> tuple[bool, float, np.ndarray, np.ndarray]:
+    """One gated EKF measurement update in Joseph form: ``(accepted, nis, x, P)``.
+
+    Rejected (NIS beyond ``gate``, a singular innovation covariance, a non-finite
+    correction) returns the state unchanged.  ``zero_gain_rows`` are states not
+    estimated (Schmidt consider states; the Joseph form stays valid for that gain);
+    ``angle_index`` is wrapped to [-pi, pi).  The filters of this package share it.
+    """
+    S = H @ P @ H.T + R
+    try:
+        Si = np.linalg.inv(S)
+    except np.linalg.LinAlgError:
+        return False, math.inf, x, P
+    nis = float(innov @ Si @ innov)
+    if not math.isfinite(nis) or nis > gate:
+        return False, nis, x, P
+    K = P @ H.T @ Si
+    if len(zero_gain_rows):
+        K[list(zero_gain_rows), :] = 0.0
+    dx = K @ innov
+    if not np.all(np.isfinite(dx)):
+        return False, nis, x, P
+    x = x + dx
+    if angle_index is not None:
+        x[angle_index] = wrap_angle(float(x[angle_index]))
+    ikh = np.eye(len(x)) - K @ H
+    P = ikh @ P @ ikh.T + K @ R @ K.T
+    return True, nis, x, 0.5 * (P + P.T)
+
+
 @dataclass(frozen=True)
 class UpdateResult:
     """Diagnostics of one measurement update (data, not logs)."""
@@ -171,25 +202,10 @@ class PdrEkf:
 
     def _update(self, innov: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float,
                 frozen: tuple = ()) -> tuple[bool, float]:
-        S = H @ self.P @ H.T + R
-        try:
-            Si = np.linalg.inv(S)
-        except np.linalg.LinAlgError:
-            return False, math.inf
-        nis = float(innov @ Si @ innov)
-        if not math.isfinite(nis) or nis > gate:
-            return False, nis
-        K = self.P @ H.T @ Si
-        K[list(CONSIDER) + list(frozen), :] = 0.0  # Schmidt: the consider (and frozen) states are not estimated
-        dx = K @ innov
-        if not np.all(np.isfinite(dx)):
-            return False, nis
-        self.x = self.x + dx
-        self.x[3] = wrap_angle(float(self.x[3]))
-        ikh = np.eye(NX) - K @ H
-        P = ikh @ self.P @ ikh.T + K @ R @ K.T  # Joseph form
-        self.P = 0.5 * (P + P.T)
-        return True, nis
+        # Schmidt: the consider (and frozen) states are not estimated
+        ok, nis, self.x, self.P = kalman_update(self.x, self.P, innov, H, R, gate,
+                                                zero_gain_rows=list(CONSIDER) + list(frozen), angle_index=PSI)
+        return ok, nis
 
     # -- per step ---------------------------------------------------------------
     def step(self, length_m: float, heading_rad: float) -> UpdateResult:

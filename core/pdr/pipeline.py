@@ -66,6 +66,7 @@ from core.pdr.deadreckoning import DeadReckoner
 from core.pdr.heading import RotationSmoother, interval_heading
 from core.pdr.magcal import MagCalibrator
 from core.pdr.steps import StepDetector, StepEvent
+from core.pdr.velocity import SpeedFeatureWindow
 from core.pdr.stride import StepFeatures, StrideModel, WeinbergStride
 from core.recording import Recording, RecordingError
 
@@ -365,7 +366,9 @@ class Pipeline:
         self.smoother.reset()
         self.reckoner = DeadReckoner()
         self.grid = GridResampler(rate_hz=self.grid_rate_hz)
-        # candidate steps in time order: [event, heading or None, confirmed]
+        #: Kubrak et al.'s eq.-1 regressors of |a| over the last 2 s (every step carries them)
+        self.speed_window = SpeedFeatureWindow(grid_rate_hz=self.grid_rate_hz)
+        # candidate steps in time order: [event, heading or None, confirmed, eq.-1 regressors at the peak]
         self._candidates: list[list] = []
         self._bout_len = 0
         self._delay_ns = int(self.heading_delay_s * 1e9)
@@ -443,6 +446,8 @@ class Pipeline:
         for tg, x in self.grid.update(t_ns, norm):
             if self.grid.restarted and self.detector.n_grid:
                 self.detector.restart_bout()
+                self.speed_window.reset()
+            self.speed_window.update(tg, x)
             ev = self.detector.update_grid(tg, x)
             if ev is not None:
                 self._candidate(ev)
@@ -503,7 +508,7 @@ class Pipeline:
             self.n_rejected_rotation += 1
             self._drop_unconfirmed()
             return
-        self._candidates.append([ev, None, False])
+        self._candidates.append([ev, None, False, self.speed_window.features()])
         self._bout_len += 1
         if self._bout_len >= self.min_bout_steps:
             for c in self._candidates:
@@ -527,8 +532,8 @@ class Pipeline:
             self._drop_unconfirmed()  # the bout ended too short
         done = []
         while cands and cands[0][2] and cands[0][1] is not None:
-            ev, h, _ = cands.pop(0)
-            done.append(self._complete(ev, h))
+            ev, h, _, reg = cands.pop(0)
+            done.append(self._complete(ev, h, reg))
         return done
 
     def _step_heading(self, ev: StepEvent) -> float:
@@ -545,16 +550,19 @@ class Pipeline:
     def finish(self) -> list[Step]:
         """End of data: complete the confirmed steps still waiting for their heading; drop an unconfirmed bout."""
         self._drop_unconfirmed()
-        done = [self._complete(ev, self._step_heading(ev) if h is None else h) for ev, h, _ in self._candidates]
+        done = [self._complete(ev, self._step_heading(ev) if h is None else h, reg)
+                for ev, h, _, reg in self._candidates]
         self._candidates = []
         if self.gnss is not None:
             self.gnss.finish()
         return done
 
-    def _complete(self, ev: StepEvent, heading: float) -> Step:
+    def _complete(self, ev: StepEvent, heading: float, regressors: tuple) -> Step:
         duration = ev.duration_s if ev.duration_s == ev.duration_s else DEFAULT_STEP_DURATION_S
         feats = StepFeatures(t_ns=ev.t_ns, duration_s=duration, acc_max_m_s2=ev.acc_max_m_s2,
-                             acc_min_m_s2=ev.acc_min_m_s2, acc_var_m2_s4=ev.acc_var_m2_s4, height_m=self.height_m)
+                             acc_min_m_s2=ev.acc_min_m_s2, acc_var_m2_s4=ev.acc_var_m2_s4, height_m=self.height_m,
+                             window_mean_m_s2=regressors[0], window_freq_hz=regressors[1],
+                             window_std_m_s2=regressors[2])
         length = self.stride_model.length_m(feats)  # eq. 4
         if heading != heading:  # no attitude yet (no magnetometer reading so far)
             heading = self.attitude.initial_yaw_rad

@@ -32,6 +32,10 @@ class StepFeatures:
     acc_min_m_s2: float  #: A_min of eq. 4 (m/s^2)
     acc_var_m2_s4: float  #: variance of the filtered norm over the step ((m/s^2)^2)
     height_m: float | None = None  #: the walker's body height, if the user gave it
+    #: Kubrak et al.'s eq.-1 regressors over the 2 s of |a| before the peak (core.pdr.velocity); nan if unknown
+    window_mean_m_s2: float = float("nan")
+    window_freq_hz: float = float("nan")
+    window_std_m_s2: float = float("nan")
 
     @property
     def frequency_hz(self) -> float:

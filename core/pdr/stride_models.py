@@ -54,6 +54,7 @@ ignored; a newer ``format_version`` or an unknown ``kind`` is refused with a
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -66,7 +67,7 @@ from core.pdr.stride import CoefficientModel, ConstantCoefficient, StepFeatures,
 FORMAT_NAME = "pdr-stride-model"
 FORMAT_VERSION = 1
 
-KINDS = ("weinberg", "weinberg_bp", "chen_linear", "chen_ann")
+KINDS = ("weinberg", "weinberg_bp", "chen_linear", "chen_ann", "kubrak_velocity")
 
 #: folder of the shipped model files (package data ``core/pdr/models/*.json``)
 MODELS_DIR = Path(__file__).resolve().parent / "models"
@@ -287,7 +288,7 @@ class NetworkCoefficient(CoefficientModel):
         if self._needs_height and f.height_m is None:
             if self.height_m is None:
                 return self.fallback_c
-            f = StepFeatures(f.t_ns, f.duration_s, f.acc_max_m_s2, f.acc_min_m_s2, f.acc_var_m2_s4, self.height_m)
+            f = dataclasses.replace(f, height_m=self.height_m)
         if self._standard:
             c = self.net.predict_one((f.height_m, f.frequency_hz))
         else:
@@ -499,6 +500,9 @@ def model_from_dict(d: dict, source: str = "<dict>") -> StrideModel:
                                     c_range=tuple(d.get("output_clip", (0.2, 0.9))),
                                     fallback_c=float(d["fallback_c"]))
             model = WeinbergStride(coefficient=cm, min_length_m=lo, max_length_m=hi)
+        elif kind == "kubrak_velocity":
+            from core.pdr.velocity import VelocityModel, VelocityStride  # noqa: PLC0415 - velocity imports stride
+            model = VelocityStride(VelocityModel.from_dict(d))
         elif kind == "chen_linear":
             k = d["coefficients"]
             model = ChenLinearStride(a=k["a"], b=k["b"], c=k["c"], min_length_m=lo, max_length_m=hi)

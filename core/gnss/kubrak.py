@@ -1,0 +1,512 @@
+"""Real-time GPS/PDR fusion with bad-GPS detection (Kubrak, Macabiau & Monnerat 2006).
+
+The pedestrian navigation system (PNS) of the paper dead-reckons with the velocity
+model of eq. 1 (:mod:`core.pdr.velocity`) and the heading of an attitude filter,
+by eq. 2::
+
+    N_k = N_{k-1} + dd_[k-1,k] cos(psi_k),   E_k = E_{k-1} + dd_[k-1,k] sin(psi_k)     (eq. 2)
+
+with ``psi`` a bearing (clockwise from North).  In our ENU convention (heading
+CCW from East, :mod:`core`) that is ``E += dd cos(psi)``, ``N += dd sin(psi)``;
+every heading derivative below is written in ours (the paper's ``d/dpsi`` of
+``N`` is ``-dd sin``, ours of ``E`` is ``-dd sin``: the same sign, on the other axis).
+
+The loosely coupled Kalman filter of the paper's Figure 8 (:class:`KubrakKf`)
+has seven states: the position errors ``dN, dE``, the velocity error ``dv``,
+the heading error ``dpsi`` and the regression coefficients' errors ``dA, dB,
+dC``.  It is written here on the total state (closed-loop error-state, the
+same filter)::
+
+    x = [E, N, dv, dpsi, A, B, C]
+    v   = A MEAN + B FREQ + C STD + dv        (eq. 1 plus what it does not explain)
+    psi = psi_pdr + dpsi                     (the pipeline's step heading, corrected)
+
+An epoch is a step of the hand-held chain (about 2 Hz): its eq.-1 regressors
+are those of the 2 s window ending at the step's peak, its heading the step's,
+and ``dd = v * dt`` over the time since the previous step (so that a missed
+step does not lose distance, the velocity model's advantage over counting
+steps; after a pause ``dt`` is the step's own duration).  ``dv`` is a
+first-order Gauss-Markov process (``dv_sd_m_s``, ``dv_tau_s``), ``dpsi`` and
+the coefficients random walks; each epoch also adds the white noise of the
+step heading and speed to the position.  The paper gives no noise values;
+ours are documented per setting.
+
+Measurements: GPS position (E, N) -- at the fix's time, the last epoch moved on
+by the time since it -- and GPS velocity (Doppler speed and course as East and
+North components, or the speed alone where the course is missing).  Every
+update passes a chi-square gate on its normalised innovation squared (NIS).
+Jacobians are written out and checked by finite differences in the tests.
+
+Bad GPS (the paper's Figures 14-16, and what a phone adds):
+
+* the receiver's reported accuracy (``max_hacc_m``) and, where the recording
+  has the receiver's status, the paper's first rule: the 4th-strongest
+  satellite in use below 25 dB-Hz (:class:`core.gnss.base.FixFusion`);
+* the innovation gates of position and velocity;
+* **coefficient variability**, the paper's recommended test: when the speed
+  the coefficients predict at the walker's usual regressors (the mean of the
+  last minute's epochs) changes over ``variability_window_s`` by more than a
+  walker's pace can -- more than ``max_speed_change_m_s`` *and* more than the
+  filter's own uncertainty allows (the change's chi-square against the
+  variance the window's updates removed plus the random walk's) -- GPS is
+  declared unreliable: the coefficients are replaced by their mean over the
+  minute before the window (the paper's correction) and fixes are not used
+  for ``unreliable_hold_s``.  Meanwhile a shadow copy of the filter keeps
+  taking them; GPS is trusted again once the shadow's coefficients stay steady
+  for a whole hold.
+
+Every fix gets a verdict (:class:`core.gnss.base.FixRecord`): used, or why not.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections import deque
+
+import numpy as np
+
+from core.conventions import heading_from_bearing_deg, wrap_angle
+from core.gnss.base import HACC_PER_SIGMA, FixFusion
+from core.gnss.ekf import CHI2_999, UpdateResult, kalman_update, sigma_max_m
+from core.pdr.velocity import VelocityModel, step_regressors
+
+#: state indices
+E, N, DV, DPSI, A, B, C = range(7)
+NX = 7
+COEF = slice(A, C + 1)
+
+
+class KubrakKf:
+    """The 7-state filter of Kubrak et al. (2006), Fig. 8 (see the module docstring).
+
+    Parameters
+    ----------
+    model : VelocityModel
+        eq. 1's starting coefficients and their prior SDs.
+    dv_sd_m_s, dv_tau_s : float
+        Gauss-Markov velocity error: SD (m/s) and correlation time (s).
+    heading_bias_sd_rad : float
+        Starting SD of the heading error (rad): the phone's yaw offset, declination, a bent field.
+    heading_bias_walk_rad_sqrt_s : float
+        Random walk of the heading error (rad/sqrt(s)).
+    coef_walk_sqrt_s : (float, float, float)
+        Random walk of A (s), B (m), C (s) per sqrt(s).
+    step_heading_sd_rad : float
+        White noise of an epoch's heading (the body's sway; rad).
+    step_speed_sd_m_s : float
+        White noise of an epoch's speed (m/s).
+    gate_nis_2d, gate_nis_1d : float
+        Chi-square gates of 2-D (position, velocity) and 1-D (speed) updates.
+    """
+
+    def __init__(self, model: VelocityModel | None = None, *, dv_sd_m_s: float = 0.1, dv_tau_s: float = 10.0,
+                 heading_bias_sd_rad: float = math.radians(15.0),
+                 heading_bias_walk_rad_sqrt_s: float = math.radians(0.3),
+                 coef_walk_sqrt_s: tuple = (1e-4, 1e-3, 1e-3), step_heading_sd_rad: float = math.radians(3.0),
+                 step_speed_sd_m_s: float = 0.05, gate_nis_2d: float = CHI2_999[2],
+                 gate_nis_1d: float = CHI2_999[1]):
+        self.model = model or VelocityModel.load()
+        self.dv_sd_m_s = float(dv_sd_m_s)
+        self.dv_tau_s = float(dv_tau_s)
+        self.heading_bias_sd_rad = float(heading_bias_sd_rad)
+        self.heading_bias_walk_rad_sqrt_s = float(heading_bias_walk_rad_sqrt_s)
+        self.coef_walk_sqrt_s = np.array(coef_walk_sqrt_s, dtype=float)
+        self.step_heading_sd_rad = float(step_heading_sd_rad)
+        self.step_speed_sd_m_s = float(step_speed_sd_m_s)
+        self.gate_nis_2d = float(gate_nis_2d)
+        self.gate_nis_1d = float(gate_nis_1d)
+        self.reset()
+
+    def reset(self) -> None:
+        self.initialized = False
+        self.x = np.zeros(NX)
+        self.P = np.eye(NX)
+        #: the last epoch: regressors (3,), PDR heading (rad), time (ns)
+        self.reg = np.full(3, math.nan)
+        self.psi_pdr = math.nan
+        self.t_ns: int | None = None
+
+    def initialize(self, east_m: float, north_m: float, pos_sd_m: float) -> None:
+        if not all(math.isfinite(v) for v in (east_m, north_m, pos_sd_m)):
+            raise ValueError(f"KubrakKf.initialize needs finite values, got {(east_m, north_m, pos_sd_m)}")
+        m = self.model
+        self.x = np.array([east_m, north_m, 0.0, 0.0, m.a_s, m.b_m, m.c_s])
+        self.P = np.diag([pos_sd_m ** 2, pos_sd_m ** 2, self.dv_sd_m_s ** 2, self.heading_bias_sd_rad ** 2,
+                          *np.square(m.sd)])
+        self.initialized = True
+
+    # -- the model ------------------------------------------------------------------
+    @staticmethod
+    def speed(x: np.ndarray, reg: np.ndarray) -> float:
+        """eq. 1 plus the velocity error: ``A MEAN + B FREQ + C STD + dv`` (m/s)."""
+        return float(x[A] * reg[0] + x[B] * reg[1] + x[C] * reg[2] + x[DV])
+
+    def heading(self) -> float:
+        """The corrected heading of the last epoch (rad, CCW from East)."""
+        return wrap_angle(self.psi_pdr + float(self.x[DPSI]))
+
+    @staticmethod
+    def move(x: np.ndarray, reg: np.ndarray, psi_pdr: float, dt_s: float) -> np.ndarray:
+        """eq. 2 in ENU: the position after ``dt_s`` at the model's speed along the corrected heading."""
+        out = np.array(x, dtype=float)
+        d = KubrakKf.speed(x, reg) * dt_s
+        psi = psi_pdr + x[DPSI]
+        out[E] += d * math.cos(psi)
+        out[N] += d * math.sin(psi)
+        return out
+
+    @staticmethod
+    def move_jacobian(x: np.ndarray, reg: np.ndarray, psi_pdr: float, dt_s: float) -> np.ndarray:
+        """``d move / d x`` (the position rows; the others are the identity)."""
+        v = KubrakKf.speed(x, reg)
+        psi = psi_pdr + x[DPSI]
+        c, s = math.cos(psi), math.sin(psi)
+        F = np.eye(NX)
+        for row, u, du in ((E, c, -s), (N, s, c)):
+            F[row, DV] = dt_s * u
+            F[row, DPSI] = v * dt_s * du
+            F[row, A:C + 1] = reg * dt_s * u
+        return F
+
+    # -- per epoch -----------------------------------------------------------------
+    def epoch(self, t_ns: int, dt_s: float, reg, psi_pdr: float) -> float:
+        """One epoch (a step): predict by eq. 2; returns the distance moved (m)."""
+        reg = np.asarray(reg, dtype=float)
+        if not (self.initialized and dt_s > 0 and math.isfinite(dt_s) and math.isfinite(psi_pdr)
+                and np.all(np.isfinite(reg))):
+            return 0.0
+        F = self.move_jacobian(self.x, reg, psi_pdr, dt_s)
+        x = self.move(self.x, reg, psi_pdr, dt_s)
+        a = math.exp(-dt_s / self.dv_tau_s)
+        F[DV, DV] = a
+        x[DV] *= a
+        Q = np.zeros((NX, NX))
+        Q[DV, DV] = self.dv_sd_m_s ** 2 * (1.0 - a * a)
+        Q[DPSI, DPSI] = self.heading_bias_walk_rad_sqrt_s ** 2 * dt_s
+        Q[COEF, COEF] = np.diag(np.square(self.coef_walk_sqrt_s) * dt_s)
+        # the epoch's own white speed and heading noise, mapped into the position
+        v = self.speed(self.x, reg)
+        psi = psi_pdr + self.x[DPSI]
+        c, s = math.cos(psi), math.sin(psi)
+        G = np.array([[dt_s * c, -v * dt_s * s], [dt_s * s, v * dt_s * c]])
+        Q[:2, :2] += G @ np.diag([self.step_speed_sd_m_s ** 2, self.step_heading_sd_rad ** 2]) @ G.T
+        P = F @ self.P @ F.T + Q
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+            return 0.0
+        moved = math.hypot(x[E] - self.x[E], x[N] - self.x[N])
+        self.x, self.P = x, 0.5 * (P + P.T)
+        self.reg, self.psi_pdr, self.t_ns = reg, float(psi_pdr), int(t_ns)
+        return moved
+
+    # -- GPS ----------------------------------------------------------------------------
+    def _since_s(self, t_ns: int, max_s: float) -> float:
+        if self.t_ns is None or not np.all(np.isfinite(self.reg)):
+            return 0.0
+        since = (t_ns - self.t_ns) * 1e-9
+        return since if 0.0 <= since <= max_s else 0.0
+
+    def fix_prediction(self, t_ns: int, max_s: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
+        """``h(x)`` of a position fix at ``t_ns`` and its Jacobian: the last epoch moved on to the fix."""
+        tau = self._since_s(t_ns, max_s)
+        if tau == 0.0:
+            H = np.zeros((2, NX))
+            H[0, E] = H[1, N] = 1.0
+            return self.x[:2].copy(), H
+        return self.move(self.x, self.reg, self.psi_pdr, tau)[:2], self.move_jacobian(self.x, self.reg,
+                                                                                      self.psi_pdr, tau)[:2]
+
+    def update_position(self, t_ns: int, east_m: float, north_m: float, sigma_m: float, *,
+                        gate: bool = True) -> UpdateResult:
+        sig_before = sigma_max_m((self.P[0, 0], self.P[0, 1], self.P[1, 1]))
+        if not (math.isfinite(east_m) and math.isfinite(north_m) and sigma_m > 0 and math.isfinite(sigma_m)):
+            return UpdateResult(False, (math.nan, math.nan), math.nan, 0.0, sig_before, "not finite")
+        pred, H = self.fix_prediction(t_ns)
+        innov = np.array([east_m, north_m]) - pred
+        before = self.x[:2].copy()
+        ok, nis, self.x, self.P = kalman_update(self.x, self.P, innov, H, np.eye(2) * sigma_m ** 2,
+                                                self.gate_nis_2d if gate else math.inf, angle_index=DPSI)
+        moved = float(np.hypot(*(self.x[:2] - before))) if ok else 0.0
+        reason = "" if ok else f"innovation gate: NIS {nis:.1f} > {self.gate_nis_2d:.1f}"
+        return UpdateResult(ok, (float(innov[0]), float(innov[1])), nis, moved, sig_before, reason)
+
+    def velocity_prediction(self) -> tuple[np.ndarray, np.ndarray]:
+        """``h(x) = v (cos psi, sin psi)`` of a GPS velocity and its Jacobian."""
+        x, reg = self.x, self.reg
+        v = self.speed(x, reg)
+        psi = self.psi_pdr + x[DPSI]
+        c, s = math.cos(psi), math.sin(psi)
+        H = np.zeros((2, NX))
+        for row, u, du in ((0, c, -s), (1, s, c)):
+            H[row, DV] = u
+            H[row, DPSI] = v * du
+            H[row, A:C + 1] = reg * u
+        return np.array([v * c, v * s]), H
+
+    def update_velocity(self, speed_m_s: float, course_rad: float, sigma_m_s: float) -> UpdateResult:
+        """A GPS velocity: speed and course (rad, CCW from East) as East/North components, or the speed alone."""
+        if not (self.initialized and np.all(np.isfinite(self.reg)) and math.isfinite(self.psi_pdr)
+                and math.isfinite(speed_m_s) and sigma_m_s > 0):
+            return UpdateResult(False, (math.nan,), math.nan, reason="no epoch or not finite")
+        if math.isfinite(course_rad):
+            pred, H = self.velocity_prediction()
+            z = speed_m_s * np.array([math.cos(course_rad), math.sin(course_rad)])
+            gate, R = self.gate_nis_2d, np.eye(2) * sigma_m_s ** 2
+        else:
+            pred = np.array([self.speed(self.x, self.reg)])
+            H = np.zeros((1, NX))
+            H[0, DV] = 1.0
+            H[0, A:C + 1] = self.reg
+            z = np.array([speed_m_s])
+            gate, R = self.gate_nis_1d, np.array([[sigma_m_s ** 2]])
+        innov = z - pred
+        ok, nis, self.x, self.P = kalman_update(self.x, self.P, innov, H, R, gate, angle_index=DPSI)
+        return UpdateResult(ok, tuple(float(v) for v in innov), nis,
+                            reason="" if ok else f"velocity gate: NIS {nis:.1f} > {gate:.1f}")
+
+    def position_sigma_m(self) -> float:
+        P = self.P
+        return sigma_max_m((P[0, 0], P[0, 1], P[1, 1]))
+
+
+class KubrakFusion(FixFusion):
+    """The real-time GPS/PNS fusion of Kubrak et al. (2006) as a streaming stage (see the module docstring).
+
+    Parameters
+    ----------
+    kf : KubrakKf or None
+        The filter with its noise settings (a prototype: each run starts a copy); default ``KubrakKf()``.
+    use_velocity : bool
+        Use the GPS Doppler velocity (speed and course) as a measurement.
+    velocity_sd_m_s : float
+        SD of a GPS velocity component (m/s).
+    velocity_min_speed_m_s : float
+        The course is used from this reported speed on (below it, the speed alone).
+    detect_variability : bool
+        The paper's bad-GPS test on the coefficients.
+    variability_window_s : float
+        Window over which the coefficients' predicted speed may not jump (s).
+    max_speed_change_m_s : float
+        Largest change of that speed over the window a walker's pace allows (m/s) ...
+    variability_gate : float
+        ... when the change is also beyond this chi-square (1 dof) of what the filter expected.
+    mean_window_s : float
+        The coefficients are replaced by their mean over this much time before the window (s).
+    unreliable_hold_s : float
+        How long GPS stays unreliable after the test fired (s), extended while the shadow filter's
+        coefficients keep varying.
+    **shared
+        The fix handling's settings (:class:`core.gnss.base.FixFusion`).
+    """
+
+    name = "kubrak"
+
+    def __init__(self, *, kf: KubrakKf | None = None, use_velocity: bool = True, velocity_sd_m_s: float = 0.3,
+                 velocity_min_speed_m_s: float = 0.5, detect_variability: bool = True,
+                 variability_window_s: float = 20.0, max_speed_change_m_s: float = 0.1,
+                 variability_gate: float = CHI2_999[1], mean_window_s: float = 60.0,
+                 unreliable_hold_s: float = 30.0, relock_s: float = 20.0, **shared):
+        super().__init__(relock_s=relock_s, **shared)
+        self._kf_proto = kf
+        self.use_velocity = bool(use_velocity)
+        self.velocity_sd_m_s = float(velocity_sd_m_s)
+        self.velocity_min_speed_m_s = float(velocity_min_speed_m_s)
+        self.detect_variability = bool(detect_variability)
+        self.variability_window_ns = int(variability_window_s * 1e9)
+        self.max_speed_change_m_s = float(max_speed_change_m_s)
+        self.variability_gate = float(variability_gate)
+        self.mean_window_ns = int(mean_window_s * 1e9)
+        self.unreliable_hold_ns = int(unreliable_hold_s * 1e9)
+        self.reset()
+
+    def _reset_filter(self) -> None:
+        self.kf = KubrakKf() if self._kf_proto is None else copy.deepcopy(self._kf_proto)
+        self.kf.reset()
+        self.shadow: KubrakKf | None = None
+        #: (t_ns, coefficients (3,), their covariance (3, 3)) after every GPS update, the last few minutes
+        self._coef_hist: deque = deque()
+        self._shadow_hist: deque = deque()
+        self._reg_hist: deque = deque()  # (t_ns, regressors) of the walking epochs, last mean_window_s
+        self.unreliable_until_ns: int | None = None
+        self.n_variability = 0  #: times the variability test fired
+        self.n_velocity_used = 0
+        self.n_velocity_gated = 0
+        self.variability_events: list[dict] = []  #: when, how much, what the coefficients became
+        self._last_walked = 0.0
+        self._last_verdict = ""
+
+    @property
+    def filt(self) -> KubrakKf:
+        return self.kf
+
+    def _init_filter_at(self, sigma_m: float) -> None:
+        self.kf.initialize(0.0, 0.0, sigma_m)
+
+    # -- epochs ---------------------------------------------------------------------------
+    def _step(self, step, t_prev_ns: int, dur_ns: int) -> float:
+        kf = self.kf
+        if not kf.initialized:
+            kf.initialize(0.0, 0.0, self.start[2] if self.start is not None else 0.1)
+        reg = np.array(step_regressors(step.features), dtype=float)
+        dt = (step.t_ns - t_prev_ns) * 1e-9
+        if not np.all(np.isfinite(reg)):
+            # no eq.-1 window yet (the first 2 s): the epoch moves by the step model's length instead
+            reg = kf.reg if np.all(np.isfinite(kf.reg)) else None
+        if reg is None:
+            walked = step.length_m
+            psi = step.heading_rad + float(kf.x[DPSI])
+            kf.x[E] += walked * math.cos(psi)
+            kf.x[N] += walked * math.sin(psi)
+            kf.psi_pdr, kf.t_ns = float(step.heading_rad), int(step.t_ns)
+        else:
+            walked = kf.epoch(step.t_ns, dt, reg, step.heading_rad)
+            self._reg_hist.append((step.t_ns, reg))
+            while self._reg_hist[0][0] < step.t_ns - self.mean_window_ns:
+                self._reg_hist.popleft()
+            if self.shadow is not None:
+                self.shadow.epoch(step.t_ns, dt, reg, step.heading_rad)
+        self._last_walked = walked
+        return walked
+
+    def _step_output(self) -> tuple[float, float]:
+        return self._last_walked, self.kf.heading()
+
+    # -- fixes ------------------------------------------------------------------------------
+    def _predict_fix(self, t_ns: int):
+        return self.kf.fix_prediction(t_ns)[0]
+
+    def _update_position(self, t_ns: int, east: float, north: float, sigma_m: float, gate: bool) -> UpdateResult:
+        return self.kf.update_position(t_ns, east, north, sigma_m, gate=gate)
+
+    def _filter_verdict(self, t_ns: int) -> str:
+        """GPS declared unreliable by the coefficient test: the shadow filter takes the fix instead."""
+        until = self.unreliable_until_ns
+        if until is None:
+            return ""
+        if t_ns >= until:
+            self.unreliable_until_ns = None
+            self.shadow = None
+            self._shadow_hist.clear()
+            return ""
+        return self._last_verdict
+
+    def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
+        kf = self.kf
+        if self.use_velocity and math.isfinite(speed) and self.anchor is not None and self.anchor[0] != t_ns:
+            c = heading_from_bearing_deg(course) if speed >= self.velocity_min_speed_m_s and math.isfinite(course) \
+                else math.nan
+            res = kf.update_velocity(speed, c, self.velocity_sd_m_s)
+            if res.accepted:
+                self.n_velocity_used += 1
+            elif res.nis == res.nis:
+                self.n_velocity_gated += 1
+        if self.detect_variability:
+            self._check_variability(t_ns)
+
+    def _fix(self, t_ns: int, v: tuple) -> None:
+        super()._fix(t_ns, v)
+        rec = self.fixes[-1] if self.fixes else None
+        if self.shadow is not None and rec is not None and rec.t_ns == t_ns and rec.reason == self._last_verdict \
+                and rec.reason:
+            self._shadow_fix(t_ns, rec)
+
+    # -- the coefficient test --------------------------------------------------------------------
+    def _reference_regressors(self) -> np.ndarray | None:
+        if not self._reg_hist:
+            return None
+        return np.mean(np.array([r for _, r in self._reg_hist]), axis=0)
+
+    def _variability(self, hist: deque, t_ns: int, ref: np.ndarray, kf: KubrakKf) -> tuple[float, float]:
+        """(change of the predicted speed over the window (m/s), its chi-square against what the filter expected)."""
+        limit = t_ns - self.variability_window_ns
+        old = None
+        for h in hist:
+            if h[0] >= limit:
+                old = h
+                break
+        if old is None or old[0] == t_ns:
+            return 0.0, 0.0
+        now_c, now_P = kf.x[COEF], kf.P[COEF, COEF]
+        dv = float(ref @ (now_c - old[1]))
+        # a consistent filter's estimate moves by at most what its updates removed from the variance, plus the walk
+        removed = float(ref @ (old[2] - now_P) @ ref)
+        walk = float(ref @ np.diag(np.square(kf.coef_walk_sqrt_s)) @ ref) * (t_ns - old[0]) * 1e-9
+        return dv, dv * dv / max(removed + walk, 1e-12)
+
+    def _record_coef(self, hist: deque, t_ns: int, kf: KubrakKf) -> None:
+        hist.append((t_ns, kf.x[COEF].copy(), kf.P[COEF, COEF].copy()))
+        keep = self.variability_window_ns + self.mean_window_ns + int(5e9)
+        while hist[0][0] < t_ns - keep:
+            hist.popleft()
+
+    def _check_variability(self, t_ns: int) -> None:
+        kf = self.kf
+        self._record_coef(self._coef_hist, t_ns, kf)
+        ref = self._reference_regressors()
+        if ref is None:
+            return
+        dv, chi2 = self._variability(self._coef_hist, t_ns, ref, kf)
+        if abs(dv) <= self.max_speed_change_m_s or chi2 <= self.variability_gate:
+            return
+        # the paper's correction: the coefficients' mean over the minute before the window
+        limit = t_ns - self.variability_window_ns
+        before = [(c, P) for t, c, P in self._coef_hist if limit - self.mean_window_ns <= t < limit]
+        if before:
+            coef = np.mean(np.array([c for c, _ in before]), axis=0)
+            Pc = before[-1][1]
+        else:
+            m = kf.model
+            coef, Pc = m.coefficients, np.diag(np.square(m.sd))
+        kf.x[COEF] = coef
+        keep = kf.P[COEF, COEF].copy()
+        kf.P[COEF, :] = 0.0
+        kf.P[:, COEF] = 0.0
+        kf.P[COEF, COEF] = np.maximum(Pc, keep) if before else Pc
+        self.n_variability += 1
+        self._last_verdict = (f"GPS unreliable: the velocity model's coefficients changed the walker's speed by "
+                              f"{dv:+.2f} m/s in {self.variability_window_ns * 1e-9:.0f} s")
+        self.variability_events.append({"t_ns": int(t_ns), "speed_change_m_s": dv, "chi2": chi2,
+                                        "coefficients": [float(c) for c in coef]})
+        self.unreliable_until_ns = t_ns + self.unreliable_hold_ns
+        self._coef_hist.clear()
+        self._record_coef(self._coef_hist, t_ns, kf)
+        self.shadow = copy.deepcopy(kf)
+        self._shadow_hist.clear()
+        self._record_coef(self._shadow_hist, t_ns, self.shadow)
+
+    def _shadow_fix(self, t_ns: int, rec) -> None:
+        """While GPS is unreliable the shadow filter takes the fixes; if its coefficients vary too, the hold goes on."""
+        sh = self.shadow
+        sigma = max((rec.hacc_m if rec.hacc_m > 0 else self.default_hacc_m) * self.hacc_scale / HACC_PER_SIGMA,
+                    self.min_sigma_m)
+        if not sh.update_position(t_ns, rec.east_m, rec.north_m, sigma).accepted:
+            self.unreliable_until_ns = max(self.unreliable_until_ns, t_ns + self.unreliable_hold_ns // 2)
+            return
+        if self.use_velocity and math.isfinite(rec.speed_m_s):
+            c = heading_from_bearing_deg(rec.course_deg) if rec.speed_m_s >= self.velocity_min_speed_m_s and \
+                math.isfinite(rec.course_deg) else math.nan
+            sh.update_velocity(rec.speed_m_s, c, self.velocity_sd_m_s)
+        self._record_coef(self._shadow_hist, t_ns, sh)
+        ref = self._reference_regressors()
+        if ref is None:
+            return
+        dv, chi2 = self._variability(self._shadow_hist, t_ns, ref, sh)
+        if abs(dv) > self.max_speed_change_m_s and chi2 > self.variability_gate:
+            self.unreliable_until_ns = t_ns + self.unreliable_hold_ns
+            self.shadow = copy.deepcopy(self.kf)
+            self._shadow_hist.clear()
+            self._record_coef(self._shadow_hist, t_ns, self.shadow)
+
+    # -- output ------------------------------------------------------------------------------------
+    def status(self) -> dict:
+        kf = self.kf
+        return {**super().status(), "speed_model_m_s": kf.speed(kf.x, kf.reg) if kf.initialized else math.nan,
+                "gps_unreliable": self.unreliable_until_ns is not None}
+
+    def counters(self) -> dict:
+        kf = self.kf
+        return {**super().counters(), "variability_detections": self.n_variability,
+                "velocity_used": self.n_velocity_used, "velocity_gated": self.n_velocity_gated,
+                "coefficients": [float(v) for v in kf.x[COEF]],
+                "heading_bias_deg": math.degrees(float(kf.x[DPSI])),
+                "variability_events": list(self.variability_events)}
