@@ -50,12 +50,37 @@ def write_track_csv(path: str, track) -> None:
                         f"{float(track.east_m[i]):.3f}", f"{float(track.north_m[i]):.3f}", f"{dist:.3f}"])
 
 
+FIX_COLUMNS = ("t_ns", "lat_deg", "lon_deg", "hacc_m", "speed_m_s", "course_deg", "used", "verdict", "nis",
+               "correction_m")
+
+
+def _fix_row(f) -> dict:
+    """One GPS fix's verdict (:class:`core.gnss.base.FixRecord`) as plain values."""
+    def num(v, nd):
+        return round(float(v), nd) if v == v else None
+    return {"t_ns": int(f.t_ns), "lat_deg": num(f.lat_deg, 8), "lon_deg": num(f.lon_deg, 8), "hacc_m": num(f.hacc_m, 2),
+            "speed_m_s": num(f.speed_m_s, 3), "course_deg": num(f.course_deg, 2), "used": bool(f.accepted),
+            "verdict": "used" if f.accepted else f.reason, "nis": num(f.nis, 3), "correction_m": num(f.correction_m, 3)}
+
+
+def write_fixes_csv(path: str, fixes) -> None:
+    """Every GPS fix the fusion saw with its verdict: used, or why not (one row per fix, :data:`FIX_COLUMNS`)."""
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(FIX_COLUMNS)
+        for fx in fixes:
+            row = _fix_row(fx)
+            w.writerow(["" if row[c] is None else row[c] for c in FIX_COLUMNS])
+
+
 def track_geojson(track, origin_lat_lon: tuple[float, float] | None = None, properties: dict | None = None,
-                  point_properties: dict | None = None) -> dict:
+                  point_properties: dict | None = None, fixes=None) -> dict:
     """The track as a GeoJSON FeatureCollection (RFC 7946: lon, lat order): a LineString and one Point per step.
 
     ``point_properties``: optional ``{name: list}`` of per-step values (one per
     step, e.g. the fused track's ``sigma_m`` and ``source``) added to each Point.
+    ``fixes``: the GPS fixes with their verdicts (:class:`core.gnss.base.FixRecord`),
+    one Point each with ``"kind": "gps_fix"``, ``used`` and ``verdict``.
     """
     extra = point_properties or {}
     known = origin_lat_lon is not None
@@ -75,13 +100,19 @@ def track_geojson(track, origin_lat_lon: tuple[float, float] | None = None, prop
     props = {"name": "PDR track", "n_steps": len(track), "origin_known": known,
              "origin_lat_lon": list(origin), **(properties or {})}
     line = {"type": "Feature", "geometry": {"type": "LineString", "coordinates": coords}, "properties": props}
+    for fx in fixes or ():
+        row = _fix_row(fx)
+        if row["lat_deg"] is None or row["lon_deg"] is None:
+            continue
+        feats.append({"type": "Feature", "geometry": {"type": "Point", "coordinates": [row["lon_deg"], row["lat_deg"]]},
+                      "properties": {"kind": "gps_fix", **{k: v for k, v in row.items() if k not in ("lat_deg", "lon_deg")}}})
     return {"type": "FeatureCollection", "features": [line] + feats}
 
 
 def write_track_geojson(path: str, track, origin_lat_lon: tuple[float, float] | None = None,
-                        properties: dict | None = None, point_properties: dict | None = None) -> None:
+                        properties: dict | None = None, point_properties: dict | None = None, fixes=None) -> None:
     with open(path, "w", encoding="utf-8") as f:
-        json.dump(track_geojson(track, origin_lat_lon, properties, point_properties), f, indent=1)
+        json.dump(track_geojson(track, origin_lat_lon, properties, point_properties, fixes), f, indent=1)
 
 
 def write_track_gpx(path: str, track, origin_lat_lon: tuple[float, float] | None = None,

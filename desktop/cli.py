@@ -80,13 +80,20 @@ def _parse_outage(text: str):
     return start, length
 
 
+def gps_choice(args) -> tuple[str, str]:
+    """``--gps``: the fusion filter's name ("" when off) and why it was chosen."""
+    from core.gnss import AUTO_FUSION, AUTO_FUSION_WHY
+
+    mode = getattr(args, "gps", "auto")
+    if mode == "auto":
+        return AUTO_FUSION, f"auto: {AUTO_FUSION_WHY}"
+    return ("", "off") if mode == "off" else (mode, "chosen with --gps")
+
+
 def build_gnss(args, rec: Recording, profile=None):
     """The GPS fusion stage for ``--gps`` (None when off or when the recording has no fixes)."""
     mode = getattr(args, "gps", "auto")
     has_gps = rec.has("gps")
-    if mode == "kubrak":
-        raise ValueError("--gps kubrak (Kubrak et al. 2006 real-time fusion) is not built yet (issue #10); "
-                         "use --gps chen")
     if mode == "off" or (mode == "auto" and not has_gps):
         if getattr(args, "gps_outage", None):
             raise ValueError("--gps-outage needs GPS fusion: the recording has no gps stream" if not has_gps
@@ -95,15 +102,16 @@ def build_gnss(args, rec: Recording, profile=None):
     if not has_gps:
         raise ValueError(f"--gps {mode}: the recording has no gps stream "
                          f"(streams: {', '.join(sorted(rec.streams))})")
-    from core.gnss.fusion import GpsFusion
+    from core.gnss import make_fusion
 
+    name, _ = gps_choice(args)
     t0 = rec.t0_ns
     hidden = [(t0 + int(a * 1e9), t0 + int((a + b) * 1e9)) for a, b in (args.gps_outage or [])]
     kw = {}
-    if profile is not None:
+    if profile is not None and name == "chen":
         from core.gnss.training import fusion_settings_from_profile
         kw = fusion_settings_from_profile(profile)
-    return GpsFusion(hidden_ns=hidden, **kw)
+    return make_fusion(name, hidden_ns=hidden, **kw)
 
 
 def build_pipeline(args, gnss=None):
@@ -164,7 +172,7 @@ class _Progress:
         sys.stderr.flush()
 
 
-def summary_lines(res, rec: Recording) -> list[str]:
+def summary_lines(res, rec: Recording, gps_why: str = "") -> list[str]:
     s = res.summary()
     rates = ", ".join(f"{n} {hz:.1f} Hz" for n, hz in s["rates_hz"].items())
     dist = s["distance_m"]
@@ -197,7 +205,7 @@ def summary_lines(res, rec: Recording) -> list[str]:
         lines.append(f"truth         {truth.get('n_steps')} steps, {truth.get('path_length_m', float('nan')):.1f} m "
                      f"(simulator)")
     if res.fusion is not None:
-        lines.extend(gps_lines(res))
+        lines.extend(gps_lines(res, gps_why))
     for lab in res.labels:
         lines.append(f"degraded      {lab}")
     for r in rec.repairs:
@@ -205,21 +213,38 @@ def summary_lines(res, rec: Recording) -> list[str]:
     return lines
 
 
-def gps_lines(res) -> list[str]:
-    """Summary lines of the GPS fusion: fixes, what was learnt, outages."""
+def gps_lines(res, why: str = "") -> list[str]:
+    """Summary lines of the GPS fusion: the filter, fixes and their verdicts, what was learnt, outages."""
     fu = res.fusion
     c = fu.counters
-    tr = c.get("training", {})
-    hm = tr.get("heading_model", {})
-    lines = [(f"gps           {c['fixes']} fixes: {c['fixes_accepted']} used, {c['fixes_screened_out']} screened out, "
-             f"{c['fixes_gated']} rejected by the filter, {c['fixes_hidden']} hidden (outages)")]
+    name = c.get("fusion", "chen")
+    paper = {"chen": "Chen et al. 2010", "kubrak": "Kubrak et al. 2006"}.get(name, name)
+    lines = [f"gps fusion    {name} ({paper}; {why})" if why else f"gps fusion    {name} ({paper})",
+             (f"gps           {c['fixes']} fixes: {c['fixes_accepted']} used, {c['fixes_screened_out']} screened out "
+              f"(accuracy, speed, C/N0), {c.get('fixes_filter_rejected', 0)} while GPS was unreliable, "
+              f"{c['fixes_gated']} rejected by the filter's gate, {c['fixes_hidden']} hidden (outages)")]
+    reasons: dict = {}
+    for f in fu.fixes:
+        if not f.accepted and f.reason != "hidden (outage)":
+            key = f.reason.split(":")[0].split(" by ")[0]
+            key = "accuracy above the limit" if key.startswith("accuracy") else key
+            reasons[key] = reasons.get(key, 0) + 1
+    if reasons:
+        lines.append("rejected      " + "; ".join(f"{k} {v}" for k, v in sorted(reasons.items(), key=lambda kv: -kv[1])))
     if fu.origin_lat_lon is not None:
         lines.append(f"start         {fu.origin_lat_lon[0]:.6f}, {fu.origin_lat_lon[1]:.6f} (WGS-84, from GPS)")
-    coef = hm.get("coefficients_deg") or []
-    lines.append(f"learnt        stride x{tr.get('stride_scale', 1.0):.3f} ({tr.get('stride_samples', 0)} windows); "
-                 f"heading offset {coef[0] if coef else 0.0:+.1f} deg"
-                 + (" + harmonics" if hm.get("harmonics_trusted") else " (one-term: headings not yet spread)")
-                 + f" ({tr.get('heading_samples', 0)} windows)")
+    if name == "chen":
+        tr = c.get("training", {})
+        hm = tr.get("heading_model", {})
+        coef = hm.get("coefficients_deg") or []
+        lines.append(f"learnt        stride x{tr.get('stride_scale', 1.0):.3f} ({tr.get('stride_samples', 0)} windows); "
+                     f"heading offset {coef[0] if coef else 0.0:+.1f} deg"
+                     + (" + harmonics" if hm.get("harmonics_trusted") else " (one-term: headings not yet spread)")
+                     + f" ({tr.get('heading_samples', 0)} windows)")
+    elif "coefficients" in c:
+        a, b, cc = c["coefficients"]
+        lines.append(f"learnt        speed = {a:.4f} MEAN + {b:.3f} FREQ + {cc:.3f} STD (eq. 1); heading offset "
+                     f"{c['heading_bias_deg']:+.1f} deg; GPS declared unreliable {c['variability_detections']} time(s)")
     if fu.steps:
         last = fu.track()
         lines.append(f"fused end     E {last.east_m[-1]:+.1f} m, N {last.north_m[-1]:+.1f} m, +- {last.sigma_m[-1]:.1f} m"
@@ -300,20 +325,27 @@ def _stride_track(res):
 
 
 def _write_outputs(args, rec, track, origin, extra, title_extra: str = "", others=None, fixes=None,
-                   subtitle: str = "") -> list:
+                   subtitle: str = "", fix_records=None) -> list:
     origin = args.origin or origin or _first_gps_origin(rec)
     offset = rec.metadata.get("unix_offset_ns")
     written = []
     from core import export
-    for out in (args.csv, args.geojson, args.gpx, args.plot):
+    fixes_out = getattr(args, "fixes", None)
+    for out in (args.csv, args.geojson, args.gpx, args.plot, fixes_out):
         if out:  # outputs may go into a folder that does not exist yet (out/ by default in the README)
             Path(out).parent.mkdir(parents=True, exist_ok=True)
     if args.csv:
         export.write_track_csv(args.csv, track)
         written.append(args.csv)
     if args.geojson:
-        export.write_track_geojson(args.geojson, track, origin, {"source": rec.source, "track": title_extra}, extra)
+        export.write_track_geojson(args.geojson, track, origin, {"source": rec.source, "track": title_extra}, extra,
+                                   fix_records)
         written.append(args.geojson)
+    if fixes_out:
+        if fix_records is None:
+            raise ValueError("--fixes needs GPS fusion: the recording has no gps stream, or --gps off")
+        export.write_fixes_csv(fixes_out, fix_records)
+        written.append(fixes_out)
     if args.gpx:
         export.write_track_gpx(args.gpx, track, origin, offset if isinstance(offset, int) else None,
                                point_properties=extra)
@@ -338,10 +370,13 @@ def cmd_replay(args) -> int:
     pipeline = build_pipeline(args, gnss)
     prog = _Progress("replay", not args.no_progress, after_s=0.0 if args.progress else 2.0)
     res = pipeline.run(rec, progress=prog)
+    gps_why = gps_choice(args)[1] if gnss is not None else ""
     if args.json:
-        print(json.dumps({**res.summary(), "mode": "handheld", "mode_reason": why}, indent=1, default=float))
+        extra_json = {"gps_fusion": gnss.name, "gps_fusion_reason": gps_why} if gnss is not None else {}
+        print(json.dumps({**res.summary(), "mode": "handheld", "mode_reason": why, **extra_json}, indent=1,
+                         default=float))
     else:
-        lines = summary_lines(res, rec)
+        lines = summary_lines(res, rec, gps_why)
         print("\n".join(lines[:1] + [f"mode          hand-held PDR ({why})"] + lines[1:]))
     fused = res.fusion is not None and res.fusion.origin_lat_lon is not None and len(res.fusion.steps)
     track = res.fusion.track() if fused else res.track
@@ -353,12 +388,13 @@ def cmd_replay(args) -> int:
         fixes = ([f.east_m for f in fx], [f.north_m for f in fx], [f.accepted for f in fx])
     s = res.summary()
     written = _write_outputs(args, rec, track, res.fusion.origin_lat_lon if fused else None, extra,
-                             "fused with GPS" if fused else "", others, fixes,
+                             f"fused with GPS ({gnss.name})" if fused else "", others, fixes,
                              f"{s['n_steps']} steps, {s['distance_m']:.1f} m, start-to-end "
-                             f"{s['start_to_end_m']:.2f} m")
+                             f"{s['start_to_end_m']:.2f} m", res.fusion.fixes if res.fusion is not None else None)
     if profile is not None and res.fusion is not None:
         from core.gnss.training import profile_with_gps_training
-        new = profile_with_gps_training(profile, pipeline.gnss.trainer)
+        new = profile_with_gps_training(profile, pipeline.gnss.trainer) if hasattr(pipeline.gnss, "trainer") \
+            else profile
         if new is not profile:
             new.save(args.profile)
             written.append(args.profile)
@@ -412,6 +448,8 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--csv", metavar="PATH", help="write the track as CSV, one row per step (local metres)")
     r.add_argument("--geojson", metavar="PATH", help="write the track as GeoJSON (WGS-84, needs --origin or GPS "
                                                       "in the recording to be placed on the map)")
+    r.add_argument("--fixes", metavar="PATH", help="write every GPS fix with its verdict (used, or why not) as CSV "
+                                                   "(the GeoJSON carries them too)")
     r.add_argument("--gpx", metavar="PATH", help="write the track as GPX 1.1 with time, step length and bearing "
                                                  "per point (needs gpxpy)")
     r.add_argument("--plot", metavar="PNG", help="draw the track to a PNG file (needs matplotlib)")
@@ -419,7 +457,8 @@ def make_parser() -> argparse.ArgumentParser:
                    help="geographic start point for GeoJSON/GPX (default: first GPS fix, else 0,0)")
     r.add_argument("--height", type=float, metavar="M", help="walker's height in metres (for the stride model)")
     r.add_argument("--stride-model", default="default", metavar="NAME|PATH",
-                   help="step length model: a shipped name (default, weinberg, weinberg_bp, chen_linear, chen_ann) "
+                   help="step length model: a shipped name (default, weinberg, weinberg_bp, chen_linear, chen_ann, "
+                        "kubrak_velocity: Kubrak et al.'s eq. 1 speed times the step's interval) "
                         "or a model JSON file (default: %(default)s)")
     r.add_argument("--stride-c", type=float, metavar="C", help="constant Weinberg coefficient C (overrides "
                                                                 "--stride-model)")
@@ -427,8 +466,10 @@ def make_parser() -> argparse.ArgumentParser:
                    help="magnetic declination, east positive (default 0: headings relative to magnetic north)")
     r.add_argument("--no-mag", action="store_true", help="ignore the magnetometer (heading relative to the start)")
     r.add_argument("--gps", choices=GPS_MODES, default="auto",
-                   help="GPS fusion: auto (fuse when the recording has fixes), off, chen (Chen et al. 2010: "
-                        "calibration while GPS is good, the PDR Kalman filter), kubrak (not yet)")
+                   help="GPS fusion: auto (fuse when the recording has fixes, with the filter the benchmark shows "
+                        "better; the summary says which), off, chen (Chen et al. 2010: calibration while GPS is "
+                        "good, the step-wise PDR Kalman filter), kubrak (Kubrak et al. 2006: the velocity-model "
+                        "Kalman filter with bad-GPS detection)")
     r.add_argument("--gps-outage", type=_parse_outage, action="append", metavar="START_S:LENGTH_S",
                    help="hide the GPS fixes from START_S (seconds from the first sensor event) for LENGTH_S; "
                         "repeatable; the error at the end of each is reported")

@@ -9,6 +9,10 @@ PDR EKF of eq. 13 with GPS position and course updates), ``training``
 #: the GPS fusion filters by name (``pdr replay --gps``, the app's setting, the benchmark)
 FUSIONS = ("chen", "kubrak")
 
+#: the filter ``--gps auto`` and the app's default use, and why (benchmarks/GNSS_FAULTS_RESULTS.md, report split)
+AUTO_FUSION = "chen"
+AUTO_FUSION_WHY = "provisional until the fault benchmark is run"
+
 
 def make_fusion(name: str, **settings):
     """A GPS fusion stage by name: ``"chen"`` (:class:`core.gnss.fusion.GpsFusion`, Chen et al. 2010) or

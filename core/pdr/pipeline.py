@@ -9,8 +9,10 @@ Events go in one at a time, in time order, as the phone delivers them::
                -> RotationSmoother.update(R of the EKF) (section 4.3)
                -> steps whose heading is due: stride model (eq. 4), DeadReckoner (eq. 1)
     mag   -> AttitudeEKF.update_mag                     (eq. 18)
-    gps   -> GpsFusion (core.gnss.fusion), when the pipeline has one: each
-             completed step goes through it too, giving the fused track
+    gps   -> the GPS fusion (core.gnss: GpsFusion of Chen et al. or KubrakFusion of
+             Kubrak et al.), when the pipeline has one: each completed step goes
+             through it too, giving the fused track; gnss_status (satellites, C/N0)
+             goes to it as well
     rotvec, others -> ignored by the core PDR
 
 Two gates keep what is not walking out of the track (neither is in the paper;
@@ -59,7 +61,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.conventions import ACC, GPS, GYRO, MAG
+from core.conventions import ACC, GNSS_STATUS, GPS, GYRO, MAG
 from core.dsp import GridResampler
 from core.pdr.attitude import AttitudeEKF
 from core.pdr.deadreckoning import DeadReckoner
@@ -315,8 +317,9 @@ class Pipeline:
         that keeps its own track gives False or a small number, and the
         pipeline's memory stays flat however long the walk.  The steps returned
         by :meth:`update` and the track are the same either way.
-    gnss : core.gnss.fusion.GpsFusion or None
-        GPS fusion after the steps (Chen et al. 2010): fixes of the ``gps``
+    gnss : core.gnss.base.FixFusion or None
+        GPS fusion after the steps (``core.gnss.make_fusion``: Chen et al. 2010 or
+        Kubrak et al. 2006): fixes of the ``gps`` (and ``gnss_status``)
         stream and every completed step go through it; :attr:`fused` holds the
         fused steps, :meth:`run` returns them in ``result.fusion``.
     site_from_gps : bool
@@ -438,6 +441,8 @@ class Pipeline:
                 self.gnss.add_fix(t_ns, values)
                 if self.site is None and self.site_from_gps and self.gnss.anchor is not None:
                     self._apply_site(self.gnss.anchor)
+            elif stream == GNSS_STATUS and self.gnss is not None:
+                self.gnss.add_status(t_ns, values)
             return []  # rotvec, ...: not used by the core PDR
         ax, ay, az = values[0], values[1], values[2]
         self.attitude.update_acc(t_ns, ax, ay, az)
@@ -680,6 +685,8 @@ class Pipeline:
         use = [n for n in (GYRO, ACC, self.mag_stream) if recording.has(n)]
         if self.gnss is not None and recording.has(GPS):
             use.append(GPS)
+            if recording.has(GNSS_STATUS):
+                use.append(GNSS_STATUS)
             self.gnss.set_time_zero(recording.t0_ns)
             off = recording.metadata.get("unix_offset_ns")
             if self.unix_offset_ns is None and isinstance(off, int):
