@@ -292,15 +292,17 @@ def test_cli_replay_with_gps_outage_reports_the_outage(gps_file, tmp_path, capsy
     assert [o["start_s"] for o in s["outages"]] == pytest.approx([200.0, 260.0])
     assert all(o["walked_m"] > 20 and o["end_error_m"] >= 0 for o in s["outages"])
     feats = json.loads(gj.read_text())["features"]
-    pts = [f for f in feats if f["geometry"]["type"] == "Point"]
+    pts = [f for f in feats if f["geometry"]["type"] == "Point" and f["properties"].get("kind") != "gps_fix"]
     assert {p["properties"]["source"] for p in pts} == {"fused", "dr"}
+    fixes = [f for f in feats if f["properties"].get("kind") == "gps_fix"]
+    assert {f["properties"]["verdict"] for f in fixes} >= {"used", "hidden (outage)"}  # every fix's verdict
     assert all(p["properties"]["sigma_m"] > 0 for p in pts)
     lon, lat = pts[0]["geometry"]["coordinates"]
     assert lat == pytest.approx(60.17, abs=0.02) and lon == pytest.approx(24.94, abs=0.05)  # the simulator's site
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--gps", "kubrak"], "issue #10"),
+    (["--gps", "off", "--fixes", "fixes.csv"], "--fixes needs GPS fusion"),
     (["--gps-outage", "10-20"], "START_S:LENGTH_S"),
     (["--gps-outage", "10:-5"], "LENGTH_S > 0"),
 ])

@@ -303,7 +303,7 @@ class KubrakFusion(FixFusion):
 
     def __init__(self, *, kf: KubrakKf | None = None, use_velocity: bool = True, velocity_sd_m_s: float = 0.3,
                  velocity_min_speed_m_s: float = 0.5, detect_variability: bool = True,
-                 variability_window_s: float = 20.0, max_speed_change_m_s: float = 0.1,
+                 variability_window_s: float = 20.0, max_speed_change_m_s: float = 0.04,
                  variability_gate: float = CHI2_999[1], mean_window_s: float = 60.0,
                  unreliable_hold_s: float = 30.0, relock_s: float = 20.0, **shared):
         super().__init__(relock_s=relock_s, **shared)
