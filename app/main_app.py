@@ -88,6 +88,8 @@ class PDRApp(App):
     rate_choices = ListProperty([str(r) for r in RATE_CHOICES])
     record_live = BooleanProperty(True)
     use_gps = BooleanProperty(True)
+    gps_fusion_text = StringProperty("auto")
+    gps_fusion_choices = ListProperty(["auto", "chen", "kubrak"])
     stride_model_text = StringProperty("default")
     stride_model_choices = ListProperty(list(STRIDE_MODEL_CHOICES))
     c_text = StringProperty("")
@@ -167,6 +169,7 @@ class PDRApp(App):
         self.rate_text = f"{s.rate_hz:g}"
         self.record_live = s.record_live
         self.use_gps = s.use_gps
+        self.gps_fusion_text = s.gps_fusion
         self.stride_model_text = s.stride_model_name
         walks = s.calibration_walks()
         scale = s.profile.c_scale
@@ -175,7 +178,7 @@ class PDRApp(App):
                        f"step length x {scale:.3f} (older version)" if scale != 1.0 else "not calibrated")
 
     def save_settings(self, height_cm: str, rate: str, record_live: bool, stride_model: str | None = None,
-                      use_gps: bool | None = None) -> None:
+                      use_gps: bool | None = None, gps_fusion: str | None = None) -> None:
         s = self.settings
         try:
             height_m = float(height_cm) / 100.0 if height_cm.strip() else None
@@ -198,6 +201,8 @@ class PDRApp(App):
         s.record_live = bool(record_live)
         if use_gps is not None:
             s.use_gps = bool(use_gps)
+        if gps_fusion is not None:
+            s.gps_fusion = str(gps_fusion)
         problems += s.validate()
         s.save(self.settings_path)
         self._settings_to_ui()
@@ -337,7 +342,7 @@ class PDRApp(App):
 
         return {"app": f"pdr-app {__version__}", "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                 "height_m": s.height_m, "stride_model": s.stride_model_name, "c_scale": s.profile.c_scale,
-                "rate_hz": s.rate_hz, "use_gps": s.use_gps}
+                "rate_hz": s.rate_hz, "use_gps": s.use_gps, "gps_fusion": s.gps_fusion_name()}
 
     def toggle_recording(self):
         """Live: stop the running recording, or start a new one."""
@@ -613,7 +618,8 @@ class PDRApp(App):
                               "fused_source": gps.fused_source, "fix_east": gps.fix_east,
                               "fix_north": gps.fix_north, "fix_hacc": gps.fix_hacc,
                               "fix_accepted": gps.fix_accepted, "n_fixes": gps.n_fixes, "n_used": gps.n_used,
-                              "cov_en_m2": gps.cov_en_m2, "anchored": gps.anchored,
+                              "cov_en_m2": gps.cov_en_m2, "anchored": gps.anchored, "fusion": gps.fusion,
+                              "last_verdict": gps.last_verdict,
                               "legend": tv._legend.text, "shows_fused": tv.shows_fused}
         return out
 

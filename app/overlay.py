@@ -102,10 +102,13 @@ def runs(flags) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(starts, ends)]
 
 
-def gps_status_text(n_fixes: int, n_used: int, cov_en_m2, anchored: bool, k_sigma: float = ELLIPSE_SIGMA) -> str:
-    """The legend's first line: ``GPS: n fixes, m used · ±X m (2σ)``, X the ellipse's semi-major axis."""
+def gps_status_text(n_fixes: int, n_used: int, cov_en_m2, anchored: bool, k_sigma: float = ELLIPSE_SIGMA,
+                    verdict: str = "") -> str:
+    """The legend's first line: ``GPS: n fixes, m used · ±X m (2σ)``, X the ellipse's semi-major axis;
+    with ``verdict``, why the last fix was not used (``· last fix: ...``)."""
     head = f"GPS: {n_fixes} fix{'es' if n_fixes != 1 else ''}, {n_used} used"
+    tail = f" · last fix: {verdict}" if verdict and verdict != "used" else ""
     if not anchored or cov_en_m2 is None:
-        return head + (" · waiting for a good fix" if n_fixes else " · no fix yet")
+        return head + (" · waiting for a good fix" if n_fixes else " · no fix yet") + tail
     a, _, _ = covariance_ellipse(cov_en_m2, k_sigma)
-    return f"{head} · ±{a:.1f} m ({k_sigma:g}σ)"
+    return f"{head} · ±{a:.1f} m ({k_sigma:g}σ)" + tail

@@ -116,6 +116,8 @@ class GpsOverlay:
     n_used: int  #: accepted fixes
     cov_en_m2: tuple | None  #: (var_e, cov_en, var_n) of the last fused step (m^2), None before a step
     anchored: bool  #: a good fix placed the walk on the map (the fused track is GPS-aided from then on)
+    fusion: str = ""  #: the filter ("chen", "kubrak")
+    last_verdict: str = ""  #: the last fix's verdict: "used", or why it was not
 
 
 class Session:
@@ -374,7 +376,7 @@ class Session:
 
     @property
     def gnss(self):
-        """The pipeline's :class:`core.gnss.fusion.GpsFusion`, None when GPS is off."""
+        """The pipeline's GPS fusion (:class:`core.gnss.base.FixFusion`), None when GPS is off."""
         return getattr(self.pipeline, "gnss", None)
 
     @property
@@ -399,7 +401,8 @@ class Session:
         fused = self.pipeline.fused
         return GpsOverlay(self.fused_east, self.fused_north, self.fused_source, self.fix_east, self.fix_north,
                           self.fix_hacc, self.fix_accepted, len(g.fixes), self._fixes_used,
-                          fused[-1].cov_en_m2 if fused else None, g.origin_lat_lon is not None)
+                          fused[-1].cov_en_m2 if fused else None, g.origin_lat_lon is not None, g.name,
+                          ("used" if g.fixes[-1].accepted else g.fixes[-1].reason) if g.fixes else "")
 
     @property
     def elapsed_s(self) -> float:

@@ -64,6 +64,10 @@ def profile_path(settings_path: str) -> str:
     return os.path.join(os.path.dirname(os.path.abspath(settings_path)), PROFILE_FILE)
 
 
+#: the app's choices of GPS filter (core.gnss.FUSIONS, or auto)
+GPS_FUSIONS = ("auto", "chen", "kubrak")
+
+
 @dataclass
 class Settings:
     """What the user sets; see the module docstring for persistence."""
@@ -74,8 +78,10 @@ class Settings:
     record_live: bool = True
     #: replay speed label ("1x", "10x", "max")
     replay_speed: str = "10x"
-    #: fuse GPS fixes into the track (core.gnss.fusion.GpsFusion after the steps)
+    #: fuse GPS fixes into the track (core.gnss.make_fusion after the steps)
     use_gps: bool = True
+    #: which GPS fusion filter: "auto" (core.gnss.AUTO_FUSION, the benchmark's better one), "chen", "kubrak"
+    gps_fusion: str = "auto"
     #: height, stride model and calibration (saved to its own file, ``profile.json``)
     profile: UserProfile = field(default_factory=UserProfile)
     #: what was wrong with the stored files (not saved)
@@ -129,25 +135,33 @@ class Settings:
     def pipeline_factory(self) -> Callable:
         """``() -> Pipeline`` with the settings as they are now (a later change needs a new factory).
 
-        Each pipeline gets its own :class:`core.gnss.fusion.GpsFusion` when :attr:`use_gps` is on, so
-        a new track starts the fusion afresh (unanchored), but from what earlier walks with GPS taught:
-        the profile's GPS stride scale and heading model (:meth:`learn_from_gps` keeps them).
+        Each pipeline gets its own fusion stage (:func:`core.gnss.make_fusion`, the filter of
+        :attr:`gps_fusion`) when :attr:`use_gps` is on, so a new track starts the fusion afresh
+        (unanchored), but from what earlier walks with GPS taught: Chen's filter starts from the
+        profile's GPS stride scale and heading model (:meth:`learn_from_gps` keeps them).
         """
-        from core.gnss.fusion import GpsFusion  # noqa: PLC0415 - the app imports core's stages on use
+        from core.gnss import make_fusion  # noqa: PLC0415 - the app imports core's stages on use
         from core.gnss.training import fusion_settings_from_profile  # noqa: PLC0415
         from core.pdr.pipeline import Pipeline  # noqa: PLC0415
 
         kw = self.pipeline_kwargs()
         use_gps = bool(self.use_gps)
-        gkw = fusion_settings_from_profile(self.profile)
-        return lambda: Pipeline(**kw, gnss=GpsFusion(**gkw) if use_gps else None)
+        name = self.gps_fusion_name()
+        gkw = fusion_settings_from_profile(self.profile) if name == "chen" else {}
+        return lambda: Pipeline(**kw, gnss=make_fusion(name, **gkw) if use_gps else None)
+
+    def gps_fusion_name(self) -> str:
+        """The filter :attr:`gps_fusion` stands for ("auto": the benchmark's better one)."""
+        from core.gnss import AUTO_FUSION  # noqa: PLC0415
+
+        return AUTO_FUSION if self.gps_fusion == "auto" else self.gps_fusion
 
     def learn_from_gps(self, pipeline) -> bool:
         """Keep in the profile what a live walk's GPS taught (stride scale, heading model); True if anything."""
         from core.gnss.training import profile_with_gps_training  # noqa: PLC0415
 
         gnss = getattr(pipeline, "gnss", None)
-        if gnss is None:
+        if gnss is None or not hasattr(gnss, "trainer"):  # Kubrak's filter keeps no profile (yet)
             return False
         new = profile_with_gps_training(self.profile, gnss.trainer)
         changed = new is not self.profile
@@ -182,6 +196,9 @@ class Settings:
             if not isinstance(getattr(self, name), bool):
                 out.append(f"{name}={getattr(self, name)!r} is not true/false; using True")
                 setattr(self, name, True)
+        if self.gps_fusion not in GPS_FUSIONS:
+            out.append(f"gps_fusion={self.gps_fusion!r} unknown; using 'auto'")
+            self.gps_fusion = "auto"
         if self.replay_speed not in ("1x", "10x", "max"):
             out.append(f"replay_speed={self.replay_speed!r} unknown; using '10x'")
             self.replay_speed = "10x"
@@ -190,7 +207,7 @@ class Settings:
     def to_dict(self) -> dict:
         """What goes into ``settings.json`` (the profile has its own file)."""
         return {"rate_hz": self.rate_hz, "record_live": self.record_live, "replay_speed": self.replay_speed,
-                "use_gps": self.use_gps}
+                "use_gps": self.use_gps, "gps_fusion": self.gps_fusion}
 
     @classmethod
     def load(cls, path: str) -> "Settings":

@@ -348,7 +348,7 @@ class TrackView(Widget):
         g = self.gps
         if g is None:
             return "GPS off"
-        text = gps_status_text(g.n_fixes, g.n_used, g.cov_en_m2, g.anchored, ELLIPSE_SIGMA)
+        text = gps_status_text(g.n_fixes, g.n_used, g.cov_en_m2, g.anchored, ELLIPSE_SIGMA, g.last_verdict)
         if g.anchored:
             def key(rgba, mark, label, alpha=None):
                 return f"[color={_hex(rgba, alpha)}]{mark}[/color] {label}"

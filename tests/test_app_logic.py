@@ -281,7 +281,7 @@ def test_old_settings_with_stride_c_migrate_to_the_profile(tmp_path):
     feats = Pipeline().run(simulate_walk(((0.0, 0.0), (10.0, 0.0)), seed=2).recording).steps[3].features
     assert s.stride_model().length_m(feats) == pytest.approx(0.52 * (feats.acc_max_m_s2 - feats.acc_min_m_s2) ** 0.25)
     s.save(str(p))
-    assert set(json.loads(p.read_text())) == {"rate_hz", "record_live", "replay_speed", "use_gps"}  # old keys gone
+    assert set(json.loads(p.read_text())) == {"rate_hz", "record_live", "replay_speed", "use_gps", "gps_fusion"}  # old keys gone
     t = Settings.load(str(p))
     assert t == s and not t.notes
     # an old file that was never calibrated (the old default C), or with a C no walker has
@@ -582,3 +582,21 @@ def test_a_live_walk_with_gps_teaches_the_profile_and_the_next_track_starts_from
     got = fusion.heading_model.coefficients_rad()[0]
     assert math.degrees(got) == pytest.approx(math.degrees(trainer.heading_model.coefficients_rad()[0]), abs=1e-6)
     assert not Settings().learn_from_gps(Pipeline())  # no GPS fusion: nothing to learn
+
+
+def test_gps_filter_setting_persists_and_builds_that_filter(tmp_path):
+    """The app's GPS filter choice (auto/chen/kubrak, issue #10) is saved, validated and used by new tracks."""
+    from core.gnss import AUTO_FUSION
+    from core.gnss.kubrak import KubrakFusion
+
+    path = str(tmp_path / "settings.json")
+    s = Settings()
+    s.gps_fusion = "kubrak"
+    s.save(path)
+    back = Settings.load(path)
+    assert back.gps_fusion == "kubrak" and isinstance(back.pipeline_factory()().gnss, KubrakFusion)
+    back.gps_fusion = "lsq"
+    assert any("gps_fusion" in p for p in back.validate()) and back.gps_fusion == "auto"
+    assert back.pipeline_factory()().gnss.name == AUTO_FUSION
+    assert gps_status_text(5, 3, (0.25, 0.0, 0.09), True, verdict="C/N0 of the 4th satellite 20 dB-Hz < 25") == \
+        "GPS: 5 fixes, 3 used · ±1.0 m (2σ) · last fix: C/N0 of the 4th satellite 20 dB-Hz < 25"
