@@ -197,7 +197,7 @@ class Session:
         self.source.start()
         if self.record_path and self.writer is None:
             device, metadata = self._record_meta
-            streams = self._record_streams or {n: STREAM_SPECS[n] for n in ("acc", "gyro", "mag", "gps")}
+            streams = self._record_streams or {n: STREAM_SPECS[n] for n in ("acc", "gyro", "mag", "gps", "gnss_status")}
             dev = dict(self.source.device)
             dev.update(device or {})
             meta = dict(metadata or {})

@@ -46,7 +46,8 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
+from core.conventions import ACC, GNSS_STATUS, GPS, GYRO, MAG, ROTVEC
+from core.gnss.nmea import NmeaSatelliteStatus
 
 #: ``(stream, t_ns, values)``
 Event = tuple
@@ -389,7 +390,28 @@ def _java_classes(jnius):
         def onStatusChanged(self, provider, status, extras):
             pass
 
-    _CLASS_CACHE[key] = (SensorListener, LocationListener)
+    class NmeaListener(PythonJavaClass):
+        """NMEA sentences of the GNSS chip (API 24+): the satellites in each fix and their C/N0 (Kubrak's rule).
+
+        ``GnssStatus.Callback`` would give the same, but it is an abstract class, which pyjnius cannot
+        implement; ``OnNmeaMessageListener`` is an interface.
+        """
+
+        __javainterfaces__ = ["android/location/OnNmeaMessageListener"]
+        __javacontext__ = "app"
+
+        def __init__(self, on_nmea):
+            super().__init__()
+            self._on_nmea = on_nmea
+
+        @java_method("(Ljava/lang/String;J)V")
+        def onNmeaMessage(self, message, timestamp):
+            try:
+                self._on_nmea(message)
+            except Exception:  # noqa: BLE001
+                pass
+
+    _CLASS_CACHE[key] = (SensorListener, LocationListener, NmeaListener)
     return _CLASS_CACHE[key]
 
 
@@ -535,7 +557,7 @@ class AndroidSource(SensorSource):
         self._thread = HandlerThread("pdr-sensors")
         self._thread.start()
         handler = Handler(self._thread.getLooper())
-        SensorListener, _ = _java_classes(jn)
+        SensorListener = _java_classes(jn)[0]
         self.missing = []
         for name in self.streams:
             sensor = self._sm.getDefaultSensor(ANDROID_SENSOR_TYPES[name])
@@ -576,7 +598,7 @@ class AndroidSource(SensorSource):
             autoclass = jn.autoclass
             Context = autoclass("android.content.Context")
             LocationManager = autoclass("android.location.LocationManager")
-            _, LocationListener = _java_classes(jn)
+            LocationListener, NmeaListener = _java_classes(jn)[1:]
             self._lm = self._activity().getSystemService(Context.LOCATION_SERVICE)
             listener = LocationListener(self._on_location)
             # (provider, minTimeMs, minDistanceM, listener, looper): fixes delivered on the sensor thread
@@ -584,6 +606,7 @@ class AndroidSource(SensorSource):
                                             self._thread.getLooper())
             self._location_listener = listener
             self.gps_status = "on (LocationListener, elapsed-realtime timestamps)"
+            self._start_nmea(NmeaListener)
             return True
         except Exception as e:  # noqa: BLE001 - SecurityException without permission, etc.
             own_error = e
@@ -594,6 +617,26 @@ class AndroidSource(SensorSource):
         except Exception as e:  # noqa: BLE001
             self.gps_status = f"off ({own_error}; plyer: {e})"
             return False
+
+    def _start_nmea(self, NmeaListener) -> None:
+        """Satellite C/N0 from the NMEA stream, as ``gnss_status`` events stamped on arrival (best effort)."""
+        jn = self._jnius
+        try:
+            SystemClock = jn.autoclass("android.os.SystemClock")
+            Handler = jn.autoclass("android.os.Handler")
+            parser = NmeaSatelliteStatus()
+
+            def on_nmea(message):
+                status = parser.update(str(message))
+                if status is not None:
+                    self.queue.push((GNSS_STATUS, int(SystemClock.elapsedRealtimeNanos()), status))
+
+            listener = NmeaListener(on_nmea)
+            self._lm.addNmeaListener(listener, Handler(self._thread.getLooper()))
+            self._nmea_listener = listener
+            self.gps_status += "; satellite C/N0 from NMEA"
+        except Exception as e:  # noqa: BLE001 - an old phone or a chip without NMEA: the fixes still come
+            self.gps_status += f"; no satellite C/N0 ({e})"
 
     def _start_plyer_gps(self):
         from plyer import gps  # noqa: PLC0415 - plyer only on the phone
@@ -626,6 +669,12 @@ class AndroidSource(SensorSource):
             except Exception:  # noqa: BLE001
                 pass
         self._location_listener = None
+        if self._lm is not None and getattr(self, "_nmea_listener", None) is not None:
+            try:
+                self._lm.removeNmeaListener(self._nmea_listener)
+            except Exception:  # noqa: BLE001
+                pass
+        self._nmea_listener = None
         if self._plyer_gps is not None:
             try:
                 self._plyer_gps.stop()

@@ -145,6 +145,15 @@ class FakeLocationManager:
     def removeUpdates(self, listener):
         self.listeners = [x for x in self.listeners if x[2] is not listener]
 
+    nmea = None
+
+    def addNmeaListener(self, listener, handler):
+        self.nmea = listener
+
+    def removeNmeaListener(self, listener):
+        if self.nmea is listener:
+            self.nmea = None
+
 
 def make_fake_jnius(sm, lm=None):
     jn = types.ModuleType("jnius")
@@ -417,7 +426,22 @@ def test_gps_fixes_keep_the_elapsed_realtime_timestamp():
     assert math.isnan(got[0][2][2])  # no altitude
     assert got[1][:2] == ("gps", 2_000_000_456) and math.isnan(got[1][2][3])
     src.stop()
-    assert lm.listeners == []
+    assert lm.listeners == [] and lm.nmea is None
+
+
+def test_nmea_sentences_become_gnss_status_events():
+    """Kubrak's C/N0 rule on the phone: GSV/GSA/GGA sentences -> (satellites used, 4th-strongest C/N0)."""
+    from tests.test_nmea import _epoch
+
+    sm, lm = FakeSensorManager(), FakeLocationManager()
+    src = AndroidSource(gps=True, jnius=make_fake_jnius(sm, lm))
+    src.start()
+    assert "C/N0 from NMEA" in src.gps_status and lm.nmea is not None
+    for sentence in _epoch([(1, 40), (3, 38), (5, 30), (7, 22), (9, 18)], [1, 3, 5, 7, 9]) + ["$garbage*00"]:
+        lm.nmea.onNmeaMessage(sentence, 1_700_000_000_000)
+    got = [e for e in src.drain() if e[0] == "gnss_status"]
+    assert got == [("gnss_status", 10**12, (5.0, 22.0))]  # stamped on the sensor clock at arrival
+    src.stop()
 
 
 def test_gps_without_permission_leaves_the_sensors_running():
