@@ -51,6 +51,8 @@ import json
 import math
 import os
 import warnings
+import zipfile
+import zlib
 from array import array
 from dataclasses import dataclass, field
 from typing import IO, Iterable, Iterator
@@ -154,38 +156,275 @@ def bad_lines_tolerated(n_bad: int, n_lines: int) -> bool:
     return n_bad <= MAX_BAD_LINES and n_bad <= MAX_BAD_LINE_FRACTION * n_lines
 
 
-def gunzip_partial(data: bytes) -> tuple[bytes, str | None]:
+def skip_bad_lines(bad: list[RecordingError], n_lines: int, source: str, repairs: list[str]) -> None:
+    """Skip the bad lines ``bad`` (errors naming their lines, in file order) of ``n_lines``, or refuse the file.
+
+    The one rule of every reader (:func:`bad_lines_tolerated`): a few are
+    skipped and counted in ``repairs`` ("skipped 3 bad line(s) of 9000
+    (first: line 17: ...)"); more are a :class:`RecordingError` naming the
+    first.  A reader stops at the first bad line past :data:`MAX_BAD_LINES`,
+    so more than that many are counted as "over 100".
+    """
+    if not bad:
+        return
+    first = bad[0]
+    if not bad_lines_tolerated(len(bad), n_lines):
+        count = len(bad) if len(bad) <= MAX_BAD_LINES else f"over {MAX_BAD_LINES}"
+        more = (f" ({count} bad lines of {n_lines}: too many to skip; at most {MAX_BAD_LINES} and 1 % are skipped)"
+                if len(bad) > 1 else "")
+        raise RecordingError(first.message + more, first.path, first.line)
+    repairs.append(f"{source}: skipped {len(bad)} bad line(s) of {n_lines} (first: line {first.line}: "
+                   f"{first.message})")
+
+
+# ---------------------------------------------------------------------------
+# streaming input: a file's bytes (gunzipped by content) -> complete text lines, a chunk at a time
+
+#: largest uncompressed size read from a gzip stream or an archive member (2 GiB: over a day of events at
+#: 250 a second in the project format); a larger one is refused (a decompression bomb, or a walk to split)
+MAX_UNCOMPRESSED_BYTES = 2 * 1024 ** 3
+#: bytes read (or inflated) at a time: the text of a file is never in memory whole, only a chunk of it
+CHUNK_BYTES = 1 << 18
+#: a line longer than this is not a line of any format read here; it is refused rather than held in memory
+MAX_LINE_BYTES = 16 << 20
+GZIP_MAGIC = b"\x1f\x8b"
+
+
+def size_text(n: int) -> str:
+    """A byte count for messages: ``2.0 GiB`` / ``400.0 MiB`` / ``512 bytes``."""
+    for unit, k in (("GiB", 30), ("MiB", 20), ("KiB", 10)):
+        if n >= 1 << k:
+            return f"{n / (1 << k):.1f} {unit}"
+    return f"{n} bytes"
+
+
+def over_limit_error(what: str, limit: int, source: str, size: int | None = None) -> RecordingError:
+    """The one-line refusal of input larger than ``limit`` bytes uncompressed (``size``: its declared size).
+
+    ``what`` names it ("the gzip stream", "archive member 'Gyroscope.csv'").
+    """
+    amount = (f"is {size_text(size)} ({size} bytes) uncompressed, over" if size is not None
+              else "inflates to more than")
+    return RecordingError(f"{what} {amount} the limit of {size_text(limit)} ({limit} bytes) for what is read "
+                          "(core.recording.MAX_UNCOMPRESSED_BYTES): refused as a decompression bomb (a real walk "
+                          "that long must be split)", source)
+
+
+#: what reading a file object may raise besides OSError (a zip member: a bad CRC, corrupt deflate data, an
+#: encrypted member, a compression method Python lacks)
+READ_ERRORS = (OSError, EOFError, zipfile.BadZipFile, zlib.error, RuntimeError, NotImplementedError)
+
+
+class ByteChunks:
+    """The bytes of a binary file object, a chunk of about :data:`CHUNK_BYTES` at a time.
+
+    Gzip input (by content: the gzip magic, whatever the name says;
+    several members are read one after the other) is inflated as it is
+    read.  A gzip stream cut off or corrupt part-way ends the chunks at the
+    damage and sets :attr:`problem` (``"the gzip stream is truncated"``,
+    ``"corrupt gzip data (...)"``, ``"trailing garbage after the gzip
+    stream"``); it is ``None`` after a whole stream.  More than ``limit``
+    bytes of inflated output (of any output when ``inflated`` is true: an
+    archive member that was itself inflated, named ``what``) is the
+    :class:`RecordingError` of :func:`over_limit_error`, raised while
+    inflating, before the output is in memory.  Read errors are a
+    :class:`RecordingError` naming ``source``.
+    """
+
+    def __init__(self, f: IO[bytes], source: str, *, limit: int | None = MAX_UNCOMPRESSED_BYTES,
+                 inflated: bool = False, what: str = "the archive member", chunk: int = CHUNK_BYTES):
+        self.f = f
+        self.source = source
+        self.limit = limit
+        self.inflated = inflated
+        self.what = what
+        self.chunk = chunk
+        self.problem: str | None = None
+        self.gzipped = False
+        #: bytes delivered so far
+        self.total = 0
+
+    def _read(self) -> bytes:
+        try:
+            return self.f.read(self.chunk)
+        except READ_ERRORS as e:
+            raise RecordingError(f"cannot read: {getattr(e, 'strerror', None) or e}", self.source) from None
+
+    def _out(self, data: bytes, what: str) -> bytes:
+        self.total += len(data)
+        if self.limit is not None and self.total > self.limit:
+            raise over_limit_error(what, self.limit, self.source)
+        return data
+
+    def __iter__(self) -> Iterator[bytes]:
+        head = self._read()
+        while 0 < len(head) < 2:  # one byte cannot tell gzip from text
+            more = self._read()
+            if not more:
+                break
+            head += more
+        if head[:2] == GZIP_MAGIC:
+            self.gzipped = True
+            yield from self._inflate(head)
+            return
+        data = head
+        while data:
+            yield self._out(data, self.what) if self.inflated else data
+            data = self._read()
+
+    def _inflate(self, data: bytes) -> Iterator[bytes]:
+        what = "the gzip stream"
+        d = zlib.decompressobj(16 + zlib.MAX_WBITS)
+        at_end = False  # the input is exhausted
+        while True:
+            try:
+                out = d.decompress(data, self.chunk)
+            except zlib.error as e:
+                self.problem = f"corrupt gzip data ({e})"
+                return
+            data = d.unconsumed_tail
+            if out:
+                yield self._out(out, what)
+            if d.eof:
+                rest = d.unused_data
+                while len(rest) < 2 and not at_end:
+                    more = self._read()
+                    at_end = not more
+                    rest += more
+                if rest[:2] == GZIP_MAGIC:  # another gzip member follows
+                    d = zlib.decompressobj(16 + zlib.MAX_WBITS)
+                    data = rest
+                    continue
+                while not rest.strip(b"\x00"):  # nothing, or NUL padding, after the last member
+                    if at_end:
+                        return
+                    rest = self._read()
+                    at_end = not rest
+                self.problem = "trailing garbage after the gzip stream"
+                return
+            if data or len(out) == self.chunk:
+                continue  # more output is pending from the input already given
+            if at_end:
+                try:
+                    out = d.flush()
+                except zlib.error as e:
+                    self.problem = f"corrupt gzip data ({e})"
+                    return
+                if out:
+                    yield self._out(out, what)
+                if not d.eof:
+                    self.problem = "the gzip stream is truncated"
+                    return
+                continue
+            data = self._read()
+            at_end = not data
+
+
+def gunzip_partial(data: bytes, limit: int | None = MAX_UNCOMPRESSED_BYTES) -> tuple[bytes, str | None]:
     """Decompress gzip ``data``; a truncated or corrupt stream gives the complete lines before the damage.
 
-    Returns ``(bytes, problem)`` with ``problem`` ``None`` when the stream was whole.
+    Returns ``(bytes, problem)`` with ``problem`` ``None`` when the stream was
+    whole.  (The readers stream instead: :class:`ByteChunks`.)
     """
-    import zlib
-    out = []
-    pos = 0
-    problem = None
-    while pos < len(data):
-        d = zlib.decompressobj(16 + zlib.MAX_WBITS)
-        try:
-            out.append(d.decompress(data[pos:]))
-            out.append(d.flush())
-        except zlib.error as e:
-            problem = f"corrupt gzip data ({e})"
-            break
-        if not d.eof:
-            problem = "the gzip stream is truncated"
-            break
-        rest = d.unused_data
-        if not rest.strip(b"\x00"):
-            break
-        if rest[:2] != b"\x1f\x8b":
-            problem = "trailing garbage after the gzip stream"
-            break
-        pos = len(data) - len(rest)  # another gzip member follows
-    raw = b"".join(out)
+    chunks = ByteChunks(io.BytesIO(data), "<bytes>", limit=limit)
+    raw = b"".join(chunks)
+    problem = chunks.problem
     if problem is not None:  # the last line was cut by the damage: keep complete lines only
         raw = raw[:raw.rfind(b"\n") + 1]
         problem += " (its cut last line dropped)"
     return raw, problem
+
+
+def _decode_replace(data: bytes) -> str:
+    return data.decode("utf-8", errors="replace")
+
+
+class TextLines:
+    """The complete lines of a :class:`ByteChunks`, a chunk of lines at a time.
+
+    Iterating gives ``(number of the first line, lines)`` with the lines
+    without their newlines; a chunk always ends at a line end, so ``decode``
+    (bytes -> str, called once per chunk) never sees half a character.  A
+    UTF-8 byte order mark at the start is dropped.  After the iteration
+    :attr:`tail` is what followed the last newline (``""`` when the text
+    ends with one; otherwise a last line cut mid-write) and :attr:`tail_line`
+    its line number; when the gzip stream was damaged (:attr:`problem`) the
+    tail is ``""`` (only complete lines are kept) and :attr:`kept_bytes`
+    counts the bytes before the damage.  With ``split_cr`` a lone ``"\\r"``
+    ends a line too (``decode`` then turns ``"\\r\\n"`` and ``"\\r"`` into
+    ``"\\n"``).  A line over :data:`MAX_LINE_BYTES` is a :class:`RecordingError`.
+    """
+
+    def __init__(self, chunks: ByteChunks, source: str, decode=_decode_replace, split_cr: bool = False):
+        self.chunks = chunks
+        self.source = source
+        self.decode = decode
+        self.split_cr = split_cr
+        self.tail = ""
+        self.tail_line = 1
+        self.kept_bytes = 0
+        #: the damage has been noted (see :func:`core.importers._common.note_damage`)
+        self.noted = False
+
+    @property
+    def gzipped(self) -> bool:
+        return self.chunks.gzipped
+
+    @property
+    def problem(self) -> str | None:
+        """What was wrong with the gzip stream (its cut last line dropped), or ``None``."""
+        p = self.chunks.problem
+        return None if p is None else p + " (its cut last line dropped)"
+
+    def __iter__(self) -> Iterator[tuple[int, list[str]]]:
+        carry = b""
+        lineno = 1
+        first = True
+        for chunk in self.chunks:
+            buf = carry + chunk if carry else chunk
+            cut = buf.rfind(b"\n")
+            if self.split_cr:
+                cut = max(cut, buf.rfind(b"\r", 0, len(buf) - 1))  # a "\r" at the end may be half a "\r\n"
+            if cut < 0:
+                carry = buf
+                if len(carry) > MAX_LINE_BYTES:
+                    raise RecordingError(f"a line longer than {size_text(MAX_LINE_BYTES)}: not a line of a "
+                                         "recording", self.source, lineno)
+                continue
+            body, carry = buf[:cut + 1], buf[cut + 1:]
+            if first:
+                body = body[3:] if body[:3] == b"\xef\xbb\xbf" else body
+                first = False
+            lines = self.decode(body).split("\n")
+            lines.pop()  # "" after the last newline
+            yield lineno, lines
+            lineno += len(lines)
+        self.kept_bytes = self.chunks.total - len(carry)
+        self.tail_line = lineno
+        if self.chunks.problem is not None:
+            return  # the damage cut the last line: complete lines only
+        if first:
+            carry = carry[3:] if carry[:3] == b"\xef\xbb\xbf" else carry
+        lines = self.decode(carry).split("\n") if carry else [""]
+        self.tail = lines.pop()
+        if lines:  # "\r" at the very end, turned into a line end by decode
+            yield lineno, lines
+            self.tail_line = lineno + len(lines)
+
+
+class WholeText:
+    """A text already in memory with the interface of :class:`TextLines` (one chunk of lines, then the tail)."""
+
+    gzipped = False
+    problem = None
+
+    def __init__(self, text: str):
+        self._lines = text.split("\n")
+        self.tail = self._lines[-1]
+        self.tail_line = len(self._lines)
+
+    def __iter__(self) -> Iterator[tuple[int, list[str]]]:
+        yield 1, self._lines[:-1]
 
 
 @dataclass
@@ -667,7 +906,8 @@ class RecordingWriter:
 
 
 def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool = True,
-                   check_units: bool = True, check_time: bool = True, allow_empty: bool = False) -> Recording:
+                   check_units: bool = True, check_time: bool = True, allow_empty: bool = False,
+                   max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
     """Read a ``pdr-recording`` file.
 
     Raises :class:`RecordingError` (naming file and line) for an empty file, a
@@ -678,35 +918,24 @@ def read_recording(path: str, *, allow_truncated_tail: bool = True, warn: bool =
     kept), a last line without its newline (a recorder killed mid-write: it
     is dropped even when it parses, since ``2.586e-0`` may be a cut
     ``2.586e-05``), and a few bad event lines (see :func:`parse_recording`).
+
+    The file is read as a stream (gzip by content, inflated as it is read),
+    a chunk of lines at a time, into growing arrays: besides the recording
+    itself (8 bytes a timestamp and a value) it takes the file line of each
+    event (8 bytes) and a few MiB.  A gzip stream that inflates to over
+    ``max_uncompressed_bytes`` (:data:`MAX_UNCOMPRESSED_BYTES`) is refused
+    while it is inflated.
     """
     path = str(path)
     try:
-        with open(path, "rb") as f:
-            data = f.read()
+        f = open(path, "rb")
     except OSError as e:
         raise RecordingError(f"cannot open: {e.strerror or e}", path) from None
-    repairs = []
-    if data[:2] == b"\x1f\x8b":  # gzip by content, whatever the name says
-        raw, problem = gunzip_partial(data)
-        if problem is not None:
-            if not raw or not allow_truncated_tail:
-                raise RecordingError(f"cannot read: {problem}", path)
-            repairs.append(f"{path}: {problem}; kept the {len(raw)} bytes before the damage")
-        data = raw
-    text = decode_utf8(data, path)
-    return parse_recording(text, path, allow_truncated_tail=allow_truncated_tail, warn=warn,
-                           check_units=check_units, check_time=check_time, allow_empty=allow_empty,
-                           _repairs=repairs)
-
-
-def decode_utf8(data: bytes, source: str) -> str:
-    """UTF-8 text; bytes that are not UTF-8 become U+FFFD and make their line a bad line (see parse_recording)."""
-    if data[:3] == b"\xef\xbb\xbf":
-        data = data[3:]
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError:
-        return data.decode("utf-8", errors="replace")
+    with f:
+        chunks = ByteChunks(f, path, limit=max_uncompressed_bytes)
+        return _parse_lines(TextLines(chunks, path), path, allow_truncated_tail=allow_truncated_tail,
+                            warn=warn, check_units=check_units, check_time=check_time, allow_empty=allow_empty,
+                            repairs=[])
 
 
 def _is_int(v) -> bool:
@@ -803,11 +1032,48 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
     no events (a live recording killed before its first flush) gives a
     recording with empty streams (noted in ``repairs``) instead of an error.
     """
-    repairs: list[str] = list(_repairs or [])
-    if not text.strip():
+    return _parse_lines(WholeText(text), source, allow_truncated_tail=allow_truncated_tail, warn=warn,
+                        check_units=check_units, check_time=check_time, allow_empty=allow_empty,
+                        repairs=list(_repairs or []))
+
+
+def _parse_lines(text: TextLines | WholeText, source: str, *, allow_truncated_tail: bool, warn: bool,
+                 check_units: bool, check_time: bool, allow_empty: bool, repairs: list[str]) -> Recording:
+    """The reader of :func:`read_recording` and :func:`parse_recording`."""
+    it = iter(text)
+    try:
+        return _parse_events(it, text, source, allow_truncated_tail, warn, check_units, check_time, allow_empty,
+                             repairs)
+    except RecordingError:
+        if not text.gzipped or allow_truncated_tail:
+            raise
+        for _ in it:  # a damaged gzip stream is refused before what the damage did to the lines is named
+            pass
+        if text.problem is not None:
+            raise RecordingError(f"cannot read: {text.problem}", source) from None
+        raise
+
+
+def _parse_events(it, text, source, allow_truncated_tail, warn, check_units, check_time, allow_empty,
+                  repairs) -> Recording:
+    # the magic line and the header: the first two lines (a text without more lines: its tail is line 1 or 2)
+    pending: list[str] = []
+    at_end = False
+    while len(pending) < 2:
+        try:
+            pending.extend(next(it)[1])
+        except StopIteration:
+            at_end = True
+            break
+    head, rest = pending[:2], pending[2:]
+    del pending
+    if at_end and text.problem is None:
+        head.append(text.tail)
+    if not head:  # a damaged gzip stream without one complete line
+        raise RecordingError(f"cannot read: {text.problem}", source)
+    if not head[0].strip() and not _any_text(head, it, text):
         raise RecordingError("empty file: expected the line '# pdr-recording 1' and a JSON header", source, 1)
-    lines = text.split("\n")
-    first = lines[0].strip()
+    first = head[0].strip()
     if not first.startswith(MAGIC):
         raise RecordingError(f"not a pdr-recording: first line must be '{MAGIC} {FORMAT_VERSION}', "
                              f"found {first[:40]!r}", source, 1)
@@ -818,84 +1084,95 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
     if version != FORMAT_VERSION:
         raise RecordingError(f"format version {version} is not supported (this reader reads version "
                              f"{FORMAT_VERSION})", source, 1)
-    if len(lines) < 2 or not lines[1].startswith("#"):
+    if len(head) < 2 or not head[1].startswith("#"):
         raise RecordingError("missing JSON header line after the magic line", source, 2)
-    if "\ufffd" in lines[1]:
+    if "\ufffd" in head[1]:
         raise RecordingError("header line holds bytes that are not UTF-8", source, 2)
     try:
-        header = json.loads(lines[1][1:])
+        header = json.loads(head[1][1:])
     except json.JSONDecodeError as e:
         raise RecordingError(f"header is not valid JSON: {e.msg} at column {e.colno + 1}", source, 2) from None
     except RecursionError:
         raise RecordingError("header is not valid JSON: nested too deeply", source, 2) from None
     specs = _check_header(header, version, source)
     ncols = {n: len(s["columns"]) for n, s in specs.items()}
-    # per stream: timestamps, value rows, file line of each event (an int64 array: 8 bytes an event)
-    data: dict[str, tuple[list[int], list[list[float]], array]] = {n: ([], [], array("q")) for n in specs}
-    last = len(lines) - 1
-    # a file written completely ends with "\n", so its last split element is ""
-    if allow_truncated_tail and last >= 2 and lines[last].strip() and not lines[last].lstrip().startswith("#"):
-        repairs.append(f"{source}: dropped an incomplete last line {last + 1}: no newline (the recording was cut "
-                       "off mid-write; its last number may be cut short)")
-        lines = lines[:last]
+    # per stream: timestamps, values (row after row), file line of each event, fields per row, values per row --
+    # growing arrays of 8 bytes an entry, viewed as numpy arrays at the end without a copy
+    data = {n: (array("q"), array("d"), array("q"), k + 2, k) for n, k in ncols.items()}
     bad: list[RecordingError] = []
     n_events = 0
-    suspect = "\ufffd" in text  # bytes that were not UTF-8 somewhere
-    for i in range(2, len(lines)):
-        line = lines[i].strip()
-        if not line or line.startswith("#"):
-            continue  # a bad byte in a comment does not matter
-        n_events += 1
-        lineno = i + 1
-        # fast path; anything unusual goes to _parse_row, which names the problem
-        parts = line.split(",")
-        name = parts[0]
-        d = data.get(name)
-        ok = d is not None and len(parts) == ncols[name] + 2 and not (suspect and "\ufffd" in line)
-        if ok:
+
+    def events(lineno: int, lines: list[str]) -> bool:
+        """Parse one chunk of event lines; False after too many bad lines (the reader stops)."""
+        nonlocal n_events
+        i = lineno - 1
+        for line in lines:
+            i += 1
+            line = line.strip()
+            if not line or line[0] == "#":
+                continue  # a bad byte in a comment does not matter
+            n_events += 1
+            # fast path; anything unusual goes to _parse_row, which names the problem
+            parts = line.split(",")
+            d = data.get(parts[0])
+            if d is not None and len(parts) == d[3]:
+                try:
+                    t = int(parts[1])
+                    if _INT64_MIN <= t <= _INT64_MAX:
+                        d[1].extend(map(float, parts[2:]))
+                        d[0].append(t)
+                        d[2].append(i)
+                        continue
+                except ValueError:
+                    del d[1][len(d[0]) * d[4]:]  # the values of this row before its bad one
             try:
-                t = int(parts[1])
-                vals = [float(p) for p in parts[2:]]
-            except ValueError:
-                ok = False
-            else:
-                ok = _INT64_MIN <= t <= _INT64_MAX
-        if not ok:
-            try:
-                name, t, vals = _parse_row(line, specs, ncols, source, lineno)
+                name, t, vals = _parse_row(line, specs, ncols, source, i)
             except RecordingError as e:
                 if not allow_truncated_tail:
                     raise
                 bad.append(e)
                 if len(bad) > MAX_BAD_LINES:
-                    break
+                    return False
                 continue
             d = data[name]
-        d[0].append(t)
-        d[1].append(vals)
-        d[2].append(lineno)
+            d[0].append(t)
+            d[1].extend(vals)
+            d[2].append(i)
+        return True
+
+    going = events(3, rest)
+    del rest
+    if going:
+        for lineno, lines in it:
+            if not events(lineno, lines):
+                going = False
+                break
+    damage = []
+    if text.problem is not None:
+        if not allow_truncated_tail:
+            raise RecordingError(f"cannot read: {text.problem}", source)
+        damage.append(f"{source}: {text.problem}; kept the {text.kept_bytes} bytes before the damage")
+    elif going and text.tail_line >= 3 and text.tail.strip():
+        if allow_truncated_tail and not text.tail.lstrip().startswith("#"):
+            damage.append(f"{source}: dropped an incomplete last line {text.tail_line}: no newline (the recording "
+                          "was cut off mid-write; its last number may be cut short)")
+        else:
+            events(text.tail_line, [text.tail])
+    repairs.extend(damage)
     if bad:
-        if not bad_lines_tolerated(len(bad), n_events):
-            e = bad[0]
-            count = len(bad) if len(bad) <= MAX_BAD_LINES else f"over {MAX_BAD_LINES}"
-            more = (f" ({count} bad lines of "
-                    f"{n_events}: too many to skip; at most {MAX_BAD_LINES} and 1 % are skipped)"
-                    if len(bad) > 1 else "")
-            raise RecordingError(e.message + more, source, e.line)
-        repairs.append(f"{source}: skipped {len(bad)} bad line(s) of {n_events} (first: line {bad[0].line}: "
-                       f"{bad[0].message})")
+        skip_bad_lines(bad, n_events, source, repairs)
     n_damage = len(repairs)
     streams = {}
     for name, spec in specs.items():
-        ts, vs, _ = data[name]
+        ts, vs, _, _, k = data[name]
         cols = tuple(spec["columns"])
-        vals = np.array(vs, dtype=np.float64).reshape(len(ts), ncols[name])
+        vals = np.frombuffer(vs, dtype=np.float64).reshape(len(ts), k)
         unit, note = str(spec.get("unit") or ""), str(spec.get("note") or "")
         vals, unit = convert_units(name, unit, vals, source, repairs)
         if name == GPS and cols == GPS_COLUMNS_V1:  # a file from before speed/course: same meaning, two nan columns
             vals, cols = _pad_gps(vals, cols)
             unit, note = STREAM_SPECS[GPS]["unit"], STREAM_SPECS[GPS]["note"]
-        streams[name] = Stream(name, np.array(ts, dtype=np.int64), vals, cols, unit, note)
+        streams[name] = Stream(name, np.frombuffer(ts, dtype=np.int64), vals, cols, unit, note)
     if not any(len(s) for s in streams.values()):
         if not allow_empty:
             raise RecordingError("the file has a header but no sensor events", source)
@@ -911,8 +1188,18 @@ def parse_recording(text: str, source: str = "<text>", *, allow_truncated_tail: 
                     repairs=repairs, source=source)
     if warn:
         for r in repairs[:n_damage]:
-            warnings.warn(r, DamagedFileWarning, stacklevel=2)
+            warnings.warn(r, DamagedFileWarning, stacklevel=4)
     return repair_recording(rec, warn=warn)
+
+
+def _any_text(head: list[str], it, text) -> bool:
+    """True if the text is more than whitespace (what follows ``head`` is read to know)."""
+    if any(h.strip() for h in head):
+        return True
+    for _, lines in it:
+        if any(ln.strip() for ln in lines):
+            return True
+    return bool(text.tail.strip())
 
 
 _INT64_MAX = 2**63 - 1

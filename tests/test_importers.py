@@ -458,17 +458,20 @@ def test_sensorlogger_errors(tmp_path):
     files = sl_files("android", with_total=False, with_gravity=False)
     with pytest.raises(RecordingError, match="without gravity"):
         read_sensorlogger(write_folder(tmp_path / "b", files))
-    # non-numeric value: file and line
+    # non-numeric values (more than one bad line and 1 %, issue #12): file and the first line
     files = sl_files("android")
     lines = files["Gyroscope.csv"].split("\n")
-    lines[5] = lines[5].replace("0.002", "oops")
+    for k in (5, 50):
+        lines[k] = lines[k].replace("0.002", "oops")
     files["Gyroscope.csv"] = "\n".join(lines)
-    with pytest.raises(RecordingError, match=r"Gyroscope.csv:6: column 'y' is not a number: 'oops'"):
+    with pytest.raises(RecordingError, match=r"Gyroscope.csv:6: column 'y' is not a number: 'oops' \(2 bad lines of "
+                                             r"150: too many to skip"):
         read_sensorlogger(write_folder(tmp_path / "c", files))
     # missing fields
     files = sl_files("android")
     lines = files["Magnetometer.csv"].split("\n")
-    lines[3] = ",".join(lines[3].split(",")[:3])
+    for k in (3, 30):
+        lines[k] = ",".join(lines[k].split(",")[:3])
     files["Magnetometer.csv"] = "\n".join(lines)
     with pytest.raises(RecordingError, match=r"Magnetometer.csv:4: missing fields"):
         read_sensorlogger(write_folder(tmp_path / "d", files))
@@ -679,16 +682,19 @@ def test_phyphox_errors(tmp_path):
     files["Raw Data.csv"] = files["Raw Data.csv"].replace("Acceleration", "Linear Acceleration")
     with pytest.raises(RecordingError, match="only linear acceleration"):
         read_phyphox(write_zip(tmp_path / "lin.zip", files))
+    # more bad lines than are skipped (over 1 %, issue #12): the first is named
     files = phyphox_files()
     lines = files["Gyroscope.csv"].split("\n")
-    lines[7] = lines[7].replace("E-3", "E-3x", 1)
+    for k in (7, 70, 170):
+        lines[k] = lines[k].replace("E-3", "E-3x", 1)
     files["Gyroscope.csv"] = "\n".join(lines)
     with pytest.raises(RecordingError, match=r"lin2.zip/Gyroscope.csv:8: column 'Gyroscope x \(rad/s\)' is not a "
-                                             r"number"):
+                                             r"number.*\(3 bad lines of 200: too many to skip"):
         read_phyphox(write_zip(tmp_path / "lin2.zip", files))
     files = phyphox_files()
     lines = files["Raw Data.csv"].split("\n")
-    lines[4] = ",".join(lines[4].split(",")[:2])  # time and x only
+    for k in (4, 44, 144, 244, 344):
+        lines[k] = ",".join(lines[k].split(",")[:2])  # time and x only
     files["Raw Data.csv"] = "\n".join(lines)
     with pytest.raises(RecordingError, match=r"short.zip/Raw Data.csv:5: missing fields: no value for "
                                              r"Acceleration y \(m/s\^2\), Acceleration z"):

@@ -43,7 +43,7 @@ from __future__ import annotations
 import os
 import zipfile
 
-from core.recording import MAGIC, Recording, RecordingError, read_recording
+from core.recording import MAGIC, MAX_UNCOMPRESSED_BYTES, Recording, RecordingError, read_recording
 from core.importers import getsensordata as _gsd
 from core.importers import phyphox as _phy
 from core.importers import sensorlogger as _sl
@@ -145,7 +145,8 @@ def detect_format(path) -> str:
     return fmt
 
 
-def load_recording(path, *, warn: bool = True, platform: str | None = None) -> Recording:
+def load_recording(path, *, warn: bool = True, platform: str | None = None,
+                   max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
     """Read any supported recording (see :data:`FORMATS`) into a :class:`Recording` in :mod:`core`'s conventions.
 
     ``warn``: emit :class:`core.recording.TimestampRepairWarning` for repaired
@@ -153,18 +154,22 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None) -> R
     ``platform``: "android" or "ios" for a Sensor Logger export without
     Metadata.csv (ignored by the other formats); without it the environment
     variable ``PDR_SENSORLOGGER_PLATFORM`` is used for such an export.
+    ``max_uncompressed_bytes``: a gzip stream or zip member larger than
+    this uncompressed is refused (:data:`core.recording.MAX_UNCOMPRESSED_BYTES`).
+    Every reader streams the file: memory holds the recording, not the text.
     """
     path = str(path)
+    limit = max_uncompressed_bytes
     fmt = detect_format(path)
     if fmt == PDR_RECORDING:
-        rec = read_recording(path, warn=warn)  # gzip or not by content, whatever the name says
+        rec = read_recording(path, warn=warn, max_uncompressed_bytes=limit)  # gzip or not by content
         rec.metadata.setdefault("source_format", PDR_RECORDING)
         return rec
     if fmt == GETSENSORDATA:
-        return read_getsensordata(path, warn=warn)
+        return read_getsensordata(path, warn=warn, max_uncompressed_bytes=limit)
     if fmt == SENSORLOGGER:
-        return read_sensorlogger(path, platform=platform, warn=warn)
-    return read_phyphox(path, warn=warn)
+        return read_sensorlogger(path, platform=platform, warn=warn, max_uncompressed_bytes=limit)
+    return read_phyphox(path, warn=warn, max_uncompressed_bytes=limit)
 
 
 __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",

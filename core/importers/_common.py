@@ -6,19 +6,21 @@ helpers and keep every unit, axis and sign conversion in their own code.
 
 from __future__ import annotations
 
-import gzip
 import math
 import os
 import zipfile
+from contextlib import contextmanager
 
 import numpy as np
 
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
 from core.geodesy import geodetic_to_enu
-from core.recording import Recording, RecordingError, acc_unit_guess, check_time_base, gunzip_partial, repair_recording
+from core.recording import (
+    GZIP_MAGIC, MAX_UNCOMPRESSED_BYTES, READ_ERRORS, ByteChunks, Recording, RecordingError, TextLines, acc_unit_guess,
+    check_time_base, gunzip_partial, over_limit_error, repair_recording, size_text,
+)
 
-GZIP_MAGIC = b"\x1f\x8b"
 ZIP_MAGIC = b"PK\x03\x04"
 ZIP_EMPTY_MAGIC = b"PK\x05\x06"
 
@@ -36,25 +38,95 @@ EXTRA_STREAM_SPECS: dict[str, dict] = {
 
 
 # ---------------------------------------------------------------------------
-# reading files: plain, gzip, inside a folder or a zip archive
+# reading files: plain, gzip, inside a folder or a zip archive -- as streams of lines
+
+#: largest side file read whole (Sensor Logger's Metadata.csv, phyphox's meta/*.csv: a few hundred bytes)
+MAX_SIDE_FILE_BYTES = 1 << 20
 
 
-def read_bytes(path: str, repairs: list[str] | None = None) -> bytes:
-    """The bytes of ``path`` (gzip-decompressed when it starts with the gzip magic).
+class TextDecoder:
+    """An importer's text, a chunk of whole lines at a time (see :class:`core.recording.TextLines`).
 
-    With a ``repairs`` list, a gzip stream cut off or corrupt part-way gives
-    the bytes before the damage and a line in ``repairs``; without one it is
-    a :class:`RecordingError`.
+    UTF-8, or Latin-1 for a chunk that is not (units like 'µT' are the only
+    non-ASCII); line ends ``\\r\\n`` and ``\\r`` become ``\\n``; a NUL in the
+    first 4096 characters is binary data, not text (a :class:`RecordingError`).
+    """
+
+    def __init__(self, source: str):
+        self.source = source
+        self.seen = 0
+
+    def __call__(self, data: bytes) -> str:
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError:
+            text = data.decode("latin-1")
+        if self.seen < 4096:
+            if "\x00" in text[:4096 - self.seen]:
+                raise RecordingError("binary data where text was expected", self.source)
+            self.seen += len(text)
+        if "\r" in text:
+            text = text.replace("\r\n", "\n").replace("\r", "\n")
+        return text
+
+
+def note_damage(text: TextLines, source: str, repairs: list[str]) -> None:
+    """After reading ``text``: a gzip stream cut part-way keeps its complete lines (noted in ``repairs``).
+
+    Nothing complete before the damage is a :class:`RecordingError`.  Noted once.
+    """
+    if text.problem is None or text.noted:
+        return
+    text.noted = True
+    if not text.kept_bytes:
+        raise RecordingError(f"corrupt gzip data: {text.problem}", source)
+    repairs.append(f"{source}: {text.problem}; kept the {text.kept_bytes} bytes before the damage")
+
+
+@contextmanager
+def _lines_of(f, source: str, repairs: list[str], limit: int | None, inflated: bool = False,
+              what: str = "the archive member"):
+    with f:
+        text = TextLines(ByteChunks(f, source, limit=limit, inflated=inflated, what=what), source,
+                         TextDecoder(source), split_cr=True)
+        yield text
+        note_damage(text, source, repairs)
+
+
+def open_text(path: str, repairs: list[str], limit: int | None = MAX_UNCOMPRESSED_BYTES):
+    """``with open_text(path, repairs) as text:`` the lines of a file (gzip by content), streamed.
+
+    A gzip stream cut part-way gives its complete lines and a line in
+    ``repairs`` once the text has been read; one inflating beyond ``limit``
+    bytes is refused while it is read.
     """
     try:
-        with open(path, "rb") as f:
-            data = f.read()
+        f = open(path, "rb")
     except OSError as e:
         raise RecordingError(f"cannot open: {e.strerror or e}", path) from None
-    return maybe_gunzip(data, path, repairs)
+    return _lines_of(f, path, repairs, limit)
+
+
+def _first_bytes(f, source: str, n: int) -> bytes:
+    raw = b""
+    for chunk in ByteChunks(f, source, limit=None, chunk=n):
+        raw += chunk
+        if len(raw) >= n:
+            break
+    return raw[:n]
+
+
+def head_bytes(path: str, n: int = 65536) -> bytes:
+    """The first ``n`` bytes of a file, decompressed when it is gzip (for format detection)."""
+    with open(path, "rb") as f:
+        try:
+            return _first_bytes(f, path, n)
+        except RecordingError:
+            return b""
 
 
 def maybe_gunzip(data: bytes, source: str, repairs: list[str] | None = None) -> bytes:
+    """``data`` gunzipped when it is gzip (bytes in memory; the readers stream instead: :func:`open_text`)."""
     if data[:2] == GZIP_MAGIC:
         raw, problem = gunzip_partial(data)
         if problem is not None:
@@ -65,43 +137,20 @@ def maybe_gunzip(data: bytes, source: str, repairs: list[str] | None = None) -> 
     return data
 
 
-def decode_text(data: bytes, source: str) -> str:
-    """UTF-8 text (a BOM is dropped; Latin-1 as a fallback: units like 'µT' are the only non-ASCII)."""
-    if data[:3] == b"\xef\xbb\xbf":
-        data = data[3:]
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError:
-        text = data.decode("latin-1")
-    if "\x00" in text[:4096]:
-        raise RecordingError("binary data where text was expected", source)
-    if "\r" in text:
-        text = text.replace("\r\n", "\n").replace("\r", "\n")
-    return text
-
-
-def head_bytes(path: str, n: int = 65536) -> bytes:
-    """The first ``n`` bytes of a file, decompressed when it is gzip (for format detection)."""
-    with open(path, "rb") as f:
-        raw = f.read(n)
-    if raw[:2] == GZIP_MAGIC:
-        try:
-            with gzip.open(path, "rb") as g:
-                return g.read(n)
-        except (OSError, EOFError):
-            return b""
-    return raw
-
-
 class FileSet:
     """A folder or a zip archive of files, addressed by their path inside it ('/'-separated).
 
     ``name.csv.gz`` is served as ``name.csv`` (decompressed), so a folder whose
-    large files were gzip-compressed reads like the original export.
+    large files were gzip-compressed reads like the original export.  Files
+    are read as streams of lines (:meth:`text`); a zip member whose declared
+    size, or a gzip stream whose output, exceeds ``limit`` bytes
+    (:data:`core.recording.MAX_UNCOMPRESSED_BYTES`) is refused naming the
+    archive, the member, its size and the limit.
     """
 
-    def __init__(self, path: str):
+    def __init__(self, path: str, limit: int | None = MAX_UNCOMPRESSED_BYTES):
         self.path = str(path)
+        self.limit = limit
         #: damage repaired while reading members (a gzip member cut part-way: its complete lines are kept)
         self.repairs: list[str] = []
         self._zip: zipfile.ZipFile | None = None
@@ -115,9 +164,10 @@ class FileSet:
         else:
             try:
                 self._zip = zipfile.ZipFile(self.path)
-            except (OSError, zipfile.BadZipFile) as e:
+                infos = self._zip.infolist()
+            except (zipfile.BadZipFile, *READ_ERRORS, ValueError) as e:
                 raise RecordingError(f"not a folder or a readable zip archive: {e}", self.path) from None
-            for info in self._zip.infolist():
+            for info in infos:
                 if not info.is_dir():
                     self._add(info.filename, info.filename)
 
@@ -135,32 +185,42 @@ class FileSet:
         real = self._real[name]
         return f"{self.path}/{real}" if self._zip is not None else real
 
-    def read_bytes(self, name: str) -> bytes:
+    def _open(self, name: str):
         real = self._real[name]
         try:
-            if self._zip is not None:
-                data = self._zip.read(real)
-            else:
-                with open(real, "rb") as f:
-                    data = f.read()
-        except (OSError, zipfile.BadZipFile, EOFError) as e:
-            raise RecordingError(f"cannot read: {e}", self.where(name)) from None
-        return maybe_gunzip(data, self.where(name), self.repairs)
+            if self._zip is None:
+                return open(real, "rb")
+            info = self._zip.getinfo(real)
+            if self.limit is not None and info.file_size > self.limit:
+                raise over_limit_error(f"archive member {real!r}", self.limit, self.path, size=info.file_size)
+            return self._zip.open(info)
+        except READ_ERRORS as e:
+            raise RecordingError(f"cannot read: {getattr(e, 'strerror', None) or e}", self.where(name)) from None
 
-    def read_text(self, name: str) -> str:
-        return decode_text(self.read_bytes(name), self.where(name))
+    def text(self, name: str):
+        """``with fs.text(name) as text:`` the member's lines, streamed (see :func:`open_text`)."""
+        return _lines_of(self._open(name), self.where(name), self.repairs, self.limit, inflated=self._zip is not None,
+                         what=f"archive member {self._real[name]!r}")
+
+    def read_text(self, name: str, max_bytes: int = MAX_SIDE_FILE_BYTES) -> str:
+        """The whole text of a small side file (metadata); over ``max_bytes`` it is a :class:`RecordingError`."""
+        lines, size = [], 0
+        with self.text(name) as text:
+            for _, chunk in text:
+                lines += chunk
+                size += sum(map(len, chunk))
+                if size > max_bytes:
+                    break
+        if size + len(text.tail) > max_bytes:
+            raise RecordingError(f"over {size_text(max_bytes)} of text: not the small metadata file it should be",
+                                 self.where(name))
+        return "\n".join(lines + [text.tail])
 
     def head(self, name: str, n: int = 4096) -> str:
-        real = self._real[name]
         try:
-            if self._zip is not None:
-                with self._zip.open(real) as f:
-                    raw = f.read(n)
-                if raw[:2] == GZIP_MAGIC:
-                    raw = maybe_gunzip(self._zip.read(real), real)[:n]
-            else:
-                raw = head_bytes(real, n)
-        except (OSError, zipfile.BadZipFile, EOFError, RecordingError):
+            with self._open(name) as f:
+                raw = _first_bytes(f, self.where(name), n)
+        except (RecordingError, *READ_ERRORS):
             return ""
         return raw.decode("utf-8", errors="replace").lstrip("\ufeff")
 

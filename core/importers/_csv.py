@@ -1,7 +1,14 @@
-"""A small strict CSV table reader for the importers (numbers only, numpy's C parser).
+"""Tables of numbers in delimited text for the importers, read as a stream (numpy's C parser, bad lines skipped).
 
-Used for Sensor Logger and phyphox files: a header line, then rows of
-numbers separated by one delimiter.  Errors name the file and the line.
+Used for Sensor Logger and phyphox files (a header line, then rows of
+numbers separated by one delimiter) and for the record lines of
+GetSensorData.  The text is read a chunk of lines at a time
+(:class:`core.recording.TextLines`) into growing arrays
+(:class:`ColumnBuffer`): memory holds the result and one chunk, never the
+file's text or a Python object per row.  A row numpy refuses is parsed
+again in Python to tell a bad line (named, skipped and counted under the
+one rule of :func:`core.recording.skip_bad_lines`) from an optional empty
+field.  Errors name the file and the line.
 """
 
 from __future__ import annotations
@@ -9,64 +16,201 @@ from __future__ import annotations
 import csv
 import io
 import re
+from array import array
 
 import numpy as np
 
-from core.recording import RecordingError
+from core.recording import MAX_BAD_LINES, RecordingError
 
 _ROWCOL = re.compile(r"at row (\d+), column (\d+)")
 _SHORT = re.compile(r"invalid column index -?\d+ at row (\d+) with (\d+) columns")
+#: failures in one chunk after which its other rows are parsed in Python at once (buffers of different lengths
+#: leave long runs of empty fields at the end of a phyphox file)
+_DENSE_FAILURES = 16
+
+
+class ColumnBuffer:
+    """A growing ``(n, k)`` array of one dtype, appended a block of rows at a time.
+
+    It lives in one :class:`array.array`, which grows in place: no Python
+    object per row and no final concatenation (the peak is the array, not
+    twice it).  :meth:`array` views it as numpy without a copy.
+    """
+
+    __slots__ = ("_a", "k", "dtype")
+
+    _TYPECODES = {np.dtype(np.float64): "d", np.dtype(np.int64): "q", np.dtype(np.bool_): "B"}
+
+    def __init__(self, k: int, dtype=np.float64):
+        self.dtype = np.dtype(dtype)
+        self._a = array(self._TYPECODES[self.dtype])
+        self.k = k
+
+    def append(self, rows: np.ndarray) -> None:
+        rows = np.ascontiguousarray(rows, dtype=self.dtype)
+        if rows.size:
+            self._a.frombytes(memoryview(rows).cast("B"))
+
+    def __len__(self) -> int:
+        return len(self._a) // max(self.k, 1)
+
+    def array(self) -> np.ndarray:
+        """The rows as an ``(n, k)`` numpy array (a view of the buffer; the buffer cannot grow after this)."""
+        if not self.k:
+            return np.zeros((0, 0), dtype=self.dtype)
+        return np.frombuffer(self._a, dtype=self.dtype).reshape(-1, self.k)
+
+
+def number(s: str) -> float:
+    """``float(s)`` for what numpy's parser reads as a number too (no ``1_000``, no non-ASCII digits)."""
+    if "_" in s or not s.isascii():
+        raise ValueError(s)
+    return float(s)
+
+
+def integer(s: str) -> int:
+    """``int(s)`` for what numpy's parser reads as an int64 too."""
+    if "_" in s or not s.isascii():
+        raise ValueError(s)
+    v = int(s)
+    if not -2**63 <= v < 2**63:
+        raise ValueError(s)
+    return v
+
+
+class BadRow(Exception):
+    """A row that cannot be read (its message names the problem)."""
+
+
+def parse_rows(rows: list[str], usecols: list[int], delimiter: str, slow, *, int_first: bool = False,
+               max_bad: int = MAX_BAD_LINES + 1):
+    """Rows of numbers: numpy's C parser, and ``slow(j)`` (Python) for each row it refuses.
+
+    ``usecols``: the fields read (the first one int64 with ``int_first``).
+    ``slow(j)`` returns ``(values, empty)`` for row ``j`` -- a float per
+    field after the int, and which fields were empty -- or raises
+    :class:`BadRow`.  Returns ``(ints or None, floats (n, m), empty (n, m)
+    bool, keep (n,) bool, bad [(j, message)])``; rows not kept are the bad
+    ones.  At most ``max_bad`` bad rows are looked for.
+    """
+    n = len(rows)
+    m = len(usecols) - int_first
+    ints = np.zeros(n, dtype=np.int64) if int_first else None
+    floats = np.empty((n, m))
+    empty = np.zeros((n, m), dtype=bool)
+    keep = np.ones(n, dtype=bool)
+    bad: list[tuple[int, str]] = []
+    dtype = [("t", np.int64), ("v", np.float64, (m,))] if int_first else np.float64
+    start = failures = 0
+
+    def put(a: int, block) -> None:
+        if int_first:
+            ints[a:a + len(block)] = block["t"]
+            floats[a:a + len(block)] = block["v"].reshape(len(block), m)
+        else:
+            floats[a:a + len(block)] = block
+
+    def one(j: int) -> None:
+        try:
+            vals, emp = slow(j)
+        except BadRow as e:
+            keep[j] = False
+            bad.append((j, str(e)))
+            return
+        if int_first:
+            ints[j] = vals[0]
+            vals = vals[1:]
+        floats[j] = vals
+        empty[j] = emp
+
+    while start < n and len(bad) < max_bad:
+        if failures >= _DENSE_FAILURES:
+            for j in range(start, n):
+                one(j)
+                if len(bad) >= max_bad:
+                    break
+            break
+        try:
+            put(start, np.loadtxt(rows[start:] if start else rows, delimiter=delimiter, usecols=usecols, dtype=dtype,
+                                  comments=None, ndmin=1 if int_first else 2, quotechar=None))
+            break
+        except ValueError as e:
+            msg = str(e)
+            m_short, m_rc = _SHORT.search(msg), _ROWCOL.search(msg)
+            if m_short:  # numpy counts these rows from 1
+                r = int(m_short.group(1)) - 1
+            elif m_rc:
+                r = int(m_rc.group(1))
+            else:
+                r = None
+            if r is None or not 0 <= r < n - start:
+                r = n - start  # no row named: every row in Python
+                failures = _DENSE_FAILURES
+                continue
+            if r:
+                put(start, np.loadtxt(rows[start:start + r], delimiter=delimiter, usecols=usecols, dtype=dtype,
+                                      comments=None, ndmin=1 if int_first else 2, quotechar=None))
+            one(start + r)
+            start += r + 1
+            failures += 1
+    if len(bad) >= max_bad:  # the rows after the last bad one looked for were not parsed
+        keep[bad[-1][0] + 1:] = False
+    return ints, floats, empty, keep, bad
 
 
 class Table:
-    """The header and data lines of a delimited text file.
+    """A delimited text file of numbers: its header, then its rows read once, as a stream.
 
-    ``lines`` are the non-empty data lines; :meth:`lineno` gives their 1-based
-    line numbers in the file (for messages).  A last line that lacks its newline
-    and has fewer fields than the header (a recording cut off mid-write) is
-    dropped and reported in ``dropped_tail``.
+    ``text`` is a :class:`core.recording.TextLines` (or anything iterating
+    ``(first line number, lines)`` with a ``tail``).  The header is the
+    first line.  :attr:`blank` is true for a file of nothing but
+    whitespace (no header).  Data lines are the non-blank lines after it;
+    a last line that lacks its newline and has fewer fields than the header
+    (a recording cut off mid-write) is dropped and reported in
+    :attr:`dropped_tail` (its line number).  ``dialect(header, first data
+    line) -> (delimiter, decimal_comma)`` may choose the dialect.
     """
 
-    def __init__(self, text: str, where: str, delimiter: str = ",", decimal_comma: bool = False):
+    def __init__(self, text, where: str, delimiter: str = ",", decimal_comma: bool = False, dialect=None):
         self.where = where
-        self.delimiter = delimiter
-        raw = text.split("\n")
-        if not raw or not raw[0].strip():
+        self._text = text
+        self._it = iter(text)
+        self.dropped_tail: int | None = None
+        #: bad lines met by :meth:`read` (errors naming their lines, in file order), and the data lines read
+        self.bad: list[RecordingError] = []
+        self.n_lines = 0
+        complete: list[str] = []
+        ended = False
+        while len(complete) < 2:  # the header and, for the dialect, the first data line
+            try:
+                complete.extend(next(self._it)[1])
+            except StopIteration:
+                ended = True
+                break
+        view = complete + [text.tail] if ended else complete  # a text without newlines: its tail is a line too
+        self.blank = not view[0].strip() and not self._rest_has_text(view)
+        self.header: list[str] = []
+        self._pending = (2, complete[1:]) if len(complete) > 1 else None
+        if self.blank:
+            return
+        if not view[0].strip():
             raise RecordingError("empty file: expected a header line", where, 1)
-        self.header = [h.strip().strip('"').strip() for h in _split_row(raw[0], delimiter)]
-        body = text[len(raw[0]):]
-        self._raw = raw
-        lines = [ln for ln in raw[1:] if ln and not ln.isspace()]
-        self._blank_lines = len(lines) != len(raw) - 1 - (raw[-1] == "")
-        if '"' in body:
-            # quoted fields: let the csv module split them, then re-join unquoted
-            lines = [delimiter.join(row) for row in csv.reader(io.StringIO("\n".join(lines)), delimiter=delimiter)]
-        if decimal_comma and delimiter != ",":
-            lines = [ln.replace(",", ".") for ln in lines]
-        self.dropped_tail = None
-        if lines and not text.endswith("\n") and lines[-1].count(delimiter) + 1 < len(self.header):
-            self.dropped_tail = self.lineno(len(lines) - 1)
-            lines.pop()
-        self.lines = lines
-        self._counts = None
-        #: cells read as nan because the field was empty or absent (set by :meth:`columns`)
-        self.empty = np.zeros((0, 0), dtype=bool)
+        if dialect is not None:
+            delimiter, decimal_comma = dialect(view[0], view[1] if len(view) > 1 else "")
+        self.delimiter = delimiter
+        self.decimal_comma = decimal_comma
+        try:
+            self.header = [h.strip().strip('"').strip() for h in _split_row(view[0], delimiter)]
+        except csv.Error as e:
+            raise RecordingError(f"header line: {e}", where, 1) from None
 
-    def lineno(self, j: int) -> int:
-        """1-based line number in the file of data line ``j``."""
-        if not self._blank_lines:
-            return j + 2
-        k = -1
-        for i in range(1, len(self._raw)):
-            ln = self._raw[i]
-            if ln and not ln.isspace():
-                k += 1
-                if k == j:
-                    return i + 1
-        return len(self._raw)
-
-    def __len__(self) -> int:
-        return len(self.lines)
+    def _rest_has_text(self, lines: list[str]) -> bool:
+        if any(ln.strip() for ln in lines):
+            return True
+        for _, more in self._it:
+            if any(ln.strip() for ln in more):
+                return True
+        return bool(self._text.tail.strip())
 
     def index(self, name: str) -> int | None:
         low = [h.lower() for h in self.header]
@@ -82,71 +226,134 @@ class Table:
             idx.append(i)
         return idx
 
-    def check_widths(self, needed: int) -> None:
-        """Every data line must have at least ``needed`` fields."""
-        if self._counts is None:
-            self._counts = np.fromiter(map(lambda ln, d=self.delimiter: ln.count(d), self.lines), dtype=np.int64,
-                                       count=len(self.lines))
-        counts = self._counts
-        short = np.flatnonzero(counts + 1 < needed)
-        if len(short):
-            j = int(short[0])
-            raise RecordingError(f"missing fields: the header has {len(self.header)} columns, this line "
-                                 f"{int(counts[j]) + 1}", self.where, self.lineno(j))
+    def _chunks(self):
+        """``(first line number, lines)`` of the data, the tail included when it is a whole line."""
+        if self._pending is not None:
+            yield self._pending
+            self._pending = None
+        yield from self._it
+        tail = self._text.tail
+        if tail and tail.strip() and self._text.tail_line > 1:
+            if tail.count(self.delimiter) + 1 < len(self.header):
+                self.dropped_tail = self._text.tail_line
+            else:
+                yield self._text.tail_line, [tail]
 
-    def columns(self, idx: list[int], dtype=np.float64, empty_ok: bool = False,
-                max_rows: int | None = None) -> np.ndarray:
-        """Columns ``idx`` as an (n, len(idx)) array; non-numbers are a :class:`RecordingError`.
+    def read(self, cols: list[tuple[int, str]], *, head_cols: list[int] = (), head_rows: int = 0,
+             with_lines: bool = False, with_empty: bool = False) -> dict:
+        """Read the rows once; ``cols`` are ``(column, mode)`` pairs, in the order of the result.
 
-        With ``empty_ok`` an empty or absent field (a short line) reads as nan
-        (optional values; phyphox buffers of different lengths) and
-        :attr:`empty` marks those cells; otherwise a short line is a "missing
-        fields" error.  ``max_rows`` reads only the first rows.
+        Modes: ``"i"`` an int64 (at most one, first), ``"f"`` a number, ``"o"``
+        an optional number (an empty or absent field is nan, marked in
+        ``empty``).  A line whose ``"i"`` or ``"f"`` field is absent
+        ("missing fields") or any field is not a number is a bad line: it is
+        skipped and listed in :attr:`bad` (the reading stops past
+        :data:`core.recording.MAX_BAD_LINES`; the caller applies
+        :func:`core.recording.skip_bad_lines`).  ``head_cols`` are read
+        leniently (anything else than a number is nan) for the first
+        ``head_rows`` rows only.  Returns a dict: ``"t"`` (n,) int64 (with an
+        ``"i"`` column), ``"v"`` (n, number of other columns) float64,
+        ``"head"`` (at most ``head_rows``, len(head_cols)), ``"line"`` (n,)
+        file line numbers (``with_lines``), ``"empty"`` (n, ...) bool
+        (``with_empty``).
         """
-        n = len(self.lines) if max_rows is None else min(max_rows, len(self.lines))
-        self.empty = np.zeros((n, len(idx)), dtype=bool)
-        if n == 0:
-            return np.zeros((0, len(idx)), dtype=dtype)
-        try:
-            return np.loadtxt(self.lines if n == len(self.lines) else self.lines[:n], delimiter=self.delimiter,
-                              usecols=idx, dtype=dtype, comments=None, ndmin=2, quotechar=None)
-        except ValueError as e:
-            if empty_ok and dtype is np.float64:
-                return self._columns_slow(idx, n)
-            m = _SHORT.search(str(e))
-            if m:  # a line with fewer fields than the header (numpy counts these rows from 1)
-                j = int(m.group(1)) - 1
-                raise RecordingError(f"missing fields: the header has {len(self.header)} columns, this line "
-                                     f"{m.group(2)}", self.where, self.lineno(j)) from None
-            m = _ROWCOL.search(str(e))  # rows from 0, file columns from 1
-            if m:
-                j = int(m.group(1))
-                c = int(m.group(2)) - 1
-                f = self.lines[j].split(self.delimiter)
-                raise self._bad(j, c, f[c] if c < len(f) else "", dtype) from None
-            raise RecordingError(f"cannot parse numbers: {e}", self.where) from None
+        int_first = bool(cols) and cols[0][1] == "i"
+        idx = [c for c, _ in cols]
+        modes = [mo for _, mo in cols]
+        nf = len(cols) - int_first
+        out_t = ColumnBuffer(1, np.int64) if int_first else None
+        out_v = ColumnBuffer(nf)
+        out_line = ColumnBuffer(1, np.int64) if with_lines else None
+        out_empty = ColumnBuffer(nf, np.bool_) if with_empty else None
+        head = ColumnBuffer(len(head_cols))
+        strict_max = max((c for c, mo in cols if mo in "if"), default=-1)
+        delim = self.delimiter
+        names = self.header
+        for first_no, lines in self._chunks():
+            nonblank = [j for j, ln in enumerate(lines) if ln and not ln.isspace()]
+            if len(nonblank) != len(lines):
+                lines = [lines[j] for j in nonblank]
+            if not lines:
+                continue
+            if any('"' in ln for ln in lines):  # quoted fields: let the csv module split them, then re-join
+                lines = [_unquote(ln, delim) if '"' in ln else ln for ln in lines]
+            if self.decimal_comma and delim != ",":
+                lines = [ln.replace(",", ".") for ln in lines]
+            self.n_lines += len(lines)
+            use_head = len(head) < head_rows
+            usecols = idx + (list(head_cols) if use_head else [])
 
-    def _columns_slow(self, idx: list[int], n: int) -> np.ndarray:
-        out = np.empty((n, len(idx)))
-        for j, ln in enumerate(self.lines[:n]):
-            f = ln.split(self.delimiter)
-            for k, c in enumerate(idx):
-                s = f[c].strip() if c < len(f) else ""
-                if not s:
-                    out[j, k] = np.nan
-                    self.empty[j, k] = True
-                    continue
-                try:
-                    out[j, k] = float(s)
-                except ValueError:
-                    raise self._bad(j, c, s) from None
-        return out
+            def slow(j, lines=lines, use_head=use_head):
+                f = lines[j].split(delim)
+                if strict_max >= len(f):
+                    raise BadRow(f"missing fields: the header has {len(names)} columns, this line {len(f)}")
+                vals, emp = [], []
+                for c, mo in zip(idx, modes):
+                    s = f[c] if c < len(f) else ""
+                    if mo == "o" and not s.strip():
+                        vals.append(np.nan)
+                        emp.append(True)
+                        continue
+                    try:
+                        vals.append(integer(s) if mo == "i" else number(s))
+                    except ValueError:
+                        what = "an integer" if mo == "i" else "a number"
+                        name = names[c] if c < len(names) else f"#{c + 1}"
+                        raise BadRow(f"column '{name}' is not {what}: {s!r}") from None
+                    if mo != "i":
+                        emp.append(False)
+                if use_head:
+                    for c in head_cols:
+                        try:
+                            vals.append(number(f[c]) if c < len(f) else np.nan)
+                        except ValueError:
+                            vals.append(np.nan)
+                        emp.append(False)
+                return vals, emp
 
-    def _bad(self, j: int, c: int, value: str, dtype=np.float64) -> RecordingError:
-        what = "an integer" if dtype is np.int64 else "a number"
-        name = self.header[c] if c < len(self.header) else f"#{c + 1}"
-        return RecordingError(f"column '{name}' is not {what}: {value!r}", self.where, self.lineno(j))
+            ints, floats, empty, keep, bad = parse_rows(lines, usecols, delim, slow, int_first=int_first,
+                                                        max_bad=MAX_BAD_LINES + 1 - len(self.bad))
+            for j, msg in bad:
+                self.bad.append(RecordingError(msg, self.where, first_no + nonblank[j]))
+            allk = bool(keep.all())
+            if int_first:
+                out_t.append(ints if allk else ints[keep])
+            out_v.append(floats[:, :nf] if allk else floats[keep, :nf])
+            if use_head:
+                h = floats[:, nf:] if allk else floats[keep, nf:]
+                head.append(h[:head_rows - len(head)])
+            if with_lines:
+                ln = np.asarray(nonblank, dtype=np.int64) + first_no
+                out_line.append(ln if allk else ln[keep])
+            if with_empty:
+                out_empty.append(empty[:, :nf] if allk else empty[keep, :nf])
+            if len(self.bad) > MAX_BAD_LINES:
+                break
+        res = {"v": out_v.array(), "head": head.array()}
+        if int_first:
+            res["t"] = out_t.array()[:, 0]
+        if with_lines:
+            res["line"] = out_line.array()[:, 0]
+        if with_empty:
+            res["empty"] = out_empty.array()
+        return res
 
 
 def _split_row(line: str, delimiter: str) -> list[str]:
-    return next(csv.reader([line], delimiter=delimiter))
+    return next(csv.reader([line], delimiter=delimiter), [])
+
+
+def _unquote(line: str, delimiter: str) -> str:
+    """A line with quoted fields, re-joined without the quotes (as it is, if the csv module cannot split it)."""
+    try:
+        return delimiter.join(_split_row(line, delimiter))
+    except csv.Error:
+        return line
+
+
+def csv_rows(text: str, where: str, delimiter: str = ",") -> list[list[str]]:
+    """The rows of a small CSV text (a metadata file); what the csv module cannot split is a RecordingError."""
+    try:
+        return list(csv.reader(io.StringIO(text), delimiter=delimiter))
+    except csv.Error as e:
+        raise RecordingError(f"not readable as CSV: {e}", where) from None

@@ -107,12 +107,14 @@ import numpy as np
 from core import quaternion as quat
 from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
 from core.recording import (
-    MAX_BAD_LINES, DamagedFileWarning, Recording, RecordingError, bad_lines_tolerated, make_stream,
+    MAX_BAD_LINES, MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, WholeText, make_stream,
+    skip_bad_lines,
 )
 from core.importers._common import (
-    EXTRA_STREAM_SPECS, POSI, PRESSURE, attitude_checks, decode_text, finish, first_bad_number,
-    first_bad_time, gps_check, gps_values, magnetic_dip_deg, read_bytes,
+    EXTRA_STREAM_SPECS, POSI, PRESSURE, attitude_checks, finish, first_bad_time, gps_check, gps_values,
+    magnetic_dip_deg, note_damage, open_text,
 )
+from core.importers._csv import BadRow, ColumnBuffer, number, parse_rows
 
 FORMAT = "getsensordata"
 
@@ -145,20 +147,25 @@ def looks_like(head: str) -> bool:
     return len(RECORD_RE.findall(head)) >= 3
 
 
-def read_getsensordata(path: str, *, warn: bool = True) -> Recording:
-    """Read a GetSensorData logfile (plain or gzip) into a :class:`Recording` (see the module doc)."""
+def read_getsensordata(path: str, *, warn: bool = True,
+                       max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
+    """Read a GetSensorData logfile (plain or gzip) into a :class:`Recording` (see the module doc).
+
+    The file is streamed a chunk of lines at a time; a gzip stream inflating
+    to over ``max_uncompressed_bytes`` is refused while it is read.
+    """
     path = str(path)
-    repairs: list[str] = []
-    text = decode_text(read_bytes(path, repairs), path)
-    return parse_getsensordata(text, path, warn=warn, _repairs=repairs)
+    with open_text(path, [], max_uncompressed_bytes) as text, np.errstate(all="ignore"):
+        return _parse(text, path, warn, [])
 
 
 class _Lines:
-    """The file's lines, with the lookup of a record's line number for messages (slow path only)."""
+    """One chunk of the file's lines, with the lookup of a record's line number for messages (errors only)."""
 
-    def __init__(self, lines: list[str], source: str):
+    def __init__(self, lines: list[str], source: str, first: int = 1):
         self.lines = lines
         self.source = source
+        self.first = first
 
     def lineno(self, tag: str, j: int) -> int:
         prefix = tag + ";"
@@ -167,74 +174,51 @@ class _Lines:
             if line.startswith(prefix):
                 k += 1
                 if k == j:
-                    return i + 1
-        return len(self.lines)
+                    return self.first + i
+        return self.first + len(self.lines) - 1
 
     def error(self, tag: str, j: int, message: str) -> RecordingError:
         return RecordingError(message, self.source, self.lineno(tag, j))
 
 
-def _table(tag: str, rows: list[str], ctx: _Lines) -> np.ndarray:
-    """The numeric fields of one record type: (n, len(names)) float64, optional missing ones nan.
+def _table(tag: str, rows: list[str]) -> tuple[np.ndarray, np.ndarray, list[tuple[int, str]]]:
+    """The numeric fields of one record type: ``(table, kept, bad)``.
 
-    Parsing is numpy's C ``loadtxt`` on the lines of one record type (about
-    6 million numbers a second); only when it fails is the file scanned again
-    in Python to name the offending line.
+    ``table`` is (rows kept, len(names)) float64, optional missing fields
+    nan; ``kept`` marks the rows kept; ``bad`` lists ``(row, message)`` for
+    each row with fields missing or not numbers.  Parsing is numpy's C
+    ``loadtxt`` on the rows of one record type and one field count (about
+    6 million numbers a second); a row it refuses is looked at in Python.
     """
     names, required = RECORDS[tag]
     want = len(names)
     n = len(rows)
     # fields after the tag, capped at the ones read
     have = np.fromiter((r.count(";") for r in rows), dtype=np.int64, count=n)
-    short = np.flatnonzero(have < required)
-    if len(short):
-        j = int(short[0])
-        raise ctx.error(tag, j, _missing_msg(tag, int(have[j])))
+    kept = have >= required
+    bad = [(int(j), _missing_msg(tag, int(have[j]))) for j in np.flatnonzero(~kept)]
     have = np.minimum(have, want)
     out = np.full((n, want), np.nan)
-    for k in np.unique(have):
-        idx = np.flatnonzero(have == k)
+    for k in np.unique(have[kept]):
+        idx = np.flatnonzero((have == k) & kept)
         sub = rows if len(idx) == n else [rows[i] for i in idx]
-        try:
-            vals = np.loadtxt(sub, delimiter=";", usecols=range(1, 1 + int(k)), dtype=np.float64,
-                              comments=None, ndmin=2)
-        except ValueError as e:
-            m = re.search(r"at row (\d+), column (\d+)", str(e))
-            if m and int(m.group(1)) < len(idx):
-                j = int(idx[int(m.group(1))])  # numpy counts rows from 0 ...
-                col = int(m.group(2)) - 1  # ... and file columns from 1
-                f = rows[j].split(";")
-                value = f[col] if col < len(f) else ""
-                raise ctx.error(tag, j, f"{tag} field {col + 1} ({names[col - 1]}) is not a number: "
-                                        f"{value!r}") from None
-            for j in idx:  # pragma: no cover - loadtxt names the row
-                f = rows[j].split(";")[1:1 + int(k)]
-                bad = first_bad_number(f)
-                if bad is not None:
-                    raise ctx.error(tag, int(j), f"{tag} field {bad + 2} ({names[bad]}) is not a number: "
-                                                 f"{f[bad]!r}") from None
-            raise RecordingError(f"{tag} records could not be parsed: {e}", ctx.source) from None
-        out[idx, :int(k)] = vals
-    return out
 
+        def slow(j, sub=sub, k=int(k)):
+            f = sub[j].split(";")[1:1 + k]
+            vals = []
+            for c, v in enumerate(f):
+                try:
+                    vals.append(number(v))
+                except ValueError:
+                    raise BadRow(f"{tag} field {c + 2} ({names[c]}) is not a number: {v[:40]!r}") from None
+            return vals, [False] * k
 
-def _split_bad_rows(tag: str, rows: list[str], ctx: _Lines) -> tuple[list[str], list[RecordingError]]:
-    """The rows of one record type that parse, and an error (with its line) for each one that does not."""
-    names, required = RECORDS[tag]
-    good, bad = [], []
-    for j, r in enumerate(rows):
-        f = r.split(";")[1:1 + len(names)]
-        if len(f) < required:
-            bad.append((j, _missing_msg(tag, len(f))))
-            continue
-        k = first_bad_number(f)
-        if k is not None:
-            bad.append((j, f"{tag} field {k + 2} ({names[k]}) is not a number: {f[k][:40]!r}"))
-            continue
-        good.append(r)
-    if len(bad) > MAX_BAD_LINES:
-        bad = bad[:MAX_BAD_LINES + 1]
-    return good, [ctx.error(tag, j, msg) for j, msg in bad]
+        _, vals, _, ok, b = parse_rows(sub, list(range(1, 1 + int(k))), ";", slow)
+        out[idx[ok], :int(k)] = vals[ok]
+        kept[idx[~ok]] = False
+        bad += [(int(idx[j]), msg) for j, msg in b]
+    bad.sort()
+    return out[kept], kept, bad
 
 
 def _missing_msg(tag: str, have: int) -> str:
@@ -282,14 +266,60 @@ def _header_unix_s(date: str) -> int | None:
     return int(dt.timestamp())
 
 
-def _robust_high(d_ns: np.ndarray, pct: float) -> int:
-    """The ``pct`` percentile of int64 nanosecond values, exact (no float rounding of ~1e18 values)."""
+def _robust_high(d_ns: np.ndarray, pct: float, overwrite: bool = False) -> int:
+    """The ``pct`` percentile of int64 nanosecond values, exact (no float rounding of ~1e18 values).
+
+    With ``overwrite`` ``d_ns`` is used as scratch space (no copy of it).
+    """
     base = int(d_ns.min())
+    if overwrite:
+        d_ns -= base
+        return base + int(round(float(np.percentile(d_ns, pct, overwrite_input=True))))
     return base + int(round(float(np.percentile(d_ns - base, pct))))
 
 
 def _sec_to_ns(s: np.ndarray) -> np.ndarray:
-    return np.rint(s * 1e9).astype(np.int64)
+    x = s * 1e9
+    return np.rint(x, out=x).astype(np.int64)
+
+
+#: AHRS rows converted to quaternions at a time (the conversion's temporaries are a few of these)
+_AHRS_BLOCK = 1 << 16
+
+
+def _ahrs_quaternions(v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """AHRS rows -> ``(q (n, 4) ENU<-device, has_vec (n,), angle between the angles' and the vector's q (deg))``.
+
+    The quaternion is the logged rotation vector where there is one, else
+    the one of the angles; converted a block of rows at a time.
+    """
+    n = len(v)
+    q = np.empty((n, 4))
+    has_vec = np.all(np.isfinite(v[:, 5:8]), axis=1)
+    ang = np.empty(int(has_vec.sum()))
+    k = 0
+    for a in range(0, n, _AHRS_BLOCK):
+        b = v[a:a + _AHRS_BLOCK]
+        pitch, roll, yaw = (np.radians(b[:, c]) for c in (2, 3, 4))
+        # R = Rz(yaw) Rx(pitch) Ry(roll)  <=>  q = qz(yaw) (x) qx(pitch) (x) qy(roll)
+        q_angles = quat.multiply_array(quat.multiply_array(quat.about_axis_array(2, yaw),
+                                                           quat.about_axis_array(0, pitch)),
+                                       quat.about_axis_array(1, roll))
+        q_angles = quat.canonical_sign_array(q_angles)
+        hv = has_vec[a:a + _AHRS_BLOCK]
+        q[a:a + len(b)] = q_angles
+        if hv.any():
+            xyz = b[hv, 5:8]
+            # the rotation vector's scalar part is not logged: w = sqrt(1 - |xyz|^2) >= 0 (Android's convention);
+            # |xyz|^2 exceeds 1 by ~1e-7 in real files, hence the clip and the renormalisation
+            w = np.sqrt(np.clip(1.0 - np.einsum("ij,ij->i", xyz, xyz), 0.0, None))
+            qv = np.column_stack([w, xyz])
+            qv /= np.linalg.norm(qv, axis=1, keepdims=True)
+            q[a + np.flatnonzero(hv)] = qv
+            dot = np.abs(np.einsum("ij,ij->i", qv, q_angles[hv]))
+            ang[k:k + len(qv)] = np.degrees(2.0 * np.arccos(np.clip(dot, -1.0, 1.0)))
+            k += len(qv)
+    return q, has_vec, ang
 
 
 def parse_getsensordata(text: str, source: str = "<text>", *, warn: bool = True,
@@ -306,73 +336,93 @@ def parse_getsensordata(text: str, source: str = "<text>", *, warn: bool = True,
     """
     # times are validated explicitly; non-finite sensor values pass through as data, without numpy warnings
     with np.errstate(all="ignore"):
-        return _parse(text, source, warn, list(_repairs or []))
+        return _parse(WholeText(text), source, warn, list(_repairs or []))
 
 
-def _parse(text: str, source: str, warn: bool, repairs: list[str]) -> Recording:
-    lines = text.split("\n")
-    comments = []
-    buckets: dict[str, list[str]] = {}
-    for line in lines:
-        if not line or line[0] == "%":
-            if line:
-                comments.append(line)
-            continue
-        key = line[:5]
-        b = buckets.get(key)
-        if b is None:
-            buckets[key] = [line]
-        else:
-            b.append(line)
-    # regroup by the real tag (field 0); almost every key is already "TAG;"
-    records: dict[str, list[str]] = {}
-    for key, rows in buckets.items():
-        if len(key) == 5 and key[4] == ";":
-            records.setdefault(key[:4], []).extend(rows)
-        else:
-            for r in rows:
-                tag = r.partition(";")[0].strip()[:16]  # a stray text line counts under its first 16 characters
-                if tag:
-                    records.setdefault(tag, []).append(r)
-    ctx = _Lines(lines, source)
-    # a last line without its newline: the logger was cut off; dropped even when it parses ("2.586e-0" may be
-    # a cut "2.586e-05")
-    if lines and lines[-1] and lines[-1][0] != "%":
-        last = lines[-1]
-        tag = last.partition(";")[0]
-        if tag in RECORDS and records.get(tag) and records[tag][-1] == last:
-            records[tag].pop()
-            if not records[tag]:
-                del records[tag]
-            repairs.append(f"{source}: dropped an incomplete last line {len(lines)} (logging was cut off)")
-    counts = {tag: len(rows) for tag, rows in sorted(records.items())}
-    tables = {}
+#: distinct record types counted in ``metadata["line_counts"]``; more are counted as "(other)"
+MAX_LINE_TYPES = 1000
+#: comment lines kept for the header (it is at the top of the file)
+MAX_COMMENTS = 1000
+
+
+def _parse(text, source: str, warn: bool, repairs: list[str]) -> Recording:
+    """The records of a logfile's lines (:class:`core.recording.TextLines` or ``WholeText``), a chunk at a time.
+
+    Only the numbers of the records read are kept, in growing arrays (a
+    record type's fields: 8 bytes each); other lines are counted.
+    """
+    comments: list[str] = []
+    counts: dict[str, int] = {}  # lines per record type, in order of appearance
+    buffers: dict[str, ColumnBuffer] = {}
     bad: list[RecordingError] = []
-    for tag, rows in records.items():
-        if tag in RECORDS:
-            try:
-                tables[tag] = _table(tag, rows, ctx)
-            except RecordingError:
-                good, errs = _split_bad_rows(tag, rows, ctx)
-                bad.extend(errs)
-                if good:
-                    records[tag] = good
-                    tables[tag] = _table(tag, good, _Lines([], source))
-    if bad:
-        bad.sort(key=lambda e: e.line or 0)
-        n_lines = sum(counts.values())
-        if not bad_lines_tolerated(len(bad), n_lines):
-            more = (f" ({len(bad)} bad lines of {n_lines}: too many to skip; at most {MAX_BAD_LINES} and 1 % are "
-                    "skipped)" if len(bad) > 1 else "")
-            raise RecordingError(bad[0].message + more, source, bad[0].line)
-        repairs.append(f"{source}: skipped {len(bad)} bad line(s) of {n_lines} (first: line {bad[0].line}: "
-                       f"{bad[0].message})")
-    for tag, v in tables.items():
-        names = RECORDS[tag][0]
-        for c in ((0,) if tag in ("GNSS", "POSI") else (0, 1)):  # the columns used as times
-            j = first_bad_time(v[:, c])
-            if j is not None:
-                raise ctx.error(tag, j, f"{tag} {names[c]} is not a usable time: {float(v[j, c])!r}")
+    bad_time: dict[str, RecordingError] = {}  # the first record of each type whose time is not usable
+
+    def chunk(first: int, lines: list[str]) -> None:
+        buckets: dict[str, list[str]] = {}
+        for line in lines:
+            if not line or line[0] == "%":
+                if line and len(comments) < MAX_COMMENTS:
+                    comments.append(line)
+                continue
+            key = line[:5]
+            b = buckets.get(key)
+            if b is None:
+                buckets[key] = [line]
+            else:
+                b.append(line)
+        # regroup by the real tag (field 0); almost every key is already "TAG;"
+        records: dict[str, list[str]] = {}
+        for key, rows in buckets.items():
+            if len(key) == 5 and key[4] == ";":
+                records.setdefault(key[:4], []).extend(rows)
+            else:
+                for r in rows:
+                    tag = r.partition(";")[0].strip()[:16]  # a stray text line counts under its first 16 characters
+                    if tag:
+                        records.setdefault(tag, []).append(r)
+        ctx = _Lines(lines, source, first)
+        for tag, rows in records.items():
+            if tag not in counts and len(counts) >= MAX_LINE_TYPES and tag not in RECORDS:
+                tag = "(other)"
+            counts[tag] = counts.get(tag, 0) + len(rows)
+            if tag not in RECORDS:
+                continue
+            table, kept, errs = _table(tag, rows)
+            bad.extend(ctx.error(tag, j, msg) for j, msg in errs)
+            if not len(table):
+                continue
+            if tag not in buffers:
+                buffers[tag] = ColumnBuffer(len(RECORDS[tag][0]))
+            buffers[tag].append(table)
+            if tag not in bad_time:
+                names = RECORDS[tag][0]
+                for c in ((0,) if tag in ("GNSS", "POSI") else (0, 1)):  # the columns used as times
+                    j = first_bad_time(table[:, c])
+                    if j is not None:
+                        bad_time[tag] = ctx.error(tag, int(np.flatnonzero(kept)[j]),
+                                                  f"{tag} {names[c]} is not a usable time: {float(table[j, c])!r}")
+                        break
+
+    for first, lines in text:
+        chunk(first, lines)
+        if len(bad) > MAX_BAD_LINES:
+            break
+    else:
+        note_damage(text, source, repairs)
+        # a last line without its newline: the logger was cut off; dropped even when it parses ("2.586e-0" may be
+        # a cut "2.586e-05")
+        last = text.tail
+        if last and last[0] != "%" and last.partition(";")[0] in RECORDS:
+            repairs.append(f"{source}: dropped an incomplete last line {text.tail_line} (logging was cut off)")
+        elif last:
+            chunk(text.tail_line, [last])
+    bad.sort(key=lambda e: e.line or 0)
+    skip_bad_lines(bad, sum(counts.values()), source, repairs)
+    tables = {tag: b.array() for tag, b in buffers.items()}
+    for tag in counts:  # in the order the record types first appear
+        if tag in bad_time:
+            raise bad_time[tag]
+    counts = dict(sorted(counts.items()))
     if warn:
         for r in repairs:
             warnings.warn(r, DamagedFileWarning, stacklevel=3)
@@ -393,10 +443,15 @@ def _parse(text: str, source: str, warn: bool, repairs: list[str]) -> Recording:
         streams[PRESSURE] = make_stream(PRESSURE, _sec_to_ns(v[:, 1]), v[:, 2:3], spec["columns"], spec["unit"],
                                         spec["note"])
     # -- AppTimestamp -> sensor clock
-    offs = [_sec_to_ns(tables[t][:, 1]) - _sec_to_ns(tables[t][:, 0])
-            for t in ("ACCE", "GYRO", "MAGN", "AHRS", "PRES") if t in tables]
-    offs = np.concatenate(offs)
-    app_offset_ns = _robust_high(offs, 99)
+    clock_tags = [t for t in ("ACCE", "GYRO", "MAGN", "AHRS", "PRES") if t in tables]
+    offs = np.empty(sum(len(tables[t]) for t in clock_tags), dtype=np.int64)
+    k = 0
+    for t in clock_tags:
+        offs[k:k + len(tables[t])] = _sec_to_ns(tables[t][:, 1])
+        offs[k:k + len(tables[t])] -= _sec_to_ns(tables[t][:, 0])
+        k += len(tables[t])
+    app_offset_ns = _robust_high(offs, 99, overwrite=True)
+    del offs
     meta["app_to_sensor_offset_ns"] = app_offset_ns
 
     def app_to_t_ns(app_s):
@@ -406,24 +461,8 @@ def _parse(text: str, source: str, warn: bool, repairs: list[str]) -> Recording:
     if "AHRS" in tables:
         v = tables["AHRS"]
         t_rot = _sec_to_ns(v[:, 1])
-        pitch, roll, yaw = (np.radians(v[:, k]) for k in (2, 3, 4))
-        # R = Rz(yaw) Rx(pitch) Ry(roll)  <=>  q = qz(yaw) (x) qx(pitch) (x) qy(roll)
-        q_angles = quat.multiply_array(quat.multiply_array(quat.about_axis_array(2, yaw), quat.about_axis_array(0, pitch)),
-                                 quat.about_axis_array(1, roll))
-        q_angles = quat.canonical_sign_array(q_angles)
-        vec = v[:, 5:8]
-        has_vec = np.all(np.isfinite(vec), axis=1)
-        q = q_angles.copy()
+        q, has_vec, ang = _ahrs_quaternions(v)
         if has_vec.any():
-            xyz = vec[has_vec]
-            # the rotation vector's scalar part is not logged: w = sqrt(1 - |xyz|^2) >= 0 (Android's convention);
-            # |xyz|^2 exceeds 1 by ~1e-7 in real files, hence the clip and the renormalisation
-            w = np.sqrt(np.clip(1.0 - np.einsum("ij,ij->i", xyz, xyz), 0.0, None))
-            qv = np.column_stack([w, xyz])
-            qv /= np.linalg.norm(qv, axis=1, keepdims=True)
-            q[has_vec] = qv
-            dot = np.abs(np.einsum("ij,ij->i", qv, q_angles[has_vec]))
-            ang = np.degrees(2.0 * np.arccos(np.clip(dot, -1.0, 1.0)))
             meta["ahrs_angles_vs_quaternion_deg"] = {"median": float(np.median(ang)), "max": float(np.max(ang))}
         meta["ahrs_from_angles"] = int((~has_vec).sum())
         streams[ROTVEC] = make_stream(ROTVEC, t_rot, q,

@@ -81,21 +81,22 @@ Device
 
 from __future__ import annotations
 
-import csv
-import io
 import os
 import re
 import warnings
+from functools import partial
 
 import numpy as np
 
 from core.conventions import ACC, GPS, GYRO, MAG
-from core.recording import DamagedFileWarning, Recording, RecordingError, make_stream
-from core.importers._common import (
-    EXTRA_STREAM_SPECS, PRESSURE, FileSet, acceleration_in_m_s2, decode_text, finish, first_bad_time, gps_check,
-    gps_values, magnetic_dip_deg, read_bytes,
+from core.recording import (
+    MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
 )
-from core.importers._csv import Table
+from core.importers._common import (
+    EXTRA_STREAM_SPECS, PRESSURE, FileSet, acceleration_in_m_s2, finish, first_bad_time, gps_check, gps_values,
+    magnetic_dip_deg, open_text,
+)
+from core.importers._csv import Table, csv_rows
 
 FORMAT = "phyphox"
 
@@ -115,16 +116,13 @@ def looks_like_meta(names: list[str]) -> bool:
     return any(n.endswith("meta/time.csv") for n in low) or any(n.endswith("meta/device.csv") for n in low)
 
 
-def _dialect(text: str) -> tuple[str, bool]:
+def _dialect(header: str, first: str) -> tuple[str, bool]:
     """(delimiter, decimal_comma) from the header and the first data line."""
-    lines = text.split("\n", 2)
-    header = lines[0]
     quoted = {d: header.count(f'"{d}"') for d in (",", ";", "\t")}
     best = max(quoted, key=quoted.get)
     if quoted[best] == 0:
         counts = {d: header.count(d) for d in (",", ";", "\t")}
         best = max(counts, key=counts.get)
-    first = lines[1] if len(lines) > 1 else ""
     decimal_comma = best != "," and "," in first
     return best, decimal_comma
 
@@ -165,9 +163,14 @@ def _classify(name: str, file_name: str) -> tuple[str, str] | None:
     return None
 
 
-def _read_props(text: str) -> dict:
+def _text_dialect(text: str) -> tuple[str, bool]:
+    lines = text.split("\n", 2)
+    return _dialect(lines[0], lines[1] if len(lines) > 1 else "")
+
+
+def _read_props(text: str, where: str) -> dict:
     out = {}
-    rows = list(csv.reader(io.StringIO(text), delimiter=_dialect(text)[0]))
+    rows = csv_rows(text, where, _text_dialect(text)[0])
     for row in rows[1:]:
         if len(row) >= 2:
             out[row[0].strip()] = row[1].strip()
@@ -175,8 +178,8 @@ def _read_props(text: str) -> dict:
 
 
 def _read_events(text: str, where: str) -> list[tuple[str, float, float]]:
-    delim, _ = _dialect(text)
-    rows = list(csv.reader(io.StringIO(text), delimiter=delim))
+    delim, _ = _text_dialect(text)
+    rows = csv_rows(text, where, delim)
     if not rows:
         return []
     head = [h.strip().lower() for h in rows[0]]
@@ -203,17 +206,23 @@ def _read_events(text: str, where: str) -> list[tuple[str, float, float]]:
     return out
 
 
-def read_phyphox(path: str, *, warn: bool = True) -> Recording:
-    """Read a phyphox CSV export (zip, folder or one CSV) into a :class:`Recording` (see the module doc)."""
+def read_phyphox(path: str, *, warn: bool = True,
+                 max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
+    """Read a phyphox CSV export (zip, folder or one CSV) into a :class:`Recording` (see the module doc).
+
+    Each data file is streamed; a zip member (or gzip file) of over
+    ``max_uncompressed_bytes`` is refused before it is read.
+    """
     path = str(path)
     if not os.path.exists(path):
         raise RecordingError("cannot open: no such file or folder", path)
+    # non-finite values pass through as data, without numpy warnings
     if os.path.isdir(path) or _is_zip(path):
-        with FileSet(path) as fs:
+        with FileSet(path, max_uncompressed_bytes) as fs, np.errstate(all="ignore"):
             names = fs.names()
             data = [n for n in names if n.lower().endswith(".csv") and "meta/" not in n.lower()
                     and not n.split("/")[-1].lower() in ("device.csv", "time.csv")]
-            files = [(n, fs.where(n), fs.read_text(n)) for n in data]
+            files = [(n, fs.where(n), partial(fs.text, n)) for n in data]
             meta = {}
             for n in names:
                 low = n.lower()
@@ -221,16 +230,54 @@ def read_phyphox(path: str, *, warn: bool = True) -> Recording:
                     meta["device"] = (fs.where(n), fs.read_text(n))
                 elif low.endswith("meta/time.csv"):
                     meta["time"] = (fs.where(n), fs.read_text(n))
-            damage = list(fs.repairs)
-    else:
-        damage = []
-        files = [(os.path.basename(path), path, decode_text(read_bytes(path, damage), path))]
-        meta = {}
-    if warn:
-        for r in damage:  # a gzip file cut part-way: its complete lines are kept
-            warnings.warn(r, DamagedFileWarning, stacklevel=2)
-    with np.errstate(all="ignore"):  # non-finite values pass through as data, without numpy warnings
-        return _build(files, meta, path, warn, damage)
+            return _build(files, meta, path, warn, fs.repairs)
+    damage: list[str] = []
+    files = [(os.path.basename(path), path, partial(open_text, path, damage, max_uncompressed_bytes))]
+    with np.errstate(all="ignore"):
+        return _build(files, {}, path, warn, damage)
+
+
+def _read_group(table: Table, ti: int, sensors, where: str, found: dict, repairs: list[str]) -> int:
+    """Read the columns of one 'Time (s)' group into ``found[sensor]``; returns the rows dropped as empty.
+
+    Optional fields may be empty (nan): a shorter value buffer leaves all a
+    sensor's fields empty, and the row is dropped for it.  A bad line -- a
+    field that is not a number, or a value without a time or some but not
+    all of a sensor's values -- is skipped and counted
+    (:func:`core.recording.skip_bad_lines`).
+    """
+    cols = sorted({c for *_, cs in sensors for c in cs})
+    data = table.read([(ti, "o")] + [(c, "o") for c in cols], with_lines=True, with_empty=True)
+    v, empty, line = data["v"], data["empty"], data["line"]
+    bad = list(table.bad)
+    picks = []
+    partial_rows = np.zeros(len(v), dtype=bool)
+    for sensor, need, order, cs in sensors:
+        pos = [0] + [1 + cols.index(c) for c in cs]
+        e = empty[:, pos[:1 + len(need)]]
+        ev = e[:, 1:]
+        partial = (ev.any(axis=1) & ~ev.all(axis=1)) | (e[:, 0] & ~ev.all(axis=1))
+        for j in np.flatnonzero(partial & ~partial_rows):
+            names = [table.header[c] for c, x in zip([ti] + cs[:len(need)], e[j]) if x]
+            bad.append(RecordingError(f"missing fields: no value for {', '.join(names)}", where, int(line[j])))
+        partial_rows |= partial
+        picks.append((sensor, need, order, pos))
+    bad.sort(key=lambda err: err.line or 0)
+    skip_bad_lines(bad, table.n_lines, where, repairs)
+    dropped = 0
+    for sensor, need, order, pos in picks:
+        vals = v if pos == list(range(v.shape[1])) else v[:, pos]
+        ok = np.all(np.isfinite(vals[:, :1 + len(need)]), axis=1) & ~partial_rows
+        j = first_bad_time(np.where(ok, vals[:, 0], 0.0))
+        if j is not None:
+            raise RecordingError(f"'{table.header[ti]}' is not a usable time: {float(vals[j, 0])!r}", where,
+                                 int(line[j]))
+        dropped += int((~ok).sum()) - int(partial_rows.sum())
+        if not ok.all():
+            vals = vals[ok]
+        if len(vals):
+            found.setdefault(sensor, []).append((len(vals), where, order, vals))
+    return dropped
 
 
 def _is_zip(path: str) -> bool:
@@ -238,56 +285,57 @@ def _is_zip(path: str) -> bool:
         return f.read(4) in (b"PK\x03\x04", b"PK\x05\x06")
 
 
-def _build(files, meta, source, warn, damage=()) -> Recording:
+def _build(files, meta, source, warn, damage: list[str]) -> Recording:
+    """``files``: (name, where, opener) with ``opener()`` a context manager giving the file's lines;
+    ``damage``: where the openers note gzip damage."""
     found: dict[str, list] = {}
     unused: list[str] = []
     dropped_rows = 0
-    repairs: list[str] = list(damage)
-    for name, where, text in files:
-        if not text.strip():
-            continue
-        delim, dec_comma = _dialect(text)
-        table = Table(text, where, delimiter=delim, decimal_comma=dec_comma)
+    repairs: list[str] = []
+    for name, where, opener in files:
+        with opener() as text:
+            table = Table(text, where, dialect=_dialect)
+            if table.blank:
+                continue
+            header = table.header
+            time_cols = [i for i, h in enumerate(header) if _TIME.match(h)]
+            if not time_cols:
+                unused.append(f"{name.split('/')[-1]} (no 'Time (s)' column)")
+                continue
+            bounds = time_cols + [len(header)]
+            groups = []
+            for g in range(len(time_cols)):
+                ti = time_cols[g]
+                comps: dict[str, dict[str, int]] = {}
+                for c in range(ti + 1, bounds[g + 1]):
+                    k = _classify(header[c], name.split("/")[-1])
+                    if k is None:
+                        continue
+                    comps.setdefault(k[0], {}).setdefault(k[1], c)
+                sensors = []
+                for sensor, cols in comps.items():
+                    need = {"gps": ("lat", "lon"), "pressure": ("p",)}.get(sensor, ("x", "y", "z"))
+                    if not all(n in cols for n in need):
+                        unused.append(f"{name.split('/')[-1]}: {sensor} without {'/'.join(need)} columns")
+                        continue
+                    extra = ("alt", "hacc", "speed", "course") if sensor == "gps" else ()
+                    order = list(need) + [n for n in extra if n in cols]
+                    sensors.append((sensor, need, order, [cols[n] for n in order]))
+                if sensors:
+                    groups.append((ti, sensors))
+            for g, (ti, sensors) in enumerate(groups):
+                if g:  # another time column of the same file: read it again
+                    with opener() as again:
+                        dropped_rows += _read_group(Table(again, where, dialect=_dialect), ti, sensors, where, found,
+                                                    repairs)
+                else:
+                    dropped_rows += _read_group(table, ti, sensors, where, found, repairs)
         if table.dropped_tail:
             repairs.append(f"{where}: dropped an incomplete last line {table.dropped_tail}")
-        time_cols = [i for i, h in enumerate(table.header) if _TIME.match(h)]
-        if not time_cols:
-            unused.append(f"{name.split('/')[-1]} (no 'Time (s)' column)")
-            continue
-        bounds = time_cols + [len(table.header)]
-        for g in range(len(time_cols)):
-            ti = time_cols[g]
-            comps: dict[str, dict[str, int]] = {}
-            for c in range(ti + 1, bounds[g + 1]):
-                k = _classify(table.header[c], name.split("/")[-1])
-                if k is None:
-                    continue
-                comps.setdefault(k[0], {}).setdefault(k[1], c)
-            for sensor, cols in comps.items():
-                need = {"gps": ("lat", "lon"), "pressure": ("p",)}.get(sensor, ("x", "y", "z"))
-                if not all(n in cols for n in need):
-                    unused.append(f"{name.split('/')[-1]}: {sensor} without {'/'.join(need)} columns")
-                    continue
-                order = list(need) + [n for n in ("alt", "hacc", "speed", "course") if sensor == "gps" and n in cols]
-                vals = table.columns([ti] + [cols[n] for n in order], empty_ok=True)
-                # a shorter value buffer leaves all its fields empty (the row is dropped); a value without a
-                # time, or some but not all of a sensor's values, is a damaged line
-                empty = table.empty[:, :1 + len(need)]
-                ev = empty[:, 1:]
-                partial = np.flatnonzero((ev.any(axis=1) & ~ev.all(axis=1)) | (empty[:, 0] & ~ev.all(axis=1)))
-                if len(partial):
-                    j = int(partial[0])
-                    names = [table.header[c] for c, e in zip([ti] + [cols[n] for n in need], empty[j]) if e]
-                    raise RecordingError(f"missing fields: no value for {', '.join(names)}", where, table.lineno(j))
-                ok = np.all(np.isfinite(vals[:, :1 + len(need)]), axis=1)
-                j = first_bad_time(np.where(ok, vals[:, 0], 0.0))
-                if j is not None:
-                    raise RecordingError(f"'{table.header[ti]}' is not a usable time: {float(vals[j, 0])!r}", where,
-                                         table.lineno(j))
-                dropped_rows += int((~ok).sum())
-                vals = vals[ok]
-                if len(vals):
-                    found.setdefault(sensor, []).append((len(vals), where, order, vals))
+    if warn:
+        for r in damage:  # a gzip file cut part-way: its complete lines are kept
+            warnings.warn(r, DamagedFileWarning, stacklevel=3)
+    repairs[:0] = damage
     if "acc" not in found and "linacc" in found:
         raise RecordingError("only linear acceleration (without g) found; export the 'Acceleration with g' "
                              "experiment: the pipeline needs acceleration including gravity", source)
@@ -347,7 +395,7 @@ def _build(files, meta, source, warn, damage=()) -> Recording:
             streams[PRESSURE] = make_stream(PRESSURE, t_ns, vals[:, 1:2], spec["columns"], spec["unit"],
                                             spec["note"])
 
-    props = _read_props(meta["device"][1]) if "device" in meta else {}
+    props = _read_props(meta["device"][1], meta["device"][0]) if "device" in meta else {}
     brand = (props.get("deviceBrand", "") + " " + props.get("deviceManufacturer", "")).lower()
     model = props.get("deviceModel", "")
     if "apple" in brand or model.lower().startswith(("iphone", "ipad", "ipod")):

@@ -100,8 +100,6 @@ A missing (or empty) Gyroscope.csv or Magnetometer.csv
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import os
 import warnings
@@ -110,12 +108,15 @@ import numpy as np
 
 from core import quaternion as quat
 from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC, STANDARD_GRAVITY_M_S2
-from core.recording import DamagedFileWarning, Recording, RecordingError, SensorSubstitutedWarning, make_stream
+from core.recording import (
+    MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, SensorSubstitutedWarning, make_stream,
+    skip_bad_lines,
+)
 from core.importers._common import (
     EXTRA_STREAM_SPECS, GYRO_UNCAL, MAG_UNCAL, PRESSURE, FileSet, acceleration_in_m_s2, attitude_checks, finish,
     gps_check, gps_values, magnetic_dip_deg, sample_at,
 )
-from core.importers._csv import Table
+from core.importers._csv import Table, csv_rows
 
 FORMAT = "sensorlogger"
 
@@ -159,36 +160,63 @@ def _read_metadata(fs: FileSet, name: str | None) -> dict:
     """Metadata.csv: a header and one row (values may be quoted and contain commas)."""
     if name is None:
         return {}
-    rows = [r for r in csv.reader(io.StringIO(fs.read_text(name))) if r]
+    rows = [r for r in csv_rows(fs.read_text(name), fs.where(name)) if r]
     if len(rows) < 2:
         return {}
     head, row = rows[0], rows[1]
     return {h.strip(): (row[i].strip() if i < len(row) else "") for i, h in enumerate(head)}
 
 
-class _Sensor:
-    """One Sensor Logger CSV: times and named value columns."""
+#: the value columns read from each file (lower-case base name): required ones, and optional ones (an empty
+#: field is nan); files not listed hold x, y, z
+_COLUMNS = {
+    "orientation": (("qw", "qx", "qy", "qz"), ()),
+    "location": (("latitude", "longitude"),
+                 ("altitude", "horizontalAccuracy", "speed", "bearing", "speedAccuracy", "bearingAccuracy")),
+    "barometer": (("pressure",), ()),
+}
 
-    def __init__(self, fs: FileSet, name: str):
+
+class _Sensor:
+    """One Sensor Logger CSV: times and named value columns, read once as a stream.
+
+    A bad line (a field missing or not a number) is skipped and counted
+    under the one rule of :func:`core.recording.skip_bad_lines`, with a line
+    in ``repairs`` and a :class:`core.recording.DamagedFileWarning`.
+    """
+
+    def __init__(self, fs: FileSet, name: str, base: str, repairs: list[str], warn: bool):
         self.where = fs.where(name)
-        text = fs.read_text(name)
-        self.empty = not text.strip()  # the app leaves a 0-byte file for a sensor that delivered nothing
-        if self.empty:
-            self.table = None
-            return
-        self.table = Table(text, self.where)
-        self.empty = len(self.table) == 0
-        if self.empty:
-            return
-        ti = self.table.require(["time"], "Sensor Logger file")[0]
-        self.time = self.table.columns([ti], dtype=np.int64)[:, 0]
-        si = self.table.index("seconds_elapsed")
-        # seconds_elapsed only fixes the recording start: the first rows suffice
-        self.elapsed = self.table.columns([si], max_rows=2000)[:, 0] if si is not None else None
+        with fs.text(name) as text:
+            table = Table(text, self.where)
+            self.table = None if table.blank else table  # the app leaves a 0-byte file for a sensor without data
+            self.empty = table.blank
+            if self.empty:
+                return
+            ti = table.require(["time"], "Sensor Logger file")[0]
+            si = table.index("seconds_elapsed")
+            strict, optional = _COLUMNS.get(base, (("x", "y", "z"), ()))
+            self._names = [c for c in strict + optional if table.index(c) is not None]
+            cols = [(ti, "i")] + [(table.index(c), "f" if c in strict else "o") for c in self._names]
+            # seconds_elapsed only fixes the recording start: the first rows suffice
+            data = table.read(cols, head_cols=[si] if si is not None else [], head_rows=2000)
+        n_repairs = len(repairs)
+        skip_bad_lines(table.bad, table.n_lines, self.where, repairs)
+        if warn:
+            for r in repairs[n_repairs:]:
+                warnings.warn(r, DamagedFileWarning, stacklevel=4)
+        self.time = data["t"]
+        self._values = data["v"]
+        self.empty = len(self.time) == 0
+        self.elapsed = data["head"][:, 0] if si is not None else None
 
     def cols(self, names: list[str], optional: bool = False) -> np.ndarray:
-        idx = self.table.require(names, "Sensor Logger file")
-        return self.table.columns(idx, empty_ok=optional)
+        """Columns ``names`` (n, len(names)); a column the file lacks is an error naming it."""
+        self.table.require(names, "Sensor Logger file")
+        pos = [next(k for k, c in enumerate(self._names) if c.lower() == n.lower()) for n in names]
+        if pos == list(range(pos[0], pos[0] + len(pos))):
+            return self._values[:, pos[0]:pos[0] + len(pos)]  # a view, no copy
+        return self._values[:, pos]
 
     def xyz(self) -> np.ndarray:
         # Sensor Logger writes z, y, x; take them by name
@@ -233,13 +261,15 @@ def _location(s: _Sensor, t_ns: np.ndarray, notes: dict, repairs: list[str]):
     return make_stream(GPS, t_ns, values, note=note)
 
 
-def read_sensorlogger(path: str, *, platform: str | None = None, warn: bool = True) -> Recording:
+def read_sensorlogger(path: str, *, platform: str | None = None, warn: bool = True,
+                      max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
     """Read a Sensor Logger export (zip, folder, or a CSV inside the folder); see the module doc.
 
     ``platform`` ("android" or "ios") overrides or replaces Metadata.csv;
     the environment variable ``PDR_SENSORLOGGER_PLATFORM`` stands in for a
     Metadata.csv without a platform (so that the command line can say it),
-    never overriding one.
+    never overriding one.  Each file is streamed; a zip member (or gzip
+    file) of over ``max_uncompressed_bytes`` is refused before it is read.
     """
     path = str(path)
     if not os.path.exists(path):
@@ -248,7 +278,7 @@ def read_sensorlogger(path: str, *, platform: str | None = None, warn: bool = Tr
     if os.path.isfile(path) and path.lower().endswith((".csv", ".csv.gz")):
         root = os.path.dirname(os.path.abspath(path))
     # non-finite values pass through as data, without numpy warnings
-    with FileSet(root) as fs, np.errstate(all="ignore"):
+    with FileSet(root, max_uncompressed_bytes) as fs, np.errstate(all="ignore"):
         return _read(fs, root, platform, warn)
 
 
@@ -261,7 +291,7 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
     sensors: dict[str, _Sensor] = {}
     for base in KNOWN:
         if base in files and base != "metadata":
-            s = _Sensor(fs, files[base])
+            s = _Sensor(fs, files[base], base, repairs, warn)
             if s.table is not None and s.table.dropped_tail:
                 repairs.append(f"{s.where}: dropped an incomplete last line {s.table.dropped_tail}")
             if not s.empty:
