@@ -18,6 +18,7 @@ from core.gnss.training import (
 )
 from core.pdr.calibration import UserProfile
 from core.pdr.pipeline import Pipeline
+from tests._gnss_helpers import truth_error
 
 
 # -- the EKF ---------------------------------------------------------------------------------------
@@ -207,14 +208,6 @@ def sim_walk():
     return walk, steps
 
 
-def _truth_error(walk, fused_step):
-    from core.geodesy import geodetic_to_enu
-
-    e, n = geodetic_to_enu(fused_step.lat_deg, fused_step.lon_deg, walk.truth.origin_lat_lon)
-    p = walk.truth.phone_position_at(fused_step.t_ns)
-    return math.hypot(e - p[0], n - p[1])
-
-
 def test_streaming_pipeline_and_batch_fusion_agree(sim_walk):
     walk, steps = sim_walk
     rec = walk.recording
@@ -235,7 +228,7 @@ def test_calibrated_fusion_beats_dead_reckoning_through_an_outage_and_stays_hone
     for name, kw in {"pdr": {"filter": "reset", "learn_stride": False, "learn_heading": False}, "ekf": {}}.items():
         fr = GpsFusion(hidden_ns=hid, **kw).run(steps, rec.streams["gps"], t0)
         last = [s for s in fr.steps if s.t_ns < hid[0][1]][-1]
-        errs[name] = _truth_error(walk, last)
+        errs[name] = truth_error(walk, last)
         if name == "ekf":
             sigma = sigma_max_m(last.cov_en_m2)
             assert errs[name] < 3.0 * sigma  # the uncertainty covers the error
@@ -249,7 +242,7 @@ def test_calibrated_fusion_beats_dead_reckoning_through_an_outage_and_stays_hone
 def test_fused_track_follows_gps_without_outage(sim_walk):
     walk, steps = sim_walk
     fr = GpsFusion().run(steps, walk.recording.streams["gps"], walk.recording.t0_ns)
-    err = [_truth_error(walk, s) for s in fr.steps[100:]]
+    err = [truth_error(walk, s) for s in fr.steps[100:]]
     assert np.median(err) < 3.0  # GPS alone: 1.5 m white + 3 m wandering bias
     assert fr.counters["fixes_accepted"] > 0.9 * fr.counters["fixes"] - 10
 

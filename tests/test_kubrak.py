@@ -11,6 +11,7 @@ from core.conventions import GNSS_STATUS, bearing_deg
 from core.gnss import make_fusion
 from core.gnss.kubrak import DPSI, NX, KubrakFusion, KubrakKf
 from core.pdr.pipeline import Pipeline
+from tests._gnss_helpers import truth_error
 from core.pdr.stride import StepFeatures
 from core.pdr.stride_models import load_stride_model
 from core.pdr.velocity import SpeedFeatureWindow, VelocityModel, VelocityStride, fit_velocity_model
@@ -173,14 +174,6 @@ def sim_walk():
 _STREAMED: dict = {}
 
 
-def _truth_error(walk, s):
-    from core.geodesy import geodetic_to_enu
-
-    e, n = geodetic_to_enu(s.lat_deg, s.lon_deg, walk.truth.origin_lat_lon)
-    p = walk.truth.phone_position_at(s.t_ns)
-    return math.hypot(e - p[0], n - p[1])
-
-
 def test_streaming_pipeline_and_batch_fusion_agree(sim_walk):
     walk, steps = sim_walk
     rec = walk.recording
@@ -197,7 +190,7 @@ def test_follows_gps_and_carries_through_an_outage_with_an_honest_sigma(sim_walk
     rec = walk.recording
     t0 = rec.t0_ns
     fr = make_fusion("kubrak").run(steps, rec.streams["gps"], t0)
-    err = [_truth_error(walk, s) for s in fr.steps[100:]]
+    err = [truth_error(walk, s) for s in fr.steps[100:]]
     assert np.median(err) < 3.0
     assert fr.counters["variability_detections"] == 0  # clean GPS is never called unreliable
     hid = [(t0 + int(200e9), t0 + int(320e9))]
@@ -205,7 +198,7 @@ def test_follows_gps_and_carries_through_an_outage_with_an_honest_sigma(sim_walk
     last = [s for s in fr.steps if s.t_ns < hid[0][1]][-1]
     o = fr.outages[0]
     assert o.walked_m > 100
-    err = _truth_error(walk, last)
+    err = truth_error(walk, last)
     assert err < 0.08 * o.walked_m
     assert err < 3.0 * math.sqrt(max(np.linalg.eigvalsh(np.array([[last.cov_en_m2[0], last.cov_en_m2[1]],
                                                                  [last.cov_en_m2[1], last.cov_en_m2[2]]]))))

@@ -1,0 +1,14 @@
+"""Shared by the GPS fusion tests (Chen: test_gnss.py, Kubrak: test_kubrak.py)."""
+
+from __future__ import annotations
+
+import math
+
+
+def truth_error(walk, fused_step) -> float:
+    """Horizontal distance (m) of a fused step's latitude/longitude from the simulator's true phone position."""
+    from core.geodesy import geodetic_to_enu
+
+    e, n = geodetic_to_enu(fused_step.lat_deg, fused_step.lon_deg, walk.truth.origin_lat_lon)
+    p = walk.truth.phone_position_at(fused_step.t_ns)
+    return math.hypot(e - p[0], n - p[1])
