@@ -12,6 +12,7 @@ import json
 import math
 import os
 import warnings
+import zipfile
 
 import numpy as np
 import pytest
@@ -137,6 +138,84 @@ def test_getsensordata_one_bad_line_is_skipped_many_reject():
     with pytest.raises(RecordingError, match="missing fields.*bad lines of 300") as e:
         parse_getsensordata("% GetSensorData\n" + "\n".join(bad) + "\n", "log.txt")
     assert e.value.line == 2
+
+
+def _export(tmp_path, fmt: str, member: str, change) -> str:
+    """A Sensor Logger folder or a phyphox zip (the synthetic exports of test_importers) with one CSV changed.
+
+    The CSV's text is encoded as Latin-1 (``"\\xff"`` stays one byte that is not UTF-8).
+    """
+    from tests.test_importers import phyphox_files, sl_files
+    files = sl_files("android", n=300) if fmt == "sensorlogger" else phyphox_files()
+    lines = files[member].split("\n")
+    change(lines)
+    data = {k: v.encode() for k, v in files.items()}
+    data[member] = "\n".join(lines).encode("latin-1")
+    if fmt == "sensorlogger":
+        root = tmp_path / "sl"
+        root.mkdir(parents=True)
+        for name, b in data.items():
+            (root / name).write_bytes(b)
+        return str(root)
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    path = tmp_path / "phy.zip"
+    with zipfile.ZipFile(path, "w") as z:
+        for name, b in data.items():
+            z.writestr(name, b)
+    return str(path)
+
+
+#: one bad line in the middle of an export's CSV: (format, member, line index, how it is damaged, message)
+_CSV_DAMAGE = [
+    ("sensorlogger", "Gyroscope.csv", 150, lambda ln: ln.replace("0.002", "0.0o2"), r"column 'y' is not a number: '0.0o2'"),
+    ("sensorlogger", "Magnetometer.csv", 99, lambda ln: ",".join(ln.split(",")[:3]),
+     r"missing fields: the header has 5 columns, this line 3"),
+    ("sensorlogger", "TotalAcceleration.csv", 200, lambda ln: ln[:5] + "\xff" + ln[6:],
+     r"column 'time' is not an integer: '17000\xff"),
+    ("phyphox", "Gyroscope.csv", 100, lambda ln: ln.replace("E-3", "E-3x", 1), r"column 'Gyroscope x \(rad/s\)' is not"),
+    ("phyphox", "Raw Data.csv", 250, lambda ln: ",".join(ln.split(",")[:2]),
+     r"missing fields: no value for Acceleration y \(m/s\^2\), Acceleration z"),
+]
+
+
+@pytest.mark.parametrize("fmt,member,k,damage,message", _CSV_DAMAGE)
+def test_one_bad_line_in_an_export_csv_is_skipped_and_counted(tmp_path, fmt, member, k, damage, message):
+    def change(lines):
+        lines[k] = damage(lines[k])
+
+    path = _export(tmp_path, fmt, member, change)
+    with pytest.warns(DamagedFileWarning, match=rf"{member}: skipped 1 bad line\(s\) of \d+ \(first: line {k + 1}: "
+                                                rf"{message}"):
+        rec = load_recording(path)
+    name = {"Gyroscope.csv": "gyro", "Magnetometer.csv": "mag"}.get(member, "acc")
+    clean = _quiet(load_recording, _export(tmp_path / "clean", fmt, member, lambda lines: None))
+    assert len(rec.streams[name]) == len(clean.streams[name]) - 1  # that line, and only it, is missing
+    for other in set(clean.streams) - {name}:
+        assert len(rec.streams[other]) == len(clean.streams[other])
+    assert any(f"skipped 1 bad line(s)" in r for r in rec.repairs)
+
+
+@pytest.mark.parametrize("fmt,member", [("sensorlogger", "Gyroscope.csv"), ("phyphox", "Gyroscope.csv")])
+def test_more_bad_export_lines_than_1_percent_reject_the_walk_naming_the_first(tmp_path, fmt, member):
+    def change(lines):
+        for k in range(20, 40, 5):  # 4 of 150-300 lines: over 1 %
+            lines[k] = lines[k].replace(",", ";", 1) if fmt == "sensorlogger" else lines[k].replace("E", "Q", 1)
+
+    with pytest.raises(RecordingError, match=r"bad lines of \d+: too many to skip; at most 100 and 1 % are skipped") as e:
+        load_recording(_export(tmp_path, fmt, member, change))
+    assert e.value.line == 21 and str(e.value).startswith(str(tmp_path)) and member in str(e.value)
+
+
+def test_at_most_100_bad_export_lines_are_skipped_even_in_a_long_file(tmp_path):
+    from tests.test_importers import sl_files, write_folder
+    files = sl_files("android", n=12_000)  # 101 bad lines are under 1 % of these, but over 100
+    lines = files["Gyroscope.csv"].split("\n")
+    for k in range(100, 100 + 101 * 50, 50):
+        lines[k] = lines[k].replace("0.002", "x")
+    files["Gyroscope.csv"] = "\n".join(lines)
+    with pytest.raises(RecordingError, match=r"Gyroscope.csv:101: column 'y' is not a number: 'x' \(over 100 bad "
+                                             r"lines of \d+: too many to skip"):
+        load_recording(str(write_folder(tmp_path / "sl", files)))
 
 
 def test_non_utf8_bytes_get_a_line_number_and_a_comment_does_not_matter(tmp_path):

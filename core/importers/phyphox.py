@@ -237,14 +237,14 @@ def read_phyphox(path: str, *, warn: bool = True,
         return _build(files, {}, path, warn, damage)
 
 
-def _read_group(table: Table, ti: int, sensors, where: str, found: dict, repairs: list[str]) -> int:
+def _read_group(table: Table, ti: int, sensors, where: str, found: dict, repairs: list[str], warn: bool) -> int:
     """Read the columns of one 'Time (s)' group into ``found[sensor]``; returns the rows dropped as empty.
 
     Optional fields may be empty (nan): a shorter value buffer leaves all a
     sensor's fields empty, and the row is dropped for it.  A bad line -- a
     field that is not a number, or a value without a time or some but not
     all of a sensor's values -- is skipped and counted
-    (:func:`core.recording.skip_bad_lines`).
+    (:func:`core.recording.skip_bad_lines`, with a :class:`DamagedFileWarning`).
     """
     cols = sorted({c for *_, cs in sensors for c in cs})
     data = table.read([(ti, "o")] + [(c, "o") for c in cols], with_lines=True, with_empty=True)
@@ -264,6 +264,8 @@ def _read_group(table: Table, ti: int, sensors, where: str, found: dict, repairs
         picks.append((sensor, need, order, pos))
     bad.sort(key=lambda err: err.line or 0)
     skip_bad_lines(bad, table.n_lines, where, repairs)
+    if warn and bad:
+        warnings.warn(repairs[-1], DamagedFileWarning, stacklevel=5)
     dropped = 0
     for sensor, need, order, pos in picks:
         vals = v if pos == list(range(v.shape[1])) else v[:, pos]
@@ -327,9 +329,9 @@ def _build(files, meta, source, warn, damage: list[str]) -> Recording:
                 if g:  # another time column of the same file: read it again
                     with opener() as again:
                         dropped_rows += _read_group(Table(again, where, dialect=_dialect), ti, sensors, where, found,
-                                                    repairs)
+                                                    repairs, warn)
                 else:
-                    dropped_rows += _read_group(table, ti, sensors, where, found, repairs)
+                    dropped_rows += _read_group(table, ti, sensors, where, found, repairs, warn)
         if table.dropped_tail:
             repairs.append(f"{where}: dropped an incomplete last line {table.dropped_tail}")
     if warn:
