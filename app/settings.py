@@ -140,14 +140,13 @@ class Settings:
         (unanchored), but from what earlier walks with GPS taught: Chen's filter starts from the
         profile's GPS stride scale and heading model (:meth:`learn_from_gps` keeps them).
         """
-        from core.gnss import make_fusion  # noqa: PLC0415 - the app imports core's stages on use
-        from core.gnss.training import fusion_settings_from_profile  # noqa: PLC0415
+        from core.gnss import make_fusion, settings_from_profile  # noqa: PLC0415 - core's stages on use
         from core.pdr.pipeline import Pipeline  # noqa: PLC0415
 
         kw = self.pipeline_kwargs()
         use_gps = bool(self.use_gps)
         name = self.gps_fusion_name()
-        gkw = fusion_settings_from_profile(self.profile) if name == "chen" else {}
+        gkw = settings_from_profile(name, self.profile)
         return lambda: Pipeline(**kw, gnss=make_fusion(name, **gkw) if use_gps else None)
 
     def gps_fusion_name(self) -> str:
@@ -157,13 +156,14 @@ class Settings:
         return AUTO_FUSION if self.gps_fusion == "auto" else self.gps_fusion
 
     def learn_from_gps(self, pipeline) -> bool:
-        """Keep in the profile what a live walk's GPS taught (stride scale, heading model); True if anything."""
-        from core.gnss.training import profile_with_gps_training  # noqa: PLC0415
+        """Keep in the profile what a live walk's GPS taught (Chen: stride scale, heading model; Kubrak: the
+        velocity model's coefficients); True if anything."""
+        from core.gnss import profile_after  # noqa: PLC0415
 
         gnss = getattr(pipeline, "gnss", None)
-        if gnss is None or not hasattr(gnss, "trainer"):  # Kubrak's filter keeps no profile (yet)
+        if gnss is None:
             return False
-        new = profile_with_gps_training(self.profile, gnss.trainer)
+        new = profile_after(self.profile, gnss)
         changed = new is not self.profile
         self.profile = new
         return changed

@@ -108,9 +108,9 @@ def build_gnss(args, rec: Recording, profile=None):
     t0 = rec.t0_ns
     hidden = [(t0 + int(a * 1e9), t0 + int((a + b) * 1e9)) for a, b in (args.gps_outage or [])]
     kw = {}
-    if profile is not None and name == "chen":
-        from core.gnss.training import fusion_settings_from_profile
-        kw = fusion_settings_from_profile(profile)
+    if profile is not None:
+        from core.gnss import settings_from_profile
+        kw = settings_from_profile(name, profile)
     return make_fusion(name, hidden_ns=hidden, **kw)
 
 
@@ -392,9 +392,8 @@ def cmd_replay(args) -> int:
                              f"{s['n_steps']} steps, {s['distance_m']:.1f} m, start-to-end "
                              f"{s['start_to_end_m']:.2f} m", res.fusion.fixes if res.fusion is not None else None)
     if profile is not None and res.fusion is not None:
-        from core.gnss.training import profile_with_gps_training
-        new = profile_with_gps_training(profile, pipeline.gnss.trainer) if hasattr(pipeline.gnss, "trainer") \
-            else profile
+        from core.gnss import profile_after
+        new = profile_after(profile, pipeline.gnss)
         if new is not profile:
             new.save(args.profile)
             written.append(args.profile)

@@ -324,3 +324,24 @@ def test_bearing_convention_of_the_course_update():
     assert bearing_deg(kf.heading()) == pytest.approx(90.0, abs=1e-9)
     res = kf.update_velocity(1.0, math.radians(90.0 - 90.0), 0.3)  # course 90 deg bearing = 0 rad ENU
     assert res.accepted and abs(res.innovation[1]) < 1e-9
+
+
+def test_profile_keeps_the_learnt_velocity_model_and_the_next_walk_starts_from_it(sim_walk, tmp_path):
+    from core.gnss import profile_after, settings_from_profile
+    from core.pdr.calibration import UserProfile
+
+    walk, steps = sim_walk
+    fr_fusion = make_fusion("kubrak")
+    fr_fusion.run(steps, walk.recording.streams["gps"], walk.recording.t0_ns)
+    prof = profile_after(UserProfile(), fr_fusion)
+    assert "velocity_model" in prof.gps
+    path = tmp_path / "p.json"
+    prof.save(path)
+    kw = settings_from_profile("kubrak", UserProfile.load(path))
+    learnt = np.array(fr_fusion.counters()["coefficients"])
+    np.testing.assert_allclose(kw["velocity_model"].coefficients, learnt, rtol=1e-9)
+    assert make_fusion("kubrak", **kw).kf.model.coefficients == pytest.approx(learnt, rel=1e-9)
+    # a walk that learnt nothing leaves the profile as it was
+    empty = make_fusion("kubrak")
+    assert profile_after(prof, empty) is prof
+    assert settings_from_profile("kubrak", UserProfile()) == {}

@@ -28,3 +28,21 @@ def make_fusion(name: str, **settings):
         from core.gnss.kubrak import KubrakFusion
         return KubrakFusion(**settings)
     raise ValueError(f"unknown GPS fusion {name!r}: one of {', '.join(FUSIONS)}")
+
+
+def settings_from_profile(name: str, profile) -> dict:
+    """The keywords of fusion ``name`` that start from what earlier walks with GPS taught (the user's profile)."""
+    if name == "chen":
+        from core.gnss.training import fusion_settings_from_profile
+        return fusion_settings_from_profile(profile)
+    from core.gnss.kubrak import settings_from_profile as kubrak_settings
+    return kubrak_settings(profile)
+
+
+def profile_after(profile, fusion):
+    """``profile`` with what ``fusion`` learnt from this walk's GPS (the same object if nothing worth keeping)."""
+    if getattr(fusion, "name", "") == "chen":
+        from core.gnss.training import profile_with_gps_training
+        return profile_with_gps_training(profile, fusion.trainer)
+    from core.gnss.kubrak import profile_with_learning
+    return profile_with_learning(profile, fusion)

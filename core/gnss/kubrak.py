@@ -276,6 +276,9 @@ class KubrakFusion(FixFusion):
     ----------
     kf : KubrakKf or None
         The filter with its noise settings (a prototype: each run starts a copy); default ``KubrakKf()``.
+    velocity_model : VelocityModel or None
+        eq. 1's starting coefficients (what earlier walks taught, :func:`profile_with_learning`),
+        when no ``kf`` is given; default the shipped ones.
     use_velocity : bool
         Use the GPS Doppler velocity (speed and course) as a measurement.
     velocity_sd_m_s : float
@@ -301,12 +304,15 @@ class KubrakFusion(FixFusion):
 
     name = "kubrak"
 
-    def __init__(self, *, kf: KubrakKf | None = None, use_velocity: bool = True, velocity_sd_m_s: float = 0.3,
+    def __init__(self, *, kf: KubrakKf | None = None, velocity_model: VelocityModel | None = None,
+                 use_velocity: bool = True, velocity_sd_m_s: float = 0.3,
                  velocity_min_speed_m_s: float = 0.5, detect_variability: bool = True,
                  variability_window_s: float = 20.0, max_speed_change_m_s: float = 0.04,
                  variability_gate: float = CHI2_999[1], mean_window_s: float = 60.0,
                  unreliable_hold_s: float = 30.0, relock_s: float = 20.0, **shared):
         super().__init__(relock_s=relock_s, **shared)
+        if kf is None and velocity_model is not None:
+            kf = KubrakKf(velocity_model)
         self._kf_proto = kf
         self.use_velocity = bool(use_velocity)
         self.velocity_sd_m_s = float(velocity_sd_m_s)
@@ -510,3 +516,46 @@ class KubrakFusion(FixFusion):
                 "coefficients": [float(v) for v in kf.x[COEF]],
                 "heading_bias_deg": math.degrees(float(kf.x[DPSI])),
                 "variability_events": list(self.variability_events)}
+
+
+#: GPS-aided walking (m) a walk needs before what it taught goes into the profile
+MIN_PROFILE_WALKED_M = 200.0
+
+
+def learned_model(fusion: KubrakFusion) -> VelocityModel | None:
+    """eq. 1's coefficients as the walk's GPS left them, with their SDs (never below half the prior's:
+    the next walk may be at another pace); None when GPS aided too little walking to say."""
+    kf = fusion.kf
+    walked = sum(s.length_m for s in fusion.steps if s.source == "fused")
+    if not kf.initialized or walked < MIN_PROFILE_WALKED_M or fusion.n_velocity_used < 60:
+        return None
+    prior = kf.model
+    sd = np.sqrt(np.maximum(np.diag(kf.P[COEF, COEF]), 0.0))
+    sd = tuple(float(max(a, 0.5 * b)) for a, b in zip(sd, prior.sd))
+    c = kf.x[COEF]
+    return VelocityModel(float(c[0]), float(c[1]), float(c[2]), sd=sd, max_speed_m_s=prior.max_speed_m_s)
+
+
+def settings_from_profile(profile) -> dict:
+    """``KubrakFusion`` keywords that start from what earlier walks taught (``UserProfile.gps["velocity_model"]``)."""
+    d = (getattr(profile, "gps", None) or {}).get("velocity_model")
+    if not isinstance(d, dict):
+        return {}
+    try:
+        return {"velocity_model": VelocityModel.from_dict(d)}
+    except (KeyError, TypeError, ValueError):
+        return {}
+
+
+def profile_with_learning(profile, fusion: KubrakFusion, now=None):
+    """A new profile with the velocity model this walk's GPS taught; ``profile`` itself if it taught too little."""
+    from dataclasses import replace
+    from datetime import datetime, timezone
+
+    model = learned_model(fusion)
+    if model is None:
+        return profile
+    gps = dict(getattr(profile, "gps", None) or {})
+    gps["velocity_model"] = model.to_dict()
+    gps["updated"] = (now or datetime.now(timezone.utc)).isoformat(timespec="seconds")
+    return replace(profile, gps=gps)
