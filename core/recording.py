@@ -848,11 +848,40 @@ def format_row(name: str, t_ns: int, values: Iterable[float]) -> str:
     return ",".join([name, str(int(t_ns))] + [repr(float(v)) for v in values]) + "\n"
 
 
+def header_line(rec: Recording, path: str) -> str:
+    """The JSON header line of ``rec`` (with its newline), or a :class:`RecordingError` if the reader would refuse it.
+
+    The header is checked as the reader will see it (after JSON) by the
+    reader's own :func:`check_header` -- metadata of the wrong type for the
+    keys the product reads (``{"truth": 0}``), a device that is not an
+    object, streams that cannot be rows -- so no file is written that
+    cannot be read back.
+    """
+    try:
+        text = json.dumps(rec.header(), sort_keys=True)
+    except (TypeError, ValueError) as e:
+        raise RecordingError(f"cannot write: the header is not JSON ({e})", path) from None
+    try:
+        check_header(json.loads(text), FORMAT_VERSION, path)
+    except RecordingError as e:
+        raise RecordingError(f"cannot write: {e.message}", path) from None
+    return "# " + text + "\n"
+
+
+def _copy(obj):
+    """A dict's copy (``{}`` for ``None``); anything else as it is, for :func:`header_line` to name."""
+    return {} if obj is None else dict(obj) if isinstance(obj, dict) else obj
+
+
 def write_recording(path: str, rec: Recording) -> None:
-    """Write ``rec`` to ``path`` (gzip if it ends in ``.gz``), events in time order."""
+    """Write ``rec`` to ``path`` (gzip if it ends in ``.gz``), events in time order.
+
+    A header the reader would refuse is a :class:`RecordingError` before anything is written.
+    """
+    head = header_line(rec, str(path))
     with _open_text(path, "w") as f:
         f.write(f"{MAGIC} {FORMAT_VERSION}\n")
-        f.write("# " + json.dumps(rec.header(), sort_keys=True) + "\n")
+        f.write(head)
         for name, t, vals in rec.events():
             f.write(format_row(name, t, vals))
 
@@ -864,7 +893,9 @@ class RecordingWriter:
     least once a second) pushes buffered lines to the OS, so a crash loses at
     most the events since the last flush.  Plain text only (gzip cannot be
     read back after an abrupt stop).  The reader accepts a truncated last line
-    (see :func:`read_recording` ``allow_truncated_tail``).
+    (see :func:`read_recording` ``allow_truncated_tail``).  A header the
+    reader would refuse is a :class:`RecordingError` before the file is made
+    (see :func:`header_line`).
     """
 
     def __init__(self, path: str, streams: dict[str, dict] | None = None, device=None, metadata=None):
@@ -874,10 +905,11 @@ class RecordingWriter:
         specs = streams or {n: STREAM_SPECS[n] for n in (ACC, GYRO, MAG, GPS)}
         rec = Recording({n: Stream(n, [], np.zeros((0, len(s["columns"]))), s["columns"], s.get("unit", ""),
                                    s.get("note", "")) for n, s in specs.items()},
-                        device=dict(device or {}), metadata=dict(metadata or {}))
+                        device=_copy(device), metadata=_copy(metadata))
+        head = header_line(rec, self.path)  # a header the reader would refuse: nothing is written
         self._f = open(self.path, "w", encoding="utf-8", newline="")
         self._f.write(f"{MAGIC} {FORMAT_VERSION}\n")
-        self._f.write("# " + json.dumps(rec.header(), sort_keys=True) + "\n")
+        self._f.write(head)
         self._f.flush()
         self.count = 0
 
@@ -960,8 +992,12 @@ _METADATA_TYPES = (
 )
 
 
-def _check_header(header, version: int, source: str) -> dict:
-    """The header's stream specs, after checking every field's type (a clear error, never a traceback)."""
+def check_header(header, version: int, source: str) -> dict:
+    """The header's stream specs, after checking every field's type (a clear error, never a traceback).
+
+    The one check of the reader (line 2 of a file) and the writers
+    (:func:`header_line`: nothing is written that the reader would refuse).
+    """
     if not isinstance(header, dict) or not isinstance(header.get("streams"), dict) or not header["streams"]:
         raise RecordingError("header must be a JSON object with a non-empty 'streams' object", source, 2)
     if "format" in header and header["format"] != FORMAT_NAME:
@@ -1094,7 +1130,7 @@ def _parse_events(it, text, source, allow_truncated_tail, warn, check_units, che
         raise RecordingError(f"header is not valid JSON: {e.msg} at column {e.colno + 1}", source, 2) from None
     except RecursionError:
         raise RecordingError("header is not valid JSON: nested too deeply", source, 2) from None
-    specs = _check_header(header, version, source)
+    specs = check_header(header, version, source)
     ncols = {n: len(s["columns"]) for n, s in specs.items()}
     # per stream: timestamps, values (row after row), file line of each event, fields per row, values per row --
     # growing arrays of 8 bytes an entry, viewed as numpy arrays at the end without a copy

@@ -1,6 +1,8 @@
 """The pdr-recording format: exact round trips, clear errors, timestamp repair."""
 
+import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -116,3 +118,59 @@ def test_events_are_merged_in_time_order():
     ts = [t for _, t, _ in rec.events()]
     assert ts == sorted(ts)
     assert len(ts) == sum(len(s) for s in rec.streams.values())
+
+
+# ---------------------------------------------------------------------------
+# the writers refuse a header the reader would refuse (issue #12): one check, core.recording.check_header
+
+@pytest.mark.parametrize("device,metadata,match", [
+    ({}, {"truth": 0}, "header metadata 'truth' must be an object, found 0"),
+    ({}, {"unix_offset_ns": "1700000000000000000"}, "'unix_offset_ns' must be an integer"),
+    ({}, {"t0_unix_ns": 1.7e18}, "'t0_unix_ns' must be an integer"),
+    ({}, {"waypoints_en_m": [[0, 0], [1, "2"]]}, "'waypoints_en_m' must be a list of"),
+    ({}, {"devices": {"left_foot": "shoe"}}, "'devices' must be an object of objects"),
+    (["phone"], {}, "'device' must be a JSON object, found list"),
+    ({}, {"walker": {1, 2}}, r"the header is not JSON \(Object of type set"),
+])
+def test_writers_refuse_a_header_the_reader_refuses_and_write_nothing(tmp_path, device, metadata, match):
+    rec = _small_recording(np.random.default_rng(2))
+    rec.device, rec.metadata = device, metadata
+    path = tmp_path / "walk.csv"
+    with pytest.raises(RecordingError, match=f"^{path}: cannot write: .*{match}"):
+        write_recording(str(path), rec)
+    assert not path.exists()
+    with pytest.raises(RecordingError, match=f"^{path}: cannot write: .*{match}"):
+        RecordingWriter(str(path), device=device, metadata=metadata)
+    assert not path.exists()
+
+
+_json = st.recursive(st.none() | st.booleans() | st.integers(-2**70, 2**70) | st.floats(allow_nan=False, width=64)
+                     | st.text(max_size=4),
+                     lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=3), inner, max_size=3),
+                     max_leaves=8)
+
+
+@settings(max_examples=150, deadline=None)
+@given(meta=st.dictionaries(st.sampled_from(["truth", "devices", "unix_offset_ns", "t0_unix_ns", "waypoints_en_m",
+                                             "walker"]), _json, max_size=4))
+def test_what_the_writer_writes_reads_back_and_what_it_refuses_the_reader_refuses(tmp_path_factory, meta):
+    rec = _small_recording(np.random.default_rng(3), n=30)
+    rec.metadata = meta
+    path = tmp_path_factory.mktemp("w") / "walk.csv"
+    try:
+        write_recording(str(path), rec)
+    except RecordingError as e:
+        assert not path.exists() and "cannot write: header metadata" in str(e)
+        refused = str(e).split("cannot write: ", 1)[1]
+        with pytest.raises(RecordingError, match=re.escape(refused)):
+            parse_recording(_text_with_header(rec), "walk.csv", check_units=False)
+        return
+    back = read_recording(str(path), check_units=False)
+    assert back.metadata == json.loads(json.dumps(meta))
+
+
+def _text_with_header(rec) -> str:
+    """The file the writer would write, without the writer's check (what the reader alone says of it)."""
+    from core.recording import FORMAT_VERSION, MAGIC, format_row
+    return (f"{MAGIC} {FORMAT_VERSION}\n# {json.dumps(rec.header(), sort_keys=True)}\n"
+            + "".join(format_row(n, t, v) for n, t, v in rec.events()))
