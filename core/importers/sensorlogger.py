@@ -300,6 +300,8 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
         repairs.append(r)
         if warn:
             warnings.warn(r, DamagedFileWarning, stacklevel=3)
+    if not sensors:
+        raise RecordingError("no usable sensor data (all Sensor Logger files empty?)", source)
     ignored = sorted(files[b].split("/")[-1] for b in files if b not in KNOWN)
     empty = sorted(files[b].split("/")[-1] for b in files if b in KNOWN and b != "metadata" and b not in sensors)
 
