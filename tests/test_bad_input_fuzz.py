@@ -416,42 +416,35 @@ def _corrupt(draw, files: dict[str, bytes], container: str) -> tuple[dict[str, b
     return out, container == "zip" and draw(st.integers(0, 4)) == 0
 
 
-def _write_damaged(draw, root, files, container, archive_damage: bool) -> str:
-    path = _write(root, files, container)
-    if archive_damage:
+def _read_damaged(workdir: str, export, draw, reader) -> None:
+    """Damage a generated export (members, and now and then the zip archive itself) and read it."""
+    files, container, _ = export
+    files, archive = _corrupt(draw, files, container)
+    path = _write(_fresh(workdir), files, container)
+    if archive:
         with open(path, "rb") as f:
             data = f.read()
-        data = _damage(draw, data)
         with open(path, "wb") as f:
-            f.write(data)
-    return path
+            f.write(_damage(draw, data))
+    _read(draw(st.sampled_from([reader, load_recording])), path)
 
 
 @_SETTINGS
 @given(log=gsd_logs(), data=st.data())
 def test_corrupted_getsensordata_logs_read_with_repairs_or_raise_a_recording_error(workdir, log, data):
-    files, container, _ = log
-    files, _ = _corrupt(data.draw, files, container)
-    path = _write(_fresh(workdir), files, "file")
-    _read(data.draw(st.sampled_from([read_getsensordata, load_recording])), path)
+    _read_damaged(workdir, log, data.draw, read_getsensordata)
 
 
 @_SETTINGS
 @given(export=sensorlogger_exports(), data=st.data())
 def test_corrupted_sensorlogger_exports_read_with_repairs_or_raise_a_recording_error(workdir, export, data):
-    files, container, _ = export
-    files, archive = _corrupt(data.draw, files, container)
-    path = _write_damaged(data.draw, _fresh(workdir), files, container, archive)
-    _read(data.draw(st.sampled_from([read_sensorlogger, load_recording])), path)
+    _read_damaged(workdir, export, data.draw, read_sensorlogger)
 
 
 @_SETTINGS
 @given(export=phyphox_exports(), data=st.data())
 def test_corrupted_phyphox_exports_read_with_repairs_or_raise_a_recording_error(workdir, export, data):
-    files, container, _ = export
-    files, archive = _corrupt(data.draw, files, container)
-    path = _write_damaged(data.draw, _fresh(workdir), files, container, archive)
-    _read(data.draw(st.sampled_from([read_phyphox, load_recording])), path)
+    _read_damaged(workdir, export, data.draw, read_phyphox)
 
 
 # ---------------------------------------------------------------------------
