@@ -163,52 +163,71 @@ def plot_outage(path: Path, title: str, fr, gps, hidden, truth_en=None) -> None:
     plt.close(fig)
 
 
-def real_walks(root: Path, only: tuple | None = None, plots: bool = False) -> list[dict]:
+def real_folders(root: Path, only: tuple | None = None):
+    """``(dataset, folder)`` of every real walk (:data:`REAL`, or ``only``) under ``root``, in order."""
+    for ds, pattern in (only or REAL):
+        for folder in sorted(p for p in (root / ds).glob(pattern) if p.is_dir()):
+            yield ds, folder
+
+
+def open_walk(ds: str, folder: Path):
+    """One real walk, its pipeline run once (after :func:`_site_declination`) and its facts.
+
+    Returns ``(rec, res, walk)`` with ``walk`` the dict :func:`real_walks` reports (``outages`` empty),
+    or None for a recording without GPS.
+    """
     from core.importers import load_recording
     from core.pdr.pipeline import Pipeline
 
+    rec = load_recording(str(folder))
+    if not rec.has(GPS):
+        return None
+    pipe = Pipeline()
+    decl = _site_declination(rec, pipe)
+    res = pipe.run(rec)
+    t0 = rec.t0_ns
+    g = rec.streams[GPS]
+    sp = g.values[:, list(g.columns).index("speed_m_s")]
+    ok = np.isfinite(sp)
+    gps_d = float(np.sum(0.5 * (sp[ok][1:] + sp[ok][:-1]) * np.diff(g.t_ns[ok] * 1e-9))) if ok.sum() > 1 else 0.0
+    step_d = float(sum(s.length_m for s in res.steps))
+    walk = {"dataset": ds, "walk": folder.name, "split": REPORT, "magnetometer": rec.has("mag"),
+            "gps_distance_m": gps_d, "step_distance_m": step_d,
+            "steps_detected": gps_d <= 0 or step_d >= STEPS_DETECTED_MIN * gps_d,
+            "declination_deg": math.degrees(decl) if decl is not None else None,
+            "walking_from_s": walking_start_s(res.steps, t0), "duration_s": (rec.t1_ns - t0) * 1e-9, "outages": []}
+    return rec, res, walk
+
+
+def real_walks(root: Path, only: tuple | None = None, plots: bool = False) -> list[dict]:
     out = []
-    for ds, pattern in (only or REAL):
-        for folder in sorted(p for p in (root / ds).glob(pattern) if p.is_dir()):
-            rec = load_recording(str(folder))
-            if not rec.has(GPS):
-                continue
-            pipe = Pipeline()
-            decl = _site_declination(rec, pipe)
-            res = pipe.run(rec)
-            t0 = rec.t0_ns
-            start = walking_start_s(res.steps, t0)
-            end = (rec.t1_ns - t0) * 1e-9
-            g = rec.streams[GPS]
-            sp = g.values[:, list(g.columns).index("speed_m_s")]
-            ok = np.isfinite(sp)
-            gps_d = float(np.sum(0.5 * (sp[ok][1:] + sp[ok][:-1]) * np.diff(g.t_ns[ok] * 1e-9))) if ok.sum() > 1 else 0.0
-            step_d = float(sum(s.length_m for s in res.steps))
-            walk = {"dataset": ds, "walk": folder.name, "split": REPORT, "magnetometer": rec.has("mag"),
-                    "gps_distance_m": gps_d, "step_distance_m": step_d,
-                    "steps_detected": gps_d <= 0 or step_d >= STEPS_DETECTED_MIN * gps_d,
-                    "declination_deg": math.degrees(decl) if decl is not None else None,
-                    "walking_from_s": start, "duration_s": end, "outages": []}
-            for a, length in windows(start, end):
-                for v in VARIANTS:
-                    fu, fr = fuse_outage(res.steps, rec.streams[GPS], t0, a, length, v)
-                    if not fr.outages:
-                        continue
-                    o = fr.outages[0].as_dict()
-                    o.update(variant=v)
-                    walk["outages"].append(o)
-            if plots and ds == REAL[0][0] and windows(start, end, lengths=(180,)):
-                a, length = windows(start, end, lengths=(180,))[0]
-                _, fr = fuse_outage(res.steps, rec.streams[GPS], t0, a, length, "ekf")
-                PLOTS.mkdir(exist_ok=True)
-                plot_outage(PLOTS / "gnss_eth_outage.png", f"ETH walk (report split): 3-minute outage from {a:.0f} s",
-                            fr, rec.streams[GPS], (t0 + int(a * 1e9), t0 + int((a + length) * 1e9)))
-            fu, fr = fuse_outage(res.steps, rec.streams[GPS], t0, 1e9, 1.0, "ekf")  # no outage: what was learnt
-            walk["learnt"] = fr.counters["training"]
-            walk["position_nis_mean"] = fr.counters["position_nis_mean"]
-            walk["heading_residuals"] = heading_residuals(fu)
-            out.append(walk)
-            print(f"  {ds}/{folder.name}: {len(walk['outages'])} outage runs", file=sys.stderr)
+    for ds, folder in real_folders(root, only):
+        opened = open_walk(ds, folder)
+        if opened is None:
+            continue
+        rec, res, walk = opened
+        t0 = rec.t0_ns
+        start, end = walk["walking_from_s"], walk["duration_s"]
+        for a, length in windows(start, end):
+            for v in VARIANTS:
+                fu, fr = fuse_outage(res.steps, rec.streams[GPS], t0, a, length, v)
+                if not fr.outages:
+                    continue
+                o = fr.outages[0].as_dict()
+                o.update(variant=v)
+                walk["outages"].append(o)
+        if plots and ds == REAL[0][0] and windows(start, end, lengths=(180,)):
+            a, length = windows(start, end, lengths=(180,))[0]
+            _, fr = fuse_outage(res.steps, rec.streams[GPS], t0, a, length, "ekf")
+            PLOTS.mkdir(exist_ok=True)
+            plot_outage(PLOTS / "gnss_eth_outage.png", f"ETH walk (report split): 3-minute outage from {a:.0f} s",
+                        fr, rec.streams[GPS], (t0 + int(a * 1e9), t0 + int((a + length) * 1e9)))
+        fu, fr = fuse_outage(res.steps, rec.streams[GPS], t0, 1e9, 1.0, "ekf")  # no outage: what was learnt
+        walk["learnt"] = fr.counters["training"]
+        walk["position_nis_mean"] = fr.counters["position_nis_mean"]
+        walk["heading_residuals"] = heading_residuals(fu)
+        out.append(walk)
+        print(f"  {ds}/{folder.name}: {len(walk['outages'])} outage runs", file=sys.stderr)
     return out
 
 

@@ -514,17 +514,37 @@ def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
 
 
 #: markdown sections other benchmark modules write, appended to RESULTS.md
-SECTIONS = ("GNSS_RESULTS.md", "FOOT_RESULTS.md", "BAD_INPUT_RESULTS.md")
+SECTIONS = ("GNSS_RESULTS.md", "GNSS_FAULTS_RESULTS.md", "FOOT_RESULTS.md", "BAD_INPUT_RESULTS.md")
+
+
+def _section_files() -> list[Path]:
+    return [f for f in (Path(__file__).with_name(s) for s in SECTIONS) if f.exists()]
+
+
+def _sections_text() -> str:
+    """The sections written by the benchmarks of their own (GPS, foot-mounted INS, bad input), as appended."""
+    return "".join("\n\n" + f.read_text().strip() for f in _section_files())
 
 
 def write(run_info: dict, out_path: Path, plots_dir: Path, argv=None) -> None:
     out_path = Path(out_path)
     plots = make_plots(run_info["results"], Path(plots_dir))
     text = build(run_info, plots, out_path, argv)
-    # sections written by the benchmarks of their own (GPS outages, foot-mounted INS), kept when this file is rebuilt
-    for extra in SECTIONS:
-        f = Path(__file__).with_name(extra)
-        if f.exists():
-            text += "\n\n" + f.read_text().strip()
+    # the sections written by the benchmarks of their own, kept when this file is rebuilt
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    out_path.write_text(text + "\n")
+    out_path.write_text(text + _sections_text() + "\n")
+
+
+def refresh_sections(out_path: Path | None = None) -> None:
+    """Fold the current sections into an existing RESULTS.md without rerunning its benchmark.
+
+    Everything from the first section heading found in the file on is replaced by the sections as they
+    are now (a benchmark of its own calls this after writing its section).
+    """
+    out_path = Path(out_path) if out_path is not None else Path(__file__).with_name("RESULTS.md")
+    if not out_path.exists():
+        return
+    text = out_path.read_text()
+    heads = ["\n" + f.read_text().lstrip().splitlines()[0] + "\n" for f in _section_files()]
+    cut = min((text.find(h) for h in heads if h in text), default=-1)
+    out_path.write_text((text[:cut] if cut >= 0 else text).rstrip("\n") + "\n" + _sections_text() + "\n")
