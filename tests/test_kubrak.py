@@ -224,21 +224,45 @@ def _with_noisy_minute(walk, start_s, length_s, sd_m, hacc_m, seed=1):
     return Stream("gps", g.t_ns, vals, g.columns, g.unit, g.note), idx
 
 
+def _accepted_far(walk, fr, limit_m=30.0) -> int:
+    from core.geodesy import geodetic_to_enu
+
+    o = walk.truth.origin_lat_lon
+    n_far = 0
+    for f in fr.fixes:
+        if f.accepted:
+            e, n = geodetic_to_enu(f.lat_deg, f.lon_deg, o)
+            p = walk.truth.phone_position_at(f.t_ns)
+            n_far += math.hypot(e - p[0], n - p[1]) > limit_m
+    return n_far
+
+
+def test_a_minute_of_steady_multipath_is_not_taken_for_the_tracks_error(sim_walk):
+    """Fixes 60 m off for a minute, reporting 5 m, right after good GPS: the relock must not take them."""
+    from core.geodesy import enu_to_geodetic, geodetic_to_enu
+
+    walk, steps = sim_walk
+    g = walk.recording.streams["gps"]
+    vals = g.values.copy()
+    t = (g.t_ns - walk.recording.t0_ns) * 1e-9
+    o = walk.truth.origin_lat_lon
+    for i in np.flatnonzero((t >= 200.0) & (t < 260.0)):
+        e, n = geodetic_to_enu(vals[i, 0], vals[i, 1], o)
+        vals[i, 0], vals[i, 1] = enu_to_geodetic(e + 60.0, n, o)
+        vals[i, 3] = 5.0
+    bad = Stream("gps", g.t_ns, vals, g.columns, g.unit, g.note)
+    fr = make_fusion("kubrak").run(steps, bad, walk.recording.t0_ns)
+    assert _accepted_far(walk, fr) == 0
+    after = [f.accepted for f in fr.fixes if 280e9 <= f.t_ns - walk.recording.t0_ns < 360e9]
+    assert sum(after) > 0.7 * len(after)  # and GPS is taken again after it (the rest: the receiver's own multipath)
+
+
 def test_noisy_gps_never_puts_a_fix_30_m_off_into_the_track(sim_walk):
     """A minute of fixes 30 m (per axis) off that report 5 m: gates and the coefficient test keep them out."""
     walk, steps = sim_walk
     bad, idx = _with_noisy_minute(walk, 150.0, 60.0, 30.0, 5.0)
     fr = make_fusion("kubrak").run(steps, bad, walk.recording.t0_ns)
-    from core.geodesy import geodetic_to_enu
-
-    o = walk.truth.origin_lat_lon
-    accepted_far = 0
-    for f in fr.fixes:
-        if f.accepted:
-            e, n = geodetic_to_enu(f.lat_deg, f.lon_deg, o)
-            p = walk.truth.phone_position_at(f.t_ns)
-            accepted_far += math.hypot(e - p[0], n - p[1]) > 30.0
-    assert accepted_far == 0
+    assert _accepted_far(walk, fr) == 0
     assert sum(not fr.fixes[i].accepted for i in range(len(fr.fixes)) if fr.fixes[i].t_ns in set(
         walk.recording.streams["gps"].t_ns[idx].tolist())) > 0.5 * len(idx)
 

@@ -189,6 +189,11 @@ class FixFusion:
     relock_s : float
         Fixes rejected by the gate for this long, agreeing among themselves (their
         innovations' SD within twice a fix's SD), are taken (s).
+    relock_max_drift : float or None
+        If set, a relock also needs the disagreement to be one the track could have
+        built up since the last fix it took: at most this share of the distance walked
+        since then, plus three fix SDs (a steady multipath offset right after good
+        fixes is not the track's error).  None: no such limit.
     anchor_max_hacc_m, anchor_max_waits : float, int
         The first fix used (the anchor) must report at most this accuracy (m), unless this
         many screened fixes came without one (then any fix within ``max_hacc_m`` anchors).
@@ -210,7 +215,7 @@ class FixFusion:
                  hacc_scale: float = 1.0, min_sigma_m: float = 1.0, fused_timeout_s: float = 5.0,
                  hold_s: float = 3.0, hidden_ns=(), relock_s: float = 8.0, anchor_max_hacc_m: float = 12.0,
                  anchor_max_waits: int = 30, start: tuple | None = None, min_cn0_4th_dbhz: float = 25.0,
-                 status_max_age_s: float = 2.0):
+                 status_max_age_s: float = 2.0, relock_max_drift: float | None = None):
         self.max_hacc_m = float(max_hacc_m)
         self.default_hacc_m = float(default_hacc_m)
         self.max_speed_m_s = float(max_speed_m_s)
@@ -219,6 +224,7 @@ class FixFusion:
         self.fused_timeout_ns = int(fused_timeout_s * 1e9)
         self.hold_ns = int(hold_s * 1e9)
         self.relock_ns = int(relock_s * 1e9)
+        self.relock_max_drift = None if relock_max_drift is None else float(relock_max_drift)
         self.anchor_max_hacc_m = float(anchor_max_hacc_m)
         self.anchor_max_waits = int(anchor_max_waits)
         self.hidden_ns = [(int(a), int(b)) for a, b in hidden_ns]
@@ -243,6 +249,7 @@ class FixFusion:
         self._last_step_ns: int | None = None
         self._last_step_dur_ns = int(0.55e9)
         self._last_accept_ns: int | None = None
+        self._walked_since_accept_m = 0.0
         self._windows = [_Window(a, b) for a, b in self.hidden_ns]
         self._t_first_ns: int | None = None
         self.n_screened_out = 0
@@ -327,6 +334,7 @@ class FixFusion:
         while self._queue and self._queue[0][0] <= step.t_ns:
             self._fix(*self._queue.popleft())
         walked = self._step(step, t_prev, dur)
+        self._walked_since_accept_m += walked
         self._last_step_ns = step.t_ns
         self._last_step_dur_ns = dur
         for w in self._windows:
@@ -457,11 +465,15 @@ class FixFusion:
         d = np.array([(r[1], r[2]) for r in run])
         if float(np.max(np.std(d, axis=0))) > 2.0 * sigma_m:
             return False  # they disagree with each other too: bad GPS, keep rejecting
+        if self.relock_max_drift is not None and float(np.hypot(*np.mean(d, axis=0))) > \
+                self.relock_max_drift * self._walked_since_accept_m + 3.0 * sigma_m:
+            return False  # more than the track can have drifted since its last fix: a steady multipath
         run.clear()
         return True
 
     def _accepted(self, t_ns, v, east, north, hacc, speed, course, nis, moved) -> None:
         self._last_accept_ns = t_ns
+        self._walked_since_accept_m = 0.0
         self._record(t_ns, v, east, north, True, "", nis, moved)
         self._after_accept(t_ns, east, north, hacc if hacc > 0 else self.default_hacc_m, speed, course)
 

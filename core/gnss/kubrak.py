@@ -298,6 +298,9 @@ class KubrakFusion(FixFusion):
     unreliable_hold_s : float
         How long GPS stays unreliable after the test fired (s), extended while the shadow filter's
         coefficients keep varying.
+    relock_s, relock_max_drift : float
+        As :class:`core.gnss.base.FixFusion`'s, stricter than Chen's defaults (8 s, no drift limit):
+        a minute-long multipath offset must not be taken for the track's own error.
     **shared
         The fix handling's settings (:class:`core.gnss.base.FixFusion`).
     """
@@ -309,8 +312,9 @@ class KubrakFusion(FixFusion):
                  velocity_min_speed_m_s: float = 0.5, detect_variability: bool = True,
                  variability_window_s: float = 20.0, max_speed_change_m_s: float = 0.04,
                  variability_gate: float = CHI2_999[1], mean_window_s: float = 60.0,
-                 unreliable_hold_s: float = 30.0, relock_s: float = 20.0, **shared):
-        super().__init__(relock_s=relock_s, **shared)
+                 unreliable_hold_s: float = 30.0, relock_s: float = 20.0, relock_max_drift: float | None = 0.15,
+                 **shared):
+        super().__init__(relock_s=relock_s, relock_max_drift=relock_max_drift, **shared)
         if kf is None and velocity_model is not None:
             kf = KubrakKf(velocity_model)
         self._kf_proto = kf
