@@ -36,6 +36,8 @@ from core.pdr.velocity import DEFAULT_MODEL_PATH, VelocityModel, fit_velocity_mo
 
 #: a weak prior: a speed of 0 at rest-level features would need A ~ 0; the data decides
 PRIOR = VelocityModel(0.0, 0.3, 0.1, sd=(0.05, 0.5, 0.5))
+#: the shipped model's SDs are at least these (A s, B m, C s): 0.1, 0.18 and 0.1-0.3 m/s at a walker's regressors
+PRIOR_SD_FLOOR = (0.01, 0.1, 0.05)
 
 
 def _stretch(steps, t0: int, t1: int):
@@ -107,8 +109,9 @@ def main(argv=None) -> int:
                         "in_sample_err_pct": float(100 * np.median(np.abs(pred_all / yd - 1))),
                         "left_out_err_pct": float(100 * np.median(np.abs(pred / yd - 1)))}
     sd = np.sqrt(np.diag(cov))
-    # the prior SDs the Kalman filter starts from: what the walkers' data says, at least the fit's own SD
-    spread = tuple(float(max(s, p)) for s, p in zip(sd, (0.002, 0.02, 0.02)))
+    # the prior SDs the Kalman filter starts from: the fit's own SD is for these walkers and placements (hand,
+    # lower back); a trouser pocket's STD is 4-5 times a hand's, so the floors allow about 0.3 m/s of speed
+    spread = tuple(float(max(s, p)) for s, p in zip(sd, PRIOR_SD_FLOOR))
     model = VelocityModel(model.a_s, model.b_m, model.c_s, sd=spread)
     d = model.to_dict()
     d.update(name="kubrak_velocity", description="Kubrak et al. 2006 eq. 1 (v = A MEAN + B FREQ + C STD over 2 s "

@@ -217,7 +217,7 @@ class KubrakKf:
                                                                                       self.psi_pdr, tau)[:2]
 
     def update_position(self, t_ns: int, east_m: float, north_m: float, sigma_m: float, *,
-                        gate: bool = True) -> UpdateResult:
+                        gate: bool = True, frozen=()) -> UpdateResult:
         sig_before = sigma_max_m((self.P[0, 0], self.P[0, 1], self.P[1, 1]))
         if not (math.isfinite(east_m) and math.isfinite(north_m) and sigma_m > 0 and math.isfinite(sigma_m)):
             return UpdateResult(False, (math.nan, math.nan), math.nan, 0.0, sig_before, "not finite")
@@ -225,7 +225,8 @@ class KubrakKf:
         innov = np.array([east_m, north_m]) - pred
         before = self.x[:2].copy()
         ok, nis, self.x, self.P = kalman_update(self.x, self.P, innov, H, np.eye(2) * sigma_m ** 2,
-                                                self.gate_nis_2d if gate else math.inf, angle_index=DPSI)
+                                                self.gate_nis_2d if gate else math.inf, zero_gain_rows=frozen,
+                                                angle_index=DPSI)
         moved = float(np.hypot(*(self.x[:2] - before))) if ok else 0.0
         reason = "" if ok else f"innovation gate: NIS {nis:.1f} > {self.gate_nis_2d:.1f}"
         return UpdateResult(ok, (float(innov[0]), float(innov[1])), nis, moved, sig_before, reason)
@@ -268,6 +269,13 @@ class KubrakKf:
         P = self.P
         return sigma_max_m((P[0, 0], P[0, 1], P[1, 1]))
 
+    def align_heading(self, offset_rad: float, sd_rad: float) -> None:
+        """Coarse alignment: the heading error set from GPS courses (its correlations dropped, as a new start)."""
+        self.x[DPSI] = wrap_angle(float(offset_rad))
+        self.P[DPSI, :] = 0.0
+        self.P[:, DPSI] = 0.0
+        self.P[DPSI, DPSI] = sd_rad ** 2
+
 
 class KubrakFusion(FixFusion):
     """The real-time GPS/PNS fusion of Kubrak et al. (2006) as a streaming stage (see the module docstring).
@@ -298,6 +306,11 @@ class KubrakFusion(FixFusion):
     unreliable_hold_s : float
         How long GPS stays unreliable after the test fired (s), extended while the shadow filter's
         coefficients keep varying.
+    align_fixes, align_min_speed_m_s, align_max_sd_rad : int, float, float
+        Coarse heading alignment before the filter learns: the heading error is set to the circular mean of
+        (GPS course - PDR heading) over ``align_fixes`` fixes of a receiver moving at least this fast, once
+        their circular SD is below ``align_max_sd_rad`` (or after four times as many); until then fixes
+        move the position only and the GPS velocity is not used.
     relock_s, relock_max_drift : float
         As :class:`core.gnss.base.FixFusion`'s, stricter than Chen's defaults (8 s, no drift limit):
         a minute-long multipath offset must not be taken for the track's own error.
@@ -313,6 +326,7 @@ class KubrakFusion(FixFusion):
                  variability_window_s: float = 20.0, max_speed_change_m_s: float = 0.04,
                  variability_gate: float = CHI2_999[1], mean_window_s: float = 60.0,
                  unreliable_hold_s: float = 30.0, relock_s: float = 20.0, relock_max_drift: float | None = 0.15,
+                 align_fixes: int = 5, align_min_speed_m_s: float = 0.8, align_max_sd_rad: float = math.radians(20.0),
                  **shared):
         super().__init__(relock_s=relock_s, relock_max_drift=relock_max_drift, **shared)
         if kf is None and velocity_model is not None:
@@ -327,6 +341,9 @@ class KubrakFusion(FixFusion):
         self.variability_gate = float(variability_gate)
         self.mean_window_ns = int(mean_window_s * 1e9)
         self.unreliable_hold_ns = int(unreliable_hold_s * 1e9)
+        self.align_fixes = int(align_fixes)
+        self.align_min_speed_m_s = float(align_min_speed_m_s)
+        self.align_max_sd_rad = float(align_max_sd_rad)
         self.reset()
 
     def _reset_filter(self) -> None:
@@ -344,6 +361,9 @@ class KubrakFusion(FixFusion):
         self.variability_events: list[dict] = []  #: when, how much, what the coefficients became
         self._last_walked = 0.0
         self._last_verdict = ""
+        #: coarse heading alignment: (course - PDR heading) of moving fixes until it is done
+        self.aligned = False
+        self._align: list[float] = []
 
     @property
     def filt(self) -> KubrakKf:
@@ -386,7 +406,27 @@ class KubrakFusion(FixFusion):
         return self.kf.fix_prediction(t_ns)[0]
 
     def _update_position(self, t_ns: int, east: float, north: float, sigma_m: float, gate: bool) -> UpdateResult:
-        return self.kf.update_position(t_ns, east, north, sigma_m, gate=gate)
+        # before the coarse alignment the heading error may be anything: fixes move the position only
+        frozen = () if self.aligned else (DV, DPSI, A, B, C)
+        return self.kf.update_position(t_ns, east, north, sigma_m, gate=gate, frozen=frozen)
+
+    def _try_align(self, speed: float, course: float) -> None:
+        """Coarse alignment from the GPS course of a walking receiver: the phone's yaw offset (a pocket, a bag,
+        the back of an upright phone) may be anything, far beyond what the EKF's linearisation can learn."""
+        kf = self.kf
+        if not (math.isfinite(course) and speed >= self.align_min_speed_m_s and math.isfinite(kf.psi_pdr)):
+            return
+        self._align.append(wrap_angle(heading_from_bearing_deg(course) - kf.psi_pdr))
+        if len(self._align) < self.align_fixes:
+            return
+        a = np.array(self._align[-2 * self.align_fixes:])
+        r = math.hypot(float(np.mean(np.cos(a))), float(np.mean(np.sin(a))))
+        sd = math.sqrt(-2.0 * math.log(max(min(r, 1.0), 1e-12)))
+        if sd > self.align_max_sd_rad and len(self._align) < 4 * self.align_fixes:
+            return  # turning: wait for a steadier stretch (or take what there is after 4 times as many)
+        kf.align_heading(math.atan2(float(np.mean(np.sin(a))), float(np.mean(np.cos(a)))),
+                         max(sd / math.sqrt(len(a)) * 3.0, kf.heading_bias_sd_rad / 3.0))
+        self.aligned = True
 
     def _filter_verdict(self, t_ns: int) -> str:
         """GPS declared unreliable by the coefficient test: the shadow filter takes the fix instead."""
@@ -402,6 +442,9 @@ class KubrakFusion(FixFusion):
 
     def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
         kf = self.kf
+        if not self.aligned:
+            self._try_align(speed, course)
+            return
         if self.use_velocity and math.isfinite(speed) and self.anchor is not None and self.anchor[0] != t_ns:
             c = heading_from_bearing_deg(course) if speed >= self.velocity_min_speed_m_s and math.isfinite(course) \
                 else math.nan
@@ -427,8 +470,15 @@ class KubrakFusion(FixFusion):
         return np.mean(np.array([r for _, r in self._reg_hist]), axis=0)
 
     def _variability(self, hist: deque, t_ns: int, ref: np.ndarray, kf: KubrakKf) -> tuple[float, float]:
-        """(change of the predicted speed over the window (m/s), its chi-square against what the filter expected)."""
+        """(change of the predicted speed over the window (m/s), its chi-square against what the filter expected).
+
+        (0, 0) until the history reaches half a minute (``mean_window_s / 2``) before the window: the first
+        learning after a start (or after a revert) is the coefficients' legitimate convergence, and there
+        would be nothing to revert to.
+        """
         limit = t_ns - self.variability_window_ns
+        if not hist or hist[0][0] > limit - self.mean_window_ns // 2:
+            return 0.0, 0.0
         old = None
         for h in hist:
             if h[0] >= limit:
