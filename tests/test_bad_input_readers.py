@@ -102,6 +102,20 @@ def test_last_line_cut_inside_a_number_is_dropped_not_read_as_another_number():
     assert len(g.streams["acc"]) == 50 and not np.any(g.streams["acc"].values == 2.586)
 
 
+def test_sensorlogger_last_line_cut_inside_a_number_is_dropped_phyphox_keeps_its_unterminated_last_line(tmp_path):
+    # Sensor Logger ends every line with a newline: one without it was cut, maybe inside its last number
+    def cut(lines):
+        lines[-2] = lines[-2][:-6] + "2.586e-0"  # "...,-0.003" of the last row cut as if mid-write
+        del lines[-1]  # no newline after it
+
+    with pytest.warns(DamagedFileWarning, match=r"Gyroscope.csv: dropped an incomplete last line 301 \(no newline"):
+        rec = load_recording(_export(tmp_path, "sensorlogger", "Gyroscope.csv", cut))
+    assert len(rec.streams["gyro"]) == 299 and not np.any(rec.streams["gyro"].values == 2.586)
+    # phyphox writes no newline after its last row (the real exports of ../shared/data): a whole row is kept
+    rec = _quiet(load_recording, _export(tmp_path / "p", "phyphox", "Gyroscope.csv", lambda lines: lines.pop()))
+    assert len(rec.streams["gyro"]) == 200 and not rec.repairs
+
+
 @pytest.mark.parametrize("bad", ["acc,1000000500000,0.1,zz,9.8", "acc,1000000500000,0.1,9.8",
                                  "acc,10000x0500000,0.1,0.2,9.8", "acx,1000000500000,0.1,0.2,9.8",
                                  "acc,99999999999999999999999,0.1,0.2,9.8"])

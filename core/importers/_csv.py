@@ -167,12 +167,16 @@ class Table:
     whitespace (no header).  Data lines are the non-blank lines after it;
     a last line that lacks its newline and has fewer fields than the header
     (a recording cut off mid-write) is dropped and reported in
-    :attr:`dropped_tail` (its line number).  ``dialect(header, first data
-    line) -> (delimiter, decimal_comma)`` may choose the dialect.
+    :attr:`dropped_tail` (its line number) -- with ``cut_tail`` any last
+    line without its newline is (for apps that end every line with one: it
+    may be cut inside its last number).  ``dialect(header, first data line)
+    -> (delimiter, decimal_comma)`` may choose the dialect.
     """
 
-    def __init__(self, text, where: str, delimiter: str = ",", decimal_comma: bool = False, dialect=None):
+    def __init__(self, text, where: str, delimiter: str = ",", decimal_comma: bool = False, dialect=None,
+                 cut_tail: bool = False):
         self.where = where
+        self.cut_tail = cut_tail
         self._text = text
         self._it = iter(text)
         self.dropped_tail: int | None = None
@@ -234,7 +238,7 @@ class Table:
         yield from self._it
         tail = self._text.tail
         if tail and tail.strip() and self._text.tail_line > 1:
-            if tail.count(self.delimiter) + 1 < len(self.header):
+            if self.cut_tail or tail.count(self.delimiter) + 1 < len(self.header):
                 self.dropped_tail = self._text.tail_line
             else:
                 yield self._text.tail_line, [tail]

@@ -188,7 +188,8 @@ class _Sensor:
     def __init__(self, fs: FileSet, name: str, base: str, repairs: list[str], warn: bool):
         self.where = fs.where(name)
         with fs.text(name) as text:
-            table = Table(text, self.where)
+            # the app ends every line with a newline: a last line without one was cut, maybe inside a number
+            table = Table(text, self.where, cut_tail=True)
             self.table = None if table.blank else table  # the app leaves a 0-byte file for a sensor without data
             self.empty = table.blank
             if self.empty:
@@ -293,7 +294,10 @@ def _read(fs: FileSet, source: str, platform_arg: str | None, warn: bool) -> Rec
         if base in files and base != "metadata":
             s = _Sensor(fs, files[base], base, repairs, warn)
             if s.table is not None and s.table.dropped_tail:
-                repairs.append(f"{s.where}: dropped an incomplete last line {s.table.dropped_tail}")
+                repairs.append(f"{s.where}: dropped an incomplete last line {s.table.dropped_tail} (no newline: "
+                               "the recording was cut off mid-write; its last number may be cut short)")
+                if warn:
+                    warnings.warn(repairs[-1], DamagedFileWarning, stacklevel=3)
             if not s.empty:
                 sensors[base] = s
     for r in fs.repairs:  # gzip members cut part-way
