@@ -41,6 +41,14 @@ line.  Timestamps that go backwards or repeat
 within a stream (real phones do this) are repaired: events are sorted by
 time and exact repeats dropped, with a :class:`TimestampRepairWarning` and a
 line in :attr:`Recording.repairs` saying how many.
+
+Readers stream (this one and :mod:`core.importers`): a file is read a chunk
+of lines at a time (:class:`ByteChunks`, :class:`TextLines`) into growing
+arrays, so memory holds the recording (8 bytes a timestamp and a value) and
+little more, never the file's text; a gzip stream or archive member that
+inflates beyond :data:`MAX_UNCOMPRESSED_BYTES` (2 GiB) is refused while it
+is read.  The writers refuse a header the reader would refuse
+(:func:`header_line`).
 """
 
 from __future__ import annotations
@@ -122,11 +130,16 @@ class RecordingError(ValueError):
     def __init__(self, message: str, path: str | None = None, line: int | None = None):
         self.path = path
         self.line = line
-        self.message = message
+        self.message = _one_line(message)
         where = ""
         if path is not None:
             where = f"{path}:{line}: " if line is not None else f"{path}: "
-        super().__init__(where + message)
+        super().__init__(_one_line(where) + self.message)
+
+
+def _one_line(text: str) -> str:
+    """``text`` on one line whatever the file held (a quoted CSV field, a file name, may hold a newline)."""
+    return str(text).replace("\r", "\\r").replace("\n", "\\n")
 
 
 class MissingSensorError(RecordingError):

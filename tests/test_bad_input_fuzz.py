@@ -467,3 +467,14 @@ def test_found_a_sensorlogger_export_whose_sensor_files_are_all_empty_is_a_recor
     path = _write(str(tmp_path), files, "zip")
     with pytest.raises(RecordingError, match=r"no usable sensor data \(all Sensor Logger files empty\?\)"):
         read_sensorlogger(path)  # was: ValueError: min() arg is an empty sequence
+
+
+def test_found_an_error_message_is_one_line_whatever_the_file_held(tmp_path):
+    files = {"Raw Data.csv": b'"Time (s)","Acceleration x (m/s^2)","Acceleration y (m/s^2)","Acceleration z (m/s^2)"\n'
+                             b"2.000000000E-3,0.000000000E0,0.000000000E0,9.000000000E0\n",
+             "meta/time.csv": b'"\n"\n'}  # a quoted field holding a newline where the header belongs
+    path = _write(str(tmp_path), files, "zip")
+    with pytest.raises(RecordingError) as e:
+        read_phyphox(path)
+    assert str(e.value) == f"{path}/meta/time.csv:1: meta/time.csv: expected columns event, experiment time, " \
+                           "system time; found \\n"
