@@ -102,7 +102,7 @@ def test_velocity_stride_is_a_shipped_stride_model():
 @pytest.mark.parametrize("psi", [-2.5, 0.0, 1.2, 3.0])
 def test_kf_jacobians_match_finite_differences(psi):
     reg = np.array([9.9, 1.9, 1.4])
-    x = np.array([3.0, -4.0, 0.05, 0.1, 0.02, 0.4, 0.15])
+    x = np.array([3.0, -4.0, 0.05, 0.1, 0.02, 0.4, 0.15, 1.5, -2.0])
     for dt in (0.0, 0.5, 1.3):
         J = KubrakKf.move_jacobian(x, reg, psi, dt)
         np.testing.assert_allclose(J, _num_jac(lambda v: KubrakKf.move(v, reg, psi, dt), x), atol=1e-7)

@@ -15,9 +15,10 @@ The loosely coupled Kalman filter of the paper's Figure 8 (:class:`KubrakKf`)
 has seven states: the position errors ``dN, dE``, the velocity error ``dv``,
 the heading error ``dpsi`` and the regression coefficients' errors ``dA, dB,
 dC``.  It is written here on the total state (closed-loop error-state, the
-same filter)::
+same filter), with two more states the paper does not have, the correlated
+part of the GPS position error (``bE, bN``: see ``KubrakKf``'s ``fix_bias_sd_m``)::
 
-    x = [E, N, dv, dpsi, A, B, C]
+    x = [E, N, dv, dpsi, A, B, C, bE, bN]
     v   = A MEAN + B FREQ + C STD + dv        (eq. 1 plus what it does not explain)
     psi = psi_pdr + dpsi                     (the pipeline's step heading, corrected)
 
@@ -72,13 +73,13 @@ from core.gnss.ekf import CHI2_999, UpdateResult, kalman_update, sigma_max_m
 from core.pdr.velocity import VelocityModel, step_regressors
 
 #: state indices
-E, N, DV, DPSI, A, B, C = range(7)
-NX = 7
+E, N, DV, DPSI, A, B, C, BE, BN = range(9)
+NX = 9
 COEF = slice(A, C + 1)
 
 
 class KubrakKf:
-    """The 7-state filter of Kubrak et al. (2006), Fig. 8 (see the module docstring).
+    """The 7-state filter of Kubrak et al. (2006), Fig. 8, plus a GPS bias (see the module docstring).
 
     Parameters
     ----------
@@ -98,6 +99,13 @@ class KubrakKf:
         White noise of an epoch's speed (m/s).
     gate_nis_2d, gate_nis_1d : float
         Chi-square gates of 2-D (position, velocity) and 1-D (speed) updates.
+    fix_bias_sd_m, fix_bias_tau_s : float
+        The GPS position error that is not white: a first-order Gauss-Markov bias per axis (SD m,
+        correlation time s), two states beyond the paper's seven.  The paper's filter takes each fix's
+        error as independent; a phone's is correlated over a minute or more (multipath, geometry; the
+        IPIN museum's indoor fixes are 5-20 m off in the same direction for minutes), and a filter
+        that averages them believes it knows the position to a metre while it is 10 m off.  0 gives
+        the paper's filter.
     """
 
     def __init__(self, model: VelocityModel | None = None, *, dv_sd_m_s: float = 0.1, dv_tau_s: float = 10.0,
@@ -105,7 +113,7 @@ class KubrakKf:
                  heading_bias_walk_rad_sqrt_s: float = math.radians(0.3),
                  coef_walk_sqrt_s: tuple = (1e-4, 1e-3, 1e-3), step_heading_sd_rad: float = math.radians(3.0),
                  step_speed_sd_m_s: float = 0.05, gate_nis_2d: float = CHI2_999[2],
-                 gate_nis_1d: float = CHI2_999[1]):
+                 gate_nis_1d: float = CHI2_999[1], fix_bias_sd_m: float = 3.0, fix_bias_tau_s: float = 60.0):
         self.model = model or VelocityModel.load()
         self.dv_sd_m_s = float(dv_sd_m_s)
         self.dv_tau_s = float(dv_tau_s)
@@ -116,6 +124,8 @@ class KubrakKf:
         self.step_speed_sd_m_s = float(step_speed_sd_m_s)
         self.gate_nis_2d = float(gate_nis_2d)
         self.gate_nis_1d = float(gate_nis_1d)
+        self.fix_bias_sd_m = float(fix_bias_sd_m)
+        self.fix_bias_tau_s = float(fix_bias_tau_s)
         self.reset()
 
     def reset(self) -> None:
@@ -131,9 +141,9 @@ class KubrakKf:
         if not all(math.isfinite(v) for v in (east_m, north_m, pos_sd_m)):
             raise ValueError(f"KubrakKf.initialize needs finite values, got {(east_m, north_m, pos_sd_m)}")
         m = self.model
-        self.x = np.array([east_m, north_m, 0.0, 0.0, m.a_s, m.b_m, m.c_s])
+        self.x = np.array([east_m, north_m, 0.0, 0.0, m.a_s, m.b_m, m.c_s, 0.0, 0.0])
         self.P = np.diag([pos_sd_m ** 2, pos_sd_m ** 2, self.dv_sd_m_s ** 2, self.heading_bias_sd_rad ** 2,
-                          *np.square(m.sd)])
+                          *np.square(m.sd), self.fix_bias_sd_m ** 2, self.fix_bias_sd_m ** 2])
         self.initialized = True
 
     # -- the model ------------------------------------------------------------------
@@ -185,6 +195,12 @@ class KubrakKf:
         Q[DV, DV] = self.dv_sd_m_s ** 2 * (1.0 - a * a)
         Q[DPSI, DPSI] = self.heading_bias_walk_rad_sqrt_s ** 2 * dt_s
         Q[COEF, COEF] = np.diag(np.square(self.coef_walk_sqrt_s) * dt_s)
+        if self.fix_bias_sd_m > 0:
+            ab = math.exp(-dt_s / self.fix_bias_tau_s)
+            F[BE, BE] = F[BN, BN] = ab
+            x[BE] *= ab
+            x[BN] *= ab
+            Q[BE, BE] = Q[BN, BN] = self.fix_bias_sd_m ** 2 * (1.0 - ab * ab)
         # the epoch's own white speed and heading noise, mapped into the position
         v = self.speed(self.x, reg)
         psi = psi_pdr + self.x[DPSI]
@@ -207,14 +223,18 @@ class KubrakKf:
         return since if 0.0 <= since <= max_s else 0.0
 
     def fix_prediction(self, t_ns: int, max_s: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
-        """``h(x)`` of a position fix at ``t_ns`` and its Jacobian: the last epoch moved on to the fix."""
+        """``h(x)`` of a position fix at ``t_ns`` and its Jacobian: the last epoch moved on to the fix, plus
+        the fix's correlated error (the bias states)."""
         tau = self._since_s(t_ns, max_s)
         if tau == 0.0:
             H = np.zeros((2, NX))
             H[0, E] = H[1, N] = 1.0
-            return self.x[:2].copy(), H
-        return self.move(self.x, self.reg, self.psi_pdr, tau)[:2], self.move_jacobian(self.x, self.reg,
-                                                                                      self.psi_pdr, tau)[:2]
+            pos = self.x[:2].copy()
+        else:
+            pos = self.move(self.x, self.reg, self.psi_pdr, tau)[:2]
+            H = self.move_jacobian(self.x, self.reg, self.psi_pdr, tau)[:2]
+        H[0, BE] = H[1, BN] = 1.0
+        return pos + self.x[BE:BN + 1], H
 
     def update_position(self, t_ns: int, east_m: float, north_m: float, sigma_m: float, *,
                         gate: bool = True, frozen=()) -> UpdateResult:
@@ -309,8 +329,9 @@ class KubrakFusion(FixFusion):
     align_fixes, align_min_speed_m_s, align_max_sd_rad : int, float, float
         Coarse heading alignment before the filter learns: the heading error is set to the circular mean of
         (GPS course - PDR heading) over ``align_fixes`` fixes of a receiver moving at least this fast, once
-        their circular SD is below ``align_max_sd_rad`` (or after four times as many); until then fixes
-        move the position only and the GPS velocity is not used.
+        their circular SD (over the last ``2 align_fixes``) is below ``align_max_sd_rad``; until then fixes
+        move the position only and the GPS velocity is not used (courses that scatter, as indoors, are
+        never taken for the phone's offset).
     relock_s, relock_max_drift : float
         As :class:`core.gnss.base.FixFusion`'s, stricter than Chen's defaults (8 s, no drift limit):
         a minute-long multipath offset must not be taken for the track's own error.
@@ -422,8 +443,8 @@ class KubrakFusion(FixFusion):
         a = np.array(self._align[-2 * self.align_fixes:])
         r = math.hypot(float(np.mean(np.cos(a))), float(np.mean(np.sin(a))))
         sd = math.sqrt(-2.0 * math.log(max(min(r, 1.0), 1e-12)))
-        if sd > self.align_max_sd_rad and len(self._align) < 4 * self.align_fixes:
-            return  # turning: wait for a steadier stretch (or take what there is after 4 times as many)
+        if sd > self.align_max_sd_rad:
+            return  # turning, or courses that scatter (indoors): wait for a steadier stretch, never guess
         kf.align_heading(math.atan2(float(np.mean(np.sin(a))), float(np.mean(np.cos(a)))),
                          max(sd / math.sqrt(len(a)) * 3.0, kf.heading_bias_sd_rad / 3.0))
         self.aligned = True
