@@ -89,6 +89,9 @@ def main(argv=None) -> int:
     rows = run(args.data, progress=lambda m: print(m, file=sys.stderr))
     md = markdown(rows)
     RESULTS_MD.write_text(md, encoding="utf-8")
+    from benchmarks.report import refresh_sections
+
+    refresh_sections()
     print(md)
     return 0 if all(math.isfinite(x["velocity_pct"]) for x in rows) else 1
 

@@ -418,7 +418,7 @@ def gps_run():
     """The GPS walk, its batch run with the fusion, and the session's replay of it."""
     w = gps_walk()
     batch = Pipeline(**Settings().pipeline_kwargs(), gnss=GpsFusion()).run(w.recording)
-    ses = replay_session(w.recording, Settings().pipeline_factory())
+    ses = replay_session(w.recording, Settings(gps_fusion="chen").pipeline_factory())  # Chen's: it trains the profile
     return w, batch, ses
 
 
@@ -427,7 +427,9 @@ def test_use_gps_setting_builds_a_fresh_fusion_per_pipeline():
     assert s.use_gps is True  # on by default
     make = s.pipeline_factory()
     a, b = make(), make()
-    assert isinstance(a.gnss, GpsFusion) and isinstance(b.gnss, GpsFusion) and a.gnss is not b.gnss
+    from core.gnss import AUTO_FUSION
+
+    assert a.gnss.name == b.gnss.name == AUTO_FUSION and a.gnss is not b.gnss
     s.use_gps = False
     assert make().gnss is not None  # a factory keeps the settings it was made with ...
     assert s.pipeline_factory()().gnss is None  # ... a new one takes the change
@@ -569,7 +571,7 @@ def test_overlay_meshes_runs_and_status():
 
 def test_a_live_walk_with_gps_teaches_the_profile_and_the_next_track_starts_from_it(gps_run, tmp_path):
     _, _, ses = gps_run
-    s = Settings()
+    s = Settings(gps_fusion="chen")
     trainer = ses.pipeline.gnss.trainer
     learnt = s.learn_from_gps(ses.pipeline)
     assert learnt == (trainer.stride_gps_distance_m >= 100.0 or trainer.n_heading_samples >= 4)

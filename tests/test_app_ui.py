@@ -488,7 +488,7 @@ def test_track_view_draws_the_gps_layer(gps_file):
     from app.overlay import runs
 
     w, _ = gps_file
-    ses = replay_session(w.recording, Settings().pipeline_factory())
+    ses = replay_session(w.recording, Settings(gps_fusion="chen").pipeline_factory())
     g = ses.gps_overlay()
     EventLoop.ensure_window()
     tv = T.TrackView(size=(480, 640), pos=(0, 0), size_hint=(None, None))
@@ -588,11 +588,13 @@ def squares(tv, key):
 
 
 def test_app_replay_with_gps_shows_fused_track_and_fixes(gps_file, tmp_path):
-    """The app with its default settings (Use GPS on) replays the GPS walk: its fused track is the batch
-    fusion's, and the screenshot shows it gold where fused and violet through the gap, and the fixes off the
-    track as light squares (rejected ones red)."""
+    """The app (Use GPS on, Chen's filter: the pixel checks below were written for its track) replays the GPS
+    walk: its fused track is the batch fusion's, and the screenshot shows it gold where fused and violet
+    through the gap, and the fixes off the track as light squares (rejected ones red)."""
     w, path = gps_file
     shot, report = tmp_path / "shot.png", tmp_path / "report.json"
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "settings.json").write_text(json.dumps({"gps_fusion": "chen"}))
     r = _run(["-m", "app", str(path), "--speed", "max", "--headless", "--exit-at-end", "--size",
               f"{SIZE[0]}x{SIZE[1]}", "--screenshot", str(shot), "--report", str(report),
               "--data-dir", str(tmp_path / "data"), "--out", str(tmp_path / "out")])
