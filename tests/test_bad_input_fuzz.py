@@ -105,8 +105,8 @@ def _write(root: str, files: dict[str, bytes], container: str) -> str:
     if container == "zip":
         path = os.path.join(root, "export.zip")
         with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
-            for name, data in files.items():
-                z.writestr(name, data)
+            for name, data in files.items():  # a fixed date: the same bytes every time (hypothesis replays)
+                z.writestr(zipfile.ZipInfo(name, date_time=(2024, 1, 1, 0, 0, 0)), data, zipfile.ZIP_DEFLATED)
         return path
     if container == "file":
         (name, data), = files.items()
@@ -124,7 +124,9 @@ def _write(root: str, files: dict[str, bytes], container: str) -> str:
 
 
 def _gz(files: dict[str, bytes], names) -> dict[str, bytes]:
-    return {(n + ".gz" if n in names else n): (gzip.compress(d, 6) if n in names else d) for n, d in files.items()}
+    """``files`` with the members ``names`` gzip-compressed (``name.gz``; no time stamp: the same bytes every time)."""
+    return {(n + ".gz" if n in names else n): (gzip.compress(d, 6, mtime=0) if n in names else d)
+            for n, d in files.items()}
 
 
 def _steps(draw, n: int, lo: int, hi: int) -> np.ndarray:
@@ -407,7 +409,7 @@ def _corrupt(draw, files: dict[str, bytes], container: str) -> tuple[dict[str, b
     out = {}
     for name, data in raw.items():
         if name in gz:
-            comp = gzip.compress(data, 6)
+            comp = gzip.compress(data, 6, mtime=0)
             if draw(st.booleans()):
                 comp = _damage(draw, comp)
             out[name + ".gz"] = comp
