@@ -146,7 +146,8 @@ def test_writers_refuse_a_header_the_reader_refuses_and_write_nothing(tmp_path, 
 
 _json = st.recursive(st.none() | st.booleans() | st.integers(-2**70, 2**70) | st.floats(allow_nan=False, width=64)
                      | st.text(max_size=4),
-                     lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=3), inner, max_size=3),
+                     lambda inner: (st.lists(inner, max_size=3)
+                                    | st.dictionaries(st.text(max_size=3), inner, max_size=3)),
                      max_leaves=8)
 
 
