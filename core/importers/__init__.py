@@ -20,7 +20,11 @@ archive members), never by the file name alone.  Every reader raises
 :class:`core.recording.RecordingError` -- one line naming the file and, where
 it applies, the line -- for input it cannot read, and finishes with
 :func:`core.recording.repair_recording` (timestamps sorted, repeats dropped,
-with a :class:`core.recording.TimestampRepairWarning`).
+with a :class:`core.recording.TimestampRepairWarning`).  Every reader streams
+its files (memory holds the recording, not the text), skips and counts a
+few bad lines under one rule (:func:`core.recording.skip_bad_lines`), and
+refuses a gzip stream or zip member larger than
+:data:`core.recording.MAX_UNCOMPRESSED_BYTES` (``max_uncompressed_bytes=``).
 
 Every importer's ``gps`` stream has the six columns of
 :data:`core.recording.STREAM_SPECS` -- ``lat_deg, lon_deg, alt_m, hacc_m,

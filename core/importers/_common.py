@@ -1,4 +1,4 @@
-"""Shared helpers of the importers: file access, fast numeric parsing, attitude checks.
+"""Shared helpers of the importers: file access as streams of lines, size limits, time and attitude checks.
 
 Nothing here knows a particular app's format; the format modules call these
 helpers and keep every unit, axis and sign conversion in their own code.
@@ -236,18 +236,7 @@ class FileSet:
 
 
 # ---------------------------------------------------------------------------
-# fast numeric tables
-
-
-def first_bad_number(fields: list[str]) -> int | None:
-    """Index of the first field that ``float()`` rejects, or ``None``."""
-    for j, s in enumerate(fields):
-        try:
-            float(s)
-        except ValueError:
-            return j
-    return None
-
+# times in seconds
 
 #: largest time (s) that fits int64 nanoseconds with room to spare
 MAX_TIME_S = 9.0e9

@@ -18,7 +18,8 @@ order.  The records read here (field 0 is the tag)::
 Every other record type (WIFI, BLE4, LIGH, SOUN, PROX, ...) is counted in
 ``metadata["ignored_line_types"]``, not read.  Fields after the ones used
 (``Accuracy``, trailing ``;``) are ignored; fewer fields than needed, or a
-field that is not a number, is a :class:`RecordingError` naming the line.
+field that is not a number, is a bad line: skipped and counted, or, past 100
+or 1 % of the lines, a :class:`RecordingError` naming the first.
 
 Time base (established on the 32 IPIN 2023 logfiles of ``../shared/data``)
 =========================================================================

@@ -32,8 +32,9 @@ Data files
     ``Pressure (hPa)`` barometer.  "Absolute ..." columns are ignored.  Rows
     whose time or required values are empty or NaN (buffers of different
     lengths in one file, or NaN where phyphox had no value) are dropped; a
-    line with some but not all of a sensor's fields is a "missing fields"
-    :class:`RecordingError`.
+    line with some but not all of a sensor's fields ("missing fields"), or
+    a field that is not a number, is a bad line: skipped and counted, or,
+    past 100 or 1 % of the lines, a :class:`RecordingError` naming the first.
     The export's dialect can be comma-separated with decimal points (the
     default), tab-separated, or semicolon/tab-separated with decimal commas;
     it is recognised from the header and first data line.

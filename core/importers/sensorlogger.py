@@ -96,6 +96,12 @@ Cannot be converted (:class:`RecordingError`)
 A missing (or empty) Gyroscope.csv or Magnetometer.csv
     The uncalibrated file is used for ``gyro`` / ``mag``, with a line in
     ``repairs`` and a :class:`core.recording.SensorSubstitutedWarning`.
+Damaged files
+    A bad line (a field missing or not a number) is skipped and counted,
+    or, past 100 or 1 % of a file's lines, a :class:`RecordingError` naming
+    the first; a last line without its newline (the app ends every line
+    with one) was cut and is dropped; both with a
+    :class:`core.recording.DamagedFileWarning`.
 """
 
 from __future__ import annotations
