@@ -367,6 +367,8 @@ def cmd_replay(args) -> int:
         return cmd_replay_foot(args, rec, why)
     profile = _load_profile(args.profile) if getattr(args, "profile", None) else None
     gnss = build_gnss(args, rec, profile)
+    if getattr(args, "fixes", None) and gnss is None:  # before the run, not after it
+        raise ValueError("--fixes needs GPS fusion: the recording has no gps stream, or --gps off")
     pipeline = build_pipeline(args, gnss)
     prog = _Progress("replay", not args.no_progress, after_s=0.0 if args.progress else 2.0)
     res = pipeline.run(rec, progress=prog)
