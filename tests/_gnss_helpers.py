@@ -12,3 +12,16 @@ def truth_error(walk, fused_step) -> float:
     e, n = geodetic_to_enu(fused_step.lat_deg, fused_step.lon_deg, walk.truth.origin_lat_lon)
     p = walk.truth.phone_position_at(fused_step.t_ns)
     return math.hypot(e - p[0], n - p[1])
+
+
+def num_jac(f, x, eps=1e-6):
+    """Central finite-difference Jacobian of ``f`` at ``x`` (for checking the filters' analytic Jacobians)."""
+    import numpy as np
+
+    y0 = f(x)
+    J = np.zeros((len(y0), len(x)))
+    for i in range(len(x)):
+        d = np.zeros(len(x))
+        d[i] = eps
+        J[:, i] = (f(x + d) - f(x - d)) / (2 * eps)
+    return J

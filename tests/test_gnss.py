@@ -18,28 +18,18 @@ from core.gnss.training import (
 )
 from core.pdr.calibration import UserProfile
 from core.pdr.pipeline import Pipeline
-from tests._gnss_helpers import truth_error
+from tests._gnss_helpers import num_jac, truth_error
 
 
 # -- the EKF ---------------------------------------------------------------------------------------
-def _num_jac(f, x, eps=1e-6):
-    y0 = f(x)
-    J = np.zeros((len(y0), len(x)))
-    for i in range(len(x)):
-        d = np.zeros(len(x))
-        d[i] = eps
-        J[:, i] = (f(x + d) - f(x - d)) / (2 * eps)
-    return J
-
-
 @pytest.mark.parametrize("psi", [-2.5, -0.3, 0.0, 1.2, 3.0])
 def test_ekf_jacobians_match_finite_differences(psi):
     x = np.array([3.0, -4.0, 0.72, psi, 0.01, 0.02])
     J = PdrEkf.transition_jacobian(x[2], x[3])
-    np.testing.assert_allclose(J, _num_jac(PdrEkf.transition, x), atol=1e-7)
+    np.testing.assert_allclose(J, num_jac(PdrEkf.transition, x), atol=1e-7)
     for frac in (0.0, 0.4, 1.0):
         H = PdrEkf.fix_jacobian(x, frac)
-        np.testing.assert_allclose(H, _num_jac(lambda v, f=frac: PdrEkf.fix_prediction(v, f), x), atol=1e-7)
+        np.testing.assert_allclose(H, num_jac(lambda v, f=frac: PdrEkf.fix_prediction(v, f), x), atol=1e-7)
 
 
 def test_ekf_step_moves_along_enu_heading_and_refuses_nonfinite():

@@ -11,21 +11,11 @@ from core.conventions import GNSS_STATUS, bearing_deg
 from core.gnss import make_fusion
 from core.gnss.kubrak import DPSI, NX, KubrakFusion, KubrakKf
 from core.pdr.pipeline import Pipeline
-from tests._gnss_helpers import truth_error
+from tests._gnss_helpers import num_jac, truth_error
 from core.pdr.stride import StepFeatures
 from core.pdr.stride_models import load_stride_model
 from core.pdr.velocity import SpeedFeatureWindow, VelocityModel, VelocityStride, fit_velocity_model
 from core.recording import Stream, make_stream
-
-
-def _num_jac(f, x, eps=1e-6):
-    y0 = f(x)
-    J = np.zeros((len(y0), len(x)))
-    for i in range(len(x)):
-        d = np.zeros(len(x))
-        d[i] = eps
-        J[:, i] = (f(x + d) - f(x - d)) / (2 * eps)
-    return J
 
 
 # -- eq. 1: the features and the model ------------------------------------------------------------------
@@ -105,7 +95,7 @@ def test_kf_jacobians_match_finite_differences(psi):
     x = np.array([3.0, -4.0, 0.05, 0.1, 0.02, 0.4, 0.15, 1.5, -2.0])
     for dt in (0.0, 0.5, 1.3):
         J = KubrakKf.move_jacobian(x, reg, psi, dt)
-        np.testing.assert_allclose(J, _num_jac(lambda v: KubrakKf.move(v, reg, psi, dt), x), atol=1e-7)
+        np.testing.assert_allclose(J, num_jac(lambda v: KubrakKf.move(v, reg, psi, dt), x), atol=1e-7)
     kf = KubrakKf()
     kf.initialize(0.0, 0.0, 1.0)
     kf.x = x.copy()
@@ -116,7 +106,7 @@ def test_kf_jacobians_match_finite_differences(psi):
         return kf.velocity_prediction()[0]
 
     H = kf.velocity_prediction()[1]
-    np.testing.assert_allclose(H, _num_jac(vel, x.copy()), atol=1e-7)
+    np.testing.assert_allclose(H, num_jac(vel, x.copy()), atol=1e-7)
     kf.x = x.copy()
 
     def pos(v):
@@ -124,7 +114,7 @@ def test_kf_jacobians_match_finite_differences(psi):
         return kf.fix_prediction(int(0.7e9))[0]
 
     H = kf.fix_prediction(int(0.7e9))[1]
-    np.testing.assert_allclose(H, _num_jac(pos, x.copy()), atol=1e-7)
+    np.testing.assert_allclose(H, num_jac(pos, x.copy()), atol=1e-7)
 
 
 def test_kf_moves_along_the_enu_heading_and_refuses_nonfinite():
