@@ -210,6 +210,13 @@ def gsd_logs(draw):
     return (_gz(files, ["log.txt"]) if gz else files), "file", expected
 
 
+def _read_valid(workdir: str, files: dict[str, bytes], container: str, reader):
+    """A valid export, written and read: no error, nothing repaired."""
+    rec = _read(reader, _write(_fresh(workdir), files, container))
+    assert rec is not None and not rec.repairs
+    return rec
+
+
 def _check(rec, expected, tol: dict, rtol: float = 0.0):
     for name, (t, v) in expected.items():
         s = rec.streams[name]
@@ -222,9 +229,7 @@ def _check(rec, expected, tol: dict, rtol: float = 0.0):
 @given(log=gsd_logs())
 def test_valid_getsensordata_logs_round_trip(workdir, log):
     files, container, expected = log
-    path = _write(_fresh(workdir), files, container)
-    rec = _read(read_getsensordata, path)
-    assert rec is not None and not rec.repairs
+    rec = _read_valid(workdir, files, container, read_getsensordata)
     _check(rec, expected, GSD_TOL)
     # every time maps onto the sensor clock: the app offset is recovered exactly
     assert set(rec.streams) == set(expected)
@@ -276,9 +281,7 @@ def sensorlogger_exports(draw):
 @given(export=sensorlogger_exports())
 def test_valid_sensorlogger_exports_round_trip(workdir, export):
     files, container, (start, expected) = export
-    path = _write(_fresh(workdir), files, container)
-    rec = _read(read_sensorlogger, path)
-    assert rec is not None and not rec.repairs
+    rec = _read_valid(workdir, files, container, read_sensorlogger)
     offset = rec.metadata["unix_offset_ns"]  # the recording's start (time - seconds_elapsed), to a few ns
     assert abs(offset - start) <= 2
     _check(rec, {n: (t + start - offset, v) for n, (t, v) in expected.items()}, {})
@@ -344,10 +347,7 @@ def phyphox_exports(draw):
 @given(export=phyphox_exports())
 def test_valid_phyphox_exports_round_trip(workdir, export):
     files, container, expected = export
-    path = _write(_fresh(workdir), files, container)
-    rec = _read(read_phyphox, path)
-    assert rec is not None and not rec.repairs
-    _check(rec, expected, {}, rtol=PHY_RTOL)
+    _check(_read_valid(workdir, files, container, read_phyphox), expected, {}, rtol=PHY_RTOL)
 
 
 # ---------------------------------------------------------------------------
