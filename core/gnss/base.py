@@ -294,6 +294,10 @@ class FixFusion:
         """Why the filter will not use a screened fix now ("" to go on)."""
         return ""
 
+    def _filter_rejected(self, t_ns: int, east: float, north: float, sigma_m: float, speed: float,
+                         course: float) -> None:
+        """A fix :meth:`_filter_verdict` turned away (local ENU, its per-axis SD): a subclass may still look at it."""
+
     def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
         """An accepted fix's further use (course, velocity, training)."""
 
@@ -432,6 +436,7 @@ class FixFusion:
         if reason:
             self.n_filter_rejected += 1
             self._record(t_ns, v, east, north, False, reason)
+            self._filter_rejected(t_ns, east, north, sigma, speed, course)
             return
         res = self._update_position(t_ns, east, north, sigma, True)
         if not res.accepted and self._relock(t_ns, res.innovation, sigma):

@@ -68,7 +68,7 @@ from collections import deque
 import numpy as np
 
 from core.conventions import heading_from_bearing_deg, wrap_angle
-from core.gnss.base import HACC_PER_SIGMA, FixFusion
+from core.gnss.base import FixFusion
 from core.gnss.ekf import CHI2_999, UpdateResult, kalman_update, sigma_max_m
 from core.pdr.velocity import VelocityModel, step_regressors
 
@@ -477,13 +477,6 @@ class KubrakFusion(FixFusion):
         if self.detect_variability:
             self._check_variability(t_ns)
 
-    def _fix(self, t_ns: int, v: tuple) -> None:
-        super()._fix(t_ns, v)
-        rec = self.fixes[-1] if self.fixes else None
-        if self.shadow is not None and rec is not None and rec.t_ns == t_ns and rec.reason == self._last_verdict \
-                and rec.reason:
-            self._shadow_fix(t_ns, rec)
-
     # -- the coefficient test --------------------------------------------------------------------
     def _reference_regressors(self) -> np.ndarray | None:
         if not self._reg_hist:
@@ -555,18 +548,19 @@ class KubrakFusion(FixFusion):
         self._shadow_hist.clear()
         self._record_coef(self._shadow_hist, t_ns, self.shadow)
 
-    def _shadow_fix(self, t_ns: int, rec) -> None:
+    def _filter_rejected(self, t_ns: int, east: float, north: float, sigma_m: float, speed: float,
+                         course: float) -> None:
         """While GPS is unreliable the shadow filter takes the fixes; if its coefficients vary too, the hold goes on."""
         sh = self.shadow
-        sigma = max((rec.hacc_m if rec.hacc_m > 0 else self.default_hacc_m) * self.hacc_scale / HACC_PER_SIGMA,
-                    self.min_sigma_m)
-        if not sh.update_position(t_ns, rec.east_m, rec.north_m, sigma).accepted:
+        if sh is None:
+            return
+        if not sh.update_position(t_ns, east, north, sigma_m).accepted:
             self.unreliable_until_ns = max(self.unreliable_until_ns, t_ns + self.unreliable_hold_ns // 2)
             return
-        if self.use_velocity and math.isfinite(rec.speed_m_s):
-            c = heading_from_bearing_deg(rec.course_deg) if rec.speed_m_s >= self.velocity_min_speed_m_s and \
-                math.isfinite(rec.course_deg) else math.nan
-            sh.update_velocity(rec.speed_m_s, c, self.velocity_sd_m_s)
+        if self.use_velocity and math.isfinite(speed):
+            c = heading_from_bearing_deg(course) if speed >= self.velocity_min_speed_m_s and math.isfinite(course) \
+                else math.nan
+            sh.update_velocity(speed, c, self.velocity_sd_m_s)
         self._record_coef(self._shadow_hist, t_ns, sh)
         ref = self._reference_regressors()
         if ref is None:
