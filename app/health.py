@@ -139,13 +139,17 @@ class HealthMonitor:
             rows.append(s)
         return rows
 
-    def format(self, queue_drops: dict | None = None, accuracy: dict | None = None) -> str:
-        """The health panel as monospace text."""
-        lines = [f"{'sensor':<7}{'rate Hz':>9}{'jitter ms':>11}{'dropped':>9}{'gaps':>6}{'order':>7}  accuracy"]
-        for s in self.snapshot(queue_drops, accuracy):
+    def format(self, queue_drops: dict | None = None, accuracy: dict | None = None, mag_line: bool = True) -> str:
+        """The health panel as monospace text (``mag_line``: end with whether the magnetometer is trusted)."""
+        rows = self.snapshot(queue_drops, accuracy)
+        w = max([7] + [len(s.stream) + 1 for s in rows])  # other devices' streams: "acc@left_foot"
+        lines = [f"{'sensor':<{w}}{'rate Hz':>9}{'jitter ms':>11}{'dropped':>9}{'gaps':>6}{'order':>7}  accuracy"]
+        for s in rows:
             jit = f"{s.jitter_ms:.2f}" if math.isfinite(s.jitter_ms) else "-"
-            lines.append(f"{s.stream:<7}{s.rate_hz:>9.1f}{jit:>11}{s.dropped:>9d}{s.gaps:>6d}"
+            lines.append(f"{s.stream:<{w}}{s.rate_hz:>9.1f}{jit:>11}{s.dropped:>9d}{s.gaps:>6d}"
                          f"{s.out_of_order:>7d}  {s.accuracy or '-'}")
+        if not mag_line:
+            return "\n".join(lines)
         if self.mag_trusted is None:
             trust = "unknown"
         else:

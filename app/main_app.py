@@ -34,8 +34,8 @@ from core.pdr.stride_models import StrideModelError
 
 import app.track_view  # noqa: F401 - registers TrackView for the kv file
 from app.session import Session, export_session, load_any_recording
-from app.settings import RATE_CHOICES, SETTINGS_FILE, STRIDE_MODEL_CHOICES, Settings
-from app.sources import REPLAY_SPEEDS, ReplaySource, SensorStartError, make_live_source
+from app.settings import RATE_CHOICES, SETTINGS_FILE, STRIDE_MODEL_CHOICES, TRACKING_MODES, Settings
+from app.sources import REPLAY_SPEEDS, SensorStartError, make_live_source, replay_source_for
 from app.storage import is_android, new_recording_path, output_dir
 
 KV_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "layout.kv")
@@ -90,6 +90,12 @@ class PDRApp(App):
     use_gps = BooleanProperty(True)
     gps_fusion_text = StringProperty("auto")
     gps_fusion_choices = ListProperty(["auto", "chen", "kubrak"])
+    tracking_mode_text = StringProperty("auto")  # the setting: auto | handheld | foot
+    tracking_mode_choices = ListProperty(list(TRACKING_MODES))
+    tracking = StringProperty("handheld")  # what the session runs: handheld | foot
+    tracking_reason = StringProperty("")
+    steps_name = StringProperty("steps")  # "strides" in foot mode (one per stance of the foot)
+    _replay_recording = None  # the recording being replayed (a new track of it needs its tracking mode)
     stride_model_text = StringProperty("default")
     stride_model_choices = ListProperty(list(STRIDE_MODEL_CHOICES))
     c_text = StringProperty("")
@@ -170,6 +176,7 @@ class PDRApp(App):
         self.record_live = s.record_live
         self.use_gps = s.use_gps
         self.gps_fusion_text = s.gps_fusion
+        self.tracking_mode_text = s.tracking_mode
         self.stride_model_text = s.stride_model_name
         walks = s.calibration_walks()
         scale = s.profile.c_scale
@@ -178,7 +185,8 @@ class PDRApp(App):
                        f"step length x {scale:.3f} (older version)" if scale != 1.0 else "not calibrated")
 
     def save_settings(self, height_cm: str, rate: str, record_live: bool, stride_model: str | None = None,
-                      use_gps: bool | None = None, gps_fusion: str | None = None) -> None:
+                      use_gps: bool | None = None, gps_fusion: str | None = None,
+                      tracking_mode: str | None = None) -> None:
         s = self.settings
         try:
             height_m = float(height_cm) / 100.0 if height_cm.strip() else None
@@ -203,14 +211,20 @@ class PDRApp(App):
             s.use_gps = bool(use_gps)
         if gps_fusion is not None:
             s.gps_fusion = str(gps_fusion)
+        if tracking_mode is not None:
+            s.tracking_mode = str(tracking_mode)
         problems += s.validate()
         s.save(self.settings_path)
         self._settings_to_ui()
         self.settings_message = ("; ".join(problems) if problems else "saved") + \
             (" – applies to the next track" if self.session else "")
 
-    def _pipeline_factory(self):
-        return self.settings.pipeline_factory()
+    def _pipeline_factory(self, recording=None):
+        """The factory of the session's tracker, and the tracking mode shown (foot or hand-held, and why)."""
+        mode, why = self.settings.choose_tracking_mode(recording)
+        self.tracking, self.tracking_reason = mode, why
+        self.steps_name = "strides" if mode == "foot" else "steps"
+        return self.settings.pipeline_factory(recording)
 
     @property
     def track_view(self):
@@ -301,23 +315,26 @@ class PDRApp(App):
         self._update_ui(force=True)
 
     def open_recording(self, path: str) -> bool:
-        try:
+        try:  # the tracker first (foot or hand-held): a foot INS may read other devices' streams too
             rec = load_any_recording(path)
-            source = ReplaySource(rec, speed=REPLAY_SPEEDS[self.speed_label])
+            factory = self._pipeline_factory(rec)
+            source = replay_source_for(rec, factory, speed=REPLAY_SPEEDS[self.speed_label])
         except Exception as e:  # noqa: BLE001 - RecordingError, ValueError, OSError: show, don't crash
             self.warning = f"cannot replay {os.path.basename(path)}: {e}"
             return False
-        self._replace_session(Session(source, pipeline_factory=self._pipeline_factory()), "replay", path)
+        self._replay_recording = rec  # a new track of this replay needs it for the tracking mode
+        self._replace_session(Session(source, pipeline_factory=factory), "replay", path)
         if rec.repairs:
             self.warning = f"{len(rec.repairs)} repair(s) while reading: " + rec.repairs[0]
-        self.message = f"replaying {os.path.basename(path)} ({rec.duration_s:.0f} s)"
+        self.message = (f"replaying {os.path.basename(path)} ({rec.duration_s:.0f} s)"
+                        + (f", foot-mounted INS ({self.tracking_reason})" if self.tracking == "foot" else ""))
         self.session.start()
         self.playing = True
         return True
 
     def start_live(self) -> bool:
         try:
-            source = make_live_source(rate_hz=self.settings.rate_hz)
+            source = make_live_source(rate_hz=self.settings.live_rate_hz())
         except Exception as e:  # noqa: BLE001
             self.warning = f"no sensors: {e}"
             return False
@@ -327,6 +344,7 @@ class PDRApp(App):
                 path = new_recording_path(self.out_dir())
             except OSError as e:
                 self.warning = f"not recording: {e}"
+        self._replay_recording = None
         session = Session(source, pipeline_factory=self._pipeline_factory(), record_path=path,
                           metadata=self._recording_metadata())
         self._replace_session(session, "live", path)
@@ -342,7 +360,8 @@ class PDRApp(App):
 
         return {"app": f"pdr-app {__version__}", "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                 "height_m": s.height_m, "stride_model": s.stride_model_name, "c_scale": s.profile.c_scale,
-                "rate_hz": s.rate_hz, "use_gps": s.use_gps, "gps_fusion": s.gps_fusion_name()}
+                "rate_hz": s.live_rate_hz(), "use_gps": s.use_gps, "gps_fusion": s.gps_fusion_name(),
+                "tracking_mode": s.choose_tracking_mode(None)[0]}
 
     def toggle_recording(self):
         """Live: stop the running recording, or start a new one."""
@@ -422,7 +441,7 @@ class PDRApp(App):
         if not ses:
             return
         if self.mode == "replay":
-            ses.pipeline_factory = self._pipeline_factory()
+            ses.pipeline_factory = self._pipeline_factory(self._replay_recording)
             self.seek_start()
             return
         ses.pipeline_factory = self._pipeline_factory()
@@ -436,6 +455,10 @@ class PDRApp(App):
         ses = self.session
         if not ses:
             self.calib_message = "start a live session (or a replay) first"
+            return
+        if self.tracking == "foot":
+            self.calib_message = ("foot mode measures each stride directly (zero-velocity updates): there is no "
+                                  "step length to calibrate")
             return
         if not ses.calibrating:
             ses.start_calibration()
@@ -604,6 +627,7 @@ class PDRApp(App):
                # the view rectangle in window pixels (y up), metres -> pixels by scale and center
                "view": {"x": wx, "y": wy, "width": tv.width, "height": tv.height, "scale": vp.scale,
                         "center": list(vp.center), "follow": tv.follow},
+               "tracking": {"mode": self.tracking, "reason": self.tracking_reason, "steps_name": self.steps_name},
                "status": {"steps": self.steps_text, "distance": self.distance_text,
                           "heading": self.heading_text, "time": self.time_text},
                "warning": self.warning, "message": self.message, "exit_code": self.exit_code,

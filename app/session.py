@@ -127,7 +127,8 @@ class Session:
     ----------
     source : app.sources.SensorSource
     pipeline_factory : callable
-        ``() -> core.pdr.pipeline.Pipeline`` (called again on :meth:`reset_track`).
+        ``() -> core.pdr.pipeline.Pipeline`` or a :class:`core.foot.tracker.FootTracker` (the same
+        streaming interface; its steps are strides), called again on :meth:`reset_track`.
     record_path : str, optional
         Write every event (as delivered, before reordering) to this file.
     flush_interval_s : float
@@ -427,6 +428,12 @@ class Session:
         }
 
     def health_text(self) -> str:
+        """The health panel: the sensor table, then what the tracker adds (the foot INS: stance, NIS, aid, sd)."""
+        extra = getattr(self.pipeline, "health_lines", None)
+        if extra is not None:  # the foot INS: no adaptive magnetometer to trust or not
+            self.health.mag_trusted = None
+            return "\n".join([self.health.format(self.source.queue_drops(), self.source.accuracy(),
+                                                  mag_line=False), *extra()])
         self.health.mag_trusted = bool(self.status().mag_trusted) if self.last_t_ns is not None else None
         return self.health.format(self.source.queue_drops(), self.source.accuracy())
 

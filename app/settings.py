@@ -4,7 +4,8 @@ Two JSON files in the app's data directory, both written atomically
 (temporary file + rename), so a crash never leaves half a file:
 
 - ``settings.json``: sampling rate, whether live sessions are recorded,
-  replay speed, whether GPS is fused into the track ("Use GPS");
+  replay speed, whether GPS is fused into the track ("Use GPS"), and the
+  tracking mode (hand-held PDR or foot-mounted INS, or auto);
 - ``profile.json``: the user's :class:`core.pdr.calibration.UserProfile`
   (format ``pdr-user-profile``): body height, stride model, the per-user
   factor ``c_scale`` and the calibration walks it was pooled from.
@@ -67,6 +68,12 @@ def profile_path(settings_path: str) -> str:
 #: the app's choices of GPS filter (core.gnss.FUSIONS, or auto)
 GPS_FUSIONS = ("auto", "chen", "kubrak")
 
+#: tracking modes (core.foot.tracker.MODES): auto, hand-held PDR, foot-mounted INS
+TRACKING_MODES = ("auto", "handheld", "foot")
+
+#: a phone on the shoe samples at least this fast (Hz): the stance detector and the INS need >= 100 Hz
+FOOT_MIN_RATE_HZ = 200.0
+
 
 @dataclass
 class Settings:
@@ -82,6 +89,9 @@ class Settings:
     use_gps: bool = True
     #: which GPS fusion filter: "auto" (core.gnss.AUTO_FUSION, the benchmark's better one), "chen", "kubrak"
     gps_fusion: str = "auto"
+    #: "handheld" (PDR), "foot" (phone or IMU on the shoe: ZUPT INS) or "auto" (a replay: what the recording
+    #: declares or its signals show, :func:`core.foot.tracker.choose_mode`; live: hand-held)
+    tracking_mode: str = "auto"
     #: height, stride model and calibration (saved to its own file, ``profile.json``)
     profile: UserProfile = field(default_factory=UserProfile)
     #: what was wrong with the stored files (not saved)
@@ -132,14 +142,44 @@ class Settings:
         """Keyword arguments for :class:`core.pdr.pipeline.Pipeline` (without the GPS stage)."""
         return {"height_m": self.height_m, "stride_model": self.stride_model()}
 
-    def pipeline_factory(self) -> Callable:
+    def choose_tracking_mode(self, recording=None) -> tuple[str, str]:
+        """``(mode, why)``: "handheld" or "foot" for a replay of ``recording``, or for live tracking (None).
+
+        Live with "auto" is hand-held: nothing is known of the walk before it starts, and a phone on the
+        shoe is a choice the user makes in Settings.
+        """
+        if recording is None:
+            if self.tracking_mode == "auto":
+                return "handheld", "live tracking is hand-held unless Foot is chosen in Settings"
+            return self.tracking_mode, "chosen in Settings"
+        from core.foot.tracker import choose_mode  # noqa: PLC0415 - core's stages on use
+
+        mode, why = choose_mode(recording, self.tracking_mode)
+        return mode, ("chosen in Settings" if self.tracking_mode != "auto" else why)
+
+    def live_rate_hz(self) -> float:
+        """The sampling rate to ask the sensors for: the setting, at least :data:`FOOT_MIN_RATE_HZ` on the shoe."""
+        if self.choose_tracking_mode(None)[0] == "foot":
+            return max(self.rate_hz, FOOT_MIN_RATE_HZ)
+        return self.rate_hz
+
+    def pipeline_factory(self, recording=None) -> Callable:
         """``() -> Pipeline`` with the settings as they are now (a later change needs a new factory).
 
-        Each pipeline gets its own fusion stage (:func:`core.gnss.make_fusion`, the filter of
-        :attr:`gps_fusion`) when :attr:`use_gps` is on, so a new track starts the fusion afresh
-        (unanchored), but from what earlier walks with GPS taught: Chen's filter starts from the
-        profile's GPS stride scale and heading model (:meth:`learn_from_gps` keeps them).
+        ``recording``: the recording to be replayed (None: live), for the tracking mode
+        (:meth:`choose_tracking_mode`).  Foot mode gives a :class:`core.foot.tracker.FootTracker` (the
+        foot INS behind the same streaming interface; the TCKF with a waist magnetometer, else ZUPT only;
+        no GPS fusion).  Hand-held mode gives the PDR pipeline, with its own fusion stage
+        (:func:`core.gnss.make_fusion`, the filter of :attr:`gps_fusion`) when :attr:`use_gps` is on, so a
+        new track starts the fusion afresh (unanchored), but from what earlier walks with GPS taught:
+        Chen's filter starts from the profile's GPS stride scale and heading model (:meth:`learn_from_gps`
+        keeps them).
         """
+        if self.choose_tracking_mode(recording)[0] == "foot":
+            from core.foot.tracker import FootTracker, foot_settings_for  # noqa: PLC0415
+
+            fs, waist = foot_settings_for(recording)
+            return lambda: FootTracker(fs, waist_device=waist)
         from core.gnss import make_fusion, settings_from_profile  # noqa: PLC0415 - core's stages on use
         from core.pdr.pipeline import Pipeline  # noqa: PLC0415
 
@@ -199,6 +239,9 @@ class Settings:
         if self.gps_fusion not in GPS_FUSIONS:
             out.append(f"gps_fusion={self.gps_fusion!r} unknown; using 'auto'")
             self.gps_fusion = "auto"
+        if self.tracking_mode not in TRACKING_MODES:
+            out.append(f"tracking_mode={self.tracking_mode!r} unknown; using 'auto'")
+            self.tracking_mode = "auto"
         if self.replay_speed not in ("1x", "10x", "max"):
             out.append(f"replay_speed={self.replay_speed!r} unknown; using '10x'")
             self.replay_speed = "10x"
@@ -207,7 +250,7 @@ class Settings:
     def to_dict(self) -> dict:
         """What goes into ``settings.json`` (the profile has its own file)."""
         return {"rate_hz": self.rate_hz, "record_live": self.record_live, "replay_speed": self.replay_speed,
-                "use_gps": self.use_gps, "gps_fusion": self.gps_fusion}
+                "use_gps": self.use_gps, "gps_fusion": self.gps_fusion, "tracking_mode": self.tracking_mode}
 
     @classmethod
     def load(cls, path: str) -> "Settings":

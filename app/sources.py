@@ -174,6 +174,14 @@ class SensorSource:
 # desktop replay
 
 
+def replay_source_for(recording, pipeline_factory: Callable, **kwargs) -> "ReplaySource":
+    """A :class:`ReplaySource` of the streams the tracker reads: :data:`PIPELINE_STREAMS` for the hand-held
+    pipeline, the tracker's ``input_streams(recording)`` when it has them (the foot INS: the foot IMU's and
+    the waist IMU's streams, e.g. ``acc@left_foot``).  ``kwargs`` go to :class:`ReplaySource`."""
+    wanted = getattr(pipeline_factory(), "input_streams", None)
+    return ReplaySource(recording, streams=wanted(recording) if wanted is not None else None, **kwargs)
+
+
 class ReplaySource(SensorSource):
     """Play a :class:`~core.recording.Recording` in sensor-time order.
 

@@ -281,7 +281,8 @@ def test_old_settings_with_stride_c_migrate_to_the_profile(tmp_path):
     feats = Pipeline().run(simulate_walk(((0.0, 0.0), (10.0, 0.0)), seed=2).recording).steps[3].features
     assert s.stride_model().length_m(feats) == pytest.approx(0.52 * (feats.acc_max_m_s2 - feats.acc_min_m_s2) ** 0.25)
     s.save(str(p))
-    assert set(json.loads(p.read_text())) == {"rate_hz", "record_live", "replay_speed", "use_gps", "gps_fusion"}  # old keys gone
+    assert set(json.loads(p.read_text())) == {"rate_hz", "record_live", "replay_speed", "use_gps", "gps_fusion",
+                                              "tracking_mode"}  # old keys gone
     t = Settings.load(str(p))
     assert t == s and not t.notes
     # an old file that was never calibrated (the old default C), or with a C no walker has

@@ -434,7 +434,8 @@ class FootNavigator:
         elif self.waist_names and name == self.waist_names[MAG]:
             self._waist_mag.add(t, v)
 
-    def _input_names(self, recording: Recording) -> list[str]:
+    def input_names(self, recording: Recording) -> list[str]:
+        """The streams of ``recording`` this navigator reads (foot IMU, foot magnetometer, waist IMU)."""
         names = [self.names[GYRO], self.names[ACC], self.names[MAG]] + list(self.waist_names.values())
         return [n for n in names if recording.has(n)]
 
@@ -469,7 +470,7 @@ class FootNavigator:
         acc_name, gyro_name = self.names[ACC], self.names[GYRO]
         k = 0
         acc_v, gyro_v = acc_s.values, gyro
-        for name, tt, v in recording.events(self._input_names(recording)):
+        for name, tt, v in recording.events(self.input_names(recording)):
             if name == acc_name:
                 self._sample(tt, tuple(acc_v[k]), tuple(gyro_v[k]), bool(stance[k]))
                 k += 1
