@@ -451,6 +451,44 @@ def run_xio(root: Path) -> dict:
 
 
 # ---------------------------------------------------------------------------
+# regression guard (benchmarks.guard): a quick subset
+
+
+#: PyShoe trials of the quick subset per split: the first this many walking trials by name
+QUICK_PYSHOE_PER_SPLIT = 3
+
+
+def quick(root: Path | None) -> dict:
+    """Regression-guard headlines (:mod:`benchmarks.guard`), SHOE at its fixed configuration:
+    ``foot_pyshoe_<split>_quick_rmse_median_m`` (3-D RMSE median of the first three walking trials of each
+    split) and ``foot_xio_report_loop_closure_median_pct`` (the two x-io loops)."""
+    from benchmarks.datasets import pyshoe, xio_foot
+
+    h: dict = {}
+    if root is None:
+        return h
+    by_split: dict = {}
+    for tr in pyshoe.trials(root):
+        if tr.info["walking"] and len(by_split.setdefault(tr.info["split"], [])) < QUICK_PYSHOE_PER_SPLIT:
+            by_split[tr.info["split"]].append(tr)
+    for split, trs in by_split.items():
+        errs = []
+        for tr in trs:
+            rec = tr.open()
+            res = FootNavigator(foot_settings("shoe", gyro_delay_s=tr.info["gyro_delay_s"])).run(rec)
+            errs.append(position_errors(res.position_n, tr.truth_pos_m)["rmse_3d_m"])
+        h[f"foot_pyshoe_{split}_quick_rmse_median_m"] = median(errs)
+    loops = []
+    for tr in xio_foot.trials(root):
+        if tr.info["kind"] == "loop":
+            res = FootNavigator(foot_settings("shoe")).run(tr.open())
+            loops.append(xio_foot.loop_closure_pct(res.stride_positions(), res.summary()["distance_m"]))
+    if loops:
+        h["foot_xio_report_loop_closure_median_pct"] = median(loops)
+    return h
+
+
+# ---------------------------------------------------------------------------
 # mode detection (core.foot.mounting)
 
 
