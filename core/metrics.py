@@ -300,3 +300,200 @@ def reference_track_errors(track_t_ns, east_m, north_m, ref_t_ns, ref_east_m, re
     theta = best_fit_rotation(rel[1:], (G - G[0])[1:])
     err_fit = np.hypot(*(rotate(rel, theta) + G[0] - G).T)[1:]
     return TrackErrors(errors_m=err, errors_fit_m=err_fit, fit_rotation_rad=theta, est_at_fixes=placed)
+
+
+# ---------------------------------------------------------------------------
+# the ground truth a recording carries, and a track's error against it
+
+#: GPS fixes with a reported accuracy (68 % radius) above this are not used as a reference track (m)
+GPS_REFERENCE_MAX_HACC_M = 12.0
+#: streams of surveyed points passed at known times: GetSensorData POSI lines, the Microsoft traces' waypoints
+LANDMARK_STREAMS = ("posi", "waypoint")
+#: a ``posi`` stream's position columns: (east, north) in metres, or latitude/longitude in degrees
+POSI_METRE_COLUMNS = (("east_m", "north_m"), ("x_m", "y_m"), ("x", "y"))
+POSI_DEGREE_COLUMNS = ("lat_deg", "lon_deg")
+
+
+@dataclass
+class Reference:
+    """Time-stamped true positions in local East/North metres (landmarks, waypoints or GPS fixes)."""
+
+    t_ns: np.ndarray
+    east_m: np.ndarray
+    north_m: np.ndarray
+    #: what they are, for people ("21 landmarks (posi stream)")
+    label: str
+    #: WGS-84 latitude, longitude of the metres' origin, when the positions came in degrees
+    origin_lat_lon: tuple[float, float] | None = None
+
+
+@dataclass
+class RecordingTruth:
+    """The ground truth a recording carries (see :func:`truth_of`); every part may be missing."""
+
+    #: surveyed points the walker passed at known times (a ``posi`` or ``waypoint`` stream: IPIN POSI, waypoints)
+    landmarks: Reference | None = None
+    #: a dense reference track that is not exact: the recording's good GPS fixes
+    gps: Reference | None = None
+    #: the simulator's truth (``metadata["truth"]``): n_steps, path_length_m, walk_start_t_ns, walk_end_t_ns,
+    #: start_en_m, end_en_m
+    simulator: dict | None = None
+    #: the simulator's waypoints (n, 2) in its metres (for a plot)
+    waypoints_en_m: np.ndarray | None = None
+
+    def __bool__(self) -> bool:
+        return self.landmarks is not None or self.gps is not None or self.simulator is not None
+
+
+def _posi_reference(stream) -> Reference | None:
+    from core.geodesy import geodetic_to_enu
+
+    cols = list(stream.columns)
+    v = np.asarray(stream.values, dtype=float)
+    t = np.asarray(stream.t_ns, dtype=np.int64)
+    origin = None
+    for ce, cn in POSI_METRE_COLUMNS:
+        if ce in cols and cn in cols:
+            e, n = v[:, cols.index(ce)], v[:, cols.index(cn)]
+            break
+    else:
+        if not all(c in cols for c in POSI_DEGREE_COLUMNS):
+            return None
+        lat, lon = v[:, cols.index("lat_deg")], v[:, cols.index("lon_deg")]
+        ok = np.isfinite(lat) & np.isfinite(lon)
+        if not ok.any():
+            return None
+        origin = (float(lat[ok][0]), float(lon[ok][0]))
+        e, n = (np.asarray(x, dtype=float).reshape(-1) for x in geodetic_to_enu(lat, lon, origin))
+    ok = np.isfinite(e) & np.isfinite(n)
+    if int(ok.sum()) < 2:
+        return None
+    return Reference(t[ok], e[ok], n[ok], f"{int(ok.sum())} landmarks ({stream.name} stream)", origin)
+
+
+def _gps_reference(stream, max_hacc_m: float) -> Reference | None:
+    from core.geodesy import geodetic_to_enu
+
+    cols = list(stream.columns)
+    v = np.asarray(stream.values, dtype=float)
+    lat, lon = v[:, cols.index("lat_deg")], v[:, cols.index("lon_deg")]
+    hacc = v[:, cols.index("hacc_m")] if "hacc_m" in cols else np.full(len(v), np.nan)
+    ok = np.isfinite(lat) & np.isfinite(lon) & (hacc <= max_hacc_m)
+    if int(ok.sum()) < 2:
+        return None
+    origin = (float(lat[ok][0]), float(lon[ok][0]))
+    e, n = (np.asarray(x, dtype=float).reshape(-1) for x in geodetic_to_enu(lat[ok], lon[ok], origin))
+    return Reference(np.asarray(stream.t_ns, dtype=np.int64)[ok], e, n,
+                     f"{int(ok.sum())} GPS fixes with accuracy <= {max_hacc_m:g} m", origin)
+
+
+def truth_of(rec, *, gps_max_hacc_m: float = GPS_REFERENCE_MAX_HACC_M) -> RecordingTruth:
+    """The ground truth in ``rec`` (a :class:`core.recording.Recording`), read from its streams and header.
+
+    * landmarks: a ``posi`` or ``waypoint`` stream (GetSensorData ``POSI`` lines, surveyor waypoints), positions as
+      ``lat_deg, lon_deg`` (to metres about the first) or in metres (:data:`POSI_METRE_COLUMNS`);
+    * GPS: the ``gps`` fixes with ``hacc_m <= gps_max_hacc_m``, at least two, as a reference track;
+    * the simulator's truth: ``metadata["truth"]`` and ``metadata["waypoints_en_m"]``.
+    """
+    out = RecordingTruth()
+    for name in LANDMARK_STREAMS:
+        posi = rec.streams.get(name)
+        if posi is not None and len(posi):
+            out.landmarks = _posi_reference(posi)
+            if out.landmarks is not None:
+                break
+    gps = rec.streams.get("gps")
+    if gps is not None and len(gps) >= 2:
+        out.gps = _gps_reference(gps, gps_max_hacc_m)
+    meta = rec.metadata if isinstance(rec.metadata, dict) else {}
+    sim = meta.get("truth")
+    if meta.get("simulator") and isinstance(sim, dict) and sim.get("path_length_m") is not None:
+        out.simulator = dict(sim)
+        wp = meta.get("waypoints_en_m")
+        if wp is not None:
+            out.waypoints_en_m = np.asarray(wp, dtype=float).reshape(-1, 2)
+    return out
+
+
+def track_start(track) -> tuple[float, float]:
+    """Where the walker stood before the track's first step: its end point less the step itself."""
+    if not len(track):
+        return 0.0, 0.0
+    l0, h0 = float(track.length_m[0]), float(track.heading_rad[0])
+    return float(track.east_m[0]) - l0 * math.cos(h0), float(track.north_m[0]) - l0 * math.sin(h0)
+
+
+def _pct_or_nan(v) -> float:
+    return float(v) if v is not None and math.isfinite(v) else math.nan
+
+
+def truth_errors(track, truth: RecordingTruth, dr_track=None) -> dict:
+    """A track's error against ``truth``, as plain numbers (nan where a metric does not apply).
+
+    ``track`` has ``t_ns, length_m, heading_rad, east_m, north_m`` per step (the track shown); the GPS
+    reference is compared with ``dr_track`` (dead reckoning alone, default ``track``), since a track fused
+    with the same GPS is not an independent estimate.
+
+    * ``"landmarks"``: :func:`landmark_errors` -- median and max error at the landmarks with the absolute
+      heading, median after the best-fit rotation and that rotation, loop closure (%) for a closed walk,
+      segment heading error, and the distance error of the steps between the first and last landmark
+      against the polyline through them;
+    * ``"simulator"``: step-count and distance error over the whole walk, the end point's error (track
+      moved from the walk's start to its end, against the true displacement) and, for a walk that ends
+      where it started, the loop closure ``100 |p(t_end) - p(t_start)| / path length``;
+    * ``"gps"``: :func:`reference_track_errors` -- median, 90th percentile and max distance from the fixes.
+    """
+    out: dict = {}
+    t = np.asarray(track.t_ns, dtype=np.int64)
+    e = np.asarray(track.east_m, dtype=float)
+    n = np.asarray(track.north_m, dtype=float)
+    lm = truth.landmarks
+    if lm is not None and len(t):
+        le = landmark_errors(t, e, n, np.asarray(track.heading_rad, dtype=float), lm.t_ns, lm.east_m, lm.north_m,
+                             start=track_start(track))
+        seg = (t > lm.t_ns[0]) & (t <= lm.t_ns[-1])
+        walked = float(np.sum(np.asarray(track.length_m, dtype=float)[seg]))
+        out["landmarks"] = {
+            "what": lm.label, "n": int(len(lm.t_ns)), "path_m": le.path_length_m,
+            "median_m": le.median_m, "max_m": le.max_m, "final_m": le.final_m,
+            "median_fit_m": le.median_fit_m, "fit_rotation_deg": math.degrees(le.fit_rotation_rad),
+            "loop_closure_pct": _pct_or_nan(le.loop_closure_pct),
+            "distance_m": walked, "distance_err_pct": distance_error_pct(walked, le.path_length_m),
+            "segment_heading_deg": le.segment_heading_mae_deg,
+            "errors_m": [float(x) for x in le.errors_m],
+        }
+    sim = truth.simulator
+    if sim is not None:
+        path = float(sim["path_length_m"])
+        dist = float(np.sum(np.asarray(track.length_m, dtype=float)))
+        d = {"what": "simulator", "n_steps": sim.get("n_steps"), "path_m": path,
+             "step_count_err_pct": step_count_error_pct(len(t), sim["n_steps"]) if sim.get("n_steps") else math.nan,
+             "distance_m": dist, "distance_err_pct": distance_error_pct(dist, path),
+             "end_error_m": math.nan, "loop_closure_pct": math.nan}
+        se, ee = sim.get("start_en_m"), sim.get("end_en_m")
+        if len(t) and se is not None and ee is not None:
+            ts = [int(sim.get("walk_start_t_ns", t[0])), int(sim.get("walk_end_t_ns", t[-1]))]
+            p = positions_at(t, e, n, np.asarray(ts, dtype=np.int64), start=track_start(track))
+            moved = p[1] - p[0]
+            true_moved = np.asarray(ee, dtype=float) - np.asarray(se, dtype=float)
+            d["end_error_m"] = float(math.hypot(*(moved - true_moved)))
+            if math.hypot(*true_moved) < LOOP_CLOSED_TOLERANCE_M and path > 0:
+                d["loop_closure_pct"] = 100.0 * float(math.hypot(*moved)) / path
+        out["simulator"] = d
+    ref = truth.gps
+    drt = dr_track if dr_track is not None else track
+    if ref is not None and len(drt):
+        te = reference_track_errors(drt.t_ns, drt.east_m, drt.north_m, ref.t_ns, ref.east_m, ref.north_m,
+                                    start=track_start(drt))
+        out["gps"] = {"what": ref.label, "n": int(len(ref.t_ns)), "median_m": te.median_m, "p90_m": te.p90_m,
+                      "max_m": float(np.max(te.errors_m)) if len(te.errors_m) else math.nan,
+                      "median_fit_m": te.median_fit_m, "fit_rotation_deg": math.degrees(te.fit_rotation_rad)}
+    return out
+
+
+def place_reference(track, ref_t0_ns: int, ref_start_en) -> np.ndarray:
+    """The shift (2,) that moves a reference into the track's frame: the reference's first point lands on
+    the track's position at that point's time (as every metric here places them)."""
+    p = positions_at(track.t_ns, track.east_m, track.north_m, np.array([int(ref_t0_ns)], dtype=np.int64),
+                     start=track_start(track))[0]
+    return p - np.asarray(ref_start_en, dtype=float)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 import warnings
@@ -114,25 +115,82 @@ def build_gnss(args, rec: Recording, profile=None):
     return make_fusion(name, hidden_ns=hidden, **kw)
 
 
-def build_pipeline(args, gnss=None):
+def build_pipeline(args, gnss=None, profile=None):
+    """The pipeline of ``args``: the stride model (``--stride-c``, ``--stride-model``, else the profile's
+    model with the user's factor) and height (``--height``, else the profile's)."""
     from core.pdr.pipeline import Pipeline
     from core.pdr.stride import WeinbergStride
 
-    kw = {"height_m": args.height, "use_magnetometer": not args.no_mag}
+    height = args.height if args.height is not None else (profile.height_m if profile is not None else None)
+    kw = {"height_m": height, "use_magnetometer": not args.no_mag}
     if args.stride_c is not None:
         kw["stride_model"] = WeinbergStride(coefficient=args.stride_c)
+    elif profile is not None and args.stride_model in (None, profile.model):
+        kw["stride_model"] = profile.stride_model()  # the user's calibrated factor on the profile's model
     else:
         from core.pdr.stride_models import load_stride_model
-        kw["stride_model"] = load_stride_model(args.stride_model)
+        kw["stride_model"] = load_stride_model(args.stride_model or "default")
     p = Pipeline(gnss=gnss, **kw)  # the default filter, with its magnetometer calibration
     p.attitude.declination_rad = math.radians(args.declination)
     return p
+
+
+#: the app's profile file, in the app's settings folder (app.settings.PROFILE_FILE)
+PROFILE_FILE = "profile.json"
+
+
+def default_profile_path() -> Path:
+    """The profile the app keeps on this computer: ``$PDR_APP_DATA/profile.json``, else in Kivy's
+    ``user_data_dir`` for the app "pdr" (``$XDG_CONFIG_HOME`` or ``~/.config`` on Linux, ``~/Library/Application
+    Support`` on macOS, ``%APPDATA%`` on Windows)."""
+    d = os.environ.get("PDR_APP_DATA")
+    if not d:
+        if sys.platform == "darwin":
+            d = os.path.expanduser("~/Library/Application Support/pdr")
+        elif sys.platform.startswith("win"):
+            d = os.path.join(os.environ.get("APPDATA", os.path.expanduser("~")), "pdr")
+        else:
+            d = os.path.join(os.path.expanduser(os.environ.get("XDG_CONFIG_HOME") or "~/.config"), "pdr")
+    return Path(d) / PROFILE_FILE
 
 
 def _load_profile(path: str):
     from core.pdr.calibration import UserProfile
 
     return UserProfile.load(path) if Path(path).exists() else UserProfile()
+
+
+def choose_profile(args, demo: bool = False):
+    """``(profile, path, saved_back)``: ``--profile PATH`` (created if missing, what GPS teaches is saved back),
+    else the app's stored profile when there is one (read only), never with ``--no-profile`` or for the demo."""
+    if getattr(args, "no_profile", False):
+        return None, None, False
+    if getattr(args, "profile", None):
+        return _load_profile(args.profile), args.profile, True
+    path = default_profile_path()
+    if demo or not path.is_file():
+        return None, None, False
+    from core.pdr.calibration import CalibrationError, UserProfile
+    try:
+        return UserProfile.load(path), str(path), False
+    except CalibrationError as e:
+        raise CalibrationError(f"{e} (the stored profile; --no-profile ignores it)") from None
+
+
+def profile_line(profile, path, args) -> str:
+    """What of the profile this run uses, in one summary line."""
+    used = []
+    if args.stride_c is None and args.stride_model in (None, profile.model):
+        n = len(profile.calibrations)
+        used.append(f"stride x{profile.c_scale:.3f} on model {profile.model}"
+                    + (f" ({n} calibration walk{'s' if n != 1 else ''})" if n else " (not calibrated)"))
+    else:
+        used.append("stride factor not used (another stride model chosen)")
+    if args.height is None and profile.height_m is not None:
+        used.append(f"height {profile.height_m:.2f} m")
+    if (profile.gps or {}).get("stride_scale"):
+        used.append(f"GPS stride x{profile.gps['stride_scale']:.3f} for GPS fusion")
+    return f"profile       {path}: " + ", ".join(used)
 
 
 class _Progress:
@@ -144,8 +202,9 @@ class _Progress:
     """
 
     def __init__(self, label: str, enabled: bool = True, *, after_s: float = 2.0, tty: bool | None = None,
-                 clock=time.monotonic):
+                 clock=time.monotonic, total: int | None = None):
         self.label = label
+        self.total = total  #: a count of items (files): shown as "k/n" beside the per cent
         self.enabled = enabled
         self.after_s = float(after_s)
         self.tty = sys.stderr.isatty() if tty is None else bool(tty)
@@ -168,7 +227,8 @@ class _Progress:
         self.last = frac
         self.shown = True
         end = "\n" if (frac >= 1.0 or not self.tty) else ""
-        sys.stderr.write(("\r" if self.tty else "") + f"{self.label}: {100 * frac:5.1f} %  ({el:.1f} s)" + end)
+        count = f"  {round(frac * self.total)}/{self.total}" if self.total else ""
+        sys.stderr.write(("\r" if self.tty else "") + f"{self.label}: {100 * frac:5.1f} %{count}  ({el:.1f} s)" + end)
         sys.stderr.flush()
 
 
@@ -200,10 +260,6 @@ def summary_lines(res, rec: Recording, gps_why: str = "") -> list[str]:
     bad = s.get("nonfinite_skipped") or {}
     if bad:
         lines.append("skipped       " + ", ".join(f"{v} non-finite {k} value(s)" for k, v in sorted(bad.items())))
-    truth = rec.metadata.get("truth") if isinstance(rec.metadata.get("truth"), dict) else None
-    if truth:
-        lines.append(f"truth         {truth.get('n_steps')} steps, {truth.get('path_length_m', float('nan')):.1f} m "
-                     f"(simulator)")
     if res.fusion is not None:
         lines.extend(gps_lines(res, gps_why))
     for lab in res.labels:
@@ -211,6 +267,77 @@ def summary_lines(res, rec: Recording, gps_why: str = "") -> list[str]:
     for r in rec.repairs:
         lines.append(f"repaired      {r}")
     return lines
+
+
+def _known(sep: str, *items) -> str:
+    """``(value, format)`` pairs formatted and joined, leaving out the values that are nan (metric not defined)."""
+    return sep.join(f.format(v) for v, f in items if v is not None and v == v)
+
+
+def truth_lines(errs: dict) -> list[str]:
+    """Summary lines of the error against the recording's ground truth (:func:`core.metrics.truth_errors`)."""
+    lines = []
+    sim = errs.get("simulator")
+    if sim:
+        n = sim.get("n_steps")
+        lines.append(f"truth         {n if n is not None else '?'} steps, {sim['path_m']:.1f} m (simulator)")
+        lines.append("truth error   " + _known(", ", (sim["step_count_err_pct"], "steps {:+.1f} %"),
+                                            (sim["distance_err_pct"], "distance {:+.1f} %"),
+                                            (sim["end_error_m"], "end point {:.2f} m off the true end"),
+                                            (sim["loop_closure_pct"], "loop closure {:.2f} %")))
+    lm = errs.get("landmarks")
+    if lm:
+        lines.append(f"truth         {lm['what']}, {lm['path_m']:.1f} m from the first to the last")
+        lines.append(f"truth error   at the landmarks: median {lm['median_m']:.1f} m, max {lm['max_m']:.1f} m; after "
+                     f"the best-fit rotation ({lm['fit_rotation_deg']:+.1f} deg) median {lm['median_fit_m']:.1f} m")
+        lines.append("truth error   " + _known("; ", (lm["distance_err_pct"],
+                                                   "distance {:+.1f} % between the first and last landmark"),
+                                            (lm["loop_closure_pct"], "loop closure {:.2f} %"),
+                                            (lm["segment_heading_deg"],
+                                             "segment headings off by {:.1f} deg on average")))
+    g = errs.get("gps")
+    if g and not lm:  # landmarks are the better truth; GPS only where there is nothing better
+        lines.append(f"truth         {g['what']} (a reference, not exact)")
+        lines.append(f"truth error   PDR alone from the fixes: median {g['median_m']:.1f} m, 90 % {g['p90_m']:.1f} m, "
+                     f"max {g['max_m']:.1f} m; after the best-fit rotation ({g['fit_rotation_deg']:+.1f} deg) median "
+                     f"{g['median_fit_m']:.1f} m")
+    return lines
+
+
+def truth_plot(truth, errs: dict, track, fused: bool) -> dict:
+    """What ``--plot`` draws of the truth, moved into the track's frame (keywords of :func:`desktop.plot.plot_track`)."""
+    from core.metrics import place_reference
+
+    kw: dict = {}
+    sim = truth.simulator
+    if sim is not None and truth.waypoints_en_m is not None and len(track):
+        start = sim.get("start_en_m") or truth.waypoints_en_m[0]
+        kw["truth_en"] = truth.waypoints_en_m + place_reference(track, sim.get("walk_start_t_ns", track.t_ns[0]),
+                                                                 start)
+    lm = truth.landmarks
+    if lm is not None and len(track):
+        xy = np.column_stack([lm.east_m, lm.north_m])
+        kw["landmarks_en"] = xy + place_reference(track, lm.t_ns[0], xy[0])
+        kw["landmarks_label"] = f"landmarks ({len(xy)}, truth)"
+    if truth.gps is not None and lm is None and not fused and len(track):
+        g = truth.gps
+        xy = np.column_stack([g.east_m, g.north_m])
+        xy = xy + place_reference(track, g.t_ns[0], xy[0])
+        kw["reference"] = (f"GPS fixes ({len(xy)}, reference)", xy[:, 0], xy[:, 1])
+    return kw
+
+
+def truth_headline(errs: dict) -> str:
+    """The truth error in a few words, for a plot's subtitle or a table cell ('' without truth)."""
+    if errs.get("landmarks"):
+        lm = errs["landmarks"]
+        return f"landmarks: median {lm['median_m']:.1f} m, max {lm['max_m']:.1f} m"
+    if errs.get("simulator"):
+        s = errs["simulator"]
+        return f"truth: distance {s['distance_err_pct']:+.1f} %, end {s['end_error_m']:.2f} m off"
+    if errs.get("gps"):
+        return f"vs GPS: median {errs['gps']['median_m']:.1f} m"
+    return ""
 
 
 def gps_lines(res, why: str = "") -> list[str]:
@@ -276,12 +403,13 @@ def choose_mode(args, rec: Recording) -> tuple[str, str]:
     return ("foot" if m.mode == FOOT else "handheld"), why
 
 
-def cmd_replay_foot(args, rec: Recording, why: str) -> int:
-    """``pdr replay --mode foot``: the foot-mounted INS (Song & Park 2018, :mod:`core.foot`)."""
+def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
+    """``--mode foot``: the foot-mounted INS (Song & Park 2018, :mod:`core.foot`); see :func:`replay_recording`."""
     if args.gps == "chen" or args.gps == "kubrak" or args.gps_outage:
         raise ValueError("GPS fusion with the foot-mounted INS is not built; use --gps off (or auto) with --mode foot")
     from core.foot.navigator import FootNavigator, FootSettings
     from core.foot.stance import StanceSettings
+    from core.metrics import truth_errors, truth_of
 
     waist = args.waist_device or None
     if waist is not None and not rec.has(f"acc@{waist}"):
@@ -291,27 +419,27 @@ def cmd_replay_foot(args, rec: Recording, why: str) -> int:
                             gyro_delay_s=args.gyro_delay_ms * 1e-3)
     res = FootNavigator(settings, foot_device=args.foot_device or "", waist_device=waist).run(rec)
     s = res.summary()
+    s["mode"] = "foot"
     s["mode_reason"] = why
-    if args.json:
-        print(json.dumps(s, indent=1, default=float))
-    else:
-        print("\n".join([
-            f"recording     {rec.source}",
-            f"mode          foot-mounted INS ({why})",
-            f"filter        ZUPT EKF, heading aid {s['aid']}, stance detector {s['detector']}",
-            f"duration      {s['duration_s']:.1f} s at {s['rate_hz']:.0f} Hz",
-            f"strides       {s['n_strides']} (stance {100 * s['stance_fraction']:.0f} % of the time)",
-            f"distance      {s['distance_m']:.1f} m",
-            f"final pos     E {s['final_east_m']:+.2f} m, N {s['final_north_m']:+.2f} m, U {s['final_up_m']:+.2f} m",
-            f"start-to-end  {s['start_to_end_m']:.2f} m"
-            + (f" ({100 * s['start_to_end_m'] / s['distance_m']:.2f} % of the distance)" if s["distance_m"] > 0
-               else ""),
-        ]))
     track = _stride_track(res)
-    written = _write_outputs(args, rec, track, None, None, title_extra="foot INS")
-    for w in written:
-        print(f"wrote         {w}")
-    return 0
+    truth = truth_of(rec)
+    errs = truth_errors(track, truth) if truth else {}
+    if errs:
+        s["truth"] = errs
+    lines = [
+        f"recording     {rec.source}",
+        f"mode          foot-mounted INS ({why})",
+        f"filter        ZUPT EKF, heading aid {s['aid']}, stance detector {s['detector']}",
+        f"duration      {s['duration_s']:.1f} s at {s['rate_hz']:.0f} Hz",
+        f"strides       {s['n_strides']} (stance {100 * s['stance_fraction']:.0f} % of the time)",
+        f"distance      {s['distance_m']:.1f} m",
+        f"final pos     E {s['final_east_m']:+.2f} m, N {s['final_north_m']:+.2f} m, U {s['final_up_m']:+.2f} m",
+        f"start-to-end  {s['start_to_end_m']:.2f} m"
+        + (f" ({100 * s['start_to_end_m'] / s['distance_m']:.2f} % of the distance)" if s["distance_m"] > 0 else ""),
+    ] + truth_lines(errs)
+    written = _write_outputs(args, outs, rec, track, None, None, title_extra="foot INS",
+                             subtitle=truth_headline(errs), truth_kw=truth_plot(truth, errs, track, False))
+    return {"summary": s, "lines": lines, "written": written}
 
 
 def _stride_track(res):
@@ -324,84 +452,416 @@ def _stride_track(res):
                  np.array([x.position_n[1] for x in st]))
 
 
-def _write_outputs(args, rec, track, origin, extra, title_extra: str = "", others=None, fixes=None,
-                   subtitle: str = "", fix_records=None) -> list:
+#: per-recording exports: option -> file name suffix in --out-dir
+EXPORTS = {"csv": ".csv", "geojson": ".geojson", "gpx": ".gpx", "plot": ".png", "fixes": ".fixes.csv"}
+#: what --out-dir writes unless --export says otherwise
+DEFAULT_EXPORTS = ("csv", "geojson")
+
+
+def check_output_path(option: str, path: str, inputs=()) -> None:
+    """Refuse, before any work, an output that cannot be written: ``ValueError`` naming the option and why."""
+    if path == "-":
+        if option != "--csv":
+            raise ValueError(f"{option} -: only --csv can write to stdout")
+        return
+    p = Path(path)
+    if p.is_dir():
+        raise ValueError(f"{option} {path}: is a folder; give a file name")
+    for i in inputs:
+        try:
+            if i and p.exists() and p.resolve() == Path(i).resolve():
+                raise ValueError(f"{option} {path}: would overwrite the recording itself")
+        except OSError:
+            pass
+    _check_writable_folder(option, path, p.parent)
+    if p.exists() and not os.access(p, os.W_OK):
+        raise ValueError(f"{option} {path}: cannot write there: the file is read-only")
+
+
+def _check_writable_folder(option: str, path: str, folder: Path) -> None:
+    """``folder`` can be created (its nearest existing ancestor is a folder we may write in) or written in."""
+    anc = folder if str(folder) else Path(".")
+    while not anc.exists():
+        if anc.is_symlink() or anc.parent == anc:
+            break
+        anc = anc.parent
+    if anc.exists() and not anc.is_dir():
+        raise ValueError(f"{option} {path}: cannot write there: {anc} is a file, not a folder")
+    if not anc.exists() or not os.access(anc, os.W_OK | os.X_OK):
+        raise ValueError(f"{option} {path}: cannot write there: no permission to write in {anc}")
+
+
+def recording_stem(path: str | None) -> str:
+    """A file name stem for a recording's exports: its name without recording suffixes."""
+    if path is None:
+        return "demo_walk"
+    name = Path(path.rstrip("/")).name
+    for suf in (".gz", ".zip", ".txt", ".csv", ".log"):
+        if name.lower().endswith(suf) and len(name) > len(suf):
+            name = name[: -len(suf)]
+    return name or "recording"
+
+
+def resolve_outputs(args, stem: str, out_dir: str | None = None) -> dict:
+    """Option -> path of every export of one recording: the explicit ``--csv`` etc., and with ``--out-dir``
+    the ``--export`` formats as ``OUT_DIR/STEM.suffix``."""
+    outs = {k: getattr(args, k, None) for k in EXPORTS}
+    out_dir = out_dir if out_dir is not None else getattr(args, "out_dir", None)
+    if out_dir:
+        for k in export_formats(args):
+            if not outs.get(k):
+                outs[k] = str(Path(out_dir) / (stem + EXPORTS[k]))
+    return {k: v for k, v in outs.items() if v}
+
+
+def export_formats(args) -> list[str]:
+    text = getattr(args, "export", None)
+    if not text:
+        return list(DEFAULT_EXPORTS)
+    names = [{"png": "plot"}.get(x.strip(), x.strip()) for x in text.split(",") if x.strip()]
+    bad = [x for x in names if x not in EXPORTS]
+    if bad:
+        raise ValueError(f"--export {text!r}: unknown format {bad[0]!r}; choose from csv, geojson, gpx, png, fixes")
+    return names
+
+
+def _write_track_csv(dest: str, track, origin) -> None:
+    """core.export's track CSV, with ``lat_deg, lon_deg`` columns when the track is placed; ``-`` is stdout."""
+    import csv
+    import io
+    import tempfile
+
+    from core import export
+    from core.geodesy import enu_to_geodetic
+
+    with tempfile.TemporaryDirectory(prefix="pdr-csv-") as tmp:
+        f = Path(tmp) / "track.csv"
+        export.write_track_csv(str(f), track)
+        rows = list(csv.reader(io.StringIO(f.read_text(encoding="utf-8"))))
+    if origin is not None and rows:
+        rows[0] += ["lat_deg", "lon_deg"]
+        lat, lon = enu_to_geodetic(np.asarray(track.east_m, float), np.asarray(track.north_m, float), origin)
+        for row, la, lo in zip(rows[1:], np.atleast_1d(lat), np.atleast_1d(lon)):
+            row += [f"{la:.8f}", f"{lo:.8f}"]
+    if dest == "-":
+        csv.writer(sys.stdout, lineterminator="\n").writerows(rows)
+        sys.stdout.flush()
+        return
+    with open(dest, "w", newline="", encoding="utf-8") as fh:
+        csv.writer(fh).writerows(rows)
+
+
+def _write_outputs(args, outs: dict, rec, track, origin, extra, title_extra: str = "", others=None, fixes=None,
+                   subtitle: str = "", fix_records=None, truth_kw=None) -> list:
     origin = args.origin or origin or _first_gps_origin(rec)
     offset = rec.metadata.get("unix_offset_ns")
     written = []
     from core import export
-    fixes_out = getattr(args, "fixes", None)
-    for out in (args.csv, args.geojson, args.gpx, args.plot, fixes_out):
-        if out:  # outputs may go into a folder that does not exist yet (out/ by default in the README)
+    for out in outs.values():
+        if out != "-":  # outputs may go into a folder that does not exist yet (out/ by default in the README)
             Path(out).parent.mkdir(parents=True, exist_ok=True)
-    if args.csv:
-        export.write_track_csv(args.csv, track)
-        written.append(args.csv)
-    if args.geojson:
-        export.write_track_geojson(args.geojson, track, origin, {"source": rec.source, "track": title_extra}, extra,
+    if outs.get("csv"):
+        _write_track_csv(outs["csv"], track, origin)
+        written.append("(stdout)" if outs["csv"] == "-" else outs["csv"])
+    if outs.get("geojson"):
+        export.write_track_geojson(outs["geojson"], track, origin, {"source": rec.source, "track": title_extra}, extra,
                                    fix_records)
-        written.append(args.geojson)
-    if fixes_out:
+        written.append(outs["geojson"])
+    if outs.get("fixes"):
         if fix_records is None:
             raise ValueError("--fixes needs GPS fusion: the recording has no gps stream, or --gps off")
-        export.write_fixes_csv(fixes_out, fix_records)
-        written.append(fixes_out)
-    if args.gpx:
-        export.write_track_gpx(args.gpx, track, origin, offset if isinstance(offset, int) else None,
+        export.write_fixes_csv(outs["fixes"], fix_records)
+        written.append(outs["fixes"])
+    if outs.get("gpx"):
+        export.write_track_gpx(outs["gpx"], track, origin, offset if isinstance(offset, int) else None,
                                point_properties=extra)
-        written.append(args.gpx)
-    if args.plot:
+        written.append(outs["gpx"])
+    if outs.get("plot"):
         from desktop.plot import plot_track
-        truth_en = rec.metadata.get("waypoints_en_m") if rec.metadata.get("simulator") else None
-        plot_track(args.plot, track, title=f"PDR: {Path(rec.source.split(' ')[0]).name}" +
-                   (f" ({title_extra})" if title_extra else ""), truth_en=truth_en, others=others, fixes=fixes,
-                   subtitle=subtitle)
-        written.append(args.plot)
+        plot_track(outs["plot"], track, title=f"PDR: {Path(rec.source.split(' ')[0]).name}" +
+                   (f" ({title_extra})" if title_extra else ""), others=others, fixes=fixes,
+                   subtitle=subtitle, **(truth_kw or {}))
+        written.append(outs["plot"])
     return written
 
 
-def cmd_replay(args) -> int:
-    rec = load_demo() if args.recording is None else load_any(args.recording, args.platform)
+def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progress=None) -> dict:
+    """Replay one recording with ``args``' settings and write ``outs``.
+
+    Returns ``{"summary": JSON-able dict, "lines": summary lines, "written": paths, "notes": status lines}``.
+    """
     mode, why = choose_mode(args, rec)
     if mode == "foot":
-        return cmd_replay_foot(args, rec, why)
-    profile = _load_profile(args.profile) if getattr(args, "profile", None) else None
+        return replay_foot(args, rec, why, outs)
+    from core.metrics import truth_errors, truth_of
+
+    profile, profile_path, save_back = choose_profile(args, demo)
     gnss = build_gnss(args, rec, profile)
-    if getattr(args, "fixes", None) and gnss is None:  # before the run, not after it
+    if outs.get("fixes") and gnss is None:  # before the run, not after it
         raise ValueError("--fixes needs GPS fusion: the recording has no gps stream, or --gps off")
-    pipeline = build_pipeline(args, gnss)
-    prog = _Progress("replay", not args.no_progress, after_s=0.0 if args.progress else 2.0)
-    res = pipeline.run(rec, progress=prog)
+    pipeline = build_pipeline(args, gnss, profile)
+    res = pipeline.run(rec, progress=progress)
     gps_why = gps_choice(args)[1] if gnss is not None else ""
-    if args.json:
-        extra_json = {"gps_fusion": gnss.name, "gps_fusion_reason": gps_why} if gnss is not None else {}
-        print(json.dumps({**res.summary(), "mode": "handheld", "mode_reason": why, **extra_json}, indent=1,
-                         default=float))
-    else:
-        lines = summary_lines(res, rec, gps_why)
-        print("\n".join(lines[:1] + [f"mode          hand-held PDR ({why})"] + lines[1:]))
     fused = res.fusion is not None and res.fusion.origin_lat_lon is not None and len(res.fusion.steps)
     track = res.fusion.track() if fused else res.track
+    truth = truth_of(rec)
+    errs = truth_errors(track, truth, dr_track=res.track) if truth else {}
+    summary = {**res.summary(), "mode": "handheld", "mode_reason": why}
+    if gnss is not None:
+        summary.update(gps_fusion=gnss.name, gps_fusion_reason=gps_why)
+    if errs:
+        summary["truth"] = errs
+    lines = summary_lines(res, rec, gps_why)
+    lines = lines[:1] + [f"mode          hand-held PDR ({why})"] + lines[1:]
+    if profile is not None:
+        lines.append(profile_line(profile, profile_path, args))
+        summary["profile"] = {"path": str(profile_path), **profile.to_dict()}
+    lines += truth_lines(errs)
     extra = track.point_properties() if fused else None
     others, fixes = {}, None
-    if fused and args.plot:
+    if fused and outs.get("plot"):
         others["dead reckoning only"] = (res.track.east_m, res.track.north_m)
         fx = [f for f in res.fusion.fixes if f.east_m == f.east_m]
         fixes = ([f.east_m for f in fx], [f.north_m for f in fx], [f.accepted for f in fx])
-    s = res.summary()
-    written = _write_outputs(args, rec, track, res.fusion.origin_lat_lon if fused else None, extra,
-                             f"fused with GPS ({gnss.name})" if fused else "", others, fixes,
-                             f"{s['n_steps']} steps, {s['distance_m']:.1f} m, start-to-end "
-                             f"{s['start_to_end_m']:.2f} m", res.fusion.fixes if res.fusion is not None else None)
-    if profile is not None and res.fusion is not None:
+    s = summary
+    sub = (f"{s['n_steps']} steps, {s['distance_m']:.1f} m, start-to-end {s['start_to_end_m']:.2f} m"
+           + (f"; {truth_headline(errs)}" if errs else ""))
+    written = _write_outputs(args, outs, rec, track, res.fusion.origin_lat_lon if fused else None, extra,
+                             f"fused with GPS ({gnss.name})" if fused else "", others, fixes, sub,
+                             res.fusion.fixes if res.fusion is not None else None,
+                             truth_plot(truth, errs, track, bool(fused)) if errs else None)
+    if profile is not None and save_back and res.fusion is not None:
         from core.gnss import profile_after
         new = profile_after(profile, pipeline.gnss)
         if new is not profile:
-            new.save(args.profile)
-            written.append(args.profile)
-    for w in written:
-        print(f"wrote         {w}")
+            new.save(profile_path)
+            written.append(profile_path)
+    return {"summary": summary, "lines": lines, "written": written}
+
+
+def _jsonable(obj):
+    """``obj`` with every non-finite float as None (JSON has no NaN or Infinity) and numpy numbers as Python's."""
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
+
+
+def dump_json(obj) -> str:
+    return json.dumps(_jsonable(obj), indent=1, default=str, allow_nan=False)
+
+
+def cmd_replay(args) -> int:
+    inputs = list(args.recording or [])
+    if len(inputs) > 1 or (len(inputs) == 1 and is_folder_of_recordings(inputs[0])):
+        return cmd_replay_batch(args, inputs)
+    path = inputs[0] if inputs else None
+    outs = resolve_outputs(args, recording_stem(path))
+    check_outputs(args, outs, inputs)
+    with _SlowNotice(f"reading {path}", not args.no_progress and path is not None, 0.0 if args.progress else 2.0):
+        rec = load_demo() if path is None else load_any(path, args.platform)
+    prog = _Progress("replay", not args.no_progress, after_s=0.0 if args.progress else 2.0)
+    r = replay_recording(args, rec, outs, demo=path is None, progress=prog)
+    stdout_taken = args.json or outs.get("csv") == "-"
+    if args.json:
+        print(dump_json(r["summary"]))
+    else:
+        print("\n".join(r["lines"]), file=sys.stderr if stdout_taken else sys.stdout)
+    for w in r["written"]:
+        if w != "(stdout)":
+            print(f"wrote         {w}", file=sys.stderr if stdout_taken else sys.stdout)
     return 0
+
+
+def check_outputs(args, outs: dict, inputs=()) -> None:
+    """Every output of this run can be written (before the long part), and stdout has one user."""
+    if args.json and outs.get("csv") == "-":
+        raise ValueError("--json and --csv - both want stdout: write one of them to a file")
+    names = {"plot": "--plot"}
+    for k, v in outs.items():
+        check_output_path(names.get(k, f"--{k}"), v, inputs)
+    if getattr(args, "out_dir", None):
+        d = Path(args.out_dir)
+        if d.exists() and not d.is_dir():
+            raise ValueError(f"--out-dir {args.out_dir}: is a file, not a folder")
+        _check_writable_folder("--out-dir", args.out_dir, d)
+
+
+# ---------------------------------------------------------------------------
+# several recordings at once
+
+#: folders this deep below a given folder are searched for recordings
+MAX_FOLDER_DEPTH = 6
+
+
+def _detect(path: str) -> str | None:
+    try:
+        from core.importers import detect_format
+    except ImportError:  # pragma: no cover - importers not installed
+        return "pdr-recording"
+    try:
+        return detect_format(path)
+    except (RecordingError, OSError):
+        return None
+
+
+def is_folder_of_recordings(path: str) -> bool:
+    """A folder that is not itself a recording (a Sensor Logger or phyphox export folder is one)."""
+    return os.path.isdir(path) and _detect(path) is None
+
+
+def collect_recordings(inputs) -> tuple[list[str], list[str]]:
+    """The recordings among ``inputs`` (files, recording folders, folders of them searched recursively):
+    ``(recordings, skipped)``, the skipped being files in a searched folder that are no recording."""
+    found, skipped = [], []
+
+    def walk(folder: Path, depth: int):
+        try:
+            entries = sorted(folder.iterdir(), key=lambda q: q.name)
+        except OSError as e:
+            raise RecordingError(f"cannot list the folder: {e.strerror or e}", str(folder)) from None
+        for q in entries:
+            if q.name.startswith("."):
+                continue
+            if q.is_dir():
+                if _detect(str(q)) is not None:
+                    found.append(str(q))
+                elif depth < MAX_FOLDER_DEPTH:
+                    walk(q, depth + 1)
+            elif q.is_file():
+                (found if _detect(str(q)) is not None else skipped).append(str(q))
+
+    for i in inputs:
+        if not os.path.exists(i):
+            raise RecordingError("cannot open: no such file or folder", i)
+        if is_folder_of_recordings(i):
+            walk(Path(i), 1)
+        else:
+            found.append(i)  # a file is read (and its error reported) even if it is no recording
+    return found, skipped
+
+
+def unique_stems(paths) -> list[str]:
+    """Export names for ``paths``: the recording's stem, with the parent folders' names where stems repeat."""
+    stems = [recording_stem(p) for p in paths]
+    for _ in range(4):
+        seen: dict = {}
+        for k, st in enumerate(stems):
+            seen.setdefault(st, []).append(k)
+        dup = [ks for ks in seen.values() if len(ks) > 1]
+        if not dup:
+            return stems
+        for ks in dup:
+            for k in ks:
+                parts = Path(paths[k].rstrip("/")).parts
+                depth = stems[k].count("__") + 2
+                stems[k] = "__".join(parts[-depth:-1] + (recording_stem(paths[k]),)) if len(parts) >= depth \
+                    else stems[k]
+    seen = {}
+    for k, st in enumerate(stems):  # still the same: number them
+        n = seen.get(st, 0)
+        seen[st] = n + 1
+        if n:
+            stems[k] = f"{st}_{n + 1}"
+    return stems
+
+
+def replay_file(path: str, stem: str, args) -> dict:
+    """One recording of a batch (in a worker process): never raises, the error is in the row."""
+    row = {"path": path, "ok": False}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            rec = load_any(path, args.platform)
+            outs = resolve_outputs(args, stem)
+            r = replay_recording(args, rec, outs)
+            row.update(ok=True, summary=_jsonable(r["summary"]), written=r["written"])
+        except (RecordingError, ValueError) as e:
+            row.update(error=str(e), exit=EXIT_INPUT)
+        except (OSError, RuntimeError) as e:
+            row.update(error=str(e), exit=1)
+        except Exception as e:  # noqa: BLE001 - one recording's failure must not end the batch
+            row.update(error=f"internal error: {type(e).__name__}: {e}", exit=1)
+    row["warnings"] = [str(w.message) for w in caught
+                       if issubclass(w.category, UserWarning) and not issubclass(w.category, DeprecationWarning)]
+    return row
+
+
+def batch_table(rows) -> list[str]:
+    """The summary table of a batch: one line per recording, then the totals."""
+    names = [os.path.relpath(r["path"]) if not os.path.isabs(r["path"]) else r["path"] for r in rows]
+    w = max([len("recording")] + [len(n) for n in names])
+    head = (f"{'recording':<{w}}  {'mode':<8}  {'duration':>9}  {'steps':>6}  {'distance':>9}  {'start-to-end':>12}"
+            "  truth error")
+    lines = [head, "-" * len(head)]
+    steps = dist = dur = 0.0
+    for name, r in zip(names, rows):
+        if not r["ok"]:
+            lines.append(f"{name:<{w}}  error: {r['error']}")
+            continue
+        s = r["summary"]
+        n = s.get("n_steps", s.get("n_strides", 0)) or 0
+        d, se = s.get("distance_m") or 0.0, s.get("start_to_end_m")
+        steps, dist, dur = steps + n, dist + d, dur + (s.get("duration_s") or 0.0)
+        se_txt = f"{se:.2f} m" if se is not None else "-"
+        lines.append(f"{name:<{w}}  {s.get('mode', ''):<8}  {s.get('duration_s') or 0.0:>7.1f} s  {n:>6d}  "
+                     f"{d:>7.1f} m  {se_txt:>12}  {truth_headline(s.get('truth') or {}) or '-'}")
+    ok = sum(1 for r in rows if r["ok"])
+    lines.append("-" * len(head))
+    lines.append(f"{len(rows)} recording{'s' if len(rows) != 1 else ''}, {ok} replayed, {len(rows) - ok} failed; "
+                 f"{int(steps)} steps, {dist:.1f} m, {dur / 60:.1f} min in all")
+    return lines
+
+
+def cmd_replay_batch(args, inputs) -> int:
+    """``pdr replay A B FOLDER ...``: every recording on all cores, one table (or JSON document)."""
+    given = [f"--{k}" if k != "plot" else "--plot" for k in EXPORTS if getattr(args, k, None)]
+    if given:
+        raise ValueError(f"{given[0]} names one file: with several recordings use --out-dir DIR (and --export "
+                         "FORMATS) for one set of files per recording")
+    export_formats(args)
+    if getattr(args, "out_dir", None):
+        check_outputs(args, {})
+    paths, skipped = collect_recordings(inputs)
+    if not paths:
+        raise RecordingError("no recordings found (formats: see pdr replay --help)", ", ".join(inputs))
+    stems = unique_stems(paths)
+    for f in skipped:
+        print(f"pdr: skipped {f}: not a recording", file=sys.stderr)
+    jobs = max(1, min(args.jobs or os.cpu_count() or 1, len(paths)))
+    prog = _Progress("replay", not args.no_progress, after_s=0.0 if args.progress else 2.0, total=len(paths))
+    rows: list = [None] * len(paths)
+    if jobs == 1:
+        for k, (pth, st) in enumerate(zip(paths, stems)):
+            rows[k] = replay_file(pth, st, args)
+            prog((k + 1) / len(paths))
+    else:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futs = {pool.submit(replay_file, pth, st, args): k for k, (pth, st) in enumerate(zip(paths, stems))}
+            for done, fut in enumerate(as_completed(futs), 1):
+                rows[futs[fut]] = fut.result()
+                prog(done / len(paths))
+    for r in rows:
+        for w in r.get("warnings", ()):
+            print(f"pdr: warning: {r['path']}: {w}", file=sys.stderr)
+        for w in r.get("written", ()):
+            print(f"wrote         {w}", file=sys.stderr)
+    failed = [r for r in rows if not r["ok"]]
+    if args.json:
+        print(dump_json({"n_recordings": len(rows), "n_failed": len(failed), "skipped": skipped,
+                         "recordings": [{k: v for k, v in r.items() if k != "exit"} for r in rows]}))
+    else:
+        print("\n".join(batch_table(rows)))
+    return max([r.get("exit", 0) for r in failed], default=0)
 
 
 def cmd_simulate(args) -> int:
@@ -419,20 +879,166 @@ def cmd_simulate(args) -> int:
     return 0
 
 
-def cmd_info(args) -> int:
-    rec = load_any(args.recording)
-    print(f"recording  {rec.source}")
-    print(f"duration   {rec.duration_s:.1f} s")
+def _pooled(profile) -> int:
+    """How many calibration walks the profile's factor is pooled from (core.pdr.calibration's rule)."""
+    from core.pdr.calibration import MAX_POOLED
+
+    last = profile.calibrations[-1].get("model_id") if profile.calibrations else None
+    return min(sum(1 for c in profile.calibrations if c.get("model_id") == last), MAX_POOLED)
+
+
+def cmd_calibrate(args) -> int:
+    """``pdr calibrate RECORDING --distance M | --from-gps``: fit the user's stride and store it in the profile."""
+    from core.pdr.calibration import CalibrationError, UserProfile
+
+    path = args.profile or str(default_profile_path())
+    check_output_path("--profile", path, [args.recording])
+    profile = UserProfile.load(path) if Path(path).is_file() else UserProfile()
+    if args.height is not None:
+        from dataclasses import replace
+        profile = replace(profile, height_m=args.height)  # CalibrationError if implausible
+    if args.stride_model and args.stride_model != profile.model:
+        from core.pdr.stride_models import load_stride_model
+        load_stride_model(args.stride_model)  # a bad name: one line, before the run
+    with _SlowNotice(f"reading {args.recording}", not args.no_progress):
+        rec = load_any(args.recording, args.platform)
+    prog = _Progress("calibrate", not args.no_progress)
+    lines = [f"recording     {rec.source}"]
+    if args.distance is not None:
+        from core.pdr.calibration import calibrate_known_distance
+        from core.pdr.pipeline import Pipeline
+        from core.pdr.stride_models import load_stride_model
+
+        model = args.stride_model or profile.model
+        pipe = Pipeline(height_m=profile.height_m, stride_model=load_stride_model(model))  # unscaled, no GPS
+        res = pipe.run(rec, progress=prog)
+        r = calibrate_known_distance(res.steps, args.distance, model=model, profile=profile)
+        new = r.profile
+        lines += [f"walk          {r.n_steps} steps over {r.known_distance_m:g} m: {r.mean_step_length_m:.2f} m a step",
+                  f"model         {model}: {r.model_distance_m:.1f} m for this walk unscaled, so this walk asks for "
+                  f"x{r.walk_scale:.3f}",
+                  f"stored        stride factor x{r.scale:.3f} on model {model} (pooled over {_pooled(new)} "
+                  f"calibration walk(s)), was x{profile.c_scale:.3f}"]
+        lines += [f"note          {w}" for w in r.warnings]
+        out = {"method": "known distance", "known_distance_m": r.known_distance_m, "n_steps": r.n_steps,
+               "model": model, "model_distance_m": r.model_distance_m, "walk_scale": r.walk_scale,
+               "c_scale": r.scale, "c_scale_before": profile.c_scale}
+    else:
+        if not rec.has("gps"):
+            raise ValueError(f"--from-gps: the recording has no gps stream (streams: {', '.join(sorted(rec.streams))})"
+                             "; walk a measured distance and use --distance M")
+        from core.gnss import make_fusion, profile_after, settings_from_profile
+        from core.pdr.pipeline import Pipeline
+
+        fusion = make_fusion("chen", **settings_from_profile("chen", profile))
+        pipe = Pipeline(height_m=profile.height_m, stride_model=profile.stride_model(), gnss=fusion)
+        pipe.run(rec, progress=prog)
+        new = profile_after(profile, pipe.gnss)
+        tr = pipe.gnss.trainer
+        if new is profile:
+            from core.gnss.training import MIN_PROFILE_GPS_M
+            raise CalibrationError(
+                f"--from-gps: the walk's good GPS taught too little: {tr.stride_gps_distance_m:.0f} m of straight, "
+                f"steady walking with good fixes, {MIN_PROFILE_GPS_M:.0f} m needed; walk longer in the open, or "
+                "walk a measured distance and use --distance M")
+        g = new.gps
+        lines.append(f"gps           {tr.stride_gps_distance_m:.0f} m of straight, steady walking with good fixes")
+        if "stride_scale" in g and g.get("stride_scale") != (profile.gps or {}).get("stride_scale"):
+            lines.append(f"stored        GPS stride scale x{g['stride_scale']:.3f} (on top of the stride factor "
+                         f"x{new.c_scale:.3f}): GPS fusion starts from it (pdr replay and the app); walks without GPS "
+                         "use the stride factor, which --distance calibrates")
+        if "heading_model" in g:
+            coef = (g["heading_model"] or {}).get("coefficients_deg") or [0.0]
+            lines.append(f"stored        heading offset {coef[0]:+.1f} deg (the phone's heading error model, eq. 12 "
+                         "of Chen et al. 2010)")
+        out = {"method": "gps", "gps_m": tr.stride_gps_distance_m, "gps": g}
+    new.save(path)
+    lines.append(f"profile       {path}")
+    if args.json:
+        print(dump_json({**out, "profile_path": path, "profile": new.to_dict()}))
+    else:
+        print("\n".join(lines))
+    return 0
+
+
+INFO_COLUMNS = (
+    ("stream", "the stream's name (acc, gyro, mag, gps, posi: ground-truth landmarks, ...; kind@device for a "
+               "second device)"),
+    ("events", "number of events (readings)"),
+    ("rate Hz", "events per second over the stream's span"),
+    ("jitter ms", "standard deviation of the intervals between events"),
+    ("gaps", "intervals longer than 2.5 times the local median interval"),
+    ("rate chg", "places where the sampling rate changes by more than a factor 1.5"),
+    ("columns [unit]", "the values of each event and their units"),
+)
+
+
+def info_table(rec: Recording) -> list[str]:
+    """``pdr info``'s stream table: one aligned row per stream under the headers of :data:`INFO_COLUMNS`."""
+    rows = []
     for n, s in rec.streams.items():
         st = s.interval_stats_s()
-        print(f"  {n:7s} {len(s):7d} events  {s.rate_hz:7.1f} Hz  jitter {1e3 * st['jitter_s']:.2f} ms  "
-              f"gaps {st['gaps']}" + (f"  rate changes {st['rate_changes']}" if st.get("rate_changes") else "")
-              + f"  [{', '.join(s.columns)}] {s.unit}")
+        jit = 1e3 * st["jitter_s"]
+        rows.append((n, f"{len(s):d}", f"{s.rate_hz:.1f}", f"{jit:.2f}" if jit == jit else "-", f"{st['gaps']}",
+                     f"{st.get('rate_changes', 0)}", f"{', '.join(s.columns)} [{s.unit}]"))
+    heads = [h for h, _ in INFO_COLUMNS]
+    w = [max([len(heads[k])] + [len(r[k]) for r in rows]) for k in range(len(heads))]
+
+    def fmt(r):
+        return "  ".join([r[0].ljust(w[0])] + [r[k].rjust(w[k]) for k in range(1, 6)] + [r[6]]).rstrip()
+
+    return [fmt(heads)] + [fmt(r) for r in rows]
+
+
+def cmd_info(args) -> int:
+    with _SlowNotice(f"reading {args.recording}", not getattr(args, "no_progress", False)):
+        rec = load_any(args.recording)
+    fmt = _detect(args.recording)
+    print(f"recording  {rec.source}")
+    if fmt:
+        print(f"format     {fmt}")
+    print(f"duration   {rec.duration_s:.1f} s")
+    print()
+    print("\n".join(info_table(rec)))
+    print()
     if rec.device:
         print(f"device     {json.dumps(rec.device)}")
     for r in rec.repairs:
         print(f"repaired   {r}")
     return 0
+
+
+class _SlowNotice:
+    """A status line on stderr when a step without progress of its own (reading a file) takes over ``after_s``:
+    ``pdr: reading X ...`` once, then how long it took."""
+
+    def __init__(self, what: str, enabled: bool = True, after_s: float = 2.0):
+        self.what, self.enabled, self.after_s = what, enabled, after_s
+        self.shown = False
+        self._timer = None
+        self._t0 = 0.0
+
+    def _show(self):
+        self.shown = True
+        sys.stderr.write(f"pdr: {self.what} ...\n")
+        sys.stderr.flush()
+
+    def __enter__(self):
+        import threading
+
+        self._t0 = time.monotonic()
+        if self.enabled:
+            self._timer = threading.Timer(self.after_s, self._show)
+            self._timer.daemon = True
+            self._timer.start()
+        return self
+
+    def __exit__(self, *exc):
+        if self._timer is not None:
+            self._timer.cancel()
+        if self.shown:
+            sys.stderr.write(f"pdr: {self.what}: done in {time.monotonic() - self._t0:.1f} s\n")
+        return False
 
 
 def make_parser() -> argparse.ArgumentParser:
@@ -441,12 +1047,21 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"pdr {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
-    r = sub.add_parser("replay", help="run the pipeline on a recording and print a summary",
+    r = sub.add_parser("replay", help="run the pipeline on recordings and print a summary",
                        description="Run the PDR pipeline on a recording (pdr-recording, GetSensorData, Sensor Logger "
-                                   "or phyphox; detected from the content) and print a summary. Without RECORDING, "
-                                   "replays the bundled simulated demo walk (a closed loop).")
-    r.add_argument("recording", nargs="?", help="recording file or folder (default: the bundled demo walk)")
-    r.add_argument("--csv", metavar="PATH", help="write the track as CSV, one row per step (local metres)")
+                                   "or phyphox; detected from the content) and print a summary, with the error "
+                                   "against the ground truth the recording carries (landmarks, simulator truth, "
+                                   "GPS). Without RECORDING, replays the bundled simulated demo walk (a closed "
+                                   "loop). With several recordings or a folder of them, replays them all on all "
+                                   "cores and prints one table (exports per recording with --out-dir).",
+                       epilog="Outputs are checked before the run: one that cannot be written exits 2. The user "
+                              "profile of `pdr calibrate` (the app's, or --profile) sets the stride factor and "
+                              "height unless --no-profile, --stride-c, --stride-model or --height say otherwise.")
+    r.add_argument("recording", nargs="*", help="recording files or folders; a folder that is no recording itself "
+                   "is searched for recordings (default: the bundled demo walk)")
+    r.add_argument("--csv", metavar="PATH", help="write the track as CSV, one row per step (local metres, and "
+                   "lat_deg/lon_deg when the track is placed by GPS or --origin); '-' writes it to stdout (the "
+                   "summary then goes to stderr)")
     r.add_argument("--geojson", metavar="PATH", help="write the track as GeoJSON (WGS-84, needs --origin or GPS "
                                                       "in the recording to be placed on the map)")
     r.add_argument("--fixes", metavar="PATH", help="write every GPS fix with its verdict (used, or why not) as CSV "
@@ -457,10 +1072,10 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--origin", type=_parse_origin, metavar="LAT,LON",
                    help="geographic start point for GeoJSON/GPX (default: first GPS fix, else 0,0)")
     r.add_argument("--height", type=float, metavar="M", help="walker's height in metres (for the stride model)")
-    r.add_argument("--stride-model", default="default", metavar="NAME|PATH",
+    r.add_argument("--stride-model", default=None, metavar="NAME|PATH",
                    help="step length model: a shipped name (default, weinberg, weinberg_bp, chen_linear, chen_ann, "
                         "kubrak_velocity: Kubrak et al.'s eq. 1 speed times the step's interval) "
-                        "or a model JSON file (default: %(default)s)")
+                        "or a model JSON file (default: the profile's model with its factor, else 'default')")
     r.add_argument("--stride-c", type=float, metavar="C", help="constant Weinberg coefficient C (overrides "
                                                                 "--stride-model)")
     r.add_argument("--declination", type=float, default=0.0, metavar="DEG",
@@ -474,8 +1089,11 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--gps-outage", type=_parse_outage, action="append", metavar="START_S:LENGTH_S",
                    help="hide the GPS fixes from START_S (seconds from the first sensor event) for LENGTH_S; "
                         "repeatable; the error at the end of each is reported")
-    r.add_argument("--profile", metavar="PATH", help="user profile (JSON): its stride scale and heading model start "
-                   "the GPS training, and what the walk taught is saved back into it")
+    r.add_argument("--profile", metavar="PATH", help="user profile (JSON) instead of the stored one: its stride "
+                   "factor and height are used, its GPS stride scale and heading model start the GPS training, and "
+                   "what the walk's GPS taught is saved back into it (the stored profile is only read)")
+    r.add_argument("--no-profile", action="store_true", help="ignore the stored user profile (default: the one "
+                   "`pdr calibrate` and the app keep, if there is one; see `pdr calibrate --help`)")
     r.add_argument("--mode", choices=MODES, default="auto",
                    help="hand-held PDR or foot-mounted INS (Song & Park 2018); auto (default): detected from the "
                         "IMU's signals (a foot shows long still stances and peak rates of several rad/s)")
@@ -493,9 +1111,16 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--platform", choices=("android", "ios"), default=None,
                    help="for a Sensor Logger export without Metadata.csv: the phone it came from "
                         "(or set PDR_SENSORLOGGER_PLATFORM)")
-    r.add_argument("--json", action="store_true", help="print the summary as JSON")
+    r.add_argument("--json", action="store_true", help="print the summary as one JSON document on stdout (status "
+                   "lines go to stderr; with several recordings: one document with a row per recording)")
+    r.add_argument("--out-dir", metavar="DIR", help="write each recording's exports into DIR as NAME.csv, "
+                   "NAME.geojson, ... (the formats of --export)")
+    r.add_argument("--export", metavar="FORMATS", help="with --out-dir: comma-separated formats among csv, geojson, "
+                   "gpx, png, fixes (default: csv,geojson)")
+    r.add_argument("--jobs", type=int, default=None, metavar="N", help="with several recordings: replay N at a time "
+                   "(default: all cores)")
     r.add_argument("--progress", action="store_true", help="show progress on stderr from the start "
-                   "(default: once the replay has taken 2 s, on a terminal or not)")
+                   "(default: once reading or replaying has taken 2 s, on a terminal or not)")
     r.add_argument("--no-progress", action="store_true", help="never show progress")
     r.set_defaults(func=cmd_replay)
 
@@ -508,8 +1133,34 @@ def make_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.set_defaults(func=cmd_simulate)
 
-    i = sub.add_parser("info", help="describe a recording: streams, rates, jitter, gaps")
+    c = sub.add_parser("calibrate", help="fit the user's stride on a walk and store it in the profile",
+                       description="Fit the walker's stride factor on a recording and store it in the user profile "
+                                   "the app uses (pdr replay then uses it, unless --no-profile). --distance M: the "
+                                   "walk was M metres, measured (the factor is pooled with the last walks made with "
+                                   "the same model). --from-gps: learn from the recording's good GPS (straight, "
+                                   "steady stretches; GPS fusion starts from it).")
+    c.add_argument("recording", help="the calibration walk (any format pdr replay reads)")
+    how = c.add_mutually_exclusive_group(required=True)
+    how.add_argument("--distance", type=float, metavar="M", help="the distance walked, in metres, measured")
+    how.add_argument("--from-gps", action="store_true", help="learn from the recording's GPS fixes (Chen et al. 2010)")
+    c.add_argument("--profile", metavar="PATH", help="profile file (default: the app's, "
+                   "$PDR_APP_DATA/profile.json or ~/.config/pdr/profile.json)")
+    c.add_argument("--height", type=float, metavar="M", help="walker's height in metres, stored in the profile")
+    c.add_argument("--stride-model", default=None, metavar="NAME|PATH", help="the model the factor belongs to "
+                   "(default: the profile's, else 'default')")
+    c.add_argument("--platform", choices=("android", "ios"), default=None,
+                   help="for a Sensor Logger export without Metadata.csv: the phone it came from")
+    c.add_argument("--json", action="store_true", help="print what was stored as JSON")
+    c.add_argument("--no-progress", action="store_true", help="never show progress")
+    c.set_defaults(func=cmd_calibrate)
+
+    i = sub.add_parser("info", help="describe a recording: streams, rates, jitter, gaps",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       description="Describe a recording: its format, duration and one row per stream:\n\n"
+                                   + "\n".join(f"  {h:<15} {d}" for h, d in INFO_COLUMNS)
+                                   + "\n\nthen the device and any repairs made while reading.")
     i.add_argument("recording")
+    i.add_argument("--no-progress", action="store_true", help="no status line when reading takes a while")
     i.set_defaults(func=cmd_info)
     return p
 

@@ -6,12 +6,15 @@ import math
 
 
 def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, landmarks_en=None,
-               others: dict | None = None, subtitle: str = "", fixes=None) -> None:
+               others: dict | None = None, subtitle: str = "", fixes=None, landmarks_label: str = "landmarks",
+               reference=None) -> None:
     """Write a PNG of the track (East/North metres, equal axes) with start and end marked.
 
     ``truth_en``: optional (n, 2) reference path; ``landmarks_en``: optional (k, 2)
     points; ``others``: optional ``{label: (east array, north array)}`` of other tracks;
-    ``fixes``: optional ``(east, north, accepted)`` GPS fixes (used ones filled, rejected ones hollow).
+    ``fixes``: optional ``(east, north, accepted)`` GPS fixes (used ones filled, rejected ones hollow);
+    ``reference``: optional ``(label, east, north)`` reference positions (e.g. good GPS fixes as truth).
+    Landmarks are numbered and joined, in the order walked, by a thin dashed line (the true path between them).
     """
     try:
         import matplotlib
@@ -26,10 +29,25 @@ def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, lan
     n = np.concatenate([[0.0], np.asarray(track.north_m, float)])
     if truth_en is not None:
         t = np.asarray(truth_en, float)
-        ax.plot(t[:, 0], t[:, 1], "-", color="0.6", lw=3, alpha=0.6, label="reference path")
+        ax.plot(t[:, 0], t[:, 1], "-", color="0.6", lw=3, alpha=0.6, label="true path")
     if landmarks_en is not None:
         lm = np.asarray(landmarks_en, float)
-        ax.plot(lm[:, 0], lm[:, 1], "s", color="tab:green", ms=6, label="landmarks")
+        ax.plot(lm[:, 0], lm[:, 1], "--", color="tab:green", lw=0.8, alpha=0.6)
+        ax.plot(lm[:, 0], lm[:, 1], "s", color="tab:green", ms=6, label=landmarks_label)
+        if len(lm) <= 40:  # numbered; landmarks at one place (a loop's start and end) share one label
+            groups: list = []
+            for k, (x, y) in enumerate(lm):
+                g = next((g for g in groups if math.hypot(x - g[0], y - g[1]) < 0.5), None)
+                if g is None:
+                    groups.append([x, y, [str(k)]])
+                else:
+                    g[2].append(str(k))
+            for x, y, ks in groups:
+                ax.annotate(",".join(ks), (x, y), textcoords="offset points", xytext=(4, 4), fontsize=6,
+                            color="tab:green")
+    if reference is not None:
+        label, re_, rn = reference
+        ax.plot(np.asarray(re_, float), np.asarray(rn, float), ".", color="0.45", ms=3, label=label)
     if fixes is not None and len(fixes[0]):
         fe, fn, ok = (np.asarray(v) for v in fixes)
         ok = ok.astype(bool)

@@ -12,6 +12,11 @@ from desktop.cli import main
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.fixture(autouse=True)
+def _no_stored_profile(tmp_path, monkeypatch):
+    monkeypatch.setenv("PDR_APP_DATA", str(tmp_path / "app"))  # never the user's own profile (subprocesses too)
+
+
 def _run(*args):
     return subprocess.run([sys.executable, "-m", "desktop", *args], capture_output=True, text=True, cwd=ROOT)
 
@@ -85,7 +90,13 @@ def test_simulate_then_replay_round_trip(tmp_path):
     p = tmp_path / "sq.csv.gz"
     r = _run("simulate", str(p), "--shape", "square", "--rate", "50", "--seed", "4")
     assert r.returncode == 0, r.stderr
-    assert _run("info", str(p)).stdout.count("Hz") == 3
+    info = _run("info", str(p)).stdout.splitlines()
+    head = next(k for k, ln in enumerate(info) if ln.startswith("stream"))
+    table = info[head:head + 4]
+    assert [ln.split()[0] for ln in table[1:]] == ["acc", "gyro", "mag"]
+    for col in ("events", "rate Hz", "jitter ms", "gaps"):  # every number ends under the end of its header
+        end = table[0].index(col) + len(col)
+        assert all(ln[end - 1] != " " and ln[end] == " " for ln in table[1:]), (col, table)
     r = _run("replay", str(p), "--json")
     s = json.loads(r.stdout)
     assert s["start_to_end_m"] < 0.03 * s["distance_m"]
@@ -122,3 +133,95 @@ def test_a_fifo_is_refused_in_one_line(tmp_path, capsys):
     assert main(["replay", str(fifo)]) == 2
     err = capsys.readouterr().err
     assert "not a regular file" in err and str(fifo) in err
+
+
+def test_info_help_describes_every_column():
+    r = _run("info", "--help")
+    for col in ("stream", "events", "rate Hz", "jitter ms", "gaps", "rate chg", "columns [unit]"):
+        assert f"  {col} " in r.stdout
+
+
+def _square(tmp_path):
+    p = tmp_path / "sq.csv.gz"
+    assert main(["simulate", str(p), "--shape", "square", "--rate", "50", "--seed", "4"]) == 0
+    return p
+
+
+def test_json_stays_json_with_exports_and_csv_dash_is_stdout(tmp_path, capsys):
+    import csv
+    import io
+
+    p = _square(tmp_path)
+    capsys.readouterr()
+    assert main(["replay", str(p), "--json", "--geojson", str(tmp_path / "o" / "t.geojson"), "--no-progress"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["n_steps"] > 100  # the whole of stdout is one JSON document
+    assert "wrote" in err and (tmp_path / "o" / "t.geojson").exists()
+    assert main(["replay", str(p), "--csv", "-", "--no-progress"]) == 0
+    out, err = capsys.readouterr()
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert len(rows) > 100 and float(rows[-1]["distance_m"]) > 50
+    assert "lat_deg" not in rows[0]  # not placed: no GPS, no --origin
+    assert "steps " in err  # the summary went to stderr
+    assert main(["replay", str(p), "--json", "--csv", "-"]) == 2
+    assert "both want stdout" in capsys.readouterr().err
+
+
+def test_placed_track_csv_carries_lat_lon(tmp_path, capsys):
+    import csv
+    import io
+
+    from core.geodesy import geodetic_to_enu
+
+    p = _square(tmp_path)
+    capsys.readouterr()
+    assert main(["replay", str(p), "--csv", "-", "--origin", "47.3769,8.5417", "--no-progress"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    lat = [float(r["lat_deg"]) for r in rows]
+    lon = [float(r["lon_deg"]) for r in rows]
+    e, n = geodetic_to_enu(lat, lon, (47.3769, 8.5417))
+    assert max(abs(e - [float(r["east_m"]) for r in rows])) < 0.01
+    assert max(abs(n - [float(r["north_m"]) for r in rows])) < 0.01
+
+
+@pytest.mark.parametrize("where,needle", [
+    ("{f}/x.csv", "is a file, not a folder"),  # a parent that is a file
+    ("{d}", "is a folder"),
+])
+def test_a_bad_output_path_exits_2_before_the_run(tmp_path, capsys, monkeypatch, where, needle):
+    p = _square(tmp_path)
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "adir").mkdir()
+    capsys.readouterr()
+
+    def no_run(*a, **k):
+        raise AssertionError("the pipeline ran before the output path was checked")
+
+    monkeypatch.setattr("core.pdr.pipeline.Pipeline.run", no_run)
+    bad = where.format(f=tmp_path / "afile", d=tmp_path / "adir")
+    assert main(["replay", str(p), "--gpx", bad]) == 2
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert out == "" and len(lines) == 1 and lines[0].startswith("pdr: error: --gpx ") and needle in lines[0]
+
+
+def test_calibrate_stores_the_profile_and_replay_uses_it(tmp_path, capsys, monkeypatch):
+    from core.pdr.calibration import UserProfile
+
+    p = _square(tmp_path)
+    capsys.readouterr()
+    assert main(["replay", str(p), "--json", "--no-progress"]) == 0
+    plain = json.loads(capsys.readouterr().out)
+    true_m = plain["truth"]["simulator"]["path_m"]  # the square's walked length
+    assert main(["calibrate", str(p), "--distance", f"{true_m}", "--height", "1.8", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    stored = tmp_path / "app" / "profile.json"
+    prof = UserProfile.load(stored)
+    assert f"profile       {stored}" in out and f"x{prof.c_scale:.3f}" in out and prof.height_m == 1.8
+    assert prof.c_scale == pytest.approx(true_m / plain["distance_m"], rel=1e-6)
+    assert main(["replay", str(p), "--json", "--no-progress"]) == 0
+    used = json.loads(capsys.readouterr().out)
+    assert used["distance_m"] == pytest.approx(true_m, rel=1e-3)  # the walk it was calibrated on: exact
+    assert used["profile"]["path"] == str(stored)
+    assert main(["replay", str(p), "--json", "--no-progress", "--no-profile"]) == 0
+    assert json.loads(capsys.readouterr().out)["distance_m"] == pytest.approx(plain["distance_m"])

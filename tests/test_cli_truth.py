@@ -1,0 +1,110 @@
+"""`pdr replay` shows the error against the ground truth a recording carries, computed here independently."""
+
+import json
+
+import numpy as np
+import pytest
+
+from core.pdr.pipeline import Pipeline
+from core.pdr.stride_models import load_stride_model
+from core.recording import Stream, read_recording, write_recording
+from desktop.cli import main
+from desktop.simulator import simulate_walk
+
+
+@pytest.fixture(autouse=True)
+def _no_stored_profile(tmp_path, monkeypatch):
+    monkeypatch.setenv("PDR_APP_DATA", str(tmp_path / "app"))  # never the user's own profile
+
+
+@pytest.fixture(scope="module")
+def square(tmp_path_factory):
+    """A simulated 20 m square at 50 Hz, its file, and the pipeline's own track of it (run here, not by the CLI)."""
+    walk = simulate_walk([(0, 0), (20, 0), (20, 20), (0, 20), (0, 0)], rate_hz=50.0, seed=4)
+    path = tmp_path_factory.mktemp("truth") / "square.csv.gz"
+    write_recording(str(path), walk.recording)
+    track = Pipeline(stride_model=load_stride_model("default")).run(read_recording(str(path))).track
+    return walk, path, track
+
+
+def test_simulator_truth_errors_equal_an_independent_computation(square, capsys):
+    walk, path, track = square
+    assert main(["replay", str(path), "--json", "--no-progress"]) == 0
+    sim = json.loads(capsys.readouterr().out)["truth"]["simulator"]
+    n_true, path_m = walk.truth.n_steps, walk.truth.path_length_m
+    assert sim["n_steps"] == n_true and sim["path_m"] == pytest.approx(path_m)
+    assert sim["step_count_err_pct"] == pytest.approx(100.0 * (len(track) - n_true) / n_true)
+    assert sim["distance_err_pct"] == pytest.approx(100.0 * (track.length_m.sum() - path_m) / path_m)
+    # a closed loop: the end point's error is about the track's start-to-end gap (within a step's interpolation)
+    gap = float(np.hypot(track.east_m[-1], track.north_m[-1]))
+    assert abs(sim["end_error_m"] - gap) < 0.7
+    assert sim["loop_closure_pct"] == pytest.approx(100.0 * sim["end_error_m"] / path_m, rel=1e-6)
+    assert main(["replay", str(path), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert f"truth         {n_true} steps, {path_m:.1f} m (simulator)" in out
+    assert f"distance {sim['distance_err_pct']:+.1f} %" in out and f"end point {sim['end_error_m']:.2f} m" in out
+
+
+def _with_landmarks(walk, track, every: int, columns=("east_m", "north_m")):
+    """The walk with a ``posi`` stream of true positions at every ``every``-th detected step's time
+    (at a step's time the track's position is that step's end point: no interpolation in the expectation)."""
+    idx = np.arange(3, len(track), every)
+    t = track.t_ns[idx]
+    true = walk.truth.position_at(t)
+    rec = walk.recording
+    streams = dict(rec.streams)
+    streams["posi"] = Stream("posi", t, true, columns, "m,m", "ground-truth landmarks (test)")
+    return type(rec)(streams, dict(rec.device), dict(rec.metadata), list(rec.repairs), rec.source), idx, true
+
+
+def test_landmark_errors_equal_an_independent_computation(square, tmp_path, capsys, monkeypatch):
+    walk, _, track = square
+    rec, idx, true = _with_landmarks(walk, track, every=12)
+    path = tmp_path / "with_posi.csv.gz"
+    write_recording(str(path), rec)
+    ours = np.column_stack([track.east_m[idx], track.north_m[idx]])
+    err = np.hypot(*((ours - ours[0]) - (true - true[0])).T)[1:]  # placed at the first landmark, absolute heading
+    drawn = {}
+    monkeypatch.setattr("desktop.plot.plot_track", lambda p, tr, **kw: drawn.update(kw))
+    assert main(["replay", str(path), "--json", "--no-progress", "--plot", str(tmp_path / "t.png")]) == 0
+    out = capsys.readouterr().out
+    lm = json.loads(out)["truth"]["landmarks"]
+    assert lm["n"] == len(idx) and "posi" in lm["what"]
+    assert lm["median_m"] == pytest.approx(float(np.median(err)), abs=1e-6)
+    assert lm["max_m"] == pytest.approx(float(err.max()), abs=1e-6)
+    assert lm["errors_m"] == pytest.approx(err.tolist(), abs=1e-6)
+    seg_len = float(np.hypot(*np.diff(true, axis=0).T).sum())
+    walked = float(track.length_m[idx[0] + 1: idx[-1] + 1].sum())
+    assert lm["distance_err_pct"] == pytest.approx(100.0 * (walked - seg_len) / seg_len, abs=1e-6)
+    # the plot gets the landmarks moved into the track's frame: the first one on the track at its time
+    assert np.allclose(drawn["landmarks_en"][0], ours[0]) and len(drawn["landmarks_en"]) == len(idx)
+    assert "landmarks: median" in drawn["subtitle"]
+
+
+def test_landmarks_in_degrees_are_read_too(square, tmp_path, capsys):
+    """An IPIN-style posi stream (lat_deg, lon_deg) gives the same errors as the one in metres."""
+    from core.geodesy import enu_to_geodetic
+
+    walk, _, track = square
+    rec, idx, true = _with_landmarks(walk, track, every=15)
+    lat, lon = enu_to_geodetic(true[:, 0], true[:, 1], (49.46, 11.11))
+    rec.streams["posi"] = Stream("posi", rec.streams["posi"].t_ns, np.column_stack([lat, lon]), ("lat_deg", "lon_deg"),
+                                 "deg,deg", "")
+    path = tmp_path / "deg.csv.gz"
+    write_recording(str(path), rec)
+    assert main(["replay", str(path), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    ours = np.column_stack([track.east_m[idx], track.north_m[idx]])
+    err = np.hypot(*((ours - ours[0]) - (true - true[0])).T)[1:]
+    assert f"truth         {len(idx)} landmarks (posi stream)" in out
+    assert f"at the landmarks: median {np.median(err):.1f} m, max {err.max():.1f} m" in out
+
+
+def test_no_truth_no_truth_lines(square, tmp_path, capsys):
+    walk, _, _ = square
+    rec = walk.recording
+    bare = type(rec)(dict(rec.streams), {}, {}, [], "bare")
+    path = tmp_path / "bare.csv"
+    write_recording(str(path), bare)
+    assert main(["replay", str(path), "--json", "--no-progress"]) == 0
+    assert "truth" not in json.loads(capsys.readouterr().out)
