@@ -1840,3 +1840,73 @@ def outdoor_walk(seed: int, minutes: float = 15.0, *, year: float = 2025.5, **kw
         "declination_deg": math.degrees(math.atan2(params["earth_field_enu_uT"][0], params["earth_field_enu_uT"][1])),
     }
     return walk
+
+
+# ---------------------------------------------------------------------------------------------------------
+# barometer
+
+
+@dataclass(frozen=True)
+class BarometerModel:
+    """A phone barometer in a building and in the weather (units in the names).
+
+    Pressure from altitude by the hypsometric equation of an isothermal layer,
+    ``p = p0 exp(-g M h / (R T))`` with the air's temperature ``temperature_c`` (not the standard
+    atmosphere's polynomial that :mod:`core.floors` inverts: the two differ by about 0.5 % of the height
+    at 15 C, as a real phone's would), plus the weather (a linear trend of ``drift_hpa_per_h`` and a slow
+    swing), white noise, a Gauss-Markov wander of the sensor, optional door/ventilation transients
+    (a pressure step of ``transient_hpa`` lasting ``transient_s``, ``transients_per_h`` times an hour on
+    average) and the sensor's resolution ``quantum_hpa``.
+    """
+
+    p0_hpa: float = 1013.25
+    temperature_c: float = 15.0
+    drift_hpa_per_h: float = 3.0
+    swing_hpa: float = 0.3
+    swing_period_s: float = 1800.0
+    noise_hpa: float = 0.02
+    wander_hpa: float = 0.02
+    wander_tau_s: float = 60.0
+    transient_hpa: float = 0.0
+    transient_s: float = 3.0
+    transients_per_h: float = 0.0
+    quantum_hpa: float = 0.0
+
+
+def floor_profile(t_s, segments) -> np.ndarray:
+    """Altitude (m) at times ``t_s`` of a walk made of ``segments`` [(duration_s, climb_m[, shape]), ...]: each
+    climbs ``climb_m`` over its duration (0 = level), level after.  ``shape`` "smooth" (default: a lift's
+    start and stop, cosine speed) or "linear" (a flight of stairs: constant speed)."""
+    t = np.asarray(t_s, dtype=float)
+    h = np.zeros_like(t)
+    t0, base = 0.0, 0.0
+    for seg in segments:
+        duration, climb = seg[0], seg[1]
+        shape = seg[2] if len(seg) > 2 else "smooth"
+        u = np.clip((t - t0) / duration, 0.0, 1.0) if duration > 0 else (t >= t0).astype(float)
+        f = u if shape == "linear" else u - np.sin(2 * math.pi * u) / (2 * math.pi)
+        h = np.where(t >= t0, base + climb * f, h)
+        t0 += duration
+        base += climb
+    return h
+
+
+def simulate_pressure(t_ns, altitude_m, model: BarometerModel | None = None, *, seed: int = 0) -> Stream:
+    """A ``pressure`` stream (hPa) at times ``t_ns`` for the true altitudes ``altitude_m`` (see :class:`BarometerModel`)."""
+    m = model or BarometerModel()
+    rng = np.random.default_rng(seed)
+    t_ns = np.asarray(t_ns, dtype=np.int64)
+    t = (t_ns - t_ns[0]) * 1e-9
+    h = np.asarray(altitude_m, dtype=float)
+    molar_mass, r_gas = 0.0289644, 8.31446  # kg/mol, J/(mol K)
+    p = m.p0_hpa * np.exp(-STANDARD_GRAVITY_M_S2 * molar_mass * h / (r_gas * (m.temperature_c + 273.15)))
+    p = p + m.drift_hpa_per_h * t / 3600.0 + m.swing_hpa * np.sin(2 * math.pi * t / m.swing_period_s + rng.uniform(0, 6.3))
+    p = p + rng.normal(0.0, m.noise_hpa, len(t)) + _gauss_markov(rng, t, np.array([m.wander_hpa]), m.wander_tau_s)[:, 0]
+    if m.transients_per_h > 0 and len(t):
+        n = rng.poisson(m.transients_per_h * t[-1] / 3600.0)
+        for start in rng.uniform(0.0, t[-1], n):
+            p = p + np.where((t >= start) & (t < start + m.transient_s), m.transient_hpa * rng.choice((-1, 1)), 0.0)
+    if m.quantum_hpa > 0:
+        p = np.round(p / m.quantum_hpa) * m.quantum_hpa
+    return make_stream("pressure", t_ns, p.reshape(-1, 1), columns=["p_hpa"], unit="hPa",
+                       note="simulated barometer (desktop.simulator.simulate_pressure)")
