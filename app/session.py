@@ -44,7 +44,8 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from core.conventions import GPS, bearing_deg
+from core.conventions import GPS, PRESSURE, bearing_deg
+from core.floors import FloorEstimator, floors_at
 from core.geodesy import geodetic_to_enu
 from core.recording import STREAM_ORDER, STREAM_SPECS
 
@@ -52,6 +53,8 @@ from app.health import HealthMonitor
 from app.recorder import BackgroundRecorder
 
 _RANK = {n: i for i, n in enumerate(STREAM_ORDER)}
+#: how a live recording's pressure stream is written (hPa, as Android reports it)
+_PRESSURE_SPEC = {"columns": ["p_hpa"], "unit": "hPa", "note": "barometric pressure (hPa = mbar, as Android reports it)"}
 
 
 def load_any_recording(path: str):
@@ -190,6 +193,8 @@ class Session:
         self.fix_accepted: list = []
         self._fixes_seen = 0
         self._fixes_used = 0
+        # the barometer's floors (core.floors), beside the tracker: pressure events never reach the pipeline
+        self.floors = FloorEstimator()
 
     # -- lifecycle ----------------------------------------------------------------
 
@@ -198,7 +203,8 @@ class Session:
         self.source.start()
         if self.record_path and self.writer is None:
             device, metadata = self._record_meta
-            streams = self._record_streams or {n: STREAM_SPECS[n] for n in ("acc", "gyro", "mag", "gps", "gnss_status")}
+            streams = self._record_streams or {**{n: STREAM_SPECS[n] for n in ("acc", "gyro", "mag", "gps", "gnss_status")},
+                                               PRESSURE: _PRESSURE_SPEC}
             dev = dict(self.source.device)
             dev.update(device or {})
             meta = dict(metadata or {})
@@ -305,8 +311,13 @@ class Session:
             if self.gnss is not None:
                 self.gnss.set_time_zero(t)  # outage times count from here, as in a batch run
         self.last_t_ns = t
-        if name == GPS and self.gps_origin is None and _good_fix(vals):
-            self.gps_origin = (_gps_value(vals, "lat_deg"), _gps_value(vals, "lon_deg"))
+        if name == PRESSURE:
+            self.floors.update(t, vals[0])
+            return
+        if name == GPS:
+            self.floors.note_fix(t, _gps_value(vals, "hacc_m"))
+            if self.gps_origin is None and _good_fix(vals):
+                self.gps_origin = (_gps_value(vals, "lat_deg"), _gps_value(vals, "lon_deg"))
         try:
             steps = self.pipeline.update(name, t, vals)
         except Exception as e:  # noqa: BLE001 - one bad event must not stop a live session
@@ -425,17 +436,34 @@ class Session:
             "heading_rad": heading,
             "mag_trusted": bool(st.mag_trusted),
             "labels": tuple(st.labels),
+            "floor": self.floors.floor if self.floors.counters["readings"] else None,
+            "floor_changes": sum(1 for c in self.floors.changes if c.floors),
         }
+
+    def floor_text(self) -> str:
+        """The barometer's line for the health panel ("" without a barometer)."""
+        f = self.floors
+        if not f.counters["readings"]:
+            return ""
+        moves = [c for c in f.changes if c.floors]
+        last = (f", last by {moves[-1].kind} ({moves[-1].floors:+d})" if moves else "")
+        return (f"barometer: floor {f.floor:+d} ({len(moves)} change{'s' if len(moves) != 1 else ''}{last}), "
+                f"altitude {f.altitude_m:+.1f} m")
+
+    def step_floors(self) -> list[int]:
+        """The floor of every step (a change counts from its midpoint: :func:`core.floors.floors_at`)."""
+        return floors_at(self.floors.changes, [s.t_ns for s in self.steps]).tolist()
 
     def health_text(self) -> str:
         """The health panel: the sensor table, then what the tracker adds (the foot INS: stance, NIS, aid, sd)."""
+        floor = [self.floor_text()] if self.floors.counters["readings"] else []
         extra = getattr(self.pipeline, "health_lines", None)
         if extra is not None:  # the foot INS: no adaptive magnetometer to trust or not
             self.health.mag_trusted = None
             return "\n".join([self.health.format(self.source.queue_drops(), self.source.accuracy(),
-                                                  mag_line=False), *extra()])
+                                                  mag_line=False), *extra(), *floor])
         self.health.mag_trusted = bool(self.status().mag_trusted) if self.last_t_ns is not None else None
-        return self.health.format(self.source.queue_drops(), self.source.accuracy())
+        return "\n".join([self.health.format(self.source.queue_drops(), self.source.accuracy()), *floor])
 
     def track(self):
         from core.pdr.pipeline import Track  # noqa: PLC0415
@@ -505,6 +533,8 @@ def export_session(session: Session, out_dir: str, basename: str, raw_path: str 
     if gnss is not None and gnss.origin_lat_lon is not None and gnss.steps:
         fused = gnss.result().track()
         track, extra = fused, fused.point_properties()
+    if session.floors.counters["readings"]:  # the barometer's floor of every step
+        extra = {**(extra or {}), "floor": floors_at(session.floors.changes, track.t_ns).tolist()}
     try:
         from core import export  # noqa: PLC0415 - the lead's module
     except ImportError as e:

@@ -46,14 +46,14 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from core.conventions import ACC, GNSS_STATUS, GPS, GYRO, MAG, ROTVEC
+from core.conventions import ACC, GNSS_STATUS, GPS, GYRO, MAG, PRESSURE, ROTVEC
 from core.gnss.nmea import NmeaSatelliteStatus
 
 #: ``(stream, t_ns, values)``
 Event = tuple
 
 #: The streams the pipeline consumes (anything else in a recording is not replayed).
-PIPELINE_STREAMS = (ACC, GYRO, MAG, GPS, ROTVEC)
+PIPELINE_STREAMS = (ACC, GYRO, MAG, GPS, ROTVEC, PRESSURE)
 
 #: Replay speeds offered by the UI: label -> factor (``inf`` = as fast as possible).
 REPLAY_SPEEDS = {"1x": 1.0, "10x": 10.0, "max": math.inf}
@@ -62,7 +62,10 @@ REPLAY_SPEEDS = {"1x": 1.0, "10x": 10.0, "max": math.inf}
 MAX_RATE_HZ = 200.0
 
 #: ``android.hardware.Sensor.TYPE_*`` constants (fixed by the Android API).
-ANDROID_SENSOR_TYPES = {ACC: 1, MAG: 2, GYRO: 4, ROTVEC: 11}
+ANDROID_SENSOR_TYPES = {ACC: 1, MAG: 2, GYRO: 4, PRESSURE: 6, ROTVEC: 11}
+
+#: sensors many phones lack: listened to when present, no warning when absent
+OPTIONAL_STREAMS = (PRESSURE,)
 
 #: ``android.hardware.SensorManager.SENSOR_STATUS_*`` names for the health panel.
 ACCURACY_NAMES = {-1: "no contact", 0: "unreliable", 1: "low", 2: "medium", 3: "high"}
@@ -204,7 +207,7 @@ class ReplaySource(SensorSource):
                  streams: Iterable[str] | None = None, max_chunk: int = 2000):
         super().__init__()
         names = [n for n in (streams or PIPELINE_STREAMS) if recording.has(n)]
-        if not names:
+        if not [n for n in names if n not in OPTIONAL_STREAMS]:  # a barometer alone tracks nothing
             raise ValueError(f"{recording.source or 'recording'}: nothing to replay "
                              f"(no {', '.join(PIPELINE_STREAMS)} stream)")
         self.recording = recording
@@ -486,7 +489,7 @@ class AndroidSource(SensorSource):
     kind = "android"
     live = True
 
-    def __init__(self, *, rate_hz: float = 100.0, streams=(ACC, GYRO, MAG), gps: bool = True,
+    def __init__(self, *, rate_hz: float = 100.0, streams=(ACC, GYRO, MAG, PRESSURE), gps: bool = True,
                  jnius=None, queue_max: int = 30000):
         super().__init__()
         self.rate_hz = float(rate_hz)
@@ -526,6 +529,8 @@ class AndroidSource(SensorSource):
     def _on_event(self, stream, t_ns, values):
         if stream == ROTVEC:
             vals = rotvec_quaternion(values)
+        elif stream == PRESSURE:
+            vals = (float(values[0]),)
         else:
             vals = (float(values[0]), float(values[1]), float(values[2]))
         self.queue.push((stream, int(t_ns), vals))
@@ -581,7 +586,8 @@ class AndroidSource(SensorSource):
             self.sensor_info[name] = _sensor_info(sensor)
         if ACC in self.missing or not self._listeners:
             raise SensorStartError("no accelerometer could be registered")
-        self.warning = ("missing sensor(s): " + ", ".join(self.missing)) if self.missing else ""
+        missing = [n for n in self.missing if n not in OPTIONAL_STREAMS]
+        self.warning = ("missing sensor(s): " + ", ".join(missing)) if missing else ""
         self.device = {"platform": "android", "requested_rate_hz": min(self.rate_hz, MAX_RATE_HZ),
                        "sampling_period_us": self.period_us, "sensors": dict(self.sensor_info)}
         try:

@@ -14,6 +14,7 @@ ACC = "acc"  #: accelerometer, m/s^2, gravity included, device frame
 GYRO = "gyro"  #: gyroscope, rad/s, device frame
 MAG = "mag"  #: magnetometer, uT, device frame (calibrated: hard iron removed by the OS if it can)
 GPS = "gps"  #: GNSS fix: lat_deg, lon_deg, alt_m, horizontal accuracy m, speed m/s, course deg (bearing)
+PRESSURE = "pressure"  #: barometer, hPa (= mbar, as Android reports it): core.floors
 ROTVEC = "rotvec"  #: the phone's own attitude (Android rotation vector) as an ENU quaternion w, x, y, z
 #: GNSS receiver status per fix: satellites used in the fix, C/N0 of the 4th strongest of them (dB-Hz, nan if < 4)
 GNSS_STATUS = "gnss_status"

@@ -107,3 +107,41 @@ def test_real_single_floor_ipin_routes_have_no_floor_change():
         res = FloorEstimator().run(rec.streams["pressure"])
         assert res.summary()["floor_changes"] == 0, (name, res.changes)
         assert res.counters["readings"] > 100
+
+
+def test_the_app_session_shows_floors_and_exports_them_per_step(tmp_path):
+    """A simulated hand-held walk with a barometer that goes up a floor by stairs half-way: the session's
+    floor, the health panel's line and the GeoJSON's per-step floor (the steps before the stairs on 0)."""
+    import json
+
+    from app.session import Session, export_session
+    from app.sources import ReplaySource
+    from core.pdr.pipeline import Pipeline
+    from core.recording import Recording
+    from desktop.simulator import simulate_walk
+
+    w = simulate_walk(((0.0, 0.0), (40.0, 0.0), (40.0, 30.0)), seed=5, still_start_s=2.0, still_end_s=2.0)
+    rec = w.recording
+    t = np.arange(rec.t0_ns, rec.t0_ns + int(rec.duration_s * 1e9), 100_000_000)
+    t_s = (t - t[0]) * 1e-9
+    half = 0.5 * t_s[-1]
+    climb = floor_profile(t_s, [(half - 7.0, 0.0), (14.0, 3.5, "linear"), (t_s[-1], 0.0)])
+    streams = dict(rec.streams, pressure=simulate_pressure(t, climb, BarometerModel(drift_hpa_per_h=2.0), seed=5))
+    rec2 = Recording(streams, device=rec.device, metadata=rec.metadata)
+    ses = Session(ReplaySource(rec2, speed=math.inf, max_chunk=500), pipeline_factory=Pipeline)
+    ses.start()
+    for _ in range(100000):
+        ses.tick(budget_s=0.01)
+        if ses.finished:
+            break
+    assert ses.summary()["floor"] == 1 and ses.summary()["floor_changes"] == 1
+    assert "barometer: floor +1" in ses.health_text() and "stairs" in ses.health_text()
+    assert len(ses.steps) == len(Pipeline().run(rec).steps)  # pressure does not disturb the steps
+    out = export_session(ses, str(tmp_path), "walk")
+    feats = json.loads(open(out["geojson"]).read())["features"]
+    floors = [f["properties"]["floor"] for f in feats if f["geometry"]["type"] == "Point" and "floor" in f["properties"]]
+    step_t = np.array([s.t_ns for s in ses.steps])
+    change = ses.floors.changes[0]
+    assert len(floors) == len(step_t)
+    assert floors == [0 if tt < change.t_mid_ns else 1 for tt in step_t] and floors[0] == 0 and floors[-1] == 1
+    assert abs((change.t_mid_ns - t[0]) * 1e-9 - half) < 5.0  # the midpoint of the stairs, within 5 s
