@@ -389,12 +389,88 @@ def before_after_table(h: dict, baseline: dict, peers: bool = False) -> str:
     return _table(header, body)
 
 
+def _section_headlines(name: str) -> dict:
+    """The headlines a benchmark of its own saved in ``benchmarks/<name>`` ({} if it has not run)."""
+    try:
+        return json.loads(Path(__file__).with_name(name).read_text()).get("headlines", {})
+    except (OSError, ValueError):
+        return {}
+
+
+def _landmark_path_m(results, dataset: str, split: str) -> float | None:
+    """Median length (m) of the surveyed-landmark polyline of a dataset's recordings of one split."""
+    lengths = []
+    for r in results:
+        lm = r.get("plot", {}).get("landmarks") if r.get("dataset") == dataset and r.get("split") == split else None
+        if lm is not None and len(lm) > 1:
+            lengths.append(float(np.sum(np.hypot(*np.diff(np.asarray(lm, float)[:, :2], axis=0).T))))
+    return float(np.median(lengths)) if lengths else None
+
+
+def what_to_expect(results: list, h: dict) -> list[str]:
+    """The top of the report: what accuracy a user can expect from what kind of walk, in plain words, from the
+    report split's numbers (each sentence only when its numbers are in this run or a saved section)."""
+    out = ["## What to expect", "",
+           "Measured on recordings by other people that nothing was tuned on (the *report* split below); "
+           "your walks will differ, and the company also measures on walks that are not here.", ""]
+
+    def num(name):
+        v = h.get(name)
+        return v if isinstance(v, (int, float)) and v == v else None
+
+    items = []
+    step_hand, step_all = num("handheld_report_step_mae_pct"), num("oxford_report_all_step_mae_pct")
+    if step_hand is not None:
+        items.append(f"**Steps**: within about {step_hand:.1f} % of the true count with the phone in the hand"
+                     + (f", {step_all:.1f} % on average over hand, pockets, bag, armband and a swinging arm"
+                        if step_all is not None else "") + ".")
+    ipin, path = num("ipin2023_report_landmark_median_m"), _landmark_path_m(results, "ipin2023_track3", "report")
+    if ipin is not None:
+        dist = num("ipin2023_report_distance_median_abs_pct")
+        loop = num("ipin2023_report_loop_closure_median_pct")
+        items.append(f"**Hand-held indoors, no GPS** (a museum, phone held in front): about {ipin:.1f} m from the "
+                     "surveyed points on average"
+                     + (f" over loops of about {path:.0f} m" if path else "")
+                     + (f"; the walked distance is right to about {dist:.0f} %" if dist is not None else "")
+                     + (f"; a loop ends about {loop:.0f} % of its length away from its start" if loop is not None
+                        else "") + ".")
+    ms = num("ms_indoor_report_landmark_median_m")
+    if ms is not None:
+        items.append(f"**Hand-held in a shopping mall**, with a waypoint every few seconds as the only help: "
+                     f"about {ms:.1f} m median error at the next waypoints.")
+    eth = num("eth_walk_report_gps_median_m")
+    gh = _section_headlines("gnss_results.json")
+    fused = gh.get("gps_outage_eth_3min_pct")
+    if eth is not None:
+        items.append(f"**Outdoors without GPS** (12 minutes, phone in the hand): about {eth:.0f} m from the "
+                     "real path at the median"
+                     + (f"; with GPS, a 3-minute GPS gap ends about {fused:.0f} % of the distance walked in it "
+                        "away from the truth" if fused is not None else "") + ".")
+    fh = _section_headlines("foot_results.json")
+    if fh.get("pyshoe_rmse_median_m") is not None:
+        items.append(f"**IMU on the shoe** (foot mode): about {100 * fh['pyshoe_rmse_median_m']:.0f} cm RMS in 3-D "
+                     "over short lab walks"
+                     + (f"; a walk around a building closes to about {fh['xio_loop_closure_median_pct']:.1f} % of "
+                        "its length" if fh.get("xio_loop_closure_median_pct") == fh.get("xio_loop_closure_median_pct")
+                        and fh.get("xio_loop_closure_median_pct") is not None else "") + ".")
+    flh = _section_headlines("floors_results.json")
+    if flh:
+        false = flh.get("ipin_report_recordings_with_a_floor_change", 0)
+        items.append(f"**Floors** (phones with a barometer): the floor sequence was right in "
+                     f"{flh.get('sim_floor_sequence_correct_pct', float('nan')):.0f} % of simulated building walks; "
+                     + ("no floor change was reported on any real single-floor walk." if not false else
+                        f"{false} real single-floor walks got a floor change they did not have."))
+    out += [f"- {t}" for t in items] + [""]
+    return out
+
+
 def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
     results = run_info["results"]
     h = headline(results)
     lines = ["# Benchmark results", ""]
+    lines += what_to_expect(results, h)
     cmd = "python -m benchmarks" + ("" if not argv else " " + " ".join(str(a) for a in argv))
-    lines += [
+    lines += ["## This run", "",
         f"Generated by `{cmd}` on {_dt.date.today().isoformat()}, code `{_git_describe()}`, "
         f"{run_info['jobs']} processes on {platform.machine()} ({os.cpu_count()} cores): "
         f"{len(results)} recordings in {run_info['wall_s']:.0f} s ({'quick subset' if run_info['quick'] else 'full run'}"

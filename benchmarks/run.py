@@ -440,11 +440,15 @@ def parse_args(argv=None):
     ap = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__.split("\n")[0])
     ap.add_argument("--data", type=Path, default=None, help="data root (default: ../shared/data beside the repo)")
     ap.add_argument("--quick", action="store_true", help="the quick subset (CI guard) with the cheap peers")
-    here = Path(__file__).resolve().parent
-    ap.add_argument("--out", type=Path, default=here / "RESULTS.md",
-                    help="Markdown report to write (default: benchmarks/RESULTS.md)")
-    ap.add_argument("--plots", type=Path, default=here / "plots",
-                    help="folder for the PNG plots (default: benchmarks/plots)")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="Markdown report to write (default: out/benchmarks/RESULTS.md; with --write-results "
+                         "benchmarks/RESULTS.md)")
+    ap.add_argument("--plots", type=Path, default=None,
+                    help="folder for the PNG plots (default: beside the report; with --write-results "
+                         "benchmarks/plots)")
+    ap.add_argument("--write-results", action="store_true",
+                    help="rewrite the committed report benchmarks/RESULTS.md and benchmarks/plots (else nothing "
+                         "tracked by git is touched)")
     ap.add_argument("--only", action="append", default=None, metavar="DATASET",
                     help="run only this dataset (module or folder name; repeatable)")
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), help="parallel processes (default 2)")
@@ -457,6 +461,11 @@ def parse_args(argv=None):
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    here = Path(__file__).resolve().parent
+    if args.out is None:
+        args.out = here / "RESULTS.md" if args.write_results else here.parent / "out" / "benchmarks" / "RESULTS.md"
+    if args.plots is None:
+        args.plots = here / "plots" if args.write_results else args.out.parent / "plots"
     root = args.data or default_data_root()
     if not root.is_dir():
         print(f"benchmark: no data folder at {root}", file=sys.stderr)
@@ -472,6 +481,9 @@ def main(argv=None) -> int:
     from benchmarks import report
 
     report.write(run_info, args.out, args.plots, argv=sys.argv[1:] if argv is None else argv)
+    print(f"benchmark: wrote {args.out} and the plots in {args.plots}"
+          + ("" if args.write_results else " (the committed report is rewritten only with --write-results)"),
+          file=sys.stderr)
     h = headline(run_info["results"])
     for t in evaluate_targets(h):
         v = "n/a" if t["value"] is None else f"{t['value']:.2f}"
