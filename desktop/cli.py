@@ -660,7 +660,13 @@ def dump_json(obj) -> str:
 
 def cmd_replay(args) -> int:
     inputs = list(args.recording or [])
-    if len(inputs) > 1 or (len(inputs) == 1 and is_folder_of_recordings(inputs[0])):
+    if len(inputs) == 1 and is_folder_of_recordings(inputs[0]):
+        found, _ = collect_recordings(inputs)
+        if len(found) == 1:  # a folder holding one recording (an export unpacked into a folder): that one
+            inputs = found
+        else:
+            return cmd_replay_batch(args, inputs)
+    if len(inputs) > 1:
         return cmd_replay_batch(args, inputs)
     path = inputs[0] if inputs else None
     outs = resolve_outputs(args, recording_stem(path))
@@ -712,9 +718,28 @@ def _detect(path: str) -> str | None:
         return None
 
 
-def is_folder_of_recordings(path: str) -> bool:
-    """A folder that is not itself a recording (a Sensor Logger or phyphox export folder is one)."""
-    return os.path.isdir(path) and _detect(path) is None
+def is_folder_of_recordings(path: str, _depth: int = 0) -> bool:
+    """A folder that is not itself a recording.  A Sensor Logger or phyphox export folder is one (the importers
+    recognise it); a folder whose content the importers recognise only because it holds such exports in
+    subfolders, or holds recordings of another format beside them, is a folder of recordings."""
+    if not os.path.isdir(path):
+        return False
+    fmt = _detect(path)
+    if fmt is None:
+        return True
+    try:
+        entries = [e for e in os.scandir(path) if not e.name.startswith(".")]
+    except OSError:
+        return False
+    for e in entries:
+        if e.is_dir():
+            if _depth < 2 and _detect(e.path) is not None and not is_folder_of_recordings(e.path, _depth + 1):
+                return True  # an export folder inside
+        elif e.is_file():
+            f = _detect(e.path)
+            if f is not None and f != fmt:
+                return True  # a recording of another format beside it
+    return False
 
 
 def collect_recordings(inputs) -> tuple[list[str], list[str]]:
@@ -852,7 +877,7 @@ def cmd_replay_batch(args, inputs) -> int:
                 prog(done / len(paths))
     for r in rows:
         for w in r.get("warnings", ()):
-            print(f"pdr: warning: {r['path']}: {w}", file=sys.stderr)
+            print(f"pdr: warning: {w}" if r["path"] in w else f"pdr: warning: {r['path']}: {w}", file=sys.stderr)
         for w in r.get("written", ()):
             print(f"wrote         {w}", file=sys.stderr)
     failed = [r for r in rows if not r["ok"]]
@@ -932,7 +957,7 @@ def cmd_calibrate(args) -> int:
 
         fusion = make_fusion("chen", **settings_from_profile("chen", profile))
         pipe = Pipeline(height_m=profile.height_m, stride_model=profile.stride_model(), gnss=fusion)
-        pipe.run(rec, progress=prog)
+        res = pipe.run(rec, progress=prog)
         new = profile_after(profile, pipe.gnss)
         tr = pipe.gnss.trainer
         if new is profile:
@@ -951,7 +976,8 @@ def cmd_calibrate(args) -> int:
             coef = (g["heading_model"] or {}).get("coefficients_deg") or [0.0]
             lines.append(f"stored        heading offset {coef[0]:+.1f} deg (the phone's heading error model, eq. 12 "
                          "of Chen et al. 2010)")
-        out = {"method": "gps", "gps_m": tr.stride_gps_distance_m, "gps": g}
+        out = {"method": "gps", "gps_m": tr.stride_gps_distance_m, "gps": g,
+               "pdr_distance_m": float(res.track.length_m.sum())}
     new.save(path)
     lines.append(f"profile       {path}")
     if args.json:

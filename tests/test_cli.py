@@ -141,55 +141,63 @@ def test_info_help_describes_every_column():
         assert f"  {col} " in r.stdout
 
 
-def _square(tmp_path):
-    p = tmp_path / "sq.csv.gz"
+@pytest.fixture(scope="module")
+def _square_file(tmp_path_factory):
+    p = tmp_path_factory.mktemp("square") / "sq.csv.gz"
     assert main(["simulate", str(p), "--shape", "square", "--rate", "50", "--seed", "4"]) == 0
     return p
 
 
-def test_json_stays_json_with_exports_and_csv_dash_is_stdout(tmp_path, capsys):
-    import csv
-    import io
-
-    p = _square(tmp_path)
+@pytest.fixture
+def square(_square_file, capsys):
     capsys.readouterr()
-    assert main(["replay", str(p), "--json", "--geojson", str(tmp_path / "o" / "t.geojson"), "--no-progress"]) == 0
-    out, err = capsys.readouterr()
-    assert json.loads(out)["n_steps"] > 100  # the whole of stdout is one JSON document
-    assert "wrote" in err and (tmp_path / "o" / "t.geojson").exists()
-    assert main(["replay", str(p), "--csv", "-", "--no-progress"]) == 0
-    out, err = capsys.readouterr()
-    rows = list(csv.DictReader(io.StringIO(out)))
-    assert len(rows) > 100 and float(rows[-1]["distance_m"]) > 50
-    assert "lat_deg" not in rows[0]  # not placed: no GPS, no --origin
-    assert "steps " in err  # the summary went to stderr
-    assert main(["replay", str(p), "--json", "--csv", "-"]) == 2
-    assert "both want stdout" in capsys.readouterr().err
+    return _square_file
 
 
-def test_placed_track_csv_carries_lat_lon(tmp_path, capsys):
+def test_json_stays_json_with_exports_and_csv_dash_is_stdout_with_lat_lon(square, tmp_path, capsys):
     import csv
     import io
 
     from core.geodesy import geodetic_to_enu
 
-    p = _square(tmp_path)
-    capsys.readouterr()
+    p = square
+    assert main(["replay", str(p), "--json", "--geojson", str(tmp_path / "o" / "t.geojson"), "--no-progress"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["n_steps"] > 100  # the whole of stdout is one JSON document
+    assert "wrote" in err and (tmp_path / "o" / "t.geojson").exists()
     assert main(["replay", str(p), "--csv", "-", "--origin", "47.3769,8.5417", "--no-progress"]) == 0
-    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    out, err = capsys.readouterr()
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert len(rows) > 100 and float(rows[-1]["distance_m"]) > 50
+    assert "steps " in err  # the summary went to stderr
     lat = [float(r["lat_deg"]) for r in rows]
     lon = [float(r["lon_deg"]) for r in rows]
-    e, n = geodetic_to_enu(lat, lon, (47.3769, 8.5417))
+    e, n = geodetic_to_enu(lat, lon, (47.3769, 8.5417))  # placed where the local metres say
     assert max(abs(e - [float(r["east_m"]) for r in rows])) < 0.01
     assert max(abs(n - [float(r["north_m"]) for r in rows])) < 0.01
+    assert main(["replay", str(p), "--json", "--csv", "-"]) == 2
+    assert "both want stdout" in capsys.readouterr().err
+
+
+def test_a_track_not_placed_has_no_lat_lon(tmp_path):
+    import numpy as np
+
+    from core.pdr.pipeline import Track
+    from desktop.cli import _write_track_csv
+
+    tr = Track(np.array([1, 2], dtype=np.int64), np.ones(2), np.zeros(2), np.array([1.0, 2.0]), np.zeros(2))
+    _write_track_csv(str(tmp_path / "t.csv"), tr, None)
+    assert "lat_deg" not in (tmp_path / "t.csv").read_text().splitlines()[0]
+    _write_track_csv(str(tmp_path / "t.csv"), tr, (10.0, 20.0))
+    assert (tmp_path / "t.csv").read_text().splitlines()[0].endswith(",lat_deg,lon_deg")
 
 
 @pytest.mark.parametrize("where,needle", [
     ("{f}/x.csv", "is a file, not a folder"),  # a parent that is a file
     ("{d}", "is a folder"),
 ])
-def test_a_bad_output_path_exits_2_before_the_run(tmp_path, capsys, monkeypatch, where, needle):
-    p = _square(tmp_path)
+def test_a_bad_output_path_exits_2_before_the_run(square, tmp_path, capsys, monkeypatch, where, needle):
+    p = square
     (tmp_path / "afile").write_text("x")
     (tmp_path / "adir").mkdir()
     capsys.readouterr()
@@ -205,23 +213,22 @@ def test_a_bad_output_path_exits_2_before_the_run(tmp_path, capsys, monkeypatch,
     assert out == "" and len(lines) == 1 and lines[0].startswith("pdr: error: --gpx ") and needle in lines[0]
 
 
-def test_calibrate_stores_the_profile_and_replay_uses_it(tmp_path, capsys, monkeypatch):
+def test_calibrate_stores_the_profile_and_replay_uses_it(square, tmp_path, capsys):
     from core.pdr.calibration import UserProfile
+    from core.recording import read_recording
 
-    p = _square(tmp_path)
+    p = square
+    true_m = read_recording(str(p)).metadata["truth"]["path_length_m"]  # the square's walked length
     capsys.readouterr()
-    assert main(["replay", str(p), "--json", "--no-progress"]) == 0
-    plain = json.loads(capsys.readouterr().out)
-    true_m = plain["truth"]["simulator"]["path_m"]  # the square's walked length
-    assert main(["calibrate", str(p), "--distance", f"{true_m}", "--height", "1.8", "--no-progress"]) == 0
-    out = capsys.readouterr().out
+    assert main(["calibrate", str(p), "--distance", f"{true_m}", "--height", "1.8", "--json", "--no-progress"]) == 0
+    doc = json.loads(capsys.readouterr().out)
     stored = tmp_path / "app" / "profile.json"
     prof = UserProfile.load(stored)
-    assert f"profile       {stored}" in out and f"x{prof.c_scale:.3f}" in out and prof.height_m == 1.8
-    assert prof.c_scale == pytest.approx(true_m / plain["distance_m"], rel=1e-6)
-    assert main(["replay", str(p), "--json", "--no-progress"]) == 0
-    used = json.loads(capsys.readouterr().out)
-    assert used["distance_m"] == pytest.approx(true_m, rel=1e-3)  # the walk it was calibrated on: exact
-    assert used["profile"]["path"] == str(stored)
+    assert doc["profile_path"] == str(stored) and prof.height_m == 1.8
+    assert prof.c_scale == pytest.approx(true_m / doc["model_distance_m"], rel=1e-9) == doc["c_scale"]
+    assert main(["replay", str(p), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert f"profile       {stored}: stride x{prof.c_scale:.3f} on model default (1 calibration walk)" in out
+    assert "distance +0.0 %" in out  # the walk it was calibrated on: exact
     assert main(["replay", str(p), "--json", "--no-progress", "--no-profile"]) == 0
-    assert json.loads(capsys.readouterr().out)["distance_m"] == pytest.approx(plain["distance_m"])
+    assert json.loads(capsys.readouterr().out)["distance_m"] == pytest.approx(doc["model_distance_m"])

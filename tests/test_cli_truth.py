@@ -8,7 +8,8 @@ import pytest
 from core.pdr.pipeline import Pipeline
 from core.pdr.stride_models import load_stride_model
 from core.recording import Stream, read_recording, write_recording
-from desktop.cli import main
+from core.metrics import truth_of
+from desktop.cli import main, truth_lines
 from desktop.simulator import simulate_walk
 
 
@@ -39,10 +40,9 @@ def test_simulator_truth_errors_equal_an_independent_computation(square, capsys)
     gap = float(np.hypot(track.east_m[-1], track.north_m[-1]))
     assert abs(sim["end_error_m"] - gap) < 0.7
     assert sim["loop_closure_pct"] == pytest.approx(100.0 * sim["end_error_m"] / path_m, rel=1e-6)
-    assert main(["replay", str(path), "--no-progress"]) == 0
-    out = capsys.readouterr().out
-    assert f"truth         {n_true} steps, {path_m:.1f} m (simulator)" in out
-    assert f"distance {sim['distance_err_pct']:+.1f} %" in out and f"end point {sim['end_error_m']:.2f} m" in out
+    lines = "\n".join(truth_lines({"simulator": sim}))  # the summary's lines of the same numbers
+    assert f"truth         {n_true} steps, {path_m:.1f} m (simulator)" in lines
+    assert f"distance {sim['distance_err_pct']:+.1f} %" in lines and f"end point {sim['end_error_m']:.2f} m" in lines
 
 
 def _with_landmarks(walk, track, every: int, columns=("east_m", "north_m")):
@@ -81,30 +81,38 @@ def test_landmark_errors_equal_an_independent_computation(square, tmp_path, caps
     assert "landmarks: median" in drawn["subtitle"]
 
 
-def test_landmarks_in_degrees_are_read_too(square, tmp_path, capsys):
-    """An IPIN-style posi stream (lat_deg, lon_deg) gives the same errors as the one in metres."""
+def test_landmarks_in_degrees_and_no_truth(square, capsys):
+    """An IPIN-style posi stream (lat_deg, lon_deg) is the same truth as one in metres; no truth, nothing."""
     from core.geodesy import enu_to_geodetic
 
     walk, _, track = square
     rec, idx, true = _with_landmarks(walk, track, every=15)
+    metres = truth_of(rec).landmarks
     lat, lon = enu_to_geodetic(true[:, 0], true[:, 1], (49.46, 11.11))
     rec.streams["posi"] = Stream("posi", rec.streams["posi"].t_ns, np.column_stack([lat, lon]), ("lat_deg", "lon_deg"),
                                  "deg,deg", "")
-    path = tmp_path / "deg.csv.gz"
-    write_recording(str(path), rec)
-    assert main(["replay", str(path), "--no-progress"]) == 0
-    out = capsys.readouterr().out
-    ours = np.column_stack([track.east_m[idx], track.north_m[idx]])
-    err = np.hypot(*((ours - ours[0]) - (true - true[0])).T)[1:]
-    assert f"truth         {len(idx)} landmarks (posi stream)" in out
-    assert f"at the landmarks: median {np.median(err):.1f} m, max {err.max():.1f} m" in out
+    deg = truth_of(rec).landmarks
+    assert deg.origin_lat_lon == pytest.approx((lat[0], lon[0]))
+    assert np.allclose(deg.east_m - metres.east_m + metres.east_m[0], 0.0, atol=0.01)
+    assert np.allclose(deg.north_m - metres.north_m + metres.north_m[0], 0.0, atol=0.01)
+    assert deg.label == f"{len(idx)} landmarks (posi stream)"
+    bare = type(rec)({k: v for k, v in rec.streams.items() if k != "posi"}, {}, {}, [], "bare")
+    assert not truth_of(bare)
 
 
-def test_no_truth_no_truth_lines(square, tmp_path, capsys):
-    walk, _, _ = square
-    rec = walk.recording
-    bare = type(rec)(dict(rec.streams), {}, {}, [], "bare")
-    path = tmp_path / "bare.csv"
-    write_recording(str(path), bare)
-    assert main(["replay", str(path), "--json", "--no-progress"]) == 0
-    assert "truth" not in json.loads(capsys.readouterr().out)
+def test_calibrate_from_gps_stores_what_gps_taught_in_the_profile(tmp_path, capsys):
+    """A straight 140 m walk with GPS: the trainer's stride scale and heading model go into the app's profile."""
+    from core.pdr.calibration import UserProfile
+    from desktop.simulator import GpsModel
+
+    walk = simulate_walk([(0, 0), (0, 140)], rate_hz=50.0, gps=GpsModel(multipath_per_min=0.0), seed=5)
+    path = tmp_path / "gps_walk.csv.gz"
+    write_recording(str(path), walk.recording)
+    assert main(["calibrate", str(path), "--from-gps", "--json", "--no-progress"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    stored = UserProfile.load(tmp_path / "app" / "profile.json")
+    assert doc["profile_path"] == str(tmp_path / "app" / "profile.json")
+    assert stored.gps["stride_scale"] == doc["gps"]["stride_scale"] and stored.gps["stride_gps_m"] >= 100
+    # the dead-reckoning distance of that run is the model's: the walker's true length over it is the scale
+    # GPS should have taught (within a per cent or two)
+    assert stored.gps["stride_scale"] == pytest.approx(walk.truth.path_length_m / doc["pdr_distance_m"], rel=0.02)
