@@ -3,7 +3,7 @@
 ::
 
     from core.importers import detect_format, load_recording
-    fmt = detect_format(path)        # "pdr-recording" | "getsensordata" | "sensorlogger" | "phyphox"
+    fmt = detect_format(path)        # "pdr-recording" | "getsensordata" | "sensorlogger" | "phyphox" | ...
     rec = load_recording(path)       # a core.recording.Recording (t_ns int64, SI, Android axes, ENU quaternions)
 
 Formats (name: input -> reader):
@@ -14,9 +14,16 @@ Formats (name: input -> reader):
   (``platform="android"|"ios"``, or the environment variable ``PDR_SENSORLOGGER_PLATFORM``, when the
   export has no Metadata.csv)
 * ``phyphox``: phyphox CSV export, zip or folder (or one data CSV) -> :func:`read_phyphox`
+* ``msindoor``: Microsoft/XYZ10 Indoor Location Competition trace (``.txt`` or ``.gz``) -> :func:`read_msindoor`
+* ``brajdic-harle``: Brajdic & Harle step-counting trace, binary ``.out`` or text ``.dat`` (or ``.gz``)
+  -> :func:`read_brajdic`
+* ``oxford-step-counter``: Oxford step-counter accelerometer CSV (``.csv`` or ``.gz``, or its folder)
+  -> :func:`read_oxford`
+* ``trundlewheel``: TrundleWheel raw log (W3C DeviceMotion, ``;``-separated, ``.csv`` or ``.gz``)
+  -> :func:`read_trundle`
 
 The format is recognised by content (magic line, record tags, CSV headers,
-archive members), never by the file name alone.  Every reader raises
+binary record layout, archive members), never by the file name alone.  Every reader raises
 :class:`core.recording.RecordingError` -- one line naming the file and, where
 it applies, the line -- for input it cannot read, and finishes with
 :func:`core.recording.repair_recording` (timestamps sorted, repeats dropped,
@@ -39,7 +46,15 @@ absolute time is known ``metadata["unix_offset_ns"]`` (``unix_ns = t_ns +
 unix_offset_ns``; survives slicing) and ``metadata["t0_unix_ns"]`` (Unix time
 of the first event at import).  Streams besides ``acc``, ``gyro``, ``mag``,
 ``rotvec`` and ``gps``: ``posi`` (GetSensorData ground-truth landmarks),
-``pressure`` (hPa), ``mag_uncal`` and ``gyro_uncal`` (Sensor Logger).
+``pressure`` (hPa), ``mag_uncal`` and ``gyro_uncal`` (Sensor Logger,
+Microsoft/XYZ10), and ground truth that is part of a file format:
+``waypoint`` (Microsoft/XYZ10 surveyor positions, floor-map metres),
+``wheel`` (trundle-wheel distance) and ``step_counts`` (cumulative step
+counts of other counters logged in the file: the TrundleWheel phone's, the
+Oxford validation files' app, ground-truth device and hardware counter);
+see :data:`core.importers._common.EXTRA_STREAM_SPECS`.  Ground truth kept
+in separate annotation files (Oxford foot switches, Brajdic & Harle step
+counts) is the benchmark readers' (``benchmarks.datasets``), not a format's.
 """
 
 from __future__ import annotations
@@ -48,18 +63,30 @@ import os
 import zipfile
 
 from core.recording import MAGIC, MAX_UNCOMPRESSED_BYTES, Recording, RecordingError, read_recording
+from core.importers import brajdic as _bh
 from core.importers import getsensordata as _gsd
+from core.importers import msindoor as _ms
+from core.importers import oxford as _ox
 from core.importers import phyphox as _phy
 from core.importers import sensorlogger as _sl
+from core.importers import trundle as _tw
 from core.importers._common import FileSet, head_bytes
+from core.importers.brajdic import read_brajdic
 from core.importers.getsensordata import read_getsensordata
+from core.importers.msindoor import read_msindoor
+from core.importers.oxford import read_oxford
 from core.importers.phyphox import read_phyphox
 from core.importers.sensorlogger import read_sensorlogger
+from core.importers.trundle import read_trundle
 
 PDR_RECORDING = "pdr-recording"
 GETSENSORDATA = _gsd.FORMAT
 SENSORLOGGER = _sl.FORMAT
 PHYPHOX = _phy.FORMAT
+MSINDOOR = _ms.FORMAT
+BRAJDIC = _bh.FORMAT
+OXFORD = _ox.FORMAT
+TRUNDLE = _tw.FORMAT
 
 #: format name -> what it is (for messages and the CLI's help)
 FORMATS = {
@@ -68,6 +95,13 @@ FORMATS = {
     SENSORLOGGER: "Sensor Logger export (zip or folder of Accelerometer.csv, Gyroscope.csv, ... with "
                   "'time,seconds_elapsed' headers)",
     PHYPHOX: "phyphox CSV export (zip or folder with 'Time (s)' CSVs and meta/, or one such CSV)",
+    MSINDOOR: "Microsoft/XYZ10 Indoor Location Competition trace ('unix_ms<TAB>TYPE_ACCELEROMETER<TAB>...' lines "
+              "after '#' header lines, .txt or .gz)",
+    BRAJDIC: "Brajdic & Harle step-counting trace (21-byte big-endian records t_ns, type, x, y, z: .out; or "
+             "'t_ns type x y z' text lines: .dat; .gz allowed)",
+    OXFORD: "Oxford step-counter accelerometer file (headerless 't_ns,accuracy,ax,ay,az' or 7-field validation "
+            "CSV, .csv or .gz, or the folder holding accelerometer.csv)",
+    TRUNDLE: "TrundleWheel raw log (';'-separated with 'time' and 'm_accG_x/y/z' columns, .csv or .gz)",
 }
 
 
@@ -76,6 +110,10 @@ _SHORT = {
     GETSENSORDATA: "getsensordata (GetSensorData/IPIN logfile)",
     SENSORLOGGER: "sensorlogger (Sensor Logger zip or folder)",
     PHYPHOX: "phyphox (phyphox CSV export)",
+    MSINDOOR: "msindoor (Microsoft/XYZ10 indoor-location trace)",
+    BRAJDIC: "brajdic-harle (Brajdic & Harle .out/.dat trace)",
+    OXFORD: "oxford-step-counter (Oxford step-counter accelerometer CSV)",
+    TRUNDLE: "trundlewheel (TrundleWheel raw log)",
 }
 
 
@@ -83,16 +121,21 @@ def _unknown(path: str, why: str) -> RecordingError:
     return RecordingError(f"unrecognised recording format ({why}); supported: {', '.join(_SHORT.values())}", path)
 
 
+#: the text formats' tests of a file's head, in the order they are tried (the most specific first)
+_TEXT_TESTS = [
+    (lambda head: head.startswith(MAGIC), PDR_RECORDING),
+    (_gsd.looks_like, GETSENSORDATA),
+    (_ms.looks_like, MSINDOOR),
+    (_sl.looks_like_csv, SENSORLOGGER),
+    (_phy.looks_like_csv, PHYPHOX),
+    (_tw.looks_like_csv, TRUNDLE),
+    (_bh.looks_like_text, BRAJDIC),
+    (_ox.looks_like, OXFORD),
+]
+
+
 def _detect_text(head: str) -> str | None:
-    if head.startswith(MAGIC):
-        return PDR_RECORDING
-    if _gsd.looks_like(head):
-        return GETSENSORDATA
-    if _sl.looks_like_csv(head):
-        return SENSORLOGGER
-    if _phy.looks_like_csv(head):
-        return PHYPHOX
-    return None
+    return next((fmt for test, fmt in _TEXT_TESTS if test(head)), None)
 
 
 def _detect_fileset(fs: FileSet) -> str | None:
@@ -103,6 +146,8 @@ def _detect_fileset(fs: FileSet) -> str | None:
     for n in csvs:
         if n.split("/")[-1].lower() == "metadata.csv" and _sl.looks_like_metadata(fs.head(n)):
             return SENSORLOGGER
+    if _ox.looks_like_folder(fs):
+        return OXFORD
     votes = {SENSORLOGGER: 0, PHYPHOX: 0}
     for n in csvs[:40]:
         head = fs.head(n, 2048)
@@ -124,7 +169,7 @@ def detect_format(path) -> str:
         with FileSet(path) as fs:
             fmt = _detect_fileset(fs)
         if fmt is None:
-            raise _unknown(path, "a folder without Sensor Logger or phyphox CSV files")
+            raise _unknown(path, "a folder without Sensor Logger, phyphox or Oxford step-counter CSV files")
         return fmt
     try:
         head = head_bytes(path, 65536)
@@ -137,10 +182,12 @@ def detect_format(path) -> str:
         except (zipfile.BadZipFile, OSError) as e:
             raise RecordingError(f"unreadable zip archive: {e}", path) from None
         if fmt is None:
-            raise _unknown(path, "a zip archive without Sensor Logger or phyphox CSV files")
+            raise _unknown(path, "a zip archive without Sensor Logger, phyphox or Oxford step-counter CSV files")
         return fmt
     if not head.strip():
         raise _unknown(path, "empty file")
+    if _bh.looks_like_binary(head):
+        return BRAJDIC
     if b"\x00" in head[:1024]:
         raise _unknown(path, "binary data")
     fmt = _detect_text(head.decode("utf-8", errors="replace").lstrip("\ufeff"))
@@ -173,8 +220,11 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
         return read_getsensordata(path, warn=warn, max_uncompressed_bytes=limit)
     if fmt == SENSORLOGGER:
         return read_sensorlogger(path, platform=platform, warn=warn, max_uncompressed_bytes=limit)
-    return read_phyphox(path, warn=warn, max_uncompressed_bytes=limit)
+    readers = {PHYPHOX: read_phyphox, MSINDOOR: read_msindoor, BRAJDIC: read_brajdic, OXFORD: read_oxford,
+               TRUNDLE: read_trundle}
+    return readers[fmt](path, warn=warn, max_uncompressed_bytes=limit)
 
 
 __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",
-           "read_phyphox", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX"]
+           "read_phyphox", "read_msindoor", "read_brajdic", "read_oxford", "read_trundle", "PDR_RECORDING",
+           "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX", "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE"]

@@ -17,8 +17,8 @@ from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
 from core.geodesy import geodetic_to_enu
 from core.recording import (
-    GZIP_MAGIC, MAX_UNCOMPRESSED_BYTES, READ_ERRORS, ByteChunks, Recording, RecordingError, TextLines, acc_unit_guess,
-    check_time_base, gunzip_partial, over_limit_error, repair_recording, size_text,
+    GZIP_MAGIC, MAX_BAD_LINES, MAX_UNCOMPRESSED_BYTES, READ_ERRORS, ByteChunks, Recording, RecordingError, TextLines,
+    acc_unit_guess, check_time_base, gunzip_partial, over_limit_error, repair_recording, size_text,
 )
 
 ZIP_MAGIC = b"PK\x03\x04"
@@ -29,11 +29,22 @@ POSI = "posi"  #: ground-truth landmarks (GetSensorData POSI lines)
 PRESSURE = "pressure"  #: barometer, hPa (= mbar, as Android reports it)
 MAG_UNCAL = "mag_uncal"  #: uncalibrated magnetometer, uT, device axes (hard iron not removed)
 GYRO_UNCAL = "gyro_uncal"  #: uncalibrated gyroscope, rad/s, device axes (bias not removed)
+WAYPOINT = "waypoint"  #: ground-truth positions in a map's East/North metres (Microsoft/XYZ10 TYPE_WAYPOINT)
+WHEEL = "wheel"  #: ground-truth odometer: cumulative distance at each tick of a trundle wheel
+STEP_COUNTS = "step_counts"  #: cumulative step counts logged with the recording, one column per counter
 
 EXTRA_STREAM_SPECS: dict[str, dict] = {
     PRESSURE: {"columns": ["p_hpa"], "unit": "hPa", "note": "barometric pressure (hPa = mbar, as Android reports it)"},
     MAG_UNCAL: {"columns": ["x", "y", "z"], "unit": "uT", "note": "magnetometer without the OS hard-iron correction"},
     GYRO_UNCAL: {"columns": ["x", "y", "z"], "unit": "rad/s", "note": "gyroscope without the OS bias correction"},
+    WAYPOINT: {"columns": ["east_m", "north_m"], "unit": "m,m",
+               "note": "ground-truth position the surveyor marked (TYPE_WAYPOINT), metres East and North in the "
+                       "floor map's frame"},
+    WHEEL: {"columns": ["distance_m"], "unit": "m",
+            "note": "ground truth: trundle-wheel distance walked, cumulative, at each wheel tick"},
+    STEP_COUNTS: {"columns": ["steps"], "unit": "1",
+                  "note": "cumulative step counts logged with the recording (other counters than ours, or a "
+                          "ground-truth device), one column per counter"},
 }
 
 
@@ -93,6 +104,14 @@ def _lines_of(f, source: str, repairs: list[str], limit: int | None, inflated: b
         note_damage(text, source, repairs)
 
 
+def open_binary(path: str):
+    """The file opened for reading bytes; what cannot be opened is a :class:`RecordingError` naming it."""
+    try:
+        return open(path, "rb")
+    except OSError as e:
+        raise RecordingError(f"cannot open: {e.strerror or e}", path) from None
+
+
 def open_text(path: str, repairs: list[str], limit: int | None = MAX_UNCOMPRESSED_BYTES):
     """``with open_text(path, repairs) as text:`` the lines of a file (gzip by content), streamed.
 
@@ -100,11 +119,25 @@ def open_text(path: str, repairs: list[str], limit: int | None = MAX_UNCOMPRESSE
     ``repairs`` once the text has been read; one inflating beyond ``limit``
     bytes is refused while it is read.
     """
-    try:
-        f = open(path, "rb")
-    except OSError as e:
-        raise RecordingError(f"cannot open: {e.strerror or e}", path) from None
-    return _lines_of(f, path, repairs, limit)
+    return _lines_of(open_binary(path), path, repairs, limit)
+
+
+def feed_lines(text, source: str, repairs: list[str], chunk, bad: list, tail) -> None:
+    """Give a text's lines to ``chunk(first line number, lines)``, a chunk at a time, as the readers do.
+
+    The reading stops once ``bad`` (the reader's list of bad lines) holds
+    more than :data:`core.recording.MAX_BAD_LINES`: the file will be refused.
+    After the whole text, damage of a gzip stream is noted in ``repairs``
+    (:func:`note_damage`) and a last line without its newline goes to
+    ``tail(line number, line)``: the reader decides whether it was cut off.
+    """
+    for first, lines in text:
+        chunk(first, lines)
+        if len(bad) > MAX_BAD_LINES:
+            return
+    note_damage(text, source, repairs)
+    if text.tail:
+        tail(text.tail_line, text.tail)
 
 
 def _first_bytes(f, source: str, n: int) -> bytes:
@@ -116,6 +149,12 @@ def _first_bytes(f, source: str, n: int) -> bytes:
     return raw[:n]
 
 
+def is_zip(path: str) -> bool:
+    """True if the file starts like a zip archive."""
+    with open(path, "rb") as f:
+        return f.read(4) in (ZIP_MAGIC, ZIP_EMPTY_MAGIC)
+
+
 def head_bytes(path: str, n: int = 65536) -> bytes:
     """The first ``n`` bytes of a file, decompressed when it is gzip (for format detection)."""
     with open(path, "rb") as f:
@@ -123,6 +162,14 @@ def head_bytes(path: str, n: int = 65536) -> bytes:
             return _first_bytes(f, path, n)
         except RecordingError:
             return b""
+
+
+def head_lines(head: str, n: int = 20) -> list[str]:
+    """The first ``n`` non-blank whole lines of a file's head (for format detection; a cut last piece is left out)."""
+    pieces = head.split("\n")
+    if len(pieces) > 1:
+        pieces.pop()  # after the last newline: "" or a line the head may have cut
+    return [ln for ln in pieces if ln.strip()][:n]
 
 
 def maybe_gunzip(data: bytes, source: str, repairs: list[str] | None = None) -> bytes:

@@ -158,6 +158,49 @@ def parse_rows(rows: list[str], usecols: list[int], delimiter: str, slow, *, int
     return ints, floats, empty, keep, bad
 
 
+def fixed_rows(rows: list[str], usecols: list[int], delimiter: str | None, nfields: tuple[int, int], *,
+               int_first: bool = True, names: list[str] | None = None):
+    """Rows of one layout without a header: ``(ints or None, floats, kept, bad)``.
+
+    A row must have ``nfields[0]`` to ``nfields[1]`` fields (``delimiter``
+    ``None``: runs of whitespace) and numbers in the fields ``usecols`` (the
+    first an int64 with ``int_first``); others are bad rows.  ``ints`` (n,)
+    and ``floats`` (n, len(usecols) - int_first) hold the rows kept, in
+    order; ``kept`` marks them among ``rows``; ``bad`` lists ``(row, message)``
+    in row order (``names``: the fields' names for the messages).
+    """
+    n = len(rows)
+    lo, hi = nfields
+    if delimiter is None:
+        have = np.fromiter((len(r.split()) for r in rows), dtype=np.int64, count=n)
+    else:
+        have = np.fromiter((r.count(delimiter) for r in rows), dtype=np.int64, count=n) + 1
+    ok = (have >= lo) & (have <= hi)
+    bad = [(int(j), f"missing fields: {lo} needed, found {int(have[j])}" if have[j] < lo else
+            f"too many fields: at most {hi}, found {int(have[j])}") for j in np.flatnonzero(~ok)]
+    idx = np.flatnonzero(ok)
+    sub = rows if len(idx) == n else [rows[i] for i in idx]
+
+    def slow(j):
+        f = sub[j].split(delimiter)
+        vals = []
+        for k, c in enumerate(usecols):
+            try:
+                vals.append(integer(f[c]) if int_first and not k else number(f[c]))
+            except ValueError:
+                name = names[c] if names and c < len(names) else f"field {c + 1}"
+                what = "an integer" if int_first and not k else "a number"
+                raise BadRow(f"{name} is not {what}: {f[c][:40]!r}") from None
+        return vals, [False] * (len(usecols) - int_first)
+
+    ints, floats, _, keep, b = parse_rows(sub, usecols, delimiter, slow, int_first=int_first)
+    bad += [(int(idx[j]), msg) for j, msg in b]
+    bad.sort()
+    kept = np.zeros(n, dtype=bool)
+    kept[idx[keep]] = True
+    return (ints[keep] if int_first else None), floats[keep], kept, bad
+
+
 class Table:
     """A delimited text file of numbers: its header, then its rows read once, as a stream.
 

@@ -108,12 +108,11 @@ import numpy as np
 from core import quaternion as quat
 from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
 from core.recording import (
-    MAX_BAD_LINES, MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, WholeText, make_stream,
-    skip_bad_lines,
+    MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, WholeText, make_stream, skip_bad_lines,
 )
 from core.importers._common import (
-    EXTRA_STREAM_SPECS, POSI, PRESSURE, attitude_checks, finish, first_bad_time, gps_check, gps_values,
-    magnetic_dip_deg, note_damage, open_text,
+    EXTRA_STREAM_SPECS, POSI, PRESSURE, attitude_checks, feed_lines, finish, first_bad_time, gps_check, gps_values,
+    magnetic_dip_deg, open_text,
 )
 from core.importers._csv import BadRow, ColumnBuffer, number, parse_rows
 
@@ -404,19 +403,15 @@ def _parse(text, source: str, warn: bool, repairs: list[str]) -> Recording:
                                                   f"{tag} {names[c]} is not a usable time: {float(table[j, c])!r}")
                         break
 
-    for first, lines in text:
-        chunk(first, lines)
-        if len(bad) > MAX_BAD_LINES:
-            break
-    else:
-        note_damage(text, source, repairs)
+    def tail(lineno: int, last: str) -> None:
         # a last line without its newline: the logger was cut off; dropped even when it parses ("2.586e-0" may be
         # a cut "2.586e-05")
-        last = text.tail
-        if last and last[0] != "%" and last.partition(";")[0] in RECORDS:
-            repairs.append(f"{source}: dropped an incomplete last line {text.tail_line} (logging was cut off)")
-        elif last:
-            chunk(text.tail_line, [last])
+        if last[0] != "%" and last.partition(";")[0] in RECORDS:
+            repairs.append(f"{source}: dropped an incomplete last line {lineno} (logging was cut off)")
+        else:
+            chunk(lineno, [last])
+
+    feed_lines(text, source, repairs, chunk, bad, tail)
     bad.sort(key=lambda e: e.line or 0)
     skip_bad_lines(bad, sum(counts.values()), source, repairs)
     tables = {tag: b.array() for tag, b in buffers.items()}

@@ -95,7 +95,7 @@ from core.recording import (
 )
 from core.importers._common import (
     EXTRA_STREAM_SPECS, PRESSURE, FileSet, acceleration_in_m_s2, finish, first_bad_time, gps_check, gps_values,
-    magnetic_dip_deg, open_text,
+    is_zip, magnetic_dip_deg, open_text,
 )
 from core.importers._csv import Table, csv_rows
 
@@ -218,7 +218,7 @@ def read_phyphox(path: str, *, warn: bool = True,
     if not os.path.exists(path):
         raise RecordingError("cannot open: no such file or folder", path)
     # non-finite values pass through as data, without numpy warnings
-    if os.path.isdir(path) or _is_zip(path):
+    if os.path.isdir(path) or is_zip(path):
         with FileSet(path, max_uncompressed_bytes) as fs, np.errstate(all="ignore"):
             names = fs.names()
             data = [n for n in names if n.lower().endswith(".csv") and "meta/" not in n.lower()
@@ -281,11 +281,6 @@ def _read_group(table: Table, ti: int, sensors, where: str, found: dict, repairs
         if len(vals):
             found.setdefault(sensor, []).append((len(vals), where, order, vals))
     return dropped
-
-
-def _is_zip(path: str) -> bool:
-    with open(path, "rb") as f:
-        return f.read(4) in (b"PK\x03\x04", b"PK\x05\x06")
 
 
 def _build(files, meta, source, warn, damage: list[str]) -> Recording:
