@@ -2,11 +2,9 @@
 
 Folder ``brajdic_harle_handheld/`` (see its README.md):
 
-* ``p<person>.<walk>_<Sex>_<age>_<height>cm_Hand_held.out``: big-endian binary,
-  21-byte records ``int64 t_ns, int8 type (1 acc, 2 gyro, 3 mag), float32 x, y, z``
-  (numpy ``[('t','>i8'),('type','i1'),('v','>f4',3)]``); ``.dat(.gz)`` holds the
-  same fields as text.  Units m/s^2, rad/s, uT; Android device axes.
-  Timestamps are device uptime (ns).
+* ``p<person>.<walk>_<Sex>_<age>_<height>cm_Hand_held.out`` (binary) or
+  ``.dat(.gz)`` (text): acc, gyro and mag, read by the importer
+  :mod:`core.importers.brajdic` (format, units, clock documented there).
 * ``groundtruth_SC.txt``: manual step count per trace (``p1.1 70``).  Walks
   without a count are still listed (no step ground truth).
 * ``groundtruth_WD.txt``: walk start and end as **accelerometer sample
@@ -20,20 +18,19 @@ middle (the band covers [170, 180) cm: 1.75 m); the band is kept in ``subject['h
 
 from __future__ import annotations
 
-import gzip
 import re
 from pathlib import Path
 
-import numpy as np
-
 from benchmarks.datasets.base import Trial
-from core.conventions import ACC, GYRO, MAG
-from core.recording import Recording, make_stream, repair_recording
+from core.conventions import ACC
+from core.importers.brajdic import RECORD as _RECORD
+from core.importers.brajdic import read_brajdic
+from core.recording import Recording
 
 NAME = "brajdic_harle_handheld"
 
-RECORD = np.dtype([("t", ">i8"), ("type", "i1"), ("v", ">f4", 3)])
-TYPES = {1: ACC, 2: GYRO, 3: MAG}
+#: the binary trace's record layout (the importer's)
+RECORD = _RECORD
 
 _FILE = re.compile(r"^(p\d+\.\d+)_([A-Za-z]+)_(\d+)-(\d+)_(\d+)-(\d+)cm_Hand_held\.(out|dat|dat\.gz)$")
 
@@ -44,19 +41,7 @@ def available(root: Path) -> bool:
 
 def read_trace(path: Path) -> Recording:
     """A :class:`Recording` (acc, gyro, mag) from a ``.out`` binary or ``.dat(.gz)`` text trace."""
-    path = Path(path)
-    if path.name.endswith(".out"):
-        d = np.fromfile(path, dtype=RECORD)
-        t, typ, v = d["t"].astype(np.int64), d["type"].astype(int), d["v"].astype(np.float64)
-    else:
-        opener = gzip.open if path.name.endswith(".gz") else open
-        with opener(path, "rt") as f:
-            a = np.loadtxt(f, ndmin=2)
-        # ns timestamps ~1e12: exact in float64
-        t, typ, v = a[:, 0].astype(np.int64), a[:, 1].astype(int), a[:, 2:5]
-    streams = {name: make_stream(name, t[typ == code], v[typ == code]) for code, name in TYPES.items()}
-    rec = Recording(streams, device={}, source=str(path))
-    return repair_recording(rec, warn=False)
+    return read_brajdic(str(path), warn=False)
 
 
 def read_step_counts(path: Path) -> dict[str, int]:

@@ -5,7 +5,8 @@ Folder ``oxford_step_counter/`` (see its README.md):
 * ``optimisation/data/<Phone>_<User>_<Surface>_<Placement>_<n>/``
 
   - ``accelerometer.csv(.gz)``: ``t_ns, accuracy, ax, ay, az`` (Android
-    ``SensorEvent.timestamp`` ns since boot; m/s^2, gravity included).
+    ``SensorEvent.timestamp`` ns since boot; m/s^2, gravity included), read
+    by the importer :mod:`core.importers.oxford`.
   - ``stepcounter.csv``: ``t_ns, foot1, foot2`` on the same clock, a row about
     every 90 ms; **a step is a 0->1 transition of either foot switch** (the
     rule of the authors' corrected stats script; it reproduces ``stats.csv``).
@@ -16,7 +17,8 @@ Folder ``oxford_step_counter/`` (see its README.md):
 
 * ``validation/*.csv`` (when present -- this copy holds none): ``t_ns, ax, ay,
   az, steps_app_algorithm, steps_ground_truth_device, steps_android_hw_counter``
-  with cumulative counts on every row; the app's and Android's hardware
+  with cumulative counts on every row (the importer's ``step_counts``
+  stream, taken out of the recording here); the app's and Android's hardware
   counter's totals are the peer counts (``app``, ``android_hw``; the hardware
   counter is ignored when it stays 0).
 
@@ -26,15 +28,15 @@ mapped to the benchmark's labels with :data:`PLACEMENTS`.
 
 from __future__ import annotations
 
-import gzip
 import re
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks.datasets.base import Trial
-from core.conventions import ACC
-from core.recording import Recording, make_stream, repair_recording
+from core.importers._common import STEP_COUNTS
+from core.importers.oxford import read_oxford
+from core.recording import Recording
 
 NAME = "oxford_step_counter"
 
@@ -57,10 +59,6 @@ def available(root: Path) -> bool:
     return (d / "optimisation" / "data").is_dir() or (d / "validation").is_dir()
 
 
-def _open(path: Path):
-    return gzip.open(path, "rt") if path.suffix == ".gz" else open(path, "rt")
-
-
 def _find(folder: Path, stem: str) -> Path | None:
     for p in (folder / stem, folder / (stem + ".gz")):
         if p.exists():
@@ -68,14 +66,15 @@ def _find(folder: Path, stem: str) -> Path | None:
     return None
 
 
-def read_accelerometer(path: Path, columns=(2, 3, 4)) -> Recording:
-    """An accelerometer-only :class:`Recording` from a headerless CSV (``t_ns`` in column 0)."""
-    with _open(path) as f:
-        a = np.loadtxt(f, delimiter=",", ndmin=2)
-    # t_ns is up to ~1e15: exactly representable in float64 (< 2**53)
-    t = a[:, 0].astype(np.int64)
-    rec = Recording({ACC: make_stream(ACC, t, a[:, list(columns)])}, device={}, source=str(path))
-    return repair_recording(rec, warn=False)
+def read_accelerometer(path: Path) -> Recording:
+    """The accelerometer-only :class:`Recording` of an accelerometer or validation file (the importer's).
+
+    A validation file's step counts (ground truth and peers) are taken out:
+    the pipeline runs on the accelerometer alone.
+    """
+    rec = read_oxford(str(path), warn=False)
+    rec.streams.pop(STEP_COUNTS, None)
+    return rec
 
 
 def foot_switch_steps(path: Path) -> np.ndarray:
@@ -133,21 +132,20 @@ def _validation_trials(base: Path) -> list[Trial]:
     for path in sorted((base / "validation").glob("*.csv*")):
         if not (path.name.endswith(".csv") or path.name.endswith(".csv.gz")):
             continue
-        with _open(path) as f:
-            a = np.loadtxt(f, delimiter=",", ndmin=2)
-        t = a[:, 0].astype(np.int64)
-        gt = a[:, 5]
+        counts = read_oxford(str(path), warn=False).stream(STEP_COUNTS, "a validation file's step counts")
+        t = counts.t_ns
+        app, gt, hw = counts.values.T
         steps = t[1:][np.diff(gt) > 0]
-        peers = {"app": int(a[-1, 4] - a[0, 4])}
-        if np.any(a[:, 6] != 0):
-            peers["android_hw"] = int(a[-1, 6] - a[0, 6])
+        peers = {"app": int(app[-1] - app[0])}
+        if np.any(hw != 0):
+            peers["android_hw"] = int(hw[-1] - hw[0])
         stem = path.name.split(".")[0]
         low = stem.lower()
         placement = next((lab for word, lab in sorted(PLACEMENTS.items(), key=lambda kv: -len(kv[0]))
                           if word in low), "unknown")
         out.append(Trial(
             dataset=NAME, name="validation/" + stem,
-            load=(lambda p=path: read_accelerometer(p, columns=(1, 2, 3))),
+            load=(lambda p=path: read_accelerometer(p)),
             placement=placement, step_t_ns=steps, step_count=int(gt[-1] - gt[0]),
             peer_step_counts=peers, info={"phone": "Samsung S6", "part": "validation"},
         ))

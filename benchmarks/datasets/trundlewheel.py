@@ -5,22 +5,16 @@ Only the two **raw** logs (``raw/*.csv.gz``, about 400 m each, one user) are
 usable for step detection; the authors' 1 Hz "conditioned" files are too
 coarse and are not read here.
 
-Raw format: ``;``-separated, one event type per row, ``time`` in ms since the
-start of the recording (the app's clock; arrival times of a web app, so they
-jitter by a few ms).  What the reader makes of it:
-
-* ``acc`` = W3C DeviceMotion ``accelerationIncludingGravity`` (``m_accG_*``),
-  m/s^2, 0.1 m/s^2 resolution, about 59 Hz.  Chrome on Android reports it in
-  the Android device axes with the Android sign (flat, screen up: z = +g;
-  checked on the still phone at the end of the walks).
-* ``gyro`` = ``rotationRate`` converted deg/s -> rad/s; W3C ``alpha`` is about
-  z, ``beta`` about x, ``gamma`` about y.
-* no magnetometer; the GNSS rows carry Unix-epoch times that cannot be tied
-  to the ``time`` clock reliably, so no ``gps`` stream.
-* ground truth: the wheel's cumulative metre ticks (``distance`` rows) as
-  ``wheel_t_ns`` / ``wheel_m``; ``distance_m`` is the last tick (the wheel
-  total the authors report).  The phone's own step counter goes to
-  ``peer_step_counts["phone"]``.
+The raw logs are read by the importer :mod:`core.importers.trundle` (the
+format, its clock and the W3C axes are documented there): ``acc`` (W3C
+``accelerationIncludingGravity``, m/s^2, 0.1 m/s^2 resolution, about 59 Hz)
+and ``gyro`` (``rotationRate``, rad/s), no magnetometer, no GNSS (its
+Unix-epoch rows cannot be tied to the app's clock).  Ground truth is part of
+the file: the wheel's cumulative metre ticks (the importer's ``wheel``
+stream) become ``wheel_t_ns`` / ``wheel_m``, ``distance_m`` is the last tick
+(the wheel total the authors report), and the phone's own step counter (its
+``step_counts`` stream) goes to ``peer_step_counts["phone"]``; both streams
+are taken out of the recording the pipeline runs on.
 
 Placement is not documented.  The signals say it was not a steady
 "texting" hold: the mean acceleration norm is 11-12 m/s^2 for minutes at a
@@ -31,7 +25,6 @@ gravity direction moves between the x and z axes.  We label it
 
 from __future__ import annotations
 
-import gzip
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,8 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.datasets.base import Trial
-from core.conventions import ACC, GYRO
-from core.recording import Recording, make_stream, repair_recording
+from core.importers._common import STEP_COUNTS, WHEEL
+from core.importers.trundle import read_trundle
+from core.recording import Recording
 
 NAME = "trundlewheel_distance"
 
@@ -60,66 +54,23 @@ def available(root: Path) -> bool:
     return any((Path(root) / NAME / "raw" / f"{n}.csv.gz").exists() for n in _FILES)
 
 
-def _parse(path: Path) -> dict:
-    with gzip.open(path, "rt") as fh:
-        header = fh.readline().rstrip("\n").split(";")
-        col = {name: i for i, name in enumerate(header)}
-        need = ["time", "m_accG_x", "m_accG_y", "m_accG_z", "m_rotTate_alpha", "m_rotTate_beta",
-                "m_rotTate_gamma", "steps", "distance"]
-        missing = [n for n in need if n not in col]
-        if missing:
-            raise ValueError(f"{path}: columns missing: {missing}")
-        acc, rot, steps, dist, first = [], [], [], [], None
-        for line in fh:
-            c = line.rstrip("\n").split(";")
-            if len(c) < len(header):
-                c += [""] * (len(header) - len(c))
-            if first is None:
-                first = c
-            if c[col["p_lat"]] if "p_lat" in col else "":
-                continue  # GNSS rows: epoch-ms clock, not read
-            t = float(c[col["time"]])
-            if c[col["m_accG_x"]]:
-                acc.append((t, float(c[col["m_accG_x"]]), float(c[col["m_accG_y"]]), float(c[col["m_accG_z"]])))
-            if c[col["m_rotTate_alpha"]]:
-                rot.append((t, float(c[col["m_rotTate_beta"]]), float(c[col["m_rotTate_gamma"]]),
-                            float(c[col["m_rotTate_alpha"]])))
-            if c[col["steps"]]:
-                steps.append((t, float(c[col["steps"]])))
-            if c[col["distance"]]:
-                dist.append((t, float(c[col["distance"]])))
-    info = {}
-    for k in ("duration", "date", "total_distance", "total_steps", "device_os", "device_model"):
-        if k in col and first is not None:
-            info[k] = first[col[k]]
-    return {"acc": np.array(acc, float).reshape(-1, 4), "rot": np.array(rot, float).reshape(-1, 4),
-            "steps": np.array(steps, float).reshape(-1, 2), "dist": np.array(dist, float).reshape(-1, 2),
-            "info": info}
-
-
-def _ms_to_ns(ms: np.ndarray) -> np.ndarray:
-    return np.round(np.asarray(ms, float) * 1e6).astype(np.int64)
+def _read(path: Path) -> tuple[Recording, dict]:
+    """The recording the pipeline runs on (acc, gyro) and the ground-truth streams taken out of it."""
+    rec = read_trundle(str(path), warn=False)
+    truth = {name: rec.streams.pop(name) for name in (WHEEL, STEP_COUNTS) if name in rec.streams}
+    rec.metadata["dataset"] = NAME
+    return rec, truth
 
 
 def load_recording(path: Path) -> Recording:
-    p = _parse(Path(path))
-    streams = {ACC: make_stream(ACC, _ms_to_ns(p["acc"][:, 0]), p["acc"][:, 1:4],
-                                note="W3C DeviceMotion accelerationIncludingGravity, 0.1 m/s^2 resolution")}
-    if len(p["rot"]):
-        streams[GYRO] = make_stream(GYRO, _ms_to_ns(p["rot"][:, 0]), np.radians(p["rot"][:, 1:4]),
-                                    note="W3C rotationRate (beta, gamma, alpha) converted to rad/s")
-    rec = Recording(streams=streams,
-                    device={"model": p["info"].get("device_model", ""), "os": p["info"].get("device_os", ""),
-                            "api": "W3C DeviceMotion (web app)"},
-                    metadata={"dataset": NAME}, source=str(path))
-    return repair_recording(rec, warn=False)
+    return _read(Path(path))[0]
 
 
 def _trial(path: Path) -> TrundleTrial:
-    p = _parse(path)
-    d = p["dist"]
-    total = float(d[-1, 1]) if len(d) else math.nan
-    phone_steps = int(p["steps"][-1, 1]) if len(p["steps"]) else None
+    truth = _read(path)[1]
+    wheel, steps = truth.get(WHEEL), truth.get(STEP_COUNTS)
+    total = float(wheel.values[-1, 0]) if wheel is not None else math.nan
+    phone_steps = int(steps.values[-1, 0]) if steps is not None else None
     name = path.name.replace(".csv.gz", "")
     return TrundleTrial(
         dataset=NAME,
@@ -131,8 +82,8 @@ def _trial(path: Path) -> TrundleTrial:
         peer_step_counts={"phone": phone_steps} if phone_steps is not None else {},
         notes="one walker, ~400 m outdoors (Malmo), web DeviceMotion ~59 Hz, no magnetometer; "
               "distance from a trundle wheel (1 m ticks)",
-        wheel_t_ns=_ms_to_ns(d[:, 0]) if len(d) else None,
-        wheel_m=d[:, 1].copy() if len(d) else None,
+        wheel_t_ns=wheel.t_ns.copy() if wheel is not None else None,
+        wheel_m=wheel.values[:, 0].copy() if wheel is not None else None,
     )
 
 
