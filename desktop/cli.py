@@ -336,7 +336,7 @@ def truth_headline(errs: dict) -> str:
         s = errs["simulator"]
         return f"truth: distance {s['distance_err_pct']:+.1f} %, end {s['end_error_m']:.2f} m off"
     if errs.get("gps"):
-        return f"vs GPS: median {errs['gps']['median_m']:.1f} m"
+        return f"PDR alone vs GPS: median {errs['gps']['median_m']:.1f} m"
     return ""
 
 
@@ -417,7 +417,8 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     aid = args.aid or ("tckf" if waist and rec.has(f"mag@{waist}") else "zupt")
     settings = FootSettings(aid=aid, stance=StanceSettings(detector=args.detector),
                             gyro_delay_s=args.gyro_delay_ms * 1e-3)
-    res = FootNavigator(settings, foot_device=args.foot_device or "", waist_device=waist).run(rec)
+    with _SlowNotice("running the foot-mounted INS", not args.no_progress, 0.0 if args.progress else 2.0):
+        res = FootNavigator(settings, foot_device=args.foot_device or "", waist_device=waist).run(rec)
     s = res.summary()
     s["mode"] = "foot"
     s["mode_reason"] = why
@@ -479,16 +480,23 @@ def check_output_path(option: str, path: str, inputs=()) -> None:
 
 
 def _check_writable_folder(option: str, path: str, folder: Path) -> None:
-    """``folder`` can be created (its nearest existing ancestor is a folder we may write in) or written in."""
-    anc = folder if str(folder) else Path(".")
-    while not anc.exists():
-        if anc.is_symlink() or anc.parent == anc:
-            break
+    """``folder`` exists or can be made, and a file can be written in it (tried: permissions alone do not say,
+    e.g. for root or on a read-only file system); the folder is left made, as the export would make it."""
+    import tempfile
+
+    folder = folder if str(folder) else Path(".")
+    anc = folder
+    while not anc.exists() and anc.parent != anc:
         anc = anc.parent
     if anc.exists() and not anc.is_dir():
         raise ValueError(f"{option} {path}: cannot write there: {anc} is a file, not a folder")
-    if not anc.exists() or not os.access(anc, os.W_OK | os.X_OK):
-        raise ValueError(f"{option} {path}: cannot write there: no permission to write in {anc}")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".pdr-write-test-", dir=str(folder))
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise ValueError(f"{option} {path}: cannot write there: {e.strerror or e} ({folder})") from None
 
 
 def recording_stem(path: str | None) -> str:
@@ -690,14 +698,13 @@ def check_outputs(args, outs: dict, inputs=()) -> None:
     """Every output of this run can be written (before the long part), and stdout has one user."""
     if args.json and outs.get("csv") == "-":
         raise ValueError("--json and --csv - both want stdout: write one of them to a file")
-    names = {"plot": "--plot"}
-    for k, v in outs.items():
-        check_output_path(names.get(k, f"--{k}"), v, inputs)
     if getattr(args, "out_dir", None):
         d = Path(args.out_dir)
         if d.exists() and not d.is_dir():
             raise ValueError(f"--out-dir {args.out_dir}: is a file, not a folder")
         _check_writable_folder("--out-dir", args.out_dir, d)
+    for k, v in outs.items():
+        check_output_path(f"--{k}", v, inputs)
 
 
 # ---------------------------------------------------------------------------

@@ -82,7 +82,8 @@ def test_help_explains_every_option():
     assert r.returncode == 0
     for opt in ("--csv", "--geojson", "--gpx", "--plot", "--origin", "--height", "--stride-c", "--declination",
                 "--no-mag", "--json", "--progress", "--no-progress", "--gps", "--gps-outage", "--profile", "--mode",
-                "--aid", "--detector", "--foot-device", "--waist-device", "--gyro-delay-ms"):
+                "--aid", "--detector", "--foot-device", "--waist-device", "--gyro-delay-ms", "--out-dir", "--export",
+                "--jobs", "--no-profile"):
         assert opt in r.stdout
 
 
@@ -195,6 +196,7 @@ def test_a_track_not_placed_has_no_lat_lon(tmp_path):
 @pytest.mark.parametrize("where,needle", [
     ("{f}/x.csv", "is a file, not a folder"),  # a parent that is a file
     ("{d}", "is a folder"),
+    ("/proc/pdr-no-such-folder/x.gpx", "cannot write there"),  # a folder that cannot be made
 ])
 def test_a_bad_output_path_exits_2_before_the_run(square, tmp_path, capsys, monkeypatch, where, needle):
     p = square
@@ -230,5 +232,7 @@ def test_calibrate_stores_the_profile_and_replay_uses_it(square, tmp_path, capsy
     out = capsys.readouterr().out
     assert f"profile       {stored}: stride x{prof.c_scale:.3f} on model default (1 calibration walk)" in out
     assert "distance +0.0 %" in out  # the walk it was calibrated on: exact
-    assert main(["replay", str(p), "--json", "--no-progress", "--no-profile"]) == 0
-    assert json.loads(capsys.readouterr().out)["distance_m"] == pytest.approx(doc["model_distance_m"])
+    from desktop.cli import choose_profile, make_parser
+
+    assert choose_profile(make_parser().parse_args(["replay", str(p), "--no-profile"])) == (None, None, False)
+    assert choose_profile(make_parser().parse_args(["replay"]), demo=True)[0] is None  # the demo is nobody's walk
