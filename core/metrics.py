@@ -309,6 +309,9 @@ def reference_track_errors(track_t_ns, east_m, north_m, ref_t_ns, ref_east_m, re
 GPS_REFERENCE_MAX_HACC_M = 12.0
 #: streams of surveyed points passed at known times: GetSensorData POSI lines, the Microsoft traces' waypoints
 LANDMARK_STREAMS = ("posi", "waypoint")
+#: cumulative counters that are ground truth: stream -> (column, what it counts); e.g. the Oxford step-counter
+#: files' foot-switch step count, a trundle wheel's distance
+COUNTER_TRUTHS = {"step_counts": ("ground_truth", "steps"), "wheel": ("distance_m", "distance")}
 #: a ``posi`` stream's position columns: (east, north) in metres, or latitude/longitude in degrees
 POSI_METRE_COLUMNS = (("east_m", "north_m"), ("x_m", "y_m"), ("x", "y"))
 POSI_DEGREE_COLUMNS = ("lat_deg", "lon_deg")
@@ -340,9 +343,13 @@ class RecordingTruth:
     simulator: dict | None = None
     #: the simulator's waypoints (n, 2) in its metres (for a plot)
     waypoints_en_m: np.ndarray | None = None
+    #: a true step count over a time span: ``{"t0_ns", "t1_ns", "n", "what"}`` (a cumulative ground-truth counter)
+    steps: dict | None = None
+    #: a true distance over a time span: ``{"t0_ns", "t1_ns", "m", "what"}`` (a cumulative odometer: trundle wheel)
+    distance: dict | None = None
 
     def __bool__(self) -> bool:
-        return self.landmarks is not None or self.gps is not None or self.simulator is not None
+        return any(x is not None for x in (self.landmarks, self.gps, self.simulator, self.steps, self.distance))
 
 
 def _posi_reference(stream) -> Reference | None:
@@ -393,7 +400,9 @@ def truth_of(rec, *, gps_max_hacc_m: float = GPS_REFERENCE_MAX_HACC_M) -> Record
     * landmarks: a ``posi`` or ``waypoint`` stream (GetSensorData ``POSI`` lines, surveyor waypoints), positions as
       ``lat_deg, lon_deg`` (to metres about the first) or in metres (:data:`POSI_METRE_COLUMNS`);
     * GPS: the ``gps`` fixes with ``hacc_m <= gps_max_hacc_m``, at least two, as a reference track;
-    * the simulator's truth: ``metadata["truth"]`` and ``metadata["waypoints_en_m"]``.
+    * the simulator's truth: ``metadata["truth"]`` and ``metadata["waypoints_en_m"]``;
+    * cumulative ground-truth counters (:data:`COUNTER_TRUTHS`): the steps or metres between their first and
+      last event.
     """
     out = RecordingTruth()
     for name in LANDMARK_STREAMS:
@@ -405,6 +414,20 @@ def truth_of(rec, *, gps_max_hacc_m: float = GPS_REFERENCE_MAX_HACC_M) -> Record
     gps = rec.streams.get("gps")
     if gps is not None and len(gps) >= 2:
         out.gps = _gps_reference(gps, gps_max_hacc_m)
+    for name, (col, kind) in COUNTER_TRUTHS.items():
+        c = rec.streams.get(name)
+        if c is None or col not in c.columns or len(c) < 2:
+            continue
+        v = np.asarray(c.values, dtype=float)[:, list(c.columns).index(col)]
+        ok = np.isfinite(v)
+        if int(ok.sum()) < 2:
+            continue
+        t = np.asarray(c.t_ns, dtype=np.int64)[ok]
+        span = {"t0_ns": int(t[0]), "t1_ns": int(t[-1]), "what": f"{name} stream, {col}"}
+        if kind == "steps":
+            out.steps = {**span, "n": int(round(v[ok][-1] - v[ok][0]))}
+        else:
+            out.distance = {**span, "m": float(v[ok][-1] - v[ok][0])}
     meta = rec.metadata if isinstance(rec.metadata, dict) else {}
     sim = meta.get("truth")
     if meta.get("simulator") and isinstance(sim, dict) and sim.get("path_length_m") is not None:
@@ -441,7 +464,9 @@ def truth_errors(track, truth: RecordingTruth, dr_track=None) -> dict:
     * ``"simulator"``: step-count and distance error over the whole walk, the end point's error (track
       moved from the walk's start to its end, against the true displacement) and, for a walk that ends
       where it started, the loop closure ``100 |p(t_end) - p(t_start)| / path length``;
-    * ``"gps"``: :func:`reference_track_errors` -- median, 90th percentile and max distance from the fixes.
+    * ``"gps"``: :func:`reference_track_errors` -- median, 90th percentile and max distance from the fixes;
+    * ``"steps"``, ``"distance"``: the steps (or metres) of the track between a ground-truth counter's first and
+      last event against the counter's.
     """
     out: dict = {}
     t = np.asarray(track.t_ns, dtype=np.int64)
@@ -480,6 +505,19 @@ def truth_errors(track, truth: RecordingTruth, dr_track=None) -> dict:
             if math.hypot(*true_moved) < LOOP_CLOSED_TOLERANCE_M and path > 0:
                 d["loop_closure_pct"] = 100.0 * float(math.hypot(*moved)) / path
         out["simulator"] = d
+    for key, c in (("steps", truth.steps), ("distance", truth.distance)):
+        if c is None:
+            continue
+        # a counter's first event counts what came before it: the steps after it, up to its last event
+        win = (t > c["t0_ns"]) & (t <= c["t1_ns"])
+        if key == "steps":
+            n_ours = int(np.sum(win))
+            out["steps"] = {"what": c["what"], "n_true": c["n"], "n": n_ours,
+                            "err_pct": step_count_error_pct(n_ours, c["n"])}
+        else:
+            d_ours = float(np.sum(np.asarray(track.length_m, dtype=float)[win]))
+            out["distance"] = {"what": c["what"], "true_m": c["m"], "m": d_ours,
+                               "err_pct": distance_error_pct(d_ours, c["m"])}
     ref = truth.gps
     drt = dr_track if dr_track is not None else track
     if ref is not None and len(drt):

@@ -295,6 +295,14 @@ def truth_lines(errs: dict) -> list[str]:
                                             (lm["loop_closure_pct"], "loop closure {:.2f} %"),
                                             (lm["segment_heading_deg"],
                                              "segment headings off by {:.1f} deg on average")))
+    c = errs.get("steps")
+    if c:
+        lines.append(f"truth         {c['n_true']} steps ({c['what']})")
+        lines.append(f"truth error   steps {c['err_pct']:+.1f} % ({c['n']} counted over the same time)")
+    c = errs.get("distance")
+    if c:
+        lines.append(f"truth         {c['true_m']:.1f} m walked ({c['what']})")
+        lines.append(f"truth error   distance {c['err_pct']:+.1f} % ({c['m']:.1f} m over the same time)")
     g = errs.get("gps")
     if g and not lm:  # landmarks are the better truth; GPS only where there is nothing better
         lines.append(f"truth         {g['what']} (a reference, not exact)")
@@ -335,6 +343,9 @@ def truth_headline(errs: dict) -> str:
     if errs.get("simulator"):
         s = errs["simulator"]
         return f"truth: distance {s['distance_err_pct']:+.1f} %, end {s['end_error_m']:.2f} m off"
+    parts = [f"{k} {errs[k]['err_pct']:+.1f} %" for k in ("steps", "distance") if errs.get(k)]
+    if parts:
+        return "truth: " + ", ".join(parts)
     if errs.get("gps"):
         return f"PDR alone vs GPS: median {errs['gps']['median_m']:.1f} m"
     return ""
@@ -808,6 +819,7 @@ def unique_stems(paths) -> list[str]:
 def replay_file(path: str, stem: str, args) -> dict:
     """One recording of a batch (in a worker process): never raises, the error is in the row."""
     row = {"path": path, "ok": False}
+    args = argparse.Namespace(**{**vars(args), "no_progress": True})  # the batch's progress line is the only one
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:

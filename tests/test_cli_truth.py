@@ -116,3 +116,35 @@ def test_calibrate_from_gps_stores_what_gps_taught_in_the_profile(tmp_path, caps
     # the dead-reckoning distance of that run is the model's: the walker's true length over it is the scale
     # GPS should have taught (within a per cent or two)
     assert stored.gps["stride_scale"] == pytest.approx(walk.truth.path_length_m / doc["pdr_distance_m"], rel=0.02)
+
+
+def test_ground_truth_counters_step_count_and_wheel_distance(capsys):
+    """Cumulative ground-truth streams (Oxford's foot-switch step counts, a trundle wheel's metres): the track's
+    steps and metres between the counter's first and last event against the counter's."""
+    from core.metrics import truth_errors
+    from core.pdr.pipeline import Track
+    from core.recording import Recording
+
+    s = 1_000_000_000
+    n = 40
+    track = Track(np.arange(1, n + 1, dtype=np.int64) * s, np.full(n, 0.7), np.zeros(n), np.cumsum(np.full(n, 0.7)),
+                  np.zeros(n))
+    t_counter = np.array([5, 20, 30], dtype=np.int64) * s + s // 2  # steps 6..30 are after the first event
+    streams = {
+        "step_counts": Stream("step_counts", t_counter, np.array([[3, 10, 0], [20, 24, 0], [27, 37, 0]], float),
+                              ("app", "ground_truth", "android_hw"), "1", ""),
+        "wheel": Stream("wheel", t_counter, np.array([[2.0], [12.0], [19.0]]), ("distance_m",), "m", ""),
+    }
+    truth = truth_of(Recording(streams))
+    errs = truth_errors(track, truth)
+    ours = 30 - 5  # steps at 6 s .. 30 s
+    assert errs["steps"]["n_true"] == 27 and errs["steps"]["n"] == ours
+    assert errs["steps"]["err_pct"] == pytest.approx(100.0 * (ours - 27) / 27)
+    assert errs["distance"]["true_m"] == pytest.approx(17.0) and errs["distance"]["m"] == pytest.approx(0.7 * ours)
+    assert errs["distance"]["err_pct"] == pytest.approx(100.0 * (0.7 * ours - 17.0) / 17.0)
+    lines = truth_lines(errs)
+    assert "truth         27 steps (step_counts stream, ground_truth)" in lines
+    assert f"truth error   distance {errs['distance']['err_pct']:+.1f} % (17.5 m over the same time)" in lines
+    # a counter that is not ground truth (the phone's own) is not truth
+    phone = Stream("step_counts", t_counter, np.array([[1.0], [9.0], [20.0]]), ("phone",), "1", "")
+    assert not truth_of(Recording({"step_counts": phone}))
