@@ -607,7 +607,7 @@ def _write_outputs(args, outs: dict, rec, track, origin, extra, title_extra: str
 def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progress=None) -> dict:
     """Replay one recording with ``args``' settings and write ``outs``.
 
-    Returns ``{"summary": JSON-able dict, "lines": summary lines, "written": paths, "notes": status lines}``.
+    Returns ``{"summary": JSON-able dict, "lines": summary lines, "written": paths}``.
     """
     mode, why = choose_mode(args, rec)
     if mode == "foot":
