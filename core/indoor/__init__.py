@@ -31,7 +31,7 @@ from core.indoor.particles import (  # noqa: F401
 
 
 def map_match(steps, plan=None, *, start=None, start_gps=None, fixes=(), config: ParticleConfig | None = None,
-              seed: int = 0) -> MapMatchResult:
+              seed: int = 0, smooth: bool = False) -> MapMatchResult:
     """The map-matched track of a walk's steps.
 
     steps
@@ -46,11 +46,15 @@ def map_match(steps, plan=None, *, start=None, start_gps=None, fixes=(), config:
     fixes
         ``(t_ns, east_m, north_m, sd_m)`` tuples (taps on the map, surveyed landmarks).
 
+    smooth
+        Also the batch smoother's track (``result.smoothed_east_m/north_m``:
+        the final particles' ancestral paths; for replays, not the live app).
+
     Steps before the start are not used.  Returns a :class:`MapMatchResult`
     (one row per step: position, covariance and spread, heading bias, ESS;
     ``diagnostics``).
     """
-    pf = ParticleFilter(plan, config, seed=seed)
+    pf = ParticleFilter(plan, config, seed=seed, keep_paths=smooth)
     if start is not None:
         t0 = int(start[0])
         pf.start(t0, float(start[1]), float(start[2]), float(start[3]))

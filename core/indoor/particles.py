@@ -15,9 +15,11 @@ Per step ``(length l, heading h)`` of :class:`core.pdr.pipeline.Step` (the
    :class:`core.indoor.geometry.WallGrid`, bounded cost per particle);
 4. all dead -> **recovery**: the step is drawn again from the cloud before it
    with three times the heading and length noise (``retries``); if every
-   particle still dies, the moves are kept through the walls (the map lacks a
-   door, or the cloud is lost) and ``recoveries`` counts it.  The state never
-   holds NaN and the filter never stops;
+   particle still dies (the map lacks a door, or the cloud is lost), no
+   particle moves this step and every bias gets ``N(0, bias_sd_rad)`` more,
+   so that later steps find the way the walls allow; ``recoveries`` counts
+   it.  Particles never pass a wall, the state never holds NaN and the
+   filter never stops;
 5. systematic resampling (Kitagawa 1996, "Monte Carlo filter and smoother for
    non-Gaussian nonlinear state space models", J. Comput. Graph. Stat.
    5(1):1-25; Arulampalam et al. 2002, IEEE TSP 50(2), Algorithm 2) when the
@@ -39,8 +41,8 @@ Estimate (:class:`Estimate`): weighted mean position, weighted 2 x 2
 covariance (``spread_m = sqrt(trace)``), the weighted circular mean of the
 bias and its spread, the mean stride scale.  When a wall lies between the
 weighted mean and the best particle (a cloud split by a wall), the mean is
-not a place the walker can be: the estimate is then the particle nearest to
-the mean (``snaps``).
+not a place the walker can be: the estimate is then the living particle
+nearest to the mean (``snaps``).
 
 Initialisation: :meth:`ParticleFilter.start` (a point with an sd: a known
 start or a landmark) or :meth:`ParticleFilter.start_gps` (a fix in degrees
@@ -121,7 +123,7 @@ class Diagnostics:
 class ParticleFilter:
     """See the module docstring.  ``plan=None``: no walls (fixes only)."""
 
-    def __init__(self, plan=None, config: ParticleConfig | None = None, seed: int = 0):
+    def __init__(self, plan=None, config: ParticleConfig | None = None, seed: int = 0, keep_paths: bool = False):
         self.plan = plan
         self.config = config or ParticleConfig()
         self.rng = np.random.default_rng(seed)
@@ -135,6 +137,7 @@ class ParticleFilter:
         self.scale = np.ones(n)
         self.bias = np.zeros(n)
         self.w = np.full(n, 1.0 / n)
+        self._paths = [] if keep_paths else None
 
     @property
     def started(self) -> bool:
@@ -155,6 +158,8 @@ class ParticleFilter:
         self.bias = wrap_angle(float(bias_rad) + self.rng.normal(0.0, c.bias_sd_rad, n))
         self.w = np.full(n, 1.0 / n)
         self.t_ns = int(t_ns)
+        if self._paths is not None:
+            self._paths = []
         return self.estimate()
 
     def start_gps(self, t_ns: int, lat_deg: float, lon_deg: float, hacc_m: float) -> Estimate:
@@ -188,28 +193,35 @@ class ParticleFilter:
         length, heading = float(step.length_m), float(step.heading_rad)
         if not (math.isfinite(length) and math.isfinite(heading)):  # a step without heading: the walker stands
             self.t_ns = int(step.t_ns)
+            self._record(True, None)
             return self.estimate()
         c, d = self.config, self.diagnostics
         n = len(self.w)
         self.bias = wrap_angle(self.bias + self.rng.normal(0.0, c.bias_rw_rad, n))
         self.scale = self.scale * np.exp(self.rng.normal(0.0, c.scale_rw, n))
-        new, dead = self._move(length, heading, 1.0)
-        if dead.all():
+        alive = self.w > 0
+        new, hit = self._move(length, heading, 1.0)
+        if (hit | ~alive).all():
             for _ in range(c.retries):
                 d.retries += 1
-                new, dead = self._move(length, heading, 3.0)
-                if not dead.all():
+                new, hit = self._move(length, heading, 3.0)
+                if not (hit | ~alive).all():
                     break
-        if dead.all():
+        if (hit | ~alive).all():  # recovery: nobody moves this step and the bias spreads again (module docstring)
             d.recoveries += 1
-            dead[:] = False
+            new, hit = self.xy.copy(), np.zeros(n, dtype=bool)
+            self.bias = wrap_angle(self.bias + self.rng.normal(0.0, c.bias_sd_rad, n))
         d.steps += 1
-        d.deaths += int(dead.sum())
+        d.deaths += int(np.sum(hit & alive))
+        dead = hit | ~alive
         self.xy = new
         w = np.where(dead, 0.0, self.w)
-        self.w = w / w.sum()
-        self._maybe_resample()
+        s = w.sum()
+        # survivors whose weights all underflowed (after a far fix) share the weight equally
+        self.w = w / s if s > 0 and math.isfinite(s) else np.where(dead, 0.0, 1.0) / float(np.sum(~dead))
+        parents = self._maybe_resample()
         self.t_ns = int(step.t_ns)
+        self._record(True, parents)
         return self.estimate()
 
     def _move(self, length: float, heading: float, inflate: float):
@@ -221,13 +233,14 @@ class ParticleFilter:
         dead = self.grid.crosses(self.xy, new) if self.grid is not None else np.zeros(n, dtype=bool)
         return new, dead
 
-    def _maybe_resample(self) -> None:
+    def _maybe_resample(self):
+        """Resample when the ESS is low; returns the parent index of every particle (None: no resampling)."""
         c, d = self.config, self.diagnostics
         n = len(self.w)
         ess = 1.0 / float(np.sum(self.w ** 2))
         d.min_ess = min(d.min_ess, ess)
         if ess >= c.resample_ess * n:
-            return
+            return None
         d.resamples += 1
         # systematic resampling (Kitagawa 1996; Arulampalam et al. 2002, Algorithm 2)
         u = (self.rng.random() + np.arange(n)) / n
@@ -237,6 +250,32 @@ class ParticleFilter:
         self.xy, self.scale, self.bias = self.xy[idx], self.scale[idx], self.bias[idx]
         self.w = np.full(n, 1.0 / n)
         self._roughen()
+        return idx
+
+    def _record(self, is_step: bool, parents) -> None:
+        """Keep the positions and the resampling's parents for the batch smoother (``keep_paths``)."""
+        if self._paths is not None:
+            self._paths.append((is_step, self.xy.copy(), parents))
+
+    def smoothed(self) -> np.ndarray:
+        """Positions ``(steps, 2)`` after each step, smoothed by the final particles' ancestral paths.
+
+        The filter-smoother of Kitagawa 1996 (section 4.2): each particle keeps
+        its past states; the smoothed position at step ``k`` is the final
+        weights' mean of the final particles' ancestors at ``k``.  Needs
+        ``keep_paths=True``; memory grows with ``steps x N``, so it is for
+        batch runs (``pdr replay``), not the live app.
+        """
+        if self._paths is None:
+            raise RuntimeError("construct the filter with keep_paths=True to smooth")
+        a = np.arange(len(self.w))
+        out = []
+        for is_step, xy, parents in reversed(self._paths):
+            if is_step:
+                out.append(self.w @ xy[a])
+            if parents is not None:
+                a = parents[a]
+        return np.array(out[::-1], dtype=float).reshape(-1, 2)
 
     def _roughen(self) -> None:
         """Gordon et al. 1993: jitter of K E N^(-1/d) per dimension (positions only where no wall is crossed)."""
@@ -272,7 +311,7 @@ class ParticleFilter:
             w = self.w * np.exp(-0.5 * (d2 - d2.min()))
             s = w.sum()
             self.w = w / s if s > 0 and math.isfinite(s) else np.full(len(self.w), 1.0 / len(self.w))
-            self._maybe_resample()
+        self._record(False, self._maybe_resample())
         self.t_ns = max(self.t_ns, int(t_ns))
         return self.estimate()
 
@@ -289,7 +328,7 @@ class ParticleFilter:
         if self.grid is not None:
             best = self.xy[int(np.argmax(w))]
             if self.grid.crosses(best[None, :], m[None, :])[0]:
-                m = self.xy[int(np.argmin(np.hypot(*dxy.T)))].copy()
+                m = self.xy[int(np.argmin(np.where(w > 0, np.hypot(*dxy.T), np.inf)))].copy()
                 snapped = True
                 self.diagnostics.snaps += 1
         return Estimate(t_ns=int(self.t_ns), east_m=float(m[0]), north_m=float(m[1]),
@@ -313,7 +352,11 @@ class ParticleFilter:
         while k < len(fx):
             out.append((False, self.fix(*fx[k])))
             k += 1
-        return MapMatchResult.from_estimates([e for is_step, e in out if is_step], self.diagnostics.as_dict())
+        res = MapMatchResult.from_estimates([e for is_step, e in out if is_step], self.diagnostics.as_dict())
+        if self._paths is not None:
+            sm = self.smoothed()
+            res.smoothed_east_m, res.smoothed_north_m = sm[:, 0], sm[:, 1]
+        return res
 
 
 @dataclass(frozen=True)
@@ -348,6 +391,9 @@ class MapMatchResult:
     ess: np.ndarray
     snapped: np.ndarray
     diagnostics: dict = field(default_factory=dict)
+    #: the batch smoother's positions (:meth:`ParticleFilter.smoothed`), None unless asked for
+    smoothed_east_m: np.ndarray | None = None
+    smoothed_north_m: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t_ns)

@@ -1,0 +1,383 @@
+"""Floor-plan particle filter and landmark fixes benchmark (issue #16): ``python -m benchmarks.indoor``.
+
+Writes ``benchmarks/indoor_results.json`` and ``benchmarks/INDOOR_RESULTS.md`` (a section of RESULTS.md).
+
+Inputs: the steps of our pipeline, built exactly as the main benchmark builds
+it (:func:`benchmarks.run.make_pipeline`: the site's declination), on
+
+* **Microsoft site2/F3** (:mod:`benchmarks.datasets.ms_indoor`) with the
+  floor's map (:func:`core.indoor.read_ms_floor`): the filter starts at the
+  first waypoint (sd ``START_SD_M``) at its time and knows nothing else;
+  scored on every later waypoint.  Beside it: the same steps without the
+  particle filter (our PDR track, the main benchmark's number) and the
+  filter without the map (the map's own share).
+* **IPIN 2023** (:mod:`benchmarks.datasets.ipin2023`; no map of floors 0 and
+  -2, so fixes only): landmarks ``0, 3, 6, ...`` are given to the filter
+  (landmark 0 as its start, the others as fixes of sd ``FIX_SD_M``), the
+  others are scored.  Beside it: the PDR track and the filter with only
+  the start, on the same landmarks.
+
+Errors: :func:`core.metrics.landmark_errors` (track placed at landmark 0 at
+its time, absolute heading), per recording the mean over its scored
+landmarks; headlines are the median of those means over the recordings of
+the split (the definition of the main benchmark's ``*_landmark_median_m``),
+with the pooled median of every scored landmark beside it.
+
+Splits (:mod:`benchmarks.splits`): Microsoft odd-numbered traces and IPIN
+routes 01, 02, 21, 22 are tuning, the rest report.  ``--tune`` searches the
+filter's settings on the tuning split only; the defaults of
+:class:`core.indoor.ParticleConfig` are its result.  Timing (``ms/step``):
+wall-clock time of :meth:`ParticleFilter.update` per step in this process.
+
+``python -m benchmarks.indoor [--data DIR] [--jobs N] [--cache FILE] [--tune] [--no-write]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import pickle
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks import splits as S
+from benchmarks.datasets import ipin2023, ms_indoor
+from benchmarks.datasets.base import default_data_root
+from core.indoor import ParticleConfig, ParticleFilter, map_match, read_ms_floor
+from core.metrics import landmark_errors
+
+HERE = Path(__file__).resolve().parent
+RESULTS_JSON = HERE / "indoor_results.json"
+RESULTS_MD = HERE / "INDOOR_RESULTS.md"
+MS_FLOOR = "ms_indoor_location_2020/site2/F3"
+#: sd of the known start (m): the surveyor's first waypoint
+START_SD_M = 0.3
+#: sd of a landmark fix (m): the walker steps on a surveyed point
+FIX_SD_M = 0.5
+#: every FIX_EVERY-th landmark (0, 3, 6, ...) is a fix on IPIN
+FIX_EVERY = 3
+#: particle counts of the sweep
+SWEEP = (100, 200, 300, 500, 1000, 2000)
+SEED = 0
+
+
+# ---------------------------------------------------------------------------
+# steps of our pipeline (the slow part; parallel, optionally cached)
+
+
+def _steps_of(args):
+    module, root, index = args
+    from benchmarks.run import make_pipeline
+
+    mod = {"ms_indoor": ms_indoor, "ipin2023": ipin2023}[module]
+    trial = mod.trials(Path(root))[index]
+    rec = trial.open()
+    tr = make_pipeline(trial).run(rec).track
+    lm = trial.landmarks
+    return {"dataset": trial.dataset, "name": trial.name, "split": S.trial_split(trial), "info": dict(trial.info),
+            "t_ns": tr.t_ns, "length_m": tr.length_m, "heading_rad": tr.heading_rad, "east_m": tr.east_m,
+            "north_m": tr.north_m,
+            "lm_t_ns": lm.t_ns, "lm_east_m": lm.east_m, "lm_north_m": lm.north_m}
+
+
+def load_walks(root: Path, jobs: int = 2, cache: Path | None = None, log=sys.stderr) -> list[dict]:
+    if cache is not None and Path(cache).exists():
+        with open(cache, "rb") as fh:
+            return pickle.load(fh)
+    tasks = []
+    if ms_indoor.available(root):
+        tasks += [("ms_indoor", str(root), i) for i, t in enumerate(ms_indoor.trials(root))
+                  if t.info["site"] + "/" + t.info["floor"] == "site2/F3"]
+    if ipin2023.available(root):
+        tasks += [("ipin2023", str(root), i) for i in range(len(ipin2023.trials(root)))]
+    t0 = time.perf_counter()
+    out = []
+    with ProcessPoolExecutor(max_workers=max(1, jobs)) as ex:
+        for k, w in enumerate(ex.map(_steps_of, tasks), start=1):
+            out.append(w)
+            print(f"[{k}/{len(tasks)}] {w['dataset']}/{w['name']}: {len(w['t_ns'])} steps "
+                  f"({time.perf_counter() - t0:.0f} s)", file=log, flush=True)
+    if cache is not None:
+        with open(cache, "wb") as fh:
+            pickle.dump(out, fh)
+    return out
+
+
+# ---------------------------------------------------------------------------
+# one walk
+
+
+class _Track:
+    def __init__(self, t_ns, length_m, heading_rad):
+        self.t_ns, self.length_m, self.heading_rad = t_ns, length_m, heading_rad
+
+
+def _errors(t_ns, east, north, heading, w, start=(0.0, 0.0)) -> np.ndarray:
+    """Per-landmark errors (landmark 1..N) of a track: :func:`core.metrics.landmark_errors`."""
+    return landmark_errors(t_ns, east, north, heading, w["lm_t_ns"], w["lm_east_m"], w["lm_north_m"],
+                           start=start).errors_m
+
+
+def _filter(w, plan, config: ParticleConfig, fixes=(), seed: int = SEED):
+    """The filter from landmark 0 on this walk's steps: (result, ms per step)."""
+    lt = w["lm_t_ns"]
+    start = (int(lt[0]), float(w["lm_east_m"][0]), float(w["lm_north_m"][0]), START_SD_M)
+    t = time.perf_counter()
+    r = map_match(_Track(w["t_ns"], w["length_m"], w["heading_rad"]), plan, start=start, fixes=fixes,
+                  config=config, seed=seed, smooth=True)
+    ms = 1e3 * (time.perf_counter() - t) / max(len(r), 1)
+    return r, ms
+
+
+def _pf_errors(w, r, smoothed: bool = False) -> np.ndarray:
+    keep = w["t_ns"] > w["lm_t_ns"][0]
+    h = w["heading_rad"][keep] - r.bias_rad
+    e, n = (r.smoothed_east_m, r.smoothed_north_m) if smoothed else (r.east_m, r.north_m)
+    return _errors(r.t_ns, e, n, h, w, start=(w["lm_east_m"][0], w["lm_north_m"][0]))
+
+
+def eval_ms(w, plan, config: ParticleConfig) -> dict:
+    pdr = _errors(w["t_ns"], w["east_m"], w["north_m"], w["heading_rad"], w)
+    nomap, _ = _filter(w, None, config)
+    mapped, ms = _filter(w, plan, config)
+    xy = np.column_stack([mapped.east_m, mapped.north_m])
+    pdr_xy = np.column_stack([w["east_m"], w["north_m"]]) - _at(w, w["lm_t_ns"][0]) + [w["lm_east_m"][0],
+                                                                                     w["lm_north_m"][0]]
+    keep = w["t_ns"] > w["lm_t_ns"][0]
+    return {"name": w["name"], "split": w["split"], "n_landmarks": len(w["lm_t_ns"]), "n_steps": len(mapped),
+            "pdr_mean_m": float(np.mean(pdr)), "nomap_mean_m": float(np.mean(_pf_errors(w, nomap))),
+            "map_mean_m": float(np.mean(_pf_errors(w, mapped))),
+            "map_smooth_mean_m": float(np.mean(_pf_errors(w, mapped, True))),
+            "map_smooth_outside": int(np.sum(~plan.is_walkable(np.column_stack([mapped.smoothed_east_m,
+                                                                                mapped.smoothed_north_m])))),
+            "pdr_errors_m": pdr.tolist(), "map_errors_m": _pf_errors(w, mapped).tolist(),
+            "map_outside": int(np.sum(~plan.is_walkable(xy))), "pdr_outside": int(np.sum(~plan.is_walkable(pdr_xy[keep]))),
+            "bias_deg": math.degrees(mapped.final_bias_rad), "ms_per_step": ms,
+            "spread_median_m": float(np.median(mapped.spread_m)) if len(mapped) else math.nan,
+            "diagnostics": mapped.diagnostics}
+
+
+def _at(w, t_ns) -> np.ndarray:
+    from core.metrics import positions_at
+
+    return positions_at(w["t_ns"], w["east_m"], w["north_m"], np.array([t_ns], dtype=np.int64))[0]
+
+
+def eval_ipin(w, config: ParticleConfig, fix_sd_m: float = FIX_SD_M) -> dict:
+    k = np.arange(len(w["lm_t_ns"]))
+    is_fix = k % FIX_EVERY == 0
+    fixes = [(int(w["lm_t_ns"][i]), float(w["lm_east_m"][i]), float(w["lm_north_m"][i]), fix_sd_m)
+             for i in k[is_fix][1:]]
+    scored = ~is_fix[1:]  # errors_m starts at landmark 1
+    pdr = _errors(w["t_ns"], w["east_m"], w["north_m"], w["heading_rad"], w)[scored]
+    nofix, _ = _filter(w, None, config)
+    fixed, ms = _filter(w, None, config, fixes=fixes)
+    e_fix = _pf_errors(w, fixed)[scored]
+    e_smooth = _pf_errors(w, fixed, True)[scored]
+    return {"name": w["name"], "split": w["split"], "n_landmarks": len(k), "n_scored": int(scored.sum()),
+            "n_fixes": len(fixes), "n_steps": len(fixed),
+            "pdr_mean_m": float(np.mean(pdr)), "nofix_mean_m": float(np.mean(_pf_errors(w, nofix)[scored])),
+            "fix_mean_m": float(np.mean(e_fix)), "fix_smooth_mean_m": float(np.mean(e_smooth)), "fix_errors_m": e_fix.tolist(), "pdr_errors_m": pdr.tolist(),
+            "bias_deg": math.degrees(fixed.final_bias_rad), "ms_per_step": ms, "diagnostics": fixed.diagnostics}
+
+
+# ---------------------------------------------------------------------------
+# summaries
+
+
+def _med(v) -> float:
+    v = [x for x in v if x is not None and math.isfinite(x)]
+    return float(np.median(v)) if v else math.nan
+
+
+def summarise(ms_rows, ipin_rows, split: str) -> dict:
+    ms = [r for r in ms_rows if r["split"] == split]
+    ip = [r for r in ipin_rows if r["split"] == split]
+    h = {}
+    if ms:
+        h.update({
+            "ms_map_landmark_median_m": _med([r["map_mean_m"] for r in ms]),
+            "ms_nomap_landmark_median_m": _med([r["nomap_mean_m"] for r in ms]),
+            "ms_landmark_median_m": _med([r["pdr_mean_m"] for r in ms]),
+            "ms_map_landmark_pooled_median_m": _med([e for r in ms for e in r["map_errors_m"]]),
+            "ms_map_smoothed_landmark_median_m": _med([r["map_smooth_mean_m"] for r in ms]),
+            "ms_map_smoothed_outside_estimates": int(sum(r["map_smooth_outside"] for r in ms)),
+            "ms_landmark_pooled_median_m": _med([e for r in ms for e in r["pdr_errors_m"]]),
+            "ms_map_outside_estimates": int(sum(r["map_outside"] for r in ms)),
+            "ms_pdr_outside_estimates": int(sum(r["pdr_outside"] for r in ms)),
+            "ms_steps": int(sum(r["n_steps"] for r in ms)), "ms_recordings": len(ms),
+            "map_ms_per_step": float(np.sum([r["ms_per_step"] * r["n_steps"] for r in ms])
+                                     / max(1, sum(r["n_steps"] for r in ms))),
+            "ms_recoveries": int(sum(r["diagnostics"]["recoveries"] for r in ms)),
+        })
+    if ip:
+        h.update({
+            "ipin_fix_landmark_median_m": _med([r["fix_mean_m"] for r in ip]),
+            "ipin_nofix_landmark_median_m": _med([r["nofix_mean_m"] for r in ip]),
+            "ipin_landmark_median_m": _med([r["pdr_mean_m"] for r in ip]),
+            "ipin_fix_landmark_pooled_median_m": _med([e for r in ip for e in r["fix_errors_m"]]),
+            "ipin_fix_smoothed_landmark_median_m": _med([r["fix_smooth_mean_m"] for r in ip]),
+            "ipin_recordings": len(ip),
+            "ipin_ms_per_step": float(np.sum([r["ms_per_step"] * r["n_steps"] for r in ip])
+                                      / max(1, sum(r["n_steps"] for r in ip))),
+        })
+    return h
+
+
+def evaluate(walks, plan, config: ParticleConfig, split: str | None = None, fix_sd_m: float = FIX_SD_M):
+    ws = [w for w in walks if split is None or w["split"] == split]
+    ms_rows = [eval_ms(w, plan, config) for w in ws if w["dataset"] == ms_indoor.NAME and len(w["lm_t_ns"]) >= 2]
+    ip_rows = [eval_ipin(w, config, fix_sd_m) for w in ws if w["dataset"] == ipin2023.NAME and len(w["lm_t_ns"]) >= 2]
+    return ms_rows, ip_rows
+
+
+def sweep(walks, plan, config: ParticleConfig, split: str) -> list[dict]:
+    out = []
+    for n in SWEEP:
+        c = dataclasses.replace(config, n_particles=n)
+        ms_rows = [eval_ms(w, plan, c) for w in walks if w["dataset"] == ms_indoor.NAME and w["split"] == split]
+        h = summarise(ms_rows, [], split)
+        out.append({"n_particles": n, "ms_map_landmark_median_m": h["ms_map_landmark_median_m"],
+                    "ms_map_smoothed_landmark_median_m": h["ms_map_smoothed_landmark_median_m"],
+                    "ms_map_landmark_pooled_median_m": h["ms_map_landmark_pooled_median_m"],
+                    "outside": h["ms_map_outside_estimates"], "map_ms_per_step": h["map_ms_per_step"],
+                    "recoveries": h["ms_recoveries"]})
+    return out
+
+
+# ---------------------------------------------------------------------------
+# tuning (tuning split only)
+
+#: the grid searched by --tune, one setting at a time from the defaults (coordinate descent, two passes)
+TUNE_GRID = {
+    "heading_sd_rad": [math.radians(v) for v in (3, 6, 10)],
+    "bias_sd_rad": [math.radians(v) for v in (8, 15, 25)],
+    "bias_rw_rad": [math.radians(v) for v in (0.2, 0.5, 1.0)],
+    "length_sd": [0.04, 0.08, 0.15],
+    "scale_sd": [0.05, 0.10, 0.20],
+}
+
+
+def tune(walks, plan, log=sys.stderr) -> ParticleConfig:
+    tw = [w for w in walks if w["split"] == S.TUNING]
+
+    def score(c):
+        h = summarise(*evaluate(tw, plan, c), S.TUNING)
+        return h["ms_map_landmark_median_m"] + h["ipin_fix_landmark_median_m"], h
+
+    best = ParticleConfig()
+    best_s, _ = score(best)
+    for _ in range(2):
+        for name, values in TUNE_GRID.items():
+            for v in values:
+                c = dataclasses.replace(best, **{name: v})
+                s, h = score(c)
+                print(f"tune {name}={v:.4g}: {s:.3f} (ms {h['ms_map_landmark_median_m']:.2f}, "
+                      f"ipin {h['ipin_fix_landmark_median_m']:.2f})", file=log, flush=True)
+                if s < best_s - 1e-9:
+                    best, best_s = c, s
+    print(f"tuned: {best} -> {best_s:.3f}", file=log)
+    return best
+
+
+# ---------------------------------------------------------------------------
+# report
+
+
+def _f(v, nd=2) -> str:
+    return "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{nd}f}"
+
+
+def _table(title: str, header: list, rows: list) -> list:
+    return ["", f"### {title}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + [
+        "| " + " | ".join(str(v) for v in r) + " |" for r in rows]
+
+
+def write_md(out: dict, path: Path) -> None:
+    hr, ht = out["headlines"][S.REPORT], out["headlines"][S.TUNING]
+    t = out["targets"]
+    L = ["## Indoors: floor-plan particle filter and landmark fixes (issue #16)", "",
+         "`python -m benchmarks.indoor` (benchmarks/indoor.py; code: core/indoor, docs/indoor.md). "
+         f"Particles: {out['config']['n_particles']}, seed {SEED}; start sd {START_SD_M} m, fix sd {FIX_SD_M} m. "
+         "Errors: `core.metrics.landmark_errors` (placed at landmark 0, absolute heading); per recording the mean "
+         "over its scored landmarks, then the median over the recordings (pooled: median of every scored landmark).",
+         "", "### Targets (report split)", "", "| target | value | limit | |", "|---|---|---|---|"]
+    for row in t:
+        L.append(f"| {row['text']} (`{row['metric']}`) | {_f(row['value'])} | {row['op']} {_f(row['limit'])} | "
+                 f"{'met' if row['met'] else '**missed**'} |")
+    L += ["", "### Headlines", "", "| headline | report | tuning |", "|---|---|---|"]
+    for k in sorted(set(hr) | set(ht)):
+        L.append(f"| `{k}` | {_f(hr.get(k), 3)} | {_f(ht.get(k), 3)} |")
+    ms_rep = [r for r in out["ms"] if r["split"] == S.REPORT]
+    ip_rep = [r for r in out["ipin"] if r["split"] == S.REPORT]
+    L += _table("Microsoft site2/F3 with its map, only the start known (report split)",
+                ["trace", "waypoints", "steps", "PDR mean (m)", "filter, no map (m)", "filter + map (m)",
+                 "smoothed + map (m)", "outside (PDR / map)", "bias (deg)", "recoveries"],
+                [[r["name"].split("/")[-1], r["n_landmarks"], r["n_steps"], _f(r["pdr_mean_m"]),
+                  _f(r["nomap_mean_m"]), _f(r["map_mean_m"]), _f(r["map_smooth_mean_m"]),
+                  f"{r['pdr_outside']} / {r['map_outside']}", _f(r["bias_deg"], 1), r["diagnostics"]["recoveries"]]
+                 for r in ms_rep])
+    L += _table("IPIN 2023, every third landmark a fix (report split)",
+                ["recording", "landmarks (scored)", "fixes", "PDR mean (m)", "filter, start only (m)",
+                 "filter + fixes (m)", "smoothed + fixes (m)", "bias (deg)", "fix resets"],
+                [[r["name"], f"{r['n_landmarks']} ({r['n_scored']})", r["n_fixes"], _f(r["pdr_mean_m"]),
+                  _f(r["nofix_mean_m"]), _f(r["fix_mean_m"]), _f(r["fix_smooth_mean_m"]), _f(r["bias_deg"], 1),
+                  r["diagnostics"]["fix_resets"]] for r in ip_rep])
+    L += _table("Particle count against accuracy and time (Microsoft with the map, report split)",
+                ["particles", "median of means (m)", "smoothed (m)", "pooled median (m)", "outside", "recoveries",
+                 "ms/step"],
+                [[r["n_particles"], _f(r["ms_map_landmark_median_m"]), _f(r["ms_map_smoothed_landmark_median_m"]),
+                  _f(r["ms_map_landmark_pooled_median_m"]), r["outside"], r["recoveries"], _f(r["map_ms_per_step"])]
+                 for r in out["sweep"]])
+    L += ["", *out.get("notes", [])]
+    Path(path).write_text("\n".join(L) + "\n")
+
+
+TARGETS = (
+    ("ms_map_landmark_median_m", "<=", 2.0, "Microsoft with its map, only the start known: median waypoint error (m)"),
+    ("ms_map_outside_estimates", "<=", 0, "Microsoft: estimates outside the walkable area"),
+    ("ipin_fix_landmark_median_m", "<=", 1.0, "IPIN 2023, every third landmark a fix: median error on the others (m)"),
+    ("map_ms_per_step", "<=", 5.0, "time per step with the map (ms, this machine)"),
+)
+
+
+def targets(h: dict) -> list[dict]:
+    out = []
+    for metric, op, limit, text in TARGETS:
+        v = h.get(metric)
+        out.append({"metric": metric, "op": op, "limit": limit, "value": v, "text": text,
+                    "met": None if v is None else bool(v <= limit)})
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.indoor", description=__doc__.split("\n")[0])
+    ap.add_argument("--data", type=Path, default=default_data_root())
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--cache", type=Path, default=None, help="pickle of the pipeline's steps (read if present)")
+    ap.add_argument("--tune", action="store_true", help="search the filter's settings on the tuning split first")
+    ap.add_argument("--no-write", action="store_true")
+    a = ap.parse_args(argv)
+    walks = load_walks(a.data, a.jobs, a.cache)
+    plan = read_ms_floor(a.data / MS_FLOOR)
+    config = tune(walks, plan) if a.tune else ParticleConfig()
+    ms_rows, ip_rows = evaluate(walks, plan, config)
+    heads = {sp: summarise(ms_rows, ip_rows, sp) for sp in S.SPLITS}
+    out = {"config": dataclasses.asdict(config), "headlines": heads, "targets": targets(heads[S.REPORT]),
+           "ms": ms_rows, "ipin": ip_rows, "sweep": sweep(walks, plan, config, S.REPORT),
+           "sweep_split": S.REPORT}
+    print(json.dumps(heads, indent=1))
+    if not a.no_write:
+        RESULTS_JSON.write_text(json.dumps(out, indent=1, default=float) + "\n")
+        write_md(out, RESULTS_MD)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
