@@ -497,7 +497,8 @@ def run_mounting(root: Path) -> dict:
     :class:`core.foot.mounting.MountingSettings` were chosen on the tuning split (IPOL odd subjects,
     PyShoe odd trials); accuracy is reported on the rest (IPOL even subjects, PyShoe even trials, x-io,
     Brajdic-Harle hand-held walks: a report-split dataset of :mod:`benchmarks.splits`)."""
-    from benchmarks.datasets import brajdic_harle, ipol_feet, pyshoe, xio_foot
+    from benchmarks.datasets import brajdic_harle, ipin2023, ipol_feet, pyshoe, xio_foot
+    from benchmarks.splits import ipin_split
     from core.foot.mounting import detect_mounting
 
     rows = []
@@ -506,7 +507,7 @@ def run_mounting(root: Path) -> dict:
         m = detect_mounting(rec, device)
         rows.append({"dataset": dataset, "recording": name, "device": device or "primary", "truth": truth,
                      "mode": m.mode, "confidence": m.confidence, "peak_rate_rad_s": m.peak_rate_rad_s,
-                     "stance_fraction": m.stance_fraction, "split": split})
+                     "stride_fraction": m.stride_fraction, "split": split})
 
     for tr in pyshoe.trials(root):
         add("pyshoe_vicon", tr.name, tr.open(), "", "foot", tr.info["split"])
@@ -521,6 +522,8 @@ def run_mounting(root: Path) -> dict:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
+        for tr in ipin2023.trials(root):  # hand-held, with compass-calibration waving at the start
+            add("ipin2023_track3", tr.name, tr.open(), "", "handheld", ipin_split(tr.info["route"]))
         for tr in brajdic_harle.trials(root):
             rec = tr.open()
             if rec.has("gyro"):
@@ -647,7 +650,8 @@ def write_markdown(out, path=RESULTS_MD) -> None:
                      f"{np.median([r['confidence'] for r in rr]):.2f} |")
         for r in mt["errors"]:
             L.append(f"\nWrong ({r['split']}): {r['dataset']} {r['recording']} {r['device']} -> {r['mode']} "
-                     f"(peak {r['peak_rate_rad_s']:.2f} rad/s, stance {r['stance_fraction']:.2f})")
+                     f"(window peak {r['peak_rate_rad_s']:.2f} rad/s, stride fraction "
+                     f"{r.get('stride_fraction', float('nan')):.2f})")
     L += ["", "Headlines (foot_results.json): " + json.dumps(out["headlines"]), ""]
     Path(path).write_text("\n".join(L))
 
@@ -656,7 +660,20 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data-root", type=Path, default=default_data_root())
     ap.add_argument("--pyshoe-rows", type=Path, default=None, help="reuse PyShoe rows from a JSON file")
+    ap.add_argument("--mounting-only", action="store_true",
+                    help="rerun only the mode detection, keeping the other results of foot_results.json")
     args = ap.parse_args(argv)
+    if args.mounting_only:
+        out = json.loads(RESULTS_JSON.read_text())
+        out["mounting"] = run_mounting(args.data_root)
+        out["headlines"] = headlines(out)
+        RESULTS_JSON.write_text(json.dumps(out, indent=1, default=float))
+        write_markdown(out)
+        m = out["mounting"]
+        print(f"mode detection: report {100 * m['accuracy_report']:.1f} % of {m['n_report']}, "
+              f"tuning {100 * m['accuracy_tuning']:.1f} %; wrong: "
+              + "; ".join(f"{r['dataset']} {r['recording']} {r['device']} ({r['split']})" for r in m["errors"]))
+        return 0
     rows = (json.loads(args.pyshoe_rows.read_text()) if args.pyshoe_rows else run_pyshoe(args.data_root))
     irows = run_ipol(args.data_root)
     xio = run_xio(args.data_root)

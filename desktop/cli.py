@@ -398,36 +398,27 @@ MODES = ("auto", "handheld", "foot")
 
 
 def choose_mode(args, rec: Recording) -> tuple[str, str]:
-    """``--mode``: the mode to run and why (auto: the foot IMU's signals, :func:`core.foot.mounting.detect_mounting`)."""
+    """``--mode``: the mode to run and why (auto: the declared placement, else the foot IMU's signals;
+    :func:`core.foot.tracker.choose_mode`, which the app uses too)."""
     mode = getattr(args, "mode", "handheld")
     if mode != "auto":
         return mode, "chosen with --mode"
-    from core.foot.devices import has_imu
-    from core.foot.mounting import FOOT, detect_mounting
+    from core.foot.tracker import choose_mode as choose
 
-    dev = args.foot_device or ""
-    if not has_imu(rec, dev):
-        return "handheld", "no accelerometer and gyroscope pair" + (f" for device {dev!r}" if dev else "")
-    m = detect_mounting(rec, dev)
-    why = (f"detected: peak rate {m.peak_rate_rad_s:.1f} rad/s, stance {100 * m.stance_fraction:.0f} % of walking "
-           f"({100 * m.confidence:.0f} % sure)")
-    return ("foot" if m.mode == FOOT else "handheld"), why
+    return choose(rec, "auto", args.foot_device or "")
 
 
 def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     """``--mode foot``: the foot-mounted INS (Song & Park 2018, :mod:`core.foot`); see :func:`replay_recording`."""
     if args.gps == "chen" or args.gps == "kubrak" or args.gps_outage:
         raise ValueError("GPS fusion with the foot-mounted INS is not built; use --gps off (or auto) with --mode foot")
-    from core.foot.navigator import FootNavigator, FootSettings
-    from core.foot.stance import StanceSettings
+    from core.foot.navigator import FootNavigator
+    from core.foot.tracker import foot_settings_for
     from core.metrics import truth_errors, truth_of
 
-    waist = args.waist_device or None
-    if waist is not None and not rec.has(f"acc@{waist}"):
-        waist = None  # no waist IMU in this recording
-    aid = args.aid or ("tckf" if waist and rec.has(f"mag@{waist}") else "zupt")
-    settings = FootSettings(aid=aid, stance=StanceSettings(detector=args.detector),
-                            gyro_delay_s=args.gyro_delay_ms * 1e-3)
+    # the product's choice (as in the app): the TCKF with a waist magnetometer, else ZUPT only
+    settings, waist = foot_settings_for(rec, aid=args.aid, detector=args.detector, waist_device=args.waist_device,
+                                        gyro_delay_s=args.gyro_delay_ms * 1e-3)
     with _SlowNotice("running the foot-mounted INS", not args.no_progress, 0.0 if args.progress else 2.0):
         res = FootNavigator(settings, foot_device=args.foot_device or "", waist_device=waist).run(rec)
     s = res.summary()

@@ -77,7 +77,8 @@ def choose_mode(recording: Recording, mode: str = "auto", foot_device: str = "")
             why += f"; foot IMUs on device(s) {', '.join(others)} (choose foot mode and the device to use one)"
         return (FOOT if foot else HANDHELD), why
     m = detect_mounting(recording, dev)
-    why = (f"detected: peak rate {m.peak_rate_rad_s:.1f} rad/s, stance {100 * m.stance_fraction:.0f} % of "
+    why = (f"detected: window peak rate {m.peak_rate_rad_s:.1f} rad/s, foot-like strides in "
+           f"{100 * m.stride_fraction:.0f} % of "
            f"walking ({100 * m.confidence:.0f} % sure)")
     return (FOOT if m.mode == FOOT else HANDHELD), why
 
