@@ -17,6 +17,13 @@ out of order
 queue drops
     events the source discarded because the UI did not drain its queue in
     time (reported by the source, added by :meth:`HealthMonitor.snapshot`).
+pauses
+    the session tells the monitor when its source was stopped on purpose
+    (:meth:`HealthMonitor.pause`: the user paused, or the sensors were off
+    while the app was away); the first interval after it is counted as
+    paused time, not as a gap, so a minute in the background is not shown
+    as thousands of dropped events.  A gap while the source runs (the phone
+    stopped delivering, e.g. asleep without a wake lock) still counts.
 """
 
 from __future__ import annotations
@@ -66,6 +73,13 @@ class StreamHealth:
         self._nominal_ns: float | None = None
         self._since_nominal = 0
         self.last_t_ns: int | None = None
+        self.paused_ns = 0  #: sensor time between a pause and the first event after it
+        self._pause_at: int | None = None
+
+    def pause(self, at_ns: int | None = None) -> None:
+        """The source was stopped on purpose after sensor time ``at_ns`` (default: this stream's last event):
+        the interval across it is a pause, not a gap (events still waiting in the reorder buffer may come first)."""
+        self._pause_at = int(at_ns) if at_ns is not None else self.last_t_ns
 
     def accept(self, t_ns: int) -> bool:
         """Account for one event; returns False (and counts it) if it is out of order."""
@@ -75,7 +89,13 @@ class StreamHealth:
             self.out_of_order += 1
             return False
         self.events += 1
-        if last is not None:
+        pause_at = self._pause_at
+        if pause_at is not None and (last is None or last > pause_at):
+            self._pause_at = pause_at = None  # nothing of this stream before the pause: nothing to bridge
+        if pause_at is not None and t_ns > pause_at:
+            self.paused_ns += t_ns - last
+            self._pause_at = None
+        elif last is not None:
             dt = t_ns - last
             nominal = self._nominal()
             if nominal and dt > self.gap_factor * nominal:
@@ -120,6 +140,14 @@ class HealthMonitor:
         self._kw = stream_kwargs
         self.streams: dict[str, StreamHealth] = {}
         self.mag_trusted: bool | None = None
+        self.pauses = 0  #: times the source was stopped on purpose
+
+    def pause(self, at_ns: int | None = None) -> None:
+        """The source was stopped on purpose after sensor time ``at_ns`` (see the module docstring): no stream
+        counts the pause as a gap."""
+        self.pauses += 1
+        for h in self.streams.values():
+            h.pause(at_ns)
 
     def accept(self, stream: str, t_ns: int) -> bool:
         h = self.streams.get(stream)
@@ -148,6 +176,9 @@ class HealthMonitor:
             jit = f"{s.jitter_ms:.2f}" if math.isfinite(s.jitter_ms) else "-"
             lines.append(f"{s.stream:<{w}}{s.rate_hz:>9.1f}{jit:>11}{s.dropped:>9d}{s.gaps:>6d}"
                          f"{s.out_of_order:>7d}  {s.accuracy or '-'}")
+        if self.pauses:
+            paused = max((h.paused_ns for h in self.streams.values()), default=0) * 1e-9
+            lines.append(f"paused {self.pauses}x, {paused:.0f} s (not counted as dropped)")
         if not mag_line:
             return "\n".join(lines)
         if self.mag_trusted is None:

@@ -6,9 +6,21 @@ Kivy clock calls :meth:`PDRApp._tick` 30 times a second: it drains the
 source and runs the pipeline (bounded time per tick), and updates the
 widgets at most 10 times a second, or when a step completes.
 
-Lifecycle (Android): ``on_pause`` stops the sensors (or pauses a replay),
-flushes the recording and saves the settings; ``on_resume`` restarts what
-was running.  ``on_stop`` finishes the track and closes the recording.
+Live tracking runs in the tracking service (:mod:`app.service`): a p4a foreground
+service on the phone, a thread of this process on the desktop; the UI holds a
+:class:`app.service.ServiceSession` that polls it.  Replays run in a
+:class:`app.session.Session` of the UI itself.
+
+Lifecycle (Android): ``on_pause`` pauses a replay (or the sensors of a live
+session that could not use the service: no location permission), flushes the
+recording and saves the settings; live tracking in the service goes on.
+``on_resume`` restarts what was paused.  ``on_stop`` leaves the service
+recording (the next start of the UI attaches to it); a replay is finished.
+
+Android 15/16 (target API 36): the layout is padded by the system-bar and
+cutout insets (edge-to-edge is enforced), and back comes through an
+``OnBackInvokedCallback`` registered while Settings or Health is shown
+(:mod:`app.android_platform`).
 """
 
 from __future__ import annotations
@@ -33,7 +45,9 @@ from core.pdr.calibration import CalibrationError
 from core.pdr.stride_models import StrideModelError
 
 import app.track_view  # noqa: F401 - registers TrackView for the kv file
-from app.session import Session, export_session, load_any_recording
+from app import android_platform as droid
+from app.service import InProcessService, ServiceClient, ServiceSession, service_answers, socket_path
+from app.session import Session, load_any_recording
 from app.settings import RATE_CHOICES, SETTINGS_FILE, STRIDE_MODEL_CHOICES, TRACKING_MODES, Settings
 from app.sources import REPLAY_SPEEDS, SensorStartError, make_live_source, replay_source_for
 from app.storage import is_android, new_recording_path, output_dir
@@ -106,8 +120,11 @@ class PDRApp(App):
 
     def __init__(self, *, recording: str | None = None, speed: str | None = None, out_dir: str | None = None,
                  data_dir: str | None = None, exit_at_end: bool = False, screenshot: str | None = None,
-                 report: str | None = None, **kwargs):
+                 report: str | None = None, jnius=None, **kwargs):
         super().__init__(**kwargs)
+        self._jnius = jnius  # the phone's (imported on Android), or a fake one (tests): insets, back, grants
+        self.back_handler = None
+        self.insets = (0, 0, 0, 0)
         self.initial_recording = recording
         self._speed_arg = speed
         self._out_dir_arg = out_dir
@@ -166,8 +183,64 @@ class PDRApp(App):
         from kivy.factory import Factory  # noqa: PLC0415
 
         root = Factory.PDRRoot()
-        Window.bind(on_keyboard=self._on_key, on_flip=self._on_flip)
+        Window.bind(on_keyboard=self._on_key, on_flip=self._on_flip, on_resize=self._on_resize)
+        root.ids.screens.bind(current=self._screen_changed)
+        jn = self.jnius
+        if jn is not None:
+            run_on_ui_thread = None
+            if self._jnius is None:  # the phone: (un)register on Android's UI thread
+                try:
+                    from android.runnable import run_on_ui_thread  # noqa: PLC0415 - p4a module
+                except ImportError:
+                    pass
+            try:
+                self.back_handler = droid.BackHandler(jn, self._back_from_android, run_on_ui_thread)
+            except Exception as e:  # noqa: BLE001 - back then comes as key 27 (or not at all)
+                self.warning = f"back button: {e}"
+        self.apply_insets(root)
         return root
+
+    # -- Android UI: jnius, insets, back ----------------------------------------------------------
+
+    @property
+    def jnius(self):
+        """The ``jnius`` module on the phone (or the one given), None on the desktop."""
+        if self._jnius is None and is_android():
+            try:
+                import jnius  # noqa: PLC0415 - the phone's
+
+                return jnius
+            except ImportError:
+                return None
+        return self._jnius
+
+    def apply_insets(self, root=None) -> None:
+        """Pad the layout by the system bars and the cutout (Android 15+ draws the app under them)."""
+        root = root or self.root
+        jn = self.jnius
+        if jn is None or root is None:
+            return
+        left, top, right, bottom = self.insets = droid.system_bar_insets(jn)
+        root.padding = [left, top, right, bottom]
+
+    def _on_resize(self, *_):
+        Clock.schedule_once(lambda dt: self.apply_insets(), 0)  # rotation, a new cutout, the bars shown
+
+    def _screen_changed(self, screens, current):
+        if self.back_handler is not None:
+            self.back_handler.want(current != "track")
+
+    def _back_from_android(self):
+        """OnBackInvokedCallback (Android's UI thread): go back on the Kivy thread."""
+        Clock.schedule_once(lambda dt: self.go_back(), 0)
+
+    def go_back(self) -> bool:
+        """Back: from Settings or Health to the track (True), else nothing to do here (False)."""
+        screens = self.root.ids.screens
+        if screens.current != "track":
+            screens.current = "track"
+            return True
+        return False
 
     def _settings_to_ui(self):
         s = self.settings
@@ -238,7 +311,8 @@ class PDRApp(App):
             if not self.open_recording(self.initial_recording):
                 self._initial_recording_failed()
         elif is_android():
-            self._request_android_permissions()
+            if not self.attach_service():
+                self._request_android_permissions()
         else:
             self.message = "Open a recording to replay it"
 
@@ -253,17 +327,25 @@ class PDRApp(App):
             Clock.schedule_interval(self._wait_frames_then_finish, 0)
 
     def on_pause(self):
-        """Android is pausing the app: sensors off, recording flushed, settings saved."""
+        """Android is pausing the app: a replay pauses, live tracking in the service goes on (the sensors of
+        a live session in the UI stop: Android sends them nothing in the background anyway); settings saved."""
         self.paused_count += 1
+        self._save_settings_quietly()
+        if isinstance(self.session, ServiceSession):
+            self._was_running = False
+            return True
         self._was_running = bool(self.session and self.session.running)
         if self.session:
             self.session.pause()
         self.playing = False
-        self._save_settings_quietly()
         return True
 
     def on_resume(self):
         self.resumed_count += 1
+        self.apply_insets()
+        if isinstance(self.session, ServiceSession):
+            self.session.tick()
+            return
         if self.session and self._was_running:
             try:
                 self.session.resume()
@@ -272,10 +354,22 @@ class PDRApp(App):
             self.playing = self.session.running
 
     def on_stop(self):
-        if self.session:
-            self._learn_from(self.session)
-            self.session.close()
+        ses = self.session
+        if isinstance(ses, ServiceSession) and ses.host is None:
+            ses.detach()  # the phone: the service goes on recording; the next start attaches to it
+        elif ses:
+            self._close_session(ses)
         self._save_settings_quietly()
+
+    def _close_session(self, ses) -> None:
+        """Finish a session: the service's is stopped (it keeps what GPS taught in the profile itself, so the
+        settings are read again), the UI's own closed here."""
+        if isinstance(ses, ServiceSession):
+            ses.close()
+            self.settings = Settings.load(self.settings_path)
+            return
+        self._learn_from(ses)
+        ses.close()
 
     def _learn_from(self, session) -> None:
         """A live walk's GPS training goes into the profile (a replayed file is someone else's walk: not kept)."""
@@ -289,9 +383,8 @@ class PDRApp(App):
             self.warning = f"settings not saved: {e}"
 
     def _on_key(self, window, key, *args):
-        if key == 27 and self.root.ids.screens.current != "track":  # Android back: to the track first
-            self.root.ids.screens.current = "track"
-            return True
+        if key == 27:  # back before Android 13 (and Escape on the desktop): to the track first
+            return self.go_back()
         return False
 
     def _on_flip(self, *_):
@@ -299,10 +392,9 @@ class PDRApp(App):
 
     # -- sessions ------------------------------------------------------------------------
 
-    def _replace_session(self, session: Session, mode: str, raw_path: str | None):
+    def _replace_session(self, session, mode: str, raw_path: str | None):
         if self.session:
-            self._learn_from(self.session)
-            self.session.close()
+            self._close_session(self.session)
         self.session = session
         self.mode = mode
         self.raw_path = raw_path
@@ -333,11 +425,8 @@ class PDRApp(App):
         return True
 
     def start_live(self) -> bool:
-        try:
-            source = make_live_source(rate_hz=self.settings.live_rate_hz())
-        except Exception as e:  # noqa: BLE001
-            self.warning = f"no sensors: {e}"
-            return False
+        """Live tracking: in the tracking service (the phone's foreground service, a thread on the desktop);
+        on a phone without a location grant, in the UI's own session (screen on only, and the warning says so)."""
         path = None
         if self.settings.record_live:
             try:
@@ -345,14 +434,65 @@ class PDRApp(App):
             except OSError as e:
                 self.warning = f"not recording: {e}"
         self._replay_recording = None
-        session = Session(source, pipeline_factory=self._pipeline_factory(), record_path=path,
-                          metadata=self._recording_metadata())
+        factory = self._pipeline_factory()
+        meta = self._recording_metadata()
+        jn = self.jnius
+        grant = droid.location_grant(droid.activity(jn)) if jn is not None and is_android() else "desktop"
+        try:
+            if grant is not None:
+                session = self._start_service_session(path, meta)
+            else:
+                source = make_live_source(rate_hz=self.settings.live_rate_hz())
+                session = Session(source, pipeline_factory=factory, record_path=path, metadata=meta)
+        except Exception as e:  # noqa: BLE001 - no sensors, no jnius, the service could not start
+            self.warning = f"no sensors: {e}"
+            return False
         self._replace_session(session, "live", path)
-        session.start()
+        session.start() if isinstance(session, Session) else session.tick()
+        if grant is None:
+            self.warning = ("no location permission: tracking runs in the app and stops when the screen is off "
+                            "(grant location to track in the background)")
         self.recording_label = os.path.basename(path) if path else ""
         self.message = f"recording to {path}" if path else "live (not recording)"
         self.playing = True
         return True
+
+    def _service_config(self, path, meta) -> dict:
+        return {"data_dir": self.data_dir, "socket": socket_path(self.data_dir), "record_path": path,
+                "metadata": meta, "out_dir": self.out_dir()}
+
+    def _start_service_session(self, path, meta) -> ServiceSession:
+        config = self._service_config(path, meta)
+        if is_android():
+            droid.start_service(self.jnius, config)  # its own process; the first polls wait for it
+            return ServiceSession(ServiceClient(config["socket"]))
+        host = InProcessService(config, lambda rate: make_live_source(rate_hz=rate))
+        host.start()
+        return ServiceSession(ServiceClient(config["socket"]), host=host)
+
+    def attach_service(self) -> bool:
+        """A new UI (the app was closed while the service recorded): take over the running service's
+        session; the first poll brings the whole track.  False when no service answers."""
+        sock = socket_path(self.data_dir)
+        if not service_answers(sock):
+            return False
+        ses = ServiceSession(ServiceClient(sock))
+        ses.poll()
+        self._replace_session(ses, "live", ses.record_path)
+        self.recording_label = os.path.basename(ses.record_path) if ses.recording and ses.record_path else ""
+        self.message = "tracking goes on" + (f", recording to {ses.record_path}" if ses.recording else "")
+        self.playing = ses.running
+        self._update_ui(force=True)
+        return True
+
+    def go_live(self) -> None:
+        """The Live button: live tracking (after a replay too), asking for the permissions first on a phone."""
+        if self.mode == "live" and self.session is not None:
+            return
+        if is_android():
+            self._request_android_permissions()
+        else:
+            self.start_live()
 
     def _recording_metadata(self) -> dict:
         s = self.settings
@@ -368,15 +508,13 @@ class PDRApp(App):
         ses = self.session
         if not ses or self.mode != "live":
             return
-        if ses.writer is not None:
+        if ses.recording:
             n = ses.stop_recording()
             self.message = (ses.record_error or f"saved {ses.record_path} ({n} events)") if n else \
                 "nothing recorded (no sensor event yet): no file written"
             self.recording_label = ""
         else:
-            ses.record_path = new_recording_path(self.out_dir())
-            ses._record_meta = (None, self._recording_metadata())
-            ses.start()
+            ses.start_recording(new_recording_path(self.out_dir()), self._recording_metadata())
             self.raw_path = ses.record_path
             self.recording_label = os.path.basename(ses.record_path)
             self.message = f"recording to {ses.record_path}"
@@ -384,18 +522,14 @@ class PDRApp(App):
     @mainthread
     def _request_android_permissions(self):
         try:
-            from android.permissions import Permission, request_permissions  # noqa: PLC0415 - p4a module
+            from android.permissions import request_permissions  # noqa: PLC0415 - p4a module
         except ImportError:
             self.start_live()
             return
-        perms = [Permission.ACCESS_FINE_LOCATION, Permission.ACCESS_COARSE_LOCATION]
         try:
-            from jnius import autoclass  # noqa: PLC0415
-
-            if autoclass("android.os.Build$VERSION").SDK_INT <= 28:
-                perms.append(Permission.WRITE_EXTERNAL_STORAGE)
+            perms = droid.permissions_to_request(droid.sdk_int(self.jnius))
         except Exception:  # noqa: BLE001
-            pass
+            perms = droid.permissions_to_request(0)
 
         def done(permissions, grants):  # called on the Android UI thread
             Clock.schedule_once(lambda dt: self.start_live(), 0)
@@ -444,8 +578,18 @@ class PDRApp(App):
             ses.pipeline_factory = self._pipeline_factory(self._replay_recording)
             self.seek_start()
             return
-        ses.pipeline_factory = self._pipeline_factory()
-        ses.reset_track()
+        factory = self._pipeline_factory()
+        if isinstance(ses, ServiceSession):
+            ses.new_track()  # the service reads the saved settings: new pipeline, sensors at the saved rate
+        else:
+            rate = self.settings.live_rate_hz()
+            if getattr(ses.source, "rate_hz", rate) != rate:
+                try:
+                    ses.replace_source(make_live_source(rate_hz=rate))
+                except Exception as e:  # noqa: BLE001
+                    self.warning = f"sensors not restarted at {rate:g} Hz: {e}"
+            ses.pipeline_factory = factory
+            ses.reset_track()
         self.track_view.set_track([0.0], [0.0])
         self._update_ui(force=True)
 
@@ -476,6 +620,17 @@ class PDRApp(App):
         if not ses or ses.calibration_range_ns is None or ses.calibrating:
             self.calib_message = "do a calibration walk first (start, walk, stop)"
             return
+        if isinstance(ses, ServiceSession):  # the steps are in the service: it calibrates and saves the profile
+            resp = ses.calibrate(known_text.strip())
+            if not resp.get("ok"):
+                self.calib_message = resp.get("error", "calibration failed")
+                return
+            self.settings = Settings.load(self.settings_path)
+            self._settings_to_ui()
+            self.calib_message = "; ".join([f"saved: step length x {resp['scale']:.3f} ({resp['n_steps']} steps, "
+                                            f"the model said {resp['model_distance_m']:.1f} m); press 'New track' "
+                                            "to use it", *resp["warnings"]])
+            return
         try:
             res = self.settings.calibrate(ses.calibration_steps(), known_text.strip())
         except CalibrationError as e:
@@ -496,7 +651,7 @@ class PDRApp(App):
         base = os.path.splitext(os.path.basename(self.raw_path or "track"))[0]
         if base.endswith((".csv", ".txt")):
             base = os.path.splitext(base)[0]
-        out = export_session(ses, self.out_dir(), base, raw_path=self.raw_path)
+        out = ses.export(self.out_dir(), base, raw_path=self.raw_path)
         written = [os.path.basename(v) for k, v in out.items() if k != "errors"]
         self.message = f"exported to {self.out_dir()}: " + ", ".join(written)
         if out["errors"]:
@@ -631,7 +786,10 @@ class PDRApp(App):
                "status": {"steps": self.steps_text, "distance": self.distance_text,
                           "heading": self.heading_text, "time": self.time_text},
                "warning": self.warning, "message": self.message, "exit_code": self.exit_code,
-               "error": self.error, "settings_problem": self.data_dir_problem}
+               "error": self.error, "settings_problem": self.data_dir_problem,
+               "service": isinstance(ses, ServiceSession), "screen": self.root.ids.screens.current,
+               "insets": list(self.insets), "padding": list(self.root.padding),
+               "back_registered": bool(self.back_handler and self.back_handler.registered)}
         if ses:
             out.update(summary={k: v for k, v in ses.summary().items() if k != "labels"},
                        track_east=ses.track_east, track_north=ses.track_north, events=ses.events_in,

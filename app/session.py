@@ -217,12 +217,32 @@ class Session:
             self._last_flush = self._clock()
 
     def pause(self) -> None:
-        """Stop the source (sensors off on Android, replay paused) and flush the recording."""
+        """Stop the source (sensors off on Android, replay paused) and flush the recording.
+
+        The health panel is told (:meth:`app.health.HealthMonitor.pause`): the time until the sensors
+        deliver again is a pause, not dropped events."""
+        was_running = self.running
         self.source.stop()
+        if was_running:
+            self.health.pause(self._max_t)
         self.flush()
 
     def resume(self) -> None:
         self.source.start()
+
+    def replace_source(self, source) -> None:
+        """Go on with another (started or not) source, e.g. the sensors at a new sampling rate; the time
+        between the two is a pause for the health panel, the recording goes on."""
+        if self.source.running:
+            self.source.stop()
+            self.health.pause(self._max_t)
+        self.source = source
+        source.start()
+
+    @property
+    def recording(self) -> bool:
+        """A recording is being written."""
+        return self.writer is not None
 
     @property
     def running(self) -> bool:
@@ -233,6 +253,16 @@ class Session:
         self.source.stop()
         self._finish()
         self.stop_recording()
+
+    def start_recording(self, path: str, metadata: dict | None = None) -> None:
+        """Record from now on to ``path`` (a live session whose recording was stopped)."""
+        self.record_path = path
+        self._record_meta = (None, metadata)
+        self.start()
+
+    def export(self, out_dir: str, basename: str, raw_path: str | None = None) -> dict:
+        """:func:`export_session` of this session."""
+        return export_session(self, out_dir, basename, raw_path=raw_path)
 
     def stop_recording(self) -> int:
         """Close the recording (what is queued is written and fsync'ed); returns the events in the file."""

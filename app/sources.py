@@ -484,14 +484,18 @@ class AndroidSource(SensorSource):
         The ``jnius`` module; imported lazily when ``None`` (tests inject a fake).
     queue_max : int
         Capacity of the event queue (about 100 s at 3 x 100 Hz by default).
+    context : android.content.Context, optional
+        Where the system services come from: the foreground service (``PythonService.mService``) in the
+        tracking service's process, which has no activity; default the app's ``PythonActivity``.
     """
 
     kind = "android"
     live = True
 
     def __init__(self, *, rate_hz: float = 100.0, streams=(ACC, GYRO, MAG, PRESSURE), gps: bool = True,
-                 jnius=None, queue_max: int = 30000):
+                 jnius=None, queue_max: int = 30000, context=None):
         super().__init__()
+        self._context = context
         self.rate_hz = float(rate_hz)
         self.period_us = sampling_period_us(rate_hz)
         self.streams = tuple(streams)
@@ -522,6 +526,8 @@ class AndroidSource(SensorSource):
         return self._jnius
 
     def _activity(self):
+        if self._context is not None:
+            return self._context
         return self._jnius.autoclass("org.kivy.android.PythonActivity").mActivity
 
     # -- callbacks (sensor thread) --------------------------------------------------
@@ -814,12 +820,14 @@ class PlyerFallbackSource(SensorSource):
         return out
 
 
-def make_live_source(*, rate_hz: float = 100.0, gps: bool = True, jnius=None, plyer=None) -> SensorSource:
+def make_live_source(*, rate_hz: float = 100.0, gps: bool = True, jnius=None, plyer=None,
+                     context=None) -> SensorSource:
     """Start the Android listener source, or plyer's facades with a visible warning.
 
     Returns a *started* source.  Raises :class:`SensorStartError` if neither works.
+    ``context``: see :class:`AndroidSource` (the tracking service passes its own).
     """
-    src = AndroidSource(rate_hz=rate_hz, gps=gps, jnius=jnius)
+    src = AndroidSource(rate_hz=rate_hz, gps=gps, jnius=jnius, context=context)
     try:
         src.start()
         return src

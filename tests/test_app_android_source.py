@@ -8,6 +8,7 @@ registered listeners' ``onSensorChanged`` with ``SensorEvent``-like objects,
 like Android's sensor thread does.
 """
 
+import json
 import math
 import sys
 import threading
@@ -155,9 +156,94 @@ class FakeLocationManager:
             self.nmea = None
 
 
-def make_fake_jnius(sm, lm=None):
+class FakeInsets:
+    """``android.graphics.Insets``: public int fields."""
+
+    def __init__(self, left, top, right, bottom):
+        self.left, self.top, self.right, self.bottom = left, top, right, bottom
+
+
+class FakeWindowInsets:
+    def __init__(self, bars, cutout):
+        self.bars, self.cutout = bars, cutout
+        self.asked = []
+
+    def getInsets(self, type_mask):
+        self.asked.append(type_mask)
+        parts = [v for bit, v in ((1, self.bars), (2, self.cutout)) if type_mask & bit]
+        return FakeInsets(*(max(p[k] for p in parts) for k in range(4)))
+
+
+class FakeBackDispatcher:
+    """``OnBackInvokedDispatcher``: what the system calls on back (the top callback), or None: the default."""
+
+    def __init__(self):
+        self.callbacks = []
+
+    def registerOnBackInvokedCallback(self, priority, callback):
+        self.callbacks.append((priority, callback))
+
+    def unregisterOnBackInvokedCallback(self, callback):
+        self.callbacks = [(p, c) for p, c in self.callbacks if c is not callback]
+
+    def back(self):
+        if not self.callbacks:
+            return False
+        self.callbacks[-1][1].onBackInvoked()
+        return True
+
+
+class FakeWakeLock:
+    def __init__(self, flags, tag):
+        self.flags, self.tag, self.held, self.counted = flags, tag, False, True
+
+    def setReferenceCounted(self, v):
+        self.counted = v
+
+    def acquire(self):
+        self.held = True
+
+    def release(self):
+        self.held = False
+
+    def isHeld(self):
+        return self.held
+
+
+class FakePowerManager:
+    PARTIAL_WAKE_LOCK = 1
+
+    def __init__(self):
+        self.locks = []
+
+    def newWakeLock(self, flags, tag):
+        self.locks.append(FakeWakeLock(flags, tag))
+        return self.locks[-1]
+
+
+class FakeNotificationManager:
+    IMPORTANCE_LOW = 2
+
+    def __init__(self):
+        self.channels, self.posted = [], []
+
+    def createNotificationChannel(self, ch):
+        self.channels.append(ch)
+
+    def notify(self, id_, notification):
+        self.posted.append((id_, notification))
+
+
+def make_fake_jnius(sm, lm=None, *, sdk=34, bars=(0, 63, 0, 126), cutout=(0, 80, 0, 0), granted=None):
+    """The fake ``jnius``; ``sdk`` is ``Build.VERSION.SDK_INT``, ``bars``/``cutout`` the insets (left, top,
+    right, bottom, px) the activity's window reports, ``granted`` the permissions granted (default: all)."""
     jn = types.ModuleType("jnius")
     jn.threads = []
+    jn.power = FakePowerManager()
+    jn.notifications = FakeNotificationManager()
+    jn.back = FakeBackDispatcher()
+    jn.window_insets = FakeWindowInsets(bars, cutout)
+    jn.services_started = []
 
     class PythonJavaClass:
         def __init__(self, *args, **kwargs):
@@ -173,13 +259,100 @@ def make_fake_jnius(sm, lm=None):
     class Context:
         SENSOR_SERVICE = "sensor"
         LOCATION_SERVICE = "location"
+        POWER_SERVICE = "power"
+        NOTIFICATION_SERVICE = "notification"
+
+    class Intent:
+        pass
+
+    class AppInfo:
+        icon = 17
+
+    class PackageManager:
+        def getLaunchIntentForPackage(self, name):
+            return Intent()
+
+    class View:
+        def getRootWindowInsets(self):
+            return jn.window_insets
+
+    class Window:
+        def getDecorView(self):
+            return View()
 
     class Activity:
+        """PythonActivity.mActivity, and PythonService.mService (a Context too)."""
+
         def getSystemService(self, name):
-            return {"sensor": sm, "location": lm}[name]
+            return {"sensor": sm, "location": lm, "power": jn.power, "notification": jn.notifications}[name]
+
+        def checkSelfPermission(self, name):
+            return 0 if granted is None or name in granted else -1
+
+        def getPackageName(self):
+            return "org.pdrproject.pdrtracker"
+
+        def getPackageManager(self):
+            return PackageManager()
+
+        def getApplicationInfo(self):
+            return AppInfo()
+
+        def getWindow(self):
+            return Window()
+
+        def getOnBackInvokedDispatcher(self):
+            return jn.back
+
+        def setAutoRestartService(self, v):
+            self.auto_restart = v
 
     class PythonActivity:
         mActivity = Activity()
+
+    class PythonService:
+        mService = PythonActivity.mActivity
+
+    class ServiceTracker:
+        @staticmethod
+        def start(ctx, icon, title, text, argument):
+            jn.services_started.append((icon, title, text, argument))
+
+    class WindowInsetsType:
+        @staticmethod
+        def systemBars():
+            return 1
+
+        @staticmethod
+        def displayCutout():
+            return 2
+
+    class NotificationChannel:
+        def __init__(self, id_, name, importance):
+            self.id, self.name, self.importance = id_, name, importance
+
+        def setShowBadge(self, v):
+            self.badge = v
+
+    class PendingIntent:
+        FLAG_IMMUTABLE = 1 << 26
+        FLAG_UPDATE_CURRENT = 1 << 27
+
+        @staticmethod
+        def getActivity(ctx, code, intent, flags):
+            return ("pending", intent, flags)
+
+    class NotificationBuilder:
+        def __init__(self, ctx, channel=None):
+            self.fields = {"channel": channel}
+
+        def __getattr__(self, name):  # setContentTitle, setContentText, ...
+            if not name.startswith("set"):
+                raise AttributeError(name)
+            return lambda value: self.fields.__setitem__(name[3:], value)
+
+        def build(self):
+            return dict(self.fields)
 
     class Looper:
         pass
@@ -213,9 +386,14 @@ def make_fake_jnius(sm, lm=None):
         MODEL = "Phone 1"
 
     class VERSION:
-        SDK_INT = 34
+        SDK_INT = sdk
 
     classes = {"android.content.Context": Context, "org.kivy.android.PythonActivity": PythonActivity,
+               "org.kivy.android.PythonService": PythonService,
+               "org.pdrproject.pdrtracker.ServiceTracker": ServiceTracker,
+               "android.view.WindowInsets$Type": WindowInsetsType, "android.app.NotificationChannel": NotificationChannel,
+               "android.app.NotificationManager": FakeNotificationManager, "android.app.PendingIntent": PendingIntent,
+               "android.app.Notification$Builder": NotificationBuilder, "android.os.PowerManager": FakePowerManager,
                "android.os.HandlerThread": HandlerThread, "android.os.Handler": Handler,
                "android.os.SystemClock": SystemClock, "android.os.Build": Build,
                "android.os.Build$VERSION": VERSION, "android.location.LocationManager": FakeLocationManager}
@@ -527,3 +705,91 @@ def test_plyer_gps_fixes_read_androids_none_values_as_unknown(monkeypatch):
     (name, t, vals), = src.drain()
     assert name == "gps" and t == 10**12  # stamped on arrival (the fake SystemClock)
     assert vals == pytest.approx((47.5, 8.5, 420.0, 4.0, 1.1, 45.0), abs=1e-12)
+
+
+def test_the_service_holds_a_partial_wake_lock_and_shows_steps_and_distance():
+    """The service's phone side (app.android_platform.ServiceHooks) against the fake jnius: a partial wake
+    lock from start to stop, the notification on its own low-importance channel with the same id as p4a's
+    foreground notification, updated with steps and distance, a tap opening the app."""
+    from app.android_platform import PARTIAL_WAKE_LOCK, ServiceHooks
+    from app.service import NOTIFICATION_CHANNEL, NOTIFICATION_ID, TrackingService
+
+    sm = FakeSensorManager()
+    jn = make_fake_jnius(sm, sdk=34)
+    service = jn.autoclass("org.kivy.android.PythonService").mService
+    hooks = ServiceHooks(jn, service)
+    clock = iter(range(0, 10**6, 1)).__next__  # one second a call
+    svc = TrackingService({"data_dir": "/nonexistent-dir-for-settings"},
+                          source_factory=lambda rate: AndroidSource(rate_hz=rate, gps=False, jnius=jn, context=service),
+                          hooks=hooks, clock=clock)
+    svc.start()
+    (lock,) = jn.power.locks
+    assert lock.flags == PARTIAL_WAKE_LOCK and lock.held and not lock.counted
+    assert len(sm.registered) == 3  # the sensors registered through the service's context
+    (channel,) = jn.notifications.channels
+    assert channel.id == NOTIFICATION_CHANNEL and channel.importance == FakeNotificationManager.IMPORTANCE_LOW
+    nid, first = jn.notifications.posted[0]
+    assert nid == NOTIFICATION_ID and first["ContentText"] == "0 steps · 0 m"
+    assert first["Ongoing"] is True and first["OnlyAlertOnce"] is True and first["channel"] == NOTIFICATION_CHANNEL
+    assert first["ContentIntent"][0] == "pending" and first["SmallIcon"] == 17
+    for type_, t, v in hardware_stream(seed=8, seconds=3.0):
+        sm.deliver(type_, t, v)
+    for _ in range(5):
+        svc.step()
+    summ = svc.session.summary()
+    assert summ["steps"] > 0
+    assert jn.notifications.posted[-1][1]["ContentText"] == f"{summ['steps']} steps · {summ['distance_m']:.0f} m"
+    n_posted = len(jn.notifications.posted)
+    svc.step()
+    assert len(jn.notifications.posted) == n_posted  # unchanged text: not posted again
+    svc.stop()
+    assert not lock.held and sm.registered == {}
+
+
+def test_the_service_argument_or_after_a_kill_the_saved_configuration(tmp_path):
+    from app.android_platform import save_service_config, service_config
+
+    cfg = {"data_dir": str(tmp_path), "record_path": str(tmp_path / "pdr-1.csv"), "socket": "s"}
+    assert service_config({"PYTHON_SERVICE_ARGUMENT": json.dumps(cfg)}) == cfg
+    assert service_config({}, str(tmp_path)) is None  # never started
+    save_service_config(cfg, True, str(tmp_path))
+    again = service_config({}, str(tmp_path))  # Android restarted the sticky service: no argument
+    assert again["record_path"] != cfg["record_path"] and again["record_path"].startswith(str(tmp_path))
+    assert "restarted" in again["metadata"]
+    save_service_config(cfg, False, str(tmp_path))  # stopped by the user: a restart does nothing
+    assert service_config({}, str(tmp_path)) is None
+
+
+def test_starting_the_service_passes_the_configuration_to_the_p4a_service_class():
+    from app.android_platform import location_grant, start_service
+
+    jn = make_fake_jnius(FakeSensorManager())
+    start_service(jn, {"socket": "/x/tracker.sock"})
+    (icon, title, _text, arg), = jn.services_started
+    assert icon == "" and title == "PDR Tracker" and json.loads(arg) == {"socket": "/x/tracker.sock"}
+    act = jn.autoclass("org.kivy.android.PythonActivity").mActivity
+    assert location_grant(act) == "fine"
+    coarse = make_fake_jnius(FakeSensorManager(), granted={"android.permission.ACCESS_COARSE_LOCATION"})
+    assert location_grant(coarse.autoclass("org.kivy.android.PythonActivity").mActivity) == "coarse"
+    none = make_fake_jnius(FakeSensorManager(), granted=set())
+    assert location_grant(none.autoclass("org.kivy.android.PythonActivity").mActivity) is None
+
+
+def test_insets_and_back_below_android_15_and_13():
+    from app.android_platform import BackHandler, system_bar_insets
+
+    assert system_bar_insets(make_fake_jnius(FakeSensorManager(), sdk=34)) == (0, 0, 0, 0)  # not edge-to-edge
+    jn = make_fake_jnius(FakeSensorManager(), sdk=35, bars=(10, 60, 20, 120), cutout=(0, 0, 0, 0))
+    assert system_bar_insets(jn) == (10, 60, 20, 120)
+    old = make_fake_jnius(FakeSensorManager(), sdk=32)
+    handler = BackHandler(old, lambda: None)
+    handler.want(True)  # Android 12: back still comes as key 27
+    assert not handler.registered and old.back.callbacks == []
+    new = make_fake_jnius(FakeSensorManager(), sdk=33)
+    went = []
+    handler = BackHandler(new, lambda: went.append(1))
+    handler.want(True)
+    handler.want(True)
+    assert len(new.back.callbacks) == 1 and new.back.back() and went == [1]
+    handler.want(False)
+    assert new.back.callbacks == [] and not new.back.back()

@@ -180,7 +180,7 @@ def finish(th):
 
 def done(dt):
     ses = a.session
-    log.update(warning=a.warning, label=a.recording_label, record_error=ses.record_error, writer=ses.writer is None,
+    log.update(warning=a.warning, label=a.recording_label, record_error=ses.record_error, writer=not ses.recording,
                events_in=ses.events_in, writes=len(writes), running=ses.running)
     with open(report, "w") as f:
         json.dump(log, f)

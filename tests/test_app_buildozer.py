@@ -190,7 +190,9 @@ def test_permissions_are_the_ones_the_app_uses(spec):
     names = {re.sub(r"^\(name=([^;)]*).*\)$", r"\1", p) for p in perms}
     assert all(n.startswith("android.permission.") for n in names), perms
     assert names == {"android.permission.ACCESS_FINE_LOCATION", "android.permission.ACCESS_COARSE_LOCATION",
-                     "android.permission.WAKE_LOCK", "android.permission.WRITE_EXTERNAL_STORAGE"}
+                     "android.permission.WAKE_LOCK", "android.permission.WRITE_EXTERNAL_STORAGE",
+                     "android.permission.FOREGROUND_SERVICE", "android.permission.FOREGROUND_SERVICE_LOCATION",
+                     "android.permission.POST_NOTIFICATIONS"}
     # storage permission only where Android still needs it for Documents/
     assert "(name=android.permission.WRITE_EXTERNAL_STORAGE;maxSdkVersion=28)" in perms
     # the location permissions serve the LocationListener; WAKE_LOCK serves android.wakelock
@@ -202,3 +204,27 @@ def test_permissions_are_the_ones_the_app_uses(spec):
     from app.sources import MAX_RATE_HZ
 
     assert MAX_RATE_HZ <= 200 and max(RATE_CHOICES) <= 200 and RANGES["rate_hz"][1] <= 200
+
+
+def test_the_tracking_service_is_declared_as_the_app_starts_it(spec):
+    """``services = Tracker:app/service_main.py:foreground:sticky:foregroundServiceType=location``, parsed as
+    p4a's build.py parses it; the name is the one app.android_platform starts (``<package>.ServiceTracker``),
+    the entry point exists and is packaged, the type's permission is declared, and the run-time permissions
+    the app asks for are declared too."""
+    from app import android_platform as droid
+    from app.service import SERVICE_NAME
+
+    services = spec.getlist("app", "services")
+    assert len(services) == 1
+    name, entry, *options = services[0].split(":")
+    assert name == SERVICE_NAME and (ROOT / entry).is_file() and entry.endswith(".py")
+    assert "foreground" in options and "sticky" in options
+    types_ = [o.split("=", 1)[1] for o in options if o.startswith("foregroundServiceType=")]
+    assert types_ == ["location"]
+    perms = {re.sub(r"^\(name=([^;)]*).*\)$", r"\1", p) for p in spec.getlist("app", "android.permissions")}
+    assert {"android.permission.FOREGROUND_SERVICE", "android.permission.FOREGROUND_SERVICE_LOCATION"} <= perms
+    for sdk in (24, 28, 33, 36):  # every run-time permission asked for is in the manifest
+        assert set(droid.permissions_to_request(sdk)) <= perms
+    assert droid.POST_NOTIFICATIONS in droid.permissions_to_request(33)
+    assert droid.POST_NOTIFICATIONS not in droid.permissions_to_request(32)
+    assert "android.permission.ACCESS_BACKGROUND_LOCATION" not in perms  # the service is started in the foreground

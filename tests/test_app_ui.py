@@ -376,16 +376,19 @@ import json, sys, threading, time
 sys.path.insert(0, sys.argv[4])  # tests/: the fake jnius lives in test_app_android_source
 from test_app_android_source import FakeSensorManager, hardware_stream, make_fake_jnius
 sm = FakeSensorManager()
-sys.modules["jnius"] = make_fake_jnius(sm)  # what "import jnius" finds on the "phone"
+# Android 16: edge-to-edge (a 63 px status bar under an 80 px cutout, a 126 px navigation bar), predictive back
+jn = make_fake_jnius(sm, sdk=36, bars=(0, 63, 0, 126), cutout=(0, 80, 0, 0))
+sys.modules["jnius"] = jn  # what "import jnius" finds on the "phone"
 from app import kivy_env
 kivy_env.prepare(headless=True)
 from kivy.config import Config
 Config.set("graphics", "width", "360"); Config.set("graphics", "height", "640")
 from kivy.clock import Clock
+from kivy.core.window import Window
 from app.main_app import PDRApp
 
 out, data, report = sys.argv[1:4]
-app = PDRApp(out_dir=out, data_dir=data)
+app = PDRApp(out_dir=out, data_dir=data, jnius=jn)
 events = hardware_stream(seed=9, seconds=8.0)
 half = len(events) // 2
 log = {"delivered": []}
@@ -397,9 +400,43 @@ def deliver(chunk):
         if i % 30 == 0:
             time.sleep(0.004)
 
+def rects(widget):
+    # every widget's rectangle in window coordinates (the track view's own labels too)
+    for w in widget.walk(restrict=True):
+        if w is widget or w.width <= 0 or w.height <= 0 or w.opacity == 0:
+            continue
+        x0, y0 = w.to_window(w.x, w.y)
+        yield type(w).__name__, x0, y0, x0 + w.width, y0 + w.height
+
+def check_layout(dt):
+    if app.frames < 3:
+        Window.canvas.ask_update()
+        return True  # laid out and drawn first
+    W, H = Window.size
+    left, top, right, bottom = app.insets
+    bars = [(0, H - top, W, H), (0, 0, W, bottom)]
+    log["insets"] = list(app.insets)
+    log["under_bars"] = [r for r in rects(app.root) for bx0, by0, bx1, by1 in bars
+                         if r[1] < bx1 and r[3] > bx0 and r[2] < by1 and r[4] > by0]
+    log["n_widgets"] = len(list(rects(app.root)))
+    # back: Settings -> Track through the OnBackInvokedCallback, never on_pause
+    app.root.ids.screens.current = "settings"
+    log["back_registered_on_settings"] = app.report()["back_registered"]
+    log["system_back_handled"] = jn.back.back()
+    Clock.schedule_once(after_back, 0)
+    return False
+
+def after_back(dt):
+    log["screen_after_back"] = app.root.ids.screens.current
+    log["back_registered_on_track"] = len(jn.back.callbacks)
+    log["paused_by_back"] = app.paused_count
+    Clock.schedule_once(start, 0)
+
 def start(dt):
-    log["started"] = app.start_live()
+    app.go_live()
+    log["started"] = app.mode == "live"
     log["mode"] = app.mode
+    log["service"] = app.report()["service"]
     log["record_path"] = app.session.record_path
     th = threading.Thread(target=deliver, args=(events[:half],))
     th.start()
@@ -408,13 +445,13 @@ def start(dt):
 def pause(th):
     if th.is_alive():
         return True
-    Clock.schedule_once(do_pause, 0.2)  # let the clock drain the queue first
+    Clock.schedule_once(do_pause, 0.2)  # let the service drain the queue first
     return False
 
 def do_pause(dt):
-    app.on_pause()
+    app.on_pause()  # the app leaves the screen: the service keeps tracking
     log["registered_while_paused"] = len(sm.registered)
-    deliver(events[half:half + 50])  # nobody listens: lost, as on a phone in the background
+    deliver(events[half:half + 50])  # recorded: the service listens in the background
     app.on_resume()
     log["registered_after_resume"] = len(sm.registered)
     th = threading.Thread(target=deliver, args=(events[half + 50:],))
@@ -424,8 +461,23 @@ def do_pause(dt):
 def finish(th):
     if th.is_alive():
         return True
-    Clock.schedule_once(do_finish, 0.3)
+    Clock.schedule_once(close_ui, 0.3)
     return False
+
+def close_ui(dt):
+    # the UI goes away (the activity is destroyed) and comes back: the new UI attaches to the service
+    old = app.session
+    log["track_before_close"] = len(old.track_east)
+    old.detach()
+    app.session = None
+    log["attached"] = app.attach_service()
+    app.session.host = old.host  # the desktop's in-process service, stopped with the app
+    svc = old.host.service.session
+    log["reopened_track_is_the_services"] = (app.session.track_east == svc.track_east
+                                             and app.session.track_north == svc.track_north)
+    log["reopened_view_points"] = len(app.track_view.east)
+    log["service_steps"] = len(svc.steps)
+    Clock.schedule_once(do_finish, 0.2)
 
 def do_finish(dt):
     app.toggle_recording()  # stop recording: the file is closed
@@ -438,20 +490,31 @@ def do_finish(dt):
     app.stop()
     return False
 
-Clock.schedule_once(start, 0.3)
+Clock.schedule_interval(check_layout, 0.05)
 app.run()
 """
 
 
-def test_live_mode_records_every_event_through_the_app(tmp_path):
+def test_live_mode_records_every_event_through_the_service(tmp_path):
+    """Live tracking through the (in-process) service with the fake jnius of an Android 16 phone: no widget
+    under the status or navigation bar, back from Settings to the track through the OnBackInvokedCallback
+    (no on_pause), the app leaving the screen does not stop the sensors, the UI closed and reopened gets the
+    whole track, and the recording has every delivered event."""
     from core.recording import read_recording
 
     report = tmp_path / "live.json"
     r = _run(["-c", LIVE, str(tmp_path / "out"), str(tmp_path / "data"), str(report), str(ROOT / "tests")])
     assert r.returncode == 0, r.stderr[-3000:]
     log = json.loads(report.read_text())
-    assert log["started"] and log["mode"] == "live" and log["warning"] == ""
-    assert log["registered_while_paused"] == 0 and log["registered_after_resume"] == 3
+    assert log["insets"] == [0, 80, 0, 126]  # the cutout is deeper than the status bar
+    assert log["n_widgets"] > 20 and log["under_bars"] == []
+    assert log["back_registered_on_settings"] and log["system_back_handled"]
+    assert log["screen_after_back"] == "track" and log["back_registered_on_track"] == 0
+    assert log["paused_by_back"] == 0
+    assert log["started"] and log["mode"] == "live" and log["service"] and log["warning"] == ""
+    assert log["registered_while_paused"] == 3 and log["registered_after_resume"] == 3
+    assert log["attached"] and log["reopened_track_is_the_services"]
+    assert log["reopened_view_points"] == log["service_steps"] + 1
     assert log["recording_label_after_stop"] == ""
     delivered = log["delivered"]
     assert log["events_in"] == len(delivered) > 1500
