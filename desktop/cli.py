@@ -440,7 +440,12 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
         f"start-to-end  {s['start_to_end_m']:.2f} m"
         + (f" ({100 * s['start_to_end_m'] / s['distance_m']:.2f} % of the distance)" if s["distance_m"] > 0 else ""),
     ] + truth_lines(errs)
-    written = _write_outputs(args, outs, rec, track, None, None, title_extra="foot INS",
+    fsum, flines, per_step = floor_report(args, rec, track)
+    if fsum is not None:
+        s["floors"] = fsum
+        lines += flines
+    written = _write_outputs(args, outs, rec, track, None, {"floor": per_step} if per_step is not None else None,
+                             title_extra="foot INS",
                              subtitle=truth_headline(errs), truth_kw=truth_plot(truth, errs, track, False))
     return {"summary": s, "lines": lines, "written": written}
 
@@ -535,8 +540,9 @@ def export_formats(args) -> list[str]:
     return names
 
 
-def _write_track_csv(dest: str, track, origin) -> None:
-    """core.export's track CSV, with ``lat_deg, lon_deg`` columns when the track is placed; ``-`` is stdout."""
+def _write_track_csv(dest: str, track, origin, floors=None) -> None:
+    """core.export's track CSV, with ``lat_deg, lon_deg`` columns when the track is placed and a ``floor``
+    column when the barometer gave one per step; ``-`` is stdout."""
     import csv
     import io
     import tempfile
@@ -553,12 +559,50 @@ def _write_track_csv(dest: str, track, origin) -> None:
         lat, lon = enu_to_geodetic(np.asarray(track.east_m, float), np.asarray(track.north_m, float), origin)
         for row, la, lo in zip(rows[1:], np.atleast_1d(lat), np.atleast_1d(lon)):
             row += [f"{la:.8f}", f"{lo:.8f}"]
+    if floors is not None and rows:
+        rows[0].append("floor")
+        for row, fl in zip(rows[1:], floors):
+            row.append(str(int(fl)))
     if dest == "-":
         csv.writer(sys.stdout, lineterminator="\n").writerows(rows)
         sys.stdout.flush()
         return
     with open(dest, "w", newline="", encoding="utf-8") as fh:
         csv.writer(fh).writerows(rows)
+
+
+def _positive_m(text: str) -> float:
+    v = float(text)
+    if not (math.isfinite(v) and 1.0 <= v <= 20.0):
+        raise argparse.ArgumentTypeError(f"{text}: a storey is 1 to 20 m high")
+    return v
+
+
+def floor_report(args, rec: Recording, track) -> tuple[dict | None, list, list | None]:
+    """The barometer's floors (:mod:`core.floors`) when the recording has pressure: ``(summary for --json,
+    summary lines, the floor of every step of track)``; ``(None, [], None)`` without a barometer."""
+    if not rec.has("pressure"):
+        return None, [], None
+    from core.floors import FloorEstimator
+
+    res = FloorEstimator(storey_height_m=args.storey_height).run(
+        rec.streams["pressure"], gps=rec.streams["gps"] if rec.has("gps") else None)
+    s = res.summary()
+    moves = [c for c in res.changes if c.floors]
+    s["changes"] = [{"t_s": round((c.t_mid_ns - rec.t0_ns) * 1e-9, 1), "floors": c.floors, "kind": c.kind,
+                     "delta_m": round(c.delta_m, 2), "rate_m_s": round(c.rate_m_s, 3), "floor_after": c.floor_after}
+                    for c in moves]
+    s["storey_height_m"] = args.storey_height
+    if moves:
+        said = ", ".join(f"{c.kind} {c.floors:+d} at {(c.t_mid_ns - rec.t0_ns) * 1e-9:.0f} s" for c in moves[:6])
+        line = (f"floors        {len(moves)} change{'s' if len(moves) > 1 else ''} ({said}"
+                + (", ..." if len(moves) > 6 else "") + f"), ends on floor {s['final_floor']:+d} "
+                f"(barometer, storey {args.storey_height:g} m)")
+    else:
+        line = f"floors        no floor change (barometer; altitude range {s['altitude_range_m']:.1f} m)"
+    if s["slopes"]:
+        line += f"; {s['slopes']} slope{'s' if s['slopes'] > 1 else ''} (ramps, hills or outdoors)"
+    return s, [line], res.floor_at(track.t_ns).tolist()
 
 
 def _write_outputs(args, outs: dict, rec, track, origin, extra, title_extra: str = "", others=None, fixes=None,
@@ -571,7 +615,7 @@ def _write_outputs(args, outs: dict, rec, track, origin, extra, title_extra: str
         if out != "-":  # outputs may go into a folder that does not exist yet (out/ by default in the README)
             Path(out).parent.mkdir(parents=True, exist_ok=True)
     if outs.get("csv"):
-        _write_track_csv(outs["csv"], track, origin)
+        _write_track_csv(outs["csv"], track, origin, (extra or {}).get("floor"))
         written.append("(stdout)" if outs["csv"] == "-" else outs["csv"])
     if outs.get("geojson"):
         export.write_track_geojson(outs["geojson"], track, origin, {"source": rec.source, "track": title_extra}, extra,
@@ -628,6 +672,11 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
         summary["profile"] = {"path": str(profile_path), **profile.to_dict()}
     lines += truth_lines(errs)
     extra = track.point_properties() if fused else None
+    fsum, flines, per_step = floor_report(args, rec, track)
+    if fsum is not None:
+        summary["floors"] = fsum
+        lines += flines
+        extra = {**(extra or {}), "floor": per_step}
     others, fixes = {}, None
     if fused and outs.get("plot"):
         others["dead reckoning only"] = (res.track.east_m, res.track.north_m)
@@ -1108,6 +1157,9 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--origin", type=_parse_origin, metavar="LAT,LON",
                    help="geographic start point for GeoJSON/GPX (default: first GPS fix, else 0,0)")
     r.add_argument("--height", type=float, metavar="M", help="walker's height in metres (for the stride model)")
+    r.add_argument("--storey-height", type=_positive_m, default=3.5, metavar="M",
+                   help="height of one storey of the building (m) for the barometer's floor count "
+                        "(default %(default)s; recordings with pressure only)")
     r.add_argument("--stride-model", default=None, metavar="NAME|PATH",
                    help="step length model: a shipped name (default, weinberg, weinberg_bp, chen_linear, chen_ann, "
                         "kubrak_velocity: Kubrak et al.'s eq. 1 speed times the step's interval) "

@@ -145,3 +145,31 @@ def test_the_app_session_shows_floors_and_exports_them_per_step(tmp_path):
     assert len(floors) == len(step_t)
     assert floors == [0 if tt < change.t_mid_ns else 1 for tt in step_t] and floors[0] == 0 and floors[-1] == 1
     assert abs((change.t_mid_ns - t[0]) * 1e-9 - half) < 5.0  # the midpoint of the stairs, within 5 s
+
+
+def test_pdr_replay_reports_floors_and_writes_them_per_step(tmp_path, capsys):
+    import csv
+    import json
+
+    from core.recording import Recording, write_recording
+    from desktop.cli import main
+    from desktop.simulator import simulate_walk
+
+    w = simulate_walk(((0.0, 0.0), (30.0, 0.0), (30.0, 20.0)), seed=6, still_start_s=2.0, still_end_s=2.0)
+    rec = w.recording
+    t = np.arange(rec.t0_ns, rec.t0_ns + int(rec.duration_s * 1e9), 100_000_000)
+    t_s = (t - t[0]) * 1e-9
+    down = floor_profile(t_s, [(0.4 * t_s[-1], 0.0), (6.0, -7.0), (t_s[-1], 0.0)])  # a lift, two floors down
+    path = tmp_path / "walk.csv.gz"
+    write_recording(str(path), Recording(dict(rec.streams, pressure=simulate_pressure(t, down, seed=6)),
+                                         device=rec.device, metadata=rec.metadata))
+    out_csv = tmp_path / "track.csv"
+    assert main(["replay", str(path), "--json", "--csv", str(out_csv), "--no-profile"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["floors"]["final_floor"] == -2 and s["floors"]["lifts"] == 1
+    assert [c["floors"] for c in s["floors"]["changes"]] == [-2]
+    rows = list(csv.DictReader(open(out_csv)))
+    assert rows[0]["floor"] == "0" and rows[-1]["floor"] == "-2"
+    with pytest.raises(SystemExit) as e:  # not a storey: refused before the run
+        main(["replay", str(path), "--storey-height", "0.2"])
+    assert e.value.code == 2
