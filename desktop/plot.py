@@ -5,6 +5,19 @@ from __future__ import annotations
 import math
 
 
+def label_groups(points, radius_m: float = 0.5) -> list:
+    """Number labels for ``points`` (n, 2) in metres, one per place: points within ``radius_m`` of an earlier
+    labelled point join its label ("0,13" where a loop starts and ends), so that no two labels overlap there."""
+    groups: list = []
+    for k, (x, y) in enumerate(np.asarray(points, float)[:, :2]):
+        g = next((g for g in groups if math.hypot(x - g[0], y - g[1]) < radius_m), None)
+        if g is None:
+            groups.append([float(x), float(y), [str(k)]])
+        else:
+            g[2].append(str(k))
+    return [(x, y, ",".join(ks)) for x, y, ks in groups]
+
+
 def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, landmarks_en=None,
                others: dict | None = None, subtitle: str = "", fixes=None, landmarks_label: str = "landmarks",
                reference=None) -> None:
@@ -35,15 +48,8 @@ def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, lan
         ax.plot(lm[:, 0], lm[:, 1], "--", color="tab:green", lw=0.8, alpha=0.6)
         ax.plot(lm[:, 0], lm[:, 1], "s", color="tab:green", ms=6, label=landmarks_label)
         if len(lm) <= 40:  # numbered; landmarks at one place (a loop's start and end) share one label
-            groups: list = []
-            for k, (x, y) in enumerate(lm):
-                g = next((g for g in groups if math.hypot(x - g[0], y - g[1]) < 0.5), None)
-                if g is None:
-                    groups.append([x, y, [str(k)]])
-                else:
-                    g[2].append(str(k))
-            for x, y, ks in groups:
-                ax.annotate(",".join(ks), (x, y), textcoords="offset points", xytext=(4, 4), fontsize=6,
+            for x, y, text in label_groups(lm):
+                ax.annotate(text, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=6,
                             color="tab:green")
     if reference is not None:
         label, re_, rn = reference

@@ -48,3 +48,11 @@ def test_what_to_expect_speaks_plainly_from_the_report_split():
     assert "99" not in text  # tuning numbers are not what a user should expect
     assert not re.search(r"issue\s*#", text, re.I)
     assert "about 5 %" in text  # the distance, rounded as a person would say it
+
+
+def test_landmarks_at_one_place_share_one_label():
+    from desktop.plot import label_groups
+
+    lm = [[0.0, 0.0], [5.0, 0.0], [5.0, 5.0], [0.1, -0.2], [5.0, 0.3]]
+    assert label_groups(lm) == [(0.0, 0.0, "0,3"), (5.0, 0.0, "1,4"), (5.0, 5.0, "2")]
+    assert len(label_groups(lm, radius_m=0.05)) == 5
