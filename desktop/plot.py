@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 
 def label_groups(points, radius_m: float = 0.5) -> list:
     """Number labels for ``points`` (n, 2) in metres, one per place: points within ``radius_m`` of an earlier
@@ -35,7 +37,6 @@ def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, lan
         import matplotlib.pyplot as plt
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise RuntimeError("plots need matplotlib: pip install matplotlib (or the 'desktop' extra)") from e
-    import numpy as np
 
     fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
     e = np.concatenate([[0.0], np.asarray(track.east_m, float)])
