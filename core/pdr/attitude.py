@@ -157,6 +157,23 @@ def heading_jacobian(m_n) -> np.ndarray:
     return np.array([-e * u / h2, -n * u / h2, 1.0])
 
 
+# 3 x 3 matrices as 9-tuples (row-major) for the per-gyroscope-event prediction: plain floats, because
+# numpy's per-call overhead (about a microsecond per operation) dominates at this size
+
+
+def _mm3(a, b) -> tuple:
+    """``a @ b`` of two 3 x 3 matrices given as 9-tuples (row-major)."""
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = a
+    b0, b1, b2, b3, b4, b5, b6, b7, b8 = b
+    return (a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7, a0 * b2 + a1 * b5 + a2 * b8,
+            a3 * b0 + a4 * b3 + a5 * b6, a3 * b1 + a4 * b4 + a5 * b7, a3 * b2 + a4 * b5 + a5 * b8,
+            a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8)
+
+
+def _transpose3(a) -> tuple:
+    return (a[0], a[3], a[6], a[1], a[4], a[7], a[2], a[5], a[8])
+
+
 @dataclass(frozen=True)
 class AttitudeSettings:
     """Settings of :class:`AttitudeEKF` (units in the names; unitless noise is of unit vectors).
@@ -503,6 +520,25 @@ class AttitudeEKF(AttitudeFilterBase):
         """
         self.settings = replace(self.settings, site_field_uT=float(field_uT), site_dip_rad=float(dip_rad))
 
+    @property
+    def P(self) -> np.ndarray:
+        """Error-state covariance (6 x 6), a new array each time: change it by assigning ``ekf.P = ...``.
+
+        Kept as four 3 x 3 blocks of plain floats (tilt-heading, cross, its transpose, bias): the
+        prediction runs on every gyroscope event, where numpy's per-call overhead outweighs the arithmetic.
+        """
+        tt, tb, bt, bb = self._Ptt, self._Ptb, self._Pbt, self._Pbb
+        return np.array((tt[0:3] + tb[0:3], tt[3:6] + tb[3:6], tt[6:9] + tb[6:9],
+                         bt[0:3] + bb[0:3], bt[3:6] + bb[3:6], bt[6:9] + bb[6:9]))
+
+    @P.setter
+    def P(self, P) -> None:
+        rows = np.asarray(P, dtype=np.float64).reshape(6, 6).tolist()
+        self._Ptt = tuple(rows[0][0:3] + rows[1][0:3] + rows[2][0:3])
+        self._Ptb = tuple(rows[0][3:6] + rows[1][3:6] + rows[2][3:6])
+        self._Pbt = tuple(rows[3][0:3] + rows[4][0:3] + rows[5][0:3])
+        self._Pbb = tuple(rows[3][3:6] + rows[4][3:6] + rows[5][3:6])
+
     def reset(self) -> None:
         s = self.settings
         self.q = (1.0, 0.0, 0.0, 0.0)
@@ -600,7 +636,9 @@ class AttitudeEKF(AttitudeFilterBase):
         """Turn TRIAD's magnetic north to true north; the heading's prior variance."""
         # without a magnetometer reading the heading is relative to initial_yaw_rad by definition; a
         # magnetometer that starts later is let in by the relock (see _relock)
-        self.P[2, 2] = (self.settings.initial_yaw_sd_rad if from_mag else 1e-3) ** 2
+        P = self.P
+        P[2, 2] = (self.settings.initial_yaw_sd_rad if from_mag else 1e-3) ** 2
+        self.P = P
         self.yaw_unobserved = not from_mag
         if not from_mag:
             return q
@@ -654,29 +692,32 @@ class AttitudeEKF(AttitudeFilterBase):
             return
         b = self.b
         w = ((wx - b[0]) * dt, (wy - b[1]) * dt, (wz - b[2]) * dt)
-        R = np.array(quat.to_matrix(self.q))
+        (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = quat.to_matrix(self.q)
         self.q = quat.normalize(quat.multiply(self.q, quat.from_rotation_vector(w)))  # eq. 7
-        P = self.P
-        # F = [[I, -R dt], [0, I]] written out: P <- F P F^T + Q
-        Rdt = R * dt
-        A = P[0:3, 0:3] - Rdt @ P[3:6, 0:3]
-        B = P[0:3, 3:6] - Rdt @ P[3:6, 3:6]
-        Ptt = A - B @ Rdt.T
+        # F = [[I, -R dt], [0, I]] written out: P <- F P F^T + Q, on the covariance's 3 x 3 blocks in
+        # plain floats (9-tuples: numpy's per-call overhead dominates for such sizes)
+        Rdt = (r0 * dt, r1 * dt, r2 * dt, r3 * dt, r4 * dt, r5 * dt, r6 * dt, r7 * dt, r8 * dt)
+        tt, tb, bb = self._Ptt, self._Ptb, self._Pbb
+        A = [x - y for x, y in zip(tt, _mm3(Rdt, self._Pbt))]
+        B = tuple(x - y for x, y in zip(tb, _mm3(Rdt, bb)))
+        Ptt = [x - y for x, y in zip(A, _mm3(B, _transpose3(Rdt)))]
         w2 = (wx - b[0]) ** 2 + (wy - b[1]) ** 2 + (wz - b[2]) ** 2
         self._w2 = w2
         qg = (s.gyro_noise_rad_sqrt_s ** 2 + s.gyro_scale_noise_sqrt_s ** 2 * w2) * dt
         qb = s.gyro_bias_walk_rad_s_sqrt_s ** 2 * dt
-        Pn = np.empty((6, 6))
-        Pn[0:3, 0:3] = Ptt + qg * _I3
-        Pn[0:3, 3:6] = B
-        Pn[3:6, 0:3] = B.T
-        Pn[3:6, 3:6] = P[3:6, 3:6] + qb * _I3
-        self.P = Pn
+        Ptt[0] += qg
+        Ptt[4] += qg
+        Ptt[8] += qg
+        self._Ptt = tuple(Ptt)
+        self._Ptb = B
+        self._Pbt = _transpose3(B)
+        self._Pbb = (bb[0] + qb, bb[1], bb[2], bb[3], bb[4] + qb, bb[5], bb[6], bb[7], bb[8] + qb)
         self.t_ns = t_ns
 
     def _random_walk(self, dt: float) -> None:
-        self.P = self.P.copy()
-        self.P[0:3, 0:3] += (self.settings.no_gyro_random_walk_rad_sqrt_s ** 2 * dt) * _I3
+        P = self.P
+        P[0:3, 0:3] += (self.settings.no_gyro_random_walk_rad_sqrt_s ** 2 * dt) * _I3
+        self.P = P
 
     # -- the update kernel ----------------------------------------------------------------------
     def _correct(self, y: np.ndarray, H: np.ndarray, Rm: np.ndarray, gate: float, *, consider_tilt=False,
