@@ -5,11 +5,16 @@ wheel to zoom, double-tap to fit the whole track.  Panning turns *follow*
 off; the Follow button turns it on again (the view then keeps the current
 position in the middle).
 
-The track is kept in metres and mapped to pixels by an
-:class:`app.viewport.Viewport` (numpy, once per redraw), so the line width
-stays constant on screen.  Redraws are coalesced with a Clock trigger: the
-line is rebuilt only when the track or the view changed, the position
-marker on every update.
+The track is kept in metres: its lines are drawn in metres under one
+``PushMatrix``/``Translate``/``Scale`` pair that the
+:class:`app.viewport.Viewport` sets, so following the walker and panning
+move the whole track by changing two numbers, not by re-projecting and
+re-tessellating every point (issue #14, item 3).  Each line is a
+:class:`ChunkedLine`: ``Line`` instructions of :data:`LINE_CHUNK` points; a
+new step rebuilds only the last chunk, so a step costs the same at 1 000
+and at 50 000 points (``benchmarks/app_trackview.py``).  Only a zoom
+rebuilds every chunk (the width, in metres, is the pixel width over the
+scale).  Redraws are coalesced with a Clock trigger.
 
 GPS layer (:meth:`TrackView.set_gps`, an :class:`app.session.GpsOverlay`)
     Once a fix has anchored the walk: the fused track (gold; its
@@ -35,8 +40,8 @@ import math
 
 import numpy as np
 from kivy.clock import Clock
-from kivy.graphics import (Color, Ellipse, InstructionGroup, Line, Mesh, PopMatrix, PushMatrix, Rectangle, Translate,
-                           Triangle)
+from kivy.graphics import (Color, Ellipse, InstructionGroup, Line, Mesh, PopMatrix, PushMatrix, Rectangle, Scale,
+                           Translate, Triangle)
 from kivy.metrics import dp, sp
 from kivy.properties import BooleanProperty, NumericProperty
 from kivy.uix.label import Label
@@ -62,6 +67,69 @@ ELLIPSE_FILL_ALPHA = 0.2
 MAX_ACCURACY_CIRCLES = 60  #: accuracy circles of the last fixes only (a minute at 1 Hz)
 FIX_CHUNK = 500  #: fixes per mesh (per colour)
 MAX_FIX_CHUNKS = 20  #: fix squares of the last 20 chunks only (10000 fixes: 2.8 h at 1 Hz)
+LINE_CHUNK = 100  #: track points per Line instruction (a new step rebuilds one; thick round-joined lines
+#: tessellate at about 50 us a point on a desktop, so 100 points keep a step near 5 ms)
+
+
+class ChunkedLine:
+    """A polyline in metres (points ``start..end`` of two lists), drawn as ``Line`` instructions of at most
+    ``chunk`` points in ``group``; consecutive chunks share their end point, so the line is continuous.
+
+    :meth:`update` with the same lists, the same start and width and more points rebuilds only the last
+    chunk and adds new ones; anything else (other lists: a new track; another width: a zoom) rebuilds all.
+    """
+
+    def __init__(self, group: InstructionGroup, chunk: int = LINE_CHUNK):
+        self.group = group
+        self.chunk = int(chunk)
+        self.lines: list = []
+        self._key = None  # (id(east), id(north), start, width) of what is drawn
+        self.end = 0  # points start..end-1 are drawn
+        self.rebuilt_chunks = 0  #: chunks (re)built by the last update (for tests and the benchmark)
+
+    def clear(self) -> None:
+        self.update([], [], 0, 0, 1.0)
+
+    def update(self, east, north, start: int, end: int, width: float) -> None:
+        if width == 1.0:  # Kivy draws width 1.0 as a 1-pixel GL line, which no Scale widens
+            width = 1.0 + 1e-9
+        key = (id(east), id(north), start, width)
+        first_chunk = 0
+        if key == self._key and end >= self.end:
+            first_chunk = max((self.end - 1 - start) // self.chunk, 0) if self.end > start else 0
+        self._key = key
+        n = max(end - start, 0)
+        n_chunks = -(-(n - 1) // self.chunk) if n > 1 else 0
+        while len(self.lines) < n_chunks:
+            line = Line(points=[], width=width, joint="round", cap="round")
+            self.group.add(line)
+            self.lines.append(line)
+        self.rebuilt_chunks = 0
+        for c in range(first_chunk, len(self.lines)):
+            line = self.lines[c]
+            if c < n_chunks:
+                a = start + c * self.chunk
+                b = min(a + self.chunk + 1, end)  # one point shared with the next chunk
+                pts = [0.0] * (2 * (b - a))
+                pts[0::2] = east[a:b]
+                pts[1::2] = north[a:b]
+                line.width = width
+                line.points = pts
+                self.rebuilt_chunks += 1
+            elif line.points:
+                line.points = []
+        self.end = end
+
+    def points_m(self) -> list:
+        """The drawn points (metres), ``[e0, n0, e1, n1, ...]``, each once."""
+        out: list = []
+        for k, line in enumerate(ln for ln in self.lines if ln.points):
+            out.extend(line.points if k == 0 else line.points[2:])
+        return out
+
+    @property
+    def width(self) -> float:
+        return self._key[3] if self._key else 0.0
 
 
 def _hex(rgba, alpha: float | None = None) -> str:
@@ -87,9 +155,13 @@ class TrackView(Widget):
         self._touches: dict = {}
         self._line_dirty = True
         self._fixes_dirty = True
+        self._moved = True  # the view moved (follow, pan): the world transform and the grid
         self.gps = None  # the last GpsOverlay given, None: GPS off
-        self._fused_e = self._fused_n = np.zeros(1)
+        self._fused_e: list = [0.0]  # the overlay's lists (append-only), points 0.._fused_len-1 drawn
+        self._fused_n: list = [0.0]
+        self._fused_len = 1
         self._fused_dr_runs: list = []
+        self._dr_scanned = 0  # steps of the fused track scanned for dead-reckoning stretches
         self._fix = {"e": np.zeros(0), "n": np.zeros(0), "hacc": np.zeros(0), "ok": np.zeros(0, bool)}
         with self.canvas.before:
             Color(*BACKGROUND)
@@ -102,8 +174,14 @@ class TrackView(Widget):
             for key, rgba in (("accepted", FIX_COLOR), ("rejected", REJECTED_COLOR)):
                 self._circle_colors[key] = Color(*rgba[:3], CIRCLE_ALPHA)
                 self._circles[key] = Mesh(vertices=[], indices=[], mode="lines")
+            # the PDR track, in metres under the world transform (see the module docstring)
+            self._world = []  # the (Translate, Scale) pairs the viewport sets
+            PushMatrix()
+            self._world.append((Translate(0, 0), Scale(1, 1, 1)))
             self._line_color = Color(*TRACK_COLOR)
-            self._line = Line(points=[], width=self.line_width, joint="round", cap="round")
+            self._line = ChunkedLine(InstructionGroup())
+            self.canvas.add(self._line.group)
+            PopMatrix()
             # the fixes: small squares, chunks of FIX_CHUNK fixes per mesh and colour, shifted by _fix_shift
             PushMatrix()
             self._fix_shift = Translate(0, 0)
@@ -116,11 +194,16 @@ class TrackView(Widget):
             self._fix_built = None  # (scale, x, y): the scale and screen position of (0, 0) the squares are built at
             self._fix_first = 0  # the first chunk drawn
             self._fix_chunks_built = 0  # chunks up to date (all but the last, which takes the new fixes)
+            PushMatrix()
+            self._world.append((Translate(0, 0), Scale(1, 1, 1)))
             self._fused_color = Color(*FUSED_COLOR)
-            self._fused = Line(points=[], width=self.line_width, joint="round", cap="round")
+            self._fused = ChunkedLine(InstructionGroup())
+            self.canvas.add(self._fused.group)
             self._fused_dr_color = Color(*FUSED_DR_COLOR)
-            self._fused_dr = InstructionGroup()  # one Line per dead-reckoning stretch (a pool, reused)
+            self._fused_dr = InstructionGroup()  # one ChunkedLine per dead-reckoning stretch (a pool, reused)
+            self.canvas.add(self._fused_dr)
             self._fused_dr_lines: list = []
+            PopMatrix()
             Color(*START_COLOR)
             self._start = Ellipse(size=(0, 0))
             # the uncertainty ellipse (ELLIPSE_SIGMA, 2-sigma), under the position marker
@@ -147,9 +230,11 @@ class TrackView(Widget):
     # -- data ---------------------------------------------------------------------
 
     def set_track(self, east, north) -> None:
-        """Replace the track (lists of metres, first point = start)."""
-        self.east = list(east) or [0.0]
-        self.north = list(north) or [0.0]
+        """The track: lists of metres, first point = the start.  The lists are kept, not copied: give the
+        same lists again after appending to them (the session's own) and only the new points are drawn;
+        other lists are a new track."""
+        self.east = east if len(east) else [0.0]
+        self.north = north if len(north) else [0.0]
         self.position = (self.east[-1], self.north[-1])
         self._line_dirty = True
         self._trigger()
@@ -166,18 +251,19 @@ class TrackView(Widget):
         """
         old, self.gps = self.gps, gps
         if gps is None:
-            self._fused_e = self._fused_n = np.zeros(1)
-            self._fused_dr_runs = []
+            self._fused_e, self._fused_n, self._fused_len = [0.0], [0.0], 1
+            self._fused_dr_runs, self._dr_scanned = [], 0
             self._fix = {"e": np.zeros(0), "n": np.zeros(0), "hacc": np.zeros(0), "ok": np.zeros(0, bool)}
             self._line_dirty = self._fixes_dirty = True
             self._fix_built = None
         else:
             n_steps = len(gps.fused_source)
             new_track = old is None or old.fused_source is not gps.fused_source  # a new session or track
-            if new_track or n_steps != len(self._fused_e) - 1 or old.anchored != gps.anchored:
-                self._fused_e = np.array(gps.fused_east[:n_steps + 1], dtype=float)
-                self._fused_n = np.array(gps.fused_north[:n_steps + 1], dtype=float)
-                self._fused_dr_runs = runs([s == "dr" for s in gps.fused_source[:n_steps]])
+            if new_track or n_steps != self._fused_len - 1 or old.anchored != gps.anchored:
+                self._fused_e, self._fused_n, self._fused_len = gps.fused_east, gps.fused_north, n_steps + 1
+                if new_track:
+                    self._fused_dr_runs, self._dr_scanned = [], 0
+                self._scan_dr(gps.fused_source, n_steps)
                 self._line_dirty = True
             n_fix = len(gps.fix_accepted)
             if new_track or n_fix < len(self._fix["ok"]):
@@ -191,16 +277,31 @@ class TrackView(Widget):
         self._set_legend(self._legend_text())
         self._trigger()
 
+    def _scan_dr(self, source, n_steps: int) -> None:
+        """Extend the dead-reckoning stretches (:func:`app.overlay.runs` of ``source == "dr"``) by the new
+        steps only: the last stretch grows, or new ones start."""
+        new = runs([s == "dr" for s in source[self._dr_scanned:n_steps]])
+        off = self._dr_scanned
+        out = self._fused_dr_runs
+        for a, b in new:
+            a, b = a + off, b + off
+            if out and a == out[-1][1] and a > 0 and source[a - 1] == "dr":
+                out[-1] = (out[-1][0], b)  # the last stretch goes on
+            else:
+                out.append((a, b))
+        self._dr_scanned = n_steps
+
     @property
     def shows_fused(self) -> bool:
         """A fused track is drawn (GPS on, the walk anchored by a fix, at least one step)."""
-        return self.gps is not None and self.gps.anchored and len(self._fused_e) > 1
+        return self.gps is not None and self.gps.anchored and self._fused_len > 1
 
     @property
     def current_position(self) -> tuple[float, float]:
         """Where the position marker is: the fused track's end when there is one, else the PDR track's."""
         if self.shows_fused:
-            return float(self._fused_e[-1]), float(self._fused_n[-1])
+            k = self._fused_len - 1
+            return float(self._fused_e[k]), float(self._fused_n[k])
         return self.position
 
     def fit(self, *_) -> None:
@@ -209,12 +310,13 @@ class TrackView(Widget):
         self.vp.set_rect(self.x, self.y, self.width, self.height)
         east, north = self.east, self.north
         if self.shows_fused:
-            east, north = np.concatenate([east, self._fused_e]), np.concatenate([north, self._fused_n])
+            k = self._fused_len
+            east, north = np.concatenate([east, self._fused_e[:k]]), np.concatenate([north, self._fused_n[:k]])
         self.vp.fit(east, north, margin_px=dp(48))  # clear of the button bar and scale bar
         self._view_changed()
 
     def _view_changed(self, *_):
-        self._line_dirty = True
+        self._line_dirty = True  # a zoom or a new size: every chunk (the widths are in metres)
         self._fixes_dirty = True
         self._trigger()
 
@@ -229,14 +331,18 @@ class TrackView(Widget):
             old = vp.center
             vp.follow(*position)
             if old != vp.center:
-                self._line_dirty = self._fixes_dirty = True
+                self._moved = True
+        if self._moved or self._line_dirty:
+            self._set_world()
+            self._draw_grid()
+            self._fixes_dirty = self._fixes_dirty or self._moved
+            self._moved = False
         if self._line_dirty:
             fused = self.shows_fused
-            self._line.width = dp(1) if fused else self.line_width
             self._line_color.a = RAW_UNDER_FUSED_ALPHA if fused else 1.0
-            self._line.points = vp.points(self.east, self.north)
+            self._line.update(self.east, self.north, 0, len(self.east),
+                              (dp(1) if fused else self.line_width) / vp.scale)
             self._draw_fused(fused)
-            self._draw_grid()
             self._line_dirty = False
         if self._fixes_dirty:
             self._draw_fixes()
@@ -260,24 +366,35 @@ class TrackView(Widget):
         self._draw_scale_bar()
         self._place_legend()
 
+    def _set_world(self) -> None:
+        """The world transform: metres -> window pixels, as the viewport maps them."""
+        vp = self.vp
+        tx, ty = vp.to_screen(0.0, 0.0)
+        for translate, scale in self._world:
+            translate.xy = (tx, ty)
+            scale.xyz = (vp.scale, vp.scale, 1.0)
+
     def _draw_fused(self, shown: bool) -> None:
         """The fused track, and its dead-reckoning-only stretches over it in their own colour."""
-        vp = self.vp
-        self._fused.width = self.line_width
-        self._fused.points = vp.points(self._fused_e, self._fused_n) if shown else []
+        width = self.line_width / self.vp.scale
+        n = self._fused_len if shown else 0
+        self._fused.update(self._fused_e, self._fused_n, 0, n, width)
         stretches = self._fused_dr_runs if shown else []
         lines = self._fused_dr_lines
         while len(lines) < len(stretches):
-            line = Line(points=[], width=self.line_width, joint="round", cap="round")
-            self._fused_dr.add(line)
-            lines.append(line)
+            lines.append(ChunkedLine(self._fused_dr))
         for k, line in enumerate(lines):
             if k < len(stretches):
                 i0, i1 = stretches[k]
-                line.width = self.line_width
-                line.points = vp.points(self._fused_e[i0:i1 + 1], self._fused_n[i0:i1 + 1])
-            elif line.points:
-                line.points = []
+                line.update(self._fused_e, self._fused_n, i0, i1 + 1, width)
+            elif line.end:
+                line.clear()
+
+    def to_screen_points(self, points_m) -> list:
+        """Metres ``[e0, n0, ...]`` (what a :class:`ChunkedLine` holds) -> window pixels, as drawn."""
+        pts = np.asarray(points_m, dtype=float).reshape(-1, 2)
+        x, y = self.vp.to_screen_arrays(pts[:, 0], pts[:, 1])
+        return np.c_[x, y].reshape(-1).tolist()
 
     def _draw_fixes(self) -> None:
         """Accuracy circles (the last MAX_ACCURACY_CIRCLES) and fix squares (see :meth:`_draw_fix_squares`)."""
@@ -403,9 +520,11 @@ class TrackView(Widget):
         tick = dp(5)
         self._bar.points = [x0, y0 + tick, x0, y0, x0 + px, y0, x0 + px, y0 + tick]
         lbl = self._bar_label
-        lbl.text = format_length(m)
-        lbl.texture_update()
-        lbl.size = lbl.texture_size
+        text = format_length(m)
+        if lbl.text != text or not lbl.texture:  # a new text texture only when the text changes (it costs
+            lbl.text = text                      # tens of ms a frame on a software renderer)
+            lbl.texture_update()
+            lbl.size = lbl.texture_size
         lbl.pos = (x0, y0 + dp(4))
 
     # -- touch: pan, pinch, scroll, double tap ---------------------------------------------

@@ -363,7 +363,7 @@ def test_track_view_pan_zoom_follow():
         # fit shows the whole track; the line has one point per track point
         tv.fit()
         tv._redraw()
-        pts = np.array(tv._line.points).reshape(-1, 2)
+        pts = np.array(tv.to_screen_points(tv._line.points_m())).reshape(-1, 2)
         assert len(pts) == 3 and (pts >= 0).all() and (pts <= 400).all()
         m, px = tv.vp.scale_bar(120)
         assert tv._bar_label.text in (f"{m:g} m", f"{m * 100:g} cm")
@@ -565,8 +565,10 @@ def test_track_view_draws_the_gps_layer(gps_file):
         n_instructions = len(tv.canvas.children)
         # the raw PDR track thin and faint under the fused one, which has every step
         assert tv.shows_fused and tv.current_position == (g.fused_east[-1], g.fused_north[-1])
-        assert tv._line.width == pytest.approx(dp(1)) and tv._line_color.a == pytest.approx(T.RAW_UNDER_FUSED_ALPHA)
-        np.testing.assert_allclose(tv._fused.points, vp.points(g.fused_east, g.fused_north), atol=0.01)
+        assert tv._line.width * vp.scale == pytest.approx(dp(1))  # the widths are in metres
+        assert tv._line_color.a == pytest.approx(T.RAW_UNDER_FUSED_ALPHA)
+        np.testing.assert_allclose(tv.to_screen_points(tv._fused.points_m()), vp.points(g.fused_east, g.fused_north),
+                                   atol=0.01)
         assert tv._fused_color.rgba == pytest.approx(list(T.FUSED_COLOR))
         # fixes: one square per fix, centred on it, in its colour; circles of the last 60, radius hacc
         ok = np.array(g.fix_accepted)
@@ -589,11 +591,11 @@ def test_track_view_draws_the_gps_layer(gps_file):
             assert tv._circle_colors[key].rgba == pytest.approx([*rgba[:3], T.CIRCLE_ALPHA])
         # the dead-reckoning stretches of the fused track, each its own violet line
         stretches = runs(np.array(g.fused_source) == "dr")
-        drawn = [ln for ln in tv._fused_dr_lines if ln.points]
+        drawn = [ln for ln in tv._fused_dr_lines if ln.points_m()]
         assert len(drawn) == len(stretches) >= 2  # before the first fix, the gap (and the multipath)
         for line, (i0, i1) in zip(drawn, stretches):
-            np.testing.assert_allclose(line.points, vp.points(g.fused_east[i0:i1 + 1], g.fused_north[i0:i1 + 1]),
-                                       atol=0.01)
+            np.testing.assert_allclose(tv.to_screen_points(line.points_m()),
+                                       vp.points(g.fused_east[i0:i1 + 1], g.fused_north[i0:i1 + 1]), atol=0.01)
         assert tv._fused_dr_color.rgba == pytest.approx(list(T.FUSED_DR_COLOR))
         # the ellipse: its outline, back in metres about the position, is p^T C^-1 p = 2^2
         px, py = vp.to_screen(g.fused_east[-1], g.fused_north[-1])
@@ -636,10 +638,10 @@ def test_track_view_draws_the_gps_layer(gps_file):
         # GPS off: the PDR track as before, nothing of the GPS layer
         tv.set_gps(None)
         tv._redraw()
-        assert tv._legend.text == "GPS off" and tv._fused.points == [] and tv._ellipse.points == []
+        assert tv._legend.text == "GPS off" and tv._fused.points_m() == [] and tv._ellipse.points == []
         assert all(not len(squares(tv, k)) and not tv._circles[k].vertices for k in tv._dots)
-        assert not any(ln.points for ln in tv._fused_dr_lines)
-        assert tv._line.width == tv.line_width and tv._line_color.a == 1.0
+        assert not any(ln.points_m() for ln in tv._fused_dr_lines)
+        assert tv._line.width * tv.vp.scale == pytest.approx(tv.line_width) and tv._line_color.a == 1.0
     finally:
         Window.remove_widget(tv)
 
@@ -707,3 +709,64 @@ def test_app_replay_with_gps_shows_fused_track_and_fixes(gps_file, tmp_path):
             far.append((x, y))
     for rgb in (FUSED_RGB, FUSED_DR_RGB, REJECTED_RGB):
         assert not any(_near_color(img, x, y, rgb, radius=1) for x, y in far)
+
+
+def test_track_view_appends_to_the_last_chunk_and_follows_by_the_transform():
+    """Issue #14 item 3, as counts rather than times: a new step rebuilds one Line chunk, following the walker
+    changes only the world transform, a zoom rebuilds every chunk (the widths are in metres), new lists are a
+    new track; the drawn points are the track's, and the dead-reckoning stretches grown step by step are
+    those of the whole track."""
+    from kivy.base import EventLoop
+    from kivy.core.window import Window
+
+    from app import track_view as T
+    from app.overlay import runs
+
+    EventLoop.ensure_window()
+    tv = T.TrackView(size=(400, 600), pos=(0, 0), size_hint=(None, None))
+    Window.add_widget(tv)
+    try:
+        rng = np.random.default_rng(5)
+        heading = np.cumsum(rng.normal(0, 0.2, 1233))
+        east = [0.0] + np.cumsum(0.7 * np.cos(heading)).tolist()
+        north = [0.0] + np.cumsum(0.7 * np.sin(heading)).tolist()
+        tv.set_track(east, north)
+        tv._redraw()
+        chunks = -(-(len(east) - 1) // T.LINE_CHUNK)
+        assert len(tv._line.lines) == tv._line.rebuilt_chunks == chunks > 3
+        np.testing.assert_array_equal(np.array(tv._line.points_m()).reshape(-1, 2), np.c_[east, north])
+        for k in range(300):  # the walk goes on: each step rebuilds the last chunk only (or starts a new one)
+            east.append(east[-1] + 0.7)
+            north.append(north[-1])
+            tv.set_track(east, north)
+            tv._redraw()
+            assert tv._line.rebuilt_chunks == 1, k
+            translate, scale = tv._world[0]
+            assert tv.vp.center == (east[-1], north[-1])  # followed by moving the transform
+            assert tuple(translate.xy) == pytest.approx(tv.vp.to_screen(0.0, 0.0)) and scale.x == tv.vp.scale
+        chunks = -(-(len(east) - 1) // T.LINE_CHUNK)
+        assert len(tv._line.lines) == chunks
+        np.testing.assert_array_equal(np.array(tv._line.points_m()).reshape(-1, 2), np.c_[east, north])
+        tv._line_dirty = True
+        tv._redraw()
+        assert tv._line.rebuilt_chunks == 1  # the same track again: the last chunk, no more
+        tv.vp.zoom_at(2.0, 200, 300)
+        tv._view_changed()
+        tv._redraw()
+        assert tv._line.rebuilt_chunks == chunks and tv._line.width * tv.vp.scale == pytest.approx(tv.line_width)
+        tv.set_track(list(east), list(north))  # other lists: a new track, drawn anew
+        tv._redraw()
+        assert tv._line.rebuilt_chunks == chunks
+        tv.set_track([0.0, 1.0], [0.0, 0.0])
+        tv._redraw()
+        assert [bool(ln.points) for ln in tv._line.lines] == [True] + [False] * (chunks - 1)
+    finally:
+        Window.remove_widget(tv)
+    source = list(rng.choice(["fused", "dr"], 400, p=[0.7, 0.3]))
+    tv2 = T.TrackView.__new__(T.TrackView)  # the stretch bookkeeping alone
+    tv2._fused_dr_runs, tv2._dr_scanned = [], 0
+    n = 0
+    while n < len(source):
+        n = min(n + int(rng.integers(1, 9)), len(source))
+        tv2._scan_dr(source, n)
+    assert tv2._fused_dr_runs == runs([s == "dr" for s in source])
