@@ -62,10 +62,42 @@ def _parse_origin(text: str | None):
 
 
 def _first_gps_origin(rec: Recording):
-    s = rec.streams.get("gps")
-    if s is not None and len(s):
-        return float(s.values[0, 0]), float(s.values[0, 1])
-    return None
+    """``(lat, lon)`` of the recording's first *good* fix (:func:`core.gnss.base.first_good_fix`), or None."""
+    from core.gnss.base import first_good_fix
+
+    fix = first_good_fix(rec.streams.get("gps"))
+    return None if fix is None else (fix[1], fix[2])
+
+
+def place_site(args, rec: Recording, pipeline) -> tuple[dict | None, list]:
+    """Magnetic declination (and the field's strength and dip) of the World Magnetic Model at the walk's place
+    and date, given to the attitude filter before the run, when the place is known (``--origin`` or a good GPS
+    fix) and the recording has a date; ``--declination`` overrides it.  Returns (summary, lines)."""
+    if args.declination is not None:
+        return ({"declination_deg": args.declination, "source": "--declination"},
+                [f"declination   {args.declination:+.1f} deg (--declination)"])
+    from core.gnss.base import first_good_fix
+
+    fix = first_good_fix(rec.streams.get("gps"))
+    if args.origin is not None:
+        (lat, lon), alt, t_ns, where = args.origin, 0.0, rec.t0_ns, "--origin"
+    elif fix is not None:
+        t_ns, lat, lon, alt = fix
+        where = "the first good GPS fix"
+    else:
+        return ({"declination_deg": 0.0, "source": "unknown place"},
+                ["declination   0 (place unknown: headings are magnetic; give --origin LAT,LON or --declination)"])
+    off = rec.metadata.get("unix_offset_ns")
+    if not isinstance(off, int):
+        return ({"declination_deg": 0.0, "source": "no date"},
+                ["declination   0 (the recording has no date for the magnetic model; give --declination)"])
+    try:
+        site = pipeline.set_site(lat, lon, alt if math.isfinite(alt) else 0.0, off + int(t_ns))
+    except (ImportError, ValueError) as e:
+        return {"declination_deg": 0.0, "source": f"magnetic model failed: {e}"}, [f"declination   0 ({e})"]
+    d = site.get("declination_deg") or 0.0
+    return ({"declination_deg": d, "source": f"World Magnetic Model at {where}", "lat_deg": lat, "lon_deg": lon},
+            [f"declination   {d:+.1f} deg (World Magnetic Model at {lat:.4f}, {lon:.4f}: {where})"])
 
 
 GPS_MODES = ("auto", "off", "chen", "kubrak")
@@ -131,7 +163,8 @@ def build_pipeline(args, gnss=None, profile=None):
         from core.pdr.stride_models import load_stride_model
         kw["stride_model"] = load_stride_model(args.stride_model or "default")
     p = Pipeline(gnss=gnss, **kw)  # the default filter, with its magnetometer calibration
-    p.attitude.declination_rad = math.radians(args.declination)
+    if args.declination is not None:
+        p.attitude.declination_rad = math.radians(args.declination)
     return p
 
 
@@ -610,6 +643,9 @@ def _write_outputs(args, outs: dict, rec, track, origin, extra, title_extra: str
     origin = args.origin or origin or _first_gps_origin(rec)
     offset = rec.metadata.get("unix_offset_ns")
     written = []
+    if origin is None and (outs.get("geojson") or outs.get("gpx")):
+        print("note          the track is not placed on the map (no GPS fix of 12 m or better, no --origin): "
+              "GeoJSON/GPX coordinates are around 0, 0; give --origin LAT,LON", file=sys.stderr)
     from core import export
     for out in outs.values():
         if out != "-":  # outputs may go into a folder that does not exist yet (out/ by default in the README)
@@ -654,6 +690,7 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     if outs.get("fixes") and gnss is None:  # before the run, not after it
         raise ValueError("--fixes needs GPS fusion: the recording has no gps stream, or --gps off")
     pipeline = build_pipeline(args, gnss, profile)
+    site, site_lines = place_site(args, rec, pipeline) if not args.no_mag else (None, [])
     res = pipeline.run(rec, progress=progress)
     gps_why = gps_choice(args)[1] if gnss is not None else ""
     fused = res.fusion is not None and res.fusion.origin_lat_lon is not None and len(res.fusion.steps)
@@ -666,7 +703,9 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     if errs:
         summary["truth"] = errs
     lines = summary_lines(res, rec, gps_why)
-    lines = lines[:1] + [f"mode          hand-held PDR ({why})"] + lines[1:]
+    lines = lines[:1] + [f"mode          hand-held PDR ({why})"] + lines[1:] + site_lines
+    if site is not None:
+        summary["declination"] = site
     if profile is not None:
         lines.append(profile_line(profile, profile_path, args))
         summary["profile"] = {"path": str(profile_path), **profile.to_dict()}
@@ -1166,8 +1205,10 @@ def make_parser() -> argparse.ArgumentParser:
                         "or a model JSON file (default: the profile's model with its factor, else 'default')")
     r.add_argument("--stride-c", type=float, metavar="C", help="constant Weinberg coefficient C (overrides "
                                                                 "--stride-model)")
-    r.add_argument("--declination", type=float, default=0.0, metavar="DEG",
-                   help="magnetic declination, east positive (default 0: headings relative to magnetic north)")
+    r.add_argument("--declination", type=float, default=None, metavar="DEG",
+                   help="magnetic declination, east positive (default: the World Magnetic Model's at the walk's "
+                        "place and date when --origin or a good GPS fix gives the place, else 0: headings "
+                        "relative to magnetic north)")
     r.add_argument("--no-mag", action="store_true", help="ignore the magnetometer (heading relative to the start)")
     r.add_argument("--gps", choices=GPS_MODES, default="auto",
                    help="GPS fusion: auto (fuse when the recording has fixes, with the filter the benchmark shows "

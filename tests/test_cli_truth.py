@@ -148,3 +148,38 @@ def test_ground_truth_counters_step_count_and_wheel_distance(capsys):
     # a counter that is not ground truth (the phone's own) is not truth
     phone = Stream("step_counts", t_counter, np.array([[1.0], [9.0], [20.0]]), ("phone",), "1", "")
     assert not truth_of(Recording({"step_counts": phone}))
+
+
+def test_declination_comes_from_the_magnetic_model_at_the_first_good_fix(tmp_path, capsys):
+    """A recording with a date and GPS whose first fix is 40 m inaccurate: the declination is the World
+    Magnetic Model's at the first fix of 12 m or better (not the first fix), and --declination overrides it."""
+    import dataclasses
+    import math
+
+    import numpy as np
+
+    from core.geodesy import declination_rad, unix_ns_to_datetime
+    from core.recording import write_recording
+    from desktop.cli import main
+    from desktop.simulator import outdoor_walk
+
+    w = outdoor_walk(2, minutes=1.0)
+    rec = w.recording
+    g = rec.streams["gps"]
+    vals = g.values.copy()
+    vals[0, 3] = 40.0  # the first fix: poor
+    vals[0, 0] += 0.5  # ... and far off (half a degree north)
+    rec.streams["gps"] = dataclasses.replace(g, values=vals)
+    rec.metadata = {**rec.metadata, "unix_offset_ns": 1_751_328_000_000_000_000 - rec.t0_ns}  # walked 2025-07-01
+    path = tmp_path / "walk.csv.gz"
+    write_recording(str(path), rec)
+    assert main(["replay", str(path), "--json", "--gps", "off", "--no-profile"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    good = int(np.flatnonzero(vals[:, 3] <= 12.0)[0])
+    when = unix_ns_to_datetime(rec.metadata["unix_offset_ns"] + int(g.t_ns[good]))
+    want = math.degrees(declination_rad(vals[good, 0], vals[good, 1], vals[good, 2], when))
+    assert s["declination"]["source"].endswith("the first good GPS fix")
+    assert abs(s["declination"]["declination_deg"] - want) < 1e-6 and abs(want) > 0.1
+    assert abs(s["declination"]["lat_deg"] - vals[good, 0]) < 1e-9
+    assert main(["replay", str(path), "--json", "--gps", "off", "--no-profile", "--declination", "-3.5"]) == 0
+    assert json.loads(capsys.readouterr().out)["declination"] == {"declination_deg": -3.5, "source": "--declination"}
