@@ -67,15 +67,15 @@ class ParticleConfig:
 
     n_particles: int = 500
     #: per-step relative step-length noise
-    length_sd: float = 0.08
+    length_sd: float = 0.12
     #: initial spread of the per-particle stride scale (relative) and its per-step random walk
-    scale_sd: float = 0.10
+    scale_sd: float = 0.05
     scale_rw: float = 0.003
     #: per-step heading noise (rad)
-    heading_sd_rad: float = math.radians(6.0)
+    heading_sd_rad: float = math.radians(10.0)
     #: initial spread of the per-particle heading bias (rad) and its per-step random walk (rad)
     bias_sd_rad: float = math.radians(15.0)
-    bias_rw_rad: float = math.radians(0.5)
+    bias_rw_rad: float = math.radians(1.6)
     #: resample when the effective sample size falls below this fraction of N
     resample_ess: float = 0.5
     #: roughening constant K (Gordon et al. 1993)
@@ -262,17 +262,25 @@ class ParticleFilter:
 
         The filter-smoother of Kitagawa 1996 (section 4.2): each particle keeps
         its past states; the smoothed position at step ``k`` is the final
-        weights' mean of the final particles' ancestors at ``k``.  Needs
+        weights' mean of the final particles' ancestors at ``k`` (the
+        ancestor nearest to it when a wall separates it from the best
+        particle's ancestor, as in :meth:`estimate`).  Needs
         ``keep_paths=True``; memory grows with ``steps x N``, so it is for
         batch runs (``pdr replay``), not the live app.
         """
         if self._paths is None:
             raise RuntimeError("construct the filter with keep_paths=True to smooth")
-        a = np.arange(len(self.w))
+        w = self.w
+        a = np.arange(len(w))
+        best = int(np.argmax(w))
         out = []
         for is_step, xy, parents in reversed(self._paths):
             if is_step:
-                out.append(self.w @ xy[a])
+                anc = xy[a]
+                m = w @ anc
+                if self.grid is not None and self.grid.crosses(anc[best][None, :], m[None, :])[0]:
+                    m = anc[int(np.argmin(np.where(w > 0, np.hypot(*(anc - m).T), np.inf)))]  # as estimate()
+                out.append(m)
             if parents is not None:
                 a = parents[a]
         return np.array(out[::-1], dtype=float).reshape(-1, 2)
