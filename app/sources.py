@@ -21,10 +21,14 @@ Sources
     ``HandlerThread``; every event keeps its ``SensorEvent.timestamp`` and is
     pushed into a bounded :class:`EventQueue`.  GPS through our own
     ``LocationListener`` stamped with ``Location.getElapsedRealtimeNanos()``
-    (the sensor clock), else plyer's GPS stamped with
-    ``SystemClock.elapsedRealtimeNanos()`` on arrival; either way a fix's
+    (the sensor clock), from the provider the location grant allows:
+    ``GPS_PROVIDER`` with precise location, ``FUSED_PROVIDER`` (API 31+) or
+    ``NETWORK_PROVIDER`` with approximate location only (Android 12+ lets
+    the user grant only that, and then ``GPS_PROVIDER`` throws).  A fix's
     values are the six ``gps`` columns with speed and course
-    (:func:`location_values`).  ``jnius`` is imported
+    (:func:`location_values`).  There is no plyer GPS fallback: plyer 2.1.0
+    (PyPI) lacks ``onLocationChanged(List)`` and loses batched fixes on
+    Android 12+, and stamps fixes on arrival.  ``jnius`` is imported
     lazily, only when the source starts (or injected, for tests).
 :class:`PlyerFallbackSource`
     plyer's sensor facades (about 5 Hz, no timestamps: events are stamped
@@ -441,26 +445,6 @@ def location_values(location) -> tuple:
     return (float(location.getLatitude()), float(location.getLongitude()), alt, acc, speed, course)
 
 
-def plyer_location_values(kw: dict) -> tuple:
-    """The ``gps`` values of a plyer ``on_location`` call (see :func:`location_values`).
-
-    plyer passes ``getSpeed()``, ``getBearing()`` and ``getAccuracy()``
-    without their ``has...()`` flags, so their "none" values -- 0.0 -- are
-    read as the importers read them (:func:`core.importers._common.gps_values`):
-    an accuracy of 0 and a bearing of exactly 0 are unknown (nan), a speed of 0
-    is kept (a standing receiver).
-    """
-    from core.importers._common import gps_values  # noqa: PLC0415 - the importers' one rule, only on plyer's path
-
-    def num(key):
-        v = kw.get(key)
-        return math.nan if v is None else float(v)
-
-    row = gps_values([num("lat")], [num("lon")], [num("altitude")], [num("accuracy")], [num("speed")],
-                     [num("bearing")])[0]
-    return tuple(float(v) for v in row)
-
-
 def rotvec_quaternion(values) -> tuple:
     """Android ``TYPE_ROTATION_VECTOR`` values to an ENU<-device quaternion ``(w, x, y, z)``."""
     x, y, z = float(values[0]), float(values[1]), float(values[2])
@@ -508,7 +492,7 @@ class AndroidSource(SensorSource):
         self.gps_status = "off"
         self._listeners: list = []
         self._location_listener = None
-        self._plyer_gps = None
+        self.location_provider = None  #: "gps", "fused" or "network" while fixes are asked for
         self._sm = None
         self._lm = None
         self._thread = None
@@ -610,33 +594,50 @@ class AndroidSource(SensorSource):
             pass
 
     def start_gps(self) -> bool:
-        """Start GNSS updates (own listener, else plyer); returns True when running."""
-        if self._location_listener is not None or self._plyer_gps is not None:
+        """Start GNSS updates with our own listener, from the provider the grant allows; True when running."""
+        if self._location_listener is not None:
             return True
+        from app.android_platform import location_grant, sdk_int  # noqa: PLC0415 - jnius-free module
+
         jn = self._jnius
         try:
+            ctx = self._activity()
+            grant = location_grant(ctx)
+            if grant is None:
+                self.gps_status = "off (no location permission)"
+                return False
             autoclass = jn.autoclass
             Context = autoclass("android.content.Context")
             LocationManager = autoclass("android.location.LocationManager")
             LocationListener, NmeaListener = _java_classes(jn)[1:]
-            self._lm = self._activity().getSystemService(Context.LOCATION_SERVICE)
+            self._lm = ctx.getSystemService(Context.LOCATION_SERVICE)
+            provider = self._provider(LocationManager, grant, sdk_int(jn))
             listener = LocationListener(self._on_location)
             # (provider, minTimeMs, minDistanceM, listener, looper): fixes delivered on the sensor thread
-            self._lm.requestLocationUpdates(LocationManager.GPS_PROVIDER, 1000, 0.0, listener,
-                                            self._thread.getLooper())
-            self._location_listener = listener
-            self.gps_status = "on (LocationListener, elapsed-realtime timestamps)"
-            self._start_nmea(NmeaListener)
-            return True
-        except Exception as e:  # noqa: BLE001 - SecurityException without permission, etc.
-            own_error = e
-        try:
-            self._start_plyer_gps()
-            self.gps_status = "on (plyer, stamped on arrival)"
-            return True
-        except Exception as e:  # noqa: BLE001
-            self.gps_status = f"off ({own_error}; plyer: {e})"
+            self._lm.requestLocationUpdates(provider, 1000, 0.0, listener, self._thread.getLooper())
+        except Exception as e:  # noqa: BLE001 - SecurityException, a provider switched off, ...
+            self.gps_status = f"off ({e})"
             return False
+        self._location_listener = listener
+        self.location_provider = str(provider)
+        approx = "" if grant == "fine" else ", approximate location only"
+        self.gps_status = f"on ({provider} provider{approx}; LocationListener, elapsed-realtime timestamps)"
+        if grant == "fine":  # satellites only from the GNSS chip
+            self._start_nmea(NmeaListener)
+        return True
+
+    def _provider(self, LocationManager, grant: str, sdk: int):
+        """``GPS_PROVIDER`` with precise location; with approximate only, ``FUSED_PROVIDER`` (API 31+, when
+        the phone has it), else ``NETWORK_PROVIDER`` (``GPS_PROVIDER`` would throw)."""
+        if grant == "fine":
+            return LocationManager.GPS_PROVIDER
+        if sdk >= 31:
+            try:
+                if self._lm.hasProvider(LocationManager.FUSED_PROVIDER):
+                    return LocationManager.FUSED_PROVIDER
+            except Exception:  # noqa: BLE001
+                pass
+        return LocationManager.NETWORK_PROVIDER
 
     def _start_nmea(self, NmeaListener) -> None:
         """Satellite C/N0 from the NMEA stream, as ``gnss_status`` events stamped on arrival (best effort)."""
@@ -657,19 +658,6 @@ class AndroidSource(SensorSource):
             self.gps_status += "; satellite C/N0 from NMEA"
         except Exception as e:  # noqa: BLE001 - an old phone or a chip without NMEA: the fixes still come
             self.gps_status += f"; no satellite C/N0 ({e})"
-
-    def _start_plyer_gps(self):
-        from plyer import gps  # noqa: PLC0415 - plyer only on the phone
-
-        SystemClock = self._jnius.autoclass("android.os.SystemClock")
-
-        def on_location(**kw):
-            t_ns = int(SystemClock.elapsedRealtimeNanos())
-            self.queue.push((GPS, t_ns, plyer_location_values(kw)))
-
-        gps.configure(on_location=on_location)
-        gps.start(minTime=1000, minDistance=0)
-        self._plyer_gps = gps
 
     def stop(self) -> None:
         self._unregister()
@@ -695,12 +683,7 @@ class AndroidSource(SensorSource):
             except Exception:  # noqa: BLE001
                 pass
         self._nmea_listener = None
-        if self._plyer_gps is not None:
-            try:
-                self._plyer_gps.stop()
-            except Exception:  # noqa: BLE001
-                pass
-            self._plyer_gps = None
+        self.location_provider = None
         if self._thread is not None:
             try:
                 self._thread.quitSafely()

@@ -19,7 +19,7 @@ import pytest
 
 from app.session import Session
 from app.sources import (PLYER_FALLBACK_WARNING, AndroidSource, PlyerFallbackSource, SensorStartError,
-                         make_live_source, plyer_location_values)
+                         make_live_source)
 from core.pdr.pipeline import Pipeline
 from core.recording import read_recording
 
@@ -133,10 +133,16 @@ class FakeJavaList:
 
 class FakeLocationManager:
     GPS_PROVIDER = "gps"
+    FUSED_PROVIDER = "fused"
+    NETWORK_PROVIDER = "network"
 
-    def __init__(self, allowed=True):
+    def __init__(self, allowed=True, providers=("gps", "fused", "network")):
         self.allowed = allowed
+        self.providers = providers
         self.listeners = []
+
+    def hasProvider(self, name):
+        return name in self.providers
 
     def requestLocationUpdates(self, provider, min_ms, min_m, listener, looper):
         if not self.allowed:
@@ -686,25 +692,40 @@ def test_session_records_a_four_value_gps_event_with_nan_speed_and_course(tmp_pa
     assert ses.gps_origin == pytest.approx((47.6, 8.6), abs=1e-12)  # the first fix's 35 m is too coarse
 
 
-def test_plyer_gps_fixes_read_androids_none_values_as_unknown(monkeypatch):
-    # plyer passes getSpeed()/getBearing()/getAccuracy() without their has...() flags: 0.0 when there is none
-    v = plyer_location_values(dict(lat=47.5, lon=8.5, speed=0.0, bearing=0.0, altitude=420.0, accuracy=0.0))
-    assert v[:3] == (47.5, 8.5, 420.0) and v[4] == pytest.approx(0.0, abs=1e-12)
-    assert math.isnan(v[3]) and math.isnan(v[5])
-    v = plyer_location_values(dict(lat=47.5, lon=8.5, speed=1.3, bearing=271.0, altitude=420.0, accuracy=6.0))
-    assert v == pytest.approx((47.5, 8.5, 420.0, 6.0, 1.3, 271.0), abs=1e-12)
-    # the fallback path: own listener refused, plyer's GPS delivers
+def test_no_plyer_gps_fallback(monkeypatch):
+    """plyer 2.1.0 loses Android 12+'s batched fixes and has no timestamps: a refused listener leaves GPS off
+    (and says why), plyer's GPS is never started even where plyer is installed."""
     sm, lm = FakeSensorManager(), FakeLocationManager(allowed=False)
-    fake_gps = types.SimpleNamespace(configure=lambda on_location: setattr(fake_gps, "cb", on_location),
-                                     start=lambda **kw: None, stop=lambda: None)
+    started = []
+    fake_gps = types.SimpleNamespace(configure=lambda **kw: started.append("configure"),
+                                     start=lambda **kw: started.append("start"), stop=lambda: None)
     monkeypatch.setitem(sys.modules, "plyer", types.SimpleNamespace(gps=fake_gps))
     src = AndroidSource(gps=True, jnius=make_fake_jnius(sm, lm))
     src.start()
-    assert src.gps_status.startswith("on (plyer")
-    fake_gps.cb(lat=47.5, lon=8.5, speed=1.1, bearing=45.0, altitude=420.0, accuracy=4.0)
-    (name, t, vals), = src.drain()
-    assert name == "gps" and t == 10**12  # stamped on arrival (the fake SystemClock)
-    assert vals == pytest.approx((47.5, 8.5, 420.0, 4.0, 1.1, 45.0), abs=1e-12)
+    assert src.running and src.gps_status.startswith("off") and started == []
+
+
+@pytest.mark.parametrize("granted, sdk, providers, want", [
+    (None, 34, ("gps", "fused", "network"), "gps"),  # precise location: the GNSS chip (and its NMEA)
+    ({"android.permission.ACCESS_COARSE_LOCATION"}, 34, ("gps", "fused", "network"), "fused"),  # approximate
+    ({"android.permission.ACCESS_COARSE_LOCATION"}, 34, ("gps", "network"), "network"),  # no fused provider
+    ({"android.permission.ACCESS_COARSE_LOCATION"}, 30, ("gps", "fused", "network"), "network"),  # before API 31
+    (set(), 34, ("gps", "fused", "network"), None),  # no location permission: nothing asked for
+])
+def test_the_location_provider_follows_the_grant(granted, sdk, providers, want):
+    sm, lm = FakeSensorManager(), FakeLocationManager(providers=providers)
+    src = AndroidSource(gps=True, jnius=make_fake_jnius(sm, lm, sdk=sdk, granted=granted))
+    src.start()
+    assert src.running  # the sensors run whatever the grant
+    if want is None:
+        assert lm.listeners == [] and src.gps_status == "off (no location permission)"
+        return
+    assert [x[0] for x in lm.listeners] == [want] and src.location_provider == want
+    assert ("approximate" in src.gps_status) == (want != "gps") and (lm.nmea is not None) == (want == "gps")
+    lm.listeners[0][2].onLocationChanged(FakeLocation(5_000_000_000, 47.5, 8.5, 900.0))
+    assert src.drain()[0][:2] == ("gps", 5_000_000_000)
+    src.stop()
+    assert lm.listeners == [] and src.location_provider is None
 
 
 def test_the_service_holds_a_partial_wake_lock_and_shows_steps_and_distance():
