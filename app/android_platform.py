@@ -37,11 +37,12 @@ def activity(jnius):
 
 def permissions_to_request(sdk: int) -> list[str]:
     """Run-time permissions to ask for at start: location (GPS; also the location-type service's
-    prerequisite), notifications on Android 13+ (the service's notification), storage up to Android 9."""
+    prerequisite), notifications on Android 13+ (the service's notification), storage up to Android 10
+    (Documents/PDR by path; Android 10 with ``requestLegacyExternalStorage``)."""
     perms = [FINE_LOCATION, COARSE_LOCATION]
     if sdk >= 33:
         perms.append(POST_NOTIFICATIONS)
-    if sdk <= 28:
+    if sdk <= 29:
         perms.append(WRITE_EXTERNAL_STORAGE)
     return perms
 

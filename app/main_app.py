@@ -53,7 +53,23 @@ from app.sources import REPLAY_SPEEDS, SensorStartError, make_live_source, repla
 from app.storage import is_android, new_recording_path, output_dir
 
 KV_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "layout.kv")
-RECORDING_PATTERNS = ["*.csv", "*.txt", "*.gz", "*.out", "*.dat"]
+RECORDING_PATTERNS = ["*.csv", "*.txt", "*.gz", "*.out", "*.dat"]  #: without core.importers' list
+
+
+def recording_formats() -> tuple[list, list]:
+    """``(file patterns, format names)`` of what ``core.importers`` reads: the extensions its format
+    descriptions name (``.csv``, ``.txt``, ``.gz``, ``.zip``, ...), the project's own first."""
+    try:
+        from core.importers import FORMATS  # noqa: PLC0415
+    except ImportError:
+        return list(RECORDING_PATTERNS), ["pdr-recording"]
+    import re  # noqa: PLC0415
+
+    exts = {m.lower() for text in FORMATS.values() for m in re.findall(r"(?<![\w.])\.([A-Za-z]{2,4})\b", text)}
+    if any(re.search(r"\bzip\b", text) for text in FORMATS.values()):
+        exts.add("zip")  # "a zip or folder of ..."
+    exts = [e for e in ("csv", "txt", "gz") if e in exts] + sorted(exts - {"csv", "txt", "gz"})
+    return ["*." + e for e in exts], list(FORMATS)
 UI_INTERVAL_S = 0.1
 
 
@@ -659,9 +675,21 @@ class PDRApp(App):
         return out
 
     def show_file_chooser(self):
-        start = os.path.dirname(self.raw_path) if self.raw_path else os.path.expanduser("~")
-        chooser = FileChooserListView(path=start, filters=RECORDING_PATTERNS)
+        """Open a recording: the chooser starts in the recordings folder, shows where it is, and lists the
+        files of the formats ``core.importers`` reads (``*.csv``, ``*.gz``, ``*.zip``, ...)."""
+        from kivy.uix.label import Label  # noqa: PLC0415
+
+        patterns, names = recording_formats()
+        start = self.out_dir()
+        chooser = FileChooserListView(path=start, filters=patterns)
         box = BoxLayout(orientation="vertical")
+        where = Label(text=chooser.path, size_hint_y=None, height="28dp", font_size="12sp", shorten=True,
+                      shorten_from="left", halign="left", valign="middle")
+        where.bind(size=lambda w, *_: setattr(w, "text_size", w.size))
+        chooser.bind(path=lambda c, path: setattr(where, "text", path))
+        box.add_widget(where)
+        box.add_widget(Label(text="reads: " + ", ".join(names), size_hint_y=None, height="22dp", font_size="11sp",
+                             color=(0.7, 0.7, 0.7, 1), shorten=True))
         box.add_widget(chooser)
         buttons = BoxLayout(size_hint_y=None, height="44dp")
         popup = Popup(title="Open a recording", content=box, size_hint=(0.95, 0.9))
@@ -673,13 +701,17 @@ class PDRApp(App):
 
         ok = Button(text="Replay")
         ok.bind(on_release=_open)
+        home = Button(text="Recordings")
+        home.bind(on_release=lambda *_: setattr(chooser, "path", start))
         cancel = Button(text="Cancel")
         cancel.bind(on_release=popup.dismiss)
-        buttons.add_widget(ok)
-        buttons.add_widget(cancel)
+        for b in (ok, home, cancel):
+            buttons.add_widget(b)
         box.add_widget(buttons)
         chooser.bind(on_submit=lambda *a: _open())
         popup.open()
+        self.chooser = chooser  # for tests and scripts
+        self.chooser_path_label = where
         return popup
 
     # -- the clock ---------------------------------------------------------------------------

@@ -572,7 +572,8 @@ class ServiceSession:
             return new
         except (OSError, ValueError, KeyError) as e:
             self.error = str(e)
-            self.source.warning = f"tracking service not answering: {e}"
+            self.source.warning = ("starting the tracking service..." if not self.polls else
+                                   f"tracking service not answering: {e}")
             return []
 
     # -- what the UI reads --------------------------------------------------------------------------

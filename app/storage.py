@@ -8,7 +8,8 @@ Android
     recordings and exports must be reachable by the user (USB, file manager),
     so in order of preference: ``Documents/PDR`` on shared storage (plyer's
     storage path; writable without permission on Android 11+, with
-    ``WRITE_EXTERNAL_STORAGE`` up to Android 9), then the app's external files
+    ``WRITE_EXTERNAL_STORAGE`` up to Android 10, which also needs the manifest's
+    ``requestLegacyExternalStorage``), then the app's external files
     directory ``Android/data/<package>/files`` (always writable, reachable over
     USB), then the private data directory.  Every candidate is checked by
     actually creating a file.

@@ -179,10 +179,25 @@ def test_android_api_levels_and_archs(spec):
     assert int(spec.get("app", "android.api")) >= 35  # Google Play's floor since 2025-08-31
     assert int(spec.get("app", "android.minapi")) == 24  # numpy recipe needs >= 24
     assert int(spec.get("app", "android.ndk_api")) == 24
-    assert set(spec.getlist("app", "android.archs")) == {"arm64-v8a", "armeabi-v7a"}
-    branch = spec.getdefault("app", "p4a.branch", "master")
-    assert branch not in ("master", "develop", "main") and re.fullmatch(r"v\d{4}\.\d{2}\.\d{2}", branch)
+    # phones, and x86_64 for the usual emulators (no scipy, whose recipe builds 64-bit archs only)
+    assert set(spec.getlist("app", "android.archs")) == {"arm64-v8a", "armeabi-v7a", "x86_64"}
+    # p4a pinned as buildozer can keep it: a tag as the branch is re-cloned on every build (buildozer compares
+    # "git branch -vv" with the branch), so the branch is master and the release is its commit
+    assert spec.get("app", "p4a.branch") == "master"
+    assert re.fullmatch(r"[0-9a-f]{40}", spec.get("app", "p4a.commit"))
     assert spec.get("app", "p4a.bootstrap") == "sdl2"
+    assert spec.getdefault("buildozer", "warn_on_root", "1") == "0"  # CI builds as root in a container
+
+
+def test_manifest_application_attributes(spec):
+    """The file buildozer pastes into <application>: attributes only (no tag, no comment), each known."""
+    path = ROOT / spec.get("app", "android.extra_manifest_application_arguments")
+    text = path.read_text().strip()
+    attrs = dict(re.findall(r'android:(\w+)="([^"]*)"', text))
+    assert re.fullmatch(r'(android:\w+="[^"]*"\s*)+', text), text
+    assert attrs == {"enableOnBackInvokedCallback": "true", "requestLegacyExternalStorage": "true",
+                     "hasFragileUserData": "true"}
+    assert not path.suffix == ".py" and "xml" not in spec.getlist("app", "source.include_exts")  # not packaged
 
 
 def test_permissions_are_the_ones_the_app_uses(spec):
@@ -193,8 +208,8 @@ def test_permissions_are_the_ones_the_app_uses(spec):
                      "android.permission.WAKE_LOCK", "android.permission.WRITE_EXTERNAL_STORAGE",
                      "android.permission.FOREGROUND_SERVICE", "android.permission.FOREGROUND_SERVICE_LOCATION",
                      "android.permission.POST_NOTIFICATIONS"}
-    # storage permission only where Android still needs it for Documents/
-    assert "(name=android.permission.WRITE_EXTERNAL_STORAGE;maxSdkVersion=28)" in perms
+    # storage permission only where Android still needs it for Documents/ (Android 10: legacy storage)
+    assert "(name=android.permission.WRITE_EXTERNAL_STORAGE;maxSdkVersion=29)" in perms
     # the location permissions serve the LocationListener; WAKE_LOCK serves android.wakelock
     src = (ROOT / "app" / "sources.py").read_text()
     assert "LOCATION_SERVICE" in src and "requestLocationUpdates" in src

@@ -268,8 +268,8 @@ def wait_end(dt):
     app.new_track()  # the calibrated profile applies to the new track
     log["new_track_scale"] = app.session.pipeline.stride_model.coefficient.scale
     popup = app.show_file_chooser()
-    chooser = popup.content.children[-1]
-    log["chooser"] = [chooser.path, list(chooser.filters)]
+    chooser = app.chooser
+    log["chooser"] = [chooser.path, list(chooser.filters), app.chooser_path_label.text, app.out_dir()]
     chooser.selection = [path]
     popup.content.children[0].children[-1].dispatch("on_release")  # the "Replay" button
     log["reopened"] = [app.mode, app.session.source.delivered, app.raw_path == path]
@@ -318,8 +318,10 @@ def test_app_lifecycle_pause_resume_and_export(walk_file, tmp_path):
     assert log["calib_message"].startswith(f"saved: step length x {known / walked:.3f}")
     assert log["c_text"] == f"step length x {known / walked:.3f} (1 walk)"
     assert log["new_track_scale"] == pytest.approx(known / walked)
-    # the file chooser opens where the recording is, and "Replay" starts it again
-    assert log["chooser"][0] == str(path.parent) and "*.csv" in log["chooser"][1]
+    # the file chooser opens in the recordings folder, says where it is, lists what core.importers reads;
+    # "Replay" starts the chosen file
+    assert log["chooser"][0] == log["chooser"][3] == log["chooser"][2] == str(tmp_path / "out")
+    assert {"*.csv", "*.txt", "*.gz", "*.zip"} <= set(log["chooser"][1])
     assert log["reopened"] == ["replay", 0, True]
 
 
