@@ -162,6 +162,9 @@ def build_pipeline(args, gnss=None, profile=None):
     else:
         from core.pdr.stride_models import load_stride_model
         kw["stride_model"] = load_stride_model(args.stride_model or "default")
+    if args.height is not None and not uses_height(kw["stride_model"]):
+        print(f"note          --height {args.height:g} m is ignored: the stride model does not use the height "
+              "(only weinberg_bp does)", file=sys.stderr)
     p = Pipeline(gnss=gnss, **kw)  # the default filter, with its magnetometer calibration
     if args.declination is not None:
         p.attitude.declination_rad = math.radians(args.declination)
@@ -265,9 +268,21 @@ class _Progress:
         sys.stderr.flush()
 
 
-def summary_lines(res, rec: Recording, gps_why: str = "") -> list[str]:
+#: stream kinds that are sensors (the rest of a recording's streams are ground truth or annotations)
+SENSOR_KINDS = ("acc", "gyro", "mag", "rotvec", "gps", "gnss_status", "pressure", "mag_uncal", "gyro_uncal")
+#: the line said instead of a track shape when nothing measures the heading
+NO_HEADING = ("none: the recording has neither a gyroscope nor a magnetometer, so the steps and the distance "
+              "are measured but not the direction (no track shape)")
+
+
+def has_heading(args, rec: Recording) -> bool:
+    """Whether anything in ``rec`` measures the walking direction (a gyroscope, or a magnetometer not ignored)."""
+    return rec.has("gyro") or (rec.has("mag") and not getattr(args, "no_mag", False))
+
+
+def summary_lines(res, rec: Recording, gps_why: str = "", heading: bool = True) -> list[str]:
     s = res.summary()
-    rates = ", ".join(f"{n} {hz:.1f} Hz" for n, hz in s["rates_hz"].items())
+    rates = ", ".join(f"{n} {hz:.1f} Hz" for n, hz in s["rates_hz"].items() if n.split("@")[0] in SENSOR_KINDS)
     dist = s["distance_m"]
     lines = [
         f"recording     {rec.source}",
@@ -275,6 +290,10 @@ def summary_lines(res, rec: Recording, gps_why: str = "") -> list[str]:
         f"sensors       {rates}",
         f"steps         {s['n_steps']}",
         f"distance      {dist:.1f} m",
+    ]
+    if not heading:  # what the recording cannot say is not made up: no position, no heading labels
+        return lines + [f"heading       {NO_HEADING}"] + [f"repaired      {r}" for r in rec.repairs]
+    lines += [
         f"final pos     E {s['final_east_m']:+.1f} m, N {s['final_north_m']:+.1f} m (start at 0, 0)",
         f"start-to-end  {s['start_to_end_m']:.2f} m"
         + (f" ({100 * s['start_to_end_m'] / dist:.2f} % of the distance walked)" if dist > 0 else ""),
@@ -604,6 +623,25 @@ def _write_track_csv(dest: str, track, origin, floors=None) -> None:
         csv.writer(fh).writerows(rows)
 
 
+def _height_m(text: str) -> float:
+    """``--height``: a body height in metres; centimetres are recognised and refused with the fix."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of metres") from None
+    if 100.0 <= v <= 250.0:
+        raise argparse.ArgumentTypeError(f"{text} looks like centimetres: give metres, e.g. {v / 100:.2f}")
+    if not (math.isfinite(v) and 1.0 <= v <= 2.5):
+        raise argparse.ArgumentTypeError(f"{text} m is not a plausible body height (1.0 to 2.5 m)")
+    return v
+
+
+def uses_height(model) -> bool:
+    """Whether a stride model takes the walker's height as an input (its own or its coefficient's)."""
+    names = getattr(model, "input_names", None) or getattr(getattr(model, "coefficient", None), "input_names", None)
+    return "height_m" in (names or ())
+
+
 def _positive_m(text: str) -> float:
     v = float(text)
     if not (math.isfinite(v) and 1.0 <= v <= 20.0):
@@ -689,6 +727,10 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     gnss = build_gnss(args, rec, profile)
     if outs.get("fixes") and gnss is None:  # before the run, not after it
         raise ValueError("--fixes needs GPS fusion: the recording has no gps stream, or --gps off")
+    heading = has_heading(args, rec) or gnss is not None
+    if not heading and (outs.get("geojson") or outs.get("gpx")):
+        raise ValueError(f"--{'geojson' if outs.get('geojson') else 'gpx'}: the recording has neither a gyroscope "
+                         "nor a magnetometer, so it has no track shape to place on a map (steps and distance only)")
     pipeline = build_pipeline(args, gnss, profile)
     site, site_lines = place_site(args, rec, pipeline) if not args.no_mag else (None, [])
     res = pipeline.run(rec, progress=progress)
@@ -698,12 +740,14 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     truth = truth_of(rec)
     errs = truth_errors(track, truth, dr_track=res.track) if truth else {}
     summary = {**res.summary(), "mode": "handheld", "mode_reason": why}
+    if not heading:
+        summary.update(heading="none", final_east_m=None, final_north_m=None, start_to_end_m=None, labels=[])
     if gnss is not None:
         summary.update(gps_fusion=gnss.name, gps_fusion_reason=gps_why)
     if errs:
         summary["truth"] = errs
-    lines = summary_lines(res, rec, gps_why)
-    lines = lines[:1] + [f"mode          hand-held PDR ({why})"] + lines[1:] + site_lines
+    lines = summary_lines(res, rec, gps_why, heading)
+    lines = lines[:1] + [f"mode          hand-held PDR ({why})"] + lines[1:] + (site_lines if heading else [])
     if site is not None:
         summary["declination"] = site
     if profile is not None:
@@ -722,9 +766,22 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
         fx = [f for f in res.fusion.fixes if f.east_m == f.east_m]
         fixes = ([f.east_m for f in fx], [f.north_m for f in fx], [f.accepted for f in fx])
     s = summary
-    sub = (f"{s['n_steps']} steps, {s['distance_m']:.1f} m, start-to-end {s['start_to_end_m']:.2f} m"
+    sub = (f"{s['n_steps']} steps, {s['distance_m']:.1f} m"
+           + (f", start-to-end {s['start_to_end_m']:.2f} m" if heading else "")
            + (f"; {truth_headline(errs)}" if errs else ""))
-    written = _write_outputs(args, outs, rec, track, res.fusion.origin_lat_lon if fused else None, extra,
+    plotted = []
+    if not heading:  # no invented track: a distance plot, and the CSV without positions or headings
+        from core.pdr.pipeline import Track
+
+        nan = np.full(len(track), np.nan)
+        track = Track(track.t_ns, track.length_m, nan, nan, nan)
+        if outs.get("plot"):
+            from desktop.plot import plot_distance
+
+            plot_distance(outs["plot"], track, title=f"Steps: {Path(rec.source.split(' ')[0]).name}", subtitle=sub)
+            plotted = [outs["plot"]]
+            outs = {k: v for k, v in outs.items() if k != "plot"}
+    written = plotted + _write_outputs(args, outs, rec, track, res.fusion.origin_lat_lon if fused else None, extra,
                              f"fused with GPS ({gnss.name})" if fused else "", others, fixes, sub,
                              res.fusion.fixes if res.fusion is not None else None,
                              truth_plot(truth, errs, track, bool(fused)) if errs else None)
@@ -1195,7 +1252,9 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--plot", metavar="PNG", help="draw the track to a PNG file (needs matplotlib)")
     r.add_argument("--origin", type=_parse_origin, metavar="LAT,LON",
                    help="geographic start point for GeoJSON/GPX (default: first GPS fix, else 0,0)")
-    r.add_argument("--height", type=float, metavar="M", help="walker's height in metres (for the stride model)")
+    r.add_argument("--height", type=_height_m, metavar="M",
+                   help="walker's body height in metres (1.0-2.5), as in the app's profile; only the weinberg_bp "
+                        "stride model uses it, the other shipped models ignore it (the summary says so)")
     r.add_argument("--storey-height", type=_positive_m, default=3.5, metavar="M",
                    help="height of one storey of the building (m) for the barometer's floor count "
                         "(default %(default)s; recordings with pressure only)")
@@ -1274,7 +1333,8 @@ def make_parser() -> argparse.ArgumentParser:
     how.add_argument("--from-gps", action="store_true", help="learn from the recording's GPS fixes (Chen et al. 2010)")
     c.add_argument("--profile", metavar="PATH", help="profile file (default: the app's, "
                    "$PDR_APP_DATA/profile.json or ~/.config/pdr/profile.json)")
-    c.add_argument("--height", type=float, metavar="M", help="walker's height in metres, stored in the profile")
+    c.add_argument("--height", type=_height_m, metavar="M",
+                   help="walker's body height in metres (1.0-2.5), stored in the profile")
     c.add_argument("--stride-model", default=None, metavar="NAME|PATH", help="the model the factor belongs to "
                    "(default: the profile's, else 'default')")
     c.add_argument("--platform", choices=("android", "ios"), default=None,

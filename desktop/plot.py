@@ -83,3 +83,31 @@ def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, lan
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def plot_distance(path: str, track, *, title: str = "Steps", subtitle: str = "") -> None:
+    """Write a PNG of the distance walked over time, one marker per step: for a recording that measures
+    steps but not their direction (an accelerometer alone), where a track shape would be made up."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise RuntimeError("plots need matplotlib: pip install matplotlib (or the 'desktop' extra)") from e
+    t = (np.asarray(track.t_ns, dtype=np.int64) - (int(track.t_ns[0]) if len(track) else 0)) * 1e-9
+    d = np.cumsum(np.asarray(track.length_m, float))
+    fig, ax = plt.subplots(figsize=(7, 4.5), dpi=110)
+    ax.plot(t, d, ".-", ms=3, lw=1, color="tab:blue", label=f"{len(track)} steps")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("distance walked (m)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    import textwrap
+
+    ax.set_title(textwrap.fill(title + (f"\n{subtitle}" if subtitle else ""), 70) +
+                 "\nno gyroscope, no magnetometer: no direction, so no track shape", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+

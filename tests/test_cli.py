@@ -236,3 +236,32 @@ def test_calibrate_stores_the_profile_and_replay_uses_it(square, tmp_path, capsy
 
     assert choose_profile(make_parser().parse_args(["replay", str(p), "--no-profile"])) == (None, None, False)
     assert choose_profile(make_parser().parse_args(["replay"]), demo=True)[0] is None  # the demo is nobody's walk
+
+
+def test_an_accelerometer_only_recording_gets_steps_and_distance_not_a_made_up_track(tmp_path, capsys):
+    from core.recording import Recording, write_recording
+    from desktop.simulator import simulate_walk
+
+    w = simulate_walk(((0.0, 0.0), (15.0, 0.0), (15.0, 10.0)), seed=8, still_start_s=1.0, still_end_s=1.0)
+    path = tmp_path / "acc-only.csv.gz"
+    write_recording(str(path), Recording({"acc": w.recording.streams["acc"]}, device=w.recording.device,
+                                         metadata=w.recording.metadata))
+    png, out_csv = tmp_path / "steps.png", tmp_path / "steps.csv"
+    assert main(["replay", str(path), "--plot", str(png), "--csv", str(out_csv)]) == 0
+    out = capsys.readouterr().out
+    assert "heading       none" in out and "final pos" not in out and "degraded" not in out
+    assert png.stat().st_size > 1000
+    rows = out_csv.read_text().strip().splitlines()
+    assert len(rows) > 10 and all(r.split(",")[5] == "nan" for r in rows[1:])  # east_m: no position invented
+    assert main(["replay", str(path), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["heading"] == "none" and s["final_east_m"] is None and s["n_steps"] > 10
+    assert main(["replay", str(path), "--geojson", str(tmp_path / "x.geojson")]) == 2  # refused, nothing written
+    assert not (tmp_path / "x.geojson").exists()
+
+
+@pytest.mark.parametrize("height, says", [("175", "centimetres"), ("0.4", "plausible"), ("tall", "number")])
+def test_height_is_metres_and_range_checked(height, says, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["replay", "--height", height])
+    assert e.value.code == 2 and says in capsys.readouterr().err
