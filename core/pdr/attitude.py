@@ -816,12 +816,13 @@ class AttitudeEKF(AttitudeFilterBase):
             return self._acc_flags(t_ns, False, "norm off", sigma2=sigma2)
         acc = self._acc_sum
         R = quat.to_matrix(self.q)
-        f_n = [R[i][0] * ax + R[i][1] * ay + R[i][2] * az for i in range(3)]
+        r0, r1, r2 = R
         if acc[4] == 0:
             acc[5] = t_ns
-        acc[0] += f_n[0]
-        acc[1] += f_n[1]
-        acc[2] += f_n[2]
+        # f_n = R a, written out (a comprehension over range(3) costs more than its arithmetic)
+        acc[0] += r0[0] * ax + r0[1] * ay + r0[2] * az
+        acc[1] += r1[0] * ax + r1[1] * ay + r1[2] * az
+        acc[2] += r2[0] * ax + r2[1] * ay + r2[2] * az
         acc[3] += sigma2
         acc[4] += 1
         if (t_ns - acc[5]) * 1e-9 < s.update_interval_s:
@@ -854,11 +855,14 @@ class AttitudeEKF(AttitudeFilterBase):
         g = self._gyro_win
         if not g.buf or (self._next_zero_rate_ns is not None and t_ns < self._next_zero_rate_ns):
             return
-        mean, sd, span = g.stats()
-        if span < 0.95 * g.window_ns or sd > s.still_gyro_sd_rad_s:
+        # the spans first: they are cheap, and the same tests in another order decide the same
+        if g.span_ns() < 0.95 * g.window_ns or self._accdir_win.span_ns() < 0.95 * g.window_ns:
             return
-        _, dir_sd, dspan = self._accdir_win.stats()
-        if dspan < 0.95 * g.window_ns or dir_sd > s.still_acc_direction_rad:
+        mean, sd, _ = g.stats()
+        if sd > s.still_gyro_sd_rad_s:
+            return
+        _, dir_sd, _ = self._accdir_win.stats()
+        if dir_sd > s.still_acc_direction_rad:
             return
         if len(self._acc_norm_win.buf) < 5 or math.sqrt(self._acc_norm_win.variance()) > s.still_acc_sd_m_s2:
             return
