@@ -500,8 +500,25 @@ class Stream:
                 if k < nb:
                     changes += 1
                 start = k
-        return {"median_s": med, "jitter_s": float(np.std(dt)), "gaps": gaps, "rate_changes": changes,
+        return {"median_s": med, "jitter_s": jitter_s(dt), "gaps": gaps, "rate_changes": changes,
                 "rates_hz": rates[:20]}
+
+
+#: an interval longer than this times the median interval is a gap (counted apart, not jitter)
+JITTER_GAP_FACTOR = 2.5
+
+
+def jitter_s(intervals_s, gap_factor: float = JITTER_GAP_FACTOR) -> float:
+    """Timing jitter: the standard deviation of the intervals between events (s), gaps left out (an interval
+    over ``gap_factor`` times the median is a gap, reported apart).  One definition for ``pdr info`` and the
+    app's health panel; nan for fewer than two intervals."""
+    dt = np.asarray(intervals_s, dtype=float)
+    dt = dt[np.isfinite(dt)]
+    if len(dt) < 2:
+        return math.nan
+    med = float(np.median(dt))
+    keep = dt[dt <= gap_factor * med] if med > 0 else dt
+    return float(np.std(keep)) if len(keep) >= 2 else math.nan
 
 
 @dataclass

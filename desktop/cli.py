@@ -1147,7 +1147,8 @@ INFO_COLUMNS = (
                "second device)"),
     ("events", "number of events (readings)"),
     ("rate Hz", "events per second over the stream's span"),
-    ("jitter ms", "standard deviation of the intervals between events"),
+    ("jitter ms", "standard deviation of the intervals between events, gaps left out (the app's health panel "
+                  "computes it the same way, core.recording.jitter_s)"),
     ("gaps", "intervals longer than 2.5 times the local median interval"),
     ("rate chg", "places where the sampling rate changes by more than a factor 1.5"),
     ("columns [unit]", "the values of each event and their units"),

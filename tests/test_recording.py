@@ -175,3 +175,17 @@ def _text_with_header(rec) -> str:
     from core.recording import FORMAT_VERSION, MAGIC, format_row
     return (f"{MAGIC} {FORMAT_VERSION}\n# {json.dumps(rec.header(), sort_keys=True)}\n"
             + "".join(format_row(n, t, v) for n, t, v in rec.events()))
+
+
+def test_jitter_leaves_gaps_out():
+    import numpy as np
+
+    from core.recording import jitter_s
+
+    rng = np.random.default_rng(4)
+    dt = 0.01 + rng.normal(0.0, 0.0005, 2000)
+    with_gaps = dt.copy()
+    with_gaps[::100] = 0.5  # 20 gaps of half a second: reported as gaps, not as jitter
+    assert abs(jitter_s(dt) - 0.0005) < 0.00005
+    assert abs(jitter_s(with_gaps) - jitter_s(dt[np.arange(len(dt)) % 100 != 0])) < 1e-12
+    assert np.isnan(jitter_s([0.01]))
