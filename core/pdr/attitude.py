@@ -161,13 +161,15 @@ def heading_jacobian(m_n) -> np.ndarray:
 # numpy's per-call overhead (about a microsecond per operation) dominates at this size
 
 
-def _mm3(a, b) -> tuple:
-    """``a @ b`` of two 3 x 3 matrices given as 9-tuples (row-major)."""
+def _sub_mm3(c, a, b) -> tuple:
+    """``c - a @ b`` of 3 x 3 matrices given as 9-tuples (row-major)."""
     a0, a1, a2, a3, a4, a5, a6, a7, a8 = a
     b0, b1, b2, b3, b4, b5, b6, b7, b8 = b
-    return (a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7, a0 * b2 + a1 * b5 + a2 * b8,
-            a3 * b0 + a4 * b3 + a5 * b6, a3 * b1 + a4 * b4 + a5 * b7, a3 * b2 + a4 * b5 + a5 * b8,
-            a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8)
+    return (c[0] - (a0 * b0 + a1 * b3 + a2 * b6), c[1] - (a0 * b1 + a1 * b4 + a2 * b7),
+            c[2] - (a0 * b2 + a1 * b5 + a2 * b8), c[3] - (a3 * b0 + a4 * b3 + a5 * b6),
+            c[4] - (a3 * b1 + a4 * b4 + a5 * b7), c[5] - (a3 * b2 + a4 * b5 + a5 * b8),
+            c[6] - (a6 * b0 + a7 * b3 + a8 * b6), c[7] - (a6 * b1 + a7 * b4 + a8 * b7),
+            c[8] - (a6 * b2 + a7 * b5 + a8 * b8))
 
 
 def _transpose3(a) -> tuple:
@@ -697,18 +699,16 @@ class AttitudeEKF(AttitudeFilterBase):
         # F = [[I, -R dt], [0, I]] written out: P <- F P F^T + Q, on the covariance's 3 x 3 blocks in
         # plain floats (9-tuples: numpy's per-call overhead dominates for such sizes)
         Rdt = (r0 * dt, r1 * dt, r2 * dt, r3 * dt, r4 * dt, r5 * dt, r6 * dt, r7 * dt, r8 * dt)
-        tt, tb, bb = self._Ptt, self._Ptb, self._Pbb
-        A = [x - y for x, y in zip(tt, _mm3(Rdt, self._Pbt))]
-        B = tuple(x - y for x, y in zip(tb, _mm3(Rdt, bb)))
-        Ptt = [x - y for x, y in zip(A, _mm3(B, _transpose3(Rdt)))]
+        bb = self._Pbb
+        A = _sub_mm3(self._Ptt, Rdt, self._Pbt)
+        B = _sub_mm3(self._Ptb, Rdt, bb)
+        p0, p1, p2, p3, p4, p5, p6, p7, p8 = _sub_mm3(A, B, (r0 * dt, r3 * dt, r6 * dt, r1 * dt, r4 * dt, r7 * dt,
+                                                              r2 * dt, r5 * dt, r8 * dt))  # A - B Rdt^T
         w2 = (wx - b[0]) ** 2 + (wy - b[1]) ** 2 + (wz - b[2]) ** 2
         self._w2 = w2
         qg = (s.gyro_noise_rad_sqrt_s ** 2 + s.gyro_scale_noise_sqrt_s ** 2 * w2) * dt
         qb = s.gyro_bias_walk_rad_s_sqrt_s ** 2 * dt
-        Ptt[0] += qg
-        Ptt[4] += qg
-        Ptt[8] += qg
-        self._Ptt = tuple(Ptt)
+        self._Ptt = (p0 + qg, p1, p2, p3, p4 + qg, p5, p6, p7, p8 + qg)
         self._Ptb = B
         self._Pbt = _transpose3(B)
         self._Pbb = (bb[0] + qb, bb[1], bb[2], bb[3], bb[4] + qb, bb[5], bb[6], bb[7], bb[8] + qb)
