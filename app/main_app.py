@@ -481,7 +481,7 @@ class PDRApp(App):
         config = self._service_config(path, meta)
         if is_android():
             droid.start_service(self.jnius, config)  # its own process; the first polls wait for it
-            return ServiceSession(ServiceClient(config["socket"]))
+            return ServiceSession(ServiceClient(config["socket"], timeout_s=2.0))
         host = InProcessService(config, lambda rate: make_live_source(rate_hz=rate))
         host.start()
         return ServiceSession(ServiceClient(config["socket"]), host=host)
@@ -492,7 +492,7 @@ class PDRApp(App):
         sock = socket_path(self.data_dir)
         if not service_answers(sock):
             return False
-        ses = ServiceSession(ServiceClient(sock))
+        ses = ServiceSession(ServiceClient(sock, timeout_s=2.0))
         ses.poll()
         self._replace_session(ses, "live", ses.record_path)
         self.recording_label = os.path.basename(ses.record_path) if ses.recording and ses.record_path else ""

@@ -76,7 +76,8 @@ class ChunkedLine:
     ``chunk`` points in ``group``; consecutive chunks share their end point, so the line is continuous.
 
     :meth:`update` with the same lists, the same start and width and more points rebuilds only the last
-    chunk and adds new ones; anything else (other lists: a new track; another width: a zoom) rebuilds all.
+    chunk and adds new ones, with no more points nothing; anything else (other lists: a new track; another
+    width: a zoom) rebuilds all.  The lists must only grow (the session's do).
     """
 
     def __init__(self, group: InstructionGroup, chunk: int = LINE_CHUNK):
@@ -95,7 +96,10 @@ class ChunkedLine:
             width = 1.0 + 1e-9
         key = (id(east), id(north), start, width)
         first_chunk = 0
-        if key == self._key and end >= self.end:
+        if key == self._key and end == self.end:  # nothing new (the lists only ever grow)
+            self.rebuilt_chunks = 0
+            return
+        if key == self._key and end > self.end:
             first_chunk = max((self.end - 1 - start) // self.chunk, 0) if self.end > start else 0
         self._key = key
         n = max(end - start, 0)
