@@ -101,9 +101,12 @@ class ServiceHooks:
         self.wake_lock = wl
 
     def release(self) -> None:
+        """The walk is over: wake lock released, the notification removed (the service ends next)."""
         wl, self.wake_lock = self.wake_lock, None
         if wl is not None and wl.isHeld():
             wl.release()
+        if self._manager is not None:
+            self._manager.cancel(NOTIFICATION_ID)
 
     def _setup(self):
         jn = self.jnius

@@ -501,6 +501,24 @@ class PDRApp(App):
         self._update_ui(force=True)
         return True
 
+    def stop_live(self) -> None:
+        """The Stop button: end live tracking (the service finishes the track, closes the recording, keeps
+        what GPS taught, releases the wake lock, removes its notification and ends); the track stays shown."""
+        ses = self.session
+        if ses is None or self.mode != "live":
+            return
+        ses.tick()  # the last steps
+        self._update_ui(force=True)
+        summ = ses.summary()
+        path = ses.record_path if ses.recording else None
+        self._close_session(ses)
+        self.session = None
+        self.mode = "idle"
+        self.playing = False
+        self.recording_label = ""
+        self.message = (f"tracking stopped: {summ['steps']} {self.steps_name}, {summ['distance_m']:.1f} m"
+                        + (f"; saved {path}" if path else ""))
+
     def go_live(self) -> None:
         """The Live button: live tracking (after a replay too), asking for the permissions first on a phone."""
         if self.mode == "live" and self.session is not None:

@@ -239,6 +239,9 @@ class FakeNotificationManager:
     def notify(self, id_, notification):
         self.posted.append((id_, notification))
 
+    def cancel(self, id_):
+        self.posted.append((id_, None))
+
 
 def make_fake_jnius(sm, lm=None, *, sdk=34, bars=(0, 63, 0, 126), cutout=(0, 80, 0, 0), granted=None):
     """The fake ``jnius``; ``sdk`` is ``Build.VERSION.SDK_INT``, ``bars``/``cutout`` the insets (left, top,
@@ -767,6 +770,7 @@ def test_the_service_holds_a_partial_wake_lock_and_shows_steps_and_distance():
     assert len(jn.notifications.posted) == n_posted  # unchanged text: not posted again
     svc.stop()
     assert not lock.held and sm.registered == {}
+    assert jn.notifications.posted[-1] == (NOTIFICATION_ID, None)  # the notification goes with the walk
 
 
 def test_the_service_argument_or_after_a_kill_the_saved_configuration(tmp_path):

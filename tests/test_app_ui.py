@@ -487,6 +487,9 @@ def do_finish(dt):
     log["events_in"] = app.session.events_in
     log["health"] = app.session.health_text()
     log["warning"] = app.warning
+    host = app.session.host
+    app.stop_live()  # the Stop button: the service ends
+    log["after_stop"] = [app.mode, host.alive, host.service.stopped, app.message]
     with open(report, "w") as f:
         json.dump(log, f)
     app.stop()
@@ -529,6 +532,8 @@ def test_live_mode_records_every_event_through_the_service(tmp_path):
         want = sorted(t for t, ty in delivered if ty == type_)
         assert rec.streams[name].t_ns.tolist() == want  # every event, exact timestamps
     assert "acc" in log["health"] and "gyro" in log["health"]
+    mode, alive, stopped, message = log["after_stop"]
+    assert mode == "idle" and not alive and stopped and message.startswith("tracking stopped: ")
 
 
 @pytest.fixture(scope="module")
