@@ -6,7 +6,8 @@ come out live on the phone and when a recording is replayed:
 rate
     events per second over the last ``window_s`` seconds of sensor time.
 jitter
-    standard deviation of the event intervals in that window (ms).
+    standard deviation of the event intervals in that window (ms), gaps left out:
+    :func:`core.recording.jitter_s`, the same as ``pdr info``.
 gaps / missed
     an interval longer than ``gap_factor`` times the nominal interval (the
     running median interval) is a gap; ``round(dt / nominal) - 1`` events are
@@ -32,6 +33,8 @@ import math
 import statistics
 from collections import deque
 from dataclasses import dataclass
+
+from core.recording import jitter_s
 
 
 @dataclass
@@ -127,7 +130,7 @@ class StreamHealth:
         recent = list(self._dt)[-k:] if k else []
         if len(recent) >= 2:
             med = statistics.median(recent) * 1e-6
-            jit = statistics.pstdev(recent) * 1e-6
+            jit = jitter_s(recent) * 1e-6  # ns -> ms; the one definition (gaps left out), as in pdr info
         else:
             med = jit = math.nan
         return StreamStats(self.name, self.events, rate, med, jit, self.gaps, self.missed, self.out_of_order)
