@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from core.indoor import (
-    FloorPlan, Georeference, ParticleConfig, ParticleFilter, map_match, plan_from_geojson, plan_to_geojson,
+    FloorPlan, Georeference, ParticleConfig, ParticleFilter, StepArrays, map_match, plan_from_geojson, plan_to_geojson,
     read_geojson, read_ipin_cal, read_ipin_floor, read_ms_floor, write_geojson,
 )
 from core.indoor.geometry import WallGrid, points_in_polygon, segments_intersect
@@ -226,15 +226,10 @@ def l_walk():
     return simulate_walk([(0.0, 0.0), (40.0, 0.0), (40.0, 30.0)], rate_hz=25.0, seed=5).truth
 
 
-class _Steps:
-    def __init__(self, t, length, heading):
-        self.t_ns, self.length_m, self.heading_rad = t, length, heading
-
-
 def _measured(truth, bias_deg: float, seed: int = 0, scale: float = 1.0):
     rng = np.random.default_rng(seed)
     n = truth.n_steps
-    return _Steps(truth.step_t_ns, truth.step_length_m * scale * (1 + rng.normal(0, 0.03, n)),
+    return StepArrays(truth.step_t_ns, truth.step_length_m * scale * (1 + rng.normal(0, 0.03, n)),
                   truth.step_heading_rad + math.radians(bias_deg) + rng.normal(0, math.radians(3), n))
 
 
@@ -263,7 +258,7 @@ def test_living_particles_never_cross_a_wall(l_walk):
     grid = plan.grid(pf.config.cell_m)
     for i in range(len(steps.t_ns)):
         before = pf.xy.copy()
-        pf.update(_Steps(int(steps.t_ns[i]), float(steps.length_m[i]), float(steps.heading_rad[i])))
+        pf.update(StepArrays(int(steps.t_ns[i]), float(steps.length_m[i]), float(steps.heading_rad[i])))
         alive = pf.w > 0
         assert plan.is_walkable(pf.xy[alive]).all()
         assert np.all(np.isfinite(pf.xy)) and np.all(np.isfinite(pf.w))
@@ -282,7 +277,7 @@ def test_streaming_equals_batch(l_walk):
     for i in range(len(steps.t_ns)):
         if i == 31:
             pf.fix(*fixes[0])
-        live.append(pf.update(_Steps(int(steps.t_ns[i]), float(steps.length_m[i]), float(steps.heading_rad[i]))))
+        live.append(pf.update(StepArrays(int(steps.t_ns[i]), float(steps.length_m[i]), float(steps.heading_rad[i]))))
     assert np.array_equal(batch.east_m, [e.east_m for e in live])
     assert np.array_equal(batch.bias_rad, [e.bias_rad for e in live])
     assert batch.diagnostics == pf.diagnostics.as_dict()
@@ -317,11 +312,11 @@ def test_all_particles_dead_recovers_without_nan():
     pf = ParticleFilter(wall, ParticleConfig(n_particles=200, bias_sd_rad=0.01, heading_sd_rad=0.01), seed=0)
     pf.start(0, 0.0, 0.0, 0.05)
     for t in range(1, 6):  # walking East into the wall, 1.5 m steps
-        e = pf.update(_Steps(t, 1.5, 0.0))
+        e = pf.update(StepArrays(t, 1.5, 0.0))
         assert np.all(np.isfinite(pf.xy)) and math.isfinite(e.east_m)
         assert (pf.xy[:, 0] < 1.0).all()  # nobody passed
     assert pf.diagnostics.recoveries >= 1 and pf.diagnostics.retries >= 1
-    e = pf.update(_Steps(7, float("nan"), 0.0))  # a step without a length: the walker stands
+    e = pf.update(StepArrays(7, float("nan"), 0.0))  # a step without a length: the walker stands
     assert math.isfinite(e.east_m)
 
 

@@ -26,7 +26,7 @@ from core.indoor.floorplan import (  # noqa: F401 - the package's API
     read_ipin_floor, read_ms_floor, write_geojson,
 )
 from core.indoor.particles import (  # noqa: F401
-    Diagnostics, Estimate, MapMatchResult, ParticleConfig, ParticleFilter,
+    Diagnostics, Estimate, MapMatchResult, ParticleConfig, ParticleFilter, StepArrays, _step_arrays,
 )
 
 
@@ -63,13 +63,6 @@ def map_match(steps, plan=None, *, start=None, start_gps=None, fixes=(), config:
         pf.start_gps(t0, float(start_gps[1]), float(start_gps[2]), float(start_gps[3]))
     else:
         raise ValueError("map_match needs a start (a point or a GPS fix)")
-    from core.indoor.particles import _step_arrays
-
     t, length, heading = _step_arrays(steps)
     keep = t > t0
-    return pf.run(_Steps(t[keep], length[keep], heading[keep]), [f for f in fixes if int(f[0]) >= t0])
-
-
-class _Steps:
-    def __init__(self, t_ns, length_m, heading_rad):
-        self.t_ns, self.length_m, self.heading_rad = t_ns, length_m, heading_rad
+    return pf.run(StepArrays(t[keep], length[keep], heading[keep]), [f for f in fixes if int(f[0]) >= t0])

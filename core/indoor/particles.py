@@ -7,7 +7,10 @@ scale ``s_i`` and heading bias ``b_i`` (rad; measured heading = true heading
 Per step ``(length l, heading h)`` of :class:`core.pdr.pipeline.Step` (the
 :meth:`ParticleFilter.update` kernel, which :meth:`ParticleFilter.run` calls too):
 
-1. random walks: ``b_i += N(0, bias_rw_rad)``, ``s_i *= exp(N(0, scale_rw))``;
+1. random walks: ``b_i += N(0, bias_rw_rad)``, ``s_i *= exp(N(0, scale_rw))`` (with
+   ``bias_gm=True`` the bias is a first-order Gauss-Markov process instead,
+   ``b_i = a b_i + N(0, bias_rw_rad)`` with ``a = sqrt(1 - (bias_rw / bias_sd)^2)``,
+   stationary sd ``bias_sd_rad``);
 2. move: ``theta_i = h - b_i + N(0, heading_sd_rad)``,
    ``d_i = l s_i (1 + N(0, length_sd))`` (at least 0),
    ``p_i += d_i (cos theta_i, sin theta_i)`` (eq. 1 of Tian et al. 2014 per particle);
@@ -76,6 +79,9 @@ class ParticleConfig:
     #: initial spread of the per-particle heading bias (rad) and its per-step random walk (rad)
     bias_sd_rad: float = math.radians(15.0)
     bias_rw_rad: float = math.radians(1.6)
+    #: the bias is a first-order Gauss-Markov process (True: it returns towards 0 with the stationary sd
+    #: bias_sd_rad) or a random walk (False)
+    bias_gm: bool = False
     #: resample when the effective sample size falls below this fraction of N
     resample_ess: float = 0.5
     #: roughening constant K (Gordon et al. 1993)
@@ -138,6 +144,9 @@ class ParticleFilter:
         self.bias = np.zeros(n)
         self.w = np.full(n, 1.0 / n)
         self._paths = [] if keep_paths else None
+        c = self.config
+        # first-order Gauss-Markov bias: stationary sd bias_sd_rad, innovation bias_rw_rad a step
+        self._bias_keep = math.sqrt(max(0.0, 1.0 - (c.bias_rw_rad / c.bias_sd_rad) ** 2)) if c.bias_gm else 1.0
 
     @property
     def started(self) -> bool:
@@ -197,7 +206,7 @@ class ParticleFilter:
             return self.estimate()
         c, d = self.config, self.diagnostics
         n = len(self.w)
-        self.bias = wrap_angle(self.bias + self.rng.normal(0.0, c.bias_rw_rad, n))
+        self.bias = wrap_angle(self._bias_keep * self.bias + self.rng.normal(0.0, c.bias_rw_rad, n))
         self.scale = self.scale * np.exp(self.rng.normal(0.0, c.scale_rw, n))
         alive = self.w > 0
         new, hit = self._move(length, heading, 1.0)
@@ -372,6 +381,15 @@ class _Step:
     t_ns: int
     length_m: float
     heading_rad: float
+
+
+@dataclass
+class StepArrays:
+    """Steps as arrays (``t_ns`` int64, ``length_m``, ``heading_rad``): what :meth:`ParticleFilter.run` takes."""
+
+    t_ns: np.ndarray
+    length_m: np.ndarray
+    heading_rad: np.ndarray
 
 
 def _step_arrays(steps):
