@@ -31,7 +31,8 @@ Formats
 Our own GeoJSON (:func:`read_geojson`, :func:`write_geojson`)
     A GeoJSON FeatureCollection (RFC 7946) that any GIS tool can draw.  Every
     feature has a ``"kind"`` property: ``"walkable"`` (Polygon/MultiPolygon,
-    holes allowed), ``"obstacle"`` (Polygon/MultiPolygon) or ``"wall"``
+    holes allowed), ``"obstacle"`` (Polygon/MultiPolygon; only the outer ring
+    counts, so an obstacle around a courtyard is drawn as several) or ``"wall"``
     (LineString/MultiLineString).  Without ``kind``, polygons are walkable
     and lines are walls.  Coordinates are WGS-84 ``[lon, lat]`` as RFC 7946
     says, unless the optional top-level member ``"pdr_floorplan"`` says

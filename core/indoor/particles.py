@@ -335,6 +335,8 @@ class ParticleFilter:
     # -- the estimate ---------------------------------------------------------
 
     def estimate(self) -> Estimate:
+        if not self.started:
+            raise RuntimeError("start the filter (start / start_gps) before asking for an estimate")
         w = self.w
         m = w @ self.xy
         dxy = self.xy - m
