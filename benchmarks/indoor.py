@@ -486,8 +486,9 @@ def notes(out: dict) -> list[str]:
         "jobs, so the same count varies from run to run; below the 5 ms budget, and more particles gain little.",
         "* The bias as a first-order Gauss-Markov process (`bias_gm=True`) instead of a random walk scored "
         "3.62-3.66 m against 3.69 m on the tuning split (sum of the two live headlines): within the seed noise, "
-        "left off. The fix sd (0.3, 0.5, 1.0 m), `resample_ess` and `roughen_k` moved the IPIN tuning number by "
-        "less than the seeds do.",
+        "left off. On the same score, `resample_ess` 0.8 and `roughen_k` 0.4 were worse (4.29, 4.42 m), "
+        "`roughen_k` 0.1 and 1000 particles no better (3.73 m); the IPIN fix sd (0.3, 0.5, 1.0 m) moved the IPIN "
+        "tuning number by less than the seeds do.",
         "* Not done: a whole-floor start (no start known), a corridor-direction prior on the heading, a fixed-lag "
         "smoother for the live display, the Microsoft floor F4 (same format, other traces).",
     ]
