@@ -284,12 +284,13 @@ def ipin_map_check(root: Path) -> dict | None:
     from PIL import Image
 
     from core.indoor import read_ipin_cal, read_ipin_floor
+    from desktop.floor_images import read_floor_image
 
     folder = Path(root) / "ipin2023_track3" / "floormaps"
     if not (folder / "Map_Floor_-01.png").exists():
         return None
     t = time.perf_counter()
-    plan = read_ipin_floor(folder, -1)
+    plan = read_ipin_floor(folder, -1, read_image=read_floor_image)
     t_read = time.perf_counter() - t
     cal = read_ipin_cal(next(iter(sorted(folder.glob("*.cal")))))[-1]
     Image.MAX_IMAGE_PIXELS = None

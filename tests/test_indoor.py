@@ -19,6 +19,7 @@ from core.indoor import (
 )
 from core.indoor.geometry import WallGrid, points_in_polygon, segments_intersect
 from core.indoor.raster import mask_boundary_segments, otsu_threshold, walls_from_image
+from desktop.floor_images import read_floor_image
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 MS_F3 = DATA / "ms_indoor_location_2020" / "site2" / "F3"
@@ -198,7 +199,7 @@ def test_ipin_cal_format(tmp_path):
     cals = read_ipin_cal(cal)
     assert sorted(cals) == [-1, 0] and cals[0].image == "room.png" and cals[0].m_per_px == 0.05
     Image.fromarray(room_image().astype(np.uint8)).save(tmp_path / "room.png")
-    plan = read_ipin_floor(tmp_path, 0)
+    plan = read_ipin_floor(tmp_path, 0, read_image=read_floor_image)
     assert plan.georef.rotation_rad == pytest.approx(math.radians(20.7))
     x0, y0, x1, y1 = plan.bounds()
     assert (x0, y0, x1, y1) == pytest.approx((-5.0, -3.0, 5.0, 3.0))  # centred on the image

@@ -56,7 +56,7 @@ Microsoft indoor location 2020 (:func:`read_ms_floor`)
     georeference keeps those scales.  The outline is walkable, the shops are
     obstacles (the surveyors walk the mall's corridors: see docs/indoor.md
     for the check on the traces).  ``floor_image.png`` is the same map drawn
-    at ``width / pixels`` metres a pixel (readable with :func:`core.indoor.raster.read_floor_image`).
+    at ``width / pixels`` metres a pixel (readable with :func:`desktop.floor_images.read_floor_image`).
 IPIN floor images (:func:`read_ipin_cal`, :func:`read_ipin_floor`)
     A ``.cal`` file of the GetSensorData tools: per floor the image file, the
     floor number, the building, latitude and longitude of the image centre,
@@ -438,12 +438,14 @@ def image_georeference(cal: ImageCalibration, shape_px) -> Georeference:
     return Georeference(cal.center_lat_deg, cal.center_lon_deg, math.radians(-cal.rotation_deg))
 
 
-def read_ipin_floor(folder, floor: int, cal_name: str | None = None, **extract) -> FloorPlan:
+def read_ipin_floor(folder, floor: int, cal_name: str | None = None, *, read_image, **extract) -> FloorPlan:
     """The floor ``floor`` of an IPIN ``floormaps`` folder: walls from its image, georeferenced by the ``.cal``.
 
-    ``extract``: keyword arguments of :func:`core.indoor.raster.walls_from_image`.
+    ``read_image``: ``path -> grey array (rows, cols)``, e.g. :func:`desktop.floor_images.read_floor_image`
+    (Pillow, desktop; ``core`` decodes no images).  ``extract``: keyword arguments of
+    :func:`core.indoor.raster.walls_from_image`.
     """
-    from core.indoor.raster import read_floor_image, walls_from_image
+    from core.indoor.raster import walls_from_image
 
     folder = Path(folder)
     cal_path = folder / cal_name if cal_name else next(iter(sorted(folder.glob("*.cal"))), None)
@@ -453,7 +455,7 @@ def read_ipin_floor(folder, floor: int, cal_name: str | None = None, **extract) 
     if floor not in cals:
         raise KeyError(f"{cal_path.name} has no floor {floor} (floors: {sorted(cals)})")
     cal = cals[floor]
-    gray = read_floor_image(folder / cal.image)
+    gray = read_image(folder / cal.image)
     h, w = gray.shape
     walls = walls_from_image(gray, cal.m_per_px, origin_px=(w / 2.0, h / 2.0), **extract)
     return FloorPlan(wall_lines=walls, georef=image_georeference(cal, gray.shape), name=cal.image.rsplit(".", 1)[0],

@@ -10,7 +10,7 @@ per file:
    is Otsu's (N. Otsu 1979, "A threshold selection method from gray-level
    histograms", IEEE Trans. SMC 9(1):62-66): the grey level that maximises
    the between-class variance ``w0 w1 (mu0 - mu1)^2`` of the histogram.
-   Transparent pixels count as background (:func:`read_floor_image`).
+   Transparent pixels count as background (:func:`desktop.floor_images.read_floor_image`).
 2. **Cells.**  The mask is cut into square blocks of ``cell_px`` pixels
    (default: the block nearest to ``cell_m``, 0.1 m); a block is wall when
    any of its pixels is (so a one-pixel line survives).
@@ -25,10 +25,10 @@ The result is plan metres, ``x`` to the right and ``y`` up from
 ``origin_px`` (column, row), ``m_per_px`` metres a pixel.
 
 Reading the image file
-    :func:`read_floor_image` uses Pillow, imported when called (a desktop
-    tool: Pillow is not among the app's requirements).  On the phone the
-    app decodes images with Kivy and passes the grey array, or -- better --
-    the walls are extracted once on the desktop and shipped in our GeoJSON
+    is not done here (``core`` is numpy only): :func:`desktop.floor_images.read_floor_image`
+    reads it with Pillow on the desktop.  On the phone the app decodes
+    images with Kivy and passes the grey array, or -- better -- the walls are
+    extracted once on the desktop and shipped in our GeoJSON
     (:func:`core.indoor.floorplan.write_geojson`), which the phone reads
     with :mod:`json` alone.
 """
@@ -39,20 +39,6 @@ import numpy as np
 
 #: default size of a block of the wall mask (m)
 DEFAULT_CELL_M = 0.1
-
-
-def read_floor_image(path) -> np.ndarray:
-    """Grey levels ``(rows, cols)`` (float 0-255) of an image file; transparent pixels become white (Pillow)."""
-    from PIL import Image  # noqa: PLC0415 - desktop only, imported when called
-
-    Image.MAX_IMAGE_PIXELS = None  # floor plans are large (the IPIN map is 54 Mpx)
-    with Image.open(str(path)) as im:
-        im.load()
-        if im.mode in ("RGBA", "LA", "PA") or (im.mode == "P" and "transparency" in im.info):
-            la = np.asarray(im.convert("LA"), dtype=np.float32)
-            a = la[..., 1] / 255.0
-            return la[..., 0] * a + 255.0 * (1.0 - a)
-        return np.asarray(im.convert("L"), dtype=np.float32)
 
 
 def otsu_threshold(gray) -> float:
