@@ -19,8 +19,14 @@ Formats (name: input -> reader):
   -> :func:`read_brajdic`
 * ``oxford-step-counter``: Oxford step-counter accelerometer CSV (``.csv`` or ``.gz``, or its folder)
   -> :func:`read_oxford`
-* ``trundlewheel``: TrundleWheel raw log (W3C DeviceMotion, ``;``-separated, ``.csv`` or ``.gz``)
-  -> :func:`read_trundle`
+* ``trundlewheel``: TrundleWheel raw log (W3C DeviceMotion, ``;``-separated, ``.csv`` or ``.gz``), or the
+  authors' 1 Hz resampled ("conditioned") file -> :func:`read_trundle`
+* ``x-io``: x-io Technologies NGIMU ``sensors.csv`` (or its session folder/zip) or x-IMU calibrated CSV
+  (``.csv`` or ``.gz``) -> :func:`read_xio`
+* ``xsens``: XSens text export (``Acquisition frequency`` line, ``PacketCounter Acc_X ...`` header; ``.txt`` or
+  ``.gz``); an IPOL trial's lower-back file reads the trial's foot files beside it -> :func:`read_xsens`
+* ``pyshoe``: PyShoe processed trial, a MATLAB level-5 MAT-file (``.mat`` or ``.mat.gz``; read with numpy and
+  zlib, :mod:`core.importers.matv5`) -> :func:`read_pyshoe`
 
 The format is recognised by content (magic line, record tags, CSV headers,
 binary record layout, archive members), never by the file name alone.  Every reader raises
@@ -48,13 +54,20 @@ of the first event at import).  Streams besides ``acc``, ``gyro``, ``mag``,
 ``rotvec`` and ``gps``: ``posi`` (GetSensorData ground-truth landmarks),
 ``pressure`` (hPa), ``mag_uncal`` and ``gyro_uncal`` (Sensor Logger,
 Microsoft/XYZ10), and ground truth that is part of a file format:
-``waypoint`` (Microsoft/XYZ10 surveyor positions, floor-map metres),
+``waypoint`` (Microsoft/XYZ10 surveyor positions, floor-map metres), ``posi`` in metres (PyShoe's VICON
+foot positions, ``east_m, north_m, up_m``), ``zero_velocity`` (PyShoe's reference still/moving labels),
 ``wheel`` (trundle-wheel distance) and ``step_counts`` (cumulative step
 counts of other counters logged in the file: the TrundleWheel phone's, the
 Oxford validation files' app, ground-truth device and hardware counter);
 see :data:`core.importers._common.EXTRA_STREAM_SPECS`.  Ground truth kept
 in separate annotation files (Oxford foot switches, Brajdic & Harle step
 counts) is the benchmark readers' (``benchmarks.datasets``), not a format's.
+
+Several IMUs in one recording (an IPOL trial: lower back and both feet) follow
+:mod:`core.foot.devices`: the primary device's plain stream names, the others'
+``acc@left_foot``, ``gyro@right_foot``, ..., described in ``metadata["devices"]``.
+Where a format says where an IMU was worn (PyShoe: the foot; IPOL: lower back
+and feet), ``device["placement"]`` says so and ``pdr replay`` picks its mode by it.
 """
 
 from __future__ import annotations
@@ -69,7 +82,11 @@ from core.importers import msindoor as _ms
 from core.importers import oxford as _ox
 from core.importers import phyphox as _phy
 from core.importers import sensorlogger as _sl
+from core.importers import pyshoe as _ps
 from core.importers import trundle as _tw
+from core.importers import xio as _xio
+from core.importers import xsens as _xs
+from core.importers.matv5 import looks_like as _looks_like_mat
 from core.importers._common import FileSet, head_bytes
 from core.importers.brajdic import read_brajdic
 from core.importers.getsensordata import read_getsensordata
@@ -77,7 +94,10 @@ from core.importers.msindoor import read_msindoor
 from core.importers.oxford import read_oxford
 from core.importers.phyphox import read_phyphox
 from core.importers.sensorlogger import read_sensorlogger
+from core.importers.pyshoe import read_pyshoe
 from core.importers.trundle import read_trundle
+from core.importers.xio import read_xio
+from core.importers.xsens import read_xsens
 
 PDR_RECORDING = "pdr-recording"
 GETSENSORDATA = _gsd.FORMAT
@@ -87,6 +107,9 @@ MSINDOOR = _ms.FORMAT
 BRAJDIC = _bh.FORMAT
 OXFORD = _ox.FORMAT
 TRUNDLE = _tw.FORMAT
+XIO = _xio.FORMAT
+XSENS = _xs.FORMAT
+PYSHOE = _ps.FORMAT
 
 #: format name -> what it is (for messages and the CLI's help)
 FORMATS = {
@@ -101,7 +124,13 @@ FORMATS = {
              "'t_ns type x y z' text lines: .dat; .gz allowed)",
     OXFORD: "Oxford step-counter accelerometer file (headerless 't_ns,accuracy,ax,ay,az' or 7-field validation "
             "CSV, .csv or .gz, or the folder holding accelerometer.csv)",
-    TRUNDLE: "TrundleWheel raw log (';'-separated with 'time' and 'm_accG_x/y/z' columns, .csv or .gz)",
+    TRUNDLE: "TrundleWheel raw log or the authors' 1 Hz resampled file (';'-separated with 'time' and "
+             "'m_accG_x/y/z' columns, .csv or .gz)",
+    XIO: "x-io NGIMU sensors.csv (or its session folder) or x-IMU CSV ('Time (s)' or 'Packet number', then "
+         "'Gyroscope X (deg/s)', 'Accelerometer X (g)', ... columns; .csv or .gz)",
+    XSENS: "XSens text export ('Acquisition frequency: 100 Hz', then 'PacketCounter Acc_X ...'; .txt or .gz); an "
+           "IPOL trial's <trial>_lb file reads its _lf/_rf foot files too",
+    PYSHOE: "PyShoe processed trial (MATLAB level-5 MAT-file with imu and ts, VICON gt; .mat or .mat.gz)",
 }
 
 
@@ -113,7 +142,10 @@ _SHORT = {
     MSINDOOR: "msindoor (Microsoft/XYZ10 indoor-location trace)",
     BRAJDIC: "brajdic-harle (Brajdic & Harle .out/.dat trace)",
     OXFORD: "oxford-step-counter (Oxford step-counter accelerometer CSV)",
-    TRUNDLE: "trundlewheel (TrundleWheel raw log)",
+    TRUNDLE: "trundlewheel (TrundleWheel raw or resampled log)",
+    XIO: "x-io (NGIMU sensors.csv or x-IMU CSV)",
+    XSENS: "xsens (XSens text export, IPOL trials)",
+    PYSHOE: "pyshoe (PyShoe processed .mat trial)",
 }
 
 
@@ -126,6 +158,8 @@ _TEXT_TESTS = [
     (lambda head: head.startswith(MAGIC), PDR_RECORDING),
     (_gsd.looks_like, GETSENSORDATA),
     (_ms.looks_like, MSINDOOR),
+    (_xio.looks_like_csv, XIO),
+    (_xs.looks_like, XSENS),
     (_sl.looks_like_csv, SENSORLOGGER),
     (_phy.looks_like_csv, PHYPHOX),
     (_tw.looks_like_csv, TRUNDLE),
@@ -148,6 +182,8 @@ def _detect_fileset(fs: FileSet) -> str | None:
             return SENSORLOGGER
     if _ox.looks_like_folder(fs):
         return OXFORD
+    if _xio.looks_like_folder(fs):
+        return XIO
     votes = {SENSORLOGGER: 0, PHYPHOX: 0}
     for n in csvs[:40]:
         head = fs.head(n, 2048)
@@ -169,7 +205,7 @@ def detect_format(path) -> str:
         with FileSet(path) as fs:
             fmt = _detect_fileset(fs)
         if fmt is None:
-            raise _unknown(path, "a folder without Sensor Logger, phyphox or Oxford step-counter CSV files")
+            raise _unknown(path, "a folder without Sensor Logger, phyphox, Oxford step-counter or NGIMU CSV files")
         return fmt
     try:
         head = head_bytes(path, 65536)
@@ -182,17 +218,29 @@ def detect_format(path) -> str:
         except (zipfile.BadZipFile, OSError) as e:
             raise RecordingError(f"unreadable zip archive: {e}", path) from None
         if fmt is None:
-            raise _unknown(path, "a zip archive without Sensor Logger, phyphox or Oxford step-counter CSV files")
+            raise _unknown(path, "a zip archive without Sensor Logger, phyphox, Oxford step-counter or NGIMU CSV "
+                                 "files")
         return fmt
     if not head.strip():
         raise _unknown(path, "empty file")
     if _bh.looks_like_binary(head):
         return BRAJDIC
+    if _looks_like_mat(head):
+        if _ps.looks_like(_ps.mat_names(path)):
+            return PYSHOE
+        raise _unknown(path, "a MAT-file without PyShoe's imu and ts variables")
     if b"\x00" in head[:1024]:
         raise _unknown(path, "binary data")
     fmt = _detect_text(head.decode("utf-8", errors="replace").lstrip("\ufeff"))
     if fmt is None:
         raise _unknown(path, "the content matches none of them")
+    if fmt == XSENS:
+        part = _xs.trial_primary(path)
+        if part is not None:
+            primary, foot = part
+            raise RecordingError(f"a foot sensor of the IPOL trial whose lower-back file {os.path.basename(primary)} "
+                                 f"is beside it: replay that file, which reads all three sensors (--mode foot "
+                                 f"--foot-device {foot} for this foot)", path)
     return fmt
 
 
@@ -221,10 +269,11 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
     if fmt == SENSORLOGGER:
         return read_sensorlogger(path, platform=platform, warn=warn, max_uncompressed_bytes=limit)
     readers = {PHYPHOX: read_phyphox, MSINDOOR: read_msindoor, BRAJDIC: read_brajdic, OXFORD: read_oxford,
-               TRUNDLE: read_trundle}
+               TRUNDLE: read_trundle, XIO: read_xio, XSENS: read_xsens, PYSHOE: read_pyshoe}
     return readers[fmt](path, warn=warn, max_uncompressed_bytes=limit)
 
 
 __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",
-           "read_phyphox", "read_msindoor", "read_brajdic", "read_oxford", "read_trundle", "PDR_RECORDING",
-           "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX", "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE"]
+           "read_phyphox", "read_msindoor", "read_brajdic", "read_oxford", "read_trundle", "read_xio", "read_xsens",
+           "read_pyshoe", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX", "MSINDOOR", "BRAJDIC", "OXFORD",
+           "TRUNDLE", "XIO", "XSENS", "PYSHOE"]

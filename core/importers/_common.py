@@ -32,6 +32,7 @@ GYRO_UNCAL = "gyro_uncal"  #: uncalibrated gyroscope, rad/s, device axes (bias n
 WAYPOINT = "waypoint"  #: ground-truth positions in a map's East/North metres (Microsoft/XYZ10 TYPE_WAYPOINT)
 WHEEL = "wheel"  #: ground-truth odometer: cumulative distance at each tick of a trundle wheel
 STEP_COUNTS = "step_counts"  #: cumulative step counts logged with the recording, one column per counter
+ZERO_VELOCITY = "zero_velocity"  #: reference zero-velocity labels (1 = foot still), one column per detector
 
 EXTRA_STREAM_SPECS: dict[str, dict] = {
     PRESSURE: {"columns": ["p_hpa"], "unit": "hPa", "note": "barometric pressure (hPa = mbar, as Android reports it)"},
@@ -45,6 +46,9 @@ EXTRA_STREAM_SPECS: dict[str, dict] = {
     STEP_COUNTS: {"columns": ["steps"], "unit": "1",
                   "note": "cumulative step counts logged with the recording (other counters than ours, or a "
                           "ground-truth device), one column per counter"},
+    ZERO_VELOCITY: {"columns": ["still"], "unit": "1",
+                    "note": "reference zero-velocity labels shipped with a foot-IMU recording (1 = the foot is "
+                            "still, 0 = moving), one column per detector (PyShoe's zv_*_opt)"},
 }
 
 

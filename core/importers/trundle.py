@@ -39,6 +39,22 @@ Columns are found by name; ``time`` and ``m_accG_x/y/z`` are required.
 * ``duration, date, total_distance, total_steps, device_os, device_model``
   are filled in the first line only: ``device`` and ``metadata``.
 
+The authors' "conditioned" files
+==================================
+The same header without the ``o_*`` and bookkeeping columns, resampled by
+the authors to one line a second with *every* field filled (``time`` on the
+app's clock, ms).  A file whose lines carry acceleration and ``p_lat``
+together is read as this layout (``metadata["layout"] = "conditioned"``;
+raw GNSS lines never carry acceleration): ``acc`` and ``gyro`` at 1 Hz (one
+sample a second: too coarse for step detection, which needs tens of Hz),
+``gps`` from ``p_lat, p_long, p_alt, p_acc`` (horizontal accuracy, m),
+``p_head`` (course, deg) and ``p_speed`` (m/s) of every line, ``wheel`` and
+``step_counts`` from the (interpolated, cumulative) ``distance`` and
+``steps``.  ``metadata["rate_warning"]`` says it, and so does a
+:class:`LowRateWarning` when the acceleration comes at under
+:data:`MIN_STEP_RATE_HZ` (a replay then finds no steps: the file's truth is
+still shown).
+
 There is no magnetometer.  A line with some but not all of a sensor's
 fields, or a field that is not a number, is a bad line: skipped and counted,
 or, past 100 or 1 % of the lines, a :class:`RecordingError` naming the first.
@@ -50,19 +66,29 @@ import warnings
 
 import numpy as np
 
-from core.conventions import ACC, GYRO
+from core.conventions import ACC, GPS, GYRO
 from core.recording import (
     MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
 )
 from core.importers._common import (
-    EXTRA_STREAM_SPECS, STEP_COUNTS, WHEEL, feed_lines, finish, first_bad_time, open_text,
+    EXTRA_STREAM_SPECS, STEP_COUNTS, WHEEL, feed_lines, finish, first_bad_time, gps_check, gps_values, open_text,
 )
 from core.importers._csv import ColumnBuffer, fixed_rows
 
 FORMAT = "trundlewheel"
 
 REQUIRED = ["time", "m_accG_x", "m_accG_y", "m_accG_z"]
+#: GNSS columns: latitude, longitude, altitude (m), horizontal accuracy (m), course (deg), speed (m/s)
+GPS_COLUMNS = ["p_lat", "p_long", "p_alt", "p_acc", "p_head", "p_speed"]
 GYRO_COLUMNS = ["m_rotTate_beta", "m_rotTate_gamma", "m_rotTate_alpha"]  # about x, y, z
+#: below this acceleration rate (Hz) a step detector cannot work: a conditioned file says so in a warning
+MIN_STEP_RATE_HZ = 10.0
+
+
+class LowRateWarning(UserWarning):
+    """The recording's acceleration is too coarse for step detection (the authors' 1 Hz resampled files)."""
+
+
 #: the first line's facts
 INFO = ("duration", "date", "total_distance", "total_steps", "device_os", "device_model")
 
@@ -102,6 +128,10 @@ def read_trundle(path: str, *, warn: bool = True,
     if warn:
         for r in repairs:
             warnings.warn(r, DamagedFileWarning, stacklevel=2)
+        acc = rec.streams.get(ACC)
+        if "rate_warning" in rec.metadata and acc is not None and len(acc) > 1 and acc.rate_hz < MIN_STEP_RATE_HZ:
+            warnings.warn(f"{path}: acceleration at {acc.rate_hz:.1f} Hz -- {rec.metadata['rate_warning']}",
+                          LowRateWarning, stacklevel=2)
     return finish(rec, warn=warn)
 
 
@@ -123,7 +153,7 @@ class _Reader:
             raise RecordingError(f"TrundleWheel raw log: missing column(s) {', '.join(missing)} (header: "
                                  f"{';'.join(self.header)[:300]})", self.path, lineno)
         want = {"acc": REQUIRED[1:], "gyro": GYRO_COLUMNS, "steps": ["steps"], "distance": ["distance"],
-                "p_lat": ["p_lat"]}
+                "p_lat": ["p_lat"], "gps": GPS_COLUMNS[1:]}
         #: group -> the positions of its columns among the values read (the time is position 0)
         self.groups: dict[str, list[int]] = {}
         self.usecols = [self.header.index("time")]
@@ -167,6 +197,10 @@ class _Reader:
         empty = np.isnan(v)
         g = self.groups
         gnss = ~empty[:, g["p_lat"][0]] if "p_lat" in g else np.zeros(len(v), dtype=bool)
+        # the authors' resampled files: acceleration and GNSS on every line, all on the app's clock
+        conditioned = bool(np.any(gnss & ~empty[:, g["acc"][0]]))
+        if conditioned:
+            gnss = np.zeros(len(v), dtype=bool)
         partial = np.zeros(len(v), dtype=bool)
         for name, cols in g.items():
             e = empty[:, cols]
@@ -205,6 +239,12 @@ class _Reader:
             spec = EXTRA_STREAM_SPECS[WHEEL]
             streams[WHEEL] = make_stream(WHEEL, t, d, spec["columns"], spec["unit"],
                                          "ground truth: trundle-wheel distance (m), cumulative, one event a 1 m tick")
+        if conditioned and "gps" in g:
+            t, lat = rows("p_lat")
+            o = use & ~empty[:, g["p_lat"][0]]
+            lon, alt, hacc, course, speed = (v[o][:, c] for c in g["gps"])
+            gv = gps_values(lat[:, 0], lon, alt, hacc, speed, course)
+            streams[GPS] = make_stream(GPS, t, gv, note="GNSS of the authors' resampled file (1 Hz)")
         if "steps" in g:
             t, n = rows("steps", cumulative=True)
             spec = EXTRA_STREAM_SPECS[STEP_COUNTS]
@@ -221,8 +261,16 @@ class _Reader:
             "app": "TrundleWheel",
             "time_base": "t_ns = round(time * 1e6): ms since the recording started, the web app's clock (arrival "
                          "times); absolute time unknown",
+            "layout": "conditioned" if conditioned else "raw",
             "gnss_lines_skipped": int(gnss.sum()),
             **{k: info[k] for k in ("duration", "date", "total_distance", "total_steps") if k in info},
         }
+        if conditioned:
+            meta["time_base"] = ("t_ns = round(time * 1e6): ms since the recording started, resampled by the "
+                                 "authors to 1 Hz; absolute time unknown")
+            meta["rate_warning"] = ("the authors' 1 Hz resampled file: one acceleration sample a second is too "
+                                    "coarse for step detection; it carries walk-level truth (wheel distance, GPS)")
+            if GPS in streams:
+                meta["gps_check"] = gps_check(streams[GPS].t_ns, streams[GPS].values)
         return Recording(streams, device={k: x for k, x in device.items() if x}, metadata=meta,
                          repairs=self.repairs, source=self.path)
