@@ -676,6 +676,103 @@ def floor_report(args, rec: Recording, track) -> tuple[dict | None, list, list |
     return s, [line], res.floor_at(track.t_ns).tolist()
 
 
+def load_map(args):
+    """``--map``: a floor plan (:mod:`core.indoor`): our GeoJSON file, a Microsoft floor folder
+    (``floor_info.json``) or an IPIN ``floormaps`` folder (a ``.cal`` and ``--map-floor``); None without."""
+    if not getattr(args, "map", None):
+        return None
+    from core.indoor import read_geojson, read_ipin_floor, read_ms_floor
+
+    path = Path(args.map)
+    if path.is_dir():
+        if any(path.glob("floor_info.json*")):
+            return read_ms_floor(path)
+        if any(path.glob("*.cal")):
+            if args.map_floor is None:
+                raise ValueError(f"--map {path}: an IPIN floor-image folder needs --map-floor N")
+            from desktop.floor_images import read_floor_image
+
+            return read_ipin_floor(path, args.map_floor, read_image=read_floor_image)
+        raise ValueError(f"--map {path}: a folder without floor_info.json (Microsoft) or a .cal (IPIN)")
+    if not path.exists():
+        raise ValueError(f"--map {path}: no such file")
+    return read_geojson(path)
+
+
+def _parse_fix(text: str):
+    try:
+        v = [float(x) for x in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) not in (3, 4) or not all(math.isfinite(x) for x in v) or (len(v) == 4 and v[3] <= 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: want T_S,EAST_M,NORTH_M[,SD_M] (seconds from the start, "
+                                         "plan metres)")
+    return (v[0], v[1], v[2], v[3] if len(v) == 4 else 2.0)
+
+
+def _parse_start(text: str):
+    try:
+        v = [float(x) for x in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) not in (2, 3) or not all(math.isfinite(x) for x in v) or (len(v) == 3 and v[2] <= 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: want EAST_M,NORTH_M[,SD_M] (plan metres)")
+    return (v[0], v[1], v[2] if len(v) == 3 else 1.0)
+
+
+def map_start(args, rec: Recording, plan, track, truth) -> tuple[dict, str]:
+    """Where the particle filter starts: ``(map_match keywords, why)``; ValueError when nothing says."""
+    t0 = int(track.t_ns[0]) - 1 if len(track) else rec.t0_ns
+    if args.start is not None:
+        e, n, sd = args.start
+        return {"start": (t0, e, n, sd)}, f"--start {e:g}, {n:g} (+- {sd:g} m)"
+    lm = truth.landmarks if truth is not None else None
+    if lm is not None and getattr(lm, "origin_lat_lon", None) is None and len(lm.t_ns):
+        return ({"start": (int(lm.t_ns[0]), float(lm.east_m[0]), float(lm.north_m[0]), 1.0)},
+                "the recording's first landmark")
+    from core.gnss.base import first_good_fix
+
+    fix = first_good_fix(rec.streams.get("gps"))
+    if fix is not None and plan.georef is not None:
+        g = rec.streams["gps"]
+        hacc = float(g.values[list(g.t_ns).index(fix[0]), 3])
+        return {"start_gps": (fix[0], fix[1], fix[2], hacc)}, "the first good GPS fix"
+    raise ValueError("--map needs a start: --start EAST_M,NORTH_M in the plan's metres (or a recording with "
+                     "landmarks in plan metres, or a good GPS fix and a georeferenced plan)")
+
+
+def map_report(args, rec: Recording, plan, track, truth) -> tuple[object, dict, list, dict]:
+    """The particle filter on the plan (:func:`core.indoor.map_match`): ``(map-matched Track, summary,
+    lines, per-step export properties)``.  The exported track is the batch smoother's."""
+    from core.indoor import map_match
+    from core.pdr.pipeline import Track
+
+    kw, why = map_start(args, rec, plan, track, truth)
+    fixes = [(rec.t0_ns + int(round(t * 1e9)), e, n, sd) for t, e, n, sd in (args.fix or ())]
+    mm = map_match(track, plan, fixes=fixes, smooth=True, **kw)
+    keep = np.isin(track.t_ns, mm.t_ns)
+    east = mm.smoothed_east_m if mm.smoothed_east_m is not None else mm.east_m
+    north = mm.smoothed_north_m if mm.smoothed_north_m is not None else mm.north_m
+    mt = Track(mm.t_ns, np.asarray(track.length_m)[keep] * mm.scale, np.asarray(track.heading_rad)[keep] - mm.bias_rad,
+               np.asarray(east, float), np.asarray(north, float))
+    d = mm.diagnostics
+    walkable = plan.is_walkable(np.column_stack([east, north])) if len(east) else np.zeros(0, bool)
+    summ = {"plan": plan.name or str(args.map), "start": why, "steps": len(mm), "fixes": len(fixes),
+            "final_heading_bias_deg": math.degrees(mm.final_bias_rad),
+            "final_spread_m": float(mm.spread_m[-1]) if len(mm) else math.nan,
+            "outside_walkable": int(np.sum(~walkable)), "diagnostics": d}
+    lines = [f"map           {summ['plan']}: particle filter from {why}"
+             + (f", {len(fixes)} fix{'es' if len(fixes) > 1 else ''}" if fixes else "")
+             + f"; heading bias {summ['final_heading_bias_deg']:+.1f} deg, spread {summ['final_spread_m']:.1f} m "
+             f"at the end; {summ['outside_walkable']} positions outside the walkable area"]
+    if d.get("recoveries"):
+        lines.append(f"map           {d['recoveries']} time(s) every particle hit a wall (recovered)")
+    props = {"raw_east_m": [round(float(v), 3) for v in np.asarray(track.east_m)[keep]],
+             "raw_north_m": [round(float(v), 3) for v in np.asarray(track.north_m)[keep]],
+             "spread_m": [round(float(v), 3) for v in mm.spread_m]}
+    return mt, summ, lines, props
+
+
 def _write_outputs(args, outs: dict, rec, track, origin, extra, title_extra: str = "", others=None, fixes=None,
                    subtitle: str = "", fix_records=None, truth_kw=None) -> list:
     origin = args.origin or origin or _first_gps_origin(rec)
@@ -731,6 +828,11 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     if not heading and (outs.get("geojson") or outs.get("gpx")):
         raise ValueError(f"--{'geojson' if outs.get('geojson') else 'gpx'}: the recording has neither a gyroscope "
                          "nor a magnetometer, so it has no track shape to place on a map (steps and distance only)")
+    plan = load_map(args)
+    if plan is not None:  # where the particles start is known before the long part, or refused
+        from core.pdr.pipeline import Track
+
+        map_start(args, rec, plan, Track(np.array([rec.t0_ns], np.int64), *(np.zeros(1),) * 4), truth_of(rec))
     pipeline = build_pipeline(args, gnss, profile)
     site, site_lines = place_site(args, rec, pipeline) if not args.no_mag else (None, [])
     res = pipeline.run(rec, progress=progress)
@@ -738,8 +840,17 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     fused = res.fusion is not None and res.fusion.origin_lat_lon is not None and len(res.fusion.steps)
     track = res.fusion.track() if fused else res.track
     truth = truth_of(rec)
+    map_lines, map_props, plot_kw, raw = [], {}, {}, None
+    if plan is not None:
+        raw = track
+        track, map_summary, map_lines, map_props = map_report(args, rec, plan, raw, truth)
+        from core.metrics import track_start
+
+        plot_kw = {"walls": plan.walls, "start_en": track_start(track), "track_label": "map-matched"}
     errs = truth_errors(track, truth, dr_track=res.track) if truth else {}
     summary = {**res.summary(), "mode": "handheld", "mode_reason": why}
+    if plan is not None:
+        summary["map"] = {**map_summary, "truth_without_map": truth_errors(raw, truth) if truth else {}}
     if not heading:
         summary.update(heading="none", final_east_m=None, final_north_m=None, start_to_end_m=None, labels=[])
     if gnss is not None:
@@ -753,14 +864,21 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     if profile is not None:
         lines.append(profile_line(profile, profile_path, args))
         summary["profile"] = {"path": str(profile_path), **profile.to_dict()}
-    lines += truth_lines(errs)
-    extra = track.point_properties() if fused else None
+    lines += map_lines + truth_lines(errs)
+    extra = track.point_properties() if fused and plan is None else None
+    if map_props:
+        extra = {**(extra or {}), **map_props}
     fsum, flines, per_step = floor_report(args, rec, track)
     if fsum is not None:
         summary["floors"] = fsum
         lines += flines
         extra = {**(extra or {}), "floor": per_step}
     others, fixes = {}, None
+    if raw is not None and len(track):  # the raw track from the same start, for comparison
+        from core.metrics import track_start
+
+        (ms_e, ms_n), (r_e, r_n) = track_start(track), track_start(raw)
+        others["without the map"] = (np.asarray(raw.east_m) + ms_e - r_e, np.asarray(raw.north_m) + ms_n - r_n)
     if fused and outs.get("plot"):
         others["dead reckoning only"] = (res.track.east_m, res.track.north_m)
         fx = [f for f in res.fusion.fixes if f.east_m == f.east_m]
@@ -784,7 +902,7 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     written = plotted + _write_outputs(args, outs, rec, track, res.fusion.origin_lat_lon if fused else None, extra,
                              f"fused with GPS ({gnss.name})" if fused else "", others, fixes, sub,
                              res.fusion.fixes if res.fusion is not None else None,
-                             truth_plot(truth, errs, track, bool(fused)) if errs else None)
+                             {**(truth_plot(truth, errs, track, bool(fused)) if errs else {}), **plot_kw} or None)
     if profile is not None and save_back and res.fusion is not None:
         from core.gnss import profile_after
         new = profile_after(profile, pipeline.gnss)
@@ -1253,6 +1371,16 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--plot", metavar="PNG", help="draw the track to a PNG file (needs matplotlib)")
     r.add_argument("--origin", type=_parse_origin, metavar="LAT,LON",
                    help="geographic start point for GeoJSON/GPX (default: first GPS fix, else 0,0)")
+    r.add_argument("--map", metavar="PLAN",
+                   help="a floor plan for the particle filter (core.indoor): our GeoJSON, a Microsoft floor "
+                        "folder (floor_info.json) or an IPIN floormaps folder (with --map-floor); the summary, "
+                        "exports and plot give the map-matched track, the raw one beside it")
+    r.add_argument("--map-floor", type=int, default=None, metavar="N", help="--map: the IPIN floor number")
+    r.add_argument("--start", type=_parse_start, default=None, metavar="E,N[,SD]",
+                   help="--map: where the walk starts, in the plan's metres (default: the recording's first "
+                        "landmark, else its first good GPS fix)")
+    r.add_argument("--fix", type=_parse_fix, action="append", default=None, metavar="T_S,E,N[,SD]",
+                   help="--map: a position fix, seconds from the start and plan metres (an 'I am here'); repeatable")
     r.add_argument("--height", type=_height_m, metavar="M",
                    help="walker's body height in metres (1.0-2.5), as in the app's profile; only the weinberg_bp "
                         "stride model uses it, the other shipped models ignore it (the summary says so)")

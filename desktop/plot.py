@@ -22,9 +22,11 @@ def label_groups(points, radius_m: float = 0.5) -> list:
 
 def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, landmarks_en=None,
                others: dict | None = None, subtitle: str = "", fixes=None, landmarks_label: str = "landmarks",
-               reference=None) -> None:
+               reference=None, walls=None, start_en=(0.0, 0.0), track_label: str = "PDR") -> None:
     """Write a PNG of the track (East/North metres, equal axes) with start and end marked.
 
+    ``walls``: optional (k, 4) wall segments ``x0, y0, x1, y1`` of a floor plan, drawn under everything;
+    ``start_en``: where the track starts (the origin, or a map-matched track's start in plan metres).
     ``truth_en``: optional (n, 2) reference path; ``landmarks_en``: optional (k, 2)
     points; ``others``: optional ``{label: (east array, north array)}`` of other tracks;
     ``fixes``: optional ``(east, north, accepted)`` GPS fixes (used ones filled, rejected ones hollow);
@@ -39,8 +41,13 @@ def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, lan
         raise RuntimeError("plots need matplotlib: pip install matplotlib (or the 'desktop' extra)") from e
 
     fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
-    e = np.concatenate([[0.0], np.asarray(track.east_m, float)])
-    n = np.concatenate([[0.0], np.asarray(track.north_m, float)])
+    if walls is not None and len(walls):
+        from matplotlib.collections import LineCollection
+
+        w = np.asarray(walls, float).reshape(-1, 2, 2)
+        ax.add_collection(LineCollection(w, colors="0.55", linewidths=0.5, zorder=0, label="walls (floor plan)"))
+    e = np.concatenate([[float(start_en[0])], np.asarray(track.east_m, float)])
+    n = np.concatenate([[float(start_en[1])], np.asarray(track.north_m, float)])
     if truth_en is not None:
         t = np.asarray(truth_en, float)
         ax.plot(t[:, 0], t[:, 1], "-", color="0.6", lw=3, alpha=0.6, label="true path")
@@ -64,7 +71,7 @@ def plot_track(path: str, track, *, title: str = "PDR track", truth_en=None, lan
                     label=f"GPS fixes not used ({int((~ok).sum())})")
     for label, (oe, on) in (others or {}).items():
         ax.plot(oe, on, "-", lw=1, alpha=0.8, label=label)
-    ax.plot(e, n, "-", color="tab:blue", lw=1.6, label=f"PDR ({len(track)} steps)")
+    ax.plot(e, n, "-", color="tab:blue", lw=1.6, label=f"{track_label} ({len(track)} steps)")
     ax.plot(e[1:], n[1:], ".", color="tab:blue", ms=2)
     ax.plot(e[0], n[0], "o", color="tab:green", ms=9, label="start")
     ax.plot(e[-1], n[-1], "X", color="tab:red", ms=9, label="end")

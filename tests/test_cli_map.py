@@ -1,0 +1,57 @@
+"""``pdr replay --map``: the floor-plan particle filter from the command line (core.indoor)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from core.indoor import FloorPlan, read_geojson, write_geojson
+from core.recording import Recording, make_stream, write_recording
+from desktop.cli import main
+from desktop.simulator import simulate_walk
+
+#: an L-shaped corridor, 2 m wide: 30 m East, then 20 m North
+CORRIDOR = [[-1.0, -1.0], [31.0, -1.0], [31.0, 21.0], [29.0, 21.0], [29.0, 1.0], [-1.0, 1.0], [-1.0, -1.0]]
+
+
+@pytest.fixture(scope="module")
+def walk_and_plan(tmp_path_factory):
+    d = tmp_path_factory.mktemp("map")
+    plan = FloorPlan(areas=[(np.array(CORRIDOR), [])], name="corridor")
+    write_geojson(plan, d / "plan.geojson")
+    w = simulate_walk(((0.0, 0.0), (30.0, 0.0), (30.0, 20.0)), seed=12, still_start_s=1.5, still_end_s=1.5,
+                      phone_yaw_offset_deg=12.0)
+    rec = w.recording
+    path = d / "walk.csv.gz"
+    write_recording(str(path), Recording(dict(rec.streams), device=rec.device, metadata=rec.metadata))
+    return str(path), str(d / "plan.geojson"), w
+
+
+def test_the_map_keeps_the_track_in_the_corridor(walk_and_plan, tmp_path, capsys):
+    path, plan_path, w = walk_and_plan
+    out = tmp_path / "track.geojson"
+    assert main(["replay", path, "--map", plan_path, "--start", "0,0,0.5", "--json", "--geojson", str(out),
+                 "--no-profile"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    m = s["map"]
+    assert m["outside_walkable"] == 0 and m["steps"] > 50
+    end = w.truth.end_en_m if hasattr(w.truth, "end_en_m") else (30.0, 20.0)
+    gj = json.loads(out.read_text())
+    pts = [f for f in gj["features"] if f["geometry"]["type"] == "Point"]
+    last = pts[-1]["properties"]
+    assert math.hypot(last["east_m"] - end[0], last["north_m"] - end[1]) < 3.0  # the map-matched end
+    assert {"raw_east_m", "raw_north_m", "spread_m"} <= set(last)
+    raw_end = (last["raw_east_m"], last["raw_north_m"])
+    assert math.hypot(raw_end[0] - end[0], raw_end[1] - end[1]) > math.hypot(last["east_m"] - end[0],
+                                                                             last["north_m"] - end[1])
+    plan = read_geojson(plan_path)
+    assert plan.is_walkable(np.array([[p["properties"]["east_m"], p["properties"]["north_m"]] for p in pts])).all()
+
+
+def test_map_without_a_start_is_refused_before_the_run(walk_and_plan, capsys):
+    path, plan_path, _ = walk_and_plan
+    assert main(["replay", path, "--map", plan_path]) == 2
+    assert "needs a start" in capsys.readouterr().err
