@@ -343,6 +343,11 @@ def test_xio_session_folder_rate_units_and_lookalikes(tmp_path):
     half = tmp_path / "half.csv"  # no accelerometer: not x-io
     half.write_text("Time (s),Gyroscope X (deg/s),Gyroscope Y (deg/s),Gyroscope Z (deg/s)\n" + "0,1,2,3\n" * 5)
     assert _detect_or_none(str(half)) != XIO
+    loops = tmp_path / "loops"  # x-io CSVs side by side: a folder of recordings, not one export
+    loops.mkdir()
+    for k in range(2):
+        (loops / f"walk{k}.csv").write_text(NGIMU_HEAD + "\n" + rows)
+    assert _detect_or_none(str(loops)) is None and detect_format(str(loops / "walk0.csv")) == XIO
 
 
 def _detect_or_none(path: str):

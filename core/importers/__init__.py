@@ -187,6 +187,8 @@ def _detect_fileset(fs: FileSet) -> str | None:
     votes = {SENSORLOGGER: 0, PHYPHOX: 0}
     for n in csvs[:40]:
         head = fs.head(n, 2048)
+        if _xio.looks_like_csv(head):
+            continue  # x-io CSVs beside each other are recordings, not one export ("Time (s)" is phyphox's too)
         if _sl.looks_like_csv(head):
             votes[SENSORLOGGER] += 1
         elif _phy.looks_like_csv(head):
