@@ -7,19 +7,19 @@ What the reader returns (one :class:`IpolTrial` per ``<subject>-<trial>.json``):
 
 * the recording of the **lower-back** sensor (``*_lb.txt.gz``, 5th lumbar
   vertebra, the placement nearest to a belt-carried phone), placement
-  ``"waist"``.  Streams ``acc`` (m/s^2), ``gyro`` (rad/s) and ``mag``.
-  The axes are the XSens sensor axes, *not* the Android device axes (the
-  reader does not know how the sensor was strapped); the step detector and
-  the stride features only use the acceleration norm, which does not care.
-  The magnetometer is in XSens normalised units (1 = the field at the XSens
-  calibration site); it is scaled by :data:`NOMINAL_FIELD_UT` to look like
-  microtesla, good enough for a relative heading, not for an absolute field.
-* time: ``t_ns = PacketCounter * 10 ms`` (the sensors sample at 100 Hz).
-  The files drop packets (gaps of 1-5 samples); the recording keeps the real
-  counters, so the gaps stay gaps.  The annotations are sample indices into
-  the *gap-filled* signal that starts at the file's first counter (that is
-  how the authors' ``import_data.load_XSens`` reads the files), so
-  index ``i`` is at ``(first_counter + i) * 10 ms``.
+  ``"waist"``, read by the importer :mod:`core.importers.xsens` (the file
+  format, the clock ``t_ns = PacketCounter * 10 ms`` and the units are
+  documented there; this reader reads the one file, without the feet).
+  Streams ``acc`` (m/s^2), ``gyro`` (rad/s) and ``mag``.  The axes are the
+  XSens sensor axes, *not* the Android device axes (the step detector and
+  the stride features only use the acceleration norm, which does not care).
+  The magnetometer is in XSens normalised units, scaled by the importer's
+  nominal :data:`NOMINAL_FIELD_UT` to look like microtesla (relative
+  headings only).  The files drop packets (gaps of 1-5 samples); the
+  recording keeps the real counters, so the gaps stay gaps.  The annotations
+  are sample indices into the *gap-filled* signal that starts at the file's
+  first counter (that is how the authors' ``import_data.load_XSens`` reads
+  the files), so index ``i`` is at ``(first_counter + i) * 10 ms``.
 * ground truth: footstep events ([foot-off, foot-strike] per step, left and
   right), trial and U-turn boundaries, subject height/weight/age/sex.
   ``step_t_ns`` are the foot strikes (ends of the events), sorted.
@@ -46,14 +46,15 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.datasets.base import Trial
-from core.conventions import ACC, GYRO, MAG
-from core.recording import Recording, make_stream
+from core.importers import xsens
+from core.importers.xsens import read_xsens
+from core.recording import Recording
 
 NAME = "ipol_healthy_gait_xsens"
 
 SAMPLE_PERIOD_NS = 10_000_000  #: 100 Hz
-#: XSens normalised magnetic units -> uT (about the total field near Paris; only used for relative heading)
-NOMINAL_FIELD_UT = 47.0
+#: XSens normalised magnetic units -> uT (the importer's nominal field; only used for relative heading)
+NOMINAL_FIELD_UT = xsens.NOMINAL_FIELD_UT
 #: nominal length of each straight leg of the protocol (m)
 LEG_LENGTH_M = 10.0
 
@@ -75,21 +76,6 @@ def available(root: Path) -> bool:
     return (Path(root) / NAME / "GaitData").is_dir()
 
 
-def _read_sensor(path: Path) -> np.ndarray:
-    """The numeric table of one XSens file: PacketCounter, Acc xyz, Gyr xyz, Mag xyz."""
-    with gzip.open(path, "rt") as fh:
-        first = fh.readline()
-        if "100 Hz" not in first:
-            raise ValueError(f"{path}: expected 'Acquisition frequency: 100 Hz', got {first.strip()!r}")
-        header = fh.readline().split()
-        if header[:4] != ["PacketCounter", "Acc_X", "Acc_Y", "Acc_Z"]:
-            raise ValueError(f"{path}: unexpected header {header}")
-        data = np.loadtxt(fh, ndmin=2)
-    if data.shape[1] != 10:
-        raise ValueError(f"{path}: expected 10 columns, got {data.shape[1]}")
-    return data
-
-
 def first_counter(path: Path) -> int:
     """The first PacketCounter of a sensor file (the origin of the annotation indices)."""
     with gzip.open(path, "rt") as fh:
@@ -99,21 +85,10 @@ def first_counter(path: Path) -> int:
 
 
 def load_recording(path: Path) -> Recording:
-    """The lower-back (or any) XSens file as a :class:`Recording` (see the module docstring)."""
-    data = _read_sensor(Path(path))
-    counter = data[:, 0].astype(np.int64)
-    keep = np.concatenate([[True], np.diff(counter) > 0])  # drop repeats / backwards counters if any
-    data, counter = data[keep], counter[keep]
-    t_ns = counter * SAMPLE_PERIOD_NS
-    streams = {
-        ACC: make_stream(ACC, t_ns, data[:, 1:4]),
-        GYRO: make_stream(GYRO, t_ns, data[:, 4:7]),
-        MAG: make_stream(MAG, t_ns, data[:, 7:10] * NOMINAL_FIELD_UT,
-                         note=f"XSens normalised units x {NOMINAL_FIELD_UT} (nominal, not a measured field)"),
-    }
-    return Recording(streams=streams, device={"model": "XSens MTw Awinda", "placement": "lower back (L5)",
-                                              "axes": "XSens sensor axes, not Android device axes"},
-                     metadata={"dataset": NAME}, source=str(path))
+    """The lower-back (or any) XSens file alone as a :class:`Recording` (see the module docstring)."""
+    rec = read_xsens(str(path), warn=False, with_siblings=False)
+    rec.metadata["dataset"] = NAME
+    return rec
 
 
 def _finite(x):

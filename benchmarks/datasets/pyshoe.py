@@ -4,6 +4,10 @@ Folder ``pyshoe_vicon/processed/`` under the data root: one
 ``<YYYY-MM-DD-hh-mm-ss>.mat.gz`` per trial (MicroStrain 3DM-GX3-25 on the
 foot, 200 Hz, VICON position at every sample).
 
+The files are read by the importer :mod:`core.importers.pyshoe` (its MAT-file
+reader :mod:`core.importers.matv5` needs numpy and zlib only); the ground truth
+that is part of a file comes out of the imported recording into the trial.
+
 What the reader returns (one :class:`PyshoeTrial` per file):
 
 * a recording whose primary device is the foot IMU (``acc``, ``gyro``;
@@ -12,14 +16,13 @@ What the reader returns (one :class:`PyshoeTrial` per file):
   ``(0, 0, -g)`` at rest, which *is* the specific force in a z-down frame),
   not the Android device axes; the foot filter does not need them.
 * ``truth_t_ns``, ``truth_pos_m`` (n, 3): the VICON foot position at every
-  sample (metres), turned into a local ENU frame.  The files' ``gt`` has z up
-  (the foot rises in the swing, the floor is near z = 0) but its horizontal
-  axes are mirrored against a right-handed z-up frame: read as ``(x, y, z)``
-  our track fits only as a mirror image (checked on the first tuning trial),
-  so ENU is ``(y, x, z)``.
+  sample (metres), in a local ENU frame: the importer's ``posi`` stream (the
+  files' ``gt`` has mirrored horizontal axes, so ENU is ``(y, x, z)``; see
+  the importer), taken out of the recording.
 * ``zv_reference``: the VICON-derived zero-velocity labels (1 = stationary)
   shipped with the file (``zv_vicon_opt``), and the other detectors' labels
-  ``zv_labels`` (``shoe``, ``ared``, ``amvd``, ``mbgtd``, ``vicon``).
+  ``zv_labels`` (``shoe``, ``ared``, ``amvd``, ``mbgtd``, ``vicon``): the
+  importer's ``zero_velocity`` stream, taken out of the recording.
 * ``pyshoe_errors_m``: PyShoe's own error per detector (``trial_error``, in
   the order shoe, ared, amvd, mbgtd, vicon), and its best detector and error.
   **Each is at that detector's per-trial optimal threshold** (``G_<det>_opt``,
@@ -37,14 +40,11 @@ The 3DM-GX3's gyroscope readings lag its accelerometer's in these files: the
 benchmark runs the navigator with ``gyro_delay_s = GYRO_DELAY_S`` (chosen on
 the tuning split from 0, 2.5, 5, 7.5, 10 ms; without it the stance positions
 climb by about 1 cm per stride).
-
-Reading needs scipy (benchmark side only).
 """
 
 from __future__ import annotations
 
-import gzip
-import io
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -52,12 +52,13 @@ import numpy as np
 
 from benchmarks.datasets.base import Trial
 from benchmarks.foot_splits import pyshoe_is_walking, pyshoe_split
-from core.conventions import ACC, GYRO
-from core.recording import Recording, make_stream
+from core.importers._common import POSI, ZERO_VELOCITY
+from core.importers.pyshoe import DETECTORS, read_pyshoe
+from core.recording import Recording
 
 NAME = "pyshoe_vicon"
 #: order of the detectors in the files' ``trial_error``
-PYSHOE_DETECTORS = ("shoe", "ared", "amvd", "mbgtd", "vicon")
+PYSHOE_DETECTORS = DETECTORS
 #: the gyroscope's lag behind the accelerometer (s), chosen on the tuning split (see above)
 GYRO_DELAY_S = 0.005
 
@@ -78,34 +79,26 @@ def available(root: Path) -> bool:
     return (Path(root) / NAME / "processed").is_dir()
 
 
-def _load_mat(path: Path) -> dict:
-    import scipy.io
-
-    with gzip.open(path, "rb") as fh:
-        return scipy.io.loadmat(io.BytesIO(fh.read()))
+def _nan(x) -> float:
+    return float(x) if x is not None else math.nan  # the importer's JSON-safe metadata has None for nan
 
 
 def _fill(trial: "PyshoeTrial", path: Path) -> Recording:
-    d = _load_mat(path)
-    ts = np.asarray(d["ts"], dtype=float).ravel()
-    t_ns = np.round(ts * 1e9).astype(np.int64)
-    imu = np.asarray(d["imu"], dtype=float)
-    trial.truth_t_ns = t_ns
-    gt = np.asarray(d["gt"], dtype=float)
-    trial.truth_pos_m = np.column_stack([gt[:, 1], gt[:, 0], gt[:, 2]])  # mirrored horizontal axes -> ENU
-    trial.zv_labels = {k[3:-4]: np.asarray(d[k]).ravel().astype(bool) for k in d if k.startswith("zv_")}
+    rec = read_pyshoe(str(path), warn=False)
+    posi = rec.streams.pop(POSI)
+    zv = rec.streams.pop(ZERO_VELOCITY, None)
+    meta = rec.metadata
+    trial.truth_t_ns = posi.t_ns.copy()
+    trial.truth_pos_m = np.asarray(posi.values, dtype=float).copy()
+    trial.zv_labels = {c: zv.values[:, j].astype(bool) for j, c in enumerate(zv.columns)} if zv is not None else {}
     trial.zv_reference = trial.zv_labels.get("vicon")
-    trial.pyshoe_thresholds = {k[2:-4]: float(np.asarray(d[k]).ravel()[0]) for k in d
-                               if k.startswith("G_") and k.endswith("_opt")}
-    err = np.asarray(d["trial_error"], dtype=float).ravel()
-    trial.pyshoe_errors_m = dict(zip(PYSHOE_DETECTORS, err.tolist()))
-    trial.pyshoe_best = (str(np.asarray(d["best_detector"]).ravel()[0]).strip(),
-                         float(np.asarray(d["best_error"]).ravel()[0]))
-    streams = {ACC: make_stream(ACC, t_ns, imu[:, 0:3], note="accelerometer, sensor axes (z down)"),
-               GYRO: make_stream(GYRO, t_ns, imu[:, 3:6], note="gyroscope, sensor axes (z down)")}
-    return Recording(streams, device={"model": "LORD MicroStrain 3DM-GX3-25", "placement": "foot",
-                                      "axes": "sensor axes, z down"},
-                     metadata={"dataset": NAME, "trial": trial.name}, source=str(path))
+    trial.pyshoe_thresholds = dict(meta.get("pyshoe_thresholds", {}))
+    trial.pyshoe_errors_m = {k: _nan(v) for k, v in meta.get("pyshoe_errors_m", {}).items()}
+    best = meta.get("pyshoe_best") or ["", None]
+    trial.pyshoe_best = (str(best[0]), _nan(best[1]))
+    meta["dataset"] = NAME
+    meta["trial"] = trial.name
+    return rec
 
 
 def trials(root: Path) -> list[PyshoeTrial]:

@@ -2,8 +2,8 @@
 
 Folder ``trundlewheel_distance/`` under the data root (see its README.md).
 Only the two **raw** logs (``raw/*.csv.gz``, about 400 m each, one user) are
-usable for step detection; the authors' 1 Hz "conditioned" files are too
-coarse and are not read here.
+usable for step detection; the authors' 1 Hz "conditioned" files (which the
+importer reads too, for ``pdr replay``) are too coarse and are not trials here.
 
 The raw logs are read by the importer :mod:`core.importers.trundle` (the
 format, its clock and the W3C axes are documented there): ``acc`` (W3C

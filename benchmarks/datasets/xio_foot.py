@@ -11,14 +11,17 @@
   beyond the described shapes: returned for the mode detection and as
   qualitative tracks, not scored.
 
-Recordings: the foot IMU is the primary device (``acc`` m/s^2 with
-``g = 9.80665``, ``gyro`` rad/s, ``mag`` uT = 100 x G).  Sensor axes, not
-Android axes.  Split: report only (:mod:`benchmarks.foot_splits`).
+The files are read by the importer :mod:`core.importers.xio` (the format,
+its clock and units are documented there): the foot IMU is the primary
+device (``acc`` m/s^2 with ``g = 9.80665``, ``gyro`` rad/s, ``mag`` uT = 100 x
+G), sensor axes, not Android axes.  The reader adds what the dataset says and
+the files do not: the IMU is on the foot (``device["placement"]``), the
+x-IMU rate (256 Hz), and the loops' ground truth (the start is the end).
+Split: report only (:mod:`benchmarks.foot_splits`).
 """
 
 from __future__ import annotations
 
-import gzip
 import math
 from pathlib import Path
 
@@ -26,8 +29,8 @@ import numpy as np
 
 from benchmarks.datasets.base import Trial
 from benchmarks.foot_splits import xio_split
-from core.conventions import ACC, GYRO, MAG, STANDARD_GRAVITY_M_S2
-from core.recording import Recording, make_stream, repair_recording
+from core.importers.xio import read_xio
+from core.recording import Recording
 
 NAME = "xio_foot_imu"
 XIMU_RATE_HZ = 256.0
@@ -37,31 +40,19 @@ def available(root: Path) -> bool:
     return (Path(root) / NAME).is_dir()
 
 
-def _table(path: Path) -> np.ndarray:
-    with gzip.open(path, "rt") as fh:
-        fh.readline()
-        return np.loadtxt(fh, delimiter=",", ndmin=2)
+def _read(path: Path, **kw) -> Recording:
+    rec = read_xio(str(path), warn=False, **kw)
+    rec.device = {**rec.device, "placement": "foot"}
+    rec.metadata["dataset"] = NAME
+    return rec
 
 
 def load_ngimu(path: Path) -> Recording:
-    d = _table(path)
-    t_ns = np.round(d[:, 0] * 1e9).astype(np.int64)
-    gyro = np.radians(d[:, 1:4])
-    acc = d[:, 4:7] * STANDARD_GRAVITY_M_S2
-    rec = Recording({ACC: make_stream(ACC, t_ns, acc), GYRO: make_stream(GYRO, t_ns, gyro)},
-                    device={"model": "x-io NGIMU", "placement": "foot", "axes": "sensor axes"},
-                    metadata={"dataset": NAME}, source=str(path))
-    return repair_recording(rec, warn=False)
+    return _read(path)
 
 
 def load_ximu(path: Path) -> Recording:
-    d = _table(path)
-    t_ns = np.round(np.arange(len(d)) * (1e9 / XIMU_RATE_HZ)).astype(np.int64)
-    return Recording({ACC: make_stream(ACC, t_ns, d[:, 4:7] * STANDARD_GRAVITY_M_S2),
-                      GYRO: make_stream(GYRO, t_ns, np.radians(d[:, 1:4])),
-                      MAG: make_stream(MAG, t_ns, d[:, 7:10] * 100.0)},
-                     device={"model": "x-io x-IMU", "placement": "foot", "axes": "sensor axes"},
-                     metadata={"dataset": NAME}, source=str(path))
+    return _read(path, ximu_rate_hz=XIMU_RATE_HZ)
 
 
 def trials(root: Path) -> list[Trial]:
