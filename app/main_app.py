@@ -17,6 +17,14 @@ recording and saves the settings; live tracking in the service goes on.
 ``on_resume`` restarts what was paused.  ``on_stop`` leaves the service
 recording (the next start of the UI attaches to it); a replay is finished.
 
+Floor plan (issue #16, :mod:`app.indoor`)
+    Settings > Floor plan > Choose picks our GeoJSON file or a Microsoft floor folder (remembered in
+    ``settings.json``); its walls are drawn under the track.  **Here** (the track screen's button, enabled
+    with a plan) arms one tap: the first places the user (the particle filter starts there), every later one
+    is a fix of about 2 m.  A replay whose recording has landmarks in plan metres starts at the first one.
+    Live, the filter runs in the tracking service (it reads the plan from the settings); in a replay, in the
+    UI's session.
+
 Android 15/16 (target API 36): the layout is padded by the system-bar and
 cutout insets (edge-to-edge is enforced), and back comes through an
 ``OnBackInvokedCallback`` registered while Settings or Health is shown
@@ -46,6 +54,7 @@ from core.pdr.stride_models import StrideModelError
 
 import app.track_view  # noqa: F401 - registers TrackView for the kv file
 from app import android_platform as droid
+from app.indoor import PLAN_PATTERNS
 from app.service import InProcessService, ServiceClient, ServiceSession, service_answers, socket_path
 from app.session import Session, load_any_recording
 from app.settings import RATE_CHOICES, SETTINGS_FILE, STRIDE_MODEL_CHOICES, TRACKING_MODES, Settings
@@ -133,6 +142,8 @@ class PDRApp(App):
     calibrating = BooleanProperty(False)
     calib_text = StringProperty("")
     calib_message = StringProperty("")
+    plan_text = StringProperty("none")  # the floor plan chosen (Settings)
+    has_plan = BooleanProperty(False)
 
     def __init__(self, *, recording: str | None = None, speed: str | None = None, out_dir: str | None = None,
                  data_dir: str | None = None, exit_at_end: bool = False, screenshot: str | None = None,
@@ -160,6 +171,8 @@ class PDRApp(App):
         self.data_dir_problem = ""
         self.paused_count = 0
         self.resumed_count = 0
+        self.plan = None  # the floor plan (core.indoor.FloorPlan) of the settings, None: none
+        self.plan_name = ""
 
     # -- build / settings ------------------------------------------------------------
 
@@ -199,6 +212,11 @@ class PDRApp(App):
         from kivy.factory import Factory  # noqa: PLC0415
 
         root = Factory.PDRRoot()
+        problem = self._load_plan()
+        if problem:
+            self.warning = "; ".join(x for x in (self.warning, problem) if x)
+        root.ids.track.set_plan(self.plan)
+        root.ids.track.bind(on_here=lambda tv, e, n: self.here(e, n))
         Window.bind(on_keyboard=self._on_key, on_flip=self._on_flip, on_resize=self._on_resize)
         root.ids.screens.bind(current=self._screen_changed)
         jn = self.jnius
@@ -314,6 +332,80 @@ class PDRApp(App):
         self.tracking, self.tracking_reason = mode, why
         self.steps_name = "strides" if mode == "foot" else "steps"
         return self.settings.pipeline_factory(recording)
+
+    # -- the floor plan -------------------------------------------------------------------
+
+    def _load_plan(self) -> str:
+        """Read the plan the settings name (app.indoor.load_plan); returns why it could not ("" when it could)."""
+        self.plan, self.plan_name, problem = self.settings.load_floor_plan()
+        self.has_plan = self.plan is not None
+        self.plan_text = self.plan_name or ("none" if not self.settings.floor_plan else "not readable")
+        return problem
+
+    def choose_plan(self, path: str) -> bool:
+        """Use the floor plan at ``path`` ("" for none): remembered in the settings, drawn, and given to the
+        running session (placed anew).  False, with the reason in the settings message, if it cannot be read."""
+        old = self.settings.floor_plan
+        self.settings.floor_plan = str(path or "")
+        problem = self._load_plan()
+        if problem:
+            self.settings.floor_plan = old
+            self._load_plan()
+            self.settings_message = problem
+            return False
+        self._save_settings_quietly()
+        self.track_view.set_plan(self.plan)
+        ses = self.session
+        if ses is not None:
+            ses.set_plan(self.plan, self.plan_name)
+        self.settings_message = (f"floor plan: {self.plan_name}" + (" – press Here on the track, then tap where "
+                                 "you are" if self.plan is not None else "") if path else "no floor plan")
+        self._update_ui(force=True)
+        return True
+
+    def here(self, east_m: float, north_m: float) -> None:
+        """The user's tap in Here mode (plan metres): the start of the map matching, later a fix."""
+        ses = self.session
+        if ses is None:
+            self.message = "start tracking (Live) or a replay first, then place yourself"
+            return
+        try:
+            ses.here(east_m, north_m)
+        except (ValueError, OSError) as e:
+            self.message = f"not placed: {e}"
+            return
+        self.track_view.follow = True
+        self.message = f"you are at {east_m:.1f}, {north_m:.1f} m on {self.plan_name}"
+        self._update_ui(force=True)
+
+    def show_plan_chooser(self):
+        """Choose a floor plan: our GeoJSON file, or a Microsoft floor folder (select the folder)."""
+        from kivy.uix.label import Label  # noqa: PLC0415
+
+        start = os.path.dirname(self.settings.floor_plan) if self.settings.floor_plan else self.out_dir()
+        chooser = FileChooserListView(path=start if os.path.isdir(start) else self.out_dir(),
+                                      filters=PLAN_PATTERNS, dirselect=True)
+        box = BoxLayout(orientation="vertical")
+        box.add_widget(Label(text="a floor-plan GeoJSON, or a Microsoft floor folder (floor_info.json)",
+                             size_hint_y=None, height="22dp", font_size="11sp", color=(0.7, 0.7, 0.7, 1),
+                             shorten=True))
+        box.add_widget(chooser)
+        buttons = BoxLayout(size_hint_y=None, height="44dp")
+        popup = Popup(title="Floor plan", content=box, size_hint=(0.95, 0.9))
+
+        def _use(path):
+            popup.dismiss()
+            self.choose_plan(path)
+
+        for text, fn in (("Use", lambda *_: chooser.selection and _use(chooser.selection[0])),
+                         ("No plan", lambda *_: _use("")), ("Cancel", popup.dismiss)):
+            b = Button(text=text)
+            b.bind(on_release=fn)
+            buttons.add_widget(b)
+        box.add_widget(buttons)
+        popup.open()
+        self.plan_chooser = chooser  # for tests and scripts
+        return popup
 
     @property
     def track_view(self):
@@ -431,7 +523,9 @@ class PDRApp(App):
             self.warning = f"cannot replay {os.path.basename(path)}: {e}"
             return False
         self._replay_recording = rec  # a new track of this replay needs it for the tracking mode
-        self._replace_session(Session(source, pipeline_factory=factory), "replay", path)
+        self._replace_session(Session(source, pipeline_factory=factory, plan=self.plan, plan_name=self.plan_name),
+                              "replay", path)
+        self._start_at_landmark(rec)
         if rec.repairs:
             self.warning = f"{len(rec.repairs)} repair(s) while reading: " + rec.repairs[0]
         self.message = (f"replaying {os.path.basename(path)} ({rec.duration_s:.0f} s)"
@@ -439,6 +533,17 @@ class PDRApp(App):
         self.session.start()
         self.playing = True
         return True
+
+    def _start_at_landmark(self, rec) -> None:
+        """A replay on a plan starts the map matching at the recording's first landmark in plan metres (as
+        ``pdr replay --map``); without one the user places it (Here)."""
+        if self.plan is None:
+            return
+        from core.metrics import truth_of  # noqa: PLC0415
+
+        lm = truth_of(rec).landmarks
+        if lm is not None and lm.origin_lat_lon is None and len(lm.t_ns):
+            self.session.start_map_at(int(lm.t_ns[0]), float(lm.east_m[0]), float(lm.north_m[0]))
 
     def start_live(self) -> bool:
         """Live tracking: in the tracking service (the phone's foreground service, a thread on the desktop);
@@ -459,7 +564,8 @@ class PDRApp(App):
                 session = self._start_service_session(path, meta)
             else:
                 source = make_live_source(rate_hz=self.settings.live_rate_hz())
-                session = Session(source, pipeline_factory=factory, record_path=path, metadata=meta)
+                session = Session(source, pipeline_factory=factory, record_path=path, metadata=meta, plan=self.plan,
+                                  plan_name=self.plan_name)
         except Exception as e:  # noqa: BLE001 - no sensors, no jnius, the service could not start
             self.warning = f"no sensors: {e}"
             return False
@@ -765,6 +871,7 @@ class PDRApp(App):
         if track_changed or force:
             tv.set_track(ses.track_east, ses.track_north)
         tv.set_gps(ses.gps_overlay())  # copies only what is new
+        tv.set_map(ses.map_overlay())
         summ = ses.summary()
         tv.set_heading(summ["heading_rad"])
         self.steps_text = str(summ["steps"])
@@ -840,7 +947,14 @@ class PDRApp(App):
                "service": isinstance(ses, ServiceSession), "screen": self.root.ids.screens.current,
                "insets": list(self.insets), "padding": list(self.root.padding),
                "back_registered": bool(self.back_handler and self.back_handler.registered)}
+        out["plan"] = {"path": self.settings.floor_plan, "name": self.plan_name,
+                       "walls": int(sum(len(m.indices) for m in tv.wall_meshes) // 2)}
         if ses:
+            m = ses.map_overlay()
+            if m is not None:
+                out["map"] = {"east": list(m.east), "north": list(m.north), "position": m.position, "cov": m.cov,
+                              "raw_offset": m.raw_offset, "placed": m.placed, "text": m.text,
+                              "shows_map": tv.shows_map}
             out.update(summary={k: v for k, v in ses.summary().items() if k != "labels"},
                        track_east=ses.track_east, track_north=ses.track_north, events=ses.events_in,
                        errors=ses.errors, health=ses.health_text(), finished=ses.finished)

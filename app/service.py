@@ -32,7 +32,14 @@ IPC: a Unix-domain stream socket, one JSON object a line
     "fix": f}}`` -> ``{"ok": true, "track_id": k', "status": {...}, "track": [east, north], ...}``
     with the lists' new items (all of them when ``k != k'``: a new track, or a new UI).  Every
     other op (``pause``, ``resume``, ``record``, ``new_track``, ``calibration``, ``calibrate``,
-    ``export``, ``stop``) replies with the fresh ``status`` too.
+    ``export``, ``here``, ``plan``, ``stop``) replies with the fresh ``status`` too.
+
+The floor plan
+    The service reads the chosen plan from the settings at its start, on ``new_track`` and on ``plan``
+    (the user chose another: a new track id, so the UI fetches the map lists anew) and runs the particle
+    filter in its session (:class:`app.indoor.MapMatcher`), so the map matching goes on with the screen
+    off; ``here`` is the user's "I am here" (plan metres).  A poll brings the map-matched track's new points
+    (``"map"``) and the status the estimate, its covariance and the health line (``status["map"]``).
 
 Desktop
     :class:`InProcessService` runs the same :class:`TrackingService` and socket server in
@@ -143,8 +150,11 @@ class TrackingService:
         self.rate_hz = settings.live_rate_hz()
         source = self.source_factory(self.rate_hz)
         factory = self.config.get("pipeline_factory") or settings.pipeline_factory()
+        plan, name, problem = settings.load_floor_plan()
+        if problem:
+            self.message = problem
         self.session = Session(source, pipeline_factory=factory, record_path=self.config.get("record_path"),
-                               metadata=self.config.get("metadata"), clock=self.clock)
+                               metadata=self.config.get("metadata"), clock=self.clock, plan=plan, plan_name=name)
         self.session.start()
         if self.hooks is not None:
             self.hooks.acquire()
@@ -221,6 +231,7 @@ class TrackingService:
         summ = dict(ses.summary())
         summ["labels"] = list(summ["labels"])
         g = ses.gps_overlay()
+        m = ses.map_overlay()
         src = ses.source
         return {"summary": summ, "running": ses.running, "finished": ses.finished, "stopped": self.stopped,
                 "recording": ses.writer is not None, "record_path": ses.record_path,
@@ -233,14 +244,17 @@ class TrackingService:
                 "message": self.message,
                 "gps": None if g is None else {"n_fixes": g.n_fixes, "n_used": g.n_used, "cov_en_m2": g.cov_en_m2,
                                                "anchored": g.anchored, "fusion": g.fusion,
-                                               "last_verdict": g.last_verdict}}
+                                               "last_verdict": g.last_verdict},
+                "map": None if m is None else {"position": m.position, "cov": m.cov, "raw_offset": m.raw_offset,
+                                               "placed": m.placed, "text": m.text}}
 
     def _op_poll(self, ses, req):
         since = req.get("since") or {}
         if req.get("track_id") != self.track_id:
             since = {}
-        a, f, j, x = (int(since.get(k, 0)) for k in ("track", "fused", "fused_source", "fix"))
-        return {"track": [ses.track_east[a:], ses.track_north[a:]],
+        a, f, j, x, m = (int(since.get(k, 0)) for k in ("track", "fused", "fused_source", "fix", "map"))
+        mm = ses.map
+        return {"map": [mm.east[m:], mm.north[m:]] if mm is not None else [[], []],"track": [ses.track_east[a:], ses.track_north[a:]],
                 "fused": [ses.fused_east[f:], ses.fused_north[f:], ses.fused_source[j:]],
                 "fixes": [ses.fix_east[x:], ses.fix_north[x:], ses.fix_hacc[x:], ses.fix_accepted[x:]]}
 
@@ -267,6 +281,8 @@ class TrackingService:
             ses.replace_source(self.source_factory(rate))
             self.rate_hz = rate
         ses.pipeline_factory = self.config.get("pipeline_factory") or settings.pipeline_factory()
+        plan, ses.plan_name, self.message = settings.load_floor_plan()
+        ses.plan = plan
         ses.reset_track()
         self.track_id += 1
         return {"rate_hz": rate}
@@ -288,6 +304,17 @@ class TrackingService:
         settings.save(self.settings_path)
         return {"scale": res.scale, "n_steps": res.n_steps, "model_distance_m": res.model_distance_m,
                 "warnings": list(res.warnings)}
+
+    def _op_here(self, ses, req):
+        ses.here(float(req["east"]), float(req["north"]))
+
+    def _op_plan(self, ses, req):
+        """The floor plan as saved now (the user chose another, or none): placed anew."""
+        plan, name, problem = self._settings().load_floor_plan()
+        ses.set_plan(plan, name)
+        self.message = problem
+        self.track_id += 1  # the UI fetches the lists anew (the map's are new)
+        return {"problem": problem}
 
     def _op_export(self, ses, req):
         return {"export": ses.export(req["out_dir"], req["basename"], raw_path=req.get("raw_path"))}
@@ -523,6 +550,7 @@ class ServiceSession:
         self.track_east, self.track_north = [], []
         self.fused_east, self.fused_north, self.fused_source = [], [], []
         self.fix_east, self.fix_north, self.fix_hacc, self.fix_accepted = [], [], [], []
+        self.map_east, self.map_north = [], []
 
     # -- talking to the service -----------------------------------------------------------------
 
@@ -542,7 +570,7 @@ class ServiceSession:
     def poll(self) -> list:
         """Fetch what is new; returns the indices of the new track points (steps)."""
         since = {"track": len(self.track_east), "fused": len(self.fused_east),
-                 "fused_source": len(self.fused_source), "fix": len(self.fix_east)}
+                 "fused_source": len(self.fused_source), "fix": len(self.fix_east), "map": len(self.map_east)}
         resp = self._request("poll", track_id=self.track_id, since=since)
         self.polls += 1
         if resp["track_id"] != self.track_id:
@@ -558,6 +586,9 @@ class ServiceSession:
         self.fused_source.extend(fs)
         for lst, new in zip((self.fix_east, self.fix_north, self.fix_hacc, self.fix_accepted), resp["fixes"]):
             lst.extend(new)
+        me, mn = resp.get("map", ([], []))
+        self.map_east.extend(me)
+        self.map_north.extend(mn)
         return list(range(n0, len(self.track_east)))
 
     def tick(self, budget_s: float | None = None, chunk: int | None = None) -> list:
@@ -600,6 +631,17 @@ class ServiceSession:
         return GpsOverlay(self.fused_east or [0.0], self.fused_north or [0.0], self.fused_source, self.fix_east,
                           self.fix_north, self.fix_hacc, self.fix_accepted, g["n_fixes"], g["n_used"], cov,
                           g["anchored"], g["fusion"], g["last_verdict"])
+
+    def map_overlay(self):
+        """The service's map matching (:class:`app.indoor.MapOverlay`), None without a plan."""
+        m = self._st("map")
+        if m is None:
+            return None
+        from app.indoor import MapOverlay  # noqa: PLC0415
+
+        cov = tuple(tuple(r) for r in m["cov"]) if m["cov"] is not None else None
+        return MapOverlay(self.map_east, self.map_north, tuple(m["position"]) if m["position"] else None, cov,
+                          tuple(m["raw_offset"]), bool(m["placed"]), m["text"])
 
     def health_text(self) -> str:
         return self._st("health", "")
@@ -651,6 +693,20 @@ class ServiceSession:
 
     def calibrate(self, known: str) -> dict:
         return self._request("calibrate", known=known)
+
+    def here(self, east_m: float, north_m: float) -> None:
+        """The user's "I am here" (plan metres), run by the service's particle filter."""
+        resp = self._request("here", east=float(east_m), north=float(north_m))
+        if not resp.get("ok"):
+            raise ValueError(resp.get("error", "not placed"))
+        self.poll()
+
+    def set_plan(self, plan=None, name: str = "") -> str:
+        """The service reads the floor plan saved in the settings again (``plan``, ``name``: the UI's copy,
+        not sent); returns why it could not use it ("" when it could)."""
+        resp = self._request("plan")
+        self.poll()
+        return resp.get("problem", "") or resp.get("error", "")
 
     def export(self, out_dir: str, basename: str, raw_path: str | None = None) -> dict:
         resp = self._request("export", out_dir=out_dir, basename=basename, raw_path=raw_path)

@@ -32,6 +32,15 @@ GPS fusion
     Fixes the fusion screened out (bad accuracy) carry no local position in their record;
     once the walk is anchored they are placed from their latitude/longitude, so the view can
     show them as rejected.
+
+Floor plan (issue #16)
+    A session given a :class:`core.indoor.FloorPlan` (``plan=``, or :meth:`Session.set_plan`) runs a
+    :class:`app.indoor.MapMatcher` (a :class:`core.indoor.ParticleFilter`) beside the tracker: it
+    starts at the user's "I am here" (:meth:`Session.here`, plan metres) or at a recording's landmark
+    (:meth:`Session.start_map_at`), every completed step goes to ``pf.update(step)``, and a later
+    "I am here" is a fix.  :meth:`Session.map_overlay` hands the view the map-matched track, the estimate
+    and its covariance; the health panel gets the filter's diagnostics; exports carry the map-matched
+    position per step beside the raw one.
 """
 
 from __future__ import annotations
@@ -50,6 +59,7 @@ from core.geodesy import geodetic_to_enu
 from core.recording import STREAM_ORDER, STREAM_SPECS
 
 from app.health import HealthMonitor
+from app.indoor import MapMatcher
 from app.recorder import BackgroundRecorder
 
 _RANK = {n: i for i, n in enumerate(STREAM_ORDER)}
@@ -147,8 +157,10 @@ class Session:
     def __init__(self, source, *, pipeline_factory: Callable, record_path: str | None = None,
                  record_streams: dict | None = None, device: dict | None = None, metadata: dict | None = None,
                  flush_interval_s: float = 0.5, reorder_window_ns: int = 50_000_000,
-                 clock: Callable[[], float] = time.monotonic, recorder_factory: Callable = BackgroundRecorder):
+                 clock: Callable[[], float] = time.monotonic, recorder_factory: Callable = BackgroundRecorder,
+                 plan=None, plan_name: str = ""):
         self.source = source
+        self.plan, self.plan_name = plan, plan_name
         self.pipeline_factory = pipeline_factory
         self.flush_interval_s = float(flush_interval_s)
         self.reorder_window_ns = int(reorder_window_ns)
@@ -195,6 +207,8 @@ class Session:
         self._fixes_used = 0
         # the barometer's floors (core.floors), beside the tracker: pressure events never reach the pipeline
         self.floors = FloorEstimator()
+        # the floor plan's particle filter (app.indoor), placed again on every new track
+        self.map = MapMatcher(self.plan, name=self.plan_name) if self.plan is not None else None
 
     # -- lifecycle ----------------------------------------------------------------
 
@@ -364,6 +378,8 @@ class Session:
             self.steps.append(s)
             self.track_east.append(float(s.east_m))
             self.track_north.append(float(s.north_m))
+            if self.map is not None:
+                self.map.add_step(s)
             new.append(s)
         fused = getattr(self.pipeline, "fused", ())
         for f in fused[len(self.fused_source):]:
@@ -413,6 +429,32 @@ class Session:
 
     def status(self):
         return self.pipeline.status()
+
+    # -- the floor plan ------------------------------------------------------------------------
+
+    def set_plan(self, plan, name: str = "") -> None:
+        """Use ``plan`` (a :class:`core.indoor.FloorPlan`, None: no plan) from now on; it is placed anew."""
+        self.plan, self.plan_name = plan, name
+        self.map = MapMatcher(plan, name=name, steps_before=len(self.steps)) if plan is not None else None
+        if self.map is not None:
+            self.map._raw_last = (self.track_east[-1], self.track_north[-1])
+
+    def here(self, east_m: float, north_m: float) -> None:
+        """The user is at plan ``(east_m, north_m)`` now (the newest sensor time): the first time the map
+        matching starts there, later it is a fix (:meth:`app.indoor.MapMatcher.here`)."""
+        if self.map is None:
+            raise ValueError("no floor plan: choose one in Settings")
+        t = self._max_t if self._max_t is not None else (self.last_t_ns or 0)
+        self.map.here(t, east_m, north_m)
+
+    def start_map_at(self, t_ns: int, east_m: float, north_m: float, sd_m: float = 1.0) -> None:
+        """Start the map matching at a landmark (plan metres) at sensor time ``t_ns`` (a replay's first)."""
+        if self.map is not None:
+            self.map.start_at(t_ns, east_m, north_m, sd_m)
+
+    def map_overlay(self):
+        """The map matching for the view (:class:`app.indoor.MapOverlay`), None without a plan."""
+        return self.map.overlay() if self.map is not None else None
 
     # -- GPS fusion ---------------------------------------------------------------------------
 
@@ -487,6 +529,8 @@ class Session:
     def health_text(self) -> str:
         """The health panel: the sensor table, then what the tracker adds (the foot INS: stance, NIS, aid, sd)."""
         floor = [self.floor_text()] if self.floors.counters["readings"] else []
+        if self.map is not None:
+            floor.append(self.map.text())
         extra = getattr(self.pipeline, "health_lines", None)
         if extra is not None:  # the foot INS: no adaptive magnetometer to trust or not
             self.health.mag_trusted = None
@@ -543,6 +587,21 @@ class Session:
         return float(sum(s.length_m for s in self.calibration_steps()))
 
 
+def write_map_csv(path: str, session: Session) -> None:
+    """One row per step: the raw (dead-reckoned) position and the map-matched one (plan metres, empty before
+    the placement) with its spread."""
+    import csv  # noqa: PLC0415
+
+    mm = session.map
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(["t_ns", "raw_east_m", "raw_north_m", "mm_east_m", "mm_north_m", "mm_spread_m"])
+        for k, s in enumerate(session.steps):
+            mmv = [mm.step_east[k], mm.step_north[k], mm.step_spread[k]]
+            w.writerow([int(s.t_ns), f"{float(s.east_m):.3f}", f"{float(s.north_m):.3f}",
+                        *("" if not math.isfinite(v) else f"{v:.3f}" for v in mmv)])
+
+
 def export_session(session: Session, out_dir: str, basename: str, raw_path: str | None = None) -> dict:
     """Write the track as GeoJSON, GPX and CSV (``core.export``) and copy the raw recording as is.
 
@@ -565,6 +624,9 @@ def export_session(session: Session, out_dir: str, basename: str, raw_path: str 
         track, extra = fused, fused.point_properties()
     if session.floors.counters["readings"]:  # the barometer's floor of every step
         extra = {**(extra or {}), "floor": floors_at(session.floors.changes, track.t_ns).tolist()}
+    mm = getattr(session, "map", None)
+    if mm is not None and mm.placed:  # the map-matched position (plan metres) beside the raw one, per step
+        extra = {**(extra or {}), **mm.export_properties(track.t_ns, [s.t_ns for s in session.steps])}
     try:
         from core import export  # noqa: PLC0415 - the lead's module
     except ImportError as e:
@@ -577,6 +639,8 @@ def export_session(session: Session, out_dir: str, basename: str, raw_path: str 
                 ("gpx", ".gpx", lambda p: export.write_track_gpx(p, track, origin_lat_lon=origin,
                                                                  unix_offset_ns=offset, point_properties=extra)),
                 ("csv", ".track.csv", lambda p: export.write_track_csv(p, track)))
+        if mm is not None and mm.placed:
+            jobs += (("map_csv", ".map.csv", lambda p: write_map_csv(p, session)),)
         for key, ext, fn in jobs:
             path = os.path.join(out_dir, basename + ext)
             try:

@@ -4,8 +4,10 @@ Two JSON files in the app's data directory, both written atomically
 (temporary file + rename), so a crash never leaves half a file:
 
 - ``settings.json``: sampling rate, whether live sessions are recorded,
-  replay speed, whether GPS is fused into the track ("Use GPS"), and the
-  tracking mode (hand-held PDR or foot-mounted INS, or auto);
+  replay speed, whether GPS is fused into the track ("Use GPS"), the
+  tracking mode (hand-held PDR or foot-mounted INS, or auto) and the floor
+  plan (a path: our GeoJSON file or a Microsoft floor folder, "" for none;
+  :mod:`app.indoor`);
 - ``profile.json``: the user's :class:`core.pdr.calibration.UserProfile`
   (format ``pdr-user-profile``): body height, stride model, the per-user
   factor ``c_scale`` and the calibration walks it was pooled from.
@@ -92,6 +94,9 @@ class Settings:
     #: "handheld" (PDR), "foot" (phone or IMU on the shoe: ZUPT INS) or "auto" (a replay: what the recording
     #: declares or its signals show, :func:`core.foot.tracker.choose_mode`; live: hand-held)
     tracking_mode: str = "auto"
+    #: the floor plan under the track (app.indoor.load_plan: our GeoJSON file or a Microsoft floor folder),
+    #: "" for none; read by the UI (walls) and by the tracking service (the particle filter)
+    floor_plan: str = ""
     #: height, stride model and calibration (saved to its own file, ``profile.json``)
     profile: UserProfile = field(default_factory=UserProfile)
     #: what was wrong with the stored files (not saved)
@@ -195,6 +200,19 @@ class Settings:
 
         return AUTO_FUSION if self.gps_fusion == "auto" else self.gps_fusion
 
+    def load_floor_plan(self):
+        """``(plan, name, problem)``: the chosen floor plan (None, "", "" without one; None, "", why when it
+        cannot be read: the app goes on without it and says so)."""
+        if not self.floor_plan:
+            return None, "", ""
+        from app.indoor import load_plan, plan_label  # noqa: PLC0415
+
+        try:
+            plan = load_plan(self.floor_plan)
+        except (ValueError, OSError) as e:
+            return None, "", f"floor plan not used: {e}"
+        return plan, plan_label(plan, self.floor_plan), ""
+
     def learn_from_gps(self, pipeline) -> bool:
         """Keep in the profile what a live walk's GPS taught (Chen: stride scale, heading model; Kubrak: the
         velocity model's coefficients); True if anything."""
@@ -242,6 +260,9 @@ class Settings:
         if self.tracking_mode not in TRACKING_MODES:
             out.append(f"tracking_mode={self.tracking_mode!r} unknown; using 'auto'")
             self.tracking_mode = "auto"
+        if not isinstance(self.floor_plan, str):
+            out.append(f"floor_plan={self.floor_plan!r} is not a path; using none")
+            self.floor_plan = ""
         if self.replay_speed not in ("1x", "10x", "max"):
             out.append(f"replay_speed={self.replay_speed!r} unknown; using '10x'")
             self.replay_speed = "10x"
@@ -250,7 +271,8 @@ class Settings:
     def to_dict(self) -> dict:
         """What goes into ``settings.json`` (the profile has its own file)."""
         return {"rate_hz": self.rate_hz, "record_live": self.record_live, "replay_speed": self.replay_speed,
-                "use_gps": self.use_gps, "gps_fusion": self.gps_fusion, "tracking_mode": self.tracking_mode}
+                "use_gps": self.use_gps, "gps_fusion": self.gps_fusion, "tracking_mode": self.tracking_mode,
+                **({"floor_plan": self.floor_plan} if self.floor_plan else {})}  # no key: no plan
 
     @classmethod
     def load(cls, path: str) -> "Settings":
@@ -266,7 +288,7 @@ class Settings:
             except (OSError, ValueError) as e:
                 s.problems.append(f"{path}: could not read settings ({e}); using defaults")
                 data = {}
-        for k in s.to_dict():
+        for k in [*s.to_dict(), "floor_plan"]:
             if k in data:
                 setattr(s, k, data[k])
         s.problems.extend(s.validate())

@@ -32,6 +32,18 @@ GPS layer (:meth:`TrackView.set_gps`, an :class:`app.session.GpsOverlay`)
     moves them without touching a vertex, and a new fix rebuilds only its
     own chunk (the squares are rebuilt only when the zoom changes); the
     violet stretches are one line each.
+
+Floor plan (:meth:`TrackView.set_plan`, :meth:`TrackView.set_map`; issue #16)
+    With a plan the view's metres are the plan's (:mod:`app.indoor`).  The walls (``plan.walls``) are
+    static: they are built once per plan, in metres, as ``lines`` meshes of at most :data:`WALL_CHUNK`
+    segments under the same kind of ``Translate``/``Scale`` as the tracks, so panning, following and
+    zooming never touch them (one pixel wide, under everything else).  Once placed, the map-matched
+    track (green) is drawn over the raw one (thin and faint, shifted by the matcher's ``raw_offset``
+    so that it starts where the user placed it), the position marker is the filter's estimate and the
+    ellipse its 2-sigma one (``est.cov``, :func:`app.overlay.covariance_ellipse`).  **Here**: with
+    :attr:`TrackView.place_mode` on, a tap (a touch that lifts within :data:`TAP_SLOP_DP` of where it
+    went down) fires ``on_here(east, north)`` in plan metres and turns the mode off; the app makes it
+    the start or a fix.
 """
 
 from __future__ import annotations
@@ -43,7 +55,7 @@ from kivy.clock import Clock
 from kivy.graphics import (Color, Ellipse, InstructionGroup, Line, Mesh, PopMatrix, PushMatrix, Rectangle, Scale,
                            Translate, Triangle)
 from kivy.metrics import dp, sp
-from kivy.properties import BooleanProperty, NumericProperty
+from kivy.properties import BooleanProperty, NumericProperty, ObjectProperty
 from kivy.uix.label import Label
 from kivy.uix.widget import Widget
 
@@ -67,6 +79,10 @@ ELLIPSE_FILL_ALPHA = 0.2
 MAX_ACCURACY_CIRCLES = 60  #: accuracy circles of the last fixes only (a minute at 1 Hz)
 FIX_CHUNK = 500  #: fixes per mesh (per colour)
 MAX_FIX_CHUNKS = 20  #: fix squares of the last 20 chunks only (10000 fixes: 2.8 h at 1 Hz)
+WALL_COLOR = (0.55, 0.58, 0.66, 1)  #: the floor plan's walls
+MAP_COLOR = (0.3, 0.95, 0.55, 1)  #: the map-matched track (the particle filter's estimate)
+WALL_CHUNK = 16000  #: wall segments per Mesh (2 vertices each: below Kivy's 65 535 indices)
+TAP_SLOP_DP = 12.0  #: a touch that lifts this close to where it went down is a tap (Here)
 LINE_CHUNK = 100  #: track points per Line instruction (a new step rebuilds one; thick round-joined lines
 #: tessellate at about 50 us a point on a desktop, so 100 points keep a step near 5 ms)
 
@@ -146,6 +162,10 @@ class TrackView(Widget):
     """Draws a track given in metres (East, North)."""
 
     follow = BooleanProperty(True)
+    #: the next tap is "I am here" (on_here(east, north) in plan metres), then the mode turns off
+    place_mode = BooleanProperty(False)
+    #: the floor plan drawn (core.indoor.FloorPlan), None: none
+    plan = ObjectProperty(None, allownone=True)
     #: track line width in pixels
     line_width = NumericProperty(dp(2))
 
@@ -167,6 +187,9 @@ class TrackView(Widget):
         self._fused_dr_runs: list = []
         self._dr_scanned = 0  # steps of the fused track scanned for dead-reckoning stretches
         self._fix = {"e": np.zeros(0), "n": np.zeros(0), "hacc": np.zeros(0), "ok": np.zeros(0, bool)}
+        self.map = None  # the last app.indoor.MapOverlay given, None: no plan
+        self._map_len = 0
+        self.register_event_type("on_here")
         with self.canvas.before:
             Color(*BACKGROUND)
             self._bg = Rectangle(pos=self.pos, size=self.size)
@@ -178,8 +201,16 @@ class TrackView(Widget):
             for key, rgba in (("accepted", FIX_COLOR), ("rejected", REJECTED_COLOR)):
                 self._circle_colors[key] = Color(*rgba[:3], CIRCLE_ALPHA)
                 self._circles[key] = Mesh(vertices=[], indices=[], mode="lines")
+            # the floor plan's walls, in plan metres (static: built once per plan)
+            self._plan_world = []  # (Translate, Scale) pairs of the plan frame
+            PushMatrix()
+            self._plan_world.append((Translate(0, 0), Scale(1, 1, 1)))
+            self._wall_color = Color(*WALL_COLOR)
+            self._walls = InstructionGroup()
+            self.canvas.add(self._walls)
+            PopMatrix()
             # the PDR track, in metres under the world transform (see the module docstring)
-            self._world = []  # the (Translate, Scale) pairs the viewport sets
+            self._world = []  # the (Translate, Scale) pairs the viewport sets (the raw frame: + raw_offset)
             PushMatrix()
             self._world.append((Translate(0, 0), Scale(1, 1, 1)))
             self._line_color = Color(*TRACK_COLOR)
@@ -207,6 +238,13 @@ class TrackView(Widget):
             self._fused_dr = InstructionGroup()  # one ChunkedLine per dead-reckoning stretch (a pool, reused)
             self.canvas.add(self._fused_dr)
             self._fused_dr_lines: list = []
+            PopMatrix()
+            # the map-matched track, in plan metres
+            PushMatrix()
+            self._plan_world.append((Translate(0, 0), Scale(1, 1, 1)))
+            self._map_color = Color(*MAP_COLOR)
+            self._map_line = ChunkedLine(InstructionGroup())
+            self.canvas.add(self._map_line.group)
             PopMatrix()
             Color(*START_COLOR)
             self._start = Ellipse(size=(0, 0))
@@ -281,6 +319,51 @@ class TrackView(Widget):
         self._set_legend(self._legend_text())
         self._trigger()
 
+    def set_plan(self, plan) -> None:
+        """The floor plan under the track (None: none): its walls are built here, once."""
+        self.plan = plan
+        self._walls.clear()
+        walls = np.asarray(plan.walls if plan is not None else np.zeros((0, 4)), dtype=float).reshape(-1, 4)
+        for a in range(0, len(walls), WALL_CHUNK):
+            seg = walls[a:a + WALL_CHUNK]
+            verts = np.zeros((len(seg), 2, 4))
+            verts[:, 0, :2], verts[:, 1, :2] = seg[:, :2], seg[:, 2:]
+            self._walls.add(Mesh(vertices=verts.ravel().tolist(), indices=list(range(2 * len(seg))), mode="lines"))
+        if plan is None:
+            self.set_map(None)
+        self._view_changed()
+
+    @property
+    def wall_meshes(self) -> list:
+        """The walls' meshes (for tests): ``lines`` meshes in plan metres."""
+        return [m for m in self._walls.children if isinstance(m, Mesh)]
+
+    def set_map(self, overlay) -> None:
+        """The map matching (:class:`app.indoor.MapOverlay`) or None; cheap to call on every UI update."""
+        old, self.map = self.map, overlay
+        n = len(overlay.east) if overlay is not None else 0
+        if old is None or overlay is None or old.east is not overlay.east or n != self._map_len \
+                or old.raw_offset != overlay.raw_offset:
+            self._map_len = n
+            self._line_dirty = True
+            self._moved = True  # the raw frame's offset may have changed
+        self._set_legend(self._legend_text())
+        self._trigger()
+
+    @property
+    def raw_offset(self) -> tuple[float, float]:
+        """Plan metres minus raw-track metres (0, 0 without a placed map)."""
+        m = self.map
+        return tuple(m.raw_offset) if m is not None and m.placed else (0.0, 0.0)
+
+    @property
+    def shows_map(self) -> bool:
+        """A map-matched position is drawn (a plan, placed)."""
+        return self.map is not None and self.map.placed and self.map.position is not None
+
+    def on_here(self, east: float, north: float) -> None:
+        """A tap in place mode, in plan metres (the app binds this)."""
+
     def _scan_dr(self, source, n_steps: int) -> None:
         """Extend the dead-reckoning stretches (:func:`app.overlay.runs` of ``source == "dr"``) by the new
         steps only: the last stretch grows, or new ones start."""
@@ -302,7 +385,10 @@ class TrackView(Widget):
 
     @property
     def current_position(self) -> tuple[float, float]:
-        """Where the position marker is: the fused track's end when there is one, else the PDR track's."""
+        """Where the position marker is: the map-matched estimate when placed on a plan, else the fused track's
+        end when there is one, else the PDR track's."""
+        if self.shows_map:
+            return tuple(float(v) for v in self.map.position)
         if self.shows_fused:
             k = self._fused_len - 1
             return float(self._fused_e[k]), float(self._fused_n[k])
@@ -316,6 +402,14 @@ class TrackView(Widget):
         if self.shows_fused:
             k = self._fused_len
             east, north = np.concatenate([east, self._fused_e[:k]]), np.concatenate([north, self._fused_n[:k]])
+        if self.plan is not None:  # the plan's frame: the raw track shifted, the map-matched track; before the
+            ox, oy = self.raw_offset  # placement the whole plan (to tap on)
+            east, north = np.asarray(east, float) + ox, np.asarray(north, float) + oy
+            if self.shows_map:
+                east, north = np.concatenate([east, self.map.east]), np.concatenate([north, self.map.north])
+            else:
+                x0, y0, x1, y1 = self.plan.bounds()
+                east, north = np.array([x0, x1]), np.array([y0, y1])
         self.vp.fit(east, north, margin_px=dp(48))  # clear of the button bar and scale bar
         self._view_changed()
 
@@ -343,16 +437,23 @@ class TrackView(Widget):
             self._moved = False
         if self._line_dirty:
             fused = self.shows_fused
-            self._line_color.a = RAW_UNDER_FUSED_ALPHA if fused else 1.0
+            under = fused or self.shows_map
+            self._line_color.a = RAW_UNDER_FUSED_ALPHA if under else 1.0
             self._line.update(self.east, self.north, 0, len(self.east),
-                              (dp(1) if fused else self.line_width) / vp.scale)
+                              (dp(1) if under else self.line_width) / vp.scale)
             self._draw_fused(fused)
+            m = self.map
+            if m is not None and m.placed:
+                self._map_line.update(m.east, m.north, 0, self._map_len, self.line_width / vp.scale)
+            elif self._map_line.end:
+                self._map_line.clear()
             self._line_dirty = False
         if self._fixes_dirty:
             self._draw_fixes()
             self._fixes_dirty = False
         r = dp(6)
-        sx, sy = vp.to_screen(self.east[0], self.north[0])
+        ox, oy = self.raw_offset
+        sx, sy = vp.to_screen(self.east[0] + ox, self.north[0] + oy)
         self._start.pos, self._start.size = (sx - r, sy - r), (2 * r, 2 * r)
         px, py = vp.to_screen(*position)
         self._draw_ellipse(px, py)
@@ -373,10 +474,11 @@ class TrackView(Widget):
     def _set_world(self) -> None:
         """The world transform: metres -> window pixels, as the viewport maps them."""
         vp = self.vp
-        tx, ty = vp.to_screen(0.0, 0.0)
-        for translate, scale in self._world:
-            translate.xy = (tx, ty)
-            scale.xyz = (vp.scale, vp.scale, 1.0)
+        for pairs, origin in ((self._world, self.raw_offset), (self._plan_world, (0.0, 0.0))):
+            tx, ty = vp.to_screen(*origin)
+            for translate, scale in pairs:
+                translate.xy = (tx, ty)
+                scale.xyz = (vp.scale, vp.scale, 1.0)
 
     def _draw_fused(self, shown: bool) -> None:
         """The fused track, and its dead-reckoning-only stretches over it in their own colour."""
@@ -409,7 +511,8 @@ class TrackView(Widget):
         recent = (np.arange(n) >= n - MAX_ACCURACY_CIRCLES) & np.isfinite(hacc) & (hacc > 0)
         if not shown:
             recent[:] = False
-        x, y = self.vp.to_screen_arrays(f["e"][recent], f["n"][recent])
+        ox, oy = self.raw_offset
+        x, y = self.vp.to_screen_arrays(f["e"][recent] + ox, f["n"][recent] + oy)
         for key, mask in (("accepted", ok[recent]), ("rejected", ~ok[recent])):
             self._circles[key].vertices, self._circles[key].indices = circles_mesh(
                 x[mask], y[mask], hacc[recent][mask] * self.vp.scale, n=32)
@@ -426,7 +529,7 @@ class TrackView(Widget):
         n = len(f["ok"]) if shown else 0
         n_chunks = -(-n // FIX_CHUNK)
         first = max(n_chunks - MAX_FIX_CHUNKS, 0)
-        ox, oy = vp.to_screen(0.0, 0.0)
+        ox, oy = vp.to_screen(*self.raw_offset)
         built = self._fix_built
         if built is None or built[0] != vp.scale or self._fix_first != first:
             built = self._fix_built = (vp.scale, ox, oy)
@@ -451,9 +554,13 @@ class TrackView(Widget):
         self._fix_chunks_built = max(n // FIX_CHUNK, first)  # the last, incomplete chunk is rebuilt next time
 
     def _draw_ellipse(self, px: float, py: float) -> None:
-        """The ELLIPSE_SIGMA (2-sigma) ellipse of the last fused step's position covariance, in pixels."""
-        cov = self.gps.cov_en_m2 if self.gps is not None else None
-        if not self.shows_fused or cov is None:
+        """The ELLIPSE_SIGMA (2-sigma) ellipse of the position's covariance, in pixels: the particle filter's
+        when placed on a plan, else the last fused step's."""
+        cov = self.gps.cov_en_m2 if self.gps is not None and self.shows_fused else None
+        if self.shows_map and self.map.cov is not None:
+            (ve, c), (_, vn) = self.map.cov
+            cov = (ve, c, vn)
+        if cov is None:
             self._ellipse.points = []
             self._ellipse_fill.vertices, self._ellipse_fill.indices = [], []
             return
@@ -466,6 +573,20 @@ class TrackView(Widget):
     # -- the legend ---------------------------------------------------------------------
 
     def _legend_text(self) -> str:
+        text = self._gps_legend()
+        m = self.map
+        if m is not None:
+            if m.placed and m.cov is not None:
+                (ve, c), (_, vn) = m.cov
+                a, _, _ = covariance_ellipse((ve, c, vn), ELLIPSE_SIGMA)
+                line = (f"[color={_hex(MAP_COLOR)}]—[/color] map · ±{a:.1f} m ({ELLIPSE_SIGMA:g}σ)   "
+                        f"[color={_hex(WALL_COLOR)}]—[/color] walls")
+            else:
+                line = "map: press Here, then tap where you are"
+            text = f"{text}\n{line}"
+        return text
+
+    def _gps_legend(self) -> str:
         g = self.gps
         if g is None:
             return "GPS off"
@@ -576,6 +697,10 @@ class TrackView(Widget):
     def on_touch_up(self, touch):
         if touch.grab_current is self:
             touch.ungrab(self)
+            single = len(self._touches) == 1
             self._touches.pop(touch.uid, None)
+            if self.place_mode and single and math.dist(touch.opos, touch.pos) <= dp(TAP_SLOP_DP):
+                self.place_mode = False
+                self.dispatch("on_here", *self.vp.to_world(*touch.pos))
             return True
         return super().on_touch_up(touch)
