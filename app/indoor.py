@@ -80,6 +80,7 @@ class MapOverlay:
     raw_offset: tuple  #: plan metres minus raw-track metres (0, 0 before the placement)
     placed: bool
     text: str  #: the health panel's line
+    bias_rad: float = 0.0  #: the filter's estimate of the heading error (measured - true), rad
 
 
 class MapMatcher:
@@ -159,7 +160,8 @@ class MapMatcher:
     def overlay(self) -> MapOverlay:
         e = self.est
         return MapOverlay(self.east, self.north, (e.east_m, e.north_m) if e is not None else None,
-                          e.cov if e is not None else None, self.raw_offset, self.placed, self.text())
+                          e.cov if e is not None else None, self.raw_offset, self.placed, self.text(),
+                          e.bias_rad if e is not None else 0.0)
 
     def text(self) -> str:
         """The health panel's line: where the filter is and its diagnostics (recoveries: the map disagrees)."""

@@ -246,7 +246,7 @@ class TrackingService:
                                                "anchored": g.anchored, "fusion": g.fusion,
                                                "last_verdict": g.last_verdict},
                 "map": None if m is None else {"position": m.position, "cov": m.cov, "raw_offset": m.raw_offset,
-                                               "placed": m.placed, "text": m.text}}
+                                               "placed": m.placed, "text": m.text, "bias_rad": m.bias_rad}}
 
     def _op_poll(self, ses, req):
         since = req.get("since") or {}
@@ -641,7 +641,7 @@ class ServiceSession:
 
         cov = tuple(tuple(r) for r in m["cov"]) if m["cov"] is not None else None
         return MapOverlay(self.map_east, self.map_north, tuple(m["position"]) if m["position"] else None, cov,
-                          tuple(m["raw_offset"]), bool(m["placed"]), m["text"])
+                          tuple(m["raw_offset"]), bool(m["placed"]), m["text"], float(m.get("bias_rad", 0.0)))
 
     def health_text(self) -> str:
         return self._st("health", "")

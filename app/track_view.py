@@ -40,7 +40,8 @@ Floor plan (:meth:`TrackView.set_plan`, :meth:`TrackView.set_map`; issue #16)
     zooming never touch them (one pixel wide, under everything else).  Once placed, the map-matched
     track (green) is drawn over the raw one (thin and faint, shifted by the matcher's ``raw_offset``
     so that it starts where the user placed it), the position marker is the filter's estimate and the
-    ellipse its 2-sigma one (``est.cov``, :func:`app.overlay.covariance_ellipse`).  **Here**: with
+    ellipse its 2-sigma one (``est.cov``, :func:`app.overlay.covariance_ellipse`); the heading arrow is
+    the tracker's heading less the filter's estimate of its bias.  **Here**: with
     :attr:`TrackView.place_mode` on, a tap (a touch that lifts within :data:`TAP_SLOP_DP` of where it
     went down) fires ``on_here(east, north)`` in plan metres and turns the mode off; the app makes it
     the start or a fix.
@@ -459,7 +460,7 @@ class TrackView(Widget):
         self._draw_ellipse(px, py)
         r = dp(5)
         self._dot.pos, self._dot.size = (px - r, py - r), (2 * r, 2 * r)
-        h = self.heading_rad
+        h = self.heading_rad - (self.map.bias_rad if self.shows_map else 0.0)  # the map's heading correction
         if h == h:
             c, s = math.cos(h), math.sin(h)
             tip, back, half = dp(22), dp(4), dp(7)

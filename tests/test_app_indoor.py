@@ -105,15 +105,16 @@ def test_a_tap_fix_moves_the_estimate_and_a_landmark_starts_a_replay(corridor, m
     matched.here(0.0, 0.0)
     assert mm.pf.diagnostics.fix_resets == 1 and math.dist((mm.est.east_m, mm.est.north_m), (0, 0)) < 1.5
     assert mm.est.spread_m < 2 * FIX_SD_M and plan.is_walkable(np.c_[mm.east, mm.north]).all()
-    # a recording's landmark (plan metres) starts the filter when the steps pass its time, without a tap
-    rec = w.recording
-    t0 = int(rec.t0_ns + 1.0e9)
-    ses = _session(rec, plan, here_at_start=False)
+    # a recording's landmark (plan metres) starts the filter when the steps pass its time, without a tap (the
+    # whole replay: the app's test below)
+    ses = _session(w.recording, plan, here_at_start=False)
+    t0 = int(w.recording.t0_ns + 1.0e9)
     ses.start_map_at(t0, 0.0, 0.0)
     assert not ses.map.placed and "first landmark" in ses.map.text()
-    _finish(ses)
-    m = ses.map_overlay()
-    assert m.placed and plan.is_walkable(np.c_[m.east, m.north]).all() and math.dist(m.position, END) < 2.5
+    while len(ses.steps) < 3:
+        ses.tick(budget_s=0.01)
+    assert ses.map.placed and ses.map.east[0] == pytest.approx(0.0, abs=1.0)
+    assert len(ses.map.east) == 1 + sum(s.t_ns > t0 for s in ses.steps) == 1 + ses.map.pf.diagnostics.steps
     # no plan: no map, and "here" says why
     ses.set_plan(None)
     assert ses.map_overlay() is None and "map" not in ses.health_text()
@@ -161,10 +162,8 @@ def test_the_service_runs_the_filter_and_the_ui_polls_it(corridor, tmp_path):
     assert svc.session.map is not None and svc.handle({"op": "poll"})["status"]["map"]["placed"] is False
     svc.step(0.0)
     assert svc.handle({"op": "here", "east": 0.0, "north": 0.0})["ok"]
-    for _ in range(10000):
+    while len(svc.session.steps) < 20:  # 20 steps are enough for the protocol
         svc.step(0.01)
-        if svc.session.finished:
-            break
     r = svc.handle({"op": "poll", "track_id": 0, "since": {"map": 3}})
     st = r["status"]["map"]
     assert st["placed"] and "map corridor" in st["text"] and "map corridor" in r["status"]["health"]
@@ -269,3 +268,84 @@ def test_matcher_rows_follow_the_session_steps():
     props = mm.export_properties([15, 30, 99], [0, 1, 10, 15, 30])
     assert props["mm_east_m"][0] is None and props["mm_east_m"][1] is not None and props["mm_east_m"][2] is None
     assert "mm_lat_deg" not in props
+
+
+APP = r"""
+import json, sys
+from app import kivy_env
+kivy_env.prepare(headless=True)
+from kivy.config import Config
+Config.set("graphics", "width", "400"); Config.set("graphics", "height", "700")
+from kivy.clock import Clock
+from kivy.tests.common import UnitTestTouch
+from app.main_app import PDRApp
+
+rec, data, out, result = sys.argv[1:5]
+app = PDRApp(recording=rec, speed="max", data_dir=data, out_dir=out)
+res = {}
+
+def at_end(dt):
+    ses = app.session
+    if ses is None or not ses.finished:
+        return True
+    tv = app.track_view
+    m = ses.map_overlay()
+    res.update(has_plan=app.has_plan, plan_text=app.plan_text, walls=len(tv.wall_meshes),
+               placed=m.placed, east=list(m.east), north=list(m.north), fixes=ses.map.pf.diagnostics.fixes,
+               health="map corridor" in ses.health_text())
+    app.root.ids.screens.current = "track"
+    tv.follow = False
+    tv.fit()
+    tv._redraw()
+    x, y = tv.vp.to_screen(30.0, 18.0)
+    x, y = tv.to_window(x, y)
+    tv.place_mode = True  # the Here button
+    t = UnitTestTouch(x, y)
+    t.touch_down()
+    t.touch_up()
+    res.update(fixes_after=ses.map.pf.diagnostics.fixes, message=app.message)
+    res["export"] = sorted(k for k in app.export() if k != "errors")
+    res["chose_none"] = app.choose_plan("")
+    res.update(walls_after=len(tv.wall_meshes), map_after=ses.map_overlay() is None,
+               saved=json.load(open(data + "/settings.json")).get("floor_plan"))
+    json.dump(res, open(result, "w"))
+    app.stop()
+    return False
+
+Clock.schedule_interval(at_end, 0.05)
+app.run()
+"""
+
+
+def test_the_app_replays_on_the_plan_from_the_landmark_and_a_tap_in_here_mode_is_a_fix(corridor, tmp_path):
+    """The real app (a subprocess: one App.run per process): the plan named in settings.json is drawn and used,
+    the replay starts at the recording's landmark, a tap in Here mode is a fix, the export has the map's CSV,
+    choosing no plan removes the walls and is saved."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from core.recording import write_recording
+
+    plan, path, w = corridor
+    rec = w.recording
+    streams = dict(rec.streams)
+    streams["posi"] = make_stream("posi", np.array([rec.t0_ns + 1_000_000_000, rec.t0_ns + 2_000_000_000]),
+                                  np.array([[0.0, 0.0], [0.4, 0.0]]), columns=["east_m", "north_m"])
+    rec_path = tmp_path / "walk.csv"
+    write_recording(str(rec_path), type(rec)(streams, device=rec.device, metadata=rec.metadata))
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "settings.json").write_text(json.dumps({"floor_plan": path, "use_gps": False}))
+    root = Path(__file__).resolve().parents[1]
+    r = subprocess.run([sys.executable, "-c", APP, str(rec_path), str(data), str(tmp_path / "out"),
+                        str(tmp_path / "res.json")], cwd=root, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-3000:]
+    res = json.loads((tmp_path / "res.json").read_text())
+    assert res["has_plan"] and res["plan_text"] == "corridor" and res["walls"] == 1 and res["health"]
+    assert res["placed"] and res["fixes"] == 0 and len(res["east"]) > 50
+    assert plan.is_walkable(np.c_[res["east"], res["north"]]).all()
+    assert math.dist((res["east"][-1], res["north"][-1]), END) < 2.5
+    assert res["fixes_after"] == 1 and res["message"].startswith("you are at 30.0, 18.0 m")
+    assert "map_csv" in res["export"]
+    assert res["chose_none"] and res["walls_after"] == 0 and res["map_after"] and res["saved"] is None
