@@ -38,7 +38,6 @@ import argparse
 import dataclasses
 import json
 import math
-import pickle
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -86,10 +85,15 @@ def _steps_of(args):
             "lm_t_ns": lm.t_ns, "lm_east_m": lm.east_m, "lm_north_m": lm.north_m}
 
 
+#: the array fields of a walk (the rest is plain data)
+_ARRAYS = ("t_ns", "length_m", "heading_rad", "east_m", "north_m", "lm_t_ns", "lm_east_m", "lm_north_m")
+
+
 def load_walks(root: Path, jobs: int = 2, cache: Path | None = None, log=sys.stderr) -> list[dict]:
-    if cache is not None and Path(cache).exists():
-        with open(cache, "rb") as fh:
-            return pickle.load(fh)
+    if cache is not None and Path(cache).exists():  # JSON, never a pickle (tests/test_no_unsafe_loading.py)
+        with open(cache, encoding="utf-8") as fh:
+            return [{k: (np.asarray(v, dtype=np.int64 if k.endswith("t_ns") else float) if k in _ARRAYS else v)
+                     for k, v in w.items()} for w in json.load(fh)]
     tasks = []
     if ms_indoor.available(root):
         tasks += [("ms_indoor", str(root), i) for i, t in enumerate(ms_indoor.trials(root))
@@ -104,8 +108,8 @@ def load_walks(root: Path, jobs: int = 2, cache: Path | None = None, log=sys.std
             print(f"[{k}/{len(tasks)}] {w['dataset']}/{w['name']}: {len(w['t_ns'])} steps "
                   f"({time.perf_counter() - t0:.0f} s)", file=log, flush=True)
     if cache is not None:
-        with open(cache, "wb") as fh:
-            pickle.dump(out, fh)
+        with open(cache, "w", encoding="utf-8") as fh:
+            json.dump([{k: (np.asarray(v).tolist() if k in _ARRAYS else v) for k, v in w.items()} for w in out], fh)
     return out
 
 
@@ -499,7 +503,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.indoor", description=__doc__.split("\n")[0])
     ap.add_argument("--data", type=Path, default=default_data_root())
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--cache", type=Path, default=None, help="pickle of the pipeline's steps (read if present)")
+    ap.add_argument("--cache", type=Path, default=None, help="JSON cache of the pipeline's steps (read if present)")
     ap.add_argument("--tune", action="store_true", help="search the filter's settings on the tuning split first")
     ap.add_argument("--no-write", action="store_true")
     a = ap.parse_args(argv)
