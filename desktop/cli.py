@@ -275,6 +275,15 @@ NO_HEADING = ("none: the recording has neither a gyroscope nor a magnetometer, s
               "are measured but not the direction (no track shape)")
 
 
+#: below this accelerometer rate (Hz) steps cannot be detected (a step lasts about half a second)
+MIN_STEP_RATE_HZ = 10.0
+
+
+def acc_rate_hz(rec: Recording) -> float:
+    s = rec.streams.get("acc")
+    return float(s.rate_hz) if s is not None and len(s) > 1 else 0.0
+
+
 def has_heading(args, rec: Recording) -> bool:
     """Whether anything in ``rec`` measures the walking direction (a gyroscope, or a magnetometer not ignored)."""
     return rec.has("gyro") or (rec.has("mag") and not getattr(args, "no_mag", False))
@@ -847,8 +856,11 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
         from core.metrics import track_start
 
         plot_kw = {"walls": plan.walls, "start_en": track_start(track), "track_label": "map-matched"}
-    errs = truth_errors(track, truth, dr_track=res.track) if truth else {}
+    coarse = acc_rate_hz(rec) < MIN_STEP_RATE_HZ
+    errs = truth_errors(track, truth, dr_track=res.track) if truth and not coarse else {}
     summary = {**res.summary(), "mode": "handheld", "mode_reason": why}
+    if coarse:  # no steps to count: say so instead of scoring 0 steps as -100 %
+        summary["steps_measured"] = False
     if plan is not None:
         summary["map"] = {**map_summary, "truth_without_map": truth_errors(raw, truth) if truth else {}}
     if not heading:
@@ -859,6 +871,10 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
         summary["truth"] = errs
     lines = summary_lines(res, rec, gps_why, heading)
     lines = lines[:1] + [f"mode          hand-held PDR ({why})"] + lines[1:] + (site_lines if heading else [])
+    if coarse:
+        lines = [ln for ln in lines if not ln.startswith(("steps ", "distance ", "final pos", "start-to-end"))]
+        lines.insert(3, f"steps         not measured: the accelerometer is sampled at {acc_rate_hz(rec):.1f} Hz, step "
+                        f"detection needs at least {MIN_STEP_RATE_HZ:g} Hz")
     if site is not None:
         summary["declination"] = site
     if profile is not None:

@@ -265,3 +265,17 @@ def test_height_is_metres_and_range_checked(height, says, capsys):
     with pytest.raises(SystemExit) as e:
         main(["replay", "--height", height])
     assert e.value.code == 2 and says in capsys.readouterr().err
+
+
+def test_an_accelerometer_too_slow_for_steps_is_said_not_scored(tmp_path, capsys):
+    from core.recording import Recording, make_stream, write_recording
+    from desktop.simulator import simulate_walk
+
+    w = simulate_walk(((0.0, 0.0), (15.0, 0.0)), seed=9, still_start_s=1.0, still_end_s=1.0)
+    acc = w.recording.streams["acc"]
+    slow = make_stream("acc", acc.t_ns[::50], acc.values[::50])  # 100 Hz -> 2 Hz
+    path = tmp_path / "slow.csv.gz"
+    write_recording(str(path), Recording({"acc": slow}, device=w.recording.device, metadata=w.recording.metadata))
+    assert main(["replay", str(path), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "not measured: the accelerometer is sampled at 2.0 Hz" in out and "truth error" not in out
