@@ -61,6 +61,37 @@ def cache_dir() -> Path:
     return d
 
 
+def save_arrays(base: Path, arrays: dict[str, np.ndarray], meta: dict | None = None) -> None:
+    """Arrays as one raw file (``base.bin``) and a JSON index of names, dtypes and shapes (``base.json``).
+
+    No pickle and no ``np.load`` (the product loads nothing unsafely: ``tests/test_no_unsafe_loading.py``).
+    """
+    index, offset = [], 0
+    tmp = base.with_name(base.name + ".tmp")
+    with open(tmp, "wb") as f:
+        for name, a in arrays.items():
+            a = np.ascontiguousarray(a)
+            index.append({"name": name, "dtype": a.dtype.str, "shape": list(a.shape), "offset": offset})
+            f.write(a.tobytes())
+            offset += a.nbytes
+    os.replace(tmp, base.with_name(base.name + ".bin"))
+    base.with_name(base.name + ".json").write_text(json.dumps({"arrays": index, "meta": meta or {}}, default=str))
+
+
+def load_arrays(base: Path) -> tuple[dict[str, np.ndarray], dict] | None:
+    """What :func:`save_arrays` wrote (arrays, meta), or None when it is not there."""
+    binf, jsf = base.with_name(base.name + ".bin"), base.with_name(base.name + ".json")
+    if not (binf.exists() and jsf.exists()):
+        return None
+    d = json.loads(jsf.read_text())
+    out = {}
+    for e in d["arrays"]:
+        dt = np.dtype(e["dtype"])
+        n = int(np.prod(e["shape"], dtype=np.int64))
+        out[e["name"]] = np.fromfile(binf, dtype=dt, count=n, offset=e["offset"]).reshape(e["shape"])
+    return out, d["meta"]
+
+
 def default_data_root() -> Path:
     return REPO.parent / "shared" / "data"
 
@@ -98,20 +129,16 @@ def _recording(path: str, refresh: bool):
     from core.importers import load_recording
     from core.recording import Recording, Stream
 
-    key = Path(path).name  # the file or folder name: one cache whichever checkout runs this
-    npz, meta = cache_dir() / f"equivalence_rec_{key}.npz", cache_dir() / f"equivalence_rec_{key}.json"
-    if refresh or not (npz.exists() and meta.exists()):
+    base = cache_dir() / f"equivalence_rec_{Path(path).name}"  # one cache whichever checkout runs this
+    if refresh or load_arrays(base) is None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             rec = load_recording(path)
-        np.savez(npz, **{f"t{i}": s.t_ns for i, s in enumerate(rec.streams.values())},
-                 **{f"v{i}": s.values for i, s in enumerate(rec.streams.values())})
-        meta.write_text(json.dumps({"streams": [[s.name, list(s.columns), s.unit, s.note]
-                                                for s in rec.streams.values()],
-                                    "device": rec.device, "metadata": rec.metadata, "source": rec.source},
-                                   default=str))
-    m = json.loads(meta.read_text())
-    d = np.load(npz)
+        save_arrays(base, {**{f"t{i}": s.t_ns for i, s in enumerate(rec.streams.values())},
+                           **{f"v{i}": s.values for i, s in enumerate(rec.streams.values())}},
+                    {"streams": [[s.name, list(s.columns), s.unit, s.note] for s in rec.streams.values()],
+                     "device": rec.device, "metadata": rec.metadata, "source": rec.source})
+    d, m = load_arrays(base)
     streams = {name: Stream(name, d[f"t{i}"], d[f"v{i}"], tuple(cols), unit, note)
                for i, (name, cols, unit, note) in enumerate(m["streams"])}
     return Recording(streams, m["device"], m["metadata"], [], m["source"])
