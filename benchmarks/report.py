@@ -597,7 +597,7 @@ def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
 
 #: markdown sections other benchmark modules write, appended to RESULTS.md
 SECTIONS = ("GNSS_RESULTS.md", "GNSS_FAULTS_RESULTS.md", "VELOCITY_RESULTS.md", "FOOT_RESULTS.md", "BAD_INPUT_RESULTS.md",
-            "FLOORS_RESULTS.md", "INDOOR_RESULTS.md")
+            "FLOORS_RESULTS.md", "INDOOR_RESULTS.md", "THROUGHPUT_RESULTS.md")
 
 
 def _section_files() -> list[Path]:
