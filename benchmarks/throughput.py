@@ -1,6 +1,6 @@
 """Throughput of the hand-held pipeline, stage by stage, against attitude filters of other projects (issue #13).
 
-    python -m benchmarks.throughput                 # one hour at 100 Hz: writes THROUGHPUT_RESULTS.md
+    python -m benchmarks.throughput                 # one hour at 100 Hz (half an hour): THROUGHPUT_RESULTS.md
     python -m benchmarks.throughput --minutes 5     # a quick look (printed, nothing written)
 
 The walk is simulated once (:func:`desktop.simulator.simulate_walk` along a
@@ -366,7 +366,8 @@ def markdown(d: dict) -> str:
     m = d["machine"]
     walk_s = d["walk_seconds"]
     L = ["## Throughput (issue #13)", "",
-         f"`python -m benchmarks.throughput` (about 10 minutes): a {_walk_name(d['minutes'])} simulated walk at "
+         f"`python -m benchmarks.throughput` ({d['seconds'] / 60:.0f} minutes here): a {_walk_name(d['minutes'])} "
+         f"simulated walk at "
          f"100 Hz (acc and gyro 100 Hz, mag 50 Hz: {d['events']:,} events, {d['samples']:,} gyroscope samples), "
          f"run in one process on {m['cpu']} ({m['cores']} cores), CPython {m['python']}, numpy {m['numpy']}, "
          f"ahrs {m['ahrs']}, imufusion {m['imufusion']}; commit {m['commit']}, {m['date']}.  Every time is the "
@@ -433,6 +434,9 @@ def markdown(d: dict) -> str:
             if n is not None:
                 L.append(f"| {r['stage']} | {r['per_s']:,.0f} | {n['per_s']:,.0f} | {r['us_per_input']:.2f} | "
                          f"{n['us_per_input']:.2f} |")
+        L += ["", "Stages the speed work did not touch (the event iteration, the magnetometer calibration, the "
+              "heading smoother) moved by up to 40 % between the two runs: the noise of a shared machine, even in "
+              "CPU time.  The instruction counts below are the deterministic measure."]
     L += ["", HISTORY]
     if d.get("notes"):
         L += ["", *d["notes"]]
