@@ -85,12 +85,26 @@ Shared, at ``core/``'s top
     ``Pipeline(gnss=...)`` runs).
 
 ``core.foot``
-    Foot-mounted INS with zero-velocity updates (Song & Park 2018).
+    Foot-mounted INS with zero-velocity updates (Song & Park 2018);
+    ``tracker`` chooses foot or hand-held for a recording and puts the foot INS
+    behind the pipeline's streaming interface.
+
+``core.indoor``
+    Floor plans (walkable area, walls, georeference) and the particle filter
+    that keeps the steps inside them, with landmark fixes.
+
+``core.floors``
+    Floors from the barometer (relative altitude, stairs, lifts, slopes).
+
+``core.metrics``
+    A track's error against the truth a recording carries (shared by the
+    command line and the benchmark).
 
 ``desktop/`` (not on the phone)
     ``desktop.cli`` (the ``pdr`` command), ``desktop.plot``,
     ``desktop.simulator`` (walks with exact truth, independent of the
-    pipeline's models).
+    pipeline's models; a barometer), ``desktop.foot_simulator``,
+    ``desktop.floor_images`` (floor-plan images, Pillow).
 """
 
 __version__ = "0.1.0"
