@@ -55,6 +55,7 @@ from typing import Callable
 
 from core.conventions import GPS, PRESSURE, bearing_deg
 from core.floors import FloorEstimator, floors_at
+from core.gnss.base import ANCHOR_MAX_HACC_M
 from core.geodesy import geodetic_to_enu
 from core.recording import STREAM_ORDER, STREAM_SPECS
 
@@ -103,8 +104,9 @@ def _gps_value(vals, column: str) -> float:
     return float(vals[i]) if len(vals) > i else math.nan
 
 
-def _good_fix(vals, max_hacc_m: float = 30.0) -> bool:
-    """A GNSS fix usable as the track's origin (finite, accuracy unknown or within ``max_hacc_m``)."""
+def _good_fix(vals, max_hacc_m: float = ANCHOR_MAX_HACC_M) -> bool:
+    """A GNSS fix usable as the track's origin (finite, accuracy unknown or within ``max_hacc_m``: the
+    fusion's anchor rule, as ``pdr replay``'s :func:`core.gnss.base.first_good_fix`)."""
     lat, lon = _gps_value(vals, "lat_deg"), _gps_value(vals, "lon_deg")
     hacc = _gps_value(vals, "hacc_m")
     return math.isfinite(lat) and math.isfinite(lon) and not (hacc > max_hacc_m)
