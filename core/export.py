@@ -35,19 +35,28 @@ def _points(track):
     return rows
 
 
-def write_track_csv(path: str, track) -> None:
-    """One row per step: ``t_ns, t_s, step_length_m, heading_rad, bearing_deg, east_m, north_m, distance_m``."""
+def track_csv_rows(track, columns: dict | None = None) -> list[list]:
+    """The track CSV as rows, header first: ``t_ns, t_s, step_length_m, heading_rad, bearing_deg, east_m,
+    north_m, distance_m`` per step, then ``columns`` (``{name: per-step values}``, e.g. lat/lon, floor)."""
+    extra = columns or {}
     t0 = int(track.t_ns[0]) if len(track) else 0
     dist = 0.0
+    rows = [["t_ns", "t_s", "step_length_m", "heading_rad", "bearing_deg", "east_m", "north_m", "distance_m",
+             *extra]]
+    for i in range(len(track)):
+        dist += float(track.length_m[i])
+        h = float(track.heading_rad[i])
+        rows.append([int(track.t_ns[i]), f"{(int(track.t_ns[i]) - t0) * 1e-9:.3f}",
+                     f"{float(track.length_m[i]):.4f}", f"{h:.5f}", f"{bearing_deg(h):.2f}",
+                     f"{float(track.east_m[i]):.3f}", f"{float(track.north_m[i]):.3f}", f"{dist:.3f}",
+                     *(vals[i] for vals in extra.values())])
+    return rows
+
+
+def write_track_csv(path: str, track, columns: dict | None = None) -> None:
+    """One row per step (:func:`track_csv_rows`), with the optional extra ``columns``."""
     with open(path, "w", newline="", encoding="utf-8") as f:
-        w = csv.writer(f)
-        w.writerow(["t_ns", "t_s", "step_length_m", "heading_rad", "bearing_deg", "east_m", "north_m", "distance_m"])
-        for i in range(len(track)):
-            dist += float(track.length_m[i])
-            h = float(track.heading_rad[i])
-            w.writerow([int(track.t_ns[i]), f"{(int(track.t_ns[i]) - t0) * 1e-9:.3f}",
-                        f"{float(track.length_m[i]):.4f}", f"{h:.5f}", f"{bearing_deg(h):.2f}",
-                        f"{float(track.east_m[i]):.3f}", f"{float(track.north_m[i]):.3f}", f"{dist:.3f}"])
+        csv.writer(f).writerows(track_csv_rows(track, columns))
 
 
 FIX_COLUMNS = ("t_ns", "lat_deg", "lon_deg", "hacc_m", "speed_m_s", "course_deg", "used", "verdict", "nis",

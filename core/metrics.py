@@ -142,6 +142,11 @@ def rotate(xy, theta: float) -> np.ndarray:
     return np.column_stack([c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1]])
 
 
+def _stat(fn, values) -> float:
+    """``fn`` of a non-empty array as a float, nan for an empty one."""
+    return float(fn(values)) if len(values) else math.nan
+
+
 @dataclass
 class LandmarkErrors:
     """Errors of one track against one walk's landmarks (see :func:`landmark_errors`)."""
@@ -163,27 +168,27 @@ class LandmarkErrors:
 
     @property
     def mean_m(self) -> float:
-        return float(np.mean(self.errors_m)) if len(self.errors_m) else math.nan
+        return _stat(np.mean, self.errors_m)
 
     @property
     def mean_fit_m(self) -> float:
-        return float(np.mean(self.errors_fit_m)) if len(self.errors_fit_m) else math.nan
+        return _stat(np.mean, self.errors_fit_m)
 
     @property
     def median_m(self) -> float:
-        return float(np.median(self.errors_m)) if len(self.errors_m) else math.nan
+        return _stat(np.median, self.errors_m)
 
     @property
     def median_fit_m(self) -> float:
-        return float(np.median(self.errors_fit_m)) if len(self.errors_fit_m) else math.nan
+        return _stat(np.median, self.errors_fit_m)
 
     @property
     def max_m(self) -> float:
-        return float(np.max(self.errors_m)) if len(self.errors_m) else math.nan
+        return _stat(np.max, self.errors_m)
 
     @property
     def final_m(self) -> float:
-        return float(self.errors_m[-1]) if len(self.errors_m) else math.nan
+        return _stat(lambda a: a[-1], self.errors_m)
 
     @property
     def segment_heading_mae_deg(self) -> float:

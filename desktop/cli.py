@@ -605,31 +605,22 @@ def _write_track_csv(dest: str, track, origin, floors=None) -> None:
     """core.export's track CSV, with ``lat_deg, lon_deg`` columns when the track is placed and a ``floor``
     column when the barometer gave one per step; ``-`` is stdout."""
     import csv
-    import io
-    import tempfile
 
     from core import export
     from core.geodesy import enu_to_geodetic
 
-    with tempfile.TemporaryDirectory(prefix="pdr-csv-") as tmp:
-        f = Path(tmp) / "track.csv"
-        export.write_track_csv(str(f), track)
-        rows = list(csv.reader(io.StringIO(f.read_text(encoding="utf-8"))))
-    if origin is not None and rows:
-        rows[0] += ["lat_deg", "lon_deg"]
+    columns = {}
+    if origin is not None:
         lat, lon = enu_to_geodetic(np.asarray(track.east_m, float), np.asarray(track.north_m, float), origin)
-        for row, la, lo in zip(rows[1:], np.atleast_1d(lat), np.atleast_1d(lon)):
-            row += [f"{la:.8f}", f"{lo:.8f}"]
-    if floors is not None and rows:
-        rows[0].append("floor")
-        for row, fl in zip(rows[1:], floors):
-            row.append(str(int(fl)))
+        columns["lat_deg"] = [f"{v:.8f}" for v in np.atleast_1d(lat)]
+        columns["lon_deg"] = [f"{v:.8f}" for v in np.atleast_1d(lon)]
+    if floors is not None:
+        columns["floor"] = [str(int(fl)) for fl in floors]
     if dest == "-":
-        csv.writer(sys.stdout, lineterminator="\n").writerows(rows)
+        csv.writer(sys.stdout, lineterminator="\n").writerows(export.track_csv_rows(track, columns))
         sys.stdout.flush()
         return
-    with open(dest, "w", newline="", encoding="utf-8") as fh:
-        csv.writer(fh).writerows(rows)
+    export.write_track_csv(dest, track, columns)
 
 
 def _height_m(text: str) -> float:
@@ -708,25 +699,23 @@ def load_map(args):
     return read_geojson(path)
 
 
-def _parse_fix(text: str):
+def _floats(text: str, n: int, default_sd: float, want: str) -> tuple:
+    """``n`` numbers and an optional positive sd (``default_sd`` without it), comma separated."""
     try:
         v = [float(x) for x in text.split(",")]
     except ValueError:
         v = []
-    if len(v) not in (3, 4) or not all(math.isfinite(x) for x in v) or (len(v) == 4 and v[3] <= 0):
-        raise argparse.ArgumentTypeError(f"{text!r}: want T_S,EAST_M,NORTH_M[,SD_M] (seconds from the start, "
-                                         "plan metres)")
-    return (v[0], v[1], v[2], v[3] if len(v) == 4 else 2.0)
+    if len(v) not in (n, n + 1) or not all(math.isfinite(x) for x in v) or (len(v) == n + 1 and v[n] <= 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: want {want}")
+    return (*v[:n], v[n] if len(v) == n + 1 else default_sd)
+
+
+def _parse_fix(text: str):
+    return _floats(text, 3, 2.0, "T_S,EAST_M,NORTH_M[,SD_M] (seconds from the start, plan metres)")
 
 
 def _parse_start(text: str):
-    try:
-        v = [float(x) for x in text.split(",")]
-    except ValueError:
-        v = []
-    if len(v) not in (2, 3) or not all(math.isfinite(x) for x in v) or (len(v) == 3 and v[2] <= 0):
-        raise argparse.ArgumentTypeError(f"{text!r}: want EAST_M,NORTH_M[,SD_M] (plan metres)")
-    return (v[0], v[1], v[2] if len(v) == 3 else 1.0)
+    return _floats(text, 2, 1.0, "EAST_M,NORTH_M[,SD_M] (plan metres)")
 
 
 def map_start(args, rec: Recording, plan, track, truth) -> tuple[dict, str]:
@@ -744,7 +733,7 @@ def map_start(args, rec: Recording, plan, track, truth) -> tuple[dict, str]:
     fix = first_good_fix(rec.streams.get("gps"))
     if fix is not None and plan.georef is not None:
         g = rec.streams["gps"]
-        hacc = float(g.values[list(g.t_ns).index(fix[0]), 3])
+        hacc = float(g.values[int(np.searchsorted(g.t_ns, fix[0])), 3])
         return {"start_gps": (fix[0], fix[1], fix[2], hacc)}, "the first good GPS fix"
     raise ValueError("--map needs a start: --start EAST_M,NORTH_M in the plan's metres (or a recording with "
                      "landmarks in plan metres, or a good GPS fix and a georeferenced plan)")
