@@ -21,6 +21,16 @@ GNSS_STATUS = "gnss_status"
 
 NS_PER_S = 1_000_000_000
 
+#: How the phone is carried (issue #17): the names shared by the carry-mode detector
+#: (core.pdr.carry), the simulator's placements, the recordings' metadata and the benchmark.
+CARRY_HANDHELD = "handheld"  #: in the hand in front of the body: reading, texting (screen roughly up)
+CARRY_SWINGING = "swinging"  #: in a hand swinging at the side, with the arm
+CARRY_POCKET = "pocket"  #: in a trouser pocket, moving with the thigh
+CARRY_BAG = "bag"  #: in a bag, backpack or pouch: loosely coupled to the trunk
+CARRY_EAR = "ear"  #: held at the ear (a call): upright beside the head
+CARRY_STILL = "still"  #: not walking: on a table, in the hand while standing, in a vehicle
+CARRY_MODES = (CARRY_HANDHELD, CARRY_SWINGING, CARRY_POCKET, CARRY_BAG, CARRY_EAR, CARRY_STILL)
+
 
 def ns_to_s(t_ns) -> float:
     """Nanoseconds to seconds (float)."""
