@@ -38,6 +38,13 @@ GPS fusion with injected faults (``sim_gps_faults``, :mod:`benchmarks.gnss_fault
     fault walks are other walks than ``sim_gps``'s: longer, 50 Hz, faults).
     Its real walks keep their splits above (the ETH walk and ``gps_walks_phone``
     report, IPIN 2023 by route).
+Carry modes on the simulator (``sim_carry``, :mod:`benchmarks.carry`, issue #17)
+    Seeds 0-29 of the simulator's placements (:func:`desktop.simulator.simulate_walk` with
+    ``placement=``, and the not-walking recordings) are **tuning**, seeds 3000-3029 **report**
+    (declared before any carry-mode number was seen).  The carry-mode detector, the per-mode step
+    gates and the walking-direction estimator may be tuned on the tuning seeds and on the real
+    tuning recordings above (IPIN tuning routes: hand-held; IPOL: waist, the nearest to a belt or
+    bag); the Oxford placements (all report, below) and the outdoor phone walks are only reported.
 Oxford step counter, Brajdic-Harle, trundle wheel
     All **report**: nothing will be tuned on them.  Honest caveat: the step
     detector's thresholds and gates were developed before this split existed
@@ -70,6 +77,9 @@ IPIN_REPORT_ROUTES = ("04", "05", "23", "24")
 SIM_GPS_SEEDS = {TUNING: tuple(range(0, 20)), REPORT: tuple(range(1000, 1020))}
 #: simulator seeds of the GPS fault benchmark (issue #10, :mod:`benchmarks.gnss_faults`)
 SIM_GPS_FAULT_SEEDS = {TUNING: tuple(range(0, 10)), REPORT: tuple(range(2000, 2010))}
+
+#: simulator seeds of the carry-mode benchmark (issue #17, :mod:`benchmarks.carry`)
+SIM_CARRY_SEEDS = {TUNING: tuple(range(0, 30)), REPORT: tuple(range(3000, 3030))}
 
 #: datasets whose every recording is in one split
 WHOLE_DATASET = {
