@@ -56,6 +56,7 @@ checks them against each other where they could differ (chunked feeding, the app
 from __future__ import annotations
 
 import math
+from array import array
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -691,28 +692,25 @@ class Pipeline:
             off = recording.metadata.get("unix_offset_ns")
             if self.unix_offset_ns is None and isinstance(off, int):
                 self.unix_offset_ns = off
+        self._log = _LogColumns()  # the log's rows go into typed columns, not tuples (memory, #13)
         try:
             total = sum(len(recording.streams[n]) for n in use)
             update = self.update
-            for k, (name, t, vals) in enumerate(recording.events(use)):
-                update(name, t, vals)
-                if progress is not None and k % 5000 == 0:
-                    progress(k / total)
+            k = 0
+            for chunk in _event_chunks(recording, use):
+                for name, t, vals in chunk:
+                    update(name, t, vals)
+                    if progress is not None and k % 5000 == 0:
+                        progress(k / total)
+                    k += 1
             self.finish()
             if progress is not None:
                 progress(1.0)
         finally:
             self.log = log
-        rows = self._log
+        att = self._log.attitude_log()
+        self._log = []
         a = self.attitude
-        att = AttitudeLog(
-            np.array([r[0] for r in rows], dtype=np.int64),
-            np.array([r[1] for r in rows], dtype=float).reshape(-1, 4),
-            np.array([r[2] for r in rows], dtype=float),
-            np.array([r[3] for r in rows], dtype=float),
-            np.array([r[4] for r in rows], dtype=float),
-            np.array([r[5] for r in rows], dtype=bool),
-        )
         counters = {"mag_used": a.n_mag_used, "mag_rejected": a.n_mag_rejected, "acc_rejected": a.n_acc_rejected,
                     "peaks_rejected_rotation": self.n_rejected_rotation, "peaks_rejected_bout": self.n_rejected_bout,
                     "nonfinite_skipped": dict(self.n_nonfinite), **self.health_counters()}
@@ -723,6 +721,75 @@ class Pipeline:
             fusion.counters["site"] = self.site
         return PipelineResult(list(self.steps), Track.from_steps(self.steps), att, self.labels(), recording,
                               counters, fusion)
+
+
+#: events a batch run turns into Python objects at a time (:func:`_event_chunks`)
+EVENT_CHUNK = 1 << 14
+
+
+def _event_chunks(recording: Recording, names: list[str], chunk: int = EVENT_CHUNK):
+    """The events of ``recording.events(names)``, in the same order, a time slice of about ``chunk`` at a time.
+
+    ``recording.events`` makes three Python lists of the whole merged recording
+    (about 80 bytes an event); a slice of ``[t_lo, t_hi)`` of every stream,
+    merged as :meth:`core.recording.Recording.merged` merges (time, then
+    :data:`core.recording.STREAM_ORDER`, then row), gives the same sequence
+    with memory for one slice.  Streams whose times are not sorted (never
+    after a reader's repair) are merged whole, as before.
+    """
+    order = recording.stream_order(names)
+    streams = [recording.streams[n] for n in order]
+    times = [np.asarray(s.t_ns) for s in streams]
+    if not times or any(len(t) > 1 and bool(np.any(t[1:] < t[:-1])) for t in times):
+        yield recording.events(names)
+        return
+    longest = max(times, key=len)
+    if not len(longest):
+        return
+    step = max(1, chunk * len(longest) // max(sum(len(t) for t in times), 1))
+    bounds = [int(b) for b in longest[step::step]]
+    vals = [s.values for s in streams]
+    lo = [0] * len(times)
+    for b in [*bounds, None]:
+        hi = [len(t) if b is None else int(np.searchsorted(t, b, side="left")) for t in times]
+        t_all = np.concatenate([t[i:j] for t, i, j in zip(times, lo, hi)])
+        s_all = np.concatenate([np.full(j - i, k, dtype=np.int64) for k, (i, j) in enumerate(zip(lo, hi))])
+        r_all = np.concatenate([np.arange(i, j, dtype=np.int64) for i, j in zip(lo, hi)])
+        idx = np.lexsort((s_all, t_all))
+        yield [(order[si], ti, tuple(vals[si][ri].tolist()))
+               for ti, si, ri in zip(t_all[idx].tolist(), s_all[idx].tolist(), r_all[idx].tolist())]
+        lo = hi
+
+
+class _LogColumns:
+    """The attitude log of a batch run as typed columns (``array.array``), 57 bytes a grid sample.
+
+    :meth:`Pipeline.update` appends one row tuple per grid sample; a list of
+    those tuples held about 400 bytes a sample (80 a pipeline event).
+    """
+
+    __slots__ = ("t", "q", "heading", "acc_s2", "mag_s2", "rejected")
+
+    def __init__(self):
+        self.t, self.q, self.heading = array("q"), array("d"), array("d")
+        self.acc_s2, self.mag_s2, self.rejected = array("d"), array("d"), array("b")
+
+    def append(self, row) -> None:
+        tg, q, heading, acc_s2, mag_s2, rejected = row
+        self.t.append(tg)
+        self.q.extend(q)
+        self.heading.append(heading)
+        self.acc_s2.append(acc_s2)
+        self.mag_s2.append(mag_s2)
+        self.rejected.append(rejected)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def attitude_log(self) -> AttitudeLog:
+        return AttitudeLog(np.array(self.t, dtype=np.int64), np.array(self.q, dtype=float).reshape(-1, 4),
+                           np.array(self.heading, dtype=float), np.array(self.acc_s2, dtype=float),
+                           np.array(self.mag_s2, dtype=float), np.array(self.rejected, dtype=bool))
 
 
 def _held_items(obj, depth: int, seen: set) -> int:
