@@ -182,7 +182,8 @@ import numpy as np
 
 from core import __version__
 from core import quaternion as quat
-from core.conventions import ACC, GPS, GYRO, MAG, STANDARD_GRAVITY_M_S2, bearing_deg, wrap_angle
+from core.conventions import (ACC, CARRY_HANDHELD, CARRY_MODES, GPS, GYRO, MAG, STANDARD_GRAVITY_M_S2, bearing_deg,
+                              wrap_angle)
 from core.geodesy import enu_to_geodetic, magnetic_field
 from core.recording import Recording, Stream, make_stream
 
@@ -615,6 +616,29 @@ class WalkTruth:
     origin_alt_m: float  #: ellipsoidal height of the ground at the origin (m; the ground is flat)
     gps: GpsTruth | None  #: what went into the GPS fixes (None without a GPS stream)
     _model: "_WalkModel" = field(repr=False)
+    #: how the phone is carried: one of ``core.conventions.CARRY_MODES`` (:mod:`desktop.placements`)
+    placement: str = CARRY_HANDHELD
+    #: pocket, swinging, ear: the leg, arm or ear carrying the phone ("left" / "right"); None otherwise
+    side: str | None = None
+    #: the placement's drawn or given choices (JSON-ready; e.g. the phone's orientation in the pocket or bag)
+    placement_info: dict = field(default_factory=dict)
+
+    @property
+    def step_foot(self) -> np.ndarray:
+        """(n,) str: the foot of each heel strike, "left" or "right" (they alternate; the first is the right
+        foot's: the body sways over the left foot during the first step)."""
+        return np.where(np.arange(1, self.n_steps + 1) % 2 == 0, "left", "right")
+
+    def forward_in_device_at(self, t_ns) -> np.ndarray:
+        """The walking direction (horizontal unit vector of ``heading_at``) in the device frame: (3,) or (n, 3).
+
+        Whatever the placement, this is what a walking-direction estimator has to find in the phone's own
+        frame (with the device y axis horizontal it is about ``(-sin d, cos d, 0)``, ``d`` the offset
+        ``device_heading_at - heading_at``)."""
+        t = np.atleast_1d(self._t(t_ns))
+        h = self._model.walker(t)[2]
+        fwd_n = np.stack([np.cos(h), np.sin(h), np.zeros_like(h)], axis=1)
+        return self._out(t_ns, _rotate_to_body(quat.to_matrix_array(self._model.quat(t)), fwd_n))
 
     def _t(self, t_ns) -> np.ndarray:
         return (np.asarray(t_ns, dtype=np.int64) - self._model.clock0_ns) * 1e-9
@@ -629,7 +653,8 @@ class WalkTruth:
         return float(h[0]) if np.ndim(t_ns) == 0 else h
 
     def device_heading_at(self, t_ns):
-        """Heading (rad, CCW from East, wrapped) of the horizontal projection of the device y axis at ``t_ns``."""
+        """Heading (rad, CCW from East, wrapped) of the horizontal projection of the device y axis at ``t_ns``
+        (ill-defined where the device y axis is near vertical: a phone upright in a pocket or at the ear)."""
         y = quat.to_matrix_array(self._model.quat(np.atleast_1d(self._t(t_ns))))[:, :, 1]
         h = np.arctan2(y[:, 1], y[:, 0])
         return float(h[0]) if np.ndim(t_ns) == 0 else h
@@ -741,17 +766,19 @@ def _pendulum_excursion(step_length_m, leg_m: float):
     return leg_m - np.sqrt(np.maximum(leg_m * leg_m - a * a, 0.0))
 
 
-def _vertical_coefficients(step_frequency_hz: float) -> np.ndarray:
+def _vertical_coefficients(step_frequency_hz: float, gain: float = HAND_VERTICAL_GAIN,
+                           lag_s: float = HAND_LAG_S) -> np.ndarray:
     """Complex coefficients (2,) in harmonics 1, 2 of the step frequency of the phone's vertical displacement
     per metre of COM excursion: ``z(u) = Re(sum_m c_m exp(2 pi i m u))``, ``u`` the step phase.
 
     The COM height is ``-(cos th + b cos 2 th) / 2`` with ``th = 2 pi (u - ds / 2)`` (peak to peak 1, lowest
     in the middle of double support, highest in mid-stance; ``b = COM_SECOND_HARMONIC`` makes the trough
-    sharper than the crest); the hand follows with gain ``HAND_VERTICAL_GAIN`` and the lag ``HAND_LAG_S``.
+    sharper than the crest); the hand follows with gain ``HAND_VERTICAL_GAIN`` and the lag ``HAND_LAG_S``
+    (``gain=1, lag_s=0``: the COM itself, for the placements of :mod:`desktop.placements`).
     """
-    u0 = 0.5 * DOUBLE_SUPPORT + HAND_LAG_S * step_frequency_hz
+    u0 = 0.5 * DOUBLE_SUPPORT + lag_s * step_frequency_hz
     c = np.array([-0.5 * np.exp(-2j * np.pi * u0), -0.5 * COM_SECOND_HARMONIC * np.exp(-4j * np.pi * u0)])
-    return HAND_VERTICAL_GAIN * c
+    return gain * c
 
 
 # ---------------------------------------------------------------------------
@@ -1006,7 +1033,7 @@ class _WalkModel:
         self.walk_end_s = float(self.t_hs[-1])
         # vertical gait: the phone's motion per metre of COM excursion (hand gain and lag included)
         self.vert_coef = _vertical_coefficients(f)
-        self.vert_crest_phase = self._crest_phase(f)
+        self.vert_crest_phase = self._crest_phase(self.vert_coef)
         self.vert_crest = float(self._vertical_unit(np.array([self.vert_crest_phase]))[0])
         lag = np.exp(-2j * np.pi * HAND_LAG_S * f)  # the hand's lag, as a phase at the step frequency
         self.fwd_amp = FORE_AFT_SPEED_SWING * self.step_length_m / (2.0 * np.pi) * lag
@@ -1016,10 +1043,10 @@ class _WalkModel:
         self.hs_amp = HEEL_STRIKE_M_S2 * self.bounce_scale * self.step_lengths / self.step_length_m
 
     @staticmethod
-    def _crest_phase(f: float) -> float:
-        """Step phase (in [0, 1)) of the crest of the phone's vertical gait motion."""
+    def _crest_phase(c: np.ndarray) -> float:
+        """Step phase (in [0, 1)) of the crest of the vertical gait motion of coefficients ``c``
+        (:func:`_vertical_coefficients`)."""
         u = np.arange(4096) / 4096
-        c = _vertical_coefficients(f)
         return float(u[np.argmax((c[0] * np.exp(2j * np.pi * u) + c[1] * np.exp(4j * np.pi * u)).real)])
 
     def _vertical_unit(self, u: np.ndarray) -> np.ndarray:
@@ -1091,16 +1118,21 @@ class _WalkModel:
         return out
 
     # -- the model -------------------------------------------------------------
+    def offset_w(self, t: np.ndarray) -> np.ndarray:
+        """Phone position (n, 3) relative to the walker's ground point in the walking frame (forward, left, up), m."""
+        d = self._gait(t)
+        d[:, 2] += self.hand_height_m
+        return d
+
     def position(self, t: np.ndarray) -> np.ndarray:
-        """Phone position (n, 3) in ENU (m)."""
+        """Phone position (n, 3) in ENU (m): the walker's ground point plus ``offset_w`` turned by the heading."""
         t = np.asarray(t, float)
         w = self.warped(t)
         x, y = self.path.state(w)[:2]
         h = self.path.smooth_heading(w, _TURN_SMOOTH_S)
-        d = self._gait(t)
+        d = self.offset_w(t)
         c, s = np.cos(h), np.sin(h)
-        pos = np.stack([x + c * d[:, 0] - s * d[:, 1], y + s * d[:, 0] + c * d[:, 1],
-                        self.hand_height_m + d[:, 2]], axis=1)
+        pos = np.stack([x + c * d[:, 0] - s * d[:, 1], y + s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
         if self.cal_s > 0:
             wc = self._cal_window(t)
             pos += wc[:, None] * np.stack([0.06 * np.sin(2 * np.pi * 0.30 * t), 0.04 * np.sin(2 * np.pi * 0.60 * t),
@@ -1413,9 +1445,12 @@ def simulate_walk(
     gps: GpsModel | None = None,
     origin_lat_lon: tuple[float, float] = DEFAULT_ORIGIN_LAT_LON,
     origin_alt_m: float = DEFAULT_ORIGIN_ALT_M,
+    placement: str = CARRY_HANDHELD,
+    placement_options: dict | None = None,
     seed: int = 0,
 ) -> SimulatedWalk:
-    """Simulate a walk along ``waypoints_en_m`` with a phone held in front of the chest.
+    """Simulate a walk along ``waypoints_en_m`` with a phone held in front of the chest (or carried otherwise:
+    ``placement``).
 
     Parameters
     ----------
@@ -1493,6 +1528,16 @@ def simulate_walk(
         axis is true north.
     origin_alt_m : float
         Height of the (flat) ground above the WGS-84 ellipsoid at the origin (m), for the GPS altitude.
+    placement : str
+        How the phone is carried, one of ``core.conventions.CARRY_MODES``: "handheld" (this module's model,
+        the default), "swinging", "pocket", "bag", "ear" (:mod:`desktop.placements`; they ignore
+        ``phone_pitch_deg``, ``phone_roll_deg``, ``phone_yaw_offset_deg`` and ``hand_sway_deg``), "still"
+        (only with a single waypoint: :func:`desktop.placements.simulate_still`).  The walk itself (heel
+        strikes, step lengths, path) is the same for every placement and the same seed; the placement's own
+        draws come from a generator of their own.
+    placement_options : dict or None
+        The placement's choices, drawn per seed where not given (see :mod:`desktop.placements`), e.g.
+        ``{"side": "left"}``; ``truth.placement_info`` has them all.
     seed : int
         Seed of all randomness (timestamps, noise, gait variability, hand drift, bias walk, GPS errors).
 
@@ -1556,6 +1601,10 @@ def simulate_walk(
     if len(origin) != 2 or not (abs(origin[0]) <= 85.0 and abs(origin[1]) <= 180.0):
         raise ValueError(f"origin_lat_lon must be (lat, lon) in degrees, |lat| <= 85, got {origin_lat_lon!r}")
     origin_alt_m = _finite("origin_alt_m", origin_alt_m)
+    if placement not in CARRY_MODES:
+        raise ValueError(f"placement must be one of {', '.join(CARRY_MODES)}, got {placement!r}")
+    if placement != CARRY_HANDHELD and calibration_motion_s > 0:
+        raise ValueError("calibration_motion_s is only simulated for the handheld placement")
 
     seeds = np.random.SeedSequence(seed)
     rngs = [np.random.default_rng(s) for s in seeds.spawn(9)]
@@ -1584,13 +1633,19 @@ def simulate_walk(
     incr[0] = 0.0
     bias_walk = np.cumsum(incr, axis=0)
 
-    model = _WalkModel(path=path, clock0_ns=clock0, step_frequency_hz=f, step_length_m=step_length_m,
-                       height_m=height_m, pitch_rad=math.radians(phone_pitch_deg),
-                       roll_rad=math.radians(phone_roll_deg), yaw_offset_rad=math.radians(phone_yaw_offset_deg),
-                       sway_rad=np.radians(sway), drift=drift, calibration_s=calibration_motion_s,
-                       step_length_cv=step_length_cv, step_time_cv=step_time_cv, bounce_scale=bounce_scale,
-                       rng_gait=rng_gait, gyro_bias=gyro_bias, bias_grid_s=bias_grid, bias_walk=bias_walk,
-                       earth_field_enu_uT=h_earth, zones=zones)
+    model_kw = dict(path=path, clock0_ns=clock0, step_frequency_hz=f, step_length_m=step_length_m,
+                    height_m=height_m, pitch_rad=math.radians(phone_pitch_deg),
+                    roll_rad=math.radians(phone_roll_deg), yaw_offset_rad=math.radians(phone_yaw_offset_deg),
+                    sway_rad=np.radians(sway), drift=drift, calibration_s=calibration_motion_s,
+                    step_length_cv=step_length_cv, step_time_cv=step_time_cv, bounce_scale=bounce_scale,
+                    rng_gait=rng_gait, gyro_bias=gyro_bias, bias_grid_s=bias_grid, bias_walk=bias_walk,
+                    earth_field_enu_uT=h_earth, zones=zones)
+    if placement == CARRY_HANDHELD:
+        model = _WalkModel(**model_kw)
+    else:
+        from desktop.placements import placement_model  # it builds on this module (a top-level import would cycle)
+        model = placement_model(placement, placement_options or {},
+                                np.random.default_rng([seed, _PLACEMENT_SEED_TAG]), total_s=total_s, **model_kw)
 
     def rel(t_ns):
         return (t_ns - clock0) * 1e-9
@@ -1670,6 +1725,9 @@ def simulate_walk(
         origin_alt_m=origin_alt_m,
         gps=gps_truth,
         _model=model,
+        placement=placement,
+        side=getattr(model, "side", None),
+        placement_info=dict(getattr(model, "info", {})),
     )
 
     metadata = {
@@ -1701,6 +1759,8 @@ def simulate_walk(
     }
     if weinberg_c is not None:
         metadata["weinberg_c"] = float(weinberg_c)
+    if placement != CARRY_HANDHELD:  # only then: hand-held recordings keep their header
+        metadata.update(placement=placement, placement_info=dict(model.info))
     if gps is not None:  # only then: recordings without GPS keep their header
         metadata.update(gps=gps.as_dict(), origin_lat_lon=list(origin), origin_alt_m=origin_alt_m)
     streams = {ACC: make_stream(ACC, t_acc, acc), GYRO: make_stream(GYRO, t_gyro, gyro)}
@@ -1796,6 +1856,7 @@ OUTDOOR_PITCH_DEG = (15.0, 40.0)
 OUTDOOR_HARD_IRON_SD_UT = 1.0
 _ROUTE_SEED_TAG = 0x5743  # street_route's generator: [seed, tag], distinct from simulate_walk's SeedSequence(seed)
 _OUTDOOR_SEED_TAG = 0x4F57  # outdoor_walk's walker draws
+_PLACEMENT_SEED_TAG = 0x504C  # the placements' draws (desktop.placements): [seed, tag]
 
 
 def outdoor_walk(seed: int, minutes: float = 15.0, *, year: float = 2025.5, **kw) -> SimulatedWalk:
