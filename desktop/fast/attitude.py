@@ -1,0 +1,802 @@
+"""The attitude EKF over a whole recording as one compiled loop: a second implementation of
+:class:`core.pdr.attitude.AttitudeEKF`.
+
+Deliberately a second implementation (issue #13 item 3): the phone's filter
+(``core/pdr/attitude.py``) stays the reference, and this kernel is checked
+against it to 1e-9 on real recordings (``tests/test_fast_path.py``).  It
+re-implements, on numpy arrays and scalars so that numba can compile it, what
+the reference does after its start:
+
+* the gyroscope prediction, eqs. 5-7 and 11 of Tian et al. 2014, with the bias
+  removed (``q <- q (x) exp((w - b) T / 2)``, ``P <- F P F^T + Q`` on the
+  covariance's blocks in the reference's order of operations);
+* the accelerometer direction update, eqs. 12-13 with the adaptive noise of
+  eq. 17 (and the turn term), averaged over ``update_interval_s``;
+* the magnetometer heading update, eq. 18's noise, as a consider (Schmidt)
+  update with the Joseph form, and its relock;
+* the zero-rate update, the running references (|g|, |h|, dip) and the
+  trailing windows (noise variances, stillness).
+
+What it does not re-implement, and why:
+
+* the start (TRIAD from the first accelerometer and magnetometer readings, or
+  gravity and ``initial_yaw_rad``): a handful of events, run by the reference
+  itself (:func:`start_with_reference`), whose state is then handed over;
+* the online magnetometer calibration (:class:`core.pdr.magcal.MagCalibrator`,
+  ellipsoid fits): it sees only the raw readings, never the attitude, so it is
+  run over the magnetometer stream beforehand (:func:`calibrate_magnetometer`,
+  Python) and the kernel gets the calibrated readings;
+* the vertical offset of an outdoor site's field, the quasi-static field
+  detector and ``mag_mode="full"``: not used by the default pipeline; the fast
+  path refuses a filter configured with them (:func:`check_supported`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from desktop.fast.jit import kernel
+
+# event kinds of the merged arrays
+GYRO_K, ACC_K, MAG_K = 0, 1, 2
+
+#: the reasons of AttitudeEKF.acc_reasons / mag_reasons, by code
+ACC_REASONS = ("used", "initialising", "norm off", "pending", "gate", "numerical")
+MAG_REASONS = ("used", "initialising", "invalid range", "norm off", "dip off", "gate", "numerical",
+               "field vertical", "calibrating", "magnetometer off")
+A_USED, A_NORM, A_PENDING, A_GATE, A_NUM = 0, 2, 3, 4, 5
+M_USED, M_RANGE, M_NORM, M_DIP, M_GATE, M_NUM, M_VERTICAL, M_CALIBRATING, M_OFF = 0, 2, 3, 4, 5, 6, 7, 8, 9
+C_USED, C_GATE, C_NUM = 0, 1, 2
+
+# settings (float array)
+(S_GN, S_GS, S_BW, S_MAXB, S_UPD, S_A0, S_KA1, S_KA2, S_KA3, S_M0, S_KM1, S_KM2, S_ACC_REJ, S_ACC_GATE,
+ S_MAG_RATIO, S_MAG_DIP, S_MAG_LO, S_MAG_HI, S_MAG_GATE, S_RELOCK_S, S_RELOCK_SPREAD, S_DECL, S_STILL_ACC_SD,
+ S_STILL_DIR, S_STILL_GYRO, S_ZR_NOISE, S_MAX_GAP, S_NO_GYRO_RW) = range(28)
+# settings (int array)
+SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI_STILL_WIN_NS = range(6)
+
+# scalar state (float array)
+(F_GRAV, F_FIELD, F_DIP, F_ALPHA_REF, F_W2, F_ACC_S2, F_MAG_S2, F_LAST_ACC0, F_LAST_ACC1, F_LAST_ACC2,
+ F_ASUM0, F_ASUM1, F_ASUM2, F_ASUM3, F_MSUM0, F_MSUM1, F_MSUM2, F_MSUM3) = range(18)
+N_FSTATE = 18
+# scalar state (int array); HAS_* flags stand for the reference's None
+(I_TNS, I_TGYRO, I_HAS_TGYRO, I_REF_NEXT, I_HAS_REF_NEXT, I_ZR_NEXT, I_HAS_ZR_NEXT, I_STILL_NEXT,
+ I_HAS_STILL_NEXT, I_ACC_N, I_ACC_T0, I_MAG_N, I_MAG_T0, I_GATED_N, I_YAW_UNOBS, I_MAG_REJ, I_N_ZR, I_N_NUM,
+ I_N_RELOCK, I_N_GYRO, I_HAS_LAST_ACC) = range(21)
+N_ISTATE = 21
+
+
+# -- plain-float quaternion algebra (the same formulas as core.quaternion, for the compiler) -----------
+
+@kernel
+def q_multiply(p, q):
+    pw, px, py, pz = p[0], p[1], p[2], p[3]
+    qw, qx, qy, qz = q[0], q[1], q[2], q[3]
+    out = np.empty(4)
+    out[0] = pw * qw - px * qx - py * qy - pz * qz
+    out[1] = pw * qx + px * qw + py * qz - pz * qy
+    out[2] = pw * qy - px * qz + py * qw + pz * qx
+    out[3] = pw * qz + px * qy - py * qx + pz * qw
+    return out
+
+
+@kernel
+def q_normalize(q):
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    s = 1.0 / n
+    out = np.empty(4)
+    for i in range(4):
+        out[i] = q[i] * s
+    return out
+
+
+@kernel
+def q_from_rotation_vector(ax, ay, az):
+    theta = math.sqrt(ax * ax + ay * ay + az * az)
+    out = np.empty(4)
+    if theta < 1e-12:
+        out[0], out[1], out[2], out[3] = 1.0, 0.5 * ax, 0.5 * ay, 0.5 * az
+        return q_normalize(out)
+    s = math.sin(0.5 * theta) / theta
+    out[0], out[1], out[2], out[3] = math.cos(0.5 * theta), ax * s, ay * s, az * s
+    return out
+
+
+@kernel
+def q_to_matrix(q):
+    """R(q) body -> ENU, as core.quaternion.to_matrix."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    R = np.empty((3, 3))
+    R[0, 0], R[0, 1], R[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+    R[1, 0], R[1, 1], R[1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+    R[2, 0], R[2, 1], R[2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    return R
+
+
+# -- running statistics on arrays (the reference's deques and histograms) --------------------------
+
+@kernel
+def median_of(counts, n, lo, width):
+    """Median of a fixed-bin histogram: the first bin whose cumulative count reaches half."""
+    half = 0.5 * n
+    cum = 0
+    for i in range(len(counts)):
+        cum += counts[i]
+        if cum >= half:
+            return lo + (i + 0.5) * width
+    return math.nan
+
+
+@kernel
+def median_add(counts, n_arr, lo, width, x):
+    i = int((x - lo) / width)
+    if 0 <= i < len(counts):
+        counts[i] += 1
+        n_arr[0] += 1
+
+
+@kernel
+def winvar_update(wt, wx, ptr, s, window_ns, t, x):
+    """Trailing-window variance (core.dsp.WindowVariance.update): push, drop the old, return the variance."""
+    hi = ptr[1]
+    wt[hi] = t
+    wx[hi] = x
+    ptr[1] = hi + 1
+    s1 = s[0] + x
+    s2 = s[1] + x * x
+    limit = t - window_ns
+    lo = ptr[0]
+    while wt[lo] < limit:
+        old = wx[lo]
+        lo += 1
+        s1 -= old
+        s2 -= old * old
+    ptr[0] = lo
+    s[0], s[1] = s1, s2
+    n = ptr[1] - lo
+    if n < 2:
+        return 0.0
+    mean = s1 / n
+    v = s2 / n - mean * mean
+    return 0.0 if 0.0 > v else v
+
+
+@kernel
+def winvar_variance(ptr, s):
+    n = ptr[1] - ptr[0]
+    if n < 2:
+        return 0.0
+    mean = s[0] / n
+    return max(s[1] / n - mean * mean, 0.0)
+
+
+@kernel
+def winspread_update(wt, wv, ptr, s, window_ns, t, x, y, z):
+    """Trailing-window per-axis sums of a 3-vector (core.dsp.WindowMeanSpread.update)."""
+    hi = ptr[1]
+    wt[hi] = t
+    wv[hi, 0], wv[hi, 1], wv[hi, 2] = x, y, z
+    ptr[1] = hi + 1
+    s0, s1, s2_ = s[0] + x, s[1] + y, s[2] + z
+    q0, q1, q2 = s[3] + x * x, s[4] + y * y, s[5] + z * z
+    limit = t - window_ns
+    lo = ptr[0]
+    while wt[lo] < limit:
+        x, y, z = wv[lo, 0], wv[lo, 1], wv[lo, 2]
+        lo += 1
+        s0 -= x
+        s1 -= y
+        s2_ -= z
+        q0 -= x * x
+        q1 -= y * y
+        q2 -= z * z
+    ptr[0] = lo
+    s[0], s[1], s[2], s[3], s[4], s[5] = s0, s1, s2_, q0, q1, q2
+
+
+@kernel
+def winspread_sd(ptr, s):
+    """Largest per-axis standard deviation of the window (the mean is s[0:3] / n)."""
+    n = ptr[1] - ptr[0]
+    m0, m1, m2 = s[0] / n, s[1] / n, s[2] / n
+    a = math.sqrt(max(s[3] / n - m0 * m0, 0.0))
+    b = math.sqrt(max(s[4] / n - m1 * m1, 0.0))
+    c = math.sqrt(max(s[5] / n - m2 * m2, 0.0))
+    out = a
+    if b > out:
+        out = b
+    if c > out:
+        out = c
+    return out
+
+
+# -- the Kalman update and the injection of the error -----------------------------------------------
+
+@kernel
+def inject(q, b, P, dx, Pn, keep_yaw, max_bias):
+    """Fold the error ``dx`` into ``q`` and ``b`` and reset it (the reference's ``_inject``); in place."""
+    dq = q_from_rotation_vector(dx[0], dx[1], dx[2])
+    qn = q_normalize(q_multiply(dq, q))
+    for i in range(4):
+        q[i] = qn[i]
+    for i in range(3):
+        v = b[i] + dx[3 + i]
+        m = -max_bias
+        if v > m:
+            m = v
+        r = max_bias
+        if m < r:
+            r = m
+        b[i] = r
+    G = np.eye(6)
+    sk = np.zeros((3, 3))
+    sk[0, 1], sk[0, 2] = -dx[2], dx[1]
+    sk[1, 0], sk[1, 2] = dx[2], -dx[0]
+    sk[2, 0], sk[2, 1] = -dx[1], dx[0]
+    for i in range(3):
+        for j in range(3):
+            G[i, j] -= 0.5 * sk[i, j]
+    if keep_yaw:
+        G[2, 0] = 0.0
+        G[2, 1] = 0.0
+    Pg = G @ Pn @ G.T
+    Ps = 0.5 * (Pg + Pg.T)
+    P[:, :] = Ps
+
+
+@kernel
+def correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw, max_bias, is_,
+            nis_sum, nis_n, slot):
+    """Kalman update of the error state and its bookkeeping (the reference's ``_correct`` and ``_record``).
+
+    Returns the outcome's code; the NIS goes into ``nis_sum[slot]``/``nis_n[slot]``, a numerical failure into
+    the state's counter, a used heading measurement ends ``yaw_unobserved``.
+    """
+    code, nis = _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw,
+                         is_[I_YAW_UNOBS] != 0, max_bias)
+    if code == C_USED and measures_yaw:
+        is_[I_YAW_UNOBS] = 0
+    if code == C_NUM:
+        is_[I_N_NUM] += 1
+    if nis == nis:
+        nis_sum[slot] += nis
+        nis_n[slot] += 1
+    return code
+
+
+@kernel
+def _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw, yaw_unobs, max_bias):
+    """The Kalman update itself; returns (code, nis)."""
+    PHt = P @ H.T.copy()
+    S = H @ PHt + Rm
+    try:
+        Sinv = np.linalg.inv(S)
+    except Exception:
+        return C_NUM, math.nan
+    nis = (y @ Sinv) @ y
+    if not math.isfinite(nis):
+        return C_NUM, nis
+    if nis > gate:
+        return C_GATE, nis
+    K = PHt @ Sinv
+    m = K.shape[1]
+    if consider_tilt:
+        K[0:2, :] = 0.0
+    yaw_consider = yaw_unobs and not measures_yaw
+    if yaw_consider:
+        K[2, :] = 0.0
+    if use_bias_axis:
+        proj = bias_axis @ K[3:6, :].copy()
+        for i in range(3):
+            for j in range(m):
+                K[3 + i, j] = bias_axis[i] * proj[j]
+    dx = K @ y
+    IKH = np.eye(6) - K @ H
+    Pn = IKH @ P @ IKH.T.copy() + K @ Rm @ K.T.copy()
+    if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(Pn))):
+        return C_NUM, nis
+    inject(q, b, P, dx, Pn, yaw_consider, max_bias)
+    return C_USED, nis
+
+
+@kernel
+def random_walk(P, rate2, dt):
+    """Covariance growth of the attitude without gyroscope (``_random_walk``)."""
+    c = rate2 * dt
+    for i in range(3):
+        for j in range(3):
+            P[i, j] += c * (1.0 if i == j else 0.0)
+
+
+@kernel
+def predict(q, b, P, wx, wy, wz, dt, sf):
+    """eqs. 5-7 and 11: ``q <- q (x) exp((w - b) dt / 2)``, ``P <- F P F^T + Q`` (the reference's block order)."""
+    R = q_to_matrix(q)
+    wbx, wby, wbz = (wx - b[0]) * dt, (wy - b[1]) * dt, (wz - b[2]) * dt
+    qn = q_normalize(q_multiply(q, q_from_rotation_vector(wbx, wby, wbz)))  # eq. 7
+    for i in range(4):
+        q[i] = qn[i]
+    Rdt = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            Rdt[i, j] = R[i, j] * dt
+    A = np.empty((3, 3))
+    B = np.empty((3, 3))
+    for i in range(3):  # A = Ptt - Rdt Pbt, B = Ptb - Rdt Pbb
+        for j in range(3):
+            A[i, j] = P[i, j] - (Rdt[i, 0] * P[3, j] + Rdt[i, 1] * P[4, j] + Rdt[i, 2] * P[5, j])
+            B[i, j] = P[i, 3 + j] - (Rdt[i, 0] * P[3, 3 + j] + Rdt[i, 1] * P[4, 3 + j] + Rdt[i, 2] * P[5, 3 + j])
+    w2 = (wx - b[0]) ** 2 + (wy - b[1]) ** 2 + (wz - b[2]) ** 2
+    qg = (sf[S_GN] ** 2 + sf[S_GS] ** 2 * w2) * dt
+    qb = sf[S_BW] ** 2 * dt
+    for i in range(3):  # Ptt = A - B Rdt^T + qg I
+        for j in range(3):
+            v = A[i, j] - (B[i, 0] * Rdt[j, 0] + B[i, 1] * Rdt[j, 1] + B[i, 2] * Rdt[j, 2])
+            P[i, j] = v + qg if i == j else v
+    for i in range(3):
+        for j in range(3):
+            P[i, 3 + j] = B[i, j]
+            P[3 + j, i] = B[i, j]
+        P[3 + i, 3 + i] += qb
+    return w2
+
+
+@kernel
+def set_field_reference(fs, decl):
+    """The reference field's azimuth (eq. 14 turned by the declination)."""
+    fs[F_ALPHA_REF] = math.atan2(math.cos(decl), math.sin(decl))
+
+
+@kernel
+def update_references(fs, g_counts, g_n, h_counts, h_n, dip_counts, dip_n, decl):
+    if g_n[0]:
+        fs[F_GRAV] = median_of(g_counts, g_n[0], 0.0, 0.01)
+    if h_n[0]:
+        fs[F_FIELD] = median_of(h_counts, h_n[0], 0.0, 0.1)
+        fs[F_DIP] = median_of(dip_counts, dip_n[0], -math.pi / 2, math.radians(0.1))
+    set_field_reference(fs, decl)
+
+
+@kernel
+def refresh_references(fs, is_, si, ti, g_counts, g_n, h_counts, h_n, dip_counts, dip_n, decl):
+    """The running references, refreshed every ``reference_update_s`` (or while |h| has readings but no value)."""
+    if not is_[I_HAS_REF_NEXT] or ti >= is_[I_REF_NEXT] or (h_n[0] and fs[F_FIELD] != fs[F_FIELD]):
+        is_[I_REF_NEXT] = ti + si[SI_REF_UPDATE_NS]
+        is_[I_HAS_REF_NEXT] = 1
+        update_references(fs, g_counts, g_n, h_counts, h_n, dip_counts, dip_n, decl)
+
+
+@kernel
+def propagate_without_gyro(P, is_, rw2, ti):
+    """A measurement at ``ti``: without a gyroscope event for 0.1 s only the attitude's uncertainty grows."""
+    if (not is_[I_HAS_TGYRO]) or ti - is_[I_TGYRO] > 100_000_000:
+        dtn = (ti - is_[I_TNS]) * 1e-9
+        if dtn > 0:
+            random_walk(P, rw2, dtn)
+    if ti > is_[I_TNS]:
+        is_[I_TNS] = ti
+
+
+@kernel
+def interval_add(fs, is_, base, n_i, t0_i, ti, a, b, c, sigma2, interval_s, out):
+    """One reading's navigation-frame vector ``(a, b, c)`` and variance into the running interval's sums.
+
+    When ``interval_s`` has passed since the interval's first reading: the means into ``out`` (x, y, z,
+    sigma2), the sums reset, and the count returned; 0 while the interval is open.
+    """
+    if is_[n_i] == 0:
+        is_[t0_i] = ti
+    fs[base] += a
+    fs[base + 1] += b
+    fs[base + 2] += c
+    fs[base + 3] += sigma2
+    is_[n_i] += 1
+    if (ti - is_[t0_i]) * 1e-9 < interval_s:
+        return 0
+    n = is_[n_i]
+    for k in range(4):
+        out[k] = fs[base + k] / n
+        fs[base + k] = 0.0
+    is_[n_i] = 0
+    is_[t0_i] = 0
+    return n
+
+
+@kernel
+def count(counts, first, code, k):
+    """``reasons[code] += k``, remembering the order in which codes first appeared (the dict's key order)."""
+    if first[code] < 0:
+        first[code] = first[len(first) - 1]
+        first[len(first) - 1] += 1
+    counts[code] += k
+
+
+@kernel
+def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, P,
+                 g_counts, g_n, h_counts, h_n, dip_counts, dip_n,
+                 gw_t, gw_v, gw_p, gw_s, ad_t, ad_v, ad_p, ad_s, an_t, an_v, an_p, an_s,
+                 av_t, av_v, av_p, av_s, mv_t, mv_v, mv_p, mv_s, gated_t, gated_v,
+                 out_q, out_acc_s2, out_mag_s2, out_mag_rej,
+                 acc_counts, acc_first, mag_counts, mag_first, nis_sum, nis_n):
+    """The attitude filter from event ``i0`` on (it has started): per grid tick the attitude and the log's columns.
+
+    ``kind``/``t``/``v``: the merged valid events (magnetometer readings already calibrated; ``cal_ok``
+    whether the calibrator had a fit); ``tick_event[j]``: the event after which grid tick ``j`` is taken.
+    Every array argument is state, updated in place.
+    """
+    n = len(t)
+    j = j0
+    n_ticks = len(tick_event)
+    still_win_ns = si[SI_STILL_WIN_NS]
+    var_win_ns = si[SI_VAR_WIN_NS]
+    decl = sf[S_DECL]
+    max_bias = sf[S_MAXB]
+    rw2 = sf[S_NO_GYRO_RW] ** 2
+    I3 = np.eye(3)
+    mean4 = np.empty(4)
+    for i in range(i0, n):
+        k = kind[i]
+        ti = t[i]
+        x, y_, z = v[i, 0], v[i, 1], v[i, 2]
+        if k == GYRO_K:
+            is_[I_N_GYRO] += 1
+            winspread_update(gw_t, gw_v, gw_p, gw_s, still_win_ns, ti, x, y_, z)
+            t_prev = is_[I_TGYRO] if is_[I_HAS_TGYRO] else is_[I_TNS]
+            is_[I_TGYRO] = ti
+            is_[I_HAS_TGYRO] = 1
+            dt = (ti - t_prev) * 1e-9
+            if dt > 0.0:
+                if dt > sf[S_MAX_GAP]:
+                    random_walk(P, rw2, dt)
+                else:
+                    fs[F_W2] = predict(q, b, P, x, y_, z, dt, sf)
+                is_[I_TNS] = ti
+        elif k == ACC_K:
+            fs[F_LAST_ACC0], fs[F_LAST_ACC1], fs[F_LAST_ACC2] = x, y_, z
+            is_[I_HAS_LAST_ACC] = 1
+            # references (|g|), then the windows
+            median_add(g_counts, g_n, 0.0, 0.01, math.sqrt(x ** 2 + y_ ** 2 + z ** 2))
+            refresh_references(fs, is_, si, ti, g_counts, g_n, h_counts, h_n, dip_counts, dip_n, decl)
+            na = math.sqrt(x * x + y_ * y_ + z * z)
+            if na > 0:
+                winspread_update(ad_t, ad_v, ad_p, ad_s, still_win_ns, ti, x / na, y_ / na, z / na)
+            winvar_update(an_t, an_v, an_p, an_s, still_win_ns, ti, na)
+            propagate_without_gyro(P, is_, rw2, ti)
+            # zero-rate update
+            if gw_p[1] > gw_p[0] and not (is_[I_HAS_ZR_NEXT] and ti < is_[I_ZR_NEXT]):
+                span_g = gw_t[gw_p[1] - 1] - gw_t[gw_p[0]]
+                span_a = ad_t[ad_p[1] - 1] - ad_t[ad_p[0]]
+                if not (span_g < 0.95 * still_win_ns or span_a < 0.95 * still_win_ns):
+                    sd = winspread_sd(gw_p, gw_s)
+                    if not (sd > sf[S_STILL_GYRO]) and not (winspread_sd(ad_p, ad_s) > sf[S_STILL_DIR]):
+                        if not (an_p[1] - an_p[0] < 5 or math.sqrt(winvar_variance(an_p, an_s)) > sf[S_STILL_ACC_SD]):
+                            ng = gw_p[1] - gw_p[0]
+                            r2 = sd * sd / ng + sf[S_ZR_NOISE] ** 2
+                            yz = np.empty(3)
+                            for c in range(3):
+                                yz[c] = gw_s[c] / ng - b[c]
+                            Hz = np.zeros((3, 6))
+                            for c in range(3):
+                                Hz[c, 3 + c] = 1.0
+                            code = correct(q, b, P, yz, Hz, r2 * I3, math.inf, False, yz, False, False, max_bias,
+                                           is_, nis_sum, nis_n, 2)
+                            if code == C_USED:
+                                is_[I_N_ZR] += 1
+                            is_[I_ZR_NEXT] = ti + still_win_ns
+                            is_[I_HAS_ZR_NEXT] = 1
+            var = winvar_update(av_t, av_v, av_p, av_s, var_win_ns, ti, na)
+            dev = abs(na - fs[F_GRAV])
+            sigma2 = sf[S_A0] ** 2 + sf[S_KA1] * dev + sf[S_KA2] * var + sf[S_KA3] * fs[F_W2]  # eq. 17
+            fs[F_ACC_S2] = sigma2
+            reason = A_PENDING
+            if dev > sf[S_ACC_REJ] or na == 0.0:
+                reason = A_NORM
+            else:
+                R = q_to_matrix(q)
+                if interval_add(fs, is_, F_ASUM0, I_ACC_N, I_ACC_T0, ti, R[0, 0] * x + R[0, 1] * y_ + R[0, 2] * z,
+                                R[1, 0] * x + R[1, 1] * y_ + R[1, 2] * z, R[2, 0] * x + R[2, 1] * y_ + R[2, 2] * z,
+                                sigma2, sf[S_UPD], mean4):
+                    fx, fy, fz, sigma2 = mean4[0], mean4[1], mean4[2], mean4[3]
+                    nf = math.sqrt(fx * fx + fy * fy + fz * fz)
+                    if nf == 0.0:
+                        reason = A_NORM
+                    else:
+                        ya = np.empty(3)
+                        for c in range(3):  # z = R^T f_n / |f_n| against h = R^T u (eqs. 12-13)
+                            ya[c] = (R[0, c] * fx + R[1, c] * fy + R[2, c] * fz) / nf - R[2, c]
+                        Ha = np.zeros((3, 6))
+                        for c in range(3):  # R^T [u]x
+                            Ha[c, 0] = R[1, c]
+                            Ha[c, 1] = -R[0, c]
+                        code = correct(q, b, P, ya, Ha, sigma2 * I3, sf[S_ACC_GATE], False, ya, False, False,
+                                       max_bias, is_, nis_sum, nis_n, 0)
+                        reason = A_USED if code == C_USED else (A_GATE if code == C_GATE else A_NUM)
+            count(acc_counts, acc_first, reason, 1)
+        else:  # magnetometer
+            reason = -1
+            n_interval = 0
+            if not si[SI_USE_MAG]:
+                reason = M_OFF
+            elif si[SI_REQUIRE_CAL] and not cal_ok[i]:
+                reason = M_CALIBRATING
+            else:
+                nm = math.sqrt(x * x + y_ * y_ + z * z)
+                if not (sf[S_MAG_LO] <= nm <= sf[S_MAG_HI]):
+                    reason = M_RANGE
+                else:
+                    R = q_to_matrix(q)
+                    # references (|h|, dip; a still phone's readings at most reference_still_rate_hz)
+                    if is_[I_HAS_LAST_ACC]:
+                        still = (an_p[1] - an_p[0] >= 5
+                                 and winvar_variance(an_p, an_s) < sf[S_STILL_ACC_SD] ** 2)
+                        due = True
+                        if still and h_n[0] != 0:
+                            if is_[I_HAS_STILL_NEXT] and ti < is_[I_STILL_NEXT]:
+                                due = False
+                            else:
+                                is_[I_STILL_NEXT] = ti + si[SI_STILL_REF_NS]
+                                is_[I_HAS_STILL_NEXT] = 1
+                        if due:
+                            a0, a1, a2 = fs[F_LAST_ACC0], fs[F_LAST_ACC1], fs[F_LAST_ACC2]
+                            nna = math.sqrt(a0 ** 2 + a1 ** 2 + a2 ** 2)
+                            nnm = math.sqrt(x ** 2 + y_ ** 2 + z ** 2)
+                            if nna > 0 and nnm > 0:
+                                sd_ = -(a0 * x + a1 * y_ + a2 * z) / (nna * nnm)
+                                median_add(dip_counts, dip_n, -math.pi / 2, math.radians(0.1),
+                                           math.asin(max(-1.0, min(1.0, sd_))))
+                                median_add(h_counts, h_n, 0.0, 0.1, nnm)
+                    refresh_references(fs, is_, si, ti, g_counts, g_n, h_counts, h_n, dip_counts, dip_n, decl)
+                    propagate_without_gyro(P, is_, rw2, ti)
+                    var = winvar_update(mv_t, mv_v, mv_p, mv_s, var_win_ns, ti, nm)
+                    dev = abs(nm - fs[F_FIELD])
+                    sigma2 = sf[S_M0] ** 2 + sf[S_KM1] * dev + sf[S_KM2] * var  # eq. 18
+                    fs[F_MAG_S2] = sigma2
+                    u0, u1, u2 = R[2, 0], R[2, 1], R[2, 2]
+                    sin_dip = -(u0 * x + u1 * y_ + u2 * z) / nm
+                    dip = math.asin(max(-1.0, min(1.0, sin_dip)))
+                    if dev > sf[S_MAG_RATIO] * fs[F_FIELD]:
+                        reason = M_NORM
+                    elif abs(dip - fs[F_DIP]) > sf[S_MAG_DIP]:
+                        reason = M_DIP
+                    else:
+                        inv = 1.0 / nm
+                        n_interval = interval_add(fs, is_, F_MSUM0, I_MAG_N, I_MAG_T0, ti,
+                                                  (R[0, 0] * x + R[0, 1] * y_ + R[0, 2] * z) * inv,
+                                                  (R[1, 0] * x + R[1, 1] * y_ + R[1, 2] * z) * inv,
+                                                  (R[2, 0] * x + R[2, 1] * y_ + R[2, 2] * z) * inv,
+                                                  sigma2, sf[S_UPD], mean4)
+                        if n_interval == 0:
+                            reason = M_USED
+                        else:
+                            e, nn, uu, sigma2 = mean4[0], mean4[1], mean4[2], mean4[3]
+                            h2 = e ** 2 + nn ** 2
+                            c2 = h2 / (h2 + uu ** 2)
+                            if c2 < 0.01:
+                                reason = M_VERTICAL
+                            else:
+                                a = fs[F_ALPHA_REF] - math.atan2(nn, e)
+                                ym = np.empty(1)
+                                ym[0] = (a + math.pi) % (2.0 * math.pi) - math.pi
+                                Hm = np.zeros((1, 6))
+                                hh = e * e + nn * nn
+                                Hm[0, 0] = -e * uu / hh
+                                Hm[0, 1] = -nn * uu / hh
+                                Hm[0, 2] = 1.0
+                                Rm = np.empty((1, 1))
+                                Rm[0, 0] = sigma2 / c2
+                                up = np.empty(3)
+                                up[0], up[1], up[2] = u0, u1, u2
+                                code = correct(q, b, P, ym, Hm, Rm, sf[S_MAG_GATE], True, up, True, True, max_bias,
+                                               is_, nis_sum, nis_n, 1)
+                                if code == C_USED:
+                                    reason = M_USED
+                                    is_[I_GATED_N] = 0
+                                elif code == C_GATE:
+                                    reason = M_GATE
+                                    g = is_[I_GATED_N]  # the relock
+                                    gated_t[g] = ti
+                                    gated_v[g] = ym[0]
+                                    g += 1
+                                    is_[I_GATED_N] = g
+                                    if not ((gated_t[g - 1] - gated_t[0]) * 1e-9 < sf[S_RELOCK_S]):
+                                        cs = 0.0
+                                        sn = 0.0
+                                        for c in range(g):
+                                            cs += math.cos(gated_v[c])
+                                        for c in range(g):
+                                            sn += math.sin(gated_v[c])
+                                        cs /= g
+                                        sn /= g
+                                        spread = math.sqrt(max(-2.0 * math.log(max(math.hypot(cs, sn), 1e-12)), 0.0))
+                                        is_[I_GATED_N] = 0
+                                        if spread < sf[S_RELOCK_SPREAD]:
+                                            P[2, :] = 0.0
+                                            P[:, 2] = 0.0
+                                            P[2, 2] = math.pi ** 2
+                                            is_[I_N_RELOCK] += 1
+                                else:
+                                    reason = M_NUM
+                            if reason != M_USED and n_interval > 1:  # the interval's earlier readings
+                                count(mag_counts, mag_first, M_USED, -(n_interval - 1))
+                                count(mag_counts, mag_first, reason, n_interval - 1)
+            is_[I_MAG_REJ] = 0 if reason == M_USED else 1
+            count(mag_counts, mag_first, reason, 1)
+        while j < n_ticks and tick_event[j] == i:
+            for c in range(4):
+                out_q[j, c] = q[c]
+            out_acc_s2[j] = fs[F_ACC_S2]
+            out_mag_s2[j] = fs[F_MAG_S2]
+            out_mag_rej[j] = is_[I_MAG_REJ] != 0
+            j += 1
+    return j
+
+
+# -- the Python side: configuration, the reference's start, the hand-over and back -------------------
+
+def check_supported(ekf) -> None:
+    """Refuse an attitude filter configured with what the kernel does not implement (see the docstring)."""
+    from core.pdr.attitude import AttitudeEKF
+
+    s = getattr(ekf, "settings", None)
+    if type(ekf) is not AttitudeEKF:
+        raise NotImplementedError(f"the fast path runs core.pdr.attitude.AttitudeEKF only, not {type(ekf).__name__}")
+    if s.mag_mode != "heading" or ekf.field_detector is not None:
+        raise NotImplementedError("the fast path implements mag_mode='heading' without a field detector")
+    if s.site_field_uT == s.site_field_uT or s.site_dip_rad == s.site_dip_rad:
+        raise NotImplementedError("the fast path does not implement the vertical offset of a site's field")
+
+
+def settings_arrays(ekf) -> tuple[np.ndarray, np.ndarray]:
+    s = ekf.settings
+    sf = np.array([s.gyro_noise_rad_sqrt_s, s.gyro_scale_noise_sqrt_s, s.gyro_bias_walk_rad_s_sqrt_s,
+                   s.max_gyro_bias_rad_s, s.update_interval_s, s.acc_noise_base, s.k_a1, s.k_a2, s.k_a3,
+                   s.mag_noise_base, s.k_m1, s.k_m2, s.acc_reject_m_s2, s.acc_gate_nis, s.mag_reject_ratio,
+                   s.mag_reject_dip_rad, s.mag_valid_range_uT[0], s.mag_valid_range_uT[1], s.mag_gate_nis,
+                   s.mag_relock_s, s.mag_relock_spread_rad, s.declination_rad, s.still_acc_sd_m_s2,
+                   s.still_acc_direction_rad, s.still_gyro_sd_rad_s, s.zero_rate_noise_rad_s, s.max_gyro_gap_s,
+                   s.no_gyro_random_walk_rad_sqrt_s], dtype=np.float64)
+    si = np.array([int(s.reference_update_s * 1e9), int(1e9 / s.reference_still_rate_hz), int(s.use_magnetometer),
+                   int(s.mag_requires_calibration), int(s.variance_window_s * 1e9), int(s.still_window_s * 1e9)],
+                  dtype=np.int64)
+    return sf, si
+
+
+def calibrate_magnetometer(calibrator, t_ns: np.ndarray, mag_b: np.ndarray):
+    """The online calibration over the whole magnetometer stream, before the filter (Python; see the docstring).
+
+    The calibrator sees each raw reading and nothing of the attitude, so running it first gives what it gives
+    inside the filter.  Returns the calibrated readings (n, 3) and whether it had a fit at each.
+    """
+    out = np.empty((len(t_ns), 3))
+    ok = np.zeros(len(t_ns), dtype=np.bool_)
+    if calibrator is None:
+        out[:] = mag_b
+        ok[:] = True
+        return out, ok
+    calibrator.reset()
+    upd = calibrator.update
+    for i, (ti, (mx, my, mz)) in enumerate(zip(t_ns.tolist(), mag_b.tolist())):
+        m = upd(ti, mx, my, mz)
+        out[i, 0], out[i, 1], out[i, 2] = float(m[0]), float(m[1]), float(m[2])
+        ok[i] = calibrator.calibrated
+    return out, ok
+
+
+def start_with_reference(ekf, kind, t, v, cal_ok, tick_event, out_q, out_acc_s2, out_mag_s2, out_mag_rej) -> tuple:
+    """Run the reference filter (no calibrator: ``v`` holds calibrated readings) until it has started.
+
+    Returns ``(i0, j0, j_init)``: the first event and the first grid tick the kernel takes over, and the
+    first grid tick taken with the filter started (the smoother's first).
+    """
+    require = ekf.settings.mag_requires_calibration and ekf.settings.use_magnetometer
+    j = 0
+    j_init = -1
+    n_ticks = len(tick_event)
+    for i in range(len(t)):
+        if ekf.initialized:
+            return i, j, (j if j_init < 0 else j_init)
+        k, ti = int(kind[i]), int(t[i])
+        x, y, z = float(v[i, 0]), float(v[i, 1]), float(v[i, 2])
+        if k == GYRO_K:
+            ekf.predict(ti, x, y, z)
+        elif k == ACC_K:
+            ekf.update_acc(ti, x, y, z)
+        elif require and not cal_ok[i]:
+            ekf._mag_flags(ti, False, "calibrating")
+        else:
+            ekf.update_mag(ti, x, y, z)
+        while j < n_ticks and tick_event[j] == i:
+            out_q[j] = ekf.q
+            out_acc_s2[j], out_mag_s2[j], out_mag_rej[j] = ekf.acc_sigma2, ekf.mag_sigma2, ekf.mag_rejected
+            if j_init < 0 and ekf.initialized:
+                j_init = j
+            j += 1
+    return len(t), j, (j if j_init < 0 else j_init)
+
+
+class KernelState:
+    """The reference filter's state as the kernel's arrays (after its start), and back."""
+
+    def __init__(self, ekf, n_gyro: int, n_acc: int, n_mag: int):
+        self.sf, self.si = settings_arrays(ekf)
+        fs = np.full(N_FSTATE, math.nan)
+        fs[F_GRAV], fs[F_FIELD], fs[F_DIP], fs[F_ALPHA_REF] = ekf.gravity_m_s2, ekf.field_uT, ekf.dip_rad, ekf._alpha_ref
+        fs[F_W2], fs[F_ACC_S2], fs[F_MAG_S2] = ekf._w2, ekf.acc_sigma2, ekf.mag_sigma2
+        la = ekf._last_acc or (math.nan,) * 3
+        fs[F_LAST_ACC0:F_LAST_ACC2 + 1] = la
+        fs[F_ASUM0:F_ASUM3 + 1] = ekf._acc_sum[0:4]
+        fs[F_MSUM0:F_MSUM3 + 1] = ekf._mag_sum[0:4]
+        is_ = np.zeros(N_ISTATE, dtype=np.int64)
+        is_[I_TNS] = ekf.t_ns
+        for flag, slot, val in ((I_HAS_TGYRO, I_TGYRO, ekf._t_gyro), (I_HAS_REF_NEXT, I_REF_NEXT, ekf._ref_next_ns),
+                                (I_HAS_ZR_NEXT, I_ZR_NEXT, ekf._next_zero_rate_ns),
+                                (I_HAS_STILL_NEXT, I_STILL_NEXT, ekf._ref_still_next_ns)):
+            is_[flag], is_[slot] = (0, 0) if val is None else (1, val)
+        is_[I_ACC_N], is_[I_ACC_T0] = ekf._acc_sum[4], ekf._acc_sum[5]
+        is_[I_MAG_N], is_[I_MAG_T0] = ekf._mag_sum[4], ekf._mag_sum[5]
+        is_[I_YAW_UNOBS], is_[I_MAG_REJ] = int(ekf.yaw_unobserved), int(ekf.mag_rejected)
+        is_[I_N_ZR], is_[I_N_NUM], is_[I_N_RELOCK] = ekf.n_zero_rate, ekf.n_numerical_rejects, ekf.n_heading_relocks
+        is_[I_N_GYRO], is_[I_HAS_LAST_ACC] = ekf.n_gyro, int(ekf._last_acc is not None)
+        self.fs, self.is_ = fs, is_
+        self.q = np.array(ekf.q, dtype=np.float64)
+        self.b = np.array(ekf.b, dtype=np.float64)
+        self.P = np.ascontiguousarray(ekf.P, dtype=np.float64)
+        refs = ekf._refs
+        self.medians = []
+        for rm in (refs.g, refs.h, refs.dip):
+            self.medians += [np.array(rm.counts, dtype=np.int64), np.array([rm.n], dtype=np.int64)]
+        # the windows: the reference's deque contents first, room for every later event of their stream
+        self.windows = []
+        for w, room, vec in ((ekf._gyro_win, n_gyro, True), (ekf._accdir_win, n_acc, True),
+                             (ekf._acc_norm_win, n_acc, False), (ekf._acc_var, n_acc, False),
+                             (ekf._mag_var, n_mag, False)):
+            cap = len(w.buf) + room + 1
+            wt = np.zeros(cap, dtype=np.int64)
+            wv = np.zeros((cap, 3) if vec else cap)
+            for k, (tk, xk) in enumerate(w.buf):
+                wt[k] = tk
+                wv[k] = xk
+            ptr = np.array([0, len(w.buf)], dtype=np.int64)
+            sums = np.array(list(w.s) + list(w.s2) if vec else [w.s1, w.s2], dtype=np.float64)
+            self.windows += [wt, wv, ptr, sums]
+        self.gated_t = np.zeros(len(ekf._gated) + n_mag + 1, dtype=np.int64)
+        self.gated_v = np.zeros(len(self.gated_t))
+        for k, (tk, vk) in enumerate(ekf._gated):
+            self.gated_t[k], self.gated_v[k] = tk, vk
+        is_[I_GATED_N] = len(ekf._gated)
+        self.acc_counts = np.zeros(len(ACC_REASONS), dtype=np.int64)
+        self.mag_counts = np.zeros(len(MAG_REASONS), dtype=np.int64)
+        self.acc_first = np.full(len(ACC_REASONS) + 1, -1, dtype=np.int64)
+        self.mag_first = np.full(len(MAG_REASONS) + 1, -1, dtype=np.int64)
+        self.acc_first[-1] = self.mag_first[-1] = 0
+        self.nis_sum = np.zeros(3)
+        self.nis_n = np.zeros(3, dtype=np.int64)
+
+    def run(self, kind, t, v, cal_ok, i0, tick_event, j0, out_q, out_acc_s2, out_mag_s2, out_mag_rej) -> int:
+        return run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, self.sf, self.si, self.fs, self.is_, self.q,
+                            self.b, self.P, *self.medians, *self.windows, self.gated_t, self.gated_v,
+                            out_q, out_acc_s2, out_mag_s2, out_mag_rej, self.acc_counts, self.acc_first,
+                            self.mag_counts, self.mag_first, self.nis_sum, self.nis_n)
+
+    def write_back(self, ekf) -> None:
+        """The kernel's final state into the reference object, for its counters and the pipeline's labels."""
+        fs, is_ = self.fs, self.is_
+        ekf.q = tuple(float(x) for x in self.q)
+        ekf.b = [float(x) for x in self.b]
+        ekf.P = self.P
+        ekf.gravity_m_s2, ekf.field_uT, ekf.dip_rad = float(fs[F_GRAV]), float(fs[F_FIELD]), float(fs[F_DIP])
+        ekf.acc_sigma2, ekf.mag_sigma2 = float(fs[F_ACC_S2]), float(fs[F_MAG_S2])
+        ekf.mag_rejected = bool(is_[I_MAG_REJ])
+        ekf.yaw_unobserved = bool(is_[I_YAW_UNOBS])
+        ekf.t_ns = int(is_[I_TNS])
+        ekf.n_zero_rate, ekf.n_numerical_rejects = int(is_[I_N_ZR]), int(is_[I_N_NUM])
+        ekf.n_heading_relocks, ekf.n_gyro = int(is_[I_N_RELOCK]), int(is_[I_N_GYRO])
+        for counts, first, names, reasons in ((self.acc_counts, self.acc_first, ACC_REASONS, ekf.acc_reasons),
+                                              (self.mag_counts, self.mag_first, MAG_REASONS, ekf.mag_reasons)):
+            for code in sorted((c for c in range(len(names)) if first[c] >= 0), key=lambda c: first[c]):
+                reasons[names[code]] = reasons.get(names[code], 0) + int(counts[code])
+        for k, kind_name in enumerate(("acc", "mag", "zero_rate")):
+            ekf._nis_sum[kind_name] += float(self.nis_sum[k])
+            ekf._nis_n[kind_name] += int(self.nis_n[k])

@@ -1,0 +1,28 @@
+"""The compiler switch of the fast path: numba's ``njit`` when it is installed, else plain Python.
+
+numba is an optional desktop extra (``pip install -e ".[fast]"``), never
+required: without it (or with ``PDR_FAST_NO_JIT=1`` in the environment) the
+same kernel functions run as plain Python -- the same code path, only slow.
+The kernels use only what both run alike: numpy arrays, scalars, ``math``.
+"""
+
+from __future__ import annotations
+
+import os
+
+try:  # pragma: no cover - depends on the installation
+    if os.environ.get("PDR_FAST_NO_JIT"):
+        raise ImportError("PDR_FAST_NO_JIT is set")
+    import numba
+
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover
+    numba = None
+    HAVE_NUMBA = False
+
+
+def kernel(fn):
+    """Compile ``fn`` with numba (no fast-math: the operations and their order stay IEEE's), or leave it."""
+    if not HAVE_NUMBA:
+        return fn
+    return numba.njit(cache=True, fastmath=False)(fn)

@@ -1,0 +1,212 @@
+"""Step detection and the speed window over the grid arrays: a second implementation of
+:class:`core.pdr.steps.StepDetector` (Tian et al. 2014, eqs. 2-3) and of
+:class:`core.pdr.velocity.SpeedFeatureWindow` (Kubrak's eq. 1 regressors).
+
+Both are compiled loops over the grid (the Butterworth low-pass is the
+recursion ``lfilter`` runs, direct form II transposed, started at the steady
+state of the first sample; the peak test, thresholds and bout bookkeeping
+depend on the previous samples).  They follow the reference's order of
+operations, so every step is the same.  Deliberately a second implementation
+(issue #13 item 3).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from core.dsp import butter2_group_delay_s, butter2_lowpass
+from desktop.fast.jit import kernel
+
+
+@kernel
+def biquad_reset(c, x0):
+    """(z1, z2) of the steady state of a constant input ``x0`` (``lfilter_zi * x0``); c = (b0, b1, b2, a1, a2)."""
+    gain = (c[0] + c[1] + c[2]) / (1.0 + c[3] + c[4])
+    y0 = gain * x0
+    return y0 - c[0] * x0, c[2] * x0 - c[4] * y0
+
+
+@kernel
+def detect(t_ns, x, restart, c, alpha_g, min_peak, min_dt_ns, max_dt_ns, delay_ns, require_valley, g0,
+           ev_tick, ev_t, ev_f):
+    """The peaks of eq. 3 on the grid; returns how many.
+
+    ``ev_tick[k]``: the grid sample at which step ``k`` is found; ``ev_t[k]`` its time (the peak less the
+    low-pass delay); ``ev_f[k]``: A_max, A_min, variance, duration (nan: first of a bout), gravity.
+    """
+    n_ev = 0
+    n_grid = 0
+    gravity = g0
+    have1 = False
+    have2 = False
+    y1 = 0.0
+    y2 = 0.0
+    t1 = 0
+    has_last = False
+    last = 0
+    armed = True
+    seg_min = math.inf
+    seg_sum = 0.0
+    seg_sum2 = 0.0
+    seg_n = 0
+    z1 = 0.0
+    z2 = 0.0
+    b0, b1, b2, a1, a2 = c[0], c[1], c[2], c[3], c[4]
+    for k in range(len(t_ns)):
+        tk = t_ns[k]
+        norm = x[k]
+        if restart[k] and n_grid:  # restart_bout
+            have1 = have2 = False
+            has_last = False
+            armed = True
+            seg_min = math.inf
+            seg_sum = seg_sum2 = 0.0
+            seg_n = 0
+        if not have1:
+            z1, z2 = biquad_reset(c, norm)
+            if n_grid == 0:
+                gravity = norm
+        n_grid += 1
+        gravity = gravity + alpha_g * (norm - gravity)
+        g = gravity
+        y = b0 * norm + z1  # the biquad, direct form II transposed
+        z1 = b1 * norm - a1 * y + z2
+        z2 = b2 * norm - a2 * y
+        if have1 and have2 and y1 > y2 and y1 >= y:  # a local maximum at the previous sample
+            t_peak = t1
+            since = t_peak - last
+            if (y1 - g > min_peak and ((not has_last) or since > min_dt_ns) and armed):  # eq. 3
+                mean = seg_sum / seg_n if seg_n else y1
+                var = max(seg_sum2 / seg_n - mean * mean, 0.0) if seg_n else 0.0
+                acc_min = seg_min if seg_min < math.inf else y1
+                duration = since * 1e-9 if has_last and since <= max_dt_ns else math.nan
+                ev_tick[n_ev] = k
+                ev_t[n_ev] = t_peak - delay_ns
+                ev_f[n_ev, 0], ev_f[n_ev, 1], ev_f[n_ev, 2] = y1, acc_min, var
+                ev_f[n_ev, 3], ev_f[n_ev, 4] = duration, g
+                n_ev += 1
+                last = t_peak
+                has_last = True
+                armed = not require_valley
+                seg_min = math.inf
+                seg_sum = seg_sum2 = 0.0
+                seg_n = 0
+        if y < g:
+            armed = True
+        if has_last and tk - last > max_dt_ns:  # a pause
+            has_last = False
+            seg_min = math.inf
+            seg_sum = seg_sum2 = 0.0
+            seg_n = 0
+        if y < seg_min:
+            seg_min = y
+        seg_sum += y
+        seg_sum2 += y * y
+        seg_n += 1
+        y2, have2 = y1, have1
+        y1, have1, t1 = y, True, tk
+    return n_ev
+
+
+def detect_steps(detector, t_ns, x, restart):
+    """StepEvent fields of every step the reference ``detector`` (its settings) finds on the grid."""
+    from core.conventions import STANDARD_GRAVITY_M_S2
+
+    b, a = butter2_lowpass(detector.cutoff_hz, detector.grid_rate_hz)
+    c = np.array([b[0] / a[0], b[1] / a[0], b[2] / a[0], a[1] / a[0], a[2] / a[0]])
+    alpha_g = 1.0 - math.exp(-1.0 / (detector.grid_rate_hz * detector.gravity_time_constant_s))
+    ev_tick = np.empty(len(t_ns) // 2 + 1, dtype=np.int64)
+    ev_t = np.empty(len(ev_tick), dtype=np.int64)
+    ev_f = np.empty((len(ev_tick), 5))
+    n = detect(t_ns, x, restart, c, alpha_g, detector.min_peak_height_m_s2, int(detector.min_step_interval_s * 1e9),
+               int(detector.max_step_interval_s * 1e9), int(round(butter2_group_delay_s(detector.cutoff_hz) * 1e9)),
+               detector.require_valley, STANDARD_GRAVITY_M_S2, ev_tick, ev_t, ev_f)
+    return ev_tick[:n].copy(), ev_t[:n].copy(), ev_f[:n].copy()
+
+
+@kernel
+def speed_features(t_ns, x, restart, c, window_ns, full_ns, min_hyst, at_tick, out):
+    """MEAN, FREQ, STD of |a| over the trailing window at the grid samples ``at_tick`` (sorted).
+
+    The window restarts with the grid (the pipeline resets it there); crossings of the low-passed norm
+    through the hysteresis band above the window mean are counted as the reference counts them.
+    """
+    n = len(t_ns)
+    crossings = np.empty(n + 1, dtype=np.int64)
+    c_lo = 0
+    c_hi = 0
+    lo = 0
+    s1 = 0.0
+    s2 = 0.0
+    started = False
+    below = False
+    has_prev = False
+    prev_t = 0
+    prev_y = 0.0
+    z1 = 0.0
+    z2 = 0.0
+    b0, b1, b2, a1, a2 = c[0], c[1], c[2], c[3], c[4]
+    m = 0
+    for k in range(n):
+        tk = t_ns[k]
+        v = x[k]
+        if restart[k] and k:  # reset()
+            lo = k
+            s1 = s2 = 0.0
+            started = below = has_prev = False
+            c_lo = c_hi = 0
+        if not started:
+            z1, z2 = biquad_reset(c, v)
+            started = True
+        s1 += v
+        s2 += v * v
+        limit = tk - window_ns
+        while t_ns[lo] <= limit:
+            old = x[lo]
+            lo += 1
+            s1 -= old
+            s2 -= old * old
+        nw = k + 1 - lo
+        mean = s1 / nw
+        sd = math.sqrt(max(s2 / nw - mean * mean, 0.0))
+        h = max(0.25 * sd, min_hyst)
+        yl = b0 * v + z1
+        z1 = b1 * v - a1 * yl + z2
+        z2 = b2 * v - a2 * yl
+        y = yl - mean
+        if y < -h:
+            below = True
+        elif below and y > h and has_prev:
+            frac = (h - prev_y) / (y - prev_y) if y != prev_y else 1.0
+            crossings[c_hi] = prev_t + int(min(max(frac, 0.0), 1.0) * (tk - prev_t))
+            c_hi += 1
+            below = False
+        prev_t, prev_y, has_prev = tk, y, True
+        while c_hi > c_lo and crossings[c_lo] <= limit:
+            c_lo += 1
+        while m < len(at_tick) and at_tick[m] == k:
+            if nw > 1 and t_ns[k] - t_ns[lo] >= full_ns:
+                mean_ = s1 / nw
+                sd_ = math.sqrt(max(s2 / nw - mean_ * mean_, 0.0))
+                nc = c_hi - c_lo
+                if nc >= 2 and crossings[c_hi - 1] > crossings[c_lo]:
+                    freq = (nc - 1) / ((crossings[c_hi - 1] - crossings[c_lo]) * 1e-9)
+                else:
+                    freq = 0.0
+                out[m, 0], out[m, 1], out[m, 2] = mean_, freq, sd_
+            else:
+                out[m, 0] = out[m, 1] = out[m, 2] = math.nan
+            m += 1
+
+
+def speed_at(window, t_ns, x, restart, at_tick):
+    """The reference ``window``'s (its settings) features at the grid samples ``at_tick`` (sorted), (m, 3)."""
+    b, a = window._ba
+    c = np.array([b[0] / a[0], b[1] / a[0], b[2] / a[0], a[1] / a[0], a[2] / a[0]])
+    window_ns = int(window.window_s * 1e9)
+    out = np.empty((len(at_tick), 3))
+    speed_features(t_ns, x, restart, c, window_ns, window_ns - int(2e9 / window.grid_rate_hz),
+                   window.min_hysteresis_m_s2, np.ascontiguousarray(at_tick, dtype=np.int64), out)
+    return out
