@@ -32,7 +32,8 @@ The trunk
     Function" (2nd ed. 2010): about 20 deg of apparent hyperextension at terminal stance and 25 deg
     flexion in swing; the slow extension in stance and the quick flexion in swing make it asymmetric.
     The pelvis turns +-4 deg about the vertical (the swinging side forward) and tilts +-4 deg (the swing
-    side drops) at the stride frequency (assumed, the order of Inman's pelvic rotation and list).  The hip
+    side drops) at the stride frequency (the order of the pelvic rotation and list of Saunders, Inman &
+    Eberhart 1953, "The major determinants in normal and pathological gait", J Bone Joint Surg 35-A).  The hip
     joints are ``0.05 height`` left and right of the centre at the leg length (``0.53 height``); the phone
     is ``0.13 height`` (0.23 m) down the thigh and ``0.04 height`` in front of its axis.  The phone is
     upright in the pocket: device y along the thigh (to the hip or to the knee), the screen facing
@@ -44,8 +45,9 @@ The trunk
     Options: ``side`` ("left"/"right"), ``top`` ("hip"/"knee"), ``screen`` ("out"/"in").
 
 "swinging": in a hand hanging at the side, the arm swinging
-    The shoulder (``0.818 height`` up, ``0.10 height`` to the side: Winter's segment proportions, "Biomechanics
-    and Motor Control of Human Movement", 4th ed. 2009) rides on the trunk, which turns +-4 deg about the
+    The shoulder joint (``0.818 height`` up, ``0.10 height`` to the side, inside Winter's shoulder width of
+    ``0.259 height``: segment proportions of Winter, "Biomechanics and Motor Control of Human Movement", 4th
+    ed. 2009) rides on the trunk, which turns +-4 deg about the
     vertical at the stride frequency (the carrying shoulder forward when that arm is forward).  Upper arm
     (``0.186 height``) at ``-5 k + A_u cos(pi (u - p))`` deg from the vertical (forward positive), the
     forearm a further ``10 + 10 k + A_e cos(pi (u - p))`` deg of elbow flexion, the phone ``0.196 height``
@@ -66,7 +68,7 @@ The trunk
     0.18 m to the side at ``0.55 height``) and follows it through a damped spring, the same in every axis:
     ``r'' + 2 zeta w r' + w^2 r = -a_anchor`` for the bag's displacement ``r`` from the anchor, natural
     frequency uniform in 3-6 Hz and damping ratio in 0.2-0.4 (assumed; drawn per seed).  ``r`` is solved
-    exactly for a piecewise-linear input on a 1 ms grid (the state-transition of the linear system) and
+    exactly for a piecewise-linear input on a 2 ms grid (the state-transition of the linear system) and
     the phone's position is the anchor plus the C2 quintic through ``r, r', r''`` at the grid points, so the
     accelerometer is still the exact second derivative of the position.  The bag tilts with its swing
     (``r`` horizontal over a 0.3 m strap, in rad) and wobbles slowly (8 sinusoids per axis, 0.3-1.2 Hz, 3 deg
@@ -87,14 +89,17 @@ The trunk
     ``"table"``: lying still, screen up or down, any yaw, tilted up to 1 deg: sensor noise and bias only.
     ``"hand_standing"``: held in front while standing (pitch 15-45 deg, any yaw): the hand drift of
     ``hand_drift_deg_s``, postural sway (sinusoids at 0.1-0.5 Hz, 5 mm RMS per axis) and physiological
-    tremor (sinusoids at 8-12 Hz: 20 um and 0.05 deg RMS per axis: about 0.1 m/s^2 and 0.05 rad/s; the
-    order of Elble & Koller, "Tremor", 1990).  ``"vehicle"``: in a car, bus or tram: the vehicle drives a
+    tremor (sinusoids at 8-12 Hz: 15 um and 0.03 deg RMS per axis, about 0.06 m/s^2 and 0.03 rad/s; 8-12 Hz
+    is physiological tremor's band, Elble & Koller, "Tremor", 1990; the amplitudes are assumed).  ``"vehicle"``: in a car, bus or tram: the vehicle drives a
     sequence of stops, accelerations (0.5-2 m/s^2) to 6-14 m/s, cruising with turns (90 deg at 0.1-0.25
-    rad/s) and braking (0.5-2 m/s^2), on a 10 ms grid integrated and interpolated by C2 quintics; the body
-    pitches 0.5 deg per m/s^2 of braking and rolls in turns; road vibration is 24 sinusoids at 5-30 Hz
-    (0.3 m/s^2 RMS vertical, 0.15 horizontal and 0.3 deg/s... times the speed over 10 m/s, plus an idle
-    0.05 m/s^2 at 25-30 Hz); the phone sits in a fixed orientation (one of six faces down, any yaw, tilted
-    up to 15 deg).  ``heading_at`` is the vehicle's heading, ``position_at`` its position.  No heel strikes.
+    rad/s, the lateral acceleration at most 2 m/s^2) and braking (0.5-2 m/s^2), each a half-sine pulse,
+    integrated on a 10 ms grid and interpolated by C2 quintics through position, velocity and acceleration;
+    the body pitches 0.5 deg per m/s^2 (the nose dips braking) and rolls 0.5 deg per m/s^2 out of turns;
+    road vibration is 24 sinusoids per axis at 5-30 Hz (acceleration 0.3 m/s^2 RMS vertical and 0.15
+    horizontal, angle 0.01 deg RMS: 0.6-2 deg/s) times the speed over 10 m/s (at most 1.5), plus an idle
+    engine's 0.05 / 0.03 m/s^2 at 25-30 Hz (all assumed, of the order of ride-comfort measurements); the
+    phone sits in a fixed orientation (one of six faces down, any yaw, tilted up to 15 deg).  ``heading_at``
+    is the vehicle's heading, ``position_at`` its position.  No heel strikes.
 """
 
 from __future__ import annotations
@@ -141,7 +146,7 @@ BAG_DAMPING = (0.2, 0.4)
 BAG_STRAP_M = 0.3
 BAG_WOBBLE_DEG = 3.0
 BAG_WOBBLE_HZ = (0.3, 1.2)
-_BAG_GRID_S = 1e-3
+_BAG_GRID_S = 2e-3
 # ear
 EAR_HEIGHT_RATIO = 0.89
 EAR_TILT_DEG = (20.0, 40.0)
@@ -149,6 +154,7 @@ EAR_TILT_DEG = (20.0, 40.0)
 VEHICLE_SPEED_M_S = (6.0, 14.0)
 VEHICLE_ACC_M_S2 = (0.5, 2.0)
 VEHICLE_TURN_RATE_RAD_S = (0.1, 0.25)
+VEHICLE_VIBRATION_DEG = 0.01  #: RMS per axis of the body's angular vibration
 VEHICLE_LATERAL_M_S2 = 2.0  #: the turn rate is limited so that the lateral acceleration stays below this
 _VEHICLE_GRID_S = 0.01
 
@@ -424,7 +430,7 @@ class _Bag(_Carried):
         return self._gait(t) + self.anchor
 
     def _solve_spring(self, wn: float, zeta: float) -> None:
-        """The bag's displacement from its anchor: ``r'' + 2 zeta wn r' + wn^2 r = -a_anchor`` on a 1 ms grid,
+        """The bag's displacement from its anchor: ``r'' + 2 zeta wn r' + wn^2 r = -a_anchor`` on a 2 ms grid,
         exact for an input linear between grid points (the discretized linear system, diagonalized and run
         in blocks), at rest before walking and until 3 s after it ends (it has died away by then)."""
         h = _BAG_GRID_S
@@ -511,8 +517,8 @@ class _Still(_Carried):
         self.info.update(pitch_deg=pitch, yaw_deg=yaw / _DEG)
         self.mount = _chain(_rot(2, yaw), _rot(0, pitch * _DEG))
         self.sway = _sinusoids(rng, 3, 8, (0.1, 0.5), 0.005)
-        self.tremor = _sinusoids(rng, 3, 12, (8.0, 12.0), 20e-6)
-        self.tremor_ang = _sinusoids(rng, 3, 12, (8.0, 12.0), 0.05 * _DEG)
+        self.tremor = _sinusoids(rng, 3, 12, (8.0, 12.0), 15e-6)
+        self.tremor_ang = _sinusoids(rng, 3, 12, (8.0, 12.0), 0.03 * _DEG)
         self.place = np.array([0.3, 0.0, 0.75 * self.height_m])
 
     # -- in a vehicle ------------------------------------------------------------------------------
@@ -599,7 +605,7 @@ class _Still(_Carried):
             return _chain(*(_rot(a, self._drift(t, a) + tr[:, a]) for a in (2, 0, 1)), self.mount)
         _, _, yaw, speed, _ = self.walker(t)
         moving = np.clip(speed / 10.0, 0.0, 1.5)
-        vib = moving[:, None] * _eval_sinusoids(self.vib_ang, t) * (0.3 * _DEG / (2.0 * np.pi * 10.0))
+        vib = moving[:, None] * _eval_sinusoids(self.vib_ang, t) * (VEHICLE_VIBRATION_DEG * _DEG)
         pitch = 0.5 * _DEG * self.veh_acc(t) + vib[:, 0]  # the nose dips when braking
         roll = 0.5 * _DEG * self.veh_lat(t) + vib[:, 1]  # the body leans out of the turn
         return _chain(_rot(2, yaw + vib[:, 2]), _rot(1, -pitch), _rot(0, roll), self.mount)

@@ -168,6 +168,18 @@ Outdoor walks
     gentle bends, no reversals); :func:`outdoor_walk` walks one for 10-20 minutes with GPS, a per-seed
     walker and phone pose, a residual hard iron and the site's WMM field (a 20-minute walk takes a few
     seconds to simulate).
+
+Placements (how the phone is carried, issue #17)
+    Everything above is the hand-held phone (``placement="handheld"``, the default).  ``placement=``
+    "swinging" (in a hand swinging at the side), "pocket" (front trouser pocket, on the thigh), "bag"
+    (loosely coupled to the trunk through a damped spring) and "ear" (at the ear in a call) put the phone
+    on another body segment of the same walk (same seed: same path, heel strikes and step lengths), and
+    :func:`desktop.placements.simulate_still` (also reachable as ``desktop.simulator.simulate_still``)
+    records not walking: on a table, in the hand while standing, in a vehicle.  Their models, numbers and
+    sources are in :mod:`desktop.placements`' docstring; the truth tells the placement
+    (``truth.placement``, ``side``, ``placement_info``), the foot of each heel strike (``step_foot``) and
+    the walking direction in the device frame (``forward_in_device_at``).  The hand-held model and its
+    recordings are unchanged by them.
 """
 
 from __future__ import annotations
@@ -189,6 +201,16 @@ from core.recording import Recording, Stream, make_stream
 
 __all__ = ["simulate_walk", "demo_walk", "street_route", "outdoor_walk", "SimulatedWalk", "WalkTruth", "GpsModel",
            "GpsFault", "GpsTruth", "DisturbanceZone", "SIMULATOR_VERSION", "WALK_RATIO_PER_HEIGHT", "default_step_length_m"]
+
+
+def __getattr__(name: str):
+    """``desktop.simulator.simulate_still``: :func:`desktop.placements.simulate_still` (imported on first use:
+    desktop.placements builds on this module)."""
+    if name == "simulate_still":
+        from desktop.placements import simulate_still
+        return simulate_still
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 #: Version of the simulation model (stored in ``metadata["simulator"]``); bumped when the same
 #: parameters and seed no longer give the same recording.
@@ -605,7 +627,9 @@ class WalkTruth:
     att_device_heading_rad: np.ndarray  #: (m,) heading of the device y axis' horizontal projection (unwrapped)
     att_gyro_bias_rad_s: np.ndarray  #: (m, 3) true gyroscope bias on the grid (device frame)
     step_device_heading_rad: np.ndarray  #: (n,) device y heading at each heel strike (wrapped)
-    phone_yaw_offset_rad: float  #: mean yaw of the device y axis relative to the walking direction (CCW)
+    #: mean yaw of the device y axis relative to the walking direction (CCW); nan for the other placements
+    #: (there ``forward_in_device_at`` is the walking direction in the device frame)
+    phone_yaw_offset_rad: float
     gyro_bias_rad_s: np.ndarray  #: (3,) constant part of the gyroscope bias (device frame)
     acc_bias_m_s2: np.ndarray  #: (3,) accelerometer bias (device frame)
     mag_t_ns: np.ndarray  #: (k,) magnetometer sample times (= recording ``mag`` timestamps)
@@ -1714,7 +1738,7 @@ def simulate_walk(
         att_device_heading_rad=frozen(dev_heading),
         att_gyro_bias_rad_s=frozen(model.gyro_bias(ta_truth)),
         step_device_heading_rad=frozen(np.arctan2(y_steps[:, 1], y_steps[:, 0])),
-        phone_yaw_offset_rad=math.radians(phone_yaw_offset_deg),
+        phone_yaw_offset_rad=math.radians(phone_yaw_offset_deg) if placement == CARRY_HANDHELD else math.nan,
         gyro_bias_rad_s=frozen(gyro_bias),
         acc_bias_m_s2=frozen(acc_bias),
         mag_t_ns=frozen(t_mag),

@@ -161,11 +161,54 @@ def test_pocket_phone_is_upright_pitching_with_the_thigh_and_feels_its_own_leg_m
     stride_hz = 0.5 * tr.n_steps / ((tr.walk_end_t_ns - tr.walk_start_t_ns) * 1e-9)
     assert dominant_hz(t_ns, lean) == pytest.approx(stride_hz, abs=0.1)
     assert 25 < np.degrees(np.ptp(np.arcsin(lean))) < 60  # about +-20 deg of thigh swing
-    # heel strikes of the pocket leg are felt more strongly than the other leg's
-    norm = np.linalg.norm(acc.values, axis=1)
-    peaks = np.array([norm[(acc.t_ns > t - 40e6) & (acc.t_ns < t + 40e6)].max() for t in tr.step_t_ns[2:-2]])
+    # heel strikes of the pocket leg are felt more strongly than the other leg's: the transient (acc norm
+    # above 15 Hz) within 40 ms of the heel strike is about 4 / 1.5 times as large (asked: 2)
+    t0 = acc.t_ns[0]
+    grid = np.arange(0.0, (acc.t_ns[-1] - t0) * 1e-9, 0.005)
+    y = np.interp(grid, (acc.t_ns - t0) * 1e-9, np.linalg.norm(acc.values, axis=1))
+    spec = np.fft.rfft(y - y.mean())
+    spec[np.fft.rfftfreq(len(y), 0.005) < 15.0] = 0.0
+    hf = np.abs(np.fft.irfft(spec, len(y)))
+    peaks = np.array([hf[np.abs(grid - (t - t0) * 1e-9) < 0.04].max() for t in tr.step_t_ns[2:-2]])
     own = tr.step_foot[2:-2] == tr.side
-    assert peaks[own].mean() > peaks[~own].mean() + 1.0
+    assert peaks[own].mean() > 2.0 * peaks[~own].mean()
+
+
+def test_swinging_arm_swings_more_when_walking_faster():
+    """The arm's amplitude grows with speed: 95th percentile of |gyro| at 2.1 steps/s (walk-ratio steps,
+    1.71 m/s) at least 1.3 times that at 1.5 steps/s (0.88 m/s) (the model gives about (1.71/0.88) ~ 1.9)."""
+    p95 = []
+    for f in (1.5, 2.1):
+        w = simulate_walk([(0, 0), (20, 0)], placement="swinging", step_frequency_hz=f, **QUIET, seed=2)
+        p95.append(np.percentile(np.linalg.norm(walking(w.recording.streams["gyro"], w.truth)[1], axis=1), 95))
+    assert p95[1] > 1.3 * p95[0]
+
+
+def test_placements_are_reproducible_and_a_given_option_moves_no_other_draw():
+    a = simulate_walk([(0, 0), (10, 0)], placement="bag", seed=6)
+    b = simulate_walk([(0, 0), (10, 0)], placement="bag", seed=6)
+    np.testing.assert_array_equal(a.recording.streams["acc"].values, b.recording.streams["acc"].values)
+    info = a.truth.placement_info
+    c = simulate_walk([(0, 0), (10, 0)], placement="bag", seed=6, placement_options={"kind": info["kind"]})
+    np.testing.assert_array_equal(a.recording.streams["gyro"].values, c.recording.streams["gyro"].values)
+    assert c.truth.placement_info == info
+
+
+@pytest.mark.parametrize("placement, options, sign", [("pocket", {"top": "hip"}, -1), ("pocket", {"top": "knee"}, 1),
+                                                      ("swinging", {"grip": "down"}, 1)])
+def test_the_phone_turns_with_the_limb_that_carries_it(placement, options, sign):
+    """Position and attitude tell the same story: when the thigh (arm) swings forward the phone moves forward
+    and its long axis leans with the limb: device y pointing to the hip leans back, to the knee (or down the
+    forearm) forward: the correlation of the two over the walk is strong and of that sign."""
+    w = simulate_walk(PATH, placement=placement, placement_options=options, rate_hz=50.0, seed=3)
+    tr = w.truth
+    t_ns, _ = walking(w.recording.streams["acc"], tr)
+    h = tr.heading_at(t_ns)
+    fwd = np.stack([np.cos(h), np.sin(h)], axis=1)
+    ahead = np.sum((tr.phone_position_at(t_ns)[:, :2] - tr.position_at(t_ns)) * fwd, axis=1)
+    y_n = quat.to_matrix_array(tr.attitude_at(t_ns))[:, :2, 1]
+    lean = np.sum(y_n * fwd, axis=1)
+    assert sign * np.corrcoef(ahead, lean)[0, 1] > 0.8
 
 
 def test_pocket_side_and_orientation_can_be_given():
@@ -193,8 +236,8 @@ def test_bag_has_less_high_frequency_content_than_the_pocket():
 
 
 def test_bag_phone_orientation_is_arbitrary_per_seed():
-    faces = {simulate_walk([(0, 0), (3, 0)], placement="bag", seed=s).truth.placement_info["face_up"]
-             for s in range(12)}
+    faces = {simulate_walk([(0, 0)], placement="bag", still_start_s=1.0, rate_hz=20.0, seed=s).truth
+             .placement_info["face_up"] for s in range(12)}
     assert len(faces) >= 4
 
 
