@@ -1629,6 +1629,8 @@ def simulate_walk(
         raise ValueError(f"placement must be one of {', '.join(CARRY_MODES)}, got {placement!r}")
     if placement != CARRY_HANDHELD and calibration_motion_s > 0:
         raise ValueError("calibration_motion_s is only simulated for the handheld placement")
+    if placement == CARRY_HANDHELD and placement_options:
+        raise ValueError("the handheld placement takes no placement_options (its pose: phone_pitch_deg etc.)")
 
     seeds = np.random.SeedSequence(seed)
     rngs = [np.random.default_rng(s) for s in seeds.spawn(9)]

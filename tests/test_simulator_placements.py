@@ -14,6 +14,7 @@ import pytest
 
 from core import quaternion as quat
 from core.conventions import CARRY_MODES, CARRY_STILL
+from core.recording import read_recording, write_recording
 from desktop.placements import STILL_KINDS, simulate_still
 from desktop.simulator import simulate_walk
 
@@ -297,6 +298,16 @@ def test_vehicle_accelerometer_is_the_second_derivative_of_its_position():
     assert np.max(np.abs(pos - phone)) < 0.01
 
 
+def test_placement_recordings_round_trip_through_the_file_format(tmp_path):
+    for i, w in enumerate((simulate_walk([(0, 0), (4, 0)], placement="pocket", rate_hz=50.0, seed=1),
+                           simulate_still("vehicle", 5.0, rate_hz=50.0, seed=1))):
+        path = str(tmp_path / f"r{i}.csv.gz")
+        write_recording(path, w.recording)
+        back = read_recording(path)
+        assert back.metadata == w.recording.metadata and back.metadata["placement"] == w.truth.placement
+        np.testing.assert_array_equal(back.streams["acc"].values, w.recording.streams["acc"].values)
+
+
 def test_invalid_placements_are_rejected():
     with pytest.raises(ValueError):
         simulate_walk(PATH, placement="helmet")
@@ -308,5 +319,7 @@ def test_invalid_placements_are_rejected():
         simulate_walk(PATH, placement="still", placement_options={"kind": "table"})  # walking: not still
     with pytest.raises(ValueError):
         simulate_walk(PATH, placement="bag", calibration_motion_s=5.0)
+    with pytest.raises(ValueError):
+        simulate_walk(PATH, placement="handheld", placement_options={"side": "left"})
     with pytest.raises(ValueError):
         simulate_still("sofa")
