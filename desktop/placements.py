@@ -7,8 +7,9 @@ gives the same walk in every placement), with the phone on another body segment.
 :func:`simulate_still` makes the recordings of "not walking" (placement "still").  Like the simulator,
 nothing here uses a filter, step model or detector of :mod:`core.pdr`: each placement is a closed-form
 (or spline) function of time, the accelerometer is the second derivative of the phone's position and the
-gyroscope the rate of its attitude, both by the simulator's own central differences (errors below 2e-3
-m/s^2 and 1e-9 rad/s; :class:`desktop.simulator._WalkModel` samples them).
+gyroscope the rate of its attitude, both by the simulator's own central differences (:class:`desktop.
+simulator._WalkModel` samples them; the acceleration is within 2e-3 m/s^2 of the exact one, 5e-3 for the
+bag, whose spline's third derivative jumps at its 2 ms knots).
 
 The walking frame is (forward, left, up), turned to ENU by the walker's smoothed heading ``h``; ``u`` is
 the step phase (heel strike ``k`` at ``u = k``), ``k`` the step-length envelope relative to the mean step
@@ -77,7 +78,7 @@ The trunk
     (uniform), any yaw, tilted up to 10 deg.  Heel-strike transients 2 m/s^2 at the anchor, filtered by the
     spring.  The spring's resonance sits on the second and third step harmonics, so the bag's acceleration
     swings as much as the hand's or more (norm s.d. 2.5-3.3 against 1.8 m/s^2 at the defaults) while its
-    content above 10 Hz is a tenth of the pocket's.
+    content above 10 Hz is a sixth to a tenth of the pocket's.
     Options: ``kind`` ("backpack"/"shoulder"), ``side`` (shoulder bag), ``natural_hz``, ``damping``.
 
 "ear": held at the ear during a call
