@@ -102,7 +102,9 @@ The trunk
     the body pitches 0.5 deg per m/s^2 (the nose dips braking) and rolls 0.5 deg per m/s^2 out of turns;
     road vibration is 24 sinusoids per axis at 5-30 Hz (acceleration 0.3 m/s^2 RMS vertical and 0.15
     horizontal, angle 0.01 deg RMS: 0.6-2 deg/s) times the speed over 10 m/s (at most 1.5), plus an idle
-    engine's 0.05 / 0.03 m/s^2 at 25-30 Hz (all assumed, of the order of ride-comfort measurements); the
+    engine's 0.05 / 0.03 m/s^2 at 25-30 Hz; bumps (potholes, joints, rails) come about every 3 s while
+    driving faster than 2 m/s, each a vertical acceleration peak of 1-3 m/s^2 up or down, 15-40 ms wide
+    (Gaussian), the most step-like thing in a vehicle (all assumed, of the order of ride measurements); the
     phone sits in a fixed orientation (one of six faces down, any yaw, tilted up to 15 deg).  ``heading_at``
     is the vehicle's heading, ``position_at`` its position.  No heel strikes.
 """
@@ -160,6 +162,7 @@ VEHICLE_SPEED_M_S = (6.0, 14.0)
 VEHICLE_ACC_M_S2 = (0.5, 2.0)
 VEHICLE_TURN_RATE_RAD_S = (0.1, 0.25)
 VEHICLE_VIBRATION_DEG = 0.01  #: RMS per axis of the body's angular vibration
+VEHICLE_BUMPS_PER_S = 0.3  #: rate of road bumps (kept only while moving, at least 0.5 s apart)
 VEHICLE_LATERAL_M_S2 = 2.0  #: the turn rate is limited so that the lateral acceleration stays below this
 _VEHICLE_GRID_S = 0.01
 
@@ -573,6 +576,15 @@ class _Still(_Carried):
         self.vib_ang = _sinusoids(rng, 3, 24, (5.0, 30.0), 1.0)
         self.idle = _sinusoids(rng, 3, 4, (25.0, 30.0), 1.0)
         self.place = np.array([0.5, 0.3, 1.0])
+        # bumps (potholes, joints, tram rails): a Poisson process while moving faster than 2 m/s, at least
+        # 0.5 s apart; each a Gaussian dip of the height: a vertical acceleration peak of 1-3 m/s^2 either way
+        n = int(rng.poisson(VEHICLE_BUMPS_PER_S * self.total_s))
+        tb = np.sort(rng.uniform(0.0, self.total_s, n))
+        amp = rng.uniform(1.0, 3.0, n) * rng.choice((-1.0, 1.0), n)
+        sig = rng.uniform(0.015, 0.04, n)
+        keep = (np.interp(tb, t, speed) > 2.0) & (np.diff(tb, prepend=-np.inf) > 0.5)
+        self.bump_t, self.bump_amp, self.bump_sig = tb[keep], amp[keep], sig[keep]
+        self.info["bumps"] = int(keep.sum())
 
     def _vibration(self, t, s, acc_rms):
         """Displacement (n, 3) of sinusoids ``s`` scaled so that their acceleration has ``acc_rms`` per axis."""
@@ -597,6 +609,14 @@ class _Still(_Carried):
         moving = np.clip(speed / 10.0, 0.0, 1.5)[:, None]
         shake = moving * self._vibration(t, self.vib, np.array([0.15, 0.15, 0.3])) + self._vibration(
             t, self.idle, np.array([0.03, 0.03, 0.05]))
+        if len(self.bump_t):  # the bumps just before and after t are enough (at most 4 sigma wide, 0.5 s apart)
+            j = np.searchsorted(self.bump_t, t)
+            for off in (-1, 0):
+                jj = np.clip(j + off, 0, len(self.bump_t) - 1)
+                valid = (j + off >= 0) & (j + off < len(self.bump_t))
+                sig2 = self.bump_sig[jj] ** 2
+                x2 = np.minimum((t - self.bump_t[jj]) ** 2 / sig2, 200.0)
+                shake[:, 2] -= np.where(valid, self.bump_amp[jj] * sig2 * np.exp(-0.5 * x2), 0.0)
         c, s = np.cos(yaw), np.sin(yaw)
         d = self.place
         return np.stack([x + c * d[0] - s * d[1], y + s * d[0] + c * d[1], np.full_like(x, d[2])], axis=1) + shake

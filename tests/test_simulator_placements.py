@@ -287,6 +287,7 @@ def test_still_recordings_have_no_steps_and_measure_g(kind):
         assert norm.std() > 0.1  # road vibration and manoeuvres
         a_n = np.einsum("nij,nj->ni", quat.to_matrix_array(tr.attitude_at(t)), acc.values)
         assert 0.5 < np.percentile(np.hypot(a_n[:, 0], a_n[:, 1]), 99) < 3.0
+        assert tr.placement_info["bumps"] > 0 and np.max(np.abs(a_n[:, 2] - G)) > 0.9  # road bumps of 1-3 m/s^2
 
 
 def test_vehicle_accelerometer_is_the_second_derivative_of_its_position():

@@ -70,6 +70,7 @@ from core.pdr.heading import RotationSmoother, interval_heading
 from core.pdr.magcal import MagCalibrator
 from core.pdr.steps import StepDetector, StepEvent
 from core.pdr.velocity import SpeedFeatureWindow
+from core.pdr.walkdir import WALKING_DIRECTIONS, WalkingDirection
 from core.pdr.stride import StepFeatures, StrideModel, WeinbergStride
 from core.recording import Recording, RecordingError
 
@@ -312,6 +313,15 @@ class Pipeline:
         (``AttitudeEKF(mag_calibrator=MagCalibrator(), mag_requires_calibration=True)``).
     log : bool
         Keep an :class:`AttitudeLog` (batch runs turn it on).
+    walking_direction : str
+        Where a step's heading comes from (issue #17): ``"device"`` -- the smoothed device axis, as
+        before (the walking-direction stage does not run); ``"acceleration"`` -- the smoothed device
+        axis plus the offset that :class:`core.pdr.walkdir.WalkingDirection` estimates from the
+        acceleration; ``"auto"`` (default) -- that offset only where the device axis is not the walking
+        direction (:meth:`core.pdr.walkdir.WalkingDirection.step_heading`): a carry mode neither
+        hand-held nor still, or a confident offset far from 0.  A hand-held phone keeps today's heading.
+    walkdir : core.pdr.walkdir.WalkingDirection or None
+        A pre-configured walking-direction stage (default: its defaults, with the smoother's delay).
     keep_steps : bool or int
         Keep every completed step in :attr:`steps` (True, the default; batch
         runs need it), none (False) or the last ``n`` (an int): a live session
@@ -339,6 +349,7 @@ class Pipeline:
                  smoother: RotationSmoother | None = None, grid_rate_hz: float = 50.0,
                  heading_delay_s: float | None = None, use_magnetometer: bool = True,
                  max_rotation_rms_rad_s: float = 3.0, rotation_window_s: float = 1.0, min_bout_steps: int = 3,
+                 walking_direction: str = "auto", walkdir: WalkingDirection | None = None,
                  mag_stream: str = MAG, log: bool = False, gnss=None, site_from_gps: bool = True,
                  unix_offset_ns: int | None = None, keep_steps: bool | int = True):
         self.keep_steps = keep_steps
@@ -361,6 +372,12 @@ class Pipeline:
         self.max_rotation_rms_rad_s = float(max_rotation_rms_rad_s)
         self.rotation_window_s = float(rotation_window_s)
         self.min_bout_steps = max(1, int(min_bout_steps))
+        if walking_direction not in WALKING_DIRECTIONS:
+            raise ValueError(f"walking_direction must be one of {WALKING_DIRECTIONS}, got {walking_direction!r}")
+        self.walking_direction = walking_direction
+        #: the walking-direction stage (None with walking_direction="device")
+        self.walkdir = None if walking_direction == "device" else (
+            walkdir or WalkingDirection(grid_rate_hz=self.grid_rate_hz, delay_s=self.heading_delay_s))
         self.log = log
         self.reset()
 
@@ -405,6 +422,8 @@ class Pipeline:
                        self.mag_stream: SensorHealth(SATURATION_FLOOR[MAG])}
         self.t_ns = 0
         self.seen: dict[str, int] = {}
+        if self.walkdir is not None:
+            self.walkdir.reset()
         self._log: list[tuple] = []
 
     # -- streaming --------------------------------------------------------------
@@ -463,6 +482,9 @@ class Pipeline:
                 fwd.append((tg, self.smoother.forward_east, self.smoother.forward_north))
                 while fwd[0][0] < tg - self._fwd_keep_ns:
                     fwd.popleft()
+                if self.walkdir is not None:
+                    self.walkdir.update(tg, self.attitude.q, ax, ay, az, self.smoother.forward_east,
+                                        self.smoother.forward_north, ev is not None, self.smoother.forward_b)
             else:
                 heading = math.nan
             if self.log:
@@ -551,7 +573,11 @@ class Pipeline:
         t1 = ev.t_ns + self._delay_ns
         t0 = t1 - int(duration * 1e9)
         t, e, n = zip(*fwd)
-        return interval_heading(t, e, n, t0, t1)
+        heading = interval_heading(t, e, n, t0, t1)
+        if self.walkdir is None:
+            return heading
+        # the carry mode in force, when a carry-mode detector runs (core.pdr.carry)
+        return self.walkdir.step_heading(heading, self.walking_direction, getattr(self, "_carry_mode", None))
 
     def finish(self) -> list[Step]:
         """End of data: complete the confirmed steps still waiting for their heading; drop an unconfirmed bout."""

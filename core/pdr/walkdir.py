@@ -1,0 +1,518 @@
+"""Walking direction from the acceleration: the heading offset between the device and the walk (issue #17).
+
+A phone held in front of the chest points its top edge (device ``y``) where
+the walker goes, and the pipeline's step heading is the smoothed heading of
+that axis (:class:`core.pdr.heading.RotationSmoother`).  In a pocket, a bag, a
+swinging hand or at the ear the device axis the smoother follows (``y``, or
+the back ``-z`` while the phone stands upright) is off the walking direction
+by an angle that is constant as long as the phone stays where it is.
+:class:`WalkingDirection` estimates that angle, the **offset**, from the
+acceleration, so that ``step heading = smoothed device heading + offset``.
+
+Per stride (two steps)
+----------------------
+On the pipeline's grid, the acceleration goes to ENU (``a_n = R(q) a_b``,
+``R`` from the attitude EKF); the vertical component's slow mean (gravity and
+any scale error) is removed.  Each sample's horizontal part is expressed in
+the frame of the smoothed device heading *at the same time*: the smoother lags
+by its group delay ``delay_s``, so a sample is paired with the smoothed forward
+vector ``delay_s`` later (a short buffer).  Over a stride (from one step event
+to the next but one: left and right steps both in, so the left/right sway
+averages out):
+
+* **axis**: the principal direction of the 2x2 covariance of the horizontal
+  acceleration (the eigenvector of its larger eigenvalue).  The stride is
+  rejected where the axis is ill-defined: eigenvalue ratio below
+  ``min_anisotropy``, horizontal acceleration below ``min_horizontal_std_m_s2``
+  (standing, pure vertical motion), the device heading turning more than
+  ``max_stride_turn_rad`` within the stride, a stride outside
+  ``[min_stride_s, max_stride_s]`` or a device axis too near the vertical
+  to have a heading.
+* **sign** (forward or backward along the axis): from the phase between the
+  vertical and the forward acceleration, see below.
+* the stride's offset: the signed axis relative to the device heading
+  (``walking heading - device heading``, wrapped with
+  :func:`core.conventions.wrap_angle`).
+
+The sign rule: gait physics
+---------------------------
+The trunk moves as an inverted pendulum over the stance leg: kinetic and
+potential energy are exchanged, the body is highest and slowest in mid-stance
+and lowest and fastest around the double support (just after a heel strike).
+So the forward speed ``v_f`` and the height ``z`` swing in opposition at the
+step frequency: ``v_f = V - k z`` (``k > 0``) up to a constant, and therefore
+
+    ``a_f = dv_f/dt = -k v_z``.
+
+With ``z = -Z cos(w t)`` (lowest at ``t = 0``, the double support) this is
+``a_z = Z w^2 cos(w t)`` (the upward acceleration peaks at the heel strike),
+``v_z = Z w sin(w t)`` and ``a_f = -k Z w sin(w t)``: the trunk decelerates
+forward (``a_f < 0``) while it rises after the heel strike (``v_z > 0``), and
+speeds up while it falls towards the next one.  The forward acceleration is a
+quarter of a step *ahead* of the vertical acceleration, in quadrature: its
+in-phase covariance with ``a_z`` is zero (and its sign differs from walker to
+walker: on the IPOL waist walks it took both signs), while its covariance
+with the vertical *velocity* is reliably negative.  So along the stride's axis
+``e`` the forward direction is the one where
+
+    ``cov(a_h . e, v_z) < 0``
+
+(the heel-strike impact, an upward jolt with a backward one, pushes the same
+way).  ``v_z`` is the vertical acceleration, its slow mean removed, through
+a leaky integrator (time constant ``vz_leak_time_s``): at the step
+frequency (1.6-2 Hz) that turns the phase by 85 deg instead of 90 (with 1 s),
+far from the 90 deg where the sign would be lost.  No sign of our ENU
+conventions enters: up is +z of ENU and the accelerometer reads ``+g`` up at
+rest, so ``a_n = R(q) a_b`` minus its mean is the upward acceleration.  On the
+IPOL lower-back walks (sensor x up, z out of the back: ``-z`` is forward) the
+rule gives the forward direction within the axis error on every stride we
+looked at (``benchmarks/walkdir.py``, tuning split).
+
+Smoothing: circular means with forgetting
+-----------------------------------------
+Turns rotate the walk and the device together, so the offset is a constant
+to be averaged, and each stride is already expressed relative to the device
+heading.  Two accumulators, each a vector sum with the forgetting factor
+``exp(-1 / memory_strides)`` per accepted stride:
+
+* the axis: unit vectors of **twice** the stride's axis angle (an axis has no
+  sign; doubling makes ``theta`` and ``theta + pi`` the same vector), each of
+  weight 1;
+* the sign evidence: the normalised covariance vector ``-cov(a_h, v_z) /
+  sqrt(var_h var_v)`` of each stride (a 2-vector pointing forward).
+
+The offset is the axis of the first, turned by ``pi`` when the second points
+the other way along it.  Its uncertainty ``offset_sigma_rad`` is the circular
+spread of the axes (``sqrt(-2 ln R2) / 2``, ``R2`` the mean resultant length of
+the doubled angles) over the square root of the effective number of strides;
+``sign_confidence`` is the component of the sign evidence along the axis over
+its total weight (0: undecided, 1: every stride perfectly in quadrature).
+
+The axis accumulator is kept per device axis of the smoother (``y`` or the
+back ``-z`` of ``forward_b="auto"``): the offset of one axis means nothing for
+the other, and a phone going upright and back does not lose either.
+
+Cost: O(1) per grid sample in plain Python (a few microseconds; the
+benchmark measures it), with a buffer of ``delay_s`` of samples.  Non-finite
+input is skipped and counted; nothing non-finite reaches the state.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from core.conventions import CARRY_HANDHELD, CARRY_STILL, wrap_angle
+from core.quaternion import to_matrix
+
+#: why strides were rejected (keys of :attr:`WalkingDirection.rejected`)
+REJECT_REASONS = ("duration", "samples", "still", "incoherent", "isotropic", "turning", "vertical_axis")
+#: how a stride's axis is found (see the module docstring)
+AXIS_METHODS = ("auto", "pca", "coherent", "phase")
+#: the pipeline's ``walking_direction`` settings (:meth:`WalkingDirection.step_heading`)
+WALKING_DIRECTIONS = ("auto", "device", "acceleration")
+
+
+def _anisotropy(cxx: float, cyy: float, cxy: float) -> float:
+    """Ratio of the larger to the smaller eigenvalue of the symmetric 2x2 matrix [[cxx, cxy], [cxy, cyy]] (1e12 for
+    a singular one, 1 for zero)."""
+    tr = cxx + cyy
+    d = math.hypot(cxx - cyy, 2.0 * cxy)
+    l1, l2 = 0.5 * (tr + d), 0.5 * (tr - d)
+    if l1 <= 0.0:
+        return 1.0
+    return l1 / l2 if l2 > 1e-12 * l1 else 1e12
+
+
+class _AxisState:
+    """The two circular accumulators of one device axis (see the module docstring)."""
+
+    __slots__ = ("c2", "s2", "w", "w2", "gx", "gy", "n")
+
+    def __init__(self):
+        self.c2 = self.s2 = self.w = self.w2 = 0.0
+        self.gx = self.gy = 0.0
+        self.n = 0
+
+
+class WalkingDirection:
+    """Heading offset between the smoothed device axis and the walking direction, from the acceleration.
+
+    Parameters (units in the names)
+    ----------
+    grid_rate_hz : float
+        Rate of :meth:`update` calls (Hz): the pipeline's grid.
+    delay_s : float
+        Group delay of the smoothed device heading (s): a sample's acceleration is compared with the
+        smoothed forward vector this much later (the pipeline gives the smoother's ``delay_s``).
+    vz_leak_time_s : float
+        Time constant of the leaky integrator from vertical acceleration to vertical velocity (s).
+    mean_time_s : float
+        Time constant of the running mean removed from the vertical acceleration (s).
+    min_stride_s, max_stride_s : float
+        Strides (two step events) outside this duration are rejected (s).
+    min_horizontal_std_m_s2 : float
+        A stride whose horizontal acceleration has less standard deviation than this (m/s^2, both axes
+        together) is no walking stride (standing, pure vertical motion).
+    min_anisotropy : float
+        Ratio of the larger to the smaller eigenvalue of the horizontal covariance below which the axis
+        is ill-defined and the stride rejected.
+    max_stride_turn_rad : float
+        A stride over which the smoothed device heading turns more than this is rejected (rad).
+    min_forward_norm : float
+        Horizontal length of the smoothed device axis below which it has no heading (the sample is
+        skipped).
+    memory_strides : float
+        Effective memory of the circular means (strides): forgetting factor ``exp(-1 / memory_strides)``.
+    confident_strides, confident_sigma_rad, confident_sign : float
+        :attr:`confident` needs at least this many accepted strides, an offset uncertainty below this
+        (rad) and a sign confidence above this.
+    auto_min_strides, auto_min_offset_rad : int, float
+        The pipeline's ``walking_direction="auto"`` (:meth:`applies`): accepted strides before the
+        offset counts in a carry mode that is not hand-held; how far from 0 a confident offset must be
+        to count without one (rad).
+    max_strides_kept : int
+        How many per-stride records :attr:`strides` keeps (diagnostics).
+    """
+
+    def __init__(self, *, grid_rate_hz: float = 50.0, delay_s: float = 0.45, vz_leak_time_s: float = 1.0,
+                 mean_time_s: float = 2.0, min_stride_s: float = 0.6, max_stride_s: float = 2.6,
+                 min_horizontal_std_m_s2: float = 0.15, min_anisotropy: float = 1.3,
+                 max_stride_turn_rad: float = math.radians(30.0), min_forward_norm: float = 0.2,
+                 memory_strides: float = 15.0, confident_strides: int = 5,
+                 confident_sigma_rad: float = math.radians(8.0), confident_sign: float = 0.15,
+                 auto_min_strides: int = 3, auto_min_offset_rad: float = math.radians(45.0),
+                 max_strides_kept: int = 64, axis_method: str = "auto",
+                 pca_min_anisotropy: float = 8.0, min_coherence: float = 0.0, reset_after_gap_s: float = 10.0):
+        self.grid_rate_hz = float(grid_rate_hz)
+        self.delay_s = float(delay_s)
+        self.vz_leak_time_s = float(vz_leak_time_s)
+        self.mean_time_s = float(mean_time_s)
+        self.min_stride_s = float(min_stride_s)
+        self.max_stride_s = float(max_stride_s)
+        self.min_horizontal_std_m_s2 = float(min_horizontal_std_m_s2)
+        self.min_anisotropy = float(min_anisotropy)
+        self.max_stride_turn_rad = float(max_stride_turn_rad)
+        self.min_forward_norm = float(min_forward_norm)
+        self.memory_strides = float(memory_strides)
+        self.confident_strides = int(confident_strides)
+        self.confident_sigma_rad = float(confident_sigma_rad)
+        self.confident_sign = float(confident_sign)
+        self.auto_min_strides = int(auto_min_strides)
+        self.auto_min_offset_rad = float(auto_min_offset_rad)
+        self.max_strides_kept = int(max_strides_kept)
+        if axis_method not in AXIS_METHODS:
+            raise ValueError(f"axis_method must be one of {AXIS_METHODS}, got {axis_method!r}")
+        self.axis_method = axis_method
+        self.pca_min_anisotropy = float(pca_min_anisotropy)
+        self.min_coherence = float(min_coherence)
+        self.reset_after_gap_s = float(reset_after_gap_s)
+        self._gap_ns = int(self.reset_after_gap_s * 1e9)
+        dt = 1.0 / self.grid_rate_hz
+        self._dt = dt
+        self._leak = math.exp(-dt / self.vz_leak_time_s)
+        self._mean_alpha = 1.0 - math.exp(-dt / self.mean_time_s)
+        self._forget = math.exp(-1.0 / self.memory_strides)
+        self._delay_n = max(0, int(round(self.delay_s * self.grid_rate_hz)))
+        self.reset()
+
+    def reset(self) -> None:
+        #: running mean of the vertical acceleration and the leaky vertical velocity
+        self._mean_u = math.nan
+        self._vz = 0.0
+        #: samples waiting for their delayed device heading: (t_ns, a_east, a_north, a_up, v_z, step)
+        self._buf = deque()
+        self._sums = [0.0] * 14  # n, sx, sy, sxx, syy, sxy, sv, sxv, syv, svv, su, sxu, syu, suu (open stride)
+        self._stride_steps = -1  # steps seen in the open stride; -1 before the first step boundary
+        self._stride_t0 = 0
+        self._stride_fwd0 = None  # device forward unit vector (east, north) at the stride's start
+        self._stride_skipped = 0  # samples of the stride without a device heading
+        self._axis_key = None
+        self._states: dict = {}
+        self._last_accepted_ns = None  # time of the last accepted stride
+        #: times the estimate was forgotten after a gap of ``reset_after_gap_s`` without an accepted stride
+        self.n_gap_resets = 0
+        #: per-stride records (dicts), the last ``max_strides_kept``
+        self.strides: deque = deque(maxlen=self.max_strides_kept)
+        #: strides closed, accepted, and rejected per reason
+        self.n_strides = 0
+        self.n_accepted = 0
+        self.rejected = {r: 0 for r in REJECT_REASONS}
+        #: sign decisions of accepted strides that disagreed with the smoothed sign at that time
+        self.n_sign_disagreements = 0
+        #: grid samples skipped for non-finite input
+        self.n_nonfinite = 0
+        #: steps whose heading got the offset (:meth:`step_heading`)
+        self.n_steps_offset = 0
+
+    # -- per sample ---------------------------------------------------------------
+    def update(self, t_ns: int, q, ax: float, ay: float, az: float, fwd_east: float, fwd_north: float,
+               step: bool = False, axis=None) -> None:
+        """One grid sample.
+
+        ``q``: attitude (w, x, y, z) body -> ENU; ``ax, ay, az``: the accelerometer (m/s^2, device
+        frame); ``fwd_east, fwd_north``: the smoothed device forward vector now
+        (:attr:`core.pdr.heading.RotationSmoother.forward_east`, ``forward_north``); ``step``: a step
+        event at this sample; ``axis``: the device axis the smoother follows (its ``forward_b``), so
+        that each axis keeps its own offset.
+        """
+        if not (math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az)
+                and math.isfinite(fwd_east) and math.isfinite(fwd_north)):
+            self.n_nonfinite += 1
+            return
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = to_matrix(q)
+        ae = r00 * ax + r01 * ay + r02 * az
+        an = r10 * ax + r11 * ay + r12 * az
+        au = r20 * ax + r21 * ay + r22 * az
+        if not (math.isfinite(ae) and math.isfinite(an) and math.isfinite(au)):
+            self.n_nonfinite += 1
+            return
+        m = self._mean_u
+        if m != m:
+            m = au
+        m += self._mean_alpha * (au - m)
+        self._mean_u = m
+        self._vz = self._leak * self._vz + (au - m) * self._dt
+        last = self._last_accepted_ns
+        if last is not None and t_ns - last > self._gap_ns:
+            self._states = {}  # a pause: the phone may have been put elsewhere (or that was no walk)
+            self._last_accepted_ns = None
+            self.n_gap_resets += 1
+        buf = self._buf
+        buf.append((t_ns, ae, an, au - m, self._vz, step))
+        if axis != self._axis_key:
+            self._axis_key = axis
+            self._stride_steps = -1  # the open stride mixed two axes: start again at the next step
+        if len(buf) > self._delay_n:
+            self._paired(buf.popleft(), fwd_east, fwd_north)
+
+    def _paired(self, sample, fe: float, fn: float) -> None:
+        """A delayed sample with the smoothed device forward vector of its time."""
+        t_ns, ae, an, au, vz, step = sample
+        norm = math.hypot(fe, fn)
+        if step:
+            self._boundary(t_ns, fe, fn, norm)
+        if self._stride_steps < 0:
+            return
+        if norm < self.min_forward_norm:
+            self._stride_skipped += 1
+            return
+        ue, un = fe / norm, fn / norm
+        x = ae * ue + an * un  # along the device heading
+        y = -ae * un + an * ue  # 90 deg counter-clockwise of it (left)
+        s = self._sums
+        s[0] += 1.0
+        s[1] += x
+        s[2] += y
+        s[3] += x * x
+        s[4] += y * y
+        s[5] += x * y
+        s[6] += vz
+        s[7] += x * vz
+        s[8] += y * vz
+        s[9] += vz * vz
+        s[10] += au
+        s[11] += x * au
+        s[12] += y * au
+        s[13] += au * au
+
+    def _boundary(self, t_ns: int, fe: float, fn: float, norm: float) -> None:
+        """A step event reached the delayed stream: close the stride after two steps."""
+        if self._stride_steps < 0 or self._stride_steps + 1 >= 2:
+            if self._stride_steps >= 0:
+                self._close(t_ns, fe, fn, norm)
+            self._stride_steps = 0
+            self._stride_t0 = t_ns
+            self._stride_fwd0 = (fe / norm, fn / norm) if norm >= self.min_forward_norm else None
+            self._stride_skipped = 0
+            self._sums = [0.0] * 14
+        else:
+            self._stride_steps += 1
+
+    def _close(self, t_ns: int, fe: float, fn: float, norm: float) -> None:
+        self.n_strides += 1
+        rec = {"t_ns": int(t_ns), "accepted": False, "reason": "", "axis_offset_rad": math.nan,
+               "offset_rad": math.nan, "anisotropy": math.nan, "corr": math.nan, "sign": 0}
+        reason = self._judge(t_ns, fe, fn, norm, rec)
+        if reason:
+            self.rejected[reason] += 1
+            rec["reason"] = reason
+        self.strides.append(rec)
+
+    def _judge(self, t_ns: int, fe: float, fn: float, norm: float, rec: dict) -> str:
+        dur = (t_ns - self._stride_t0) * 1e-9
+        if not self.min_stride_s <= dur <= self.max_stride_s:
+            return "duration"
+        s = self._sums
+        n = s[0]
+        if self._stride_fwd0 is None or norm < self.min_forward_norm or self._stride_skipped > 0.2 * (n + 1):
+            return "vertical_axis"
+        if n < 0.5 * dur * self.grid_rate_hz or n < 10:
+            return "samples"
+        e0, n0 = self._stride_fwd0
+        turn = math.atan2(e0 * fn - n0 * fe, e0 * fe + n0 * fn)  # device heading change over the stride
+        rec["turn_rad"] = turn
+        if abs(turn) > self.max_stride_turn_rad:
+            return "turning"
+        inv = 1.0 / n
+        mx, my, mv = s[1] * inv, s[2] * inv, s[6] * inv
+        cxx = max(s[3] * inv - mx * mx, 0.0)
+        cyy = max(s[4] * inv - my * my, 0.0)
+        cxy = s[5] * inv - mx * my
+        cxv = s[7] * inv - mx * mv
+        cyv = s[8] * inv - my * mv
+        cvv = max(s[9] * inv - mv * mv, 0.0)
+        tr = cxx + cyy
+        if tr < self.min_horizontal_std_m_s2 ** 2:
+            return "still"
+        raw_aniso = _anisotropy(cxx, cyy, cxy)
+        rec["anisotropy"] = raw_aniso
+        # forward evidence: -cov(a_h, v_z), normalised to a correlation
+        den = math.sqrt(tr * cvv)
+        gx, gy = (-cxv / den, -cyv / den) if den > 1e-12 else (0.0, 0.0)
+        mu = s[10] * inv
+        cuu = max(s[13] * inv - mu * mu, 0.0)
+        du = math.sqrt(tr * cuu)
+        hx, hy = ((s[11] * inv - mx * mu) / du, (s[12] * inv - my * mu) / du) if du > 1e-12 else (0.0, 0.0)
+        # the part of the horizontal acceleration that moves with the vertical: covariance g g' + h h'
+        kxx, kyy, kxy = gx * gx + hx * hx, gy * gy + hy * hy, gx * gy + hx * hy
+        coherence = kxx + kyy
+        rec["coherence"] = coherence
+        method = self.axis_method
+        if method == "auto":
+            method = "pca" if raw_aniso >= self.pca_min_anisotropy else "coherent"
+        rec["method"] = method
+        if method == "pca":
+            theta = 0.5 * math.atan2(2.0 * cxy, cxx - cyy)  # axis angle from the device heading
+            aniso = raw_aniso
+        else:
+            if coherence < self.min_coherence:
+                return "incoherent"
+            aniso = _anisotropy(kxx, kyy, kxy)
+            theta = 0.5 * math.atan2(2.0 * kxy, kxx - kyy) if method == "coherent" else math.atan2(gy, gx)
+        rec["axis_anisotropy"] = aniso
+        if aniso < self.min_anisotropy:
+            return "isotropic"
+        rec["axis_offset_rad"] = theta
+        ct, st = math.cos(theta), math.sin(theta)
+        along = gx * ct + gy * st
+        rec["corr"] = along
+        rec["axis"] = self._axis_key
+        sign = 1 if along >= 0.0 else -1
+        rec["sign"] = sign
+        rec["offset_rad"] = theta if sign > 0 else wrap_angle(theta + math.pi)
+        self._last_accepted_ns = t_ns
+        st_ = self._states.get(self._axis_key)
+        if st_ is None:
+            st_ = self._states[self._axis_key] = _AxisState()
+        smoothed_before = self._offset_of(st_) if st_.n else None
+        f = self._forget
+        st_.c2 = f * st_.c2 + math.cos(2.0 * theta)
+        st_.s2 = f * st_.s2 + math.sin(2.0 * theta)
+        st_.w = f * st_.w + 1.0
+        st_.w2 = f * f * st_.w2 + 1.0
+        st_.gx = f * st_.gx + gx
+        st_.gy = f * st_.gy + gy
+        st_.n += 1
+        self.n_accepted += 1
+        rec["accepted"] = True
+        if smoothed_before is not None and abs(wrap_angle(rec["offset_rad"] - smoothed_before)) > 0.5 * math.pi:
+            self.n_sign_disagreements += 1
+        return ""
+
+    # -- the estimate -------------------------------------------------------------
+    @staticmethod
+    def _offset_of(st: _AxisState) -> float:
+        theta = 0.5 * math.atan2(st.s2, st.c2)
+        if st.gx * math.cos(theta) + st.gy * math.sin(theta) < 0.0:
+            theta += math.pi
+        return wrap_angle(theta)
+
+    def _state(self):
+        st = self._states.get(self._axis_key)
+        return st if st is not None and st.n else None
+
+    @property
+    def offset_rad(self) -> float:
+        """Walking heading minus smoothed device heading (rad, wrapped); 0 before any accepted stride."""
+        st = self._state()
+        return self._offset_of(st) if st is not None else 0.0
+
+    @property
+    def n_used(self) -> int:
+        """Accepted strides behind the current axis's offset."""
+        st = self._state()
+        return st.n if st is not None else 0
+
+    @property
+    def axis_resultant(self) -> float:
+        """Mean resultant length of the doubled stride axes (1: all strides agree; 0: no axis)."""
+        st = self._state()
+        return math.hypot(st.c2, st.s2) / st.w if st is not None else 0.0
+
+    @property
+    def offset_sigma_rad(self) -> float:
+        """Standard error of the offset's axis (rad): circular spread over sqrt(effective strides); pi before any."""
+        st = self._state()
+        if st is None:
+            return math.pi
+        r = min(max(math.hypot(st.c2, st.s2) / st.w, 1e-12), 1.0)
+        spread = 0.5 * math.sqrt(-2.0 * math.log(r))
+        n_eff = st.w * st.w / st.w2
+        return min(spread / math.sqrt(n_eff), math.pi)
+
+    @property
+    def sign_confidence(self) -> float:
+        """Mean forward correlation along the offset's direction (0..1; 0 before any stride)."""
+        st = self._state()
+        if st is None:
+            return 0.0
+        o = self._offset_of(st)
+        return max(0.0, (st.gx * math.cos(o) + st.gy * math.sin(o)) / st.w)
+
+    @property
+    def confident(self) -> bool:
+        """Enough strides, a small uncertainty and a clear sign (see the settings)."""
+        return (self.n_used >= self.confident_strides and self.offset_sigma_rad <= self.confident_sigma_rad
+                and self.sign_confidence >= self.confident_sign)
+
+    def applies(self, setting: str = "auto", carry_mode: str | None = None) -> bool:
+        """Whether a step's heading gets the offset (the pipeline's ``walking_direction``).
+
+        ``"device"``: never.  ``"acceleration"``: once a stride was accepted.  ``"auto"``: in a carry
+        mode other than hand-held and still once ``auto_min_strides`` strides were accepted (there the
+        device axis is known not to be the walking direction, and the estimate is the best there is);
+        in the hand-held mode, or without a carry-mode detector (``carry_mode`` None), only when the
+        estimate is :attr:`confident` and farther than ``auto_min_offset_rad`` from 0: a phone read in
+        the hand points its top edge within 45 deg of the walk, so a confident offset beyond that means
+        it is not (or not so) held, while a hand-held phone, whose estimate sits near 0, keeps today's
+        heading exactly instead of taking on the estimate's noise.
+        """
+        if setting == "device" or not self.n_used:
+            return False
+        if setting == "acceleration":
+            return True
+        if carry_mode is not None and carry_mode not in (CARRY_HANDHELD, CARRY_STILL):
+            return self.n_used >= self.auto_min_strides
+        return self.confident and abs(self.offset_rad) > self.auto_min_offset_rad
+
+    def step_heading(self, device_heading_rad: float, setting: str = "auto", carry_mode: str | None = None) -> float:
+        """A step's heading: the smoothed device heading, plus the offset where :meth:`applies` says so.
+
+        Returns ``device_heading_rad`` itself (bit for bit) where the offset does not apply, and counts
+        the steps that got it in :attr:`n_steps_offset`.
+        """
+        if device_heading_rad != device_heading_rad or not self.applies(setting, carry_mode):
+            return device_heading_rad
+        self.n_steps_offset += 1
+        return wrap_angle(device_heading_rad + self.offset_rad)
+
+    def diagnostics(self) -> dict:
+        """The estimate and its counters, as data."""
+        return {"offset_rad": self.offset_rad, "offset_sigma_rad": self.offset_sigma_rad,
+                "sign_confidence": self.sign_confidence, "axis_resultant": self.axis_resultant,
+                "confident": self.confident, "n_used": self.n_used, "n_strides": self.n_strides,
+                "n_accepted": self.n_accepted, "rejected": dict(self.rejected),
+                "n_sign_disagreements": self.n_sign_disagreements, "n_nonfinite": self.n_nonfinite,
+                "n_steps_offset": self.n_steps_offset, "n_gap_resets": self.n_gap_resets,
+                "axes": {str(k): self._offset_of(v) for k, v in self._states.items() if v.n}}

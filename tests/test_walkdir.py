@@ -1,0 +1,178 @@
+"""The walking-direction stage (core.pdr.walkdir, issue #17 item 3): synthetic gait, simulator truth, pipeline.
+
+Cheap by design (a few seconds): the synthetic gait runs the stage alone; the simulator walks are short.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from core import quaternion as quat
+from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
+from core.metrics import circular_mean
+from core.pdr.pipeline import Pipeline
+from core.pdr.walkdir import WalkingDirection
+
+RATE_HZ = 50.0
+STEP_HZ = 1.8
+
+
+def _feed(wd: WalkingDirection, *, offset_deg: float, seconds: float = 30.0, heading_deg=lambda t: 30.0,
+          forward_sign: float = 1.0, vertical_m: float = 0.03, forward_m_s2: float = 1.5, sway_m_s2: float = 0.8,
+          noise_m_s2: float = 0.05, seed: int = 0, lag_s: float | None = None, samples=None):
+    """A synthetic gait on the grid: the trunk's pendulum (a_f = -k v_z, the relation of the module docstring),
+    a lateral sway at the stride frequency, the phone flat with its y axis ``offset_deg`` clockwise of the walk.
+
+    ``heading_deg(t)``: the walking heading; the smoothed device forward vector handed to the stage lags
+    the device by ``lag_s`` (the smoother's delay: ``wd.delay_s`` unless given).  ``forward_sign=-1`` makes
+    the forward acceleration lead the wrong way (a walk backwards, for the sign test).  Returns the offsets
+    seen after every sample.
+    """
+    rng = np.random.default_rng(seed)
+    w = 2.0 * math.pi * STEP_HZ
+    lag = wd.delay_s if lag_s is None else lag_s
+    out = []
+    n = int(seconds * RATE_HZ)
+    for k in range(n):
+        t = k / RATE_HZ
+        h = math.radians(heading_deg(t))
+        dev = h - math.radians(offset_deg)  # device y heading
+        dev_lag = math.radians(heading_deg(max(t - lag, 0.0))) - math.radians(offset_deg)
+        a_up = vertical_m * w * w * math.cos(w * t)
+        a_f = -forward_sign * forward_m_s2 * math.sin(w * t)  # forward deceleration while rising
+        a_l = sway_m_s2 * math.sin(0.5 * w * t)
+        a_n = (a_f * math.cos(h) - a_l * math.sin(h), a_f * math.sin(h) + a_l * math.cos(h), a_up)
+        a_n = [a + noise_m_s2 * rng.standard_normal() for a in a_n]
+        q = quat.from_axis_angle((0.0, 0.0, 1.0), dev - 0.5 * math.pi)  # y axis at heading dev, screen up
+        r = quat.to_matrix(q)
+        f = (a_n[0], a_n[1], a_n[2] + STANDARD_GRAVITY_M_S2)
+        acc_b = [r[0][i] * f[0] + r[1][i] * f[1] + r[2][i] * f[2] for i in range(3)]  # R^T f
+        step = k % int(round(RATE_HZ / STEP_HZ)) == 0 and t > 0.5
+        wd.update(10**12 + int(t * 1e9), q, *acc_b, math.cos(dev_lag), math.sin(dev_lag), step, (0.0, 1.0, 0.0))
+        if samples is not None:
+            samples.append((t, wd.offset_rad))
+        out.append(wd.offset_rad)
+    return out
+
+
+@pytest.mark.parametrize("offset_deg", [0.0, 75.0, -120.0, 180.0])
+def test_synthetic_gait_offset_and_sign(offset_deg):
+    wd = WalkingDirection()
+    _feed(wd, offset_deg=offset_deg, seconds=20.0)
+    # the device is offset_deg clockwise of the walk: walking heading - device heading = +offset_deg
+    assert wd.n_used >= 10
+    assert abs(math.degrees(wrap_angle(wd.offset_rad - math.radians(offset_deg)))) < 5.0
+    assert wd.confident and wd.sign_confidence > 0.5
+    assert wd.n_sign_disagreements == 0
+
+
+def test_sign_follows_the_phase_rule():
+    """The same axis with the forward acceleration's phase reversed gives the opposite direction."""
+    a, b = WalkingDirection(), WalkingDirection()
+    _feed(a, offset_deg=40.0, seconds=15.0)
+    _feed(b, offset_deg=40.0, seconds=15.0, forward_sign=-1.0)
+    assert abs(math.degrees(wrap_angle(a.offset_rad - math.radians(40.0)))) < 5.0
+    assert abs(math.degrees(wrap_angle(b.offset_rad - math.radians(40.0 - 180.0)))) < 5.0
+    for s in a.strides:
+        if s["accepted"]:
+            assert s["sign"] in (-1, 1) and s["corr"] == s["corr"]
+
+
+def test_turn_does_not_move_the_offset():
+    """A 90 deg corner at 45 deg/s turns walk and device together: the smoothed offset stays where it would
+    have been without the corner (tolerance 2 deg at every sample)."""
+    def corner(t):
+        return 10.0 + 90.0 * min(max((t - 12.0) / 2.0, 0.0), 1.0)
+
+    runs = []
+    for heading in (corner, lambda t: 10.0):
+        wd = WalkingDirection()
+        seen = []
+        _feed(wd, offset_deg=-60.0, seconds=24.0, heading_deg=heading, samples=seen)
+        runs.append((wd, np.array([o for _, o in seen])))
+    (turned, a), (straight, b) = runs
+    assert np.max(np.abs(np.degrees(wrap_angle(a - b)))) < 2.0
+    assert turned.rejected["turning"] >= 1  # the strides inside the corner were left out
+    assert abs(math.degrees(wrap_angle(turned.offset_rad - math.radians(-60.0)))) < 5.0
+
+
+def test_degenerate_input_no_nan():
+    wd = WalkingDirection()
+    q = (1.0, 0.0, 0.0, 0.0)
+    t0 = 10**12
+    for k in range(2000):  # standing still, steps claimed anyway
+        wd.update(t0 + k * 20_000_000, q, 0.0, 0.0, STANDARD_GRAVITY_M_S2, 0.0, 1.0, k % 28 == 0, (0.0, 1.0, 0.0))
+    assert wd.n_used == 0 and wd.offset_rad == 0.0 and wd.rejected["still"] > 0
+    for k in range(2000):  # pure vertical motion
+        az = STANDARD_GRAVITY_M_S2 + 3.0 * math.cos(2 * math.pi * STEP_HZ * k / RATE_HZ)
+        wd.update(t0 + (2000 + k) * 20_000_000, q, 0.0, 0.0, az, 0.0, 1.0, k % 28 == 0, (0.0, 1.0, 0.0))
+    assert wd.n_used == 0 and wd.offset_rad == 0.0
+    wd.update(t0 + 5000 * 20_000_000, q, math.nan, 0.0, 9.8, 0.0, 1.0, True, (0.0, 1.0, 0.0))
+    wd.update(t0 + 5001 * 20_000_000, q, 0.0, 0.0, 9.8, math.inf, 1.0, True, (0.0, 1.0, 0.0))
+    wd.update(t0 + 5002 * 20_000_000, q, 0.0, 0.0, 9.8, 0.0, 0.0, True, (0.0, 0.0, -1.0))  # no device heading
+    assert wd.n_nonfinite == 2
+    d = wd.diagnostics()
+    for k in ("offset_rad", "offset_sigma_rad", "sign_confidence", "axis_resultant"):
+        assert math.isfinite(d[k])
+    assert not wd.confident
+    # a step heading without an estimate is the device heading itself
+    assert wd.step_heading(0.25, "acceleration") == 0.25
+
+
+def _sim_errors(walk, pipe):
+    res = pipe.run(walk.recording)
+    errs = []
+    for st in res.steps[10:]:
+        ts = np.linspace(st.t_ns - st.features.duration_s * 1e9, st.t_ns, 6).astype(np.int64)
+        errs.append(abs(math.degrees(wrap_angle(st.heading_rad - circular_mean(walk.truth.heading_at(ts))))))
+    return res, np.asarray(errs)
+
+
+def test_simulator_offset_phone_with_a_turn():
+    """A phone held 70 deg off the walk, a 90 deg corner: the step heading after 10 steps follows the truth."""
+    from desktop.simulator import simulate_walk
+
+    walk = simulate_walk([(0.0, 0.0), (25.0, 0.0), (25.0, 20.0)], phone_yaw_offset_deg=70.0, seed=3)
+    pipe = Pipeline(walking_direction="acceleration")
+    res, after = _sim_errors(walk, pipe)
+    assert np.median(after) < 5.0
+    wd = pipe.walkdir
+    assert wd.confident and abs(math.degrees(wd.offset_rad) + 70.0) < 5.0
+    # today's heading (the device axis) is 70 deg off; "auto" takes the offset too (confident, far from 0)
+    assert wd.applies("auto") and not wd.applies("device")
+
+
+def test_handheld_auto_is_device_exactly():
+    """A hand-held phone (the simulator's default, 3 deg off the walk): "auto" changes no heading, not even by 1 ulp."""
+    from desktop.simulator import simulate_walk
+
+    walk = simulate_walk([(0.0, 0.0), (15.0, 0.0), (15.0, 12.0)], seed=5)
+    a = Pipeline().run(walk.recording)
+    b = Pipeline(walking_direction="device").run(walk.recording)
+    assert [s.t_ns for s in a.steps] == [s.t_ns for s in b.steps]
+    assert [s.heading_rad for s in a.steps] == [s.heading_rad for s in b.steps]
+    with pytest.raises(ValueError):
+        Pipeline(walking_direction="compass")
+
+
+@pytest.mark.parametrize("placement", ["pocket", "bag"])
+def test_simulator_placements(placement):
+    """The placements of desktop.placements (one seed each, short): offset within 5 deg of the truth."""
+    from desktop.simulator import simulate_walk
+
+    try:
+        walk = simulate_walk([(0.0, 0.0), (25.0, 0.0), (25.0, 15.0)], placement=placement, seed=1)
+    except TypeError:
+        pytest.skip("the simulator has no placements")
+    pipe = Pipeline(walking_direction="acceleration")
+    _, after = _sim_errors(walk, pipe)
+    assert pipe.walkdir.confident
+    # the offset against the truth: walking heading minus the true heading of the smoother's axis
+    axis = np.asarray(pipe.smoother.forward_b, dtype=float)
+    t = np.linspace(walk.truth.walk_start_t_ns, walk.truth.walk_end_t_ns, 50).astype(np.int64)[25:45]
+    v = quat.to_matrix_array(walk.truth.attitude_at(t))[:, :2, :] @ axis
+    true = circular_mean(walk.truth.heading_at(t) - np.arctan2(v[:, 1], v[:, 0]))
+    assert abs(math.degrees(wrap_angle(pipe.walkdir.offset_rad - true))) < 5.0
