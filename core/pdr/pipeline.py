@@ -576,8 +576,9 @@ class Pipeline:
         heading = interval_heading(t, e, n, t0, t1)
         if self.walkdir is None:
             return heading
-        # the carry mode in force, when a carry-mode detector runs (core.pdr.carry)
-        return self.walkdir.step_heading(heading, self.walking_direction, getattr(self, "_carry_mode", None))
+        # the carry mode in force, when a carry-mode detector runs (core.pdr.carry); None without one
+        mode = getattr(self, "_carry_mode", None) if getattr(self, "carry", None) is not None else None
+        return self.walkdir.step_heading(heading, self.walking_direction, mode)
 
     def finish(self) -> list[Step]:
         """End of data: complete the confirmed steps still waiting for their heading; drop an unconfirmed bout."""

@@ -167,10 +167,10 @@ class WalkingDirection:
     confident_strides, confident_sigma_rad, confident_sign : float
         :attr:`confident` needs at least this many accepted strides, an offset uncertainty below this
         (rad) and a sign confidence above this.
-    auto_min_strides, auto_min_offset_rad : int, float
+    auto_min_strides, auto_far_min_strides, auto_min_offset_rad : int, int, float
         The pipeline's ``walking_direction="auto"`` (:meth:`applies`): accepted strides before the
-        offset counts in a carry mode that is not hand-held; how far from 0 a confident offset must be
-        to count without one (rad).
+        offset counts in a carry mode that is not hand-held; without a carry-mode detector, the
+        strides and the distance from 0 (rad) a confident offset needs to count.
     max_strides_kept : int
         How many per-stride records :attr:`strides` keeps (diagnostics).
     """
@@ -181,7 +181,8 @@ class WalkingDirection:
                  max_stride_turn_rad: float = math.radians(30.0), min_forward_norm: float = 0.2,
                  memory_strides: float = 15.0, confident_strides: int = 5,
                  confident_sigma_rad: float = math.radians(8.0), confident_sign: float = 0.15,
-                 auto_min_strides: int = 3, auto_min_offset_rad: float = math.radians(45.0),
+                 auto_min_strides: int = 3, auto_far_min_strides: int = 10,
+                 auto_min_offset_rad: float = math.radians(45.0),
                  max_strides_kept: int = 64, axis_method: str = "auto",
                  pca_min_anisotropy: float = 8.0, min_coherence: float = 0.0, reset_after_gap_s: float = 10.0):
         self.grid_rate_hz = float(grid_rate_hz)
@@ -199,6 +200,7 @@ class WalkingDirection:
         self.confident_sigma_rad = float(confident_sigma_rad)
         self.confident_sign = float(confident_sign)
         self.auto_min_strides = int(auto_min_strides)
+        self.auto_far_min_strides = int(auto_far_min_strides)
         self.auto_min_offset_rad = float(auto_min_offset_rad)
         self.max_strides_kept = int(max_strides_kept)
         if axis_method not in AXIS_METHODS:
@@ -479,22 +481,27 @@ class WalkingDirection:
     def applies(self, setting: str = "auto", carry_mode: str | None = None) -> bool:
         """Whether a step's heading gets the offset (the pipeline's ``walking_direction``).
 
-        ``"device"``: never.  ``"acceleration"``: once a stride was accepted.  ``"auto"``: in a carry
-        mode other than hand-held and still once ``auto_min_strides`` strides were accepted (there the
-        device axis is known not to be the walking direction, and the estimate is the best there is);
-        in the hand-held mode, or without a carry-mode detector (``carry_mode`` None), only when the
-        estimate is :attr:`confident` and farther than ``auto_min_offset_rad`` from 0: a phone read in
-        the hand points its top edge within 45 deg of the walk, so a confident offset beyond that means
-        it is not (or not so) held, while a hand-held phone, whose estimate sits near 0, keeps today's
-        heading exactly instead of taking on the estimate's noise.
+        ``"device"``: never.  ``"acceleration"``: once a stride was accepted.  ``"auto"``:
+
+        * with a carry-mode detector (``carry_mode`` given): in every mode but hand-held and still, once
+          ``auto_min_strides`` strides were accepted -- there the device axis is known not to be the
+          walking direction and the estimate is the best there is; never in the hand-held mode, which
+          keeps today's heading exactly (a phone read in the hand points its top edge where the walker
+          goes, and the estimate's noise would only add to it);
+        * without one (``carry_mode`` None): only an estimate that is :attr:`confident` over at least
+          ``auto_far_min_strides`` strides and farther than ``auto_min_offset_rad`` from 0.  A phone
+          read in the hand points its top edge within 45 deg of the walk, so such an offset means it is
+          not held so; the stride count keeps the waving of a compass calibration (periodic, stepping
+          in place or not) from passing for a walk.
         """
         if setting == "device" or not self.n_used:
             return False
         if setting == "acceleration":
             return True
-        if carry_mode is not None and carry_mode not in (CARRY_HANDHELD, CARRY_STILL):
-            return self.n_used >= self.auto_min_strides
-        return self.confident and abs(self.offset_rad) > self.auto_min_offset_rad
+        if carry_mode is not None:
+            return carry_mode not in (CARRY_HANDHELD, CARRY_STILL) and self.n_used >= self.auto_min_strides
+        return (self.n_used >= self.auto_far_min_strides and self.confident
+                and abs(self.offset_rad) > self.auto_min_offset_rad)
 
     def step_heading(self, device_heading_rad: float, setting: str = "auto", carry_mode: str | None = None) -> float:
         """A step's heading: the smoothed device heading, plus the offset where :meth:`applies` says so.
