@@ -19,7 +19,10 @@ The recordings (``--data``, default ``../shared/data``): four IPIN 2023
 track-3 logfiles (GetSensorData, hand-held, 5-13 minutes), the ETH Sensor Logger
 walk (12 minutes outdoors) and the bundled demo (``desktop/data``); the
 recordings that are not there are skipped and named.  ``--quick``: the demo
-and one IPIN logfile.
+and one IPIN logfile.  ``--fast``: the results of the fast desktop path
+(:func:`desktop.fast.run_fast`, a second implementation over whole arrays)
+instead of ``Pipeline().run``, compared with results stored from the phone's
+path: the two implementations held to each other on all six recordings.
 
 The stored results live outside the repository (``--store``, default
 ``$PDR_BENCH_CACHE/equivalence.json``, ``$PDR_BENCH_CACHE`` defaulting to
@@ -144,13 +147,18 @@ def _recording(path: str, refresh: bool):
     return Recording(streams, m["device"], m["metadata"], [], m["source"])
 
 
-def results_of(path: str, refresh: bool = False) -> dict:
-    """Run the default pipeline on one recording; what is stored of it (JSON-able)."""
+def results_of(path: str, refresh: bool = False, fast: bool = False) -> dict:
+    """Run the default pipeline (or the fast path) on one recording; what is stored of it (JSON-able)."""
     from core.pdr.pipeline import Pipeline
 
     rec = _recording(path, refresh)
     t0 = time.perf_counter()
-    res = Pipeline().run(rec)
+    if fast:
+        from desktop.fast import run_fast
+
+        res = run_fast(rec)
+    else:
+        res = Pipeline().run(rec)
     seconds = time.perf_counter() - t0
     tr, att = res.track, res.attitude
     return {
@@ -166,12 +174,13 @@ def results_of(path: str, refresh: bool = False) -> dict:
     }
 
 
-def run_all(paths: dict[str, Path], jobs: int, refresh: bool = False) -> dict[str, dict]:
+def run_all(paths: dict[str, Path], jobs: int, refresh: bool = False, fast: bool = False) -> dict[str, dict]:
     names = list(paths)
     if jobs <= 1:
-        return {n: results_of(str(paths[n]), refresh) for n in names}
+        return {n: results_of(str(paths[n]), refresh, fast) for n in names}
     with ProcessPoolExecutor(jobs) as ex:
-        return dict(zip(names, ex.map(results_of, [str(paths[n]) for n in names], [refresh] * len(names))))
+        return dict(zip(names, ex.map(results_of, [str(paths[n]) for n in names], [refresh] * len(names),
+                                      [fast] * len(names))))
 
 
 def _nan_equal_diff(a: np.ndarray, b: np.ndarray, angle: bool = False) -> float:
@@ -259,13 +268,16 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="the demo and one IPIN logfile")
     ap.add_argument("--tol", type=float, default=1e-9)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--fast", action="store_true", help="the fast desktop path's results (desktop.fast.run_fast)")
     args = ap.parse_args(argv)
+    if args.fast and args.save:
+        raise SystemExit("--fast compares with results stored from Pipeline.run; it stores none")
     store = args.store or cache_dir() / "equivalence.json"
     paths, missing = recordings(args.data or default_data_root(), args.quick)
     if missing:
         print("missing, skipped: " + ", ".join(missing), file=sys.stderr)
     t0 = time.perf_counter()
-    new = run_all(paths, args.jobs, refresh=args.save)
+    new = run_all(paths, args.jobs, refresh=args.save, fast=args.fast)
     wall = time.perf_counter() - t0
     for name, r in new.items():
         print(f"{name:45s} {r['events']:8d} events {len(r['step_t_ns']):5d} steps {r['seconds']:6.1f} s "

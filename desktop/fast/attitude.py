@@ -115,6 +115,58 @@ def q_to_matrix(q):
     return R
 
 
+# -- small dense algebra, written out: a BLAS or LAPACK call costs more than these matrices' arithmetic ----
+
+@kernel
+def mm(a, b):
+    """``a @ b`` of small matrices."""
+    n, k = a.shape
+    m = b.shape[1]
+    out = np.zeros((n, m))
+    for i in range(n):
+        for j in range(m):
+            acc = 0.0
+            for r in range(k):
+                acc += a[i, r] * b[r, j]
+            out[i, j] = acc
+    return out
+
+
+@kernel
+def mv(a, x):
+    """``a @ x`` of a small matrix and a vector."""
+    out = np.zeros(a.shape[0])
+    for i in range(a.shape[0]):
+        acc = 0.0
+        for r in range(a.shape[1]):
+            acc += a[i, r] * x[r]
+        out[i] = acc
+    return out
+
+
+@kernel
+def inverse(S):
+    """Inverse of a 1 x 1 or 3 x 3 innovation covariance (adjugate over determinant); None if singular."""
+    m = S.shape[0]
+    out = np.empty((m, m))
+    if m == 1:
+        if S[0, 0] == 0.0:
+            return out, False
+        out[0, 0] = 1.0 / S[0, 0]
+        return out, True
+    a, b, c = S[0, 0], S[0, 1], S[0, 2]
+    d, e, f = S[1, 0], S[1, 1], S[1, 2]
+    g, h, i = S[2, 0], S[2, 1], S[2, 2]
+    c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
+    det = a * c00 + d * c01 + g * c02
+    if det == 0.0 or not math.isfinite(det):
+        return out, False
+    out[0, 0], out[0, 1], out[0, 2] = c00 / det, c01 / det, c02 / det
+    out[1, 0], out[1, 1], out[1, 2] = (f * g - d * i) / det, (a * i - c * g) / det, (c * d - a * f) / det
+    out[2, 0], out[2, 1], out[2, 2] = (d * h - e * g) / det, (b * g - a * h) / det, (a * e - b * d) / det
+    return out, True
+
+
 # -- running statistics on arrays (the reference's deques and histograms) --------------------------
 
 @kernel
@@ -241,7 +293,7 @@ def inject(q, b, P, dx, Pn, keep_yaw, max_bias):
     if keep_yaw:
         G[2, 0] = 0.0
         G[2, 1] = 0.0
-    Pg = G @ Pn @ G.T
+    Pg = mm(mm(G, Pn), G.T)
     Ps = 0.5 * (Pg + Pg.T)
     P[:, :] = Ps
 
@@ -269,18 +321,20 @@ def correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, me
 @kernel
 def _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw, yaw_unobs, max_bias):
     """The Kalman update itself; returns (code, nis)."""
-    PHt = P @ H.T.copy()
-    S = H @ PHt + Rm
-    try:
-        Sinv = np.linalg.inv(S)
-    except Exception:
+    PHt = mm(P, H.T)
+    S = mm(H, PHt) + Rm
+    Sinv, ok = inverse(S)
+    if not ok:
         return C_NUM, math.nan
-    nis = (y @ Sinv) @ y
+    ySinv = mv(Sinv.T, y)
+    nis = 0.0
+    for k in range(len(y)):
+        nis += ySinv[k] * y[k]
     if not math.isfinite(nis):
         return C_NUM, nis
     if nis > gate:
         return C_GATE, nis
-    K = PHt @ Sinv
+    K = mm(PHt, Sinv)
     m = K.shape[1]
     if consider_tilt:
         K[0:2, :] = 0.0
@@ -288,13 +342,13 @@ def _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, m
     if yaw_consider:
         K[2, :] = 0.0
     if use_bias_axis:
-        proj = bias_axis @ K[3:6, :].copy()
+        proj = mv(K[3:6, :].T, bias_axis)
         for i in range(3):
             for j in range(m):
                 K[3 + i, j] = bias_axis[i] * proj[j]
-    dx = K @ y
-    IKH = np.eye(6) - K @ H
-    Pn = IKH @ P @ IKH.T.copy() + K @ Rm @ K.T.copy()
+    dx = mv(K, y)
+    IKH = np.eye(6) - mm(K, H)
+    Pn = mm(mm(IKH, P), IKH.T) + mm(mm(K, Rm), K.T)  # Joseph form
     if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(Pn))):
         return C_NUM, nis
     inject(q, b, P, dx, Pn, yaw_consider, max_bias)
@@ -312,16 +366,34 @@ def random_walk(P, rate2, dt):
 
 @kernel
 def predict(q, b, P, wx, wy, wz, dt, sf):
-    """eqs. 5-7 and 11: ``q <- q (x) exp((w - b) dt / 2)``, ``P <- F P F^T + Q`` (the reference's block order)."""
-    R = q_to_matrix(q)
-    wbx, wby, wbz = (wx - b[0]) * dt, (wy - b[1]) * dt, (wz - b[2]) * dt
-    qn = q_normalize(q_multiply(q, q_from_rotation_vector(wbx, wby, wbz)))  # eq. 7
-    for i in range(4):
-        q[i] = qn[i]
+    """eqs. 5-7 and 11: ``q <- q (x) exp((w - b) dt / 2)``, ``P <- F P F^T + Q`` (the reference's block order).
+
+    Written out in scalars (the formulas of core.quaternion): it runs on every gyroscope event.
+    """
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+    r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+    r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    ax, ay, az = (wx - b[0]) * dt, (wy - b[1]) * dt, (wz - b[2]) * dt
+    theta = math.sqrt(ax * ax + ay * ay + az * az)  # the rotation vector's quaternion
+    if theta < 1e-12:
+        pw, px, py, pz = 1.0, 0.5 * ax, 0.5 * ay, 0.5 * az
+        nrm = math.sqrt(pw * pw + px * px + py * py + pz * pz)
+        sc = 1.0 / nrm
+        pw, px, py, pz = pw * sc, px * sc, py * sc, pz * sc
+    else:
+        sc = math.sin(0.5 * theta) / theta
+        pw, px, py, pz = math.cos(0.5 * theta), ax * sc, ay * sc, az * sc
+    mw = w * pw - x * px - y * py - z * pz  # q (x) p, eq. 7
+    mx = w * px + x * pw + y * pz - z * py
+    my = w * py - x * pz + y * pw + z * px
+    mz = w * pz + x * py - y * px + z * pw
+    sc = 1.0 / math.sqrt(mw * mw + mx * mx + my * my + mz * mz)
+    q[0], q[1], q[2], q[3] = mw * sc, mx * sc, my * sc, mz * sc
     Rdt = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            Rdt[i, j] = R[i, j] * dt
+    Rdt[0, 0], Rdt[0, 1], Rdt[0, 2] = r00 * dt, r01 * dt, r02 * dt
+    Rdt[1, 0], Rdt[1, 1], Rdt[1, 2] = r10 * dt, r11 * dt, r12 * dt
+    Rdt[2, 0], Rdt[2, 1], Rdt[2, 2] = r20 * dt, r21 * dt, r22 * dt
     A = np.empty((3, 3))
     B = np.empty((3, 3))
     for i in range(3):  # A = Ptt - Rdt Pbt, B = Ptb - Rdt Pbb

@@ -24,6 +24,8 @@ attitude log, counters and labels.  Desktop only: nothing in ``core/`` or
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from core.conventions import ACC, GYRO
@@ -100,13 +102,15 @@ class _Events:
         self.pos = {c: np.flatnonzero(self.kind == c) for c in (fatt.GYRO_K, fatt.ACC_K, fatt.MAG_K)}
 
 
-def run_fast(recording: Recording, **params) -> PipelineResult:
+def run_fast(recording: Recording, *, timings: dict | None = None, **params) -> PipelineResult:
     """``Pipeline(**params).run(recording)``, computed over whole arrays (see the module docstring).
 
     Takes the same parameters as :class:`core.pdr.pipeline.Pipeline`; a GPS
     fusion (``gnss``) and attitude filters the kernel does not implement
     (:func:`desktop.fast.attitude.check_supported`) raise ``NotImplementedError``.
+    ``timings``, if given, receives the CPU seconds of each stage (the benchmark's breakdown).
     """
+    clock = _Clock(timings)
     if params.get("gnss") is not None:
         raise NotImplementedError("the fast path has no GPS fusion")
     recording.stream(ACC, "step detection needs the accelerometer")
@@ -114,6 +118,7 @@ def run_fast(recording: Recording, **params) -> PipelineResult:
     ekf = p.attitude
     fatt.check_supported(ekf)
     ev = _Events(recording, p)
+    clock("events")
     # 2. the magnetometer calibration over its stream
     calibrator = ekf.mag_calibrator
     mag_pos = ev.pos[fatt.MAG_K]
@@ -121,10 +126,12 @@ def run_fast(recording: Recording, **params) -> PipelineResult:
     cal_ok = np.ones(len(ev.t), dtype=np.bool_)
     if ekf.use_magnetometer and len(mag_pos):
         v[mag_pos], cal_ok[mag_pos] = fatt.calibrate_magnetometer(calibrator, ev.t[mag_pos], ev.v[mag_pos])
+    clock("magnetometer calibration")
     # 3. the grid
     acc_pos = ev.pos[fatt.ACC_K]
     gt, gx, src, restart = grid_of(ev.t[acc_pos], acc_norm(ev.v[acc_pos]), p.grid_rate_hz)
     tick_event = np.ascontiguousarray(acc_pos[src])
+    clock("grid")
     n_ticks = len(gt)
     # 4. the attitude
     out_q = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (n_ticks, 1))
@@ -140,6 +147,7 @@ def run_fast(recording: Recording, **params) -> PipelineResult:
             st.write_back(ekf)
     finally:
         ekf.mag_calibrator = calibrator
+    clock("attitude")
     # 5. smoother, detector, speed window
     east, north, heading = (np.full(n_ticks, np.nan) for _ in range(3))
     e, nn, h, counters = smooth_headings(p.smoother, out_q[j_init:])
@@ -151,6 +159,7 @@ def run_fast(recording: Recording, **params) -> PipelineResult:
     p.detector.n_grid = n_ticks
     ev_tick, ev_t, ev_f = detect_steps(p.detector, gt, gx, restart)
     regressors = speed_at(p.speed_window, gt, gx, restart, ev_tick)
+    clock("smoother, steps, speed window")
     # 6. gates and steps
     gyro_pos = ev.pos[fatt.GYRO_K]
     rot_sum = np.empty(len(gyro_pos))
@@ -166,7 +175,22 @@ def run_fast(recording: Recording, **params) -> PipelineResult:
         p.finish()
     if len(ev.t):
         p.t_ns = int(ev.t[-1])
+    clock("gates and steps")
     return _result(p, recording, AttitudeLog(gt, out_q, heading, out_acc_s2, out_mag_s2, out_rej))
+
+
+class _Clock:
+    """CPU seconds since the last call, added to ``timings[name]`` (nothing without a dict)."""
+
+    def __init__(self, timings: dict | None):
+        self.timings = timings
+        self.t = time.process_time()
+
+    def __call__(self, name: str) -> None:
+        if self.timings is not None:
+            now = time.process_time()
+            self.timings[name] = self.timings.get(name, 0.0) + now - self.t
+            self.t = now
 
 
 def _result(p: Pipeline, recording: Recording, att: AttitudeLog) -> PipelineResult:
