@@ -421,6 +421,7 @@ def markdown(d: dict) -> str:
          f"run in one process on {m['cpu']} ({m['cores']} cores), CPython {m['python']}, numpy {m['numpy']}, "
          f"ahrs {m['ahrs']}, imufusion {m['imufusion']}; commit {m['commit']}, {m['date']}.  Every time is the "
          f"process's CPU time, the best of {d['repeat']} runs (other work shared the machine's two cores).", "",
+         *([d["rerun"], ""] if d.get("rerun") else []),
          "### Pipeline and stages", "",
          "| what | inputs | per second | µs per input | µs per pipeline event | note |",
          "|---|---|---:|---:|---:|---|"]
@@ -628,11 +629,9 @@ def _rerun(args) -> int:
     if "memory" in args.only:
         d["memory"] = [memory(x) for x in (d["minutes"] / 6.0, d["minutes"])]
         note.append("the memory of a batch run")
-    d.setdefault("notes", [])
-    d["notes"] = [n for n in d["notes"] if not n.startswith("Rerun on its own")]
-    d["notes"].append(f"Rerun on its own (`--only {' '.join(args.only)}`) at commit {m['commit']}, {m['date']}: "
-                      f"{' and '.join(note)}; every other number is from the run at commit "
-                      f"{d['machine']['commit']}, {d['machine']['date']}.")
+    d["rerun"] = (f"Rerun on its own (`--only {' '.join(args.only)}`) at commit {m['commit']}, {m['date']}: "
+                  f"{' and '.join(note)}; every other number is from the run at commit "
+                  f"{d['machine']['commit']}, {d['machine']['date']}.")
     args.json.write_text(json.dumps(d, indent=1))
     RESULTS_MD.write_text(markdown(d))
     from benchmarks.report import refresh_sections
