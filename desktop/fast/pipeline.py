@@ -115,6 +115,8 @@ def run_fast(recording: Recording, *, timings: dict | None = None, **params) -> 
         raise NotImplementedError("the fast path has no GPS fusion")
     recording.stream(ACC, "step detection needs the accelerometer")
     p = Pipeline(**params)
+    if getattr(p, "carry", None) is not None:
+        raise NotImplementedError("the fast path has no carry-mode detection (issue #17): its gates would differ")
     ekf = p.attitude
     fatt.check_supported(ekf)
     ev = _Events(recording, p)
