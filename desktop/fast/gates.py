@@ -7,8 +7,10 @@ gyroscope events, and the release runs only at the grid samples where
 something can change (a peak arrives, a step's heading falls due, a bout's
 time runs out) instead of at every one.  A step's heading is
 :func:`core.pdr.heading.interval_heading` over the forward vectors the
-pipeline would still hold; the stride model (eq. 4) and the dead reckoner
-(eq. 1) are core's own classes.
+pipeline would still hold, through the pipeline's own walking-direction stage
+(:class:`core.pdr.walkdir.WalkingDirection`, fed every grid sample in Python:
+it is not ported); the stride model (eq. 4) and the dead reckoner (eq. 1) are
+core's own classes.
 """
 
 from __future__ import annotations
@@ -60,6 +62,28 @@ class StepRelease:
         self.delay_ns = int(pipe.heading_delay_s * 1e9)
         self.gap_ns = int(pipe.detector.max_step_interval_s * 1e9)
         self.keep_ns = self.gap_ns + self.delay_ns + 1_000_000_000
+        self._walkdir = None  # (first grid sample, q, acc, axes) when the pipeline has a walking-direction stage
+        self._wd_next = 0
+
+    def walking_direction(self, j_init: int, q, acc, axes) -> None:
+        """Feed the pipeline's walking-direction stage as it is fed: every grid sample after the attitude's start,
+        with the attitude ``q`` (n, 4), the accelerometer reading ``acc`` (n, 3) behind each sample and the
+        smoother's axis there (``axes``, from ``j_init`` on)."""
+        self._walkdir = (j_init, q, acc, axes)
+        self._wd_next = j_init
+
+    def _walkdir_to(self, k: int, step_ticks: set) -> None:
+        """The walking-direction stage updated with the grid samples up to ``k``."""
+        if self._walkdir is None:
+            return
+        j_init, q, acc, axes = self._walkdir
+        wd = self.p.walkdir
+        e, n = self.fwd_e, self.fwd_n
+        for j in range(self._wd_next, k + 1):
+            a = acc[j]
+            wd.update(int(self.grid_t[j]), tuple(q[j].tolist()), float(a[0]), float(a[1]), float(a[2]),
+                      float(e[j - j_init]), float(n[j - j_init]), j in step_ticks, axes[j - j_init])
+        self._wd_next = max(self._wd_next, k + 1)
 
     def run(self, ev_tick, events: list[StepEvent], rms, regressors) -> None:
         """All the candidates (found at grid samples ``ev_tick``, rotation RMS ``rms`` there), then the end."""
@@ -69,12 +93,15 @@ class StepRelease:
         gap = np.searchsorted(gt, t + self.gap_ns, side="right")
         ticks = np.unique(np.concatenate([ev_tick, due, gap]))
         ticks = ticks[ticks < len(gt)]
+        steps_at = set(ev_tick.tolist())
         m = 0
         for k in ticks.tolist():
+            self._walkdir_to(k, steps_at)
             while m < len(ev_tick) and ev_tick[m] == k:
                 self.candidate(events[m], float(rms[m]), tuple(float(x) for x in regressors[m]))
                 m += 1
             self.release(k)
+        self._walkdir_to(len(gt) - 1, steps_at)
         self.finish()
 
     def candidate(self, ev: StepEvent, rms: float, regressors: tuple) -> None:
@@ -107,7 +134,9 @@ class StepRelease:
         duration = ev.duration_s if ev.duration_s == ev.duration_s else DEFAULT_STEP_DURATION_S
         t1 = ev.t_ns + self.delay_ns
         t0 = t1 - int(duration * 1e9)
-        return interval_heading(self.fwd_t[lo:hi], self.fwd_e[lo:hi], self.fwd_n[lo:hi], t0, t1)
+        heading = interval_heading(self.fwd_t[lo:hi], self.fwd_e[lo:hi], self.fwd_n[lo:hi], t0, t1)
+        wd = getattr(self.p, "walkdir", None)
+        return heading if wd is None else wd.step_heading(heading, self.p.walking_direction, None)
 
     def release(self, k: int) -> None:
         cands = self.cands

@@ -21,10 +21,11 @@ from desktop.fast.jit import kernel
 
 
 @kernel
-def smooth(q, c, auto_axis, fwd0, up_enter, up_exit, out_east, out_north, out_heading, counters):
+def smooth(q, c, auto_axis, fwd0, up_enter, up_exit, out_east, out_north, out_heading, out_upright, counters):
     """Filter ``R(q)`` row by row of ``q`` (n, 4); the forward vector's East, North and heading per row.
 
-    ``counters`` (in/out): [upright, axis switches, samples upright].
+    ``out_upright``: whether the back of the phone was the forward axis at each row; ``counters`` (in/out):
+    [upright, axis switches, samples upright].
     """
     b0, b1, b2, a1, a2 = c[0], c[1], c[2], c[3], c[4]
     z1 = np.empty(6)
@@ -67,18 +68,20 @@ def smooth(q, c, auto_axis, fwd0, up_enter, up_exit, out_east, out_north, out_he
         out_east[k] = east
         out_north[k] = north
         out_heading[k] = math.atan2(north, east)
+        out_upright[k] = upright
     counters[0] = 1 if upright else 0
 
 
 def smooth_headings(smoother, q: np.ndarray):
-    """(east, north, heading) of the reference ``smoother``'s settings over the attitudes ``q`` (n, 4),
-    and its counters (upright at the end, axis switches, samples upright)."""
+    """(east, north, heading, upright) of the reference ``smoother``'s settings over the attitudes ``q``
+    (n, 4), and its counters (upright at the end, axis switches, samples upright)."""
     b, a = butter2_lowpass(smoother.cutoff_hz, smoother.grid_rate_hz)
     c = np.array([b[0] / a[0], b[1] / a[0], b[2] / a[0], a[1] / a[0], a[2] / a[0]])
     n = len(q)
     east, north, heading = np.empty(n), np.empty(n), np.empty(n)
+    upright = np.zeros(n, dtype=np.bool_)
     counters = np.zeros(3, dtype=np.int64)
     fwd0 = np.array((0.0, 1.0, 0.0) if smoother.auto_axis else smoother.forward_b, dtype=np.float64)
     smooth(np.ascontiguousarray(q), c, smoother.auto_axis, fwd0, smoother.upright_enter, smoother.upright_exit,
-           east, north, heading, counters)
-    return east, north, heading, counters
+           east, north, heading, upright, counters)
+    return east, north, heading, upright, counters

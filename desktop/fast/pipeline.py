@@ -152,7 +152,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, **params) -> 
     clock("attitude")
     # 5. smoother, detector, speed window
     east, north, heading = (np.full(n_ticks, np.nan) for _ in range(3))
-    e, nn, h, counters = smooth_headings(p.smoother, out_q[j_init:])
+    e, nn, h, upright, counters = smooth_headings(p.smoother, out_q[j_init:])
     east[j_init:], north[j_init:], heading[j_init:] = e, nn, h
     p.smoother.upright = bool(counters[0])
     p.smoother.n_axis_switches, p.smoother.n_upright = int(counters[1]), int(counters[2])
@@ -172,7 +172,12 @@ def run_fast(recording: Recording, *, timings: dict | None = None, **params) -> 
                    0.0)
     events = [StepEvent(t, *f) for t, f in zip(ev_t.tolist(), ev_f.tolist())]
     if len(gt):
-        StepRelease(p, gt, gt[j_init:], east[j_init:], north[j_init:], out_rej).run(ev_tick, events, rms, regressors)
+        release = StepRelease(p, gt, gt[j_init:], east[j_init:], north[j_init:], out_rej)
+        if getattr(p, "walkdir", None) is not None:
+            axes = [(0.0, 0.0, -1.0) if u else (0.0, 1.0, 0.0) for u in upright.tolist()] if p.smoother.auto_axis \
+                else [p.smoother.forward_b] * len(upright)
+            release.walking_direction(j_init, out_q, ev.v[tick_event], axes)
+        release.run(ev_tick, events, rms, regressors)
     else:
         p.finish()
     if len(ev.t):
