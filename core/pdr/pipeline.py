@@ -55,6 +55,7 @@ checks them against each other where they could differ (chunked feeding, the app
 
 from __future__ import annotations
 
+import copy
 import math
 from array import array
 from collections import deque
@@ -62,13 +63,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.conventions import ACC, GNSS_STATUS, GPS, GYRO, MAG
+from core.conventions import ACC, CARRY_HANDHELD, CARRY_SWINGING, GNSS_STATUS, GPS, GYRO, MAG
 from core.dsp import GridResampler
 from core.pdr.attitude import AttitudeEKF
+from core.pdr.carry import CarryModeDetector
 from core.pdr.deadreckoning import DeadReckoner
 from core.pdr.heading import RotationSmoother, interval_heading
 from core.pdr.magcal import MagCalibrator
-from core.pdr.steps import StepDetector, StepEvent
+from core.pdr.steps import STEP_GATES, StepDetector, StepEvent
 from core.pdr.velocity import SpeedFeatureWindow
 from core.pdr.walkdir import WALKING_DIRECTIONS, WalkingDirection
 from core.pdr.stride import StepFeatures, StrideModel, WeinbergStride
@@ -188,6 +190,7 @@ class Step:
     north_m: float
     features: StepFeatures  #: what the stride model saw
     mag_trusted: bool  #: whether the last magnetometer reading before the step was used by the EKF
+    carry_mode: str = CARRY_HANDHELD  #: carry mode in force at the peak (core.conventions.CARRY_MODES; issue #17)
 
 
 @dataclass(frozen=True)
@@ -204,6 +207,8 @@ class Status:
     acc_sigma2: float  #: latest adaptive accelerometer variance (eq. 17)
     mag_sigma2: float  #: latest adaptive magnetometer variance (eq. 18)
     labels: tuple[str, ...]  #: degraded modes in force
+    carry_mode: str = CARRY_HANDHELD  #: how the phone is carried (core.conventions.CARRY_MODES; issue #17)
+    carry_confidence: float = math.nan  #: the carry detector's confidence in it, 0..1 (nan: detection off)
 
 
 @dataclass
@@ -342,6 +347,26 @@ class Pipeline:
     unix_offset_ns : int or None
         Unix time minus sensor-clock time (ns); :meth:`run` takes it from the
         recording's metadata when not given.
+    carry : bool or core.pdr.carry.CarryModeDetector
+        Carry-mode detection (issue #17; True: a default
+        :class:`core.pdr.carry.CarryModeDetector`; False: none, every step is
+        detected as hand-held, as before #17).  The mode chooses the step
+        detector's gates (``step_gates``) and the rotation gate; it is in
+        :meth:`status`, in every :class:`Step` and in the batch counters
+        (``carry``: time per mode, changes).
+    step_gates : dict or None
+        Carry mode -> :class:`core.pdr.steps.StepGates`; default
+        :data:`core.pdr.steps.STEP_GATES`.
+    swinging_max_rotation_rms_rad_s : float
+        The rotation gate in the swinging mode while the carry detector finds
+        the rotation periodic about one axis (a swinging arm turns the phone at
+        2-6 rad/s; the irregular, multi-axis waving of a compass calibration is
+        still held to ``max_rotation_rms_rad_s``) (rad/s).
+    rotation_hold_s : float
+        The carry detector needs a few seconds of walking (its window, then its hysteresis) to call a
+        mode; every mode's step detector runs and its peaks of the last ``rotation_hold_s`` seconds are
+        held, and at a change of mode the new mode's peaks since the last confirmed step replace the
+        unconfirmed candidates (through the new mode's rotation gate) (s).
     """
 
     def __init__(self, *, height_m: float | None = None, stride_model: StrideModel | None = None,
@@ -351,8 +376,17 @@ class Pipeline:
                  max_rotation_rms_rad_s: float = 3.0, rotation_window_s: float = 1.0, min_bout_steps: int = 3,
                  walking_direction: str = "auto", walkdir: WalkingDirection | None = None,
                  mag_stream: str = MAG, log: bool = False, gnss=None, site_from_gps: bool = True,
-                 unix_offset_ns: int | None = None, keep_steps: bool | int = True):
+                 unix_offset_ns: int | None = None, keep_steps: bool | int = True,
+                 carry: bool | CarryModeDetector = True, step_gates: dict | None = None,
+                 swinging_max_rotation_rms_rad_s: float = 8.0, rotation_hold_s: float = 8.0):
         self.keep_steps = keep_steps
+        if carry is True:
+            carry = CarryModeDetector(grid_rate_hz=grid_rate_hz)
+        #: the carry-mode detector (None: off)
+        self.carry = carry or None
+        self.step_gates = dict(STEP_GATES if step_gates is None else step_gates)
+        self.swinging_max_rotation_rms_rad_s = float(swinging_max_rotation_rms_rad_s)
+        self.rotation_hold_s = float(rotation_hold_s)
         self.gnss = gnss
         self.site_from_gps = bool(site_from_gps)
         self.unix_offset_ns = unix_offset_ns
@@ -361,6 +395,7 @@ class Pipeline:
         self.stride_model = stride_model or WeinbergStride()
         self.grid_rate_hz = float(grid_rate_hz)
         self.detector = step_detector or StepDetector(grid_rate_hz=grid_rate_hz)
+        self._mode_detectors, self._det_of = self._make_mode_detectors()
         self.attitude = attitude or AttitudeEKF(use_magnetometer=use_magnetometer, mag_calibrator=MagCalibrator())
         if not use_magnetometer:
             self.attitude.use_magnetometer = False
@@ -383,6 +418,26 @@ class Pipeline:
 
     def reset(self) -> None:
         self.detector.reset()
+        self.detector.set_gates(self.step_gates[CARRY_HANDHELD])
+        self.detector.step_period_s = math.nan
+        if self.carry is not None:
+            self.carry.reset()
+        self._carry_mode = CARRY_HANDHELD
+        self._gyro_last = None  # the last gyroscope reading, for the carry detector's grid
+        # every mode detector's peaks of the last rotation_hold_s: (event, regressors, rotation RMS)
+        for d in self._mode_detectors:
+            if d is not self.detector:
+                d.reset()
+            d.step_period_s = math.nan
+        self._held = {d: deque() for d in self._mode_detectors}
+        self._active_det = self.detector
+        self._rot_hold_ns = int(self.rotation_hold_s * 1e9)
+        self._min_gap_ns = int(self.detector.min_step_interval_s * 1e9)
+        self._confirmed_ns = -(1 << 62)  # the last confirmed candidate's peak time
+        #: held peaks made candidates at a change of the step detector (mode change); unconfirmed
+        #: candidates replaced by them
+        self.n_replayed = 0
+        self.n_replaced_mode = 0
         self.attitude.reset()
         self.smoother.reset()
         self.reckoner = DeadReckoner()
@@ -413,6 +468,8 @@ class Pipeline:
         #: smoothed forward vector on the grid, (t_ns, east, north), the last few seconds
         self._fwd = deque()
         self._fwd_keep_ns = self._bout_gap_ns + self._delay_ns + 1_000_000_000
+        if self.carry is not None:  # peaks replayed at a mode change are up to rotation_hold_s old
+            self._fwd_keep_ns += int(self.rotation_hold_s * 1e9)
         #: non-finite sensor values skipped, per stream
         self.n_nonfinite: dict[str, int] = {}
         #: finite values beyond any phone sensor's range (IMPOSSIBLE) skipped, per stream
@@ -445,6 +502,7 @@ class Pipeline:
         if stream == GYRO:
             wx, wy, wz = values[0], values[1], values[2]
             self.attitude.predict(t_ns, wx, wy, wz)
+            self._gyro_last = (wx, wy, wz)
             w2 = wx * wx + wy * wy + wz * wz
             rot = self._rot
             rot.append((t_ns, w2))
@@ -472,10 +530,17 @@ class Pipeline:
             if self.grid.restarted and self.detector.n_grid:
                 self.detector.restart_bout()
                 self.speed_window.reset()
+                if self.carry is not None:
+                    self.carry.restart()
+                    for d in self._mode_detectors:
+                        d.restart_bout()
             self.speed_window.update(tg, x)
-            ev = self.detector.update_grid(tg, x)
-            if ev is not None:
-                self._candidate(ev)
+            if self.carry is None:
+                ev = self.detector.update_grid(tg, x)
+                if ev is not None:
+                    self._candidate(ev)
+            else:
+                ev = self._carry_steps(tg, x, ax, ay, az)
             if self.attitude.initialized:
                 heading = self.smoother.update(self.attitude.matrix())
                 fwd = self._fwd
@@ -528,19 +593,107 @@ class Pipeline:
         n = len(self._rot)
         return math.sqrt(max(self._rot_sum, 0.0) / n) if n else 0.0
 
-    def _candidate(self, ev: StepEvent) -> None:
-        """A peak from the detector: apply the rotation and bout gates."""
+    def _make_mode_detectors(self) -> tuple[list, dict]:
+        """One step detector per distinct gates of ``step_gates`` (the hand-held gates: ``self.detector``);
+        returns ``(detectors, {mode: detector})``.  Without carry detection: ``self.detector`` alone."""
+        base = self.detector
+        if self.carry is None:
+            return [base], {}
+        default = self.step_gates[CARRY_HANDHELD]
+        by_gates = {default: base}
+        for gates in self.step_gates.values():
+            if gates not in by_gates:
+                det = copy.copy(base)  # the same settings; reset() gives it its own state
+                det.reset()
+                det.set_gates(gates)
+                by_gates[gates] = det
+        return list(by_gates.values()), {m: by_gates[g] for m, g in self.step_gates.items()}
+
+    def _carry_steps(self, tg: int, x: float, ax: float, ay: float, az: float) -> StepEvent | None:
+        """One grid sample with carry detection: the mode, every mode's step detector, the active one's peak.
+
+        Each distinct :class:`core.pdr.steps.StepGates` has its own detector, all fed the same norm (a few
+        microseconds each); the one of the mode in force gives the candidates.  Every detector's peaks of
+        the last ``rotation_hold_s`` are held with the rotation and regressors at the peak: when the mode
+        changes to one with another detector, the unconfirmed candidates are replaced by the new detector's
+        held peaks since the last confirmed step (:meth:`_switch_detector`), so the seconds the carry
+        detector needed to decide (its window, its hysteresis) are counted with the right gates.
+        """
+        c = self.carry
+        g = self._gyro_last
+        mode = c.update_grid(tg, ax, ay, az) if g is None else c.update_grid(tg, ax, ay, az, g[0], g[1], g[2])
+        self._carry_mode = mode
+        period = c.step_period_s
+        active = self._active_det
+        out = None
+        regs = None
+        for det in self._mode_detectors:
+            det.step_period_s = period
+            ev = det.update_grid(tg, x)
+            if ev is not None:
+                if regs is None:
+                    regs, rot = self.speed_window.features(), self.rotation_rms_rad_s()
+                held = self._held[det]
+                held.append((ev, regs, rot))
+                while held[0][0].t_ns < ev.t_ns - self._rot_hold_ns:
+                    held.popleft()
+                if det is active:
+                    out = ev
+        new = self._det_of[mode]
+        if new is not active:
+            self._switch_detector(new, tg)
+            return None
+        if out is not None:
+            self._candidate(out, regs, rot)
+        return out
+
+    def _switch_detector(self, det: StepDetector, t_grid_ns: int) -> None:
+        """The mode in force has another step detector: its held peaks replace the unconfirmed candidates."""
+        self._active_det = det
+        kept = [c for c in self._candidates if c[2]]
+        self.n_replaced_mode += len(self._candidates) - len(kept)
+        self._candidates = kept
+        self._bout_len = 0
+        after = self._confirmed_ns + self._min_gap_ns
+        n_rot = self.n_rejected_rotation  # counted once, when the peak was live
+        for ev, regs, rot in self._held[det]:
+            if ev.t_ns > after and ev.t_ns >= t_grid_ns - self._rot_hold_ns:
+                self.n_replayed += 1
+                self._candidate(ev, regs, rot)
+        self.n_rejected_rotation = n_rot
+
+    def carry_mode_at(self, t_ns: int) -> str:
+        """The carry mode in force at ``t_ns`` (the last change at or before it; hand-held without detection)."""
+        if self.carry is None:
+            return CARRY_HANDHELD
+        changes = self.carry.changes
+        for k in range(len(changes) - 1, -1, -1):
+            if changes[k][0] <= t_ns:
+                return changes[k][2]
+        return changes[0][1] if changes else self.carry.mode
+
+    def _rotation_limit_rad_s(self) -> float:
+        """The rotation gate in force: wider for a swinging arm whose rotation is periodic about one axis."""
+        if self._carry_mode == CARRY_SWINGING and self.carry.rotation_periodic:
+            return max(self.max_rotation_rms_rad_s, self.swinging_max_rotation_rms_rad_s)
+        return self.max_rotation_rms_rad_s
+
+    def _candidate(self, ev: StepEvent, regressors: tuple | None = None, rot: float | None = None) -> None:
+        """A peak from the detector: apply the rotation and bout gates.
+
+        ``regressors`` and ``rot``: the speed regressors and the rotation RMS at the peak (default: now)."""
         if ev.duration_s != ev.duration_s:  # first step after a pause: a new bout
             self._drop_unconfirmed()
-        if self.rotation_rms_rad_s() > self.max_rotation_rms_rad_s:
+        if (self.rotation_rms_rad_s() if rot is None else rot) > self._rotation_limit_rad_s():
             self.n_rejected_rotation += 1
             self._drop_unconfirmed()
             return
-        self._candidates.append([ev, None, False, self.speed_window.features()])
+        self._candidates.append([ev, None, False, self.speed_window.features() if regressors is None else regressors])
         self._bout_len += 1
         if self._bout_len >= self.min_bout_steps:
             for c in self._candidates:
                 c[2] = True
+            self._confirmed_ns = ev.t_ns
 
     def _drop_unconfirmed(self) -> None:
         kept = [c for c in self._candidates if c[2]]
@@ -601,7 +754,8 @@ class Pipeline:
             heading = self.attitude.initial_yaw_rad
         east, north = self.reckoner.update(length, heading)  # eq. 1
         step = Step(self.n_steps, ev.t_ns, length, heading, east, north, feats,
-                    not self.attitude.mag_rejected and self.attitude.use_magnetometer)
+                    not self.attitude.mag_rejected and self.attitude.use_magnetometer,
+                    carry_mode=self.carry_mode_at(ev.t_ns))
         self.steps.append(step)
         self.n_steps += 1
         if self.gnss is not None:
@@ -697,7 +851,8 @@ class Pipeline:
         return Status(self.t_ns, self.reckoner.n_steps, self.reckoner.distance_m, self.reckoner.east_m,
                       self.reckoner.north_m, self.smoother.heading_rad,
                       a.use_magnetometer and a.n_mag_used > 0 and not a.mag_rejected,
-                      a.acc_sigma2, a.mag_sigma2, self.labels())
+                      a.acc_sigma2, a.mag_sigma2, self.labels(), self._carry_mode,
+                      self.carry.confidence if self.carry is not None else math.nan)
 
     # -- batch -----------------------------------------------------------------
     def run(self, recording: Recording, progress=None) -> PipelineResult:
@@ -740,9 +895,12 @@ class Pipeline:
         a = self.attitude
         counters = {"mag_used": a.n_mag_used, "mag_rejected": a.n_mag_rejected, "acc_rejected": a.n_acc_rejected,
                     "peaks_rejected_rotation": self.n_rejected_rotation, "peaks_rejected_bout": self.n_rejected_bout,
+                    "peaks_replayed_mode_change": self.n_replayed, "peaks_replaced_mode_change": self.n_replaced_mode,
                     "nonfinite_skipped": dict(self.n_nonfinite), **self.health_counters()}
         if hasattr(a, "counters"):
             counters["attitude"] = a.counters()
+        if self.carry is not None:
+            counters["carry"] = self.carry.counters()
         fusion = self.gnss.result() if self.gnss is not None else None
         if fusion is not None:
             fusion.counters["site"] = self.site

@@ -18,6 +18,42 @@ which removes the double peaks of a heel strike.
 
 A_max and A_min of eq. 4 and the variance of the filtered norm over each step
 are collected on the way for the stride model.
+
+Gates per carry mode (issue #17, :data:`STEP_GATES`, chosen by the pipeline
+from :class:`core.pdr.carry.CarryModeDetector`).  The settings above suit a
+phone coupled to the trunk (hand-held, at the ear, in a bag), whose norm
+repeats every step.  A phone on a limb sees the two half-strides differently:
+in a trouser pocket the near leg's heel strike is much stronger than the far
+leg's, in a swinging hand the arm is forward at one step and back at the next.
+The norm then carries a strong component at the stride frequency (half the
+step frequency): every other peak may stay below ``A_th``, every other valley
+above ``g`` (the valley test then drops a step), and the weak half-stride's
+shape can add a spurious peak.  Two gates answer it, on for ``pocket`` and
+``swinging``:
+
+* **stride comb** (``stride_comb``): the norm is averaged with itself one step
+  period earlier, ``x'(t) = (x(t) + x(t - T_step)) / 2`` (``T_step`` from the
+  carry detector's autocorrelation).  A component at the stride frequency is
+  shifted by half its period and cancels; the step-frequency component and its
+  harmonics are shifted by whole periods and pass unchanged, in phase (no delay
+  at the step frequency).  The two legs' peaks become equal;
+* **cadence gate** (``min_interval_period_frac``): a peak closer than this
+  fraction of ``T_step`` to the previous step is not a step (the gait's
+  cadence changes little from one step to the next; the spurious peak of a
+  half-stride comes early).
+
+The comb's echo: when the walk stops, the last step comes out of the comb a
+second time, at half its height, one period later.  **Echo gate**
+(``min_raw_range_m_s2``): a peak counts only if the raw norm itself varied
+that much (max - min) in the last half period: the echo falls on a quiet
+signal; a real step, the weak leg's too, moves the raw norm by more.
+
+In a swinging hand two more: the arm's centripetal acceleration raises the
+mean of the norm by 1-2 m/s^2 when the swing starts, so the running mean ``g``
+follows faster (``gravity_time_constant_s`` 1 s instead of 3: the valleys
+fall below it from the first steps), and the step's wave left after the comb
+is small beside the swing (the hand damps the heel strike), so ``A_th`` is
+0.3 m/s^2: the carry detector has already found the gait periodic.
 """
 
 from __future__ import annotations
@@ -26,7 +62,37 @@ import math
 from dataclasses import dataclass
 
 from core.dsp import Biquad, GridResampler, butter2_group_delay_s, butter2_lowpass
-from core.conventions import STANDARD_GRAVITY_M_S2
+from core.conventions import (CARRY_BAG, CARRY_EAR, CARRY_HANDHELD, CARRY_POCKET, CARRY_STILL, CARRY_SWINGING,
+                              STANDARD_GRAVITY_M_S2)
+
+
+@dataclass(frozen=True)
+class StepGates:
+    """The step detector's per-carry-mode settings (see the module docstring)."""
+
+    stride_comb: bool = False  #: average the norm with itself one step period earlier
+    min_interval_period_frac: float = 0.0  #: a step needs this fraction of the step period since the last (0: off)
+    #: ``A_th`` of eq. 3 in this mode (m/s^2); None: the detector's ``min_peak_height_m_s2``
+    min_peak_height_m_s2: float | None = None
+    #: time constant of the running mean ``g`` in this mode (s); None: the detector's ``gravity_time_constant_s``
+    gravity_time_constant_s: float | None = None
+    #: a peak needs the raw norm to vary this much (max - min) in the last half step period (m/s^2; 0: off)
+    min_raw_range_m_s2: float = 0.0
+
+
+#: gates per carry mode (core.conventions.CARRY_MODES); the trunk-coupled modes keep the hand-held detector
+STEP_GATES = {
+    CARRY_HANDHELD: StepGates(),
+    CARRY_EAR: StepGates(),
+    CARRY_BAG: StepGates(),
+    CARRY_STILL: StepGates(),
+    CARRY_POCKET: StepGates(stride_comb=True, min_interval_period_frac=0.6, min_raw_range_m_s2=0.5),
+    CARRY_SWINGING: StepGates(stride_comb=True, min_interval_period_frac=0.6, min_peak_height_m_s2=0.3,
+                              gravity_time_constant_s=1.0, min_raw_range_m_s2=0.5),
+}
+
+#: longest step period the stride comb keeps a history for (s)
+MAX_COMB_PERIOD_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -76,16 +142,27 @@ class StepDetector:
         self.max_step_interval_s = float(max_step_interval_s)
         self.gravity_time_constant_s = float(gravity_time_constant_s)
         self.require_valley = bool(require_valley)
+        #: per-carry-mode gates in force (:meth:`set_gates`); the default is the hand-held detector
+        self.gates = StepGates()
+        #: current step period (s) from the carry detector (nan: unknown; the comb and cadence gate wait)
+        self.step_period_s = math.nan
         self.reset()
+
+    def set_gates(self, gates: StepGates) -> None:
+        """Switch to another carry mode's gates (the filters' state is kept)."""
+        self.gates = gates
+        tau = self.gravity_time_constant_s if gates.gravity_time_constant_s is None else gates.gravity_time_constant_s
+        self._alpha_g = 1.0 - math.exp(-1.0 / (self.grid_rate_hz * tau))
 
     def reset(self) -> None:
         self.resampler = GridResampler(rate_hz=self.grid_rate_hz)
         b, a = butter2_lowpass(self.cutoff_hz, self.grid_rate_hz)
         self._lp = Biquad(b, a)
-        self._alpha_g = 1.0 - math.exp(-1.0 / (self.grid_rate_hz * self.gravity_time_constant_s))
+        self.set_gates(self.gates)  # the running mean's rate
         self._min_dt_ns = int(self.min_step_interval_s * 1e9)
         # the low-pass delays the peak; steps are time-stamped at the unfiltered instant
         self._delay_ns = int(round(butter2_group_delay_s(self.cutoff_hz) * 1e9))
+        self._delay_samples = int(round(butter2_group_delay_s(self.cutoff_hz) * self.grid_rate_hz))
         self._max_dt_ns = int(self.max_step_interval_s * 1e9)
         self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
         self._y1 = self._y2 = None  # last two filtered values
@@ -96,6 +173,10 @@ class StepDetector:
         self._seg_sum = 0.0
         self._seg_sum2 = 0.0
         self._seg_n = 0
+        # the raw norm of the last MAX_COMB_PERIOD_S, a ring (the stride comb's delay line)
+        self._hist = [0.0] * (int(MAX_COMB_PERIOD_S * self.grid_rate_hz) + 2)
+        self._hist_k = 0
+        self._hist_n = 0
         #: number of grid samples processed
         self.n_grid = 0
         #: last grid sample ``(t_ns, raw norm, filtered norm)`` (diagnostics)
@@ -122,6 +203,38 @@ class StepDetector:
         self._seg_min = math.inf
         self._seg_sum = self._seg_sum2 = 0.0
         self._seg_n = 0
+        self._hist_n = 0
+
+    def _comb(self, norm: float) -> float:
+        """The stride comb (module docstring): ``(x(t) + x(t - T_step)) / 2`` once a period of history is there."""
+        h = self._hist
+        n = len(h)
+        k = self._hist_k
+        h[k] = norm
+        self._hist_k = (k + 1) % n
+        if self._hist_n < n:
+            self._hist_n += 1
+        if not self.gates.stride_comb:
+            return norm
+        period = self.step_period_s
+        if not period > 0.0:
+            return norm
+        lag = int(round(period * self.grid_rate_hz))
+        if lag < 1 or lag >= min(n, self._hist_n):
+            return norm
+        return 0.5 * (norm + h[(k - lag) % n])
+
+    def _raw_range(self) -> float:
+        """Range (max - min) of the raw norm over the last half step period and the low-pass delay (m/s^2)."""
+        h = self._hist
+        n = len(h)
+        back = min(n, self._hist_n, int(0.5 * self.step_period_s * self.grid_rate_hz) + self._delay_samples + 2) \
+            if self.step_period_s > 0.0 else min(n, self._hist_n)
+        if back < 2:
+            return 0.0
+        k = self._hist_k
+        seg = [h[(k - 1 - i) % n] for i in range(back)]
+        return max(seg) - min(seg)
 
     def update_grid(self, t_ns: int, norm: float) -> StepEvent | None:
         """Process one sample of the uniform grid (the kernel shared by streaming and batch)."""
@@ -131,7 +244,7 @@ class StepDetector:
                 self.gravity_m_s2 = norm
         self.n_grid += 1
         g = self.gravity_m_s2 = self.gravity_m_s2 + self._alpha_g * (norm - self.gravity_m_s2)
-        y = self._lp.step(norm)
+        y = self._lp.step(self._comb(norm))
         self.last = (t_ns, norm, y)
         event = None
         y1, y2 = self._y1, self._y2
@@ -139,9 +252,16 @@ class StepDetector:
             # local maximum at the previous grid sample
             t_peak = self._t1
             since = None if self._last_step_ns is None else t_peak - self._last_step_ns
-            if (y1 - g > self.min_peak_height_m_s2  # eq. 3, amplitude threshold
-                    and (since is None or since > self._min_dt_ns)  # eq. 3, time threshold
-                    and self._armed):
+            min_dt = self._min_dt_ns
+            frac = self.gates.min_interval_period_frac
+            if frac > 0.0 and self.step_period_s > 0.0:  # the cadence gate (module docstring)
+                min_dt = max(min_dt, int(frac * self.step_period_s * 1e9))
+            a_th = self.min_peak_height_m_s2 if self.gates.min_peak_height_m_s2 is None else \
+                self.gates.min_peak_height_m_s2
+            if (y1 - g > a_th  # eq. 3, amplitude threshold
+                    and (since is None or since > min_dt)  # eq. 3, time threshold
+                    and self._armed
+                    and (self.gates.min_raw_range_m_s2 <= 0.0 or self._raw_range() >= self.gates.min_raw_range_m_s2)):
                 n = self._seg_n
                 mean = self._seg_sum / n if n else y1
                 var = max(self._seg_sum2 / n - mean * mean, 0.0) if n else 0.0

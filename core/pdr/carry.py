@@ -1,0 +1,418 @@
+"""How the phone is carried (issue #17): carry-mode detection from the signals alone, causal and cheap.
+
+:class:`CarryModeDetector` is fed every sample of the pipeline's uniform grid
+(50 Hz) with the acceleration vector in the device frame (gravity included)
+and, when the recording has one, the gyroscope vector.  It keeps the last
+``window_s`` seconds in ring buffers (O(1) per sample) and every ``hop_s``
+seconds computes a handful of features over the window with numpy (a few
+hundred microseconds once per hop: a few microseconds per sample).  Every mode
+must be recognisable from the accelerometer alone (the Oxford traces have no
+gyroscope); the gyroscope only sharpens the decision between a swinging hand
+and a waving hand.
+
+Features and the physics they come from
+=======================================
+
+``gravity_b`` (unit vector, device frame)
+    The window mean of the specific force: while walking, the body's
+    accelerations average out over a few strides and what is left is gravity
+    (the phone reads ``+g`` up).  Its direction is where the phone "looks":
+    a phone read or texted in front of the chest lies screen up, tilted
+    towards the face (``+z`` large, some ``+y``); a phone at the ear stands
+    upright, its top up (``+y`` large, ``z`` small); a phone in a trouser
+    pocket stands along the thigh (``|y|`` large, top up or down).
+``tilt_rms_rad``
+    RMS angle between the specific force smoothed over ``tilt_smooth_s``
+    (a 0.2 s mean: the impacts of the heel strike are removed, the swing of a
+    limb is kept) and ``gravity_b``.  A phone coupled to the trunk (hand in
+    front of the chest, ear, bag) tilts by a few degrees with the trunk's
+    sway; a phone on a limb tilts with the limb, which swings at the stride
+    frequency: the thigh by about +-20-30 deg, a hanging arm by +-20-45 deg
+    at the hand.  A pendulum point below the arm's centre of percussion also
+    feels a tangential specific force, so the hand sees the largest apparent
+    tilt.
+``coherence``
+    ``|mean(a)| / mean(|a|)``: 1 when the specific force keeps one
+    direction, lower when it turns (the swinging arm's centripetal and
+    tangential accelerations rotate it through a large angle every stride).
+``periodicity``, ``step_period_s``, ``stride_share``
+    Normalised autocorrelation of the acceleration norm at the stride lag
+    (the strongest one between ``min_stride_s`` and ``max_stride_s``) and at
+    half of it (the step lag).  Gait is periodic: both are high while
+    walking; a table, a phone held while standing or a vehicle's vibration
+    have no gait periodicity.  ``stride_share = R(stride) - R(step)``: a
+    phone on the trunk sees both feet alike (the norm repeats every step,
+    ``R(step) ~ R(stride)``); a phone on a limb sees the two half-strides
+    differently (the near leg's impact is stronger in a pocket; the arm is
+    forward on one step and back on the next), so the norm repeats every
+    stride only.
+``tilt_stride_corr``
+    Autocorrelation of the tilt at the stride lag: a limb swings once per
+    stride (a periodic tilt), the trunk's sway is small and irregular.
+``acc_std_m_s2``
+    Standard deviation of the norm: the energy of the gait.  Under
+    ``min_walk_std_m_s2`` nobody is walking (a phone on a table reads
+    noise of ~0.02 m/s^2, one held while standing ~0.1-0.3).
+``horizontal_ratio``
+    sqrt(horizontal / vertical variance) of the specific force about
+    ``gravity_b``: on the trunk the gait's acceleration is mostly vertical
+    (the body's centre of mass rises and falls every step); on a swinging
+    arm or leg the limb's tangential and centripetal accelerations add a
+    large horizontal part.
+``gyro_rms_rad_s``, ``gyro_axis_share``, ``gyro_periodicity`` (gyroscope only)
+    A swinging arm turns the phone fast (2-6 rad/s) about one axis (the
+    shoulder's pivot), periodically at the stride frequency: most of the
+    rotation's variance is on one axis and its autocorrelation at the stride
+    lag is high.  Waving the phone to calibrate the compass is as fast but
+    irregular and about all three axes: ``rotation_periodic`` is False then,
+    and the pipeline's rotation gate keeps those peaks out even in the
+    swinging mode.
+
+Decision
+========
+Each mode gets a score in [0, 1] from soft thresholds (logistic functions of
+the features, settings below); the raw decision of a hop is the best score,
+its confidence the best score's share of the total.  Hysteresis: a new mode
+replaces the current one only after it has been the raw decision for
+``switch_s`` seconds without interruption (``still`` <-> walking after
+``switch_still_s``); the first full window decides the initial mode at once.
+Every change is logged as ``(t_ns, from, to, confidence)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from core.conventions import (CARRY_BAG, CARRY_EAR, CARRY_HANDHELD, CARRY_MODES, CARRY_POCKET, CARRY_STILL,
+                              CARRY_SWINGING)
+
+
+def _sig(x: float, x0: float, width: float) -> float:
+    """Logistic membership: 0.5 at ``x0``, 0.73 at ``x0 + width``."""
+    z = (x - x0) / width
+    if z > 30.0:
+        return 1.0
+    if z < -30.0:
+        return 0.0
+    return 1.0 / (1.0 + math.exp(-z))
+
+
+class CarryModeDetector:
+    """Carry mode from the acceleration (and gyroscope) on the pipeline's grid; causal, O(1) per sample.
+
+    Parameters
+    ----------
+    grid_rate_hz : float
+        Rate of the samples fed to :meth:`update_grid` (Hz).
+    window_s : float
+        Length of the feature window (s): two strides of a slow walk.
+    hop_s : float
+        The features and the raw decision are computed every ``hop_s`` seconds (s).
+    tilt_smooth_s : float
+        Mean over which the specific force's direction is smoothed for ``tilt_rms_rad`` (s).
+    min_stride_s, max_stride_s : float
+        Range of the stride period searched in the autocorrelation (s); a
+        walking cadence of 1.3-2.5 steps/s is a stride of 0.8-1.54 s.
+    min_walk_std_m_s2 : float
+        Norm standard deviation below which there is no walking (m/s^2).
+    min_periodicity : float
+        Autocorrelation at the stride or step lag below which there is no gait.
+    max_gait_tilt_rad : float
+        ``tilt_rms_rad`` above which the motion is no gait but waving (a compass calibration turns the
+        phone through +-60-90 deg; a swinging hand stays within about +-45 deg) (rad).
+    max_gait_rotation_rad_s : float
+        With a gyroscope: RMS rotation above which a rotation spread over the axes
+        (``gyro_axis_share`` under ``swing_axis_share``) is waving, not gait (rad/s).
+    swing_axis_share : float
+        Share of the rotation's variance on its main axis from which it is a pendulum (an arm's swing);
+        also the first condition of ``rotation_periodic``.
+    screen_up_z : float
+        ``gravity_b`` z component above which the screen faces up (hand-held).
+    upright_y : float
+        ``gravity_b`` y component above which the phone stands top up (ear).
+    ear_incline_x : float
+        ``|gravity_b x|`` above which an upright phone is inclined from the ear towards the mouth
+        (in the screen's plane: 20-40 deg, ``sin`` 0.34-0.64), not upright in a pouch or bag.
+    limb_tilt_rad, limb_stride_share : float
+        Scales of the limb evidence ``tilt_rms_rad / limb_tilt_rad + stride_share / limb_stride_share``
+        (a limb from 1.5: the tilt alone, or the two half-strides' difference alone, or both in part).
+    min_limb_stride_share : float
+        ... and in any case ``stride_share`` above this: a limb always sees its two half-strides
+        differently; a trunk whose tilt is large but symmetric is waved, not walked with.
+    arm_evidence : float
+        ``stride_share + 0.3 horizontal_ratio`` (+ ``0.3 (gyro_rms - swing_gyro_rad_s)``, clipped to +-0.3)
+        above which the limb is the swinging arm rather than a thigh: the hand's norm repeats only every
+        stride (R(step) <= 0), its horizontal acceleration is large, it turns faster than a thigh.
+    swing_gyro_rad_s : float
+        With a gyroscope: the RMS rotation at which the gyroscope is neutral in the arm evidence (rad/s).
+    switch_s : float
+        A new walking mode must win for this long before it replaces the current one (s).
+    switch_still_s : float
+        The same for changes from or to ``still`` (s).
+    """
+
+    def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
+                 tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 1.6,
+                 min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, max_gait_tilt_rad: float = 0.6,
+                 max_gait_rotation_rad_s: float = 4.5, swing_axis_share: float = 0.85, screen_up_z: float = 0.3,
+                 upright_y: float = 0.6, ear_incline_x: float = 0.22, limb_tilt_rad: float = 0.16,
+                 limb_stride_share: float = 0.3, min_limb_stride_share: float = 0.15, arm_evidence: float = 1.1,
+                 swing_gyro_rad_s: float = 2.0,
+                 switch_s: float = 3.0, switch_still_s: float = 2.0):
+        self.grid_rate_hz = float(grid_rate_hz)
+        self.window_s = float(window_s)
+        self.hop_s = float(hop_s)
+        self.tilt_smooth_s = float(tilt_smooth_s)
+        self.min_stride_s = float(min_stride_s)
+        self.max_stride_s = float(max_stride_s)
+        self.min_walk_std_m_s2 = float(min_walk_std_m_s2)
+        self.min_periodicity = float(min_periodicity)
+        self.max_gait_tilt_rad = float(max_gait_tilt_rad)
+        self.max_gait_rotation_rad_s = float(max_gait_rotation_rad_s)
+        self.swing_axis_share = float(swing_axis_share)
+        self.screen_up_z = float(screen_up_z)
+        self.upright_y = float(upright_y)
+        self.ear_incline_x = float(ear_incline_x)
+        self.limb_tilt_rad = float(limb_tilt_rad)
+        self.limb_stride_share = float(limb_stride_share)
+        self.min_limb_stride_share = float(min_limb_stride_share)
+        self.arm_evidence = float(arm_evidence)
+        self.swing_gyro_rad_s = float(swing_gyro_rad_s)
+        self.switch_s = float(switch_s)
+        self.switch_still_s = float(switch_still_s)
+        self.reset()
+
+    def reset(self) -> None:
+        n = self._n = max(8, int(round(self.window_s * self.grid_rate_hz)))
+        self._hop = max(1, int(round(self.hop_s * self.grid_rate_hz)))
+        self._smooth = max(1, int(round(self.tilt_smooth_s * self.grid_rate_hz)))
+        self._lag_lo = max(2, int(self.min_stride_s * self.grid_rate_hz))
+        self._lag_hi = min(n - 8, int(math.ceil(self.max_stride_s * self.grid_rate_hz)))
+        self._nfft = 1 << int(math.ceil(math.log2(2 * n)))
+        self._buf = np.zeros((n, 6))  # ax ay az gx gy gz, ring
+        self._k = 0  # next row of the ring
+        self._filled = 0
+        self._since_hop = 0
+        self._has_gyro = False
+        #: current mode (one of core.conventions.CARRY_MODES) and its confidence 0..1
+        self.mode = CARRY_HANDHELD
+        self.confidence = 0.0
+        self._decided = False
+        self._cand = None
+        self._cand_ns = 0
+        self._cand_conf = 0.0
+        #: raw (per-hop) decision and its confidence, before the hysteresis
+        self.raw_mode = CARRY_HANDHELD
+        self.raw_confidence = 0.0
+        #: mode changes: (t_ns, from, to, confidence)
+        self.changes: list[tuple[int, str, str, float]] = []
+        #: seconds spent in each mode (grid samples / rate)
+        self.time_s = {m: 0.0 for m in CARRY_MODES}
+        #: step period (s) from the autocorrelation of the norm (nan until known or when not walking)
+        self.step_period_s = math.nan
+        #: the phone's rotation is periodic about one axis (a swinging arm), not irregular (waving)
+        self.rotation_periodic = False
+        #: the last hop's features (name -> float) and mode scores (mode -> float), for diagnostics
+        self.features: dict = {}
+        self.scores: dict = {}
+        self.n_hops = 0
+        self._dt = 1.0 / self.grid_rate_hz
+
+    # -- streaming ------------------------------------------------------------
+    def update_grid(self, t_ns: int, ax: float, ay: float, az: float, gx: float | None = None,
+                    gy: float | None = None, gz: float | None = None) -> str:
+        """One grid sample (acc m/s^2, gyro rad/s or None); returns the current mode."""
+        row = self._buf[self._k]
+        if gx is None:
+            row[0], row[1], row[2], row[3], row[4], row[5] = ax, ay, az, 0.0, 0.0, 0.0
+        else:
+            row[0], row[1], row[2], row[3], row[4], row[5] = ax, ay, az, gx, gy, gz
+            self._has_gyro = True
+        self._k = (self._k + 1) % self._n
+        if self._filled < self._n:
+            self._filled += 1
+        self.time_s[self.mode] += self._dt
+        self._since_hop += 1
+        if self._since_hop >= self._hop and self._filled >= self._n:
+            self._since_hop = 0
+            self._hop_decision(t_ns)
+        return self.mode
+
+    def restart(self) -> None:
+        """A gap in the data: the window starts again (the mode is kept)."""
+        self._filled = 0
+        self._since_hop = 0
+
+    # -- features ---------------------------------------------------------------
+    def _autocorr(self, x: np.ndarray) -> np.ndarray:
+        """Unbiased normalised autocorrelation of a zero-mean signal at lags 0..n-1."""
+        n = len(x)
+        f = np.fft.rfft(x, self._nfft)
+        r = np.fft.irfft(f * np.conj(f), self._nfft)[:n]
+        if r[0] <= 1e-12:
+            return np.zeros(n)
+        return (r / r[0]) * (n / (n - np.arange(n)))
+
+    def compute_features(self, w: np.ndarray) -> dict:
+        """The features of one window ``w`` (n, 6: acc xyz, gyro xyz, oldest first)."""
+        acc = w[:, :3]
+        norm = np.sqrt(np.einsum("ij,ij->i", acc, acc))
+        m = acc.mean(axis=0)
+        m_norm = float(np.linalg.norm(m))
+        mean_norm = float(norm.mean())
+        u = m / m_norm if m_norm > 1e-6 else np.array([0.0, 0.0, 1.0])
+        x = norm - mean_norm
+        std = float(np.sqrt(np.mean(x * x)))
+        lo, hi = self._lag_lo, self._lag_hi
+        r = self._autocorr(x)
+        seg = r[lo:hi + 1]
+        top = float(np.max(seg))
+        # the shortest lag that is a local maximum within 85 % of the best: the stride, not two of them
+        peaks = np.flatnonzero((seg[1:-1] >= seg[:-2]) & (seg[1:-1] >= seg[2:]) & (seg[1:-1] >= 0.85 * top)) + 1
+        k2 = lo + (int(peaks[0]) if len(peaks) else int(np.argmax(seg)))
+        ks = k2 // 2
+        r_step = float(np.max(r[max(1, ks - 2):ks + 3]))
+        r_stride = float(r[k2])
+        if not len(peaks):  # no stride inside the range (a maximum on its edge): no stride share either
+            r_step = r_stride = min(r_step, r_stride)
+        # smoothed direction of the specific force and its angle from the mean direction
+        c = np.cumsum(np.vstack([np.zeros((1, 3)), acc]), axis=0)
+        s = self._smooth
+        sm = (c[s:] - c[:-s]) / s
+        smn = np.sqrt(np.einsum("ij,ij->i", sm, sm))
+        cosang = np.clip((sm @ u) / np.maximum(smn, 1e-9), -1.0, 1.0)
+        ang = np.arccos(cosang)
+        tilt_rms = float(np.sqrt(np.mean(ang * ang)))
+        # tilt periodicity: the component of the smoothed direction along its main swing axis
+        d = sm / np.maximum(smn, 1e-9)[:, None] - u
+        cov = d.T @ d
+        evals, evecs = np.linalg.eigh(cov)
+        swing = d @ evecs[:, -1]
+        swing = swing - swing.mean()
+        rt = self._autocorr(swing)
+        tilt_stride = float(rt[k2]) if len(rt) > k2 else 0.0
+        dyn = acc - m
+        cov_a = dyn.T @ dyn / len(dyn)
+        vert = float(u @ cov_a @ u)
+        horiz = max(float(np.trace(cov_a)) - vert, 0.0)
+        f = {
+            "gravity_x": float(u[0]), "gravity_y": float(u[1]), "gravity_z": float(u[2]),
+            "tilt_rms_rad": tilt_rms, "coherence": m_norm / mean_norm if mean_norm > 1e-6 else 1.0,
+            "acc_std_m_s2": std, "periodicity": max(r_step, r_stride), "r_step": r_step, "r_stride": r_stride,
+            "stride_share": r_stride - r_step, "stride_period_s": k2 / self.grid_rate_hz,
+            "tilt_stride_corr": tilt_stride, "horizontal_ratio": math.sqrt(horiz / vert) if vert > 1e-9 else 0.0,
+        }
+        if self._has_gyro:
+            gyr = w[:, 3:]
+            g_rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", gyr, gyr))))
+            gc = gyr - gyr.mean(axis=0)
+            cg = gc.T @ gc
+            ge, gv = np.linalg.eigh(cg)
+            share = float(ge[-1] / max(float(np.sum(ge)), 1e-12))
+            main = gc @ gv[:, -1]
+            rg = self._autocorr(main)
+            f.update(gyro_rms_rad_s=g_rms, gyro_axis_share=share, gyro_periodicity=float(rg[k2]))
+        return f
+
+    def mode_scores(self, f: dict) -> dict:
+        """Soft score of every mode (0..1) from the features (see the module docstring)."""
+        # waving the phone (a compass calibration) is no gait however periodic: it turns the phone through
+        # far larger angles than any limb, and (gyroscope) fast about all three axes
+        waving = _sig(f["tilt_rms_rad"], self.max_gait_tilt_rad, 0.05)
+        if "gyro_rms_rad_s" in f:
+            waving = max(waving, _sig(f["gyro_rms_rad_s"], self.max_gait_rotation_rad_s, 0.3)
+                         * (1.0 - _sig(f["gyro_axis_share"], self.swing_axis_share, 0.04)))
+        walk = (_sig(f["periodicity"], self.min_periodicity, 0.05)
+                * _sig(f["acc_std_m_s2"], self.min_walk_std_m_s2, 0.1) * (1.0 - waving))
+        # a limb: the tilt swings and the norm repeats every stride rather than every step
+        ss = f["stride_share"]
+        limb = (_sig(f["tilt_rms_rad"] / self.limb_tilt_rad + max(ss, 0.0) / self.limb_stride_share, 1.5, 0.12)
+                * _sig(ss, self.min_limb_stride_share, 0.03))
+        # the arm rather than the thigh: large horizontal (centripetal, tangential) acceleration, the norm's
+        # stride share near 1; the gyroscope's rate adds to it
+        arm_x = ss + 0.3 * f["horizontal_ratio"]
+        if "gyro_rms_rad_s" in f:
+            arm_x += 0.3 * min(max(f["gyro_rms_rad_s"] - self.swing_gyro_rad_s, -1.0), 1.0)
+        arm = _sig(arm_x, self.arm_evidence, 0.2)
+        gx, gy, gz = f["gravity_x"], f["gravity_y"], f["gravity_z"]
+        # read in the hand: screen up, pitched towards the face (gravity in the device's y-z plane, y not down)
+        hand = _sig(gz, self.screen_up_z, 0.06) * (1.0 - _sig(abs(gx), 0.5, 0.06)) * _sig(gy, -0.3, 0.06)
+        # at the ear: upright, the long axis inclined from the ear towards the mouth in the screen's plane
+        ear = _sig(gy, self.upright_y, 0.08) * _sig(abs(gx), self.ear_incline_x, 0.05)
+        trunk = 1.0 - limb
+        return {
+            CARRY_HANDHELD: walk * trunk * hand,
+            CARRY_EAR: walk * trunk * (1.0 - hand) * ear,
+            CARRY_BAG: walk * trunk * (1.0 - hand) * (1.0 - ear),
+            CARRY_POCKET: walk * limb * (1.0 - arm),
+            CARRY_SWINGING: walk * limb * arm,
+            CARRY_STILL: 1.0 - walk,
+        }
+
+    def _hop_decision(self, t_ns: int) -> None:
+        k = self._k
+        w = np.concatenate([self._buf[k:], self._buf[:k]]) if k else self._buf
+        f = self.compute_features(w)
+        sc = self.mode_scores(f)
+        self.features, self.scores = f, sc
+        self.n_hops += 1
+        best = max(sc, key=sc.get)
+        total = sum(sc.values())
+        conf = sc[best] / total if total > 1e-12 else 0.0
+        self.raw_mode, self.raw_confidence = best, conf
+        walking = best != CARRY_STILL
+        # the step period whenever the norm is periodic, also before the mode has left "still"
+        periodic = f["periodicity"] >= self.min_periodicity and f["acc_std_m_s2"] >= 0.5 * self.min_walk_std_m_s2
+        self.step_period_s = 0.5 * f["stride_period_s"] if periodic else math.nan
+        self.rotation_periodic = bool(walking and f.get("gyro_axis_share", 0.0) >= self.swing_axis_share
+                                      and f.get("gyro_periodicity", 0.0) >= 0.5)
+        if not self._decided:
+            self._decided = True
+            if best != self.mode:
+                self.changes.append((int(t_ns), self.mode, best, conf))
+            self.mode, self.confidence = best, conf
+            return
+        if best == self.mode:
+            self._cand = None
+            self.confidence = conf
+            return
+        if best != self._cand:
+            self._cand, self._cand_ns = best, t_ns
+        need = self.switch_still_s if CARRY_STILL in (best, self.mode) else self.switch_s
+        if (t_ns - self._cand_ns) * 1e-9 >= need - 1e-9:
+            self.changes.append((int(t_ns), self.mode, best, conf))
+            self.mode, self.confidence = best, conf
+            self._cand = None
+        else:
+            self.confidence = sc[self.mode] / total if total > 1e-12 else 0.0
+
+    # -- diagnostics -------------------------------------------------------------
+    def counters(self) -> dict:
+        """Time per mode (s), the changes and their number: the ``carry`` counters of a batch run."""
+        return {"time_s": {m: round(v, 2) for m, v in self.time_s.items() if v > 0},
+                "n_changes": len(self.changes),
+                "changes": [{"t_ns": t, "from": a, "to": b, "confidence": round(c, 3)}
+                            for t, a, b, c in self.changes],
+                "mode": self.mode, "confidence": round(self.confidence, 3)}
+
+
+def time_in_modes(carry_counters: dict, t_start_ns: int, intervals) -> dict:
+    """Seconds per mode over ``intervals`` (``[(t0_ns, t1_ns)]``) from a run's ``counters["carry"]``.
+
+    The mode before the first change is that change's ``from`` (the current mode without changes), from
+    ``t_start_ns`` on; each change holds until the next.  Used by the benchmark and the tests to compare
+    the detected modes with the truth over the walking time.
+    """
+    changes = carry_counters.get("changes", [])
+    first = changes[0]["from"] if changes else carry_counters.get("mode", CARRY_HANDHELD)
+    bounds = [(int(t_start_ns), first)] + [(c["t_ns"], c["to"]) for c in changes]
+    out: dict = {}
+    for a, b in intervals:
+        for k, (t0, mode) in enumerate(bounds):
+            t1 = bounds[k + 1][0] if k + 1 < len(bounds) else b
+            lo, hi = max(a, t0), min(b, t1)
+            if hi > lo:
+                out[mode] = out.get(mode, 0.0) + (hi - lo) * 1e-9
+    return out
