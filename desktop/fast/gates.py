@@ -16,6 +16,7 @@ core's own classes.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -64,6 +65,8 @@ class StepRelease:
         self.keep_ns = self.gap_ns + self.delay_ns + 1_000_000_000
         self._walkdir = None  # (first grid sample, q, acc, axes) when the pipeline has a walking-direction stage
         self._wd_next = 0
+        #: CPU seconds spent in the walking-direction stage (the benchmark's breakdown)
+        self.walkdir_s = 0.0
 
     def walking_direction(self, j_init: int, q, acc, axes) -> None:
         """Feed the pipeline's walking-direction stage as it is fed: every grid sample after the attitude's start,
@@ -76,6 +79,7 @@ class StepRelease:
         """The walking-direction stage updated with the grid samples up to ``k``."""
         if self._walkdir is None:
             return
+        t0 = time.process_time()
         j_init, q, acc, axes = self._walkdir
         wd = self.p.walkdir
         e, n = self.fwd_e, self.fwd_n
@@ -84,6 +88,7 @@ class StepRelease:
             wd.update(int(self.grid_t[j]), tuple(q[j].tolist()), float(a[0]), float(a[1]), float(a[2]),
                       float(e[j - j_init]), float(n[j - j_init]), j in step_ticks, axes[j - j_init])
         self._wd_next = max(self._wd_next, k + 1)
+        self.walkdir_s += time.process_time() - t0
 
     def run(self, ev_tick, events: list[StepEvent], rms, regressors) -> None:
         """All the candidates (found at grid samples ``ev_tick``, rotation RMS ``rms`` there), then the end."""

@@ -128,7 +128,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, **params) -> 
     cal_ok = np.ones(len(ev.t), dtype=np.bool_)
     if ekf.use_magnetometer and len(mag_pos):
         v[mag_pos], cal_ok[mag_pos] = fatt.calibrate_magnetometer(calibrator, ev.t[mag_pos], ev.v[mag_pos])
-    clock("magnetometer calibration")
+    clock("magnetometer calibration (core's, Python)")
     # 3. the grid
     acc_pos = ev.pos[fatt.ACC_K]
     gt, gx, src, restart = grid_of(ev.t[acc_pos], acc_norm(ev.v[acc_pos]), p.grid_rate_hz)
@@ -178,6 +178,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, **params) -> 
                 else [p.smoother.forward_b] * len(upright)
             release.walking_direction(j_init, out_q, ev.v[tick_event], axes)
         release.run(ev_tick, events, rms, regressors)
+        clock.move("walking direction (core's stage, Python)", release.walkdir_s)
     else:
         p.finish()
     if len(ev.t):
@@ -198,6 +199,12 @@ class _Clock:
             now = time.process_time()
             self.timings[name] = self.timings.get(name, 0.0) + now - self.t
             self.t = now
+
+    def move(self, name: str, seconds: float) -> None:
+        """Book ``seconds`` of the running interval under ``name`` (a stage interleaved with another)."""
+        if self.timings is not None:
+            self.timings[name] = self.timings.get(name, 0.0) + seconds
+            self.t += seconds
 
 
 def _result(p: Pipeline, recording: Recording, att: AttitudeLog) -> PipelineResult:
