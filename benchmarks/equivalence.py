@@ -23,6 +23,8 @@ and one IPIN logfile.  ``--fast``: the results of the fast desktop path
 (:func:`desktop.fast.run_fast`, a second implementation over whole arrays)
 instead of ``Pipeline().run``, compared with results stored from the phone's
 path: the two implementations held to each other on all six recordings.
+The fast path has no carry-mode detection (issue #17), so ``--fast`` runs
+both without it: store with ``--save --no-carry`` first.
 
 The stored results live outside the repository (``--store``, default
 ``$PDR_BENCH_CACHE/equivalence.json``, ``$PDR_BENCH_CACHE`` defaulting to
@@ -147,7 +149,7 @@ def _recording(path: str, refresh: bool):
     return Recording(streams, m["device"], m["metadata"], [], m["source"])
 
 
-def results_of(path: str, refresh: bool = False, fast: bool = False) -> dict:
+def results_of(path: str, refresh: bool = False, fast: bool = False, carry: bool = True) -> dict:
     """Run the default pipeline (or the fast path) on one recording; what is stored of it (JSON-able)."""
     from core.pdr.pipeline import Pipeline
 
@@ -156,9 +158,9 @@ def results_of(path: str, refresh: bool = False, fast: bool = False) -> dict:
     if fast:
         from desktop.fast import run_fast
 
-        res = run_fast(rec)
+        res = run_fast(rec, carry=False)
     else:
-        res = Pipeline().run(rec)
+        res = Pipeline(carry=carry).run(rec)
     seconds = time.perf_counter() - t0
     tr, att = res.track, res.attitude
     return {
@@ -174,13 +176,14 @@ def results_of(path: str, refresh: bool = False, fast: bool = False) -> dict:
     }
 
 
-def run_all(paths: dict[str, Path], jobs: int, refresh: bool = False, fast: bool = False) -> dict[str, dict]:
+def run_all(paths: dict[str, Path], jobs: int, refresh: bool = False, fast: bool = False,
+            carry: bool = True) -> dict[str, dict]:
     names = list(paths)
     if jobs <= 1:
-        return {n: results_of(str(paths[n]), refresh, fast) for n in names}
+        return {n: results_of(str(paths[n]), refresh, fast, carry) for n in names}
     with ProcessPoolExecutor(jobs) as ex:
         return dict(zip(names, ex.map(results_of, [str(paths[n]) for n in names], [refresh] * len(names),
-                                      [fast] * len(names))))
+                                      [fast] * len(names), [carry] * len(names))))
 
 
 def _nan_equal_diff(a: np.ndarray, b: np.ndarray, angle: bool = False) -> float:
@@ -268,7 +271,9 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="the demo and one IPIN logfile")
     ap.add_argument("--tol", type=float, default=1e-9)
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--fast", action="store_true", help="the fast desktop path's results (desktop.fast.run_fast)")
+    ap.add_argument("--fast", action="store_true",
+                    help="the fast desktop path's results (desktop.fast.run_fast; without carry-mode detection)")
+    ap.add_argument("--no-carry", action="store_true", help="the pipeline without carry-mode detection (for --fast)")
     args = ap.parse_args(argv)
     if args.fast and args.save:
         raise SystemExit("--fast compares with results stored from Pipeline.run; it stores none")
@@ -277,7 +282,8 @@ def main(argv=None) -> int:
     if missing:
         print("missing, skipped: " + ", ".join(missing), file=sys.stderr)
     t0 = time.perf_counter()
-    new = run_all(paths, args.jobs, refresh=args.save, fast=args.fast)
+    carry = not (args.no_carry or args.fast)
+    new = run_all(paths, args.jobs, refresh=args.save, fast=args.fast, carry=carry)
     wall = time.perf_counter() - t0
     for name, r in new.items():
         print(f"{name:45s} {r['events']:8d} events {len(r['step_t_ns']):5d} steps {r['seconds']:6.1f} s "
@@ -285,10 +291,14 @@ def main(argv=None) -> int:
     print(f"wall {wall:.1f} s")
     digest = other_core_digest()
     if args.save:
-        store.write_text(json.dumps({"other_core_digest": digest, "recordings": new}))
+        store.write_text(json.dumps({"other_core_digest": digest, "carry": carry, "recordings": new}))
         print(f"stored {store}")
         return 0
     saved = json.loads(store.read_text())
+    if saved.get("carry", True) != carry:
+        print(f"NOTE: the stored results were {'with' if saved.get('carry', True) else 'without'} carry-mode "
+              f"detection, these {'with' if carry else 'without'} (--fast needs a store saved with --no-carry)",
+              file=sys.stderr)
     if saved["other_core_digest"] != digest:
         print("NOTE: core modules outside the files under change differ from the stored run's: "
               "a difference may come from them", file=sys.stderr)

@@ -211,8 +211,10 @@ def _result(p: Pipeline, recording: Recording, att: AttitudeLog) -> PipelineResu
     """The :class:`PipelineResult` of the filled pipeline ``p``, with the counters ``Pipeline.run`` gives."""
     a = p.attitude
     counters = dict(mag_used=a.n_mag_used, mag_rejected=a.n_mag_rejected, acc_rejected=a.n_acc_rejected,
-                    peaks_rejected_rotation=p.n_rejected_rotation, peaks_rejected_bout=p.n_rejected_bout,
-                    nonfinite_skipped=dict(p.n_nonfinite))
+                    peaks_rejected_rotation=p.n_rejected_rotation, peaks_rejected_bout=p.n_rejected_bout)
+    if hasattr(p, "n_replayed"):  # the carry stage's peaks at a mode change: none without it
+        counters.update(peaks_replayed_mode_change=p.n_replayed, peaks_replaced_mode_change=p.n_replaced_mode)
+    counters["nonfinite_skipped"] = dict(p.n_nonfinite)
     counters.update(p.health_counters())
     counters["attitude"] = a.counters()
     return PipelineResult(list(p.steps), Track.from_steps(p.steps), att, p.labels(), recording, counters, None)
