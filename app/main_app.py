@@ -49,6 +49,7 @@ from kivy.uix.button import Button
 from kivy.uix.filechooser import FileChooserListView
 from kivy.uix.popup import Popup
 
+from core.conventions import CARRY_BAG, CARRY_EAR, CARRY_HANDHELD, CARRY_POCKET, CARRY_STILL, CARRY_SWINGING
 from core.pdr.calibration import CalibrationError
 from core.pdr.stride_models import StrideModelError
 
@@ -82,6 +83,11 @@ def recording_formats() -> tuple[list, list]:
 UI_INTERVAL_S = 0.1
 
 
+#: the carry modes in a word, for the status strip's narrow column (the health panel says them in full)
+CARRY_SHORT = {CARRY_HANDHELD: "hand", CARRY_SWINGING: "swing", CARRY_POCKET: "pocket", CARRY_BAG: "bag",
+               CARRY_EAR: "ear", CARRY_STILL: "still"}
+
+
 def _fmt_time(s: float) -> str:
     s = int(s)
     return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
@@ -112,6 +118,8 @@ class PDRApp(App):
     distance_text = StringProperty("0.0 m")
     heading_text = StringProperty("–")
     time_text = StringProperty("0:00")
+    #: the name under the heading in the status strip: "heading", with the carry mode when one is detected
+    heading_name = StringProperty("heading")
     warning = StringProperty("")
     message = StringProperty("")
     health_text = StringProperty("")
@@ -879,6 +887,8 @@ class PDRApp(App):
         h = summ["heading_deg"]
         self.heading_text = f"{h:.0f}°" if h == h else "–"
         self.time_text = _fmt_time(summ["elapsed_s"])
+        carry = summ.get("carry")
+        self.heading_name = f"heading · {CARRY_SHORT.get(carry, carry)}" if carry else "heading"
         if self.root.ids.screens.current == "health" or force:
             self.health_text = ses.health_text()
         self.calibrating = ses.calibrating  # a new track ends a calibration walk
@@ -941,7 +951,8 @@ class PDRApp(App):
                         "center": list(vp.center), "follow": tv.follow},
                "tracking": {"mode": self.tracking, "reason": self.tracking_reason, "steps_name": self.steps_name},
                "status": {"steps": self.steps_text, "distance": self.distance_text,
-                          "heading": self.heading_text, "time": self.time_text},
+                          "heading": self.heading_text, "time": self.time_text,
+                          "heading_name": self.heading_name},
                "warning": self.warning, "message": self.message, "exit_code": self.exit_code,
                "error": self.error, "settings_problem": self.data_dir_problem,
                "service": isinstance(ses, ServiceSession), "screen": self.root.ids.screens.current,

@@ -53,7 +53,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from core.conventions import GPS, PRESSURE, bearing_deg
+from core.conventions import CARRY_WORDS, GPS, PRESSURE, bearing_deg
 from core.floors import FloorEstimator, floors_at
 from core.gnss.base import ANCHOR_MAX_HACC_M
 from core.geodesy import geodetic_to_enu
@@ -512,7 +512,35 @@ class Session:
             "labels": tuple(st.labels),
             "floor": self.floors.floor if self.floors.counters["readings"] else None,
             "floor_changes": sum(1 for c in self.floors.changes if c.floors),
+            **self._carry(st),
         }
+
+    def _carry(self, st) -> dict:
+        """How the phone is carried (issue #17), for the strip: ``carry`` (a core.conventions.CARRY_MODES
+        name, None when the pipeline has no carry-mode detector: foot mode, or turned off), its confidence
+        and the number of changes."""
+        det = getattr(self.pipeline, "carry", None)
+        if det is None:
+            return {"carry": None, "carry_confidence": math.nan, "carry_changes": 0}
+        return {"carry": st.carry_mode, "carry_confidence": float(st.carry_confidence),
+                "carry_changes": len(det.changes)}
+
+    def carry_text(self) -> str:
+        """The carry-mode detector's line for the health panel ("" without one)."""
+        det = getattr(self.pipeline, "carry", None)
+        if det is None or self.last_t_ns is None:
+            return ""
+        st = self.status()
+        said = CARRY_WORDS.get(st.carry_mode, st.carry_mode)
+        last = ""
+        if det.changes:
+            t, _, to, _ = det.changes[-1]
+            t0 = self.first_t_ns if self.first_t_ns is not None else t
+            dt = max(0, int((t - t0) * 1e-9))
+            last = f", last at {dt // 60}:{dt % 60:02d} to {CARRY_WORDS.get(to, to)}"
+        n = len(det.changes)
+        return (f"carried: {said} ({100 * st.carry_confidence:.0f} % sure); "
+                f"{n} change{'s' if n != 1 else ''}{last}")
 
     def floor_text(self) -> str:
         """The barometer's line for the health panel ("" without a barometer)."""
@@ -531,6 +559,9 @@ class Session:
     def health_text(self) -> str:
         """The health panel: the sensor table, then what the tracker adds (the foot INS: stance, NIS, aid, sd)."""
         floor = [self.floor_text()] if self.floors.counters["readings"] else []
+        carry = self.carry_text()
+        if carry:
+            floor.insert(0, carry)
         if self.map is not None:
             floor.append(self.map.text())
         extra = getattr(self.pipeline, "health_lines", None)
@@ -626,6 +657,8 @@ def export_session(session: Session, out_dir: str, basename: str, raw_path: str 
         track, extra = fused, fused.point_properties()
     if session.floors.counters["readings"]:  # the barometer's floor of every step
         extra = {**(extra or {}), "floor": floors_at(session.floors.changes, track.t_ns).tolist()}
+    if getattr(session.pipeline, "carry", None) is not None and len(session.steps) == len(track):
+        extra = {**(extra or {}), "carry": [getattr(st, "carry_mode", "") for st in session.steps]}
     mm = getattr(session, "map", None)
     if mm is not None and mm.placed:  # the map-matched position (plan metres) beside the raw one, per step
         extra = {**(extra or {}), **mm.export_properties(track.t_ns, [s.t_ns for s in session.steps])}
@@ -640,7 +673,8 @@ def export_session(session: Session, out_dir: str, basename: str, raw_path: str 
                                                                               point_properties=extra)),
                 ("gpx", ".gpx", lambda p: export.write_track_gpx(p, track, origin_lat_lon=origin,
                                                                  unix_offset_ns=offset, point_properties=extra)),
-                ("csv", ".track.csv", lambda p: export.write_track_csv(p, track)))
+                ("csv", ".track.csv", lambda p: export.write_track_csv(
+                    p, track, {"carry": extra["carry"]} if extra and "carry" in extra else None)))
         if mm is not None and mm.placed:
             jobs += (("map_csv", ".map.csv", lambda p: write_map_csv(p, session)),)
         for key, ext, fn in jobs:

@@ -30,6 +30,9 @@ CARRY_BAG = "bag"  #: in a bag, backpack or pouch: loosely coupled to the trunk
 CARRY_EAR = "ear"  #: held at the ear (a call): upright beside the head
 CARRY_STILL = "still"  #: not walking: on a table, in the hand while standing, in a vehicle
 CARRY_MODES = (CARRY_HANDHELD, CARRY_SWINGING, CARRY_POCKET, CARRY_BAG, CARRY_EAR, CARRY_STILL)
+#: the carry modes in words, for the summary and the app
+CARRY_WORDS = {CARRY_HANDHELD: "in the hand", CARRY_SWINGING: "swinging in the hand", CARRY_POCKET: "in a pocket",
+               CARRY_BAG: "in a bag", CARRY_EAR: "at the ear", CARRY_STILL: "not walking"}
 
 
 def ns_to_s(t_ns) -> float:

@@ -318,6 +318,7 @@ def summary_lines(res, rec: Recording, gps_why: str = "", heading: bool = True) 
         b = att["gyro_bias_rad_s"]
         lines.append(f"gyro bias     ({1e3 * b[0]:+.2f}, {1e3 * b[1]:+.2f}, {1e3 * b[2]:+.2f}) mrad/s, "
                      f"heading +- {math.degrees(att.get('heading_sd_rad', math.nan)):.1f} deg at the end")
+    lines.extend(carry_lines(s.get("carry"), rec.t0_ns))
     bad = s.get("nonfinite_skipped") or {}
     if bad:
         lines.append("skipped       " + ", ".join(f"{v} non-finite {k} value(s)" for k, v in sorted(bad.items())))
@@ -328,6 +329,23 @@ def summary_lines(res, rec: Recording, gps_why: str = "", heading: bool = True) 
     for r in rec.repairs:
         lines.append(f"repaired      {r}")
     return lines
+
+
+def carry_lines(carry: dict | None, t0_ns: int) -> list[str]:
+    """The carry-mode detector's line for the summary (issue #17): time per mode and the changes."""
+    if not carry or not carry.get("time_s"):
+        return []
+    from core.conventions import CARRY_WORDS
+
+    times = carry["time_s"]
+    total = sum(times.values()) or 1.0
+    share = ", ".join(f"{CARRY_WORDS.get(m, m)} {100 * v / total:.0f} %"
+                      for m, v in sorted(times.items(), key=lambda kv: -kv[1]))
+    ch = carry.get("changes") or []
+    said = "; ".join(f"{(c['t_ns'] - t0_ns) * 1e-9:.0f} s {CARRY_WORDS.get(c['to'], c['to'])}" for c in ch[:6])
+    more = ", ..." if len(ch) > 6 else ""
+    return [f"carried       {share} of the time"
+            + (f"; {len(ch)} change{'s' if len(ch) != 1 else ''} ({said}{more})" if ch else "")]
 
 
 def _known(sep: str, *items) -> str:
@@ -601,9 +619,10 @@ def export_formats(args) -> list[str]:
     return names
 
 
-def _write_track_csv(dest: str, track, origin, floors=None) -> None:
-    """core.export's track CSV, with ``lat_deg, lon_deg`` columns when the track is placed and a ``floor``
-    column when the barometer gave one per step; ``-`` is stdout."""
+def _write_track_csv(dest: str, track, origin, floors=None, carry=None) -> None:
+    """core.export's track CSV, with ``lat_deg, lon_deg`` columns when the track is placed, a ``floor``
+    column when the barometer gave one per step and a ``carry`` column (the carry mode at each step, issue
+    #17) when the pipeline detected it; ``-`` is stdout."""
     import csv
 
     from core import export
@@ -616,6 +635,8 @@ def _write_track_csv(dest: str, track, origin, floors=None) -> None:
         columns["lon_deg"] = [f"{v:.8f}" for v in np.atleast_1d(lon)]
     if floors is not None:
         columns["floor"] = [str(int(fl)) for fl in floors]
+    if carry is not None:
+        columns["carry"] = [str(c) for c in carry]
     if dest == "-":
         csv.writer(sys.stdout, lineterminator="\n").writerows(export.track_csv_rows(track, columns))
         sys.stdout.flush()
@@ -784,7 +805,7 @@ def _write_outputs(args, outs: dict, rec, track, origin, extra, title_extra: str
         if out != "-":  # outputs may go into a folder that does not exist yet (out/ by default in the README)
             Path(out).parent.mkdir(parents=True, exist_ok=True)
     if outs.get("csv"):
-        _write_track_csv(outs["csv"], track, origin, (extra or {}).get("floor"))
+        _write_track_csv(outs["csv"], track, origin, (extra or {}).get("floor"), (extra or {}).get("carry"))
         written.append("(stdout)" if outs["csv"] == "-" else outs["csv"])
     if outs.get("geojson"):
         export.write_track_geojson(outs["geojson"], track, origin, {"source": rec.source, "track": title_extra}, extra,
@@ -873,6 +894,8 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     extra = track.point_properties() if fused and plan is None else None
     if map_props:
         extra = {**(extra or {}), **map_props}
+    if getattr(pipeline, "carry", None) is not None and len(res.steps) == len(track):
+        extra = {**(extra or {}), "carry": [st.carry_mode for st in res.steps]}
     fsum, flines, per_step = floor_report(args, rec, track)
     if fsum is not None:
         summary["floors"] = fsum

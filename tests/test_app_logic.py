@@ -13,6 +13,7 @@ from app.health import HealthMonitor, StreamHealth
 from app.overlay import (ELLIPSE_SIGMA, circles_mesh, covariance_ellipse, ellipse_points, gps_status_text, runs,
                          squares_mesh)
 from app.session import Session, export_session, load_any_recording
+from tests._session_helpers import replay_session
 from app.settings import PROFILE_FILE, SETTINGS_FILE, STRIDE_MODEL_CHOICES, Settings
 from app.sources import ReplaySource, sampling_period_us
 from app.storage import new_recording_path, output_dir
@@ -48,18 +49,6 @@ def gps_walk(seed: int = 1, minutes: float = 2.0, gap_s=GPS_GAP_S):
     keep = ~((t_s >= gap_s[0]) & (t_s < gap_s[1]))
     rec.streams["gps"] = dataclasses.replace(g, t_ns=g.t_ns[keep], values=g.values[keep])
     return w
-
-
-def replay_session(rec, pipeline_factory, chunk: int = 500) -> Session:
-    """A session that replayed ``rec`` to the end, as fast as it goes."""
-    ses = Session(ReplaySource(rec, speed=math.inf, max_chunk=chunk), pipeline_factory=pipeline_factory)
-    ses.start()
-    for _ in range(100000):
-        ses.tick(budget_s=0.01)
-        if ses.finished:
-            break
-    assert ses.finished
-    return ses
 
 
 class FakeClock:

@@ -114,9 +114,9 @@ def test_the_app_session_shows_floors_and_exports_them_per_step(tmp_path):
     floor, the health panel's line and the GeoJSON's per-step floor (the steps before the stairs on 0)."""
     import json
 
-    from app.session import Session, export_session
-    from app.sources import ReplaySource
+    from app.session import export_session
     from core.pdr.pipeline import Pipeline
+    from tests._session_helpers import replay_session
     from core.recording import Recording
     from desktop.simulator import simulate_walk
 
@@ -128,12 +128,7 @@ def test_the_app_session_shows_floors_and_exports_them_per_step(tmp_path):
     climb = floor_profile(t_s, [(half - 7.0, 0.0), (14.0, 3.5, "linear"), (t_s[-1], 0.0)])
     streams = dict(rec.streams, pressure=simulate_pressure(t, climb, BarometerModel(drift_hpa_per_h=2.0), seed=5))
     rec2 = Recording(streams, device=rec.device, metadata=rec.metadata)
-    ses = Session(ReplaySource(rec2, speed=math.inf, max_chunk=500), pipeline_factory=Pipeline)
-    ses.start()
-    for _ in range(100000):
-        ses.tick(budget_s=0.01)
-        if ses.finished:
-            break
+    ses = replay_session(rec2, Pipeline)
     assert ses.summary()["floor"] == 1 and ses.summary()["floor_changes"] == 1
     assert "barometer: floor +1" in ses.health_text() and "stairs" in ses.health_text()
     assert len(ses.steps) == len(Pipeline().run(rec).steps)  # pressure does not disturb the steps
