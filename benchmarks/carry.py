@@ -407,6 +407,9 @@ def markdown(summary: dict, meta: dict) -> str:
              "(carry detection and per-mode step gates). Splits as declared in `benchmarks/splits.py`: Oxford and "
              "Brajdic-Harle are report only; the placement -> mode mapping is declared in `benchmarks/carry.py`.",
              ""]
+    for path, m in meta.get("merged", {}).items():
+        lines += [f"Merged from an earlier run (`python -m benchmarks.carry {' '.join(m['argv'] or [])}`): "
+                  f"{m['n']} recordings.", ""]
     tm = meta.get("timing")
     if tm:
         lines += [f"Cost (one simulated walk, {tm['events']} events at 50 Hz, best of 3): pipeline "
@@ -474,12 +477,24 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=None, help="only the first N simulator seeds of each split")
     ap.add_argument("--no-write", action="store_true", help="write under out/benchmarks/ instead of benchmarks/")
     ap.add_argument("--no-timing", action="store_true")
+    ap.add_argument("--merge", type=Path, action="append", default=None, metavar="JSON",
+                    help="add the results of an earlier run's carry_results.json for the (dataset, split) pairs "
+                         "this run does not cover (the report says which came from where)")
     args = ap.parse_args(argv)
     root = args.data or default_data_root()
     t0 = time.perf_counter()
     results = run(root, only=args.only, split=args.split, n_seeds=args.seeds, jobs=args.jobs)
     meta = {"argv": sys.argv[1:] if argv is None else list(argv), "n_recordings": len(results),
             "wall_s": time.perf_counter() - t0}
+    if args.merge:
+        have = {(r["dataset"], r["split"]) for r in results if "error" not in r}
+        meta["merged"] = {}
+        for path in args.merge:
+            old = json.loads(Path(path).read_text())
+            add = [r for r in old["results"] if "error" not in r and (r["dataset"], r["split"]) not in have]
+            results += add
+            meta["merged"][str(path)] = {"argv": old["meta"].get("argv"), "n": len(add)}
+            have |= {(r["dataset"], r["split"]) for r in add}
     if not args.no_timing:
         meta["timing"] = timing()
     summary = summarize(results)

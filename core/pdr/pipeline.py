@@ -63,7 +63,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.conventions import ACC, CARRY_HANDHELD, CARRY_SWINGING, GNSS_STATUS, GPS, GYRO, MAG
+from core.conventions import (ACC, CARRY_BAG, CARRY_EAR, CARRY_HANDHELD, CARRY_POCKET, CARRY_STILL, CARRY_SWINGING,
+                              GNSS_STATUS, GPS, GYRO, MAG)
 from core.dsp import GridResampler
 from core.pdr.attitude import AttitudeEKF
 from core.pdr.carry import CarryModeDetector
@@ -672,6 +673,24 @@ class Pipeline:
                 return changes[k][2]
         return changes[0][1] if changes else self.carry.mode
 
+    #: carry-mode names in the labels
+    _CARRY_WORDS = {CARRY_SWINGING: "in a swinging hand", CARRY_POCKET: "in a trouser pocket",
+                    CARRY_BAG: "in a bag or on the trunk", CARRY_EAR: "at the ear"}
+
+    def _carry_label(self) -> str | None:
+        """A label when the phone was walked with mostly otherwise than in the hand (issue #17)."""
+        if self.carry is None:
+            return None
+        walking = {m: s for m, s in self.carry.time_s.items() if m != CARRY_STILL and s > 0}
+        total = sum(walking.values())
+        if total < 10.0:
+            return None
+        mode = max(walking, key=walking.get)
+        if mode not in self._CARRY_WORDS:
+            return None
+        return (f"phone carried {self._CARRY_WORDS[mode]} {100 * walking[mode] / total:.0f} % of the walking time "
+                f"({len(self.carry.changes)} carry-mode changes): steps counted with that mode's gates")
+
     def _rotation_limit_rad_s(self) -> float:
         """The rotation gate in force: wider for a swinging arm whose rotation is periodic about one axis."""
         if self._carry_mode == CARRY_SWINGING and self.carry.rotation_periodic:
@@ -789,6 +808,9 @@ class Pipeline:
             what = ", ".join(f"{k} {v}" for k, v in sorted(self.n_impossible.items()))
             out.append(f"impossible sensor values (beyond any phone sensor's range) skipped ({what})")
         out.extend(self._health_labels())
+        carry = self._carry_label()
+        if carry:
+            out.append(carry)
         if not self.seen.get(GYRO) and self.seen.get(ACC):
             out.append("no gyroscope: heading from accelerometer and magnetometer only (noisy while walking)")
         if not self.attitude.use_magnetometer:

@@ -40,7 +40,8 @@ shape can add a spurious peak.  Two gates answer it, on for ``pocket`` and
 * **cadence gate** (``min_interval_period_frac``): a peak closer than this
   fraction of ``T_step`` to the previous step is not a step (the gait's
   cadence changes little from one step to the next; the spurious peak of a
-  half-stride comes early).
+  half-stride comes early).  Also on for ``bag``: a bag or pouch hangs on a
+  strap and bounces at its own 3-6 Hz, which can put a second peak in a step.
 
 The comb's echo: when the walk stops, the last step comes out of the comb a
 second time, at half its height, one period later.  **Echo gate**
@@ -80,11 +81,11 @@ class StepGates:
     min_raw_range_m_s2: float = 0.0
 
 
-#: gates per carry mode (core.conventions.CARRY_MODES); the trunk-coupled modes keep the hand-held detector
+#: gates per carry mode (core.conventions.CARRY_MODES); hand-held, ear and still keep the hand-held detector
 STEP_GATES = {
     CARRY_HANDHELD: StepGates(),
     CARRY_EAR: StepGates(),
-    CARRY_BAG: StepGates(),
+    CARRY_BAG: StepGates(min_interval_period_frac=0.6),  # a bag bouncing on its strap: a second peak in a step
     CARRY_STILL: StepGates(),
     CARRY_POCKET: StepGates(stride_comb=True, min_interval_period_frac=0.6, min_raw_range_m_s2=0.5),
     CARRY_SWINGING: StepGates(stride_comb=True, min_interval_period_frac=0.6, min_peak_height_m_s2=0.3,
