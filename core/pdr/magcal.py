@@ -391,6 +391,11 @@ class MagCalibrator:
         self.reset()
 
     def reset(self) -> None:
+        # the settings as the per-reading path uses them (read here: a setting changed later takes effect at reset)
+        self._max_nrm2 = self.max_raw_norm_uT * self.max_raw_norm_uT
+        self._bootstrap_ns = int(self.bootstrap_window_s * 1e9)
+        self._r_min = 0.25 * self.field_range_uT[0]
+        self._sector_scale = self.n_sectors / (2.0 * math.pi)
         nslots = self.n_bins * self.samples_per_bin
         self._slot_m: list = [None] * nslots  # raw sample tuples
         self._slot_t: list = [-1] * nslots  # t_ns, -1 = empty
@@ -464,7 +469,7 @@ class MagCalibrator:
 
     # -- binning ----------------------------------------------------------------
     def _bin_of(self, mx: float, my: float, mz: float) -> int:
-        """Direction bin of a raw reading about the current centre, -1 if too close to it."""
+        """Direction bin of a raw reading about the current centre, -1 if too close to it (as :meth:`update` bins)."""
         cx, cy, cz = self._centre
         dx, dy, dz = mx - cx, my - cy, mz - cz
         if self._centre_a is not None:
@@ -472,31 +477,12 @@ class MagCalibrator:
             dx, dy, dz = (a00 * dx + a01 * dy + a02 * dz, a10 * dx + a11 * dy + a12 * dz,
                           a20 * dx + a21 * dy + a22 * dz)
         r = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if r < 0.25 * self.field_range_uT[0]:
+        if r < self._r_min:
             return -1  # direction undefined near the centre (a still phone before any fit)
         nb, ns = self.bin_bands, self.n_sectors
         band = min(int((dz / r + 1.0) * 0.5 * nb), nb - 1)
-        sector = min(int((math.atan2(dy, dx) + math.pi) * (ns / (2.0 * math.pi))), ns - 1)
+        sector = min(int((math.atan2(dy, dx) + math.pi) * self._sector_scale), ns - 1)
         return band * ns + sector
-
-    def _store(self, t_ns: int, m: tuple, k: int) -> None:
-        per = self.samples_per_bin
-        base = k * per
-        ts = self._slot_t
-        j = base
-        oldest = ts[base]
-        for i in range(base + 1, base + per):
-            if ts[i] < oldest:  # empty slots (-1) come first, then the oldest
-                oldest, j = ts[i], i
-        if oldest < 0:
-            self._n_stored += 1
-            if self._bin_count[k] == 0:
-                self._occupied += 1
-                self._new_bins_since += 1
-            self._bin_count[k] += 1
-        ts[j] = t_ns
-        self._slot_m[j] = m
-        self._new_since += 1
 
     def _stored(self) -> tuple[np.ndarray, np.ndarray]:
         idx = [i for i, t in enumerate(self._slot_t) if t >= 0]
@@ -536,30 +522,68 @@ class MagCalibrator:
         (counted in ``n_invalid``) and returned as they came through the
         calibration in force.
         """
+        # the per-reading path (the phone runs it at 50-100 Hz): binning and storing written out on locals, the
+        # same float operations as _bin_of and _store; the fits happen in _attempt, at most every refit_interval_s
         t_ns = int(t_ns)
         mx, my, mz = float(mx), float(my), float(mz)
         nrm2 = mx * mx + my * my + mz * mz
-        if not (math.isfinite(nrm2) and nrm2 <= self.max_raw_norm_uT * self.max_raw_norm_uT):
+        if not (math.isfinite(nrm2) and nrm2 <= self._max_nrm2):
             self.n_invalid += 1
             return self._apply_tuple(mx, my, mz)
         self.n_valid += 1
         m = (mx, my, mz)
-        if not self._calibrated and (not self._recent or t_ns - self._recent[-1][0] >= _RECENT_DT_NS):
-            self._recent.append((t_ns, m))
-            t_old = t_ns - int(self.bootstrap_window_s * 1e9)
-            while self._recent[0][0] < t_old:
-                self._recent.pop(0)
+        if not self._calibrated:
+            rec = self._recent
+            if not rec or t_ns - rec[-1][0] >= _RECENT_DT_NS:
+                rec.append((t_ns, m))
+                t_old = t_ns - self._bootstrap_ns
+                while rec[0][0] < t_old:
+                    rec.pop(0)
         self._t_prev = t_ns
-        k = self._bin_of(mx, my, mz) if self._centre is not None else -1
-        if k >= 0:
-            self._store(t_ns, m, k)
+        centre = self._centre
+        if centre is not None:
+            cx, cy, cz = centre
+            dx, dy, dz = mx - cx, my - cy, mz - cz
+            ca = self._centre_a
+            if ca is not None:
+                (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = ca
+                dx, dy, dz = (a00 * dx + a01 * dy + a02 * dz, a10 * dx + a11 * dy + a12 * dz,
+                              a20 * dx + a21 * dy + a22 * dz)
+            r = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if r >= self._r_min:
+                nb, ns = self.bin_bands, self.n_sectors
+                band = int((dz / r + 1.0) * 0.5 * nb)
+                sector = int((math.atan2(dy, dx) + math.pi) * self._sector_scale)
+                k = (band if band < nb else nb - 1) * ns + (sector if sector < ns else ns - 1)
+                # store: the bin's first empty slot, else its oldest sample (newest wins)
+                per = self.samples_per_bin
+                ts = self._slot_t
+                j = base = k * per
+                oldest = ts[base]
+                for i in range(base + 1, base + per):
+                    if ts[i] < oldest:  # empty slots (-1) come first, then the oldest
+                        oldest, j = ts[i], i
+                if oldest < 0:
+                    self._n_stored += 1
+                    counts = self._bin_count
+                    if counts[k] == 0:
+                        self._occupied += 1
+                        self._new_bins_since += 1
+                    counts[k] += 1
+                ts[j] = t_ns
+                self._slot_m[j] = m
+                self._new_since += 1
         if self._t_last_attempt is None:
             self._t_last_attempt = t_ns
-        elif ((t_ns - self._t_last_attempt) * 1e-9 >= self.refit_interval_s
-              and (self._new_since >= self.refit_min_new_samples or self._new_bins_since > 0
-                   or self._centre is None)):
+        elif ((self._new_since >= self.refit_min_new_samples or self._new_bins_since > 0 or centre is None)
+              and (t_ns - self._t_last_attempt) * 1e-9 >= self.refit_interval_s):
             self._attempt(t_ns)
-        return self._apply_tuple(mx, my, mz)
+        if not self._calibrated:
+            return m
+        bx, by, bz = self._b
+        dx, dy, dz = mx - bx, my - by, mz - bz
+        (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = self._a
+        return (a00 * dx + a01 * dy + a02 * dz, a10 * dx + a11 * dy + a12 * dz, a20 * dx + a21 * dy + a22 * dz)
 
     def _coverage_about(self, m: np.ndarray, offset, a) -> float:
         """Fraction of direction bins hit by the samples ``m`` calibrated with ``offset``, ``a``."""
