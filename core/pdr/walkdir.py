@@ -20,14 +20,33 @@ vector ``delay_s`` later (a short buffer).  Over a stride (from one step event
 to the next but one: left and right steps both in, so the left/right sway
 averages out):
 
-* **axis**: the principal direction of the 2x2 covariance of the horizontal
-  acceleration (the eigenvector of its larger eigenvalue).  The stride is
-  rejected where the axis is ill-defined: eigenvalue ratio below
-  ``min_anisotropy``, horizontal acceleration below ``min_horizontal_std_m_s2``
-  (standing, pure vertical motion), the device heading turning more than
-  ``max_stride_turn_rad`` within the stride, a stride outside
-  ``[min_stride_s, max_stride_s]`` or a device axis too near the vertical
-  to have a heading.
+* **axis**: the principal direction (eigenvector of the larger eigenvalue) of
+  a 2x2 covariance of the horizontal acceleration.  Which covariance
+  (``axis_method="auto"``, the default) depends on the stride:
+
+  - where one direction dominates the raw covariance (eigenvalue ratio at
+    least ``pca_min_anisotropy``, 8): that raw covariance.  A limb swings the
+    phone in the sagittal plane (an arm swinging at the side, a thigh with a
+    pocket): the swing at the stride frequency is along the walk and
+    outweighs everything else;
+  - else the covariance of the part of the horizontal acceleration that moves
+    with the vertical: ``g g' + h h'`` with ``g``, ``h`` the horizontal
+    acceleration's correlation vectors with the vertical velocity and the
+    vertical acceleration.  On the trunk (belt, bag, hand at the chest, ear)
+    the lateral sway at the stride frequency is as large as the fore-aft
+    motion at the step frequency and pulls the raw axis sideways (10 deg
+    median on the IPOL waist walks); over a whole stride it is uncorrelated
+    with the vertical motion, which is at the step frequency, and drops out
+    (5 deg).  On the simulator the rule picks the raw axis for the swinging
+    arm and the pocket and the coherent one for the rest, each the better of
+    the two there.
+
+  The stride is rejected where the axis is ill-defined: the chosen matrix's
+  eigenvalue ratio below ``min_anisotropy``, horizontal acceleration below
+  ``min_horizontal_std_m_s2`` (standing, pure vertical motion), the device
+  heading turning more than ``max_stride_turn_rad`` within the stride, a
+  stride outside ``[min_stride_s, max_stride_s]`` or a device axis too near
+  the vertical to have a heading.
 * **sign** (forward or backward along the axis): from the phase between the
   vertical and the forward acceleration, see below.
 * the stride's offset: the signed axis relative to the device heading
@@ -55,18 +74,25 @@ walker: on the IPOL waist walks it took both signs), while its covariance
 with the vertical *velocity* is reliably negative.  So along the stride's axis
 ``e`` the forward direction is the one where
 
-    ``cov(a_h . e, v_z) < 0``
+    ``cov(a_h . e, v_z) < 0``.
 
-(the heel-strike impact, an upward jolt with a backward one, pushes the same
-way).  ``v_z`` is the vertical acceleration, its slow mean removed, through
-a leaky integrator (time constant ``vz_leak_time_s``): at the step
-frequency (1.6-2 Hz) that turns the phase by 85 deg instead of 90 (with 1 s),
-far from the 90 deg where the sign would be lost.  No sign of our ENU
+``v_z`` is the vertical acceleration, its slow mean removed (time constant
+``mean_time_s``), through a leaky integrator (time constant
+``vz_leak_time_s``): at the step frequency (1.6-2 Hz) the pair turns the
+phase by about 82 deg instead of 90 (5 deg lost to the leak, 2-3 deg to the
+mean removal), far from the 90 deg off where the sign would be lost.  (The
+heel-strike impact, an upward jolt with a backward one at the moment ``v_z``
+crosses zero, adds to the in-phase covariance with ``a_z``, not to this one.)  No sign of our ENU
 conventions enters: up is +z of ENU and the accelerometer reads ``+g`` up at
 rest, so ``a_n = R(q) a_b`` minus its mean is the upward acceleration.  On the
-IPOL lower-back walks (sensor x up, z out of the back: ``-z`` is forward) the
-rule gives the forward direction within the axis error on every stride we
-looked at (``benchmarks/walkdir.py``, tuning split).
+IPOL lower-back walks (sensor x up, z out of the back: ``-z`` is forward;
+tuning split) the rule took the wrong direction on 1 of 814 accepted strides,
+and on none of the simulator's trunk placements (bag, ear, hand at the chest)
+or the pocket.  Its weak spot is the hand swinging at the side: the arm's own
+swing, at the stride frequency, dominates the horizontal acceleration and
+leaves little trunk motion in quadrature with the vertical; on the simulator
+about a fifth of those strides get the wrong sign and a fifth of the walks
+end with the wrong direction (``benchmarks/WALKDIR_RESULTS.md``).
 
 Smoothing: circular means with forgetting
 -----------------------------------------
@@ -87,6 +113,10 @@ spread of the axes (``sqrt(-2 ln R2) / 2``, ``R2`` the mean resultant length of
 the doubled angles) over the square root of the effective number of strides;
 ``sign_confidence`` is the component of the sign evidence along the axis over
 its total weight (0: undecided, 1: every stride perfectly in quadrature).
+
+After ``reset_after_gap_s`` without an accepted stride (a pause, a ride, the
+waving of a compass calibration before the walk) the estimate is forgotten:
+the phone may be elsewhere when the walk goes on.
 
 The axis accumulator is kept per device axis of the smoother (``y`` or the
 back ``-z`` of ``forward_b="auto"``): the offset of one axis means nothing for
@@ -234,6 +264,8 @@ class WalkingDirection:
         self._last_accepted_ns = None  # time of the last accepted stride
         #: times the estimate was forgotten after a gap of ``reset_after_gap_s`` without an accepted stride
         self.n_gap_resets = 0
+        #: :meth:`estimate` just before the last such reset (None before any)
+        self.last_estimate = None
         #: per-stride records (dicts), the last ``max_strides_kept``
         self.strides: deque = deque(maxlen=self.max_strides_kept)
         #: strides closed, accepted, and rejected per reason
@@ -277,6 +309,7 @@ class WalkingDirection:
         self._vz = self._leak * self._vz + (au - m) * self._dt
         last = self._last_accepted_ns
         if last is not None and t_ns - last > self._gap_ns:
+            self.last_estimate = self.estimate()
             self._states = {}  # a pause: the phone may have been put elsewhere (or that was no walk)
             self._last_accepted_ns = None
             self.n_gap_resets += 1
@@ -514,11 +547,15 @@ class WalkingDirection:
         self.n_steps_offset += 1
         return wrap_angle(device_heading_rad + self.offset_rad)
 
-    def diagnostics(self) -> dict:
-        """The estimate and its counters, as data."""
+    def estimate(self) -> dict:
+        """The current estimate of the smoother's current axis, as data."""
         return {"offset_rad": self.offset_rad, "offset_sigma_rad": self.offset_sigma_rad,
                 "sign_confidence": self.sign_confidence, "axis_resultant": self.axis_resultant,
-                "confident": self.confident, "n_used": self.n_used, "n_strides": self.n_strides,
+                "confident": self.confident, "n_used": self.n_used}
+
+    def diagnostics(self) -> dict:
+        """The estimate and its counters, as data (``last_estimate``: the one forgotten at the last pause)."""
+        return {**self.estimate(), "last_estimate": self.last_estimate, "n_strides": self.n_strides,
                 "n_accepted": self.n_accepted, "rejected": dict(self.rejected),
                 "n_sign_disagreements": self.n_sign_disagreements, "n_nonfinite": self.n_nonfinite,
                 "n_steps_offset": self.n_steps_offset, "n_gap_resets": self.n_gap_resets,
