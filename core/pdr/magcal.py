@@ -182,29 +182,50 @@ class EllipsoidFitError(ValueError):
 
 
 def _centred(samples: np.ndarray, n_min: int):
-    """``(centre, scale, (samples - centre) / scale)`` with the RMS distance as the scale: a well-conditioned fit."""
+    """``(centre, scale, (samples - centre) / scale)`` with the RMS distance as the scale: a well-conditioned fit.
+
+    The means as ``add.reduce`` over the count, which is what ``ndarray.mean`` computes (the same floats),
+    without its wrapping: the fits run on a hundred-odd samples, where numpy's per-call cost is the cost.
+    """
     n = len(samples)
     if n < n_min:
         raise EllipsoidFitError(f"too few samples ({n} < {n_min})")
-    c = samples.mean(axis=0)
+    c = np.add.reduce(samples, axis=0) / n
     d = samples - c
-    s = math.sqrt(float(np.mean(np.sum(d * d, axis=1))))
+    s = math.sqrt(float(np.add.reduce(np.add.reduce(d * d, axis=1))) / n)
     if not s > 1e-9:
         raise EllipsoidFitError("samples coincide")
     return c, s, d / s
 
 
+def _norms(d: np.ndarray) -> np.ndarray:
+    """Row norms of ``d`` (n, 3): ``numpy.linalg.norm(d, axis=1)``'s own arithmetic, without its wrapping."""
+    return np.sqrt(np.add.reduce(d * d, axis=1))
+
+
+#: the soft iron of a sphere fit (read-only: shared by every sphere fit)
+_EYE = np.eye(3)
+_EYE.flags.writeable = False
+
+
 def _fit(samples: np.ndarray):
-    """Kernel of :func:`fit_ellipsoid` on finite samples; also returns the axis ratio."""
+    """Kernel of :func:`fit_ellipsoid` on finite samples: ``(offset, A, F, axis ratio)`` (the residual: :func:`_rms`)."""
     c, s, u = _centred(samples, 9)
     n = len(u)
     x, y, z = u.T
-    design = np.stack([x * x - z * z, y * y - z * z, 2 * x * y, 2 * x * z, 2 * y * z, x, y, z, np.ones(n)], axis=1)
-    rhs = -(x * x + y * y + z * z)
-    theta, _, rank, _ = np.linalg.lstsq(design, rhs, rcond=None)
+    xx, yy, zz = x * x, y * y, z * z
+    design = np.empty((9, n))  # transposed: each regressor written whole (lstsq copies into column order anyway)
+    np.subtract(xx, zz, out=design[0])
+    np.subtract(yy, zz, out=design[1])
+    x2 = 2 * x
+    np.multiply(x2, y, out=design[2])
+    np.multiply(x2, z, out=design[3])
+    np.multiply(2 * y, z, out=design[4])
+    design[5], design[6], design[7], design[8] = x, y, z, 1.0
+    theta, _, rank, _ = np.linalg.lstsq(design.T, -(xx + yy + zz), rcond=None)
     if rank < 9:
         raise EllipsoidFitError(f"degenerate geometry (rank {rank} < 9)")
-    p1, p2, p4, p5, p6, g1, g2, g3, k = theta
+    p1, p2, p4, p5, p6, g1, g2, g3, k = theta.tolist()
     q = np.array([[1.0 + p1, p4, p5], [p4, 1.0 + p2, p6], [p5, p6, 1.0 - p1 - p2]])
     lam, vec = np.linalg.eigh(q)
     if not lam[0] > 1e-9 * lam[2]:
@@ -217,29 +238,35 @@ def _fit(samples: np.ndarray):
     field_s = float(np.prod(semi) ** (1.0 / 3.0))
     a = (vec * (field_s * np.sqrt(lam / r2))) @ vec.T
     a = 0.5 * (a + a.T)
-    offset = c + s * b_s
-    field = s * field_s
-    resid = np.linalg.norm((samples - offset) @ a.T, axis=1) - field
-    rms = float(math.sqrt(float(np.mean(resid * resid))))
-    return offset, a, field, rms, float(semi.max() / semi.min())
+    return c + s * b_s, a, s * field_s, float(semi.max() / semi.min())
 
 
 def _fit_sphere(samples: np.ndarray):
-    """Hard iron only: the best sphere ``|m - b| = F`` (linear: ``|m|^2 = 2 b.m + F^2 - |b|^2``)."""
+    """Hard iron only: the best sphere ``|m - b| = F`` (linear: ``|m|^2 = 2 b.m + F^2 - |b|^2``), as :func:`_fit`."""
     c, s, x = _centred(samples, 4)
-    n = len(x)
-    design = np.concatenate([2.0 * x, np.ones((n, 1))], axis=1)
-    theta, _, rank, _ = np.linalg.lstsq(design, np.sum(x * x, axis=1), rcond=None)
+    design = np.empty((len(x), 4))
+    np.multiply(x, 2.0, out=design[:, :3])
+    design[:, 3] = 1.0
+    theta, _, rank, _ = np.linalg.lstsq(design, np.add.reduce(x * x, axis=1), rcond=None)
     if rank < 4:
         raise EllipsoidFitError(f"degenerate geometry (rank {rank} < 4)")
     b_s = theta[:3]
     r2 = float(theta[3] + b_s @ b_s)
     if not r2 > 0.0:
         raise EllipsoidFitError("not a sphere (imaginary)")
-    offset = c + s * b_s
-    field = s * math.sqrt(r2)
-    resid = np.linalg.norm(samples - offset, axis=1) - field
-    return offset, np.eye(3), field, float(math.sqrt(float(np.mean(resid * resid)))), 1.0
+    return c + s * b_s, _EYE, s * math.sqrt(r2), 1.0
+
+
+def _residuals(m: np.ndarray, offset, a, field) -> np.ndarray:
+    """``|A (m_i - b)| - F`` per sample (a sphere's ``A`` is the identity: no product needed, the same floats)."""
+    d = m - offset
+    return _norms(d if a is _EYE else d @ a.T) - field
+
+
+def _rms(m: np.ndarray, offset, a, field) -> float:
+    """RMS of :func:`_residuals` (uT): the quality of a fit, computed for the fit that is kept only."""
+    resid = _residuals(m, offset, a, field)
+    return math.sqrt(float(np.add.reduce(resid * resid)) / len(resid))
 
 
 def fit_sphere(samples) -> tuple[np.ndarray, np.ndarray, float, float]:
@@ -250,8 +277,8 @@ def fit_sphere(samples) -> tuple[np.ndarray, np.ndarray, float, float]:
     """
     m = np.asarray(samples, dtype=np.float64).reshape(-1, 3)
     m = m[np.all(np.isfinite(m), axis=1)]
-    offset, a, field, rms, _ = _fit_sphere(m)
-    return offset, a, field, rms
+    offset, _, field, _ = _fit_sphere(m)
+    return offset, np.eye(3), field, _rms(m, offset, _EYE, field)
 
 
 def fit_ellipsoid(samples) -> tuple[np.ndarray, np.ndarray, float, float]:
@@ -268,8 +295,8 @@ def fit_ellipsoid(samples) -> tuple[np.ndarray, np.ndarray, float, float]:
     """
     m = np.asarray(samples, dtype=np.float64).reshape(-1, 3)
     m = m[np.all(np.isfinite(m), axis=1)]
-    offset, a, field, rms, _ = _fit(m)
-    return offset, a, field, rms
+    offset, a, field, _ = _fit(m)
+    return offset, a, field, _rms(m, offset, a, field)
 
 
 # ---------------------------------------------------------------------------
@@ -614,7 +641,7 @@ class MagCalibrator:
                 t, m = t[keep], m[keep]
             if len(t) >= self.min_samples:
                 try:
-                    (c_s, _, f_s, _, _), _ = self._trimmed(_fit_sphere, m, t)
+                    (c_s, _, f_s, _), _, _ = self._trimmed(_fit_sphere, m, t)
                     if f_s >= 0.25 * self.field_range_uT[0]:
                         self._centre = tuple(float(v) for v in c_s)
                 except (EllipsoidFitError, np.linalg.LinAlgError):
@@ -639,7 +666,7 @@ class MagCalibrator:
         self.n_fits += 1
         self._attempted_fit = True
         try:
-            (offset, a, field, rms, ratio), inl = self._trimmed(_fit if soft else _fit_sphere, m, t)
+            (offset, a, field, ratio), inl, fitted = self._trimmed(_fit if soft else _fit_sphere, m, t)
         except EllipsoidFitError as e:
             self._reason = str(e)
             return
@@ -659,18 +686,18 @@ class MagCalibrator:
             self._reason = f"coverage {cov:.2f} < {self.min_coverage:.2f} (inliers about the fit)"
             return
         u = (m - offset) @ a.T
-        u /= np.maximum(np.linalg.norm(u, axis=1), 1e-12)[:, None]
+        u /= np.maximum(_norms(u), 1e-12)[:, None]
         spread = math.sqrt(max(float(np.linalg.eigvalsh(np.cov(u.T))[0]), 0.0))
         if spread < self.min_direction_spread:
             self._reason = f"direction spread {spread:.2f} < {self.min_direction_spread:.2f}"
             return
+        rms = _rms(fitted, offset, a, field)
         if rms > self.max_residual_fraction * field:
             self._reason = f"residual {rms:.2f} uT > {self.max_residual_fraction:.1%} of {field:.1f} uT"
             return
         if self._calibrated and cov < self._fit_cov:
             # the fit in force came from more directions: keep it while it still explains the samples
-            d = np.linalg.norm((m - np.asarray(self._b)) @ np.asarray(self._a).T, axis=1) - self._field
-            cur = math.sqrt(float(np.mean(d * d)))
+            cur = _rms(m, np.asarray(self._b), np.asarray(self._a), self._field)
             if cur <= self.max_residual_fraction * self._field:
                 self._reason = (f"kept the fit in force (coverage {self._fit_cov:.2f} > {cov:.2f}, "
                                 f"residual {cur:.2f} uT)")
@@ -701,37 +728,45 @@ class MagCalibrator:
         F over all samples) wins, so a jump of the offset leaves the old
         samples as outliers even when they are many; then the fit is
         repeated on the inliers until they no longer change (at most 3
-        times).  Returns the fit and the inlier mask of ``m``.
+        times).  Returns the fit ``(offset, A, F, axis ratio)``, the inlier mask of ``m`` and the samples the
+        fit was made on (its residual is computed by the caller when it needs it).  A start from the newest
+        samples is only tried when the fit to all of them left some out: with all of them inliers, no start can
+        have more.
         """
+        limit = self.outlier_fraction
 
         def inliers(res):
-            offset, a, field = res[0], res[1], res[2]
-            r = np.abs(np.linalg.norm((m - offset) @ a.T, axis=1) - field)
-            return r <= self.outlier_fraction * field
+            return np.abs(_residuals(m, res[0], res[1], res[2])) <= limit * res[2]
 
-        res = fit(m)
+        res, fitted = fit(m), m
         mask = inliers(res)
-        order = np.argsort(t, kind="stable")
-        for part in (2, 4):
-            newest = order[len(t) - len(t) // part:]
-            if len(newest) < self.min_samples:
-                break
-            try:
-                res_n = fit(m[newest])
-            except (EllipsoidFitError, np.linalg.LinAlgError):
-                continue
-            mask_n = inliers(res_n)
-            if np.count_nonzero(mask_n) > np.count_nonzero(mask):
-                res, mask = res_n, mask_n
+        n_in = int(np.count_nonzero(mask))
+        if n_in < len(m):
+            order = np.argsort(t, kind="stable")
+            for part in (2, 4):
+                newest = order[len(t) - len(t) // part:]
+                if len(newest) < self.min_samples:
+                    break
+                m_n = m[newest]
+                try:
+                    res_n = fit(m_n)
+                except (EllipsoidFitError, np.linalg.LinAlgError):
+                    continue
+                mask_n = inliers(res_n)
+                n_n = int(np.count_nonzero(mask_n))
+                if n_n > n_in:
+                    res, mask, fitted, n_in = res_n, mask_n, m_n, n_n
         for _ in range(3):
-            if np.count_nonzero(mask) < self.min_samples or np.all(mask):
+            if n_in < self.min_samples or n_in == len(m):
                 break
-            res = fit(m[mask])
+            fitted = m[mask]
+            res = fit(fitted)
             new = inliers(res)
             if np.array_equal(new, mask):
                 break
             mask = new
-        return res, mask
+            n_in = int(np.count_nonzero(mask))
+        return res, mask, fitted
 
     # -- batch ------------------------------------------------------------------
     def run(self, t_ns, mag_b) -> MagCalTrace:
