@@ -155,6 +155,7 @@ the start or a gap, or the reference not yet learnt), 'norm moving',
 from __future__ import annotations
 
 import math
+from array import array
 from dataclasses import dataclass
 
 import numpy as np
@@ -424,14 +425,16 @@ class MagCalibrator:
         self._r_min = 0.25 * self.field_range_uT[0]
         self._sector_scale = self.n_sectors / (2.0 * math.pi)
         nslots = self.n_bins * self.samples_per_bin
-        self._slot_m: list = [None] * nslots  # raw sample tuples
-        self._slot_t: list = [-1] * nslots  # t_ns, -1 = empty
+        # typed arrays: read and written per reading as fast as lists, handed to numpy without a conversion
+        self._slot_m = array("d", bytes(24 * nslots))  # raw samples, three floats a slot
+        self._slot_t = array("q", [-1]) * nslots  # t_ns, -1 = empty
         self._bin_count = [0] * self.n_bins
         self._n_stored = 0
         self._occupied = 0
         # centre of the direction bins: the bootstrap sphere until a fit is accepted, then the fit
         self._centre = None  # None until the first bootstrap sphere
-        self._recent: list = []  # (t_ns, m) reservoir for the bootstrap, one per _RECENT_DT_NS
+        self._recent = array("q")  # t_ns of the reservoir for the bootstrap, one per _RECENT_DT_NS
+        self._recent_m = array("d")  # its readings, three floats each
         self._centre_a = None  # soft iron of the accepted fit (None: identity)
         self._t_prev = None
         # calibration in force
@@ -495,51 +498,62 @@ class MagCalibrator:
             n_accepted=self.n_accepted, t_fit_ns=self._t_fit, t_first_fit_ns=self._t_first_fit)
 
     # -- binning ----------------------------------------------------------------
-    def _bin_of(self, mx: float, my: float, mz: float) -> int:
-        """Direction bin of a raw reading about the current centre, -1 if too close to it (as :meth:`update` bins)."""
+    def _bins(self, m: np.ndarray) -> np.ndarray:
+        """Direction bins of raw readings ``m`` (n, 3) about the current centre, -1 where too close to it.
+
+        The float operations of :meth:`update`'s bin of one reading, element by element (numpy's arithmetic
+        is IEEE's, as Python's; the azimuth by ``math.atan2`` as there), so that a re-binned sample lands in
+        the bin the streaming path gives it.
+        """
         cx, cy, cz = self._centre
-        dx, dy, dz = mx - cx, my - cy, mz - cz
+        dx, dy, dz = m[:, 0] - cx, m[:, 1] - cy, m[:, 2] - cz
         if self._centre_a is not None:
             (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = self._centre_a
             dx, dy, dz = (a00 * dx + a01 * dy + a02 * dz, a10 * dx + a11 * dy + a12 * dz,
                           a20 * dx + a21 * dy + a22 * dz)
-        r = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if r < self._r_min:
-            return -1  # direction undefined near the centre (a still phone before any fit)
-        nb, ns = self.bin_bands, self.n_sectors
-        band = min(int((dz / r + 1.0) * 0.5 * nb), nb - 1)
-        sector = min(int((math.atan2(dy, dx) + math.pi) * self._sector_scale), ns - 1)
-        return band * ns + sector
+        r = np.sqrt(dx * dx + dy * dy + dz * dz)
+        k = np.full(len(m), -1, dtype=np.int64)  # direction undefined near the centre (a still phone before any fit)
+        ok = np.flatnonzero(r >= self._r_min)
+        if len(ok):
+            nb, ns = self.bin_bands, self.n_sectors
+            band = np.minimum(((dz[ok] / r[ok] + 1.0) * 0.5 * nb).astype(np.int64), nb - 1)
+            azimuth = np.array(list(map(math.atan2, dy[ok].tolist(), dx[ok].tolist())))
+            sector = np.minimum(((azimuth + math.pi) * self._sector_scale).astype(np.int64), ns - 1)
+            k[ok] = band * ns + sector
+        return k
 
     def _stored(self) -> tuple[np.ndarray, np.ndarray]:
-        idx = [i for i, t in enumerate(self._slot_t) if t >= 0]
-        if not idx:
-            return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-        t = np.array([self._slot_t[i] for i in idx], dtype=np.int64)
-        m = np.array([self._slot_m[i] for i in idx], dtype=np.float64)
-        return t, m
+        """The store's samples in slot order: ``t_ns`` (n,), ``m`` (n, 3)."""
+        t = np.frombuffer(self._slot_t, dtype=np.int64)
+        full = t >= 0
+        return t[full], np.frombuffer(self._slot_m, dtype=np.float64).reshape(-1, 3)[full]  # copies
 
-    def _refill(self, t: np.ndarray, m: np.ndarray) -> None:
-        """Rebuild the store from samples (newest first wins its bin) about the current centre."""
-        nslots = self.n_bins * self.samples_per_bin
-        self._slot_m = [None] * nslots
-        self._slot_t = [-1] * nslots
-        self._bin_count = [0] * self.n_bins
-        self._n_stored = 0
-        self._occupied = 0
-        per = self.samples_per_bin
-        for i in np.argsort(-t, kind="stable").tolist():
-            mi = (float(m[i, 0]), float(m[i, 1]), float(m[i, 2]))
-            k = self._bin_of(*mi)
-            if k < 0 or self._bin_count[k] >= per:
-                continue
-            j = k * per + self._bin_count[k]
-            self._slot_t[j] = int(t[i])
-            self._slot_m[j] = mi
-            self._bin_count[k] += 1
-            self._n_stored += 1
-            if self._bin_count[k] == 1:
-                self._occupied += 1
+    def _refill(self, t: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rebuild the store from samples (newest first wins its bin) about the current centre; returns it.
+
+        Each bin takes its ``samples_per_bin`` newest samples, into its slots newest first; the store is
+        returned as :meth:`_stored` gives it (in slot order).
+        """
+        per, nbins = self.samples_per_bin, self.n_bins
+        order = np.argsort(-t, kind="stable")  # newest first
+        k = self._bins(m[order])
+        by_bin = np.argsort(k, kind="stable")  # grouped by bin, newest first within each
+        kb = k[by_bin]
+        rank = np.arange(len(kb)) - np.searchsorted(kb, kb, side="left")  # place within its bin
+        take = (kb >= 0) & (rank < per)
+        slot = kb[take] * per + rank[take]  # ascending: the slot order
+        src = order[by_bin[take]]
+        t_st, m_st = t[src], m[src]
+        slot_t = np.full(nbins * per, -1, dtype=np.int64)
+        slot_t[slot] = t_st
+        slot_m = np.zeros((nbins * per, 3))
+        slot_m[slot] = m_st
+        self._slot_t, self._slot_m = array("q", slot_t.tobytes()), array("d", slot_m.tobytes())
+        counts = np.bincount(kb[take], minlength=nbins)
+        self._bin_count = counts.tolist()
+        self._n_stored = len(slot)
+        self._occupied = int(np.count_nonzero(counts))
+        return t_st, m_st
 
     # -- streaming ------------------------------------------------------------
     def update(self, t_ns: int, mx: float, my: float, mz: float) -> tuple:
@@ -561,11 +575,16 @@ class MagCalibrator:
         m = (mx, my, mz)
         if not self._calibrated:
             rec = self._recent
-            if not rec or t_ns - rec[-1][0] >= _RECENT_DT_NS:
-                rec.append((t_ns, m))
+            if not rec or t_ns - rec[-1] >= _RECENT_DT_NS:
+                rec.append(t_ns)
+                self._recent_m.extend(m)
                 t_old = t_ns - self._bootstrap_ns
-                while rec[0][0] < t_old:
-                    rec.pop(0)
+                n_old = 0
+                while rec[n_old] < t_old:
+                    n_old += 1
+                if n_old:
+                    del rec[:n_old]
+                    del self._recent_m[:3 * n_old]
         self._t_prev = t_ns
         centre = self._centre
         if centre is not None:
@@ -598,7 +617,8 @@ class MagCalibrator:
                         self._new_bins_since += 1
                     counts[k] += 1
                 ts[j] = t_ns
-                self._slot_m[j] = m
+                sm, j = self._slot_m, 3 * j
+                sm[j], sm[j + 1], sm[j + 2] = mx, my, mz
                 self._new_since += 1
         if self._t_last_attempt is None:
             self._t_last_attempt = t_ns
@@ -633,8 +653,8 @@ class MagCalibrator:
         if not self._calibrated:
             # centre the bins on the best sphere through the store and the recent readings
             if self._recent:
-                t = np.concatenate([t[keep], np.array([r[0] for r in self._recent], dtype=np.int64)])
-                m = np.concatenate([m[keep], np.array([r[1] for r in self._recent])])
+                t = np.concatenate([t[keep], np.frombuffer(self._recent, dtype=np.int64)])
+                m = np.concatenate([m[keep], np.frombuffer(self._recent_m, dtype=np.float64).reshape(-1, 3)])
                 t, first = np.unique(t, return_index=True)
                 m = m[first]
             else:
@@ -649,11 +669,9 @@ class MagCalibrator:
             if self._centre is None:
                 self._reason = f"too few samples ({len(t)} < {self.min_samples})"
                 return
-            self._refill(t, m)
-            t, m = self._stored()
+            t, m = self._refill(t, m)
         elif not np.all(keep):
-            self._refill(t[keep], m[keep])
-            t, m = self._stored()
+            t, m = self._refill(t[keep], m[keep])
         n = len(t)
         if n < self.min_samples:
             self._reason = f"too few samples ({n} < {self.min_samples})"
@@ -706,7 +724,7 @@ class MagCalibrator:
         self._b = tuple(float(v) for v in offset)
         self._a = tuple(tuple(float(v) for v in row) for row in a) if soft else _IDENTITY
         self._centre, self._centre_a = self._b, (self._a if soft else None)
-        self._recent = []
+        self._recent, self._recent_m = array("q"), array("d")
         self._refill(t, m)
         self._model = "hard+soft iron" if soft else "hard iron"
         self._field, self._resid, self._ratio = float(field), float(rms), float(ratio)
@@ -778,13 +796,14 @@ class MagCalibrator:
         """
         t = np.asarray(t_ns, dtype=np.int64).reshape(-1)
         m = np.asarray(mag_b, dtype=np.float64).reshape(len(t), 3)
-        out = np.empty((len(t), 3))
-        idx = np.empty(len(t), dtype=np.int64)
         n0 = len(self._fits)
-        for i, (ti, (mx, my, mz)) in enumerate(zip(t.tolist(), m.tolist())):
-            out[i] = self.update(ti, mx, my, mz)
-            idx[i] = self.n_accepted
-        return MagCalTrace(t_ns=t, mag_cal_b=out, fit_index=idx, fits=tuple(self._fits[n0:]), status=self.status)
+        upd = self.update
+        rows, idx = [], []
+        for ti, (mx, my, mz) in zip(t.tolist(), m.tolist()):
+            rows.append(upd(ti, mx, my, mz))
+            idx.append(self.n_accepted)
+        return MagCalTrace(t_ns=t, mag_cal_b=np.array(rows, dtype=np.float64).reshape(len(t), 3),
+                           fit_index=np.array(idx, dtype=np.int64), fits=tuple(self._fits[n0:]), status=self.status)
 
 
 # ---------------------------------------------------------------------------
