@@ -749,10 +749,15 @@ def calibrate_magnetometer(calibrator, t_ns: np.ndarray, mag_b: np.ndarray):
         return out, ok
     calibrator.reset()
     upd = calibrator.update
-    for i, (ti, (mx, my, mz)) in enumerate(zip(t_ns.tolist(), mag_b.tolist())):
-        m = upd(ti, mx, my, mz)
-        out[i, 0], out[i, 1], out[i, 2] = float(m[0]), float(m[1]), float(m[2])
-        ok[i] = calibrator.calibrated
+    readings = zip(t_ns.tolist(), mag_b.tolist())
+    rows = []
+    for i, (ti, (mx, my, mz)) in enumerate(readings):
+        rows.append(upd(ti, mx, my, mz))
+        if calibrator.calibrated:  # a fit in force stays in force (only reset() undoes it): so from here on
+            ok[i:] = True
+            break
+    rows += [upd(ti, mx, my, mz) for ti, (mx, my, mz) in readings]  # the rest of the stream
+    out[:] = np.array(rows, dtype=np.float64).reshape(len(t_ns), 3)
     return out, ok
 
 
