@@ -13,8 +13,10 @@ process and on the same samples:
   with what it gets in the pipeline (the sensor-health checks, the attitude
   EKF with its magnetometer calibration, the calibration alone, the grid
   resampler, the step detector, the heading smoother, Kubrak's speed
-  window), in events (or grid samples) per second and microseconds per
-  input, and its cost per pipeline event;
+  window, and issue #17's carry-mode detector and walking-direction stage,
+  each fed per grid sample what the pipeline feeds it), in events (or grid
+  samples) per second and microseconds per input, and its cost per pipeline
+  event;
 * **pipeline, streaming**: ``Pipeline(keep_steps=False).update()`` once per
   event, as the app calls it (the events are made into a list first, so the
   time is the pipeline's alone);
@@ -43,9 +45,11 @@ The machine has few cores and other work may run beside the benchmark: every
 timing is the process's CPU time, the best of ``--repeat`` runs (3).  ``--minutes N`` simulates an
 N-minute walk instead (the memory rows then use N/6 and N minutes); only the
 full hour writes ``THROUGHPUT_RESULTS.md`` (and folds it into ``RESULTS.md``),
-unless ``--write`` is given.  ``--only fast memory --json RUN.json`` reruns
-only those parts on top of an earlier run's numbers (the rest is slow) and
-says so in the report.
+unless ``--write`` is given.  ``--only PART ... --json RUN.json`` (parts:
+``pipeline stages fast memory profile``) reruns only those parts on top of an
+earlier run's numbers (the rest is slow): the report's header says which rows
+are from which run, and a table sets the rerun rows against the ones they
+replaced.
 """
 
 from __future__ import annotations
@@ -204,17 +208,28 @@ def stage_timings(rec, events: list, repeat: int) -> list[dict]:
         w.features()
 
     row("speed window", "grid samples", len(samples), _best(speed, repeat), "Kubrak's eq.-1 regressors")
-    # the EKF's attitude on the grid, as the smoother gets it
+    # per grid sample what the pipeline has when it makes it (an accelerometer reading at or after the sample):
+    # that reading, the last gyroscope reading, the EKF's attitude once started, and whether the detector found
+    # a step there
     a = AttitudeEKF(mag_calibrator=MagCalibrator())
-    qs, k = [], 0
+    det = StepDetector()
+    feed, k = [], 0
     grid_t = [t for t, _ in samples]
+    gyro_v = None
     for s, t, v in events:
-        while k < len(grid_t) and grid_t[k] <= t:
-            if a.initialized:
-                qs.append(a.q)
-            k += 1
-        (a.predict if s == GYRO else a.update_acc if s == ACC else a.update_mag)(t, v[0], v[1], v[2])
-    mats = [quat.to_matrix(q) for q in qs]
+        if s == GYRO:
+            a.predict(t, v[0], v[1], v[2])
+            gyro_v = v
+        elif s == MAG:
+            a.update_mag(t, v[0], v[1], v[2])
+        else:
+            a.update_acc(t, v[0], v[1], v[2])
+            while k < len(grid_t) and grid_t[k] <= t:
+                step = det.update_grid(grid_t[k], samples[k][1]) is not None
+                feed.append((grid_t[k], a.q if a.initialized else None, v, gyro_v, step))
+                k += 1
+    started = [f for f in feed if f[1] is not None]
+    mats = [quat.to_matrix(f[1]) for f in started]
 
     def smoother():
         sm = RotationSmoother(forward_b="auto")
@@ -222,7 +237,60 @@ def stage_timings(rec, events: list, repeat: int) -> list[dict]:
             sm.update(m)
 
     row("heading smoother", "grid samples", len(mats), _best(smoother, repeat), "section 4.3, from R")
+    row_carry, row_walkdir = _stage_inputs_issue17(feed, started, mats)
+    if row_carry is not None:
+        row("carry-mode detector", "grid samples", len(feed), _best(row_carry, repeat),
+            "issue #17: core.pdr.carry, the detector alone (its per-mode step detectors not counted)")
+    if row_walkdir is not None:
+        row("walking direction", "grid samples", len(started), _best(row_walkdir, repeat),
+            "issue #17: core.pdr.walkdir, fed every grid sample after the attitude's start")
     return rows
+
+
+def _stage_inputs_issue17(feed: list, started: list, mats: list):
+    """The carry-mode detector's and the walking-direction stage's timed loops (None where core has no such stage).
+
+    Both are made as the pipeline makes them (its grid rate, its heading delay) and fed what it feeds them:
+    the detector every grid sample's accelerometer reading and the last gyroscope reading; the walking
+    direction, after the attitude's start, the attitude, that reading, the smoother's forward vector and axis
+    (from an untimed smoother pass) and the step flag.
+    """
+    from core.pdr.heading import RotationSmoother
+    from core.pdr.pipeline import Pipeline
+
+    try:
+        from core.pdr.carry import CarryModeDetector
+    except ImportError:  # pragma: no cover - before issue #17's stage
+        CarryModeDetector = None
+    try:
+        from core.pdr.walkdir import WalkingDirection
+    except ImportError:  # pragma: no cover
+        WalkingDirection = None
+    p = Pipeline(keep_steps=False)
+    carry = walkdir = None
+    if CarryModeDetector is not None:
+        def carry():
+            c = CarryModeDetector(grid_rate_hz=p.grid_rate_hz)
+            up = c.update_grid
+            for t, _, av, gv, _ in feed:
+                if gv is None:
+                    up(t, av[0], av[1], av[2])
+                else:
+                    up(t, av[0], av[1], av[2], gv[0], gv[1], gv[2])
+    if WalkingDirection is not None:
+        sm = RotationSmoother(forward_b="auto")
+        fwd = []
+        for m in mats:
+            sm.update(m)
+            fwd.append((sm.forward_east, sm.forward_north, sm.forward_b))
+        wd_in = [(t, q, av, fe, fn, step, axis) for (t, q, av, _, step), (fe, fn, axis) in zip(started, fwd)]
+
+        def walkdir():
+            w = WalkingDirection(grid_rate_hz=p.grid_rate_hz, delay_s=p.heading_delay_s)
+            up = w.update
+            for t, q, av, fe, fn, step, axis in wd_in:
+                up(t, q, av[0], av[1], av[2], fe, fn, step, axis)
+    return carry, walkdir
 
 
 # ---------------------------------------------------------------------------
@@ -249,7 +317,8 @@ def pipeline_timings(rec, events: list, repeat: int) -> list[dict]:
         for _ in rec.events([GYRO, ACC, MAG]):
             pass
 
-    for name, fn, note in (("pipeline, streaming", streaming, "update() per event, keep_steps=False (the app)"),
+    for name, fn, note in (("pipeline, streaming", streaming, "update() per event, keep_steps=False (the app; "
+                                                            "defaults: carry-mode and walking-direction stages on)"),
                            ("pipeline, batch", batch, "run(): iterates the recording, keeps the attitude log"),
                            ("recording.events()", iterate, "the batch run's event iteration alone")):
         s = _best(fn, repeat)
@@ -425,7 +494,8 @@ def markdown(d: dict) -> str:
          f"run in one process on {m['cpu']} ({m['cores']} cores), CPython {m['python']}, numpy {m['numpy']}, "
          f"ahrs {m['ahrs']}, imufusion {m['imufusion']}; commit {m['commit']}, {m['date']}.  Every time is the "
          f"process's CPU time, the best of {d['repeat']} runs (other work shared the machine's two cores).", "",
-         *([d["rerun"], ""] if d.get("rerun") else []),
+         *([_rerun_header(d), ""] if d.get("parts") else [d["rerun"], ""] if d.get("rerun") else []),
+         *_against_previous(d),
          "### Pipeline and stages", "",
          "| what | inputs | per second | µs per input | µs per pipeline event | note |",
          "|---|---|---:|---:|---:|---|"]
@@ -558,7 +628,7 @@ def main(argv=None) -> int:
                     help="with --markdown-only: the --json of a run on the code before the speed work")
     ap.add_argument("--after-short", type=Path, default=None,
                     help="with --markdown-only: the --json of a run of this code on --before's walk")
-    ap.add_argument("--only", nargs="+", choices=("fast", "memory"), default=None,
+    ap.add_argument("--only", nargs="+", choices=tuple(PARTS), default=None,
                     help="rerun only these parts on top of the run in --json (updated in place), then write the report")
     ap.add_argument("--memory-child", type=float, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -620,24 +690,78 @@ def main(argv=None) -> int:
     return 0
 
 
+#: the parts ``--only`` reruns, as the report's header names them
+PARTS = {"pipeline": "the pipeline rows (streaming, batch, the event iteration)", "stages": "the stage rows",
+         "fast": "the fast path and its stage timing", "memory": "the memory of a batch run",
+         "profile": "the streaming path's profile"}
+
+
+def _rerun_header(d: dict) -> str:
+    """Which rows are from which run: every part rerun on its own, then the run the rest is from."""
+    parts = d["parts"]
+    said = [f"{PARTS[k]} at commit {v['commit']}, {v['date']}" + (f" ({v['note']})" if v.get("note") else "")
+            for k, v in parts.items()]
+    rest = ["the peers", "the before-and-after tables"] + [PARTS[k] for k in PARTS if k not in parts]
+    return (f"Rerun on their own (`--only`): {'; '.join(said)}; every other number ({', '.join(rest)}) is from "
+            f"the run at commit {d['machine']['commit']}, {d['machine']['date']}.")
+
+
+def _against_previous(d: dict) -> list[str]:
+    """The rows of the latest ``--only`` rerun against the same rows of the run they replaced."""
+    prev = d.get("previous")
+    if not prev:
+        return []
+    now = {"pipeline": d["pipeline"], "stages": d["stages"], "fast": [d["fast"]] if d.get("fast") else []}
+    L = ["### This rerun against the one before", "",
+         "| what | before, per second | after, per second | after / before | before: commit |",
+         "|---|---:|---:|---:|---|"]
+    for part, old in prev.items():
+        before = {r["stage"]: r for r in old["rows"]}
+        for n in now[part]:
+            r = before.get(n["stage"])
+            if r is None:
+                L.append(f"| {n['stage']} | (a new row) | {n['per_s']:,.0f} | | |")
+            else:
+                L.append(f"| {n['stage']} | {r['per_s']:,.0f} | {n['per_s']:,.0f} | {n['per_s'] / r['per_s']:.2f} | "
+                         f"{old['commit']} ({old['date']}) |")
+    return L + ["", "CPU time, best of the runs, on a machine shared with other work: a stage the change did not "
+                "touch can move by tens of per cent between two runs.", ""]
+
+
 def _rerun(args) -> int:
     """``--only``: the chosen parts anew on the walk of the run in ``--json``; the rest of its numbers kept."""
     if args.json is None or not args.json.exists():
         raise SystemExit("--only needs --json: an earlier run's numbers to update")
     d = json.loads(args.json.read_text())
     m = machine()
-    note = []
+    parts = d.setdefault("parts", {})
+    when = {k: parts.get(k, {"commit": d["machine"]["commit"], "date": d["machine"]["date"]}) for k in PARTS}
+    d["previous"] = {}
+    rec = walk(d["minutes"]) if {"pipeline", "stages", "fast"} & set(args.only) else None
+    events = list(rec.events([GYRO, ACC, MAG])) if {"pipeline", "stages"} & set(args.only) else None
+    if "pipeline" in args.only:
+        d["previous"]["pipeline"] = {**when["pipeline"], "rows": d["pipeline"]}
+        d["pipeline"] = pipeline_timings(rec, events, args.repeat)
+        for r in d["pipeline"]:
+            print(f"{r['stage']:28s} {r['per_s']:10,.0f} /s", file=sys.stderr)
+    if "stages" in args.only:
+        d["previous"]["stages"] = {**when["stages"], "rows": d["stages"]}
+        d["stages"] = stage_timings(rec, events, args.repeat)
+        for r in d["stages"]:
+            print(f"{r['stage']:28s} {r['per_s']:10,.0f} /s", file=sys.stderr)
+    del events
     if "fast" in args.only:
-        rec = walk(d["minutes"])
+        if d.get("fast"):
+            d["previous"]["fast"] = {**when["fast"], "rows": [{k: v for k, v in d["fast"].items() if k != "stages"}]}
         d["fast"] = fast_timings(rec, args.repeat)
         print(f"fast path {d['fast']['per_s']:,.0f} events/s", file=sys.stderr)
-        note.append("the fast path")
     if "memory" in args.only:
         d["memory"] = [memory(x) for x in (d["minutes"] / 6.0, d["minutes"])]
-        note.append("the memory of a batch run")
-    d["rerun"] = (f"Rerun on its own (`--only {' '.join(args.only)}`) at commit {m['commit']}, {m['date']}: "
-                  f"{' and '.join(note)}; every other number is from the run at commit "
-                  f"{d['machine']['commit']}, {d['machine']['date']}.")
+    if "profile" in args.only:
+        d["profile"], d["profile_total_s"] = profile(rec or walk(d["minutes"]), min(10.0, d["minutes"]))
+    for k in args.only:
+        parts[k] = {"commit": m["commit"], "date": m["date"]}
+    d.pop("rerun", None)
     args.json.write_text(json.dumps(d, indent=1))
     RESULTS_MD.write_text(markdown(d))
     from benchmarks.report import refresh_sections
