@@ -122,3 +122,24 @@ def test_fast_refuses_what_it_does_not_implement():
         run_fast(walk.recording, gnss=object(), carry=False)
     with pytest.raises(NotImplementedError):
         run_fast(walk.recording)  # carry-mode detection, on by default
+
+
+def test_fast_magnetometer_calibration_equals_core_reading_by_reading():
+    # the compiled per-reading part with core's fit attempts between its chunks (desktop.fast.magcal) against
+    # MagCalibrator.update: the same floats (bit for bit), the same fits and final status; the IPIN cut waves the
+    # phone first, so the calibrator bootstraps, fits, and later attempts keep or replace the fit
+    from core.pdr.magcal import MagCalibrator
+    from desktop.fast.magcal import calibrate_stream
+
+    s = _real(REAL[0][0], 0.0, 90.0).streams["mag"]
+    t, v = np.asarray(s.t_ns, dtype=np.int64), np.asarray(s.values, dtype=np.float64)[:, :3]
+    ref = MagCalibrator()
+    rows, flags = [], []
+    for ti, (x, y, z) in zip(t.tolist(), v.tolist()):
+        rows.append(ref.update(ti, x, y, z))
+        flags.append(ref.calibrated)
+    cal = MagCalibrator()
+    out, ok = calibrate_stream(cal, t, v)
+    assert np.array_equal(np.array(rows).view(np.int64), out.view(np.int64))
+    assert ok.tolist() == flags and any(flags)
+    assert cal._fits == ref._fits and cal.status == ref.status and ref.n_fits > 5

@@ -24,8 +24,9 @@ What it does not re-implement, and why:
   itself (:func:`start_with_reference`), whose state is then handed over;
 * the online magnetometer calibration (:class:`core.pdr.magcal.MagCalibrator`,
   ellipsoid fits): it sees only the raw readings, never the attitude, so it is
-  run over the magnetometer stream beforehand (:func:`calibrate_magnetometer`,
-  Python) and the kernel gets the calibrated readings;
+  run over the magnetometer stream beforehand (:func:`calibrate_magnetometer`:
+  its per-reading part compiled, its fits core's Python) and the kernel gets the
+  calibrated readings;
 * the vertical offset of an outdoor site's field, the quasi-static field
   detector and ``mag_mode="full"``: not used by the default pipeline; the fast
   path refuses a filter configured with them (:func:`check_supported`).
@@ -38,6 +39,7 @@ import math
 import numpy as np
 
 from desktop.fast.jit import kernel
+from desktop.fast.magcal import calibrate_stream
 
 # event kinds of the merged arrays
 GYRO_K, ACC_K, MAG_K = 0, 1, 2
@@ -736,29 +738,16 @@ def settings_arrays(ekf) -> tuple[np.ndarray, np.ndarray]:
 
 
 def calibrate_magnetometer(calibrator, t_ns: np.ndarray, mag_b: np.ndarray):
-    """The online calibration over the whole magnetometer stream, before the filter (Python; see the docstring).
+    """The online calibration over the whole magnetometer stream, before the filter (see the docstring).
 
     The calibrator sees each raw reading and nothing of the attitude, so running it first gives what it gives
-    inside the filter.  Returns the calibrated readings (n, 3) and whether it had a fit at each.
+    inside the filter: its per-reading part compiled, its fit attempts core's own
+    (:func:`desktop.fast.magcal.calibrate_stream`).  Returns the calibrated readings (n, 3) and whether it had
+    a fit at each.
     """
-    out = np.empty((len(t_ns), 3))
-    ok = np.zeros(len(t_ns), dtype=np.bool_)
     if calibrator is None:
-        out[:] = mag_b
-        ok[:] = True
-        return out, ok
-    calibrator.reset()
-    upd = calibrator.update
-    readings = zip(t_ns.tolist(), mag_b.tolist())
-    rows = []
-    for i, (ti, (mx, my, mz)) in enumerate(readings):
-        rows.append(upd(ti, mx, my, mz))
-        if calibrator.calibrated:  # a fit in force stays in force (only reset() undoes it): so from here on
-            ok[i:] = True
-            break
-    rows += [upd(ti, mx, my, mz) for ti, (mx, my, mz) in readings]  # the rest of the stream
-    out[:] = np.array(rows, dtype=np.float64).reshape(len(t_ns), 3)
-    return out, ok
+        return np.array(mag_b, dtype=np.float64).reshape(len(t_ns), 3), np.ones(len(t_ns), dtype=np.bool_)
+    return calibrate_stream(calibrator, t_ns, mag_b)
 
 
 def start_with_reference(ekf, kind, t, v, cal_ok, tick_event, out_q, out_acc_s2, out_mag_s2, out_mag_rej) -> tuple:

@@ -7,8 +7,9 @@ apart where the data allow it:
    merged in the pipeline's order, as arrays (vectorised); the sensor-health
    counters (vectorised where no reading sits on a rail or repeats, else
    core's :class:`core.pdr.pipeline.SensorHealth`);
-2. the magnetometer calibration over its stream (Python; it never sees the
-   attitude: :func:`desktop.fast.attitude.calibrate_magnetometer`);
+2. the magnetometer calibration over its stream (it never sees the attitude:
+   :func:`desktop.fast.attitude.calibrate_magnetometer`; compiled per reading,
+   its fits core's Python);
 3. the accelerometer norm (eq. 2) and its uniform grid (compiled);
 4. the attitude filter over all events, the attitude taken at each grid sample
    (compiled after the reference's own start: :mod:`desktop.fast.attitude`);
@@ -128,7 +129,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, **params) -> 
     cal_ok = np.ones(len(ev.t), dtype=np.bool_)
     if ekf.use_magnetometer and len(mag_pos):
         v[mag_pos], cal_ok[mag_pos] = fatt.calibrate_magnetometer(calibrator, ev.t[mag_pos], ev.v[mag_pos])
-    clock("magnetometer calibration (core's, Python)")
+    clock("magnetometer calibration (compiled per reading; core's fits, Python)")
     # 3. the grid
     acc_pos = ev.pos[fatt.ACC_K]
     gt, gx, src, restart = grid_of(ev.t[acc_pos], acc_norm(ev.v[acc_pos]), p.grid_rate_hz)
