@@ -12,7 +12,7 @@ import pytest
 from core.conventions import CARRY_HANDHELD, CARRY_MODES, CARRY_POCKET, CARRY_STILL, CARRY_SWINGING, GYRO
 from core.pdr.carry import CarryModeDetector, time_in_modes
 from core.pdr.pipeline import Pipeline
-from core.pdr.steps import STEP_GATES, StepDetector
+from core.pdr.steps import POCKET_GATES, STEP_GATES, StepDetector
 from core.recording import Recording
 from desktop.placements import simulate_still
 from desktop.simulator import simulate_walk
@@ -141,20 +141,22 @@ def test_calibration_waving_still_rejected():
 
 def test_stride_comb_counts_asymmetric_steps():
     """A norm with a strong stride component (the near leg's impacts larger, as in a pocket): every other valley
-    stays above g, so the hand-held gates count half the steps; the pocket's gates (comb) count them all."""
+    stays above g, so the hand-held gates count half the steps; the limb gates (comb) count them all."""
     rate, f_step = 50.0, 1.8
     t = np.arange(0.0, 33.0, 1.0 / rate)
     walking = t >= 3.0  # 3 s standing, then 30 s of walking
     x = 9.81 + walking * (1.2 * np.cos(2 * np.pi * f_step * t) + 1.5 * np.cos(np.pi * f_step * t))
     n_true = int(30.0 * f_step)
     counts = {}
-    for mode in (CARRY_HANDHELD, CARRY_POCKET):
+    for mode, gates in ((CARRY_HANDHELD, STEP_GATES[CARRY_HANDHELD]), (CARRY_POCKET, POCKET_GATES),
+                        (CARRY_SWINGING, STEP_GATES[CARRY_SWINGING])):
         d = StepDetector()
-        d.set_gates(STEP_GATES[mode])
+        d.set_gates(gates)
         d.step_period_s = 1.0 / f_step
         counts[mode] = sum(d.update_grid(int(ti * 1e9), xi) is not None for ti, xi in zip(t, x))
     assert counts[CARRY_HANDHELD] < 0.6 * n_true
     assert abs(counts[CARRY_POCKET] - n_true) <= 3, counts
+    assert abs(counts[CARRY_SWINGING] - n_true) <= 3, counts
 
 
 def test_carry_off_and_diagnostics():

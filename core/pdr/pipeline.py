@@ -688,8 +688,18 @@ class Pipeline:
         mode = max(walking, key=walking.get)
         if mode not in self._CARRY_WORDS:
             return None
+        wd = self.walkdir
+        how = []
+        if self.step_gates.get(mode) != self.step_gates.get(CARRY_HANDHELD):
+            how.append("steps counted with that mode's gates")
+        if wd is not None and wd.n_steps_offset:
+            how.append(f"walking direction from the acceleration on {wd.n_steps_offset} of {self.n_steps} steps "
+                       f"(offset {math.degrees(wd.offset_rad):+.0f} deg from the phone's axis at the end)")
+        else:
+            how.append("walking direction from the phone's axis (no walking-direction estimate yet)")
         return (f"phone carried {self._CARRY_WORDS[mode]} {100 * walking[mode] / total:.0f} % of the walking time "
-                f"({len(self.carry.changes)} carry-mode changes): steps counted with that mode's gates")
+                f"({len(self.carry.changes)} carry-mode change{'s' if len(self.carry.changes) != 1 else ''}): "
+                + "; ".join(how))
 
     def _rotation_limit_rad_s(self) -> float:
         """The rotation gate in force: wider for a swinging arm whose rotation is periodic about one axis."""
@@ -798,7 +808,9 @@ class Pipeline:
             out.append(f"magnetometer {100 * rej / (used + rej):.0f} % rejected: the heading leans on the "
                        f"gyroscope (bent or miscalibrated field)")
         sm = self.smoother
-        if getattr(sm, "auto_axis", False) and sm.n_upright > 0.5 * max(self.detector.n_grid, 1):
+        wd = self.walkdir
+        by_acc = wd is not None and wd.n_steps_offset > 0.5 * max(self.n_steps, 1)
+        if getattr(sm, "auto_axis", False) and sm.n_upright > 0.5 * max(self.detector.n_grid, 1) and not by_acc:
             out.append("phone upright most of the time (pocket or hanging hand): walking direction from the back "
                        "of the phone, off by an unknown constant without GPS")
         if self.n_nonfinite:
