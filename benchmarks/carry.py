@@ -400,7 +400,7 @@ def _f(x, fmt="{:.2f}"):
 
 
 def markdown(summary: dict, meta: dict) -> str:
-    lines = ["# Carry modes (issue #17): step counts per placement and the mode classification", "",
+    lines = ["## Carry modes (issue #17): step counts per placement and the mode classification", "",
              f"`python -m benchmarks.carry {' '.join(meta.get('argv', []))}` "
              f"({meta.get('n_recordings')} recordings, {meta.get('wall_s', 0):.0f} s). "
              "Before = `Pipeline(carry=False)` (the hand-held detector of before #17), after = `Pipeline()` "
@@ -418,7 +418,7 @@ def markdown(summary: dict, meta: dict) -> str:
                   f"{tm['detector_us_per_sample']:.1f} us per grid sample.", ""]
     for key, s in summary.items():
         ds, sp = key.split("/")
-        lines += [f"## {ds}, {sp} split ({s['n']} recordings)", ""]
+        lines += [f"### {ds}, {sp} split ({s['n']} recordings)", ""]
         variants = [v for v in ("before", "after", "after_acc_only") if f"{v}_mae_pct" in s["steps"][0]]
         head = "| placement | n | " + " | ".join(f"{v} MAE % | {v} mean % | {v} F1" for v in variants) + " |"
         lines += [head, "|" + "---|" * (2 + 3 * len(variants))]

@@ -423,7 +423,7 @@ def cost_us_per_sample(n: int = 20000) -> float:
 
 # -- report ---------------------------------------------------------------------------------------------------
 def markdown(res: dict) -> str:
-    L = ["# Walking direction per carry mode (issue #17 items 3-4)", "",
+    L = ["## Walking direction per carry mode (issue #17 items 3-4)", "",
          "Built by `python -m benchmarks.walkdir` (see its docstring for the method). \"before\": today's step "
          "heading (smoothed device axis); \"after\": plus the acceleration offset of `core.pdr.walkdir` on every "
          "step (`walking_direction=\"acceleration\"`); \"auto\": the pipeline's default.", "",
@@ -434,7 +434,7 @@ def markdown(res: dict) -> str:
         L += [f"Simulator rows from an earlier run ({res['sim_reused_from']}); the real walks rerun at "
               f"{res.get('run_at')}.", ""]
     if sim:
-        L += ["## Simulator: |step heading - true walking heading| after 10 steps (deg)", "",
+        L += ["### Simulator: |step heading - true walking heading| after 10 steps (deg)", "",
               f"Target: median <= {TARGET_DEG:g} deg in every placement (\"after\").  Walks over 90: walks whose own "
               "median error is above 90 deg (a sign error).", "",
               "The step heading's error is the sum of two: the offset's (the estimator of `core.pdr.walkdir`: "
@@ -454,7 +454,7 @@ def markdown(res: dict) -> str:
         L.append("")
     ip = res.get("ipol", {})
     if ip:
-        L += ["## IPOL waist walks (tuning split): 10 m out, U-turn, 10 m back", "",
+        L += ["### IPOL waist walks (tuning split): 10 m out, U-turn, 10 m back", "",
               f"{ip['trials']} trials.  Truth: the walking direction is the sensor's -z (out of the back) axis "
               "(mounting assumption).  The estimate at the end of the walk (before the pause that ends each "
               f"trial) against that axis: median |error| {ip['offset_error_median_abs_deg']} deg, p90 "
@@ -471,7 +471,7 @@ def markdown(res: dict) -> str:
         L.append("")
     gw = res.get("gps_walks", [])
     if gw:
-        L += ["## Outdoor phone walks against the GPS course (report only, nothing tuned)", "",
+        L += ["### Outdoor phone walks against the GPS course (report only, nothing tuned)", "",
               "Spread: circular |PDR - GPS| around the walk's own mean difference (offset-free); abs: median "
               "|PDR - GPS| with the declination (walks with a magnetometer).", "",
               "| walk | mag | stretches | before: mean diff / spread / abs | after | auto | offset over the steps | "
