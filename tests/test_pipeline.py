@@ -103,14 +103,14 @@ def test_keep_steps_false_streams_the_same_steps_as_the_batch_run():
         assert list(p.steps) == ([] if keep is False else batch.steps[-5:])
 
 
-def test_an_hour_of_streaming_keeps_the_filter_sound_the_memory_flat_and_the_heading_bounded():
-    """One hour at 50 Hz along city streets (about 25 s): quaternion unit, covariance symmetric positive
+def test_half_an_hour_of_streaming_keeps_the_filter_sound_the_memory_flat_and_the_heading_bounded():
+    """Half an hour at 50 Hz along city streets (the 24-hour walk: benchmarks/long_walk.py): quaternion unit, covariance symmetric positive
     definite at every 5-minute checkpoint, no container growing with the walk, heading error as the
     magnetometer bounds it (the same in the last 10 minutes as in the first)."""
     from core.pdr.attitude import AttitudeEKF
 
-    walk = simulate_walk(street_route(1.26 * 3600.0, seed=7), rate_hz=50.0, seed=7)
-    assert walk.recording.duration_s > 3500.0
+    walk = simulate_walk(street_route(1.26 * 1800.0, seed=7), rate_hz=50.0, seed=7)
+    assert walk.recording.duration_s > 1750.0
     p = Pipeline(keep_steps=False)
     assert isinstance(p.attitude, AttitudeEKF)
     steps, sizes = [], []
@@ -126,8 +126,8 @@ def test_an_hour_of_streaming_keeps_the_filter_sound_the_memory_flat_and_the_hea
             assert np.linalg.eigvalsh(0.5 * (P + P.T)).min() > 0.0
             sizes.append(p.held_items())
     steps.extend(p.finish())
-    assert len(sizes) >= 11
-    # memory flat: what the pipeline holds after an hour is what it held after 10 minutes (within noise)
+    assert len(sizes) >= 5
+    # memory flat: what the pipeline holds after half an hour is what it held after 10 minutes (within noise)
     assert max(sizes[2:]) <= 1.05 * sizes[1] + 100, sizes
     assert len(p.steps) == 0 and p.n_steps == len(steps)
     assert len(steps) == pytest.approx(len(walk.truth.step_t_ns), rel=0.01)
@@ -137,7 +137,7 @@ def test_an_hour_of_streaming_keeps_the_filter_sound_the_memory_flat_and_the_hea
     block = (t - t[0]) // 600_000_000_000
     p95 = [np.percentile(np.abs(err[block == b]), 95) for b in np.unique(block)]
     med = [np.median(np.abs(err[block == b])) for b in np.unique(block)]
-    assert len(p95) == 6
+    assert len(p95) == 3
     assert max(p95) < 7.0 and max(med) < 4.5, (p95, med)
     assert p95[-1] < p95[0] + 1.5 and med[-1] < med[0] + 1.0
     assert p.attitude.counters()["heading_sd_rad"] < math.radians(3.0)
