@@ -33,6 +33,11 @@ def test_demo_replay_prints_the_summary_and_writes_every_output(tmp_path):
     assert out["png"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     gj = json.loads(out["geojson"].read_text())
     assert len(gj["features"]) == 1 + 227
+    # how the phone was carried (issue #17): in the summary, and per step, where a counted step is never
+    # "not walking" (the demo starts standing: the detector's hysteresis says "still" over its first steps)
+    assert "carried       in the hand" in r.stdout
+    carry = [ln.rsplit(",", 1)[1] for ln in out["csv"].read_text().splitlines()[1:]]
+    assert len(carry) == 227 and set(carry) == {"handheld"}
 
 
 def test_demo_loop_closes(capsys):

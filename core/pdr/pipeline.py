@@ -191,7 +191,8 @@ class Step:
     north_m: float
     features: StepFeatures  #: what the stride model saw
     mag_trusted: bool  #: whether the last magnetometer reading before the step was used by the EKF
-    carry_mode: str = CARRY_HANDHELD  #: carry mode in force at the peak (core.conventions.CARRY_MODES; issue #17)
+    #: carry mode in force at the peak (core.conventions.CARRY_MODES; issue #17), never "still" for a step
+    carry_mode: str = CARRY_HANDHELD
 
 
 @dataclass(frozen=True)
@@ -663,6 +664,20 @@ class Pipeline:
                 self._candidate(ev, regs, rot)
         self.n_rejected_rotation = n_rot
 
+    def _step_carry_mode(self, t_ns: int) -> str:
+        """The carry mode a step is labelled with: the mode in force at its peak, except that a counted step is
+        never "not walking" (the detector's hysteresis lags the first steps of a walk): then the walking mode
+        that follows, or the one before, or hand-held."""
+        mode = self.carry_mode_at(t_ns)
+        if mode != CARRY_STILL or self.carry is None:
+            return mode
+        changes = self.carry.changes
+        after = [c[2] for c in changes if c[0] > t_ns and c[2] != CARRY_STILL]
+        if after:
+            return after[0]
+        before = [c[1] for c in changes if c[0] <= t_ns and c[1] != CARRY_STILL]
+        return before[-1] if before else (self.carry.mode if self.carry.mode != CARRY_STILL else CARRY_HANDHELD)
+
     def carry_mode_at(self, t_ns: int) -> str:
         """The carry mode in force at ``t_ns`` (the last change at or before it; hand-held without detection)."""
         if self.carry is None:
@@ -784,7 +799,7 @@ class Pipeline:
         east, north = self.reckoner.update(length, heading)  # eq. 1
         step = Step(self.n_steps, ev.t_ns, length, heading, east, north, feats,
                     not self.attitude.mag_rejected and self.attitude.use_magnetometer,
-                    carry_mode=self.carry_mode_at(ev.t_ns))
+                    carry_mode=self._step_carry_mode(ev.t_ns))
         self.steps.append(step)
         self.n_steps += 1
         if self.gnss is not None:
