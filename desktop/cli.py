@@ -1120,12 +1120,18 @@ def replay_file(path: str, stem: str, args) -> dict:
     return row
 
 
+def main_carry_mode(carry: dict | None) -> str:
+    """The carry mode of most of the walking time (issue #17), "-" without a carry-mode detector."""
+    walking = {m: v for m, v in ((carry or {}).get("time_s") or {}).items() if m != "still"}
+    return max(walking, key=walking.get) if walking else "-"
+
+
 def batch_table(rows) -> list[str]:
     """The summary table of a batch: one line per recording, then the totals."""
     names = [os.path.relpath(r["path"]) if not os.path.isabs(r["path"]) else r["path"] for r in rows]
     w = max([len("recording")] + [len(n) for n in names])
-    head = (f"{'recording':<{w}}  {'mode':<8}  {'duration':>9}  {'steps':>6}  {'distance':>9}  {'start-to-end':>12}"
-            "  truth error")
+    head = (f"{'recording':<{w}}  {'tracker':<9}  {'carried':<8}  {'duration':>9}  {'steps':>6}  {'distance':>9}  "
+            f"{'start-to-end':>12}  truth error")
     lines = [head, "-" * len(head)]
     steps = dist = dur = 0.0
     for name, r in zip(names, rows):
@@ -1137,7 +1143,9 @@ def batch_table(rows) -> list[str]:
         d, se = s.get("distance_m") or 0.0, s.get("start_to_end_m")
         steps, dist, dur = steps + n, dist + d, dur + (s.get("duration_s") or 0.0)
         se_txt = f"{se:.2f} m" if se is not None else "-"
-        lines.append(f"{name:<{w}}  {s.get('mode', ''):<8}  {s.get('duration_s') or 0.0:>7.1f} s  {n:>6d}  "
+        tracker = {"handheld": "phone PDR", "foot": "foot INS"}.get(s.get("mode", ""), s.get("mode", ""))
+        lines.append(f"{name:<{w}}  {tracker:<9}  {main_carry_mode(s.get('carry')):<8}  "
+                     f"{s.get('duration_s') or 0.0:>7.1f} s  {n:>6d}  "
                      f"{d:>7.1f} m  {se_txt:>12}  {truth_headline(s.get('truth') or {}) or '-'}")
     ok = sum(1 for r in rows if r["ok"])
     lines.append("-" * len(head))

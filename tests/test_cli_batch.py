@@ -72,11 +72,13 @@ def test_batch_json_has_one_row_per_recording_and_exports_go_to_out_dir(walks, b
 def test_batch_table_on_all_cores_has_the_rows_of_the_json(walks, batch_json, capsys):
     assert main(["replay", str(walks / "line.csv.gz"), str(walks / "sub" / "turn.csv.gz"), "--jobs", "2"]) == 0
     table = capsys.readouterr().out.splitlines()
-    assert table[0].split()[:2] == ["recording", "mode"] and len(table) == 2 + 2 + 2
+    assert table[0].split()[:3] == ["recording", "tracker", "carried"] and len(table) == 2 + 2 + 2
     for r in json.loads(batch_json[1])["recordings"][:2]:
         s = r["summary"]
         row = next(ln for ln in table if ln.startswith(r["path"]))
         assert f"{s['n_steps']:d}" in row.split() and f"{s['distance_m']:.1f}" in row.split()
+        # the carry mode of most of the walking time (the simulated walks are hand-held)
+        assert row.split()[1:4] == ["phone", "PDR", "handheld"], row
 
 
 def test_batch_refuses_single_file_exports(walks, capsys):
