@@ -77,7 +77,9 @@ Shared, at ``core/``'s top
     ``attitude_qekf`` (the paper's quaternion EKF, for comparison), ``magcal``
     (magnetometer calibration, quasi-static field), ``heading``
     (rotation-matrix smoothing, section 4.3; a step's heading),
-    ``deadreckoning`` (eq. 1), ``pipeline``.
+    ``carry`` (how the phone is carried: the mode chooses the step gates),
+    ``walkdir`` (the walking direction from the acceleration, where the phone's
+    axis is not it), ``deadreckoning`` (eq. 1), ``pipeline``.
 
 ``core.gnss`` -- GPS fusion (Chen et al. 2010; Kubrak et al. 2006)
     ``heading_model`` (eq. 12), ``ekf`` (eq. 13 with GPS updates),
@@ -103,8 +105,11 @@ Shared, at ``core/``'s top
 ``desktop/`` (not on the phone)
     ``desktop.cli`` (the ``pdr`` command), ``desktop.plot``,
     ``desktop.simulator`` (walks with exact truth, independent of the
-    pipeline's models; a barometer), ``desktop.foot_simulator``,
-    ``desktop.floor_images`` (floor-plan images, Pillow).
+    pipeline's models; a barometer), ``desktop.placements`` (the phone swinging
+    in the hand, in a pocket, a bag, at the ear; not walking),
+    ``desktop.foot_simulator``, ``desktop.floor_images`` (floor-plan images,
+    Pillow), ``desktop.fast`` (a second, array-and-numba implementation of the
+    batch pipeline, checked against it).
 """
 
 __version__ = "0.1.0"
