@@ -787,12 +787,17 @@ class Pipeline:
             self.gnss.finish()
         return done
 
-    def _complete(self, ev: StepEvent, heading: float, regressors: tuple) -> Step:
+    def step_features(self, ev: StepEvent, regressors: tuple) -> StepFeatures:
+        """What the stride model sees of a step (eq. 4's inputs and Kubrak's eq.-1 regressors); the fast path
+        (desktop.fast) builds its steps with it too."""
         duration = ev.duration_s if ev.duration_s == ev.duration_s else DEFAULT_STEP_DURATION_S
-        feats = StepFeatures(t_ns=ev.t_ns, duration_s=duration, acc_max_m_s2=ev.acc_max_m_s2,
-                             acc_min_m_s2=ev.acc_min_m_s2, acc_var_m2_s4=ev.acc_var_m2_s4, height_m=self.height_m,
-                             window_mean_m_s2=regressors[0], window_freq_hz=regressors[1],
-                             window_std_m_s2=regressors[2])
+        return StepFeatures(t_ns=ev.t_ns, duration_s=duration, acc_max_m_s2=ev.acc_max_m_s2,
+                            acc_min_m_s2=ev.acc_min_m_s2, acc_var_m2_s4=ev.acc_var_m2_s4, height_m=self.height_m,
+                            window_mean_m_s2=regressors[0], window_freq_hz=regressors[1],
+                            window_std_m_s2=regressors[2])
+
+    def _complete(self, ev: StepEvent, heading: float, regressors: tuple) -> Step:
+        feats = self.step_features(ev, regressors)
         length = self.stride_model.length_m(feats)  # eq. 4
         if heading != heading:  # no attitude yet (no magnetometer reading so far)
             heading = self.attitude.initial_yaw_rad

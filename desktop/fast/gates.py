@@ -23,7 +23,6 @@ import numpy as np
 from core.pdr.heading import interval_heading
 from core.pdr.pipeline import DEFAULT_STEP_DURATION_S, Step
 from core.pdr.steps import StepEvent
-from core.pdr.stride import StepFeatures
 from desktop.fast.jit import kernel
 
 
@@ -167,11 +166,7 @@ class StepRelease:
 
     def complete(self, ev: StepEvent, heading: float, regressors: tuple, mag_rejected: bool) -> None:
         p = self.p
-        duration = ev.duration_s if ev.duration_s == ev.duration_s else DEFAULT_STEP_DURATION_S
-        feats = StepFeatures(t_ns=ev.t_ns, duration_s=duration, acc_max_m_s2=ev.acc_max_m_s2,
-                             acc_min_m_s2=ev.acc_min_m_s2, acc_var_m2_s4=ev.acc_var_m2_s4, height_m=p.height_m,
-                             window_mean_m_s2=regressors[0], window_freq_hz=regressors[1],
-                             window_std_m_s2=regressors[2])
+        feats = p.step_features(ev, regressors)
         length = p.stride_model.length_m(feats)  # eq. 4
         if heading != heading:  # no attitude yet
             heading = p.attitude.initial_yaw_rad
