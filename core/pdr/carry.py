@@ -191,6 +191,7 @@ class CarryModeDetector:
         self._lag_lo = max(2, int(self.min_stride_s * self.grid_rate_hz))
         self._lag_hi = min(n - 8, int(math.ceil(self.max_stride_s * self.grid_rate_hz)))
         self._nfft = 1 << int(math.ceil(math.log2(2 * n)))
+        self._scratch_n = {}  # window length -> compute_features' work arrays
         self._buf = np.zeros((n, 6))  # ax ay az gx gy gz, ring
         self._k = 0  # next row of the ring
         self._filled = 0
@@ -247,54 +248,81 @@ class CarryModeDetector:
 
     # -- features ---------------------------------------------------------------
     def _autocorr(self, x: np.ndarray) -> np.ndarray:
-        """Unbiased normalised autocorrelation of a zero-mean signal at lags 0..n-1."""
-        n = len(x)
-        f = np.fft.rfft(x, self._nfft)
-        r = np.fft.irfft(f * np.conj(f), self._nfft)[:n]
-        if r[0] <= 1e-12:
-            return np.zeros(n)
-        return (r / r[0]) * (n / (n - np.arange(n)))
+        """Autocorrelation at lags 0..n-1 of each row of ``x`` (zero-mean signals, 2-D), normalised by its
+        lag 0 (a row whose lag 0 is under 1e-12 gives zeros), not yet unbiased: ``r(k) n_k / (n_k - k)``
+        for a row of ``n_k`` samples (the rest of the row zero-padded)."""
+        n = x.shape[-1]
+        f = np.fft.rfft(x, self._nfft)  # one batched transform for all the rows (the last axis)
+        r = np.fft.irfft(f * np.conj(f), self._nfft)[..., :n]
+        r0 = r[..., :1]
+        out = r / np.where(r0 > 1e-12, r0, 1.0)
+        out[r0[..., 0] <= 1e-12] = 0.0
+        return out
 
     def compute_features(self, w: np.ndarray) -> dict:
-        """The features of one window ``w`` (n, 6: acc xyz, gyro xyz, oldest first)."""
+        """The features of one window ``w`` (n, 6: acc xyz, gyro xyz, oldest first).
+
+        Written for few numpy calls (this runs on the phone every ``hop_s``): the two or three
+        autocorrelations share one batched FFT, the two 3 x 3 eigenproblems one ``eigh``.
+        """
+        n = len(w)
+        scratch = self._scratch_n.get(n)
+        if scratch is None:  # the unbiased autocorrelation's factor at lags 0..n-1; the acceleration's running
+            # sums (row 0 stays 0); the autocorrelated signals: the norm, the tilt's swing, the rotation
+            scratch = self._scratch_n[n] = (n / (n - np.arange(n)), np.zeros((n + 1, 3)), np.zeros((3, n)))
+        unbias, c, rows = scratch
         acc = w[:, :3]
         norm = np.sqrt(np.einsum("ij,ij->i", acc, acc))
-        m = acc.mean(axis=0)
-        m_norm = float(np.linalg.norm(m))
-        mean_norm = float(norm.mean())
+        m = np.add.reduce(acc, axis=0) / n
+        m_norm = math.sqrt(float(m.dot(m)))
+        mean_norm = float(np.add.reduce(norm)) / n
         u = m / m_norm if m_norm > 1e-6 else np.array([0.0, 0.0, 1.0])
         x = norm - mean_norm
-        std = float(np.sqrt(np.mean(x * x)))
+        std = math.sqrt(float(np.add.reduce(x * x)) / n)
+        # smoothed direction of the specific force and its angle from the mean direction
+        np.cumsum(acc, axis=0, out=c[1:])
+        s = self._smooth
+        sm = (c[s:] - c[:-s]) / s
+        smn = np.sqrt(np.einsum("ij,ij->i", sm, sm))
+        den = np.maximum(smn, 1e-9)
+        cosang = np.clip((sm @ u) / den, -1.0, 1.0)
+        ang = np.arccos(cosang)
+        tilt_rms = math.sqrt(float(np.add.reduce(ang * ang)) / len(ang))
+        # tilt periodicity: the component of the smoothed direction along its main swing axis
+        d = sm / den[:, None] - u
+        dyn = acc - m
+        cov_a = dyn.T @ dyn / n
+        if self._has_gyro:
+            gyr = w[:, 3:]
+            gm = np.add.reduce(gyr, axis=0) / n
+            gc = gyr - gm
+            evals, evecs = np.linalg.eigh(np.stack([d.T @ d, gc.T @ gc]))
+            ge, gv = evals[1], evecs[1]
+            evecs = evecs[0]
+        else:
+            evals, evecs = np.linalg.eigh(d.T @ d)
+        swing = d @ evecs[:, -1]
+        swing -= float(np.add.reduce(swing)) / len(swing)
+        rows = rows[:3 if self._has_gyro else 2]  # the signals, zero-padded to n (row 1's tail stays 0)
+        rows[0] = x
+        rows[1, :len(swing)] = swing
+        if self._has_gyro:
+            np.matmul(gc, gv[:, -1], out=rows[2])
+        r_all = self._autocorr(rows)
+        r = r_all[0] * unbias
         lo, hi = self._lag_lo, self._lag_hi
-        r = self._autocorr(x)
         seg = r[lo:hi + 1]
-        top = float(np.max(seg))
+        top = float(seg.max())
         # the shortest lag that is a local maximum within 85 % of the best: the stride, not two of them
         peaks = np.flatnonzero((seg[1:-1] >= seg[:-2]) & (seg[1:-1] >= seg[2:]) & (seg[1:-1] >= 0.85 * top)) + 1
         k2 = lo + (int(peaks[0]) if len(peaks) else int(np.argmax(seg)))
         ks = k2 // 2
-        r_step = float(np.max(r[max(1, ks - 2):ks + 3]))
+        r_step = float(r[max(1, ks - 2):ks + 3].max())
         r_stride = float(r[k2])
         if not len(peaks):  # no stride inside the range (a maximum on its edge): no stride share either
             r_step = r_stride = min(r_step, r_stride)
-        # smoothed direction of the specific force and its angle from the mean direction
-        c = np.cumsum(np.vstack([np.zeros((1, 3)), acc]), axis=0)
-        s = self._smooth
-        sm = (c[s:] - c[:-s]) / s
-        smn = np.sqrt(np.einsum("ij,ij->i", sm, sm))
-        cosang = np.clip((sm @ u) / np.maximum(smn, 1e-9), -1.0, 1.0)
-        ang = np.arccos(cosang)
-        tilt_rms = float(np.sqrt(np.mean(ang * ang)))
-        # tilt periodicity: the component of the smoothed direction along its main swing axis
-        d = sm / np.maximum(smn, 1e-9)[:, None] - u
-        cov = d.T @ d
-        evals, evecs = np.linalg.eigh(cov)
-        swing = d @ evecs[:, -1]
-        swing = swing - swing.mean()
-        rt = self._autocorr(swing)
-        tilt_stride = float(rt[k2]) if len(rt) > k2 else 0.0
-        dyn = acc - m
-        cov_a = dyn.T @ dyn / len(dyn)
+        ns = len(swing)
+        tilt_stride = float(r_all[1, k2]) * (ns / (ns - k2)) if ns > k2 else 0.0
         vert = float(u @ cov_a @ u)
         horiz = max(float(np.trace(cov_a)) - vert, 0.0)
         f = {
@@ -305,15 +333,9 @@ class CarryModeDetector:
             "tilt_stride_corr": tilt_stride, "horizontal_ratio": math.sqrt(horiz / vert) if vert > 1e-9 else 0.0,
         }
         if self._has_gyro:
-            gyr = w[:, 3:]
-            g_rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", gyr, gyr))))
-            gc = gyr - gyr.mean(axis=0)
-            cg = gc.T @ gc
-            ge, gv = np.linalg.eigh(cg)
+            g_rms = math.sqrt(float(np.add.reduce(np.einsum("ij,ij->i", gyr, gyr))) / n)
             share = float(ge[-1] / max(float(np.sum(ge)), 1e-12))
-            main = gc @ gv[:, -1]
-            rg = self._autocorr(main)
-            f.update(gyro_rms_rad_s=g_rms, gyro_axis_share=share, gyro_periodicity=float(rg[k2]))
+            f.update(gyro_rms_rad_s=g_rms, gyro_axis_share=share, gyro_periodicity=float(r_all[2, k2]) * (n / (n - k2)))
         return f
 
     def mode_scores(self, f: dict) -> dict:
