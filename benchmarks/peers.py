@@ -54,8 +54,11 @@ readings) except imufusion, which runs its own start-up.
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -275,20 +278,83 @@ def step_headings(att: Attitude, step_t_ns, *, grid_rate_hz: float = 50.0, cutof
                      for t, dk in zip(steps, d)])
 
 
+#: bump when a peer's wrapper above changes what it returns (the cache's key also holds this file's digest)
+CACHE_VERSION = 1
+
+
+def _peer_version(name: str) -> str:
+    """The installed version of the package behind a peer ("" for ``rotvec``, the phone's own)."""
+    from importlib import metadata
+
+    dist = {"imufusion": "imufusion", "madgwick": "ahrs", "ekf": "ahrs"}.get(name)
+    if dist is None:
+        return ""
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return "?"
+
+
+def cache_key(name: str, rec: Recording, magnetic_dip_rad: float | None) -> str:
+    """What a peer's attitude depends on, as a hex digest: the peer and its package's version, this module's
+    source (its wrappers and settings), the site's dip, and every timestamp and value of the streams it
+    reads (gyroscope, accelerometer, magnetometer, rotation vector)."""
+    h = hashlib.blake2b(digest_size=20)
+    h.update(f"{CACHE_VERSION}|{name}|{_peer_version(name)}|{magnetic_dip_rad!r}|".encode())
+    h.update(Path(__file__).read_bytes())
+    for stream in (GYRO, ACC, MAG, ROTVEC):
+        if rec.has(stream):
+            s = rec.streams[stream]
+            h.update(stream.encode())
+            h.update(np.ascontiguousarray(s.t_ns, dtype=np.int64).tobytes())
+            h.update(np.ascontiguousarray(s.values, dtype=np.float64).tobytes())
+    return h.hexdigest()
+
+
+def peer_attitude(name: str, rec: Recording, magnetic_dip_rad: float | None = None,
+                  cache_dir: Path | None = None) -> tuple[Attitude, bool]:
+    """A peer's attitude over ``rec``, from ``cache_dir`` when an earlier run stored it: ``(attitude, cached)``.
+
+    A peer's output depends only on the recording, the site and the peer (never on our pipeline), so a
+    benchmark rerun or a parameter sweep need not run it again; :func:`cache_key` says what a stored
+    result must match.  Written atomically (another process may be reading the folder).
+    """
+    path = None
+    if cache_dir is not None:
+        path = Path(cache_dir) / f"{name}-{cache_key(name, rec, magnetic_dip_rad)}.npz"
+        if path.exists():
+            try:
+                with np.load(path) as z:
+                    return Attitude(z["t_ns"], z["q_wxyz"]), True
+            except (OSError, ValueError, KeyError):  # a damaged file: run the peer again and replace it
+                pass
+    att = ATTITUDE[name](rec, magnetic_dip_rad=magnetic_dip_rad)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
+        np.savez(tmp, t_ns=np.asarray(att.t_ns, dtype=np.int64), q_wxyz=np.asarray(att.q_wxyz, dtype=np.float64))
+        os.replace(tmp, path)
+    return att, False
+
+
 def run_peers(rec: Recording, step_t_ns, names=ALL_PEERS, magnetic_dip_rad: float | None = None,
-              **heading_kw) -> tuple[dict, dict]:
+              cache_dir: Path | None = None, cached: list | None = None, **heading_kw) -> tuple[dict, dict]:
     """Per-step headings of every peer that can run: ``({name: headings}, {name: error message})``.
 
     ``magnetic_dip_rad``: the site's World Magnetic Model dip, for the peers
-    that take a magnetic reference (``ekf``); ``heading_kw`` go to
-    :func:`step_headings`.
+    that take a magnetic reference (``ekf``); ``cache_dir``: where the peers'
+    attitudes are kept between runs (:func:`peer_attitude`; None: always run
+    them), ``cached`` receives the names of the peers read from it;
+    ``heading_kw`` go to :func:`step_headings`.
     """
     out, errors = {}, {}
     for name in names:
         if not can_run(name, rec):
             continue
         try:
-            att = ATTITUDE[name](rec, magnetic_dip_rad=magnetic_dip_rad)
+            att, hit = peer_attitude(name, rec, magnetic_dip_rad, cache_dir)
+            if hit and cached is not None:
+                cached.append(name)
             out[name] = step_headings(att, step_t_ns, **heading_kw)
         except ImportError as e:
             errors[name] = f"not installed ({e.name})"

@@ -198,3 +198,42 @@ def test_report_labels_splits_and_compares_with_the_baseline(tmp_path, monkeypat
     assert "| `ipin2023_*_landmark_median_m` | 2.500 |  |  |  |  |  |" in text
     assert "median distance from its own GPS track" in text and "| ours | 12.0 | 5.0 |" in text
     assert "tuning split" in text  # the headline table has a column per split
+
+
+def test_peer_cache_gives_the_peers_stored_attitude_and_misses_on_any_change(tmp_path, monkeypatch):
+    """The peer cache (issue #13): a second run reads the stored attitude instead of running the peer (the
+    peer's function is made to fail to prove it), with the same headings; a change of the recording's
+    readings or of the site's dip is a different key, so the peer runs again."""
+    rec, tn, _ = turning_phone(duration_s=12.0)
+    steps = tn[::50][4:-2]
+    dip = math.atan2(40.0, 20.0)
+    cached: list = []
+    first, err = peers.run_peers(rec, steps, names=("rotvec",), magnetic_dip_rad=dip, cache_dir=tmp_path,
+                                 cached=cached, delay_s=0.0, cutoff_hz=5.0)
+    assert not err and cached == [] and len(list(tmp_path.glob("rotvec-*.npz"))) == 1
+
+    def must_not_run(*a, **k):
+        raise AssertionError("the peer ran although its attitude was stored")
+
+    monkeypatch.setitem(peers.ATTITUDE, "rotvec", must_not_run)
+    again, err = peers.run_peers(rec, steps, names=("rotvec",), magnetic_dip_rad=dip, cache_dir=tmp_path,
+                                 cached=cached, delay_s=0.0, cutoff_hz=5.0)
+    assert not err and cached == ["rotvec"]
+    np.testing.assert_allclose(again["rotvec"], first["rotvec"], rtol=0, atol=1e-15)
+    # another dip, or one reading changed: not the stored result (the peer is asked to run and fails here)
+    _, err = peers.run_peers(rec, steps, names=("rotvec",), magnetic_dip_rad=dip + 1e-6, cache_dir=tmp_path)
+    assert "AssertionError" in err["rotvec"]
+    rv = rec.streams["rotvec"]
+    values = rv.values.copy()
+    values[100, 1] += 1e-9
+    changed = Recording({**rec.streams, "rotvec": make_stream("rotvec", rv.t_ns, values)})
+    assert peers.cache_key("rotvec", changed, dip) != peers.cache_key("rotvec", rec, dip)
+    # a damaged stored file is run again (and replaced), never an error
+    monkeypatch.undo()
+    for f in tmp_path.glob("rotvec-*.npz"):
+        f.write_bytes(b"not an npz")
+    cached.clear()
+    fixed, err = peers.run_peers(rec, steps, names=("rotvec",), magnetic_dip_rad=dip, cache_dir=tmp_path,
+                                 cached=cached, delay_s=0.0, cutoff_hz=5.0)
+    assert not err and cached == []
+    np.testing.assert_allclose(fixed["rotvec"], first["rotvec"], rtol=0, atol=1e-15)
