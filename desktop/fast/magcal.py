@@ -1,4 +1,4 @@
-"""The magnetometer calibration's per-reading part as a compiled loop; its fits stay core's (Python).
+"""The magnetometer calibration's per-reading part and its bootstrap attempts compiled; its fits stay core's.
 
 :class:`core.pdr.magcal.MagCalibrator` sees only the raw readings, never the
 attitude, so the fast path runs it over the magnetometer stream before the
@@ -6,16 +6,27 @@ filter.  Per reading it checks the reading, keeps the bootstrap reservoir,
 bins and stores the reading about the current centre and applies the
 calibration in force: :func:`calibrate_readings`, a second implementation of
 ``MagCalibrator.update`` (the same float operations in the same order, so
-the same floats).  Its fit attempts -- at most one per ``refit_interval_s``,
-about one in fifty readings at 50 Hz -- are core's own ``_attempt``: the
-kernel stops at a reading whose attempt is due, :class:`_Handover` writes
-the kernel's state into the calibrator, the attempt runs (sphere and ellipsoid
-fits, re-binning), and the state is read back before the kernel goes on.
+the same floats).  Its fit attempts come at most one per ``refit_interval_s``
+(about one in fifty readings at 50 Hz): the kernel stops at a reading whose
+attempt is due.  Until a fit is accepted an attempt is mostly the bootstrap --
+the trimmed sphere through the store and the reservoir centres the direction
+bins, the store is rebuilt about it, and the attempt ends on too few samples
+or too little coverage (every attempt of a phone held flat, e.g. the simulated
+hour walk of the throughput benchmark): :func:`bootstrap_attempt` compiles
+that part (core's ``_fit_sphere`` with ``_centred``, ``_trimmed``,
+``_refill`` and ``numpy.unique``; numpy's pairwise summation reproduced, so the
+same floats; ``numpy.linalg.lstsq`` is numba's where compiled, the same LAPACK
+driver: equal to the bit on every recording tried).  An attempt that reaches a
+fit, and every attempt once a fit is in force, is core's own ``_attempt``
+(ellipsoid and sphere fits, acceptance): :class:`_Handover` writes the
+kernel's state into the calibrator, the attempt runs, and the state is read
+back before the kernel goes on.
 
 The state is the calibrator's private store (slots, bin counts, counters,
 centre, the calibration in force): this module is held to core's by
-``tests/test_fast_path.py`` (every calibrated reading, every fit and the final
-status equal on a real recording's magnetometer stream).
+``tests/test_fast_path.py`` and ``tests/test_fast_magcal.py`` (every
+calibrated reading, every fit, the final status and store equal on real
+recordings, simulated walks and a synthetic stream).
 """
 
 from __future__ import annotations
@@ -26,15 +37,17 @@ from array import array
 import numpy as np
 
 from core.pdr import magcal as core_magcal
-from desktop.fast.jit import kernel
+from desktop.fast.jit import HAVE_NUMBA, kernel
 
 # float state: the centre, its soft iron, the offset and soft iron in force, settings
-F_C, F_CA, F_B, F_A, F_R_MIN, F_SECTOR, F_MAX_NRM2, F_REFIT_S = 0, 3, 12, 15, 24, 25, 26, 27
-N_F = 28
+(F_C, F_CA, F_B, F_A, F_R_MIN, F_SECTOR, F_MAX_NRM2, F_REFIT_S, F_MAX_AGE_S, F_OUTLIER,
+ F_MIN_COV) = 0, 3, 12, 15, 24, 25, 26, 27, 28, 29, 30
+N_F = 31
 # int state: flags (the reference's None), counters, the reservoir's ends (indices into the stream), settings
 (I_HAS_C, I_HAS_CA, I_CAL, I_HAS_LAST, I_T_LAST, I_NEW, I_NEW_BINS, I_STORED, I_OCCUPIED, I_VALID, I_INVALID,
- I_HAS_PREV, I_T_PREV, I_HEAD, I_TAIL, I_NB, I_NS, I_PER, I_MIN_NEW, I_BOOT_NS, I_RECENT_NS) = range(21)
-N_I = 21
+ I_HAS_PREV, I_T_PREV, I_HEAD, I_TAIL, I_NB, I_NS, I_PER, I_MIN_NEW, I_BOOT_NS, I_RECENT_NS, I_MIN_SAMPLES,
+ I_NBINS) = range(23)
+N_I = 23
 
 
 @kernel
@@ -106,6 +119,290 @@ def calibrate_readings(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring, out, o
     return n
 
 
+# ---------------------------------------------------------------------------
+# the bootstrap attempt, compiled: core's ``_attempt`` while no fit is in force, up to where a fit is due
+
+
+@kernel
+def _block(a, lo, n):
+    """numpy's ``pairwise_sum`` of ``a[lo:lo + n]`` for ``n <= 128``: eight accumulators, then the rest."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    end = n - n % 8
+    while i < end:
+        j = lo + i
+        r0 += a[j]
+        r1 += a[j + 1]
+        r2 += a[j + 2]
+        r3 += a[j + 3]
+        r4 += a[j + 4]
+        r5 += a[j + 5]
+        r6 += a[j + 6]
+        r7 += a[j + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@kernel
+def _pairwise(a, lo, n):
+    """``numpy.add.reduce`` of ``a[lo:lo + n]`` (contiguous float64): numpy's pairwise summation, its floats.
+
+    Blocks of at most 128 (:func:`_block`), longer runs halved at a multiple of 8 and the halves' sums added:
+    numpy's ``pairwise_sum``, its recursion walked with an explicit stack (numba's cache cannot hold a
+    recursive function), so that the sums below are numpy's to the bit.
+    """
+    if n <= 128:
+        return _block(a, lo, n)
+    s_lo = np.empty(64, dtype=np.int64)
+    s_n = np.empty(64, dtype=np.int64)
+    s_stage = np.zeros(64, dtype=np.int64)
+    s_left = np.empty(64)
+    s_right = np.empty(64)
+    s_lo[0], s_n[0], s_stage[0] = lo, n, 0
+    sp = 1
+    result = 0.0
+    while sp > 0:
+        top = sp - 1
+        m = s_n[top]
+        val = 0.0
+        done = False
+        if m <= 128:
+            val = _block(a, s_lo[top], m)
+            done = True
+        else:
+            n2 = m // 2
+            n2 -= n2 % 8
+            if s_stage[top] == 0:  # the left half first
+                s_stage[top] = 1
+                s_lo[sp], s_n[sp], s_stage[sp] = s_lo[top], n2, 0
+                sp += 1
+            elif s_stage[top] == 1:  # then the right
+                s_stage[top] = 2
+                s_lo[sp], s_n[sp], s_stage[sp] = s_lo[top] + n2, m - n2, 0
+                sp += 1
+            else:
+                val = s_left[top] + s_right[top]
+                done = True
+        if done:
+            sp -= 1
+            if sp == 0:
+                result = val
+            elif s_stage[sp - 1] == 1:
+                s_left[sp - 1] = val
+            else:
+                s_right[sp - 1] = val
+    return result
+
+
+@kernel
+def _sphere(m, idx, k, out):
+    """``core.pdr.magcal._fit_sphere`` on the rows ``idx[:k]`` of ``m``: 1 and ``out = (b_x, b_y, b_z, F)``, or 0
+    where core raises :class:`EllipsoidFitError` (fewer than 4 samples, coinciding, rank < 4, imaginary).
+
+    ``_centred`` (mean, RMS scale, unit samples) and the linear least squares ``|m|^2 = 2 b.m + F^2 - |b|^2``
+    (``numpy.linalg.lstsq``, numba's own where compiled: the same LAPACK driver, gelsd) with core's float
+    operations in core's order: means and row sums sequential, the sum of squares pairwise as numpy's.
+    """
+    if k < 4:
+        return 0
+    cx, cy, cz = 0.0, 0.0, 0.0
+    for r in range(k):
+        j = idx[r]
+        cx += m[j, 0]
+        cy += m[j, 1]
+        cz += m[j, 2]
+    cx, cy, cz = cx / k, cy / k, cz / k
+    d = np.empty((k, 3))
+    sq = np.empty(k)
+    for r in range(k):
+        j = idx[r]
+        dx, dy, dz = m[j, 0] - cx, m[j, 1] - cy, m[j, 2] - cz
+        d[r, 0], d[r, 1], d[r, 2] = dx, dy, dz
+        sq[r] = dx * dx + dy * dy + dz * dz
+    s = math.sqrt(_pairwise(sq, 0, k) / k)
+    if not s > 1e-9:
+        return 0
+    design = np.empty((k, 4))
+    rhs = np.empty(k)
+    for r in range(k):
+        x, y, z = d[r, 0] / s, d[r, 1] / s, d[r, 2] / s
+        design[r, 0], design[r, 1], design[r, 2], design[r, 3] = x * 2.0, y * 2.0, z * 2.0, 1.0
+        rhs[r] = x * x + y * y + z * z
+    theta, _, rank, _ = np.linalg.lstsq(design, rhs, 2.220446049250313e-16 * max(k, 4))  # numpy's rcond=None
+    if rank < 4:
+        return 0
+    bx, by, bz = theta[0], theta[1], theta[2]
+    r2 = theta[3] + (bx * bx + by * by + bz * bz)
+    if not r2 > 0.0:
+        return 0
+    out[0], out[1], out[2], out[3] = cx + s * bx, cy + s * by, cz + s * bz, s * math.sqrt(r2)
+    return 1
+
+
+@kernel
+def _inliers(m, k, res, limit, mask):
+    """``| |m_i - b| - F | <= limit F`` for the first ``k`` rows of ``m`` (a sphere's residuals); their count."""
+    bx, by, bz, f = res[0], res[1], res[2], res[3]
+    lim = limit * f
+    n_in = 0
+    for i in range(k):
+        dx, dy, dz = m[i, 0] - bx, m[i, 1] - by, m[i, 2] - bz
+        ok = abs(math.sqrt(dx * dx + dy * dy + dz * dz) - f) <= lim
+        mask[i] = ok
+        if ok:
+            n_in += 1
+    return n_in
+
+
+@kernel
+def _trimmed_sphere(t, m, k, min_samples, limit, out):
+    """``MagCalibrator._trimmed(_fit_sphere, m[:k], t[:k])``'s fit into ``out``: 1, or 0 where core's raises.
+
+    A start from all samples, else from the newest half or quarter with more inliers, then at most three
+    refits on the inliers until they no longer change (core's docstring has the why).
+    """
+    idx = np.arange(k)
+    if _sphere(m, idx, k, out) == 0:
+        return 0
+    mask = np.empty(k, dtype=np.bool_)
+    n_in = _inliers(m, k, out, limit, mask)
+    if n_in < k:
+        order = np.argsort(t[:k], kind="mergesort")
+        res_n = np.empty(4)
+        mask_n = np.empty(k, dtype=np.bool_)
+        for part in (2, 4):
+            lo = k - k // part
+            if k - lo < min_samples:
+                break
+            if _sphere(m, order[lo:], k - lo, res_n) == 0:
+                continue
+            n_n = _inliers(m, k, res_n, limit, mask_n)
+            if n_n > n_in:
+                out[:] = res_n
+                mask[:] = mask_n
+                n_in = n_n
+    new = np.empty(k, dtype=np.bool_)
+    for _ in range(3):
+        if n_in < min_samples or n_in == k:
+            break
+        sel = np.flatnonzero(mask)
+        if _sphere(m, sel, len(sel), out) == 0:
+            return 0
+        n_new = _inliers(m, k, out, limit, new)
+        same = True
+        for i in range(k):
+            if new[i] != mask[i]:
+                same = False
+                break
+        if same:
+            break
+        mask[:] = new
+        n_in = n_new
+    return 1
+
+
+@kernel
+def bootstrap_attempt(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring):
+    """``MagCalibrator._attempt`` at reading ``i`` while no fit is in force, compiled as far as the rejections
+    before a fit: the store (samples younger than ``sample_max_age_s``) and the bootstrap reservoir, merged
+    by time (a stored sample wins a tie), the trimmed sphere centres the bins (where it is plausible), and
+    the store is rebuilt about that centre.  Returns ``(code, count)``: 0 no centre yet (``count``: the
+    samples), 1 too few samples in the rebuilt store (``count``: them), 2 its coverage too small -- the
+    state then is the one core's attempt leaves -- or 3 a fit is due: nothing is changed, core's attempt
+    must run (the ellipsoid and sphere fits and their acceptance).
+    """
+    tn = t[i]
+    per, nb, ns = is_[I_PER], is_[I_NB], is_[I_NS]
+    min_samples = is_[I_MIN_SAMPLES]
+    nslot = len(slot_t)
+    head, tail = is_[I_HEAD], is_[I_TAIL]
+    cap = nslot + tail - head
+    tt = np.empty(cap, dtype=np.int64)
+    mm = np.empty((cap, 3))
+    c = 0
+    max_age = fs[F_MAX_AGE_S]
+    for s in range(nslot):  # _stored, then keep
+        ts = slot_t[s]
+        if ts >= 0 and (tn - ts) * 1e-9 <= max_age:
+            tt[c] = ts
+            mm[c, 0], mm[c, 1], mm[c, 2] = slot_m[3 * s], slot_m[3 * s + 1], slot_m[3 * s + 2]
+            c += 1
+    if tail > head:  # the reservoir too, then numpy.unique by time (the first of equal times)
+        for r in range(head, tail):
+            j = ring[r]
+            tt[c] = t[j]
+            mm[c, 0], mm[c, 1], mm[c, 2] = v[j, 0], v[j, 1], v[j, 2]
+            c += 1
+        order = np.argsort(tt[:c], kind="mergesort")
+        t2 = np.empty(c, dtype=np.int64)
+        m2 = np.empty((c, 3))
+        u = 0
+        for r in range(c):
+            o = order[r]
+            if u > 0 and tt[o] == t2[u - 1]:
+                continue
+            t2[u] = tt[o]
+            m2[u, 0], m2[u, 1], m2[u, 2] = mm[o, 0], mm[o, 1], mm[o, 2]
+            u += 1
+        tt, mm, c = t2, m2, u
+    has_c = is_[I_HAS_C]
+    cx, cy, cz = fs[F_C], fs[F_C + 1], fs[F_C + 2]
+    if c >= min_samples:
+        res = np.empty(4)
+        if _trimmed_sphere(tt, mm, c, min_samples, fs[F_OUTLIER], res) == 1 and res[3] >= fs[F_R_MIN]:
+            has_c = 1
+            cx, cy, cz = res[0], res[1], res[2]
+    if has_c == 0:
+        is_[I_T_LAST], is_[I_NEW], is_[I_NEW_BINS] = tn, 0, 0
+        return 0, c
+    # _refill about the centre: newest first (a stable order), each bin its samples_per_bin newest
+    new_t = np.full(nslot, -1, dtype=np.int64)
+    new_m = np.zeros(3 * nslot)
+    counts = np.zeros(len(bin_count), dtype=np.int64)
+    order = np.argsort(-tt[:c], kind="mergesort")
+    r_min, scale = fs[F_R_MIN], fs[F_SECTOR]
+    n_st = 0
+    occupied = 0
+    for r in range(c):
+        o = order[r]
+        dx, dy, dz = mm[o, 0] - cx, mm[o, 1] - cy, mm[o, 2] - cz
+        rr = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if not rr >= r_min:
+            continue
+        band = int((dz / rr + 1.0) * 0.5 * nb)
+        sector = int((math.atan2(dy, dx) + math.pi) * scale)
+        k = (band if band < nb else nb - 1) * ns + (sector if sector < ns else ns - 1)
+        if counts[k] >= per:
+            continue
+        j = k * per + counts[k]
+        if counts[k] == 0:
+            occupied += 1
+        counts[k] += 1
+        new_t[j] = tt[o]
+        new_m[3 * j], new_m[3 * j + 1], new_m[3 * j + 2] = mm[o, 0], mm[o, 1], mm[o, 2]
+        n_st += 1
+    if n_st >= min_samples and occupied / is_[I_NBINS] >= fs[F_MIN_COV]:
+        return 3, n_st  # a fit: core's
+    slot_t[:] = new_t
+    slot_m[:] = new_m
+    bin_count[:] = counts
+    is_[I_STORED], is_[I_OCCUPIED] = n_st, occupied
+    is_[I_HAS_C] = 1
+    fs[F_C], fs[F_C + 1], fs[F_C + 2] = cx, cy, cz
+    is_[I_T_LAST], is_[I_NEW], is_[I_NEW_BINS] = tn, 0, 0
+    return (1 if n_st < min_samples else 2), n_st
+
+
 def _flat(rows) -> list:
     return [float(x) for row in rows for x in row]
 
@@ -120,9 +417,11 @@ class _Handover:
         self.ring = np.zeros(max(len(t), 1), dtype=np.int64)
         self.fs[F_R_MIN], self.fs[F_SECTOR], self.fs[F_MAX_NRM2] = cal._r_min, cal._sector_scale, cal._max_nrm2
         self.fs[F_REFIT_S] = cal.refit_interval_s
-        self.is_[[I_NB, I_NS, I_PER, I_MIN_NEW, I_BOOT_NS, I_RECENT_NS]] = (
+        self.fs[F_MAX_AGE_S], self.fs[F_OUTLIER], self.fs[F_MIN_COV] = (
+            cal.sample_max_age_s, cal.outlier_fraction, cal.min_coverage)
+        self.is_[[I_NB, I_NS, I_PER, I_MIN_NEW, I_BOOT_NS, I_RECENT_NS, I_MIN_SAMPLES, I_NBINS]] = (
             cal.bin_bands, cal.n_sectors, cal.samples_per_bin, cal.refit_min_new_samples, cal._bootstrap_ns,
-            core_magcal._RECENT_DT_NS)
+            core_magcal._RECENT_DT_NS, cal.min_samples, cal.n_bins)
         self.read(cal)
 
     def read(self, cal) -> None:
@@ -153,6 +452,7 @@ class _Handover:
     def write(self, cal) -> None:
         """The kernel's state into the calibrator (before an attempt, and at the end)."""
         is_ = self.is_
+        cal._centre = tuple(float(x) for x in self.fs[F_C:F_C + 3]) if is_[I_HAS_C] else None  # bootstrap attempts
         cal._slot_t, cal._slot_m = array("q", self.slot_t.tobytes()), array("d", self.slot_m.tobytes())
         cal._bin_count = self.bin_count.tolist()
         if cal._calibrated:
@@ -168,10 +468,17 @@ class _Handover:
         cal._t_prev = int(is_[I_T_PREV]) if is_[I_HAS_PREV] else None
 
 
-def calibrate_stream(cal, t_ns: np.ndarray, mag_b: np.ndarray):
+def calibrate_stream(cal, t_ns: np.ndarray, mag_b: np.ndarray, compiled_attempts: bool | None = None):
     """``cal`` (reset first) over a whole magnetometer stream: the calibrated readings (n, 3) and whether a fit
     was in force at each, as ``MagCalibrator.update`` reading by reading gives them; ``cal`` ends in the state
-    those updates leave."""
+    those updates leave.
+
+    ``compiled_attempts`` (default: where numba is installed) runs the attempts before the first accepted fit
+    with :func:`bootstrap_attempt` as far as it goes (to the rejection, or to a fit, which is core's); without
+    it every attempt is core's ``_attempt`` (numpy, faster than the kernel run as plain Python).
+    """
+    if compiled_attempts is None:
+        compiled_attempts = HAVE_NUMBA
     cal.reset()
     t = np.ascontiguousarray(t_ns, dtype=np.int64)
     v = np.ascontiguousarray(mag_b, dtype=np.float64).reshape(len(t), 3)
@@ -183,9 +490,18 @@ def calibrate_stream(cal, t_ns: np.ndarray, mag_b: np.ndarray):
         i = calibrate_readings(t, v, i, h.fs, h.is_, h.slot_t, h.slot_m, h.bin_count, h.ring, out, ok)
         if i >= len(t):
             break
-        h.write(cal)
-        cal._attempt(int(t[i]))
-        h.read(cal)
+        code = 3
+        if compiled_attempts and not h.is_[I_CAL]:
+            code, count = bootstrap_attempt(t, v, i, h.fs, h.is_, h.slot_t, h.slot_m, h.bin_count, h.ring)
+        if code == 3:
+            h.write(cal)
+            cal._attempt(int(t[i]))
+            h.read(cal)
+        elif code == 2:
+            cov = int(h.is_[I_OCCUPIED]) / cal.n_bins
+            cal._reason = f"coverage {cov:.2f} < {cal.min_coverage:.2f}"
+        else:
+            cal._reason = f"too few samples ({int(count)} < {cal.min_samples})"
         out[i] = cal._apply_tuple(float(v[i, 0]), float(v[i, 1]), float(v[i, 2]))
         ok[i] = cal.calibrated
         i += 1
