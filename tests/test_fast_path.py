@@ -9,9 +9,13 @@ that the test stays within its CI budget) and a simulated walk: the same
 steps (times, count), lengths, headings and positions within 1e-9 (m, rad),
 the attitude log on the grid within 1e-9, the same counters and labels.
 
-The fast path has no carry-mode detection (issue #17's per-mode gates):
-``run_fast`` refuses a pipeline that runs one (the default), and both sides
-here run with ``carry=False``.
+Both sides run the default pipeline, carry-mode detection included (issue
+#17: the mode chooses the step gates; at a mode change held peaks are
+replayed): the same carry counters (time per mode, changes, peaks replayed
+and replaced) and per-step carry mode too, on walks in the hand, in a pocket
+and a swinging hand, one that changes between them (with a gap that restarts
+the grid), and one without the carry stage.  The vectorised carry features
+(:mod:`desktop.fast.carry`) are held to core's within 1e-12 window by window.
 
 numba is not in the ``test`` extra (compiling the kernels takes longer than
 this test may), so in CI the kernels run as plain Python: the same code
@@ -29,7 +33,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.conventions import CARRY_HANDHELD, CARRY_POCKET, CARRY_STILL, CARRY_SWINGING
 from core.pdr.pipeline import Pipeline
+from core.recording import Recording, Stream
 from desktop.fast import run_fast
 from desktop.simulator import simulate_walk
 
@@ -60,11 +66,12 @@ def _real(rel: str, start_s: float, end_s: float):
     return rec.slice_time(t0 + int(start_s * 1e9), t0 + int(end_s * 1e9))
 
 
-def _assert_same(rec, **params):
-    params = {"carry": False, **params}  # the fast path has no carry-mode stage (issue #17): it refuses one
-    pipe = Pipeline(**params)
+def _assert_same(rec, make=None, **params):
+    """``Pipeline(**params).run(rec)`` against ``run_fast(rec, **params)``, or, with ``make`` (a function giving a
+    fresh pipeline), ``make().run(rec)`` against ``run_fast(rec, pipeline=make())``."""
+    pipe = Pipeline(**params) if make is None else make()
     plain = pipe.run(rec)
-    fast = run_fast(rec, **params)
+    fast = run_fast(rec, **params) if make is None else run_fast(rec, pipeline=make())
     a, b = plain.track, fast.track
     assert len(a) == len(b) and len(a) > 0
     assert np.array_equal(a.t_ns, b.t_ns)
@@ -74,6 +81,7 @@ def _assert_same(rec, **params):
     dh = np.abs((a.heading_rad - b.heading_rad + math.pi) % (2 * math.pi) - math.pi)
     assert np.max(dh) <= TOL
     assert [s.mag_trusted for s in plain.steps] == [s.mag_trusted for s in fast.steps]
+    assert [s.carry_mode for s in plain.steps] == [s.carry_mode for s in fast.steps]
     assert [s.features.window_freq_hz for s in plain.steps] == pytest.approx(
         [s.features.window_freq_hz for s in fast.steps], abs=TOL, nan_ok=True)
     la, lb = plain.attitude, fast.attitude
@@ -87,8 +95,9 @@ def _assert_same(rec, **params):
     ca, cb = plain.counters, fast.counters
     assert set(ca) == set(cb)
     for key in ("mag_used", "mag_rejected", "acc_rejected", "peaks_rejected_rotation", "peaks_rejected_bout",
-                "nonfinite_skipped", "impossible_skipped", "sensor_health", "mag_all_rejected"):
-        assert ca[key] == cb[key], key
+                "peaks_replayed_mode_change", "peaks_replaced_mode_change", "nonfinite_skipped", "impossible_skipped",
+                "sensor_health", "mag_all_rejected", "carry"):
+        assert ca.get(key) == cb.get(key), key
     aa, ab = ca["attitude"], cb["attitude"]
     for key in ("mag_reasons", "zero_rate_updates", "heading_relocks", "numerical_rejects", "mag_calibration"):
         assert aa[key] == ab[key], key
@@ -102,26 +111,95 @@ def test_fast_equals_plain_on_real_recordings(rel, start_s, end_s):
     assert len(plain.steps) >= 10
 
 
+def _joined(first, second, gap_ns):
+    """``second`` appended to ``first``, its clock shifted to start ``gap_ns`` after ``first`` ends."""
+    end = max(int(s.t_ns[-1]) for s in first.streams.values() if len(s))
+    shift = end + gap_ns - min(int(s.t_ns[0]) for s in second.streams.values() if len(s))
+    streams = {name: Stream(name, np.concatenate([s.t_ns, second.streams[name].t_ns + shift]),
+                            np.concatenate([s.values, second.streams[name].values]), s.columns, s.unit, s.note)
+               for name, s in first.streams.items() if name in second.streams}
+    return Recording(streams, dict(first.device), dict(first.metadata))
+
+
 def test_fast_equals_plain_on_the_simulator():
     # a phone in the trouser pocket: upright (the smoother follows the back of the phone) and turned from the
-    # walking direction, so the walking-direction stage's offset applies to most steps
+    # walking direction, so the walking-direction stage's offset applies to most steps; a 1 s gap in the middle
+    # restarts the grid (the carry detector's window refills, its hops count from there)
     walk = simulate_walk([(0.0, 0.0), (16.0, 0.0), (16.0, 10.0), (0.0, 10.0), (0.0, 0.0)], seed=5,
                          placement="pocket")
-    _, pipe = _assert_same(walk.recording)
+    rec = walk.recording
+    cut = rec.t0_ns + 20_000_000_000
+    rec = _joined(rec.slice_time(rec.t0_ns, cut), rec.slice_time(cut, rec.t0_ns + (1 << 50)), 1_000_000_000)
+    plain, pipe = _assert_same(rec)
     assert pipe.walkdir.n_steps_offset > 10
+    modes = [s.carry_mode for s in plain.steps]
+    assert max(set(modes), key=modes.count) == CARRY_POCKET
+
+
+def test_fast_equals_plain_when_the_carry_mode_changes():
+    # the phone in the hand, then swinging in the hand, then in a pocket: the swinging mode has its own step
+    # detector, so the changes to and from it replay its held peaks and replace the unconfirmed candidates
+    path = [(0.0, 0.0), (16.0, 0.0), (16.0, 10.0)]
+    hand, swing, pocket = (simulate_walk(path, seed=s, placement=pl).recording
+                           for s, pl in ((5, "handheld"), (6, "swinging"), (7, "pocket")))
+    rec = _joined(_joined(hand, swing, 10_000_000), pocket, 10_000_000)
+    plain, _ = _assert_same(rec)
+    c = plain.counters
+    to = [ch["to"] for ch in c["carry"]["changes"] if ch["to"] != CARRY_STILL]
+    assert to[0] == CARRY_SWINGING and to[-1] == CARRY_POCKET, to
+    assert c["peaks_replayed_mode_change"] > 0 and c["peaks_replaced_mode_change"] > 0
+    assert {CARRY_HANDHELD, CARRY_SWINGING, CARRY_POCKET} <= {s.carry_mode for s in plain.steps}
 
 
 def test_fast_equals_plain_with_other_settings():
-    # no magnetometer, a shorter bout and a stricter rotation gate: the other branches of the kernels
-    _assert_same(_real(REAL[0][0], 55.0, 90.0), use_magnetometer=False, min_bout_steps=2, max_rotation_rms_rad_s=1.5)
+    # no magnetometer, a shorter bout, a stricter rotation gate and no carry-mode stage: the other branches of the
+    # kernels; the pipeline handed over ready-made (a declination set on its attitude filter)
+    def make():
+        p = Pipeline(use_magnetometer=False, min_bout_steps=2, max_rotation_rms_rad_s=1.5, carry=False)
+        p.attitude.declination_rad = 0.1
+        return p
+
+    plain, _ = _assert_same(_real(REAL[0][0], 55.0, 90.0), make)
+    assert "carry" not in plain.counters and {s.carry_mode for s in plain.steps} == {CARRY_HANDHELD}
 
 
 def test_fast_refuses_what_it_does_not_implement():
     walk = simulate_walk([(0.0, 0.0), (5.0, 0.0)], seed=1)
     with pytest.raises(NotImplementedError):
-        run_fast(walk.recording, gnss=object(), carry=False)
-    with pytest.raises(NotImplementedError):
-        run_fast(walk.recording)  # carry-mode detection, on by default
+        run_fast(walk.recording, gnss=object())
+    with pytest.raises(TypeError):
+        run_fast(walk.recording, pipeline=Pipeline(), carry=False)  # a pipeline or its parameters, not both
+
+
+def test_carry_features_equal_core_window_by_window():
+    # the vectorised features of desktop.fast.carry against CarryModeDetector.compute_features: random windows
+    # (with and without a gyroscope, a gyroscope frozen or all zeros) and every hop of a real recording's grid
+    from core.pdr.carry import CarryModeDetector
+    from desktop.fast.carry import hop_samples, window_features
+
+    det = CarryModeDetector()
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=(40, det._n, 6)) * rng.uniform(0.1, 3.0, size=(40, 1, 6))
+    w[:, :, 2] += 9.8
+    w[:4, :, 3:] = 0.0
+    w[4:8, :, 3:] = 0.7
+    with_gyro = np.arange(40) >= 12
+    rec = _real(*REAL[1])
+    acc = rec.streams["acc"]
+    gyro = np.column_stack([np.interp(acc.t_ns, rec.streams["gyro"].t_ns, rec.streams["gyro"].values[:, i])
+                            for i in range(3)])
+    rows = np.column_stack([acc.values[:, :3], gyro])
+    hops = hop_samples(det, np.arange(len(rows)) % 1000 == 0)  # restarts every 1000 samples
+    assert len(hops) > 50 and not np.any(np.diff(hops) % det._hop)  # within a segment: one hop apart
+    w = np.concatenate([w, np.stack([rows[k - det._n + 1:k + 1] for k in hops])])
+    with_gyro = np.concatenate([with_gyro, np.ones(len(hops), dtype=bool)])
+    worst = 0.0
+    for wi, g, f in zip(w, with_gyro, window_features(det, w, with_gyro)):
+        det._has_gyro = bool(g)
+        ref = det.compute_features(wi)
+        assert set(ref) == set(f)
+        worst = max(worst, max(abs(ref[k] - f[k]) for k in ref))
+    assert worst <= 1e-12
 
 
 def test_fast_magnetometer_calibration_equals_core_reading_by_reading():

@@ -10,7 +10,12 @@ time runs out) instead of at every one.  A step's heading is
 pipeline would still hold, through the pipeline's own walking-direction stage
 (:class:`core.pdr.walkdir.WalkingDirection`, fed every grid sample in Python:
 it is not ported); the stride model (eq. 4) and the dead reckoner (eq. 1) are
-core's own classes.
+core's own classes.  With carry-mode detection (issue #17) the candidates
+are the peaks of the detector of the mode in force; at a change to a mode with
+another detector its held peaks (the last ``rotation_hold_s``) replace the
+unconfirmed candidates, as ``Pipeline._switch_detector`` does, and every step
+is labelled with its carry mode (``Pipeline._step_carry_mode`` on the detector's
+state at the step's completion).
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import time
 
 import numpy as np
 
+from core.conventions import CARRY_MODES, CARRY_SWINGING
 from core.pdr.heading import interval_heading
 from core.pdr.pipeline import DEFAULT_STEP_DURATION_S, Step
 from core.pdr.steps import StepEvent
@@ -62,6 +68,14 @@ class StepRelease:
         self.delay_ns = int(pipe.heading_delay_s * 1e9)
         self.gap_ns = int(pipe.detector.max_step_interval_s * 1e9)
         self.keep_ns = self.gap_ns + self.delay_ns + 1_000_000_000
+        if getattr(pipe, "carry", None) is not None:  # peaks replayed at a mode change are up to rotation_hold_s old
+            self.keep_ns += int(pipe.rotation_hold_s * 1e9)
+        self.hold_ns = int(pipe.rotation_hold_s * 1e9)
+        self.min_gap_ns = int(pipe.detector.min_step_interval_s * 1e9)
+        self.confirmed_ns = -(1 << 62)  # the last confirmed candidate's peak time
+        self.carry = None  # the carry detector's per-sample track (desktop.fast.carry.CarryTrack), when it runs
+        self.peaks: list = []
+        self.k = None  # the grid sample being processed (None: the end)
         self._walkdir = None  # (first grid sample, q, acc, axes) when the pipeline has a walking-direction stage
         self._wd_next = 0
         #: CPU seconds spent in the walking-direction stage (the benchmark's breakdown)
@@ -89,30 +103,90 @@ class StepRelease:
         self._wd_next = max(self._wd_next, k + 1)
         self.walkdir_s += time.process_time() - t0
 
-    def run(self, ev_tick, events: list[StepEvent], rms, regressors) -> None:
-        """All the candidates (found at grid samples ``ev_tick``, rotation RMS ``rms`` there), then the end."""
+    def run(self, peaks: list, carry=None, det_at=None) -> None:
+        """All the candidates, then the end.
+
+        ``peaks``: per step detector of the pipeline (``pipe._mode_detectors``' order; one without carry
+        detection) ``(ev_tick, events, rms, regressors)``: the grid samples at which its peaks are found, the
+        :class:`StepEvent` of each, the rotation RMS and the speed regressors there.  With carry detection,
+        ``carry`` is the detector's per-sample :class:`desktop.fast.carry.CarryTrack` and ``det_at[k]`` the
+        index of the mode's detector at grid sample ``k``; the active detector's peaks are candidates, and at a
+        change of detector the new one's held peaks replace the unconfirmed candidates.
+        """
         gt = self.grid_t
-        t = np.array([e.t_ns for e in events], dtype=np.int64)
-        due = np.maximum(np.searchsorted(gt, t + self.delay_ns, side="left"), ev_tick)
-        gap = np.searchsorted(gt, t + self.gap_ns, side="right")
-        ticks = np.unique(np.concatenate([ev_tick, due, gap]))
-        ticks = ticks[ticks < len(gt)]
-        steps_at = set(ev_tick.tolist())
-        m = 0
+        n_grid = len(gt)
+        self.carry = carry
+        self.peaks = [(np.asarray(tk, dtype=np.int64), evs, np.array([e.t_ns for e in evs], dtype=np.int64), r, g)
+                      for tk, evs, r, g in peaks]
+        if det_at is None:
+            det_at = np.zeros(n_grid, dtype=np.int64)
+        prev = np.concatenate([[0], det_at[:-1]])
+        switch = det_at != prev
+        ticks = [np.flatnonzero(switch)]
+        steps_at = set()
+        for d, (tk, _, t, _, _) in enumerate(self.peaks):
+            # a peak's own sample, the one where its heading falls due, the one where its bout's time runs out:
+            # the release can change only there (a replayed peak's at the change of detector, in the list too)
+            ticks += [tk, np.searchsorted(gt, t + self.delay_ns, side="left"),
+                      np.searchsorted(gt, t + self.gap_ns, side="right")]
+            live = tk[(det_at[tk] == d) & ~switch[tk]]
+            steps_at.update(live.tolist())
+        ticks = np.unique(np.concatenate(ticks))
+        ticks = ticks[ticks < n_grid]
+        nxt = [0] * len(self.peaks)
         for k in ticks.tolist():
             self._walkdir_to(k, steps_at)
-            while m < len(ev_tick) and ev_tick[m] == k:
-                self.candidate(events[m], float(rms[m]), tuple(float(x) for x in regressors[m]))
-                m += 1
+            self.k = k
+            d = int(det_at[k])
+            if switch[k]:
+                self.switch(d, k)
+            else:
+                tk, evs, _, rms, regs = self.peaks[d]
+                m = nxt[d]
+                while m < len(tk) and tk[m] < k:
+                    m += 1
+                while m < len(tk) and tk[m] == k:
+                    self.candidate(evs[m], float(rms[m]), tuple(float(x) for x in regs[m]))
+                    m += 1
+                nxt[d] = m
             self.release(k)
-        self._walkdir_to(len(gt) - 1, steps_at)
+        self._walkdir_to(n_grid - 1, steps_at)
+        self.k = None
         self.finish()
+
+    def _rotation_limit(self) -> float:
+        """The pipeline's rotation gate in force at the current grid sample (wider for a periodic swinging arm)."""
+        p = self.p
+        c = self.carry
+        k = -1 if self.k is None else self.k
+        swinging = c is not None and CARRY_MODES[int(c.mode[k])] == CARRY_SWINGING and bool(c.rotation_periodic[k])
+        return max(p.max_rotation_rms_rad_s, p.swinging_max_rotation_rms_rad_s) if swinging \
+            else p.max_rotation_rms_rad_s
+
+    def switch(self, d: int, k: int) -> None:
+        """The mode at grid sample ``k`` has detector ``d``: its held peaks (found by ``k``, within
+        ``rotation_hold_s``, after the last confirmed step) replace the unconfirmed candidates
+        (``Pipeline._switch_detector``)."""
+        p = self.p
+        kept = [c for c in self.cands if c[2]]
+        p.n_replaced_mode += len(self.cands) - len(kept)
+        self.cands = kept
+        self.bout_len = 0
+        tk, evs, t, rms, regs = self.peaks[d]
+        hi = int(np.searchsorted(tk, k, side="right"))
+        lo = int(np.searchsorted(t[:hi], max(self.confirmed_ns + self.min_gap_ns + 1,
+                                             int(self.grid_t[k]) - self.hold_ns), side="left"))
+        n_rot = p.n_rejected_rotation  # counted once, when the peak was live
+        for m in range(lo, hi):
+            p.n_replayed += 1
+            self.candidate(evs[m], float(rms[m]), tuple(float(x) for x in regs[m]))
+        p.n_rejected_rotation = n_rot
 
     def candidate(self, ev: StepEvent, rms: float, regressors: tuple) -> None:
         p = self.p
         if ev.duration_s != ev.duration_s:  # first step after a pause: a new bout
             self.drop_unconfirmed()
-        if rms > p.max_rotation_rms_rad_s:
+        if rms > self._rotation_limit():
             p.n_rejected_rotation += 1
             self.drop_unconfirmed()
             return
@@ -121,12 +195,20 @@ class StepRelease:
         if self.bout_len >= p.min_bout_steps:
             for c in self.cands:
                 c[2] = True
+            self.confirmed_ns = ev.t_ns
 
     def drop_unconfirmed(self) -> None:
         kept = [c for c in self.cands if c[2]]
         self.p.n_rejected_bout += len(self.cands) - len(kept)
         self.cands = kept
         self.bout_len = 0
+
+    def _mode_now(self) -> str | None:
+        """The carry mode in force at the current grid sample (None without carry detection)."""
+        c = self.carry
+        if c is None:
+            return None
+        return CARRY_MODES[int(c.mode[-1 if self.k is None else self.k])]
 
     def heading(self, ev: StepEvent, k: int) -> float:
         """The step's heading with the forward vectors the pipeline holds at grid sample ``k``."""
@@ -140,7 +222,7 @@ class StepRelease:
         t0 = t1 - int(duration * 1e9)
         heading = interval_heading(self.fwd_t[lo:hi], self.fwd_e[lo:hi], self.fwd_n[lo:hi], t0, t1)
         wd = getattr(self.p, "walkdir", None)
-        return heading if wd is None else wd.step_heading(heading, self.p.walking_direction, None)
+        return heading if wd is None else wd.step_heading(heading, self.p.walking_direction, self._mode_now())
 
     def release(self, k: int) -> None:
         cands = self.cands
@@ -164,6 +246,21 @@ class StepRelease:
             self.complete(ev, self.heading(ev, last) if h is None else h, reg, rejected)
         self.cands = []
 
+    def _carry_mode_of(self, t_ns: int) -> str:
+        """The carry mode a step completed now is labelled with: the pipeline's rule
+        (``Pipeline._step_carry_mode``) on the detector's state at the current grid sample."""
+        p = self.p
+        c = self.carry
+        if c is None or self.k is None:  # no detector, or the end: the detector's final state
+            return p._step_carry_mode(t_ns)
+        det = p.carry
+        final = det.changes, det.mode
+        det.changes, det.mode = c.changes[:int(c.n_changes[self.k])], CARRY_MODES[int(c.mode[self.k])]
+        try:
+            return p._step_carry_mode(t_ns)
+        finally:
+            det.changes, det.mode = final
+
     def complete(self, ev: StepEvent, heading: float, regressors: tuple, mag_rejected: bool) -> None:
         p = self.p
         feats = p.step_features(ev, regressors)
@@ -172,5 +269,6 @@ class StepRelease:
             heading = p.attitude.initial_yaw_rad
         east, north = p.reckoner.update(length, heading)  # eq. 1
         p.steps.append(Step(p.n_steps, ev.t_ns, length, heading, east, north, feats,
-                            not mag_rejected and p.attitude.use_magnetometer))
+                            not mag_rejected and p.attitude.use_magnetometer,
+                            carry_mode=self._carry_mode_of(ev.t_ns)))
         p.n_steps += 1

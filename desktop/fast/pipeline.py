@@ -13,9 +13,17 @@ apart where the data allow it:
 3. the accelerometer norm (eq. 2) and its uniform grid (compiled);
 4. the attitude filter over all events, the attitude taken at each grid sample
    (compiled after the reference's own start: :mod:`desktop.fast.attitude`);
-5. the rotation smoother over the grid's attitudes (section 4.3), the step
-   detector (eqs. 2-3) and the speed window over the grid (compiled);
-6. the gates and the steps (per step, :mod:`desktop.fast.gates`).
+5. the rotation smoother over the grid's attitudes (section 4.3, compiled);
+6. the carry-mode detector (issue #17, :mod:`desktop.fast.carry`): its
+   features over all hops at once (vectorised), each hop's decision core's;
+   its mode and step period at every grid sample;
+7. one step detector (eqs. 2-3) per distinct carry-mode gates of
+   ``step_gates`` (usually two: the hand-held and the swinging hand's), each
+   over the whole grid with the carry detector's step period, and the speed
+   window at their peaks (compiled);
+8. the gates and the steps (per step, :mod:`desktop.fast.gates`): the active
+   mode's peaks are candidates; at a change to a mode with another detector
+   that detector's held peaks replace the unconfirmed candidates.
 
 The result is :meth:`core.pdr.pipeline.Pipeline.run`'s: the same steps, the
 positions and headings within 1e-9 (``tests/test_fast_path.py``), the same
@@ -29,12 +37,13 @@ import time
 
 import numpy as np
 
-from core.conventions import ACC, GYRO
+from core.conventions import ACC, CARRY_MODES, GYRO
 from core.pdr.pipeline import (IMPOSSIBLE, MAG, SATURATION_FLOOR, AttitudeLog, Pipeline, PipelineResult, SensorHealth,
                                Track)
 from core.pdr.steps import StepEvent
 from core.recording import Recording
 from desktop.fast import attitude as fatt
+from desktop.fast.carry import run_carry
 from desktop.fast.gates import StepRelease, rotation_sums
 from desktop.fast.grid import acc_norm, grid_of
 from desktop.fast.heading import smooth_headings
@@ -103,21 +112,28 @@ class _Events:
         self.pos = {c: np.flatnonzero(self.kind == c) for c in (fatt.GYRO_K, fatt.ACC_K, fatt.MAG_K)}
 
 
-def run_fast(recording: Recording, *, timings: dict | None = None, **params) -> PipelineResult:
+def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pipeline | None = None,
+             **params) -> PipelineResult:
     """``Pipeline(**params).run(recording)``, computed over whole arrays (see the module docstring).
 
-    Takes the same parameters as :class:`core.pdr.pipeline.Pipeline`; a GPS
-    fusion (``gnss``) and attitude filters the kernel does not implement
+    Takes the same parameters as :class:`core.pdr.pipeline.Pipeline`, or instead (not both) ``pipeline``: a
+    ready-made one to fill, as ``pipeline.run(recording)`` would (it is reset first, as ``run`` resets it: its
+    settings stay, e.g. a magnetic declination or site field given to its attitude filter).  A GPS fusion
+    (``gnss``) and attitude filters the kernel does not implement
     (:func:`desktop.fast.attitude.check_supported`) raise ``NotImplementedError``.
     ``timings``, if given, receives the CPU seconds of each stage (the benchmark's breakdown).
     """
     clock = _Clock(timings)
-    if params.get("gnss") is not None:
+    if pipeline is not None and params:
+        raise TypeError("run_fast takes either a pipeline or the parameters of one, not both")
+    if params.get("gnss") is not None or getattr(pipeline, "gnss", None) is not None:
         raise NotImplementedError("the fast path has no GPS fusion")
     recording.stream(ACC, "step detection needs the accelerometer")
-    p = Pipeline(**params)
-    if getattr(p, "carry", None) is not None:
-        raise NotImplementedError("the fast path has no carry-mode detection (issue #17): its gates would differ")
+    if pipeline is None:
+        p = Pipeline(**params)
+    else:
+        p = pipeline
+        p.reset()
     ekf = p.attitude
     fatt.check_supported(ekf)
     ev = _Events(recording, p)
@@ -159,26 +175,51 @@ def run_fast(recording: Recording, *, timings: dict | None = None, **params) -> 
     p.smoother.n_axis_switches, p.smoother.n_upright = int(counters[1]), int(counters[2])
     if p.smoother.upright:
         p.smoother.forward_b = (0.0, 0.0, -1.0)
-    p.detector.n_grid = n_ticks
-    ev_tick, ev_t, ev_f = detect_steps(p.detector, gt, gx, restart)
-    regressors = speed_at(p.speed_window, gt, gx, restart, ev_tick)
-    clock("smoother, steps, speed window")
-    # 6. gates and steps
+    clock("smoother")
+    # the carry-mode detector (issue #17): its mode and step period at every grid sample
     gyro_pos = ev.pos[fatt.GYRO_K]
+    acc_at = ev.v[tick_event]
+    track = det_at = None
+    if p.carry is not None:
+        g = np.searchsorted(gyro_pos, tick_event, side="left") - 1
+        has_gyro = g >= 0
+        gyro_at = np.where(has_gyro[:, None], ev.v[gyro_pos[np.maximum(g, 0)]] if len(gyro_pos) else 0.0, 0.0)
+        track = run_carry(p.carry, gt, acc_at, gyro_at, has_gyro, restart)
+        index = {d: i for i, d in enumerate(p._mode_detectors)}
+        det_of_mode = np.array([index[p._det_of[m]] for m in CARRY_MODES], dtype=np.int64)
+        det_at = det_of_mode[track.mode]
+        p._carry_mode = CARRY_MODES[int(track.mode[-1])] if n_ticks else p._carry_mode
+        p._active_det = p._mode_detectors[int(det_at[-1])] if n_ticks else p._active_det
+    clock("carry-mode detector")
+    # every step detector (one per distinct gates), the speed window at their peaks
+    found = []
+    for det in p._mode_detectors:
+        det.n_grid = n_ticks
+        ev_tick, ev_t, ev_f = detect_steps(det, gt, gx, restart, det.gates,
+                                           None if track is None else track.step_period_s)
+        found.append((ev_tick, ev_t, ev_f))
+    all_ticks = np.unique(np.concatenate([f[0] for f in found]))
+    speed = speed_at(p.speed_window, gt, gx, restart, all_ticks)
+    clock("steps, speed window")
+    # 6. gates and steps
     rot_sum = np.empty(len(gyro_pos))
     rot_n = np.empty(len(gyro_pos), dtype=np.int64)
     rotation_sums(ev.t[gyro_pos], np.ascontiguousarray(ev.v[gyro_pos]), p._rot_window_ns, rot_sum, rot_n)
-    g = np.searchsorted(gyro_pos, tick_event[ev_tick], side="left") - 1
-    rms = np.where(g >= 0, np.sqrt(np.maximum(rot_sum[np.maximum(g, 0)], 0.0) / np.maximum(rot_n[np.maximum(g, 0)], 1)),
-                   0.0)
-    events = [StepEvent(t, *f) for t, f in zip(ev_t.tolist(), ev_f.tolist())]
+    peaks = []
+    for ev_tick, ev_t, ev_f in found:
+        g = np.searchsorted(gyro_pos, tick_event[ev_tick], side="left") - 1
+        gi = np.maximum(g, 0)
+        rms = np.where(g >= 0, np.sqrt(np.maximum(rot_sum[gi], 0.0) / np.maximum(rot_n[gi], 1)), 0.0) \
+            if len(gyro_pos) else np.zeros(len(ev_tick))
+        events = [StepEvent(t, *f) for t, f in zip(ev_t.tolist(), ev_f.tolist())]
+        peaks.append((ev_tick, events, rms, speed[np.searchsorted(all_ticks, ev_tick)]))
     if len(gt):
         release = StepRelease(p, gt, gt[j_init:], east[j_init:], north[j_init:], out_rej)
         if getattr(p, "walkdir", None) is not None:
             axes = [(0.0, 0.0, -1.0) if u else (0.0, 1.0, 0.0) for u in upright.tolist()] if p.smoother.auto_axis \
                 else [p.smoother.forward_b] * len(upright)
-            release.walking_direction(j_init, out_q, ev.v[tick_event], axes)
-        release.run(ev_tick, events, rms, regressors)
+            release.walking_direction(j_init, out_q, acc_at, axes)
+        release.run(peaks, track, det_at)
         clock.move("walking direction (core's stage, Python)", release.walkdir_s)
     else:
         p.finish()
@@ -213,9 +254,10 @@ def _result(p: Pipeline, recording: Recording, att: AttitudeLog) -> PipelineResu
     a = p.attitude
     counters = dict(mag_used=a.n_mag_used, mag_rejected=a.n_mag_rejected, acc_rejected=a.n_acc_rejected,
                     peaks_rejected_rotation=p.n_rejected_rotation, peaks_rejected_bout=p.n_rejected_bout)
-    if hasattr(p, "n_replayed"):  # the carry stage's peaks at a mode change: none without it
-        counters.update(peaks_replayed_mode_change=p.n_replayed, peaks_replaced_mode_change=p.n_replaced_mode)
+    counters.update(peaks_replayed_mode_change=p.n_replayed, peaks_replaced_mode_change=p.n_replaced_mode)
     counters["nonfinite_skipped"] = dict(p.n_nonfinite)
     counters.update(p.health_counters())
     counters["attitude"] = a.counters()
+    if p.carry is not None:
+        counters["carry"] = p.carry.counters()
     return PipelineResult(list(p.steps), Track.from_steps(p.steps), att, p.labels(), recording, counters, None)

@@ -6,8 +6,11 @@ Both are compiled loops over the grid (the Butterworth low-pass is the
 recursion ``lfilter`` runs, direct form II transposed, started at the steady
 state of the first sample; the peak test, thresholds and bout bookkeeping
 depend on the previous samples).  They follow the reference's order of
-operations, so every step is the same.  Deliberately a second implementation
-(issue #13 item 3).
+operations, so every step is the same.  The step detector takes a carry
+mode's gates (:class:`core.pdr.steps.StepGates`: the stride comb, the cadence
+and echo gates, the mode's ``A_th`` and gravity time constant) with the step
+period the carry detector gives it at every grid sample.  Deliberately a
+second implementation (issue #13 item 3).
 """
 
 from __future__ import annotations
@@ -29,13 +32,21 @@ def biquad_reset(c, x0):
 
 
 @kernel
-def detect(t_ns, x, restart, c, alpha_g, min_peak, min_dt_ns, max_dt_ns, delay_ns, require_valley, g0,
-           ev_tick, ev_t, ev_f):
-    """The peaks of eq. 3 on the grid; returns how many.
+def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_valley, g0,
+           comb_lag, gate_dt_ns, min_raw_range, range_back, hist, ev_tick, ev_t, ev_f):
+    """The peaks of eq. 3 on the grid, with a carry mode's gates (:class:`core.pdr.steps.StepGates`); returns how
+    many.
 
-    ``ev_tick[k]``: the grid sample at which step ``k`` is found; ``ev_t[k]`` its time (the peak less the
-    low-pass delay); ``ev_f[k]``: A_max, A_min, variance, duration (nan: first of a bout), gravity.
+    Per grid sample, from the step period the detector holds there: ``comb_lag`` the stride comb's delay in
+    samples (0: no comb); ``gate_dt_ns`` the time threshold of eq. 3 with the cadence gate; ``range_back`` how many
+    raw samples the echo gate looks back (``min_raw_range`` <= 0: no echo gate).  ``hist``: the comb's ring of raw
+    norms (its length is the detector's).  ``ev_tick[k]``: the grid sample at which step ``k`` is found; ``ev_t[k]``
+    its time (the peak less the low-pass delay); ``ev_f[k]``: A_max, A_min, variance, duration (nan: first of a
+    bout), gravity.
     """
+    n_hist = len(hist)
+    hist_k = 0
+    hist_n = 0
     n_ev = 0
     n_grid = 0
     gravity = g0
@@ -64,6 +75,7 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, min_dt_ns, max_dt_ns, delay_n
             seg_min = math.inf
             seg_sum = seg_sum2 = 0.0
             seg_n = 0
+            hist_n = 0
         if not have1:
             z1, z2 = biquad_reset(c, norm)
             if n_grid == 0:
@@ -71,13 +83,35 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, min_dt_ns, max_dt_ns, delay_n
         n_grid += 1
         gravity = gravity + alpha_g * (norm - gravity)
         g = gravity
-        y = b0 * norm + z1  # the biquad, direct form II transposed
-        z1 = b1 * norm - a1 * y + z2
-        z2 = b2 * norm - a2 * y
+        hist[hist_k] = norm  # the stride comb's delay line (core.pdr.steps.StepDetector._comb)
+        written = hist_k
+        hist_k = (hist_k + 1) % n_hist
+        if hist_n < n_hist:
+            hist_n += 1
+        lag = comb_lag[k]
+        xin = norm
+        if lag >= 1 and lag < min(n_hist, hist_n):
+            xin = 0.5 * (norm + hist[(written - lag) % n_hist])
+        y = b0 * xin + z1  # the biquad, direct form II transposed
+        z1 = b1 * xin - a1 * y + z2
+        z2 = b2 * xin - a2 * y
         if have1 and have2 and y1 > y2 and y1 >= y:  # a local maximum at the previous sample
             t_peak = t1
             since = t_peak - last
-            if (y1 - g > min_peak and ((not has_last) or since > min_dt_ns) and armed):  # eq. 3
+            passed = y1 - g > min_peak and ((not has_last) or since > gate_dt_ns[k]) and armed  # eq. 3
+            if passed and min_raw_range > 0.0:  # the echo gate: the raw norm's range over the last half period
+                back = min(n_hist, hist_n, range_back[k])
+                rng = 0.0
+                if back >= 2:
+                    lo_v = math.inf
+                    hi_v = -math.inf
+                    for i in range(back):
+                        v = hist[(hist_k - 1 - i) % n_hist]
+                        lo_v = min(lo_v, v)
+                        hi_v = max(hi_v, v)
+                    rng = hi_v - lo_v
+                passed = rng >= min_raw_range
+            if passed:
                 mean = seg_sum / seg_n if seg_n else y1
                 var = max(seg_sum2 / seg_n - mean * mean, 0.0) if seg_n else 0.0
                 acc_min = seg_min if seg_min < math.inf else y1
@@ -110,20 +144,47 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, min_dt_ns, max_dt_ns, delay_n
     return n_ev
 
 
-def detect_steps(detector, t_ns, x, restart):
-    """StepEvent fields of every step the reference ``detector`` (its settings) finds on the grid."""
-    from core.conventions import STANDARD_GRAVITY_M_S2
+def detect_steps(detector, t_ns, x, restart, gates=None, step_period_s=None):
+    """StepEvent fields of every step the reference ``detector`` (its settings) finds on the grid.
 
-    b, a = butter2_lowpass(detector.cutoff_hz, detector.grid_rate_hz)
+    ``gates``: the carry mode's :class:`core.pdr.steps.StepGates` in force (default: the detector's own);
+    ``step_period_s``: the step period the detector is given at each grid sample (the carry detector's; default:
+    none, nan), which the stride comb, the cadence gate and the echo gate use.
+    """
+    from core.conventions import STANDARD_GRAVITY_M_S2
+    from core.pdr.steps import MAX_COMB_PERIOD_S
+
+    gates = detector.gates if gates is None else gates
+    rate = detector.grid_rate_hz
+    b, a = butter2_lowpass(detector.cutoff_hz, rate)
     c = np.array([b[0] / a[0], b[1] / a[0], b[2] / a[0], a[1] / a[0], a[2] / a[0]])
-    alpha_g = 1.0 - math.exp(-1.0 / (detector.grid_rate_hz * detector.gravity_time_constant_s))
-    ev_tick = np.empty(len(t_ns) // 2 + 1, dtype=np.int64)
+    tau = detector.gravity_time_constant_s if gates.gravity_time_constant_s is None else gates.gravity_time_constant_s
+    alpha_g = 1.0 - math.exp(-1.0 / (rate * tau))
+    a_th = detector.min_peak_height_m_s2 if gates.min_peak_height_m_s2 is None else gates.min_peak_height_m_s2
+    n = len(t_ns)
+    period = np.full(n, np.nan) if step_period_s is None else np.asarray(step_period_s, dtype=float)
+    known = period > 0.0
+    p = np.where(known, period, 0.0)
+    n_hist = int(MAX_COMB_PERIOD_S * rate) + 2
+    # the reference's int(round(period * rate)), int(frac * period * 1e9), int(0.5 * period * rate), per sample
+    comb_lag = np.where(known, np.round(p * rate), 0.0).astype(np.int64) if gates.stride_comb \
+        else np.zeros(n, np.int64)
+    min_dt = int(detector.min_step_interval_s * 1e9)
+    frac = gates.min_interval_period_frac
+    gate_dt = np.full(n, min_dt, dtype=np.int64)
+    if frac > 0.0:
+        gate_dt = np.where(known, np.maximum(min_dt, np.trunc(frac * p * 1e9).astype(np.int64)), min_dt)
+    delay_samples = int(round(butter2_group_delay_s(detector.cutoff_hz) * rate))
+    range_back = np.where(known, np.trunc(0.5 * p * rate).astype(np.int64) + delay_samples + 2, n_hist)
+    ev_tick = np.empty(n // 2 + 1, dtype=np.int64)
     ev_t = np.empty(len(ev_tick), dtype=np.int64)
     ev_f = np.empty((len(ev_tick), 5))
-    n = detect(t_ns, x, restart, c, alpha_g, detector.min_peak_height_m_s2, int(detector.min_step_interval_s * 1e9),
-               int(detector.max_step_interval_s * 1e9), int(round(butter2_group_delay_s(detector.cutoff_hz) * 1e9)),
-               detector.require_valley, STANDARD_GRAVITY_M_S2, ev_tick, ev_t, ev_f)
-    return ev_tick[:n].copy(), ev_t[:n].copy(), ev_f[:n].copy()
+    k = detect(t_ns, x, restart, c, alpha_g, a_th, int(detector.max_step_interval_s * 1e9),
+               int(round(butter2_group_delay_s(detector.cutoff_hz) * 1e9)), detector.require_valley,
+               STANDARD_GRAVITY_M_S2, np.ascontiguousarray(comb_lag), np.ascontiguousarray(gate_dt),
+               float(gates.min_raw_range_m_s2), np.ascontiguousarray(range_back.astype(np.int64)), np.zeros(n_hist),
+               ev_tick, ev_t, ev_f)
+    return ev_tick[:k].copy(), ev_t[:k].copy(), ev_f[:k].copy()
 
 
 @kernel
