@@ -23,8 +23,8 @@ and one IPIN logfile.  ``--fast``: the results of the fast desktop path
 (:func:`desktop.fast.run_fast`, a second implementation over whole arrays)
 instead of ``Pipeline().run``, compared with results stored from the phone's
 path: the two implementations held to each other on all six recordings.
-The fast path has no carry-mode detection (issue #17), so ``--fast`` runs
-both without it: store with ``--save --no-carry`` first.
+Both run the default pipeline, carry-mode detection (issue #17) included;
+``--no-carry`` runs both without it (store with ``--save --no-carry`` then).
 
 The stored results live outside the repository (``--store``, default
 ``$PDR_BENCH_CACHE/equivalence.json``, ``$PDR_BENCH_CACHE`` defaulting to
@@ -158,7 +158,7 @@ def results_of(path: str, refresh: bool = False, fast: bool = False, carry: bool
     if fast:
         from desktop.fast import run_fast
 
-        res = run_fast(rec, carry=False)
+        res = run_fast(rec, carry=carry)
     else:
         res = Pipeline(carry=carry).run(rec)
     seconds = time.perf_counter() - t0
@@ -272,8 +272,8 @@ def main(argv=None) -> int:
     ap.add_argument("--tol", type=float, default=1e-9)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--fast", action="store_true",
-                    help="the fast desktop path's results (desktop.fast.run_fast; without carry-mode detection)")
-    ap.add_argument("--no-carry", action="store_true", help="the pipeline without carry-mode detection (for --fast)")
+                    help="the fast desktop path's results (desktop.fast.run_fast)")
+    ap.add_argument("--no-carry", action="store_true", help="the pipeline without carry-mode detection")
     args = ap.parse_args(argv)
     if args.fast and args.save:
         raise SystemExit("--fast compares with results stored from Pipeline.run; it stores none")
@@ -282,7 +282,7 @@ def main(argv=None) -> int:
     if missing:
         print("missing, skipped: " + ", ".join(missing), file=sys.stderr)
     t0 = time.perf_counter()
-    carry = not (args.no_carry or args.fast)
+    carry = not args.no_carry
     new = run_all(paths, args.jobs, refresh=args.save, fast=args.fast, carry=carry)
     wall = time.perf_counter() - t0
     for name, r in new.items():
@@ -297,7 +297,7 @@ def main(argv=None) -> int:
     saved = json.loads(store.read_text())
     if saved.get("carry", True) != carry:
         print(f"NOTE: the stored results were {'with' if saved.get('carry', True) else 'without'} carry-mode "
-              f"detection, these {'with' if carry else 'without'} (--fast needs a store saved with --no-carry)",
+              f"detection, these {'with' if carry else 'without'} (store with the same --no-carry setting)",
               file=sys.stderr)
     if saved["other_core_digest"] != digest:
         print("NOTE: core modules outside the files under change differ from the stored run's: "

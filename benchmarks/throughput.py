@@ -327,20 +327,20 @@ def pipeline_timings(rec, events: list, repeat: int) -> list[dict]:
     return out
 
 
-def fast_timings(rec, repeat: int) -> dict:
+def fast_timings(rec, repeat: int, carry: bool = True) -> dict:
     """The fast desktop path on the walk: best CPU time after a warm-up, per stage, and the compile time.
 
-    Without carry-mode detection (issue #17), which the fast path does not have (it refuses a pipeline with it).
+    The default pipeline, carry-mode detection (issue #17) included; ``carry=False`` times it without.
     """
     from desktop.fast import HAVE_NUMBA, run_fast
 
     n = sum(len(rec.streams[k]) for k in (ACC, GYRO, MAG))
-    run_fast(rec, carry=False)  # compiled (or loaded from numba's cache) before the timing; no carry stage
+    run_fast(rec, carry=carry)  # compiled (or loaded from numba's cache) before the timing
     best, stages = math.inf, {}
     for _ in range(repeat):
         tm = {}
         t0 = time.process_time()
-        run_fast(rec, timings=tm, carry=False)
+        run_fast(rec, timings=tm, carry=carry)
         s = time.process_time() - t0
         if s < best:
             best, stages = s, tm
@@ -364,8 +364,8 @@ def _compile_time() -> dict:
     import tempfile
 
     code = ("import time; from benchmarks.throughput import walk; rec = walk(0.5); t0 = time.process_time(); "
-            "from desktop.fast import run_fast; run_fast(rec, carry=False); t1 = time.process_time(); "
-            "run_fast(rec, carry=False); "
+            "from desktop.fast import run_fast; run_fast(rec); t1 = time.process_time(); "
+            "run_fast(rec); "
             "t2 = time.process_time(); print((t1 - t0) - (t2 - t1))")
     with tempfile.TemporaryDirectory() as cache:
         out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True,
