@@ -55,7 +55,7 @@ def _same_status(a: MagCalStatus, b: MagCalStatus) -> bool:
 def _check(t, v, **settings) -> MagCalibrator:
     """The compiled attempts against ``update`` reading by reading; returns the reference calibrator."""
     ref = MagCalibrator(**settings)
-    rows, flags, reasons = [], [], []
+    rows, flags = [], []
     for ti, (x, y, z) in zip(t.tolist(), v.tolist()):
         rows.append(ref.update(ti, x, y, z))
         flags.append(ref.calibrated)

@@ -1,0 +1,216 @@
+"""The fast path's walking-direction stage over the whole grid against core's, fed sample by sample.
+
+:func:`desktop.fast.walkdir.walking_direction_over_grid` is held to :class:`core.pdr.walkdir.WalkingDirection`
+fed grid sample by grid sample with the very inputs ``Pipeline`` feeds it (recorded from ``Pipeline.run``):
+after every grid sample the current axis and its accumulators (what ``step_heading``, ``applies``,
+``offset_rad`` and ``estimate`` read) within ``TOL``, and at the end the whole state -- the delay buffer, the
+open stride, every axis, the counters, the per-stride records, ``last_estimate`` and ``diagnostics()``.  The
+inputs: a pocket walk and a swinging-hand walk of the simulator (the offset applies), the IPIN cut (compass
+waving, then a hand-held walk) and a synthetic stream with non-finite samples, axis switches and a pause (the
+gap's reset).  Seeded; the kernels run as plain Python in CI (no numba).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from core.pdr.pipeline import Pipeline
+from core.pdr.walkdir import WalkingDirection
+from desktop.fast.walkdir import WalkdirTrace, walking_direction_over_grid
+from desktop.simulator import simulate_walk
+from test_fast_path import REAL, _real  # tests/ is on sys.path: the IPIN cut, skipped where absent
+
+TOL = 1e-9  # on every float (rad, m/s^2 and the accumulators); in practice they are bit for bit equal
+FIELDS = ("c2", "s2", "w", "w2", "gx", "gy")
+
+
+def _record(rec, **params):
+    """``Pipeline(**params).run(rec)`` with its walking-direction stage's inputs and the estimate after each
+    update recorded: ``(pipeline, inputs, after)``."""
+    inputs, after = [], []
+    orig = WalkingDirection.update
+
+    def update(self, t_ns, q, ax, ay, az, fe, fn, step=False, axis=None):
+        orig(self, t_ns, q, ax, ay, az, fe, fn, step, axis)
+        inputs.append((t_ns, tuple(q), ax, ay, az, fe, fn, step, axis))
+        after.append(_estimate_state(self))
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(WalkingDirection, "update", update)
+    try:
+        pipe = Pipeline(**params)
+        pipe.run(rec)
+    finally:
+        mp.undo()
+    return pipe, inputs, after
+
+
+def _estimate_state(wd):
+    """What the estimate is made of: the current axis and its accumulators (None without an accepted stride)."""
+    st = wd._states.get(wd._axis_key)
+    return wd._axis_key, (tuple(getattr(st, f) for f in FIELDS) + (st.n,) if st is not None and st.n else None)
+
+
+def _arrays(inputs):
+    t = np.array([x[0] for x in inputs], dtype=np.int64)
+    q = np.array([x[1] for x in inputs], dtype=np.float64).reshape(-1, 4)
+    acc = np.array([x[2:5] for x in inputs], dtype=np.float64).reshape(-1, 3)
+    fe = np.array([x[5] for x in inputs], dtype=np.float64)
+    fn = np.array([x[6] for x in inputs], dtype=np.float64)
+    steps = {j for j, x in enumerate(inputs) if x[7]}
+    axes = [x[8] for x in inputs]
+    return t, q, acc, fe, fn, steps, axes
+
+
+def _close(a, b) -> bool:
+    """Floats within TOL (nan equal to nan); containers element by element; anything else equal."""
+    if isinstance(a, dict):
+        return isinstance(b, dict) and list(a) == list(b) and all(_close(a[k], b[k]) for k in a)
+    if isinstance(a, (tuple, list)):
+        return type(a) is type(b) and len(a) == len(b) and all(_close(x, y) for x, y in zip(a, b))
+    if isinstance(a, float) and isinstance(b, float):
+        if math.isnan(a) or math.isnan(b):
+            return math.isnan(a) and math.isnan(b)
+        return abs(a - b) <= TOL * max(1.0, abs(a))
+    return type(a) is type(b) and a == b
+
+
+def _state(wd) -> dict:
+    """Everything of a WalkingDirection that updates change, as plain data."""
+    return {"mean_u": wd._mean_u, "vz": wd._vz, "buf": list(wd._buf), "sums": wd._sums,
+            "stride": (wd._stride_steps, wd._stride_t0, wd._stride_fwd0, wd._stride_skipped),
+            "axis_key": wd._axis_key,
+            "states": {k: tuple(getattr(v, f) for f in FIELDS) + (v.n,) for k, v in wd._states.items()},
+            "last_accepted_ns": wd._last_accepted_ns, "n_gap_resets": wd.n_gap_resets,
+            "last_estimate": wd.last_estimate, "strides": list(wd.strides), "maxlen": wd.strides.maxlen,
+            "n_strides": wd.n_strides, "n_accepted": wd.n_accepted, "rejected": wd.rejected,
+            "n_sign_disagreements": wd.n_sign_disagreements, "n_nonfinite": wd.n_nonfinite,
+            "diagnostics": wd.diagnostics()}
+
+
+def _check(ref: WalkingDirection, inputs, after, fresh: WalkingDirection) -> WalkdirTrace:
+    """The trace over ``inputs`` against the recorded estimate after each sample and the final state of ``ref``."""
+    t, q, acc, fe, fn, steps, axes = _arrays(inputs)
+    trace = walking_direction_over_grid(fresh, t, q, acc, fe, fn, steps, axes)
+    for j, (want_key, want) in enumerate(after):
+        key, st = trace.offset_state(j)
+        got = None if st is None else tuple(getattr(st, f) for f in FIELDS) + (st.n,)
+        assert key == want_key and ((want is None and got is None) or (want is not None and _close(want, got))), j
+    # what step_heading gives after a sample, with and without a carry mode: through WalkdirTrace.at, and from
+    # an object holding the recorded estimate
+    probe = WalkingDirection(**_settings(ref))
+    for j in range(0, len(after), max(1, len(after) // 50)):
+        trace.at(probe, j)
+        want_key, want = after[j]
+        shadow = WalkingDirection(**_settings(ref))
+        shadow._axis_key = want_key
+        if want is not None:
+            st = shadow._states[want_key] = type(probe._states[want_key])()
+            st.c2, st.s2, st.w, st.w2, st.gx, st.gy, st.n = want
+        for setting, mode in (("auto", None), ("auto", "pocket"), ("auto", "handheld"), ("acceleration", None)):
+            assert _close(probe.step_heading(0.3, setting, mode), shadow.step_heading(0.3, setting, mode))
+        assert _close(probe.estimate(), shadow.estimate())
+    trace.finish(fresh)
+    fresh.n_steps_offset = ref.n_steps_offset  # counted by step_heading, not by the updates
+    assert _close(_state(ref), _state(fresh))
+    return trace
+
+
+def _settings(wd: WalkingDirection) -> dict:
+    names = ("grid_rate_hz", "delay_s", "vz_leak_time_s", "mean_time_s", "min_stride_s", "max_stride_s",
+             "min_horizontal_std_m_s2", "min_anisotropy", "max_stride_turn_rad", "min_forward_norm",
+             "memory_strides", "confident_strides", "confident_sigma_rad", "confident_sign", "auto_min_strides",
+             "auto_far_min_strides", "auto_min_offset_rad", "max_strides_kept", "axis_method", "pca_min_anisotropy",
+             "min_coherence", "reset_after_gap_s")
+    return {k: getattr(wd, k) for k in names}
+
+
+@pytest.mark.parametrize("placement, seed", [("pocket", 5), ("swinging", 6)])
+def test_simulated_walk_equals_core(placement, seed):
+    walk = simulate_walk([(0.0, 0.0), (16.0, 0.0), (16.0, 10.0), (0.0, 10.0), (0.0, 0.0)], seed=seed,
+                         placement=placement)
+    pipe, inputs, after = _record(walk.recording)
+    ref = pipe.walkdir
+    _check(ref, inputs, after, WalkingDirection(**_settings(ref)))
+    assert ref.n_accepted >= 5 and ref.n_steps_offset > 0  # the offset was applied to steps
+
+
+def test_ipin_cut_equals_core():
+    pipe, inputs, after = _record(_real(*REAL[0]))
+    ref = pipe.walkdir
+    _check(ref, inputs, after, WalkingDirection(**_settings(ref)))
+    assert ref.n_strides > 10
+
+
+def test_synthetic_stream_nonfinite_axis_switches_and_a_pause():
+    # 60 s at 50 Hz of a walk-like acceleration (steps every 0.55 s) whose forward axis is 70 deg off the device
+    # heading, with a device turning slowly; non-finite samples, axis switches, a stride with a vertical axis,
+    # and 15 s without steps (the gap's reset); a random pca/coherent mix from the noise
+    rng = np.random.default_rng(21)
+    n = 50 * 60
+    t = 5_000_000_000 + 20_000_000 * np.arange(n, dtype=np.int64)
+    s = t * 1e-9
+    head = 0.02 * s
+    yaw = np.column_stack([np.cos(0.5 * head), np.zeros(n), np.zeros(n), np.sin(0.5 * head)])
+    phase = 2.0 * math.pi * s / 0.55
+    walking = (s < 25.0) | (s > 40.0)
+    fwd_dev = head + math.radians(70.0)
+    a_f = np.where(walking, -1.2 * np.sin(phase), 0.0)
+    a_up = np.where(walking, 2.0 * np.cos(phase), 0.0)
+    a_side = np.where(walking, 0.5 * np.sin(0.5 * phase + 0.3), 0.0)
+    ae = a_f * np.cos(fwd_dev) - a_side * np.sin(fwd_dev)
+    an = a_f * np.sin(fwd_dev) + a_side * np.cos(fwd_dev)
+    acc_n = np.column_stack([ae, an, 9.81 + a_up]) + rng.normal(scale=0.05, size=(n, 3))
+    # device frame: rotate back by the yaw (q rotates body into ENU)
+    c, sn = np.cos(head), np.sin(head)
+    acc = np.column_stack([c * acc_n[:, 0] + sn * acc_n[:, 1], -sn * acc_n[:, 0] + c * acc_n[:, 1], acc_n[:, 2]])
+    fe, fn = np.cos(head), np.sin(head)
+    fe = fe.copy()
+    fe[1200:1260] *= 0.05  # the forward axis nearly vertical for a while
+    fn = fn.copy()
+    fn[1200:1260] *= 0.05
+    acc[rng.integers(0, n, size=15)] = np.nan
+    fe[rng.integers(0, n, size=5)] = np.inf
+    steps = {j for j in range(n) if walking[j] and (j % 27 == 0)}
+    axes = [(0.0, 1.0, 0.0) if (j // 700) % 3 else (0.0, 0.0, -1.0) for j in range(n)]
+    ref = WalkingDirection(max_strides_kept=8)
+    after = []
+    inputs = []
+    for j in range(n):
+        args = (int(t[j]), tuple(yaw[j].tolist()), float(acc[j, 0]), float(acc[j, 1]), float(acc[j, 2]),
+                float(fe[j]), float(fn[j]), j in steps, axes[j])
+        ref.update(*args)
+        inputs.append(args)
+        after.append(_estimate_state(ref))
+    _check(ref, inputs, after, WalkingDirection(max_strides_kept=8))
+    assert ref.n_gap_resets >= 1 and ref.n_accepted >= 10 and ref.n_nonfinite >= 15
+    assert len(ref.diagnostics()["axes"]) == 2 and ref.last_estimate is not None
+    assert sum(ref.rejected.values()) > 0
+
+
+def test_from_a_later_grid_sample_and_as_step_release_reads_it():
+    # j_init > 0 and the axes given as indices: the samples before j_init are not fed; at() before j_init and
+    # at the end
+    walk = simulate_walk([(0.0, 0.0), (20.0, 0.0)], seed=8, placement="pocket")
+    pipe, inputs, after = _record(walk.recording)
+    t, q, acc, fe, fn, steps, axes = _arrays(inputs)
+    j0 = 7
+    pad_t = np.concatenate([t[0] - 20_000_000 * np.arange(j0, 0, -1), t])
+    pad_q = np.concatenate([np.full((j0, 4), np.nan), q])
+    pad_acc = np.concatenate([np.full((j0, 3), np.nan), acc])
+    keys = sorted(set(axes))
+    ids = np.array([keys.index(a) for a in axes])
+    wd = WalkingDirection(**_settings(pipe.walkdir))
+    trace = walking_direction_over_grid(wd, pad_t, pad_q, pad_acc, fe, fn, {j + j0 for j in steps}, ids, j0,
+                                        axis_keys=keys)
+    trace.at(wd, j0 - 1)
+    assert wd._axis_key is None and wd._states == {} and wd.offset_rad == 0.0
+    for j, (want_key, want) in enumerate(after):
+        key, st = trace.offset_state(j + j0)
+        assert key == want_key and (st is None) == (want is None)
+    trace.at(wd, len(pad_t) - 1)
+    wd.n_steps_offset = pipe.walkdir.n_steps_offset
+    assert _close(_state(pipe.walkdir), _state(wd))
