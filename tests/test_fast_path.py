@@ -173,7 +173,8 @@ def test_fast_refuses_what_it_does_not_implement():
 
 def test_carry_features_equal_core_window_by_window():
     # the vectorised features of desktop.fast.carry against CarryModeDetector.compute_features: random windows
-    # (with and without a gyroscope, a gyroscope frozen or all zeros) and every hop of a real recording's grid
+    # (with and without a gyroscope, a gyroscope frozen or all zeros, a phone at rest or reading zeros) and every
+    # hop of a real recording's grid
     from core.pdr.carry import CarryModeDetector
     from desktop.fast.carry import hop_samples, window_features
 
@@ -183,6 +184,9 @@ def test_carry_features_equal_core_window_by_window():
     w[:, :, 2] += 9.8
     w[:4, :, 3:] = 0.0
     w[4:8, :, 3:] = 0.7
+    w[8:11, :, :3] = (0.1, 9.7, 0.3)  # a phone that does not move: the tilt's arc cosine at 1, no periodicity
+    w[9, :, :3] = 0.0
+    w[10, :, :3] += rng.normal(size=(det._n, 3)) * 1e-9
     with_gyro = np.arange(40) >= 12
     rec = _real(*REAL[1])
     acc = rec.streams["acc"]

@@ -56,7 +56,10 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     acc = w[:, :, :3]
     norm = np.sqrt(np.einsum("hij,hij->hi", acc, acc))
     mean = acc.mean(axis=1)
-    m_norm = np.sqrt(np.einsum("hi,hi->h", mean, mean))
+    # |mean| one window at a time with the reference's call (np.linalg.norm of a vector is a BLAS dot): the
+    # gravity direction's last bit matters to the tilt of a phone that does not move, whose arc cosine near 1
+    # turns it into 1e-8 rad
+    m_norm = np.array([float(np.linalg.norm(v)) for v in mean])
     mean_norm = norm.mean(axis=1)
     ok = m_norm > 1e-6
     u = np.where(ok[:, None], mean / np.where(ok, m_norm, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
