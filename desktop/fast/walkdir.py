@@ -354,7 +354,7 @@ assert set(_METHODS) == set(AXIS_METHODS)
 
 def _axis_state(row, n) -> _AxisState:
     st = _AxisState()
-    st.c2, st.s2, st.w, st.w2, st.gx, st.gy = (float(x) for x in row)
+    st.c2, st.s2, st.w, st.w2, st.gx, st.gy = row.tolist()
     st.n = int(n)
     return st
 
@@ -369,17 +369,24 @@ class WalkdirTrace:
         self.key, self.acc, self.n_used = key, acc, n_used
         self._final = final
         self._last = len(key) - 1 + j_init
+        # the estimate changes only at some samples (an accepted stride, a gap's reset, an axis switch): at()
+        # writes into the object only when it differs from what it wrote last
+        n = len(key)
+        changed = np.ones(n, dtype=bool)
+        if n > 1:
+            changed[1:] = (key[1:] != key[:-1]) | (n_used[1:] != n_used[:-1]) | (acc[1:] != acc[:-1]).any(axis=1)
+        self._version = np.cumsum(changed)
+        self._written = None  # (object, version) at() wrote last
 
     def offset_state(self, j: int):
         """``(axis key, _AxisState or None)`` in force after grid sample ``j`` (None before the first sample
         or with no accepted stride behind the current axis)."""
-        i = j - self.j_init
-        if i < 0 or len(self.key) == 0:
+        i = min(j - self.j_init, len(self.key) - 1)
+        if j < self.j_init or i < 0:
             return None, None
-        k = int(self.key[min(i, len(self.key) - 1)])
-        key = self.keys[k] if k >= 0 else None
-        n = int(self.n_used[min(i, len(self.key) - 1)])
-        return key, (_axis_state(self.acc[min(i, len(self.key) - 1)], n) if n else None)
+        k = int(self.key[i])
+        n = int(self.n_used[i])
+        return (self.keys[k] if k >= 0 else None), (_axis_state(self.acc[i], n) if n else None)
 
     def at(self, wd, j: int) -> None:
         """Put into ``wd`` what its ``step_heading``/``applies``/``offset_rad``/``estimate`` read after grid
@@ -388,14 +395,19 @@ class WalkdirTrace:
         if j >= self._last:
             self.finish(wd)
             return
+        version = int(self._version[j - self.j_init]) if j >= self.j_init else 0
+        if self._written is not None and self._written[0] is wd and self._written[1] == version:
+            return
         key, st = self.offset_state(j)
         wd._axis_key = key
         wd._states = {key: st} if st is not None else {}
+        self._written = (wd, version)
 
     def finish(self, wd) -> None:
         """The state ``WalkingDirection.update`` leaves after every grid sample (``n_steps_offset`` kept)."""
         for name, value in self._final.items():
             setattr(wd, name, value() if callable(value) else value)
+        self._written = None
 
 
 def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, axes, j_init: int = 0,
@@ -423,9 +435,10 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
     step = np.zeros(n, dtype=np.bool_)
     step[ticks] = True
     if axis_keys is None:
-        index: dict = {}
-        ids = np.fromiter((index.setdefault(a, len(index)) for a in axes[:n]), dtype=np.int64, count=n)
-        keys = list(index)
+        axes = list(axes[:n])
+        keys = list(dict.fromkeys(axes))  # in order of first appearance
+        index = {a: i for i, a in enumerate(keys)}
+        ids = np.array(list(map(index.__getitem__, axes)), dtype=np.int64).reshape(n)
     else:
         keys = list(axis_keys)
         ids = np.ascontiguousarray(np.asarray(axes, dtype=np.int64)[:n])
