@@ -107,8 +107,9 @@ class StepRelease:
         """All the candidates, then the end.
 
         ``peaks``: per step detector of the pipeline (``pipe._mode_detectors``' order; one without carry
-        detection) ``(ev_tick, events, rms, regressors)``: the grid samples at which its peaks are found, the
-        :class:`StepEvent` of each, the rotation RMS and the speed regressors there.  With carry detection,
+        detection) ``(ev_tick, ev_t, ev_f, rms, regressors)``: the grid samples at which its peaks are found, the
+        :class:`StepEvent` fields of each (its time; the rest, in order), the rotation RMS and the speed regressors
+        there.  With carry detection,
         ``carry`` is the detector's per-sample :class:`desktop.fast.carry.CarryTrack` and ``det_at[k]`` the
         index of the mode's detector at grid sample ``k``; the active detector's peaks are candidates, and at a
         change of detector the new one's held peaks replace the unconfirmed candidates.
@@ -116,15 +117,15 @@ class StepRelease:
         gt = self.grid_t
         n_grid = len(gt)
         self.carry = carry
-        self.peaks = [(np.asarray(tk, dtype=np.int64), evs, np.array([e.t_ns for e in evs], dtype=np.int64), r, g)
-                      for tk, evs, r, g in peaks]
+        self.peaks = [(np.asarray(tk, dtype=np.int64), np.asarray(t, dtype=np.int64), f, r, g)
+                      for tk, t, f, r, g in peaks]
         if det_at is None:
             det_at = np.zeros(n_grid, dtype=np.int64)
         prev = np.concatenate([[0], det_at[:-1]])
         switch = det_at != prev
         ticks = [np.flatnonzero(switch)]
         steps_at = set()
-        for d, (tk, _, t, _, _) in enumerate(self.peaks):
+        for d, (tk, t, _, _, _) in enumerate(self.peaks):
             # a peak's own sample, the one where its heading falls due, the one where its bout's time runs out:
             # the release can change only there (a replayed peak's at the change of detector, in the list too)
             ticks += [tk, np.searchsorted(gt, t + self.delay_ns, side="left"),
@@ -141,12 +142,12 @@ class StepRelease:
             if switch[k]:
                 self.switch(d, k)
             else:
-                tk, evs, _, rms, regs = self.peaks[d]
+                tk = self.peaks[d][0]
                 m = nxt[d]
                 while m < len(tk) and tk[m] < k:
                     m += 1
                 while m < len(tk) and tk[m] == k:
-                    self.candidate(evs[m], float(rms[m]), tuple(float(x) for x in regs[m]))
+                    self._peak(d, m)
                     m += 1
                 nxt[d] = m
             self.release(k)
@@ -172,15 +173,20 @@ class StepRelease:
         p.n_replaced_mode += len(self.cands) - len(kept)
         self.cands = kept
         self.bout_len = 0
-        tk, evs, t, rms, regs = self.peaks[d]
+        tk, t = self.peaks[d][:2]
         hi = int(np.searchsorted(tk, k, side="right"))
         lo = int(np.searchsorted(t[:hi], max(self.confirmed_ns + self.min_gap_ns + 1,
                                              int(self.grid_t[k]) - self.hold_ns), side="left"))
         n_rot = p.n_rejected_rotation  # counted once, when the peak was live
         for m in range(lo, hi):
             p.n_replayed += 1
-            self.candidate(evs[m], float(rms[m]), tuple(float(x) for x in regs[m]))
+            self._peak(d, m)
         p.n_rejected_rotation = n_rot
+
+    def _peak(self, d: int, m: int) -> None:
+        """Peak ``m`` of detector ``d`` made a candidate (its StepEvent built only now: most are never needed)."""
+        _, t, f, rms, regs = self.peaks[d]
+        self.candidate(StepEvent(int(t[m]), *f[m].tolist()), float(rms[m]), tuple(regs[m].tolist()))
 
     def candidate(self, ev: StepEvent, rms: float, regressors: tuple) -> None:
         p = self.p

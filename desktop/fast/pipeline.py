@@ -40,7 +40,6 @@ import numpy as np
 from core.conventions import ACC, CARRY_MODES, GYRO
 from core.pdr.pipeline import (IMPOSSIBLE, MAG, SATURATION_FLOOR, AttitudeLog, Pipeline, PipelineResult, SensorHealth,
                                Track)
-from core.pdr.steps import StepEvent
 from core.recording import Recording
 from desktop.fast import attitude as fatt
 from desktop.fast.carry import run_carry
@@ -211,8 +210,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         gi = np.maximum(g, 0)
         rms = np.where(g >= 0, np.sqrt(np.maximum(rot_sum[gi], 0.0) / np.maximum(rot_n[gi], 1)), 0.0) \
             if len(gyro_pos) else np.zeros(len(ev_tick))
-        events = [StepEvent(t, *f) for t, f in zip(ev_t.tolist(), ev_f.tolist())]
-        peaks.append((ev_tick, events, rms, speed[np.searchsorted(all_ticks, ev_tick)]))
+        peaks.append((ev_tick, ev_t, ev_f, rms, speed[np.searchsorted(all_ticks, ev_tick)]))
     if len(gt):
         release = StepRelease(p, gt, gt[j_init:], east[j_init:], north[j_init:], out_rej)
         if getattr(p, "walkdir", None) is not None:
