@@ -614,8 +614,25 @@ def build(run_info: dict, plots: dict, out_path: Path, argv=None) -> str:
     lines += ["## Run time", "",
               f"Pipeline: {_fmt(runtime, 2)} s per recording on average, "
               f"median {_fmt(M.nanmedian(per_ev), 1)} us per sensor event (acc+gyro+mag); "
-              f"peers: {_fmt(M.nanmean([r.get('peer_runtime_s') for r in results]), 2)} s per landmark recording.", ""]
+              f"peers: {_fmt(M.nanmean([r.get('peer_runtime_s') for r in results]), 2)} s per landmark recording."
+              + _engine_note(results), ""]
     return "\n".join(lines)
+
+
+def _engine_note(results: list[dict]) -> str:
+    """Which engine ran our pipeline and how many peer runs came from the cache (issue #13), as a sentence."""
+    engines: dict = {}
+    for r in results:
+        e = r.get("engine")
+        if e:
+            key = "fast path" if e == "fast" else "reference (Pipeline.run)"
+            engines[key] = engines.get(key, 0) + 1
+    n_cached = sum(len(r.get("peers_cached", ())) for r in results)
+    parts = [f"{k} on {v} recording{'s' if v != 1 else ''}" for k, v in engines.items()]
+    out = f" Our pipeline ran on the {' and the '.join(parts)}." if parts else ""
+    if n_cached:
+        out += f" {n_cached} peer runs were read from the peer cache (the peers' attitudes of an earlier run)."
+    return out
 
 
 #: markdown sections other benchmark modules write, appended to RESULTS.md

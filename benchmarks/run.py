@@ -1,6 +1,7 @@
 """The benchmark run: every dataset present, our pipeline and the peers on each recording.
 
-``python -m benchmarks [--data DIR] [--quick] [--out FILE] [--plots DIR] [--only DATASET] [--jobs N] [--split S]``
+``python -m benchmarks [--data DIR] [--quick] [--out FILE] [--plots DIR] [--only DATASET] [--jobs N] [--split S]
+[--engine auto|fast|reference] [--peer-cache DIR | --no-peer-cache]``
 
 For every trial of every dataset module found under the data root:
 
@@ -25,7 +26,13 @@ Every result row carries its split (``"split"``: ``tuning`` or ``report``,
 declared in :mod:`benchmarks.splits`); ``--split`` runs one split only.
 
 Trials run in parallel processes (``--jobs``, default 2); progress goes to
-stderr, one line per recording.  The Markdown report and the plots are made
+stderr, one line per recording.  Two things make a rerun cheap (issue #13):
+our pipeline runs on the fast desktop path (:func:`desktop.fast.run_fast`,
+the same results within 1e-9) when numba is installed (``--engine``), and
+the peers' attitudes, which do not depend on our code, are kept in
+``out/benchmarks/peer_cache`` between runs (``--peer-cache``,
+``--no-peer-cache``; :func:`benchmarks.peers.peer_attitude` says what a
+stored result must match).  The Markdown report and the plots are made
 by :mod:`benchmarks.report`; :func:`headline` gives the numbers the targets
 and the CI guard (:mod:`benchmarks.guard`) look at.
 """
@@ -47,6 +54,7 @@ from benchmarks import metrics as M
 from benchmarks import splits as S
 from benchmarks.datasets.base import Trial, default_data_root
 from benchmarks.headline import evaluate_targets, headline
+from desktop.engine import ENGINES
 
 #: dataset modules in report order (ipol and trundlewheel belong to the stride-length work; optional)
 DATASET_MODULES = ("oxford", "brajdic_harle", "ipin2023", "ms_indoor", "eth_walk", "ipol", "trundlewheel")
@@ -165,10 +173,12 @@ def _peer_headings(trial: Trial, rec, pipe, tr, peer_names, r: dict) -> dict:
         return {}
     dip = trial.site.magnetic_field()[1] if trial.site is not None else None
     t_peer = time.perf_counter()
-    ph, perr = P.run_peers(rec, tr.t_ns, names=peer_names, magnetic_dip_rad=dip, grid_rate_hz=pipe.grid_rate_hz,
-                           cutoff_hz=pipe.smoother.cutoff_hz, delay_s=pipe.heading_delay_s,
-                           forward_b=pipe.smoother.forward_b)
+    cached: list = []
+    ph, perr = P.run_peers(rec, tr.t_ns, names=peer_names, magnetic_dip_rad=dip, cache_dir=_SETTINGS["peer_cache"],
+                           cached=cached, grid_rate_hz=pipe.grid_rate_hz, cutoff_hz=pipe.smoother.cutoff_hz,
+                           delay_s=pipe.heading_delay_s, forward_b=pipe.smoother.forward_b)
     r["peer_runtime_s"] = r.get("peer_runtime_s", 0.0) + time.perf_counter() - t_peer
+    r["peers_cached"] = r.get("peers_cached", []) + cached
     if perr:
         r["peer_errors"] = perr
     return ph
@@ -201,7 +211,7 @@ def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True, pipeli
     if trial.reference_track is not None and rec.has("gps"):
         raise RuntimeError(f"{trial.name}: the GPS used as reference is still in the recording")
     pipe = make_pipeline(trial, **(pipeline_overrides or {}))
-    res = pipe.run(rec)
+    res, engine = run_ours(pipe, rec)
     t_run = time.perf_counter() - t0 - t_load
     tr = res.track
     r: dict = {
@@ -209,7 +219,7 @@ def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True, pipeli
         "info": dict(trial.info), "declination_deg": math.degrees(trial.declination_rad or 0.0),
         "labels": list(res.labels), "duration_s": rec.duration_s,
         "events": int(sum(len(s) for n, s in rec.streams.items() if n in ("acc", "gyro", "mag"))),
-        "n_steps_total": len(tr), "counters": dict(res.counters), "notes": trial.notes,
+        "n_steps_total": len(tr), "counters": dict(res.counters), "notes": trial.notes, "engine": engine,
     }
     q = res.attitude.q_wxyz
     r["attitude_nan_pct"] = 100.0 * float(np.mean(~np.isfinite(q).all(axis=1))) if len(q) else 0.0
@@ -313,11 +323,21 @@ def evaluate_trial(trial: Trial, peer_names=(), keep_tracks: bool = True, pipeli
 _TRIALS: dict = {}
 #: keyword-argument factory for our pipeline in this process (set in the workers by the pool initializer)
 _FACTORY = None
+#: this process's engine choice (``--engine``) and peer cache folder (None: none); set like the factory
+_SETTINGS: dict = {"engine": "reference", "peer_cache": None}
 
 
-def _set_factory(factory) -> None:
+def _set_factory(factory, engine: str = "reference", peer_cache=None) -> None:
     global _FACTORY
     _FACTORY = factory
+    _SETTINGS.update(engine=engine, peer_cache=peer_cache)
+
+
+def run_ours(pipe, rec) -> tuple:
+    """``(result, engine that ran)``: :func:`desktop.engine.run_pipeline` on this process's engine."""
+    from desktop.engine import run_pipeline
+
+    return run_pipeline(pipe, rec, _SETTINGS["engine"])
 
 
 def _trials_of(module_name: str, root: str) -> list[Trial]:
@@ -342,7 +362,8 @@ def _task(module_name: str, root: str, index: int, peer_names, keep_tracks: bool
 
 
 def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names=None, split: str | None = None,
-        pipeline_kwargs_factory=None, keep_tracks: bool = True, log=sys.stderr) -> dict:
+        pipeline_kwargs_factory=None, keep_tracks: bool = True, log=sys.stderr, engine: str = "reference",
+        peer_cache: Path | None = None) -> dict:
     """Evaluate every trial present; returns ``{"results": [...], "datasets": {...}, ...}``.
 
     ``split``: only the recordings of this split (:mod:`benchmarks.splits`).
@@ -351,7 +372,11 @@ def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names
     per recording so that every recording gets fresh filter objects.  With
     ``jobs > 1`` it reaches the worker processes through the pool's
     initializer (Linux forks them, so a lambda or closure works).
+    ``engine``: one of :data:`desktop.engine.ENGINES` (:func:`run_ours`); ``peer_cache``: the
+    folder of the peers' stored attitudes (None: run every peer).
     """
+    if engine not in ENGINES:
+        raise ValueError(f"engine {engine!r}: one of {', '.join(ENGINES)}")  # before the workers start
     from benchmarks import peers as P
 
     root = Path(root)
@@ -392,16 +417,16 @@ def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names
         print(f"[{done:3d}/{len(tasks)}] {r['dataset']}/{r['name']}: {_progress_line(r)}", file=log, flush=True)
 
     if jobs <= 1:
-        previous = _FACTORY
-        _set_factory(pipeline_kwargs_factory)
+        previous = (_FACTORY, _SETTINGS["engine"], _SETTINGS["peer_cache"])
+        _set_factory(pipeline_kwargs_factory, engine, peer_cache)
         try:
             for task in tasks:
                 report(_task(*task))
         finally:
-            _set_factory(previous)
+            _set_factory(*previous)
     else:
         with ProcessPoolExecutor(max_workers=jobs, initializer=_set_factory,
-                                 initargs=(pipeline_kwargs_factory,)) as ex:
+                                 initargs=(pipeline_kwargs_factory, engine, peer_cache)) as ex:
             futures = [ex.submit(_task, *task) for task in tasks]
             for f in as_completed(futures):
                 report(f.result())
@@ -410,7 +435,8 @@ def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names
     results.sort(key=lambda r: (rank.get(r["dataset"], len(rank)), r["name"]))
     print(f"benchmark: done in {wall:.0f} s", file=log, flush=True)
     return {"results": results, "datasets": datasets, "import_errors": import_errors, "wall_s": wall,
-            "quick": quick, "jobs": jobs, "peers": list(peer_names), "root": str(root), "split": split}
+            "quick": quick, "jobs": jobs, "peers": list(peer_names), "root": str(root), "split": split,
+            "engine": engine, "peer_cache": None if peer_cache is None else str(peer_cache)}
 
 
 def _progress_line(r: dict) -> str:
@@ -456,6 +482,12 @@ def parse_args(argv=None):
                     help="comma-separated heading peers (default: all installed; quick: rotvec,imufusion)")
     ap.add_argument("--split", choices=S.SPLITS, default=None,
                     help="run only this split (default: both; see benchmarks/splits.py)")
+    ap.add_argument("--engine", choices=ENGINES, default="auto",
+                    help="our pipeline: the fast desktop path (desktop.fast, the same results within 1e-9) when "
+                         "numba is installed (auto, the default), always (fast), or Pipeline.run (reference)")
+    ap.add_argument("--peer-cache", type=Path, default=None, metavar="DIR",
+                    help="where the peers' attitudes are kept between runs (default: out/benchmarks/peer_cache)")
+    ap.add_argument("--no-peer-cache", action="store_true", help="run every peer, read and store nothing")
     return ap.parse_args(argv)
 
 
@@ -471,7 +503,9 @@ def main(argv=None) -> int:
         print(f"benchmark: no data folder at {root}", file=sys.stderr)
         return 2
     peer_names = tuple(p for p in args.peers.split(",") if p) if args.peers is not None else None
-    run_info = run(root, quick=args.quick, only=args.only, jobs=args.jobs, peer_names=peer_names, split=args.split)
+    cache = None if args.no_peer_cache else (args.peer_cache or here.parent / "out" / "benchmarks" / "peer_cache")
+    run_info = run(root, quick=args.quick, only=args.only, jobs=args.jobs, peer_names=peer_names, split=args.split,
+                   engine=args.engine, peer_cache=cache)
     if not args.quick and not args.only and args.split is None:
         # issue #4: leave-one-subject-out study of the stride models (trains them; about a minute)
         from benchmarks.stride_eval import stride_section

@@ -19,6 +19,7 @@ import numpy as np
 
 from core import __version__
 from core.recording import Recording, RecordingError, read_recording, write_recording
+from desktop.engine import ENGINES
 
 DEMO_PATH = Path(__file__).with_name("data") / "demo_walk.csv.gz"
 
@@ -854,7 +855,9 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
         map_start(args, rec, plan, Track(np.array([rec.t0_ns], np.int64), *(np.zeros(1),) * 4), truth_of(rec))
     pipeline = build_pipeline(args, gnss, profile)
     site, site_lines = place_site(args, rec, pipeline) if not args.no_mag else (None, [])
-    res = pipeline.run(rec, progress=progress)
+    from desktop.engine import run_pipeline
+
+    res, engine = run_pipeline(pipeline, rec, args.engine, progress)
     gps_why = gps_choice(args)[1] if gnss is not None else ""
     fused = res.fusion is not None and res.fusion.origin_lat_lon is not None and len(res.fusion.steps)
     track = res.fusion.track() if fused else res.track
@@ -868,7 +871,7 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
         plot_kw = {"walls": plan.walls, "start_en": track_start(track), "track_label": "map-matched"}
     coarse = acc_rate_hz(rec) < MIN_STEP_RATE_HZ
     errs = truth_errors(track, truth, dr_track=res.track) if truth and not coarse else {}
-    summary = {**res.summary(), "mode": "handheld", "mode_reason": why}
+    summary = {**res.summary(), "mode": "handheld", "mode_reason": why, "engine": engine}
     if coarse:  # no steps to count: say so instead of scoring 0 steps as -100 %
         summary["steps_measured"] = False
     if plan is not None:
@@ -881,6 +884,9 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
         summary["truth"] = errs
     lines = summary_lines(res, rec, gps_why, heading)
     lines = lines[:1] + [f"mode          hand-held PDR ({why})"] + lines[1:] + (site_lines if heading else [])
+    if engine != "reference":  # the phone's code is the default; say when another engine ran, or why not
+        lines.append("engine        " + ("the fast desktop path (desktop.fast; the same results within 1e-9)"
+                                         if engine == "fast" else engine))
     if coarse:
         lines = [ln for ln in lines if not ln.startswith(("steps ", "distance ", "final pos", "start-to-end"))]
         lines.insert(3, f"steps         not measured: the accelerometer is sampled at {acc_rate_hz(rec):.1f} Hz, step "
@@ -1464,6 +1470,11 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--platform", choices=("android", "ios"), default=None,
                    help="for a Sensor Logger export without Metadata.csv: the phone it came from "
                         "(or set PDR_SENSORLOGGER_PLATFORM)")
+    r.add_argument("--engine", choices=ENGINES, default="auto",
+                   help="hand-held pipeline: the fast desktop path over whole arrays (the same results within 1e-9) "
+                        "when numba is installed (auto, the default; pip install '.[fast]'), always (fast; slow "
+                        "without numba), or the phone's per-event code (reference). The fast path has no GPS "
+                        "fusion: auto falls back to the reference then")
     r.add_argument("--json", action="store_true", help="print the summary as one JSON document on stdout (status "
                    "lines go to stderr; with several recordings: one document with a row per recording)")
     r.add_argument("--out-dir", metavar="DIR", help="write each recording's exports into DIR as NAME.csv, "

@@ -1,0 +1,50 @@
+"""Which engine runs a hand-held pipeline over a recording: the phone's code or the fast desktop path.
+
+One choice for the command line (``pdr replay --engine``) and the benchmark
+(``python -m benchmarks --engine``), made here once:
+
+``reference``
+    ``pipeline.run(recording)``: :class:`core.pdr.pipeline.Pipeline`'s
+    streaming kernel, one event at a time -- the code the phone runs.
+``fast``
+    :func:`desktop.fast.run_fast` over whole arrays, the same result within
+    1e-9 (``tests/test_fast_path.py``).  Without numba its kernels run as plain
+    Python, much slower than the reference; a pipeline it does not implement
+    (GPS fusion, an attitude filter without a kernel) is refused with the reason.
+``auto`` (the default)
+    The fast path when numba is installed (the ``fast`` extra) and it
+    implements the pipeline, else the reference.  The first use compiles the
+    kernels (about a minute of CPU), which numba keeps in its cache for the
+    next runs.
+"""
+
+from __future__ import annotations
+
+ENGINES = ("auto", "fast", "reference")
+
+
+def run_pipeline(pipeline, recording, engine: str = "auto", progress=None) -> tuple:
+    """Run ``pipeline`` over ``recording`` on ``engine`` (one of :data:`ENGINES`); returns ``(result, ran)``.
+
+    ``ran`` is ``"fast"``, ``"reference"``, or ``"reference (why the fast path could not)"`` for ``auto``.
+    ``progress`` (the fraction done, 0..1) is called by the reference engine only; the fast path calls it
+    once, at the end.  ``engine="fast"`` on a pipeline the fast path does not implement raises
+    :class:`ValueError` with the reason.
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"engine {engine!r}: one of {', '.join(ENGINES)}")
+    if engine == "reference":
+        return pipeline.run(recording, progress=progress), "reference"
+    from desktop.fast import HAVE_NUMBA, run_fast
+
+    if engine == "auto" and not HAVE_NUMBA:
+        return pipeline.run(recording, progress=progress), "reference"
+    try:
+        result = run_fast(recording, pipeline=pipeline)
+    except NotImplementedError as e:  # refused before any work: Pipeline.run starts afresh
+        if engine == "fast":
+            raise ValueError(f"the fast path cannot run this pipeline: {e}") from None
+        return pipeline.run(recording, progress=progress), f"reference ({e})"
+    if progress is not None:
+        progress(1.0)
+    return result, "fast"
