@@ -4,12 +4,13 @@
 first accepted fit in :func:`desktop.fast.magcal.bootstrap_attempt` (sphere fits with trimming, re-binning) as far
 as the rejections before a fit, and hands the attempts that reach a fit to core's ``_attempt``.  Held here to
 ``core.pdr.magcal.MagCalibrator.update`` fed reading by reading: every calibrated reading and the fit parameters
-within ``TOL`` (relative; in practice they are bit for bit equal), the same accept and reject decisions (reasons,
-states, counters), and the same final private store.  The inputs: the IPIN cut (compass waving, then a walk: the
-calibrator fits early and keeps refitting), the ETH walk held flat (bootstrap attempts only), simulated walks
-(hand-held, pocket; one with a hard and soft iron and a calibration waving) and a synthetic stream with broken
-readings, a still phone and an offset jump.  Seeded; each case runs the kernels as plain Python in CI (no numba)
-in a few seconds.
+within ``TOL`` (relative; the bootstrap centre differs from core's by rounding, about 1e-15 relative, as the
+least squares is a QR and not LAPACK's SVD), the same accept and reject decisions (reasons, states, counters),
+and the same final private store.  The inputs: the IPIN cut (compass waving, then a walk: the calibrator fits
+early and keeps refitting), the ETH walk held flat (bootstrap attempts only), simulated walks (hand-held,
+pocket; one with a hard and soft iron and a calibration waving) and a synthetic stream with broken readings, a
+still phone and an offset jump.  Seeded; each case runs the kernels as plain Python in CI (no numba) in a few
+seconds.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 import pytest
 
 from core.pdr.magcal import MagCalibrator, MagCalStatus
-from desktop.fast.magcal import _pairwise, calibrate_stream
+from desktop.fast.magcal import _lstsq4, _pairwise, calibrate_stream
 from desktop.simulator import simulate_walk
 from test_fast_path import _load  # tests/ is on sys.path: the real recordings, cached, skipped where absent
 
@@ -85,6 +86,22 @@ def test_pairwise_sum_is_numpys():
     for n in list(range(0, 300)) + [517, 1031, 2500]:
         a = rng.normal(size=n) * 10.0 ** rng.normal(size=n)
         assert _pairwise(a, 0, n) == (float(np.add.reduce(a)) if n else 0.0)
+
+
+def test_qr_least_squares_against_lapacks():
+    # the sphere's design (2x, 2y, 2z, 1) from samples spread over the sphere down to nearly one plane: the QR's
+    # solution within 1e-11 of numpy.linalg.lstsq's (relative); an exactly flat one (rank 3) goes to lstsq
+    rng = np.random.default_rng(8)
+    for flat in (1.0, 1e-2, 1e-4):
+        x = rng.normal(size=(300, 3)) * [1.0, 1.0, flat]
+        design = np.column_stack([2.0 * x, np.ones(300)])
+        rhs = (x * x).sum(axis=1) + rng.normal(scale=0.01, size=300)
+        want = np.linalg.lstsq(design, rhs, rcond=None)[0]
+        got = np.empty(4)
+        assert _lstsq4(design.copy(), rhs.copy(), 300, got) == 4
+        assert np.abs(got - want).max() <= 1e-11 * np.abs(want).max()
+    design[:, 2] = 0.0
+    assert _lstsq4(design.copy(), rhs.copy(), 300, got) == -1  # the caller asks numpy.linalg.lstsq: rank 3
 
 
 def test_ipin_cut_waving_then_walking():

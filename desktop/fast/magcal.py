@@ -14,9 +14,11 @@ bins, the store is rebuilt about it, and the attempt ends on too few samples
 or too little coverage (every attempt of a phone held flat, e.g. the simulated
 hour walk of the throughput benchmark): :func:`bootstrap_attempt` compiles
 that part (core's ``_fit_sphere`` with ``_centred``, ``_trimmed``,
-``_refill`` and ``numpy.unique``; numpy's pairwise summation reproduced, so the
-same floats; ``numpy.linalg.lstsq`` is numba's where compiled, the same LAPACK
-driver: equal to the bit on every recording tried).  An attempt that reaches a
+``_refill`` and ``numpy.unique``; numpy's pairwise summation reproduced; the
+least squares by a Householder QR instead of LAPACK's SVD, :func:`_lstsq4`, so
+the sphere's centre differs from core's by rounding only, about 1e-15
+relative, and the rest -- every calibrated reading, the store, the decisions
+-- is equal on every recording tried).  An attempt that reaches a
 fit, and every attempt once a fit is in force, is core's own ``_attempt``
 (ellipsoid and sphere fits, acceptance): :class:`_Handover` writes the
 kernel's state into the calibrator, the attempt runs, and the state is read
@@ -46,14 +48,18 @@ N_F = 31
 # int state: flags (the reference's None), counters, the reservoir's ends (indices into the stream), settings
 (I_HAS_C, I_HAS_CA, I_CAL, I_HAS_LAST, I_T_LAST, I_NEW, I_NEW_BINS, I_STORED, I_OCCUPIED, I_VALID, I_INVALID,
  I_HAS_PREV, I_T_PREV, I_HEAD, I_TAIL, I_NB, I_NS, I_PER, I_MIN_NEW, I_BOOT_NS, I_RECENT_NS, I_MIN_SAMPLES,
- I_NBINS) = range(23)
-N_I = 23
+ I_NBINS, I_COMPILED, I_REASON, I_REASON_N) = range(26)
+N_I = 26
 
 
 @kernel
 def calibrate_readings(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring, out, ok):
     """``MagCalibrator.update`` from reading ``i`` on; returns the first reading whose fit attempt is due
-    (stored, its output not yet written) or ``len(t)``.  ``ring`` holds the reservoir's readings (indices)."""
+    (stored, its output not yet written) or ``len(t)``.  ``ring`` holds the reservoir's readings (indices).
+
+    With ``is_[I_COMPILED]`` the attempts before the first accepted fit run here (:func:`bootstrap_attempt`)
+    and it returns only at one that reaches a fit; the outcome of the last of them is left in ``is_[I_REASON]``
+    (its code) and ``is_[I_REASON_N]`` (its count) for the status's reason."""
     n = len(t)
     nb, ns, per = is_[I_NB], is_[I_NS], is_[I_PER]
     while i < n:
@@ -105,7 +111,12 @@ def calibrate_readings(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring, out, o
                 is_[I_HAS_LAST], is_[I_T_LAST] = 1, ti
             elif ((is_[I_NEW] >= is_[I_MIN_NEW] or is_[I_NEW_BINS] > 0 or is_[I_HAS_C] == 0)
                   and (ti - is_[I_T_LAST]) * 1e-9 >= fs[F_REFIT_S]):
-                return i
+                if is_[I_COMPILED] == 0 or is_[I_CAL] != 0:
+                    return i
+                code, count = bootstrap_attempt(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring)
+                if code == 3:
+                    return i
+                is_[I_REASON], is_[I_REASON_N] = code, count
         if is_[I_CAL] != 0:
             dx, dy, dz = mx - fs[F_B], my - fs[F_B + 1], mz - fs[F_B + 2]
             a = F_A
@@ -205,13 +216,65 @@ def _pairwise(a, lo, n):
 
 
 @kernel
+def _lstsq4(design, rhs, k, theta):
+    """Least squares ``design[:k] theta = rhs[:k]`` for 4 unknowns; returns the rank as core's lstsq finds it.
+
+    Householder QR (4 reflections, back substitution): a few microseconds where LAPACK's SVD-based gelsd,
+    what ``numpy.linalg.lstsq`` runs, takes 15-40 on a few hundred rows.  Its solution differs from gelsd's
+    by rounding only (relative ``cond * 1e-16``, 1e-13 on the phone's samples); where the triangle is
+    ill-conditioned (``|R_jj|`` spread over more than 1e6, far from rank 4 being in question for gelsd's
+    ``rcond``) it hands the problem to ``numpy.linalg.lstsq`` itself, so the rank decisions are gelsd's.
+    ``design`` and ``rhs`` are overwritten.
+    """
+    r_abs_min, r_abs_max = math.inf, 0.0
+    for j in range(4):
+        nrm2 = 0.0
+        for i in range(j, k):
+            nrm2 += design[i, j] * design[i, j]
+        nrm = math.sqrt(nrm2)
+        if nrm == 0.0:
+            r_abs_min = 0.0
+            break
+        ajj = design[j, j]
+        alpha = -nrm if ajj >= 0.0 else nrm
+        design[j, j] = ajj - alpha  # the reflector v = (a_jj - alpha, a_j+1,j, ...)
+        vnorm2 = nrm2 - ajj * ajj + design[j, j] * design[j, j]
+        for c in range(j + 1, 4):
+            dot = 0.0
+            for i in range(j, k):
+                dot += design[i, j] * design[i, c]
+            f = 2.0 * dot / vnorm2
+            for i in range(j, k):
+                design[i, c] -= f * design[i, j]
+        dot = 0.0
+        for i in range(j, k):
+            dot += design[i, j] * rhs[i]
+        f = 2.0 * dot / vnorm2
+        for i in range(j, k):
+            rhs[i] -= f * design[i, j]
+        theta[j] = alpha  # R's diagonal, for now
+        r_abs_min = min(r_abs_min, abs(alpha))
+        r_abs_max = max(r_abs_max, abs(alpha))
+    if not r_abs_min > 1e-6 * r_abs_max:
+        return -1  # the caller runs numpy.linalg.lstsq on the original problem
+    x = np.empty(4)
+    for j in range(3, -1, -1):
+        acc = rhs[j]
+        for c in range(j + 1, 4):
+            acc -= design[j, c] * x[c]
+        x[j] = acc / theta[j]
+    theta[:] = x
+    return 4
+
+
+@kernel
 def _sphere(m, idx, k, out):
     """``core.pdr.magcal._fit_sphere`` on the rows ``idx[:k]`` of ``m``: 1 and ``out = (b_x, b_y, b_z, F)``, or 0
     where core raises :class:`EllipsoidFitError` (fewer than 4 samples, coinciding, rank < 4, imaginary).
 
-    ``_centred`` (mean, RMS scale, unit samples) and the linear least squares ``|m|^2 = 2 b.m + F^2 - |b|^2``
-    (``numpy.linalg.lstsq``, numba's own where compiled: the same LAPACK driver, gelsd) with core's float
-    operations in core's order: means and row sums sequential, the sum of squares pairwise as numpy's.
+    ``_centred`` (mean, RMS scale, unit samples) with core's float operations in core's order (means and row
+    sums sequential, the sum of squares pairwise as numpy's), and the linear least squares
+    ``|m|^2 = 2 b.m + F^2 - |b|^2`` by :func:`_lstsq4` (core: ``numpy.linalg.lstsq``; the same to rounding).
     """
     if k < 4:
         return 0
@@ -238,7 +301,10 @@ def _sphere(m, idx, k, out):
         x, y, z = d[r, 0] / s, d[r, 1] / s, d[r, 2] / s
         design[r, 0], design[r, 1], design[r, 2], design[r, 3] = x * 2.0, y * 2.0, z * 2.0, 1.0
         rhs[r] = x * x + y * y + z * z
-    theta, _, rank, _ = np.linalg.lstsq(design, rhs, 2.220446049250313e-16 * max(k, 4))  # numpy's rcond=None
+    theta = np.empty(4)
+    rank = _lstsq4(design.copy(), rhs.copy(), k, theta)
+    if rank < 0:  # ill-conditioned: gelsd itself, rcond as numpy's None
+        theta, _, rank, _ = np.linalg.lstsq(design, rhs, 2.220446049250313e-16 * max(k, 4))
     if rank < 4:
         return 0
     bx, by, bz = theta[0], theta[1], theta[2]
@@ -319,7 +385,7 @@ def bootstrap_attempt(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring):
     the store is rebuilt about that centre.  Returns ``(code, count)``: 0 no centre yet (``count``: the
     samples), 1 too few samples in the rebuilt store (``count``: them), 2 its coverage too small -- the
     state then is the one core's attempt leaves -- or 3 a fit is due: nothing is changed, core's attempt
-    must run (the ellipsoid and sphere fits and their acceptance).
+    must run (the ellipsoid and sphere fits and their acceptance).  (For 2 ``count`` is the occupied bins.)
     """
     tn = t[i]
     per, nb, ns = is_[I_PER], is_[I_NB], is_[I_NS]
@@ -400,7 +466,9 @@ def bootstrap_attempt(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring):
     is_[I_HAS_C] = 1
     fs[F_C], fs[F_C + 1], fs[F_C + 2] = cx, cy, cz
     is_[I_T_LAST], is_[I_NEW], is_[I_NEW_BINS] = tn, 0, 0
-    return (1 if n_st < min_samples else 2), n_st
+    if n_st < min_samples:
+        return 1, n_st
+    return 2, occupied
 
 
 def _flat(rows) -> list:
@@ -485,25 +553,23 @@ def calibrate_stream(cal, t_ns: np.ndarray, mag_b: np.ndarray, compiled_attempts
     out = np.empty((len(t), 3))
     ok = np.zeros(len(t), dtype=np.bool_)
     h = _Handover(cal, t, v)
+    h.is_[I_COMPILED], h.is_[I_REASON] = bool(compiled_attempts), -1
     i = 0
     while True:
         i = calibrate_readings(t, v, i, h.fs, h.is_, h.slot_t, h.slot_m, h.bin_count, h.ring, out, ok)
         if i >= len(t):
             break
-        code = 3
-        if compiled_attempts and not h.is_[I_CAL]:
-            code, count = bootstrap_attempt(t, v, i, h.fs, h.is_, h.slot_t, h.slot_m, h.bin_count, h.ring)
-        if code == 3:
-            h.write(cal)
-            cal._attempt(int(t[i]))
-            h.read(cal)
-        elif code == 2:
-            cov = int(h.is_[I_OCCUPIED]) / cal.n_bins
-            cal._reason = f"coverage {cov:.2f} < {cal.min_coverage:.2f}"
-        else:
-            cal._reason = f"too few samples ({int(count)} < {cal.min_samples})"
+        h.write(cal)
+        cal._attempt(int(t[i]))
+        h.read(cal)
+        h.is_[I_REASON] = -1  # core's attempt set the reason
         out[i] = cal._apply_tuple(float(v[i, 0]), float(v[i, 1]), float(v[i, 2]))
         ok[i] = cal.calibrated
         i += 1
     h.write(cal)
+    code, count = int(h.is_[I_REASON]), int(h.is_[I_REASON_N])
+    if code == 2:
+        cal._reason = f"coverage {count / cal.n_bins:.2f} < {cal.min_coverage:.2f}"
+    elif code >= 0:
+        cal._reason = f"too few samples ({count} < {cal.min_samples})"
     return out, ok
