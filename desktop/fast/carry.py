@@ -177,11 +177,15 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
         w = view[h - (n - 1)].transpose(0, 2, 1)
         for k, f in zip(h.tolist(), window_features(det, w, seen_gyro[h])):
             det._has_gyro = bool(seen_gyro[k])
-            det.compute_features = lambda _w, f=f: f  # the decision of core's detector, on these features
+            asked = []
+            det.compute_features = lambda _w, f=f: asked.append(True) or f  # core's decision, on these features
             try:
                 det._hop_decision(int(t_ns[k]))
             finally:
                 del det.compute_features
+            if not asked:  # a guard: core's hop must take its features from compute_features
+                raise RuntimeError("CarryModeDetector's hop no longer asks compute_features for its features: "
+                                   "desktop.fast.carry.run_carry needs to follow it")
             modes.append(mode_idx[det.mode])
             periods.append(det.step_period_s)
             periodic.append(det.rotation_periodic)
