@@ -13,6 +13,7 @@ gap's reset).  Seeded; the kernels run as plain Python in CI (no numba).
 from __future__ import annotations
 
 import math
+from functools import cache
 
 import numpy as np
 import pytest
@@ -145,18 +146,27 @@ def test_ipin_cut_equals_core():
     assert ref.n_strides > 10
 
 
-def test_synthetic_stream_nonfinite_axis_switches_and_a_pause():
-    # 60 s at 50 Hz of a walk-like acceleration (steps every 0.55 s) whose forward axis is 70 deg off the device
-    # heading, with a device turning slowly; non-finite samples, axis switches, a stride with a vertical axis,
-    # and 15 s without steps (the gap's reset); a random pca/coherent mix from the noise
+SETTINGS = (dict(max_strides_kept=8), dict(axis_method="pca", max_strides_kept=0),
+            dict(axis_method="coherent", min_coherence=0.79), dict(axis_method="phase", min_anisotropy=1.05),
+            dict(pca_min_anisotropy=3.0, memory_strides=4.0, reset_after_gap_s=5.0, delay_s=0.0))
+
+
+@cache
+def _synthetic(i: int) -> WalkingDirection:
+    """The synthetic stream with ``SETTINGS[i]``, checked: the reference (once per test session)."""
+    settings = SETTINGS[i]
+    # 60 s at 50 Hz of a walk-like acceleration (steps every 0.54 s) whose forward axis is 70 deg off the device
+    # heading, with a device turning slowly and once quickly; non-finite samples, axis switches, strides with a
+    # vertical axis, a pause of 15 s (steps standing still for 4 s of it, then the gap's reset); each axis
+    # method, an incoherence limit, no records kept, no delay
     rng = np.random.default_rng(21)
     n = 50 * 60
     t = 5_000_000_000 + 20_000_000 * np.arange(n, dtype=np.int64)
     s = t * 1e-9
-    head = 0.02 * s
+    head = 0.02 * s + np.clip(s - 53.0, 0.0, 1.0) * 1.5  # 1.5 rad within a second at 53 s: turning strides
     yaw = np.column_stack([np.cos(0.5 * head), np.zeros(n), np.zeros(n), np.sin(0.5 * head)])
     phase = 2.0 * math.pi * s / 0.55
-    walking = (s < 25.0) | (s > 40.0)
+    walking = (s < 25.0) | (s > 40.0)  # j < 1000 and j > 1750
     fwd_dev = head + math.radians(70.0)
     a_f = np.where(walking, -1.2 * np.sin(phase), 0.0)
     a_up = np.where(walking, 2.0 * np.cos(phase), 0.0)
@@ -169,14 +179,14 @@ def test_synthetic_stream_nonfinite_axis_switches_and_a_pause():
     acc = np.column_stack([c * acc_n[:, 0] + sn * acc_n[:, 1], -sn * acc_n[:, 0] + c * acc_n[:, 1], acc_n[:, 2]])
     fe, fn = np.cos(head), np.sin(head)
     fe = fe.copy()
-    fe[1200:1260] *= 0.05  # the forward axis nearly vertical for a while
+    fe[2200:2300] *= 0.05  # the forward axis nearly vertical for a while
     fn = fn.copy()
-    fn[1200:1260] *= 0.05
+    fn[2200:2300] *= 0.05
     acc[rng.integers(0, n, size=15)] = np.nan
     fe[rng.integers(0, n, size=5)] = np.inf
-    steps = {j for j in range(n) if walking[j] and (j % 27 == 0)}
+    steps = {j for j in range(n) if (walking[j] or 1300 <= j < 1500) and (j % 27 == 0)}
     axes = [(0.0, 1.0, 0.0) if (j // 700) % 3 else (0.0, 0.0, -1.0) for j in range(n)]
-    ref = WalkingDirection(max_strides_kept=8)
+    ref = WalkingDirection(**settings)
     after = []
     inputs = []
     for j in range(n):
@@ -185,10 +195,24 @@ def test_synthetic_stream_nonfinite_axis_switches_and_a_pause():
         ref.update(*args)
         inputs.append(args)
         after.append(_estimate_state(ref))
-    _check(ref, inputs, after, WalkingDirection(max_strides_kept=8))
-    assert ref.n_gap_resets >= 1 and ref.n_accepted >= 10 and ref.n_nonfinite >= 15
-    assert len(ref.diagnostics()["axes"]) == 2 and ref.last_estimate is not None
-    assert sum(ref.rejected.values()) > 0
+    _check(ref, inputs, after, WalkingDirection(**settings))
+    return ref
+
+
+@pytest.mark.parametrize("i", range(len(SETTINGS)),
+                         ids=[",".join(f"{k}={v}" for k, v in d.items()) for d in SETTINGS])
+def test_synthetic_stream_nonfinite_axis_switches_and_a_pause(i):
+    ref = _synthetic(i)
+    assert ref.n_gap_resets >= 1 and ref.n_accepted >= 5 and ref.n_nonfinite >= 15
+    assert ref.last_estimate is not None and sum(ref.rejected.values()) > 0
+
+
+def test_synthetic_streams_reach_every_outcome():
+    # the settings above between them: both axes kept, most of the rejection reasons
+    refs = [_synthetic(i) for i in range(len(SETTINGS))]
+    assert any(len(r.diagnostics()["axes"]) == 2 for r in refs)
+    seen = {k for r in refs for k, v in r.rejected.items() if v}
+    assert {"duration", "vertical_axis", "still", "turning", "incoherent"} <= seen, seen
 
 
 def test_from_a_later_grid_sample_and_as_step_release_reads_it():
