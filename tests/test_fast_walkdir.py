@@ -5,9 +5,10 @@ fed grid sample by grid sample with the very inputs ``Pipeline`` feeds it (recor
 after every grid sample the current axis and its accumulators (what ``step_heading``, ``applies``,
 ``offset_rad`` and ``estimate`` read) within ``TOL``, and at the end the whole state -- the delay buffer, the
 open stride, every axis, the counters, the per-stride records, ``last_estimate`` and ``diagnostics()``.  The
-inputs: a pocket walk and a swinging-hand walk of the simulator (the offset applies), the IPIN cut (compass
-waving, then a hand-held walk) and a synthetic stream with non-finite samples, axis switches and a pause (the
-gap's reset).  Seeded; the kernels run as plain Python in CI (no numba).
+inputs: pocket walks of the simulator (the offset applies), the IPIN cut (compass waving, then a hand-held
+walk) and a synthetic stream with non-finite samples, axis switches, a quick turn and a pause (the gap's
+reset) under five settings.  And ``run_fast`` with the stage wired into ``StepRelease`` as proposed
+(:func:`wired_walkdir_to`) against ``Pipeline.run``.  Seeded; the kernels run as plain Python in CI (no numba).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ FIELDS = ("c2", "s2", "w", "w2", "gx", "gy")
 
 def _record(rec, **params):
     """``Pipeline(**params).run(rec)`` with its walking-direction stage's inputs and the estimate after each
-    update recorded: ``(pipeline, inputs, after)``."""
+    update recorded: ``(pipeline, inputs, after, result)``."""
     inputs, after = [], []
     orig = WalkingDirection.update
 
@@ -43,10 +44,10 @@ def _record(rec, **params):
     mp.setattr(WalkingDirection, "update", update)
     try:
         pipe = Pipeline(**params)
-        pipe.run(rec)
+        res = pipe.run(rec)
     finally:
         mp.undo()
-    return pipe, inputs, after
+    return pipe, inputs, after, res
 
 
 def _estimate_state(wd):
@@ -129,18 +130,17 @@ def _settings(wd: WalkingDirection) -> dict:
     return {k: getattr(wd, k) for k in names}
 
 
-@pytest.mark.parametrize("placement, seed", [("pocket", 5), ("swinging", 6)])
-def test_simulated_walk_equals_core(placement, seed):
-    walk = simulate_walk([(0.0, 0.0), (16.0, 0.0), (16.0, 10.0), (0.0, 10.0), (0.0, 0.0)], seed=seed,
-                         placement=placement)
-    pipe, inputs, after = _record(walk.recording)
+def test_simulated_pocket_walk_equals_core():
+    walk = simulate_walk([(0.0, 0.0), (16.0, 0.0), (16.0, 10.0), (0.0, 10.0), (0.0, 0.0)], seed=5,
+                         placement="pocket")
+    pipe, inputs, after, _ = _record(walk.recording)
     ref = pipe.walkdir
     _check(ref, inputs, after, WalkingDirection(**_settings(ref)))
     assert ref.n_accepted >= 5 and ref.n_steps_offset > 0  # the offset was applied to steps
 
 
 def test_ipin_cut_equals_core():
-    pipe, inputs, after = _record(_real(*REAL[0]))
+    pipe, inputs, after, _ = _record(_real(*REAL[0]))
     ref = pipe.walkdir
     _check(ref, inputs, after, WalkingDirection(**_settings(ref)))
     assert ref.n_strides > 10
@@ -215,11 +215,46 @@ def test_synthetic_streams_reach_every_outcome():
     assert {"duration", "vertical_axis", "still", "turning", "incoherent"} <= seen, seen
 
 
+@cache
+def _short_pocket_walk():
+    rec = simulate_walk([(0.0, 0.0), (20.0, 0.0), (20.0, 6.0)], seed=8, placement="pocket").recording
+    return rec, _record(rec)
+
+
+def wired_walkdir_to(self, k: int, step_ticks: set) -> None:
+    """``desktop.fast.gates.StepRelease._walkdir_to`` as the stage is wired in (the report of the change that
+    added desktop/fast/walkdir.py): the whole grid in one pass at the first call, then the estimate after
+    grid sample ``k`` put into the pipeline's WalkingDirection (the final state at the last sample)."""
+    if self._walkdir is None:
+        return
+    if getattr(self, "_wd_trace", None) is None:
+        j_init, q, acc, axes = self._walkdir
+        self._wd_trace = walking_direction_over_grid(self.p.walkdir, self.grid_t, q, acc, self.fwd_e, self.fwd_n,
+                                                     step_ticks, axes, j_init)
+    self._wd_trace.at(self.p.walkdir, k)
+
+
+def test_wired_into_the_fast_path(monkeypatch):
+    # run_fast with StepRelease._walkdir_to replaced as proposed: the steps and the stage's final state (labels
+    # and counters read it) as Pipeline.run's
+    from desktop.fast import gates, run_fast
+
+    rec, (pipe, _, _, res) = _short_pocket_walk()
+    monkeypatch.setattr(gates.StepRelease, "_walkdir_to", wired_walkdir_to)
+    fast = Pipeline()
+    got = run_fast(rec, pipeline=fast)
+    assert fast.walkdir.n_steps_offset == pipe.walkdir.n_steps_offset > 0
+    assert _close(_state(pipe.walkdir), _state(fast.walkdir))
+    assert np.array_equal(got.track.t_ns, res.track.t_ns)
+    for name in ("heading_rad", "east_m", "north_m", "length_m"):
+        assert np.allclose(getattr(got.track, name), getattr(res.track, name), rtol=0.0, atol=TOL), name
+    assert got.summary()["labels"] == res.summary()["labels"]
+
+
 def test_from_a_later_grid_sample_and_as_step_release_reads_it():
     # j_init > 0 and the axes given as indices: the samples before j_init are not fed; at() before j_init and
     # at the end
-    walk = simulate_walk([(0.0, 0.0), (20.0, 0.0)], seed=8, placement="pocket")
-    pipe, inputs, after = _record(walk.recording)
+    _, (pipe, inputs, after, _) = _short_pocket_walk()
     t, q, acc, fe, fn, steps, axes = _arrays(inputs)
     j0 = 7
     pad_t = np.concatenate([t[0] - 20_000_000 * np.arange(j0, 0, -1), t])
