@@ -166,7 +166,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     finally:
         ekf.mag_calibrator = calibrator
     clock("attitude")
-    # 5. smoother, detector, speed window
+    # 5. the smoother
     east, north, heading = (np.full(n_ticks, np.nan) for _ in range(3))
     e, nn, h, upright, counters = smooth_headings(p.smoother, out_q[j_init:])
     east[j_init:], north[j_init:], heading[j_init:] = e, nn, h
@@ -175,7 +175,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     if p.smoother.upright:
         p.smoother.forward_b = (0.0, 0.0, -1.0)
     clock("smoother")
-    # the carry-mode detector (issue #17): its mode and step period at every grid sample
+    # 6. the carry-mode detector (issue #17): its mode and step period at every grid sample
     gyro_pos = ev.pos[fatt.GYRO_K]
     acc_at = ev.v[tick_event]
     track = det_at = None
@@ -190,7 +190,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         p._carry_mode = CARRY_MODES[int(track.mode[-1])] if n_ticks else p._carry_mode
         p._active_det = p._mode_detectors[int(det_at[-1])] if n_ticks else p._active_det
     clock("carry-mode detector")
-    # every step detector (one per distinct gates), the speed window at their peaks
+    # 7. every step detector (one per distinct gates), the speed window at their peaks
     found = []
     for det in p._mode_detectors:
         det.n_grid = n_ticks
@@ -200,7 +200,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     all_ticks = np.unique(np.concatenate([f[0] for f in found]))
     speed = speed_at(p.speed_window, gt, gx, restart, all_ticks)
     clock("steps, speed window")
-    # 6. gates and steps
+    # 8. gates and steps
     rot_sum = np.empty(len(gyro_pos))
     rot_n = np.empty(len(gyro_pos), dtype=np.int64)
     rotation_sums(ev.t[gyro_pos], np.ascontiguousarray(ev.v[gyro_pos]), p._rot_window_ns, rot_sum, rot_n)
