@@ -1,4 +1,4 @@
-"""The magnetometer calibration's per-reading part and its bootstrap attempts compiled; its fits stay core's.
+"""The magnetometer calibration compiled up to its fits: per reading, and each attempt as far as a fit.
 
 :class:`core.pdr.magcal.MagCalibrator` sees only the raw readings, never the
 attitude, so the fast path runs it over the magnetometer stream before the
@@ -7,22 +7,23 @@ bins and stores the reading about the current centre and applies the
 calibration in force: :func:`calibrate_readings`, a second implementation of
 ``MagCalibrator.update`` (the same float operations in the same order, so
 the same floats).  Its fit attempts come at most one per ``refit_interval_s``
-(about one in fifty readings at 50 Hz): the kernel stops at a reading whose
-attempt is due.  Until a fit is accepted an attempt is mostly the bootstrap --
-the trimmed sphere through the store and the reservoir centres the direction
-bins, the store is rebuilt about it, and the attempt ends on too few samples
-or too little coverage (every attempt of a phone held flat, e.g. the simulated
-hour walk of the throughput benchmark): :func:`bootstrap_attempt` compiles
-that part (core's ``_fit_sphere`` with ``_centred``, ``_trimmed``,
-``_refill`` and ``numpy.unique``; numpy's pairwise summation reproduced; the
-least squares by a Householder QR instead of LAPACK's SVD, :func:`_lstsq4`, so
-the sphere's centre differs from core's by rounding only, about 1e-15
-relative, and the rest -- every calibrated reading, the store, the decisions
--- is equal on every recording tried).  An attempt that reaches a
-fit, and every attempt once a fit is in force, is core's own ``_attempt``
-(ellipsoid and sphere fits, acceptance): :class:`_Handover` writes the
-kernel's state into the calibrator, the attempt runs, and the state is read
-back before the kernel goes on.
+(about one in fifty readings at 50 Hz).  Most of them end before a fit: until
+a fit is accepted the trimmed sphere through the store and the reservoir
+centres the direction bins, the store is rebuilt about it, and the attempt
+ends on too few samples or too little coverage (every attempt of a phone held
+flat, e.g. the simulated hour walk of the throughput benchmark); with a fit in
+force the store is rebuilt where samples expired and the same two checks
+follow (half the attempts of the IPIN logfiles).  :func:`attempt_to_fit`
+compiles that part, called from the per-reading kernel (core's ``_fit_sphere``
+with ``_centred``, ``_trimmed``, ``_refill`` and ``numpy.unique``; numpy's
+pairwise summation reproduced; the least squares by a Householder QR instead
+of LAPACK's SVD, :func:`_lstsq4`, so the sphere's centre differs from core's
+by rounding only, about 1e-15 relative, and the rest -- every calibrated
+reading, the store, the decisions -- is equal on every recording tried).  An
+attempt that reaches a fit is core's own ``_attempt`` (ellipsoid and sphere
+fits, acceptance): the kernel stops there, :class:`_Handover` writes its
+state into the calibrator, the attempt runs, and the state is read back
+before the kernel goes on.
 
 The state is the calibrator's private store (slots, bin counts, counters,
 centre, the calibration in force): this module is held to core's by
@@ -57,8 +58,8 @@ def calibrate_readings(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring, out, o
     """``MagCalibrator.update`` from reading ``i`` on; returns the first reading whose fit attempt is due
     (stored, its output not yet written) or ``len(t)``.  ``ring`` holds the reservoir's readings (indices).
 
-    With ``is_[I_COMPILED]`` the attempts before the first accepted fit run here (:func:`bootstrap_attempt`)
-    and it returns only at one that reaches a fit; the outcome of the last of them is left in ``is_[I_REASON]``
+    With ``is_[I_COMPILED]`` the attempts run here (:func:`attempt_to_fit`) and it returns only at one that
+    reaches a fit; the outcome of the last of them is left in ``is_[I_REASON]``
     (its code) and ``is_[I_REASON_N]`` (its count) for the status's reason."""
     n = len(t)
     nb, ns, per = is_[I_NB], is_[I_NS], is_[I_PER]
@@ -111,9 +112,9 @@ def calibrate_readings(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring, out, o
                 is_[I_HAS_LAST], is_[I_T_LAST] = 1, ti
             elif ((is_[I_NEW] >= is_[I_MIN_NEW] or is_[I_NEW_BINS] > 0 or is_[I_HAS_C] == 0)
                   and (ti - is_[I_T_LAST]) * 1e-9 >= fs[F_REFIT_S]):
-                if is_[I_COMPILED] == 0 or is_[I_CAL] != 0:
+                if is_[I_COMPILED] == 0:
                     return i
-                code, count = bootstrap_attempt(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring)
+                code, count = attempt_to_fit(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring)
                 if code == 3:
                     return i
                 is_[I_REASON], is_[I_REASON_N] = code, count
@@ -378,59 +379,76 @@ def _trimmed_sphere(t, m, k, min_samples, limit, out):
 
 
 @kernel
-def bootstrap_attempt(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring):
-    """``MagCalibrator._attempt`` at reading ``i`` while no fit is in force, compiled as far as the rejections
-    before a fit: the store (samples younger than ``sample_max_age_s``) and the bootstrap reservoir, merged
-    by time (a stored sample wins a tie), the trimmed sphere centres the bins (where it is plausible), and
-    the store is rebuilt about that centre.  Returns ``(code, count)``: 0 no centre yet (``count``: the
-    samples), 1 too few samples in the rebuilt store (``count``: them), 2 its coverage too small -- the
-    state then is the one core's attempt leaves -- or 3 a fit is due: nothing is changed, core's attempt
-    must run (the ellipsoid and sphere fits and their acceptance).  (For 2 ``count`` is the occupied bins.)
+def attempt_to_fit(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring):
+    """``MagCalibrator._attempt`` at reading ``i``, compiled as far as the rejections before a fit.
+
+    Before the first accepted fit: the store (samples younger than ``sample_max_age_s``) and the bootstrap
+    reservoir, merged by time (a stored sample wins a tie), the trimmed sphere centres the bins (where it is
+    plausible), and the store is rebuilt about that centre.  With a fit in force: the store is rebuilt about
+    the fit (its soft iron too) only where samples expired.  Then the count and the coverage are checked.
+    Returns ``(code, count)``: 0 no centre yet (``count``: the samples), 1 too few samples in the store
+    (``count``: them), 2 its coverage too small (``count``: the occupied bins) -- the state then is the one
+    core's attempt leaves -- or 3 a fit is due: nothing is changed, core's attempt must run (the ellipsoid
+    and sphere fits and their acceptance).
     """
     tn = t[i]
     per, nb, ns = is_[I_PER], is_[I_NB], is_[I_NS]
     min_samples = is_[I_MIN_SAMPLES]
     nslot = len(slot_t)
     head, tail = is_[I_HEAD], is_[I_TAIL]
+    calibrated = is_[I_CAL] != 0
     cap = nslot + tail - head
     tt = np.empty(cap, dtype=np.int64)
     mm = np.empty((cap, 3))
     c = 0
+    n_full = 0
     max_age = fs[F_MAX_AGE_S]
     for s in range(nslot):  # _stored, then keep
         ts = slot_t[s]
-        if ts >= 0 and (tn - ts) * 1e-9 <= max_age:
-            tt[c] = ts
-            mm[c, 0], mm[c, 1], mm[c, 2] = slot_m[3 * s], slot_m[3 * s + 1], slot_m[3 * s + 2]
-            c += 1
-    if tail > head:  # the reservoir too, then numpy.unique by time (the first of equal times)
-        for r in range(head, tail):
-            j = ring[r]
-            tt[c] = t[j]
-            mm[c, 0], mm[c, 1], mm[c, 2] = v[j, 0], v[j, 1], v[j, 2]
-            c += 1
-        order = np.argsort(tt[:c], kind="mergesort")
-        t2 = np.empty(c, dtype=np.int64)
-        m2 = np.empty((c, 3))
-        u = 0
-        for r in range(c):
-            o = order[r]
-            if u > 0 and tt[o] == t2[u - 1]:
-                continue
-            t2[u] = tt[o]
-            m2[u, 0], m2[u, 1], m2[u, 2] = mm[o, 0], mm[o, 1], mm[o, 2]
-            u += 1
-        tt, mm, c = t2, m2, u
-    has_c = is_[I_HAS_C]
+        if ts >= 0:
+            n_full += 1
+            if (tn - ts) * 1e-9 <= max_age:
+                tt[c] = ts
+                mm[c, 0], mm[c, 1], mm[c, 2] = slot_m[3 * s], slot_m[3 * s + 1], slot_m[3 * s + 2]
+                c += 1
     cx, cy, cz = fs[F_C], fs[F_C + 1], fs[F_C + 2]
-    if c >= min_samples:
-        res = np.empty(4)
-        if _trimmed_sphere(tt, mm, c, min_samples, fs[F_OUTLIER], res) == 1 and res[3] >= fs[F_R_MIN]:
-            has_c = 1
-            cx, cy, cz = res[0], res[1], res[2]
-    if has_c == 0:
-        is_[I_T_LAST], is_[I_NEW], is_[I_NEW_BINS] = tn, 0, 0
-        return 0, c
+    if calibrated:
+        if c == n_full:  # nothing expired: the store stays as it is (core re-bins only `not np.all(keep)`)
+            occupied = is_[I_OCCUPIED]
+            if c >= min_samples and occupied / is_[I_NBINS] >= fs[F_MIN_COV]:
+                return 3, c  # a fit: core's
+            is_[I_T_LAST], is_[I_NEW], is_[I_NEW_BINS] = tn, 0, 0
+            if c < min_samples:
+                return 1, c
+            return 2, occupied
+    else:
+        if tail > head:  # the reservoir too, then numpy.unique by time (the first of equal times)
+            for r in range(head, tail):
+                j = ring[r]
+                tt[c] = t[j]
+                mm[c, 0], mm[c, 1], mm[c, 2] = v[j, 0], v[j, 1], v[j, 2]
+                c += 1
+            order = np.argsort(tt[:c], kind="mergesort")
+            t2 = np.empty(c, dtype=np.int64)
+            m2 = np.empty((c, 3))
+            u = 0
+            for r in range(c):
+                o = order[r]
+                if u > 0 and tt[o] == t2[u - 1]:
+                    continue
+                t2[u] = tt[o]
+                m2[u, 0], m2[u, 1], m2[u, 2] = mm[o, 0], mm[o, 1], mm[o, 2]
+                u += 1
+            tt, mm, c = t2, m2, u
+        has_c = is_[I_HAS_C]
+        if c >= min_samples:
+            res = np.empty(4)
+            if _trimmed_sphere(tt, mm, c, min_samples, fs[F_OUTLIER], res) == 1 and res[3] >= fs[F_R_MIN]:
+                has_c = 1
+                cx, cy, cz = res[0], res[1], res[2]
+        if has_c == 0:
+            is_[I_T_LAST], is_[I_NEW], is_[I_NEW_BINS] = tn, 0, 0
+            return 0, c
     # _refill about the centre: newest first (a stable order), each bin its samples_per_bin newest
     new_t = np.full(nslot, -1, dtype=np.int64)
     new_m = np.zeros(3 * nslot)
@@ -439,9 +457,15 @@ def bootstrap_attempt(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring):
     r_min, scale = fs[F_R_MIN], fs[F_SECTOR]
     n_st = 0
     occupied = 0
+    has_ca = is_[I_HAS_CA] != 0
+    a = F_CA
     for r in range(c):
         o = order[r]
         dx, dy, dz = mm[o, 0] - cx, mm[o, 1] - cy, mm[o, 2] - cz
+        if has_ca:  # _bins about a fit with soft iron
+            dx, dy, dz = (fs[a] * dx + fs[a + 1] * dy + fs[a + 2] * dz,
+                          fs[a + 3] * dx + fs[a + 4] * dy + fs[a + 5] * dz,
+                          fs[a + 6] * dx + fs[a + 7] * dy + fs[a + 8] * dz)
         rr = math.sqrt(dx * dx + dy * dy + dz * dz)
         if not rr >= r_min:
             continue
@@ -541,9 +565,9 @@ def calibrate_stream(cal, t_ns: np.ndarray, mag_b: np.ndarray, compiled_attempts
     was in force at each, as ``MagCalibrator.update`` reading by reading gives them; ``cal`` ends in the state
     those updates leave.
 
-    ``compiled_attempts`` (default: where numba is installed) runs the attempts before the first accepted fit
-    with :func:`bootstrap_attempt` as far as it goes (to the rejection, or to a fit, which is core's); without
-    it every attempt is core's ``_attempt`` (numpy, faster than the kernel run as plain Python).
+    ``compiled_attempts`` (default: where numba is installed) runs the fit attempts with
+    :func:`attempt_to_fit` as far as it goes (to a rejection before a fit, or to a fit, which is core's);
+    without it every attempt is core's ``_attempt`` (numpy, faster than the kernel run as plain Python).
     """
     if compiled_attempts is None:
         compiled_attempts = HAVE_NUMBA
