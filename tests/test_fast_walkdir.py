@@ -93,10 +93,11 @@ def _state(wd) -> dict:
             "diagnostics": wd.diagnostics()}
 
 
-def _check(ref: WalkingDirection, inputs, after, fresh: WalkingDirection) -> WalkdirTrace:
-    """The trace over ``inputs`` against the recorded estimate after each sample and the final state of ``ref``."""
+def _check(ref: WalkingDirection, inputs, after, fresh: WalkingDirection, compiled: bool = True) -> WalkdirTrace:
+    """The trace over ``inputs`` against the recorded estimate after each sample and the final state of ``ref``
+    (``compiled``: the kernel, even where it runs as plain Python; else ``update`` fed sample by sample)."""
     t, q, acc, fe, fn, steps, axes = _arrays(inputs)
-    trace = walking_direction_over_grid(fresh, t, q, acc, fe, fn, steps, axes)
+    trace = walking_direction_over_grid(fresh, t, q, acc, fe, fn, steps, axes, compiled=compiled)
     for j, (want_key, want) in enumerate(after):
         key, st = trace.offset_state(j)
         got = None if st is None else tuple(getattr(st, f) for f in FIELDS) + (st.n,)
@@ -196,6 +197,8 @@ def _synthetic(i: int) -> WalkingDirection:
         inputs.append(args)
         after.append(_estimate_state(ref))
     _check(ref, inputs, after, WalkingDirection(**settings))
+    if i == 0:  # without numba the trace comes from update itself: the same
+        _check(ref, inputs, after, WalkingDirection(**settings), compiled=False)
     return ref
 
 
@@ -264,7 +267,7 @@ def test_from_a_later_grid_sample_and_as_step_release_reads_it():
     ids = np.array([keys.index(a) for a in axes])
     wd = WalkingDirection(**_settings(pipe.walkdir))
     trace = walking_direction_over_grid(wd, pad_t, pad_q, pad_acc, fe, fn, {j + j0 for j in steps}, ids, j0,
-                                        axis_keys=keys)
+                                        axis_keys=keys, compiled=True)
     trace.at(wd, j0 - 1)
     assert wd._axis_key is None and wd._states == {} and wd.offset_rad == 0.0
     for j, (want_key, want) in enumerate(after):

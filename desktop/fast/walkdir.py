@@ -29,7 +29,7 @@ from collections import deque
 import numpy as np
 
 from core.pdr.walkdir import AXIS_METHODS, REJECT_REASONS, _AxisState
-from desktop.fast.jit import kernel
+from desktop.fast.jit import HAVE_NUMBA, kernel
 
 # float settings
 (F_DT, F_LEAK, F_ALPHA, F_FORGET, F_MIN_FWD, F_MIN_STRIDE, F_MAX_STRIDE, F_RATE, F_MAX_TURN, F_MIN_TR,
@@ -411,7 +411,7 @@ class WalkdirTrace:
 
 
 def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, axes, j_init: int = 0,
-                                axis_keys=None) -> WalkdirTrace:
+                                axis_keys=None, compiled: bool | None = None) -> WalkdirTrace:
     """``wd.update`` (a :class:`core.pdr.walkdir.WalkingDirection`, reset here) for grid samples ``j_init..``.
 
     Grid sample ``j`` (``j >= j_init``) is fed as ``StepRelease._walkdir_to`` feeds it: time ``grid_t[j]``, the
@@ -420,7 +420,13 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
     an array of grid indices) and the smoother's axis ``axes[j - j_init]`` (hashable keys; or, with
     ``axis_keys``, int indices into it).  Returns the :class:`WalkdirTrace`; ``wd`` itself is left reset until
     :meth:`WalkdirTrace.at` or :meth:`WalkdirTrace.finish` writes into it.
+
+    ``compiled`` (default: where numba is installed) runs :func:`walk_kernel`; without it ``wd.update`` itself
+    is fed every sample and the estimate recorded after each (the kernel run as plain Python is slower than
+    core's update), so the trace is the same either way.
     """
+    if compiled is None:
+        compiled = HAVE_NUMBA
     wd.reset()
     grid_t = np.asarray(grid_t, dtype=np.int64)
     n = len(grid_t) - j_init
@@ -442,6 +448,8 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
     else:
         keys = list(axis_keys)
         ids = np.ascontiguousarray(np.asarray(axes, dtype=np.int64)[:n])
+    if not compiled:
+        return _fed(wd, t, qq, aa, fe, fn, step, ids, keys, j_init)
     fs = np.zeros(N_F)
     fs[[F_DT, F_LEAK, F_ALPHA, F_FORGET, F_MIN_FWD, F_MIN_STRIDE, F_MAX_STRIDE, F_RATE, F_MAX_TURN, F_MIN_TR,
         F_PCA_ANISO, F_MIN_COH, F_MIN_ANISO]] = (
@@ -470,6 +478,30 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
                     cur_n, cur_key)
     return WalkdirTrace(j_init, keys, cur_key, cur, cur_n,
                         _final_state(wd, keys, t, step, fs, is_, ax, ax_n, ax_order, smp, fifo, rec_i, rec_f, est))
+
+
+def _fed(wd, t, q, acc, fe, fn, step, ids, keys, j_init) -> WalkdirTrace:
+    """The trace by ``wd.update`` itself, sample by sample (fed as ``StepRelease`` fed it), and its final state."""
+    n = len(t)
+    cur = np.zeros((n, 6))
+    cur_n = np.zeros(n, dtype=np.int64)
+    cur_key = np.full(n, -1, dtype=np.int64)
+    index = {k: i for i, k in enumerate(keys)}
+    upd = wd.update
+    tl, ql, al, el, nl, sl, il = t.tolist(), q.tolist(), acc.tolist(), fe.tolist(), fn.tolist(), step.tolist(), \
+        ids.tolist()
+    for j in range(n):
+        a = al[j]
+        upd(tl[j], tuple(ql[j]), a[0], a[1], a[2], el[j], nl[j], sl[j], keys[il[j]])
+        key = wd._axis_key
+        if key is not None:
+            cur_key[j] = index[key]
+            st = wd._states.get(key)
+            if st is not None and st.n:
+                cur[j] = (st.c2, st.s2, st.w, st.w2, st.gx, st.gy)
+                cur_n[j] = st.n
+    states = dict(wd._states)  # at() replaces the dict: the final one is kept here (its states no longer change)
+    return WalkdirTrace(j_init, keys, cur_key, cur, cur_n, {"_axis_key": wd._axis_key, "_states": states})
 
 
 def _final_state(wd, keys, t, step, fs, is_, ax, ax_n, ax_order, smp, fifo, rec_i, rec_f, est) -> dict:
