@@ -91,7 +91,7 @@ def test_pairwise_sum_is_numpys():
 
 def test_qr_least_squares_against_lapacks():
     # the sphere's design (2x, 2y, 2z, 1) from samples spread over the sphere down to nearly one plane: the QR's
-    # solution within 1e-11 of numpy.linalg.lstsq's (relative); an exactly flat one (rank 3) goes to lstsq
+    # solution within 1e-11 of numpy.linalg.lstsq's (relative); an exactly flat one (rank 3) is left to core
     rng = np.random.default_rng(8)
     for flat in (1.0, 1e-2, 1e-4):
         x = rng.normal(size=(300, 3)) * [1.0, 1.0, flat]
@@ -102,7 +102,7 @@ def test_qr_least_squares_against_lapacks():
         assert _lstsq4(design.copy(), rhs.copy(), 300, got) == 4
         assert np.abs(got - want).max() <= 1e-11 * np.abs(want).max()
     design[:, 2] = 0.0
-    assert _lstsq4(design.copy(), rhs.copy(), 300, got) == -1  # the caller asks numpy.linalg.lstsq: rank 3
+    assert _lstsq4(design.copy(), rhs.copy(), 300, got) == -1  # core's attempt decides (gelsd: rank 3)
 
 
 def test_ipin_cut_waving_then_walking():

@@ -218,13 +218,13 @@ def _pairwise(a, lo, n):
 
 @kernel
 def _lstsq4(design, rhs, k, theta):
-    """Least squares ``design[:k] theta = rhs[:k]`` for 4 unknowns; returns the rank as core's lstsq finds it.
+    """Least squares ``design[:k] theta = rhs[:k]`` for 4 unknowns into ``theta``: 4 (the rank), or -1.
 
     Householder QR (4 reflections, back substitution): a few microseconds where LAPACK's SVD-based gelsd,
     what ``numpy.linalg.lstsq`` runs, takes 15-40 on a few hundred rows.  Its solution differs from gelsd's
-    by rounding only (relative ``cond * 1e-16``, 1e-13 on the phone's samples); where the triangle is
+    by rounding only (relative ``cond * 1e-16``, 1e-13 on the phone's samples).  Where the triangle is
     ill-conditioned (``|R_jj|`` spread over more than 1e6, far from rank 4 being in question for gelsd's
-    ``rcond``) it hands the problem to ``numpy.linalg.lstsq`` itself, so the rank decisions are gelsd's.
+    ``rcond``) it returns -1 and the whole attempt is left to core, so the rank decisions are gelsd's.
     ``design`` and ``rhs`` are overwritten.
     """
     r_abs_min, r_abs_max = math.inf, 0.0
@@ -257,7 +257,7 @@ def _lstsq4(design, rhs, k, theta):
         r_abs_min = min(r_abs_min, abs(alpha))
         r_abs_max = max(r_abs_max, abs(alpha))
     if not r_abs_min > 1e-6 * r_abs_max:
-        return -1  # the caller runs numpy.linalg.lstsq on the original problem
+        return -1  # ill-conditioned: core's attempt decides
     x = np.empty(4)
     for j in range(3, -1, -1):
         acc = rhs[j]
@@ -270,8 +270,9 @@ def _lstsq4(design, rhs, k, theta):
 
 @kernel
 def _sphere(m, idx, k, out):
-    """``core.pdr.magcal._fit_sphere`` on the rows ``idx[:k]`` of ``m``: 1 and ``out = (b_x, b_y, b_z, F)``, or 0
-    where core raises :class:`EllipsoidFitError` (fewer than 4 samples, coinciding, rank < 4, imaginary).
+    """``core.pdr.magcal._fit_sphere`` on the rows ``idx[:k]`` of ``m``: 1 and ``out = (b_x, b_y, b_z, F)``, 0
+    where core raises :class:`EllipsoidFitError` (fewer than 4 samples, coinciding, rank < 4, imaginary), or
+    -1 where the least squares is ill-conditioned (:func:`_lstsq4`: core's attempt must decide).
 
     ``_centred`` (mean, RMS scale, unit samples) with core's float operations in core's order (means and row
     sums sequential, the sum of squares pairwise as numpy's), and the linear least squares
@@ -303,11 +304,8 @@ def _sphere(m, idx, k, out):
         design[r, 0], design[r, 1], design[r, 2], design[r, 3] = x * 2.0, y * 2.0, z * 2.0, 1.0
         rhs[r] = x * x + y * y + z * z
     theta = np.empty(4)
-    rank = _lstsq4(design.copy(), rhs.copy(), k, theta)
-    if rank < 0:  # ill-conditioned: gelsd itself, rcond as numpy's None
-        theta, _, rank, _ = np.linalg.lstsq(design, rhs, 2.220446049250313e-16 * max(k, 4))
-    if rank < 4:
-        return 0
+    if _lstsq4(design, rhs, k, theta) < 0:
+        return -1
     bx, by, bz = theta[0], theta[1], theta[2]
     r2 = theta[3] + (bx * bx + by * by + bz * bz)
     if not r2 > 0.0:
@@ -333,14 +331,16 @@ def _inliers(m, k, res, limit, mask):
 
 @kernel
 def _trimmed_sphere(t, m, k, min_samples, limit, out):
-    """``MagCalibrator._trimmed(_fit_sphere, m[:k], t[:k])``'s fit into ``out``: 1, or 0 where core's raises.
+    """``MagCalibrator._trimmed(_fit_sphere, m[:k], t[:k])``'s fit into ``out``: 1, 0 where core's raises, or -1
+    where a least squares on the way is ill-conditioned (core's attempt must run).
 
     A start from all samples, else from the newest half or quarter with more inliers, then at most three
     refits on the inliers until they no longer change (core's docstring has the why).
     """
     idx = np.arange(k)
-    if _sphere(m, idx, k, out) == 0:
-        return 0
+    ok = _sphere(m, idx, k, out)
+    if ok <= 0:
+        return ok
     mask = np.empty(k, dtype=np.bool_)
     n_in = _inliers(m, k, out, limit, mask)
     if n_in < k:
@@ -351,7 +351,10 @@ def _trimmed_sphere(t, m, k, min_samples, limit, out):
             lo = k - k // part
             if k - lo < min_samples:
                 break
-            if _sphere(m, order[lo:], k - lo, res_n) == 0:
+            ok = _sphere(m, order[lo:], k - lo, res_n)
+            if ok < 0:
+                return ok
+            if ok == 0:
                 continue
             n_n = _inliers(m, k, res_n, limit, mask_n)
             if n_n > n_in:
@@ -363,8 +366,9 @@ def _trimmed_sphere(t, m, k, min_samples, limit, out):
         if n_in < min_samples or n_in == k:
             break
         sel = np.flatnonzero(mask)
-        if _sphere(m, sel, len(sel), out) == 0:
-            return 0
+        ok = _sphere(m, sel, len(sel), out)
+        if ok <= 0:
+            return ok
         n_new = _inliers(m, k, out, limit, new)
         same = True
         for i in range(k):
@@ -443,7 +447,10 @@ def attempt_to_fit(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring):
         has_c = is_[I_HAS_C]
         if c >= min_samples:
             res = np.empty(4)
-            if _trimmed_sphere(tt, mm, c, min_samples, fs[F_OUTLIER], res) == 1 and res[3] >= fs[F_R_MIN]:
+            ok = _trimmed_sphere(tt, mm, c, min_samples, fs[F_OUTLIER], res)
+            if ok < 0:
+                return 3, c  # an ill-conditioned sphere: core's attempt
+            if ok == 1 and res[3] >= fs[F_R_MIN]:
                 has_c = 1
                 cx, cy, cz = res[0], res[1], res[2]
         if has_c == 0:
