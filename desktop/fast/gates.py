@@ -8,8 +8,9 @@ something can change (a peak arrives, a step's heading falls due, a bout's
 time runs out) instead of at every one.  A step's heading is
 :func:`core.pdr.heading.interval_heading` over the forward vectors the
 pipeline would still hold, through the pipeline's own walking-direction stage
-(:class:`core.pdr.walkdir.WalkingDirection`, fed every grid sample in Python:
-it is not ported); the stride model (eq. 4) and the dead reckoner (eq. 1) are
+(:class:`core.pdr.walkdir.WalkingDirection`, run over the whole grid at once by
+:func:`desktop.fast.walkdir.walking_direction_over_grid` and read at each step
+through core's own ``step_heading``); the stride model (eq. 4) and the dead reckoner (eq. 1) are
 core's own classes.  With carry-mode detection (issue #17) the candidates
 are the peaks of the detector of the mode in force; at a change to a mode with
 another detector its held peaks (the last ``rotation_hold_s``) replace the
@@ -30,6 +31,7 @@ from core.pdr.heading import interval_heading
 from core.pdr.pipeline import DEFAULT_STEP_DURATION_S, Step
 from core.pdr.steps import StepEvent
 from desktop.fast.jit import kernel
+from desktop.fast.walkdir import walking_direction_over_grid
 
 
 @kernel
@@ -77,7 +79,7 @@ class StepRelease:
         self.peaks: list = []
         self.k = None  # the grid sample being processed (None: the end)
         self._walkdir = None  # (first grid sample, q, acc, axes) when the pipeline has a walking-direction stage
-        self._wd_next = 0
+        self._wd_trace = None  # the stage over the whole grid (desktop.fast.walkdir), made at the first _walkdir_to
         #: CPU seconds spent in the walking-direction stage (the benchmark's breakdown)
         self.walkdir_s = 0.0
 
@@ -86,21 +88,21 @@ class StepRelease:
         with the attitude ``q`` (n, 4), the accelerometer reading ``acc`` (n, 3) behind each sample and the
         smoother's axis there (``axes``, from ``j_init`` on)."""
         self._walkdir = (j_init, q, acc, axes)
-        self._wd_next = j_init
+        self._wd_trace = None
 
     def _walkdir_to(self, k: int, step_ticks: set) -> None:
-        """The walking-direction stage updated with the grid samples up to ``k``."""
+        """The walking-direction stage as the grid samples up to ``k`` leave it: the whole grid in one pass
+        (:func:`desktop.fast.walkdir.walking_direction_over_grid`, at the first call: ``step_ticks`` is complete
+        by then), then the estimate after sample ``k`` put into the pipeline's stage (at the last sample its
+        whole final state)."""
         if self._walkdir is None:
             return
         t0 = time.process_time()
-        j_init, q, acc, axes = self._walkdir
-        wd = self.p.walkdir
-        e, n = self.fwd_e, self.fwd_n
-        for j in range(self._wd_next, k + 1):
-            a = acc[j]
-            wd.update(int(self.grid_t[j]), tuple(q[j].tolist()), float(a[0]), float(a[1]), float(a[2]),
-                      float(e[j - j_init]), float(n[j - j_init]), j in step_ticks, axes[j - j_init])
-        self._wd_next = max(self._wd_next, k + 1)
+        if self._wd_trace is None:
+            j_init, q, acc, axes = self._walkdir
+            self._wd_trace = walking_direction_over_grid(self.p.walkdir, self.grid_t, q, acc, self.fwd_e,
+                                                         self.fwd_n, step_ticks, axes, j_init)
+        self._wd_trace.at(self.p.walkdir, k)
         self.walkdir_s += time.process_time() - t0
 
     def run(self, peaks: list, carry=None, det_at=None) -> None:
