@@ -311,29 +311,49 @@ def cache_key(name: str, rec: Recording, magnetic_dip_rad: float | None) -> str:
     return h.hexdigest()
 
 
+def _write_attitude(path: Path, att: Attitude) -> None:
+    """``att`` as raw little-endian numbers: the count (int64), the times (int64), the quaternions (4 float64 each);
+    written to a temporary name and renamed (another process may be reading the folder)."""
+    t = np.ascontiguousarray(att.t_ns, dtype="<i8")
+    q = np.ascontiguousarray(att.q_wxyz, dtype="<f8").reshape(len(t), 4)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    tmp.write_bytes(np.array([len(t)], dtype="<i8").tobytes() + t.tobytes() + q.tobytes())
+    os.replace(tmp, path)
+
+
+def _read_attitude(path: Path) -> Attitude | None:
+    """What :func:`_write_attitude` wrote, or None for a file of the wrong size (damaged, cut short)."""
+    data = path.read_bytes()
+    if len(data) < 8:
+        return None
+    n = int(np.frombuffer(data, dtype="<i8", count=1)[0])
+    if n < 0 or len(data) != 8 + 8 * n + 32 * n:
+        return None
+    t = np.frombuffer(data, dtype="<i8", count=n, offset=8).astype(np.int64)
+    q = np.frombuffer(data, dtype="<f8", count=4 * n, offset=8 + 8 * n).reshape(n, 4).astype(np.float64)
+    return Attitude(t, q)
+
+
 def peer_attitude(name: str, rec: Recording, magnetic_dip_rad: float | None = None,
                   cache_dir: Path | None = None) -> tuple[Attitude, bool]:
     """A peer's attitude over ``rec``, from ``cache_dir`` when an earlier run stored it: ``(attitude, cached)``.
 
     A peer's output depends only on the recording, the site and the peer (never on our pipeline), so a
     benchmark rerun or a parameter sweep need not run it again; :func:`cache_key` says what a stored
-    result must match.  Written atomically (another process may be reading the folder).
+    result must match.  Stored as raw numbers (:func:`_write_attitude`: nothing is unpickled); a damaged
+    file is run again and replaced.
     """
     path = None
     if cache_dir is not None:
-        path = Path(cache_dir) / f"{name}-{cache_key(name, rec, magnetic_dip_rad)}.npz"
+        path = Path(cache_dir) / f"{name}-{cache_key(name, rec, magnetic_dip_rad)}.att"
         if path.exists():
-            try:
-                with np.load(path) as z:
-                    return Attitude(z["t_ns"], z["q_wxyz"]), True
-            except (OSError, ValueError, KeyError):  # a damaged file: run the peer again and replace it
-                pass
+            att = _read_attitude(path)
+            if att is not None:
+                return att, True
     att = ATTITUDE[name](rec, magnetic_dip_rad=magnetic_dip_rad)
     if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
-        np.savez(tmp, t_ns=np.asarray(att.t_ns, dtype=np.int64), q_wxyz=np.asarray(att.q_wxyz, dtype=np.float64))
-        os.replace(tmp, path)
+        _write_attitude(path, att)
     return att, False
 
 

@@ -210,7 +210,7 @@ def test_peer_cache_gives_the_peers_stored_attitude_and_misses_on_any_change(tmp
     cached: list = []
     first, err = peers.run_peers(rec, steps, names=("rotvec",), magnetic_dip_rad=dip, cache_dir=tmp_path,
                                  cached=cached, delay_s=0.0, cutoff_hz=5.0)
-    assert not err and cached == [] and len(list(tmp_path.glob("rotvec-*.npz"))) == 1
+    assert not err and cached == [] and len(list(tmp_path.glob("rotvec-*.att"))) == 1
 
     def must_not_run(*a, **k):
         raise AssertionError("the peer ran although its attitude was stored")
@@ -230,8 +230,8 @@ def test_peer_cache_gives_the_peers_stored_attitude_and_misses_on_any_change(tmp
     assert peers.cache_key("rotvec", changed, dip) != peers.cache_key("rotvec", rec, dip)
     # a damaged stored file is run again (and replaced), never an error
     monkeypatch.undo()
-    for f in tmp_path.glob("rotvec-*.npz"):
-        f.write_bytes(b"not an npz")
+    for f in tmp_path.glob("rotvec-*.att"):
+        f.write_bytes(f.read_bytes()[:-5])  # cut short
     cached.clear()
     fixed, err = peers.run_peers(rec, steps, names=("rotvec",), magnetic_dip_rad=dip, cache_dir=tmp_path,
                                  cached=cached, delay_s=0.0, cutoff_hz=5.0)
