@@ -15,7 +15,11 @@ the reference does after its start:
 * the magnetometer heading update, eq. 18's noise, as a consider (Schmidt)
   update with the Joseph form, and its relock;
 * the zero-rate update, the running references (|g|, |h|, dip) and the
-  trailing windows (noise variances, stillness).
+  trailing windows (noise variances, stillness);
+* the vertical hard-iron offset from an outdoor site's field (the WMM
+  strength and dip a GPS fix gives, ``set_site_field``), and a site's
+  settings changed between two events (:meth:`KernelState.new_settings`: the
+  pipeline's ``_apply_site`` at its first anchoring fix).
 
 What it does not re-implement, and why:
 
@@ -27,9 +31,9 @@ What it does not re-implement, and why:
   run over the magnetometer stream beforehand (:func:`calibrate_magnetometer`:
   its per-reading part compiled, its fits core's Python) and the kernel gets the
   calibrated readings;
-* the vertical offset of an outdoor site's field, the quasi-static field
-  detector and ``mag_mode="full"``: not used by the default pipeline; the fast
-  path refuses a filter configured with them (:func:`check_supported`).
+* the quasi-static field detector and ``mag_mode="full"``: not used by the
+  default pipeline; the fast path refuses a filter configured with them
+  (:func:`check_supported`).
 """
 
 from __future__ import annotations
@@ -55,7 +59,8 @@ C_USED, C_GATE, C_NUM = 0, 1, 2
 # settings (float array)
 (S_GN, S_GS, S_BW, S_MAXB, S_UPD, S_A0, S_KA1, S_KA2, S_KA3, S_M0, S_KM1, S_KM2, S_ACC_REJ, S_ACC_GATE,
  S_MAG_RATIO, S_MAG_DIP, S_MAG_LO, S_MAG_HI, S_MAG_GATE, S_RELOCK_S, S_RELOCK_SPREAD, S_DECL, S_STILL_ACC_SD,
- S_STILL_DIR, S_STILL_GYRO, S_ZR_NOISE, S_MAX_GAP, S_NO_GYRO_RW) = range(28)
+ S_STILL_DIR, S_STILL_GYRO, S_ZR_NOISE, S_MAX_GAP, S_NO_GYRO_RW, S_SITE_F, S_SITE_DIP, S_VO_DIP_ERR, S_VO_NORM_ERR,
+ S_VO_MIN_S, S_VO_RIDGE) = range(34)
 # settings (int array)
 SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI_STILL_WIN_NS = range(6)
 
@@ -63,6 +68,8 @@ SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI
 (F_GRAV, F_FIELD, F_DIP, F_ALPHA_REF, F_W2, F_ACC_S2, F_MAG_S2, F_LAST_ACC0, F_LAST_ACC1, F_LAST_ACC2,
  F_ASUM0, F_ASUM1, F_ASUM2, F_ASUM3, F_MSUM0, F_MSUM1, F_MSUM2, F_MSUM3) = range(18)
 N_FSTATE = 18
+# the vertical offset's scalar state (int array): the next refresh, its first, whether it is on
+VO_NEXT, VO_HAS_NEXT, VO_T0, VO_HAS_T0, VO_ACTIVE = range(5)
 # scalar state (int array); HAS_* flags stand for the reference's None
 (I_TNS, I_TGYRO, I_HAS_TGYRO, I_REF_NEXT, I_HAS_REF_NEXT, I_ZR_NEXT, I_HAS_ZR_NEXT, I_STILL_NEXT,
  I_HAS_STILL_NEXT, I_ACC_N, I_ACC_T0, I_MAG_N, I_MAG_T0, I_GATED_N, I_YAW_UNOBS, I_MAG_REJ, I_N_ZR, I_N_NUM,
@@ -488,17 +495,78 @@ def count(counts, first, code, k):
 
 
 @kernel
+def vertical_offset(R, x, y, z, ti, sf, vo_S, vo_r, vo_i, vo_b, rd_counts, rd_n, rn_counts, rn_n, fs,
+                    h_counts, h_n, dip_counts, dip_n):
+    """A reading with the hard-iron offset along the directions the phone held vertical removed, from the site's
+    field (``AttitudeEKF._vertical_offset``: ``up_b . (m - b) = -F sin d`` by ridge least squares, applied while
+    the readings' median dip and strength are off the site's; its references restarted at each switch)."""
+    u0, u1, u2 = R[2, 0], R[2, 1], R[2, 2]
+    nm = math.sqrt(x * x + y * y + z * z)
+    median_add(rd_counts, rd_n, -math.pi / 2, math.radians(0.1),
+               math.asin(max(-1.0, min(1.0, -(u0 * x + u1 * y + u2 * z) / nm))))
+    rhs = u0 * x + u1 * y + u2 * z + sf[S_SITE_F] * math.sin(sf[S_SITE_DIP])
+    u = (u0, u1, u2)
+    for i in range(3):
+        vo_r[i] += u[i] * rhs
+        for j in range(3):
+            vo_S[i, j] += u[i] * u[j]
+    if not vo_i[VO_HAS_NEXT] or ti >= vo_i[VO_NEXT]:
+        vo_i[VO_NEXT] = ti + 1_000_000_000
+        vo_i[VO_HAS_NEXT] = 1
+        if not vo_i[VO_HAS_T0]:
+            vo_i[VO_T0] = ti
+            vo_i[VO_HAS_T0] = 1
+        median_add(rn_counts, rn_n, 0.0, 0.1, nm)
+        dip_err = abs(median_of(rd_counts, rd_n[0], -math.pi / 2, math.radians(0.1)) - sf[S_SITE_DIP])
+        norm_err = abs(median_of(rn_counts, rn_n[0], 0.0, 0.1) / sf[S_SITE_F] - 1.0)
+        if vo_i[VO_ACTIVE]:  # hysteresis: stays on until the dip is clearly right
+            active = dip_err > 0.5 * sf[S_VO_DIP_ERR]
+        else:
+            active = (dip_err > sf[S_VO_DIP_ERR] and norm_err > sf[S_VO_NORM_ERR]
+                      and (ti - vo_i[VO_T0]) * 1e-9 >= sf[S_VO_MIN_S])
+        if active:
+            ridge = sf[S_VO_RIDGE] * (vo_S[0, 0] + vo_S[1, 1] + vo_S[2, 2]) / 3.0
+            A = np.empty((3, 3))
+            for i in range(3):
+                for j in range(3):
+                    A[i, j] = vo_S[i, j] + ridge * (1.0 if i == j else 0.0)
+            rr = np.empty(3)
+            for i in range(3):
+                rr[i] = vo_r[i]
+            sol = np.linalg.solve(A, rr)
+            if math.isfinite(sol[0]) and math.isfinite(sol[1]) and math.isfinite(sol[2]):
+                for i in range(3):
+                    vo_b[i] = sol[i]
+        if active != (vo_i[VO_ACTIVE] != 0):  # the references were of the other field: start them again
+            vo_i[VO_ACTIVE] = 1 if active else 0
+            h_counts[:] = 0
+            h_n[0] = 0
+            dip_counts[:] = 0
+            dip_n[0] = 0
+            fs[F_FIELD] = math.nan
+            fs[F_DIP] = math.nan
+            if not active:
+                for i in range(3):
+                    vo_b[i] = 0.0
+    if not vo_i[VO_ACTIVE]:
+        return x, y, z
+    return x - vo_b[0], y - vo_b[1], z - vo_b[2]
+
+
+@kernel
 def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, P,
                  g_counts, g_n, h_counts, h_n, dip_counts, dip_n,
                  gw_t, gw_v, gw_p, gw_s, ad_t, ad_v, ad_p, ad_s, an_t, an_v, an_p, an_s,
                  av_t, av_v, av_p, av_s, mv_t, mv_v, mv_p, mv_s, gated_t, gated_v,
                  out_q, out_acc_s2, out_mag_s2, out_mag_rej,
-                 acc_counts, acc_first, mag_counts, mag_first, nis_sum, nis_n):
+                 acc_counts, acc_first, mag_counts, mag_first, nis_sum, nis_n,
+                 vo_S, vo_r, vo_i, vo_b, rd_counts, rd_n, rn_counts, rn_n):
     """The attitude filter from event ``i0`` on (it has started): per grid tick the attitude and the log's columns.
 
     ``kind``/``t``/``v``: the merged valid events (magnetometer readings already calibrated; ``cal_ok``
     whether the calibrator had a fit); ``tick_event[j]``: the event after which grid tick ``j`` is taken.
-    Every array argument is state, updated in place.
+    Every array argument is state, updated in place.  With a site's field (``sf[S_SITE_F]``, ``sf[S_SITE_DIP]``)
+    each magnetometer reading goes through :func:`vertical_offset` first (``vo_*``, ``rd_*``, ``rn_*``: its state).
     """
     n = len(t)
     j = j0
@@ -508,6 +576,7 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
     decl = sf[S_DECL]
     max_bias = sf[S_MAXB]
     rw2 = sf[S_NO_GYRO_RW] ** 2
+    site = sf[S_SITE_F] == sf[S_SITE_F] and sf[S_SITE_DIP] == sf[S_SITE_DIP]
     I3 = np.eye(3)
     mean4 = np.empty(4)
     for i in range(i0, n):
@@ -601,6 +670,10 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                     reason = M_RANGE
                 else:
                     R = q_to_matrix(q)
+                    if site:
+                        x, y_, z = vertical_offset(R, x, y_, z, ti, sf, vo_S, vo_r, vo_i, vo_b, rd_counts, rd_n,
+                                                   rn_counts, rn_n, fs, h_counts, h_n, dip_counts, dip_n)
+                        nm = math.sqrt(x * x + y_ * y_ + z * z)
                     # references (|h|, dip; a still phone's readings at most reference_still_rate_hz)
                     if is_[I_HAS_LAST_ACC]:
                         still = (an_p[1] - an_p[0] >= 5
@@ -718,8 +791,6 @@ def check_supported(ekf) -> None:
         raise NotImplementedError(f"the fast path runs core.pdr.attitude.AttitudeEKF only, not {type(ekf).__name__}")
     if s.mag_mode != "heading" or ekf.field_detector is not None:
         raise NotImplementedError("the fast path implements mag_mode='heading' without a field detector")
-    if s.site_field_uT == s.site_field_uT or s.site_dip_rad == s.site_dip_rad:
-        raise NotImplementedError("the fast path does not implement the vertical offset of a site's field")
 
 
 def settings_arrays(ekf) -> tuple[np.ndarray, np.ndarray]:
@@ -730,7 +801,8 @@ def settings_arrays(ekf) -> tuple[np.ndarray, np.ndarray]:
                    s.mag_reject_dip_rad, s.mag_valid_range_uT[0], s.mag_valid_range_uT[1], s.mag_gate_nis,
                    s.mag_relock_s, s.mag_relock_spread_rad, s.declination_rad, s.still_acc_sd_m_s2,
                    s.still_acc_direction_rad, s.still_gyro_sd_rad_s, s.zero_rate_noise_rad_s, s.max_gyro_gap_s,
-                   s.no_gyro_random_walk_rad_sqrt_s], dtype=np.float64)
+                   s.no_gyro_random_walk_rad_sqrt_s, s.site_field_uT, s.site_dip_rad, s.vertical_offset_dip_error_rad,
+                   s.vertical_offset_norm_error, s.vertical_offset_min_s, s.vertical_offset_ridge], dtype=np.float64)
     si = np.array([int(s.reference_update_s * 1e9), int(1e9 / s.reference_still_rate_hz), int(s.use_magnetometer),
                    int(s.mag_requires_calibration), int(s.variance_window_s * 1e9), int(s.still_window_s * 1e9)],
                   dtype=np.int64)
@@ -750,19 +822,24 @@ def calibrate_magnetometer(calibrator, t_ns: np.ndarray, mag_b: np.ndarray):
     return calibrate_stream(calibrator, t_ns, mag_b)
 
 
-def start_with_reference(ekf, kind, t, v, cal_ok, tick_event, out_q, out_acc_s2, out_mag_s2, out_mag_rej) -> tuple:
+def start_with_reference(ekf, kind, t, v, cal_ok, tick_event, out_q, out_acc_s2, out_mag_s2, out_mag_rej,
+                         hook_at: int = -1, hook=None) -> tuple:
     """Run the reference filter (no calibrator: ``v`` holds calibrated readings) until it has started.
 
     Returns ``(i0, j0, j_init)``: the first event and the first grid tick the kernel takes over, and the
-    first grid tick taken with the filter started (the smoother's first).
+    first grid tick taken with the filter started (the smoother's first).  ``hook()``, if given, is called
+    before event ``hook_at`` (a GPS site given to the filter, :meth:`core.pdr.pipeline.Pipeline._apply_site`)
+    when that comes before the hand-over.
     """
-    require = ekf.settings.mag_requires_calibration and ekf.settings.use_magnetometer
     j = 0
     j_init = -1
     n_ticks = len(tick_event)
     for i in range(len(t)):
+        if i == hook_at:
+            hook()
         if ekf.initialized:
             return i, j, (j if j_init < 0 else j_init)
+        require = ekf.settings.mag_requires_calibration and ekf.settings.use_magnetometer
         k, ti = int(kind[i]), int(t[i])
         x, y, z = float(v[i, 0]), float(v[i, 1]), float(v[i, 2])
         if k == GYRO_K:
@@ -839,12 +916,32 @@ class KernelState:
         self.acc_first[-1] = self.mag_first[-1] = 0
         self.nis_sum = np.zeros(3)
         self.nis_n = np.zeros(3, dtype=np.int64)
+        # the vertical offset of a site's field (AttitudeEKF._vertical_offset)
+        self.vo_S = np.array(ekf._vo_S, dtype=np.float64)
+        self.vo_r = np.array(ekf._vo_r, dtype=np.float64)
+        self.vo_i = np.array([ekf._vo_next_ns or 0, ekf._vo_next_ns is not None, ekf._vo_t0_ns or 0,
+                              ekf._vo_t0_ns is not None, ekf._vo_active], dtype=np.int64)
+        self.vo_b = np.array(ekf.vertical_offset_uT, dtype=np.float64)
+        self.vo_medians = []
+        for rm in (ekf._raw_dip_med, ekf._raw_norm_med):
+            self.vo_medians += [np.array(rm.counts, dtype=np.int64), np.array([rm.n], dtype=np.int64)]
 
     def run(self, kind, t, v, cal_ok, i0, tick_event, j0, out_q, out_acc_s2, out_mag_s2, out_mag_rej) -> int:
+        """The kernel over events ``i0 .. len(t) - 1`` (pass the arrays cut short to stop earlier); returns the
+        next grid tick."""
         return run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, self.sf, self.si, self.fs, self.is_, self.q,
                             self.b, self.P, *self.medians, *self.windows, self.gated_t, self.gated_v,
                             out_q, out_acc_s2, out_mag_s2, out_mag_rej, self.acc_counts, self.acc_first,
-                            self.mag_counts, self.mag_first, self.nis_sum, self.nis_n)
+                            self.mag_counts, self.mag_first, self.nis_sum, self.nis_n,
+                            self.vo_S, self.vo_r, self.vo_i, self.vo_b, *self.vo_medians)
+
+    def new_settings(self, ekf, refresh_references: bool) -> None:
+        """``ekf``'s settings changed between two events (a site from GPS: declination, field): the kernel's
+        settings again, and with ``refresh_references`` the references recomputed with the new declination,
+        as the reference's ``declination_rad`` setter does (``_update_references``)."""
+        self.sf, self.si = settings_arrays(ekf)
+        if refresh_references:
+            update_references(self.fs, *self.medians, self.sf[S_DECL])
 
     def write_back(self, ekf) -> None:
         """The kernel's final state into the reference object, for its counters and the pipeline's labels."""
@@ -859,6 +956,16 @@ class KernelState:
         ekf.t_ns = int(is_[I_TNS])
         ekf.n_zero_rate, ekf.n_numerical_rejects = int(is_[I_N_ZR]), int(is_[I_N_NUM])
         ekf.n_heading_relocks, ekf.n_gyro = int(is_[I_N_RELOCK]), int(is_[I_N_GYRO])
+        ekf._alpha_ref = float(fs[F_ALPHA_REF])
+        vo = self.vo_i
+        ekf._vo_S = self.vo_S.tolist()
+        ekf._vo_r = self.vo_r.tolist()
+        ekf._vo_next_ns = int(vo[VO_NEXT]) if vo[VO_HAS_NEXT] else None
+        ekf._vo_t0_ns = int(vo[VO_T0]) if vo[VO_HAS_T0] else None
+        ekf._vo_active = bool(vo[VO_ACTIVE])
+        ekf.vertical_offset_uT = tuple(float(x) for x in self.vo_b)
+        for rm, counts, n in ((ekf._raw_dip_med, *self.vo_medians[0:2]), (ekf._raw_norm_med, *self.vo_medians[2:4])):
+            rm.counts, rm.n = counts.tolist(), int(n[0])
         for counts, first, names, reasons in ((self.acc_counts, self.acc_first, ACC_REASONS, ekf.acc_reasons),
                                               (self.mag_counts, self.mag_first, MAG_REASONS, ekf.mag_reasons)):
             for code in sorted((c for c in range(len(names)) if first[c] >= 0), key=lambda c: first[c]):
