@@ -2,14 +2,16 @@
 
 The fast path's agreement with the reference is ``tests/test_fast_path.py``'s
 subject; here the question is whether the command line really runs the
-engine asked for, with the same results, and says so -- and whether a
-pipeline the fast path does not implement (GPS fusion) is refused clearly
-(``--engine fast``) or falls back to the reference with the reason (``auto``).
+engine asked for, with the same results, and says so (GPS fusion included)
+-- and whether a pipeline the fast path does not implement (an attitude
+filter without a kernel) is refused clearly (``--engine fast``) or falls
+back to the reference with the reason (``auto``).
 In CI numba is absent: the fast path's kernels run as plain Python (so the
 walks here are short) and ``auto`` is the reference unless told otherwise.
 """
 
 import json
+import math
 
 import pytest
 
@@ -63,17 +65,42 @@ def gps_walk(tmp_path_factory):
     return p
 
 
-def test_gps_fusion_falls_back_under_auto_and_is_refused_under_fast(gps_walk, capsys, monkeypatch):
-    monkeypatch.setattr(desktop.fast, "HAVE_NUMBA", True)  # auto would take the fast path if it could
-    s = _replay_json(capsys, gps_walk)
-    assert s["engine"].startswith("reference (") and "GPS" in s["engine"]
-    assert s.get("gps_fusion")  # the fallback ran the whole pipeline, the fusion included
-    capsys.readouterr()
-    assert main(["replay", str(gps_walk), "--engine", "fast", "--no-progress"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "fast path" in err[0] and "GPS" in err[0]
-    # without the fusion the same recording runs on the fast path
-    assert _replay_json(capsys, gps_walk, "--engine", "fast", "--gps", "off")["engine"] == "fast"
+def _close(a, b, where=""):
+    """JSON values equal, numbers within TOL (nan equal to nan)."""
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and set(a) == set(b), where
+        for k in a:
+            _close(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, list):
+        assert isinstance(b, list) and len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b)):
+            _close(x, y, f"{where}[{i}]")
+    elif isinstance(a, float) or isinstance(b, float):
+        assert (math.isnan(a) and math.isnan(b)) or abs(a - b) <= TOL, (where, a, b)
+    else:
+        assert a == b, (where, a, b)
+
+
+def test_gps_fusion_runs_on_the_fast_path_under_auto(gps_walk, capsys, monkeypatch):
+    monkeypatch.setattr(desktop.fast, "HAVE_NUMBA", True)  # auto takes the fast path where it can
+    ref = _replay_json(capsys, gps_walk, "--engine", "reference")
+    auto = _replay_json(capsys, gps_walk)
+    assert ref["engine"] == "reference" and auto["engine"] == "fast"
+    assert auto["gps_fusion"] == ref["gps_fusion"] and auto["gps"]["fixes_accepted"] > 10
+    _close({k: v for k, v in ref.items() if k != "engine"}, {k: v for k, v in auto.items() if k != "engine"})
+
+
+def test_what_the_fast_path_does_not_implement_falls_back_under_auto_and_is_refused_under_fast(gps_walk,
+                                                                                             monkeypatch):
+    from core.pdr.attitude_qekf import QuaternionEKF
+    from core.recording import read_recording
+
+    monkeypatch.setattr(desktop.fast, "HAVE_NUMBA", True)
+    rec = read_recording(str(gps_walk))
+    res, ran = run_pipeline(Pipeline(attitude=QuaternionEKF(), carry=False), rec)
+    assert ran.startswith("reference (") and "AttitudeEKF" in ran and len(res.steps) > 10
+    with pytest.raises(ValueError, match="fast path cannot run this pipeline"):
+        run_pipeline(Pipeline(attitude=QuaternionEKF()), rec, "fast")
 
 
 def test_run_pipeline_refuses_an_unknown_engine():

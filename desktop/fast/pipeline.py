@@ -1,7 +1,8 @@
 """``run_fast``: the hand-held pipeline over whole arrays, stage by stage.
 
 The order of :class:`core.pdr.pipeline.Pipeline`'s per-event loop, taken
-apart where the data allow it:
+apart where the data allow it (the stages that do not depend on the attitude
+first):
 
 1. the events of the three streams, checked (non-finite, impossible) and
    merged in the pipeline's order, as arrays (vectorised); the sensor-health
@@ -11,33 +12,49 @@ apart where the data allow it:
    :func:`desktop.fast.attitude.calibrate_magnetometer`; compiled per reading,
    its fits core's Python);
 3. the accelerometer norm (eq. 2) and its uniform grid (compiled);
-4. the attitude filter over all events, the attitude taken at each grid sample
-   (compiled after the reference's own start: :mod:`desktop.fast.attitude`);
-5. the rotation smoother over the grid's attitudes (section 4.3, compiled);
-6. the carry-mode detector (issue #17, :mod:`desktop.fast.carry`): its
+4. the carry-mode detector (issue #17, :mod:`desktop.fast.carry`): its
    features over all hops at once (vectorised), each hop's decision core's;
    its mode and step period at every grid sample;
-7. one step detector (eqs. 2-3) per distinct carry-mode gates of
+5. one step detector (eqs. 2-3) per distinct carry-mode gates of
    ``step_gates`` (usually two: the hand-held and the swinging hand's), each
    over the whole grid with the carry detector's step period, and the speed
    window at their peaks (compiled);
-8. the gates and the steps (per step, :mod:`desktop.fast.gates`): the active
+6. with a GPS fusion (``Pipeline(gnss=...)``) and ``site_from_gps``: the
+   sensor event before which the reference gives the attitude filter the
+   site's WMM declination and field (``Pipeline._apply_site`` at the GPS event
+   where the fusion first has an anchor).  Nothing else of the fusion feeds
+   back into the PDR, and neither the anchoring fix nor the moment the fusion
+   gets to it depends on the attitude (they depend on the fixes, the receiver
+   status and the steps' times and completion), so a copy of the pipeline
+   runs the gates and the steps' completion without headings, feeding a copy
+   of the fusion, up to that event (:meth:`_FusionEvents.site_event`);
+7. the attitude filter over all events, the attitude taken at each grid sample
+   (compiled after the reference's own start: :mod:`desktop.fast.attitude`),
+   in two segments with the site given between them;
+8. the rotation smoother over the grid's attitudes (section 4.3, compiled);
+9. the gates and the steps (per step, :mod:`desktop.fast.gates`): the active
    mode's peaks are candidates; at a change to a mode with another detector
-   that detector's held peaks replace the unconfirmed candidates.
+   that detector's held peaks replace the unconfirmed candidates.  The GPS
+   fusion (core's own, per fix and per step) is fed as ``Pipeline.update``
+   feeds it: each fix and receiver status before the first grid sample whose
+   accelerometer event comes after it (time, then ``recording.stream_order``),
+   each step as it completes, the rest at the end (:class:`_Feed`).
 
 The result is :meth:`core.pdr.pipeline.Pipeline.run`'s: the same steps, the
 positions and headings within 1e-9 (``tests/test_fast_path.py``), the same
-attitude log, counters and labels.  Desktop only: nothing in ``core/`` or
+attitude log, counters and labels, and with a GPS fusion the same fused track,
+fixes' verdicts, outages and site.  Desktop only: nothing in ``core/`` or
 ``app/`` imports it, and the phone's per-event path stays the reference.
 """
 
 from __future__ import annotations
 
+import copy
 import time
 
 import numpy as np
 
-from core.conventions import ACC, CARRY_MODES, GYRO
+from core.conventions import ACC, CARRY_MODES, GNSS_STATUS, GPS, GYRO
 from core.pdr.pipeline import (IMPOSSIBLE, MAG, SATURATION_FLOOR, AttitudeLog, Pipeline, PipelineResult, SensorHealth,
                                Track)
 from core.recording import Recording
@@ -118,15 +135,14 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     Takes the same parameters as :class:`core.pdr.pipeline.Pipeline`, or instead (not both) ``pipeline``: a
     ready-made one to fill, as ``pipeline.run(recording)`` would (it is reset first, as ``run`` resets it: its
     settings stay, e.g. a magnetic declination or site field given to its attitude filter).  A GPS fusion
-    (``gnss``) and attitude filters the kernel does not implement
-    (:func:`desktop.fast.attitude.check_supported`) raise ``NotImplementedError``.
+    (``gnss``) runs as the reference runs it (:class:`_FusionEvents`); attitude filters the kernel does not
+    implement (:func:`desktop.fast.attitude.check_supported`) and a fusion with a known ``start`` whose
+    anchor would give the site (``site_from_gps``) raise ``NotImplementedError``.
     ``timings``, if given, receives the CPU seconds of each stage (the benchmark's breakdown).
     """
     clock = _Clock(timings)
     if pipeline is not None and params:
         raise TypeError("run_fast takes either a pipeline or the parameters of one, not both")
-    if params.get("gnss") is not None or getattr(pipeline, "gnss", None) is not None:
-        raise NotImplementedError("the fast path has no GPS fusion")
     recording.stream(ACC, "step detection needs the accelerometer")
     if pipeline is None:
         p = Pipeline(**params)
@@ -135,7 +151,13 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         p.reset()
     ekf = p.attitude
     fatt.check_supported(ekf)
+    if p.gnss is not None and p.keep_steps is not True and int(p.keep_steps) == 0:
+        raise NotImplementedError("the fast path hands the fusion its steps from the pipeline's list: keep_steps=0")
+    if p.gnss is not None and recording.has(GPS) and p.site_from_gps and getattr(p.gnss, "start", None) is not None:
+        raise NotImplementedError("the fast path does not implement a GPS fusion with a known start that gives "
+                                  "the attitude filter its site (its anchor waits on the fused track)")
     ev = _Events(recording, p)
+    fusion = _FusionEvents(recording, p, ev) if p.gnss is not None else None
     clock("events")
     # 2. the magnetometer calibration over its stream
     calibrator = ekf.mag_calibrator
@@ -151,31 +173,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     tick_event = np.ascontiguousarray(acc_pos[src])
     clock("grid")
     n_ticks = len(gt)
-    # 4. the attitude
-    out_q = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (n_ticks, 1))
-    out_acc_s2, out_mag_s2 = np.full(n_ticks, np.nan), np.full(n_ticks, np.nan)
-    out_rej = np.zeros(n_ticks, dtype=np.bool_)
-    ekf.mag_calibrator = None
-    try:
-        i0, j0, j_init = fatt.start_with_reference(ekf, ev.kind, ev.t, v, cal_ok, tick_event, out_q, out_acc_s2,
-                                                   out_mag_s2, out_rej)
-        if i0 < len(ev.t):
-            st = fatt.KernelState(ekf, len(ev.pos[fatt.GYRO_K]), len(acc_pos), len(mag_pos))
-            st.run(ev.kind, ev.t, v, cal_ok, i0, tick_event, j0, out_q, out_acc_s2, out_mag_s2, out_rej)
-            st.write_back(ekf)
-    finally:
-        ekf.mag_calibrator = calibrator
-    clock("attitude")
-    # 5. the smoother
-    east, north, heading = (np.full(n_ticks, np.nan) for _ in range(3))
-    e, nn, h, upright, counters = smooth_headings(p.smoother, out_q[j_init:])
-    east[j_init:], north[j_init:], heading[j_init:] = e, nn, h
-    p.smoother.upright = bool(counters[0])
-    p.smoother.n_axis_switches, p.smoother.n_upright = int(counters[1]), int(counters[2])
-    if p.smoother.upright:
-        p.smoother.forward_b = (0.0, 0.0, -1.0)
-    clock("smoother")
-    # 6. the carry-mode detector (issue #17): its mode and step period at every grid sample
+    # 4. the carry-mode detector (issue #17): its mode and step period at every grid sample
     gyro_pos = ev.pos[fatt.GYRO_K]
     acc_at = ev.v[tick_event]
     track = det_at = None
@@ -190,7 +188,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         p._carry_mode = CARRY_MODES[int(track.mode[-1])] if n_ticks else p._carry_mode
         p._active_det = p._mode_detectors[int(det_at[-1])] if n_ticks else p._active_det
     clock("carry-mode detector")
-    # 7. every step detector (one per distinct gates), the speed window at their peaks
+    # 5. every step detector (one per distinct gates), the speed window at their peaks
     found = []
     for det in p._mode_detectors:
         det.n_grid = n_ticks
@@ -200,7 +198,6 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     all_ticks = np.unique(np.concatenate([f[0] for f in found]))
     speed = speed_at(p.speed_window, gt, gx, restart, all_ticks)
     clock("steps, speed window")
-    # 8. gates and steps
     rot_sum = np.empty(len(gyro_pos))
     rot_n = np.empty(len(gyro_pos), dtype=np.int64)
     rotation_sums(ev.t[gyro_pos], np.ascontiguousarray(ev.v[gyro_pos]), p._rot_window_ns, rot_sum, rot_n)
@@ -211,8 +208,57 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         rms = np.where(g >= 0, np.sqrt(np.maximum(rot_sum[gi], 0.0) / np.maximum(rot_n[gi], 1)), 0.0) \
             if len(gyro_pos) else np.zeros(len(ev_tick))
         peaks.append((ev_tick, ev_t, ev_f, rms, speed[np.searchsorted(all_ticks, ev_tick)]))
+    # 6. the sensor event before which the first anchoring fix gives the attitude filter its site (-1: none)
+    site_at, anchor = -1, None
+    if fusion is not None and p.site_from_gps and np.any(fusion.is_gps):
+        site_at, anchor = fusion.site_event(p, gt, tick_event, peaks, track, det_at)
+        clock("GPS site (the fusion's fixes and the steps' schedule)")
+    # 7. the attitude (in two segments around the site)
+    out_q = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (n_ticks, 1))
+    out_acc_s2, out_mag_s2 = np.full(n_ticks, np.nan), np.full(n_ticks, np.nan)
+    out_rej = np.zeros(n_ticks, dtype=np.bool_)
+    applied = []
+
+    def give_site():
+        """The reference's ``Pipeline._apply_site`` at the anchoring fix (once)."""
+        applied.append(True)
+        p._apply_site(anchor)
+
+    ekf.mag_calibrator = None
+    try:
+        i0, j0, j_init = fatt.start_with_reference(ekf, ev.kind, ev.t, v, cal_ok, tick_event, out_q, out_acc_s2,
+                                                   out_mag_s2, out_mag_rej=out_rej, hook_at=site_at, hook=give_site)
+        if i0 < len(ev.t):
+            st = fatt.KernelState(ekf, len(gyro_pos), len(acc_pos), len(mag_pos))
+            j = j0
+            if site_at >= 0 and not applied:  # two segments, the site given between them
+                j = st.run(ev.kind[:site_at], ev.t[:site_at], v[:site_at], cal_ok[:site_at], i0, tick_event, j,
+                           out_q, out_acc_s2, out_mag_s2, out_rej)
+                give_site()
+                st.new_settings(ekf, refresh_references=bool(p.site.get("declination_deg") is not None))
+                i0 = site_at
+            st.run(ev.kind, ev.t, v, cal_ok, i0, tick_event, j, out_q, out_acc_s2, out_mag_s2, out_rej)
+            st.write_back(ekf)
+        if site_at >= 0 and not applied:  # after the last sensor event
+            give_site()
+    finally:
+        ekf.mag_calibrator = calibrator
+    clock("attitude")
+    # 8. the smoother
+    east, north, heading = (np.full(n_ticks, np.nan) for _ in range(3))
+    e, nn, h, upright, counters = smooth_headings(p.smoother, out_q[j_init:])
+    east[j_init:], north[j_init:], heading[j_init:] = e, nn, h
+    p.smoother.upright = bool(counters[0])
+    p.smoother.n_axis_switches, p.smoother.n_upright = int(counters[1]), int(counters[2])
+    if p.smoother.upright:
+        p.smoother.forward_b = (0.0, 0.0, -1.0)
+    clock("smoother")
+    # 9. gates and steps (the GPS fusion fed as they complete)
+    feed = _Feed(p, fusion, tick_event, site_at) if fusion is not None else None
     if len(gt):
-        release = StepRelease(p, gt, gt[j_init:], east[j_init:], north[j_init:], out_rej)
+        release = (StepRelease if feed is None else _FedRelease)(p, gt, gt[j_init:], east[j_init:], north[j_init:],
+                                                                 out_rej)
+        release.feed = feed
         if getattr(p, "walkdir", None) is not None:
             axes = [(0.0, 0.0, -1.0) if u else (0.0, 1.0, 0.0) for u in upright.tolist()] if p.smoother.auto_axis \
                 else [p.smoother.forward_b] * len(upright)
@@ -220,11 +266,167 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         release.run(peaks, track, det_at)
         clock.move("walking direction (core's stage, Python)", release.walkdir_s)
     else:
+        if feed is not None:
+            feed.to(None)
         p.finish()
     if len(ev.t):
         p.t_ns = int(ev.t[-1])
+    if fusion is not None and len(fusion.t):
+        p.t_ns = max(p.t_ns, int(fusion.t[-1])) if len(ev.t) else int(fusion.t[-1])
     clock("gates and steps")
     return _result(p, recording, AttitudeLog(gt, out_q, heading, out_acc_s2, out_mag_s2, out_rej))
+
+
+class _SiteDue(Exception):
+    """Raised by a scouting :class:`_Feed` at the GPS event where the reference gives the attitude its site."""
+
+    def __init__(self, at: int, anchor: tuple):
+        super().__init__(at)
+        self.at, self.anchor = at, anchor
+
+
+class _FusionEvents:
+    """The GPS fusion's events (``gps`` fixes and ``gnss_status``), merged as ``Pipeline.run`` merges them.
+
+    ``ins[m]``: how many valid sensor events come before fusion event ``m`` in the pipeline's order (time,
+    then ``recording.stream_order``, then row), i.e. the sensor event it is handed over before.  Also does
+    what ``Pipeline.run`` does for a fusion: the streams counted as seen, the fusion's time zero, the Unix
+    offset from the recording's metadata.
+    """
+
+    def __init__(self, recording: Recording, p: Pipeline, ev: _Events):
+        names = ([GPS] + ([GNSS_STATUS] if recording.has(GNSS_STATUS) else [])) if recording.has(GPS) else []
+        sensors = [n for n in (GYRO, ACC, p.mag_stream) if recording.has(n)]
+        order = recording.stream_order(sensors + names)
+        rank = {n: i for i, n in enumerate(order)}
+        ts, rs, rows, vals = [], [], [], []
+        for name in names:
+            s = recording.streams[name]
+            t = np.asarray(s.t_ns, dtype=np.int64)
+            p.seen[name] = len(t)
+            ts.append(t)
+            rs.append(np.full(len(t), rank[name], dtype=np.int64))
+            rows.append(np.arange(len(t), dtype=np.int64))
+            vals.append(s.values)
+        empty = np.zeros(0, dtype=np.int64)
+        t, r, row = (np.concatenate(x) if x else empty for x in (ts, rs, rows))
+        idx = np.lexsort((row, r, t))
+        self.t, self.rank, self.row = t[idx], r[idx], row[idx]
+        self.is_gps = self.rank == rank.get(GPS, -1)
+        self._vals = {rank[n]: v for n, v in zip(names, vals)}
+        big = len(order)
+        code_rank = np.array([rank.get(n, big) for n in (GYRO, ACC, p.mag_stream)], dtype=np.int64)
+        ev_rank = code_rank[ev.kind.astype(np.int64)] if len(ev.t) else np.zeros(0, np.int64)
+        lo = np.searchsorted(ev.t, self.t, side="left")
+        hi = np.searchsorted(ev.t, self.t, side="right")
+        self.ins = np.array([a + int(np.count_nonzero(ev_rank[a:b] < rk)) if b > a else a
+                             for a, b, rk in zip(lo.tolist(), hi.tolist(), self.rank.tolist())], dtype=np.int64)
+        if names:  # as Pipeline.run: only with fixes to fuse
+            p.gnss.set_time_zero(recording.t0_ns)
+            off = recording.metadata.get("unix_offset_ns")
+            if p.unix_offset_ns is None and isinstance(off, int):
+                p.unix_offset_ns = off
+
+    def values(self, m: int) -> tuple:
+        """Fusion event ``m``'s values, as the pipeline's event loop hands them over."""
+        return tuple(self._vals[int(self.rank[m])][int(self.row[m])].tolist())
+
+    def site_event(self, p: Pipeline, gt, tick_event, peaks, track, det_at) -> tuple:
+        """``(sensor event, anchor)`` before which the reference gives the attitude filter its site, or
+        ``(-1, None)``.
+
+        The fix that anchors the walk and the moment the fusion gets to it (a fix waits for the first step after
+        it) depend on the fixes, the receiver status and the steps' times and completion, none of which depends on
+        the attitude (a known ``start`` would make the anchor wait on the fused track: refused).  So a copy of the
+        pipeline runs the gates and the steps' completion without any heading, feeding a copy of the fusion, up to
+        the GPS event where the reference would call ``_apply_site``.
+        """
+        scout = copy.deepcopy(p)
+        scout.walkdir = None
+        feed = _Feed(scout, self, tick_event, -1, scout=True)
+        try:
+            if len(gt):
+                none = np.zeros(0)
+                release = _FedRelease(scout, gt, gt[:0], none, none, np.zeros(len(gt), dtype=np.bool_))
+                release.feed = feed
+                release.run(peaks, track, det_at)
+            else:
+                feed.to(None)
+        except _SiteDue as due:
+            return due.at, due.anchor
+        return -1, None
+
+
+class _FedRelease(StepRelease):
+    """:class:`desktop.fast.gates.StepRelease` feeding the pipeline's GPS fusion (``feed``, a :class:`_Feed`).
+
+    Only the order of the fusion's calls matters to it: before a grid sample's steps complete (``release``) the
+    fixes and status before its accelerometer event; each completed step at once (``complete``); at the end the
+    rest of the fixes, the last steps, then the fusion's ``finish`` (``Pipeline.finish``).
+    """
+
+    feed = None
+
+    def release(self, k: int) -> None:
+        self.feed.tick(k)
+        super().release(k)
+
+    def complete(self, ev, heading: float, regressors: tuple, mag_rejected: bool) -> None:
+        super().complete(ev, heading, regressors, mag_rejected)
+        self.feed.step(self.p.steps[-1])
+
+    def finish(self) -> None:
+        self.feed.to(None)
+        super().finish()
+        self.feed.finish()
+
+
+class _Feed:
+    """The pipeline's GPS fusion fed as ``Pipeline.update`` feeds it: each fix and status at its event, each step
+    as it completes (:class:`desktop.fast.gates.StepRelease` calls :meth:`tick` before a grid sample's work,
+    :meth:`step` per completed step, :meth:`to` with None and :meth:`finish` at the end).
+
+    ``site_at``: the sensor event before which the attitude got its site (-1: none); a scouting feed instead
+    raises :class:`_SiteDue` where the reference would give it.
+    """
+
+    def __init__(self, p: Pipeline, events: _FusionEvents, tick_event, site_at: int, scout: bool = False):
+        self.p, self.ev, self.tick_event, self.site_at, self.scout = p, events, tick_event, site_at, scout
+        self.m = 0
+        self.anchored = False
+
+    def to(self, i: int | None) -> None:
+        """The fusion events before sensor event ``i`` (None: all)."""
+        ev, p = self.ev, self.p
+        g = p.gnss
+        n = len(ev.t)
+        while self.m < n and (i is None or ev.ins[self.m] <= i):
+            m = self.m
+            self.m += 1
+            if not ev.is_gps[m]:
+                g.add_status(int(ev.t[m]), ev.values(m))
+                continue
+            g.add_fix(int(ev.t[m]), ev.values(m))
+            if not self.anchored and p.site_from_gps and g.anchor is not None:
+                self.anchored = True  # where Pipeline.update calls _apply_site
+                if self.scout:
+                    raise _SiteDue(int(ev.ins[m]), g.anchor)
+                if int(ev.ins[m]) != self.site_at:
+                    raise RuntimeError(f"the fast path gave the site before sensor event {self.site_at}, the "
+                                       f"reference gives it before {int(ev.ins[m])}")
+        if i is None and not self.scout and self.site_at >= 0 and not self.anchored:
+            raise RuntimeError("the fast path gave the attitude a site the reference does not give")
+
+    def tick(self, k: int) -> None:
+        """Before grid sample ``k``'s work: the fusion events before its accelerometer event."""
+        self.to(int(self.tick_event[k]))
+
+    def step(self, step) -> None:
+        """A completed step, to the fusion (``Pipeline._complete``)."""
+        self.p.fused.append(self.p.gnss.add_step(step))
+
+    def finish(self) -> None:
+        self.p.gnss.finish()
 
 
 class _Clock:
@@ -258,4 +460,7 @@ def _result(p: Pipeline, recording: Recording, att: AttitudeLog) -> PipelineResu
     counters["attitude"] = a.counters()
     if p.carry is not None:
         counters["carry"] = p.carry.counters()
-    return PipelineResult(list(p.steps), Track.from_steps(p.steps), att, p.labels(), recording, counters, None)
+    fusion = p.gnss.result() if p.gnss is not None else None
+    if fusion is not None:
+        fusion.counters["site"] = p.site
+    return PipelineResult(list(p.steps), Track.from_steps(p.steps), att, p.labels(), recording, counters, fusion)
