@@ -12,8 +12,8 @@ One choice for the command line (``pdr replay --engine``) and the benchmark
     core's own, fed the fixes and steps in the reference's order; the site the
     first fix gives the attitude filter between the same two events).  Without
     numba its kernels run as plain Python, much slower than the reference; a
-    pipeline it does not implement (an attitude filter without a kernel, a
-    fusion with a known start that gives the site) is refused with the reason.
+    pipeline it does not implement (an attitude filter without a kernel) is
+    refused with the reason.
 ``auto`` (the default)
     The fast path when numba is installed (the ``fast`` extra) and it
     implements the pipeline, else the reference.  The first use compiles the

@@ -266,6 +266,24 @@ def test_fast_equals_plain_with_other_settings():
     assert "carry" not in plain.counters and {s.carry_mode for s in plain.steps} == {CARRY_HANDHELD}
 
 
+def test_fast_equals_plain_with_gps_fusion_from_a_known_start():
+    # a known start: the walk is placed there and the anchor (which gives the site) is the first fix the fused
+    # track accepts, so it waits on the headings: the fast path runs the attitude without the site first
+    from core.gnss import make_fusion
+    from desktop.simulator import outdoor_walk
+
+    rec = outdoor_walk(3, minutes=0.5).recording
+    t0 = rec.t0_ns
+    lat, lon = rec.streams["gps"].values[0, :2]
+
+    def make():
+        return Pipeline(gnss=make_fusion("chen", start=(float(lat), float(lon), 3.0)),
+                        unix_offset_ns=1_751_000_000_000_000_000 - t0)
+
+    plain, pipe = _assert_same(rec, make)
+    assert pipe.site["applied"] and pipe.gnss.anchor is not None
+
+
 def test_fast_refuses_what_it_does_not_implement():
     from core.gnss import make_fusion
     from core.pdr.attitude_qekf import QuaternionEKF
@@ -275,8 +293,6 @@ def test_fast_refuses_what_it_does_not_implement():
     with pytest.raises(NotImplementedError, match="AttitudeEKF only"):
         run_fast(walk.recording, attitude=QuaternionEKF())
     rec = outdoor_walk(1, minutes=0.1).recording
-    with pytest.raises(NotImplementedError, match="known start"):  # its anchor waits on the fused track
-        run_fast(rec, gnss=make_fusion("chen", start=(47.0, 8.0, 5.0)))
     with pytest.raises(NotImplementedError, match="keep_steps"):
         run_fast(rec, gnss=make_fusion("chen"), keep_steps=False)
     with pytest.raises(TypeError):

@@ -27,7 +27,10 @@ first):
    gets to it depends on the attitude (they depend on the fixes, the receiver
    status and the steps' times and completion), so a copy of the pipeline
    runs the gates and the steps' completion without headings, feeding a copy
-   of the fusion, up to that event (:meth:`_FusionEvents.site_event`);
+   of the fusion, up to that event (:meth:`_FusionEvents.site_event`).  With
+   a known ``start`` the anchor is the first fix the fused track accepts: the
+   copy then runs with the headings of a first attitude without the site
+   (equal to the reference's up to that event), and stages 7 and 8 run again;
 7. the attitude filter over all events, the attitude taken at each grid sample
    (compiled after the reference's own start: :mod:`desktop.fast.attitude`),
    in two segments with the site given between them;
@@ -135,9 +138,9 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     Takes the same parameters as :class:`core.pdr.pipeline.Pipeline`, or instead (not both) ``pipeline``: a
     ready-made one to fill, as ``pipeline.run(recording)`` would (it is reset first, as ``run`` resets it: its
     settings stay, e.g. a magnetic declination or site field given to its attitude filter).  A GPS fusion
-    (``gnss``) runs as the reference runs it (:class:`_FusionEvents`); attitude filters the kernel does not
-    implement (:func:`desktop.fast.attitude.check_supported`) and a fusion with a known ``start`` whose
-    anchor would give the site (``site_from_gps``) raise ``NotImplementedError``.
+    (``gnss``) runs as the reference runs it (:class:`_FusionEvents`, :class:`_Feed`).  Attitude filters the
+    kernel does not implement (:func:`desktop.fast.attitude.check_supported`) raise ``NotImplementedError``, and
+    so does a fusion with ``keep_steps=0`` (the steps go to it from the pipeline's list).
     ``timings``, if given, receives the CPU seconds of each stage (the benchmark's breakdown).
     """
     clock = _Clock(timings)
@@ -153,9 +156,6 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     fatt.check_supported(ekf)
     if p.gnss is not None and p.keep_steps is not True and int(p.keep_steps) == 0:
         raise NotImplementedError("the fast path hands the fusion its steps from the pipeline's list: keep_steps=0")
-    if p.gnss is not None and recording.has(GPS) and p.site_from_gps and getattr(p.gnss, "start", None) is not None:
-        raise NotImplementedError("the fast path does not implement a GPS fusion with a known start that gives "
-                                  "the attitude filter its site (its anchor waits on the fused track)")
     ev = _Events(recording, p)
     fusion = _FusionEvents(recording, p, ev) if p.gnss is not None else None
     clock("events")
@@ -209,11 +209,67 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
             if len(gyro_pos) else np.zeros(len(ev_tick))
         peaks.append((ev_tick, ev_t, ev_f, rms, speed[np.searchsorted(all_ticks, ev_tick)]))
     # 6. the sensor event before which the first anchoring fix gives the attitude filter its site (-1: none)
-    site_at, anchor = -1, None
+    site_at, anchor, att = -1, None, None
     if fusion is not None and p.site_from_gps and np.any(fusion.is_gps):
-        site_at, anchor = fusion.site_event(p, gt, tick_event, peaks, track, det_at)
+        if getattr(p.gnss, "start", None) is not None:  # the anchor waits on the fused track: the headings first
+            att = _attitude_and_smoother(p, ev, v, cal_ok, tick_event, -1, None)
+            clock("attitude, smoother (without the site)")
+        site_at, anchor = fusion.site_event(p, gt, tick_event, peaks, track, det_at, att, acc_at)
         clock("GPS site (the fusion's fixes and the steps' schedule)")
-    # 7. the attitude (in two segments around the site)
+        if att is not None and site_at >= 0:  # again from the start, the site given where it is due
+            p.attitude.reset()
+            p.smoother.reset()
+            att = None
+    # 7, 8. the attitude (in two segments around the site) and the smoother
+    if att is None:
+        att = _attitude_and_smoother(p, ev, v, cal_ok, tick_event, site_at, anchor)
+        clock("attitude, smoother")
+    # 9. gates and steps (the GPS fusion fed as they complete)
+    feed = _Feed(p, fusion, tick_event, site_at) if fusion is not None else None
+    if len(gt):
+        release = att.release(p, StepRelease if feed is None else _FedRelease, gt, acc_at)
+        release.feed = feed
+        release.run(peaks, track, det_at)
+        clock.move("walking direction (core's stage, Python)", release.walkdir_s)
+    else:
+        if feed is not None:
+            feed.to(None)
+        p.finish()
+    if len(ev.t):
+        p.t_ns = int(ev.t[-1])
+    if fusion is not None and len(fusion.t):
+        p.t_ns = max(p.t_ns, int(fusion.t[-1])) if len(ev.t) else int(fusion.t[-1])
+    clock("gates and steps")
+    return _result(p, recording, AttitudeLog(gt, att.q, att.heading, att.acc_s2, att.mag_s2, att.rejected))
+
+
+class _Attitude:
+    """The attitude on the grid (``q``, the log's columns, ``j_init``: the first sample with the filter started)
+    and the smoother's forward vector and heading there, ``upright`` per sample from ``j_init`` on."""
+
+    def __init__(self, q, acc_s2, mag_s2, rejected, j_init, east, north, heading, upright):
+        self.q, self.acc_s2, self.mag_s2, self.rejected, self.j_init = q, acc_s2, mag_s2, rejected, j_init
+        self.east, self.north, self.heading, self.upright = east, north, heading, upright
+
+    def release(self, p: Pipeline, cls, gt, acc_at) -> StepRelease:
+        """A :class:`desktop.fast.gates.StepRelease` (or subclass ``cls``) for ``p`` on the grid ``gt`` with these
+        forward vectors, its walking-direction stage fed where the pipeline has one (``acc_at``: the accelerometer
+        reading behind each grid sample)."""
+        j = self.j_init
+        release = cls(p, gt, gt[j:], self.east[j:], self.north[j:], self.rejected)
+        if getattr(p, "walkdir", None) is not None:
+            axes = [(0.0, 0.0, -1.0) if u else (0.0, 1.0, 0.0) for u in self.upright.tolist()] \
+                if p.smoother.auto_axis else [p.smoother.forward_b] * len(self.upright)
+            release.walking_direction(j, self.q, acc_at, axes)
+        return release
+
+
+def _attitude_and_smoother(p: Pipeline, ev: _Events, v, cal_ok, tick_event, site_at: int, anchor) -> _Attitude:
+    """The attitude filter over all events, taken at each grid sample (``tick_event[j]``: the event behind sample
+    ``j``), the site given before event ``site_at`` (``Pipeline._apply_site(anchor)``; -1: none); then the
+    rotation smoother over the grid's attitudes (section 4.3), its final state into ``p.smoother``."""
+    ekf = p.attitude
+    n_ticks = len(tick_event)
     out_q = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (n_ticks, 1))
     out_acc_s2, out_mag_s2 = np.full(n_ticks, np.nan), np.full(n_ticks, np.nan)
     out_rej = np.zeros(n_ticks, dtype=np.bool_)
@@ -224,12 +280,13 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         applied.append(True)
         p._apply_site(anchor)
 
+    calibrator = ekf.mag_calibrator
     ekf.mag_calibrator = None
     try:
         i0, j0, j_init = fatt.start_with_reference(ekf, ev.kind, ev.t, v, cal_ok, tick_event, out_q, out_acc_s2,
                                                    out_mag_s2, out_mag_rej=out_rej, hook_at=site_at, hook=give_site)
         if i0 < len(ev.t):
-            st = fatt.KernelState(ekf, len(gyro_pos), len(acc_pos), len(mag_pos))
+            st = fatt.KernelState(ekf, len(ev.pos[fatt.GYRO_K]), len(ev.pos[fatt.ACC_K]), len(ev.pos[fatt.MAG_K]))
             j = j0
             if site_at >= 0 and not applied:  # two segments, the site given between them
                 j = st.run(ev.kind[:site_at], ev.t[:site_at], v[:site_at], cal_ok[:site_at], i0, tick_event, j,
@@ -243,8 +300,6 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
             give_site()
     finally:
         ekf.mag_calibrator = calibrator
-    clock("attitude")
-    # 8. the smoother
     east, north, heading = (np.full(n_ticks, np.nan) for _ in range(3))
     e, nn, h, upright, counters = smooth_headings(p.smoother, out_q[j_init:])
     east[j_init:], north[j_init:], heading[j_init:] = e, nn, h
@@ -252,29 +307,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     p.smoother.n_axis_switches, p.smoother.n_upright = int(counters[1]), int(counters[2])
     if p.smoother.upright:
         p.smoother.forward_b = (0.0, 0.0, -1.0)
-    clock("smoother")
-    # 9. gates and steps (the GPS fusion fed as they complete)
-    feed = _Feed(p, fusion, tick_event, site_at) if fusion is not None else None
-    if len(gt):
-        release = (StepRelease if feed is None else _FedRelease)(p, gt, gt[j_init:], east[j_init:], north[j_init:],
-                                                                 out_rej)
-        release.feed = feed
-        if getattr(p, "walkdir", None) is not None:
-            axes = [(0.0, 0.0, -1.0) if u else (0.0, 1.0, 0.0) for u in upright.tolist()] if p.smoother.auto_axis \
-                else [p.smoother.forward_b] * len(upright)
-            release.walking_direction(j_init, out_q, acc_at, axes)
-        release.run(peaks, track, det_at)
-        clock.move("walking direction (core's stage, Python)", release.walkdir_s)
-    else:
-        if feed is not None:
-            feed.to(None)
-        p.finish()
-    if len(ev.t):
-        p.t_ns = int(ev.t[-1])
-    if fusion is not None and len(fusion.t):
-        p.t_ns = max(p.t_ns, int(fusion.t[-1])) if len(ev.t) else int(fusion.t[-1])
-    clock("gates and steps")
-    return _result(p, recording, AttitudeLog(gt, out_q, heading, out_acc_s2, out_mag_s2, out_rej))
+    return _Attitude(out_q, out_acc_s2, out_mag_s2, out_rej, j_init, east, north, heading, upright)
 
 
 class _SiteDue(Exception):
@@ -331,23 +364,28 @@ class _FusionEvents:
         """Fusion event ``m``'s values, as the pipeline's event loop hands them over."""
         return tuple(self._vals[int(self.rank[m])][int(self.row[m])].tolist())
 
-    def site_event(self, p: Pipeline, gt, tick_event, peaks, track, det_at) -> tuple:
+    def site_event(self, p: Pipeline, gt, tick_event, peaks, track, det_at, att=None, acc_at=None) -> tuple:
         """``(sensor event, anchor)`` before which the reference gives the attitude filter its site, or
         ``(-1, None)``.
 
         The fix that anchors the walk and the moment the fusion gets to it (a fix waits for the first step after
         it) depend on the fixes, the receiver status and the steps' times and completion, none of which depends on
-        the attitude (a known ``start`` would make the anchor wait on the fused track: refused).  So a copy of the
-        pipeline runs the gates and the steps' completion without any heading, feeding a copy of the fusion, up to
-        the GPS event where the reference would call ``_apply_site``.
+        the attitude.  So a copy of the pipeline runs the gates and the steps' completion without any heading,
+        feeding a copy of the fusion, up to the GPS event where the reference would call ``_apply_site``.  With a
+        known ``start`` the anchor is the first fix the fused track accepts: then the copy runs with the headings
+        of the attitude without the site (``att``, an :class:`_Attitude`; the same as the reference's up to there).
         """
         scout = copy.deepcopy(p)
-        scout.walkdir = None
+        if att is None:
+            scout.walkdir = None
         feed = _Feed(scout, self, tick_event, -1, scout=True)
         try:
             if len(gt):
-                none = np.zeros(0)
-                release = _FedRelease(scout, gt, gt[:0], none, none, np.zeros(len(gt), dtype=np.bool_))
+                if att is None:
+                    none = np.zeros(0)
+                    release = _FedRelease(scout, gt, gt[:0], none, none, np.zeros(len(gt), dtype=np.bool_))
+                else:
+                    release = att.release(scout, _FedRelease, gt, acc_at)
                 release.feed = feed
                 release.run(peaks, track, det_at)
             else:
