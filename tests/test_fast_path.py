@@ -282,19 +282,19 @@ def test_fast_equals_plain_with_gps_fusion_from_a_known_start():
 
     plain, pipe = _assert_same(rec, make)
     assert pipe.site["applied"] and pipe.gnss.anchor is not None
+    # a live session's pipeline keeps no steps (keep_steps=False): the fusion gets them all the same
+    plain = Pipeline(gnss=make_fusion("chen"), keep_steps=False, carry=False).run(rec)
+    fast = run_fast(rec, gnss=make_fusion("chen"), keep_steps=False, carry=False)
+    assert not fast.steps and len(plain.fusion.steps) > 20
+    _close(plain.fusion, fast.fusion, "fusion")
 
 
 def test_fast_refuses_what_it_does_not_implement():
-    from core.gnss import make_fusion
     from core.pdr.attitude_qekf import QuaternionEKF
-    from desktop.simulator import outdoor_walk
 
     walk = simulate_walk([(0.0, 0.0), (5.0, 0.0)], seed=1)
     with pytest.raises(NotImplementedError, match="AttitudeEKF only"):
         run_fast(walk.recording, attitude=QuaternionEKF())
-    rec = outdoor_walk(1, minutes=0.1).recording
-    with pytest.raises(NotImplementedError, match="keep_steps"):
-        run_fast(rec, gnss=make_fusion("chen"), keep_steps=False)
     with pytest.raises(TypeError):
         run_fast(walk.recording, pipeline=Pipeline(), carry=False)  # a pipeline or its parameters, not both
 

@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import copy
 import time
+from collections import deque
 
 import numpy as np
 
@@ -139,8 +140,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     ready-made one to fill, as ``pipeline.run(recording)`` would (it is reset first, as ``run`` resets it: its
     settings stay, e.g. a magnetic declination or site field given to its attitude filter).  A GPS fusion
     (``gnss``) runs as the reference runs it (:class:`_FusionEvents`, :class:`_Feed`).  Attitude filters the
-    kernel does not implement (:func:`desktop.fast.attitude.check_supported`) raise ``NotImplementedError``, and
-    so does a fusion with ``keep_steps=0`` (the steps go to it from the pipeline's list).
+    kernel does not implement (:func:`desktop.fast.attitude.check_supported`) raise ``NotImplementedError``.
     ``timings``, if given, receives the CPU seconds of each stage (the benchmark's breakdown).
     """
     clock = _Clock(timings)
@@ -154,8 +154,6 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         p.reset()
     ekf = p.attitude
     fatt.check_supported(ekf)
-    if p.gnss is not None and p.keep_steps is not True and int(p.keep_steps) == 0:
-        raise NotImplementedError("the fast path hands the fusion its steps from the pipeline's list: keep_steps=0")
     ev = _Events(recording, p)
     fusion = _FusionEvents(recording, p, ev) if p.gnss is not None else None
     clock("events")
@@ -410,8 +408,19 @@ class _FedRelease(StepRelease):
         super().release(k)
 
     def complete(self, ev, heading: float, regressors: tuple, mag_rejected: bool) -> None:
-        super().complete(ev, heading, regressors, mag_rejected)
-        self.feed.step(self.p.steps[-1])
+        p = self.p
+        kept = p.steps
+        if isinstance(kept, deque) and kept.maxlen == 0:  # keep_steps=False: the step, though the list keeps none
+            p.steps = []
+            try:
+                super().complete(ev, heading, regressors, mag_rejected)
+                step = p.steps[-1]
+            finally:
+                p.steps = kept
+        else:
+            super().complete(ev, heading, regressors, mag_rejected)
+            step = kept[-1]
+        self.feed.step(step)
 
     def finish(self) -> None:
         self.feed.to(None)
