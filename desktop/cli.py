@@ -1473,8 +1473,8 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--engine", choices=ENGINES, default="auto",
                    help="hand-held pipeline: the fast desktop path over whole arrays (the same results within 1e-9) "
                         "when numba is installed (auto, the default; pip install '.[fast]'), always (fast; slow "
-                        "without numba), or the phone's per-event code (reference). The fast path has no GPS "
-                        "fusion: auto falls back to the reference then")
+                        "without numba), or the phone's per-event code (reference); GPS fusion included. Its first "
+                        "use compiles for about a minute (numba caches the result)")
     r.add_argument("--json", action="store_true", help="print the summary as one JSON document on stdout (status "
                    "lines go to stderr; with several recordings: one document with a row per recording)")
     r.add_argument("--out-dir", metavar="DIR", help="write each recording's exports into DIR as NAME.csv, "

@@ -30,8 +30,8 @@ def run_pipeline(pipeline, recording, engine: str = "auto", progress=None) -> tu
     """Run ``pipeline`` over ``recording`` on ``engine`` (one of :data:`ENGINES`); returns ``(result, ran)``.
 
     ``ran`` is ``"fast"``, ``"reference"``, or ``"reference (why the fast path could not)"`` for ``auto``.
-    ``progress`` (the fraction done, 0..1) is called by the reference engine only; the fast path calls it
-    once, at the end.  ``engine="fast"`` on a pipeline the fast path does not implement raises
+    ``progress`` (the fraction done, 0..1) is called every few thousand events by the reference, after each
+    stage by the fast path.  ``engine="fast"`` on a pipeline the fast path does not implement raises
     :class:`ValueError` with the reason.
     """
     if engine not in ENGINES:
@@ -43,11 +43,9 @@ def run_pipeline(pipeline, recording, engine: str = "auto", progress=None) -> tu
     if engine == "auto" and not HAVE_NUMBA:
         return pipeline.run(recording, progress=progress), "reference"
     try:
-        result = run_fast(recording, pipeline=pipeline)
+        result = run_fast(recording, pipeline=pipeline, progress=progress)
     except NotImplementedError as e:  # refused before any work: Pipeline.run starts afresh
         if engine == "fast":
             raise ValueError(f"the fast path cannot run this pipeline: {e}") from None
         return pipeline.run(recording, progress=progress), f"reference ({e})"
-    if progress is not None:
-        progress(1.0)
     return result, "fast"

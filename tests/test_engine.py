@@ -106,3 +106,13 @@ def test_what_the_fast_path_does_not_implement_falls_back_under_auto_and_is_refu
 def test_run_pipeline_refuses_an_unknown_engine():
     with pytest.raises(ValueError, match="auto, fast, reference"):
         run_pipeline(Pipeline(), None, "turbo")
+
+
+def test_the_fast_path_reports_progress_after_its_stages(line_walk):
+    # a long file on the fast path is minutes without an event loop: progress comes after each stage instead
+    from core.recording import read_recording
+
+    seen = []
+    _, ran = run_pipeline(Pipeline(), read_recording(str(line_walk)), "fast", progress=seen.append)
+    assert ran == "fast" and len(seen) >= 5
+    assert all(b > a for a, b in zip(seen, seen[1:])) and 0.0 < seen[0] and seen[-1] == pytest.approx(1.0, abs=1e-12)

@@ -133,7 +133,7 @@ class _Events:
 
 
 def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pipeline | None = None,
-             **params) -> PipelineResult:
+             progress=None, **params) -> PipelineResult:
     """``Pipeline(**params).run(recording)``, computed over whole arrays (see the module docstring).
 
     Takes the same parameters as :class:`core.pdr.pipeline.Pipeline`, or instead (not both) ``pipeline``: a
@@ -141,9 +141,10 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     settings stay, e.g. a magnetic declination or site field given to its attitude filter).  A GPS fusion
     (``gnss``) runs as the reference runs it (:class:`_FusionEvents`, :class:`_Feed`).  Attitude filters the
     kernel does not implement (:func:`desktop.fast.attitude.check_supported`) raise ``NotImplementedError``.
-    ``timings``, if given, receives the CPU seconds of each stage (the benchmark's breakdown).
+    ``timings``, if given, receives the CPU seconds of each stage (the benchmark's breakdown); ``progress``, if
+    given, is called with the fraction done (0..1, a rough share of the time) after each stage.
     """
-    clock = _Clock(timings)
+    clock = _Clock(timings, progress)
     if pipeline is not None and params:
         raise TypeError("run_fast takes either a pipeline or the parameters of one, not both")
     recording.stream(ACC, "step detection needs the accelerometer")
@@ -156,7 +157,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     fatt.check_supported(ekf)
     ev = _Events(recording, p)
     fusion = _FusionEvents(recording, p, ev) if p.gnss is not None else None
-    clock("events")
+    clock("events", 0.10)
     # 2. the magnetometer calibration over its stream
     calibrator = ekf.mag_calibrator
     mag_pos = ev.pos[fatt.MAG_K]
@@ -164,12 +165,12 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     cal_ok = np.ones(len(ev.t), dtype=np.bool_)
     if ekf.use_magnetometer and len(mag_pos):
         v[mag_pos], cal_ok[mag_pos] = fatt.calibrate_magnetometer(calibrator, ev.t[mag_pos], ev.v[mag_pos])
-    clock("magnetometer calibration (compiled per reading; core's fits, Python)")
+    clock("magnetometer calibration (compiled; core's fits where one is due)", 0.15)
     # 3. the grid
     acc_pos = ev.pos[fatt.ACC_K]
     gt, gx, src, restart = grid_of(ev.t[acc_pos], acc_norm(ev.v[acc_pos]), p.grid_rate_hz)
     tick_event = np.ascontiguousarray(acc_pos[src])
-    clock("grid")
+    clock("grid", 0.17)
     n_ticks = len(gt)
     # 4. the carry-mode detector (issue #17): its mode and step period at every grid sample
     gyro_pos = ev.pos[fatt.GYRO_K]
@@ -185,7 +186,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         det_at = det_of_mode[track.mode]
         p._carry_mode = CARRY_MODES[int(track.mode[-1])] if n_ticks else p._carry_mode
         p._active_det = p._mode_detectors[int(det_at[-1])] if n_ticks else p._active_det
-    clock("carry-mode detector")
+    clock("carry-mode detector", 0.35)
     # 5. every step detector (one per distinct gates), the speed window at their peaks
     found = []
     for det in p._mode_detectors:
@@ -195,7 +196,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         found.append((ev_tick, ev_t, ev_f))
     all_ticks = np.unique(np.concatenate([f[0] for f in found]))
     speed = speed_at(p.speed_window, gt, gx, restart, all_ticks)
-    clock("steps, speed window")
+    clock("steps, speed window", 0.40)
     rot_sum = np.empty(len(gyro_pos))
     rot_n = np.empty(len(gyro_pos), dtype=np.int64)
     rotation_sums(ev.t[gyro_pos], np.ascontiguousarray(ev.v[gyro_pos]), p._rot_window_ns, rot_sum, rot_n)
@@ -211,9 +212,9 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     if fusion is not None and p.site_from_gps and np.any(fusion.is_gps):
         if getattr(p.gnss, "start", None) is not None:  # the anchor waits on the fused track: the headings first
             att = _attitude_and_smoother(p, ev, v, cal_ok, tick_event, -1, None)
-            clock("attitude, smoother (without the site)")
+            clock("attitude, smoother (without the site)", 0.55)
         site_at, anchor = fusion.site_event(p, gt, tick_event, peaks, track, det_at, att, acc_at)
-        clock("GPS site (the fusion's fixes and the steps' schedule)")
+        clock("GPS site (the fusion's fixes and the steps' schedule)", 0.45)
         if att is not None and site_at >= 0:  # again from the start, the site given where it is due
             p.attitude.reset()
             p.smoother.reset()
@@ -221,14 +222,14 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     # 7, 8. the attitude (in two segments around the site) and the smoother
     if att is None:
         att = _attitude_and_smoother(p, ev, v, cal_ok, tick_event, site_at, anchor)
-        clock("attitude, smoother")
+        clock("attitude, smoother", 0.70)
     # 9. gates and steps (the GPS fusion fed as they complete)
     feed = _Feed(p, fusion, tick_event, site_at) if fusion is not None else None
     if len(gt):
         release = att.release(p, StepRelease if feed is None else _FedRelease, gt, acc_at)
         release.feed = feed
         release.run(peaks, track, det_at)
-        clock.move("walking direction (core's stage, Python)", release.walkdir_s)
+        clock.move("walking direction", release.walkdir_s)
     else:
         if feed is not None:
             feed.to(None)
@@ -237,7 +238,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         p.t_ns = int(ev.t[-1])
     if fusion is not None and len(fusion.t):
         p.t_ns = max(p.t_ns, int(fusion.t[-1])) if len(ev.t) else int(fusion.t[-1])
-    clock("gates and steps")
+    clock("gates and steps", 1.0)
     return _result(p, recording, AttitudeLog(gt, att.q, att.heading, att.acc_s2, att.mag_s2, att.rejected))
 
 
@@ -477,13 +478,19 @@ class _Feed:
 
 
 class _Clock:
-    """CPU seconds since the last call, added to ``timings[name]`` (nothing without a dict)."""
+    """CPU seconds since the last call, added to ``timings[name]`` (nothing without a dict); the fraction of the run
+    done at the end of that stage to ``progress`` (nothing without one)."""
 
-    def __init__(self, timings: dict | None):
+    def __init__(self, timings: dict | None, progress=None):
         self.timings = timings
+        self.progress = progress
+        self.done = 0.0
         self.t = time.process_time()
 
-    def __call__(self, name: str) -> None:
+    def __call__(self, name: str, done: float | None = None) -> None:
+        if self.progress is not None and done is not None and done > self.done:
+            self.done = done
+            self.progress(done)
         if self.timings is not None:
             now = time.process_time()
             self.timings[name] = self.timings.get(name, 0.0) + now - self.t
