@@ -19,7 +19,7 @@ import numpy as np
 
 from core import __version__
 from core.recording import Recording, RecordingError, read_recording, write_recording
-from desktop.engine import ENGINES
+from desktop.engine import ENGINES, run_pipeline
 
 DEMO_PATH = Path(__file__).with_name("data") / "demo_walk.csv.gz"
 
@@ -855,8 +855,6 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
         map_start(args, rec, plan, Track(np.array([rec.t0_ns], np.int64), *(np.zeros(1),) * 4), truth_of(rec))
     pipeline = build_pipeline(args, gnss, profile)
     site, site_lines = place_site(args, rec, pipeline) if not args.no_mag else (None, [])
-    from desktop.engine import run_pipeline
-
     res, engine = run_pipeline(pipeline, rec, args.engine, progress)
     gps_why = gps_choice(args)[1] if gnss is not None else ""
     fused = res.fusion is not None and res.fusion.origin_lat_lon is not None and len(res.fusion.steps)

@@ -376,7 +376,12 @@ class CarryModeDetector:
     def _hop_decision(self, t_ns: int) -> None:
         k = self._k
         w = np.concatenate([self._buf[k:], self._buf[:k]]) if k else self._buf
-        f = self.compute_features(w)
+        self.decide(t_ns, self.compute_features(w))
+
+    def decide(self, t_ns: int, f: dict) -> None:
+        """One hop's decision from its window's features ``f`` (:meth:`compute_features`): the scores, the raw
+        mode, the step period, the hysteresis and the change log.  The fast desktop path (desktop.fast.carry)
+        computes the features of every hop at once and calls this for each."""
         sc = self.mode_scores(f)
         self.features, self.scores = f, sc
         self.n_hops += 1

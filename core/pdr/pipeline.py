@@ -249,6 +249,15 @@ class AttitudeLog:
     mag_rejected: np.ndarray  #: bool: last magnetometer reading rejected
 
 
+def _mode_at(t_ns: int, changes: list, mode: str) -> str:
+    """The carry mode in force at ``t_ns`` from a detector's change log ``(t_ns, from, to, confidence)`` and its
+    current ``mode``: the last change at or before it, else the first change's "from", else ``mode``."""
+    for k in range(len(changes) - 1, -1, -1):
+        if changes[k][0] <= t_ns:
+            return changes[k][2]
+    return changes[0][1] if changes else mode
+
+
 @dataclass
 class PipelineResult:
     steps: list[Step]
@@ -664,29 +673,29 @@ class Pipeline:
                 self._candidate(ev, regs, rot)
         self.n_rejected_rotation = n_rot
 
-    def _step_carry_mode(self, t_ns: int) -> str:
+    def _step_carry_mode(self, t_ns: int, changes: list | None = None, mode: str | None = None) -> str:
         """The carry mode a step is labelled with: the mode in force at its peak, except that a counted step is
         never "not walking" (the detector's hysteresis lags the first steps of a walk): then the walking mode
-        that follows, or the one before, or hand-held."""
-        mode = self.carry_mode_at(t_ns)
-        if mode != CARRY_STILL or self.carry is None:
-            return mode
-        changes = self.carry.changes
+        that follows, or the one before, or hand-held.  ``changes`` and ``mode``: the detector's change log and
+        current mode to read (default: the detector's own; the fast path gives them as they were at a grid sample)."""
+        if self.carry is None:
+            return CARRY_HANDHELD
+        changes = self.carry.changes if changes is None else changes
+        current = self.carry.mode if mode is None else mode
+        at = _mode_at(t_ns, changes, current)
+        if at != CARRY_STILL:
+            return at
         after = [c[2] for c in changes if c[0] > t_ns and c[2] != CARRY_STILL]
         if after:
             return after[0]
         before = [c[1] for c in changes if c[0] <= t_ns and c[1] != CARRY_STILL]
-        return before[-1] if before else (self.carry.mode if self.carry.mode != CARRY_STILL else CARRY_HANDHELD)
+        return before[-1] if before else (current if current != CARRY_STILL else CARRY_HANDHELD)
 
     def carry_mode_at(self, t_ns: int) -> str:
         """The carry mode in force at ``t_ns`` (the last change at or before it; hand-held without detection)."""
         if self.carry is None:
             return CARRY_HANDHELD
-        changes = self.carry.changes
-        for k in range(len(changes) - 1, -1, -1):
-            if changes[k][0] <= t_ns:
-                return changes[k][2]
-        return changes[0][1] if changes else self.carry.mode
+        return _mode_at(t_ns, self.carry.changes, self.carry.mode)
 
     #: carry-mode names in the labels
     _CARRY_WORDS = {CARRY_SWINGING: "in a swinging hand", CARRY_POCKET: "in a trouser pocket",

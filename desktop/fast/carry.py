@@ -159,7 +159,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     per-sample :class:`CarryTrack`.
 
     The features of every hop come from :func:`window_features`; each hop's decision (scores, hysteresis,
-    change log) is the detector's own, given those features.
+    change log) is the detector's own (:meth:`core.pdr.carry.CarryModeDetector.decide`).
     """
     n_grid = len(t_ns)
     hops = hop_samples(det, restart)
@@ -177,15 +177,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
         w = view[h - (n - 1)].transpose(0, 2, 1)
         for k, f in zip(h.tolist(), window_features(det, w, seen_gyro[h])):
             det._has_gyro = bool(seen_gyro[k])
-            asked = []
-            det.compute_features = lambda _w, f=f: asked.append(True) or f  # core's decision, on these features
-            try:
-                det._hop_decision(int(t_ns[k]))
-            finally:
-                del det.compute_features
-            if not asked:  # a guard: core's hop must take its features from compute_features
-                raise RuntimeError("CarryModeDetector's hop no longer asks compute_features for its features: "
-                                   "desktop.fast.carry.run_carry needs to follow it")
+            det.decide(int(t_ns[k]), f)  # core's decision, on these features
             modes.append(mode_idx[det.mode])
             periods.append(det.step_period_s)
             periodic.append(det.rotation_periodic)

@@ -257,17 +257,10 @@ class StepRelease:
     def _carry_mode_of(self, t_ns: int) -> str:
         """The carry mode a step completed now is labelled with: the pipeline's rule
         (``Pipeline._step_carry_mode``) on the detector's state at the current grid sample."""
-        p = self.p
         c = self.carry
         if c is None or self.k is None:  # no detector, or the end: the detector's final state
-            return p._step_carry_mode(t_ns)
-        det = p.carry
-        final = det.changes, det.mode
-        det.changes, det.mode = c.changes[:int(c.n_changes[self.k])], CARRY_MODES[int(c.mode[self.k])]
-        try:
-            return p._step_carry_mode(t_ns)
-        finally:
-            det.changes, det.mode = final
+            return self.p._step_carry_mode(t_ns)
+        return self.p._step_carry_mode(t_ns, c.changes[:int(c.n_changes[self.k])], CARRY_MODES[int(c.mode[self.k])])
 
     def complete(self, ev: StepEvent, heading: float, regressors: tuple, mag_rejected: bool) -> None:
         p = self.p
