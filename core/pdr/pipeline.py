@@ -806,18 +806,25 @@ class Pipeline:
                             window_std_m_s2=regressors[2])
 
     def _complete(self, ev: StepEvent, heading: float, regressors: tuple) -> Step:
+        step = self.add_step(ev, heading, regressors, self.attitude.mag_rejected, self._step_carry_mode(ev.t_ns))
+        if self.gnss is not None:
+            self.fused.append(self.gnss.add_step(step))
+        return step
+
+    def add_step(self, ev: StepEvent, heading: float, regressors: tuple, mag_rejected: bool,
+                 carry_mode: str) -> Step:
+        """A confirmed step with its heading: its length (eq. 4), the dead reckoning (eq. 1), the step list.
+        ``mag_rejected``: the filter's flag for the last magnetometer reading; the fast path (desktop.fast)
+        completes its steps with it too."""
         feats = self.step_features(ev, regressors)
         length = self.stride_model.length_m(feats)  # eq. 4
         if heading != heading:  # no attitude yet (no magnetometer reading so far)
             heading = self.attitude.initial_yaw_rad
         east, north = self.reckoner.update(length, heading)  # eq. 1
         step = Step(self.n_steps, ev.t_ns, length, heading, east, north, feats,
-                    not self.attitude.mag_rejected and self.attitude.use_magnetometer,
-                    carry_mode=self._step_carry_mode(ev.t_ns))
+                    not mag_rejected and self.attitude.use_magnetometer, carry_mode=carry_mode)
         self.steps.append(step)
         self.n_steps += 1
-        if self.gnss is not None:
-            self.fused.append(self.gnss.add_step(step))
         return step
 
     #: share of rejected magnetometer readings above which the summary warns

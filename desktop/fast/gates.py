@@ -262,14 +262,6 @@ class StepRelease:
             return self.p._step_carry_mode(t_ns)
         return self.p._step_carry_mode(t_ns, c.changes[:int(c.n_changes[self.k])], CARRY_MODES[int(c.mode[self.k])])
 
-    def complete(self, ev: StepEvent, heading: float, regressors: tuple, mag_rejected: bool) -> None:
-        p = self.p
-        feats = p.step_features(ev, regressors)
-        length = p.stride_model.length_m(feats)  # eq. 4
-        if heading != heading:  # no attitude yet
-            heading = p.attitude.initial_yaw_rad
-        east, north = p.reckoner.update(length, heading)  # eq. 1
-        p.steps.append(Step(p.n_steps, ev.t_ns, length, heading, east, north, feats,
-                            not mag_rejected and p.attitude.use_magnetometer,
-                            carry_mode=self._carry_mode_of(ev.t_ns)))
-        p.n_steps += 1
+    def complete(self, ev: StepEvent, heading: float, regressors: tuple, mag_rejected: bool) -> Step:
+        """The step completed with the pipeline's own :meth:`core.pdr.pipeline.Pipeline.add_step` (eqs. 4, 1)."""
+        return self.p.add_step(ev, heading, regressors, mag_rejected, self._carry_mode_of(ev.t_ns))

@@ -54,7 +54,6 @@ from __future__ import annotations
 
 import copy
 import time
-from collections import deque
 
 import numpy as np
 
@@ -408,20 +407,10 @@ class _FedRelease(StepRelease):
         self.feed.tick(k)
         super().release(k)
 
-    def complete(self, ev, heading: float, regressors: tuple, mag_rejected: bool) -> None:
-        p = self.p
-        kept = p.steps
-        if isinstance(kept, deque) and kept.maxlen == 0:  # keep_steps=False: the step, though the list keeps none
-            p.steps = []
-            try:
-                super().complete(ev, heading, regressors, mag_rejected)
-                step = p.steps[-1]
-            finally:
-                p.steps = kept
-        else:
-            super().complete(ev, heading, regressors, mag_rejected)
-            step = kept[-1]
+    def complete(self, ev, heading: float, regressors: tuple, mag_rejected: bool):
+        step = super().complete(ev, heading, regressors, mag_rejected)
         self.feed.step(step)
+        return step
 
     def finish(self) -> None:
         self.feed.to(None)
