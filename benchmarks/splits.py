@@ -60,8 +60,17 @@ Caveat for the "before" numbers (``benchmarks/baseline_before.json``): our
 attitude filter was tuned on all IPIN 2023 routes before the split was
 declared, so its IPIN report-split numbers before issue #8 are optimistic.
 
-A dataset without a declaration here is an error (:func:`split_of` raises):
-a new dataset must be declared before its numbers count.
+More phone walks (``phone_walks_more``, issue #25, declared 2026-12-04 before any number was seen on them)
+    By repository, about a third tuning: ``thomasdingemanse/ML4QS`` (``thomasdingemanse_lopen``, an
+    outdoor GPS walk, probably in a trouser pocket) is **tuning**; ``kim66003/ML4QS_group25`` and
+    ``Aymdi/DeadReckoning`` are **report**.
+Further public recordings (issue #25, fetched into a folder outside the repository)
+    By repository, listed in :data:`REAL_TUNING_REPOS` when they are declared; a repository not
+    listed there is **report**.
+
+A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
+has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
+named.
 """
 
 from __future__ import annotations
@@ -80,6 +89,16 @@ SIM_GPS_FAULT_SEEDS = {TUNING: tuple(range(0, 10)), REPORT: tuple(range(2000, 20
 
 #: simulator seeds of the carry-mode benchmark (issue #17, :mod:`benchmarks.carry`)
 SIM_CARRY_SEEDS = {TUNING: tuple(range(0, 30)), REPORT: tuple(range(3000, 3030))}
+
+#: repositories of real walks whose recordings are tuning (issue #25); every other repository is report
+REAL_TUNING_REPOS = frozenset({"thomasdingemanse/ML4QS"})
+
+#: the repository of each ``phone_walks_more`` walk (its MANIFEST.tsv says the same)
+PHONE_WALKS_MORE_REPOS = {
+    "thomasdingemanse_lopen": "thomasdingemanse/ML4QS",
+    "kim66003_walking_2020-06-03_15-13-20": "kim66003/ML4QS_group25",
+    "aymdi_data": "Aymdi/DeadReckoning",
+}
 
 #: datasets whose every recording is in one split
 WHOLE_DATASET = {
@@ -100,12 +119,14 @@ def ms_indoor_split(file_no: int) -> str:
 
 
 def ipin_split(route: str) -> str:
+    """IPIN 2023 by route; a route not declared has never been tuned on: report."""
     route = f"{int(route):02d}"
-    if route in IPIN_TUNING_ROUTES:
-        return TUNING
-    if route in IPIN_REPORT_ROUTES:
-        return REPORT
-    raise ValueError(f"IPIN 2023 route {route} has no declared split (benchmarks/splits.py)")
+    return TUNING if route in IPIN_TUNING_ROUTES else REPORT
+
+
+def repo_split(repository: str) -> str:
+    """A real walk by its source repository (``owner/name``): tuning only if declared so."""
+    return TUNING if repository in REAL_TUNING_REPOS else REPORT
 
 
 def split_of(dataset: str, info: dict | None = None) -> str:
@@ -117,11 +138,29 @@ def split_of(dataset: str, info: dict | None = None) -> str:
     info = info or {}
     if dataset in WHOLE_DATASET:
         return WHOLE_DATASET[dataset]
-    if dataset == "ipin2023_track3":
+    if dataset == "ipin2023_track3" and "route" in info:
         return ipin_split(info["route"])
-    if dataset == "ms_indoor_location_2020":
+    if dataset == "ms_indoor_location_2020" and "file_no" in info:
         return ms_indoor_split(info["file_no"])
-    raise ValueError(f"dataset {dataset!r} has no declared split: declare it in benchmarks/splits.py")
+    if "repository" in info:
+        return repo_split(info["repository"])
+    if dataset == "phone_walks_more" and info.get("walk") in PHONE_WALKS_MORE_REPOS:
+        return repo_split(PHONE_WALKS_MORE_REPOS[info["walk"]])
+    return REPORT
+
+
+def declared(dataset: str, info: dict | None = None) -> bool:
+    """Whether the declarations above name this recording (else :func:`split_of` says report)."""
+    info = info or {}
+    if dataset in WHOLE_DATASET:
+        return True
+    if dataset == "ipin2023_track3":
+        return f"{int(info.get('route', -1)):02d}" in IPIN_TUNING_ROUTES + IPIN_REPORT_ROUTES
+    if dataset == "ms_indoor_location_2020":
+        return "file_no" in info
+    if dataset == "phone_walks_more":
+        return info.get("walk") in PHONE_WALKS_MORE_REPOS
+    return "repository" in info
 
 
 def trial_split(trial) -> str:

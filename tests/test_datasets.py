@@ -181,15 +181,21 @@ def test_split_declarations():
 
     assert [S.split_of("ipin2023_track3", {"route": r}) for r in ("01", "02", "21", "22")] == ["tuning"] * 4
     assert [S.split_of("ipin2023_track3", {"route": r}) for r in ("04", "05", "23", "24")] == ["report"] * 4
-    with pytest.raises(ValueError, match="no declared split"):
-        S.split_of("ipin2023_track3", {"route": "03"})
+    # an undeclared route was never tuned on: report, and not declared
+    assert S.split_of("ipin2023_track3", {"route": "03"}) == "report"
+    assert not S.declared("ipin2023_track3", {"route": "03"}) and S.declared("ipin2023_track3", {"route": "21"})
     assert [S.split_of("ms_indoor_location_2020", {"file_no": k}) for k in (1, 2, 3, 4)] == \
         ["tuning", "report", "tuning", "report"]
     for ds in ("oxford_step_counter", "brajdic_harle_handheld", "trundlewheel_distance", "sensorlogger_gps_walk_ethz"):
         assert S.split_of(ds) == "report"
     assert S.split_of("ipol_healthy_gait_xsens") == "tuning"
-    with pytest.raises(ValueError, match="declare it"):
-        S.split_of("some_new_dataset")
+    assert S.split_of("some_new_dataset") == "report" and not S.declared("some_new_dataset")
+    # issue #25: the real corpus by repository, a third tuning
+    assert S.split_of("phone_walks_more", {"walk": "thomasdingemanse_lopen"}) == "tuning"
+    assert [S.split_of("phone_walks_more", {"walk": w}) for w in ("kim66003_walking_2020-06-03_15-13-20", "aymdi_data")] \
+        == ["report"] * 2
+    assert S.split_of("anything", {"repository": "thomasdingemanse/ML4QS"}) == "tuning"
+    assert S.split_of("anything", {"repository": "someone/else"}) == "report"
     from benchmarks.run import DATASET_MODULES
     import importlib
 
