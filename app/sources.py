@@ -572,7 +572,8 @@ class AndroidSource(SensorSource):
             if not self._sm.registerListener(listener, sensor, self.period_us, 0, handler):
                 self.missing.append(name)
                 continue
-            self._listeners.append(listener)  # keep a Python reference while Java holds the proxy
+            # keep a Python reference while Java holds the proxy, and the sensor for unregisterListener
+            self._listeners.append((listener, sensor))
             self.sensor_info[name] = _sensor_info(sensor)
         if ACC in self.missing or not self._listeners:
             raise SensorStartError("no accelerometer could be registered")
@@ -665,9 +666,12 @@ class AndroidSource(SensorSource):
 
     def _unregister(self):
         if self._sm is not None:
-            for listener in self._listeners:
+            for listener, sensor in self._listeners:
+                # the (listener, sensor) overload: with the listener alone pyjnius 1.7 scores the deprecated
+                # unregisterListener(SensorListener) as high as unregisterListener(SensorEventListener) and
+                # the tie goes to the former (the higher signature string), which CheckJNI aborts on
                 try:
-                    self._sm.unregisterListener(listener)
+                    self._sm.unregisterListener(listener, sensor)
                 except Exception:  # noqa: BLE001
                     pass
         self._listeners = []
@@ -706,7 +710,7 @@ class AndroidSource(SensorSource):
     @property
     def listener_errors(self) -> int:
         """Exceptions caught inside the sensor callbacks (each one lost an event)."""
-        return sum(getattr(lst, "errors", 0) for lst in self._listeners)
+        return sum(getattr(lst, "errors", 0) for lst, _sensor in self._listeners)
 
     def describe(self) -> str:
         return f"android sensors at {min(self.rate_hz, MAX_RATE_HZ):g} Hz (requested)"

@@ -17,6 +17,7 @@ import types
 import numpy as np
 import pytest
 
+import _pyjnius_fake as pj
 from app.session import Session
 from app.sources import (PLYER_FALLBACK_WARNING, AndroidSource, PlyerFallbackSource, SensorStartError,
                          make_live_source)
@@ -51,6 +52,8 @@ class FakeEvent:
 
 
 class FakeSensorManager:
+    __javaclass__ = "android/hardware/SensorManager"
+
     def __init__(self, missing=()):
         self.sensors = {t: FakeSensor(t) for t in (1, 2, 4) if t not in missing}
         self.registered = {}  # listener -> (sensor, period_us, latency_us, handler)
@@ -66,9 +69,11 @@ class FakeSensorManager:
             self.register_calls.append((sensor.getType(), period_us, latency_us))
         return True
 
-    def unregisterListener(self, listener):
+    def unregisterListener(self, listener, sensor=None):
+        """``(listener)``: every sensor of the listener; ``(listener, sensor)``: that one (the Java overloads)."""
         with self.lock:
-            self.registered.pop(listener, None)
+            if sensor is None or self.registered.get(listener, (None,))[0] is sensor:
+                self.registered.pop(listener, None)
 
     def deliver(self, type_, t_ns, values):
         """What Android's sensor thread does: call every listener registered for that sensor."""
@@ -132,6 +137,7 @@ class FakeJavaList:
 
 
 class FakeLocationManager:
+    __javaclass__ = "android/location/LocationManager"
     GPS_PROVIDER = "gps"
     FUSED_PROVIDER = "fused"
     NETWORK_PROVIDER = "network"
@@ -217,6 +223,7 @@ class FakeWakeLock:
 
 
 class FakePowerManager:
+    __javaclass__ = "android/os/PowerManager"
     PARTIAL_WAKE_LOCK = 1
 
     def __init__(self):
@@ -228,6 +235,7 @@ class FakePowerManager:
 
 
 class FakeNotificationManager:
+    __javaclass__ = "android/app/NotificationManager"
     IMPORTANCE_LOW = 2
 
     def __init__(self):
@@ -245,25 +253,21 @@ class FakeNotificationManager:
 
 def make_fake_jnius(sm, lm=None, *, sdk=34, bars=(0, 63, 0, 126), cutout=(0, 80, 0, 0), granted=None):
     """The fake ``jnius``; ``sdk`` is ``Build.VERSION.SDK_INT``, ``bars``/``cutout`` the insets (left, top,
-    right, bottom, px) the activity's window reports, ``granted`` the permissions granted (default: all)."""
+    right, bottom, px) the activity's window reports, ``granted`` the permissions granted (default: all).
+
+    Every Java call goes through :class:`tests._pyjnius_fake.Bridge`: the overload is chosen as pyjnius 1.7
+    chooses it, logged in ``jn.calls`` as ``(class, method, signature)``, and an argument of the wrong Java
+    type aborts as CheckJNI aborts a debuggable build (:class:`~tests._pyjnius_fake.CheckJNIAbort`)."""
     jn = types.ModuleType("jnius")
+    bridge = pj.Bridge()
+    jn.calls = bridge.calls
+    jn.granted = granted
     jn.threads = []
     jn.power = FakePowerManager()
     jn.notifications = FakeNotificationManager()
     jn.back = FakeBackDispatcher()
     jn.window_insets = FakeWindowInsets(bars, cutout)
     jn.services_started = []
-
-    class PythonJavaClass:
-        def __init__(self, *args, **kwargs):
-            pass
-
-    def java_method(signature, name=None):
-        def deco(f):
-            f.__javasignature__ = signature
-            f.__javaname__ = name or f.__name__
-            return f
-        return deco
 
     class Context:
         SENSOR_SERVICE = "sensor"
@@ -296,7 +300,7 @@ def make_fake_jnius(sm, lm=None, *, sdk=34, bars=(0, 63, 0, 126), cutout=(0, 80,
             return {"sensor": sm, "location": lm, "power": jn.power, "notification": jn.notifications}[name]
 
         def checkSelfPermission(self, name):
-            return 0 if granted is None or name in granted else -1
+            return 0 if jn.granted is None or name in jn.granted else -1
 
         def getPackageName(self):
             return "org.pdrproject.pdrtracker"
@@ -326,6 +330,10 @@ def make_fake_jnius(sm, lm=None, *, sdk=34, bars=(0, 63, 0, 126), cutout=(0, 80,
         @staticmethod
         def start(ctx, icon, title, text, argument):
             jn.services_started.append((icon, title, text, argument))
+
+        @staticmethod
+        def stop(ctx):
+            jn.services_started.append("stop")
 
     class WindowInsetsType:
         @staticmethod
@@ -406,9 +414,12 @@ def make_fake_jnius(sm, lm=None, *, sdk=34, bars=(0, 63, 0, 126), cutout=(0, 80,
                "android.os.HandlerThread": HandlerThread, "android.os.Handler": Handler,
                "android.os.SystemClock": SystemClock, "android.os.Build": Build,
                "android.os.Build$VERSION": VERSION, "android.location.LocationManager": FakeLocationManager}
-    jn.PythonJavaClass = PythonJavaClass
-    jn.java_method = java_method
-    jn.autoclass = lambda name: classes[name]
+    jn.PythonJavaClass = pj.PythonJavaClass
+    jn.java_method = pj.java_method
+    jn.JavaException = pj.JavaException
+    jn.cast = pj.cast
+    jn.classes = classes
+    jn.autoclass = lambda name: pj.JavaClassProxy(bridge, name, classes[name])
     return jn
 
 
@@ -820,3 +831,161 @@ def test_insets_and_back_below_android_15_and_13():
     assert len(new.back.callbacks) == 1 and new.back.back() and went == [1]
     handler.want(False)
     assert new.back.callbacks == [] and not new.back.back()
+
+
+# -- the Java signature of every call: pyjnius 1.7's overload choice (tests/_pyjnius_fake.py) ----------------
+
+SEL, SENSOR = "Landroid/hardware/SensorEventListener;", "Landroid/hardware/Sensor;"
+#: (class, method) -> the signature the app means; every Java call the app makes is here
+EXPECTED_SIGNATURES = {
+    ("android/content/Context", "getSystemService"): "(Ljava/lang/String;)Ljava/lang/Object;",
+    ("android/content/Context", "checkSelfPermission"): "(Ljava/lang/String;)I",
+    ("android/content/Context", "getPackageName"): "()Ljava/lang/String;",
+    ("android/content/Context", "getPackageManager"): "()Landroid/content/pm/PackageManager;",
+    ("android/content/Context", "getApplicationInfo"): "()Landroid/content/pm/ApplicationInfo;",
+    ("android/app/Activity", "getWindow"): "()Landroid/view/Window;",
+    ("android/app/Activity", "getOnBackInvokedDispatcher"): "()Landroid/window/OnBackInvokedDispatcher;",
+    ("org/kivy/android/PythonService", "setAutoRestartService"): "(Z)V",
+    ("android/hardware/SensorManager", "getDefaultSensor"): "(I)Landroid/hardware/Sensor;",
+    ("android/hardware/SensorManager", "registerListener"): f"({SEL}{SENSOR}IILandroid/os/Handler;)Z",
+    ("android/hardware/SensorManager", "unregisterListener"): f"({SEL}{SENSOR})V",
+    ("android/hardware/Sensor", "getName"): "()Ljava/lang/String;",
+    ("android/hardware/Sensor", "getVendor"): "()Ljava/lang/String;",
+    ("android/hardware/Sensor", "getMinDelay"): "()I",
+    ("android/hardware/Sensor", "getResolution"): "()F",
+    ("android/hardware/Sensor", "getMaximumRange"): "()F",
+    ("android/os/HandlerThread", "<init>"): "(Ljava/lang/String;)V",
+    ("android/os/HandlerThread", "start"): "()V",
+    ("android/os/HandlerThread", "getLooper"): "()Landroid/os/Looper;",
+    ("android/os/HandlerThread", "quitSafely"): "()Z",
+    ("android/os/Handler", "<init>"): "(Landroid/os/Looper;)V",
+    ("android/os/SystemClock", "elapsedRealtimeNanos"): "()J",
+    ("android/location/LocationManager", "requestLocationUpdates"):
+        "(Ljava/lang/String;JFLandroid/location/LocationListener;Landroid/os/Looper;)V",
+    ("android/location/LocationManager", "removeUpdates"): "(Landroid/location/LocationListener;)V",
+    ("android/location/LocationManager", "hasProvider"): "(Ljava/lang/String;)Z",
+    ("android/location/LocationManager", "addNmeaListener"):
+        "(Landroid/location/OnNmeaMessageListener;Landroid/os/Handler;)Z",
+    ("android/location/LocationManager", "removeNmeaListener"): "(Landroid/location/OnNmeaMessageListener;)V",
+    ("android/os/PowerManager", "newWakeLock"): "(ILjava/lang/String;)Landroid/os/PowerManager$WakeLock;",
+    ("android/os/PowerManager$WakeLock", "setReferenceCounted"): "(Z)V",
+    ("android/os/PowerManager$WakeLock", "acquire"): "()V",
+    ("android/os/PowerManager$WakeLock", "release"): "()V",
+    ("android/os/PowerManager$WakeLock", "isHeld"): "()Z",
+    ("android/app/NotificationManager", "createNotificationChannel"): "(Landroid/app/NotificationChannel;)V",
+    ("android/app/NotificationManager", "notify"): "(ILandroid/app/Notification;)V",
+    ("android/app/NotificationManager", "cancel"): "(I)V",
+    ("android/app/NotificationChannel", "<init>"): "(Ljava/lang/String;Ljava/lang/CharSequence;I)V",
+    ("android/app/NotificationChannel", "setShowBadge"): "(Z)V",
+    ("android/app/PendingIntent", "getActivity"):
+        "(Landroid/content/Context;ILandroid/content/Intent;I)Landroid/app/PendingIntent;",
+    ("android/app/Notification$Builder", "<init>"): "(Landroid/content/Context;Ljava/lang/String;)V",
+    ("android/app/Notification$Builder", "setContentTitle"): "(Ljava/lang/CharSequence;)Landroid/app/Notification$Builder;",
+    ("android/app/Notification$Builder", "setContentText"): "(Ljava/lang/CharSequence;)Landroid/app/Notification$Builder;",
+    ("android/app/Notification$Builder", "setSmallIcon"): "(I)Landroid/app/Notification$Builder;",
+    ("android/app/Notification$Builder", "setOngoing"): "(Z)Landroid/app/Notification$Builder;",
+    ("android/app/Notification$Builder", "setOnlyAlertOnce"): "(Z)Landroid/app/Notification$Builder;",
+    ("android/app/Notification$Builder", "setContentIntent"):
+        "(Landroid/app/PendingIntent;)Landroid/app/Notification$Builder;",
+    ("android/app/Notification$Builder", "build"): "()Landroid/app/Notification;",
+    ("android/content/pm/PackageManager", "getLaunchIntentForPackage"): "(Ljava/lang/String;)Landroid/content/Intent;",
+    ("org/pdrproject/pdrtracker/ServiceTracker", "start"):
+        "(Landroid/content/Context;Ljava/lang/String;Ljava/lang/String;Ljava/lang/String;Ljava/lang/String;)V",
+    ("org/pdrproject/pdrtracker/ServiceTracker", "stop"): "(Landroid/content/Context;)V",
+    ("android/view/Window", "getDecorView"): "()Landroid/view/View;",
+    ("android/view/View", "getRootWindowInsets"): "()Landroid/view/WindowInsets;",
+    ("android/view/WindowInsets", "getInsets"): "(I)Landroid/graphics/Insets;",
+    ("android/view/WindowInsets$Type", "systemBars"): "()I",
+    ("android/view/WindowInsets$Type", "displayCutout"): "()I",
+    ("android/window/OnBackInvokedDispatcher", "registerOnBackInvokedCallback"):
+        "(ILandroid/window/OnBackInvokedCallback;)V",
+    ("android/window/OnBackInvokedDispatcher", "unregisterOnBackInvokedCallback"):
+        "(Landroid/window/OnBackInvokedCallback;)V",
+}
+
+
+def _declaring(cls, name, sig):
+    """The class of the SDK table that declares ``name`` with ``sig`` (a call on a PythonActivity is Context's)."""
+    for c in [cls] + sorted(pj.supertypes(cls) - {cls}):
+        if sig in [s.replace("static ", "") for s in pj.SDK.get(c, ((), {}, {}))[1].get(name, [])]:
+            return c
+    return cls
+
+
+def run_every_java_path(jn, sm, lm):
+    """Everything of app.sources and app.android_platform that talks to Java, once."""
+    from app.android_platform import BackHandler, ServiceHooks, start_service, stop_service, system_bar_insets
+
+    src = AndroidSource(gps=True, jnius=jn)
+    src.start()
+    for type_, t, v in hardware_stream(seed=9, seconds=0.2):
+        sm.deliver(type_, t, v)
+    src.drain()
+    src.stop()
+    coarse = AndroidSource(gps=True, jnius=jn)  # approximate location only: the fused provider
+    jn.granted = {"android.permission.ACCESS_COARSE_LOCATION"}
+    coarse.start()
+    coarse.stop()
+    service = jn.autoclass("org.kivy.android.PythonService").mService
+    service.setAutoRestartService(False)
+    hooks = ServiceHooks(jn, service)
+    hooks.acquire()
+    hooks.notify("PDR Tracker", "3 steps · 2 m")
+    hooks.release()
+    start_service(jn, {"socket": "/x"})
+    stop_service(jn)
+    system_bar_insets(jn)
+    back = BackHandler(jn, lambda: None)
+    back.want(True)
+    back.want(False)
+
+
+def test_every_java_call_resolves_to_the_intended_overload_as_pyjnius_1_7_chooses():
+    """pyjnius 1.7 picks among overloads by score, ties to the highest signature string (the fake resolves
+    the same way): every call the app makes lands on the signature it means, none on a deprecated one.
+    ``unregisterListener(listener)`` alone would land on the deprecated ``(SensorListener)`` and abort."""
+    sm, lm = FakeSensorManager(), FakeLocationManager()
+    jn = make_fake_jnius(sm, lm, sdk=35)
+    run_every_java_path(jn, sm, lm)
+    called = {}
+    for cls, name, sig in jn.calls:
+        called.setdefault((_declaring(cls, name, sig), name), set()).add(sig)
+    assert set(called) == set(EXPECTED_SIGNATURES)  # every call is asserted, and every asserted one happened
+    for key, sigs in called.items():
+        assert sigs == {EXPECTED_SIGNATURES[key]}, key
+    assert not {(c, n, s) for c, n, s in jn.calls} & pj.DEPRECATED
+    assert sm.registered == {} and sm.register_calls  # the listeners really went
+
+
+def test_the_fake_resolves_overloads_by_pyjnius_1_7_scores():
+    """The facts the fake reproduces (jnius_utils.pxi calculate_score, JavaMultipleMethod.__call__)."""
+    um = pj.SDK["android/hardware/SensorManager"][1]["unregisterListener"]
+    listener = type("L", (pj.PythonJavaClass,), {"__javainterfaces__": ["android/hardware/SensorEventListener"]})()
+    bridge = pj.Bridge()
+    sensor = pj.JavaObject(bridge, "android/hardware/Sensor", object())
+    # a Python listener scores +1 against any object parameter: a tie, broken by the signature string
+    assert pj.choose(um, (listener,), "u") == "(Landroid/hardware/SensorListener;)V"
+    assert pj.choose(um, (listener, sensor), "u") == f"({SEL}{SENSOR})V"
+    # an autoclass object scores +5 for any other class: putExtra(name, uri) lands on putExtra(String, String)
+    put = pj.SDK["android/content/Intent"][1]["putExtra"]
+    uri = pj.JavaObject(bridge, "android/net/Uri", object())
+    assert pj.choose(put, ("android.intent.extra.STREAM", uri), "p") == \
+        "(Ljava/lang/String;Ljava/lang/String;)Landroid/content/Intent;"
+    parcel = pj.cast("android.os.Parcelable", uri)
+    assert pj.choose(put, ("x", parcel), "p") == "(Ljava/lang/String;Landroid/os/Parcelable;)Landroid/content/Intent;"
+    # a Python str is no CharSequence among overloads; an int no Integer
+    with pytest.raises(pj.JavaException):
+        pj.choose(["(Ljava/lang/CharSequence;)V", "(I)V"], ("text",), "t")
+    assert pj.choose(pj.SDK["android/content/ContentValues"][1]["put"], ("k", "v"), "put") == \
+        "(Ljava/lang/String;Ljava/lang/String;)V"
+    with pytest.raises(pj.JavaException):
+        pj.choose(pj.SDK["android/content/ContentValues"][1]["put"], ("k", 1), "put")
+    # a wrong Java type aborts a debuggable build (CheckJNI), past any `except Exception`
+    sm = FakeSensorManager()
+    jn = make_fake_jnius(sm)
+    sm_java = jn.autoclass("org.kivy.android.PythonActivity").mActivity.getSystemService("sensor")
+    with pytest.raises(pj.CheckJNIAbort):
+        try:
+            sm_java.unregisterListener(listener)
+        except Exception:  # noqa: BLE001 - as app code would
+            pass
