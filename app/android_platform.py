@@ -139,29 +139,21 @@ class ServiceHooks:
         self._manager.notify(NOTIFICATION_ID, b.build())
 
 
-def service_config(environ=os.environ, private_dir: str | None = None) -> dict | None:
-    """The service's configuration: its start argument, or -- Android restarting the sticky service after
-    a kill passes none -- the one it saved, if it was still tracking (then into a new recording file)."""
-    arg = environ.get("PYTHON_SERVICE_ARGUMENT", "")
-    if arg:
-        return json.loads(arg)
-    base = private_dir or environ.get("ANDROID_PRIVATE", "")
-    try:
-        with open(os.path.join(base, CONFIG_FILE), encoding="utf-8") as f:
-            saved = json.load(f)
-    except (OSError, ValueError):
-        return None
-    if not saved.get("active"):
-        return None
-    if saved.get("record_path"):
-        from app.storage import new_recording_path  # noqa: PLC0415
+def service_config(environ=os.environ) -> dict | None:
+    """The service's configuration: its start argument (``PYTHON_SERVICE_ARGUMENT``), None without one.
 
-        saved["record_path"] = new_recording_path(os.path.dirname(saved["record_path"]))
-    saved.setdefault("metadata", {})["restarted"] = "by Android after the service was killed"
-    return saved
+    p4a's ``PythonService`` passes an empty argument when Android restarts the service with a null intent
+    (what ``START_STICKY`` does after a kill; buildozer.spec no longer declares ``sticky``, so p4a returns
+    ``START_NOT_STICKY`` and Android should not).  Such a restart does not track: a walk the user did not
+    start would go into a new file, and ``startForeground`` from the background throws on Android 12+
+    anyway.  What the killed walk left is told by the next UI (:func:`take_interrupted_walk`)."""
+    arg = environ.get("PYTHON_SERVICE_ARGUMENT", "")
+    return json.loads(arg) if arg else None
 
 
 def save_service_config(config: dict, active: bool, private_dir: str) -> None:
+    """``service.json``: the running walk's configuration, ``active`` while it tracks (cleared when it stops:
+    still set at the next start of the UI means the process died while tracking)."""
     data = {k: v for k, v in config.items() if k != "pipeline_factory"}
     data["active"] = active
     try:
@@ -169,6 +161,32 @@ def save_service_config(config: dict, active: bool, private_dir: str) -> None:
             json.dump(data, f)
     except OSError:
         pass
+
+
+def take_interrupted_walk(private_dir: str | None) -> str:
+    """What the UI tells at its start when no service answers but ``service.json`` still says ``active``:
+    the service's process died while it tracked (Android stopped it, the app was swiped from the recents,
+    a crash).  The file is marked done, so it is told once; "" when there is nothing to tell."""
+    if not private_dir:
+        return ""
+    path = os.path.join(private_dir, CONFIG_FILE)
+    try:
+        with open(path, encoding="utf-8") as f:
+            saved = json.load(f)
+    except (OSError, ValueError):
+        return ""
+    if not isinstance(saved, dict) or not saved.get("active"):
+        return ""
+    save_service_config(saved, False, private_dir)
+    rec = saved.get("record_path")
+    import time  # noqa: PLC0415
+
+    if rec and os.path.exists(rec):
+        when = time.strftime("%H:%M", time.localtime(os.path.getmtime(rec)))
+        return (f"the last walk ended without Stop at about {when} (Android stopped the tracking service, or the "
+                f"app was swiped away): {os.path.basename(rec)} keeps it up to then")
+    return ("the last walk ended without Stop (Android stopped the tracking service, or the app was swiped "
+            "away)")
 
 
 def service_main(jnius=None, environ=os.environ) -> None:
@@ -180,14 +198,16 @@ def service_main(jnius=None, environ=os.environ) -> None:
         import jnius  # noqa: PLC0415 - the phone's
     service = jnius.autoclass("org.kivy.android.PythonService").mService
     private = environ.get("ANDROID_PRIVATE") or service.getFilesDir().getAbsolutePath()
-    config = service_config(environ, private)
+    config = service_config(environ)
     if config is None:
-        return  # nothing to do (a restart after a stop): p4a stops the service when this returns
+        return  # restarted by Android with a null intent: no walk without the user; p4a then stops the service
     service.setAutoRestartService(False)
     save_service_config(config, True, private)
     try:
+        # ``active`` is cleared as the stop begins, before the sensors go: a crash while stopping leaves no
+        # walk to resume
         run_service(config, lambda rate: make_live_source(rate_hz=rate, context=service, jnius=jnius),
-                    hooks=ServiceHooks(jnius, service))
+                    hooks=ServiceHooks(jnius, service), on_stopping=lambda: save_service_config(config, False, private))
     finally:
         save_service_config(config, False, private)
 

@@ -179,6 +179,7 @@ class PDRApp(App):
         self.data_dir_problem = ""
         self.paused_count = 0
         self.resumed_count = 0
+        self.pending_notice = ""  #: told with the next message (the last walk was interrupted)
         self.plan = None  # the floor plan (core.indoor.FloorPlan) of the settings, None: none
         self.plan_name = ""
 
@@ -428,6 +429,8 @@ class PDRApp(App):
                 self._initial_recording_failed()
         elif is_android():
             if not self.attach_service():
+                # the service's process died while it tracked: say so (once); the walk is not resumed
+                self.pending_notice = droid.take_interrupted_walk(os.environ.get("ANDROID_PRIVATE"))
                 self._request_android_permissions()
         else:
             self.message = "Open a recording to replay it"
@@ -584,6 +587,9 @@ class PDRApp(App):
                             "(grant location to track in the background)")
         self.recording_label = os.path.basename(path) if path else ""
         self.message = f"recording to {path}" if path else "live (not recording)"
+        if self.pending_notice:
+            self.message = f"{self.pending_notice}; {self.message}"
+            self.pending_notice = ""
         self.playing = True
         return True
 

@@ -69,7 +69,7 @@ NOTIFICATION_CHANNEL = "pdr-tracking"
 #: the notification is updated at most this often (s)
 NOTIFY_INTERVAL_S = 2.0
 SOCKET_NAME = "tracker.sock"
-#: what the service was started with (read again when Android restarts the sticky service after a kill)
+#: what the service was started with, ``active`` while it tracks (app.android_platform.take_interrupted_walk)
 CONFIG_FILE = "service.json"
 
 
@@ -113,11 +113,15 @@ class TrackingService:
         partial wake lock, ``notify(title, text)``.  None on the desktop.
     clock : callable
         Seconds, for the notification's pace and the session's tick budget (tests inject one).
+    on_stopping : callable, optional
+        Called first when the walk stops, before the sensors and the recording (the phone clears
+        ``service.json``'s ``active`` there).
     """
 
     def __init__(self, config: dict, *, source_factory: Callable, hooks=None,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic, on_stopping: Callable | None = None):
         self.config = dict(config)
+        self.on_stopping = on_stopping
         self.source_factory = source_factory
         self.hooks = hooks
         self.clock = clock
@@ -174,6 +178,11 @@ class TrackingService:
         with self.lock:
             if self.stopped:
                 return 0
+            if self.on_stopping is not None:  # first: the phone clears service.json's `active`
+                try:
+                    self.on_stopping()
+                except Exception as e:  # noqa: BLE001 - never lose the stop over it
+                    self.message = f"stop not saved: {e}"
             ses = self.session
             n = 0
             if ses is not None:
@@ -392,11 +401,11 @@ class ServiceServer:
 
 def run_service(config: dict, source_factory: Callable, *, hooks=None, stop: threading.Event | None = None,
                 interval_s: float = 0.02, started: Callable | None = None,
-                clock: Callable[[], float] = time.monotonic) -> TrackingService:
+                clock: Callable[[], float] = time.monotonic, on_stopping: Callable | None = None) -> TrackingService:
     """The service's main loop: start, serve the socket, step until stopped (by the UI's ``stop`` or by
     ``stop``), then close.  Runs in the p4a service process's main thread, or in a thread on the desktop.
     ``started(service)`` is called once the socket answers."""
-    svc = TrackingService(config, source_factory=source_factory, hooks=hooks, clock=clock)
+    svc = TrackingService(config, source_factory=source_factory, hooks=hooks, clock=clock, on_stopping=on_stopping)
     svc.start()
     server = ServiceServer(svc, config["socket"])
     server.start()

@@ -784,18 +784,78 @@ def test_the_service_holds_a_partial_wake_lock_and_shows_steps_and_distance():
     assert jn.notifications.posted[-1] == (NOTIFICATION_ID, None)  # the notification goes with the walk
 
 
-def test_the_service_argument_or_after_a_kill_the_saved_configuration(tmp_path):
-    from app.android_platform import save_service_config, service_config
+def test_a_service_restarted_with_a_null_intent_does_not_track(tmp_path, monkeypatch):
+    """After a kill, a sticky restart comes without an argument (p4a: a null intent): even with
+    ``service.json`` still saying ``active``, no walk starts -- no sensors, no recording, no run loop."""
+    import app.service
+    from app.android_platform import save_service_config, service_config, service_main
 
     cfg = {"data_dir": str(tmp_path), "record_path": str(tmp_path / "pdr-1.csv"), "socket": "s"}
     assert service_config({"PYTHON_SERVICE_ARGUMENT": json.dumps(cfg)}) == cfg
-    assert service_config({}, str(tmp_path)) is None  # never started
-    save_service_config(cfg, True, str(tmp_path))
-    again = service_config({}, str(tmp_path))  # Android restarted the sticky service: no argument
-    assert again["record_path"] != cfg["record_path"] and again["record_path"].startswith(str(tmp_path))
-    assert "restarted" in again["metadata"]
-    save_service_config(cfg, False, str(tmp_path))  # stopped by the user: a restart does nothing
-    assert service_config({}, str(tmp_path)) is None
+    save_service_config(cfg, True, str(tmp_path))  # the process died while tracking
+    assert service_config({}) is None and service_config({"PYTHON_SERVICE_ARGUMENT": ""}) is None
+    runs = []
+    monkeypatch.setattr(app.service, "run_service", lambda *a, **k: runs.append(a))
+    sm = FakeSensorManager()
+    jn = make_fake_jnius(sm)
+    service_main(jnius=jn, environ={"ANDROID_PRIVATE": str(tmp_path), "PYTHON_SERVICE_ARGUMENT": ""})
+    assert runs == [] and sm.register_calls == [] and not (tmp_path / "pdr-1.csv").exists()
+    assert json.loads((tmp_path / "service.json").read_text())["active"] is True  # left for the UI to tell
+
+
+class StopWatchingSensorManager(FakeSensorManager):
+    """Reads ``service.json`` when the sensors are unregistered (the moment a crash while stopping bites)."""
+
+    def __init__(self, config_path):
+        super().__init__()
+        self.config_path = config_path
+        self.active_at_unregister = []
+
+    def unregisterListener(self, listener, sensor=None):
+        self.active_at_unregister.append(json.loads(self.config_path.read_text())["active"])
+        super().unregisterListener(listener, sensor)
+
+
+def test_the_service_clears_active_before_the_sensors_stop(tmp_path):
+    """The phone's service entry point, end to end on the fake jnius: ``active`` while it tracks, cleared as
+    the user's stop begins (before the sensors are unregistered and the recording closed); the UI started
+    next finds nothing interrupted."""
+    from app.android_platform import service_main, take_interrupted_walk
+    from app.service import ServiceClient, service_answers, socket_path
+
+    data = tmp_path / "data"
+    data.mkdir()
+    cfg = {"data_dir": str(data), "socket": socket_path(str(data)), "record_path": str(tmp_path / "pdr-2.csv"),
+           "metadata": {"app": "test"}}
+    sm = StopWatchingSensorManager(tmp_path / "service.json")
+    jn = make_fake_jnius(sm, FakeLocationManager())
+    th = threading.Thread(target=service_main, kwargs={"jnius": jn, "environ": {
+        "ANDROID_PRIVATE": str(tmp_path), "PYTHON_SERVICE_ARGUMENT": json.dumps(cfg)}})
+    th.start()
+    try:
+        for _ in range(2000):  # until the socket answers (no sleep: service_answers has its own timeout)
+            if service_answers(cfg["socket"], timeout_s=0.05):
+                break
+        assert json.loads((tmp_path / "service.json").read_text())["active"] is True
+        assert len(sm.registered) == 3
+        ServiceClient(cfg["socket"]).request("stop")
+    finally:
+        th.join(10)
+    assert not th.is_alive() and sm.registered == {}
+    assert sm.active_at_unregister == [False, False, False]
+    assert take_interrupted_walk(str(tmp_path)) == ""
+
+
+def test_the_next_ui_tells_of_a_walk_killed_while_tracking_once(tmp_path):
+    from app.android_platform import save_service_config, take_interrupted_walk
+
+    rec = tmp_path / "pdr-3.csv"
+    rec.write_text("# a walk cut short\n")
+    save_service_config({"record_path": str(rec), "socket": "s"}, True, str(tmp_path))
+    told = take_interrupted_walk(str(tmp_path))
+    assert "ended without Stop" in told and "pdr-3.csv" in told
+    assert take_interrupted_walk(str(tmp_path)) == ""  # told once
+    assert take_interrupted_walk(None) == "" and take_interrupted_walk(str(tmp_path / "none")) == ""
 
 
 def test_starting_the_service_passes_the_configuration_to_the_p4a_service_class():
