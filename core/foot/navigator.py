@@ -25,7 +25,9 @@ interpolated at its time (plus ``gyro_delay_s``, a sensor's inter-sensor
 latency; a recording with simultaneous rows pairs them exactly).  The filter starts with the initial
 alignment at the end of the first stance of at least ``align_min_s``; samples
 of that stance get its attitude, zero velocity and the origin, samples before
-it NaN.  Heading aids are applied at the end of each stance (the state is then
+it NaN.  A walk that starts moving has no such stance: after
+``align_fallback_stances`` shorter stances the next stance of at least
+``align_fallback_min_s`` aligns (counted in ``aligned_on_short_stance``).  Heading aids are applied at the end of each stance (the state is then
 that of the stance's last sample).
 
 Batch :meth:`FootNavigator.run` detects stance over the whole recording at
@@ -71,6 +73,11 @@ class FootSettings:
     align_min_s: float = 0.3
     #: ... in which gaps of non-stance up to this long do not count as motion (s)
     align_max_gap_s: float = 0.1
+    #: a walk that starts moving (no still period of ``align_min_s``): after this many stances too short
+    #: for the alignment (each at least ``align_fallback_min_s``), the next one at least that long aligns
+    #: (a single short stance at the start may be a false detection; the second confirms the gait)
+    align_fallback_stances: int = 1
+    align_fallback_min_s: float = 0.05
     #: the mean rate of the still period is the initial gyroscope bias only if it lasted this long (s);
     #: after a shorter one the filter starts from zero bias (on the PyShoe tuning split the 1-4 s at the
     #: start of a trial gave worse tracks than zero: the foot is not quite still)
@@ -219,6 +226,7 @@ class FootNavigator:
         self._prev_stance = False
         self._stance_start: int | None = None
         self._align = [np.zeros(3), np.zeros(3), 0, None, None]  # sum acc, sum gyro, n, t_first, t_last
+        self._short_stances = 0  # stances before the alignment too short for it (see align_fallback_stances)
         self._held: list = []  # samples of the alignment stance (t_ns) waiting for their state
         self._gap: list = []  # samples of a gap in the alignment stance (t, acc, gyro, stance)
         self._last_stride_t: int | None = None
@@ -234,7 +242,8 @@ class FootNavigator:
         self.zupt_nis: list[float] = []
         self.heading_updates: list = []
         self.course_updates: list = []
-        self.counters = {"skipped_nonfinite": 0, "aid_unavailable": 0, "aid_gated": 0, "alignments_rejected": 0}
+        self.counters = {"skipped_nonfinite": 0, "aid_unavailable": 0, "aid_gated": 0, "alignments_rejected": 0,
+                         "aligned_on_short_stance": 0}
 
     # -- the per-sample kernel ----------------------------------------------------------------
     def _sample(self, t: int, acc, gyro, stance: bool) -> None:
@@ -308,7 +317,11 @@ class FootNavigator:
         if (t - a[4]) * 1e-9 <= s.align_max_gap_s:
             return
         gap, self._gap = self._gap, []
-        if (a[4] - a[3]) * 1e-9 >= s.align_min_s:
+        dur = (a[4] - a[3]) * 1e-9
+        short_ok = self._short_stances >= s.align_fallback_stances and dur >= s.align_fallback_min_s
+        if dur >= s.align_min_s or short_ok:
+            if dur < s.align_min_s:
+                self.counters["aligned_on_short_stance"] += 1
             self._do_align()
             for th in self._held:
                 self._emit(th, True)
@@ -321,6 +334,8 @@ class FootNavigator:
                 self._sample(*g)
             return
         self.counters["alignments_rejected"] += 1
+        if dur >= s.align_fallback_min_s:
+            self._short_stances += 1
         for th in self._held:
             self._emit_nan(th)
         self._held = []
