@@ -18,7 +18,11 @@ Tables 2-3 (``aid``):
     The two cascaded filters: :class:`core.foot.course.CourseErrorFilter`
     estimates the course-angle error from the waist heading and the course of
     successive stances (eqs. 11-19); its estimate is the heading-error
-    measurement of the ZUPT filter with its variance (eqs. 22-25).
+    measurement of the ZUPT filter with its variance (eqs. 22-25), with the
+    tilt-coupled row of eq. 22 (the azimuth of the foot's axis,
+    :func:`core.pdr.attitude.heading_jacobian`), handed over once per
+    ``course.handover_strides`` strides, after which the first filter restarts
+    (each stride's information counted once; see :mod:`core.foot.course`).
 
 Samples are the foot accelerometer's events, each with the gyroscope reading
 interpolated at its time (plus ``gyro_delay_s``, a sensor's inter-sensor
@@ -410,19 +414,26 @@ class FootNavigator:
             else:
                 self.counters["aid_unavailable" if reason in ("", "no waist heading") else "aid_gated"] += 1
         elif s.aid == "tckf":
-            cu = self.course.update(t1, psi_w, d[0], d[1])
+            fwd_n = ins.matrix() @ self._foot_axis
+            h = heading_jacobian(fwd_n)  # eq. 22's first row in ENU: the tilt-coupled heading of the foot
+            started = self.course.started
+            cu = self.course.update(t1, psi_w, d[0], d[1], prior_var_rad2=float(h @ ins.P[0:3, 0:3] @ h))
             self.course_updates.append(cu)
-            if cu.used:
-                before = ins.heading_of(self._foot_axis)
-                u = ins.update_heading(cu.x_rad, (0.0, 0.0, 1.0), cu.p_rad2)  # eqs. 22-25
+            if self.course.started and not started:
+                # the waist-to-course offset holds the INS heading error of the boresight strides: every
+                # later course error is relative to it (a Schmidt consider term; see core.foot.course)
+                c = self.settings.course
+                ins.consider_heading(h, c.gamma * c.mag_heading_sd_rad ** 2 / max(c.boresight_strides, 1))
+            if cu.used and cu.handover:
+                # eqs. 23-25: the first filter's estimate and variance, handed over once (then it restarts)
+                u = ins.update_heading_relative(cu.x_rad, h, cu.p_rad2)
                 self.heading_updates.append(u)
-                if u.used:
-                    self.course.applied(wrap_angle(ins.heading_of(self._foot_axis) - before))
+                self.course.restart()
                 aid, innov, nis = "tckf", cu.x_rad, u.nis
-            elif cu.reason not in ("boresight",):
+            elif not cu.used and cu.reason not in ("boresight",):
                 self.counters["aid_gated" if cu.reason in ("gated", "turning", "short stride")
                               else "aid_unavailable"] += 1
-            x1, p1 = self.course.x, self.course.p
+            x1, p1 = cu.x_rad, cu.p_rad2
         self._prev_course, self._prev_waist = course, psi_w
         self.strides.append(Stride(t0, t1, tuple(ins.p), length, course, psi_w, aid, innov, nis, x1, p1))
         self._last_stride_t = t1
