@@ -140,6 +140,20 @@ def pyshoe_metric(pos_n, truth_n, align_dist_m: float = PYSHOE_ALIGN_DIST_M) -> 
 
 
 def median(values) -> float:
+    """Median of errors where a failed recording (None or NaN: no track, no number) counts as an infinite
+    error: it is never dropped (a median over trials with one failure in the upper half is unchanged; with
+    half of them failed it is inf).  :func:`n_failed` says how many."""
+    v = [math.inf if x is None or math.isnan(x) else float(x) for x in values]
+    return float(np.median(v)) if v else math.nan
+
+
+def n_failed(values) -> int:
+    """How many of ``values`` are failures (None, NaN or inf: a recording without a usable track)."""
+    return sum(1 for x in values if x is None or not math.isfinite(x))
+
+
+def median_finite(values) -> float:
+    """Median of the finite values (for timings and scores that are not errors of a track)."""
     v = [x for x in values if x is not None and math.isfinite(x)]
     return float(np.median(v)) if v else math.nan
 
@@ -311,19 +325,20 @@ def summarise_pyshoe(rows, split) -> dict:
             "rmse_z_median_m": median([r["cases"][c].get("rmse_z_m", math.nan) for r in rs]),
             "pyshoe_2d_median_m": median([r["cases"][c].get("pyshoe_2d_m", math.nan) for r in rs]),
             "pyshoe_3d_median_m": median([r["cases"][c].get("pyshoe_3d_m", math.nan) for r in rs]),
-            "us_per_sample_median": median([r["cases"][c].get("us_per_sample", math.nan) for r in rs]),
+            "us_per_sample_median": median_finite([r["cases"][c].get("us_per_sample", math.nan) for r in rs]),
+            "n_failed": n_failed([r["cases"][c]["rmse_3d_m"] for r in rs]),
         }
         if "stance_f1" in rs[0]["cases"][c]:
-            out["cases"][c]["stance_f1_median_walking"] = median(
+            out["cases"][c]["stance_f1_median_walking"] = median_finite(
                 [r["cases"][c]["stance_f1"] for r in rs if r["walking"]])
-            out["cases"][c]["stance_f1_median_all"] = median([r["cases"][c]["stance_f1"] for r in rs])
+            out["cases"][c]["stance_f1_median_all"] = median_finite([r["cases"][c]["stance_f1"] for r in rs])
     out["pyshoe_best_per_trial_median_m"] = median([r["pyshoe_best"][1] for r in rs])
     out["pyshoe_best_per_trial_median_walking_m"] = median([r["pyshoe_best"][1] for r in rs if r["walking"]])
     out["n_walking"] = sum(1 for r in rs if r["walking"])
     if "pyshoe_labels_f1" in rs[0]:
-        out["pyshoe_labels_f1_median_walking"] = {d: median([r["pyshoe_labels_f1"][d] for r in rs if r["walking"]])
+        out["pyshoe_labels_f1_median_walking"] = {d: median_finite([r["pyshoe_labels_f1"][d] for r in rs if r["walking"]])
                                                   for d in rs[0]["pyshoe_labels_f1"]}
-    out["pyshoe_per_detector_median_m"] = {d: median([r["pyshoe_errors_m"][d] for r in rs])
+    out["pyshoe_per_detector_median_m"] = {d: median_finite([r["pyshoe_errors_m"][d] for r in rs])
                                            for d in rs[0]["pyshoe_errors_m"]}
     return out
 
@@ -415,7 +430,7 @@ def summarise_ipol(rows, split) -> dict:
     out = {"n_trials": len(_of_split(rows, split)), "cases": {}}
     if not out["n_trials"]:
         return {}
-    out["stance_f1_median"] = median([v for r in _of_split(rows, split) for v in r["stance_f1"].values()])
+    out["stance_f1_median"] = median_finite([v for r in _of_split(rows, split) for v in r["stance_f1"].values()])
     for aid in AIDS:
         c = [r["cases"][aid] for r in _of_split(rows, split)]
         out["cases"][aid] = {

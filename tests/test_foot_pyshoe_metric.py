@@ -71,3 +71,14 @@ def test_peer_follows_exact_simulated_walk_with_true_stance():
     # the first-order step (current sample, no trapezoid) climbs about 1.5 cm per stride on exact data
     dz = pos[st, 2] - truth[st, 2]
     assert 0.02 < np.max(np.abs(dz)) < 0.10
+
+
+def test_a_failed_recording_counts_in_the_median():
+    """A recording without a track (NaN error) is an infinite error in the benchmark's medians, never dropped."""
+    from benchmarks.foot import median, n_failed
+
+    assert median([0.1, 0.2, float("nan")]) == 0.2  # not 0.15, the median of the two that worked
+    assert median([0.1, float("nan"), None, 0.3]) == math.inf
+    assert n_failed([0.1, float("nan"), None, math.inf]) == 3
+    e = position_errors(np.full((10, 3), np.nan), np.zeros((10, 3)))
+    assert math.isnan(e["rmse_3d_m"]) and median([e["rmse_3d_m"], 0.1, 0.2]) == 0.2

@@ -55,6 +55,8 @@ class CourseSettings:
     max_turn_rad: float = math.radians(15.0)
     #: innovation gate (1 dof)
     gate_nis: float = 16.0
+    #: measurements pre-filtered before each hand-over to the second filter (then the filter restarts)
+    handover_strides: int = 1
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,8 @@ class CourseUpdate:
     x_rad: float  #: estimate after the update
     p_rad2: float  #: its variance (eq. 25 hands it to the second filter)
     nis: float = math.nan
+    #: this update completes a hand-over: ``x_rad, p_rad2`` go to the second filter, then :meth:`restart`
+    handover: bool = False
 
 
 class CourseErrorFilter:
@@ -81,6 +85,8 @@ class CourseErrorFilter:
     def reset(self) -> None:
         self.x = 0.0
         self.p = self.settings.initial_sd_rad ** 2
+        self.fresh = True  #: no information since the start or the last hand-over
+        self.n_since_handover = 0
         self.t_ns: int | None = None
         self.offset_rad = math.nan
         self._bore: list[float] = []
@@ -100,8 +106,16 @@ class CourseErrorFilter:
             self.p = e * e * self.p + self.settings.process_noise_rad_sqrt_s ** 2 * dt
         self.t_ns = t_ns
 
-    def update(self, t_ns: int, waist_heading_rad: float, stride_east_m: float, stride_north_m: float) -> CourseUpdate:
-        """One stride: waist heading and the stride's displacement (eqs. 17-18), then the update of eq. 16."""
+    def restart(self) -> None:
+        """After a hand-over: no information left (the second filter has it all)."""
+        self.x, self.p, self.fresh, self.n_since_handover = 0.0, math.inf, True, 0
+
+    def update(self, t_ns: int, waist_heading_rad: float, stride_east_m: float, stride_north_m: float,
+               prior_var_rad2: float = math.nan) -> CourseUpdate:
+        """One stride: waist heading and the stride's displacement (eqs. 17-18), then the update of eq. 16.
+
+        ``prior_var_rad2``: the second filter's variance of the heading error, the prediction's variance
+        in the gate while this filter has no information (after a restart); nan: no gate then."""
         s = self.settings
         length = math.hypot(stride_east_m, stride_north_m)
         course = math.atan2(stride_north_m, stride_east_m)  # eq. 17 (ENU)
@@ -126,18 +140,23 @@ class CourseErrorFilter:
             return CourseUpdate(t_ns, math.nan, False, "boresight", self.x, self.p)
         z = wrap_angle(z_raw - self.offset_rad)
         r = s.gamma * s.mag_heading_sd_rad ** 2  # eq. 19
-        y = wrap_angle(z - self.x)
-        nis = y * y / (self.p + r)
+        if self.fresh:  # no information: the gate predicts z = 0 with the second filter's variance
+            y = z
+            nis = y * y / (prior_var_rad2 + r) if math.isfinite(prior_var_rad2) else math.nan
+        else:
+            y = wrap_angle(z - self.x)
+            nis = y * y / (self.p + r)
         if nis > s.gate_nis:
             return CourseUpdate(t_ns, z, False, "gated", self.x, self.p, nis)
-        k = self.p / (self.p + r)
-        self.x += k * y
-        self.p *= 1.0 - k
-        return CourseUpdate(t_ns, z, True, "used", self.x, self.p, nis)
-
-    def applied(self, heading_correction_rad: float) -> None:
-        """The second filter turned the INS heading by this much: the course error left is that much less."""
-        self.x -= heading_correction_rad
+        if self.fresh:  # eq. 16 with an uninformative prior
+            self.x, self.p, self.fresh = z, r, False
+        else:
+            k = self.p / (self.p + r)
+            self.x += k * y
+            self.p *= 1.0 - k
+        self.n_since_handover += 1
+        return CourseUpdate(t_ns, z, True, "used", self.x, self.p, nis,
+                            handover=self.n_since_handover >= s.handover_strides)
 
 
 def body_heading(acc_mean_b, mag_mean_b, axis_b) -> float:

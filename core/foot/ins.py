@@ -138,6 +138,10 @@ class ZuptEKF:
         self.g = STANDARD_GRAVITY_M_S2
         self.n_rejected = 0
         self.last_dx = np.zeros(N_STATES)
+        #: Schmidt "consider" term (see :meth:`consider_heading`): cross-covariance (15,) of the error state
+        #: with a past heading error that later measurements are relative to, and that error's variance
+        self.consider = None
+        self.consider_var = math.nan
         self._f_prev = (0.0, 0.0, STANDARD_GRAVITY_M_S2)
         self._w_prev = (0.0, 0.0, 0.0)
         self._phi = np.eye(N_STATES)
@@ -261,6 +265,8 @@ class ZuptEKF:
             self.n_rejected += 1
             return
         self.P = phi @ self.P @ phi.T + self.process_noise(dt_s)
+        if self.consider is not None:
+            self.consider = phi @ self.consider
         self.q, self.v, self.p = q_new, v_new, p_new
         self._f_prev, self._w_prev = tuple(acc_b), tuple(gyro_b)
 
@@ -271,20 +277,23 @@ class ZuptEKF:
             self.n_rejected += 1
             return Update(kind, False, tuple(float(v) for v in y), nis, len(y))
         self.P = 0.5 * (P_new + P_new.T)
+        if self.consider is not None:
+            self.consider = self._consider_next
         self.correct(dx)
         self.last_dx = dx
         return Update(kind, True, tuple(float(v) for v in y), nis, len(y))
 
     def _update_block(self, kind: str, y: np.ndarray, sl: slice, Rm: np.ndarray) -> Update:
         """Update with ``H`` selecting the states ``sl``: ``P H^T = P[:, sl]``, ``P <- P - K (P H^T)^T``."""
-        return self._kalman(kind, y, self.P[:, sl], self.P[sl, sl] + Rm, Rm, None)
+        return self._kalman(kind, y, self.P[:, sl], self.P[sl, sl] + Rm, Rm, None,
+                            None if self.consider is None else self.consider[sl])
 
     def _update(self, kind: str, y: np.ndarray, H: np.ndarray, Rm: np.ndarray) -> Update:
         """General update, Joseph form."""
         PHt = self.P @ H.T
-        return self._kalman(kind, y, PHt, H @ PHt + Rm, Rm, H)
+        return self._kalman(kind, y, PHt, H @ PHt + Rm, Rm, H, None if self.consider is None else H @ self.consider)
 
-    def _kalman(self, kind, y, PHt, S, Rm, H) -> Update:
+    def _kalman(self, kind, y, PHt, S, Rm, H, h_consider=None) -> Update:
         try:
             Sinv = np.linalg.inv(S)
         except np.linalg.LinAlgError:
@@ -296,6 +305,8 @@ class ZuptEKF:
         else:
             ikh = np.eye(N_STATES) - K @ H
             P_new = ikh @ self.P @ ikh.T + K @ Rm @ K.T
+        if h_consider is not None:  # the considered error is not estimated; its correlation shrinks
+            self._consider_next = self.consider - K @ h_consider
         return self._apply(kind, y, K, P_new, float(y @ Sinv @ y))
 
     def correct(self, dx) -> None:
@@ -323,6 +334,32 @@ class ZuptEKF:
         H = np.zeros((1, N_STATES))
         H[0, ATT] = h_att
         return self._update("heading", np.array([float(innovation_rad)]), H, np.array([[float(variance_rad2)]]))
+
+    def consider_heading(self, h_att, extra_var_rad2: float = 0.0) -> None:
+        """Keep the heading error ``c = h_att . dtheta`` of now (plus independent noise of ``extra_var_rad2``)
+        as a constant that later measurements are relative to (:meth:`update_heading_relative`): a Schmidt
+        consider parameter, never estimated, its cross-covariance with the error state carried."""
+        h = np.asarray(h_att, dtype=float)
+        self.consider = self.P[:, ATT] @ h
+        self.consider_var = float(h @ self.P[ATT, ATT] @ h) + float(extra_var_rad2)
+
+    def update_heading_relative(self, innovation_rad: float, h_att, variance_rad2: float) -> Update:
+        """A heading measurement relative to the considered one: ``innovation = h_att . dtheta - c + v``
+        (Schmidt-Kalman: ``c`` is not estimated, the gain and covariance account for it)."""
+        if self.consider is None:
+            return self.update_heading(innovation_rad, h_att, variance_rad2)
+        h = np.asarray(h_att, dtype=float)
+        y = np.array([float(innovation_rad)])
+        ph = self.P[:, ATT] @ h - self.consider  # P_a H_a^T (state rows), H_a = [h, -1]
+        hc = float(h @ self.consider[ATT]) - self.consider_var  # H_a P_a[:, c]
+        s_ = float(h @ ph[ATT]) - float(h @ self.consider[ATT]) + self.consider_var + float(variance_rad2)
+        if not s_ > 0:
+            self.n_rejected += 1
+            return Update("heading", False, (float(y[0]),), math.nan, 1)
+        K = (ph / s_).reshape(-1, 1)
+        P_new = self.P - s_ * (K @ K.T)
+        self._consider_next = self.consider - K[:, 0] * hc
+        return self._apply("heading", y, K, P_new, float(y[0] * y[0] / s_))
 
     # -- views --------------------------------------------------------------------------------
     def matrix(self) -> np.ndarray:

@@ -18,14 +18,20 @@ Tables 2-3 (``aid``):
     The two cascaded filters: :class:`core.foot.course.CourseErrorFilter`
     estimates the course-angle error from the waist heading and the course of
     successive stances (eqs. 11-19); its estimate is the heading-error
-    measurement of the ZUPT filter with its variance (eqs. 22-25).
+    measurement of the ZUPT filter with its variance (eqs. 22-25), with the
+    tilt-coupled row of eq. 22 (the azimuth of the foot's axis,
+    :func:`core.pdr.attitude.heading_jacobian`), handed over once per
+    ``course.handover_strides`` strides, after which the first filter restarts
+    (each stride's information counted once; see :mod:`core.foot.course`).
 
 Samples are the foot accelerometer's events, each with the gyroscope reading
 interpolated at its time (plus ``gyro_delay_s``, a sensor's inter-sensor
 latency; a recording with simultaneous rows pairs them exactly).  The filter starts with the initial
 alignment at the end of the first stance of at least ``align_min_s``; samples
 of that stance get its attitude, zero velocity and the origin, samples before
-it NaN.  Heading aids are applied at the end of each stance (the state is then
+it NaN.  A walk that starts moving has no such stance: after
+``align_fallback_stances`` shorter stances the next stance of at least
+``align_fallback_min_s`` aligns (counted in ``aligned_on_short_stance``).  Heading aids are applied at the end of each stance (the state is then
 that of the stance's last sample).
 
 Batch :meth:`FootNavigator.run` detects stance over the whole recording at
@@ -71,6 +77,11 @@ class FootSettings:
     align_min_s: float = 0.3
     #: ... in which gaps of non-stance up to this long do not count as motion (s)
     align_max_gap_s: float = 0.1
+    #: a walk that starts moving (no still period of ``align_min_s``): after this many stances too short
+    #: for the alignment (each at least ``align_fallback_min_s``), the next one at least that long aligns
+    #: (a single short stance at the start may be a false detection; the second confirms the gait)
+    align_fallback_stances: int = 1
+    align_fallback_min_s: float = 0.05
     #: the mean rate of the still period is the initial gyroscope bias only if it lasted this long (s);
     #: after a shorter one the filter starts from zero bias (on the PyShoe tuning split the 1-4 s at the
     #: start of a trial gave worse tracks than zero: the foot is not quite still)
@@ -219,6 +230,7 @@ class FootNavigator:
         self._prev_stance = False
         self._stance_start: int | None = None
         self._align = [np.zeros(3), np.zeros(3), 0, None, None]  # sum acc, sum gyro, n, t_first, t_last
+        self._short_stances = 0  # stances before the alignment too short for it (see align_fallback_stances)
         self._held: list = []  # samples of the alignment stance (t_ns) waiting for their state
         self._gap: list = []  # samples of a gap in the alignment stance (t, acc, gyro, stance)
         self._last_stride_t: int | None = None
@@ -234,7 +246,8 @@ class FootNavigator:
         self.zupt_nis: list[float] = []
         self.heading_updates: list = []
         self.course_updates: list = []
-        self.counters = {"skipped_nonfinite": 0, "aid_unavailable": 0, "aid_gated": 0, "alignments_rejected": 0}
+        self.counters = {"skipped_nonfinite": 0, "aid_unavailable": 0, "aid_gated": 0, "alignments_rejected": 0,
+                         "aligned_on_short_stance": 0}
 
     # -- the per-sample kernel ----------------------------------------------------------------
     def _sample(self, t: int, acc, gyro, stance: bool) -> None:
@@ -308,7 +321,11 @@ class FootNavigator:
         if (t - a[4]) * 1e-9 <= s.align_max_gap_s:
             return
         gap, self._gap = self._gap, []
-        if (a[4] - a[3]) * 1e-9 >= s.align_min_s:
+        dur = (a[4] - a[3]) * 1e-9
+        short_ok = self._short_stances >= s.align_fallback_stances and dur >= s.align_fallback_min_s
+        if dur >= s.align_min_s or short_ok:
+            if dur < s.align_min_s:
+                self.counters["aligned_on_short_stance"] += 1
             self._do_align()
             for th in self._held:
                 self._emit(th, True)
@@ -321,6 +338,8 @@ class FootNavigator:
                 self._sample(*g)
             return
         self.counters["alignments_rejected"] += 1
+        if dur >= s.align_fallback_min_s:
+            self._short_stances += 1
         for th in self._held:
             self._emit_nan(th)
         self._held = []
@@ -395,19 +414,26 @@ class FootNavigator:
             else:
                 self.counters["aid_unavailable" if reason in ("", "no waist heading") else "aid_gated"] += 1
         elif s.aid == "tckf":
-            cu = self.course.update(t1, psi_w, d[0], d[1])
+            fwd_n = ins.matrix() @ self._foot_axis
+            h = heading_jacobian(fwd_n)  # eq. 22's first row in ENU: the tilt-coupled heading of the foot
+            started = self.course.started
+            cu = self.course.update(t1, psi_w, d[0], d[1], prior_var_rad2=float(h @ ins.P[0:3, 0:3] @ h))
             self.course_updates.append(cu)
-            if cu.used:
-                before = ins.heading_of(self._foot_axis)
-                u = ins.update_heading(cu.x_rad, (0.0, 0.0, 1.0), cu.p_rad2)  # eqs. 22-25
+            if self.course.started and not started:
+                # the waist-to-course offset holds the INS heading error of the boresight strides: every
+                # later course error is relative to it (a Schmidt consider term; see core.foot.course)
+                c = self.settings.course
+                ins.consider_heading(h, c.gamma * c.mag_heading_sd_rad ** 2 / max(c.boresight_strides, 1))
+            if cu.used and cu.handover:
+                # eqs. 23-25: the first filter's estimate and variance, handed over once (then it restarts)
+                u = ins.update_heading_relative(cu.x_rad, h, cu.p_rad2)
                 self.heading_updates.append(u)
-                if u.used:
-                    self.course.applied(wrap_angle(ins.heading_of(self._foot_axis) - before))
+                self.course.restart()
                 aid, innov, nis = "tckf", cu.x_rad, u.nis
-            elif cu.reason not in ("boresight",):
+            elif not cu.used and cu.reason not in ("boresight",):
                 self.counters["aid_gated" if cu.reason in ("gated", "turning", "short stride")
                               else "aid_unavailable"] += 1
-            x1, p1 = self.course.x, self.course.p
+            x1, p1 = cu.x_rad, cu.p_rad2
         self._prev_course, self._prev_waist = course, psi_w
         self.strides.append(Stride(t0, t1, tuple(ins.p), length, course, psi_w, aid, innov, nis, x1, p1))
         self._last_stride_t = t1
