@@ -227,6 +227,10 @@ class FixFusion:
         it off).
     status_max_age_s : float
         A ``gnss_status`` reading older than this does not describe a fix (s).
+    pause_s : float
+        A longer time between two steps is a pause (the step detector's ``max_step_interval_s``):
+        the step after it spans its own duration; a shorter gap up to three durations is a missed
+        step and its distance still counts (s).
     """
 
     #: the filter's name (``make_fusion``, summaries)
@@ -236,7 +240,7 @@ class FixFusion:
                  hacc_scale: float = 1.0, min_sigma_m: float = 1.0, fused_timeout_s: float = 5.0,
                  hold_s: float = 3.0, hidden_ns=(), relock_s: float = 8.0, anchor_max_hacc_m: float = ANCHOR_MAX_HACC_M,
                  anchor_max_waits: int = 30, start: tuple | None = None, min_cn0_4th_dbhz: float = 25.0,
-                 status_max_age_s: float = 2.0, relock_max_drift: float | None = None):
+                 status_max_age_s: float = 2.0, relock_max_drift: float | None = None, pause_s: float = 1.5):
         self.max_hacc_m = float(max_hacc_m)
         self.default_hacc_m = float(default_hacc_m)
         self.max_speed_m_s = float(max_speed_m_s)
@@ -258,6 +262,7 @@ class FixFusion:
         self.start = start
         self.min_cn0_4th_dbhz = float(min_cn0_4th_dbhz)
         self.status_max_age_ns = int(status_max_age_s * 1e9)
+        self.pause_ns = int(pause_s * 1e9)
 
     def reset(self) -> None:
         self.origin_lat_lon: tuple[float, float] | None = None
@@ -346,8 +351,11 @@ class FixFusion:
         prev = self._last_step_ns
         d = step.features.duration_s
         dur = int(d * 1e9) if d == d else self._last_step_dur_ns
-        t_prev = step.t_ns - dur if prev is None else max(prev, step.t_ns - 3 * dur)
-        return t_prev, dur
+        if prev is None or step.t_ns - prev > self.pause_ns:
+            # the first step, or the first after a pause: its own duration (issue #26: it covered three)
+            return step.t_ns - dur, dur
+        # a missed step (up to two more durations) still counts its distance
+        return max(prev, step.t_ns - 3 * dur), dur
 
     def _before_fixes(self, step, t_prev_ns: int) -> None:
         """Called with each step before the fixes inside its interval are processed."""

@@ -21,7 +21,10 @@ Per step (:meth:`PdrEkf.step`)
        lags by about 5 steps, ~3 m of track); not in the paper;
     2. the measurement update with the step's length from the stride model and
        its heading compensated by the unified error model (eq. 12), the
-       paper's "measurement vector";
+       paper's "measurement vector" -- of ``l`` and ``psi`` only: the position
+       rows get no gain (the step does not observe where the walker already
+       is; through the consider states' cross terms it moved the position
+       sideways at every turn of an outage);
     3. the position moves by eq. 13 with the updated ``l`` and ``psi``;
        ``F = d f / d x`` (a test checks it by finite differences).
 
@@ -228,7 +231,10 @@ class PdrEkf:
         H[0, L], H[0, K] = 1.0, self.x[L]
         H[1, PSI], H[1, B] = 1.0, 1.0
         R = np.diag([self.length_sd_m ** 2, self.heading_sd_rad ** 2])
-        ok, nis = self._update(innov, H, R, math.inf)
+        # the step's own length and heading say nothing about where the walker already is: the position rows
+        # get no gain (issue #26: through the consider states' cross terms, rescaled by set_consider_sd at
+        # every step, each turn moved the dead-reckoned position sideways, 166-174 m over a 3-minute outage)
+        ok, nis = self._update(innov, H, R, math.inf, frozen=(E, N))
         # eq. 13: the position moves by the step
         F = self.transition_jacobian(self.x[L], self.x[PSI])
         self.x = self.transition(self.x)
