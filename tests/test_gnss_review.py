@@ -112,3 +112,85 @@ def test_stride_scale_comes_from_position_chords_not_a_doppler_speed_that_reads_
             tr.add_fix(int(k * 1e9), e + rng.normal(0, 1.5), n + rng.normal(0, 1.5), 5.0, 0.8 * v, heading)
     assert tr.stride_scale == pytest.approx(scale, rel=0.03)
     assert tr.n_stride_samples >= 5
+
+
+def test_the_coefficients_revert_keeps_the_covariance_positive_semidefinite():
+    """Bug 5a: the coefficient test's revert took ``np.maximum(Pc, keep)`` element by element, which can be
+    indefinite; the cover used now is PSD and at least as large as both (Loewner order)."""
+    from core.gnss.ekf import covariance_cover
+
+    Pc = np.array([[0.7, -0.1, 2.6], [-0.1, 2.8, -1.9], [2.6, -1.9, 10.9]])
+    keep = np.array([[0.3, -1.2, -0.6], [-1.2, 5.9, 3.4], [-0.6, 3.4, 5.0]])
+    assert np.linalg.eigvalsh(np.maximum(Pc, keep)).min() < -0.05  # what the revert did
+    M = covariance_cover(Pc, keep)
+    for other in (None, Pc, keep):
+        ev = np.linalg.eigvalsh(M if other is None else M - other)
+        assert ev.min() > -1e-9
+    np.testing.assert_allclose(covariance_cover(Pc, 0.5 * Pc), Pc, atol=1e-12)  # already covering: unchanged
+
+
+def test_the_coefficients_revert_in_the_filter_is_positive_semidefinite(monkeypatch):
+    """Bug 5a, in the filter: the revert's covariance of the coefficients covers both and stays PSD."""
+    from core.gnss.kubrak import COEF, KubrakFusion
+
+    f = KubrakFusion()
+    f.kf.initialize(0.0, 0.0, 3.0)
+    keep = np.array([[0.3, -1.2, -0.6], [-1.2, 5.9, 3.4], [-0.6, 3.4, 5.0]]) * 1e-3
+    Pc = np.array([[0.7, -0.1, 2.6], [-0.1, 2.8, -1.9], [2.6, -1.9, 10.9]]) * 1e-3
+    f.kf.P[COEF, COEF] = keep
+    f._revert_coefficients(f.kf.x[COEF].copy(), Pc, True)
+    assert np.linalg.eigvalsh(f.kf.P).min() > -1e-12
+
+
+def test_the_reset_variant_reports_the_innovation_before_the_reset():
+    """Bug 5b: Chen's ``filter="reset"`` computed its innovation after jumping to the fix: always 0."""
+    from core.gnss.fusion import GpsFusion
+
+    f = GpsFusion(filter="reset")
+    f.ekf.initialize(10.0, -4.0, 2.0, 0.7, 0.0)
+    res = f._update_position(0, 13.0, 0.0, 3.0, True)
+    assert res.innovation == pytest.approx((3.0, 4.0))
+    assert res.correction_m == pytest.approx(5.0)
+    assert (f.ekf.x[0], f.ekf.x[1]) == (13.0, 0.0)
+
+
+def test_fix_predictions_do_not_snap_back_to_the_last_step():
+    """Bug 5d: Kubrak's prediction of a fix more than 1.5 s after the last epoch fell back to that epoch
+    (Chen's after two step durations): the prediction must be continuous in the fix's time."""
+    from core.gnss.ekf import PdrEkf
+    from core.gnss.fusion import GpsFusion
+    from core.gnss.kubrak import KubrakFusion
+    from core.pdr.velocity import VelocityModel
+
+    k = KubrakFusion(velocity_model=VelocityModel(0.0, 0.7, 0.0))
+    k.run(_steps([0.5 * i for i in range(1, 11)]))
+    t_last = k.kf.t_ns
+    pred = [k.kf.fix_prediction(t_last + int(s * 1e9))[0][0] for s in np.arange(0.0, 4.0, 0.05)]
+    assert np.max(np.abs(np.diff(pred))) < 0.1  # 1.4 m/s * 0.05 s = 0.07 m at most
+    assert np.all(np.diff(pred) >= -1e-9)
+
+    c = GpsFusion()
+    c.run(_steps([0.5 * i for i in range(1, 11)]))
+    pred = [PdrEkf.fix_prediction(c.ekf.x, c._fraction(c._last_step_ns + int(s * 1e9)))[0]
+            for s in np.arange(0.0, 3.0, 0.05)]
+    assert np.max(np.abs(np.diff(pred))) < 0.1
+    assert np.all(np.diff(pred) >= -1e-9)
+
+
+def test_the_gps_course_is_compared_with_the_heading_of_its_time():
+    """Bug 5c: the GPS course lags our heading by about 1.5 s (the receiver's smoothing): through a turn the
+    course of a fix is the heading 1.5 s earlier, and as a measurement of the last step's heading it gets
+    the turn since then added."""
+    from core.gnss.kubrak import KubrakFusion
+
+    def heading(t):  # a 90-degree turn over 3 s at t = 10 s
+        return float(np.clip((t - 10.0) / 3.0, 0.0, 1.0)) * math.pi / 2
+
+    f = KubrakFusion(course_latency_s=1.5)
+    for s in _steps([0.5 * i for i in range(1, 25)], heading_rad=heading):
+        f.add_step(s)
+    t = f._last_step_ns
+    c = f.course_now(t, heading(t * 1e-9 - 1.5))
+    assert c == pytest.approx(heading(t * 1e-9), abs=1e-9)
+    off = KubrakFusion(course_latency_s=0.0)
+    assert off.course_now(t, 0.3) == 0.3

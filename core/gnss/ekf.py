@@ -32,7 +32,7 @@ GPS (:meth:`PdrEkf.update_position`, :meth:`PdrEkf.update_course`)
     A fix at time ``t`` between step ``k`` (at ``t_k``) and the next is
     compared with the position after step ``k`` plus the part of the next
     step already walked, ``f = (t - t_k) / T`` of it (``T`` the last step's
-    duration, ``f`` clipped to [0, 1], 0 after a pause)::
+    duration, ``f`` clipped to [0, 1]: after a pause the walker stands one step on)::
 
         h(x) = [E + f l cos psi,  N + f l sin psi]
 
@@ -116,6 +116,15 @@ def kalman_update(x: np.ndarray, P: np.ndarray, innov: np.ndarray, H: np.ndarray
     ikh = np.eye(len(x)) - K @ H
     P = ikh @ P @ ikh.T + K @ R @ K.T
     return True, nis, x, 0.5 * (P + P.T)
+
+
+def covariance_cover(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """A positive semi-definite covariance at least as large as both ``a`` and ``b`` (Loewner order):
+    ``a + [b - a]_+``, the positive part of the difference added (``np.maximum`` element by element can be
+    indefinite; issue #26).  ``a`` and ``b`` must be symmetric PSD."""
+    w, v = np.linalg.eigh(0.5 * ((b - a) + (b - a).T))
+    out = a + (v * np.maximum(w, 0.0)) @ v.T
+    return 0.5 * (out + out.T)
 
 
 @dataclass(frozen=True)
