@@ -21,7 +21,10 @@ Per step (:meth:`PdrEkf.step`)
        lags by about 5 steps, ~3 m of track); not in the paper;
     2. the measurement update with the step's length from the stride model and
        its heading compensated by the unified error model (eq. 12), the
-       paper's "measurement vector";
+       paper's "measurement vector" -- of ``l`` and ``psi`` only: the position
+       rows get no gain (the step does not observe where the walker already
+       is; through the consider states' cross terms it moved the position
+       sideways at every turn of an outage);
     3. the position moves by eq. 13 with the updated ``l`` and ``psi``;
        ``F = d f / d x`` (a test checks it by finite differences).
 
@@ -29,7 +32,7 @@ GPS (:meth:`PdrEkf.update_position`, :meth:`PdrEkf.update_course`)
     A fix at time ``t`` between step ``k`` (at ``t_k``) and the next is
     compared with the position after step ``k`` plus the part of the next
     step already walked, ``f = (t - t_k) / T`` of it (``T`` the last step's
-    duration, ``f`` clipped to [0, 1], 0 after a pause)::
+    duration, ``f`` clipped to [0, 1]: after a pause the walker stands one step on)::
 
         h(x) = [E + f l cos psi,  N + f l sin psi]
 
@@ -113,6 +116,15 @@ def kalman_update(x: np.ndarray, P: np.ndarray, innov: np.ndarray, H: np.ndarray
     ikh = np.eye(len(x)) - K @ H
     P = ikh @ P @ ikh.T + K @ R @ K.T
     return True, nis, x, 0.5 * (P + P.T)
+
+
+def covariance_cover(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """A positive semi-definite covariance at least as large as both ``a`` and ``b`` (Loewner order):
+    ``a + [b - a]_+``, the positive part of the difference added (``np.maximum`` element by element can be
+    indefinite; issue #26).  ``a`` and ``b`` must be symmetric PSD."""
+    w, v = np.linalg.eigh(0.5 * ((b - a) + (b - a).T))
+    out = a + (v * np.maximum(w, 0.0)) @ v.T
+    return 0.5 * (out + out.T)
 
 
 @dataclass(frozen=True)
@@ -228,7 +240,10 @@ class PdrEkf:
         H[0, L], H[0, K] = 1.0, self.x[L]
         H[1, PSI], H[1, B] = 1.0, 1.0
         R = np.diag([self.length_sd_m ** 2, self.heading_sd_rad ** 2])
-        ok, nis = self._update(innov, H, R, math.inf)
+        # the step's own length and heading say nothing about where the walker already is: the position rows
+        # get no gain (issue #26: through the consider states' cross terms, rescaled by set_consider_sd at
+        # every step, each turn moved the dead-reckoned position sideways, 166-174 m over a 3-minute outage)
+        ok, nis = self._update(innov, H, R, math.inf, frozen=(E, N))
         # eq. 13: the position moves by the step
         F = self.transition_jacobian(self.x[L], self.x[PSI])
         self.x = self.transition(self.x)

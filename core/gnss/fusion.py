@@ -175,11 +175,12 @@ class GpsFusion(FixFusion):
         return float(self.ekf.x[2]), float(self.ekf.x[3])
 
     def _fraction(self, t_ns: int) -> float:
-        """The part of the next step already walked at a fix's time (0 after a pause)."""
-        if self._last_step_ns is None:
+        """The part of the next step already walked at a fix's time: at most the whole step (a pause: the walker
+        stands there; before issue #26 the prediction snapped back to the last step after two durations)."""
+        if self._last_step_ns is None or not self._last_step_dur_ns:
             return 0.0
         since = t_ns - self._last_step_ns
-        return min(since / self._last_step_dur_ns, 1.0) if 0 <= since <= 2 * self._last_step_dur_ns else 0.0
+        return min(since / self._last_step_dur_ns, 1.0) if since > 0 else 0.0
 
     def _predict_fix(self, t_ns: int):
         return PdrEkf.fix_prediction(self.ekf.x, self._fraction(t_ns))
@@ -188,15 +189,15 @@ class GpsFusion(FixFusion):
         ekf = self.ekf
         if self.filter == "reset":
             before = self.ekf.position_sigma_m()
-            moved = math.hypot(east - ekf.x[0], north - ekf.x[1])
+            innov = (float(east - ekf.x[0]), float(north - ekf.x[1]))  # before the reset (issue #26: it was after)
             ekf.reset_position(east, north, sigma_m)
-            return UpdateResult(True, (east - ekf.x[0], north - ekf.x[1]), math.nan, moved, before)
+            return UpdateResult(True, innov, math.nan, math.hypot(*innov), before)
         return ekf.update_position(east, north, sigma_m, self._fraction(t_ns), gate=gate)
 
     def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
         if self.filter == "ekf" and self.origin_lat_lon is not None and self.use_course and \
                 speed >= self.course_min_speed_m_s and math.isfinite(course) and self.anchor[0] != t_ns:
-            self.ekf.update_course(heading_from_bearing_deg(course), self.course_sd_rad)
+            self.ekf.update_course(self.course_now(t_ns, heading_from_bearing_deg(course)), self.course_sd_rad)
         c_rad = heading_from_bearing_deg(course) if math.isfinite(course) else math.nan
         self.trainer.add_fix(t_ns, east, north, hacc, speed, c_rad)
 

@@ -69,7 +69,7 @@ import numpy as np
 
 from core.conventions import heading_from_bearing_deg, wrap_angle
 from core.gnss.base import FixFusion
-from core.gnss.ekf import CHI2_999, UpdateResult, kalman_update, sigma_max_m
+from core.gnss.ekf import CHI2_999, UpdateResult, covariance_cover, kalman_update, sigma_max_m
 from core.pdr.velocity import VelocityModel, step_regressors
 
 #: state indices
@@ -220,11 +220,12 @@ class KubrakKf:
         if self.t_ns is None or not np.all(np.isfinite(self.reg)):
             return 0.0
         since = (t_ns - self.t_ns) * 1e-9
-        return since if 0.0 <= since <= max_s else 0.0
+        return min(since, max_s) if since > 0.0 else 0.0
 
     def fix_prediction(self, t_ns: int, max_s: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
-        """``h(x)`` of a position fix at ``t_ns`` and its Jacobian: the last epoch moved on to the fix, plus
-        the fix's correlated error (the bias states)."""
+        """``h(x)`` of a position fix at ``t_ns`` and its Jacobian: the last epoch moved on to the fix (by at most
+        ``max_s`` of walking: a longer gap is a pause, and the walker stands there rather than snapping back
+        to the last epoch as before issue #26), plus the fix's correlated error (the bias states)."""
         tau = self._since_s(t_ns, max_s)
         if tau == 0.0:
             H = np.zeros((2, NX))
@@ -431,13 +432,13 @@ class KubrakFusion(FixFusion):
         frozen = () if self.aligned else (DV, DPSI, A, B, C)
         return self.kf.update_position(t_ns, east, north, sigma_m, gate=gate, frozen=frozen)
 
-    def _try_align(self, speed: float, course: float) -> None:
+    def _try_align(self, speed: float, course: float) -> None:  # course: rad, CCW from East, as of now
         """Coarse alignment from the GPS course of a walking receiver: the phone's yaw offset (a pocket, a bag,
         the back of an upright phone) may be anything, far beyond what the EKF's linearisation can learn."""
         kf = self.kf
         if not (math.isfinite(course) and speed >= self.align_min_speed_m_s and math.isfinite(kf.psi_pdr)):
             return
-        self._align.append(wrap_angle(heading_from_bearing_deg(course) - kf.psi_pdr))
+        self._align.append(wrap_angle(course - kf.psi_pdr))
         if len(self._align) < self.align_fixes:
             return
         a = np.array(self._align[-2 * self.align_fixes:])
@@ -464,11 +465,12 @@ class KubrakFusion(FixFusion):
     def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
         kf = self.kf
         if not self.aligned:
-            self._try_align(speed, course)
+            self._try_align(speed, self.course_now(t_ns, heading_from_bearing_deg(course)) if math.isfinite(course)
+                            else math.nan)
             return
         if self.use_velocity and math.isfinite(speed) and self.anchor is not None and self.anchor[0] != t_ns:
-            c = heading_from_bearing_deg(course) if speed >= self.velocity_min_speed_m_s and math.isfinite(course) \
-                else math.nan
+            c = self.course_now(t_ns, heading_from_bearing_deg(course)) \
+                if speed >= self.velocity_min_speed_m_s and math.isfinite(course) else math.nan
             res = kf.update_velocity(speed, c, self.velocity_sd_m_s)
             if res.accepted:
                 self.n_velocity_used += 1
@@ -531,11 +533,7 @@ class KubrakFusion(FixFusion):
         else:
             m = kf.model
             coef, Pc = m.coefficients, np.diag(np.square(m.sd))
-        kf.x[COEF] = coef
-        keep = kf.P[COEF, COEF].copy()
-        kf.P[COEF, :] = 0.0
-        kf.P[:, COEF] = 0.0
-        kf.P[COEF, COEF] = np.maximum(Pc, keep) if before else Pc
+        self._revert_coefficients(coef, Pc, bool(before))
         self.n_variability += 1
         self._last_verdict = (f"GPS unreliable: the velocity model's coefficients changed the walker's speed by "
                               f"{dv:+.2f} m/s in {self.variability_window_ns * 1e-9:.0f} s")
@@ -548,6 +546,16 @@ class KubrakFusion(FixFusion):
         self._shadow_hist.clear()
         self._record_coef(self._shadow_hist, t_ns, self.shadow)
 
+    def _revert_coefficients(self, coef: np.ndarray, Pc: np.ndarray, cover: bool) -> None:
+        """The coefficients set to ``coef`` with covariance ``Pc`` (``cover``: at least the current one too, in
+        the PSD sense), uncorrelated with the other states, as a new start of them."""
+        kf = self.kf
+        kf.x[COEF] = coef
+        keep = kf.P[COEF, COEF].copy()
+        kf.P[COEF, :] = 0.0
+        kf.P[:, COEF] = 0.0
+        kf.P[COEF, COEF] = covariance_cover(Pc, keep) if cover else Pc
+
     def _filter_rejected(self, t_ns: int, east: float, north: float, sigma_m: float, speed: float,
                          course: float) -> None:
         """While GPS is unreliable the shadow filter takes the fixes; if its coefficients vary too, the hold goes on."""
@@ -558,8 +566,8 @@ class KubrakFusion(FixFusion):
             self.unreliable_until_ns = max(self.unreliable_until_ns, t_ns + self.unreliable_hold_ns // 2)
             return
         if self.use_velocity and math.isfinite(speed):
-            c = heading_from_bearing_deg(course) if speed >= self.velocity_min_speed_m_s and math.isfinite(course) \
-                else math.nan
+            c = self.course_now(t_ns, heading_from_bearing_deg(course)) \
+                if speed >= self.velocity_min_speed_m_s and math.isfinite(course) else math.nan
             sh.update_velocity(speed, c, self.velocity_sd_m_s)
         self._record_coef(self._shadow_hist, t_ns, sh)
         ref = self._reference_regressors()

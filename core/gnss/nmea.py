@@ -20,6 +20,10 @@ is an abstract class, which pyjnius cannot implement).
 * ``GGA`` or ``RMC`` closes an epoch: :meth:`NmeaSatelliteStatus.update`
   returns ``(n_used, cn0_4th_dbhz)`` -- the values of the ``gnss_status``
   stream (:data:`core.conventions.GNSS_STATUS`) -- and starts the next epoch.
+  Most receivers send both: only a closer after new GSV/GSA sentences closes
+  one (the other would report an empty epoch, 0 satellites, and the C/N0
+  rule would reject every fix: issue #26).  Without a GSA in the epoch the
+  satellites in use are unknown (nan), not 0.
 
 Sentences with a bad checksum, unknown talkers or garbage are counted in
 :attr:`NmeaSatelliteStatus.n_bad` and otherwise ignored: the parser never
@@ -67,6 +71,8 @@ class NmeaSatelliteStatus:
     def reset(self) -> None:
         self._snr: dict[tuple[int, int], float] = {}  # (system, prn) -> SNR dB-Hz, this epoch
         self._used: set[tuple[int, int]] = set()
+        self._fresh = False  # a GSV or GSA since the last closed epoch
+        self._gsa_seen = False
         self.n_bad = 0
         self.n_epochs = 0
         self.last: tuple[float, float] | None = None
@@ -86,7 +92,7 @@ class NmeaSatelliteStatus:
             self._gsv(TALKERS.get(talker), fields)
         elif kind == "GSA":
             self._gsa(talker, fields)
-        elif kind in ("GGA", "RMC"):
+        elif kind in ("GGA", "RMC") and self._fresh:
             return self._close()
         return None
 
@@ -94,6 +100,7 @@ class NmeaSatelliteStatus:
         if system is None:
             self.n_bad += 1
             return
+        self._fresh = True
         # $xxGSV,total,msg,in_view,[prn,elev,azim,snr]x1..4[,signal_id]
         for k in range(4, len(f) - 3, 4):
             prn, snr = _int(f[k]), f[k + 3]
@@ -115,6 +122,7 @@ class NmeaSatelliteStatus:
         if system is None:
             self.n_bad += 1
             return
+        self._fresh = self._gsa_seen = True
         for v in f[3:15]:
             prn = _int(v)
             if prn is not None and prn > 0:
@@ -122,10 +130,11 @@ class NmeaSatelliteStatus:
 
     def _close(self) -> tuple[float, float]:
         snrs = sorted((self._snr[k] for k in self._used if k in self._snr), reverse=True)
-        n_used = float(len(self._used))
+        n_used = float(len(self._used)) if self._gsa_seen else math.nan
         out = (n_used, snrs[3] if len(snrs) >= 4 else math.nan)
         self._snr.clear()
         self._used.clear()
+        self._fresh = self._gsa_seen = False
         self.n_epochs += 1
         self.last = out
         return out

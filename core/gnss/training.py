@@ -21,13 +21,14 @@ A training window
       below ``max_speed_cv``.
 
 What a window gives
-    *Stride*: ``scale = GPS distance / model distance``, where the GPS
-    distance is the integral of the receivers' Doppler speed where it is
-    reported (far steadier than differences of 5-metre positions) and the
-    chord between the first and last fix otherwise (straight walking, so the
-    chord is the path; at least ``min_chord_m``), and the model distance is
-    the sum of the stride model's step lengths over the same time span (a
-    step counts with the part of its interval inside the window).
+    *Stride*: ``scale = GPS distance / model distance`` over a straight
+    *stretch* of consecutive usable windows, the GPS distance being the chord
+    between the stretch's end fixes once it reaches ``stride_chord_m`` (the
+    walk is straight, so the chord is the path), and the model distance the
+    sum of the stride model's step lengths over the same time span (a step
+    counts with the part of its interval inside a window).  Not the
+    receivers' Doppler speed: steadier, but on the iOS walks it reads 15-25 %
+    low against the chords (issue #26).
 
     *Heading*: ``delta = course - mean(our heading)`` for eq. 12
     (:class:`core.gnss.heading_model.HeadingErrorModel`), the course being the
@@ -137,6 +138,11 @@ class OnlineTrainer:
         Relative uncertainty of the stride scale before training, and its floor after.
     learn_stride, learn_heading : bool
         What to learn (the benchmark switches them to isolate each part).
+    stride_chord_m : float
+        A stride sample is the chord of a straight stretch of consecutive windows once it reaches this
+        length (m), against the model distance over the stretch; its end fixes must report ``max_hacc_m``.
+    stretch_turn_rad : float
+        A window whose mean heading differs more from the stretch's first starts a new stretch (rad).
     heading_model : HeadingErrorModel or None
         The model to refine (a persisted one); a new one if None.
     """
@@ -151,7 +157,8 @@ class OnlineTrainer:
                  scale_gate: float = 0.3, min_samples: int = 3, noisy_window: int = 4, noisy_cv: float = 0.15,
                  forgetting: float = 0.98, prior_scale_sd: float = 0.08, min_scale_sd: float = 0.015,
                  learn_stride: bool = True, learn_heading: bool = True,
-                 heading_model: HeadingErrorModel | None = None):
+                 heading_model: HeadingErrorModel | None = None, stride_chord_m: float = 30.0,
+                 stretch_turn_rad: float = math.radians(10.0)):
         self.window_s = float(window_s)
         self.min_steps = int(min_steps)
         self.max_hacc_m = float(max_hacc_m)
@@ -177,6 +184,8 @@ class OnlineTrainer:
         self.min_scale_sd = float(min_scale_sd)
         self.learn_stride = bool(learn_stride)
         self.learn_heading = bool(learn_heading)
+        self.stride_chord_m = float(stride_chord_m)
+        self.stretch_turn_rad = float(stretch_turn_rad)
         self.heading_model = heading_model if heading_model is not None else HeadingErrorModel()
         self.reset()
 
@@ -184,6 +193,7 @@ class OnlineTrainer:
         self._steps: deque = deque()  # (t_ns, t_prev_ns, length_m, heading_rad)
         self._fixes: deque = deque()  # (t_ns, east, north, hacc, speed, course_rad)
         self._window_start_ns: int | None = None
+        self._stretch: dict | None = None  # the straight stretch the stride sample grows over
         self._w = self.scale_prior_weight_m
         self._ws = self.scale_prior * self.scale_prior_weight_m
         self._wss = 0.0  # weighted sum of squared deviations of the accepted samples
@@ -247,6 +257,7 @@ class OnlineTrainer:
         nan = math.nan
 
         def refuse(reason, heading=nan, dist=nan):
+            self._stretch = None  # a refused window ends a straight stretch
             return WindowFlags(t1, False, False, nan, nan, heading, dist, reason)
 
         hacc = np.array([f[3] for f in fx])
@@ -279,19 +290,15 @@ class OnlineTrainer:
                 return refuse(f"GPS speed {mean_sp:.2f} m/s is not walking", mean_h)
             if float(np.std(sp)) > self.max_speed_cv * mean_sp:
                 return refuse(f"unsteady speed (CV {np.std(sp) / mean_sp:.2f})", mean_h)
-            ts = np.array([f[0] for f in fx], dtype=float) * 1e-9
-            v = np.where(np.isfinite(speeds), speeds, mean_sp)
-            gps_d = float(np.sum(0.5 * (v[1:] + v[:-1]) * np.diff(ts)))
         else:
             if chord < self.min_chord_m:
                 return refuse(f"chord {chord:.1f} m < {self.min_chord_m:.0f} m", mean_h, chord)
-            gps_d = chord
             if not self.min_speed_m_s <= chord / dur <= self.max_speed_m_s:
                 return refuse(f"GPS speed {chord / dur:.2f} m/s is not walking", mean_h, chord)
         reasons = []
-        # -- stride
+        # -- stride: the chord of a long straight stretch of such windows against the model distance over it
         used_s = False
-        scale = gps_d / model_d if model_d > 0 else nan
+        scale, gps_d = self._stretch_sample(fx, mean_h, model_d)
         if self.learn_stride and math.isfinite(scale):
             self._recent.append(scale)
             rec = np.array(self._recent)
@@ -340,6 +347,31 @@ class OnlineTrainer:
                 else:
                     reasons.append(f"heading sample rejected: {fl.reason}")
         return WindowFlags(t1, used_s, used_h, scale, dev, mean_h, gps_d, "; ".join(reasons), res_h)
+
+    def _stretch_sample(self, fx, mean_h: float, model_d: float) -> tuple[float, float]:
+        """Add a straight window to the current stretch; ``(scale, chord_m)`` once the stretch's chord reaches
+        ``stride_chord_m`` (then a new stretch starts at its end), else ``(nan, nan)``.
+
+        The chord between the stretch's end fixes, not the Doppler speed: on the iOS walks the speed reads
+        15-25 % low (issue #26), and over 30 m or more the fixes' own errors are a few per cent of the chord.
+        A window continues the stretch if it starts at the stretch's last fix and its mean heading is within
+        ``stretch_turn_rad`` of the stretch's first window.
+        """
+        nan = math.nan
+        st = self._stretch
+        first, last = fx[0], fx[-1]
+        if st is None or st["t_end"] != first[0] or abs(wrap_angle(mean_h - st["heading"])) > self.stretch_turn_rad:
+            st = self._stretch = {"start": first, "t_end": first[0], "heading": mean_h, "model_m": 0.0}
+        st["t_end"] = last[0]
+        st["model_m"] += model_d
+        a = st["start"]
+        chord = math.hypot(last[1] - a[1], last[2] - a[2])
+        if chord < self.stride_chord_m or st["model_m"] <= 0:
+            return nan, nan
+        good = a[3] <= self.max_hacc_m and last[3] <= self.max_hacc_m
+        scale = chord / st["model_m"]
+        self._stretch = {"start": last, "t_end": last[0], "heading": mean_h, "model_m": 0.0}
+        return (scale, chord) if good else (nan, nan)
 
     def counters(self) -> dict:
         return {"windows": len(self.windows), "stride_samples": self.n_stride_samples,
