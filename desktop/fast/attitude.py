@@ -298,7 +298,7 @@ def inject(q, b, P, dx, Pn, keep_yaw, max_bias):
     sk[2, 0], sk[2, 1] = -dx[1], dx[0]
     for i in range(3):
         for j in range(3):
-            G[i, j] -= 0.5 * sk[i, j]
+            G[i, j] += 0.5 * sk[i, j]  # I + [dtheta / 2]x (navigation-frame error)
     if keep_yaw:
         G[2, 0] = 0.0
         G[2, 1] = 0.0
