@@ -69,6 +69,7 @@ import numpy as np
 
 from core import __version__
 from core.conventions import ACC, GNSS_STATUS, GPS, GYRO, MAG, ROTVEC, STANDARD_GRAVITY_M_S2
+from core.validation import gap_free_rate_hz, validate_recording
 
 MAGIC = "# pdr-recording"
 FORMAT_NAME = "pdr-recording"
@@ -465,8 +466,10 @@ class Stream:
 
     @property
     def rate_hz(self) -> float:
-        """Mean event rate (events per second), 0 for fewer than two events."""
-        return (len(self) - 1) / self.duration_s if self.duration_s > 0 else 0.0
+        """Event rate (events per second) over the stream without its gaps
+        (:func:`core.validation.gap_free_rate_hz`: a 10-hour pause in a 100 Hz walk is 100 Hz, not 0.4),
+        0 for fewer than two events."""
+        return gap_free_rate_hz(self.t_ns) if self.duration_s > 0 else 0.0
 
     def interval_stats_s(self, block: int = 64) -> dict:
         """Median interval, its jitter (std), gaps, and changes of the sampling rate.
@@ -532,6 +535,8 @@ class Recording:
     repairs: list[str] = field(default_factory=list)
     #: Where the recording came from (path or description), for messages.
     source: str = ""
+    #: What was wrong with its streams (:class:`core.validation.Finding`, found by the reader).
+    problems: list = field(default_factory=list)
 
     def has(self, name: str) -> bool:
         return name in self.streams and len(self.streams[name]) > 0
@@ -599,7 +604,8 @@ class Recording:
         for name, s in self.streams.items():
             m = (s.t_ns >= t_start_ns) & (s.t_ns < t_end_ns)
             streams[name] = Stream(name, s.t_ns[m], s.values[m], s.columns, s.unit, s.note)
-        return Recording(streams, dict(self.device), dict(self.metadata), list(self.repairs), self.source)
+        return Recording(streams, dict(self.device), dict(self.metadata), list(self.repairs), self.source,
+                         list(self.problems))
 
     def header(self) -> dict:
         return {
@@ -705,19 +711,47 @@ def convert_units(name: str, unit: str, values: np.ndarray, source: str, repairs
     return values, canonical
 
 
-def check_values_against_units(stream: Stream, source: str) -> None:
+#: a gyroscope stuck at its range (saturated) plateaus at a value of at most this per axis (rad/s; phone ranges
+#: are 2000 deg/s = 34.9 rad/s and 4000 deg/s = 69.8 rad/s)
+GYRO_MAX_RANGE_RAD_S = 70.0
+
+
+def gyro_saturated(v: np.ndarray, threshold: float = GYRO_P99_MAX_RAD_S) -> bool:
+    """True when the fast samples of a gyroscope (``|w|`` over ``threshold``) are mostly an axis stuck at its
+    largest value (a plateau: saturation), not a scale (deg/s declared as rad/s reach their maximum once).
+
+    An axis is at its plateau where ``|w|`` is within 1e-6 of the axis' largest ``|w|``, that value is
+    reached by three samples or more and is at most :data:`GYRO_MAX_RANGE_RAD_S`."""
+    a = np.abs(v[np.all(np.isfinite(v), axis=1)])
+    if not len(a):
+        return False
+    top = a.max(axis=0)
+    at = a >= top * (1 - 1e-6)
+    plateau = at & ((at.sum(axis=0) >= 3) & (top <= GYRO_MAX_RANGE_RAD_S) & (top > 0))
+    fast = np.linalg.norm(a, axis=1) > threshold
+    return bool(fast.any()) and float(np.mean(plateau[fast].any(axis=1))) >= 0.5
+
+
+def check_values_against_units(stream: Stream, source: str, declared: str = "") -> None:
     """A :class:`RecordingError` when a stream's values do not fit its unit (says which unit they look like).
+
+    ``stream`` holds the values converted to the unit of :mod:`core`; ``declared`` is the unit the file
+    declared (converted from), so that both ways are checked: data in another unit under the core unit, and
+    data already in the core unit under a unit that was converted (an accelerometer declared in g whose
+    values are m/s^2 would walk 9.8 times too hard; a magnetometer declared in nT whose values are uT).
 
     Only for streams of at least :data:`MIN_EVENTS_FOR_UNIT_CHECK` events, and
     only when the values clearly fit another unit: ``acc`` whose median |a|
     while still-ish is about 1 (g) or above 300 (cm/s^2 or mg), ``gyro``
-    whose 99th percentile |w| is above :data:`GYRO_P99_MAX_RAD_S` (deg/s),
-    ``mag`` whose median |B| is above 2000 (nT) or below 1.5 but not 0
+    whose 99th percentile |w| is above :data:`GYRO_P99_MAX_RAD_S` (deg/s) unless
+    the fast samples are a plateau (a saturated gyroscope, :func:`gyro_saturated`: the degraded modes
+    report it), ``mag`` whose median |B| is above 2000 (nT) or below 1.5 but not 0
     (gauss or mT).  A dead sensor (all zeros) is not a unit problem.
     """
     kind = stream.name.partition("@")[0]
     if len(stream) < MIN_EVENTS_FOR_UNIT_CHECK or kind not in (ACC, GYRO, MAG):
         return
+    factor = UNITS[kind].get(declared, 1.0) if declared else 1.0
     v = stream.values
     with np.errstate(all="ignore"):
         if kind == ACC:
@@ -726,6 +760,13 @@ def check_values_against_units(stream: Stream, source: str) -> None:
                 return
             norm = np.linalg.norm(v, axis=1)
             low = float(np.nanpercentile(norm, 10))
+            if factor != 1.0:
+                if acc_unit_guess(m, low) != "m/s^2" and acc_unit_guess(m / factor, low / factor) == "m/s^2":
+                    raise RecordingError(f"stream '{stream.name}' is declared in {declared} but its magnitude while "
+                                         f"still-ish is {m / factor:.3g} {declared}, not about 1: the values look "
+                                         f"like m/s^2 already; declare \"unit\": \"m/s^2\" (converting them would "
+                                         f"make every acceleration {factor:.4g} times too large)", source)
+                return
             if acc_unit_guess(m, low) == "g":
                 raise RecordingError(f"stream '{stream.name}' is declared in m/s^2 but its magnitude while "
                                      f"still-ish is {m:.3g}, about 1: it looks like g; declare \"unit\": \"g\" "
@@ -737,15 +778,23 @@ def check_values_against_units(stream: Stream, source: str) -> None:
         elif kind == GYRO:
             norm = np.linalg.norm(v, axis=1)
             norm = norm[np.isfinite(norm)]
-            if len(norm) and (p99 := float(np.percentile(norm, 99))) > GYRO_P99_MAX_RAD_S:
-                raise RecordingError(f"stream '{stream.name}' is declared in rad/s but 1 % of its samples turn "
-                                     f"faster than {p99:.4g} rad/s (over {GYRO_P99_MAX_RAD_S:g}, the range of phone "
-                                     "gyroscopes; a walking phone shows 50-300 deg/s): it looks like deg/s; "
-                                     "declare \"unit\": \"deg/s\"", source)
+            if len(norm) and (p99 := float(np.percentile(norm, 99))) > GYRO_P99_MAX_RAD_S and not gyro_saturated(v):
+                raise RecordingError(f"stream '{stream.name}' is declared in {declared or 'rad/s'} but 1 % of its "
+                                     f"samples turn faster than {p99:.4g} rad/s (over {GYRO_P99_MAX_RAD_S:g}, the "
+                                     "range of phone gyroscopes; a walking phone shows 50-300 deg/s): it looks like "
+                                     "deg/s; declare \"unit\": \"deg/s\"", source)
         else:
             norm = np.linalg.norm(v, axis=1)
             norm = norm[np.isfinite(norm)]
             med = float(np.median(norm)) if len(norm) else 0.0
+            if factor != 1.0 and (med > 2000.0 or 0.0 < med < 1.5):
+                raw = med / factor
+                fits = [u for u, f in UNITS[MAG].items() if 15.0 <= raw * f <= 200.0 and u in ("uT", "nT", "mT", "G")]
+                like = " or ".join(fits) if fits else "no unit of a magnetometer"
+                raise RecordingError(f"stream '{stream.name}' is declared in {declared} but its median |B| is "
+                                     f"{raw:.4g} {declared} = {med:.4g} uT (the Earth's field is 25-65 uT): the "
+                                     f"values look like {like}"
+                                     + (f"; declare \"unit\": \"{fits[0]}\"" if fits else ""), source)
             if med > 2000.0:
                 raise RecordingError(f"stream '{stream.name}' is declared in uT but its median |B| is {med:.4g} "
                                      "(the Earth's field is 25-65 uT): it looks like nT; declare \"unit\": \"nT\"",
@@ -848,7 +897,9 @@ def repair_timestamps(stream: Stream) -> tuple[Stream, int, int]:
 
 
 def repair_recording(rec: Recording, warn: bool = True) -> Recording:
-    """Repair every stream of ``rec`` in place (see :func:`repair_timestamps`) and record what was done."""
+    """Repair every stream of ``rec`` in place (see :func:`repair_timestamps`) and record what was done, then
+    validate the streams against each other (:func:`core.validation.validate_recording`): the last step of
+    every reader."""
     for name in list(rec.streams):
         fixed, n_back, n_dup = repair_timestamps(rec.streams[name])
         if n_back or n_dup:
@@ -860,7 +911,7 @@ def repair_recording(rec: Recording, warn: bool = True) -> Recording:
             rec.repairs.append(msg)
             if warn:
                 warnings.warn(msg, TimestampRepairWarning, stacklevel=3)
-    return rec
+    return validate_recording(rec, warn=warn)
 
 
 # ---------------------------------------------------------------------------
@@ -917,7 +968,7 @@ def write_recording(path: str, rec: Recording) -> None:
 
 
 class RecordingWriter:
-    """Append-only writer for live sessions: header first, then each event as it arrives.
+    """Append-only writer for live sessions: each event as it arrives, the header with the first events.
 
     Each :meth:`add` appends one line; :meth:`flush` (called by the app at
     least once a second) pushes buffered lines to the OS, so a crash loses at
@@ -926,6 +977,12 @@ class RecordingWriter:
     (see :func:`read_recording` ``allow_truncated_tail``).  A header the
     reader would refuse is a :class:`RecordingError` before the file is made
     (see :func:`header_line`).
+
+    Never a header-only file: the file appears at the first :meth:`flush` that
+    has events (written as ``path + ".part"``, synced, then renamed), so a
+    writer killed before its first events leaves no file rather than one the
+    reader refuses ("the file has a header but no sensor events");
+    :meth:`close` without any event writes nothing.
     """
 
     def __init__(self, path: str, streams: dict[str, dict] | None = None, device=None, metadata=None):
@@ -937,23 +994,42 @@ class RecordingWriter:
                                    s.get("note", "")) for n, s in specs.items()},
                         device=_copy(device), metadata=_copy(metadata))
         head = header_line(rec, self.path)  # a header the reader would refuse: nothing is written
-        self._f = open(self.path, "w", encoding="utf-8", newline="")
-        self._f.write(f"{MAGIC} {FORMAT_VERSION}\n")
-        self._f.write(head)
-        self._f.flush()
+        self._head = f"{MAGIC} {FORMAT_VERSION}\n" + head
+        self._pending: list[str] = []  # the first events, until the file is made
+        self._f = None
+        self._closed = False
         self.count = 0
 
     def add(self, name: str, t_ns: int, values: Iterable[float]) -> None:
-        self._f.write(format_row(name, t_ns, values))
+        row = format_row(name, t_ns, values)
+        if self._f is None:
+            self._pending.append(row)
+        else:
+            self._f.write(row)
         self.count += 1
 
     def flush(self) -> None:
+        if self._f is None:
+            if not self._pending:
+                return
+            part = self.path + ".part"
+            with open(part, "w", encoding="utf-8", newline="") as f:
+                f.write(self._head + "".join(self._pending))
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(part, self.path)  # the recording appears with its header and first events
+            self._pending = []
+            self._f = open(self.path, "a", encoding="utf-8", newline="")
+            return
         self._f.flush()
         os.fsync(self._f.fileno())
 
     def close(self) -> None:
-        if not self._f.closed:
-            self.flush()
+        if self._closed:
+            return
+        self.flush()
+        self._closed = True
+        if self._f is not None:
             self._f.close()
 
     def __enter__(self):
@@ -1184,7 +1260,7 @@ def _parse_events(it, text, source, allow_truncated_tail, warn, check_units, che
             if d is not None and len(parts) == d[3]:
                 try:
                     t = int(parts[1])
-                    if _INT64_MIN <= t <= _INT64_MAX:
+                    if 0 <= t <= _INT64_MAX:
                         d[1].extend(map(float, parts[2:]))
                         d[0].append(t)
                         d[2].append(i)
@@ -1229,11 +1305,13 @@ def _parse_events(it, text, source, allow_truncated_tail, warn, check_units, che
         skip_bad_lines(bad, n_events, source, repairs)
     n_damage = len(repairs)
     streams = {}
+    declared = {}
     for name, spec in specs.items():
         ts, vs, _, _, k = data[name]
         cols = tuple(spec["columns"])
         vals = np.frombuffer(vs, dtype=np.float64).reshape(len(ts), k)
         unit, note = str(spec.get("unit") or ""), str(spec.get("note") or "")
+        declared[name] = unit
         vals, unit = convert_units(name, unit, vals, source, repairs)
         if name == GPS and cols == GPS_COLUMNS_V1:  # a file from before speed/course: same meaning, two nan columns
             vals, cols = _pad_gps(vals, cols)
@@ -1241,7 +1319,8 @@ def _parse_events(it, text, source, allow_truncated_tail, warn, check_units, che
         streams[name] = Stream(name, np.frombuffer(ts, dtype=np.int64), vals, cols, unit, note)
     if not any(len(s) for s in streams.values()):
         if not allow_empty:
-            raise RecordingError("the file has a header but no sensor events", source)
+            raise RecordingError("the file has a header but no sensor events: an empty recording (stopped before "
+                                 "its first events were written), nothing to replay", source)
         repairs.append(f"{source}: the file has a header but no sensor events (a recording stopped before its "
                        "first events were written)")
     if check_time:
@@ -1249,7 +1328,7 @@ def _parse_events(it, text, source, allow_truncated_tail, warn, check_units, che
             check_time_base(name, s.t_ns, source, data[name][2])
     if check_units:
         for s in streams.values():
-            check_values_against_units(s, source)
+            check_values_against_units(s, source, declared.get(s.name, ""))
     rec = Recording(streams, device=dict(header.get("device") or {}), metadata=dict(header.get("metadata") or {}),
                     repairs=repairs, source=source)
     if warn:
@@ -1292,6 +1371,9 @@ def _parse_row(line: str, specs, ncols, source: str, lineno: int):
                              source, lineno) from None
     if not _INT64_MIN <= t <= _INT64_MAX:
         raise RecordingError(f"timestamp {parts[1][:40]} does not fit a 64-bit nanosecond count", source, lineno)
+    if t < 0:
+        raise RecordingError(f"timestamp {parts[1][:40]} is negative: t_ns counts nanoseconds on the sensor clock "
+                             "(from the phone's boot)", source, lineno)
     vals = []
     for col, p in zip(specs[name]["columns"], parts[2:]):
         try:

@@ -104,6 +104,10 @@ def place_site(args, rec: Recording, pipeline) -> tuple[dict | None, list]:
 GPS_MODES = ("auto", "off", "chen", "kubrak")
 
 
+#: the latest end of a --gps-outage (s after the start): 1e9 s, 31 years, keeps it a 64-bit nanosecond count
+MAX_OUTAGE_END_S = 1e9
+
+
 def _parse_outage(text: str):
     try:
         start, length = (float(v) for v in text.split(":"))
@@ -111,6 +115,9 @@ def _parse_outage(text: str):
         raise argparse.ArgumentTypeError(f"--gps-outage wants START_S:LENGTH_S (seconds), got {text!r}") from None
     if not (math.isfinite(start) and math.isfinite(length) and start >= 0 and length > 0):
         raise argparse.ArgumentTypeError(f"--gps-outage {text!r}: START_S >= 0 and LENGTH_S > 0 seconds")
+    if start + length > MAX_OUTAGE_END_S:  # the end must be a nanosecond count on the recording's clock
+        raise argparse.ArgumentTypeError(f"--gps-outage {text!r}: START_S + LENGTH_S must be at most "
+                                         f"{MAX_OUTAGE_END_S:.0e} s (a walk is hours, not centuries)")
     return start, length
 
 
@@ -302,7 +309,8 @@ def summary_lines(res, rec: Recording, gps_why: str = "", heading: bool = True) 
         f"distance      {dist:.1f} m",
     ]
     if not heading:  # what the recording cannot say is not made up: no position, no heading labels
-        return lines + [f"heading       {NO_HEADING}"] + [f"repaired      {r}" for r in rec.repairs]
+        return (lines + [f"heading       {NO_HEADING}"] + [f"repaired      {r}" for r in rec.repairs]
+                + problem_lines(rec))
     lines += [
         f"final pos     E {s['final_east_m']:+.1f} m, N {s['final_north_m']:+.1f} m (start at 0, 0)",
         f"start-to-end  {s['start_to_end_m']:.2f} m"
@@ -329,7 +337,41 @@ def summary_lines(res, rec: Recording, gps_why: str = "", heading: bool = True) 
         lines.append(f"degraded      {lab}")
     for r in rec.repairs:
         lines.append(f"repaired      {r}")
-    return lines
+    return lines + problem_lines(rec)
+
+
+def problem_lines(rec: Recording) -> list[str]:
+    """The stream problems found while reading (:mod:`core.validation`) that changed nothing (gaps, spikes):
+    those that did are among the ``repaired`` lines."""
+    return [f"stream        {f.text}" for f in getattr(rec, "problems", []) if f.action == "reported"]
+
+
+def problem_summary(rec: Recording) -> dict:
+    """The JSON summary's ``stream_problems`` ({problem: count}) and ``stream_findings`` (one per finding)."""
+    from core.validation import problem_counts
+
+    found = list(getattr(rec, "problems", []))
+    return {"stream_problems": problem_counts(found), "stream_findings": [f.as_dict() for f in found]}
+
+
+def foot_rate_problem(rec: Recording, device: str, window_s: float):
+    """A ``RATE_TOO_LOW`` finding when the foot IMU is too slow for the ZUPT stance detector (its window of
+    ``window_s`` needs :data:`FOOT_MIN_WINDOW_SAMPLES` samples), or None."""
+    from core.validation import low_rate_finding
+
+    need = FOOT_MIN_WINDOW_SAMPLES / window_s
+    for kind in ("gyro", "acc"):
+        name = kind + (f"@{device}" if device else "")
+        f = low_rate_finding(rec, name, need, f"the foot-mounted INS (its stance detector decides on a "
+                                              f"{window_s:g} s window, {FOOT_MIN_WINDOW_SAMPLES} samples or "
+                                              "more)")
+        if f is not None:
+            return f
+    return None
+
+
+#: fewest samples in the stance detector's window for the foot-mounted INS (at the default 0.1 s: 50 Hz)
+FOOT_MIN_WINDOW_SAMPLES = 5
 
 
 def carry_lines(carry: dict | None, t0_ns: int) -> list[str]:
@@ -499,6 +541,9 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     # the product's choice (as in the app): the TCKF with a waist magnetometer, else ZUPT only
     settings, waist = foot_settings_for(rec, aid=args.aid, detector=args.detector, waist_device=args.waist_device,
                                         gyro_delay_s=args.gyro_delay_ms * 1e-3)
+    slow = foot_rate_problem(rec, args.foot_device or "", settings.stance.window_s)
+    if slow is not None:
+        raise ValueError(slow.text)
     with _SlowNotice("running the foot-mounted INS", not args.no_progress, 0.0 if args.progress else 2.0):
         res = FootNavigator(settings, foot_device=args.foot_device or "", waist_device=waist).run(rec)
     s = res.summary()
@@ -524,6 +569,8 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     if fsum is not None:
         s["floors"] = fsum
         lines += flines
+    s.update(problem_summary(rec))
+    lines += problem_lines(rec)
     written = _write_outputs(args, outs, rec, track, None, {"floor": per_step} if per_step is not None else None,
                              title_extra="foot INS",
                              subtitle=truth_headline(errs), truth_kw=truth_plot(truth, errs, track, False))
@@ -869,7 +916,7 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
         plot_kw = {"walls": plan.walls, "start_en": track_start(track), "track_label": "map-matched"}
     coarse = acc_rate_hz(rec) < MIN_STEP_RATE_HZ
     errs = truth_errors(track, truth, dr_track=res.track) if truth and not coarse else {}
-    summary = {**res.summary(), "mode": "handheld", "mode_reason": why, "engine": engine}
+    summary = {**res.summary(), "mode": "handheld", "mode_reason": why, "engine": engine, **problem_summary(rec)}
     if coarse:  # no steps to count: say so instead of scoring 0 steps as -100 %
         summary["steps_measured"] = False
     if plan is not None:

@@ -290,12 +290,18 @@ _finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 @st.composite
 def _recordings(draw):
     streams = {}
+    lo, hi = 0, 2**63 - 1  # t_ns counts from the boot: never negative (round 3: a negative one is a bad line)
     for name, k in (("acc", 3), ("gyro", 3), ("gps", 6), ("pressure", 1)):
         if name != "acc" and not draw(st.booleans()):
             continue
-        ts = sorted(draw(st.lists(st.integers(-2**63, 2**63 - 1), min_size=1 if name == "acc" else 0, max_size=12,
+        ts = sorted(draw(st.lists(st.integers(lo, hi), min_size=1 if name == "acc" else 0, max_size=12,
                                   unique=True)))
+        if name == "acc":  # the other streams on the same clock as the IMU (core.validation checks it)
+            lo, hi = ts[0], ts[-1]
         vals = [[draw(_finite) for _ in range(k)] for _ in ts]
+        if name == "gps":  # possible fixes (core.validation drops impossible ones)
+            vals = [[draw(st.floats(-90, 90)), draw(st.floats(-180, 180)), v[2], abs(v[3]), v[4], v[5]]
+                    for v in vals]
         cols = [f"v{j}" for j in range(k)] if name == "pressure" else None
         streams[name] = make_stream(name, ts, np.array(vals, dtype=np.float64).reshape(len(ts), k), columns=cols,
                                     unit="hPa" if name == "pressure" else None)
@@ -479,10 +485,18 @@ def test_a_rate_change_is_not_thousands_of_gaps():
 
 
 def test_a_header_only_file_is_an_error_or_with_allow_empty_an_empty_recording(tmp_path):
-    from core.recording import RecordingWriter
+    from core.recording import FORMAT_VERSION, MAGIC, RecordingWriter, header_line
     p = tmp_path / "live.csv"
-    RecordingWriter(str(p), device={"model": "phone"}).close()  # as if killed before the first event
-    with pytest.raises(RecordingError, match="header but no sensor events"):
+    w = RecordingWriter(str(p), device={"model": "phone"})
+    w.flush()  # round 3: the writer holds the header until its first events: killed now, no file is left
+    assert not p.exists()
+    w.close()
+    assert not p.exists()
+    empty = Recording({n: make_stream(n, [], np.zeros((0, 6 if n == "gps" else 3))) for n in ("acc", "gyro", "mag",
+                                                                                             "gps")},
+                      device={"model": "phone"})
+    p.write_text(f"{MAGIC} {FORMAT_VERSION}\n" + header_line(empty, str(p)))  # another writer's header-only file
+    with pytest.raises(RecordingError, match="header but no sensor events: an empty recording"):
         read_recording(str(p))
     rec = read_recording(str(p), allow_empty=True, warn=False)
     assert set(rec.streams) == {"acc", "gyro", "mag", "gps"} and not any(len(s) for s in rec.streams.values())

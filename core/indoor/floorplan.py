@@ -75,7 +75,7 @@ from pathlib import Path
 import numpy as np
 
 from core.geodesy import enu_to_geodetic, geodetic_to_enu
-from core.indoor.geometry import WallGrid, points_in_polygon, ring_segments
+from core.indoor.geometry import WallGrid, points_in_polygon, ring_segments, segments_intersect
 from core.metrics import rotate
 
 FORMAT_VERSION = 1
@@ -126,6 +126,62 @@ def _ring(r) -> np.ndarray:
     return a
 
 
+class RingIndex:
+    """A closed ring ``(K, 2)`` for point-in-polygon queries (the even-odd rule of
+    :func:`~core.indoor.geometry.points_in_polygon`) in time proportional to the edges near the points.
+
+    Points outside the ring's bounding box are outside; the others are tested against the edges of their
+    horizontal band only (the band of height ``(y_max - y_min) / (K / per_band)`` the point's y falls in;
+    each edge is listed in every band its y range overlaps): a horizontal ray from a point can only cross
+    edges that straddle the point's y, and those all overlap its band.
+    """
+
+    def __init__(self, ring, per_band: int = 16):
+        r = np.asarray(ring, dtype=float).reshape(-1, 2)
+        self.ring = r
+        self.lo = r.min(axis=0)
+        self.hi = r.max(axis=0)
+        k = len(r)
+        self.bands = nb = max(1, k // per_band)
+        y0, y1 = r[:, 1], np.roll(r[:, 1], -1)
+        self.h = float(self.hi[1] - self.lo[1]) / nb or 1.0
+        b0 = np.clip(np.floor((np.minimum(y0, y1) - self.lo[1]) / self.h).astype(np.int64), 0, nb - 1)
+        b1 = np.clip(np.floor((np.maximum(y0, y1) - self.lo[1]) / self.h).astype(np.int64), 0, nb - 1)
+        spans = b1 - b0 + 1
+        edge = np.repeat(np.arange(k), spans)
+        band = np.repeat(b0, spans) + np.arange(int(spans.sum())) - np.repeat(np.cumsum(spans) - spans, spans)
+        order = np.argsort(band, kind="stable")
+        self._edges = edge[order]
+        self._start = np.concatenate([[0], np.cumsum(np.bincount(band, minlength=nb))])
+
+    def contains(self, xy) -> np.ndarray:
+        p = np.asarray(xy, dtype=float).reshape(-1, 2)
+        out = np.zeros(len(p), dtype=bool)
+        box = np.flatnonzero(np.all((p >= self.lo) & (p <= self.hi), axis=1))
+        if not len(box) or len(self.ring) < 3:
+            return out
+        if self.bands == 1:
+            out[box] = points_in_polygon(p[box], self.ring)
+            return out
+        q = p[box]
+        band = np.clip(np.floor((q[:, 1] - self.lo[1]) / self.h).astype(np.int64), 0, self.bands - 1)
+        counts = self._start[band + 1] - self._start[band]
+        pt = np.repeat(np.arange(len(q)), counts)
+        first = np.repeat(self._start[band], counts)
+        e = self._edges[first + np.arange(len(pt)) - np.repeat(np.cumsum(counts) - counts, counts)]
+        r = self.ring
+        x0, y0 = r[e, 0], r[e, 1]
+        nxt = (e + 1) % len(r)
+        x1, y1 = r[nxt, 0], r[nxt, 1]
+        px, py = q[pt, 0], q[pt, 1]
+        straddle = (y0 > py) != (y1 > py)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x_cross = x0 + (py - y0) * (x1 - x0) / (y1 - y0)
+        n = np.bincount(pt[straddle & (px < x_cross)], minlength=len(q))
+        out[box] = n % 2 == 1
+        return out
+
+
 @dataclass
 class FloorPlan:
     """Walkable area and walls of one floor, in plan metres (see the module docstring)."""
@@ -145,6 +201,7 @@ class FloorPlan:
             raise ValueError("wall lines must be finite")
         self._walls = None
         self._grids = {}
+        self._rings = {}
 
     @property
     def walls(self) -> np.ndarray:
@@ -169,20 +226,30 @@ class FloorPlan:
             self._grids[key] = WallGrid(self.walls, cell_m=key)
         return self._grids[key]
 
+    def _inside(self, p: np.ndarray, ring: np.ndarray) -> np.ndarray:
+        """Points of ``p`` inside ``ring`` (even-odd rule) through the ring's :class:`RingIndex` (cached)."""
+        key = id(ring)
+        if key not in self._rings:
+            self._rings[key] = RingIndex(ring)
+        return self._rings[key].contains(p)
+
     def is_walkable(self, xy) -> np.ndarray:
-        """Boolean ``(N,)``: inside a walkable polygon, outside its holes and every obstacle."""
+        """Boolean ``(N,)``: inside a walkable polygon, outside its holes and every obstacle.
+
+        Each ring answers through a :class:`RingIndex` (its bounding box, then the edges of one band), so a
+        query costs the edges near the points, not the plan's size."""
         p = np.asarray(xy, dtype=float).reshape(-1, 2)
         if not self.areas:
             ok = np.ones(len(p), dtype=bool)
         else:
             ok = np.zeros(len(p), dtype=bool)
             for outer, holes in self.areas:
-                inside = points_in_polygon(p, outer)
+                inside = self._inside(p, outer)
                 for h in holes:
-                    inside &= ~points_in_polygon(p, h)
+                    inside &= ~self._inside(p, h)
                 ok |= inside
         for r in self.obstacles:
-            ok &= ~points_in_polygon(p, r)
+            ok &= ~self._inside(p, r)
         return ok & np.all(np.isfinite(p), axis=1)
 
     def bounds(self) -> tuple[float, float, float, float]:
@@ -233,50 +300,190 @@ def _coords(doc) -> np.ndarray:
     return np.asarray(pts, dtype=float).reshape(-1, 2)
 
 
-def plan_from_geojson(doc: dict, *, name: str = "") -> FloorPlan:
-    """A :class:`FloorPlan` from a parsed GeoJSON document of our format (module docstring)."""
-    if doc.get("type") != "FeatureCollection":
-        raise ValueError("a floor plan is a GeoJSON FeatureCollection")
+class PlanFileError(ValueError):
+    """A floor-plan file that cannot be used; ``str()`` is one line naming the file and the feature."""
+
+
+#: a plan file larger than this (its text, after gzip) is refused before it is parsed (the largest real plan
+#: read here, a Microsoft mall floor, is about 1 MB of GeoJSON)
+MAX_PLAN_BYTES = 64 << 20
+#: a polygon ring or line with more vertices than this is refused (a corridor outline needs tens to hundreds;
+#: simplify the ring, e.g. to 0.05 m, in a GIS tool)
+MAX_RING_VERTICES = 100_000
+#: every vertex of a plan together
+MAX_PLAN_VERTICES = 500_000
+
+
+def _where(source, index=None) -> str:
+    at = f"{source}: " if source else ""
+    return at + (f"feature {index}: " if index is not None else "")
+
+
+def _coordinate_array(c, what: str, where: str, min_points: int) -> np.ndarray:
+    """``c`` as an ``(K, 2)`` float array of finite [x, y] pairs, or a :class:`PlanFileError`."""
+    if not isinstance(c, list) or not all(isinstance(p, list) and len(p) >= 2 for p in c):
+        raise PlanFileError(f"{where}{what} must be a list of [x, y] positions")
+    try:
+        a = np.asarray([p[:2] for p in c], dtype=float).reshape(-1, 2)
+    except (TypeError, ValueError):
+        raise PlanFileError(f"{where}{what} holds a position that is not two numbers") from None
+    if not np.all(np.isfinite(a)):
+        raise PlanFileError(f"{where}{what} holds a position that is not finite")
+    if len(a) < min_points:
+        raise PlanFileError(f"{where}{what} needs {min_points} or more positions, found {len(a)}")
+    return a
+
+
+def _features(doc, source, max_ring_vertices: int, max_vertices: int) -> list:
+    """The features of a plan document, checked: ``[(index, kind, polygons, lines)]`` with every ring and
+    line an ``(K, 2)`` array in the file's units; a :class:`PlanFileError` naming the file and the feature."""
+    feats = doc.get("features", [])
+    if not isinstance(feats, list):
+        raise PlanFileError(f"{_where(source)}'features' must be a list of features, found "
+                            f"{type(feats).__name__}")
+    out, total = [], 0
+    for i, f in enumerate(feats):
+        where = _where(source, i)
+        if not isinstance(f, dict):
+            raise PlanFileError(f"{where}a feature must be a JSON object, found {type(f).__name__}")
+        g = f.get("geometry") or {}
+        props = f.get("properties") or {}
+        if not isinstance(g, dict) or not isinstance(props, dict):
+            raise PlanFileError(f"{where}'geometry' and 'properties' must be JSON objects")
+        t = g.get("type")
+        coords = g.get("coordinates")
+        if t in ("Polygon", "MultiPolygon", "LineString", "MultiLineString") and not isinstance(coords, list):
+            raise PlanFileError(f"{where}a {t} needs a list of 'coordinates'")
+        polys, lines = [], []
+        if t == "Polygon" or t == "MultiPolygon":
+            for k, poly in enumerate([coords] if t == "Polygon" else coords):
+                if not isinstance(poly, list) or not poly:
+                    raise PlanFileError(f"{where}polygon {k} must be a non-empty list of rings")
+                polys.append([_coordinate_array(r, f"ring {j} of polygon {k}", where, 3) for j, r in enumerate(poly)])
+        elif t == "LineString" or t == "MultiLineString":
+            for k, line in enumerate([coords] if t == "LineString" else coords):
+                lines.append(_coordinate_array(line, f"line {k}", where, 2))
+        for a in [r for p in polys for r in p] + lines:
+            if len(a) > max_ring_vertices:
+                raise PlanFileError(f"{where}a ring or line of {len(a)} vertices, over the limit of "
+                                    f"{max_ring_vertices} (core.indoor.floorplan.MAX_RING_VERTICES): simplify it "
+                                    "(a corridor outline needs hundreds)")
+            total += len(a)
+        if total > max_vertices:
+            raise PlanFileError(f"{where}the plan has more than {max_vertices} vertices (the limit, "
+                                "core.indoor.floorplan.MAX_PLAN_VERTICES): simplify it or split it into floors")
+        kind = props.get("kind")
+        if kind is None:
+            kind = "walkable" if polys else "wall"
+        if kind not in KINDS:
+            raise PlanFileError(f"{where}unknown feature kind {str(kind)[:40]!r} (one of {', '.join(KINDS)})")
+        out.append((i, kind, polys, lines))
+    return out
+
+
+def ring_self_crossing(ring) -> tuple[int, int] | None:
+    """Two edges of a closed ring ``(K, 2)`` that cross or touch, other than neighbours at their shared vertex
+    (the ring is not a simple polygon: the even-odd rule then makes part of it outside), or None.
+
+    A sweep along x: edges sorted by their smallest x, each block of edges tested (CLRS 33.1,
+    :func:`~core.indoor.geometry.segments_intersect`) against the edges that start before the block's
+    largest x -- about K log K for a plan's rings, not K^2."""
+    seg = ring_segments(_ring(ring))
+    k = len(seg)
+    if k < 4:
+        return None
+    x_lo = np.minimum(seg[:, 0], seg[:, 2])
+    x_hi = np.maximum(seg[:, 0], seg[:, 2])
+    order = np.argsort(x_lo, kind="stable")
+    xs = x_lo[order]
+    block = 256
+    for a in range(0, k, block):
+        idx = order[a:a + block]
+        b = int(np.searchsorted(xs, x_hi[idx].max(), side="right"))
+        cand = order[a:b]
+        i = np.repeat(idx, len(cand))
+        j = np.tile(cand, len(idx))
+        gap = np.abs(i - j)
+        keep = (i < j) & (gap != 1) & (gap != k - 1)  # each pair once; neighbours share a vertex
+        i, j = i[keep], j[keep]
+        if not len(i):
+            continue
+        hit = segments_intersect(seg[i, :2], seg[i, 2:], seg[j, :2], seg[j, 2:])
+        if hit.any():
+            m = int(np.flatnonzero(hit)[0])
+            return int(i[m]), int(j[m])
+    return None
+
+
+def _check_simple(ring_plan: np.ndarray, what: str, where: str) -> None:
+    hit = ring_self_crossing(ring_plan)
+    if hit is not None:
+        e = ring_segments(_ring(ring_plan))[hit[0]]
+        raise PlanFileError(f"{where}{what} crosses itself (edges {hit[0]} and {hit[1]}, near "
+                            f"{e[0]:.2f}, {e[1]:.2f} m in the plan): a self-intersecting polygon is not a "
+                            "walkable area; split it into polygons that do not cross themselves")
+
+
+def plan_from_geojson(doc: dict, *, name: str = "", source: str | None = None,
+                      max_ring_vertices: int = MAX_RING_VERTICES, max_vertices: int = MAX_PLAN_VERTICES) -> FloorPlan:
+    """A :class:`FloorPlan` from a parsed GeoJSON document of our format (module docstring).
+
+    The document is checked first (:class:`PlanFileError`, one line naming ``source`` and the feature): its
+    structure, every position a pair of finite numbers, rings of 3 or more, at most ``max_ring_vertices`` in a
+    ring or line and ``max_vertices`` in all, and walkable and obstacle rings that do not cross themselves."""
+    if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
+        raise PlanFileError(f"{_where(source)}a floor plan is a GeoJSON FeatureCollection")
     head = doc.get("pdr_floorplan") or {}
+    if not isinstance(head, dict):
+        raise PlanFileError(f"{_where(source)}'pdr_floorplan' must be a JSON object")
     units = head.get("units", "deg")
     if units not in ("deg", "m"):
-        raise ValueError(f"pdr_floorplan.units must be 'deg' or 'm', not {units!r}")
+        raise PlanFileError(f"{_where(source)}pdr_floorplan.units must be 'deg' or 'm', not {str(units)[:20]!r}")
+    for key, n in (("origin_lat_lon", 2), ("scale", 2)):
+        v = head.get(key)
+        if v is not None and not (isinstance(v, list) and len(v) == n and all(
+                isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in v)):
+            raise PlanFileError(f"{_where(source)}pdr_floorplan.{key} must be {n} finite numbers")
+    rot = head.get("rotation_deg", 0.0)
+    if isinstance(rot, bool) or not isinstance(rot, (int, float)) or not math.isfinite(rot):
+        raise PlanFileError(f"{_where(source)}pdr_floorplan.rotation_deg must be a finite number")
+    feats = _features(doc, source, max_ring_vertices, max_vertices)
     if units == "deg":
         origin = head.get("origin_lat_lon")
         if origin is None:
-            c = _coords(doc)
-            if not len(c):
-                raise ValueError("a floor plan in degrees needs at least one coordinate")
+            pts = [r for _, _, polys, lines in feats for p in polys for r in p] + [a for f in feats for a in f[3]]
+            if not pts:
+                raise PlanFileError(f"{_where(source)}a floor plan in degrees needs at least one coordinate")
+            c = np.vstack(pts)
             lo, hi = c.min(axis=0), c.max(axis=0)
             origin = (0.5 * (lo[1] + hi[1]), 0.5 * (lo[0] + hi[0]))
         georef = Georeference(float(origin[0]), float(origin[1]))
 
-        def conv(c):
-            a = np.asarray(c, dtype=float)[:, :2]
+        def conv(a):
             e, n = geodetic_to_enu(a[:, 1], a[:, 0], georef.origin)
             return np.column_stack([e, n])
     else:
         origin = head.get("origin_lat_lon")
         scale = head.get("scale", (1.0, 1.0))
         georef = None if origin is None else Georeference(
-            float(origin[0]), float(origin[1]), math.radians(float(head.get("rotation_deg", 0.0))),
-            float(scale[0]), float(scale[1]))
+            float(origin[0]), float(origin[1]), math.radians(float(rot)), float(scale[0]), float(scale[1]))
 
-        def conv(c):
-            return np.asarray(c, dtype=float)[:, :2]
+        def conv(a):
+            return a
     areas, obstacles, walls = [], [], []
-    for f in doc.get("features", []):
-        g = f.get("geometry") or {}
-        kind = (f.get("properties") or {}).get("kind")
-        polys, lines = _polygons(g), _lines(g)
-        if kind is None:
-            kind = "walkable" if polys else "wall"
-        if kind not in KINDS:
-            raise ValueError(f"unknown feature kind {kind!r} (one of {', '.join(KINDS)})")
+    for i, kind, polys, lines in feats:
+        where = _where(source, i)
         if kind == "walkable":
-            areas += [(conv(p[0]), [conv(h) for h in p[1:]]) for p in polys]
+            for k, p in enumerate(polys):
+                rings = [conv(r) for r in p]
+                for j, r in enumerate(rings):
+                    _check_simple(r, f"walkable polygon {k}, ring {j},", where)
+                areas.append((rings[0], rings[1:]))
         elif kind == "obstacle":
-            obstacles += [conv(r) for p in polys for r in p[:1]]
+            for k, p in enumerate(polys):
+                r = conv(p[0])
+                _check_simple(r, f"obstacle polygon {k}", where)
+                obstacles.append(r)
         else:
             for line in lines:
                 a = conv(line)
@@ -288,11 +495,36 @@ def plan_from_geojson(doc: dict, *, name: str = "") -> FloorPlan:
                      name=str(head.get("name", name)), floor=str(head.get("floor", "")))
 
 
-def read_geojson(path) -> FloorPlan:
-    """Read a floor plan of our GeoJSON format (``.geojson``, ``.json``, optionally ``.gz``)."""
-    with _open_text(path) as fh:
-        doc = json.load(fh)
-    return plan_from_geojson(doc, name=Path(str(path)).name.split(".")[0])
+def _load_json(source: str, max_bytes: int = MAX_PLAN_BYTES):
+    """The parsed JSON of a map file (gzip by its name), or a :class:`PlanFileError` naming it: a file that
+    cannot be read, is not JSON, or holds more than ``max_bytes`` of text (refused before it is parsed)."""
+    try:
+        with _open_text(source) as fh:
+            text = fh.read(max_bytes + 1)
+    except (OSError, EOFError, UnicodeDecodeError) as e:
+        raise PlanFileError(f"{source}: cannot read the plan: {getattr(e, 'strerror', None) or e}") from None
+    if len(text) > max_bytes:
+        raise PlanFileError(f"{source}: the plan is over {max_bytes >> 20} MiB of text (the limit, "
+                            "core.indoor.floorplan.MAX_PLAN_BYTES): simplify it or split it into floors")
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise PlanFileError(f"{source}: not JSON: {e.msg} at line {e.lineno} column {e.colno}") from None
+    except RecursionError:
+        raise PlanFileError(f"{source}: not JSON: nested too deeply") from None
+
+
+def read_geojson(path, *, max_bytes: int = MAX_PLAN_BYTES, max_ring_vertices: int = MAX_RING_VERTICES,
+                 max_vertices: int = MAX_PLAN_VERTICES) -> FloorPlan:
+    """Read a floor plan of our GeoJSON format (``.geojson``, ``.json``, optionally ``.gz``).
+
+    Whatever is wrong with the file is a :class:`PlanFileError` naming it (and the feature): a file that
+    cannot be read, is not JSON, holds more than ``max_bytes`` of text (refused before it is parsed), or
+    fails the checks of :func:`plan_from_geojson`."""
+    source = str(path)
+    doc = _load_json(source, max_bytes)
+    return plan_from_geojson(doc, name=Path(source).name.split(".")[0], source=source,
+                             max_ring_vertices=max_ring_vertices, max_vertices=max_vertices)
 
 
 def _closed(ring) -> list:
@@ -360,14 +592,23 @@ def _first(folder: Path, names) -> Path:
 def read_ms_floor(folder) -> FloorPlan:
     """The Microsoft competition's floor map (``geojson_map.json(.gz)`` + ``floor_info.json``) in its waypoint metres."""
     folder = Path(folder)
-    with _open_text(_first(folder, ("geojson_map.json", "geojson_map.json.gz"))) as fh:
-        doc = json.load(fh)
-    with _open_text(_first(folder, ("floor_info.json", "floor_info.json.gz"))) as fh:
-        info = json.load(fh)["map_info"]
+    map_path = str(_first(folder, ("geojson_map.json", "geojson_map.json.gz")))
+    doc = _load_json(map_path)
+    info_path = str(_first(folder, ("floor_info.json", "floor_info.json.gz")))
+    info = _load_json(info_path)
+    info = info.get("map_info") if isinstance(info, dict) else None
+    if not (isinstance(info, dict) and all(isinstance(info.get(k), (int, float)) and not isinstance(info.get(k), bool)
+                                           and info[k] > 0 for k in ("width", "height"))):
+        raise PlanFileError(f"{info_path}: needs 'map_info' with a positive 'width' and 'height' (m)")
+    if not isinstance(doc, dict):
+        raise PlanFileError(f"{map_path}: a floor map is a GeoJSON FeatureCollection")
+    _features(doc, map_path, MAX_RING_VERTICES, MAX_PLAN_VERTICES)  # the structure, named file and feature
     feats = doc.get("features", [])
     if not feats:
-        raise ValueError(f"{folder}: the map has no features")
+        raise PlanFileError(f"{map_path}: the map has no features")
     c = _coords(doc)
+    if not len(c):
+        raise PlanFileError(f"{map_path}: the map has no coordinates")
     lon0, lat0 = c.min(axis=0)
     lon1, lat1 = c.max(axis=0)
     origin = (float(lat0), float(lon0))
