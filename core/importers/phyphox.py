@@ -29,7 +29,11 @@ Data files
     and course_deg from Velocity and Direction, NaN where the phone had none,
     e.g. before its first fix with a velocity; ``Vertical Accuracy`` is not
     read -- its unit is "(°)" in the iOS header, "(m)" in Android's);
-    ``Pressure (hPa)`` barometer.  "Absolute ..." columns are ignored.  Rows
+    ``Pressure (hPa)`` barometer.  Fixes stamped less than 0.5 s after a
+    START are the phone's cached last location (the OS hands it over when
+    phyphox subscribes; on the real walks two fixes at the same 0.02 s with
+    35 m accuracy, one at 0.000 s followed by an 11.8 s gap and a 29 m jump,
+    599 m accuracy at 0.05 s): dropped and noted in ``repairs``.  "Absolute ..." columns are ignored.  Rows
     whose time or required values are empty or NaN (buffers of different
     lengths in one file, or NaN where phyphox had no value) are dropped; a
     line with some but not all of a sensor's fields ("missing fields"), or
@@ -162,6 +166,25 @@ def _classify(name: str, file_name: str) -> tuple[str, str] | None:
     if unit in ("µt", "μt", "ut", "microtesla"):
         return ("mag", axis)
     return None
+
+
+#: fixes stamped this soon after a START (s of experiment time) are the phone's cached last location
+CACHED_FIX_WINDOW_S = 0.5
+
+
+def _cached_fixes(t_s: np.ndarray, starts_s) -> np.ndarray:
+    """Which fixes are the cached last location the OS hands over when phyphox subscribes (see the module doc).
+
+    A fix stamped less than :data:`CACHED_FIX_WINDOW_S` after the START of its run: no receiver gets a
+    fresh fix that fast (the location stream's own first fixes on the real walks: two identical-time
+    fixes at 0.02 s with 35 m accuracy, one at 0.000 s followed by an 11.8 s gap and a 29 m jump, 599 m
+    and 227 m accuracy at 0.05 s; the next fixes come 0.4-12 s later).
+    """
+    t_s = np.asarray(t_s, dtype=np.float64)
+    e = np.sort(np.asarray(starts_s, dtype=np.float64))
+    k = np.clip(np.searchsorted(e, t_s, side="right") - 1, 0, len(e) - 1)
+    since = t_s - e[k]
+    return (since >= 0.0) & (since < CACHED_FIX_WINDOW_S)
 
 
 def _text_dialect(text: str) -> tuple[str, bool]:
@@ -366,6 +389,10 @@ def _build(files, meta, source, warn, damage: list[str]) -> Recording:
     for sensor, items in found.items():
         items.sort(key=lambda it: -it[0])  # the longest record of a sensor wins
         n, where, order, vals = items[0]
+        if sensor == "linacc":  # gravity removed by the OS: the attitude filter needs it in
+            unused.extend(f"{it[1].replace(os.sep, '/').split('/')[-1]}: linear acceleration (gravity removed by the "
+                          "OS), not used: the pipeline reads the acceleration with g" for it in items)
+            continue
         used[sensor] = where.replace(os.sep, "/").split("/")[-1]
         if len(items) > 1:
             unused.extend(f"{it[1].split('/')[-1]}: second {sensor} record" for it in items[1:])
@@ -380,6 +407,13 @@ def _build(files, meta, source, warn, damage: list[str]) -> Recording:
             dropped_rows += int(zero.sum())
             streams[MAG] = make_stream(MAG, t_ns[~zero], vals[~zero, 1:4])
         elif sensor == "gps":
+            cached = _cached_fixes(vals[:, 0], [e for e, _ in starts] or [0.0])
+            if cached.any():
+                repairs.append(f"{where}: dropped {int(cached.sum())} fix(es) stamped within "
+                               f"{CACHED_FIX_WINDOW_S:g} s of a START (experiment time "
+                               f"{vals[cached, 0].min():.3f} to {vals[cached, 0].max():.3f} s): the phone's cached "
+                               "last location, delivered when phyphox subscribes")
+                vals, t_ns = vals[~cached], t_ns[~cached]
             cols = {c: vals[:, 1 + i] for i, c in enumerate(order)}
             streams[GPS] = make_stream(GPS, t_ns, gps_values(cols["lat"], cols["lon"], cols.get("alt"),
                                                              cols.get("hacc"), cols.get("speed"), cols.get("course")),
