@@ -33,6 +33,7 @@ cutout insets (edge-to-edge is enforced), and back comes through an
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -40,7 +41,9 @@ import tempfile
 import time
 
 from kivy.app import App
+from kivy.base import ExceptionHandler, ExceptionManager
 from kivy.clock import Clock, mainthread
+from kivy.logger import Logger
 from kivy.core.window import Window
 from kivy.lang import Builder
 from kivy.properties import BooleanProperty, ListProperty, NumericProperty, StringProperty
@@ -56,7 +59,8 @@ from core.pdr.stride_models import StrideModelError
 import app.track_view  # noqa: F401 - registers TrackView for the kv file
 from app import android_platform as droid
 from app.indoor import PLAN_PATTERNS
-from app.service import InProcessService, ServiceClient, ServiceSession, service_answers, socket_path
+from app.service import (InProcessService, ServiceClient, ServiceSession, ServiceUnavailable, service_answers,
+                         socket_path)
 from app.session import Session, load_any_recording
 from app.settings import RATE_CHOICES, SETTINGS_FILE, STRIDE_MODEL_CHOICES, TRACKING_MODES, Settings
 from app.sources import REPLAY_SPEEDS, SensorStartError, make_live_source, replay_source_for
@@ -81,6 +85,63 @@ def recording_formats() -> tuple[list, list]:
     exts = [e for e in ("csv", "txt", "gz") if e in exts] + sorted(exts - {"csv", "txt", "gz"})
     return ["*." + e for e in exts], list(FORMATS)
 UI_INTERVAL_S = 0.1
+#: a button whose request the tracking service did not answer is tried again after this long, this often
+#: (only where sending it twice does no harm: play/pause as the wanted state, export)
+RETRY_S = 1.5
+MAX_RETRIES = 2
+#: what the message calls a callback
+ACTION_NAMES = {"toggle_play": "play/pause", "set_playing": "play/pause", "toggle_recording": "recording",
+                "export": "export", "new_track": "new track", "toggle_calibration": "calibration walk",
+                "save_calibration": "calibration", "stop_live": "stop", "go_live": "live", "choose_plan": "floor plan",
+                "here": "here", "open_recording": "open", "seek_start": "back to the start"}
+
+
+def ui_callback(retry: bool = False):
+    """A UI callback that cannot close the app: the tracking service not answering (it is starting Python and
+    numpy, or busy with a long export) is a message, and with ``retry`` the callback runs again after
+    :data:`RETRY_S` (at most :data:`MAX_RETRIES` times); any other exception is logged and shown."""
+    def deco(fn):
+        name = fn.__name__
+
+        @functools.wraps(fn)
+        def wrapper(self, *args, _attempt=0, **kwargs):
+            try:
+                return fn(self, *args, **kwargs)
+            except ServiceUnavailable as e:
+                again = None
+                if retry and _attempt < MAX_RETRIES:
+                    def again(dt=None):
+                        wrapper(self, *args, _attempt=_attempt + 1, **kwargs)
+                self._service_unavailable(name, e, again)
+            except Exception as e:  # noqa: BLE001 - a button must never close the app
+                self._callback_failed(name, e)
+            return None
+        return wrapper
+    return deco
+
+
+class KeepAlive(ExceptionHandler):
+    """Kivy's last resort: an exception nothing caught in the event loop (a touch handler, a clock callback)
+    is logged and shown, and the app goes on (``ExceptionManager.PASS``); Ctrl-C and ``SystemExit`` still end it."""
+
+    MAX_LOGGED = 20  #: tracebacks logged in full (a callback raising every frame is then only counted)
+
+    def __init__(self, app):
+        super().__init__()
+        self.app = app
+        self.count = 0
+
+    def handle_exception(self, inst):
+        if not isinstance(inst, Exception):
+            return ExceptionManager.RAISE
+        self.count += 1
+        if self.count <= self.MAX_LOGGED:
+            Logger.error(f"PDR: uncaught {type(inst).__name__}: {inst}", exc_info=(type(inst), inst, inst.__traceback__))
+        try:
+            self.app.warning = f"internal error ({self.count}x, logged; the app goes on): {type(inst).__name__}: {inst}"
+        except Exception:  # noqa: BLE001
+            pass
+        return ExceptionManager.PASS
 
 
 #: the carry modes in a word, for the status strip's narrow column (the health panel says them in full)
@@ -180,6 +241,8 @@ class PDRApp(App):
         self.paused_count = 0
         self.resumed_count = 0
         self.pending_notice = ""  #: told with the next message (the last walk was interrupted)
+        self.schedule_retry = Clock.schedule_once  #: how a retry is scheduled (tests collect them)
+        self.exception_handler = KeepAlive(self)
         self.plan = None  # the floor plan (core.indoor.FloorPlan) of the settings, None: none
         self.plan_name = ""
 
@@ -209,6 +272,8 @@ class PDRApp(App):
         return output_dir(self.data_dir, self._out_dir_arg)
 
     def build(self):
+        if self.exception_handler not in ExceptionManager.handlers:
+            ExceptionManager.add_handler(self.exception_handler)
         self.settings = Settings.load(self.settings_path)
         problems = ([self.data_dir_problem] if self.data_dir_problem else []) + list(self.settings.problems)
         if problems:
@@ -285,6 +350,21 @@ class PDRApp(App):
             return True
         return False
 
+    def _service_unavailable(self, name: str, e: Exception, again) -> None:
+        what = ACTION_NAMES.get(name, name.replace("_", " "))
+        Logger.warning(f"PDR: {name}: tracking service not answering: {e}")
+        if again is not None:
+            self.message = f"{what}: the tracking service is not answering ({e}); trying again in {RETRY_S:g} s"
+            self.schedule_retry(again, RETRY_S)
+        else:
+            self.message = (f"{what}: the tracking service is not answering ({e}); it may still be starting or "
+                            "busy with an export -- try again in a moment")
+
+    def _callback_failed(self, name: str, e: Exception) -> None:
+        Logger.exception(f"PDR: {name} failed")
+        self.message = (f"{ACTION_NAMES.get(name, name.replace('_', ' '))} failed: {type(e).__name__}: {e} "
+                        "(logged; the app goes on)")
+
     def _settings_to_ui(self):
         s = self.settings
         self.height_text = f"{s.height_m * 100:.0f}" if s.height_m else ""
@@ -300,6 +380,7 @@ class PDRApp(App):
         self.c_text = (f"step length x {scale:.3f} ({n} walk{'s' if n > 1 else ''})" if walks else
                        f"step length x {scale:.3f} (older version)" if scale != 1.0 else "not calibrated")
 
+    @ui_callback()
     def save_settings(self, height_cm: str, rate: str, record_live: bool, stride_model: str | None = None,
                       use_gps: bool | None = None, gps_fusion: str | None = None,
                       tracking_mode: str | None = None) -> None:
@@ -351,6 +432,7 @@ class PDRApp(App):
         self.plan_text = self.plan_name or ("none" if not self.settings.floor_plan else "not readable")
         return problem
 
+    @ui_callback()
     def choose_plan(self, path: str) -> bool:
         """Use the floor plan at ``path`` ("" for none): remembered in the settings, drawn, and given to the
         running session (placed anew).  False, with the reason in the settings message, if it cannot be read."""
@@ -372,6 +454,7 @@ class PDRApp(App):
         self._update_ui(force=True)
         return True
 
+    @ui_callback()
     def here(self, east_m: float, north_m: float) -> None:
         """The user's tap in Here mode (plan metres): the start of the map matching, later a fix."""
         ses = self.session
@@ -387,6 +470,7 @@ class PDRApp(App):
         self.message = f"you are at {east_m:.1f}, {north_m:.1f} m on {self.plan_name}"
         self._update_ui(force=True)
 
+    @ui_callback()
     def show_plan_chooser(self):
         """Choose a floor plan: our GeoJSON file, or a Microsoft floor folder (select the folder)."""
         from kivy.uix.label import Label  # noqa: PLC0415
@@ -473,6 +557,8 @@ class PDRApp(App):
             self.playing = self.session.running
 
     def on_stop(self):
+        if self.exception_handler in ExceptionManager.handlers:
+            ExceptionManager.remove_handler(self.exception_handler)
         ses = self.session
         if isinstance(ses, ServiceSession) and ses.host is None:
             ses.detach()  # the phone: the service goes on recording; the next start attaches to it
@@ -525,6 +611,7 @@ class PDRApp(App):
         self.warning = session.source.warning
         self._update_ui(force=True)
 
+    @ui_callback()
     def open_recording(self, path: str) -> bool:
         try:  # the tracker first (foot or hand-held): a foot INS may read other devices' streams too
             rec = load_any_recording(path)
@@ -613,7 +700,11 @@ class PDRApp(App):
         if not service_answers(sock):
             return False
         ses = ServiceSession(ServiceClient(sock, timeout_s=2.0))
-        ses.poll()
+        try:
+            ses.poll()
+        except (OSError, ValueError, KeyError):  # it answered a ping, then not: as if none answered
+            ses.client.close()
+            return False
         self._replace_session(ses, "live", ses.record_path)
         self.recording_label = os.path.basename(ses.record_path) if ses.recording and ses.record_path else ""
         self.message = "tracking goes on" + (f", recording to {ses.record_path}" if ses.recording else "")
@@ -621,6 +712,7 @@ class PDRApp(App):
         self._update_ui(force=True)
         return True
 
+    @ui_callback()
     def stop_live(self) -> None:
         """The Stop button: end live tracking (the service finishes the track, closes the recording, keeps
         what GPS taught, releases the wake lock, removes its notification and ends); the track stays shown."""
@@ -639,6 +731,7 @@ class PDRApp(App):
         self.message = (f"tracking stopped: {summ['steps']} {self.steps_name}, {summ['distance_m']:.1f} m"
                         + (f"; saved {path}" if path else ""))
 
+    @ui_callback()
     def go_live(self) -> None:
         """The Live button: live tracking (after a replay too), asking for the permissions first on a phone."""
         if self.mode == "live" and self.session is not None:
@@ -657,6 +750,7 @@ class PDRApp(App):
                 "rate_hz": s.live_rate_hz(), "use_gps": s.use_gps, "gps_fusion": s.gps_fusion_name(),
                 "tracking_mode": s.choose_tracking_mode(None)[0]}
 
+    @ui_callback()
     def toggle_recording(self):
         """Live: stop the running recording, or start a new one."""
         ses = self.session
@@ -692,18 +786,32 @@ class PDRApp(App):
 
     # -- replay controls -----------------------------------------------------------------
 
+    @ui_callback()
     def toggle_play(self):
         ses = self.session
         if not ses:
             return
-        if ses.running:
-            ses.pause()
-        else:
+        self.set_playing(not ses.running)
+
+    @ui_callback(retry=True)
+    def set_playing(self, want: bool):
+        """Play (resume) or pause; sent again by a retry as the wanted state, so twice is no harm."""
+        ses = self.session
+        if not ses or ses.running == want:
+            self.playing = bool(ses and ses.running)
+            return
+        if want:
             if self.mode == "replay" and ses.finished:
                 self.seek_start()
-            ses.resume()
+            try:
+                ses.resume()
+            except SensorStartError as e:
+                self.warning = f"sensors did not restart: {e}"
+        else:
+            ses.pause()
         self.playing = ses.running
 
+    @ui_callback()
     def seek_start(self):
         ses = self.session
         if not ses or self.mode != "replay":
@@ -715,6 +823,7 @@ class PDRApp(App):
         self.track_view.set_track([0.0], [0.0])
         self._update_ui(force=True)
 
+    @ui_callback()
     def set_speed(self, label: str):
         if label not in REPLAY_SPEEDS:
             return
@@ -723,6 +832,7 @@ class PDRApp(App):
         if self.session and self.mode == "replay":
             self.session.source.set_speed(REPLAY_SPEEDS[label])
 
+    @ui_callback()
     def new_track(self):
         """Start a new track with the current settings (live: the recording goes on)."""
         ses = self.session
@@ -749,6 +859,7 @@ class PDRApp(App):
 
     # -- calibration ---------------------------------------------------------------------
 
+    @ui_callback()
     def toggle_calibration(self):
         ses = self.session
         if not ses:
@@ -768,6 +879,7 @@ class PDRApp(App):
             self.calib_text = f"measured {walked:.1f} m"
             self.calib_message = "enter the known distance and save"
 
+    @ui_callback()
     def save_calibration(self, known_text: str):
         """Calibrate the profile with the calibration walk's steps (core.pdr.calibration) and save it."""
         ses = self.session
@@ -798,6 +910,7 @@ class PDRApp(App):
 
     # -- export ----------------------------------------------------------------------------
 
+    @ui_callback(retry=True)
     def export(self):
         ses = self.session
         if not ses:
@@ -812,6 +925,7 @@ class PDRApp(App):
             self.warning = "export: " + "; ".join(out["errors"])
         return out
 
+    @ui_callback()
     def show_file_chooser(self):
         """Open a recording: the chooser starts in the recordings folder, shows where it is, and lists the
         files of the formats ``core.importers`` reads (``*.csv``, ``*.gz``, ``*.zip``, ...)."""
