@@ -216,8 +216,9 @@ class PDRApp(App):
 
     def __init__(self, *, recording: str | None = None, speed: str | None = None, out_dir: str | None = None,
                  data_dir: str | None = None, exit_at_end: bool = False, screenshot: str | None = None,
-                 report: str | None = None, jnius=None, **kwargs):
+                 report: str | None = None, jnius=None, files=None, **kwargs):
         super().__init__(**kwargs)
+        self._files = files  # app.android_files.AndroidFiles: the system picker and Downloads (None: decided)
         self._jnius = jnius  # the phone's (imported on Android), or a fake one (tests): insets, back, grants
         self.back_handler = None
         self.insets = (0, 0, 0, 0)
@@ -321,6 +322,41 @@ class PDRApp(App):
             except ImportError:
                 return None
         return self._jnius
+
+    @property
+    def files(self):
+        """:class:`app.android_files.AndroidFiles` on the phone (the system picker, Downloads), None on the
+        desktop (Kivy's file chooser and the export folder)."""
+        if self._files is None and is_android() and self.jnius is not None:
+            try:
+                import android.activity as activity_module  # noqa: PLC0415 - p4a module
+
+                from app.android_files import AndroidFiles  # noqa: PLC0415
+
+                self._files = AndroidFiles(self.jnius, activity_module)
+            except Exception as e:  # noqa: BLE001 - then Kivy's chooser, which shows only the app's files
+                Logger.warning(f"PDR: no system picker: {e}")
+                self._files = False
+        return self._files or None
+
+    def _import_dir(self, kind: str) -> str:
+        """Where a document chosen in the system picker is copied (the app's own storage)."""
+        return os.path.join(self.data_dir, kind)
+
+    def _pick(self, kind: str, then) -> None:
+        """The system picker; ``then(path)`` on the Kivy thread once the chosen document is copied."""
+        def done(path, error):  # Android's UI thread or the copy's thread
+            Clock.schedule_once(lambda dt: self._picked(path, error, then), 0)
+
+        self.files.pick(self._import_dir(kind), done)
+        self.message = "choose a file in the system picker"
+
+    @ui_callback()
+    def _picked(self, path, error, then) -> None:
+        if path is None:
+            self.message = "nothing opened" + ("" if error == "cancelled" else f": {error}")
+            return
+        then(path)
 
     def apply_insets(self, root=None) -> None:
         """Pad the layout by the system bars and the cutout (Android 15+ draws the app under them)."""
@@ -472,8 +508,13 @@ class PDRApp(App):
 
     @ui_callback()
     def show_plan_chooser(self):
-        """Choose a floor plan: our GeoJSON file, or a Microsoft floor folder (select the folder)."""
+        """Choose a floor plan: our GeoJSON file, or a Microsoft floor folder (select the folder).  On the
+        phone, the system picker (a GeoJSON file, copied into the app's storage)."""
         from kivy.uix.label import Label  # noqa: PLC0415
+
+        if self.files is not None:
+            self._pick("plans", self.choose_plan)
+            return None
 
         start = os.path.dirname(self.settings.floor_plan) if self.settings.floor_plan else self.out_dir()
         chooser = FileChooserListView(path=start if os.path.isdir(start) else self.out_dir(),
@@ -920,9 +961,20 @@ class PDRApp(App):
             base = os.path.splitext(base)[0]
         out = ses.export(self.out_dir(), base, raw_path=self.raw_path)
         written = [os.path.basename(v) for k, v in out.items() if k != "errors"]
-        self.message = f"exported to {self.out_dir()}: " + ", ".join(written)
-        if out["errors"]:
-            self.warning = "export: " + "; ".join(out["errors"])
+        where = self.out_dir()
+        errors = list(out["errors"])
+        if self.files is not None and written:  # the phone: also into Download/PDR, the user's own files
+            try:
+                shared = self.files.export_to_downloads([v for k, v in out.items() if k != "errors"])
+            except Exception as e:  # noqa: BLE001 - the files are still in the export folder
+                errors.append(f"not copied to Download/PDR: {e}")
+                shared = []
+            if shared:
+                out["downloads"] = shared
+                where = os.path.dirname(shared[0])
+        self.message = f"exported to {where}: " + ", ".join(written)
+        if errors:
+            self.warning = "export: " + "; ".join(errors)
         return out
 
     @ui_callback()
@@ -931,6 +983,9 @@ class PDRApp(App):
         files of the formats ``core.importers`` reads (``*.csv``, ``*.gz``, ``*.zip``, ...)."""
         from kivy.uix.label import Label  # noqa: PLC0415
 
+        if self.files is not None:  # the phone: the system picker sees what scoped storage hides from paths
+            self._pick("imported", self.open_recording)
+            return None
         patterns, names = recording_formats()
         start = self.out_dir()
         chooser = FileChooserListView(path=start, filters=patterns)
