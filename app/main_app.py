@@ -33,6 +33,7 @@ cutout insets (edge-to-edge is enforced), and back comes through an
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -40,7 +41,9 @@ import tempfile
 import time
 
 from kivy.app import App
+from kivy.base import ExceptionHandler, ExceptionManager
 from kivy.clock import Clock, mainthread
+from kivy.logger import Logger
 from kivy.core.window import Window
 from kivy.lang import Builder
 from kivy.properties import BooleanProperty, ListProperty, NumericProperty, StringProperty
@@ -56,7 +59,8 @@ from core.pdr.stride_models import StrideModelError
 import app.track_view  # noqa: F401 - registers TrackView for the kv file
 from app import android_platform as droid
 from app.indoor import PLAN_PATTERNS
-from app.service import InProcessService, ServiceClient, ServiceSession, service_answers, socket_path
+from app.service import (InProcessService, ServiceClient, ServiceSession, ServiceUnavailable, service_answers,
+                         socket_path)
 from app.session import Session, load_any_recording
 from app.settings import RATE_CHOICES, SETTINGS_FILE, STRIDE_MODEL_CHOICES, TRACKING_MODES, Settings
 from app.sources import REPLAY_SPEEDS, SensorStartError, make_live_source, replay_source_for
@@ -81,6 +85,63 @@ def recording_formats() -> tuple[list, list]:
     exts = [e for e in ("csv", "txt", "gz") if e in exts] + sorted(exts - {"csv", "txt", "gz"})
     return ["*." + e for e in exts], list(FORMATS)
 UI_INTERVAL_S = 0.1
+#: a button whose request the tracking service did not answer is tried again after this long, this often
+#: (only where sending it twice does no harm: play/pause as the wanted state, export)
+RETRY_S = 1.5
+MAX_RETRIES = 2
+#: what the message calls a callback
+ACTION_NAMES = {"toggle_play": "play/pause", "set_playing": "play/pause", "toggle_recording": "recording",
+                "export": "export", "new_track": "new track", "toggle_calibration": "calibration walk",
+                "save_calibration": "calibration", "stop_live": "stop", "go_live": "live", "choose_plan": "floor plan",
+                "here": "here", "open_recording": "open", "seek_start": "back to the start"}
+
+
+def ui_callback(retry: bool = False):
+    """A UI callback that cannot close the app: the tracking service not answering (it is starting Python and
+    numpy, or busy with a long export) is a message, and with ``retry`` the callback runs again after
+    :data:`RETRY_S` (at most :data:`MAX_RETRIES` times); any other exception is logged and shown."""
+    def deco(fn):
+        name = fn.__name__
+
+        @functools.wraps(fn)
+        def wrapper(self, *args, _attempt=0, **kwargs):
+            try:
+                return fn(self, *args, **kwargs)
+            except ServiceUnavailable as e:
+                again = None
+                if retry and _attempt < MAX_RETRIES:
+                    def again(dt=None):
+                        wrapper(self, *args, _attempt=_attempt + 1, **kwargs)
+                self._service_unavailable(name, e, again)
+            except Exception as e:  # noqa: BLE001 - a button must never close the app
+                self._callback_failed(name, e)
+            return None
+        return wrapper
+    return deco
+
+
+class KeepAlive(ExceptionHandler):
+    """Kivy's last resort: an exception nothing caught in the event loop (a touch handler, a clock callback)
+    is logged and shown, and the app goes on (``ExceptionManager.PASS``); Ctrl-C and ``SystemExit`` still end it."""
+
+    MAX_LOGGED = 20  #: tracebacks logged in full (a callback raising every frame is then only counted)
+
+    def __init__(self, app):
+        super().__init__()
+        self.app = app
+        self.count = 0
+
+    def handle_exception(self, inst):
+        if not isinstance(inst, Exception):
+            return ExceptionManager.RAISE
+        self.count += 1
+        if self.count <= self.MAX_LOGGED:
+            Logger.error(f"PDR: uncaught {type(inst).__name__}: {inst}", exc_info=(type(inst), inst, inst.__traceback__))
+        try:
+            self.app.warning = f"internal error ({self.count}x, logged; the app goes on): {type(inst).__name__}: {inst}"
+        except Exception:  # noqa: BLE001
+            pass
+        return ExceptionManager.PASS
 
 
 #: the carry modes in a word, for the status strip's narrow column (the health panel says them in full)
@@ -155,8 +216,9 @@ class PDRApp(App):
 
     def __init__(self, *, recording: str | None = None, speed: str | None = None, out_dir: str | None = None,
                  data_dir: str | None = None, exit_at_end: bool = False, screenshot: str | None = None,
-                 report: str | None = None, jnius=None, **kwargs):
+                 report: str | None = None, jnius=None, files=None, **kwargs):
         super().__init__(**kwargs)
+        self._files = files  # app.android_files.AndroidFiles: the system picker and Downloads (None: decided)
         self._jnius = jnius  # the phone's (imported on Android), or a fake one (tests): insets, back, grants
         self.back_handler = None
         self.insets = (0, 0, 0, 0)
@@ -180,6 +242,8 @@ class PDRApp(App):
         self.paused_count = 0
         self.resumed_count = 0
         self.pending_notice = ""  #: told with the next message (the last walk was interrupted)
+        self.schedule_retry = Clock.schedule_once  #: how a retry is scheduled (tests collect them)
+        self.exception_handler = KeepAlive(self)
         self.plan = None  # the floor plan (core.indoor.FloorPlan) of the settings, None: none
         self.plan_name = ""
 
@@ -209,6 +273,8 @@ class PDRApp(App):
         return output_dir(self.data_dir, self._out_dir_arg)
 
     def build(self):
+        if self.exception_handler not in ExceptionManager.handlers:
+            ExceptionManager.add_handler(self.exception_handler)
         self.settings = Settings.load(self.settings_path)
         problems = ([self.data_dir_problem] if self.data_dir_problem else []) + list(self.settings.problems)
         if problems:
@@ -257,6 +323,41 @@ class PDRApp(App):
                 return None
         return self._jnius
 
+    @property
+    def files(self):
+        """:class:`app.android_files.AndroidFiles` on the phone (the system picker, Downloads), None on the
+        desktop (Kivy's file chooser and the export folder)."""
+        if self._files is None and is_android() and self.jnius is not None:
+            try:
+                import android.activity as activity_module  # noqa: PLC0415 - p4a module
+
+                from app.android_files import AndroidFiles  # noqa: PLC0415
+
+                self._files = AndroidFiles(self.jnius, activity_module)
+            except Exception as e:  # noqa: BLE001 - then Kivy's chooser, which shows only the app's files
+                Logger.warning(f"PDR: no system picker: {e}")
+                self._files = False
+        return self._files or None
+
+    def _import_dir(self, kind: str) -> str:
+        """Where a document chosen in the system picker is copied (the app's own storage)."""
+        return os.path.join(self.data_dir, kind)
+
+    def _pick(self, kind: str, then) -> None:
+        """The system picker; ``then(path)`` on the Kivy thread once the chosen document is copied."""
+        def done(path, error):  # Android's UI thread or the copy's thread
+            Clock.schedule_once(lambda dt: self._picked(path, error, then), 0)
+
+        self.files.pick(self._import_dir(kind), done)
+        self.message = "choose a file in the system picker"
+
+    @ui_callback()
+    def _picked(self, path, error, then) -> None:
+        if path is None:
+            self.message = "nothing opened" + ("" if error == "cancelled" else f": {error}")
+            return
+        then(path)
+
     def apply_insets(self, root=None) -> None:
         """Pad the layout by the system bars and the cutout (Android 15+ draws the app under them)."""
         root = root or self.root
@@ -285,6 +386,21 @@ class PDRApp(App):
             return True
         return False
 
+    def _service_unavailable(self, name: str, e: Exception, again) -> None:
+        what = ACTION_NAMES.get(name, name.replace("_", " "))
+        Logger.warning(f"PDR: {name}: tracking service not answering: {e}")
+        if again is not None:
+            self.message = f"{what}: the tracking service is not answering ({e}); trying again in {RETRY_S:g} s"
+            self.schedule_retry(again, RETRY_S)
+        else:
+            self.message = (f"{what}: the tracking service is not answering ({e}); it may still be starting or "
+                            "busy with an export -- try again in a moment")
+
+    def _callback_failed(self, name: str, e: Exception) -> None:
+        Logger.exception(f"PDR: {name} failed")
+        self.message = (f"{ACTION_NAMES.get(name, name.replace('_', ' '))} failed: {type(e).__name__}: {e} "
+                        "(logged; the app goes on)")
+
     def _settings_to_ui(self):
         s = self.settings
         self.height_text = f"{s.height_m * 100:.0f}" if s.height_m else ""
@@ -300,6 +416,7 @@ class PDRApp(App):
         self.c_text = (f"step length x {scale:.3f} ({n} walk{'s' if n > 1 else ''})" if walks else
                        f"step length x {scale:.3f} (older version)" if scale != 1.0 else "not calibrated")
 
+    @ui_callback()
     def save_settings(self, height_cm: str, rate: str, record_live: bool, stride_model: str | None = None,
                       use_gps: bool | None = None, gps_fusion: str | None = None,
                       tracking_mode: str | None = None) -> None:
@@ -351,6 +468,7 @@ class PDRApp(App):
         self.plan_text = self.plan_name or ("none" if not self.settings.floor_plan else "not readable")
         return problem
 
+    @ui_callback()
     def choose_plan(self, path: str) -> bool:
         """Use the floor plan at ``path`` ("" for none): remembered in the settings, drawn, and given to the
         running session (placed anew).  False, with the reason in the settings message, if it cannot be read."""
@@ -372,6 +490,7 @@ class PDRApp(App):
         self._update_ui(force=True)
         return True
 
+    @ui_callback()
     def here(self, east_m: float, north_m: float) -> None:
         """The user's tap in Here mode (plan metres): the start of the map matching, later a fix."""
         ses = self.session
@@ -387,9 +506,15 @@ class PDRApp(App):
         self.message = f"you are at {east_m:.1f}, {north_m:.1f} m on {self.plan_name}"
         self._update_ui(force=True)
 
+    @ui_callback()
     def show_plan_chooser(self):
-        """Choose a floor plan: our GeoJSON file, or a Microsoft floor folder (select the folder)."""
+        """Choose a floor plan: our GeoJSON file, or a Microsoft floor folder (select the folder).  On the
+        phone, the system picker (a GeoJSON file, copied into the app's storage)."""
         from kivy.uix.label import Label  # noqa: PLC0415
+
+        if self.files is not None:
+            self._pick("plans", self.choose_plan)
+            return None
 
         start = os.path.dirname(self.settings.floor_plan) if self.settings.floor_plan else self.out_dir()
         chooser = FileChooserListView(path=start if os.path.isdir(start) else self.out_dir(),
@@ -473,6 +598,8 @@ class PDRApp(App):
             self.playing = self.session.running
 
     def on_stop(self):
+        if self.exception_handler in ExceptionManager.handlers:
+            ExceptionManager.remove_handler(self.exception_handler)
         ses = self.session
         if isinstance(ses, ServiceSession) and ses.host is None:
             ses.detach()  # the phone: the service goes on recording; the next start attaches to it
@@ -525,6 +652,7 @@ class PDRApp(App):
         self.warning = session.source.warning
         self._update_ui(force=True)
 
+    @ui_callback()
     def open_recording(self, path: str) -> bool:
         try:  # the tracker first (foot or hand-held): a foot INS may read other devices' streams too
             rec = load_any_recording(path)
@@ -613,7 +741,11 @@ class PDRApp(App):
         if not service_answers(sock):
             return False
         ses = ServiceSession(ServiceClient(sock, timeout_s=2.0))
-        ses.poll()
+        try:
+            ses.poll()
+        except (OSError, ValueError, KeyError):  # it answered a ping, then not: as if none answered
+            ses.client.close()
+            return False
         self._replace_session(ses, "live", ses.record_path)
         self.recording_label = os.path.basename(ses.record_path) if ses.recording and ses.record_path else ""
         self.message = "tracking goes on" + (f", recording to {ses.record_path}" if ses.recording else "")
@@ -621,6 +753,7 @@ class PDRApp(App):
         self._update_ui(force=True)
         return True
 
+    @ui_callback()
     def stop_live(self) -> None:
         """The Stop button: end live tracking (the service finishes the track, closes the recording, keeps
         what GPS taught, releases the wake lock, removes its notification and ends); the track stays shown."""
@@ -639,6 +772,7 @@ class PDRApp(App):
         self.message = (f"tracking stopped: {summ['steps']} {self.steps_name}, {summ['distance_m']:.1f} m"
                         + (f"; saved {path}" if path else ""))
 
+    @ui_callback()
     def go_live(self) -> None:
         """The Live button: live tracking (after a replay too), asking for the permissions first on a phone."""
         if self.mode == "live" and self.session is not None:
@@ -657,6 +791,7 @@ class PDRApp(App):
                 "rate_hz": s.live_rate_hz(), "use_gps": s.use_gps, "gps_fusion": s.gps_fusion_name(),
                 "tracking_mode": s.choose_tracking_mode(None)[0]}
 
+    @ui_callback()
     def toggle_recording(self):
         """Live: stop the running recording, or start a new one."""
         ses = self.session
@@ -692,18 +827,32 @@ class PDRApp(App):
 
     # -- replay controls -----------------------------------------------------------------
 
+    @ui_callback()
     def toggle_play(self):
         ses = self.session
         if not ses:
             return
-        if ses.running:
-            ses.pause()
-        else:
+        self.set_playing(not ses.running)
+
+    @ui_callback(retry=True)
+    def set_playing(self, want: bool):
+        """Play (resume) or pause; sent again by a retry as the wanted state, so twice is no harm."""
+        ses = self.session
+        if not ses or ses.running == want:
+            self.playing = bool(ses and ses.running)
+            return
+        if want:
             if self.mode == "replay" and ses.finished:
                 self.seek_start()
-            ses.resume()
+            try:
+                ses.resume()
+            except SensorStartError as e:
+                self.warning = f"sensors did not restart: {e}"
+        else:
+            ses.pause()
         self.playing = ses.running
 
+    @ui_callback()
     def seek_start(self):
         ses = self.session
         if not ses or self.mode != "replay":
@@ -715,6 +864,7 @@ class PDRApp(App):
         self.track_view.set_track([0.0], [0.0])
         self._update_ui(force=True)
 
+    @ui_callback()
     def set_speed(self, label: str):
         if label not in REPLAY_SPEEDS:
             return
@@ -723,6 +873,7 @@ class PDRApp(App):
         if self.session and self.mode == "replay":
             self.session.source.set_speed(REPLAY_SPEEDS[label])
 
+    @ui_callback()
     def new_track(self):
         """Start a new track with the current settings (live: the recording goes on)."""
         ses = self.session
@@ -749,6 +900,7 @@ class PDRApp(App):
 
     # -- calibration ---------------------------------------------------------------------
 
+    @ui_callback()
     def toggle_calibration(self):
         ses = self.session
         if not ses:
@@ -768,6 +920,7 @@ class PDRApp(App):
             self.calib_text = f"measured {walked:.1f} m"
             self.calib_message = "enter the known distance and save"
 
+    @ui_callback()
     def save_calibration(self, known_text: str):
         """Calibrate the profile with the calibration walk's steps (core.pdr.calibration) and save it."""
         ses = self.session
@@ -798,6 +951,7 @@ class PDRApp(App):
 
     # -- export ----------------------------------------------------------------------------
 
+    @ui_callback(retry=True)
     def export(self):
         ses = self.session
         if not ses:
@@ -807,16 +961,31 @@ class PDRApp(App):
             base = os.path.splitext(base)[0]
         out = ses.export(self.out_dir(), base, raw_path=self.raw_path)
         written = [os.path.basename(v) for k, v in out.items() if k != "errors"]
-        self.message = f"exported to {self.out_dir()}: " + ", ".join(written)
-        if out["errors"]:
-            self.warning = "export: " + "; ".join(out["errors"])
+        where = self.out_dir()
+        errors = list(out["errors"])
+        if self.files is not None and written:  # the phone: also into Download/PDR, the user's own files
+            try:
+                shared = self.files.export_to_downloads([v for k, v in out.items() if k != "errors"])
+            except Exception as e:  # noqa: BLE001 - the files are still in the export folder
+                errors.append(f"not copied to Download/PDR: {e}")
+                shared = []
+            if shared:
+                out["downloads"] = shared
+                where = os.path.dirname(shared[0])
+        self.message = f"exported to {where}: " + ", ".join(written)
+        if errors:
+            self.warning = "export: " + "; ".join(errors)
         return out
 
+    @ui_callback()
     def show_file_chooser(self):
         """Open a recording: the chooser starts in the recordings folder, shows where it is, and lists the
         files of the formats ``core.importers`` reads (``*.csv``, ``*.gz``, ``*.zip``, ...)."""
         from kivy.uix.label import Label  # noqa: PLC0415
 
+        if self.files is not None:  # the phone: the system picker sees what scoped storage hides from paths
+            self._pick("imported", self.open_recording)
+            return None
         patterns, names = recording_formats()
         start = self.out_dir()
         chooser = FileChooserListView(path=start, filters=patterns)

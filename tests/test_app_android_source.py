@@ -268,6 +268,9 @@ def make_fake_jnius(sm, lm=None, *, sdk=34, bars=(0, 63, 0, 126), cutout=(0, 80,
     jn.back = FakeBackDispatcher()
     jn.window_insets = FakeWindowInsets(bars, cutout)
     jn.services_started = []
+    jn.activity_requests = []
+    jn.resolver = None
+    jn.wrap = bridge.wrap  # a Java object handed to a Python callback, as pyjnius hands it
 
     class Context:
         SENSOR_SERVICE = "sensor"
@@ -319,6 +322,12 @@ def make_fake_jnius(sm, lm=None, *, sdk=34, bars=(0, 63, 0, 126), cutout=(0, 80,
 
         def setAutoRestartService(self, v):
             self.auto_restart = v
+
+        def startActivityForResult(self, intent, code):  # the system picker (tests/test_app_files.py)
+            jn.activity_requests.append((intent, code))
+
+        def getContentResolver(self):
+            return jn.resolver
 
     class PythonActivity:
         mActivity = Activity()
@@ -972,6 +981,14 @@ def _declaring(cls, name, sig):
     return cls
 
 
+def called_signatures(jn) -> dict:
+    """``(declaring class, method) -> {signatures}`` of the Java calls the fake ``jn`` saw."""
+    called = {}
+    for cls, name, sig in jn.calls:
+        called.setdefault((_declaring(cls, name, sig), name), set()).add(sig)
+    return called
+
+
 def run_every_java_path(jn, sm, lm):
     """Everything of app.sources and app.android_platform that talks to Java, once."""
     from app.android_platform import BackHandler, ServiceHooks, start_service, stop_service, system_bar_insets
@@ -1007,9 +1024,7 @@ def test_every_java_call_resolves_to_the_intended_overload_as_pyjnius_1_7_choose
     sm, lm = FakeSensorManager(), FakeLocationManager()
     jn = make_fake_jnius(sm, lm, sdk=35)
     run_every_java_path(jn, sm, lm)
-    called = {}
-    for cls, name, sig in jn.calls:
-        called.setdefault((_declaring(cls, name, sig), name), set()).add(sig)
+    called = called_signatures(jn)
     assert set(called) == set(EXPECTED_SIGNATURES)  # every call is asserted, and every asserted one happened
     for key, sigs in called.items():
         assert sigs == {EXPECTED_SIGNATURES[key]}, key
