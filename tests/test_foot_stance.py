@@ -9,7 +9,7 @@ from core.foot.navigator import FootNavigator, FootSettings
 from core.foot.stance import DETECTORS, StanceDetector, StanceSettings, infer_foot_axes
 from desktop.foot_simulator import footprints, simulate_foot
 
-THRESHOLDS = {"shoe": 1e5, "song": 300.0, "amv": 0.1, "are": 0.1}
+THRESHOLDS = {"shoe": 1e5, "song": 1.0, "amv": 0.1, "are": 0.1}
 
 
 def _walk(rate_hz=200.0, seed=0):
@@ -112,3 +112,87 @@ def test_streaming_equals_batch_with_separate_gyro_clock_and_delay():
     ok = np.isfinite(batch.position_n[:, 0])
     assert np.array_equal(stream.t_ns, batch.t_ns)
     assert np.allclose(stream.position_n[ok], batch.position_n[ok], atol=1e-9)
+
+
+# -- the moving minimum, the adaptive threshold, the paper's detector (issue #27) ---------------------------
+
+from core.foot.stance import song_terms, window_min  # noqa: E402
+
+
+def test_window_min_equals_brute_force():
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 7, 64, 301):
+        x = rng.normal(size=n)
+        lo = rng.integers(0, n, size=n)
+        hi = np.minimum(lo + 1 + rng.integers(0, n, size=n), n)
+        expect = np.array([x[a:b].min() for a, b in zip(lo, hi)])
+        assert np.array_equal(window_min(x, lo, hi), expect)
+
+
+def _shaky_walk(seed=0):
+    """A walk whose stances are not still (gyro noise 0.4 rad/s: the SHOE statistic ~1.6e5 > 1e5 in stance, as in running)."""
+    return simulate_foot(footprints([(8.4, 0.0)]), rate_hz=200.0, acc_noise_m_s2=0.3, gyro_noise_rad_s=0.4,
+                         seed=seed)
+
+
+def test_adaptive_threshold_follows_a_raised_floor_and_leaves_a_quiet_walk_alone():
+    fixed = StanceSettings(detector="shoe", threshold=1e5, adaptive_floor_factor=0.0)
+    assert StanceSettings().floor_factor == 2.0  # the default (chosen on the PyShoe tuning split)
+    adaptive = StanceSettings(detector="shoe", threshold=1e5, adaptive_floor_factor=3.0,
+                              adaptive_floor_window_s=1.2)
+    w = _shaky_walk()
+    acc, gyr = w.recording.streams["acc"].values, w.recording.streams["gyro"].values
+    f_fixed = _f1(StanceDetector(fixed).detect(w.t_ns, acc, gyr).stance, w.stance)
+    res = StanceDetector(adaptive).detect(w.t_ns, acc, gyr)
+    assert f_fixed < 0.3, f_fixed
+    assert _f1(res.stance, w.stance) > 0.8, _f1(res.stance, w.stance)
+    assert np.all(res.thresholds >= 1e5) and np.max(res.thresholds) > 1e5
+    q = _walk()  # quiet: the floor far below 1e5 / 3, the same decisions as the fixed threshold
+    acc, gyr = q.recording.streams["acc"].values, q.recording.streams["gyro"].values
+    assert np.array_equal(StanceDetector(fixed).detect(q.t_ns, acc, gyr).stance,
+                          StanceDetector(adaptive).detect(q.t_ns, acc, gyr).stance)
+
+
+@pytest.mark.parametrize("causal", [False, True])
+def test_adaptive_streaming_equals_batch_with_its_stated_delay(causal):
+    w = _shaky_walk(1)
+    acc, gyr = w.recording.streams["acc"].values, w.recording.streams["gyro"].values
+    st = StanceSettings(detector="shoe", threshold=1e5, adaptive_floor_factor=3.0, adaptive_floor_window_s=1.2,
+                        adaptive_floor_causal=causal)
+    det = StanceDetector(st)
+    assert det.delay_s == pytest.approx(0.05 if causal else 0.65)
+    batch = det.detect(w.t_ns, acc, gyr)
+    stream = det.stream()
+    out, lag = [], []
+    for t, a, g in zip(w.t_ns.tolist(), acc.tolist(), gyr.tolist()):
+        d = stream.update(t, a, g)
+        lag += [(t - o[0]) * 1e-9 for o in d]
+        out += d
+    out += stream.flush()
+    assert [o[0] for o in out] == w.t_ns.tolist()
+    assert np.array_equal(np.array([o[1] for o in out]), batch.stance)
+    assert max(lag) <= det.delay_s + 0.006  # one sample interval at 200 Hz beyond the stated delay
+
+
+def test_song_is_the_paper_detector_acceleration_in_g_trailing_window():
+    """Eq. 6 as written: J <= 1 finds the stance; no term decides alone (in SI units the acceleration
+    terms are g^2..g^4 times larger and would); the window is k - k0 .. k (no later sample counts)."""
+    w = _walk()
+    acc, gyr = w.recording.streams["acc"].values, w.recording.streams["gyro"].values
+    ax = infer_foot_axes(acc, gyr)
+    st = StanceSettings(detector="song", window_s=0.15, acc_axes=ax["acc_axes"], gyro_axes=ax["gyro_axes"])
+    assert st.threshold_value == 1.0 and st.trailing and StanceDetector(st).delay_s == 0.0
+    res = StanceDetector(st).detect(w.t_ns, acc, gyr)
+    assert _f1(res.stance, w.stance) > 0.8, _f1(res.stance, w.stance)
+    # in stance the rate term A_r is the largest of the five in most samples: every term takes part
+    terms = song_terms(st, w.t_ns, acc, gyr)
+    assert np.mean(np.argmax(terms, axis=1)[w.stance] == 4) > 0.6
+    # read in SI units, P_a (g^4 times larger) decides alone and J <= 1 marks almost nothing
+    si_st = StanceSettings(**{**st.__dict__, "song_acc_unit_m_s2": 1.0})
+    si = song_terms(si_st, w.t_ns, acc, gyr)
+    assert np.mean(np.argmax(si, axis=1)[w.stance] == 1) > 0.9
+    assert np.mean(StanceDetector(si_st).detect(w.t_ns, acc, gyr).stance[w.stance]) < 0.01
+    later = acc.copy()
+    later[600:] += 5.0
+    assert np.array_equal(StanceDetector(st).detect(w.t_ns[:600], acc[:600], gyr[:600]).statistic,
+                          StanceDetector(st).detect(w.t_ns, later, gyr).statistic[:600])

@@ -508,8 +508,8 @@ class FootNavigator:
     def update(self, stream: str, t_ns: int, values) -> list:
         """One sensor event; returns the samples whose state became known, as ``(t_ns, position_n)``.
 
-        Stance is decided ``stance.window_s / 2`` late (the centred window), so
-        the positions come that late.  The "song" detector needs its axes set
+        Stance is decided :attr:`core.foot.stance.StanceSettings.delay_s` late (the
+        look-ahead of the detector's windows), so the positions come that late.  The "song" detector needs its axes set
         in the settings (``song_axes`` other than "auto") for streaming.
         """
         if self._stream is None:

@@ -1,13 +1,16 @@
 """Stance (zero-velocity) detection for a foot-mounted IMU.
 
-Four detectors, selectable by name, all on a window defined in **seconds**
-(centred on the sample; samples with ``|t_j - t_k| <= window_s / 2``), so a
-setting means the same at 100 and at 400 Hz.  Each gives a statistic per
-sample; the sample is stance when the statistic is at most ``threshold``.
+Four detectors, selectable by name, all on a window defined in **seconds**,
+so a setting means the same at 100 and at 400 Hz.  The window is centred on
+the sample (samples with ``|t_j - t_k| <= window_s / 2``) or trailing
+(``t_k - window_s <= t_j <= t_k``, the paper's ``k - k0 .. k``;
+``window_alignment``).  Each gives a statistic per sample; the sample is
+stance when the statistic is at most the threshold.
 
-``"song"`` -- Song & Park 2018, eqs. 1-6
-    With ``a_x, a_z`` two accelerometer axes and ``w_x, w_y`` two gyroscope
-    axes (the paper's; :func:`infer_foot_axes` finds them on any mounting)::
+``"song"`` -- Song & Park 2018, eqs. 1-6, as written
+    With ``a_x, a_z`` two accelerometer axes **in g** (the readings divided by
+    ``song_acc_unit_m_s2``, standard gravity) and ``w_x, w_y`` two gyroscope
+    axes in rad/s (the paper's; :func:`infer_foot_axes` finds them on any mounting)::
 
         E_a = Var(sqrt(a_x^2 + a_z^2))          (eq. 1)
         P_a = Var(a_x a_z)                       (eq. 2)
@@ -16,19 +19,35 @@ sample; the sample is stance when the statistic is at most ``threshold``.
         A_r = sqrt(w_x(k)^2 + w_y(k)^2)          (eq. 5, this sample only)
         J   = max(w1 E_a, w2 P_a, w3 S_a, w4 E_r, w5 A_r)   (eq. 6; stance: J <= 1)
 
-    Weights ``w = (50, 100, 100, 3, 5)`` as in the paper (SI units: m/s^2,
-    rad/s); the paper's window is 15 samples at 100 Hz, ``window_s = 0.15``.
-    The variances are population variances over the window.
+    Weights ``w = (50, 100, 100, 3, 5)`` and the threshold 1 as in the paper;
+    its window is ``k - k0 .. k`` with ``k0`` = 15 samples at 100 Hz: trailing,
+    ``window_s = 0.15`` (``window_alignment="auto"`` is trailing for "song").
+    The variances are population variances over the window.  (Read in SI
+    units, m/s^2, the acceleration terms are ``g^2`` to ``g^4`` times larger and
+    decide alone: an earlier version did that, with a threshold of 100.)
 ``"shoe"`` -- the stance hypothesis optimal detector (SHOE, generalised likelihood ratio; Skog et al. 2010)::
 
-        T = 1/W sum_k ( |a_k - g a_mean/|a_mean||^2 / sigma_a^2 + |w_k|^2 / sigma_w^2 )
+        T = 1/W sum_k ( |a_k - g a_mean/|a_mean||^2 / sigma_a^2 + |w_k|^2 / sigma_w^2 )   (dimensionless)
 ``"amv"`` -- acceleration moving variance: ``T = 1/W sum_k |a_k - a_mean|^2`` ((m/s^2)^2)
 ``"are"`` -- angular rate energy: ``T = 1/W sum_k |w_k|^2`` ((rad/s)^2)
 
+Adaptive threshold (``adaptive_floor_factor > 0``; the default for "shoe", :data:`DEFAULT_FLOOR_FACTORS`): the threshold of sample k is
+``max(threshold, adaptive_floor_factor * floor_k)`` where ``floor_k`` is the
+minimum of the statistic (in its own units) over ``adaptive_floor_window_s``
+around k: centred (``|t_j - t_k| <= window / 2``, for replays) or trailing
+(``t_k - window <= t_j <= t_k``, causal, ``adaptive_floor_causal``).  When
+running, the foot is never as still as in a walking stance: the statistic's
+floor rises by orders of magnitude and a fixed threshold finds no stance; a
+threshold relative to the floor follows it, while in walking (floor far below
+``threshold / factor``) nothing changes.
+
 Batch (:meth:`StanceDetector.detect`) works on whole arrays with cumulative
-sums (O(n), no Python loop).  Streaming (:class:`StanceStream`) buffers one
-half-window of samples and calls the same batch kernel on the buffer, so it
-decides each sample ``window_s / 2`` late and gives the same result.
+sums and a sparse table for the moving minimum (O(n log n), no Python loop
+per sample).  Streaming (:class:`StanceStream`) buffers what the windows need
+and calls the same kernels on the buffer, so it decides each sample
+:attr:`StanceDetector.delay_s` late (the look-ahead of the statistic's window,
+``window_s / 2`` centred and 0 trailing, plus the floor's, ``adaptive_floor_window_s
+/ 2`` centred and 0 causal) and gives the same result.
 """
 
 from __future__ import annotations
@@ -42,10 +61,16 @@ import numpy as np
 from core.conventions import STANDARD_GRAVITY_M_S2
 
 DETECTORS = ("song", "shoe", "amv", "are")
+WINDOW_ALIGNMENTS = ("auto", "centred", "trailing")
 
-#: default threshold of each detector (chosen on the PyShoe tuning split with window_s = 0.1, "song" with
-#: the paper's 0.15 s; see docs/foot.md).  The paper's own J <= 1 marks almost nothing as stance on PyShoe.
-DEFAULT_THRESHOLDS = {"song": 100.0, "shoe": 1.0e5, "amv": 0.02, "are": 0.2}
+#: default threshold of each detector: "song" the paper's J <= 1; the others chosen on the PyShoe tuning
+#: split with window_s = 0.1 (see docs/foot.md)
+DEFAULT_THRESHOLDS = {"song": 1.0, "shoe": 1.0e5, "amv": 0.02, "are": 0.2}
+
+#: default adaptive-threshold factor of each detector (0 = fixed threshold): "shoe" chosen on the PyShoe
+#: tuning split (factor 2 with a 1.2 s window: mean 3-D RMSE of the 14 tuning trials 1.19 -> 0.11 m, the
+#: running trial 2017-11-27-11-11-53 15.1 -> 0.22 m, the walking trials unchanged); the others untuned, fixed
+DEFAULT_FLOOR_FACTORS = {"song": 0.0, "shoe": 2.0, "amv": 0.0, "are": 0.0}
 
 #: eq. 6 weights (w1 .. w5) of the paper
 SONG_WEIGHTS = (50.0, 100.0, 100.0, 3.0, 5.0)
@@ -57,12 +82,23 @@ class StanceSettings:
 
     #: one of :data:`DETECTORS`
     detector: str = "shoe"
-    #: width of the centred window (s); the paper's is 15 samples at 100 Hz (0.15 s), the tuned default 0.1 s
+    #: width of the window (s); the paper's is 15 samples at 100 Hz (0.15 s), the tuned default 0.1 s
     window_s: float = 0.1
+    #: "centred", "trailing" or "auto" (trailing for "song" as in the paper, centred for the others)
+    window_alignment: str = "auto"
     #: stance when the statistic <= threshold; nan: the detector's entry of :data:`DEFAULT_THRESHOLDS`
     threshold: float = math.nan
+    #: adaptive threshold: ``max(threshold, factor * moving minimum of the statistic)``; 0 = off; nan: the
+    #: detector's entry of :data:`DEFAULT_FLOOR_FACTORS`
+    adaptive_floor_factor: float = math.nan
+    #: the window of that moving minimum (s)
+    adaptive_floor_window_s: float = 1.2
+    #: the moving minimum over the trailing window (causal, for live use) instead of the centred one
+    adaptive_floor_causal: bool = False
     #: "song": eq. 6 weights
     song_weights: tuple = SONG_WEIGHTS
+    #: "song": the paper's acceleration unit, g (m/s^2 per unit)
+    song_acc_unit_m_s2: float = STANDARD_GRAVITY_M_S2
     #: "song": the accelerometer axes playing the paper's x (forward) and z (vertical)
     acc_axes: tuple = (0, 2)
     #: "song": the gyroscope axes playing the paper's x and y (the two not about the vertical)
@@ -78,10 +114,48 @@ class StanceSettings:
             raise ValueError(f"unknown stance detector {self.detector!r}: one of {', '.join(DETECTORS)}")
         if not (self.window_s > 0 and math.isfinite(self.window_s)):
             raise ValueError(f"window_s must be a positive number, not {self.window_s!r}")
+        if self.window_alignment not in WINDOW_ALIGNMENTS:
+            raise ValueError(f"unknown window_alignment {self.window_alignment!r}: one of "
+                             f"{', '.join(WINDOW_ALIGNMENTS)}")
+        if not (math.isnan(self.adaptive_floor_factor)
+                or (self.adaptive_floor_factor >= 0 and math.isfinite(self.adaptive_floor_factor))):
+            raise ValueError(f"adaptive_floor_factor must be >= 0, not {self.adaptive_floor_factor!r}")
+        if self.floor_factor > 0 and not (self.adaptive_floor_window_s > 0):
+            raise ValueError(f"adaptive_floor_window_s must be positive, not {self.adaptive_floor_window_s!r}")
 
     @property
     def threshold_value(self) -> float:
         return DEFAULT_THRESHOLDS[self.detector] if math.isnan(self.threshold) else float(self.threshold)
+
+    @property
+    def floor_factor(self) -> float:
+        """The adaptive threshold's factor in use (0: a fixed threshold)."""
+        f = self.adaptive_floor_factor
+        return DEFAULT_FLOOR_FACTORS[self.detector] if math.isnan(f) else float(f)
+
+    @property
+    def trailing(self) -> bool:
+        """Whether the statistic's window is trailing (``k - k0 .. k``) rather than centred."""
+        if self.window_alignment == "auto":
+            return self.detector == "song"
+        return self.window_alignment == "trailing"
+
+    def statistic_span_ns(self) -> tuple[int, int]:
+        """``(back, ahead)``: how far (ns) the statistic's window reaches before and after its sample."""
+        w = int(round(self.window_s * 1e9))
+        return (w, 0) if self.trailing else (w // 2, w // 2)
+
+    def floor_span_ns(self) -> tuple[int, int]:
+        """``(back, ahead)`` of the adaptive threshold's moving minimum ((0, 0) when off)."""
+        if self.floor_factor <= 0:
+            return (0, 0)
+        w = int(round(self.adaptive_floor_window_s * 1e9))
+        return (w, 0) if self.adaptive_floor_causal else (w // 2, w // 2)
+
+    @property
+    def delay_s(self) -> float:
+        """How late (s) a streaming decision comes: the look-ahead of the two windows."""
+        return (self.statistic_span_ns()[1] + self.floor_span_ns()[1]) * 1e-9
 
 
 @dataclass
@@ -91,8 +165,10 @@ class StanceResult:
     t_ns: np.ndarray
     stance: np.ndarray  #: bool (n,)
     statistic: np.ndarray  #: (n,), stance where <= threshold
-    threshold: float
+    threshold: float  #: the fixed threshold (the adaptive one's lower bound)
     detector: str
+    #: (n,) the threshold of every sample (the fixed one, or the adaptive one)
+    thresholds: np.ndarray | None = None
 
     def phases(self) -> np.ndarray:
         """Stance phases as ``(m, 2)`` sample index pairs ``[start, end]`` (inclusive)."""
@@ -108,12 +184,44 @@ def runs(mask) -> np.ndarray:
     return np.column_stack([starts, ends]).astype(np.int64)
 
 
-def _window_bounds(t_ns: np.ndarray, half_ns: int, lo_t=None, hi_t=None):
-    """Index range ``[lo, hi)`` of the samples within ``half_ns`` of each sample."""
+def _window_bounds(t_ns: np.ndarray, back_ns: int, ahead_ns: int):
+    """Index range ``[lo, hi)`` of the samples with ``t_k - back <= t_j <= t_k + ahead`` for each sample k."""
     t = np.asarray(t_ns, dtype=np.int64)
-    lo = np.searchsorted(t, t - half_ns, side="left")
-    hi = np.searchsorted(t, t + half_ns, side="right")
+    lo = np.searchsorted(t, t - back_ns, side="left")
+    hi = np.searchsorted(t, t + ahead_ns, side="right")
     return lo, hi
+
+
+def window_min(x, lo, hi) -> np.ndarray:
+    """Minimum of ``x`` (n,) over each window ``[lo, hi)`` (non-empty), by a sparse table: O(n log n)."""
+    x = np.asarray(x, dtype=float)
+    n = len(x)
+    if n == 0:
+        return np.zeros(0)
+    lo = np.asarray(lo, dtype=np.int64)
+    length = np.asarray(hi, dtype=np.int64) - lo
+    level = np.floor(np.log2(np.maximum(length, 1))).astype(np.int64)
+    out = np.empty(n)
+    table = x
+    for j in range(int(level.max()) + 1):
+        m = level == j
+        if np.any(m):
+            out[m] = np.minimum(table[lo[m]], table[lo[m] + length[m] - (1 << j)])
+        half = 1 << j
+        if len(table) > half:
+            table = np.minimum(table[:-half], table[half:])  # min over [i, i + 2^(j+1))
+    return out
+
+
+def thresholds(settings: "StanceSettings", t_ns, stat) -> np.ndarray:
+    """The threshold of every sample: fixed, or ``max(threshold, factor * moving minimum)`` (adaptive)."""
+    s = settings
+    stat = np.asarray(stat, dtype=float)
+    base = np.full(len(stat), s.threshold_value)
+    if s.floor_factor <= 0 or len(stat) == 0:
+        return base
+    lo, hi = _window_bounds(t_ns, *s.floor_span_ns())
+    return np.maximum(base, s.floor_factor * window_min(stat, lo, hi))
 
 
 def _wsum(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -129,6 +237,32 @@ def _wvar(x, lo, hi, count):
     return np.maximum(_wsum(x0 * x0, lo, hi) / count - m * m, 0.0)
 
 
+def _song_terms(s: StanceSettings, acc, gyr, lo, hi, cnt) -> np.ndarray:
+    ix, iz = s.acc_axes
+    gx, gy = s.gyro_axes
+    ax, az = acc[:, ix] / s.song_acc_unit_m_s2, acc[:, iz] / s.song_acc_unit_m_s2  # in g, as the paper
+    wr = np.sqrt(gyr[:, gx] ** 2 + gyr[:, gy] ** 2)
+    w1, w2, w3, w4, w5 = s.song_weights
+    return np.column_stack([
+        w1 * _wvar(np.sqrt(ax * ax + az * az), lo, hi, cnt),  # eq. 1
+        w2 * _wvar(ax * az, lo, hi, cnt),  # eq. 2
+        w3 * _wvar(ax + az, lo, hi, cnt),  # eq. 3
+        w4 * _wvar(wr, lo, hi, cnt),  # eq. 4
+        w5 * wr,  # eq. 5
+    ])
+
+
+def song_terms(settings: StanceSettings, t_ns, acc_b, gyro_b) -> np.ndarray:
+    """The five weighted terms of eq. 6 per sample, ``(n, 5)``: ``w1 E_a, w2 P_a, w3 S_a, w4 E_r, w5 A_r``
+    (their maximum is the "song" statistic ``J``)."""
+    acc = np.asarray(acc_b, dtype=float).reshape(-1, 3)
+    gyr = np.asarray(gyro_b, dtype=float).reshape(-1, 3)
+    if len(acc) == 0:
+        return np.zeros((0, 5))
+    lo, hi = _window_bounds(t_ns, *settings.statistic_span_ns())
+    return _song_terms(settings, acc, gyr, lo, hi, (hi - lo).astype(float))
+
+
 def statistic(settings: StanceSettings, t_ns, acc_b, gyro_b) -> np.ndarray:
     """The detector statistic of every sample (the kernel of batch and streaming detection)."""
     s = settings
@@ -137,21 +271,10 @@ def statistic(settings: StanceSettings, t_ns, acc_b, gyro_b) -> np.ndarray:
     n = len(acc)
     if n == 0:
         return np.zeros(0)
-    lo, hi = _window_bounds(t_ns, int(round(s.window_s * 0.5e9)))
+    lo, hi = _window_bounds(t_ns, *s.statistic_span_ns())
     cnt = (hi - lo).astype(float)
     if s.detector == "song":
-        ix, iz = s.acc_axes
-        gx, gy = s.gyro_axes
-        ax, az = acc[:, ix], acc[:, iz]
-        wr = np.sqrt(gyr[:, gx] ** 2 + gyr[:, gy] ** 2)
-        w1, w2, w3, w4, w5 = s.song_weights
-        return np.maximum.reduce([
-            w1 * _wvar(np.sqrt(ax * ax + az * az), lo, hi, cnt),  # eq. 1
-            w2 * _wvar(ax * az, lo, hi, cnt),  # eq. 2
-            w3 * _wvar(ax + az, lo, hi, cnt),  # eq. 3
-            w4 * _wvar(wr, lo, hi, cnt),  # eq. 4
-            w5 * wr,  # eq. 5
-        ])  # eq. 6
+        return np.max(_song_terms(s, acc, gyr, lo, hi, cnt), axis=1)  # eq. 6
     w2sum = _wsum(np.einsum("ij,ij->i", gyr, gyr), lo, hi)
     if s.detector == "are":
         return w2sum / cnt
@@ -187,7 +310,13 @@ class StanceDetector:
         t = np.asarray(t_ns, dtype=np.int64)
         stat = statistic(self.settings, t, acc_b, gyro_b)
         stat = np.where(np.isfinite(stat), stat, np.inf)  # a bad number is never stance
-        return StanceResult(t, stat <= self.threshold, stat, self.threshold, self.settings.detector)
+        thr = thresholds(self.settings, t, stat)
+        return StanceResult(t, stat <= thr, stat, self.threshold, self.settings.detector, thr)
+
+    @property
+    def delay_s(self) -> float:
+        """How late a streaming decision comes (s): :attr:`StanceSettings.delay_s`."""
+        return self.settings.delay_s
 
     def stream(self) -> "StanceStream":
         return StanceStream(self)
@@ -196,45 +325,72 @@ class StanceDetector:
 class StanceStream:
     """Streaming stance detection: :meth:`update` returns the decisions that became due.
 
-    Each decision is ``(t_ns, stance, statistic)`` of a sample ``window_s / 2``
+    Each decision is ``(t_ns, stance, statistic)`` of a sample :attr:`StanceDetector.delay_s`
     in the past; :meth:`flush` decides the rest at the end.  The decisions are
-    those of :meth:`StanceDetector.detect` on the whole stream.
+    those of :meth:`StanceDetector.detect` on the whole stream: the statistic of
+    a sample is computed by :func:`statistic` on the buffered samples its window
+    covers, the adaptive threshold by :func:`thresholds` on the buffered statistics.
     """
 
     def __init__(self, detector: StanceDetector):
         self.detector = detector
-        self._half_ns = int(round(detector.settings.window_s * 0.5e9))
+        s = detector.settings
+        self._back, self._ahead = s.statistic_span_ns()
+        self._fback, self._fahead = s.floor_span_ns()
         self._buf: deque = deque()  # (t_ns, acc, gyro)
-        self._next = 0  # index in _buf of the next sample to decide
+        self._next = 0  # index in _buf of the next sample whose statistic is due
+        self._stats: deque = deque()  # (t_ns, statistic) known
+        self._dnext = 0  # index in _stats of the next sample to decide
 
     def update(self, t_ns: int, acc_b, gyro_b) -> list[tuple[int, bool, float]]:
         self._buf.append((int(t_ns), tuple(acc_b), tuple(gyro_b)))
-        return self._decide(int(t_ns))
+        self._statistics(int(t_ns))
+        return self._decide(int(t_ns) - self._ahead)
 
     def flush(self) -> list[tuple[int, bool, float]]:
+        self._statistics(None)
         return self._decide(None)
 
-    def _decide(self, t_now) -> list:
-        out = []
+    def _statistics(self, t_now) -> None:
+        s = self.detector.settings
         while self._next < len(self._buf):
             tk = self._buf[self._next][0]
-            if t_now is not None and t_now < tk + self._half_ns:
+            if t_now is not None and t_now < tk + self._ahead:
                 break
-            # drop samples no window still needs
-            while self._buf[0][0] < tk - self._half_ns:
+            while self._buf[0][0] < tk - self._back:  # drop samples no window still needs
                 self._buf.popleft()
                 self._next -= 1
             k = self._next
-            m = len(self._buf)
-            t = np.fromiter((b[0] for b in self._buf), dtype=np.int64, count=m)
-            hi = np.searchsorted(t, tk + self._half_ns, side="right")
-            acc = np.array([b[1] for b in list(self._buf)[:hi]])
-            gyr = np.array([b[2] for b in list(self._buf)[:hi]])
-            stat = float(statistic(self.detector.settings, t[:hi], acc, gyr)[k])
-            if not math.isfinite(stat):
-                stat = math.inf
-            out.append((tk, stat <= self.detector.threshold, stat))
+            t = np.fromiter((b[0] for b in self._buf), dtype=np.int64, count=len(self._buf))
+            hi = int(np.searchsorted(t, tk + self._ahead, side="right"))
+            rows = list(self._buf)[:hi]
+            stat = float(statistic(s, t[:hi], [b[1] for b in rows], [b[2] for b in rows])[k])
+            self._stats.append((tk, stat if math.isfinite(stat) else math.inf))
             self._next += 1
+
+    def _decide(self, t_known) -> list:
+        """Decide the samples whose floor window lies within the statistics known (up to ``t_known``)."""
+        s = self.detector.settings
+        thr0 = self.detector.threshold
+        out = []
+        st = self._stats
+        while self._dnext < len(st):
+            tk, stat = st[self._dnext]
+            if t_known is not None and t_known < tk + self._fahead:
+                break
+            while st[0][0] < tk - self._fback:
+                st.popleft()
+                self._dnext -= 1
+            thr = thr0
+            if s.floor_factor > 0:
+                floor = min(v for tj, v in st if tj <= tk + self._fahead)
+                thr = max(thr0, s.floor_factor * floor)
+            out.append((tk, stat <= thr, stat))
+            self._dnext += 1
+        if s.floor_factor <= 0:  # no floor window: keep nothing
+            while self._dnext > 0:
+                st.popleft()
+                self._dnext -= 1
         return out
 
 

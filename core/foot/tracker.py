@@ -89,14 +89,18 @@ def foot_settings_for(recording: Recording | None, *, aid: str | None = None, de
 
     ``aid`` None: "tckf" when the recording has the waist device's accelerometer and magnetometer,
     else "zupt" (a single foot IMU: its magnetometer near the floor is too disturbed to be the default,
-    see the benchmark's IPOL table).  ``recording`` None (a live phone on the shoe): no waist device.
+    see the benchmark's IPOL table).  ``recording`` None (a live phone on the shoe): no waist device, and
+    the stance detector's adaptive threshold causal (:class:`core.foot.stance.StanceSettings`).
     """
     waist = waist_device or None
     if waist is not None and (recording is None or not (recording.has(stream_name(ACC, waist))
                                                         and recording.has(stream_name(MAG, waist)))):
         waist = None
     chosen = aid or ("tckf" if waist is not None else "zupt")
-    return FootSettings(aid=chosen, stance=StanceSettings(detector=detector), gyro_delay_s=gyro_delay_s), waist
+    # live (no recording): the adaptive threshold's causal moving minimum, decisions window_s / 2 late
+    # instead of (window_s + adaptive_floor_window_s) / 2 (0.05 s against 0.65 s with the defaults)
+    stance = StanceSettings(detector=detector, adaptive_floor_causal=recording is None)
+    return FootSettings(aid=chosen, stance=stance, gyro_delay_s=gyro_delay_s), waist
 
 
 @dataclass(frozen=True)
