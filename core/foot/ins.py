@@ -51,7 +51,10 @@ Measurements (eq. 9 and the options):
 * a heading angle: ``y = wrap(psi_meas - psi_est) = h . dtheta``, ``H = [h 0 0 0 0]``.
 
 Every update returns its innovation and normalised innovation squared (NIS);
-an update whose result would not be finite is discarded and counted.
+an update whose result would not be finite is discarded and counted.  The
+update, the injection and the reset after it (``P <- G P G^T``,
+``G = I + [dtheta / 2]x`` on the attitude block) are :mod:`core.kalman`'s,
+shared with the phone's attitude filter.
 """
 
 from __future__ import annotations
@@ -61,9 +64,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from core import kalman
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2
-from core.pdr.attitude import skew
+from core.kalman import skew
 
 N_STATES = 15
 ATT, VEL, POS, BG, BA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
@@ -271,47 +275,36 @@ class ZuptEKF:
         self._f_prev, self._w_prev = tuple(acc_b), tuple(gyro_b)
 
     # -- updates ------------------------------------------------------------------------------
-    def _apply(self, kind: str, y, K, P_new, nis: float) -> Update:
-        dx = K @ y
-        if not (all(map(math.isfinite, dx.tolist())) and math.isfinite(float(P_new.sum()))):
+    def _update(self, kind: str, y: np.ndarray, H, Rm: np.ndarray) -> Update:
+        """One update through the shared kernel (:func:`core.kalman.correct`; ``H`` an array, or the slice of
+        the states it selects), the error folded in and reset (:func:`core.kalman.reset_covariance`)."""
+        c = kalman.correct(self.P, y, H, Rm)
+        if not c.used:
             self.n_rejected += 1
-            return Update(kind, False, tuple(float(v) for v in y), nis, len(y))
-        self.P = 0.5 * (P_new + P_new.T)
-        if self.consider is not None:
-            self.consider = self._consider_next
+            return Update(kind, False, tuple(float(v) for v in y), c.nis, len(y))
+        if self.consider is not None:  # the considered error is not estimated; its correlation shrinks
+            hc = self.consider[H] if isinstance(H, slice) else H @ self.consider
+            self.consider = self.consider - c.K @ hc
+        return self._fold(kind, y, c.dx, c.P, c.nis)
+
+    def _fold(self, kind: str, y: np.ndarray, dx: np.ndarray, P_new: np.ndarray, nis: float) -> Update:
+        """Fold a used update's ``dx`` into the nominal state and reset the error (:func:`core.kalman.reset_covariance`;
+        the consider term's cross-covariance goes through the same reset Jacobian)."""
+        G = kalman.reset_jacobian(dx[ATT], N_STATES, ATT)
         self.correct(dx)
+        self.P = kalman.reset_covariance(P_new, dx[ATT], ATT, G)
+        if self.consider is not None:
+            self.consider = G @ self.consider
         self.last_dx = dx
         return Update(kind, True, tuple(float(v) for v in y), nis, len(y))
 
     def _update_block(self, kind: str, y: np.ndarray, sl: slice, Rm: np.ndarray) -> Update:
         """Update with ``H`` selecting the states ``sl``: ``P H^T = P[:, sl]``, ``P <- P - K (P H^T)^T``."""
-        return self._kalman(kind, y, self.P[:, sl], self.P[sl, sl] + Rm, Rm, None,
-                            None if self.consider is None else self.consider[sl])
-
-    def _update(self, kind: str, y: np.ndarray, H: np.ndarray, Rm: np.ndarray) -> Update:
-        """General update, Joseph form."""
-        PHt = self.P @ H.T
-        return self._kalman(kind, y, PHt, H @ PHt + Rm, Rm, H, None if self.consider is None else H @ self.consider)
-
-    def _kalman(self, kind, y, PHt, S, Rm, H, h_consider=None) -> Update:
-        try:
-            Sinv = np.linalg.inv(S)
-        except np.linalg.LinAlgError:
-            self.n_rejected += 1
-            return Update(kind, False, tuple(y), math.nan, len(y))
-        K = PHt @ Sinv
-        if H is None:
-            P_new = self.P - K @ PHt.T
-        else:
-            ikh = np.eye(N_STATES) - K @ H
-            P_new = ikh @ self.P @ ikh.T + K @ Rm @ K.T
-        if h_consider is not None:  # the considered error is not estimated; its correlation shrinks
-            self._consider_next = self.consider - K @ h_consider
-        return self._apply(kind, y, K, P_new, float(y @ Sinv @ y))
+        return self._update(kind, y, sl, Rm)
 
     def correct(self, dx) -> None:
         """Fold an error estimate into the nominal state (and reset it to zero)."""
-        self.q = quat.normalize(quat.multiply(quat.from_rotation_vector(tuple(dx[ATT])), self.q))
+        self.q = kalman.inject_rotation(self.q, dx[ATT])
         d = dx.tolist()
         v, p, bg, ba = self.v, self.p, self.bg, self.ba
         self.v = (v[0] + d[3], v[1] + d[4], v[2] + d[5])
@@ -358,8 +351,12 @@ class ZuptEKF:
             return Update("heading", False, (float(y[0]),), math.nan, 1)
         K = (ph / s_).reshape(-1, 1)
         P_new = self.P - s_ * (K @ K.T)
-        self._consider_next = self.consider - K[:, 0] * hc
-        return self._apply("heading", y, K, P_new, float(y[0] * y[0] / s_))
+        dx = K[:, 0] * float(y[0])
+        if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(P_new))):
+            self.n_rejected += 1
+            return Update("heading", False, (float(y[0]),), math.nan, 1)
+        self.consider = self.consider - K[:, 0] * hc
+        return self._fold("heading", y, dx, P_new, float(y[0] * y[0] / s_))
 
     # -- views --------------------------------------------------------------------------------
     def matrix(self) -> np.ndarray:

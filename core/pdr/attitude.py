@@ -134,12 +134,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from core import kalman
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
+from core.kalman import skew  # noqa: F401  (re-exported: core.foot and older callers import it from here)
 from core.dsp import RunningMedian, WindowMeanSpread, WindowVariance
 
 _I3 = np.eye(3)
-_I6 = np.eye(6)
+_I3.flags.writeable = False
 
 #: per-component magnitudes no phone sensor reports (m/s^2, rad/s, uT): such readings are skipped like
 #: non-finite ones (squared, they would overflow to inf and poison the running windows)
@@ -151,13 +153,6 @@ _MAG_IMPOSSIBLE = 1e6
 def _plausible(x: float, y: float, z: float, lim: float) -> bool:
     """All three finite and within +-lim (False for NaN too)."""
     return -lim <= x <= lim and -lim <= y <= lim and -lim <= z <= lim
-for _m in (_I3, _I6):
-    _m.flags.writeable = False
-
-
-def skew(v) -> np.ndarray:
-    """Cross-product matrix ``[v]x`` (``[v]x w = v x w``)."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def direction_jacobian(mat_nb, v_n) -> np.ndarray:
@@ -755,52 +750,37 @@ class AttitudeEKF(AttitudeFilterBase):
         Its Jacobian is zero, but its correlation with the tilt and the bias would otherwise let every
         tilt or bias correction shrink the heading's variance, where nothing observes the heading.
         """
-        P = self.P
-        PHt = P @ H.T
-        S = H @ PHt + Rm
-        try:
-            Sinv = np.linalg.inv(S)
-        except np.linalg.LinAlgError:
-            self.n_numerical_rejects += 1
-            return False, "numerical", math.nan
-        nis = float(y @ Sinv @ y)
-        if not math.isfinite(nis):
-            self.n_numerical_rejects += 1
-            return False, "numerical", nis
-        if nis > gate:
-            return False, "gate", nis
-        K = PHt @ Sinv
-        if consider_tilt:  # Schmidt update: roll and pitch are not corrected by this measurement
-            K[0:2, :] = 0.0
         yaw_consider = self.yaw_unobserved and not measures_yaw
-        if yaw_consider:  # Schmidt update: the heading is not corrected (see the docstring)
-            K[2, :] = 0.0
-        if bias_axis is not None:  # only the bias component about this body axis
-            K[3:6, :] = np.outer(bias_axis, bias_axis @ K[3:6, :])
-        dx = K @ y
-        IKH = _I6 - K @ H
-        Pn = IKH @ P @ IKH.T + K @ Rm @ K.T  # Joseph form: valid for any gain
-        if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(Pn))):
+
+        def adjust(K):
+            if consider_tilt:  # Schmidt update: roll and pitch are not corrected by this measurement
+                K[0:2, :] = 0.0
+            if yaw_consider:  # Schmidt update: the heading is not corrected (see the docstring)
+                K[2, :] = 0.0
+            if bias_axis is not None:  # only the bias component about this body axis
+                K[3:6, :] = np.outer(bias_axis, bias_axis @ K[3:6, :])
+
+        c = kalman.correct(self.P, y, H, Rm, gate, adjust_gain=adjust)
+        if c.verdict is kalman.Verdict.NUMERICAL:
             self.n_numerical_rejects += 1
-            return False, "numerical", nis
-        self._inject(dx, Pn, keep_yaw=yaw_consider)
+        if not c.used:
+            return False, c.verdict.value, c.nis
+        self._inject(c.dx, c.P, keep_yaw=yaw_consider)
         if measures_yaw:
             self.yaw_unobserved = False
-        return True, "used", nis
+        return True, "used", c.nis
 
     def _inject(self, dx: np.ndarray, Pn: np.ndarray, keep_yaw: bool = False) -> None:
+        """Fold the error into ``q`` and ``b`` and reset it: ``P <- G P G^T`` (:func:`core.kalman.reset_jacobian`,
+        ``G = I + [dtheta / 2]x`` for this navigation-frame error; derived in the module docstring)."""
         dth = dx[0:3]
-        self.q = quat.normalize(quat.multiply(quat.from_rotation_vector(tuple(dth.tolist())), self.q))
+        self.q = kalman.inject_rotation(self.q, dth)
         lim = self.settings.max_gyro_bias_rad_s
         self.b = [min(lim, max(-lim, self.b[i] + float(dx[3 + i]))) for i in range(3)]
-        # reset of the error to zero: G = blockdiag(I + [dtheta / 2]x, I) for a navigation-frame error
-        # (see the module docstring; the body-frame formula has the other sign)
-        G = _I6.copy()
-        G[0:3, 0:3] += 0.5 * skew(dth)
+        G = kalman.reset_jacobian(dth, 6)
         if keep_yaw:  # a consider heading is carried, not re-linearised: its row stays the identity's
             G[2, 0:2] = 0.0
-        Pn = G @ Pn @ G.T
-        self.P = 0.5 * (Pn + Pn.T)
+        self.P = kalman.reset_covariance(Pn, dth, G=G)
 
     def _record(self, kind: str, used: bool, nis: float) -> None:
         if nis == nis:
