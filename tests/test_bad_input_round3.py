@@ -181,8 +181,8 @@ def test_plan_size_and_vertex_limits_are_clear_and_a_big_ring_is_indexed(tmp_pat
     th = np.linspace(0, 2 * np.pi, 2000, endpoint=False)
     ring = np.column_stack([30 * np.cos(th), 20 * np.sin(th)])
     p = _plan(tmp_path, [ring.tolist()])
-    with pytest.raises(PlanFileError, match=r"p\.geojson: feature 0: a ring or line of 2000 vertices, over the limit "
-                                            "of 1000"):
+    with pytest.raises(PlanFileError, match=r"p\.geojson: feature 0: ring 0 of polygon 0 has 2000 vertices, over "
+                                            "the limit of 1000"):
         read_geojson(p, max_ring_vertices=1000)
     with pytest.raises(PlanFileError, match="more than 1500 vertices"):
         read_geojson(p, max_vertices=1500)
