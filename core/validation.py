@@ -189,18 +189,18 @@ def _check_clock(rec, name, span, src, warn) -> None:
     imu = f"the IMU's run from t_ns {span[0]} to {span[1]}"
     fixed = None
     for factor, unit in ((10**3, "microseconds"), (10**6, "milliseconds"), (10**9, "seconds")):
-        if _inside(t0 * factor, t1 * factor, span, margin) and max(abs(t0), abs(t1)) * factor < 2 ** 63:
+        if _inside(t0 * factor, t1 * factor, span, margin) and max(abs(t0), abs(t1)) * factor < 2 ** 62:
             fixed = s.t_ns * np.int64(factor)
             problem = StreamProblem.OTHER_TIME_UNIT
             text = (f"{src}: stream '{name}': its timestamps (t_ns {int(t0)} to {int(t1)}) are {unit}, not "
                     f"nanoseconds ({imu}): multiplied by {factor:.0e}")
             break
     off = rec.metadata.get("unix_offset_ns")
-    if fixed is None and isinstance(off, int) and not isinstance(off, bool):
+    if fixed is None and isinstance(off, int) and not isinstance(off, bool) and abs(off) < 2 ** 62:
         for factor, unit in ((1, "nanoseconds"), (10**3, "microseconds"), (10**6, "milliseconds"),
                              (10**9, "seconds")):
             a, b = t0 * factor - off, t1 * factor - off
-            if _inside(a, b, span, margin) and max(abs(t0), abs(t1)) * factor < 2 ** 63:
+            if _inside(a, b, span, margin) and max(abs(t0), abs(t1)) * factor < 2 ** 62:
                 fixed = s.t_ns * np.int64(factor) - np.int64(off)
                 problem = StreamProblem.OTHER_CLOCK
                 text = (f"{src}: stream '{name}': its timestamps are Unix time in {unit}, not the sensor clock "
