@@ -189,18 +189,18 @@ def _check_clock(rec, name, span, src, warn) -> None:
     imu = f"the IMU's run from t_ns {span[0]} to {span[1]}"
     fixed = None
     for factor, unit in ((10**3, "microseconds"), (10**6, "milliseconds"), (10**9, "seconds")):
-        if _inside(t0 * factor, t1 * factor, span, margin) and max(abs(t0), abs(t1)) * factor < 2 ** 63:
+        if _inside(t0 * factor, t1 * factor, span, margin) and max(abs(t0), abs(t1)) * factor < 2 ** 62:
             fixed = s.t_ns * np.int64(factor)
             problem = StreamProblem.OTHER_TIME_UNIT
             text = (f"{src}: stream '{name}': its timestamps (t_ns {int(t0)} to {int(t1)}) are {unit}, not "
                     f"nanoseconds ({imu}): multiplied by {factor:.0e}")
             break
     off = rec.metadata.get("unix_offset_ns")
-    if fixed is None and isinstance(off, int) and not isinstance(off, bool):
+    if fixed is None and isinstance(off, int) and not isinstance(off, bool) and abs(off) < 2 ** 62:
         for factor, unit in ((1, "nanoseconds"), (10**3, "microseconds"), (10**6, "milliseconds"),
                              (10**9, "seconds")):
             a, b = t0 * factor - off, t1 * factor - off
-            if _inside(a, b, span, margin) and max(abs(t0), abs(t1)) * factor < 2 ** 63:
+            if _inside(a, b, span, margin) and max(abs(t0), abs(t1)) * factor < 2 ** 62:
                 fixed = s.t_ns * np.int64(factor) - np.int64(off)
                 problem = StreamProblem.OTHER_CLOCK
                 text = (f"{src}: stream '{name}': its timestamps are Unix time in {unit}, not the sensor clock "
@@ -248,6 +248,12 @@ def stream_gaps(t_ns, min_gap_s: float = GAP_REPORT_S, factor: float = JITTER_GA
     return t[g], t[g + 1]
 
 
+def _ran_through(s, a: int, b: int) -> bool:
+    """Whether stream ``s`` has at least half its usual events between ``a`` and ``b`` (ns): it ran in the gap."""
+    inside = int(np.searchsorted(s.t_ns, b, side="left") - np.searchsorted(s.t_ns, a, side="right"))
+    return inside >= max(1.0, 0.5 * (b - a) * 1e-9 * s.rate_hz)
+
+
 def _gaps(rec, src, warn) -> None:
     t_ref = rec.t0_ns
     imu = {n: s for n, s in rec.streams.items() if n.partition("@")[0] in IMU_KINDS and len(s) > 2}
@@ -258,7 +264,7 @@ def _gaps(rec, src, warn) -> None:
         k = int(np.argmax(b - a))
         longest = (b[k] - a[k]) * 1e-9
         others = [o for o, so in imu.items() if o != name and o.partition("@")[1:] == name.partition("@")[1:]
-                  and np.any((so.t_ns > a[k]) & (so.t_ns < b[k]))]
+                  and _ran_through(so, int(a[k]), int(b[k]))]
         where = f"{(a[k] - t_ref) * 1e-9:.1f} s to {(b[k] - t_ref) * 1e-9:.1f} s"
         text = (f"{src}: stream '{name}': {len(a)} gap(s) without events, the longest {longest:.1f} s "
                 f"({where} after the start)")

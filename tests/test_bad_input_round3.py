@@ -181,8 +181,8 @@ def test_plan_size_and_vertex_limits_are_clear_and_a_big_ring_is_indexed(tmp_pat
     th = np.linspace(0, 2 * np.pi, 2000, endpoint=False)
     ring = np.column_stack([30 * np.cos(th), 20 * np.sin(th)])
     p = _plan(tmp_path, [ring.tolist()])
-    with pytest.raises(PlanFileError, match=r"p\.geojson: feature 0: a ring or line of 2000 vertices, over the limit "
-                                            "of 1000"):
+    with pytest.raises(PlanFileError, match=r"p\.geojson: feature 0: ring 0 of polygon 0 has 2000 vertices, over "
+                                            "the limit of 1000"):
         read_geojson(p, max_ring_vertices=1000)
     with pytest.raises(PlanFileError, match="more than 1500 vertices"):
         read_geojson(p, max_vertices=1500)
@@ -328,3 +328,38 @@ def test_the_writer_holds_the_header_until_its_first_events(tmp_path):
     w.add("acc", 2 * 10**9, (0.0, 0.0, 9.8))
     w.close()
     assert len(read_recording(str(p)).streams["acc"]) == 2 and not (tmp_path / "live.csv.part").exists()
+
+
+# ---------------------------------------------------------------------------
+# the validation as a property: any recording gives repaired streams on one clock, never an exception
+
+
+def test_validation_never_raises_and_leaves_other_streams_on_the_imu_clock():
+    from hypothesis import given, settings, strategies as st
+
+    from core.validation import CLOCK_MARGIN_S, validate_recording
+
+    ints = st.integers(0, 2**63 - 1)
+
+    @settings(max_examples=150, deadline=None, derandomize=True)
+    @given(t_acc=st.lists(ints, min_size=2, max_size=30, unique=True), t_gps=st.lists(ints, max_size=30, unique=True),
+           scale=st.sampled_from([1, 10**3, 10**6, 10**9]), off=st.one_of(st.none(), st.integers(-2**64, 2**64)),
+           lat=st.floats(-1e3, 1e3), hacc=st.floats(-5, 50))
+    def check(t_acc, t_gps, scale, off, lat, hacc):
+        t_acc = np.sort(np.array(t_acc, dtype=np.int64))
+        t_gps = np.sort(np.array(t_gps, dtype=np.int64)) // scale
+        gps = np.tile([lat, 8.5, 400.0, hacc, 1.0, 0.0], (len(t_gps), 1))
+        rec = Recording({"acc": make_stream("acc", t_acc, np.zeros((len(t_acc), 3))),
+                         "gps": make_stream("gps", t_gps, gps)}, metadata={} if off is None else
+                        {"unix_offset_ns": off})
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            validate_recording(rec)
+        g = rec.streams["gps"]
+        if len(g):
+            margin = max(CLOCK_MARGIN_S * 1e9, float(t_acc[-1] - t_acc[0]))
+            assert t_acc[0] - margin <= float(g.t_ns[0]) and float(g.t_ns[-1]) <= t_acc[-1] + margin
+            assert np.all(np.abs(g.values[:, 0]) <= 90) and np.all(g.values[:, 3] >= 0)
+        assert all(f.problem in StreamProblem for f in rec.problems)
+
+    check()

@@ -319,14 +319,28 @@ def _where(source, index=None) -> str:
     return at + (f"feature {index}: " if index is not None else "")
 
 
-def _coordinate_array(c, what: str, where: str, min_points: int) -> np.ndarray:
-    """``c`` as an ``(K, 2)`` float array of finite [x, y] pairs, or a :class:`PlanFileError`."""
-    if not isinstance(c, list) or not all(isinstance(p, list) and len(p) >= 2 for p in c):
+def _coordinate_array(c, what: str, where: str, min_points: int, max_points: int) -> np.ndarray:
+    """``c`` as an ``(K, 2)`` float array of finite [x, y] pairs, or a :class:`PlanFileError` (also for
+    more than ``max_points``, counted before anything is converted)."""
+    if not isinstance(c, list):
         raise PlanFileError(f"{where}{what} must be a list of [x, y] positions")
-    try:
-        a = np.asarray([p[:2] for p in c], dtype=float).reshape(-1, 2)
+    if len(c) > max_points:
+        raise PlanFileError(f"{where}{what} has {len(c)} vertices, over the limit of {max_points} "
+                            "(core.indoor.floorplan.MAX_RING_VERTICES): simplify it (a corridor outline needs "
+                            "hundreds)")
+    a = None
+    try:  # the usual case, [x, y] pairs: numpy converts the list at once
+        a = np.asarray(c, dtype=float)
     except (TypeError, ValueError):
-        raise PlanFileError(f"{where}{what} holds a position that is not two numbers") from None
+        pass
+    if a is None or a.ndim != 2 or a.shape[1] < 2:
+        if not all(isinstance(p, list) and len(p) >= 2 for p in c):
+            raise PlanFileError(f"{where}{what} must be a list of [x, y] positions")
+        try:
+            a = np.asarray([p[:2] for p in c], dtype=float)
+        except (TypeError, ValueError):
+            raise PlanFileError(f"{where}{what} holds a position that is not two numbers") from None
+    a = a[:, :2].reshape(-1, 2)
     if not np.all(np.isfinite(a)):
         raise PlanFileError(f"{where}{what} holds a position that is not finite")
     if len(a) < min_points:
@@ -359,16 +373,12 @@ def _features(doc, source, max_ring_vertices: int, max_vertices: int) -> list:
             for k, poly in enumerate([coords] if t == "Polygon" else coords):
                 if not isinstance(poly, list) or not poly:
                     raise PlanFileError(f"{where}polygon {k} must be a non-empty list of rings")
-                polys.append([_coordinate_array(r, f"ring {j} of polygon {k}", where, 3) for j, r in enumerate(poly)])
+                polys.append([_coordinate_array(r, f"ring {j} of polygon {k}", where, 3, max_ring_vertices)
+                              for j, r in enumerate(poly)])
         elif t == "LineString" or t == "MultiLineString":
             for k, line in enumerate([coords] if t == "LineString" else coords):
-                lines.append(_coordinate_array(line, f"line {k}", where, 2))
-        for a in [r for p in polys for r in p] + lines:
-            if len(a) > max_ring_vertices:
-                raise PlanFileError(f"{where}a ring or line of {len(a)} vertices, over the limit of "
-                                    f"{max_ring_vertices} (core.indoor.floorplan.MAX_RING_VERTICES): simplify it "
-                                    "(a corridor outline needs hundreds)")
-            total += len(a)
+                lines.append(_coordinate_array(line, f"line {k}", where, 2, max_ring_vertices))
+        total += sum(len(a) for a in [r for p in polys for r in p] + lines)
         if total > max_vertices:
             raise PlanFileError(f"{where}the plan has more than {max_vertices} vertices (the limit, "
                                 "core.indoor.floorplan.MAX_PLAN_VERTICES): simplify it or split it into floors")
@@ -385,33 +395,50 @@ def ring_self_crossing(ring) -> tuple[int, int] | None:
     """Two edges of a closed ring ``(K, 2)`` that cross or touch, other than neighbours at their shared vertex
     (the ring is not a simple polygon: the even-odd rule then makes part of it outside), or None.
 
-    A sweep along x: edges sorted by their smallest x, each block of edges tested (CLRS 33.1,
-    :func:`~core.indoor.geometry.segments_intersect`) against the edges that start before the block's
-    largest x -- about K log K for a plan's rings, not K^2."""
+    The edges are hashed into a uniform grid of cells two median edges wide (each edge in every cell its bounding
+    box overlaps); only edges sharing a cell can meet, and those pairs are tested (CLRS 33.1,
+    :func:`~core.indoor.geometry.segments_intersect`): about K tests for a plan's rings, not K^2."""
     seg = ring_segments(_ring(ring))
     k = len(seg)
     if k < 4:
         return None
-    x_lo = np.minimum(seg[:, 0], seg[:, 2])
-    x_hi = np.maximum(seg[:, 0], seg[:, 2])
-    order = np.argsort(x_lo, kind="stable")
-    xs = x_lo[order]
-    block = 256
-    for a in range(0, k, block):
-        idx = order[a:a + block]
-        b = int(np.searchsorted(xs, x_hi[idx].max(), side="right"))
-        cand = order[a:b]
-        i = np.repeat(idx, len(cand))
-        j = np.tile(cand, len(idx))
-        gap = np.abs(i - j)
-        keep = (i < j) & (gap != 1) & (gap != k - 1)  # each pair once; neighbours share a vertex
-        i, j = i[keep], j[keep]
+    lo = np.minimum(seg[:, :2], seg[:, 2:])
+    hi = np.maximum(seg[:, :2], seg[:, 2:])
+    origin = lo.min(axis=0)
+    ext = hi.max(axis=0) - origin
+    cell = max(2.0 * float(np.median((hi - lo).max(axis=1))), float(ext.max()) / k, 1e-9)  # about 2 edges long
+    c_lo = np.floor((lo - origin) / cell).astype(np.int64)
+    c_hi = np.floor((hi - origin) / cell).astype(np.int64)
+    ny = int(c_hi[:, 1].max()) + 1
+    w = c_hi[:, 0] - c_lo[:, 0] + 1
+    n_per = w * (c_hi[:, 1] - c_lo[:, 1] + 1)
+    edge = np.repeat(np.arange(k), n_per)
+    j = np.arange(int(n_per.sum())) - np.repeat(np.cumsum(n_per) - n_per, n_per)
+    wr = np.repeat(w, n_per)
+    key = (np.repeat(c_lo[:, 0], n_per) + j % wr) * ny + np.repeat(c_lo[:, 1], n_per) + j // wr
+    order = np.argsort(key, kind="stable")
+    key, edge = key[order], edge[order]
+    start = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
+    count = np.diff(np.concatenate([start, [len(key)]]))
+    g0 = np.repeat(start, count)  # each entry: its cell's first entry and size
+    c = np.repeat(count, count)
+    step = 1 << 16
+    for a in range(0, len(key), step):  # the pairs of entries sharing a cell, a block of entries at a time
+        pos = np.arange(a, min(a + step, len(key)))
+        cc = c[pos]
+        p = np.repeat(pos, cc)
+        q = np.repeat(g0[pos], cc) + np.arange(int(cc.sum())) - np.repeat(np.cumsum(cc) - cc, cc)
+        keep = q > p
+        i, jj = edge[p[keep]], edge[q[keep]]
+        gap = np.abs(i - jj)
+        keep = (gap != 1) & (gap != k - 1) & (gap != 0)  # neighbours share a vertex
+        i, jj = i[keep], jj[keep]
         if not len(i):
             continue
-        hit = segments_intersect(seg[i, :2], seg[i, 2:], seg[j, :2], seg[j, 2:])
+        hit = segments_intersect(seg[i, :2], seg[i, 2:], seg[jj, :2], seg[jj, 2:])
         if hit.any():
             m = int(np.flatnonzero(hit)[0])
-            return int(i[m]), int(j[m])
+            return tuple(sorted((int(i[m]), int(jj[m]))))
     return None
 
 
