@@ -41,6 +41,7 @@ A walk that fails (an exception, no steps, no GPS) is counted and listed, never 
 from __future__ import annotations
 
 import argparse
+import ast
 import json
 import math
 import sys
@@ -89,6 +90,10 @@ def replay_args(folder: Path, outages=()):
     return make_parser().parse_args(argv)
 
 
+#: ``--set NAME=VALUE``: walking-direction settings for an experiment on the tuning split (None: the defaults)
+WALKDIR_OVERRIDES: dict = {}
+
+
 def run_default(rec, folder: Path, outages=(), probe: bool = False):
     """One run of the default path (what :func:`desktop.cli.replay_recording` runs, without its exports):
     ``(result, pipeline, engine)``.  ``probe``: the walking-direction stage records the device heading too
@@ -100,6 +105,11 @@ def run_default(rec, folder: Path, outages=(), probe: bool = False):
     gnss = build_gnss(args, rec, None)
     pipeline = build_pipeline(args, gnss, None)
     place_site(args, rec, pipeline)
+    if WALKDIR_OVERRIDES and pipeline.walkdir is not None:
+        from core.pdr.walkdir import WalkingDirection
+
+        pipeline.walkdir = WalkingDirection(grid_rate_hz=pipeline.grid_rate_hz, delay_s=pipeline.heading_delay_s,
+                                            **WALKDIR_OVERRIDES)
     if probe and pipeline.walkdir is not None:
         from benchmarks.walkdir import _Probe
 
@@ -506,7 +516,9 @@ def _change(c) -> str:
 
 
 def _task(args):
-    walk, outages, plots = args
+    walk, outages, plots, overrides = args
+    WALKDIR_OVERRIDES.clear()
+    WALKDIR_OVERRIDES.update(overrides)
     t = time.time()
     r = evaluate_walk(walk, outages, plots)
     r["seconds"] = round(time.time() - t, 1)
@@ -524,6 +536,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-outages", action="store_true")
     ap.add_argument("--no-plots", action="store_true")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="a core.pdr.walkdir.WalkingDirection setting for an experiment (tuning split only)")
     a = ap.parse_args(argv)
     root = a.data or default_data_root()
     walks = real_walks(root, a.extra)
@@ -533,7 +547,16 @@ def main(argv=None) -> int:
     if a.split != "all":
         walks = [w for w in walks if w.split == a.split]
     t = time.time()
-    tasks = [(w, not a.no_outages, not a.no_plots) for w in walks]
+    overrides = {}
+    for item in a.set:
+        k, v = item.split("=", 1)
+        try:
+            overrides[k] = ast.literal_eval(v)
+        except (ValueError, SyntaxError):
+            overrides[k] = v
+    if overrides and any(w.split != TUNING for w in walks):
+        ap.error("--set is for experiments on the tuning split: add --split tuning")
+    tasks = [(w, not a.no_outages, not a.no_plots, overrides) for w in walks]
     if a.jobs > 1:
         with ProcessPoolExecutor(a.jobs) as ex:
             rows = list(ex.map(_task, tasks))
