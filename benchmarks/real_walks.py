@@ -41,6 +41,7 @@ A walk that fails (an exception, no steps, no GPS) is counted and listed, never 
 from __future__ import annotations
 
 import argparse
+import ast
 import json
 import math
 import sys
@@ -89,6 +90,10 @@ def replay_args(folder: Path, outages=()):
     return make_parser().parse_args(argv)
 
 
+#: ``--set NAME=VALUE``: walking-direction settings for an experiment on the tuning split (None: the defaults)
+WALKDIR_OVERRIDES: dict = {}
+
+
 def run_default(rec, folder: Path, outages=(), probe: bool = False):
     """One run of the default path (what :func:`desktop.cli.replay_recording` runs, without its exports):
     ``(result, pipeline, engine)``.  ``probe``: the walking-direction stage records the device heading too
@@ -100,6 +105,11 @@ def run_default(rec, folder: Path, outages=(), probe: bool = False):
     gnss = build_gnss(args, rec, None)
     pipeline = build_pipeline(args, gnss, None)
     place_site(args, rec, pipeline)
+    if WALKDIR_OVERRIDES and pipeline.walkdir is not None:
+        from core.pdr.walkdir import WalkingDirection
+
+        pipeline.walkdir = WalkingDirection(grid_rate_hz=pipeline.grid_rate_hz, delay_s=pipeline.heading_delay_s,
+                                            **WALKDIR_OVERRIDES)
     if probe and pipeline.walkdir is not None:
         from benchmarks.walkdir import _Probe
 
@@ -212,8 +222,30 @@ def pdr_alone(res, outage) -> dict:
             "offset_deg": math.degrees(off)}
 
 
-def run_outage(rec, walk: RealWalk, a: float, length: float, floor_hacc: float | None) -> dict:
-    res, _, _ = run_default(rec, walk.folder, [(a, length)])
+class _Fused:
+    """A pipeline result with another fusion result (the batch replay of :func:`fuse_outage`)."""
+
+    def __init__(self, steps, fusion):
+        self.steps, self.fusion = steps, fusion
+
+
+def fuse_outage(rec, walk: RealWalk, res, a: float, length: float):
+    """The default path's GPS fusion with one hidden window, over the steps of the run without it:
+    :func:`desktop.cli.build_gnss` with ``--gps-outage A:L``, then its batch ``run`` -- the kernel the
+    pipeline streams through (``FixFusion.run``: same order of fixes and steps; the steps do not depend on the
+    fusion once the site is placed before the run, as ``pdr replay`` places it).  Checked against a full run
+    of the product per walk (:func:`evaluate_walk`: ``fusion_replay_max_diff_m``)."""
+    from core.conventions import GNSS_STATUS
+    from desktop.cli import build_gnss
+
+    gnss = build_gnss(replay_args(walk.folder, [(a, length)]), rec, None)
+    fr = gnss.run(res.steps, rec.streams[GPS], rec.t0_ns, rec.streams.get(GNSS_STATUS))
+    return _Fused(res.steps, fr)
+
+
+def run_outage(rec, walk: RealWalk, a: float, length: float, floor_hacc: float | None, base=None) -> dict:
+    res = fuse_outage(rec, walk, base, a, length) if base is not None else run_default(rec, walk.folder,
+                                                                                        [(a, length)])[0]
     fu = res.fusion
     row = {"start_s": a, "length_s": length}
     if fu is None or not fu.outages:
@@ -295,9 +327,22 @@ def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> d
             row["gps_median_hacc_m"] = float(np.median(fixes[3]))
             if outages:
                 row["walking_from_s"] = walking_from_s(res.steps, t0)
-                for a, length in outage_windows(row["walking_from_s"], row["duration_s"]):
+                wins_o = outage_windows(row["walking_from_s"], row["duration_s"])
+                base = res
+                if wins_o:  # the batch replay against one full run of the product (the 3-minute one, else first)
+                    a, length = next((w for w in wins_o if w[1] == 180.0), wins_o[0])
+                    full = run_default(rec, walk.folder, [(a, length)])[0]
+                    rep_ = fuse_outage(rec, walk, res, a, length)
+                    fa, fb = full.fusion.track(), rep_.fusion.track()
+                    same = len(fa) == len(fb) and len(full.steps) == len(res.steps)
+                    row["fusion_replay_max_diff_m"] = (float(max(np.max(np.abs(fa.east_m - fb.east_m)),
+                                                                 np.max(np.abs(fa.north_m - fb.north_m))))
+                                                       if same and len(fa) else None)
+                    if not same or row["fusion_replay_max_diff_m"] is None or row["fusion_replay_max_diff_m"] > 1e-6:
+                        base = None  # not the same: every outage as a full run of the product
+                for a, length in wins_o:
                     try:
-                        row["outages"].append(run_outage(rec, walk, a, length, row["gps_median_hacc_m"]))
+                        row["outages"].append(run_outage(rec, walk, a, length, row["gps_median_hacc_m"], base))
                     except Exception as e:  # an outage that fails is listed
                         row["outages"].append({"start_s": a, "length_s": length, "failed": repr(e)})
         if plots:
@@ -506,7 +551,9 @@ def _change(c) -> str:
 
 
 def _task(args):
-    walk, outages, plots = args
+    walk, outages, plots, overrides = args
+    WALKDIR_OVERRIDES.clear()
+    WALKDIR_OVERRIDES.update(overrides)
     t = time.time()
     r = evaluate_walk(walk, outages, plots)
     r["seconds"] = round(time.time() - t, 1)
@@ -524,6 +571,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-outages", action="store_true")
     ap.add_argument("--no-plots", action="store_true")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="a core.pdr.walkdir.WalkingDirection setting for an experiment (tuning split only)")
     a = ap.parse_args(argv)
     root = a.data or default_data_root()
     walks = real_walks(root, a.extra)
@@ -533,7 +582,16 @@ def main(argv=None) -> int:
     if a.split != "all":
         walks = [w for w in walks if w.split == a.split]
     t = time.time()
-    tasks = [(w, not a.no_outages, not a.no_plots) for w in walks]
+    overrides = {}
+    for item in a.set:
+        k, v = item.split("=", 1)
+        try:
+            overrides[k] = ast.literal_eval(v)
+        except (ValueError, SyntaxError):
+            overrides[k] = v
+    if overrides and any(w.split != TUNING for w in walks):
+        ap.error("--set is for experiments on the tuning split: add --split tuning")
+    tasks = [(w, not a.no_outages, not a.no_plots, overrides) for w in walks]
     if a.jobs > 1:
         with ProcessPoolExecutor(a.jobs) as ex:
             rows = list(ex.map(_task, tasks))

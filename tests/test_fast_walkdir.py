@@ -276,3 +276,28 @@ def test_from_a_later_grid_sample_and_as_step_release_reads_it():
     trace.at(wd, len(pad_t) - 1)
     wd.n_steps_offset = pipe.walkdir.n_steps_offset
     assert _close(_state(pipe.walkdir), _state(wd))
+
+
+def test_skew_sign_runs_core_update_and_equals_pipeline_run():
+    # sign_method other than "phase" (issue #25): the compiled kernel does not implement it, so the trace is fed
+    # through WalkingDirection.update (whatever ``compiled`` says) and carries the skew evidence (kx, ky, wp):
+    # run_fast gives Pipeline.run's steps and the stage's final state
+    from desktop.fast import run_fast
+
+    rec, _ = _short_pocket_walk()
+
+    def pipe():
+        return Pipeline(walkdir=WalkingDirection(grid_rate_hz=50.0, delay_s=Pipeline().heading_delay_s,
+                                                 sign_method="auto"))
+
+    ref = pipe()
+    res = ref.run(rec)
+    fast = pipe()
+    got = run_fast(rec, pipeline=fast)
+    assert ref.walkdir.n_accepted > 5 and any("skew" in s for s in ref.walkdir.strides)
+    assert fast.walkdir.n_steps_offset == ref.walkdir.n_steps_offset > 0
+    assert _close(_state(ref.walkdir), _state(fast.walkdir))
+    assert _close({k: (v.kx, v.ky, v.wp) for k, v in ref.walkdir._states.items()},
+                  {k: (v.kx, v.ky, v.wp) for k, v in fast.walkdir._states.items()})
+    for name in ("heading_rad", "east_m", "north_m", "length_m"):
+        assert np.allclose(getattr(got.track, name), getattr(res.track, name), rtol=0.0, atol=TOL), name

@@ -354,14 +354,18 @@ assert set(_METHODS) == set(AXIS_METHODS)
 
 def _axis_state(row, n) -> _AxisState:
     st = _AxisState()
-    st.c2, st.s2, st.w, st.w2, st.gx, st.gy = row.tolist()
+    vals = row.tolist()
+    st.c2, st.s2, st.w, st.w2, st.gx, st.gy = vals[:6]
+    if len(vals) > 6:  # fed through update (sign_method other than "phase"): the skew evidence too
+        st.kx, st.ky, st.wp = vals[6:9]
     st.n = int(n)
     return st
 
 
 class WalkdirTrace:
     """The stage's run over a grid (:func:`walking_direction_over_grid`): the estimate after each grid sample
-    (the current axis ``key`` and its accumulators ``acc`` (n, 6: c2, s2, w, w2, gx, gy), ``n_used`` (0: no
+    (the current axis ``key`` and its accumulators ``acc`` (n, 6: c2, s2, w, w2, gx, gy; n, 9 with kx, ky, wp
+    when fed through ``update``), ``n_used`` (0: no
     estimate)), from ``j_init`` on, and the final state."""
 
     def __init__(self, j_init, keys, key, acc, n_used, final):
@@ -423,10 +427,13 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
 
     ``compiled`` (default: where numba is installed) runs :func:`walk_kernel`; without it ``wd.update`` itself
     is fed every sample and the estimate recorded after each (the kernel run as plain Python is slower than
-    core's update), so the trace is the same either way.
+    core's update), so the trace is the same either way.  The kernel implements ``sign_method="phase"``
+    only: any other sign method (issue #25) is fed through ``wd.update``, whatever ``compiled`` says.
     """
     if compiled is None:
         compiled = HAVE_NUMBA
+    if getattr(wd, "sign_method", "phase") != "phase":
+        compiled = False  # the kernel mirrors the phase rule only: the skew sign (issue #25) runs core's update
     wd.reset()
     grid_t = np.asarray(grid_t, dtype=np.int64)
     n = len(grid_t) - j_init
@@ -483,7 +490,7 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
 def _fed(wd, t, q, acc, fe, fn, step, ids, keys, j_init) -> WalkdirTrace:
     """The trace by ``wd.update`` itself, sample by sample (fed as ``StepRelease`` fed it), and its final state."""
     n = len(t)
-    cur = np.zeros((n, 6))
+    cur = np.zeros((n, 9))
     cur_n = np.zeros(n, dtype=np.int64)
     cur_key = np.full(n, -1, dtype=np.int64)
     index = {k: i for i, k in enumerate(keys)}
@@ -498,7 +505,7 @@ def _fed(wd, t, q, acc, fe, fn, step, ids, keys, j_init) -> WalkdirTrace:
             cur_key[j] = index[key]
             st = wd._states.get(key)
             if st is not None and st.n:
-                cur[j] = (st.c2, st.s2, st.w, st.w2, st.gx, st.gy)
+                cur[j] = (st.c2, st.s2, st.w, st.w2, st.gx, st.gy, st.kx, st.ky, st.wp)
                 cur_n[j] = st.n
     states = dict(wd._states)  # at() replaces the dict: the final one is kept here (its states no longer change)
     return WalkdirTrace(j_init, keys, cur_key, cur, cur_n, {"_axis_key": wd._axis_key, "_states": states})
