@@ -63,7 +63,9 @@ The trunk
     ``+-8 g`` deg (pronation) about a fixed offset (uniform in +-15 deg).  Grip: device y along the forearm to the fingers
     ("down") or across the hand pointing forward ("forward"), the screen facing the thigh; a fixed tilt of up
     to 10 deg; the hand drift of ``hand_drift_deg_s`` on top.  Heel-strike transients 1 m/s^2 (the arm
-    damps them).  Options: ``side``, ``grip``.
+    damps them).  Options: ``side``, ``grip``, ``swing_scale`` (the swing's amplitudes times this, 1 by default;
+    issue #25: a phone swung hard in the hand, the held-back clip's 9 rad/s, is ``swing_scale`` 2.5, whose
+    gyroscope peaks at 8.9 rad/s; the default arm's peaks are 3.6 rad/s at the reference speed).
 
 "bag": a shoulder bag or a backpack, loosely coupled to the trunk
     The bag hangs from an anchor on the trunk (backpack: 0.15 m behind at ``0.70 height``; shoulder bag:
@@ -339,11 +341,15 @@ class _Pocket(_Carried):
 class _Swinging(_Carried):
     placement = CARRY_SWINGING
     impact_m_s2 = 1.0
-    choices = {"side": _SIDES, "grip": ("down", "forward")}
+    choices = {"side": _SIDES, "grip": ("down", "forward"), "swing_scale": None}
 
     def _setup(self, rng, options):
         self.side = self._pick(rng, options, "side")
         grip = self._pick(rng, options, "grip")
+        self.swing_scale = float(options.get("swing_scale", 1.0))
+        if not 0.0 < self.swing_scale <= 4.0:
+            raise ValueError(f"placement_options['swing_scale'] must be in (0, 4], got {self.swing_scale!r}")
+        self.info["swing_scale"] = self.swing_scale
         twist0 = rng.uniform(-15.0, 15.0)
         tilt = rng.uniform(-10.0, 10.0, 2)
         self.info.update(twist_deg=twist0, tilt_deg=tilt.tolist())
@@ -357,7 +363,7 @@ class _Swinging(_Carried):
     def _angles(self, t):
         u = self.phase(t)
         k = self.rel_length(t)
-        g = np.minimum(k * self.speed_gain, 1.6)
+        g = np.minimum(k * self.speed_gain, 1.6) * self.swing_scale
         swing = np.cos(np.pi * (u - self.arm_phase))
         upper = (-5.0 * k + ARM_SWING_DEG[0] * g * swing) * _DEG
         fore = upper + (10.0 + 10.0 * k + ARM_SWING_DEG[1] * g * swing) * _DEG

@@ -26,7 +26,7 @@ _CACHE = {}
 
 
 def walk(placement, **kw):
-    key = (placement, tuple(sorted(kw.items(), key=str)))
+    key = (placement, repr(sorted(kw.items(), key=str)))
     if key not in _CACHE:
         _CACHE[key] = simulate_walk(PATH, placement=placement, rate_hz=200.0, **QUIET, seed=11, **kw)
     return _CACHE[key]
@@ -307,6 +307,24 @@ def test_placement_recordings_round_trip_through_the_file_format(tmp_path):
         back = read_recording(path)
         assert back.metadata == w.recording.metadata and back.metadata["placement"] == w.truth.placement
         np.testing.assert_array_equal(back.streams["acc"].values, w.recording.streams["acc"].values)
+
+
+def test_swinging_arm_swung_hard_turns_at_9_to_10_rad_s():
+    """``swing_scale`` (issue #25): the held-back clip's hand swung at up to 9-10 rad/s is ``swing_scale`` 2.5-2.8;
+    the gyroscope's peaks scale with it, at the same stride frequency, and the walk is the same walk."""
+    w1, w25 = walk("swinging"), walk("swinging", placement_options={"swing_scale": 2.5})
+    p1 = np.percentile(np.linalg.norm(walking(w1.recording.streams["gyro"], w1.truth)[1], axis=1), 99.9)
+    t_ns, g = walking(w25.recording.streams["gyro"], w25.truth)
+    p25 = np.percentile(np.linalg.norm(g, axis=1), 99.9)
+    assert 8.0 < p25 < 10.5
+    assert p25 > 2.0 * p1  # the twist and the hand drift do not scale
+    tr = w25.truth
+    stride_hz = 0.5 * tr.n_steps / ((tr.walk_end_t_ns - tr.walk_start_t_ns) * 1e-9)
+    assert dominant_hz(t_ns, g[:, int(np.argmax(g.var(axis=0)))]) == pytest.approx(stride_hz, abs=0.1)
+    assert np.array_equal(tr.step_t_ns, w1.truth.step_t_ns)
+    assert tr.placement_info["swing_scale"] == 2.5
+    with pytest.raises(ValueError):
+        simulate_walk(PATH, placement="swinging", placement_options={"swing_scale": 0.0})
 
 
 def test_invalid_placements_are_rejected():

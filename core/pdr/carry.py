@@ -114,14 +114,38 @@ class CarryModeDetector:
         Mean over which the specific force's direction is smoothed for ``tilt_rms_rad`` (s).
     min_stride_s, max_stride_s : float
         Range of the stride period searched in the autocorrelation (s); a
-        walking cadence of 1.3-2.5 steps/s is a stride of 0.8-1.54 s.
+        walking cadence of 0.8-2.5 steps/s is a stride of 0.8-2.5 s (issue #25: a slow, gentle walk at
+        0.8-1.2 steps/s is a stride of 1.7-2.5 s).
+    slow_stride_s, slow_stride_margin : float
+        A stride longer than ``slow_stride_s`` (s; a cadence under 1.25 steps/s) is taken only when the
+        autocorrelation has no peak within ``slow_stride_margin`` of its best at the shorter lags: at a
+        normal cadence the autocorrelation over a 4 s window at two strides' lag is as high as at one,
+        and noisier.
     min_walk_std_m_s2 : float
-        Norm standard deviation below which there is no walking (m/s^2).
+        Norm standard deviation from which a periodic norm is a normal walk (m/s^2).
     min_periodicity : float
         Autocorrelation at the stride or step lag below which there is no gait.
+    gentle_min_std_m_s2, gentle_min_periodicity : float
+        A gentle walk (issue #25: a slow walk with the phone held still, 0.5-1 m/s^2 of user acceleration)
+        moves the norm by less than ``min_walk_std_m_s2`` but is as periodic as any walk: a norm whose
+        standard deviation is above ``gentle_min_std_m_s2`` (m/s^2; a phone on a table reads ~0.02, one
+        held while standing under 0.1 by tremor) and whose autocorrelation at the gait's lag is above
+        ``gentle_min_periodicity`` is walking too: periodicity decides, not amplitude.
+    gentle_max_std_m_s2 : float
+        While the norm is periodic (a step period known) with a standard deviation under this (m/s^2),
+        :attr:`gentle` is True (off again from ``min_walk_std_m_s2`` or when the periodicity goes: a band,
+        so that it does not flap): the pipeline then counts a trunk mode's steps with the gentle gait's
+        step detector (:data:`core.pdr.steps.GENTLE_GATES`).
+    step_antiphase : float
+        A slow walk on the trunk repeats its norm every step, and a step of 0.8-1.25 s lies inside the
+        stride range: when the autocorrelation at half the lag found is below this (the half lag is in
+        anti-phase: the lag is one period of the norm) and the gyroscope's rotation, which a walker sways
+        once per stride, is in anti-phase at that lag too, the lag is the step and the stride twice it.
     max_gait_tilt_rad : float
         ``tilt_rms_rad`` above which the motion is no gait but waving (a compass calibration turns the
-        phone through +-60-90 deg; a swinging hand stays within about +-45 deg) (rad).
+        phone through +-60-90 deg; a swinging hand mostly stays within about +-45 deg) (rad), unless the
+        gyroscope shows a gait's rotation: periodic at the stride about one axis while the norm is periodic
+        (a hand swung hard, up to 10 rad/s, issue #25: waving is irregular and about every axis).
     max_gait_rotation_rad_s : float
         With a gyroscope: RMS rotation above which a rotation spread over the axes
         (``gyro_axis_share`` under ``swing_axis_share``) is waving, not gait (rad/s).
@@ -147,6 +171,10 @@ class CarryModeDetector:
         stride (R(step) <= 0), its horizontal acceleration is large, it turns faster than a thigh.
     swing_gyro_rad_s : float
         With a gyroscope: the RMS rotation at which the gyroscope is neutral in the arm evidence (rad/s).
+    hard_swing_gyro_rad_s : float
+        With a gyroscope: an RMS rotation above this, about one axis and periodic at the stride, is a swinging
+        arm whatever the norm's stride share (a hard swing's centripetal acceleration repeats every step)
+        (rad/s; a thigh turns at about 1.5, an arm swung normally at 2-2.5).
     switch_s : float
         A new walking mode must win for this long before it replaces the current one (s).
     switch_still_s : float
@@ -154,12 +182,15 @@ class CarryModeDetector:
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
-                 tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 1.6,
-                 min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, max_gait_tilt_rad: float = 0.6,
+                 tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.5,
+                 slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7,
+                 min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
+                 gentle_min_periodicity: float = 0.6, gentle_max_std_m_s2: float = 0.5,
+                 step_antiphase: float = -0.2, max_gait_tilt_rad: float = 0.6,
                  max_gait_rotation_rad_s: float = 4.5, swing_axis_share: float = 0.85, screen_up_z: float = 0.3,
                  upright_y: float = 0.6, ear_incline_x: float = 0.22, limb_tilt_rad: float = 0.16,
                  limb_stride_share: float = 0.3, min_limb_stride_share: float = 0.15, arm_evidence: float = 1.1,
-                 swing_gyro_rad_s: float = 2.0,
+                 swing_gyro_rad_s: float = 2.0, hard_swing_gyro_rad_s: float = 3.5,
                  switch_s: float = 3.0, switch_still_s: float = 2.0):
         self.grid_rate_hz = float(grid_rate_hz)
         self.window_s = float(window_s)
@@ -167,8 +198,14 @@ class CarryModeDetector:
         self.tilt_smooth_s = float(tilt_smooth_s)
         self.min_stride_s = float(min_stride_s)
         self.max_stride_s = float(max_stride_s)
+        self.slow_stride_s = float(slow_stride_s)
+        self.slow_stride_margin = float(slow_stride_margin)
         self.min_walk_std_m_s2 = float(min_walk_std_m_s2)
         self.min_periodicity = float(min_periodicity)
+        self.gentle_min_std_m_s2 = float(gentle_min_std_m_s2)
+        self.gentle_min_periodicity = float(gentle_min_periodicity)
+        self.gentle_max_std_m_s2 = float(gentle_max_std_m_s2)
+        self.step_antiphase = float(step_antiphase)
         self.max_gait_tilt_rad = float(max_gait_tilt_rad)
         self.max_gait_rotation_rad_s = float(max_gait_rotation_rad_s)
         self.swing_axis_share = float(swing_axis_share)
@@ -180,6 +217,7 @@ class CarryModeDetector:
         self.min_limb_stride_share = float(min_limb_stride_share)
         self.arm_evidence = float(arm_evidence)
         self.swing_gyro_rad_s = float(swing_gyro_rad_s)
+        self.hard_swing_gyro_rad_s = float(hard_swing_gyro_rad_s)
         self.switch_s = float(switch_s)
         self.switch_still_s = float(switch_still_s)
         self.reset()
@@ -190,6 +228,7 @@ class CarryModeDetector:
         self._smooth = max(1, int(round(self.tilt_smooth_s * self.grid_rate_hz)))
         self._lag_lo = max(2, int(self.min_stride_s * self.grid_rate_hz))
         self._lag_hi = min(n - 8, int(math.ceil(self.max_stride_s * self.grid_rate_hz)))
+        self._lag_short = max(self._lag_lo + 2, min(self._lag_hi, int(math.ceil(self.slow_stride_s * self.grid_rate_hz))))
         self._nfft = 1 << int(math.ceil(math.log2(2 * n)))
         self._scratch_n = {}  # window length -> compute_features' work arrays
         self._buf = np.zeros((n, 6))  # ax ay az gx gy gz, ring
@@ -215,6 +254,8 @@ class CarryModeDetector:
         self.step_period_s = math.nan
         #: the phone's rotation is periodic about one axis (a swinging arm), not irregular (waving)
         self.rotation_periodic = False
+        #: walking gently (a periodic gait whose norm moves little; see ``gentle_max_std_m_s2``)
+        self.gentle = False
         #: the last hop's features (name -> float) and mode scores (mode -> float), for diagnostics
         self.features: dict = {}
         self.scores: dict = {}
@@ -313,9 +354,15 @@ class CarryModeDetector:
         lo, hi = self._lag_lo, self._lag_hi
         seg = r[lo:hi + 1]
         top = float(seg.max())
+        short = seg[:self._lag_short - lo + 1]
+        if float(short.max()) >= self.slow_stride_margin * top:  # a normal cadence's stride (see slow_stride_s)
+            seg = short
+            top = float(seg.max())
         # the shortest lag that is a local maximum within 85 % of the best: the stride, not two of them
         peaks = np.flatnonzero((seg[1:-1] >= seg[:-2]) & (seg[1:-1] >= seg[2:]) & (seg[1:-1] >= 0.85 * top)) + 1
         k2 = lo + (int(peaks[0]) if len(peaks) else int(np.argmax(seg)))
+        if self._has_gyro:
+            k2 = self._stride_lag(r, r_all[2], k2, n)
         ks = k2 // 2
         r_step = float(r[max(1, ks - 2):ks + 3].max())
         r_stride = float(r[k2])
@@ -338,16 +385,33 @@ class CarryModeDetector:
             f.update(gyro_rms_rad_s=g_rms, gyro_axis_share=share, gyro_periodicity=float(r_all[2, k2]) * (n / (n - k2)))
         return f
 
+    def _stride_lag(self, r: np.ndarray, r_gyro: np.ndarray, k2: int, n: int) -> int:
+        """The stride lag from the lag ``k2`` found in the norm's (unbiased) autocorrelation ``r``: twice it when
+        ``k2`` is a slow walk's step (``step_antiphase``: the norm in anti-phase at ``k2 / 2``, the rotation's
+        main axis, autocorrelation ``r_gyro`` not yet unbiased, in anti-phase at ``k2``) and twice it is in range."""
+        k4 = 2 * k2
+        if k4 > self._lag_hi or r[k2 // 2] >= self.step_antiphase:
+            return k2
+        if float(r_gyro[k2]) * (n / (n - k2)) >= self.step_antiphase:
+            return k2
+        return k4
+
     def mode_scores(self, f: dict) -> dict:
         """Soft score of every mode (0..1) from the features (see the module docstring)."""
         # waving the phone (a compass calibration) is no gait however periodic: it turns the phone through
         # far larger angles than any limb, and (gyroscope) fast about all three axes
         waving = _sig(f["tilt_rms_rad"], self.max_gait_tilt_rad, 0.05)
         if "gyro_rms_rad_s" in f:
-            waving = max(waving, _sig(f["gyro_rms_rad_s"], self.max_gait_rotation_rad_s, 0.3)
-                         * (1.0 - _sig(f["gyro_axis_share"], self.swing_axis_share, 0.04)))
-        walk = (_sig(f["periodicity"], self.min_periodicity, 0.05)
-                * _sig(f["acc_std_m_s2"], self.min_walk_std_m_s2, 0.1) * (1.0 - waving))
+            one_axis = _sig(f["gyro_axis_share"], self.swing_axis_share, 0.04)
+            # a gait's rotation (issue #25): about one axis, periodic at the stride, the norm periodic too
+            gait_rotation = one_axis * _sig(f["gyro_periodicity"], 0.5, 0.05) * _sig(f["periodicity"], 0.5, 0.05)
+            waving = max(waving * (1.0 - gait_rotation),
+                         _sig(f["gyro_rms_rad_s"], self.max_gait_rotation_rad_s, 0.3) * (1.0 - one_axis))
+        std = f["acc_std_m_s2"]
+        amplitude = max(_sig(std, self.min_walk_std_m_s2, 0.1),  # a walk, or a gentle one that is clearly periodic
+                        _sig(f["periodicity"], self.gentle_min_periodicity, 0.05)
+                        * _sig(std, self.gentle_min_std_m_s2, 0.02))
+        walk = _sig(f["periodicity"], self.min_periodicity, 0.05) * amplitude * (1.0 - waving)
         # a limb: the tilt swings and the norm repeats every stride rather than every step
         ss = f["stride_share"]
         limb = (_sig(f["tilt_rms_rad"] / self.limb_tilt_rad + max(ss, 0.0) / self.limb_stride_share, 1.5, 0.12)
@@ -358,6 +422,15 @@ class CarryModeDetector:
         if "gyro_rms_rad_s" in f:
             arm_x += 0.3 * min(max(f["gyro_rms_rad_s"] - self.swing_gyro_rad_s, -1.0), 1.0)
         arm = _sig(arm_x, self.arm_evidence, 0.2)
+        if "gyro_rms_rad_s" in f:
+            # a hand swung hard (issue #25, up to 10 rad/s): the arm's centripetal acceleration, the same at both
+            # passes of the swing, makes the norm repeat every step (no stride share), but the rotation is the
+            # arm's: fast, about one axis, periodic at the stride
+            hard_swing = (_sig(f["gyro_axis_share"], self.swing_axis_share, 0.04)
+                          * _sig(f["gyro_periodicity"], 0.5, 0.05)
+                          * _sig(f["gyro_rms_rad_s"], self.hard_swing_gyro_rad_s, 0.3))
+            limb = max(limb, hard_swing)
+            arm = max(arm, hard_swing)
         gx, gy, gz = f["gravity_x"], f["gravity_y"], f["gravity_z"]
         # read in the hand: screen up, pitched towards the face (gravity in the device's y-z plane, y not down)
         hand = _sig(gz, self.screen_up_z, 0.06) * (1.0 - _sig(abs(gx), 0.5, 0.06)) * _sig(gy, -0.3, 0.06)
@@ -391,10 +464,17 @@ class CarryModeDetector:
         self.raw_mode, self.raw_confidence = best, conf
         walking = best != CARRY_STILL
         # the step period whenever the norm is periodic, also before the mode has left "still"
-        periodic = f["periodicity"] >= self.min_periodicity and f["acc_std_m_s2"] >= 0.5 * self.min_walk_std_m_s2
+        std = f["acc_std_m_s2"]
+        periodic = f["periodicity"] >= self.min_periodicity and (
+            std >= 0.5 * self.min_walk_std_m_s2
+            or (f["periodicity"] >= self.gentle_min_periodicity and std >= self.gentle_min_std_m_s2))
         self.step_period_s = 0.5 * f["stride_period_s"] if periodic else math.nan
         self.rotation_periodic = bool(walking and f.get("gyro_axis_share", 0.0) >= self.swing_axis_share
                                       and f.get("gyro_periodicity", 0.0) >= 0.5)
+        if not periodic or std >= self.min_walk_std_m_s2:
+            self.gentle = False
+        elif std < self.gentle_max_std_m_s2:
+            self.gentle = True
         if not self._decided:
             self._decided = True
             if best != self.mode:

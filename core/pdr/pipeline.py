@@ -71,7 +71,7 @@ from core.pdr.carry import CarryModeDetector
 from core.pdr.deadreckoning import DeadReckoner
 from core.pdr.heading import RotationSmoother, interval_heading
 from core.pdr.magcal import MagCalibrator
-from core.pdr.steps import STEP_GATES, StepDetector, StepEvent
+from core.pdr.steps import GENTLE, STEP_GATES, StepDetector, StepEvent
 from core.pdr.velocity import SpeedFeatureWindow
 from core.pdr.walkdir import WALKING_DIRECTIONS, WalkingDirection
 from core.pdr.stride import StepFeatures, StrideModel, WeinbergStride
@@ -371,7 +371,7 @@ class Pipeline:
     swinging_max_rotation_rms_rad_s : float
         The rotation gate in the swinging mode while the carry detector finds
         the rotation periodic about one axis (a swinging arm turns the phone at
-        2-6 rad/s; the irregular, multi-axis waving of a compass calibration is
+        2-10 rad/s, issue #25; the irregular, multi-axis waving of a compass calibration is
         still held to ``max_rotation_rms_rad_s``) (rad/s).
     rotation_hold_s : float
         The carry detector needs a few seconds of walking (its window, then its hysteresis) to call a
@@ -389,7 +389,7 @@ class Pipeline:
                  mag_stream: str = MAG, log: bool = False, gnss=None, site_from_gps: bool = True,
                  unix_offset_ns: int | None = None, keep_steps: bool | int = True,
                  carry: bool | CarryModeDetector = True, step_gates: dict | None = None,
-                 swinging_max_rotation_rms_rad_s: float = 8.0, rotation_hold_s: float = 8.0):
+                 swinging_max_rotation_rms_rad_s: float = 12.0, rotation_hold_s: float = 8.0):
         self.keep_steps = keep_steps
         if carry is True:
             carry = CarryModeDetector(grid_rate_hz=grid_rate_hz)
@@ -650,13 +650,18 @@ class Pipeline:
                     held.popleft()
                 if det is active:
                     out = ev
-        new = self._det_of[mode]
+        new = self._det_of[GENTLE if c.gentle and self._gentle_applies(mode) else mode]
         if new is not active:
             self._switch_detector(new, tg)
             return None
         if out is not None:
             self._candidate(out, regs, rot)
         return out
+
+    def _gentle_applies(self, mode: str) -> bool:
+        """A gentle walk (the carry detector's ``gentle``) is counted with the ``GENTLE`` gates in the modes that
+        count with the hand-held gates (the trunk's); a limb's gates stay."""
+        return GENTLE in self.step_gates and self.step_gates.get(mode) == self.step_gates[CARRY_HANDHELD]
 
     def _switch_detector(self, det: StepDetector, t_grid_ns: int) -> None:
         """The mode in force has another step detector: its held peaks replace the unconfirmed candidates."""

@@ -56,6 +56,12 @@ follows faster (``gravity_time_constant_s`` 1 s instead of 3: the valleys
 fall below it from the first steps), and the step's wave left after the comb
 is small beside the swing (the hand damps the heel strike), so ``A_th`` is
 0.3 m/s^2: the carry detector has already found the gait periodic.
+
+A slow, gentle walk (issue #25: 0.5-1 m/s^2 of user acceleration at 0.8-1.2 steps/s, a phone held still in
+the hand) lifts the filtered norm only 0.2-0.5 m/s^2 above ``g``, under the hand-held ``A_th``.  When the carry
+detector finds the norm periodic but gentle (:attr:`core.pdr.carry.CarryModeDetector.gentle`), a trunk mode's
+steps are counted with :data:`GENTLE_GATES`: ``A_th`` 0.15 m/s^2 with the cadence gate (the step period is
+known then).  The periodicity decides that it is walking, not the amplitude.
 """
 
 from __future__ import annotations
@@ -102,6 +108,15 @@ STEP_GATES = {
     CARRY_SWINGING: StepGates(stride_comb=True, min_interval_period_frac=0.6, min_peak_height_m_s2=0.3,
                               gravity_time_constant_s=1.0, min_raw_range_m_s2=0.5),
 }
+
+#: the key of :data:`STEP_GATES` (and ``Pipeline(step_gates=...)``) of a gentle walk, beside the carry modes
+GENTLE = "gentle"
+#: a slow, gentle walk on the trunk (issue #25: 0.5-1 m/s^2 of user acceleration, 0.8-1.2 steps/s; the carry
+#: detector's :attr:`core.pdr.carry.CarryModeDetector.gentle`): its steps rise 0.2-0.5 m/s^2 above ``g``, under
+#: the hand-held ``A_th`` of 0.6.  The carry detector has found the norm periodic, so ``A_th`` is 0.15 m/s^2;
+#: the cadence gate keeps a second bump within a step out (the step period is known)
+GENTLE_GATES = StepGates(min_interval_period_frac=0.6, min_peak_height_m_s2=0.15)
+STEP_GATES[GENTLE] = GENTLE_GATES
 
 #: longest step period the stride comb keeps a history for (s)
 MAX_COMB_PERIOD_S = 1.0

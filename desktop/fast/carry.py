@@ -16,7 +16,7 @@ The scoring (:meth:`~core.pdr.carry.CarryModeDetector.mode_scores`) and the
 hysteresis are not ported: :func:`run_carry` hands each hop's features to the
 reference detector's own per-hop decision (about 7,200 hops an hour of walk),
 and records what the pipeline reads after every grid sample (the mode, the
-step period, whether the rotation is periodic, the changes logged so far).
+step period, whether the rotation is periodic, whether the walk is gentle, the changes logged so far).
 """
 
 from __future__ import annotations
@@ -70,10 +70,34 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     rows = np.arange(m_w)
     seg = r[:, lo:hi + 1]
     top = seg.max(axis=1)
+    # a slow stride only without a peak near the best at a normal cadence's (CarryModeDetector.slow_stride_s)
+    hs = det._lag_short
+    short_top = seg[:, :hs - lo + 1].max(axis=1)
+    use_short = short_top >= det.slow_stride_margin * top
+    seg = np.where(use_short[:, None], np.where(np.arange(hi - lo + 1)[None, :] <= hs - lo, seg, -np.inf), seg)
+    top = np.where(use_short, short_top, top)
     mid = seg[:, 1:-1]
     peak = (mid >= seg[:, :-2]) & (mid >= seg[:, 2:]) & (mid >= 0.85 * top[:, None])
+    peak[:, hs - lo - 1:] &= ~use_short[:, None]  # the short range's last lag is its edge, no peak
     has_peak = peak.any(axis=1)
     k2 = lo + np.where(has_peak, np.argmax(peak, axis=1) + 1, np.argmax(seg, axis=1))
+    gyro = None
+    if np.any(has_gyro):
+        gyr = w[:, :, 3:]
+        g_rms = np.sqrt(np.mean(np.einsum("hij,hij->hi", gyr, gyr), axis=1))
+        gc = gyr - gyr.mean(axis=1)[:, None, :]
+        cg = np.matmul(gc.transpose(0, 2, 1), gc)
+        ge, gv = np.linalg.eigh(cg)
+        share = ge[:, -1] / np.maximum(ge.sum(axis=1), 1e-12)
+        main = np.matmul(gc, gv[:, :, -1:])[:, :, 0]
+        rg = _autocorr(det, main)
+        # a slow walk's step found as the stride (core.pdr.carry.CarryModeDetector._stride_lag)
+        anti = det.step_antiphase
+        k4 = 2 * k2
+        double = (np.asarray(has_gyro, dtype=bool) & (k4 <= hi) & (r[rows, k2 // 2] < anti)
+                  & (rg[rows, k2] < anti))
+        k2 = np.where(double, k4, k2)
+        gyro = (g_rms, share, rg[rows, k2])
     ks = k2 // 2
     around = ks[:, None] + np.arange(-2, 3)[None, :]  # lags max(1, ks - 2) .. ks + 2
     r_step = np.where(around >= 1, r[rows[:, None], np.maximum(around, 0)], -np.inf).max(axis=1)
@@ -101,17 +125,6 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     cov_a = np.matmul(dyn.transpose(0, 2, 1), dyn) / n
     vert = np.matmul(np.matmul(u[:, None, :], cov_a), u[:, :, None])[:, 0, 0]
     horiz = np.maximum(np.trace(cov_a, axis1=1, axis2=2) - vert, 0.0)
-    gyro = None
-    if np.any(has_gyro):
-        gyr = w[:, :, 3:]
-        g_rms = np.sqrt(np.mean(np.einsum("hij,hij->hi", gyr, gyr), axis=1))
-        gc = gyr - gyr.mean(axis=1)[:, None, :]
-        cg = np.matmul(gc.transpose(0, 2, 1), gc)
-        ge, gv = np.linalg.eigh(cg)
-        share = ge[:, -1] / np.maximum(ge.sum(axis=1), 1e-12)
-        main = np.matmul(gc, gv[:, :, -1:])[:, :, 0]
-        rg = _autocorr(det, main)
-        gyro = (g_rms, share, rg[rows, k2])
     rate = det.grid_rate_hz
     out = []
     cols = [u[:, 0], u[:, 1], u[:, 2], tilt_rms, m_norm, mean_norm, std, r_step, r_stride, k2, tilt_stride, vert,
@@ -147,6 +160,7 @@ class CarryTrack:
     mode: np.ndarray  #: index into core.conventions.CARRY_MODES of the mode in force
     step_period_s: np.ndarray  #: the detector's step period (nan: unknown)
     rotation_periodic: np.ndarray  #: bool: the rotation is periodic about one axis
+    gentle: np.ndarray  #: bool: a gentle walk (the detector's ``gentle``)
     n_changes: np.ndarray  #: how many mode changes were logged so far
     changes: list  #: the detector's change log at the end
 
@@ -170,6 +184,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     modes = [mode_idx[det.mode]]
     periods = [det.step_period_s]
     periodic = [det.rotation_periodic]
+    gentle = [det.gentle]
     n_changes = [len(det.changes)]
     view = np.lib.stride_tricks.sliding_window_view(rows, n, axis=0) if n_grid >= n else None
     for a in range(0, len(hops), HOP_CHUNK):
@@ -181,11 +196,13 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
             modes.append(mode_idx[det.mode])
             periods.append(det.step_period_s)
             periodic.append(det.rotation_periodic)
+            gentle.append(det.gentle)
             n_changes.append(len(det.changes))
     # the state after sample k: that of the last hop at or before k (the initial state before the first)
     at = np.searchsorted(hops, np.arange(n_grid), side="right")
     track = CarryTrack(np.asarray(modes, dtype=np.int64)[at], np.asarray(periods, dtype=float)[at],
-                       np.asarray(periodic, dtype=bool)[at], np.asarray(n_changes, dtype=np.int64)[at],
+                       np.asarray(periodic, dtype=bool)[at], np.asarray(gentle, dtype=bool)[at],
+                       np.asarray(n_changes, dtype=np.int64)[at],
                        det.changes)
     # time per mode: the mode in force before each sample, added one grid period at a time as the detector does
     before = np.concatenate([[modes[0]], track.mode[:-1]]).astype(np.int64) if n_grid else np.zeros(0, np.int64)

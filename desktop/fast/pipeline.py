@@ -61,6 +61,7 @@ from core.conventions import ACC, CARRY_MODES, GNSS_STATUS, GPS, GYRO
 from core.pdr.pipeline import (IMPOSSIBLE, MAG, SATURATION_FLOOR, AttitudeLog, Pipeline, PipelineResult, SensorHealth,
                                Track)
 from core.recording import Recording
+from core.pdr.steps import GENTLE
 from desktop.fast import attitude as fatt
 from desktop.fast.carry import run_carry
 from desktop.fast.gates import StepRelease, rotation_sums
@@ -183,6 +184,9 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         index = {d: i for i, d in enumerate(p._mode_detectors)}
         det_of_mode = np.array([index[p._det_of[m]] for m in CARRY_MODES], dtype=np.int64)
         det_at = det_of_mode[track.mode]
+        if GENTLE in p._det_of:  # a gentle walk in a trunk mode: the gentle detector (Pipeline._carry_steps)
+            gentle_mode = np.array([p._gentle_applies(m) for m in CARRY_MODES], dtype=bool)
+            det_at = np.where(track.gentle & gentle_mode[track.mode], index[p._det_of[GENTLE]], det_at)
         p._carry_mode = CARRY_MODES[int(track.mode[-1])] if n_ticks else p._carry_mode
         p._active_det = p._mode_detectors[int(det_at[-1])] if n_ticks else p._active_det
     clock("carry-mode detector", 0.35)
