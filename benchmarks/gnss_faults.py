@@ -397,27 +397,30 @@ def _work(item):
         return item, None, {}, traceback.format_exc()
 
 
-def jobs_of(root: Path | None, splits, quick: bool) -> list:
-    """The work items, longest first: simulator walks, real walks, IPIN files."""
+PARTS = ("sim", "real", "ipin")
+
+
+def jobs_of(root: Path | None, splits, quick: bool, parts=PARTS) -> list:
+    """The work items, longest first: simulator walks, real walks, IPIN files (those of ``parts``)."""
     items = []
-    for sp in splits:
+    for sp in splits if "sim" in parts else ():
         seeds = QUICK_SEEDS if quick else SIM_GPS_FAULT_SEEDS[sp]
         items += [("sim", (s, "quick" if quick else sp)) for s in seeds]
         if quick:
             break
     if root is not None and Path(root).is_dir():
-        if REPORT in splits or quick:
+        if (REPORT in splits or quick) and "real" in parts:
             only = (REAL[0],) if quick else None
             items += [("real", (ds, str(folder))) for ds, folder in real_folders(Path(root), only)]
-        for i, t in enumerate(_ipin_trials(Path(root))):
+        for i, t in enumerate(_ipin_trials(Path(root)) if "ipin" in parts else ()):
             if (t.name in QUICK_IPIN) if quick else split_of(t.dataset, t.info) in splits:
                 items.append(("ipin", (str(root), i)))
     return items
 
 
-def run(root: Path | None, splits=SPLITS, quick: bool = False, jobs: int = 2) -> dict:
+def run(root: Path | None, splits=SPLITS, quick: bool = False, jobs: int = 2, parts=PARTS) -> dict:
     t = time.time()
-    items = jobs_of(root, splits, quick)
+    items = jobs_of(root, splits, quick, parts)
     data = {"sim": [], "real": [], "ipin": [], "missing": {}, "failed": [], "splits": list(splits), "quick": quick}
     done = 0
 
@@ -689,7 +692,14 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="JSON to write (default benchmarks/gnss_faults_results.json; "
                     "--quick: not written unless given)")
     ap.add_argument("--markdown-only", action="store_true", help="rewrite the Markdown from the JSON of a run")
+    ap.add_argument("--parts", default=",".join(PARTS),
+                    help="comma-separated subset of sim,real,ipin (a subset writes neither JSON nor Markdown "
+                         "unless --out is given)")
     args = ap.parse_args(argv)
+    parts = tuple(p for p in args.parts.split(",") if p)
+    if not set(parts) <= set(PARTS):
+        ap.error(f"--parts: one or more of {', '.join(PARTS)}")
+    subset = args.quick or set(parts) != set(PARTS)
     from benchmarks.report import refresh_sections
 
     if args.markdown_only:
@@ -698,11 +708,11 @@ def main(argv=None) -> int:
         return 0
     root = args.data or default_data_root()
     splits = SPLITS if args.split == "all" else (args.split,)
-    data = run(root, splits, quick=args.quick, jobs=args.jobs)
-    out = args.out or (None if args.quick else RESULTS_JSON)
+    data = run(root, splits, quick=args.quick, jobs=args.jobs, parts=parts)
+    out = args.out or (None if subset else RESULTS_JSON)
     if out is not None:
         out.write_text(json.dumps(data, indent=1, default=float))
-    if not args.quick:
+    if not subset:
         RESULTS_MD.write_text(markdown(data))
         refresh_sections()
     for k, v in sorted(data["headlines"].items()):

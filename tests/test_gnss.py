@@ -217,7 +217,9 @@ def test_calibrated_fusion_beats_dead_reckoning_through_an_outage_and_stays_hone
     hid = [(t0 + int(200e9), t0 + int(320e9))]
     errs = {}
     for name, kw in {"pdr": {"filter": "reset", "learn_stride": False, "learn_heading": False}, "ekf": {}}.items():
-        fr = GpsFusion(hidden_ns=hid, **kw).run(steps, rec.streams["gps"], t0)
+        # the EKF's own honesty, without the usability judge: after this outage the simulator's receiver has a
+        # multipath episode, which the judge keeps out until the walk ends, so GPS would not rejoin
+        fr = GpsFusion(hidden_ns=hid, judge=None, **kw).run(steps, rec.streams["gps"], t0)
         last = [s for s in fr.steps if s.t_ns < hid[0][1]][-1]
         errs[name] = truth_error(walk, last)
         if name == "ekf":
@@ -234,8 +236,19 @@ def test_fused_track_follows_gps_without_outage(sim_walk):
     walk, steps = sim_walk
     fr = GpsFusion().run(steps, walk.recording.streams["gps"], walk.recording.t0_ns)
     err = [truth_error(walk, s) for s in fr.steps[100:]]
-    assert np.median(err) < 3.0  # GPS alone: 1.5 m white + 3 m wandering bias
-    assert fr.counters["fixes_accepted"] > 0.9 * fr.counters["fixes"] - 10
+    assert np.median(err) < 3.0  # GPS alone: 1.5 m white + 3 m wandering bias, and multipath episodes
+    # the fixes near the truth are taken, those of the receiver's multipath episodes are not (issue #26's judge)
+    from core.geodesy import geodetic_to_enu
+
+    o = walk.truth.origin_lat_lon
+    near = far = near_taken = far_taken = 0
+    for f in fr.fixes:
+        e, n = geodetic_to_enu(f.lat_deg, f.lon_deg, o)
+        p = walk.truth.phone_position_at(f.t_ns)
+        d = math.hypot(e - p[0], n - p[1])
+        near, near_taken = near + (d < 8.0), near_taken + (d < 8.0 and f.accepted)
+        far, far_taken = far + (d > 20.0), far_taken + (d > 20.0 and f.accepted)
+    assert near_taken > 0.7 * near and far > 10 and far_taken <= 0.1 * far  # 231 of 310 and 0 of 26 (seed 7)
 
 
 def test_bad_fixes_are_screened_and_never_reach_the_state(sim_walk):

@@ -184,7 +184,9 @@ def test_follows_gps_and_carries_through_an_outage_with_an_honest_sigma(sim_walk
     assert np.median(err) < 3.0
     assert fr.counters["variability_detections"] == 0  # clean GPS is never called unreliable
     hid = [(t0 + int(200e9), t0 + int(320e9))]
-    fr = make_fusion("kubrak", hidden_ns=hid).run(steps, rec.streams["gps"], t0)
+    # the filter's own honesty, without the usability judge: after this outage the simulator's receiver has a
+    # multipath episode, which the judge keeps out until the walk ends, so GPS would not rejoin
+    fr = make_fusion("kubrak", hidden_ns=hid, judge=None).run(steps, rec.streams["gps"], t0)
     last = [s for s in fr.steps if s.t_ns < hid[0][1]][-1]
     o = fr.outages[0]
     assert o.walked_m > 100
@@ -244,7 +246,9 @@ def test_a_minute_of_steady_multipath_is_not_taken_for_the_tracks_error(sim_walk
     fr = make_fusion("kubrak").run(steps, bad, walk.recording.t0_ns)
     assert _accepted_far(walk, fr) == 0
     after = [f.accepted for f in fr.fixes if 280e9 <= f.t_ns - walk.recording.t0_ns < 360e9]
-    assert sum(after) > 0.7 * len(after)  # and GPS is taken again after it (the rest: the receiver's own multipath)
+    # and GPS is taken again after it: the judge trusts the stream 25 s after the jump back has left its window,
+    # and keeps out the receiver's own multipath episode at 333 s (issue #26); before the judge 0.7 of them
+    assert sum(after) >= 20
 
 
 def test_noisy_gps_never_puts_a_fix_30_m_off_into_the_track(sim_walk):
@@ -263,9 +267,10 @@ def test_coefficient_test_fires_on_noisy_gps_and_restores_the_minute_before(sim_
     walk, steps = sim_walk
     bad, _ = _with_noisy_minute(walk, 180.0, 60.0, 15.0, 8.0)
     g = walk.recording.streams["gps"]
-    clean = make_fusion("kubrak").run(steps, g, walk.recording.t0_ns)
+    # the coefficient test itself: without the usability judge (which keeps these fixes from the filter)
+    clean = make_fusion("kubrak", judge=None).run(steps, g, walk.recording.t0_ns)
     assert clean.counters["variability_detections"] == 0
-    fr = make_fusion("kubrak").run(steps, bad, walk.recording.t0_ns)
+    fr = make_fusion("kubrak", judge=None).run(steps, bad, walk.recording.t0_ns)
     assert fr.counters["variability_detections"] >= 1
     ev = fr.counters["variability_events"][0]
     assert 180e9 <= ev["t_ns"] - walk.recording.t0_ns <= 250e9

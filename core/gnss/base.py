@@ -55,6 +55,7 @@ import numpy as np
 from core.conventions import wrap_angle
 from core.geodesy import enu_to_geodetic, geodetic_to_enu
 from core.gnss.ekf import UpdateResult, sigma_max_m
+from core.gnss.judge import GpsJudge, GpsVerdict, JudgeSettings
 
 #: 68 % radius of a circular 2-D Gaussian, in units of its per-axis SD: hacc = 1.515 sigma
 HACC_PER_SIGMA = math.sqrt(-2.0 * math.log(1.0 - 0.68))
@@ -247,7 +248,7 @@ class FixFusion:
                  hold_s: float = 3.0, hidden_ns=(), relock_s: float = 8.0, anchor_max_hacc_m: float = ANCHOR_MAX_HACC_M,
                  anchor_max_waits: int = 30, start: tuple | None = None, min_cn0_4th_dbhz: float = 25.0,
                  status_max_age_s: float = 2.0, relock_max_drift: float | None = None, pause_s: float = 1.5,
-                 course_latency_s: float = 1.5):
+                 course_latency_s: float = 1.5, judge: JudgeSettings | None = JudgeSettings()):
         self.max_hacc_m = float(max_hacc_m)
         self.default_hacc_m = float(default_hacc_m)
         self.max_speed_m_s = float(max_speed_m_s)
@@ -271,6 +272,7 @@ class FixFusion:
         self.status_max_age_ns = int(status_max_age_s * 1e9)
         self.pause_ns = int(pause_s * 1e9)
         self.course_latency_ns = int(course_latency_s * 1e9)
+        self.judge_settings = judge
 
     def reset(self) -> None:
         self.origin_lat_lon: tuple[float, float] | None = None
@@ -297,6 +299,10 @@ class FixFusion:
         self._nis_n = 0
         self._status: tuple | None = None  # last gnss_status: (t_ns, n_used, cn0_4th_dbhz)
         self._headings: deque = deque()  # (t_ns, step heading unwrapped) of the last few seconds
+        self._pdr: deque = deque()  # (t_ns, east, north) of the pipeline's dead-reckoned steps, last few seconds
+        self.judge = GpsJudge(self.judge_settings) if self.judge_settings is not None else None
+        self.n_judged_out = 0
+        self.relocks: list[dict] = []  #: when the filter re-locked to GPS, by how far, by which rule
         if self.start is not None:
             self.origin_lat_lon = (self.start[0], self.start[1])
         self._reset_filter()
@@ -391,13 +397,52 @@ class FixFusion:
     def _before_fixes(self, step, t_prev_ns: int) -> None:
         """Called with each step before the fixes inside its interval are processed."""
 
+    @property
+    def trusting_gps(self) -> bool:
+        """Whether the judge lets fixes into the filter now (always, without a judge)."""
+        return self.judge is None or self.judge.verdict is GpsVerdict.USABLE
+
+    def _pdr_at(self, t_ns: int) -> tuple[float, float]:
+        """The pipeline's dead-reckoned position at ``t_ns`` (between the steps around it; nan before any)."""
+        p = self._pdr
+        if not p:
+            return math.nan, math.nan
+        t = np.array([x[0] for x in p], dtype=np.int64)
+        return (float(np.interp(t_ns, t, [x[1] for x in p])), float(np.interp(t_ns, t, [x[2] for x in p])))
+
+    def _dead_reckon(self, step, t_prev_ns: int, dur_ns: int) -> float:
+        """A step while GPS is not trusted: the filter runs (its covariance grows), but the position moves by the
+        step itself -- the pipeline's length and heading, with what good GPS taught before, if any -- so that
+        the fused track is the dead-reckoned one (Chen's EKF and Kubrak's velocity model would otherwise make
+        a track of their own: on IPIN T21r02, without a single fix, Chen's 7.0 m against dead reckoning's 3.0)."""
+        filt = self.filt
+        e0, n0 = (float(filt.x[0]), float(filt.x[1])) if filt.initialized else (0.0, 0.0)
+        self._step(step, t_prev_ns, dur_ns)
+        length, heading = self._dead_reckoned_step(step)
+        if not (math.isfinite(length) and math.isfinite(heading)):
+            return 0.0
+        filt.x[0] = e0 + length * math.cos(heading)
+        filt.x[1] = n0 + length * math.sin(heading)
+        return length
+
+    def _dead_reckoned_step(self, step) -> tuple[float, float]:
+        """(length_m, heading_rad) of a step while GPS is not trusted; the subclass's output follows them."""
+        raise NotImplementedError
+
     def add_step(self, step) -> FusedStep:
         """A completed :class:`core.pdr.pipeline.Step`; returns its fused counterpart."""
         t_prev, dur = self._step_times(step)
         self._before_fixes(step, t_prev)
+        pdr = self._pdr
+        pdr.append((int(step.t_ns), float(step.east_m), float(step.north_m)))
+        while len(pdr) > 2 and pdr[1][0] < step.t_ns - self.hold_ns - int(5e9):
+            pdr.popleft()
         while self._queue and self._queue[0][0] <= step.t_ns:
             self._fix(*self._queue.popleft())
-        walked = self._step(step, t_prev, dur)
+        if self.trusting_gps:
+            walked = self._step(step, t_prev, dur)
+        else:
+            walked = self._dead_reckon(step, t_prev, dur)
         self._remember_heading(step.t_ns, step.heading_rad)
         self._walked_since_accept_m += walked
         self._last_step_ns = step.t_ns
@@ -457,9 +502,14 @@ class FixFusion:
             self._record(t_ns, v, nan, nan, False, "hidden (outage)")
             return
         reason = self._screen(t_ns, lat, lon, hacc, speed)
+        judged = None
         if not reason:
             reason = self._cn0_verdict(t_ns)
             self.n_cn0 += bool(reason)
+            if self.judge is not None:
+                st = self._status
+                fresh = st is not None and self.min_cn0_4th_dbhz > 0 and abs(t_ns - st[0]) <= self.status_max_age_ns
+                judged = self.judge.add_fix(t_ns, lat, lon, hacc_eff, self._pdr_at(t_ns), (not reason) if fresh else None)
         if reason:
             self.n_screened_out += 1
             self._record(t_ns, v, nan, nan, False, reason)
@@ -493,6 +543,11 @@ class FixFusion:
         east, north = geodetic_to_enu(lat, lon, self.origin_lat_lon)
         pred = self._predict_fix(t_ns)
         self._outage_end(t_ns, east, north, pred, filt.position_sigma_m())
+        if judged is not None and judged.verdict is not GpsVerdict.USABLE:
+            self.n_judged_out += 1
+            self._record(t_ns, v, east, north, False,
+                         f"GPS judged {judged.verdict.value}: " + "; ".join(c.value for c in judged.causes))
+            return
         reason = self._filter_verdict(t_ns)
         if reason:
             self.n_filter_rejected += 1
@@ -515,17 +570,36 @@ class FixFusion:
         if res.nis == res.nis:
             self._nis_sum += res.nis
             self._nis_n += 1
+            if self.judge is not None:
+                self.judge.add_nis(res.nis)
         self._outage_jump(t_ns, res.correction_m)
         if self.anchor is None:
             self.anchor = (int(t_ns), float(lat), float(lon), float(v[2]) if len(v) > 2 else math.nan)
         self._accepted(t_ns, v, east, north, hacc, speed, course, res.nis, res.correction_m)
 
     def _relock(self, t_ns: int, innovation, sigma_m: float) -> bool:
-        """Consecutive gated fixes that agree among themselves for ``relock_s``: the track is off, not GPS."""
+        """Consecutive gated fixes that agree among themselves for ``relock_s``: the track is off, not GPS.
+
+        With a judge, gated fixes for ``relock_s`` that it found usable all along, and not inconsistent with the
+        steps at any time since the filter's last accepted fix (so the fixes did not jump: the track drifted
+        away from them), are taken back, whatever the covariance says (issue #26: on one phone walk 270 of 545 fixes that
+        formed a smooth path were rejected).  Otherwise they must agree among themselves for ``relock_s``
+        and, with ``relock_max_drift``, by no more than the track can have drifted.
+        """
         run = self._rejected_run
         run.append((t_ns, innovation[0], innovation[1]))
         while run and run[0][0] < t_ns - 2 * self.relock_ns:
             run.popleft()
+        j = self.judge
+        since = j.passing_since_ns if j is not None else None
+        jumped = j is not None and j.last_inconsistent_ns is not None and \
+            (self._last_accept_ns is None or j.last_inconsistent_ns >= self._last_accept_ns)
+        if since is not None and j.verdict is GpsVerdict.USABLE and not jumped and since <= run[0][0] and \
+                t_ns - run[0][0] >= self.relock_ns:
+            self.relocks.append({"t_ns": int(t_ns), "offset_m": float(math.hypot(innovation[0], innovation[1])),
+                                 "rule": "consistent stream", "consistent_s": (t_ns - since) * 1e-9})
+            run.clear()
+            return True
         if len(run) < 3 or t_ns - run[0][0] < self.relock_ns:
             return False
         d = np.array([(r[1], r[2]) for r in run])
@@ -534,6 +608,8 @@ class FixFusion:
         if self.relock_max_drift is not None and float(np.hypot(*np.mean(d, axis=0))) > \
                 self.relock_max_drift * self._walked_since_accept_m + 3.0 * sigma_m:
             return False  # more than the track can have drifted since its last fix: a steady multipath
+        self.relocks.append({"t_ns": int(t_ns), "offset_m": float(np.hypot(*np.mean(d, axis=0))),
+                             "rule": "gated fixes agree", "consistent_s": (t_ns - run[0][0]) * 1e-9})
         run.clear()
         return True
 
@@ -597,6 +673,8 @@ class FixFusion:
                 "fixes_gated": self.n_gated, "fixes_relocked": self.n_relocked,
                 "fixes_hidden": sum(1 for f in self.fixes if f.reason == "hidden (outage)"),
                 "position_nis_mean": self._nis_sum / self._nis_n if self._nis_n else math.nan,
+                "fixes_judged_out": self.n_judged_out, "relocks": list(self.relocks),
+                "gps_judge": self.judge.summary() if self.judge is not None else None,
                 "fusion": self.name}
 
     def run(self, steps, gps_stream=None, t0_ns: int | None = None, status_stream=None) -> FusionResult:

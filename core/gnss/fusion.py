@@ -35,7 +35,7 @@ from __future__ import annotations
 import copy
 import math
 
-from core.conventions import heading_from_bearing_deg
+from core.conventions import heading_from_bearing_deg, wrap_angle
 from core.gnss.base import (HACC_PER_SIGMA, FixFusion, FixRecord, FusedStep, FusedTrack,  # noqa: F401 - re-exported
                             FusionResult, OutageResult)
 from core.gnss.ekf import PdrEkf, UpdateResult
@@ -173,6 +173,12 @@ class GpsFusion(FixFusion):
 
     def _step_output(self) -> tuple[float, float]:
         return float(self.ekf.x[2]), float(self.ekf.x[3])
+
+    def _dead_reckoned_step(self, step) -> tuple[float, float]:
+        length, heading = self.stride_scale * step.length_m, self.compensated_heading(step.heading_rad)
+        if math.isfinite(length) and math.isfinite(heading):
+            self.ekf.x[2], self.ekf.x[3] = length, wrap_angle(heading)
+        return length, heading
 
     def _fraction(self, t_ns: int) -> float:
         """The part of the next step already walked at a fix's time: at most the whole step (a pause: the walker

@@ -423,6 +423,10 @@ class KubrakFusion(FixFusion):
     def _step_output(self) -> tuple[float, float]:
         return self._last_walked, self.kf.heading()
 
+    def _dead_reckoned_step(self, step) -> tuple[float, float]:
+        self._last_walked = step.length_m
+        return step.length_m, wrap_angle(step.heading_rad + float(self.kf.x[DPSI]))
+
     # -- fixes ------------------------------------------------------------------------------
     def _predict_fix(self, t_ns: int):
         return self.kf.fix_prediction(t_ns)[0]

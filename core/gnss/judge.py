@@ -1,0 +1,281 @@
+"""Whether a GPS fix stream can be trusted, fix by fix and minute by minute (issue #26).
+
+A phone reports fixes indoors too: on the IPIN museum's hand-held loops they
+report 4-39 m and are 2-23 m off in the same direction for minutes, and a
+filter that takes them (each one plausible on its own) ends worse than dead
+reckoning alone.  Kubrak et al. (2006) trust the receiver's C/N0 first and
+the behaviour of their filter's own estimates second ("such quality
+monitoring techniques do not provide reliable results due to the limited
+amount of data"); :class:`GpsJudge` looks at a window of the stream as a
+whole, against the walker's own steps, before the filter sees a fix.
+
+Evidence over the last ``window_s`` of screened fixes
+    * **reported accuracy**: the median ``hacc_m`` at most ``max_median_hacc_m``;
+    * **signal** (where the recording has the receiver's status): at most
+      ``max_signal_fail_share`` of the fixes fail Kubrak et al.'s C/N0 rule;
+    * **consistency with the steps**: the fixes' positions against the
+      dead-reckoned positions at the same times (the pipeline's steps),
+      after the best rotation, translation and scale (the phone's heading
+      offset and where the walk sits are not known yet, nor the walker's
+      stride: ``step_scale_limits``), have an RMS residual of at most
+      ``shape_residual_floor_m`` or ``shape_residual_per_hacc`` times their
+      median reported accuracy, whichever is larger.  The fixes agree
+      among themselves and with the walker's motion: a stream that moves
+      while the walker turns in a 10-m room, or stands while the walker
+      walks on, is not a position;
+    * **the filter's innovations** (:meth:`GpsJudge.add_nis`): the mean NIS
+      of the last ``nis_window`` fixes the filter took within the upper
+      ``nis_quantile`` point of its chi-square band (2 degrees of freedom
+      each): fixes pulling the track harder than both uncertainties allow.
+
+Verdict (:class:`GpsVerdict`)
+    ``UNKNOWN`` until a window holds ``min_fixes``; ``UNUSABLE`` as soon as
+    any evidence fails (the causes as :class:`Cause` members, the numbers
+    in a :class:`Judgement`); ``USABLE`` once all of it has passed for
+    ``usable_after_s`` without a break.  Neither ``UNKNOWN`` nor
+    ``UNUSABLE`` lets a fix into the filter: the fused track is then the
+    dead-reckoned one (:class:`core.gnss.base.FixFusion`).
+
+The thresholds were chosen on the tuning split only (``benchmarks/splits.py``):
+IPIN routes 01, 02 (fixes 1.5-6 m off, reporting 4-6 m, residual against the
+steps 1.1-2.6 m: GPS helps) and 21, 22 (reporting 12-39 m, residual 3.0-3.7 m,
+fixes 8-23 m off: GPS hurts), the outdoor tuning walk and the simulator's
+tuning seeds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from core.geodesy import geodetic_to_enu
+
+
+class GpsVerdict(Enum):
+    """What the judge says of the fix stream now."""
+
+    UNKNOWN = "unknown"  #: too few fixes yet to say
+    USABLE = "usable"
+    UNUSABLE = "unusable"
+
+
+class Cause(Enum):
+    """Why a stream is not (yet) usable."""
+
+    FEW_FIXES = "too few fixes in the window"
+    ACCURACY = "reported accuracy too coarse"
+    SIGNAL = "weak satellite signals"
+    INCONSISTENT = "fixes inconsistent with the steps"
+    NIS = "innovations beyond the filter's chi-square band"
+    SETTLING = "consistent for too short a time"
+
+
+@dataclass(frozen=True)
+class JudgeSettings:
+    """The judge's thresholds (units in the names); see the module docstring."""
+
+    window_s: float = 15.0
+    min_fixes: int = 8
+    max_median_hacc_m: float = 10.0
+    max_signal_fail_share: float = 0.5
+    #: the residual allowed: this floor, or this many times the window's median reported accuracy if more
+    #: (white fix noise of a reported 68 % radius h gives an RMS 2-D residual of about 0.93 h)
+    shape_residual_floor_m: float = 4.0
+    shape_residual_per_hacc: float = 1.2
+    #: the dead-reckoned track may be this much too short or long against the fixes (the stride not yet learnt)
+    step_scale_limits: tuple = (0.7, 1.4)
+    usable_after_s: float = 10.0
+    nis_window: int = 20
+    nis_quantile: float = 0.999
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """The judge's view at one fix (diagnostics as data)."""
+
+    t_ns: int
+    verdict: GpsVerdict
+    causes: tuple = ()  #: :class:`Cause` members, empty when usable
+    n_fixes: int = 0  #: screened fixes in the window
+    median_hacc_m: float = math.nan
+    shape_residual_m: float = math.nan  #: RMS residual against the steps after the best rigid motion (m)
+    signal_fail_share: float = math.nan  #: of the window's fixes with a receiver status, the share failing
+    nis_mean: float = math.nan  #: mean NIS of the filter's last accepted fixes
+    nis_limit: float = math.nan  #: its chi-square band's upper point
+
+    def as_dict(self) -> dict:
+        return {"t_ns": self.t_ns, "verdict": self.verdict.value, "causes": [c.value for c in self.causes],
+                "n_fixes": self.n_fixes, "median_hacc_m": self.median_hacc_m,
+                "shape_residual_m": self.shape_residual_m, "signal_fail_share": self.signal_fail_share,
+                "nis_mean": self.nis_mean, "nis_limit": self.nis_limit}
+
+
+def chi2_mean_limit(dof_each: int, n: int, quantile: float) -> float:
+    """Upper ``quantile`` point of the mean of ``n`` chi-square variables of ``dof_each`` degrees of freedom
+    (Wilson-Hilferty: the cube root of a chi-square is nearly normal)."""
+    k = dof_each * n
+    z = _normal_quantile(quantile)
+    c = 2.0 / (9.0 * k)
+    return k * (1.0 - c + z * math.sqrt(c)) ** 3 / n
+
+
+def _normal_quantile(p: float) -> float:
+    """Standard normal quantile (Acklam's rational approximation, |error| < 1.2e-9 on (0, 1))."""
+    a = (-3.969683028665376e+01, 2.209460984245205e+02, -2.759285104469687e+02, 1.383577518672690e+02,
+         -3.066479806614716e+01, 2.506628277459239e+00)
+    b = (-5.447609879822406e+01, 1.615858368580409e+02, -1.556989798598866e+02, 6.680131188771972e+01,
+         -1.328068155288572e+01)
+    c = (-7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e+00, -2.549732539343734e+00,
+         4.374664141464968e+00, 2.938163982698783e+00)
+    d = (7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e+00, 3.754408661907416e+00)
+    if not 0.0 < p < 1.0:
+        raise ValueError(f"quantile must be in (0, 1), got {p}")
+    lo = 0.02425
+    if p < lo or p > 1.0 - lo:
+        q = math.sqrt(-2.0 * math.log(p if p < lo else 1.0 - p))
+        x = (((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5]) / \
+            ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1.0)
+        return x if p < lo else -x
+    q = p - 0.5
+    r = q * q
+    return (((((a[0] * r + a[1]) * r + a[2]) * r + a[3]) * r + a[4]) * r + a[5]) * q / \
+        (((((b[0] * r + b[1]) * r + b[2]) * r + b[3]) * r + b[4]) * r + 1.0)
+
+
+def shape_residual_m(a: np.ndarray, b: np.ndarray, scale_limits=(1.0, 1.0)) -> float:
+    """RMS distance (m) between point sets ``a`` and ``b`` (n, 2) after the rotation, translation and scale
+    (within ``scale_limits``) of ``b`` that fit ``a`` best (Procrustes; no reflection)."""
+    a0 = a - a.mean(axis=0)
+    b0 = b - b.mean(axis=0)
+    u, sv, vt = np.linalg.svd(b0.T @ a0)
+    d = 1.0 if np.linalg.det(u @ vt) >= 0 else -1.0  # a reflection is not a motion
+    u[:, -1] *= d
+    sv = sv.copy()
+    sv[-1] *= d
+    r = u @ vt
+    bb = float(np.sum(b0 * b0))
+    scale = float(np.sum(sv)) / bb if bb > 0 else 1.0
+    scale = min(max(scale, scale_limits[0]), scale_limits[1])
+    return float(math.sqrt(np.mean(np.sum((a0 - scale * (b0 @ r)) ** 2, axis=1))))
+
+
+@dataclass
+class _Counts:
+    fixes: int = 0
+    usable: int = 0
+    causes: dict = field(default_factory=dict)
+
+
+class GpsJudge:
+    """Streams fixes (with the dead-reckoned position at their time) and the filter's NIS; says whether to
+    trust the stream (see the module docstring)."""
+
+    def __init__(self, settings: JudgeSettings | None = None):
+        self.settings = settings or JudgeSettings()
+        self.nis_limit = chi2_mean_limit(2, self.settings.nis_window, self.settings.nis_quantile)
+        self.reset()
+
+    def reset(self) -> None:
+        self._ref: tuple | None = None  # (lat, lon) of the judge's own frame
+        self._fixes: deque = deque()  # (t_ns, east, north, hacc, signal_ok or None, pdr_e, pdr_n)
+        self._nis: deque = deque(maxlen=self.settings.nis_window)
+        self._passing_since_ns: int | None = None
+        #: the last time the fixes disagreed with the steps (a jump, multipath): None if never
+        self.last_inconsistent_ns: int | None = None
+        self.last: Judgement | None = None
+        self.first_usable_ns: int | None = None
+        self._counts = _Counts()
+
+    @property
+    def passing_since_ns(self) -> int | None:
+        """Since when every piece of evidence has passed without a break (None: it fails now)."""
+        return self._passing_since_ns
+
+    @property
+    def verdict(self) -> GpsVerdict:
+        return self.last.verdict if self.last is not None else GpsVerdict.UNKNOWN
+
+    def add_nis(self, nis: float) -> None:
+        """The NIS of a fix the filter took."""
+        if math.isfinite(nis):
+            self._nis.append(float(nis))
+
+    def add_fix(self, t_ns: int, lat_deg: float, lon_deg: float, hacc_m: float, pdr_en, signal_ok=None) -> Judgement:
+        """A screened fix, the dead-reckoned position ``pdr_en`` (m, the walk's frame) at its time, and whether
+        the receiver's status passed the C/N0 rule (None: no status)."""
+        s = self.settings
+        if self._ref is None:
+            self._ref = (float(lat_deg), float(lon_deg))
+        e, n = geodetic_to_enu(lat_deg, lon_deg, self._ref)
+        fx = self._fixes
+        fx.append((int(t_ns), float(e), float(n), float(hacc_m), signal_ok, float(pdr_en[0]), float(pdr_en[1])))
+        while fx and fx[0][0] <= t_ns - int(s.window_s * 1e9):
+            fx.popleft()
+        j = self._judge(int(t_ns))
+        self.last = j
+        c = self._counts
+        c.fixes += 1
+        if j.verdict is GpsVerdict.USABLE:
+            c.usable += 1
+            if self.first_usable_ns is None:
+                self.first_usable_ns = int(t_ns)
+        for cause in j.causes:
+            c.causes[cause] = c.causes.get(cause, 0) + 1
+        return j
+
+    def _judge(self, t_ns: int) -> Judgement:
+        s = self.settings
+        fx = self._fixes
+        n = len(fx)
+        hacc = np.array([f[3] for f in fx])
+        med = float(np.median(hacc)) if n else math.nan
+        sig = [f[4] for f in fx if f[4] is not None]
+        fail = float(np.mean([not ok for ok in sig])) if sig else math.nan
+        nis_mean = float(np.mean(self._nis)) if len(self._nis) == self._nis.maxlen else math.nan
+        resid = math.nan
+        if n >= 3:
+            a = np.array([(f[1], f[2]) for f in fx])
+            b = np.array([(f[5], f[6]) for f in fx])
+            if np.all(np.isfinite(b)):
+                resid = shape_residual_m(a, b, s.step_scale_limits)
+        causes = []
+        if n < s.min_fixes:
+            causes.append(Cause.FEW_FIXES)
+        if not med <= s.max_median_hacc_m:
+            causes.append(Cause.ACCURACY)
+        if fail == fail and fail > s.max_signal_fail_share:
+            causes.append(Cause.SIGNAL)
+        limit = max(s.shape_residual_floor_m, s.shape_residual_per_hacc * med) if med == med else math.nan
+        if not resid <= limit and n >= s.min_fixes:
+            causes.append(Cause.INCONSISTENT)
+        if nis_mean == nis_mean and nis_mean > self.nis_limit:
+            causes.append(Cause.NIS)
+            self._nis.clear()  # judged once: the next window starts afresh
+        if Cause.INCONSISTENT in causes:
+            self.last_inconsistent_ns = t_ns
+        kw = dict(n_fixes=n, median_hacc_m=med, shape_residual_m=resid, signal_fail_share=fail,
+                  nis_mean=nis_mean, nis_limit=self.nis_limit)
+        if not causes:
+            if self._passing_since_ns is None:
+                self._passing_since_ns = t_ns
+            if t_ns - self._passing_since_ns >= int(s.usable_after_s * 1e9):
+                return Judgement(t_ns, GpsVerdict.USABLE, (), **kw)
+            causes = [Cause.SETTLING]
+        else:
+            self._passing_since_ns = None
+        # UNKNOWN while nothing but the lack of evidence has been seen
+        unknown = self.verdict is GpsVerdict.UNKNOWN and set(causes) <= {Cause.FEW_FIXES, Cause.SETTLING}
+        return Judgement(t_ns, GpsVerdict.UNKNOWN if unknown else GpsVerdict.UNUSABLE, tuple(causes), **kw)
+
+    def summary(self) -> dict:
+        """What the judge said over the walk (data): fixes judged, share usable, fixes per cause, the verdict now."""
+        c = self._counts
+        return {"verdict": self.verdict.value, "fixes_judged": c.fixes, "fixes_usable": c.usable,
+                "usable_share": c.usable / c.fixes if c.fixes else math.nan,
+                "causes": {k.value: v for k, v in sorted(c.causes.items(), key=lambda kv: -kv[1])},
+                "first_usable_ns": self.first_usable_ns,
+                "last": self.last.as_dict() if self.last is not None else None}
