@@ -122,3 +122,28 @@ def test_position_consistency_nees_on_simulator():
     # 10 runs of 2 dof: the 99 % band of the mean is about [0.7, 3.7]; allow [0.5, 4] for the unmodelled
     # mechanisation error
     assert 0.5 < m < 4.0, m
+
+
+def test_soft_zupt_noise_scale_and_streaming_equals_batch():
+    """``update_zero_velocity(noise_scale)`` is the update with sigma_z times the scale (the NIS shows it);
+    a navigator with a soft ZUPT gives the same track streaming and batch."""
+    e1, e3 = ZuptEKF(), ZuptEKF()
+    for e in (e1, e3):
+        e.align((0.0, 0.0, 9.8), (0.0, 0.0, 0.0))
+        e.v = (0.05, -0.02, 0.01)
+    p_vv = e1.P[3, 3]
+    u1, u3 = e1.update_zero_velocity(), e3.update_zero_velocity(noise_scale=3.0)
+    v2 = 0.05 ** 2 + 0.02 ** 2 + 0.01 ** 2
+    assert math.isclose(u1.nis, v2 / (p_vv + 0.01 ** 2), rel_tol=1e-9)
+    assert math.isclose(u3.nis, v2 / (p_vv + 9 * 0.01 ** 2), rel_tol=1e-9)
+    w = _walk(seed=5)
+    fs = FootSettings(stance=StanceSettings(threshold=1e5, window_s=0.05), soft_zupt_gain=3.0)
+    batch = FootNavigator(fs).run(w.recording)
+    nav = FootNavigator(fs)
+    for name, t, v in w.recording.events(["gyro", "acc", "mag"]):
+        nav.update(name, t, v)
+    stream = nav.finish()
+    ok = np.isfinite(batch.position_n[:, 0])
+    assert np.allclose(stream.position_n[ok], batch.position_n[ok], atol=1e-9)
+    hard = FootNavigator(FootSettings(stance=StanceSettings(threshold=1e5, window_s=0.05))).run(w.recording)
+    assert not np.allclose(hard.position_n[ok], batch.position_n[ok], atol=1e-6)  # the gain does something

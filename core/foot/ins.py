@@ -312,10 +312,12 @@ class ZuptEKF:
         self.bg = (bg[0] + d[9], bg[1] + d[10], bg[2] + d[11])
         self.ba = (ba[0] + d[12], ba[1] + d[13], ba[2] + d[14])
 
-    def update_zero_velocity(self) -> Update:
-        """eq. 9: ``z = 0`` during stance (``H = [0 I 0 0 0]``)."""
+    def update_zero_velocity(self, noise_scale: float = 1.0) -> Update:
+        """eq. 9: ``z = 0`` during stance (``H = [0 I 0 0 0]``); ``noise_scale`` multiplies ``sigma_z``
+        (a soft ZUPT: less weight where the detector is less sure)."""
         y = np.array((-self.v[0], -self.v[1], -self.v[2]))
-        return self._update_block("zupt", y, VEL, self._r_zupt)
+        r = self._r_zupt if noise_scale == 1.0 else self._r_zupt * (noise_scale * noise_scale)
+        return self._update_block("zupt", y, VEL, r)
 
     def update_zero_rate(self, gyro_b) -> Update:
         """Zero angular rate during stance: the reading is the bias (``H = [0 0 0 I 0]``)."""

@@ -94,6 +94,11 @@ class FootSettings:
     foot_mag_heading_sd_rad: float = math.radians(10.0)
     #: "course": sd of the waist heading used as the foot heading (rad)
     course_heading_sd_rad: float = math.radians(10.0)
+    #: soft ZUPT: the zero-velocity noise is ``zupt_noise_m_s * (1 + soft_zupt_gain * statistic / threshold)``
+    #: (the detector's confidence: 0 at a perfectly still sample, 1 at the threshold); 0 = a hard switch.
+    #: Off by default: on the PyShoe tuning split gains 1, 3, 10 gave mean 3-D RMSE 0.115, 0.116, 0.119 m
+    #: against 0.114 m (the largest error fell, 0.29 -> 0.24 m, the median rose, 0.100 -> 0.111 m)
+    soft_zupt_gain: float = 0.0
 
     def __post_init__(self):
         if self.aid not in AIDS:
@@ -250,7 +255,7 @@ class FootNavigator:
                          "aligned_on_short_stance": 0}
 
     # -- the per-sample kernel ----------------------------------------------------------------
-    def _sample(self, t: int, acc, gyro, stance: bool) -> None:
+    def _sample(self, t: int, acc, gyro, stance: bool, ratio: float = 0.0) -> None:
         if not (all(map(math.isfinite, acc)) and all(map(math.isfinite, gyro))):
             self.counters["skipped_nonfinite"] += 1
             stance = False
@@ -271,7 +276,8 @@ class FootNavigator:
         if stance:
             if not self._prev_stance:
                 self._stance_start = t
-            u = ins.update_zero_velocity()
+            g = self.settings.soft_zupt_gain
+            u = ins.update_zero_velocity(1.0 + g * min(max(ratio, 0.0), 1.0) if g > 0 else 1.0)
             if u.used:
                 self.zupt_nis.append(u.nis)
             if ins.settings.zero_rate_update and gyro is not None:
@@ -489,16 +495,20 @@ class FootNavigator:
             if len(labels) != len(t):
                 raise ValueError(f"{len(labels)} stance labels for {len(t)} accelerometer samples")
             stance = labels & finite
+            ratio = np.zeros(len(t))
         else:
             stance = np.zeros(len(t), dtype=bool)
+            ratio = np.zeros(len(t))
             if np.any(finite):
-                stance[finite] = det.detect(t[finite], acc_s.values[finite], gyro[finite]).stance
+                r = det.detect(t[finite], acc_s.values[finite], gyro[finite])
+                stance[finite] = r.stance
+                ratio[finite] = np.where(r.stance, r.statistic / r.thresholds, 0.0)
         acc_name, gyro_name = self.names[ACC], self.names[GYRO]
         k = 0
         acc_v, gyro_v = acc_s.values, gyro
         for name, tt, v in recording.events(self.input_names(recording)):
             if name == acc_name:
-                self._sample(tt, tuple(acc_v[k]), tuple(gyro_v[k]), bool(stance[k]))
+                self._sample(tt, tuple(acc_v[k]), tuple(gyro_v[k]), bool(stance[k]), float(ratio[k]))
                 k += 1
             elif name != gyro_name:
                 self._other(name, tt, v)
@@ -555,11 +565,11 @@ class FootNavigator:
                 self._drain_bad()
 
     def _feed(self, decisions) -> None:
-        for td, st, _ in decisions:
+        for td, st, stat, thr in decisions:
             self._drain_bad()
             t, acc, gyro = self._pending.popleft()[:3]
             assert t == td
-            self._sample(t, acc, gyro, st)
+            self._sample(t, acc, gyro, st, stat / thr if st else 0.0)
         self._drain_bad()
 
     def _drain_bad(self) -> None:

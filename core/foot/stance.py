@@ -325,7 +325,7 @@ class StanceDetector:
 class StanceStream:
     """Streaming stance detection: :meth:`update` returns the decisions that became due.
 
-    Each decision is ``(t_ns, stance, statistic)`` of a sample :attr:`StanceDetector.delay_s`
+    Each decision is ``(t_ns, stance, statistic, threshold)`` of a sample :attr:`StanceDetector.delay_s`
     in the past; :meth:`flush` decides the rest at the end.  The decisions are
     those of :meth:`StanceDetector.detect` on the whole stream: the statistic of
     a sample is computed by :func:`statistic` on the buffered samples its window
@@ -342,12 +342,12 @@ class StanceStream:
         self._stats: deque = deque()  # (t_ns, statistic) known
         self._dnext = 0  # index in _stats of the next sample to decide
 
-    def update(self, t_ns: int, acc_b, gyro_b) -> list[tuple[int, bool, float]]:
+    def update(self, t_ns: int, acc_b, gyro_b) -> list[tuple[int, bool, float, float]]:
         self._buf.append((int(t_ns), tuple(acc_b), tuple(gyro_b)))
         self._statistics(int(t_ns))
         return self._decide(int(t_ns) - self._ahead)
 
-    def flush(self) -> list[tuple[int, bool, float]]:
+    def flush(self) -> list[tuple[int, bool, float, float]]:
         self._statistics(None)
         return self._decide(None)
 
@@ -385,7 +385,7 @@ class StanceStream:
             if s.floor_factor > 0:
                 floor = min(v for tj, v in st if tj <= tk + self._fahead)
                 thr = max(thr0, s.floor_factor * floor)
-            out.append((tk, stat <= thr, stat))
+            out.append((tk, stat <= thr, stat, thr))
             self._dnext += 1
         if s.floor_factor <= 0:  # no floor window: keep nothing
             while self._dnext > 0:
