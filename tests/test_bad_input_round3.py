@@ -308,6 +308,7 @@ def test_one_line_with_a_negative_timestamp_is_skipped_and_counted_not_the_whole
     p.write_text("".join(lines))
     code, s, err = _main(["replay", str(p), "--json", "--no-progress"])
     assert code == 0 and "skipped 1 bad line(s)" in err and "timestamp -5 is negative" in err
+    assert any("skipped 1 bad line(s)" in r for r in s["repairs"]) and s["n_steps"] > 30
 
 
 # ---------------------------------------------------------------------------
