@@ -347,11 +347,13 @@ def problem_lines(rec: Recording) -> list[str]:
 
 
 def problem_summary(rec: Recording) -> dict:
-    """The JSON summary's ``stream_problems`` ({problem: count}) and ``stream_findings`` (one per finding)."""
+    """The JSON summary's ``stream_problems`` ({problem: count}), ``stream_findings`` (one per finding) and
+    ``repairs`` (every repair made while reading, as the ``repaired`` lines say them)."""
     from core.validation import problem_counts
 
     found = list(getattr(rec, "problems", []))
-    return {"stream_problems": problem_counts(found), "stream_findings": [f.as_dict() for f in found]}
+    return {"stream_problems": problem_counts(found), "stream_findings": [f.as_dict() for f in found],
+            "repairs": list(rec.repairs)}
 
 
 def foot_rate_problem(rec: Recording, device: str, window_s: float):

@@ -279,13 +279,11 @@ def test_a_gap_in_the_accelerometer_alone_is_reported_in_the_summary_and_the_jso
     assert code == 0 and s["stream_problems"] == {"GAP": 1}
     text = s["stream_findings"][0]["text"]
     assert "the longest 8.0 s" in text and "while gyro and mag ran" in text and "no steps are counted" in text
-    code, _, _ = _replay(tmp_path, rec, "--no-progress")
-    p = tmp_path / "walk.csv"
     import contextlib
     import io
-    out = io.StringIO()
+    out = io.StringIO()  # the summary lines (the same file, without --json)
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-        assert main(["replay", str(p), "--no-progress"]) == 0
+        assert main(["replay", str(tmp_path / "walk.csv"), "--no-progress"]) == 0
     assert any(ln.startswith("stream ") and "no steps are counted" in ln for ln in out.getvalue().splitlines())
 
 
@@ -308,6 +306,7 @@ def test_one_line_with_a_negative_timestamp_is_skipped_and_counted_not_the_whole
     p.write_text("".join(lines))
     code, s, err = _main(["replay", str(p), "--json", "--no-progress"])
     assert code == 0 and "skipped 1 bad line(s)" in err and "timestamp -5 is negative" in err
+    assert any("skipped 1 bad line(s)" in r for r in s["repairs"]) and s["n_steps"] > 30
 
 
 # ---------------------------------------------------------------------------
@@ -341,7 +340,7 @@ def test_validation_never_raises_and_leaves_other_streams_on_the_imu_clock():
 
     ints = st.integers(0, 2**63 - 1)
 
-    @settings(max_examples=150, deadline=None, derandomize=True)
+    @settings(max_examples=100, deadline=None, derandomize=True)
     @given(t_acc=st.lists(ints, min_size=2, max_size=30, unique=True), t_gps=st.lists(ints, max_size=30, unique=True),
            scale=st.sampled_from([1, 10**3, 10**6, 10**9]), off=st.one_of(st.none(), st.integers(-2**64, 2**64)),
            lat=st.floats(-1e3, 1e3), hacc=st.floats(-5, 50))
