@@ -42,7 +42,7 @@ import numpy as np
 from core.pdr.calibration import CalibrationError, calibrate_known_distance
 from core.pdr.pipeline import Pipeline
 from core.pdr.stride import StepFeatures
-from core.pdr.stride_models import lengths_of, save_stride_model, with_scale
+from core.pdr.stride_models import lengths_of, save_stride_model, weinberg_root, with_scale
 from desktop.stride_training import MODEL_KINDS, TrainConfig, Walk, fit_model
 
 MODEL_LABELS = {
@@ -600,3 +600,161 @@ def stride_section(data_root) -> str:
     if not ipol_walks(str(root)):
         return "## Step length (issue #4)\n\nIPOL dataset not found under the data root: no step-length results.\n"
     return render_markdown(run_study(root))
+
+
+# ---------------------------------------------------------------------------
+# distance without calibration on phones (issue #25)
+#
+# The default C above is a lower-back sensor's (IPOL).  A phone in the hand or in a pocket sees another
+# acceleration amplitude for the same step, so the default is refitted on the phones of the tuning split
+# (:func:`fit_phone_c`) and scored on every phone walk of the report split that has a distance truth.
+
+#: a GPS chord stretch: this long (s), fixes with reported accuracy at most this (m), chord / path at least this
+CHORD_WINDOW_S = 40.0
+CHORD_MAX_HACC_M = 10.0
+CHORD_MIN_STRAIGHTNESS = 0.97
+CHORD_MIN_M = 30.0
+#: the loop of ``phone_walks_more/aymdi_data`` (its README: 116 m and 168 steps)
+AYMDI_LOOP_M = 116.0
+
+
+@dataclass
+class PhoneWalk:
+    """A phone walk with a distance truth: its stretches ``(features, distance_m)`` and how they were measured."""
+
+    name: str
+    dataset: str
+    split: str
+    truth: str  #: "landmarks" (surveyed), "gps_chords" (straight GPS stretches), "loop" (stated length), "wheel"
+    stretches: list  #: [(features, distance_m)]
+    carry_time_s: dict = field(default_factory=dict)
+
+    @property
+    def distance_m(self) -> float:
+        return float(sum(d for _, d in self.stretches))
+
+    def c_needed(self) -> float:
+        """The constant C that gives this walk's distance: the ratio of sums over its stretches, or for GPS
+        chords the median over the stretches (a fix's jump spoils one stretch, not the walk)."""
+        roots = [float(np.sum(weinberg_root(f))) for f, _ in self.stretches]
+        if self.truth == "gps_chords":
+            return float(np.median([d / r for (_, d), r in zip(self.stretches, roots) if r > 0]))
+        return self.distance_m / sum(roots)
+
+    def error_pct(self, c: float) -> float:
+        """Signed distance error of a constant ``c`` on this walk (%; the same robust rule as :meth:`c_needed`)."""
+        return 100.0 * (c / self.c_needed() - 1.0)
+
+
+def _run_steps(recording):
+    """The pipeline's steps on ``recording`` without its GPS (PDR alone), and its carry counters."""
+    from core.recording import Recording
+
+    rec = Recording({k: v for k, v in recording.streams.items() if k != "gps"}, dict(recording.device),
+                    dict(recording.metadata))
+    res = Pipeline().run(rec)
+    return res.steps, res.counters.get("carry", {}).get("time_s", {})
+
+
+def chord_stretches(steps, gps) -> list:
+    """Straight stretches of a GPS walk: ``[(features of the steps inside, chord_m)]``.
+
+    Windows of ``CHORD_WINDOW_S`` over fixes whose reported accuracy is at most ``CHORD_MAX_HACC_M`` (positions
+    smoothed over five fixes), kept when the chord is at least ``CHORD_MIN_M`` and ``CHORD_MIN_STRAIGHTNESS`` of
+    the path along the fixes: the position chord, not the Doppler speed, is the distance."""
+    from core.geodesy import geodetic_to_enu
+
+    v, tg = np.asarray(gps.values, float), np.asarray(gps.t_ns, np.int64)
+    ok = np.isfinite(v[:, 3]) & (v[:, 3] <= CHORD_MAX_HACC_M) & np.isfinite(v[:, 0])
+    if ok.sum() < 10:
+        return []
+    e, n = (np.asarray(a, float) for a in geodetic_to_enu(v[:, 0], v[:, 1], (v[ok][0, 0], v[ok][0, 1])))
+    box = np.ones(5) / 5
+    es, ns = np.convolve(e, box, mode="same"), np.convolve(n, box, mode="same")
+    t = np.array([s.t_ns for s in steps], dtype=np.int64)
+    out, i = [], 5
+    while i < len(tg) - 5:
+        j = int(np.searchsorted(tg, tg[i] + int(CHORD_WINDOW_S * 1e9)))
+        if j >= len(tg) - 5:
+            break
+        if not ok[i - 2:j + 3].all() or j - i < 0.8 * CHORD_WINDOW_S * gps.rate_hz:
+            i += 5
+            continue
+        path = float(np.sum(np.hypot(np.diff(es[i:j + 1]), np.diff(ns[i:j + 1]))))
+        chord = float(np.hypot(es[j] - es[i], ns[j] - ns[i]))
+        sel = np.flatnonzero((t > tg[i]) & (t <= tg[j]))
+        if path > 0 and chord >= CHORD_MIN_M and chord / path >= CHORD_MIN_STRAIGHTNESS and len(sel) > 10:
+            out.append(([steps[k].features for k in sel], chord))
+            i = j
+        else:
+            i += 2
+    return out
+
+
+def phone_walks(data_root) -> list[PhoneWalk]:
+    """Every phone walk with a distance truth under ``data_root``, with its split (``benchmarks.splits``)."""
+    from benchmarks.splits import split_of, trial_split
+    from core.importers import load_recording
+
+    root = Path(data_root)
+    out = []
+    for lw in ipin_walks(str(root)):  # surveyed landmarks, detours dropped (ipin_walks)
+        route = lw.name[1:3]
+        out.append(PhoneWalk(lw.name, "ipin2023_track3", split_of("ipin2023_track3", {"route": route}), "landmarks",
+                             [(lw.features, lw.distance_m)]))
+    gps_folders = [("sensorlogger_gps_walk_ethz", p) for p in sorted((root / "sensorlogger_gps_walk_ethz").glob("20*"))]
+    gps_folders += [("gps_walks_phone", p) for p in sorted((root / "gps_walks_phone").iterdir()) if p.is_dir()] \
+        if (root / "gps_walks_phone").is_dir() else []
+    more = root / "phone_walks_more"
+    if more.is_dir():
+        gps_folders += [("phone_walks_more", p) for p in sorted(more.iterdir()) if p.is_dir() and p.name != "aymdi_data"]
+    for dataset, folder in gps_folders:
+        rec = load_recording(str(folder), warn=False)
+        if "gps" not in rec.streams:
+            continue
+        steps, carry = _run_steps(rec)
+        split = split_of(dataset, {"walk": folder.name})
+        out.append(PhoneWalk(folder.name, dataset, split, "gps_chords", chord_stretches(steps, rec.streams["gps"]),
+                             carry))
+    if (more / "aymdi_data").is_dir():
+        steps, carry = _run_steps(load_recording(str(more / "aymdi_data"), warn=False))
+        out.append(PhoneWalk("aymdi_data", "phone_walks_more", split_of("phone_walks_more", {"walk": "aymdi_data"}),
+                             "loop", [([s.features for s in steps], AYMDI_LOOP_M)], carry))
+    for lw in trundle_walks(str(root)):
+        out.append(PhoneWalk(lw.name, "trundlewheel_distance", split_of("trundlewheel_distance"), "wheel",
+                             [(lw.features, lw.distance_m)]))
+    return [w for w in out if w.stretches]
+
+
+def fit_phone_c(walks, split: str = "tuning") -> float:
+    """The default C from the phones of ``split`` (the tuning split: the shipped default): each walk's own C
+    (:meth:`PhoneWalk.c_needed`) weighted by its distance."""
+    ws = [w for w in walks if w.split == split]
+    if not ws:
+        raise ValueError(f"no phone walk with a distance truth in the {split} split")
+    return float(sum(w.c_needed() * w.distance_m for w in ws) / sum(w.distance_m for w in ws))
+
+
+def phone_distance_markdown(walks, c_before: float, c_after: float) -> str:
+    """Per walk and per split: the distance error of the old and the new default C."""
+    lines = ["## Distance without calibration on phones (issue #25)", "",
+             f"Default Weinberg C {c_before:.4f} (fitted on IPOL's lower-back sensor) -> {c_after:.4f} (refitted on "
+             "the phones of the tuning split: IPIN tuning routes' landmark stretches, thomasdingemanse_lopen's straight "
+             "GPS chords; each walk's own C weighted by its distance).  Error = C / (the walk's own C) - 1.", "",
+             "| split | walk | dataset | truth | distance m | walk's C | error before % | error after % |",
+             "|---|---|---|---|---|---|---|---|"]
+    for split in ("tuning", "report"):
+        for w in [w for w in walks if w.split == split]:
+            lines.append(f"| {split} | {w.name} | {w.dataset} | {w.truth} | {w.distance_m:.0f} | {w.c_needed():.3f} | "
+                         f"{w.error_pct(c_before):+.1f} | {w.error_pct(c_after):+.1f} |")
+    lines += ["", "| split | walks | median abs before % | mean signed before % | median abs after % | "
+              "mean signed after % |", "|---|---|---|---|---|---|"]
+    for split in ("tuning", "report"):
+        ws = [w for w in walks if w.split == split]
+        if not ws:
+            continue
+        b = np.array([w.error_pct(c_before) for w in ws])
+        a = np.array([w.error_pct(c_after) for w in ws])
+        lines.append(f"| {split} | {len(ws)} | {np.median(np.abs(b)):.1f} | {b.mean():+.1f} | "
+                     f"{np.median(np.abs(a)):.1f} | {a.mean():+.1f} |")
+    return "\n".join(lines) + "\n"

@@ -341,3 +341,40 @@ def test_constant_coefficient_default_is_the_shipped_model():
 
     shipped = load_stride_model("default")
     assert shipped.coefficient.c == pytest.approx(ConstantCoefficient().c, abs=5e-4)
+
+
+def test_phone_distance_chords_and_walk_c():
+    """benchmarks.stride_eval's phone-distance study (issue #25): a straight walk's GPS chord is its distance,
+    a fix with a poor reported accuracy keeps its window out, and a walk's own C is the ratio of sums (surveyed
+    truth) or the median over the stretches (GPS chords: one spoilt stretch does not move it)."""
+    from types import SimpleNamespace
+
+    from benchmarks.stride_eval import PhoneWalk, chord_stretches, fit_phone_c
+    from core.geodesy import enu_to_geodetic
+
+    t_s = np.arange(0.0, 200.0, 1.0)  # fixes at 1 Hz, walking north at 1.4 m/s
+    lat, lon = enu_to_geodetic(np.zeros_like(t_s), 1.4 * t_s, (47.0, 8.0))
+    hacc = np.full_like(t_s, 4.0)
+    hacc[120:125] = 30.0  # a poor stretch
+    vals = np.column_stack([lat, lon, np.zeros_like(t_s), hacc, np.full_like(t_s, 1.4), np.zeros_like(t_s)])
+    gps = SimpleNamespace(values=vals, t_ns=(t_s * 1e9).astype(np.int64), rate_hz=1.0)
+    step_t = np.arange(0.25, 200.0, 0.5)
+    steps = [SimpleNamespace(t_ns=int(t * 1e9), features=StepFeatures(int(t * 1e9), 0.5, 11.0, 9.0, 0.5))
+             for t in step_t]
+    out = chord_stretches(steps, gps)
+    assert len(out) >= 2
+    for feats, chord in out:
+        assert chord == pytest.approx(1.4 * 40.0, rel=0.03)
+        assert len(feats) == pytest.approx(80, abs=2)
+        t = np.array([f.t_ns for f in feats]) * 1e-9
+        assert not np.any((t > 118.0) & (t < 127.0))  # no stretch through the poor fixes
+    root = 2.0 ** 0.25  # every step's (A_max - A_min) ** (1/4)
+    good = [([StepFeatures(0, 0.5, 11.0, 9.0, 0.5)] * 10, 10 * 0.48 * root)] * 3
+    chords = PhoneWalk("w", "d", "tuning", "gps_chords", good + [(good[0][0], 100.0)])  # one GPS jump
+    assert chords.c_needed() == pytest.approx(0.48)
+    surveyed = PhoneWalk("s", "d", "tuning", "landmarks", [(good[0][0], 10 * 0.5 * root)])
+    assert surveyed.c_needed() == pytest.approx(0.5)
+    assert surveyed.error_pct(0.55) == pytest.approx(10.0)
+    report = PhoneWalk("r", "d", "report", "landmarks", [(good[0][0], 10 * 0.9 * root)])
+    c = fit_phone_c([surveyed, report])  # the report walk is never used
+    assert c == pytest.approx(0.5)

@@ -5,6 +5,8 @@ Usage (from the repository root)::
     python -m tools.train_stride                    # LOSO CV table, then fit on all subjects and write core/pdr/models/
     python -m tools.train_stride --no-write         # only the cross-validation
     python -m tools.train_stride --data-root PATH   # data elsewhere than ../shared/data
+    python -m tools.train_stride --phones           # issue #25: refit default.json's C on the tuning split's
+                                                    # phones, score it on the report split's (no IPOL study)
 
 The fitting code is :mod:`desktop.stride_training`; the study (walks from the
 datasets, leave-one-subject-out) is :mod:`benchmarks.stride_eval`.
@@ -32,7 +34,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out-dir", type=Path, default=ROOT / "core" / "pdr" / "models")
     ap.add_argument("--no-write", action="store_true", help="only run the cross-validation")
     ap.add_argument("--seed", type=int, default=TrainConfig.seed)
+    ap.add_argument("--phones", action="store_true",
+                    help="refit the default Weinberg C on the tuning split's phone walks (issue #25)")
     args = ap.parse_args(argv)
+    if args.phones:
+        return _phones(args)
     cfg = TrainConfig(seed=args.seed)
     study = stride_eval.run_study(args.data_root, cfg)
     print(stride_eval.render_markdown(study))
@@ -41,6 +47,44 @@ def main(argv: list[str] | None = None) -> int:
                                            created=datetime.now(timezone.utc).isoformat(timespec="seconds"))
         for p in written:
             print(f"wrote {p}")
+    return 0
+
+
+def _phones(args) -> int:
+    """Refit ``default.json``'s C on the tuning split's phones; the report split's phones are only scored."""
+    import json
+
+    from core.pdr.stride_models import load_stride_model, save_stride_model
+
+    walks = stride_eval.phone_walks(args.data_root)
+    c_new = stride_eval.fit_phone_c(walks, "tuning")
+    path = args.out_dir / "default.json"
+    old = json.loads(path.read_text(encoding="utf-8"))
+    c_old = float(old["c"])
+    print(stride_eval.phone_distance_markdown(walks, c_old, c_new))
+    if args.no_write:
+        return 0
+    model = load_stride_model(path)
+    model.coefficient.c = c_new
+    tuning = [w for w in walks if w.split == "tuning"]
+    training = dict(old.get("training", {}))
+    training["phones"] = {
+        "issue": 25, "tool": "tools/train_stride.py --phones", "split": "tuning",
+        "data": "IPIN 2023 tuning routes 01, 02, 21, 22 (hand-held, two phones; surveyed landmark stretches) and "
+                "phone_walks_more/thomasdingemanse_lopen (a phone on its long edge, probably a trouser pocket; "
+                "straight GPS chords)",
+        "walks": [{"name": w.name, "truth": w.truth, "distance_m": round(w.distance_m, 1),
+                   "c": round(w.c_needed(), 4)} for w in tuning],
+        "rule": "each walk's own C (ratio of sums over its stretches; median over the stretches for GPS chords), "
+                "weighted by its distance",
+        "c_before": c_old,
+    }
+    meta = {k: v for k, v in old.items() if k not in ("format", "format_version", "kind", "inputs", "output", "c",
+                                                      "c_unit", "length_clip_m")}
+    meta.update(description="default = Weinberg, constant C refitted on the tuning split's phones (issue #25)",
+                placement="phone", training=training)
+    save_stride_model(model, path, **meta)
+    print(f"wrote {path}: C {c_old:.4f} -> {c_new:.4f}")
     return 0
 
 
