@@ -475,6 +475,14 @@ def truth_headline(errs: dict) -> str:
     return ""
 
 
+def gps_track_label(fusion, name: str) -> str:
+    """What the fused track is, for the plot's title and the GeoJSON: fused with GPS, or dead reckoning where GPS
+    was judged unusable, and why (:func:`core.gnss.judge.verdict_text`)."""
+    from core.gnss.judge import verdict_text
+
+    return verdict_text(fusion.counters.get("gps_judge"), name)
+
+
 def gps_lines(res, why: str = "") -> list[str]:
     """Summary lines of the GPS fusion: the filter, fixes and their verdicts, what was learnt, outages."""
     fu = res.fusion
@@ -485,6 +493,13 @@ def gps_lines(res, why: str = "") -> list[str]:
              (f"gps           {c['fixes']} fixes: {c['fixes_accepted']} used, {c['fixes_screened_out']} screened out "
               f"(accuracy, speed, C/N0), {c.get('fixes_filter_rejected', 0)} while GPS was unreliable, "
               f"{c['fixes_gated']} rejected by the filter's gate, {c['fixes_hidden']} hidden (outages)")]
+    if c.get("gps_judge"):
+        from core.gnss.judge import verdict_text
+
+        j = c["gps_judge"]
+        lines.append(f"gps verdict   {verdict_text(j, name)}; {j['fixes_usable']} of {j['fixes_judged']} screened fixes "
+                     f"judged usable, {c.get('fixes_judged_out', 0)} kept from the filter"
+                     + (f"; re-locked to GPS {len(c['relocks'])} time(s)" if c.get("relocks") else ""))
     reasons: dict = {}
     for f in fu.fixes:
         if not f.accepted and f.reason != "hidden (outage)":
@@ -927,6 +942,12 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
         summary.update(heading="none", final_east_m=None, final_north_m=None, start_to_end_m=None, labels=[])
     if gnss is not None:
         summary.update(gps_fusion=gnss.name, gps_fusion_reason=gps_why)
+        if res.fusion is not None:
+            from core.gnss.judge import verdict_text
+
+            judge = res.fusion.counters.get("gps_judge")
+            summary.update(gps_verdict=verdict_text(judge, gnss.name), gps_judge=judge,
+                           gps_relocks=res.fusion.counters.get("relocks", []))
     if errs:
         summary["truth"] = errs
     lines = summary_lines(res, rec, gps_why, heading)
@@ -981,7 +1002,7 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
             plotted = [outs["plot"]]
             outs = {k: v for k, v in outs.items() if k != "plot"}
     written = plotted + _write_outputs(args, outs, rec, track, res.fusion.origin_lat_lon if fused else None, extra,
-                             f"fused with GPS ({gnss.name})" if fused else "", others, fixes, sub,
+                             gps_track_label(res.fusion, gnss.name) if fused else "", others, fixes, sub,
                              res.fusion.fixes if res.fusion is not None else None,
                              {**(truth_plot(truth, errs, track, bool(fused)) if errs else {}), **plot_kw} or None)
     if profile is not None and save_back and res.fusion is not None:

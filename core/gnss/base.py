@@ -11,7 +11,11 @@ Per fix, in this order; every fix gets a verdict (:class:`FixRecord`: used, or r
        simulated outages), measured but never used;
     2. screening: finite position, reported accuracy ``hacc_m <= max_hacc_m`` (a fix without one
        is given ``default_hacc_m``), speed at most ``max_speed_m_s`` (a vehicle, not a walker);
-    3. the receiver's own signal quality where the recording carries it (the ``gnss_status``
+    3. the usability judge (:class:`core.gnss.judge.GpsJudge`, issue #26): the stream's window of
+       fixes against the steps, its accuracy and signal, the filter's NIS; until it says the stream
+       is usable no fix reaches the filter (anchoring aside) and the fused position moves by the
+       pipeline's own steps (the track is the dead-reckoned one);
+    3b. the receiver's own signal quality where the recording carries it (the ``gnss_status``
        stream: Android ``GnssStatus`` or NMEA GSA/GSV): the rule of Kubrak et al. -- a fix whose
        4th-strongest satellite in use is below ``min_cn0_4th_dbhz`` (25 dB-Hz), or with fewer than
        4 satellites in use, is not used;
@@ -23,7 +27,8 @@ Per fix, in this order; every fix gets a verdict (:class:`FixRecord`: used, or r
        a fix that disagrees with the track beyond what both uncertainties allow is rejected;
        fixes that keep being rejected but agree among themselves for ``relock_s`` are taken,
        with the covariance widened (after a long outage the track is more likely off than a
-       steady GPS);
+       steady GPS); fixes the judge found consistent with the walker's motion all along, with
+       no jump since the last fix taken, re-lock the position onto them (:meth:`FixFusion._relock`);
     7. the subclass's extra use of an accepted fix (course, velocity, training).
 
 Fix times and step times
@@ -229,6 +234,9 @@ class FixFusion:
         it off).
     status_max_age_s : float
         A ``gnss_status`` reading older than this does not describe a fix (s).
+    judge : JudgeSettings or None
+        The usability judge's settings (:mod:`core.gnss.judge`); None: no judge, every screened fix
+        goes to the filter (the behaviour before issue #26).
     pause_s : float
         A longer time between two steps is a pause (the step detector's ``max_step_interval_s``):
         the step after it spans its own duration; a shorter gap up to three durations is a missed
@@ -559,8 +567,18 @@ class FixFusion:
             # the track, not the GPS, is wrong: take the fix with the position uncertainty widened by
             # the disagreement (so its NIS is acceptable) instead of rejecting GPS for ever
             d = np.array(res.innovation)
-            filt.P[:2, :2] += np.outer(d, d)
-            res = self._update_position(t_ns, east, north, sigma, False)
+            if self.relocks[-1]["rule"] == "consistent stream":
+                # a stream consistent with the walker's motion all along: the position restarts on the fix,
+                # its correlations with the rest dropped (widening it by the disagreement let the next fixes
+                # pull the heading through them: on the tuning walk the track then ran 40-150 m off again)
+                filt.x[:2] += d
+                filt.P[:2, :] = 0.0
+                filt.P[:, :2] = 0.0
+                filt.P[0, 0] = filt.P[1, 1] = sigma ** 2
+                res = UpdateResult(True, res.innovation, math.nan, float(np.hypot(*d)), res.sigma_before_m)
+            else:
+                filt.P[:2, :2] += np.outer(d, d)
+                res = self._update_position(t_ns, east, north, sigma, False)
             self.n_relocked += 1
         if not res.accepted:
             self.n_gated += 1

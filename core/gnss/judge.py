@@ -19,7 +19,9 @@ Evidence over the last ``window_s`` of screened fixes
       offset and where the walk sits are not known yet, nor the walker's
       stride: ``step_scale_limits``), have an RMS residual of at most
       ``shape_residual_floor_m`` or ``shape_residual_per_hacc`` times their
-      median reported accuracy, whichever is larger.  The fixes agree
+      median reported accuracy, whichever is larger; and their displacement
+      over the window (the means of its first and last three fixes) is the
+      steps' within the same scale, give or take twice its noise;  The fixes agree
       among themselves and with the walker's motion: a stream that moves
       while the walker turns in a 10-m room, or stands while the walker
       walks on, is not a position;
@@ -184,7 +186,7 @@ class GpsJudge:
         self._fixes: deque = deque()  # (t_ns, east, north, hacc, signal_ok or None, pdr_e, pdr_n)
         self._nis: deque = deque(maxlen=self.settings.nis_window)
         self._passing_since_ns: int | None = None
-        #: the last time the fixes disagreed with the steps (a jump, multipath): None if never
+        #: the last time the fixes' shape disagreed with the steps (a jump, multipath): None if never
         self.last_inconsistent_ns: int | None = None
         self.last: Judgement | None = None
         self.first_usable_ns: int | None = None
@@ -250,12 +252,13 @@ class GpsJudge:
         if fail == fail and fail > s.max_signal_fail_share:
             causes.append(Cause.SIGNAL)
         limit = max(s.shape_residual_floor_m, s.shape_residual_per_hacc * med) if med == med else math.nan
-        if not resid <= limit and n >= s.min_fixes:
+        moved_off = self._displacement_off_m(med) if n >= s.min_fixes else math.nan
+        if n >= s.min_fixes and (not resid <= limit or moved_off > 0.0):
             causes.append(Cause.INCONSISTENT)
         if nis_mean == nis_mean and nis_mean > self.nis_limit:
             causes.append(Cause.NIS)
             self._nis.clear()  # judged once: the next window starts afresh
-        if Cause.INCONSISTENT in causes:
+        if n >= s.min_fixes and not resid <= limit:  # a jump or an offset episode in the stream itself
             self.last_inconsistent_ns = t_ns
         kw = dict(n_fixes=n, median_hacc_m=med, shape_residual_m=resid, signal_fail_share=fail,
                   nis_mean=nis_mean, nis_limit=self.nis_limit)
@@ -271,6 +274,21 @@ class GpsJudge:
         unknown = self.verdict is GpsVerdict.UNKNOWN and set(causes) <= {Cause.FEW_FIXES, Cause.SETTLING}
         return Judgement(t_ns, GpsVerdict.UNKNOWN if unknown else GpsVerdict.UNUSABLE, tuple(causes), **kw)
 
+    def _displacement_off_m(self, hacc_m: float) -> float:
+        """How far (m) the fixes' displacement over the window lies outside what the steps' allows: the mean of
+        the first and of the last three fixes, against the dead-reckoned displacement times ``step_scale_limits``,
+        with twice the SD of the difference of two such means as tolerance (<= 0: they agree)."""
+        fx = list(self._fixes)
+        k = min(3, len(fx) // 2)
+        if k < 1:
+            return math.nan
+        a, b = np.array(fx[:k]), np.array(fx[-k:])
+        d_fix = math.hypot(*(b[:, 1:3].mean(axis=0) - a[:, 1:3].mean(axis=0)))
+        d_pdr = math.hypot(*(b[:, 5:7].mean(axis=0) - a[:, 5:7].mean(axis=0)))
+        lo, hi = self.settings.step_scale_limits
+        tol = 2.0 * math.sqrt(2.0 / k) * hacc_m / 1.515  # hacc is a 68 % radius: 1.515 per-axis SDs
+        return max(lo * d_pdr - d_fix, d_fix - hi * d_pdr) - tol
+
     def summary(self) -> dict:
         """What the judge said over the walk (data): fixes judged, share usable, fixes per cause, the verdict now."""
         c = self._counts
@@ -279,3 +297,21 @@ class GpsJudge:
                 "causes": {k.value: v for k, v in sorted(c.causes.items(), key=lambda kv: -kv[1])},
                 "first_usable_ns": self.first_usable_ns,
                 "last": self.last.as_dict() if self.last is not None else None}
+
+
+def verdict_text(summary: dict | None, filter_name: str = "") -> str:
+    """One line for a summary, a legend or an export's properties, from :meth:`GpsJudge.summary`: whether GPS was
+    used and, where it was not, why (the causes by how many fixes they kept out)."""
+    if not summary:
+        return f"fused with GPS ({filter_name})" if filter_name else "fused with GPS"
+    causes = [c for c in summary.get("causes", {}) if c not in (Cause.SETTLING.value, Cause.FEW_FIXES.value)] or \
+        list(summary.get("causes", {}))
+    why = ", ".join(causes[:3])
+    if not summary.get("fixes_usable"):
+        return "dead reckoning: GPS judged unusable" + (f" ({why})" if why else "")
+    share = summary.get("usable_share", math.nan)
+    head = f"fused with GPS ({filter_name})" if filter_name else "fused with GPS"
+    if share == share and share < 0.995:
+        return f"{head}; GPS judged unusable for {100.0 * (1.0 - share):.0f} % of the fixes" + \
+            (f" ({why}): dead reckoning there" if why else "")
+    return head

@@ -1,0 +1,124 @@
+"""The GPS usability judge (issue #26): indoor-like streams are kept out, a consistent stream is trusted and
+re-locked to; the fused track is the dead-reckoned one while GPS is not trusted."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from core.geodesy import enu_to_geodetic
+from core.gnss.judge import Cause, GpsJudge, GpsVerdict, chi2_mean_limit, shape_residual_m, verdict_text
+
+ORIGIN = (47.37, 8.54)
+
+
+def _walk(heading, seconds=240.0, dt=0.5, length=0.7):
+    """Pipeline-like steps (with their dead-reckoned positions) of a walker whose heading is ``heading(t)``."""
+    from core.pdr.pipeline import Step
+    from core.pdr.stride import StepFeatures
+
+    steps, e, n = [], 0.0, 0.0
+    for i, t in enumerate(np.arange(dt, seconds, dt)):
+        h = heading(t)
+        e, n = e + length * math.cos(h), n + length * math.sin(h)
+        t_ns = int(round(t * 1e9))
+        f = StepFeatures(t_ns=t_ns, duration_s=dt, acc_max_m_s2=11.0, acc_min_m_s2=8.5, acc_var_m2_s4=1.0,
+                         window_mean_m_s2=0.0, window_freq_hz=2.0, window_std_m_s2=0.0)
+        steps.append(Step(i, t_ns, length, h, e, n, f, True))
+    return steps
+
+
+def _gps(steps, fix_en, hacc):
+    """A gps stream of fixes at 1 Hz at ``fix_en(t, e_true, n_true)``."""
+    from core.recording import Stream
+
+    st = np.array([s.t_ns for s in steps])
+    e = np.array([s.east_m for s in steps])
+    n = np.array([s.north_m for s in steps])
+    rows, ts = [], []
+    for t in np.arange(1.0, st[-1] * 1e-9, 1.0):
+        te, tn = np.interp(t * 1e9, st, e), np.interp(t * 1e9, st, n)
+        fe, fn = fix_en(t, te, tn)
+        lat, lon = enu_to_geodetic(fe, fn, ORIGIN)
+        rows.append((float(lat), float(lon), 400.0, hacc, 1.4, math.nan))
+        ts.append(int(t * 1e9))
+    return Stream("gps", np.array(ts, dtype=np.int64), np.array(rows),
+                  ("lat_deg", "lon_deg", "alt_m", "hacc_m", "speed_m_s", "course_deg"),
+                  ("deg", "deg", "m", "m", "m/s", "deg"), "")
+
+
+def _room(t):  # a walker turning around a 10-m room: a 5-m side every 7 steps
+    return (int(t / 3.5) % 4) * math.pi / 2
+
+
+def test_a_stream_that_wanders_while_the_walker_turns_in_a_room_is_kept_out_and_the_track_is_dead_reckoning():
+    from core.gnss import make_fusion
+
+    steps = _walk(_room)
+    rng = np.random.default_rng(4)
+    # fixes moving on at walking pace along a corridor outside while the walker turns in the room, reporting 5 m
+    gps = _gps(steps, lambda t, e, n: (1.2 * (t % 60.0) + rng.normal(0, 1.0), 8.0 + rng.normal(0, 1.0)), 5.0)
+    for name in ("chen", "kubrak"):
+        fr = make_fusion(name, start=(*ORIGIN, 1.0)).run(steps, gps)
+        assert sum(f.accepted for f in fr.fixes) == 0
+        j = fr.counters["gps_judge"]
+        assert j["verdict"] == "unusable" and Cause.INCONSISTENT.value in j["causes"]
+        d = [math.hypot(a.east_m - b.east_m, a.north_m - b.north_m) for a, b in zip(fr.steps, steps)]
+        assert max(d) < 1e-6  # the fused track is the dead-reckoned one
+        assert verdict_text(j, name).startswith("dead reckoning: GPS judged unusable (fixes inconsistent")
+
+
+def test_coarse_fixes_are_kept_out_for_their_accuracy():
+    from core.gnss import make_fusion
+
+    steps = _walk(lambda t: 0.3)
+    gps = _gps(steps, lambda t, e, n: (e + 12.0, n - 9.0), 14.0)  # indoors: biased, reporting 14 m
+    fr = make_fusion("kubrak", start=(*ORIGIN, 1.0)).run(steps, gps)
+    assert sum(f.accepted for f in fr.fixes) == 0
+    assert Cause.ACCURACY.value in fr.counters["gps_judge"]["causes"]
+
+
+def test_a_consistent_stream_is_trusted_after_its_settling_time_and_rotated_steps_do_not_matter():
+    j = GpsJudge()
+    rng = np.random.default_rng(2)
+    rot = math.radians(40.0)  # the phone's heading offset: the dead-reckoned track is turned against the fixes
+    verdicts = []
+    for k in range(60):
+        e, n = 1.3 * k, 0.2 * k * math.sin(k / 9.0)
+        pe, pn = math.cos(rot) * e - math.sin(rot) * n, math.sin(rot) * e + math.cos(rot) * n
+        lat, lon = enu_to_geodetic(e + rng.normal(0, 1.5), n + rng.normal(0, 1.5), ORIGIN)
+        verdicts.append(j.add_fix(int(k * 1e9), float(lat), float(lon), 4.0, (pe, pn)).verdict)
+    assert verdicts[0] is GpsVerdict.UNKNOWN
+    first = verdicts.index(GpsVerdict.USABLE)
+    assert 15 <= first <= 20  # 8 fixes, then 10 s passing
+    assert all(v is GpsVerdict.USABLE for v in verdicts[first:])
+
+
+def test_a_consistent_stream_the_track_drifted_from_is_taken_back_and_the_fusion_says_so():
+    """Never lose a consistent stream (issue #26): the steps' heading drifts away from good fixes; once they
+    agree with the walker's motion for relock_s, the filter re-locks to them whatever its covariance says."""
+    from core.gnss import make_fusion
+
+    true_steps = _walk(lambda t: 0.5)
+    drift = _walk(lambda t: 0.5 + math.radians(0.25) * t)  # the PDR heading drifts 1 degree per 4 s
+    rng = np.random.default_rng(5)
+    gps = _gps(true_steps, lambda t, e, n: (e + rng.normal(0, 1.0), n + rng.normal(0, 1.0)), 3.0)
+    for name in ("chen", "kubrak"):
+        fr = make_fusion(name).run(drift, gps)
+        last = fr.steps[-1]
+        truth = true_steps[-1]
+        assert math.hypot(last.east_m - truth.east_m, last.north_m - truth.north_m) < 10.0, name
+        late = [f.accepted for f in fr.fixes if f.t_ns > 120e9]
+        assert np.mean(late) > 0.7, name
+
+
+def test_the_nis_band_and_the_shape_residual():
+    # chi-square 0.999 point for 40 dof is 73.40: the mean of 20 2-dof NIS
+    assert chi2_mean_limit(2, 20, 0.999) == pytest.approx(73.40 / 20, rel=0.01)
+    a = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+    r = np.array([[0.0, -1.0], [1.0, 0.0]])
+    assert shape_residual_m(a, (a @ r.T) * 0.8 + 5.0, (0.7, 1.4)) == pytest.approx(0.0, abs=1e-9)
+    assert shape_residual_m(a, a[:, ::-1] * [1, -1] * 1.0, (1.0, 1.0)) < 1e-9  # a rotation, not a reflection
+    assert shape_residual_m(a, a * [1.0, -1.0], (1.0, 1.0)) > 3.0  # the mirror image is not the same walk
