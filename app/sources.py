@@ -71,6 +71,15 @@ ANDROID_SENSOR_TYPES = {ACC: 1, MAG: 2, GYRO: 4, PRESSURE: 6, ROTVEC: 11}
 #: sensors many phones lack: listened to when present, no warning when absent
 OPTIONAL_STREAMS = (PRESSURE,)
 
+#: the Java listener added to the APK (``android.add_src``: app/java/org/pdrproject/sensors/EventBuffer.java)
+BUFFER_CLASS = "org.pdrproject.sensors.EventBuffer"
+#: values the Java buffer keeps per event, per stream (rotvec: x, y, z and w when the phone gives it)
+BUFFER_WIDTH = {ACC: 3, GYRO: 3, MAG: 3, PRESSURE: 1, ROTVEC: 4}
+#: events one Java buffer holds: 5 s at the 200 Hz cap, polled every POLL_INTERVAL_S
+BUFFER_CAPACITY = 1024
+#: how often the Java buffers are taken (s): five times a second
+POLL_INTERVAL_S = 0.2
+
 #: ``android.hardware.SensorManager.SENSOR_STATUS_*`` names for the health panel.
 ACCURACY_NAMES = {-1: "no contact", 0: "unreliable", 1: "low", 2: "medium", 3: "high"}
 
@@ -110,6 +119,14 @@ class EventQueue:
                 self.dropped[old[0]] += 1
             self._q.append(event)
             self.pushed += 1
+
+    def push_many(self, events: list) -> None:
+        """:meth:`push` of each event, under one lock (a poll of the Java buffers)."""
+        with self._lock:
+            self._q.extend(events)
+            self.pushed += len(events)
+            for _ in range(len(self._q) - self.maxlen):
+                self.dropped[self._q.popleft()[0]] += 1
 
     def drain(self, max_n: int | None = None) -> list:
         """Remove and return up to ``max_n`` events (all if ``None``), oldest first."""
@@ -477,8 +494,17 @@ class AndroidSource(SensorSource):
     live = True
 
     def __init__(self, *, rate_hz: float = 100.0, streams=(ACC, GYRO, MAG, PRESSURE), gps: bool = True,
-                 jnius=None, queue_max: int = 30000, context=None):
+                 jnius=None, queue_max: int = 30000, context=None, java_buffer: bool = True,
+                 poll_interval_s: float = POLL_INTERVAL_S, clock: Callable[[], float] = time.monotonic):
         super().__init__()
+        self.java_buffer = java_buffer
+        self.poll_interval_s = float(poll_interval_s)
+        self._clock = clock
+        self._buffers: list = []  # (stream, EventBuffer) while the Java listener is used
+        self._buffer_drops: dict = {}
+        self._last_poll = -math.inf
+        #: "java buffer" (EventBuffer in the APK) or "python listener" (a PythonJavaClass per sensor)
+        self.listener_kind = ""
         self._context = context
         self.rate_hz = float(rate_hz)
         self.period_us = sampling_period_us(rate_hz)
@@ -561,26 +587,35 @@ class AndroidSource(SensorSource):
         self._thread.start()
         handler = Handler(self._thread.getLooper())
         SensorListener = _java_classes(jn)[0]
+        Buffer = self._buffer_class(jn)
+        self.listener_kind = "java buffer" if Buffer is not None else "python listener"
+        self._buffers = []
         self.missing = []
         for name in self.streams:
             sensor = self._sm.getDefaultSensor(ANDROID_SENSOR_TYPES[name])
             if sensor is None:
                 self.missing.append(name)
                 continue
-            listener = SensorListener(name, self._on_event, self._on_accuracy)
+            if Buffer is not None:
+                listener = Buffer(BUFFER_CAPACITY, BUFFER_WIDTH[name])
+            else:
+                listener = SensorListener(name, self._on_event, self._on_accuracy)
             # (listener, sensor, samplingPeriodUs, maxReportLatencyUs=0: no batching, handler)
             if not self._sm.registerListener(listener, sensor, self.period_us, 0, handler):
                 self.missing.append(name)
                 continue
             # keep a Python reference while Java holds the proxy, and the sensor for unregisterListener
             self._listeners.append((listener, sensor))
+            if Buffer is not None:
+                self._buffers.append((name, listener))
             self.sensor_info[name] = _sensor_info(sensor)
         if ACC in self.missing or not self._listeners:
             raise SensorStartError("no accelerometer could be registered")
         missing = [n for n in self.missing if n not in OPTIONAL_STREAMS]
         self.warning = ("missing sensor(s): " + ", ".join(missing)) if missing else ""
         self.device = {"platform": "android", "requested_rate_hz": min(self.rate_hz, MAX_RATE_HZ),
-                       "sampling_period_us": self.period_us, "sensors": dict(self.sensor_info)}
+                       "sampling_period_us": self.period_us, "sensors": dict(self.sensor_info),
+                       "listener": self.listener_kind}
         try:
             clock = autoclass("android.os.SystemClock")
             self.unix_offset_ns = int(time.time_ns() - int(clock.elapsedRealtimeNanos()))
@@ -593,6 +628,36 @@ class AndroidSource(SensorSource):
                                android_sdk=int(VERSION.SDK_INT))
         except Exception:  # noqa: BLE001 - cosmetic
             pass
+
+    def _buffer_class(self, jn):
+        """The Java listener class when the APK has it (and it is wanted), else None: the Python listener."""
+        if not self.java_buffer:
+            return None
+        try:
+            return jn.autoclass(BUFFER_CLASS)
+        except Exception:  # noqa: BLE001 - JavaException "Class not found": an APK built without add_src
+            return None
+
+    def poll_buffers(self) -> int:
+        """Take every Java buffer's events into the queue, all sensors merged in timestamp order (as a
+        listener per event would have pushed them); returns how many."""
+        batch = []
+        for name, buf in self._buffers:
+            try:
+                n = buf.take()
+                if n:
+                    batch += _buffer_events(name, buf.takenTimes(), buf.takenValues(), n)
+                self._buffer_drops[name] = int(buf.dropped())
+                acc = int(buf.accuracy())
+                if acc >= -1:
+                    self._accuracy[name] = acc
+            except Exception:  # noqa: BLE001 - a poll lost, not the walk
+                self.callback_errors += 1
+        if batch:
+            batch.sort(key=_event_time)
+            self.queue.push_many(batch)
+        self._last_poll = self._clock()
+        return len(batch)
 
     def start_gps(self) -> bool:
         """Start GNSS updates with our own listener, from the provider the grant allows; True when running."""
@@ -674,6 +739,9 @@ class AndroidSource(SensorSource):
                     self._sm.unregisterListener(listener, sensor)
                 except Exception:  # noqa: BLE001
                     pass
+        if self._buffers:
+            self.poll_buffers()  # what came before the listeners went
+            self._buffers = []
         self._listeners = []
         if self._lm is not None and self._location_listener is not None:
             try:
@@ -699,10 +767,14 @@ class AndroidSource(SensorSource):
     # -- consumer side -----------------------------------------------------------
 
     def drain(self, max_events: int | None = None) -> list:
+        if self._buffers and self._clock() - self._last_poll >= self.poll_interval_s:
+            self.poll_buffers()
         return self.queue.drain(max_events)
 
     def queue_drops(self) -> dict:
-        return dict(self.queue.dropped)
+        drops = Counter(self.queue.dropped)
+        drops.update(self._buffer_drops)
+        return {k: v for k, v in drops.items() if v}
 
     def accuracy(self) -> dict:
         return dict(self._accuracy)
@@ -713,7 +785,25 @@ class AndroidSource(SensorSource):
         return sum(getattr(lst, "errors", 0) for lst, _sensor in self._listeners)
 
     def describe(self) -> str:
-        return f"android sensors at {min(self.rate_hz, MAX_RATE_HZ):g} Hz (requested)"
+        kind = f", {self.listener_kind}" if self.listener_kind else ""
+        return f"android sensors at {min(self.rate_hz, MAX_RATE_HZ):g} Hz (requested{kind})"
+
+
+def _event_time(event) -> int:
+    return event[1]
+
+
+def _buffer_events(name: str, times, values, n: int) -> list:
+    """A Java buffer's ``n`` events (``long[]`` times, ``float[]`` values of :data:`BUFFER_WIDTH` each, as
+    pyjnius gives them: lists) as the pipeline's ``(stream, t_ns, values)``."""
+    if name == ROTVEC:
+        w = BUFFER_WIDTH[ROTVEC]
+        return [(name, times[k], rotvec_quaternion([x for x in values[k * w:(k + 1) * w] if x == x]))
+                for k in range(n)]
+    if BUFFER_WIDTH[name] == 1:
+        return [(name, t, (v,)) for t, v in zip(times, values)]
+    it = iter(values)
+    return [(name, t, (a, b, c)) for t, a, b, c in zip(times, it, it, it)]
 
 
 def _sensor_info(sensor) -> dict:

@@ -31,6 +31,8 @@ a call to a method missing from it fails, so the table is complete for what the 
 
 from __future__ import annotations
 
+import functools
+
 #: ``class: (superclasses and interfaces, {method: [signature, ...]}, {object field: type})``; ``<init>`` are
 #: the constructors; a signature with a leading ``static `` is a static method.
 SDK: dict = {}
@@ -147,6 +149,11 @@ _cls("android/provider/MediaStore$MediaColumns")
 _cls("android/provider/OpenableColumns")
 _cls("android/os/Environment")
 _cls("android/app/Activity$Result")
+
+# the app's own Java listener (app/java/org/pdrproject/sensors/EventBuffer.java)
+_cls("org/pdrproject/sensors/EventBuffer", ["android/hardware/SensorEventListener"], init=["(II)V"], take=["()I"],
+     takenTimes=["()[J"], takenValues=["()[F"], dropped=["()J"], accuracy=["()I"], width=["()I"])
+_cls("android/hardware/SensorEventListener")
 
 #: methods of the Android SDK the app must not use (deprecated overloads picked by mistake show up here)
 DEPRECATED = {("android/hardware/SensorManager", "unregisterListener", f"({SL})V"),
@@ -283,7 +290,8 @@ def choose(signatures: list, args: tuple, where: str) -> str:
 # -- Java types (for CheckJNI) -----------------------------------------------------------------------------
 
 
-def supertypes(cls: str) -> set:
+@functools.lru_cache(maxsize=None)
+def supertypes(cls: str) -> frozenset:
     out, todo = set(), [cls]
     while todo:
         c = todo.pop()
@@ -291,7 +299,7 @@ def supertypes(cls: str) -> set:
             continue
         out.add(c)
         todo += list(SDK.get(c, ((),))[0])
-    return out | {"java/lang/Object"}
+    return frozenset(out | {"java/lang/Object"})
 
 
 def assignable(r: str, arg) -> bool:
@@ -319,13 +327,14 @@ def assignable(r: str, arg) -> bool:
 # -- wrapped objects ---------------------------------------------------------------------------------------
 
 
-def _members(cls: str, name: str) -> list:
+@functools.lru_cache(maxsize=None)
+def _members(cls: str, name: str) -> tuple:
     sigs = []
     for c in [cls] + sorted(supertypes(cls) - {cls}):
         for sig in SDK.get(c, ((), {}, {}))[1].get(name, []):
             if sig not in sigs:
                 sigs.append(sig)
-    return sigs
+    return tuple(sigs)
 
 
 def _field_type(cls: str, name: str):

@@ -428,7 +428,12 @@ def make_fake_jnius(sm, lm=None, *, sdk=34, bars=(0, 63, 0, 126), cutout=(0, 80,
     jn.JavaException = pj.JavaException
     jn.cast = pj.cast
     jn.classes = classes
-    jn.autoclass = lambda name: pj.JavaClassProxy(bridge, name, classes[name])
+    def autoclass(name):
+        if name not in classes:  # as pyjnius says it (e.g. the Java listener of an APK built without add_src)
+            raise pj.JavaException(f"Class not found {name.replace('.', '/')!r}")
+        return pj.JavaClassProxy(bridge, name, classes[name])
+
+    jn.autoclass = autoclass
     return jn
 
 

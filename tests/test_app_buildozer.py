@@ -245,3 +245,17 @@ def test_the_tracking_service_is_declared_as_the_app_starts_it(spec):
     assert droid.POST_NOTIFICATIONS in droid.permissions_to_request(33)
     assert droid.POST_NOTIFICATIONS not in droid.permissions_to_request(32)
     assert "android.permission.ACCESS_BACKGROUND_LOCATION" not in perms  # the service is started in the foreground
+
+
+def test_the_java_listener_is_compiled_into_the_apk(spec):
+    """``android.add_src`` names a Java source root (p4a adds it as a gradle ``srcDir``) holding the class
+    app.sources autoclasses, in the folder of its package; .java files are not packaged as app files."""
+    from app.sources import BUFFER_CLASS
+
+    roots = spec.getlist("app", "android.add_src")
+    assert len(roots) == 1
+    java = ROOT / roots[0] / (BUFFER_CLASS.replace(".", "/") + ".java")
+    assert java.is_file()
+    text = java.read_text()
+    assert f"package {BUFFER_CLASS.rsplit('.', 1)[0]};" in text and "implements SensorEventListener" in text
+    assert "java" not in spec.getlist("app", "source.include_exts")
