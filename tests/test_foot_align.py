@@ -7,6 +7,7 @@ import numpy as np
 from core.foot.navigator import FootNavigator, FootSettings
 from core.foot.stance import StanceSettings
 from desktop.foot_simulator import footprints, simulate_foot
+from tests._foot_helpers import run_streaming
 
 
 def _running_start(seed=0):
@@ -36,10 +37,7 @@ def test_streaming_aligns_the_same_way():
     w = _running_start(1)
     fs = FootSettings(stance=StanceSettings(detector="shoe", threshold=1e5, window_s=0.05))
     batch = FootNavigator(fs).run(w.recording)
-    nav = FootNavigator(fs)
-    for name, t, v in w.recording.events(["gyro", "acc", "mag"]):
-        nav.update(name, t, v)
-    stream = nav.finish()
+    stream = run_streaming(fs, w.recording)
     ok = np.isfinite(batch.position_n[:, 0])
     assert ok.any() and np.array_equal(ok, np.isfinite(stream.position_n[:, 0]))
     assert np.allclose(stream.position_n[ok], batch.position_n[ok], atol=1e-9)

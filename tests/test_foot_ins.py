@@ -10,6 +10,7 @@ from core.foot.ins import N_STATES, ZuptEKF
 from core.foot.navigator import FootNavigator, FootSettings
 from core.foot.stance import StanceSettings
 from desktop.foot_simulator import footprints, simulate_foot
+from tests._foot_helpers import run_streaming
 
 
 def _error(a: ZuptEKF, b: ZuptEKF) -> np.ndarray:
@@ -139,10 +140,7 @@ def test_soft_zupt_noise_scale_and_streaming_equals_batch():
     w = _walk(seed=5)
     fs = FootSettings(stance=StanceSettings(threshold=1e5, window_s=0.05), soft_zupt_gain=3.0)
     batch = FootNavigator(fs).run(w.recording)
-    nav = FootNavigator(fs)
-    for name, t, v in w.recording.events(["gyro", "acc", "mag"]):
-        nav.update(name, t, v)
-    stream = nav.finish()
+    stream = run_streaming(fs, w.recording)
     ok = np.isfinite(batch.position_n[:, 0])
     assert np.allclose(stream.position_n[ok], batch.position_n[ok], atol=1e-9)
     hard = FootNavigator(FootSettings(stance=StanceSettings(threshold=1e5, window_s=0.05))).run(w.recording)

@@ -8,6 +8,7 @@ import pytest
 from core.foot.navigator import FootNavigator, FootSettings
 from core.foot.stance import DETECTORS, StanceDetector, StanceSettings, infer_foot_axes
 from desktop.foot_simulator import footprints, simulate_foot
+from tests._foot_helpers import run_streaming
 
 THRESHOLDS = {"shoe": 1e5, "song": 1.0, "amv": 0.1, "are": 0.1}
 
@@ -84,10 +85,7 @@ def test_navigator_streaming_equals_batch():
     w = _walk()
     fs = FootSettings(stance=StanceSettings(threshold=1e5, window_s=0.05))
     batch = FootNavigator(fs).run(w.recording)
-    nav = FootNavigator(fs)
-    for name, t, v in w.recording.events(["gyro", "acc", "mag"]):
-        nav.update(name, t, v)
-    stream = nav.finish()
+    stream = run_streaming(fs, w.recording)
     assert np.array_equal(stream.t_ns, batch.t_ns)
     ok = np.isfinite(batch.position_n[:, 0])
     assert np.array_equal(ok, np.isfinite(stream.position_n[:, 0]))
