@@ -1509,8 +1509,10 @@ def make_parser() -> argparse.ArgumentParser:
                         "relative to magnetic north)")
     r.add_argument("--no-mag", action="store_true", help="ignore the magnetometer (heading relative to the start)")
     r.add_argument("--gps", choices=GPS_MODES, default="auto",
-                   help="GPS fusion: auto (fuse when the recording has fixes, with the filter the benchmark shows "
-                        "better; the summary says which), off, chen (Chen et al. 2010: calibration while GPS is "
+                   help="GPS fusion: auto (fuse when the recording has fixes, with Kubrak's filter, better than "
+                        "Chen's on the tuning split's indoor loops and noisy-GPS walks; the summary says which and "
+                        "why; fixes the GPS judge finds unusable are not used and the track is then dead "
+                        "reckoning), off, chen (Chen et al. 2010: calibration while GPS is "
                         "good, the step-wise PDR Kalman filter), kubrak (Kubrak et al. 2006: the velocity-model "
                         "Kalman filter with bad-GPS detection)")
     r.add_argument("--gps-outage", type=_parse_outage, action="append", metavar="START_S:LENGTH_S",
