@@ -84,6 +84,9 @@ WALL_COLOR = (0.55, 0.58, 0.66, 1)  #: the floor plan's walls
 MAP_COLOR = (0.3, 0.95, 0.55, 1)  #: the map-matched track (the particle filter's estimate)
 WALL_CHUNK = 16000  #: wall segments per Mesh (2 vertices each: below Kivy's 65 535 indices)
 TAP_SLOP_DP = 12.0  #: a touch that lifts this close to where it went down is a tap (Here)
+#: a zoom redraws the track with the points closer than this many pixels to the last one kept dropped (each
+#: chunk keeps its first and last point): a whole walk fitted into the view tessellates a few points a chunk
+DECIMATE_PX = 1.0
 LINE_CHUNK = 100  #: track points per Line instruction (a new step rebuilds one; thick round-joined lines
 #: tessellate at about 50 us a point on a desktop, so 100 points keep a step near 5 ms)
 
@@ -108,10 +111,11 @@ class ChunkedLine:
     def clear(self) -> None:
         self.update([], [], 0, 0, 1.0)
 
-    def update(self, east, north, start: int, end: int, width: float) -> None:
+    def update(self, east, north, start: int, end: int, width: float, tol_m: float = 0.0) -> None:
+        """``tol_m``: drop the points closer than this to the last one kept (0: keep all); see :func:`decimate`."""
         if width == 1.0:  # Kivy draws width 1.0 as a 1-pixel GL line, which no Scale widens
             width = 1.0 + 1e-9
-        key = (id(east), id(north), start, width)
+        key = (id(east), id(north), start, width, tol_m)
         first_chunk = 0
         if key == self._key and end == self.end:  # nothing new (the lists only ever grow)
             self.rebuilt_chunks = 0
@@ -131,15 +135,21 @@ class ChunkedLine:
             if c < n_chunks:
                 a = start + c * self.chunk
                 b = min(a + self.chunk + 1, end)  # one point shared with the next chunk
-                pts = [0.0] * (2 * (b - a))
-                pts[0::2] = east[a:b]
-                pts[1::2] = north[a:b]
+                xs, ys = decimate(east[a:b], north[a:b], tol_m)
+                pts = [0.0] * (2 * len(xs))
+                pts[0::2] = xs
+                pts[1::2] = ys
                 line.width = width
                 line.points = pts
                 self.rebuilt_chunks += 1
             elif line.points:
                 line.points = []
         self.end = end
+
+    @property
+    def n_points(self) -> int:
+        """Points handed to the tessellator (shared chunk ends counted in each chunk)."""
+        return sum(len(ln.points) // 2 for ln in self.lines)
 
     def points_m(self) -> list:
         """The drawn points (metres), ``[e0, n0, e1, n1, ...]``, each once."""
@@ -151,6 +161,24 @@ class ChunkedLine:
     @property
     def width(self) -> float:
         return self._key[3] if self._key else 0.0
+
+
+def decimate(xs: list, ys: list, tol: float) -> tuple[list, list]:
+    """The points of a polyline with those closer than ``tol`` to the last kept one dropped; the first and
+    the last are always kept (chunks stay joined).  ``tol <= 0``: all of them."""
+    if tol <= 0 or len(xs) <= 2:
+        return xs, ys
+    t2 = tol * tol
+    ox, oy = [xs[0]], [ys[0]]
+    lx, ly = xs[0], ys[0]
+    for x, y in zip(xs[1:-1], ys[1:-1]):
+        if (x - lx) * (x - lx) + (y - ly) * (y - ly) >= t2:
+            ox.append(x)
+            oy.append(y)
+            lx, ly = x, y
+    ox.append(xs[-1])
+    oy.append(ys[-1])
+    return ox, oy
 
 
 def _hex(rgba, alpha: float | None = None) -> str:
@@ -441,7 +469,7 @@ class TrackView(Widget):
             under = fused or self.shows_map
             self._line_color.a = RAW_UNDER_FUSED_ALPHA if under else 1.0
             self._line.update(self.east, self.north, 0, len(self.east),
-                              (dp(1) if under else self.line_width) / vp.scale)
+                              (dp(1) if under else self.line_width) / vp.scale, DECIMATE_PX / vp.scale)
             self._draw_fused(fused)
             m = self.map
             if m is not None and m.placed:

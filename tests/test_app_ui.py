@@ -777,3 +777,50 @@ def test_track_view_appends_to_the_last_chunk_and_follows_by_the_transform():
         n = min(n + int(rng.integers(1, 9)), len(source))
         tv2._scan_dr(source, n)
     assert tv2._fused_dr_runs == runs([s == "dr" for s in source])
+
+
+def test_a_zoomed_out_track_tessellates_fewer_points_and_all_again_zoomed_in():
+    """Issue #28 item 5: a pinch rebuilds every chunk; with the points closer than a pixel to the last kept
+    one dropped, a walk of an hour fitted into the view hands the tessellator a small fraction of its points,
+    every chunk still starts and ends on the track, and zoomed in again every point is drawn."""
+    from kivy.base import EventLoop
+    from kivy.core.window import Window
+
+    from app import track_view as T
+
+    xs = [0.0, 0.3, 0.6, 2.0, 2.1, 5.0]
+    assert T.decimate(xs, [0.0] * 6, 1.0) == ([0.0, 2.0, 5.0], [0.0] * 3)
+    assert T.decimate(xs, [0.0] * 6, 0.0) == (xs, [0.0] * 6)
+    EventLoop.ensure_window()
+    tv = T.TrackView(size=(400, 600), pos=(0, 0), size_hint=(None, None))
+    Window.add_widget(tv)
+    try:
+        rng = np.random.default_rng(8)
+        heading = np.cumsum(rng.normal(0, 0.1, 7000))  # about an hour of steps
+        east = [0.0] + np.cumsum(0.7 * np.cos(heading)).tolist()
+        north = [0.0] + np.cumsum(0.7 * np.sin(heading)).tolist()
+        tv.set_track(east, north)
+        tv._redraw()
+        full = tv._line.n_points
+        assert full >= len(east)  # 14 px a step at the start: nothing dropped
+        tv.fit()
+        tv._redraw()
+        scale = tv.vp.scale
+        assert scale * 0.7 < 1.0  # fitted: a step is under a pixel
+        fitted = tv._line.n_points
+        assert fitted < 0.2 * full, (fitted, full)
+        tol = T.DECIMATE_PX / scale
+        pts = np.array(tv._line.points_m()).reshape(-1, 2)
+        track = np.c_[east, north]
+        for line in tv._line.lines:  # each chunk's ends are track points
+            p = np.array(line.points).reshape(-1, 2)
+            assert np.min(np.hypot(*(track - p[0]).T)) == 0.0 and np.min(np.hypot(*(track - p[-1]).T)) == 0.0
+        # every track point (every 97th checked) is within a pixel of a drawn one
+        d = np.array([np.min(np.hypot(*(pts - q).T)) for q in track[::97]])
+        assert d.max() <= tol + 1e-9
+        tv.vp.zoom_at(1.0 / (scale / 20.0), 200, 300)  # back to 20 px/m
+        tv._view_changed()
+        tv._redraw()
+        assert tv._line.n_points == full
+    finally:
+        Window.remove_widget(tv)
