@@ -129,12 +129,12 @@ class CarryModeDetector:
         A gentle walk (issue #25: a slow walk with the phone held still, 0.5-1 m/s^2 of user acceleration)
         moves the norm by less than ``min_walk_std_m_s2`` but is as periodic as any walk: a norm whose
         standard deviation is above ``gentle_min_std_m_s2`` (m/s^2; a phone on a table reads ~0.02, one
-        held while standing under 0.1 by tremor) and whose autocorrelation at the gait's lag is above
-        ``gentle_min_periodicity`` is walking too: periodicity decides, not amplitude.
+        held while standing under 0.1 by tremor) and whose autocorrelation at both the step and the stride lag
+        (both legs) is above ``gentle_min_periodicity`` is walking too: periodicity decides, not amplitude.
     gentle_max_std_m_s2 : float
-        While the norm is periodic (a step period known) with a standard deviation under this (m/s^2),
-        :attr:`gentle` is True (off again from ``min_walk_std_m_s2`` or when the periodicity goes: a band,
-        so that it does not flap): the pipeline then counts a trunk mode's steps with the gentle gait's
+        While the norm is periodic at both legs' lags (``gentle_min_periodicity``) with a standard deviation
+        under this (m/s^2), :attr:`gentle` is True (off again from ``min_walk_std_m_s2`` or when either lag's
+        autocorrelation falls under ``min_periodicity``: a band, so that it does not flap): the pipeline then counts a trunk mode's steps with the gentle gait's
         step detector (:data:`core.pdr.steps.GENTLE_GATES`).
     step_antiphase : float
         A slow walk on the trunk repeats its norm every step, and a step of 0.8-1.25 s lies inside the
@@ -409,7 +409,7 @@ class CarryModeDetector:
                          _sig(f["gyro_rms_rad_s"], self.max_gait_rotation_rad_s, 0.3) * (1.0 - one_axis))
         std = f["acc_std_m_s2"]
         amplitude = max(_sig(std, self.min_walk_std_m_s2, 0.1),  # a walk, or a gentle one that is clearly periodic
-                        _sig(f["periodicity"], self.gentle_min_periodicity, 0.05)
+                        _sig(min(f["r_step"], f["r_stride"]), self.gentle_min_periodicity, 0.05)
                         * _sig(std, self.gentle_min_std_m_s2, 0.02))
         walk = _sig(f["periodicity"], self.min_periodicity, 0.05) * amplitude * (1.0 - waving)
         # a limb: the tilt swings and the norm repeats every stride rather than every step
@@ -467,13 +467,14 @@ class CarryModeDetector:
         std = f["acc_std_m_s2"]
         periodic = f["periodicity"] >= self.min_periodicity and (
             std >= 0.5 * self.min_walk_std_m_s2
-            or (f["periodicity"] >= self.gentle_min_periodicity and std >= self.gentle_min_std_m_s2))
+            or (min(f["r_step"], f["r_stride"]) >= self.gentle_min_periodicity and std >= self.gentle_min_std_m_s2))
         self.step_period_s = 0.5 * f["stride_period_s"] if periodic else math.nan
         self.rotation_periodic = bool(walking and f.get("gyro_axis_share", 0.0) >= self.swing_axis_share
                                       and f.get("gyro_periodicity", 0.0) >= 0.5)
-        if not periodic or std >= self.min_walk_std_m_s2:
+        both = min(f["r_step"], f["r_stride"])  # both legs
+        if not periodic or both < self.min_periodicity or std >= self.min_walk_std_m_s2:
             self.gentle = False
-        elif std < self.gentle_max_std_m_s2:
+        elif both >= self.gentle_min_periodicity and self.gentle_min_std_m_s2 <= std < self.gentle_max_std_m_s2:
             self.gentle = True
         if not self._decided:
             self._decided = True

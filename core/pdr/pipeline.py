@@ -660,8 +660,10 @@ class Pipeline:
 
     def _gentle_applies(self, mode: str) -> bool:
         """A gentle walk (the carry detector's ``gentle``) is counted with the ``GENTLE`` gates in the modes that
-        count with the hand-held gates (the trunk's); a limb's gates stay."""
-        return GENTLE in self.step_gates and self.step_gates.get(mode) == self.step_gates[CARRY_HANDHELD]
+        count with the hand-held gates (the trunk's) while walking; a limb's gates stay, and "not walking" keeps the
+        hand-held gates (standing, turning on the spot: weak peaks there are no steps)."""
+        return (GENTLE in self.step_gates and mode != CARRY_STILL
+                and self.step_gates.get(mode) == self.step_gates[CARRY_HANDHELD])
 
     def _switch_detector(self, det: StepDetector, t_grid_ns: int) -> None:
         """The mode in force has another step detector: its held peaks replace the unconfirmed candidates."""
