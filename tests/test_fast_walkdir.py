@@ -29,9 +29,17 @@ TOL = 1e-9  # on every float (rad, m/s^2 and the accumulators); in practice they
 FIELDS = ("c2", "s2", "w", "w2", "gx", "gy")
 
 
+def _phase_wd(**kw) -> WalkingDirection:
+    """The stage with the sign rule the compiled kernel implements (``sign_method="phase"``; the default
+    ``"auto"`` is fed through ``update``, :func:`test_skew_sign_runs_core_update_and_equals_pipeline_run`)."""
+    return WalkingDirection(**{"grid_rate_hz": 50.0, "delay_s": Pipeline().heading_delay_s, "sign_method": "phase",
+                               **kw})
+
+
 def _record(rec, **params):
     """``Pipeline(**params).run(rec)`` with its walking-direction stage's inputs and the estimate after each
-    update recorded: ``(pipeline, inputs, after, result)``."""
+    update recorded: ``(pipeline, inputs, after, result)``; the stage is :func:`_phase_wd` unless given."""
+    params.setdefault("walkdir", _phase_wd())
     inputs, after = [], []
     orig = WalkingDirection.update
 
@@ -127,7 +135,7 @@ def _settings(wd: WalkingDirection) -> dict:
              "min_horizontal_std_m_s2", "min_anisotropy", "max_stride_turn_rad", "min_forward_norm",
              "memory_strides", "confident_strides", "confident_sigma_rad", "confident_sign", "auto_min_strides",
              "auto_far_min_strides", "auto_min_offset_rad", "max_strides_kept", "axis_method", "pca_min_anisotropy",
-             "min_coherence", "reset_after_gap_s")
+             "min_coherence", "reset_after_gap_s", "sign_method")
     return {k: getattr(wd, k) for k in names}
 
 
@@ -155,7 +163,7 @@ SETTINGS = (dict(max_strides_kept=8), dict(axis_method="pca", max_strides_kept=0
 @cache
 def _synthetic(i: int) -> WalkingDirection:
     """The synthetic stream with ``SETTINGS[i]``, checked: the reference (once per test session)."""
-    settings = SETTINGS[i]
+    settings = {"sign_method": "phase", **SETTINGS[i]}
     # 60 s at 50 Hz of a walk-like acceleration (steps every 0.54 s) whose forward axis is 70 deg off the device
     # heading, with a device turning slowly and once quickly; non-finite samples, axis switches, strides with a
     # vertical axis, a pause of 15 s (steps standing still for 4 s of it, then the gap's reset); each axis
@@ -244,7 +252,7 @@ def test_wired_into_the_fast_path(monkeypatch):
 
     rec, (pipe, _, _, res) = _short_pocket_walk()
     monkeypatch.setattr(gates.StepRelease, "_walkdir_to", wired_walkdir_to)
-    fast = Pipeline()
+    fast = Pipeline(walkdir=_phase_wd())
     got = run_fast(rec, pipeline=fast)
     assert fast.walkdir.n_steps_offset == pipe.walkdir.n_steps_offset > 0
     assert _close(_state(pipe.walkdir), _state(fast.walkdir))

@@ -958,6 +958,12 @@ def csv_fixes(walk: str) -> dict:
     folder, _fmt, (tc, la, lo, sp, co), _mag, _acc = WALKS[walk]
     c = read_csv_columns(folder, "Location.csv")
     keep = c[tc] >= 0  # Sensor Logger: fixes cached before the start have negative seconds_elapsed
+    if _fmt == "phyphox":  # phyphox: the cached last location comes within 0.5 s of each START (issue #25)
+        from core.importers.phyphox import _cached_fixes, _read_events
+
+        tf = Path(folder) / "meta" / "time.csv"
+        ev = _read_events(tf.read_text(encoding="utf-8-sig"), str(tf)) if tf.exists() else []
+        keep = ~_cached_fixes(c[tc], [e for k, e, _ in ev if k == "START"] or [0.0])
     speed, course = c[sp].copy(), c[co].copy()
     speed[~(speed >= 0) | (c.get("speedAccuracy", speed * 0) < 0)] = np.nan
     course[~(course > 0) | (c.get("bearingAccuracy", course * 0) < 0)] = np.nan  # 0.0 = Android's no bearing

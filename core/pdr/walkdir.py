@@ -246,7 +246,7 @@ class WalkingDirection:
                  auto_min_offset_rad: float = math.radians(45.0),
                  max_strides_kept: int = 64, axis_method: str = "auto",
                  pca_min_anisotropy: float = 8.0, min_coherence: float = 0.0, reset_after_gap_s: float = 10.0,
-                 sign_method: str = "phase", velocity_leak_time_s: float = 0.5, skew_scale: float = 1.0):
+                 sign_method: str = "auto", velocity_leak_time_s: float = 0.5, skew_scale: float = 1.0):
         self.grid_rate_hz = float(grid_rate_hz)
         self.delay_s = float(delay_s)
         self.vz_leak_time_s = float(vz_leak_time_s)
