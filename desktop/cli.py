@@ -285,6 +285,9 @@ NO_HEADING = ("none: the recording has neither a gyroscope nor a magnetometer, s
 
 #: below this accelerometer rate (Hz) steps cannot be detected (a step lasts about half a second)
 MIN_STEP_RATE_HZ = 10.0
+#: a nominal 10 Hz export measures a little under 10 Hz from its timestamps (9.99 Hz on a phyphox Android walk,
+#: which counts its steps): the rate test allows this fraction below MIN_STEP_RATE_HZ
+STEP_RATE_TOLERANCE = 0.05
 
 
 def acc_rate_hz(rec: Recording) -> float:
@@ -931,7 +934,7 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
         from core.metrics import track_start
 
         plot_kw = {"walls": plan.walls, "start_en": track_start(track), "track_label": "map-matched"}
-    coarse = acc_rate_hz(rec) < MIN_STEP_RATE_HZ
+    coarse = acc_rate_hz(rec) < MIN_STEP_RATE_HZ * (1.0 - STEP_RATE_TOLERANCE)
     errs = truth_errors(track, truth, dr_track=res.track) if truth and not coarse else {}
     summary = {**res.summary(), "mode": "handheld", "mode_reason": why, "engine": engine, **problem_summary(rec)}
     if coarse:  # no steps to count: say so instead of scoring 0 steps as -100 %
