@@ -145,3 +145,16 @@ def test_a_usable_stream_stays_usable_through_a_short_gap(gap_s, usable_at_once)
     if usable_at_once:
         coarse = [fix(29.0 + gap_s + k, hacc=30.0).verdict for k in range(3, 6)]
         assert coarse[-1] is GpsVerdict.UNUSABLE  # the accuracy still counts (median 16.5 m of the six)
+
+
+def test_a_gap_full_of_screened_out_fixes_is_not_resumed_after():
+    """Coarse fixes the screening refused inside the gap (a noisy minute, not a tunnel): judged afresh."""
+    org = (47.0, 8.0)
+    j = GpsJudge()
+    for t in range(30):
+        lat, lon = enu_to_geodetic(1.4 * t, 0.0, org)
+        j.add_fix(int(t * 1e9), float(lat), float(lon), 3.0, (1.4 * t, 0.0))
+    assert j.verdict is GpsVerdict.USABLE
+    j.add_screened_out(int(40e9))
+    lat, lon = enu_to_geodetic(1.4 * 50, 0.0, org)
+    assert j.add_fix(int(50e9), float(lat), float(lon), 3.0, (1.4 * 50, 0.0)).verdict is GpsVerdict.UNUSABLE

@@ -519,6 +519,8 @@ class FixFusion:
                 st = self._status
                 fresh = st is not None and self.min_cn0_4th_dbhz > 0 and abs(t_ns - st[0]) <= self.status_max_age_ns
                 judged = self.judge.add_fix(t_ns, lat, lon, hacc_eff, self._pdr_at(t_ns), (not reason) if fresh else None)
+        elif self.judge is not None and reason != "no position":
+            self.judge.add_screened_out(t_ns)  # too coarse or too fast: the stream is bad, not merely absent
         if reason:
             self.n_screened_out += 1
             self._record(t_ns, v, nan, nan, False, reason)
