@@ -119,13 +119,20 @@ def _read(tmp_path, rec, name="r.csv"):
 
 @pytest.mark.parametrize("factor, unit", [(10**6, "milliseconds"), (10**3, "microseconds")])
 def test_a_gps_stream_in_ms_or_us_is_repaired_with_a_warning(tmp_path, walk, factor, unit):
-    """Before: read as nanoseconds, the summary said 1050 s and a GPS rate of 1 MHz, 34 of 49 fixes gated."""
+    """Before: read as nanoseconds, the summary said 1050 s and a GPS rate of 1 MHz, 34 of 49 fixes gated.
+
+    Repaired, the stream is fused as the same stream in nanoseconds is: the same fixes accepted, none gated.
+    (Until issue #26 that was nearly all of them; the GPS judge now holds a stream's first 15-20 s back until
+    it has judged it, on this 21-fix walk all but the anchor and the last few, so the count is compared with
+    the nanosecond stream's rather than with the number of fixes.)"""
     g = walk.streams["gps"]
+    _, s0, _ = _replay(tmp_path, walk, name="ns.csv")
     code, s, err = _replay(tmp_path, _copy(walk, gps=make_stream("gps", g.t_ns // factor, g.values)))
     assert code == 0 and s["duration_s"] == pytest.approx(walk.duration_s, abs=0.1)
     assert s["rates_hz"]["gps"] == pytest.approx(1.0, rel=0.05)
     assert s["stream_problems"] == {"OTHER_TIME_UNIT": len(g)} and f"are {unit}, not nanoseconds" in err
-    assert s["gps"]["fixes_accepted"] >= len(g) - 2
+    assert s["gps"]["fixes_accepted"] == s0["gps"]["fixes_accepted"] >= 3 and s["gps"]["fixes_gated"] == 0
+    assert s["gps"]["fixes_accepted"] + s["gps"]["fixes_judged_out"] >= len(g) - 2
 
 
 def test_a_gps_stream_on_the_unix_clock_is_moved_with_the_offset_or_dropped_in_one_line(tmp_path, walk):

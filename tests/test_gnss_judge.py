@@ -122,3 +122,39 @@ def test_the_nis_band_and_the_shape_residual():
     assert shape_residual_m(a, (a @ r.T) * 0.8 + 5.0, (0.7, 1.4)) == pytest.approx(0.0, abs=1e-9)
     assert shape_residual_m(a, a[:, ::-1] * [1, -1] * 1.0, (1.0, 1.0)) < 1e-9  # a rotation, not a reflection
     assert shape_residual_m(a, a * [1.0, -1.0], (1.0, 1.0)) > 3.0  # the mirror image is not the same walk
+
+
+@pytest.mark.parametrize("gap_s, usable_at_once", [(25.0, True), (90.0, False)])
+def test_a_usable_stream_stays_usable_through_a_short_gap(gap_s, usable_at_once):
+    """A straight walk at 1.4 m/s with fixes every second, usable after its settling; then a gap: after a short
+    one (<= resume_max_gap_s, 60 s) the first fix is usable at once (before: a fresh window and settling, about
+    18 s), after a long one the stream is judged afresh; coarse fixes after the gap are still kept out."""
+    org = (47.0, 8.0)
+    j = GpsJudge()
+
+    def fix(t, hacc=3.0):
+        e = 1.4 * t
+        lat, lon = enu_to_geodetic(e, 0.0, org)
+        return j.add_fix(int(t * 1e9), float(lat), float(lon), hacc, (e, 0.0))
+
+    for t in range(30):
+        v = fix(float(t))
+    assert v.verdict is GpsVerdict.USABLE
+    after = [fix(29.0 + gap_s + k).verdict for k in range(3)]
+    assert (after == [GpsVerdict.USABLE] * 3) is usable_at_once
+    if usable_at_once:
+        coarse = [fix(29.0 + gap_s + k, hacc=30.0).verdict for k in range(3, 6)]
+        assert coarse[-1] is GpsVerdict.UNUSABLE  # the accuracy still counts (median 16.5 m of the six)
+
+
+def test_a_gap_full_of_screened_out_fixes_is_not_resumed_after():
+    """Coarse fixes the screening refused inside the gap (a noisy minute, not a tunnel): judged afresh."""
+    org = (47.0, 8.0)
+    j = GpsJudge()
+    for t in range(30):
+        lat, lon = enu_to_geodetic(1.4 * t, 0.0, org)
+        j.add_fix(int(t * 1e9), float(lat), float(lon), 3.0, (1.4 * t, 0.0))
+    assert j.verdict is GpsVerdict.USABLE
+    j.add_screened_out(int(40e9))
+    lat, lon = enu_to_geodetic(1.4 * 50, 0.0, org)
+    assert j.add_fix(int(50e9), float(lat), float(lon), 3.0, (1.4 * 50, 0.0)).verdict is GpsVerdict.UNUSABLE

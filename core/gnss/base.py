@@ -310,6 +310,7 @@ class FixFusion:
         self._pdr: deque = deque()  # (t_ns, east, north) of the pipeline's dead-reckoned steps, last few seconds
         self.judge = GpsJudge(self.judge_settings) if self.judge_settings is not None else None
         self.n_judged_out = 0
+        self._pending_learning: list = []  # fixes the judge has not judged yet, for training once it has
         self.relocks: list[dict] = []  #: when the filter re-locked to GPS, by how far, by which rule
         if self.start is not None:
             self.origin_lat_lon = (self.start[0], self.start[1])
@@ -518,6 +519,8 @@ class FixFusion:
                 st = self._status
                 fresh = st is not None and self.min_cn0_4th_dbhz > 0 and abs(t_ns - st[0]) <= self.status_max_age_ns
                 judged = self.judge.add_fix(t_ns, lat, lon, hacc_eff, self._pdr_at(t_ns), (not reason) if fresh else None)
+        elif self.judge is not None and reason != "no position":
+            self.judge.add_screened_out(t_ns)  # too coarse or too fast: the stream is bad, not merely absent
         if reason:
             self.n_screened_out += 1
             self._record(t_ns, v, nan, nan, False, reason)
@@ -552,10 +555,17 @@ class FixFusion:
         pred = self._predict_fix(t_ns)
         self._outage_end(t_ns, east, north, pred, filt.position_sigma_m())
         if judged is not None and judged.verdict is not GpsVerdict.USABLE:
+            if judged.verdict is GpsVerdict.UNKNOWN:
+                # not yet judged (too few fixes, settling): what it teaches waits for the verdict
+                self._pending_learning.append((t_ns, east, north, hacc_eff, speed, course))
+            else:
+                self._pending_learning.clear()
             self.n_judged_out += 1
             self._record(t_ns, v, east, north, False,
                          f"GPS judged {judged.verdict.value}: " + "; ".join(c.value for c in judged.causes))
             return
+        if self._pending_learning:
+            self._learn_pending()
         reason = self._filter_verdict(t_ns)
         if reason:
             self.n_filter_rejected += 1
@@ -630,6 +640,25 @@ class FixFusion:
                              "rule": "gated fixes agree", "consistent_s": (t_ns - run[0][0]) * 1e-9})
         run.clear()
         return True
+
+    def _learn_pending(self) -> None:
+        """The judge has just found the stream usable: the fixes it held back while it had too few to judge, or
+        while they settled, and that its passing windows covered, teach the subclass (:meth:`_learn_from_fix`) in
+        time order.  Without this a walk's first 15-20 s of good GPS taught nothing (a straight 140-m walk
+        then learnt too little stride for the profile: 79 m of the 100 m needed)."""
+        j = self.judge
+        since = j.passing_since_ns if j is not None else None
+        pending, self._pending_learning = self._pending_learning, []
+        if since is None:
+            return
+        first = since - int(j.settings.window_s * 1e9)  # the window that first passed began here
+        for t, e, n, h, sp, c in pending:
+            if t >= first:
+                self._learn_from_fix(t, e, n, h, sp, c)
+
+    def _learn_from_fix(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
+        """A good fix's use for training (stride, heading model): with every accepted fix, and with the fixes the
+        judge held back before it found the stream usable (:meth:`_learn_pending`)."""
 
     def _accepted(self, t_ns, v, east, north, hacc, speed, course, nis, moved) -> None:
         self._last_accept_ns = t_ns

@@ -210,6 +210,9 @@ class GpsFusion(FixFusion):
         if self.filter == "ekf" and self.origin_lat_lon is not None and self.use_course and \
                 speed >= self.course_min_speed_m_s and math.isfinite(course) and self.anchor[0] != t_ns:
             self.ekf.update_course(self.course_now(t_ns, heading_from_bearing_deg(course)), self.course_sd_rad)
+        self._learn_from_fix(t_ns, east, north, hacc, speed, course)
+
+    def _learn_from_fix(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
         c_rad = heading_from_bearing_deg(course) if math.isfinite(course) else math.nan
         self.trainer.add_fix(t_ns, east, north, hacc, speed, c_rad)
 

@@ -93,6 +93,14 @@ class JudgeSettings:
     usable_after_s: float = 10.0
     nis_window: int = 20
     nis_quantile: float = 0.999
+    #: after a gap of at most this long (s) in a stream found usable, its fixes stay usable while the window
+    #: refills (only too few fixes against them): the filter's own gate checks them against the dead-reckoned
+    #: position; the other evidence (accuracy, signal, NIS) still counts at once, the shape once the window holds
+    #: ``min_fixes`` again.  Only a gap without fixes: screened-out ones in it (too coarse, too fast:
+    #: :meth:`GpsJudge.add_screened_out`) mean a bad stream, judged afresh (on the simulator's tuning fault walks
+    #: a noisy minute's few fine-looking fixes between coarse ones were otherwise taken, one 30 m off).
+    #: 0 turns it off (a fresh ``window_s`` + ``usable_after_s`` after every gap)
+    resume_max_gap_s: float = 60.0
 
 
 @dataclass(frozen=True)
@@ -186,6 +194,9 @@ class GpsJudge:
         self._fixes: deque = deque()  # (t_ns, east, north, hacc, signal_ok or None, pdr_e, pdr_n)
         self._nis: deque = deque(maxlen=self.settings.nis_window)
         self._passing_since_ns: int | None = None
+        self._resuming = False  # refilling the window after a short gap in a usable stream
+        self._prev_fix_ns: int | None = None
+        self._screened_since_fix = False  # a fix screened out (coarse, fast) since the last one judged
         #: the last time the fixes' shape disagreed with the steps (a jump, multipath): None if never
         self.last_inconsistent_ns: int | None = None
         self.last: Judgement | None = None
@@ -206,6 +217,12 @@ class GpsJudge:
         if math.isfinite(nis):
             self._nis.append(float(nis))
 
+    def add_screened_out(self, t_ns: int) -> None:
+        """A fix the screening refused (accuracy or speed): the stream is bad here, so a gap it falls in is not one
+        to resume after (``resume_max_gap_s``)."""
+        self._screened_since_fix = True
+        self._resuming = False
+
     def add_fix(self, t_ns: int, lat_deg: float, lon_deg: float, hacc_m: float, pdr_en, signal_ok=None) -> Judgement:
         """A screened fix, the dead-reckoned position ``pdr_en`` (m, the walk's frame) at its time, and whether
         the receiver's status passed the C/N0 rule (None: no status)."""
@@ -214,6 +231,12 @@ class GpsJudge:
             self._ref = (float(lat_deg), float(lon_deg))
         e, n = geodetic_to_enu(lat_deg, lon_deg, self._ref)
         fx = self._fixes
+        gap_ns = int(t_ns) - self._prev_fix_ns if self._prev_fix_ns is not None else None
+        self._prev_fix_ns = int(t_ns)
+        if gap_ns is not None and self.verdict is GpsVerdict.USABLE and gap_ns <= int(s.resume_max_gap_s * 1e9) \
+                and not self._screened_since_fix:
+            self._resuming = True  # cleared as soon as the window's evidence says anything but "too few fixes"
+        self._screened_since_fix = False
         fx.append((int(t_ns), float(e), float(n), float(hacc_m), signal_ok, float(pdr_en[0]), float(pdr_en[1])))
         while fx and fx[0][0] <= t_ns - int(s.window_s * 1e9):
             fx.popleft()
@@ -262,6 +285,11 @@ class GpsJudge:
             self.last_inconsistent_ns = t_ns
         kw = dict(n_fixes=n, median_hacc_m=med, shape_residual_m=resid, signal_fail_share=fail,
                   nis_mean=nis_mean, nis_limit=self.nis_limit)
+        if self._resuming and causes == [Cause.FEW_FIXES]:
+            # a short gap in a stream found usable (a tunnel, a hidden window): still usable while the window
+            # refills, its passing time kept (issue #26 follow-up: a 25-s gap cost a fresh 18 s of re-judging)
+            return Judgement(t_ns, GpsVerdict.USABLE, (), **kw)
+        self._resuming = False
         if not causes:
             if self._passing_since_ns is None:
                 self._passing_since_ns = t_ns
