@@ -257,8 +257,10 @@ class AttitudeSettings:
     mag_relock_spread_rad: float = math.radians(10.0)
     #: the references |g|, |h| and dip are running medians of every reading, refreshed this often (s)
     reference_update_s: float = 1.0
-    #: while the phone is still, magnetometer readings enter the references at most this often (Hz)
-    reference_still_rate_hz: float = 1.0
+    #: while the phone is still, magnetometer readings enter the references at most this often (Hz); inf (the
+    #: default since issue #27's ablation, benchmarks/ABLATION_RESULTS.md): no limit -- at 1 Hz it changed
+    #: nothing on the tuning split and the ETH walk it was made for did better without it (18.6 against 19.3 m)
+    reference_still_rate_hz: float = math.inf
     #: magnetic declination, east of true north positive (rad); 0: headings relative to magnetic north
     declination_rad: float = 0.0
     #: the site's field strength (uT) and dip (rad, below the horizontal positive) from the World

@@ -70,7 +70,6 @@ from core.pdr.attitude import AttitudeEKF
 from core.pdr.carry import CarryModeDetector
 from core.pdr.deadreckoning import DeadReckoner
 from core.pdr.heading import RotationSmoother, interval_heading
-from core.pdr.magcal import MagCalibrator
 from core.pdr.steps import GENTLE, STEP_GATES, StepDetector, StepEvent
 from core.pdr.velocity import SpeedFeatureWindow
 from core.pdr.walkdir import WALKING_DIRECTIONS, WalkingDirection
@@ -305,8 +304,11 @@ class Pipeline:
         :class:`RotationSmoother`); defaults suit a hand-held phone (the
         smoother's walking axis is the top edge, the back of the phone while it
         stands upright: ``forward_b="auto"``).  The
-        default attitude filter runs the magnetometer through an online
-        hard/soft-iron calibration (:class:`core.pdr.magcal.MagCalibrator`).
+        default attitude filter takes the phone's calibrated field as it is:
+        the online hard/soft-iron calibration (:class:`core.pdr.magcal.MagCalibrator`,
+        ``AttitudeEKF(mag_calibrator=MagCalibrator())``) is off by default since
+        the ablation of issue #27 (``benchmarks/ABLATION_RESULTS.md``: on the tuning
+        split the IPIN median landmark error was 2.93 m with it, 2.49 m without).
     grid_rate_hz : float
         Uniform grid rate for the step detector and the heading smoother (Hz).
     heading_delay_s : float or None
@@ -407,7 +409,7 @@ class Pipeline:
         self.grid_rate_hz = float(grid_rate_hz)
         self.detector = step_detector or StepDetector(grid_rate_hz=grid_rate_hz)
         self._mode_detectors, self._det_of = self._make_mode_detectors()
-        self.attitude = attitude or AttitudeEKF(use_magnetometer=use_magnetometer, mag_calibrator=MagCalibrator())
+        self.attitude = attitude or AttitudeEKF(use_magnetometer=use_magnetometer)
         if not use_magnetometer:
             self.attitude.use_magnetometer = False
         self.smoother = smoother or RotationSmoother(grid_rate_hz=grid_rate_hz, forward_b="auto")
