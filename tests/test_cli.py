@@ -284,3 +284,14 @@ def test_an_accelerometer_too_slow_for_steps_is_said_not_scored(tmp_path, capsys
     assert main(["replay", str(path), "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "not measured: the accelerometer is sampled at 2.0 Hz" in out and "truth error" not in out
+
+
+def test_a_closed_pipe_is_not_an_error():
+    """`pdr info X | head -1` (issue #29): the reader closed the pipe before pdr wrote; exit 0, nothing on stderr."""
+    demo = ROOT / "desktop" / "data" / "demo_walk.csv.gz"
+    proc = subprocess.Popen([sys.executable, "-m", "desktop", "info", str(demo)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # before the child has imported anything: its first write meets a closed pipe
+    err = proc.stderr.read()
+    proc.wait(timeout=60)
+    assert proc.returncode == 0 and err == "", (proc.returncode, err)
