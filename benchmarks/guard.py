@@ -16,7 +16,8 @@ splits) and compares each with ``benchmarks/thresholds.json``::
 thresholds are a regression guard, not the issue's targets: the baseline
 of the last accepted run plus a margin (:func:`margin`).  A headline with
 no value in this run (its dataset absent) is reported and skipped; a
-recording that raises fails the guard.
+recording that raises fails the guard, and so does a failed data check (:func:`ipin_loader_checks`:
+the IPIN loader's own checks on every logfile).
 
 Exit status: 0 passed (or no data folder: skipped), 1 a headline got worse
 or a recording failed, 2 bad usage.  ``--update`` rewrites the thresholds
@@ -116,6 +117,31 @@ def thresholds_from(values: dict) -> dict:
     return out
 
 
+def ipin_loader_checks(root: Path) -> list[str]:
+    """The IPIN 2023 loader's own checks on every logfile (moved here from tests/test_importers.py, which
+    checks two of them, for CI's test time: issue #29): no repairs, the rotation vector agreeing with the
+    accelerometer's tilt and the magnetometer's heading, the AHRS angles with its quaternion, the
+    Nuremberg field's dip, the 50 Hz rate. A list of failures, one line each (empty: all passed or no data)."""
+    from core.importers.getsensordata import read_getsensordata
+
+    failures = []
+    for f in sorted((root / "ipin2023_track3" / "logfiles").glob("*.txt.gz")):
+        try:
+            rec = read_getsensordata(f)
+            chk = rec.metadata["rotvec_check"]
+            problems = [what for what, bad in (
+                (f"repairs {rec.repairs}", rec.repairs != []),
+                (f"rotation vector check {chk}", not (chk["tilt_err_deg"] < 10 and chk["heading_diff_deg"] < 15)),
+                ("AHRS angles vs quaternion", not rec.metadata["ahrs_angles_vs_quaternion_deg"]["max"] < 0.5),
+                (f"dip {rec.metadata['mag_dip_deg']:.1f} deg", not rec.metadata["mag_dip_deg"] > 30),
+                (f"acc rate {rec.streams['acc'].rate_hz:.1f} Hz", not 48 < rec.streams["acc"].rate_hz < 51),
+            ) if bad]
+        except Exception as e:  # noqa: BLE001 - a file that does not load is a failure to report
+            problems = [f"{type(e).__name__}: {e}"]
+        failures += [f"{f.name}: {p}" for p in problems]
+    return failures
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.guard", description=__doc__.split("\n")[0])
     ap.add_argument("--data", type=Path, default=None, help="data root (default: ../shared/data beside the repo)")
@@ -142,6 +168,7 @@ def main(argv=None) -> int:
         for f in parts:
             values.update(f.result())
     failed = [r for r in info["results"] if "error" in r]
+    loader_failures = ipin_loader_checks(root)
     if args.update:
         doc = {"_about": "CI regression guard (benchmarks/guard.py): quick-subset headline numbers may not get "
                          "worse than these limits (baseline + margin). Not the issue's targets.",
@@ -154,7 +181,9 @@ def main(argv=None) -> int:
     print_table(rows)
     for r in failed:
         print(f"FAILED recording {r['dataset']}/{r['name']}: {r['error']}")
-    if failed or not ok:
+    for line in loader_failures:
+        print(f"FAILED loader check {line}")
+    if failed or loader_failures or not ok:
         print("benchmark guard: FAILED (a headline got worse than its threshold, or a recording failed)")
         return 1
     print("benchmark guard: passed")

@@ -24,11 +24,23 @@ from core.conventions import bearing_deg
 from core.geodesy import WGS84_A_M, WGS84_E2, enu_to_geodetic, geodetic_to_enu  # noqa: F401 (re-exported)
 
 
+#: the start point's time before the first step when the track cannot tell the step period (one step, or a
+#: pause of 2 s or more between the first two): about one step at walking cadence
+_STEP_PERIOD_NS = 500_000_000
+
+
 def _points(track):
-    """Rows (t_ns, east, north, length, heading) with the start point (0, 0) first."""
+    """Rows (t_ns, east, north, length, heading) with the start point (0, 0) first.
+
+    The start point's time is the first step's start: one step period (the first two steps' interval)
+    before the first step, whose time is the step's end (it used to be the first step's own time, so the
+    first two GPX points shared a timestamp: issue #29)."""
     rows = []
     if len(track):
-        rows.append((int(track.t_ns[0]), 0.0, 0.0, 0.0, float(track.heading_rad[0])))
+        t0 = int(track.t_ns[0])
+        dt = int(track.t_ns[1]) - t0 if len(track) > 1 else 0
+        rows.append((t0 - (dt if 0 < dt < 2_000_000_000 else _STEP_PERIOD_NS), 0.0, 0.0, 0.0,
+                     float(track.heading_rad[0])))
     for i in range(len(track)):
         rows.append((int(track.t_ns[i]), float(track.east_m[i]), float(track.north_m[i]),
                      float(track.length_m[i]), float(track.heading_rad[i])))

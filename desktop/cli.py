@@ -1610,6 +1610,10 @@ def main(argv=None) -> int:
         warnings.simplefilter("always")
         try:
             code = args.func(args)
+            sys.stdout.flush()  # a closed pipe shows here, not at exit
+        except BrokenPipeError:  # `pdr info X | head -1`: the reader has what it wanted; not an error
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # the exit's flush writes nowhere
+            code = 0
         except RecordingError as e:
             print(f"pdr: error: {e}", file=sys.stderr)
             code = EXIT_INPUT

@@ -35,11 +35,15 @@ def _with_bad_value(rec: Recording, stream: str, bad: float, where: float = 0.5,
 
 
 @pytest.mark.parametrize("stream", ["acc", "gyro", "mag"])
-@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
-def test_one_bad_value_changes_the_demo_closure_by_less_than_10_cm(demo, stream, bad):
+def test_one_bad_value_changes_the_demo_closure_by_less_than_10_cm(demo, stream):
+    """NaN, +inf and -inf, one each at 30, 50 and 70 % of the walk (one run per stream instead of one per
+    value, for CI's time: issue #29): each is skipped and counted, the closure moves by less than 10 cm."""
     rec, clean = demo
-    s = Pipeline().run(_with_bad_value(rec, stream, bad)).summary()
-    assert s["nonfinite_skipped"] == {stream: 1}
+    bad = rec
+    for where, value in ((0.3, math.nan), (0.5, math.inf), (0.7, -math.inf)):
+        bad = _with_bad_value(bad, stream, value, where=where)
+    s = Pipeline().run(bad).summary()
+    assert s["nonfinite_skipped"] == {stream: 3}
     assert s["n_steps"] == clean["n_steps"]
     moved = math.hypot(s["final_east_m"] - clean["final_east_m"], s["final_north_m"] - clean["final_north_m"])
     assert moved < 0.1

@@ -299,3 +299,14 @@ def test_a_nominal_10_hz_export_counts_its_steps(tmp_path, capsys, rate_hz, meas
     assert main(["replay", str(path), "--json", "--no-progress", "--gps", "off"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s.get("steps_measured", True) is measured
+
+
+def test_a_closed_pipe_is_not_an_error():
+    """`pdr info X | head -1` (issue #29): the reader closed the pipe before pdr wrote; exit 0, nothing on stderr."""
+    demo = ROOT / "desktop" / "data" / "demo_walk.csv.gz"
+    proc = subprocess.Popen([sys.executable, "-m", "desktop", "info", str(demo)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # before the child has imported anything: its first write meets a closed pipe
+    err = proc.stderr.read()
+    proc.wait(timeout=60)
+    assert proc.returncode == 0 and err == "", (proc.returncode, err)

@@ -79,3 +79,14 @@ def test_csv_has_one_row_per_step_and_cumulative_distance(tmp_path):
     assert len(rows) == 5
     assert float(rows[-1]["distance_m"]) == pytest.approx(3.5)
     assert float(rows[2]["bearing_deg"]) == pytest.approx(0.0)
+
+
+def test_gpx_times_increase_from_the_start_point(tmp_path):
+    """Issue #29: the start point had the first step's time (the first two points of every GPX shared a
+    timestamp); it is the first step's start, one step period (the first two steps' interval) before it."""
+    gpxpy = pytest.importorskip("gpxpy")
+    p = tmp_path / "t.gpx"
+    write_track_gpx(str(p), _track(), (10.0, 20.0), unix_offset_ns=1_700_000_000 * 10**9 - 10**12)
+    t = [q.time.timestamp() for q in gpxpy.parse(p.read_text()).tracks[0].segments[0].points]
+    assert all(b > a for a, b in zip(t, t[1:])), t
+    assert t[1] - t[0] == pytest.approx(t[2] - t[1], abs=1e-3)

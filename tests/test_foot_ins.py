@@ -108,13 +108,16 @@ def test_noisy_walk_with_detector_closes_loop():
 
 def test_position_consistency_nees_on_simulator():
     """Horizontal position NEES at the last stance over 10 seeds (400 Hz, true stance, initial heading
-    known): the filter's noise equals the simulator's, so the mean NEES must lie in the chi-square band."""
+    known): the filter's noise equals the simulator's, so the mean NEES must lie in the chi-square band.
+    The loop is half the size of :func:`_walk`'s (12.6 m; mean NEES 1.09 against 1.05 on the full loop)
+    for CI's time (issue #29)."""
     nees = []
     rate = 400.0
+    legs = [(4.2, 0.0), (2.1, math.pi / 2), (4.2, math.pi / 2), (2.1, math.pi / 2)]
     for seed in range(10):
         # per-sample noise sd = continuous density * sqrt(rate)
-        w = _walk(seed=100 + seed, rate_hz=rate, acc_noise_m_s2=0.02 * math.sqrt(rate),
-                  gyro_noise_rad_s=0.002 * math.sqrt(rate))
+        w = simulate_foot(footprints(legs), rate_hz=rate, acc_noise_m_s2=0.02 * math.sqrt(rate),
+                          gyro_noise_rad_s=0.002 * math.sqrt(rate), seed=100 + seed)
         nav = FootNavigator(FootSettings(initial_heading_rad=-math.pi / 2))
         nav.run(w.recording, stance=w.stance)
         e = np.array(nav.ins.p[:2]) - w.position_n[-1, :2]

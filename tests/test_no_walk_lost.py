@@ -282,27 +282,55 @@ while True:  # a 200 Hz sensor, delivered in 30 Hz ticks like the app's clock
 
 @pytest.mark.skipif(os.name != "posix", reason="SIGKILL")
 def test_kill_9_at_random_moments_loses_at_most_the_last_second(tmp_path):
+    """Fourteen recording processes killed at seeded random moments after their start. They run side by
+    side (each killed at its own moment on the shared monotonic clock), so the test takes the longest
+    delay, not their sum."""
+    import selectors
+
     rnd = random.Random(12)
     delays = [rnd.uniform(0.0, 0.4) for _ in range(4)] + [rnd.uniform(0.4, 2.0) for _ in range(10)]
     rnd.shuffle(delays)
-    results = []
-    for i, delay in enumerate(delays):
-        path = tmp_path / f"kill{i}.csv"
-        proc = subprocess.Popen([sys.executable, "-c", CHILD, str(path), str(ROOT)], cwd=ROOT,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        try:
-            line = proc.stdout.readline()
-            assert line.strip().isdigit(), proc.stderr.read()
-            t0 = int(line)
-            time.sleep(delay)
-            kill_ns = time.monotonic_ns()
-            os.kill(proc.pid, signal.SIGKILL)  # no close(), no atexit, no finally
+    procs, t0s, kills = [], {}, {}
+    sel = selectors.DefaultSelector()
+    try:
+        for i in range(len(delays)):
+            proc = subprocess.Popen([sys.executable, "-c", CHILD, str(tmp_path / f"kill{i}.csv"), str(ROOT)],
+                                    cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            procs.append(proc)
+            sel.register(proc.stdout, selectors.EVENT_READ, i)
+        due = {}  # process -> monotonic ns of its kill
+        while len(kills) < len(procs):
+            now = time.monotonic_ns()
+            for i in [i for i, t in due.items() if t <= now]:
+                kills[i] = time.monotonic_ns()
+                os.kill(procs[i].pid, signal.SIGKILL)  # no close(), no atexit, no finally
+                del due[i]
+            waiting = sel.get_map()
+            if not due and not waiting:
+                break
+            timeout = max(0.0, (min(due.values()) - time.monotonic_ns()) * 1e-9) if due else 30.0
+            ready = sel.select(timeout) if waiting else time.sleep(timeout) or []
+            if waiting and not ready and not due:
+                raise AssertionError("no recording process started within 30 s")
+            for key, _ in ready:
+                i = key.data
+                sel.unregister(key.fileobj)
+                line = procs[i].stdout.readline()
+                assert line.strip().isdigit(), procs[i].stderr.read()
+                t0s[i] = int(line)
+                due[i] = t0s[i] + int(delays[i] * 1e9)
+        for proc in procs:
             proc.wait(timeout=10)
-        finally:
+    finally:
+        for proc in procs:
             if proc.poll() is None:
                 proc.kill()
                 proc.wait(timeout=10)
+        sel.close()
+    results = []
+    for i, (delay, proc) in enumerate(zip(delays, procs)):
         assert proc.returncode == -signal.SIGKILL
+        path, t0 = tmp_path / f"kill{i}.csv", t0s[i]
         if path.exists():
             got = events_in(read_recording(str(path), warn=False))  # reads back without error
         else:
@@ -310,7 +338,7 @@ def test_kill_9_at_random_moments_loses_at_most_the_last_second(tmp_path):
         n = len(got)
         assert got == [event(k, t0) for k in range(n)]  # exactly the prefix of what was sent
         # every event sampled more than a second before the kill is in the file
-        must = max(0, (kill_ns - 1_000_000_000 - t0) // 5_000_000 + 1)
+        must = max(0, (kills[i] - 1_000_000_000 - t0) // 5_000_000 + 1)
         assert n >= must, (i, delay, n, must)
         results.append((delay, n, path.exists()))
     print(results)
