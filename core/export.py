@@ -30,7 +30,9 @@ _STEP_PERIOD_NS = 500_000_000
 
 
 def _points(track):
-    """Rows (t_ns, east, north, length, heading) with the start point (0, 0) first.
+    """Rows (t_ns, east, north, length, heading) with the start point first: where the walker stood before
+    the first step (:func:`core.metrics.track_start`; (0, 0) for a dead-reckoned track, the first step's start
+    on a map-matched one, which used to be drawn from (0, 0) too).
 
     The start point's time is the first step's start: one step period (the first two steps' interval)
     before the first step, whose time is the step's end (it used to be the first step's own time, so the
@@ -39,7 +41,10 @@ def _points(track):
     if len(track):
         t0 = int(track.t_ns[0])
         dt = int(track.t_ns[1]) - t0 if len(track) > 1 else 0
-        rows.append((t0 - (dt if 0 < dt < 2_000_000_000 else _STEP_PERIOD_NS), 0.0, 0.0, 0.0,
+        from core.metrics import track_start
+
+        e0, n0 = track_start(track)
+        rows.append((t0 - (dt if 0 < dt < 2_000_000_000 else _STEP_PERIOD_NS), e0, n0, 0.0,
                      float(track.heading_rad[0])))
     for i in range(len(track)):
         rows.append((int(track.t_ns[i]), float(track.east_m[i]), float(track.north_m[i]),

@@ -428,7 +428,10 @@ def truth_of(rec, *, gps_max_hacc_m: float = GPS_REFERENCE_MAX_HACC_M) -> Record
         if int(ok.sum()) < 2:
             continue
         t = np.asarray(c.t_ns, dtype=np.int64)[ok]
-        span = {"t0_ns": int(t[0]), "t1_ns": int(t[-1]), "what": f"{name} stream, {col}"}
+        note = str(getattr(c, "note", "") or "")
+        what = note.split(": ", 1)[1] if note.startswith("ground truth beside the recording: ") else \
+            f"{name} stream, {col}"
+        span = {"t0_ns": int(t[0]), "t1_ns": int(t[-1]), "what": what}
         if kind == "steps":
             out.steps = {**span, "n": int(round(v[ok][-1] - v[ok][0]))}
         else:

@@ -860,13 +860,40 @@ def map_report(args, rec: Recording, plan, track, truth) -> tuple[object, dict, 
     return mt, summ, lines, props
 
 
+def plan_track_to_enu(track, georef):
+    """A track in a floor plan's metres -> the same track in metres East/North of the plan's geo-reference
+    origin (:meth:`core.indoor.floorplan.Georeference.plan_to_enu`; headings turned by its rotation), so that
+    the exports' lat/lon are the plan's own (issue #29: map-matched exports used to land at 0, 0)."""
+    from core.pdr.pipeline import Track
+
+    en = georef.plan_to_enu(np.column_stack([np.asarray(track.east_m, float), np.asarray(track.north_m, float)]))
+    return Track(np.asarray(track.t_ns), np.asarray(track.length_m, float),
+                 np.asarray(track.heading_rad, float) + georef.rotation_rad, en[:, 0], en[:, 1])
+
+
 def _write_outputs(args, outs: dict, rec, track, origin, extra, title_extra: str = "", others=None, fixes=None,
-                   subtitle: str = "", fix_records=None, truth_kw=None) -> list:
-    origin = args.origin or origin or _first_gps_origin(rec)
+                   subtitle: str = "", fix_records=None, truth_kw=None, plan=None) -> list:
+    """Write ``outs``.  With a floor ``plan`` the track is in the plan's metres: its geo-reference places the
+    exports (``--origin`` is then the plan's origin when the plan has none); the plot stays in plan metres."""
+    plot_track_ = track
+    if plan is not None:
+        georef = getattr(plan, "georef", None)
+        if georef is None and args.origin is not None:
+            from core.indoor.floorplan import Georeference
+
+            georef = Georeference(*args.origin)
+        if georef is not None:
+            track, origin = plan_track_to_enu(track, georef), georef.origin
+        else:
+            origin = None
+    else:
+        origin = args.origin or origin or _first_gps_origin(rec)
     offset = rec.metadata.get("unix_offset_ns")
     written = []
     if origin is None and (outs.get("geojson") or outs.get("gpx")):
-        print("note          the track is not placed on the map (no GPS fix of 12 m or better, no --origin): "
+        why = ("the floor plan has no geo-reference and there is no --origin" if plan is not None else
+               "no GPS fix of 12 m or better, no --origin")
+        print(f"note          the track is not placed on the map ({why}): "
               "GeoJSON/GPX coordinates are around 0, 0; give --origin LAT,LON", file=sys.stderr)
     from core import export
     for out in outs.values():
@@ -890,7 +917,7 @@ def _write_outputs(args, outs: dict, rec, track, origin, extra, title_extra: str
         written.append(outs["gpx"])
     if outs.get("plot"):
         from desktop.plot import plot_track
-        plot_track(outs["plot"], track, title=f"PDR: {Path(rec.source.split(' ')[0]).name}" +
+        plot_track(outs["plot"], plot_track_, title=f"PDR: {Path(rec.source.split(' ')[0]).name}" +
                    (f" ({title_extra})" if title_extra else ""), others=others, fixes=fixes,
                    subtitle=subtitle, **(truth_kw or {}))
         written.append(outs["plot"])
@@ -1007,7 +1034,8 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     written = plotted + _write_outputs(args, outs, rec, track, res.fusion.origin_lat_lon if fused else None, extra,
                              gps_track_label(res.fusion, gnss.name) if fused else "", others, fixes, sub,
                              res.fusion.fixes if res.fusion is not None else None,
-                             {**(truth_plot(truth, errs, track, bool(fused)) if errs else {}), **plot_kw} or None)
+                             {**(truth_plot(truth, errs, track, bool(fused)) if errs else {}), **plot_kw} or None,
+                             plan=plan)
     if profile is not None and save_back and res.fusion is not None:
         from core.gnss import profile_after
         new = profile_after(profile, pipeline.gnss)

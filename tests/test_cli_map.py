@@ -55,3 +55,30 @@ def test_map_without_a_start_is_refused_before_the_run(walk_and_plan, capsys):
     path, plan_path, _ = walk_and_plan
     assert main(["replay", path, "--map", plan_path]) == 2
     assert "needs a start" in capsys.readouterr().err
+
+
+def test_map_matched_exports_take_the_plans_geo_reference(walk_and_plan, tmp_path, capsys):
+    """Issue #29: the exports of a map-matched track are placed by the plan's own geo-reference (here turned
+    by 30 deg and scaled), not at 0, 0: every exported point maps back into the plan's walkable area, and
+    the line starts at the --start point."""
+    from core.indoor import Georeference
+
+    path, _, _ = walk_and_plan
+    georef = Georeference(47.3769, 8.5417, math.radians(30.0), 1.02, 0.98)
+    plan = FloorPlan(areas=[(np.array(CORRIDOR), [])], name="corridor", georef=georef)
+    plan_path = tmp_path / "geo_plan.geojson"
+    write_geojson(plan, plan_path, units="m")
+    out, csv_out = tmp_path / "track.geojson", tmp_path / "track.csv"
+    assert main(["replay", path, "--map", str(plan_path), "--start", "0,0,0.5", "--geojson", str(out),
+                 "--csv", str(csv_out), "--no-profile"]) == 0
+    assert "not placed" not in capsys.readouterr().err
+    gj = json.loads(out.read_text())
+    line = gj["features"][0]
+    assert line["properties"]["origin_known"] and line["properties"]["origin_lat_lon"] == pytest.approx([47.3769, 8.5417])
+    lonlat = np.array(line["geometry"]["coordinates"])
+    xy = georef.from_geodetic(lonlat[:, 1], lonlat[:, 0])
+    assert np.hypot(*xy[0]) < 1.0  # the start point, not 0, 0
+    assert plan.is_walkable(xy[1:]).all()
+    rows = np.genfromtxt(csv_out, delimiter=",", names=True)
+    xy_csv = georef.from_geodetic(rows["lat_deg"], rows["lon_deg"])
+    np.testing.assert_allclose(xy_csv, xy[1:], atol=0.01)

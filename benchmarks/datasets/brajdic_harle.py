@@ -23,6 +23,7 @@ from pathlib import Path
 
 from benchmarks.datasets.base import Trial
 from core.conventions import ACC
+from core.importers import beside as _beside
 from core.importers.brajdic import RECORD as _RECORD
 from core.importers.brajdic import read_brajdic
 from core.recording import Recording
@@ -45,19 +46,11 @@ def read_trace(path: Path) -> Recording:
 
 
 def read_step_counts(path: Path) -> dict[str, int]:
-    out = {}
-    for line in Path(path).read_text().split("\n"):
-        parts = line.split()
-        if len(parts) >= 2 and parts[1].isdigit():
-            out[parts[0]] = int(parts[1])
-    return out
+    return _beside.read_step_counts(str(path))
 
 
 def read_walk_windows(path: Path) -> dict[str, tuple[int, int]]:
-    out = {}
-    for m in re.finditer(r"^(p\d+\.\d+)Hand_held\s*\((\d+)\s+(\d+)\)", Path(path).read_text(), re.M):
-        out[m.group(1)] = (int(m.group(2)), int(m.group(3)))
-    return out
+    return _beside.read_walk_windows(str(path))
 
 
 def trials(root: Path) -> list[Trial]:

@@ -37,7 +37,6 @@ footstep annotations (a defect of the source; the reader returns it as is).
 
 from __future__ import annotations
 
-import gzip
 import json
 import math
 from dataclasses import dataclass
@@ -47,6 +46,7 @@ import numpy as np
 
 from benchmarks.datasets.base import Trial
 from core.importers import xsens
+from core.importers.beside import ipol_events, ipol_first_counter
 from core.importers.xsens import read_xsens
 from core.recording import Recording
 
@@ -78,10 +78,7 @@ def available(root: Path) -> bool:
 
 def first_counter(path: Path) -> int:
     """The first PacketCounter of a sensor file (the origin of the annotation indices)."""
-    with gzip.open(path, "rt") as fh:
-        fh.readline()
-        fh.readline()
-        return int(float(fh.readline().split()[0]))
+    return ipol_first_counter(str(path))
 
 
 def load_recording(path: Path) -> Recording:
@@ -101,14 +98,8 @@ def _trial(meta_path: Path) -> IpolTrial:
     lb = meta_path.with_name(f"{name}_lb.txt.gz")
     c0 = first_counter(lb)
 
-    def t_of(i) -> np.ndarray:
-        return (np.asarray(i, dtype=np.int64) + c0) * SAMPLE_PERIOD_NS
-
-    left = t_of(np.asarray(meta.get("LeftFootEvents", []), dtype=np.int64).reshape(-1, 2))
-    right = t_of(np.asarray(meta.get("RightFootEvents", []), dtype=np.int64).reshape(-1, 2))
-    strikes = np.sort(np.concatenate([left[:, 1], right[:, 1]]))
-    tb = t_of(meta["TrialBoundaries"])
-    ub = t_of(meta["UTurnBoundaries"])
+    ev = ipol_events(meta, c0)
+    left, right, strikes, tb, ub = ev["left"], ev["right"], ev["strikes"], ev["trial"], ev["uturn"]
     height_cm = meta.get("Height")
     if height_cm is not None and not (isinstance(height_cm, (int, float)) and math.isfinite(height_cm) and height_cm > 0):
         height_cm = None  # subject 10: NaN in the metadata

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.datasets.base import Trial
+from core.importers import beside as _beside
 from core.importers._common import STEP_COUNTS
 from core.importers.oxford import read_oxford
 from core.recording import Recording
@@ -78,15 +79,9 @@ def read_accelerometer(path: Path) -> Recording:
 
 
 def foot_switch_steps(path: Path) -> np.ndarray:
-    """Step instants (t_ns) from ``stepcounter.csv``: rows where either foot switch goes 0 -> 1."""
-    s = np.loadtxt(path, delimiter=",", ndmin=2)
-    t = s[:, 0].astype(np.int64)
-    feet = s[:, 1:3].astype(int)
-    rises = (np.diff(feet, axis=0) == 1).any(axis=1)
-    # two feet rising in the same row would be two steps; it does not happen in this data
-    both = (np.diff(feet, axis=0) == 1).all(axis=1)
-    idx = np.concatenate([np.flatnonzero(rises), np.flatnonzero(both)]) + 1
-    return np.sort(t[idx])
+    """Step instants (t_ns) from ``stepcounter.csv``: rows where either foot switch goes 0 -> 1
+    (:func:`core.importers.beside.foot_switch_steps`, which ``pdr replay`` uses too)."""
+    return _beside.foot_switch_steps(str(path))[0]
 
 
 def _notes_count(folder: Path) -> int | None:

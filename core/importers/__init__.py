@@ -60,8 +60,9 @@ foot positions, ``east_m, north_m, up_m``), ``zero_velocity`` (PyShoe's referenc
 counts of other counters logged in the file: the TrundleWheel phone's, the
 Oxford validation files' app, ground-truth device and hardware counter);
 see :data:`core.importers._common.EXTRA_STREAM_SPECS`.  Ground truth kept
-in separate annotation files (Oxford foot switches, Brajdic & Harle step
-counts) is the benchmark readers' (``benchmarks.datasets``), not a format's.
+in separate annotation files beside a recording (Oxford foot switches, Brajdic & Harle step
+counts, IPOL foot strikes) is added by :func:`load_recording` as a ``step_counts`` stream
+(:mod:`core.importers.beside`, which the benchmark readers use too).
 
 Several IMUs in one recording (an IPOL trial: lower back and both feet) follow
 :mod:`core.foot.devices`: the primary device's plain stream names, the others'
@@ -88,6 +89,7 @@ from core.importers import xio as _xio
 from core.importers import xsens as _xs
 from core.importers.matv5 import looks_like as _looks_like_mat
 from core.importers._common import FileSet, head_bytes
+from core.importers.beside import attach_truth_beside
 from core.importers.brajdic import read_brajdic
 from core.importers.getsensordata import read_getsensordata
 from core.importers.msindoor import read_msindoor
@@ -247,7 +249,7 @@ def detect_format(path) -> str:
 
 
 def load_recording(path, *, warn: bool = True, platform: str | None = None,
-                   max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
+                   max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES, truth_beside: bool = True) -> Recording:
     """Read any supported recording (see :data:`FORMATS`) into a :class:`Recording` in :mod:`core`'s conventions.
 
     ``warn``: emit :class:`core.recording.TimestampRepairWarning` for repaired
@@ -258,6 +260,9 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
     ``max_uncompressed_bytes``: a gzip stream or zip member larger than
     this uncompressed is refused (:data:`core.recording.MAX_UNCOMPRESSED_BYTES`).
     Every reader streams the file: memory holds the recording, not the text.
+    ``truth_beside``: add the ground truth a dataset keeps in an annotation file beside the recording
+    (Oxford ``stepcounter.csv``, Brajdic & Harle ``groundtruth_SC.txt``, IPOL ``<trial>.json``) as a
+    ``step_counts`` stream (:mod:`core.importers.beside`).
     """
     path = str(path)
     limit = max_uncompressed_bytes
@@ -272,7 +277,8 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
         return read_sensorlogger(path, platform=platform, warn=warn, max_uncompressed_bytes=limit)
     readers = {PHYPHOX: read_phyphox, MSINDOOR: read_msindoor, BRAJDIC: read_brajdic, OXFORD: read_oxford,
                TRUNDLE: read_trundle, XIO: read_xio, XSENS: read_xsens, PYSHOE: read_pyshoe}
-    return readers[fmt](path, warn=warn, max_uncompressed_bytes=limit)
+    rec = readers[fmt](path, warn=warn, max_uncompressed_bytes=limit)
+    return attach_truth_beside(path, rec) if truth_beside else rec
 
 
 __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",

@@ -30,8 +30,8 @@ Values are Android ``SensorEvent.values`` in the device frame: m/s^2 with
 gravity (median ``|a|`` 9.2-9.5 on the real walks), rad/s and uT; copied
 (float32 widened to float64).  The file name's height band and the
 dataset's step counts and walk windows are annotations of the dataset, not
-of the file: the benchmark reader (``benchmarks.datasets.brajdic_harle``)
-adds them.
+of the file: :func:`core.importers.load_recording` adds the step count beside the trace
+(:mod:`core.importers.beside`), the benchmark reader (``benchmarks.datasets.brajdic_harle``) the rest.
 
 Streams: ``acc``, ``gyro``, ``mag``.
 """

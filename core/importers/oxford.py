@@ -24,7 +24,8 @@ device, Android's hardware step counter): they are part of the file, so
 they come as the ``step_counts`` stream (columns ``app``,
 ``ground_truth``, ``android_hw``).  The optimisation folders keep their
 ground truth in a separate ``stepcounter.csv`` (foot switches): that is an
-annotation, read by the benchmark (``benchmarks.datasets.oxford``), not here.
+annotation, not part of the file; :func:`core.importers.load_recording` adds it
+(:mod:`core.importers.beside`).
 
 A folder is read through its ``accelerometer.csv`` (``.gz`` allowed), and the
 folder's ``metadata.txt`` (``accelerometer : MPU6515 Accelerometer``), when
