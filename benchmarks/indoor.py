@@ -1,12 +1,15 @@
 """Floor-plan particle filter and landmark fixes benchmark (issue #16): ``python -m benchmarks.indoor``.
 
-Writes ``benchmarks/indoor_results.json`` and ``benchmarks/INDOOR_RESULTS.md`` (a section of RESULTS.md).
+Writes ``benchmarks/indoor_results.json`` and ``benchmarks/INDOOR_RESULTS.md`` (a section of RESULTS.md);
+``--data``, ``--only``, ``--no-write`` as every benchmark (:mod:`benchmarks.options`: a subset or
+``--no-write`` writes under ``out/benchmarks/indoor/``).  A recording that fails is a row with its error,
+counted as +inf in the medians and listed.
 
 Inputs: the steps of our pipeline, built exactly as the main benchmark builds
 it (:func:`benchmarks.run.make_pipeline`: the site's declination), on
 
-* **Microsoft site2/F3** (:mod:`benchmarks.datasets.ms_indoor`) with the
-  floor's map (:func:`core.indoor.read_ms_floor`): the filter starts at the
+* **Microsoft, every floor with a map** (``site*/F*/floor_info.json`` and ``geojson_map.json``; in our
+  data site2/F3; :mod:`benchmarks.datasets.ms_indoor`) with the floor's map (:func:`core.indoor.read_ms_floor`): the filter starts at the
   first waypoint (sd ``START_SD_M``) at its time and knows nothing else;
   scored on every later waypoint.  Beside it: the same steps without the
   particle filter (our PDR track, the main benchmark's number) and the
@@ -47,14 +50,14 @@ import numpy as np
 
 from benchmarks import splits as S
 from benchmarks.datasets import ipin2023, ms_indoor
-from benchmarks.datasets.base import default_data_root
+from benchmarks.options import (add_common, data_root, failed_row, failures_line, median_inf, only_keys,
+                                result_path, selected)
 from core.indoor import ParticleConfig, StepArrays, map_match, read_ms_floor
 from core.metrics import landmark_errors
 
 HERE = Path(__file__).resolve().parent
 RESULTS_JSON = HERE / "indoor_results.json"
 RESULTS_MD = HERE / "INDOOR_RESULTS.md"
-MS_FLOOR = "ms_indoor_location_2020/site2/F3"
 #: sd of the known start (m): the surveyor's first waypoint
 START_SD_M = 0.3
 #: sd of a landmark fix (m): the walker steps on a surveyed point
@@ -76,8 +79,11 @@ def _steps_of(args):
 
     mod = {"ms_indoor": ms_indoor, "ipin2023": ipin2023}[module]
     trial = mod.trials(Path(root))[index]
-    rec = trial.open()
-    tr = make_pipeline(trial).run(rec).track
+    try:
+        rec = trial.open()
+        tr = make_pipeline(trial).run(rec).track
+    except Exception as e:  # counted and listed, never dropped (benchmarks.options)
+        return {"dataset": trial.dataset, **failed_row(trial.name, S.trial_split(trial), e), "info": dict(trial.info)}
     lm = trial.landmarks
     return {"dataset": trial.dataset, "name": trial.name, "split": S.trial_split(trial), "info": dict(trial.info),
             "t_ns": tr.t_ns, "length_m": tr.length_m, "heading_rad": tr.heading_rad, "east_m": tr.east_m,
@@ -85,11 +91,37 @@ def _steps_of(args):
             "lm_t_ns": lm.t_ns, "lm_east_m": lm.east_m, "lm_north_m": lm.north_m}
 
 
+def ms_floor_folder(root: Path, info: dict) -> Path:
+    """A Microsoft trace's floor folder (``site*/F*``), where its map is."""
+    return Path(root) / ms_indoor.NAME / info["site"] / info["floor"]
+
+
+def has_map(folder: Path) -> bool:
+    return any(Path(folder).glob("floor_info.json*")) and any(Path(folder).glob("geojson_map.json*"))
+
+
+def floor_plans(root: Path, walks) -> dict:
+    """``{"site/floor": FloorPlan}`` of every Microsoft floor the walks are on that has a map."""
+    out = {}
+    for w in walks:
+        if w["dataset"] == ms_indoor.NAME:
+            key = w["info"]["site"] + "/" + w["info"]["floor"]
+            if key not in out and has_map(ms_floor_folder(root, w["info"])):
+                out[key] = read_ms_floor(ms_floor_folder(root, w["info"]))
+    return out
+
+
+def plan_of(plans: dict, w):
+    return plans.get(w["info"]["site"] + "/" + w["info"]["floor"]) if w["dataset"] == ms_indoor.NAME else None
+
+
 #: the array fields of a walk (the rest is plain data)
 _ARRAYS = ("t_ns", "length_m", "heading_rad", "east_m", "north_m", "lm_t_ns", "lm_east_m", "lm_north_m")
 
 
-def load_walks(root: Path, jobs: int = 2, cache: Path | None = None, log=sys.stderr) -> list[dict]:
+def load_walks(root: Path, jobs: int = 2, cache: Path | None = None, log=sys.stderr, only=None) -> list[dict]:
+    """Our pipeline's steps on every Microsoft trace on a floor with a map and every IPIN route (``only``:
+    :func:`benchmarks.options.selected` keys); a recording that fails is a row with ``"failed"``."""
     if cache is not None and Path(cache).exists():  # JSON, never a pickle (tests/test_no_unsafe_loading.py)
         with open(cache, encoding="utf-8") as fh:
             return [{k: (np.asarray(v, dtype=np.int64 if k.endswith("t_ns") else float) if k in _ARRAYS else v)
@@ -97,15 +129,17 @@ def load_walks(root: Path, jobs: int = 2, cache: Path | None = None, log=sys.std
     tasks = []
     if ms_indoor.available(root):
         tasks += [("ms_indoor", str(root), i) for i, t in enumerate(ms_indoor.trials(root))
-                  if t.info["site"] + "/" + t.info["floor"] == "site2/F3"]
+                  if has_map(ms_floor_folder(root, t.info)) and selected(only, t.name, t.dataset)]
     if ipin2023.available(root):
-        tasks += [("ipin2023", str(root), i) for i in range(len(ipin2023.trials(root)))]
+        tasks += [("ipin2023", str(root), i) for i, t in enumerate(ipin2023.trials(root))
+                  if selected(only, t.name, t.dataset)]
     t0 = time.perf_counter()
     out = []
     with ProcessPoolExecutor(max_workers=max(1, jobs)) as ex:
         for k, w in enumerate(ex.map(_steps_of, tasks), start=1):
             out.append(w)
-            print(f"[{k}/{len(tasks)}] {w['dataset']}/{w['name']}: {len(w['t_ns'])} steps "
+            print(f"[{k}/{len(tasks)}] {w['dataset']}/{w['name']}: "
+                  + (f"FAILED {w['failed']} " if w.get("failed") else f"{len(w['t_ns'])} steps ") +
                   f"({time.perf_counter() - t0:.0f} s)", file=log, flush=True)
     if cache is not None:
         with open(cache, "w", encoding="utf-8") as fh:
@@ -191,8 +225,25 @@ def eval_ipin(w, config: ParticleConfig, fix_sd_m: float = FIX_SD_M, seed: int =
 
 
 def _med(v) -> float:
-    v = [x for x in v if x is not None and math.isfinite(x)]
-    return float(np.median(v)) if v else math.nan
+    """The median, a failed recording (None, nan) counted as +inf (benchmarks.options.median_inf)."""
+    return median_inf(v)
+
+
+def _failed_ms(w) -> dict:
+    return {"name": w["name"], "split": w["split"], "failed": w.get("failed") or "fewer than 2 landmarks",
+            "floor": w["info"].get("site", "") + "/" + w["info"].get("floor", ""), "n_landmarks": 0, "n_steps": 0,
+            "pdr_mean_m": math.inf, "nomap_mean_m": math.inf, "map_mean_m": math.inf, "map_smooth_mean_m": math.inf,
+            "map_smooth_outside": 0, "pdr_errors_m": [math.inf], "map_errors_m": [math.inf], "map_outside": 0,
+            "pdr_outside": 0, "bias_deg": math.nan, "ms_per_step": 0.0, "spread_median_m": math.nan,
+            "diagnostics": {"recoveries": 0, "fix_resets": 0}}
+
+
+def _failed_ipin(w) -> dict:
+    return {"name": w["name"], "split": w["split"], "failed": w.get("failed") or "fewer than 2 landmarks",
+            "n_landmarks": 0, "n_scored": 0, "n_fixes": 0, "n_steps": 0, "pdr_mean_m": math.inf,
+            "nofix_mean_m": math.inf, "fix_mean_m": math.inf, "fix_smooth_mean_m": math.inf,
+            "fix_errors_m": [math.inf], "pdr_errors_m": [math.inf], "bias_deg": math.nan, "ms_per_step": 0.0,
+            "diagnostics": {"recoveries": 0, "fix_resets": 0}}
 
 
 def summarise(ms_rows, ipin_rows, split: str) -> dict:
@@ -214,6 +265,8 @@ def summarise(ms_rows, ipin_rows, split: str) -> dict:
             "map_ms_per_step": float(np.sum([r["ms_per_step"] * r["n_steps"] for r in ms])
                                      / max(1, sum(r["n_steps"] for r in ms))),
             "ms_recoveries": int(sum(r["diagnostics"]["recoveries"] for r in ms)),
+            "ms_failed": sum(1 for r in ms if r.get("failed")),
+            "ms_floors": sorted({r["floor"] for r in ms if r.get("floor")}),
         })
     if ip:
         h.update({
@@ -222,30 +275,50 @@ def summarise(ms_rows, ipin_rows, split: str) -> dict:
             "ipin_landmark_median_m": _med([r["pdr_mean_m"] for r in ip]),
             "ipin_fix_landmark_pooled_median_m": _med([e for r in ip for e in r["fix_errors_m"]]),
             "ipin_fix_smoothed_landmark_median_m": _med([r["fix_smooth_mean_m"] for r in ip]),
-            "ipin_recordings": len(ip),
+            "ipin_recordings": len(ip), "ipin_failed": sum(1 for r in ip if r.get("failed")),
             "ipin_ms_per_step": float(np.sum([r["ms_per_step"] * r["n_steps"] for r in ip])
                                       / max(1, sum(r["n_steps"] for r in ip))),
         })
     return h
 
 
-def evaluate(walks, plan, config: ParticleConfig, split: str | None = None, fix_sd_m: float = FIX_SD_M,
+def _ok(w) -> bool:
+    return not w.get("failed") and len(w["lm_t_ns"]) >= 2
+
+
+def evaluate(walks, plans: dict, config: ParticleConfig, split: str | None = None, fix_sd_m: float = FIX_SD_M,
              seed: int = SEED):
+    """Rows of every walk of ``split``; a walk that failed (or whose filter fails) is a row with
+    ``"failed"`` and +inf errors: counted in the medians, listed in the report."""
     ws = [w for w in walks if split is None or w["split"] == split]
-    ms_rows = [eval_ms(w, plan, config, seed) for w in ws if w["dataset"] == ms_indoor.NAME and len(w["lm_t_ns"]) >= 2]
-    ip_rows = [eval_ipin(w, config, fix_sd_m, seed) for w in ws
-               if w["dataset"] == ipin2023.NAME and len(w["lm_t_ns"]) >= 2]
+    ms_rows, ip_rows = [], []
+    for w in ws:
+        if w["dataset"] == ms_indoor.NAME and plan_of(plans, w) is not None:
+            try:
+                row = eval_ms(w, plan_of(plans, w), config, seed) if _ok(w) else _failed_ms(w)
+            except Exception as e:
+                row = _failed_ms({**w, "failed": failed_row(w["name"], w["split"], e)["failed"]})
+            row["floor"] = w["info"]["site"] + "/" + w["info"]["floor"]
+            ms_rows.append(row)
+        elif w["dataset"] == ipin2023.NAME:
+            try:
+                ip_rows.append(eval_ipin(w, config, fix_sd_m, seed) if _ok(w) else _failed_ipin(w))
+            except Exception as e:
+                ip_rows.append(_failed_ipin({**w, "failed": failed_row(w["name"], w["split"], e)["failed"]}))
     return ms_rows, ip_rows
 
 
-def sweep(walks, plan, config: ParticleConfig, split: str) -> list[dict]:
-    """Particle count against accuracy and time: the filter with the map on the Microsoft traces of ``split``."""
+def sweep(walks, plans: dict, config: ParticleConfig, split: str) -> list[dict]:
+    """Particle count against accuracy and time: the filter with the map on the Microsoft traces of ``split``
+    (the failed ones are the evaluation's rows, not repeated here)."""
     out = []
-    ws = [w for w in walks if w["dataset"] == ms_indoor.NAME and w["split"] == split]
+    ws = [w for w in walks if w["dataset"] == ms_indoor.NAME and w["split"] == split and _ok(w)
+          and plan_of(plans, w) is not None]
     for n in SWEEP:
         c = dataclasses.replace(config, n_particles=n)
         live, smooth, outside, steps, t_ms, rec = [], [], 0, 0, 0.0, 0
         for w in ws:
+            plan = plan_of(plans, w)
             r, ms = _filter(w, plan, c)
             live.append(float(np.mean(_pf_errors(w, r))))
             smooth.append(float(np.mean(_pf_errors(w, r, True))))
@@ -264,11 +337,11 @@ SEED_HEADLINES = ("ms_map_landmark_median_m", "ms_map_smoothed_landmark_median_m
                   "ipin_fix_smoothed_landmark_median_m")
 
 
-def seed_spread(walks, plan, config: ParticleConfig, seeds=range(1, 5)) -> dict:
+def seed_spread(walks, plans, config: ParticleConfig, seeds=range(1, 5)) -> dict:
     """Min and max of the headlines over other filter seeds, per split."""
     out = {}
     for sp in S.SPLITS:
-        hs = [summarise(*evaluate(walks, plan, config, split=sp, seed=sd), sp) for sd in seeds]
+        hs = [summarise(*evaluate(walks, plans, config, split=sp, seed=sd), sp) for sd in seeds]
         out[sp] = {k: [min(h[k] for h in hs), max(h[k] for h in hs)] for k in SEED_HEADLINES if all(k in h for h in hs)}
     return out
 
@@ -337,13 +410,13 @@ TUNE_GRID = {
 TUNE_SEEDS = (0, 1)
 
 
-def tune(walks, plan, log=sys.stderr) -> ParticleConfig:
+def tune(walks, plans, log=sys.stderr) -> ParticleConfig:
     """Coordinate descent over :data:`TUNE_GRID` on the tuning split; the score is the sum of the two
     live-filter headlines, averaged over :data:`TUNE_SEEDS`."""
     tw = [w for w in walks if w["split"] == S.TUNING]
 
     def score(c):
-        hs = [summarise(*evaluate(tw, plan, c, seed=sd), S.TUNING) for sd in TUNE_SEEDS]
+        hs = [summarise(*evaluate(tw, plans, c, seed=sd), S.TUNING) for sd in TUNE_SEEDS]
         ms = float(np.mean([h["ms_map_landmark_median_m"] for h in hs]))
         ip = float(np.mean([h["ipin_fix_landmark_median_m"] for h in hs]))
         return ms + ip, ms, ip
@@ -369,6 +442,8 @@ def tune(walks, plan, log=sys.stderr) -> ParticleConfig:
 
 
 def _f(v, nd=2) -> str:
+    if isinstance(v, (list, tuple, str)):
+        return ", ".join(map(str, v)) if not isinstance(v, str) else v
     return "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{nd}f}"
 
 
@@ -394,10 +469,11 @@ def write_md(out: dict, path: Path) -> None:
         L.append(f"| `{k}` | {_f(hr.get(k), 3)} | {_f(ht.get(k), 3)} |")
     ms_rep = [r for r in out["ms"] if r["split"] == S.REPORT]
     ip_rep = [r for r in out["ipin"] if r["split"] == S.REPORT]
-    L += _table("Microsoft site2/F3 with its map, only the start known (report split)",
+    L += _table("Microsoft, every floor with a map (" + ", ".join(hr.get("ms_floors", [])) + "), only the start "
+                "known (report split)",
                 ["trace", "waypoints", "steps", "PDR mean (m)", "filter, no map (m)", "filter + map (m)",
                  "smoothed + map (m)", "outside (PDR / map)", "bias (deg)", "recoveries"],
-                [[r["name"].split("/")[-1], r["n_landmarks"], r["n_steps"], _f(r["pdr_mean_m"]),
+                [[r["name"].split("/", 2)[-1] if not r.get("failed") else f"{r['name']} (failed)", r["n_landmarks"], r["n_steps"], _f(r["pdr_mean_m"]),
                   _f(r["nomap_mean_m"]), _f(r["map_mean_m"]), _f(r["map_smooth_mean_m"]),
                   f"{r['pdr_outside']} / {r['map_outside']}", _f(r["bias_deg"], 1), r["diagnostics"]["recoveries"]]
                  for r in ms_rep])
@@ -429,6 +505,9 @@ def write_md(out: dict, path: Path) -> None:
               "georeference, lie this far from the orange dots the image draws for them: "
               + ", ".join(f"{r['point']} {r['to_dot_m']:.2f} m" for r in im["references"])
               + f" (largest {im['max_to_dot_m']:.2f} m; the dots are about 0.3 m wide)."]
+    if out.get("failed"):
+        L += _table("Recordings that failed (counted as +inf in the medians)", ["recording", "split", "error"],
+                    [[r["name"], r["split"], r["failed"]] for r in out["failed"]])
     L += ["", *out.get("notes", [])]
     Path(path).write_text("\n".join(L) + "\n")
 
@@ -451,7 +530,15 @@ def targets(h: dict) -> list[dict]:
 
 
 def notes(out: dict) -> list[str]:
-    """What the numbers say, in words (targets missed are said first)."""
+    """What the numbers say, in words (targets missed are said first); a subset run (``--only``) without both
+    datasets on both splits has no notes."""
+    try:
+        return _notes(out)
+    except (KeyError, TypeError, ValueError):
+        return ["### What the numbers say", "", "* A subset run: the notes need both datasets on both splits."]
+
+
+def _notes(out: dict) -> list[str]:
     hr, ht = out["headlines"][S.REPORT], out["headlines"][S.TUNING]
     sp = out.get("seed_spread", {})
 
@@ -501,26 +588,33 @@ def notes(out: dict) -> list[str]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.indoor", description=__doc__.split("\n")[0])
-    ap.add_argument("--data", type=Path, default=default_data_root())
+    add_common(ap, what="recording names (site2/F3/5dd3..., IPIN2023_T3_...) or datasets")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--cache", type=Path, default=None, help="JSON cache of the pipeline's steps (read if present)")
     ap.add_argument("--tune", action="store_true", help="search the filter's settings on the tuning split first")
-    ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--no-sweep", action="store_true", help="skip the particle-count sweep and the seed spread")
     a = ap.parse_args(argv)
-    walks = load_walks(a.data, a.jobs, a.cache)
-    plan = read_ms_floor(a.data / MS_FLOOR)
-    config = tune(walks, plan) if a.tune else ParticleConfig()
-    ms_rows, ip_rows = evaluate(walks, plan, config)
+    root = data_root(a)
+    walks = load_walks(root, a.jobs, a.cache, only=only_keys(a))
+    plans = floor_plans(root, walks)
+    print(f"indoor: {len(walks)} recordings, maps of {', '.join(sorted(plans)) or 'no floor'}", file=sys.stderr)
+    config = tune(walks, plans) if a.tune else ParticleConfig()
+    ms_rows, ip_rows = evaluate(walks, plans, config)
     heads = {sp: summarise(ms_rows, ip_rows, sp) for sp in S.SPLITS}
     out = {"config": dataclasses.asdict(config), "headlines": heads, "targets": targets(heads[S.REPORT]),
-           "ms": ms_rows, "ipin": ip_rows, "sweep": sweep(walks, plan, config, S.REPORT),
-           "sweep_tuning": sweep(walks, plan, config, S.TUNING), "seed_spread": seed_spread(walks, plan, config),
-           "ipin_map": ipin_map_check(a.data)}
+           "ms": ms_rows, "ipin": ip_rows,
+           "sweep": [] if a.no_sweep else sweep(walks, plans, config, S.REPORT),
+           "sweep_tuning": [] if a.no_sweep else sweep(walks, plans, config, S.TUNING),
+           "seed_spread": {} if a.no_sweep else seed_spread(walks, plans, config),
+           "ipin_map": ipin_map_check(root), "failed": [r for r in ms_rows + ip_rows if r.get("failed")]}
     out["notes"] = notes(out)
-    print(json.dumps(heads, indent=1))
-    if not a.no_write:
-        RESULTS_JSON.write_text(json.dumps(out, indent=1, default=float) + "\n")
-        write_md(out, RESULTS_MD)
+    print(json.dumps(heads, indent=1, default=float))
+    if out["failed"]:
+        print("indoor: " + failures_line(out["failed"]), file=sys.stderr)
+    res_json, res_md = result_path(a, RESULTS_JSON, "indoor"), result_path(a, RESULTS_MD, "indoor")
+    res_json.write_text(json.dumps(out, indent=1, default=float) + "\n")
+    write_md(out, res_md)
+    print(f"indoor: wrote {res_md}", file=sys.stderr)
     return 0
 
 

@@ -1,0 +1,95 @@
+"""The options every benchmark module takes the same way (issue #29): ``--data``, ``--only``, ``--no-write``.
+
+* ``--data DIR`` (alias ``--data-root``): the data root, laid out as ``../shared/data`` (default: that folder
+  beside the checkout).  Recordings the split declarations (:mod:`benchmarks.splits`) do not name are report.
+* ``--only NAMES``: comma-separated (or repeated) parts of recording names, or dataset names: only the
+  recordings whose name (or dataset) contains one of them.  A subset never rewrites the committed results:
+  ``--only`` implies ``--no-write``.
+* ``--no-write``: nothing tracked by git is touched: the results files (and plots) go to
+  ``out/benchmarks/<module>/`` instead of ``benchmarks/``.
+
+A recording that fails is counted and listed in the results (:func:`failed_row`), never dropped from a
+median: its errors count as +inf (the company's rule).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import traceback
+from pathlib import Path
+
+from benchmarks.datasets.base import default_data_root
+
+REPO = Path(__file__).resolve().parent.parent
+HERE = REPO / "benchmarks"
+
+
+def add_common(ap: argparse.ArgumentParser, *, what: str = "recording names") -> None:
+    """Add ``--data``, ``--only`` and ``--no-write`` to ``ap``."""
+    ap.add_argument("--data", "--data-root", dest="data", type=Path, default=None,
+                    help="the data root, laid out as ../shared/data (default: that folder beside the checkout)")
+    ap.add_argument("--only", action="append", default=None, metavar="NAMES",
+                    help=f"comma-separated parts of {what} (repeatable): run that subset; implies --no-write")
+    ap.add_argument("--no-write", action="store_true",
+                    help="write the results under out/benchmarks/<module>/, touch nothing tracked by git")
+
+
+def data_root(args) -> Path:
+    return Path(args.data) if getattr(args, "data", None) else default_data_root()
+
+
+def only_keys(args) -> list[str] | None:
+    """The ``--only`` substrings, or None for everything."""
+    raw = getattr(args, "only", None)
+    if not raw:
+        return None
+    if isinstance(raw, str):
+        raw = [raw]
+    keys = [k.strip() for item in raw for k in str(item).split(",") if k.strip()]
+    return keys or None
+
+
+def selected(keys: list[str] | None, *names: str) -> bool:
+    """True when no ``--only`` was given or one of ``names`` contains one of its parts."""
+    return keys is None or any(k in str(n) for k in keys for n in names if n)
+
+
+def writes_committed(args) -> bool:
+    """Whether this run may rewrite the committed results (a full run without ``--no-write``)."""
+    return not getattr(args, "no_write", False) and only_keys(args) is None
+
+
+def out_dir(module: str) -> Path:
+    """``out/benchmarks/<module>/`` (created): where a ``--no-write`` or ``--only`` run writes."""
+    d = REPO / "out" / "benchmarks" / module
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+def result_path(args, committed: Path, module: str) -> Path:
+    """``committed`` for a full run, else the same file name under :func:`out_dir`."""
+    return Path(committed) if writes_committed(args) else out_dir(module) / Path(committed).name
+
+
+def failed_row(name: str, split: str, exc: BaseException, **extra) -> dict:
+    """A row for a recording that failed: named, counted, its error kept (one line and the last frame)."""
+    tb = traceback.extract_tb(exc.__traceback__)
+    where = f" ({Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
+    return {"name": name, "split": split, "failed": f"{type(exc).__name__}: {exc}{where}", **extra}
+
+
+def failures_line(rows) -> str:
+    """``"2 failed: a (ValueError: ...), b (...)"`` or ``""``."""
+    bad = [r for r in rows if r.get("failed")]
+    return "" if not bad else f"{len(bad)} failed: " + "; ".join(f"{r['name']} ({r['failed']})" for r in bad)
+
+
+def median_inf(values) -> float:
+    """The median with failures as +inf (never dropped); nan only when there is nothing."""
+    v = [math.inf if x is None or (isinstance(x, float) and math.isnan(x)) else float(x) for x in values]
+    if not v:
+        return math.nan
+    v.sort()
+    n = len(v)
+    return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2.0
