@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import splits as S
-from benchmarks.datasets.base import default_data_root
+from benchmarks.options import add_common, data_root, only_keys, result_path
 
 #: the datasets with heading truth: module name, folder name, headline prefix, kind of truth
 DATASETS = (("ipin2023", "ipin2023_track3", "ipin", "landmarks"),
@@ -198,12 +198,14 @@ def verdict(row: dict, product: dict, turns_on: bool = False) -> tuple[str, floa
 # the run
 
 
-def run_config(name: str, root: Path, split: str | None, peers=(), log=sys.stderr, peer_cache=None) -> list[dict]:
-    """Every recording of :data:`DATASETS` with configuration ``name``: the rows of :func:`benchmarks.run.run`."""
+def run_config(name: str, root: Path, split: str | None, peers=(), log=sys.stderr, peer_cache=None,
+               names=None) -> list[dict]:
+    """Every recording of :data:`DATASETS` with configuration ``name`` (``names``: only the recordings whose
+    name contains one of these): the rows of :func:`benchmarks.run.run`."""
     from benchmarks.run import run
 
     _, factory, only = CONFIGS[name]
-    info = run(root, only=list(only or [d[0] for d in DATASETS]), jobs=1, peer_names=tuple(peers), split=split,
+    info = run(root, only=list(only or [d[0] for d in DATASETS]) + list(names or ()), jobs=1, peer_names=tuple(peers), split=split,
                pipeline_kwargs_factory=factory, keep_tracks=False, log=log, engine="reference",
                peer_cache=peer_cache)
     return info["results"]
@@ -272,9 +274,8 @@ def main(argv=None) -> int:
     from benchmarks import peers as P
 
     ap = argparse.ArgumentParser(prog="python -m benchmarks.ablation", description=__doc__.split("\n")[0])
-    ap.add_argument("--data", type=Path, default=None, help="data root (default: ../shared/data beside the repo)")
-    ap.add_argument("--only", action="append", default=None, metavar="NAME", choices=list(CONFIGS),
-                    help="run only this configuration (repeatable; the product always runs)")
+    add_common(ap, what="configurations (" + ", ".join(CONFIGS) + "; the product always runs) and/or recording "
+               "names")
     ap.add_argument("--split", choices=S.SPLITS, default=None, help="one split only (default: both)")
     ap.add_argument("--gps", choices=("off",), default="off", help="the PDR alone (the only choice, see the docstring)")
     ap.add_argument("--peers", default="",
@@ -282,22 +283,25 @@ def main(argv=None) -> int:
                          f"{','.join(P.ALL_PEERS)}; default none: they cost more than all the rows, and their "
                          "numbers are the benchmark's, benchmarks/RESULTS.md)")
     ap.add_argument("--peer-cache", type=Path, default=None, help="the peers' stored attitudes (default: none)")
-    ap.add_argument("--no-write", action="store_true", help="print the table, write nothing")
-    ap.add_argument("--out", type=Path, default=None, help="file to write (default benchmarks/ABLATION_RESULTS.md)")
+    ap.add_argument("--out", type=Path, default=None, help="file to write (default benchmarks/ABLATION_RESULTS.md; "
+                    "with --no-write or --only out/benchmarks/ablation/)")
     args = ap.parse_args(argv)
-    root = args.data or default_data_root()
+    root = data_root(args)
+    keys = only_keys(args) or []
+    configs = [k for k in keys if k in CONFIGS]
+    rec_names = [k for k in keys if k not in CONFIGS] or None
     if not root.is_dir():
         print(f"benchmarks.ablation: no data folder at {root}", file=sys.stderr)
         return 2
-    names = [PRODUCT] + [n for n in CONFIGS if n != PRODUCT and (args.only is None or n in args.only)]
+    names = [PRODUCT] + [n for n in CONFIGS if n != PRODUCT and (not configs or n in configs)]
     splits = (args.split,) if args.split else S.SPLITS
     peers = tuple(P.available_peers(tuple(p for p in args.peers.split(",") if p)))
     summary, peer_rows, t0 = {}, {}, time.perf_counter()
-    out = args.out or Path(__file__).resolve().parent / "ABLATION_RESULTS.md"
+    out = args.out or result_path(args, Path(__file__).resolve().parent / "ABLATION_RESULTS.md", "ablation")
     for name in names:
         print(f"ablation: {name} ({CONFIGS[name][0]})", file=sys.stderr, flush=True)
         results = run_config(name, root, args.split, peers=peers if name == PRODUCT else (),
-                             log=sys.stderr, peer_cache=args.peer_cache)
+                             log=sys.stderr, peer_cache=args.peer_cache, names=rec_names)
         for split in splits:
             summary[(name, split)] = summarise(results, split)
             if name == PRODUCT:
@@ -307,11 +311,9 @@ def main(argv=None) -> int:
         body += (f"\nRun: `python -m benchmarks.ablation {' '.join(argv if argv is not None else sys.argv[1:])}`, "
                  f"reference engine, one process, PDR alone, {time.perf_counter() - t0:.0f} s"
                  f"{'' if name == names[-1] else ' so far (' + str(names.index(name) + 1) + ' of ' + str(len(names)) + ' rows)'}.\n")
-        if not args.no_write:  # after every row: a long run that is stopped keeps what it has
-            write_results(out, body)
+        write_results(out, body)  # after every row: a long run that is stopped keeps what it has
     print(body)
-    if not args.no_write:
-        print(f"ablation: wrote {out}", file=sys.stderr)
+    print(f"ablation: wrote {out}", file=sys.stderr)
     return 0
 
 

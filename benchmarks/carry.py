@@ -74,7 +74,8 @@ import numpy as np
 
 from benchmarks import metrics as M
 from benchmarks import splits as S
-from benchmarks.datasets.base import Trial, default_data_root
+from benchmarks.datasets.base import Trial
+from benchmarks.options import add_common, data_root, failed_row, failures_line, only_keys, result_path, selected
 from benchmarks.run import _in_window, make_pipeline
 from core.conventions import (ACC, CARRY_BAG, CARRY_HANDHELD, CARRY_MODES, CARRY_POCKET, CARRY_STILL,
                               CARRY_SWINGING, GYRO, MAG)
@@ -225,6 +226,7 @@ def _real_trials(module: str, root: str) -> list[Trial]:
 
 def _task(task) -> dict:
     kind = task[0]
+    trial = None
     try:
         if kind == SIM:
             _, placement, seed = task
@@ -233,25 +235,29 @@ def _task(task) -> dict:
         _, module, root, i = task
         trial = _real_trials(module, root)[i]
         return evaluate(trial, S.trial_split(trial))
-    except Exception as e:  # one bad recording must not stop the run
-        return {"task": list(map(str, task)), "error": f"{type(e).__name__}: {e}"}
+    except Exception as e:  # one bad recording must not stop the run: counted and listed (benchmarks.options)
+        name = trial.name if trial is not None else "/".join(map(str, task[1:]))
+        row = failed_row(name, S.trial_split(trial) if trial is not None and kind != SIM else "?", e)
+        return {"task": list(map(str, task)), "error": row["failed"], "name": name, "split": row["split"],
+                "dataset": trial.dataset if trial is not None and kind != SIM else str(task[1] if kind != SIM else SIM)}
 
 
 def tasks_for(root: Path, only=None, split: str | None = None, n_seeds: int | None = None) -> list[tuple]:
+    """``only``: :func:`benchmarks.options.only_keys` -- dataset names (sim, oxford, ...) or parts of
+    recording names."""
     out = []
     if only is None or SIM in only or "sim" in only:
         for sp in ((split,) if split else S.SPLITS):
             seeds = S.SIM_CARRY_SEEDS[sp][:n_seeds] if n_seeds else S.SIM_CARRY_SEEDS[sp]
             out += [(SIM, p, s) for s in seeds for p in SIM_PLACEMENTS]
     for module, name in REAL_DATASETS.items():
-        if only is not None and module not in only and name not in only:
-            continue
         mod = importlib.import_module(f"benchmarks.datasets.{module}")
         if not mod.available(root):
             continue
+        whole = selected(only, module, name)
         trials = _real_trials(module, str(root))
         out += [("real", module, str(root), i) for i, t in enumerate(trials)
-                if split is None or S.trial_split(t) == split]
+                if (split is None or S.trial_split(t) == split) and (whole or selected(only, t.name))]
     return out
 
 
@@ -324,7 +330,12 @@ def confusion(rows: list[dict], modes_key: str = "modes_s") -> dict:
 
 
 def summarize(results: list[dict]) -> dict:
+    """Per dataset and split; the recordings that failed are under ``"failed"`` (named, with their error)."""
     out = {}
+    bad = [r for r in results if "error" in r]
+    if bad:
+        out["failed"] = [{"name": r.get("name", "/".join(r["task"])), "split": r.get("split", "?"),
+                          "failed": r["error"]} for r in bad]
     for ds in [SIM] + list(REAL_DATASETS.values()):
         for sp in S.SPLITS:
             rs = _ok(results, ds, sp)
@@ -407,6 +418,10 @@ def markdown(summary: dict, meta: dict) -> str:
              "(carry detection and per-mode step gates). Splits as declared in `benchmarks/splits.py`: Oxford and "
              "Brajdic-Harle are report only; the placement -> mode mapping is declared in `benchmarks/carry.py`.",
              ""]
+    if summary.get("failed"):
+        lines += [f"**{len(summary['failed'])} recording(s) failed** (counted, not in the tables' means; a failure "
+                  "is +inf): " + "; ".join(f"{r['name']} ({r['split']}): {r['failed']}" for r in summary["failed"]),
+                  ""]
     for path, m in meta.get("merged", {}).items():
         lines += [f"Merged from an earlier run (`python -m benchmarks.carry {' '.join(m['argv'] or [])}`): "
                   f"{m['n']} recordings.", ""]
@@ -417,6 +432,8 @@ def markdown(summary: dict, meta: dict) -> str:
                   f"{tm['carry_on_us_per_event']:.1f} with it; the detector alone "
                   f"{tm['detector_us_per_sample']:.1f} us per grid sample.", ""]
     for key, s in summary.items():
+        if key == "failed":
+            continue
         ds, sp = key.split("/")
         lines += [f"### {ds}, {sp} split ({s['n']} recordings)", ""]
         variants = [v for v in ("before", "after", "after_acc_only") if f"{v}_mae_pct" in s["steps"][0]]
@@ -469,21 +486,18 @@ def _jsonable(x):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.carry", description=__doc__.split("\n")[0])
-    ap.add_argument("--data", type=Path, default=None)
+    add_common(ap, what="datasets (sim, oxford, brajdic_harle, ipol, ipin2023) or recording names")
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1))
-    ap.add_argument("--only", action="append", default=None,
-                    help="sim, oxford, brajdic_harle, ipol, ipin2023 (repeatable)")
     ap.add_argument("--split", choices=S.SPLITS, default=None)
     ap.add_argument("--seeds", type=int, default=None, help="only the first N simulator seeds of each split")
-    ap.add_argument("--no-write", action="store_true", help="write under out/benchmarks/ instead of benchmarks/")
     ap.add_argument("--no-timing", action="store_true")
     ap.add_argument("--merge", type=Path, action="append", default=None, metavar="JSON",
                     help="add the results of an earlier run's carry_results.json for the (dataset, split) pairs "
                          "this run does not cover (the report says which came from where)")
     args = ap.parse_args(argv)
-    root = args.data or default_data_root()
+    root = data_root(args)
     t0 = time.perf_counter()
-    results = run(root, only=args.only, split=args.split, n_seeds=args.seeds, jobs=args.jobs)
+    results = run(root, only=only_keys(args), split=args.split, n_seeds=args.seeds, jobs=args.jobs)
     meta = {"argv": sys.argv[1:] if argv is None else list(argv), "n_recordings": len(results),
             "wall_s": time.perf_counter() - t0}
     if args.merge:
@@ -499,12 +513,12 @@ def main(argv=None) -> int:
         meta["timing"] = timing()
     summary = summarize(results)
     here = Path(__file__).resolve().parent
-    out_dir = here.parent / "out" / "benchmarks" if args.no_write else here
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "carry_results.json").write_text(json.dumps(_jsonable(
-        {"meta": meta, "summary": summary, "results": results}), indent=1))
-    (out_dir / "CARRY_RESULTS.md").write_text(markdown(summary, meta))
-    print(f"carry benchmark: wrote {out_dir / 'CARRY_RESULTS.md'}", file=sys.stderr)
+    res_json, res_md = result_path(args, here / "carry_results.json", "carry"), result_path(args, here / "CARRY_RESULTS.md", "carry")
+    res_json.write_text(json.dumps(_jsonable({"meta": meta, "summary": summary, "results": results}), indent=1))
+    res_md.write_text(markdown(summary, meta))
+    if summary.get("failed"):
+        print("carry benchmark: " + failures_line(summary["failed"]), file=sys.stderr)
+    print(f"carry benchmark: wrote {res_md}", file=sys.stderr)
     return 0
 
 

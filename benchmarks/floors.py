@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.datasets.base import default_data_root
+from benchmarks.options import add_common, data_root, only_keys, out_dir, selected, writes_committed
 from benchmarks.splits import REPORT, TUNING, ipin_split
 from core.floors import FloorEstimator, FloorSettings
 from desktop.simulator import BarometerModel, floor_profile, simulate_pressure
@@ -117,9 +117,13 @@ def _real_recordings(root: Path):
                 yield folder, d.name, REPORT, (lambda d=d: load_recording(d, warn=False))
 
 
-def run_real(root: Path, settings: FloorSettings | None = None) -> list[dict]:
+def run_real(root: Path, settings: FloorSettings | None = None, keys=None) -> list[dict]:
+    """Every recording with a barometer (``keys``: :func:`benchmarks.options.selected`); one that cannot be
+    read is a row with its ``error``, listed in the report."""
     rows = []
     for dataset, name, split, load in _real_recordings(root):
+        if not selected(keys, dataset, name):
+            continue
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:
@@ -151,14 +155,16 @@ def run_real(root: Path, settings: FloorSettings | None = None) -> list[dict]:
 
 def headlines(out) -> dict:
     ipin = [r for r in out["real"] if r["dataset"] == "ipin2023_track3" and "error" not in r]
+    sim = out["sim"].get(REPORT, {})  # a subset (--only) may have no simulator part
     return {"split": REPORT,
-            "sim_floor_sequence_correct_pct": out["sim"][REPORT]["floor_sequence_correct_pct"],
-            "sim_kinds_correct_pct": out["sim"][REPORT]["kinds_correct_pct"],
-            "sim_flat_hours_with_a_false_change": out["sim"][REPORT]["flat_hours_with_a_false_change"],
+            "sim_floor_sequence_correct_pct": sim.get("floor_sequence_correct_pct"),
+            "sim_kinds_correct_pct": sim.get("kinds_correct_pct"),
+            "sim_flat_hours_with_a_false_change": sim.get("flat_hours_with_a_false_change"),
             "ipin_report_recordings_with_a_floor_change": sum(1 for r in ipin if r["split"] == REPORT
                                                               and r["floor_changes"]),
             "ipin_tuning_recordings_with_a_floor_change": sum(1 for r in ipin if r["split"] == TUNING
-                                                              and r["floor_changes"])}
+                                                              and r["floor_changes"]),
+            "recordings_failed": sum(1 for r in out["real"] if "error" in r)}
 
 
 def _f(x, nd=1):
@@ -220,30 +226,46 @@ def write_markdown(out, path=RESULTS_MD) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.floors", description=__doc__.split("\n")[0])
-    ap.add_argument("--data", type=Path, default=None)
+    add_common(ap, what="sim or recording names (T05r01, babur_walking) or datasets")
     ap.add_argument("--write-results", action="store_true",
-                    help="write floors_results.json, FLOORS_RESULTS.md and fold it into RESULTS.md")
+                    help="rewrite the committed floors_results.json, FLOORS_RESULTS.md and fold it into RESULTS.md "
+                         "(a full run only; without it the results go to out/benchmarks/floors/)")
     args = ap.parse_args(argv)
-    root = args.data or default_data_root()
+    if args.write_results and not writes_committed(args):
+        ap.error("--write-results is for a full run: not with --only or --no-write")
+    root = data_root(args)
+    keys = only_keys(args)
     t0 = time.perf_counter()
     out = {"sim": {}, "real": []}
-    for split, seeds in SIM_SEEDS.items():
+    for split, seeds in SIM_SEEDS.items() if selected(keys, "sim") else ():
         rows = run_sim(seeds)
         out["sim"][split] = summarise_sim(rows)
         out["sim"][split]["rows"] = rows
         print(f"simulator {split}: {out['sim'][split]['floor_sequence_correct_pct']:.0f} % sequences right",
               file=sys.stderr)
-    if root.is_dir():
-        out["real"] = run_real(root)
+    if root.is_dir() and keys != ["sim"]:
+        out["real"] = run_real(root, keys=keys)
     out["headlines"] = headlines(out)
     print(json.dumps(out["headlines"], indent=1))
     print(f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
+    bad = [r for r in out["real"] if r.get("error")]
+    if bad:
+        print(f"floors: {len(bad)} failed: " + "; ".join(f"{r['dataset']}/{r['recording']} ({r['error']})"
+                                                          for r in bad), file=sys.stderr)
     if args.write_results:
         RESULTS_JSON.write_text(json.dumps(out, indent=1, default=float) + "\n")
         write_markdown(out)
         from benchmarks.report import refresh_sections
 
         refresh_sections()
+    else:
+        d = out_dir("floors")
+        (d / RESULTS_JSON.name).write_text(json.dumps(out, indent=1, default=float) + "\n")
+        try:
+            write_markdown(out, d / RESULTS_MD.name)
+            print(f"floors: wrote {d / RESULTS_MD.name}", file=sys.stderr)
+        except (KeyError, TypeError, ValueError, ZeroDivisionError):  # a subset without the simulator's part
+            print(f"floors: wrote {d / RESULTS_JSON.name}", file=sys.stderr)
     return 0
 
 

@@ -46,7 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.datasets.base import default_data_root
+from benchmarks.options import (add_common, data_root, failed_row, failures_line, failures_markdown, only_keys,
+                                out_dir, result_path, selected, writes_committed)
 from benchmarks.splits import REPORT, SIM_GPS_SEEDS, TUNING
 from core.conventions import GPS
 from core.gnss.ekf import sigma_max_m
@@ -199,36 +200,53 @@ def open_walk(ds: str, folder: Path):
     return rec, res, walk
 
 
-def real_walks(root: Path, only: tuple | None = None, plots: bool = False) -> list[dict]:
+def real_walks(root: Path, only: tuple | None = None, plots: bool = False, keys=None, failed=None) -> list[dict]:
+    """The outage runs on every real walk (``keys``: :func:`benchmarks.options.selected`); a walk that
+    fails is appended to ``failed`` (a list) as a named row, or raises when ``failed`` is None."""
     out = []
     for ds, folder in real_folders(root, only):
-        opened = open_walk(ds, folder)
-        if opened is None:
+        if not selected(keys, ds, folder.name):
             continue
-        rec, res, walk = opened
-        t0 = rec.t0_ns
-        start, end = walk["walking_from_s"], walk["duration_s"]
-        for a, length in windows(start, end):
-            for v in VARIANTS:
-                fu, fr = fuse_outage(res.steps, rec.streams[GPS], t0, a, length, v)
-                if not fr.outages:
-                    continue
-                o = fr.outages[0].as_dict()
-                o.update(variant=v)
-                walk["outages"].append(o)
-        if plots and ds == REAL[0][0] and windows(start, end, lengths=(180,)):
-            a, length = windows(start, end, lengths=(180,))[0]
-            _, fr = fuse_outage(res.steps, rec.streams[GPS], t0, a, length, "ekf")
-            PLOTS.mkdir(exist_ok=True)
-            plot_outage(PLOTS / "gnss_eth_outage.png", f"ETH walk (report split): 3-minute outage from {a:.0f} s",
-                        fr, rec.streams[GPS], (t0 + int(a * 1e9), t0 + int((a + length) * 1e9)))
-        fu, fr = fuse_outage(res.steps, rec.streams[GPS], t0, 1e9, 1.0, "ekf")  # no outage: what was learnt
-        walk["learnt"] = fr.counters["training"]
-        walk["position_nis_mean"] = fr.counters["position_nis_mean"]
-        walk["heading_residuals"] = heading_residuals(fu)
-        out.append(walk)
-        print(f"  {ds}/{folder.name}: {len(walk['outages'])} outage runs", file=sys.stderr)
+        try:
+            walk = _real_walk(ds, folder, plots)
+        except Exception as e:
+            if failed is None:
+                raise
+            failed.append(failed_row(f"{ds}/{folder.name}", REPORT, e))
+            print(f"  {ds}/{folder.name}: FAILED {failed[-1]['failed']}", file=sys.stderr)
+            continue
+        if walk is not None:
+            out.append(walk)
     return out
+
+
+def _real_walk(ds: str, folder: Path, plots: bool) -> dict | None:
+    opened = open_walk(ds, folder)
+    if opened is None:
+        return None
+    rec, res, walk = opened
+    t0 = rec.t0_ns
+    start, end = walk["walking_from_s"], walk["duration_s"]
+    for a, length in windows(start, end):
+        for v in VARIANTS:
+            fu, fr = fuse_outage(res.steps, rec.streams[GPS], t0, a, length, v)
+            if not fr.outages:
+                continue
+            o = fr.outages[0].as_dict()
+            o.update(variant=v)
+            walk["outages"].append(o)
+    if plots and ds == REAL[0][0] and windows(start, end, lengths=(180,)):
+        a, length = windows(start, end, lengths=(180,))[0]
+        _, fr = fuse_outage(res.steps, rec.streams[GPS], t0, a, length, "ekf")
+        PLOTS.mkdir(parents=True, exist_ok=True)
+        plot_outage(PLOTS / "gnss_eth_outage.png", f"ETH walk (report split): 3-minute outage from {a:.0f} s",
+                    fr, rec.streams[GPS], (t0 + int(a * 1e9), t0 + int((a + length) * 1e9)))
+    fu, fr = fuse_outage(res.steps, rec.streams[GPS], t0, 1e9, 1.0, "ekf")  # no outage: what was learnt
+    walk["learnt"] = fr.counters["training"]
+    walk["position_nis_mean"] = fr.counters["position_nis_mean"]
+    walk["heading_residuals"] = heading_residuals(fu)
+    print(f"  {ds}/{folder.name}: {len(walk['outages'])} outage runs", file=sys.stderr)
+    return walk
 
 
 def heading_residuals(fu, skip: int = 5) -> dict:
@@ -277,7 +295,7 @@ def sim_walks(seeds, minutes: float = 15.0, start_s: float = 360.0, length_s: fl
             walked = sum(s.length_m for s in inside)
             sig = sigma_max_m(last.cov_en_m2)
             if v == "ekf" and seed == plot_seed:
-                PLOTS.mkdir(exist_ok=True)
+                PLOTS.mkdir(parents=True, exist_ok=True)
                 tt = np.linspace(rec.t0_ns, rec.t1_ns, 4000).astype(np.int64)
                 pe, pn = truth.phone_position_at(tt)[:, 0], truth.phone_position_at(tt)[:, 1]
                 la, lo = enu_to_geodetic(pe, pn, truth.origin_lat_lon)
@@ -400,6 +418,7 @@ def markdown(data: dict) -> str:
     others = {k: v for k, v in h.items() if "sigma" in k}
     if others:
         lines += ["", "Uncertainty: " + "; ".join(f"`{k}` {v:.2f}" for k, v in sorted(others.items())) + "."]
+    lines += failures_markdown(data.get("failed", []))
     return "\n".join(lines) + "\n"
 
 
@@ -436,30 +455,44 @@ def quick_real(root: Path | None) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.gnss_eval", description=__doc__.split("\n")[0])
-    ap.add_argument("--data", type=Path, default=None)
+    add_common(ap, what="sim or real walk names (2023-03-17_15-50-47, babur_walking)")
     ap.add_argument("--sim-walks", type=int, default=20, help="simulated walks per split (default 20)")
     ap.add_argument("--split", choices=("report", "tuning", "both"), default="both", help="simulator split(s)")
     ap.add_argument("--no-real", action="store_true")
-    ap.add_argument("--out", type=Path, default=RESULTS_JSON)
+    ap.add_argument("--out", type=Path, default=None, help="the results JSON (default: gnss_results.json, under "
+                    "out/benchmarks/gnss_eval/ with --no-write or --only)")
     ap.add_argument("--markdown-only", action="store_true", help="rewrite GNSS_RESULTS.md from the JSON of a run")
     ap.add_argument("--keep-sim", action="store_true", help="reuse the simulator results of the last run (real walks only)")
     args = ap.parse_args(argv)
+    global PLOTS
+    keys = only_keys(args)
+    out_json = args.out or result_path(args, RESULTS_JSON, "gnss_eval")
+    out_md = result_path(args, RESULTS_MD, "gnss_eval")
+    if not writes_committed(args):
+        PLOTS = out_dir("gnss_eval") / "plots"
     if args.markdown_only:
-        RESULTS_MD.write_text(markdown(json.loads(args.out.read_text())))
+        out_md.write_text(markdown(json.loads(out_json.read_text())))
         return 0
-    root = args.data or default_data_root()
+    root = data_root(args)
     t = time.time()
-    real = [] if args.no_real or root is None or not Path(root).is_dir() else real_walks(Path(root), plots=True)
+    failed: list = []
+    real = ([] if args.no_real or not Path(root).is_dir() or keys == ["sim"] else
+            real_walks(Path(root), plots=True, keys=keys, failed=failed))
     splits = (TUNING, REPORT) if args.split == "both" else (args.split,)
     if args.keep_sim:
-        sim = json.loads(args.out.read_text())["sim"]
-    else:
+        sim = json.loads(RESULTS_JSON.read_text())["sim"]
+    elif selected(keys, "sim"):
         sim = {sp: sim_walks(SIM_GPS_SEEDS[sp][:args.sim_walks], plot_seed=SIM_GPS_SEEDS[REPORT][0])
                for sp in splits}
+    else:
+        sim = {}
     h = headlines(real, sim)
-    args.out.write_text(json.dumps({"headlines": h, "real": real, "sim": sim, "seconds": time.time() - t},
-                                   indent=1, default=float))
-    RESULTS_MD.write_text(markdown(json.loads(args.out.read_text())))
+    out_json.write_text(json.dumps({"headlines": h, "real": real, "sim": sim, "failed": failed,
+                                    "seconds": time.time() - t}, indent=1, default=float))
+    out_md.write_text(markdown(json.loads(out_json.read_text())))
+    if failed:
+        print("gnss_eval: " + failures_line(failed), file=sys.stderr)
+    print(f"gnss_eval: wrote {out_md}", file=sys.stderr)
     for k, v in sorted(h.items()):
         print(f"{k:55s} {v:8.3f}")
     return 0

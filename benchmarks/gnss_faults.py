@@ -93,7 +93,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import metrics as M
-from benchmarks.datasets.base import default_data_root
+from benchmarks.options import add_common, data_root, only_keys, out_dir, selected, writes_committed
 from benchmarks.gnss_eval import REAL, VARIANTS, headlines as gnss_headlines, open_walk, real_folders, windows
 from benchmarks.splits import REPORT, SIM_GPS_FAULT_SEEDS, SPLITS, TUNING, split_of
 from core.conventions import GPS
@@ -400,27 +400,31 @@ def _work(item):
 PARTS = ("sim", "real", "ipin")
 
 
-def jobs_of(root: Path | None, splits, quick: bool, parts=PARTS) -> list:
-    """The work items, longest first: simulator walks, real walks, IPIN files (those of ``parts``)."""
+def jobs_of(root: Path | None, splits, quick: bool, parts=PARTS, keys=None) -> list:
+    """The work items, longest first: simulator walks, real walks, IPIN files (those of ``parts`` and of
+    ``keys``, :func:`benchmarks.options.selected`: sim, real, ipin or parts of names)."""
     items = []
     for sp in splits if "sim" in parts else ():
         seeds = QUICK_SEEDS if quick else SIM_GPS_FAULT_SEEDS[sp]
-        items += [("sim", (s, "quick" if quick else sp)) for s in seeds]
+        items += [("sim", (s, "quick" if quick else sp)) for s in seeds if selected(keys, "sim", f"sim-{s}")]
         if quick:
             break
     if root is not None and Path(root).is_dir():
         if (REPORT in splits or quick) and "real" in parts:
             only = (REAL[0],) if quick else None
-            items += [("real", (ds, str(folder))) for ds, folder in real_folders(Path(root), only)]
+            items += [("real", (ds, str(folder))) for ds, folder in real_folders(Path(root), only)
+                      if selected(keys, "real", ds, folder.name)]
         for i, t in enumerate(_ipin_trials(Path(root)) if "ipin" in parts else ()):
+            if not selected(keys, "ipin", t.name):
+                continue
             if (t.name in QUICK_IPIN) if quick else split_of(t.dataset, t.info) in splits:
                 items.append(("ipin", (str(root), i)))
     return items
 
 
-def run(root: Path | None, splits=SPLITS, quick: bool = False, jobs: int = 2, parts=PARTS) -> dict:
+def run(root: Path | None, splits=SPLITS, quick: bool = False, jobs: int = 2, parts=PARTS, keys=None) -> dict:
     t = time.time()
-    items = jobs_of(root, splits, quick, parts)
+    items = jobs_of(root, splits, quick, parts, keys)
     data = {"sim": [], "real": [], "ipin": [], "missing": {}, "failed": [], "splits": list(splits), "quick": quick}
     done = 0
 
@@ -685,36 +689,37 @@ def markdown(data: dict) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.gnss_faults", description=__doc__.split("\n")[0])
-    ap.add_argument("--data", type=Path, default=None)
+    add_common(ap, what="sim, real, ipin or recording names (2023-03-17_15-50-47, T05r01, sim-3)")
     ap.add_argument("--split", choices=("tuning", "report", "all"), default="all")
     ap.add_argument("--quick", action="store_true", help="the CI subset (about a minute)")
     ap.add_argument("--jobs", type=int, default=2, help="parallel processes (default 2)")
     ap.add_argument("--out", type=Path, default=None, help="JSON to write (default benchmarks/gnss_faults_results.json; "
-                    "--quick: not written unless given)")
+                    "a subset, --quick or --no-write: out/benchmarks/gnss_faults/)")
     ap.add_argument("--markdown-only", action="store_true", help="rewrite the Markdown from the JSON of a run")
     ap.add_argument("--parts", default=",".join(PARTS),
-                    help="comma-separated subset of sim,real,ipin (a subset writes neither JSON nor Markdown "
-                         "unless --out is given)")
+                    help="comma-separated subset of sim,real,ipin (a subset writes under out/benchmarks/gnss_faults/)")
     args = ap.parse_args(argv)
     parts = tuple(p for p in args.parts.split(",") if p)
     if not set(parts) <= set(PARTS):
         ap.error(f"--parts: one or more of {', '.join(PARTS)}")
-    subset = args.quick or set(parts) != set(PARTS)
+    subset = args.quick or set(parts) != set(PARTS) or not writes_committed(args)
     from benchmarks.report import refresh_sections
 
     if args.markdown_only:
         RESULTS_MD.write_text(markdown(json.loads((args.out or RESULTS_JSON).read_text())))
         refresh_sections()
         return 0
-    root = args.data or default_data_root()
+    root = data_root(args)
     splits = SPLITS if args.split == "all" else (args.split,)
-    data = run(root, splits, quick=args.quick, jobs=args.jobs, parts=parts)
-    out = args.out or (None if subset else RESULTS_JSON)
-    if out is not None:
-        out.write_text(json.dumps(data, indent=1, default=float))
+    data = run(root, splits, quick=args.quick, jobs=args.jobs, parts=parts, keys=only_keys(args))
+    out = args.out or (out_dir("gnss_faults") / RESULTS_JSON.name if subset else RESULTS_JSON)
+    out.write_text(json.dumps(data, indent=1, default=float))
     if not subset:
         RESULTS_MD.write_text(markdown(data))
         refresh_sections()
+    else:
+        (out_dir("gnss_faults") / RESULTS_MD.name).write_text(markdown(data))
+        print(f"gnss_faults: wrote {out_dir('gnss_faults') / RESULTS_MD.name}", file=sys.stderr)
     for k, v in sorted(data["headlines"].items()):
         print(f"{k:60s} {v:9.3f}")
     print(f"{data['seconds']:.0f} s" + (f", {len(data['failed'])} item(s) FAILED" if data["failed"] else ""),

@@ -93,3 +93,46 @@ def median_inf(values) -> float:
     v.sort()
     n = len(v)
     return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2.0
+
+
+def task_name(task) -> str:
+    """A readable name for a task tuple (paths by their last two parts, no None)."""
+    parts = task if isinstance(task, (tuple, list)) else (task,)
+    out = []
+    for p in parts:
+        if p is None or isinstance(p, dict):
+            continue
+        s = str(p)
+        out.append("/".join(Path(s).parts[-2:]) if "/" in s else s)
+    return " ".join(out)
+
+
+class Guarded:
+    """``fn(task)`` that returns a :func:`failed_row` instead of raising (picklable for process pools): one
+    bad recording neither stops the run nor vanishes from it."""
+
+    def __init__(self, fn, split: str = "?"):
+        self.fn = fn
+        self.split = split
+
+    def __call__(self, task):
+        try:
+            return self.fn(task)
+        except Exception as e:
+            return failed_row(task_name(task), self.split, e)
+
+
+def split_failed(rows) -> tuple[list, list]:
+    """``(failed rows, the others)``."""
+    rows = list(rows)
+    return [r for r in rows if isinstance(r, dict) and r.get("failed")], [r for r in rows
+                                                                          if not (isinstance(r, dict) and r.get("failed"))]
+
+
+def failures_markdown(failed) -> list[str]:
+    """Markdown lines listing the failed recordings (empty when none)."""
+    if not failed:
+        return []
+    return ["", f"### {len(failed)} recording(s) failed (counted as failed, +inf, never dropped silently)", "",
+            "| recording | split | error |", "|---|---|---|"] + [
+        f"| {r['name']} | {r.get('split', '?')} | {str(r['failed']).replace('|', '/')} |" for r in failed] + [""]

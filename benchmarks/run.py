@@ -54,12 +54,26 @@ from benchmarks import metrics as M
 from benchmarks import splits as S
 from benchmarks.datasets.base import Trial, default_data_root
 from benchmarks.headline import evaluate_targets, headline
+from benchmarks.options import selected
 from desktop.engine import ENGINES
 
 #: dataset modules in report order (ipol and trundlewheel belong to the stride-length work; optional)
 DATASET_MODULES = ("oxford", "brajdic_harle", "ipin2023", "ms_indoor", "eth_walk", "ipol", "trundlewheel")
 #: dataset modules with long recordings, started first
 LONG_FIRST = ("eth_walk", "trundlewheel")
+
+
+def _is_dataset_name(key: str) -> bool:
+    """``key`` names a dataset (its module or its folder), not part of a recording's name."""
+    if key in DATASET_MODULES:
+        return True
+    for name in DATASET_MODULES:
+        try:
+            if importlib.import_module(f"benchmarks.datasets.{name}").NAME == key:
+                return True
+        except Exception:  # a reader in progress: dataset_modules reports it
+            continue
+    return False
 
 
 def dataset_modules(only: list[str] | None = None) -> tuple[list, dict]:
@@ -385,7 +399,10 @@ def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names
     if peer_names is None:
         peer_names = P.QUICK_PEERS if quick else P.ALL_PEERS
     peer_names = tuple(P.available_peers(peer_names))
-    mods, import_errors = dataset_modules(only)
+    keys = [k.strip() for o in (only or ()) for k in str(o).split(",") if k.strip()]
+    ds_keys = [k for k in keys if _is_dataset_name(k)]
+    name_keys = [k for k in keys if not _is_dataset_name(k)] or None  # parts of recording names
+    mods, import_errors = dataset_modules(ds_keys or None)
     tasks, datasets = [], {}
     for mod in mods:
         short = mod.__name__.rsplit(".", 1)[1]
@@ -393,6 +410,9 @@ def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names
             continue
         trials = _trials_of(short, str(root))
         idx = quick_subset(mod.NAME, trials) if quick else list(range(len(trials)))
+        idx = [i for i in idx if selected(name_keys, trials[i].name)]
+        if name_keys and not idx:
+            continue
         if split is not None:
             idx = [i for i in idx if S.trial_split(trials[i]) == split]
             if not idx:
@@ -402,7 +422,8 @@ def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names
                               "doc": (mod.__doc__ or "").strip().split("\n")[0]}
         tasks += [(short, str(root), i, peer_names, keep_tracks) for i in idx]
     print(f"benchmark: {len(tasks)} recordings in {len(datasets)} datasets under {root} "
-          f"({'quick' if quick else 'full'} run{'' if split is None else ', ' + split + ' split'}, {jobs} processes, "
+          f"({'quick' if quick else 'subset' if keys else 'full'} run{'' if split is None else ', ' + split + ' split'}, "
+          f"{jobs} processes, "
           f"peers: {', '.join(peer_names) or 'none'})", file=log, flush=True)
     # the longest recordings first, so that the two processes finish together
     tasks.sort(key=lambda task: task[0] not in LONG_FIRST)
@@ -435,7 +456,7 @@ def run(root: Path, *, quick: bool = False, only=None, jobs: int = 2, peer_names
     results.sort(key=lambda r: (rank.get(r["dataset"], len(rank)), r["name"]))
     print(f"benchmark: done in {wall:.0f} s", file=log, flush=True)
     return {"results": results, "datasets": datasets, "import_errors": import_errors, "wall_s": wall,
-            "quick": quick, "jobs": jobs, "peers": list(peer_names), "root": str(root), "split": split,
+            "quick": quick, "only": keys or None, "jobs": jobs, "peers": list(peer_names), "root": str(root), "split": split,
             "engine": engine, "peer_cache": None if peer_cache is None else str(peer_cache)}
 
 
@@ -475,8 +496,12 @@ def parse_args(argv=None):
     ap.add_argument("--write-results", action="store_true",
                     help="rewrite the committed report benchmarks/RESULTS.md and benchmarks/plots (else nothing "
                          "tracked by git is touched)")
-    ap.add_argument("--only", action="append", default=None, metavar="DATASET",
-                    help="run only this dataset (module or folder name; repeatable)")
+    ap.add_argument("--only", action="append", default=None, metavar="NAMES",
+                    help="comma-separated datasets (module or folder name) and/or parts of recording names "
+                         "(repeatable): run that subset (never with --write-results)")
+    ap.add_argument("--no-write", action="store_true",
+                    help="the default: write under out/benchmarks/, nothing tracked by git (the same option as "
+                         "every benchmark module's; --write-results rewrites the committed report)")
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), help="parallel processes (default 2)")
     ap.add_argument("--peers", default=None,
                     help="comma-separated heading peers (default: all installed; quick: rotvec,imufusion)")
@@ -493,6 +518,10 @@ def parse_args(argv=None):
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.write_results and (args.only or args.no_write or args.quick or args.split):
+        print("benchmark: --write-results rewrites the committed report from a full run: not with --only, --quick, "
+              "--split or --no-write", file=sys.stderr)
+        return 2
     here = Path(__file__).resolve().parent
     if args.out is None:
         args.out = here / "RESULTS.md" if args.write_results else here.parent / "out" / "benchmarks" / "RESULTS.md"

@@ -71,6 +71,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.equivalence import cache_dir, load_arrays, save_arrays
+from benchmarks.options import out_dir
 from core.conventions import ACC, GYRO, MAG
 
 RESULTS_MD = Path(__file__).with_name("THROUGHPUT_RESULTS.md")
@@ -630,6 +631,10 @@ def main(argv=None) -> int:
                     help="with --markdown-only: the --json of a run of this code on --before's walk")
     ap.add_argument("--only", nargs="+", choices=tuple(PARTS), default=None,
                     help="rerun only these parts on top of the run in --json (updated in place), then write the report")
+    ap.add_argument("--data", "--data-root", dest="data", type=Path, default=None,
+                    help="accepted as by every benchmark; unused: the walk is simulated (--minutes)")
+    ap.add_argument("--no-write", action="store_true",
+                    help="write the report under out/benchmarks/throughput/, touch nothing tracked by git")
     ap.add_argument("--memory-child", type=float, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.memory_child is not None:
@@ -644,10 +649,7 @@ def main(argv=None) -> int:
         if args.after_short is not None:
             a = json.loads(args.after_short.read_text())
             d["after_short"] = a["pipeline"] + a["stages"]
-        RESULTS_MD.write_text(markdown(d))
-        from benchmarks.report import refresh_sections
-
-        refresh_sections()
+        _write_report(d, args)
         return 0
     if args.only:
         return _rerun(args)
@@ -679,12 +681,8 @@ def main(argv=None) -> int:
     d["seconds"] = time.perf_counter() - t_start
     if args.json:
         args.json.write_text(json.dumps(d, indent=1))
-    if args.write or args.minutes == 60.0:
-        RESULTS_MD.write_text(markdown(d))
-        from benchmarks.report import refresh_sections
-
-        refresh_sections()
-        print(f"wrote {RESULTS_MD}", file=sys.stderr)
+    if args.write or args.minutes == 60.0 or args.no_write:
+        _write_report(d, args)
     else:
         print(markdown(d))
     print(f"{d['seconds']:.0f} s", file=sys.stderr)
@@ -766,11 +764,23 @@ def _rerun(args) -> int:
         parts[k] = {"commit": m["commit"], "date": m["date"]}
     d.pop("rerun", None)
     args.json.write_text(json.dumps(d, indent=1))
-    RESULTS_MD.write_text(markdown(d))
-    from benchmarks.report import refresh_sections
-
-    refresh_sections()
+    _write_report(d, args)
     return 0
+
+
+def _write_report(d: dict, args) -> None:
+    """THROUGHPUT_RESULTS.md (and RESULTS.md's section), or with ``--no-write`` the same file under
+    ``out/benchmarks/throughput/`` and nothing tracked by git."""
+    if args.no_write:
+        path = out_dir("throughput") / RESULTS_MD.name
+        path.write_text(markdown(d))
+    else:
+        path = RESULTS_MD
+        path.write_text(markdown(d))
+        from benchmarks.report import refresh_sections
+
+        refresh_sections()
+    print(f"wrote {path}", file=sys.stderr)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.datasets import ipin2023, ipol
-from benchmarks.datasets.base import default_data_root
+from benchmarks.options import (add_common, data_root, failed_row, failures_markdown, only_keys, result_path,
+                                selected, writes_committed)
 from benchmarks.splits import REPORT, TUNING, trial_split
 from core.pdr.pipeline import Pipeline
 from core.pdr.stride_models import load_stride_model
@@ -38,26 +39,54 @@ def _distances(steps, t0: int, t1: int) -> tuple[float, float]:
     return sum(stride.length_m(s.features) for s in sel), sum(vel.length_m(s.features) for s in sel)
 
 
-def run(root: Path, progress=print) -> list[dict]:
+def _failed(ds: str, tr, split: str, e: Exception, progress) -> dict:
+    """A recording that failed: counted as +inf in both columns and listed (benchmarks.options)."""
+    row = {"dataset": ds, "walk": tr.name, "split": split, "truth_m": math.nan, "stride_pct": math.inf,
+           "velocity_pct": math.inf, "failed": failed_row(tr.name, split, e)["failed"]}
+    progress(f"{tr.name}: FAILED {row['failed']}")
+    return row
+
+
+def run(root: Path, progress=print, keys=None) -> list[dict]:
+    """Every IPIN route and IPOL trial (``keys``: :func:`benchmarks.options.selected`)."""
     rows = []
-    for tr in ipin2023.trials(root):
-        rec = tr.open()
-        lm = tr.landmarks
-        steps = Pipeline().run(rec).steps
-        truth = float(np.sum(np.hypot(np.diff(lm.east_m), np.diff(lm.north_m))))
-        ds, dv = _distances(steps, int(lm.t_ns[0]), int(lm.t_ns[-1]))
-        rows.append({"dataset": "ipin2023_track3", "walk": tr.name, "split": trial_split(tr), "truth_m": truth,
-                     "stride_pct": 100 * (ds / truth - 1), "velocity_pct": 100 * (dv / truth - 1)})
-        progress(f"{tr.name}: stride {rows[-1]['stride_pct']:+.1f} %, velocity {rows[-1]['velocity_pct']:+.1f} %")
+    for tr in ipin2023.trials(root) if ipin2023.available(root) else ():
+        if not selected(keys, tr.name, ipin2023.NAME):
+            continue
+        try:
+            rows.append(_ipin_row(tr, progress))
+        except Exception as e:
+            rows.append(_failed(ipin2023.NAME, tr, trial_split(tr), e, progress))
     for tr in ipol.trials(root):
-        steps = Pipeline().run(tr.open()).steps
-        ds = dv = truth = 0.0
-        for t0, t1, length in tr.legs:
-            a, b = _distances(steps, t0, t1)
-            ds, dv, truth = ds + a, dv + b, truth + length
-        rows.append({"dataset": "ipol_healthy_gait_xsens", "walk": tr.name, "split": TUNING, "truth_m": truth,
-                     "stride_pct": 100 * (ds / truth - 1), "velocity_pct": 100 * (dv / truth - 1)})
+        if not selected(keys, tr.name, ipol.NAME):
+            continue
+        try:
+            rows.append(_ipol_row(tr))
+        except Exception as e:
+            rows.append(_failed(ipol.NAME, tr, TUNING, e, progress))
     return rows
+
+
+def _ipin_row(tr, progress) -> dict:
+    rec = tr.open()
+    lm = tr.landmarks
+    steps = Pipeline().run(rec).steps
+    truth = float(np.sum(np.hypot(np.diff(lm.east_m), np.diff(lm.north_m))))
+    ds, dv = _distances(steps, int(lm.t_ns[0]), int(lm.t_ns[-1]))
+    row = {"dataset": "ipin2023_track3", "walk": tr.name, "split": trial_split(tr), "truth_m": truth,
+           "stride_pct": 100 * (ds / truth - 1), "velocity_pct": 100 * (dv / truth - 1)}
+    progress(f"{tr.name}: stride {row['stride_pct']:+.1f} %, velocity {row['velocity_pct']:+.1f} %")
+    return row
+
+
+def _ipol_row(tr) -> dict:
+    steps = Pipeline().run(tr.open()).steps
+    ds = dv = truth = 0.0
+    for t0, t1, length in tr.legs:
+        a, b = _distances(steps, t0, t1)
+        ds, dv, truth = ds + a, dv + b, truth + length
+    return {"dataset": "ipol_healthy_gait_xsens", "walk": tr.name, "split": TUNING, "truth_m": truth,
+            "stride_pct": 100 * (ds / truth - 1), "velocity_pct": 100 * (dv / truth - 1)}
 
 
 def markdown(rows: list[dict]) -> str:
@@ -81,18 +110,24 @@ def markdown(rows: list[dict]) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", type=Path, default=default_data_root())
+    add_common(ap, what="recording names (T05r01, 1-1) or datasets")
     args = ap.parse_args(argv)
-    if not (args.data / ipin2023.NAME).is_dir():
-        print(f"no data under {args.data}", file=sys.stderr)
+    root = data_root(args)
+    if not (root / ipin2023.NAME).is_dir() and not (root / ipol.NAME).is_dir():
+        print(f"no data under {root}", file=sys.stderr)
         return 2
-    rows = run(args.data, progress=lambda m: print(m, file=sys.stderr))
+    rows = run(root, progress=lambda m: print(m, file=sys.stderr), keys=only_keys(args))
     md = markdown(rows)
-    RESULTS_MD.write_text(md, encoding="utf-8")
-    from benchmarks.report import refresh_sections
+    bad = [r for r in rows if r.get("failed")]
+    md += "\n".join(failures_markdown([{"name": r["walk"], "split": r["split"], "failed": r["failed"]} for r in bad]))
+    out = result_path(args, RESULTS_MD, "velocity_eval")
+    out.write_text(md, encoding="utf-8")
+    if writes_committed(args):
+        from benchmarks.report import refresh_sections
 
-    refresh_sections()
+        refresh_sections()
     print(md)
+    print(f"velocity_eval: wrote {out}", file=sys.stderr)
     return 0 if all(math.isfinite(x["velocity_pct"]) for x in rows) else 1
 
 

@@ -46,7 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.datasets.base import default_data_root
+from benchmarks.options import (Guarded, add_common, data_root, failures_line, failures_markdown, only_keys,
+                                result_path, selected, split_failed)
 from benchmarks.splits import REPORT, SIM_CARRY_SEEDS, TUNING, split_of
 from core.conventions import CARRY_BAG, CARRY_EAR, CARRY_HANDHELD, CARRY_POCKET, CARRY_SWINGING, GPS, wrap_angle
 from core.metrics import circular_mean
@@ -488,15 +489,19 @@ def markdown(res: dict) -> str:
                      f"{cell(w['device'])} | {cell(w['acceleration'])} | {cell(w['auto'])} | {off} | "
                      f"{w['likely_placement']} |")
         L.append("")
+    L += failures_markdown(res.get("failed", []))
     return "\n".join(L) + "\n"
 
 
 def run(root: Path, *, splits=(TUNING, REPORT), seeds: int | None = None, jobs: int = 2, real: bool = True,
-        placements=PLACEMENTS, probe_kwargs=None, reuse_sim: bool = False) -> dict:
+        placements=PLACEMENTS, probe_kwargs=None, reuse_sim: bool = False, only=None) -> dict:
+    """``only``: :func:`benchmarks.options.only_keys` (sim, ipol, gps_walks_phone or parts of names); a
+    recording that fails is listed under ``"failed"``."""
+    failed = []
     tasks = []
     for split in splits:
         ss = SIM_CARRY_SEEDS[split][:seeds] if seeds else SIM_CARRY_SEEDS[split]
-        tasks += [(pl, s, probe_kwargs) for pl in placements for s in ss]
+        tasks += [(pl, s, probe_kwargs) for pl in placements for s in ss if selected(only, "sim", f"{pl}-{s}")]
     out = {"cost_us_per_grid_sample": cost_us_per_sample()}
     with ProcessPoolExecutor(max_workers=jobs) as ex:
         if reuse_sim:  # the simulator's part from the last results file (only the real walks rerun)
@@ -504,48 +509,57 @@ def run(root: Path, *, splits=(TUNING, REPORT), seeds: int | None = None, jobs: 
             out["sim"], out["sim_walks"] = old["sim"], old["sim_walks"]
             out["sim_reused_from"] = old.get("run_at")
         else:
-            sim_rows = list(ex.map(sim_task, tasks))
+            bad, sim_rows = split_failed(ex.map(Guarded(sim_task), tasks))
+            failed += bad
             out["sim"] = summarize_sim(sim_rows)
             out["sim_walks"] = [{k: v for k, v in r.items() if k != "errors_rad"} for r in sim_rows]
         if real:
             from benchmarks.datasets import ipol
 
-            n = len(ipol.trials(root))
-            ip_rows = list(ex.map(ipol_task, [(str(root), i) for i in range(n)]))
-            out["ipol"] = summarize_ipol(ip_rows)
-            out["ipol_trials"] = [{k: v for k, v in r.items() if k != "errors_rad"} for r in ip_rows]
-            folders = sorted(p for p in (root / "gps_walks_phone").glob("*") if p.is_dir())
-            out["gps_walks"] = list(ex.map(gps_task, [(str(root), f) for f in folders]))
+            trials = ipol.trials(root)
+            idx = [i for i, t in enumerate(trials) if selected(only, "ipol", t.name)]
+            bad, ip_rows = split_failed(ex.map(Guarded(ipol_task, TUNING), [(str(root), i) for i in idx]))
+            failed += bad
+            if ip_rows:
+                out["ipol"] = summarize_ipol(ip_rows)
+                out["ipol_trials"] = [{k: v for k, v in r.items() if k != "errors_rad"} for r in ip_rows]
+            folders = [p for p in sorted((root / "gps_walks_phone").glob("*")) if p.is_dir()
+                       and selected(only, "gps_walks_phone", p.name)]
+            bad, out["gps_walks"] = split_failed(ex.map(Guarded(gps_task, REPORT), [(str(root), f) for f in folders]))
+            failed += bad
+    out["failed"] = failed
     return _jsonable(out)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--data", type=Path, default=None)
+    add_common(ap, what="sim, ipol, gps_walks_phone or recording names (walking-N, 1-1, babur_walking)")
     ap.add_argument("--split", choices=(TUNING, REPORT, "both"), default="both")
     ap.add_argument("--seeds", type=int, default=None, help="only the first N seeds of each split")
     ap.add_argument("--placements", default=",".join(PLACEMENTS))
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--no-real", action="store_true", help="the simulator only")
-    ap.add_argument("--no-write", action="store_true", help="print, do not write the results files")
     ap.add_argument("--reuse-sim", action="store_true", help="the simulator's part from the last results file")
     ap.add_argument("--markdown-only", action="store_true", help="rebuild the markdown from the results file")
     a = ap.parse_args(argv)
+    res_json, res_md = result_path(a, RESULTS_JSON, "walkdir"), result_path(a, RESULTS_MD, "walkdir")
     if a.markdown_only:
-        RESULTS_MD.write_text(markdown(json.loads(RESULTS_JSON.read_text())))
+        res_md.write_text(markdown(json.loads(RESULTS_JSON.read_text())))
         return 0
-    root = a.data or default_data_root()
+    root = data_root(a)
     splits = (TUNING, REPORT) if a.split == "both" else (a.split,)
     t0 = time.perf_counter()
     res = run(root, splits=splits, seeds=a.seeds, jobs=a.jobs, real=not a.no_real,
-              placements=tuple(a.placements.split(",")), reuse_sim=a.reuse_sim)
+              placements=tuple(a.placements.split(",")), reuse_sim=a.reuse_sim, only=only_keys(a))
     res["wall_s"] = round(time.perf_counter() - t0, 1)
     res["run_at"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     md = markdown(res)
     print(md)
-    if not a.no_write:
-        RESULTS_JSON.write_text(json.dumps(res, indent=1) + "\n")
-        RESULTS_MD.write_text(md)
+    res_json.write_text(json.dumps(res, indent=1) + "\n")
+    res_md.write_text(md)
+    if res["failed"]:
+        print("walkdir: " + failures_line(res["failed"]), file=sys.stderr)
+    print(f"walkdir: wrote {res_md}", file=sys.stderr)
     return 0
 
 

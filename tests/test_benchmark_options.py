@@ -1,0 +1,61 @@
+"""Every benchmark module takes --data, --only and --no-write the same way (issue #29, benchmarks.options)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+
+import pytest
+
+from benchmarks import options as O
+
+#: the benchmark modules with a command line (python -m benchmarks.<name>)
+MODULES = ("run", "indoor", "carry", "walkdir", "gnss_eval", "gnss_faults", "ablation", "floors", "velocity_eval",
+           "throughput", "foot", "real_walks")
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_every_benchmark_takes_data_only_and_no_write(name, capsys):
+    mod = importlib.import_module(f"benchmarks.{name}")
+    with pytest.raises(SystemExit) as e:
+        mod.main(["--help"])
+    assert e.value.code == 0
+    text = capsys.readouterr().out
+    for opt in ("--data", "--only", "--no-write"):
+        assert opt in text, f"benchmarks.{name} has no {opt}"
+
+
+def _args(argv):
+    ap = argparse.ArgumentParser()
+    O.add_common(ap)
+    return ap.parse_args(argv)
+
+
+def test_only_is_comma_separated_and_repeatable_and_implies_no_write(tmp_path):
+    a = _args(["--only", "T05r01,1-1", "--only", "babur"])
+    assert O.only_keys(a) == ["T05r01", "1-1", "babur"]
+    assert O.selected(O.only_keys(a), "ipin2023_track3", "IPIN2023_T3_T05r01") and \
+        not O.selected(O.only_keys(a), "oxford", "Pixel_Jamie")
+    assert not O.writes_committed(a)
+    committed = O.HERE / "INDOOR_RESULTS.md"
+    assert O.result_path(a, committed, "indoor") == O.REPO / "out" / "benchmarks" / "indoor" / committed.name
+    full = _args([])
+    assert O.writes_committed(full) and O.result_path(full, committed, "indoor") == committed
+    assert not O.writes_committed(_args(["--no-write"]))
+    assert O.data_root(_args(["--data", str(tmp_path)])) == tmp_path
+
+
+def test_a_failed_recording_counts_as_inf_never_dropped():
+    assert O.median_inf([1.0, None, 3.0]) == 3.0  # [1, 3, inf]: dropping the failure would give 2.0
+    assert O.median_inf([None]) == math.inf and math.isnan(O.median_inf([]))
+
+    def boom(task):
+        raise ValueError("bad file")
+
+    row = O.Guarded(boom, "report")(("ipin2023", "/data/x/T05r01.txt"))
+    assert row["failed"].startswith("ValueError: bad file") and row["split"] == "report"
+    bad, ok = O.split_failed([row, {"name": "a"}])
+    assert bad == [row] and ok == [{"name": "a"}]
+    assert "1 failed" in O.failures_line(bad) and "x/T05r01.txt" in O.failures_line(bad)
+    assert any("bad file" in ln for ln in O.failures_markdown(bad))
