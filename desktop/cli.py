@@ -592,8 +592,8 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     s.update(problem_summary(rec))
     lines += problem_lines(rec)
     written = _write_outputs(args, outs, rec, track, None, {"floor": per_step} if per_step is not None else None,
-                             title_extra="foot INS",
-                             subtitle=truth_headline(errs), truth_kw=truth_plot(truth, errs, track, False))
+                             title_extra="foot INS", subtitle=truth_headline(errs),
+                             truth_kw={**truth_plot(truth, errs, track, False), "track_unit": "strides"})
     return {"summary": s, "lines": lines, "written": written}
 
 
@@ -1014,7 +1014,11 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     if fused and outs.get("plot"):
         others["dead reckoning only"] = (res.track.east_m, res.track.north_m)
         fx = [f for f in res.fusion.fixes if f.east_m == f.east_m]
-        fixes = ([f.east_m for f in fx], [f.north_m for f in fx], [f.accepted for f in fx])
+        fixes = ([f.east_m for f in fx], [f.north_m for f in fx], [f.accepted for f in fx], [f.reason for f in fx])
+        if getattr(args, "gps_outage", None):  # the hidden windows, shaded and named on the plot
+            plot_kw["hidden"] = [(rec.t0_ns + int(a * 1e9), rec.t0_ns + int((a + b) * 1e9),
+                                  f"GPS hidden {a:.0f}-{a + b:.0f} s (--gps-outage {a:g}:{b:g})")
+                                 for a, b in args.gps_outage]
     s = summary
     sub = (f"{s['n_steps']} steps, {s['distance_m']:.1f} m"
            + (f", start-to-end {s['start_to_end_m']:.2f} m" if heading else "")
