@@ -380,16 +380,26 @@ def plot_walk(walk: RealWalk, rec, res, fixes, row, st_t, modes) -> str:
     if fu is not None and fu.steps:
         ft = fu.track()
         ax1.plot(ft.east_m, ft.north_m, "-", lw=1.2, label="fused (default path)")
-        gx = [f.east_m for f in fu.fixes if f.east_m == f.east_m]
-        gy = [f.north_m for f in fu.fixes if f.north_m == f.north_m]
-        ax1.plot(gx, gy, ".", ms=2, color="k", label="GPS fixes")
+        from desktop.plot import verdict_group
+
+        fx = [f for f in fu.fixes if f.east_m == f.east_m and f.north_m == f.north_m]
+        used = [f for f in fx if f.accepted]
+        ax1.plot([f.east_m for f in used], [f.north_m for f in used], ".", ms=2, color="k",
+                 label=f"GPS fixes used ({len(used)})")
+        groups: dict = {}
+        for f in fx:
+            if not f.accepted:  # each unused fix under its verdict (the fusion's reason, grouped by rule)
+                groups.setdefault(verdict_group(f.reason), []).append(f)
+        for g, fs in sorted(groups.items(), key=lambda kv: -len(kv[1])):
+            ax1.plot([f.east_m for f in fs], [f.north_m for f in fs], "o", mfc="none", ms=3, alpha=0.6,
+                     label=f"GPS not used, {g} ({len(fs)})")
         e0, n0 = ft.east_m[0] - res.steps[0].east_m, ft.north_m[0] - res.steps[0].north_m
     else:
         e0 = n0 = 0.0
     ax1.plot([s.east_m + e0 for s in res.steps], [s.north_m + n0 for s in res.steps], "-", lw=1, alpha=0.7,
              label="PDR alone (from the start)")
     ax1.set_aspect("equal", adjustable="datalim")
-    ax1.legend(fontsize=8)
+    ax1.legend(fontsize=7)
     ax1.set_title(f"{walk.name} ({walk.split} split)")
     ax1.set_xlabel("east (m)")
     ax1.set_ylabel("north (m)")

@@ -1316,6 +1316,7 @@ def cmd_simulate(args) -> int:
         shapes = {"square": [(0, 0), (20, 0), (20, 20), (0, 20), (0, 0)], "line": [(0, 0), (0, 50)],
                   "turn": [(0, 0), (0, 20), (20, 20)]}
         walk = simulator.simulate_walk(shapes[args.shape], rate_hz=args.rate, seed=args.seed)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)  # out/ by default in the README, as for replay
     write_recording(args.out, walk.recording)
     print(f"wrote {args.out}: {walk.recording.duration_s:.1f} s, {len(walk.truth.step_t_ns)} steps, "
           f"{walk.truth.path_length_m:.1f} m")

@@ -93,7 +93,7 @@ def test_help_explains_every_option():
 
 
 def test_simulate_then_replay_round_trip(tmp_path):
-    p = tmp_path / "sq.csv.gz"
+    p = tmp_path / "out" / "sq.csv.gz"  # a folder that does not exist yet, as out/ on a fresh clone (#29)
     r = _run("simulate", str(p), "--shape", "square", "--rate", "50", "--seed", "4")
     assert r.returncode == 0, r.stderr
     info = _run("info", str(p)).stdout.splitlines()
