@@ -845,7 +845,8 @@ def main(argv=None) -> int:
                     help="comma-separated: datasets (pyshoe, ipol, xio, mounting) and/or parts of PyShoe trial "
                          "names (2017-11-27); runs that subset and writes nothing (implies --no-write)")
     ap.add_argument("--no-write", action="store_true",
-                    help="print the headlines, do not rewrite foot_results.json, FOOT_RESULTS.md or the plots")
+                    help="write foot_results.json under out/benchmarks/foot/; do not rewrite foot_results.json, "
+                         "FOOT_RESULTS.md or the plots")
     ap.add_argument("--pyshoe-rows", type=Path, default=None, help="reuse PyShoe rows from a JSON file")
     ap.add_argument("--mounting-only", action="store_true",
                     help="rerun only the mode detection, keeping the other results of foot_results.json")
@@ -885,7 +886,11 @@ def main(argv=None) -> int:
         out["plots"] = write_plots(rows)
         RESULTS_JSON.write_text(json.dumps(out, indent=1, default=float))
         write_markdown(out)
-    else:
+    else:  # a subset or --no-write: under out/benchmarks/foot/, nothing tracked by git (benchmarks.options)
+        from benchmarks.options import out_dir
+
+        (out_dir("foot") / RESULTS_JSON.name).write_text(json.dumps(out, indent=1, default=float))
+        print(f"foot: wrote {out_dir('foot') / RESULTS_JSON.name}", file=sys.stderr)
         for r in out["pyshoe"]["trials"]:
             c = r["cases"]
             print(f"{r['trial']} ({r['split']}): " + ", ".join(

@@ -53,6 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.datasets.base import default_data_root
+from benchmarks.options import out_dir, writes_committed
 from benchmarks.datasets.phone_walks import STEP_CLIP, RealWalk, real_walks
 from benchmarks.splits import REPORT, TUNING
 from core.conventions import GPS, wrap_angle
@@ -577,7 +578,8 @@ def main(argv=None) -> int:
     ap.add_argument("--extra", type=Path, default=None, help="a folder of fetched recordings (<owner>__<repo>/<walk>)")
     ap.add_argument("--only", default=None, help="comma-separated substrings of walk names")
     ap.add_argument("--split", choices=(TUNING, REPORT, "all"), default="all")
-    ap.add_argument("--no-write", action="store_true", help="print, do not write the results files")
+    ap.add_argument("--no-write", action="store_true",
+                    help="write the results under out/benchmarks/real_walks/, touch nothing tracked by git")
     ap.add_argument("--no-outages", action="store_true")
     ap.add_argument("--no-plots", action="store_true")
     ap.add_argument("--jobs", type=int, default=1)
@@ -617,13 +619,14 @@ def main(argv=None) -> int:
         commit = "?"
     meta = {"when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit, "seconds": time.time() - t}
     md = markdown(rows, summ, meta)
-    if a.no_write:
-        print(md)
-    else:
-        RESULTS_MD.write_text(md)
-        RESULTS_JSON.write_text(json.dumps(_jsonable({"meta": meta, "summary": summ, "walks": rows}), indent=1))
-        print(md)
-        print(f"wrote {RESULTS_MD} and {RESULTS_JSON}", file=sys.stderr)
+    # a subset (--only, --split, --extra, --set) or --no-write: under out/benchmarks/real_walks/ (benchmarks.options)
+    subset = a.split != "all" or a.extra is not None or bool(overrides)
+    res_md = RESULTS_MD if writes_committed(a) and not subset else out_dir("real_walks") / RESULTS_MD.name
+    res_json = RESULTS_JSON if writes_committed(a) and not subset else out_dir("real_walks") / RESULTS_JSON.name
+    res_md.write_text(md)
+    res_json.write_text(json.dumps(_jsonable({"meta": meta, "summary": summ, "walks": rows}), indent=1))
+    print(md)
+    print(f"wrote {res_md} and {res_json}", file=sys.stderr)
     return 0
 
 

@@ -70,7 +70,7 @@ def _first_gps_origin(rec: Recording):
     return None if fix is None else (fix[1], fix[2])
 
 
-def place_site(args, rec: Recording, pipeline) -> tuple[dict | None, list]:
+def place_site(args, rec: Recording, pipeline, plan=None) -> tuple[dict | None, list]:
     """Magnetic declination (and the field's strength and dip) of the World Magnetic Model at the walk's place
     and date, given to the attitude filter before the run, when the place is known (``--origin`` or a good GPS
     fix) and the recording has a date; ``--declination`` overrides it.  Returns (summary, lines)."""
@@ -85,6 +85,8 @@ def place_site(args, rec: Recording, pipeline) -> tuple[dict | None, list]:
     elif fix is not None:
         t_ns, lat, lon, alt = fix
         where = "the first good GPS fix"
+    elif getattr(plan, "georef", None) is not None:  # --map: the floor plan says where the building is
+        (lat, lon), alt, t_ns, where = plan.georef.origin, 0.0, rec.t0_ns, "the floor plan's geo-reference"
     else:
         return ({"declination_deg": 0.0, "source": "unknown place"},
                 ["declination   0 (place unknown: headings are magnetic; give --origin LAT,LON or --declination)"])
@@ -948,7 +950,7 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
 
         map_start(args, rec, plan, Track(np.array([rec.t0_ns], np.int64), *(np.zeros(1),) * 4), truth_of(rec))
     pipeline = build_pipeline(args, gnss, profile)
-    site, site_lines = place_site(args, rec, pipeline) if not args.no_mag else (None, [])
+    site, site_lines = place_site(args, rec, pipeline, plan) if not args.no_mag else (None, [])
     res, engine = run_pipeline(pipeline, rec, args.engine, progress)
     gps_why = gps_choice(args)[1] if gnss is not None else ""
     fused = res.fusion is not None and res.fusion.origin_lat_lon is not None and len(res.fusion.steps)

@@ -82,3 +82,24 @@ def test_map_matched_exports_take_the_plans_geo_reference(walk_and_plan, tmp_pat
     rows = np.genfromtxt(csv_out, delimiter=",", names=True)
     xy_csv = georef.from_geodetic(rows["lat_deg"], rows["lon_deg"])
     np.testing.assert_allclose(xy_csv, xy[1:], atol=0.01)
+
+
+def test_a_geo_referenced_plan_gives_the_declination(walk_and_plan, tmp_path, capsys):
+    """The plan says where the building is: the World Magnetic Model's declination there, as a GPS fix would."""
+    from core.geodesy import declination_rad, unix_ns_to_datetime
+    from core.indoor import Georeference
+    from core.recording import read_recording
+
+    path, _, _ = walk_and_plan
+    rec = read_recording(path)
+    rec.metadata = {**rec.metadata, "unix_offset_ns": 1_751_328_000_000_000_000 - rec.t0_ns}  # 2025-07-01
+    dated = tmp_path / "dated.csv.gz"
+    write_recording(str(dated), rec)
+    plan = FloorPlan(areas=[(np.array(CORRIDOR), [])], name="corridor", georef=Georeference(30.3011, 120.1301))
+    write_geojson(plan, tmp_path / "p.geojson", units="m")
+    assert main(["replay", str(dated), "--map", str(tmp_path / "p.geojson"), "--start", "0,0", "--json",
+                 "--no-profile"]) == 0
+    d = json.loads(capsys.readouterr().out)["declination"]
+    want = math.degrees(declination_rad(30.3011, 120.1301, 0.0, unix_ns_to_datetime(1_751_328_000_000_000_000)))
+    assert d["source"].endswith("the floor plan's geo-reference") and abs(d["declination_deg"] - want) < 1e-6
+    assert abs(want) > 1.0
