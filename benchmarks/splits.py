@@ -70,7 +70,7 @@ Further public recordings (issue #25, fetched into a folder outside the reposito
     Declared 2026-12-06, before any number was seen on them (``/work/extra_data``, its MANIFEST.tsv;
     two repositories, the rule: sorted by ``owner/name``, every third from the first is tuning):
     ``fif911/ML4QS`` (one 73-s outdoor phyphox walk with GPS) is **tuning**; ``mikamartinb/ML4QS``
-    (the 19 outdoor phyphox walks of 1-2 minutes with GPS and a gyroscope, one walker, of its 78 "gehen" walks) is **report**.  Honest caveat: the
+    (the 11 outdoor phyphox walks of 1-2 minutes with GPS fixes and a gyroscope, one walker, of its 78 "gehen" walks) is **report**.  Honest caveat: the
     tuning side of this corpus is one short walk, so it can guide little; the report side is one
     repository's walkers and phones.
 
