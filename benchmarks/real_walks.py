@@ -274,7 +274,7 @@ def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> d
     from core.importers import load_recording
 
     row = {"name": walk.name, "dataset": walk.dataset, "walk": walk.walk, "split": walk.split, "kind": walk.kind,
-           "repository": walk.repository}
+           "repository": walk.repository, "corpus": walk.corpus, "carry": walk.carry}
     try:
         rec = load_recording(str(walk.folder), warn=False)
         res, pipe, engine = run_default(rec, walk.folder, probe=True)
@@ -460,6 +460,29 @@ def summarize(rows: list[dict]) -> dict:
     return out
 
 
+def summarize_by(rows: list[dict], key: str) -> dict:
+    """:func:`summarize` of the rows grouped by ``row[key]`` (the corpus, the stated carry position)."""
+    out = {}
+    for value in sorted({str(r.get(key, "")) for r in rows}):
+        out[value] = summarize([r for r in rows if str(r.get(key, "")) == value])
+    return out
+
+
+def corpus_meta(root: Path, extra: Path | None, walks) -> dict:
+    """Which corpus a run read: the folders, the extra folder's manifest (rows, sha256) and walks per corpus."""
+    import hashlib
+
+    meta = {"data_root": str(root), "extra": str(extra) if extra else None,
+            "walks_per_corpus": {c: sum(1 for w in walks if w.corpus == c) for c in sorted({w.corpus for w in walks})},
+            "repositories_extra": sorted({w.repository for w in walks if w.corpus == "extra"})}
+    man = Path(extra) / "MANIFEST.tsv" if extra else None
+    if man is not None and man.exists():
+        data = man.read_bytes()
+        meta["extra_manifest"] = {"path": str(man), "rows": max(data.count(b"\n") - 1, 0),
+                                  "sha256": hashlib.sha256(data).hexdigest()[:16]}
+    return meta
+
+
 def _f(x, nd=1):
     return "–" if x is None else f"{x:.{nd}f}"
 
@@ -474,6 +497,15 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
          "starts; end error in % of the fused distance inside; PDR alone = dead reckoning from the fused position "
          "at the window's start, turned by the fusion's learnt heading offset. Floor = median reported accuracy / "
          "outage distance.", ""]
+    cm = meta.get("corpus") or {}
+    if cm:
+        man = cm.get("extra_manifest")
+        L += [f"Corpus: data root `{cm['data_root']}`"
+              + (f", extra folder `{cm['extra']}`" if cm.get("extra") else ", no extra folder")
+              + (f" (manifest `{man['path']}`, {man['rows']} files, sha256 {man['sha256']})" if man else "")
+              + "; walks per corpus: " + ", ".join(f"{k} {v}" for k, v in cm["walks_per_corpus"].items())
+              + (f"; extra repositories: {', '.join(cm['repositories_extra'])}" if cm.get("repositories_extra") else "")
+              + ".", ""]
     L += ["### Per split against the targets", "",
           "| split | walks (GPS) | failed | 30-s SD median (deg) | device-axis SD median | abs drift median (deg/min) | "
           "sign errors (|mean offset| > 90, walks with a magnetometer) | 3-min default median % | 3-min PDR alone % | "
@@ -500,14 +532,34 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
               f"<= {TARGET_3MIN_DEFAULT_PCT:g} %: {verdict(o3['default_median_pct'], TARGET_3MIN_DEFAULT_PCT)} "
               f"({_f(o3['default_median_pct'])}); 3-min PDR alone <= {TARGET_3MIN_PDR_PCT:g} %: "
               f"{verdict(o3['pdr_median_pct'], TARGET_3MIN_PDR_PCT)} ({_f(o3['pdr_median_pct'])})."]
+    for title, groups in (("corpus", meta.get("by_corpus") or {}),
+                          ("carry position (as the source states it; an inference in brackets)",
+                           meta.get("by_carry") or {})):
+        if not groups:
+            continue
+        L += ["", f"### Per {title} and split", "",
+              "| group | split | walks (GPS) | failed | 30-s SD median (deg) | device-axis SD median | "
+              "abs drift median (deg/min) | sign errors | 1-min default / PDR % | 3-min default / PDR % (walks) | "
+              "clips: mean abs step error % |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+        for g, per_split in groups.items():
+            for split, d in per_split.items():
+                o1, o3 = d["outage_60s"], d["outage_180s"]
+                L.append(f"| {g} | {split} | {d['walks']} ({d['gps_walks']}) | {len(d['failed'])} | "
+                         f"{_f(d['sd_median_deg'])} | {_f(d['sd_device_median_deg'])} | "
+                         f"{_f(d['abs_drift_median_deg_min'])} | {len(d['sign_errors'])} | "
+                         f"{_f(o1['default_median_pct'])} / {_f(o1['pdr_median_pct'])} | "
+                         f"{_f(o3['default_median_pct'])} / {_f(o3['pdr_median_pct'])} ({o3['walks']}) | "
+                         f"{_f(d['clip_abs_step_error_mean_pct'])} ({d['clips']}) |")
     L += ["", "### Per walk", "",
-          "| split | walk | kind | mag | acc Hz | steps (count, error %) | distance m | carry (share of steps) | "
+          "| split | walk | kind | stated carry | mag | acc Hz | steps (count, error %) | distance m | "
+          "detected carry (share of steps) | "
           "windows | SD deg | drift deg/min | mean offset deg | device-axis SD / mean | 1-min def / PDR % | "
           "3-min def / PDR % | 5-min def / PDR % | floor 3-min % | learnt offset median deg |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r.get("failed"):
-            L.append(f"| {r['split']} | {r['name']} | {r['kind']} | | | FAILED: {r['failed']} |" + " |" * 12)
+            L.append(f"| {r['split']} | {r['name']} | {r['kind']} | {r.get('carry', '')} | | | FAILED: {r['failed']} |"
+                     + " |" * 12)
             continue
         n = r["n_steps"]
         steps = f"{n}" + (f" ({r['steps_counted']}, {r['steps_error_pct']:+.1f})" if r.get("steps_counted") else "")
@@ -524,7 +576,8 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
                             f" (n {len(good)}{', failed ' + str(len(bad)) if bad else ''})") if good or bad else "–"
         g3 = [o for o in r.get("outages", []) if o["length_s"] == 180 and not o.get("failed")]
         learnt = _med([o.get("learnt_offset_deg") for o in r.get("outages", []) if not o.get("failed")])
-        L.append(f"| {r['split']} | {r['name']} | {r['kind']} | {'yes' if r.get('magnetometer') else 'no'} | "
+        L.append(f"| {r['split']} | {r['name']} | {r['kind']} | {r.get('carry', '')} | "
+                 f"{'yes' if r.get('magnetometer') else 'no'} | "
                  f"{r['acc_rate_hz']:.0f} | {steps} | {dist} | {carry} | {s['n_windows']} | {_f(s['sd_deg'])} | "
                  f"{_f(s['drift_deg_min'])} | {_f(s['mean_offset_deg'])} | {_f(sd['sd_deg'])} / "
                  f"{_f(sd['mean_offset_deg'])} | {outs[60]} | {outs[180]} | {outs[300]} | "
@@ -605,7 +658,9 @@ def main(argv=None) -> int:
                                 cwd=Path(__file__).parent).stdout.strip()
     except OSError:
         commit = "?"
-    meta = {"when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit, "seconds": time.time() - t}
+    meta = {"when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit, "seconds": time.time() - t,
+            "corpus": corpus_meta(root, a.extra, walks), "by_corpus": summarize_by(rows, "corpus"),
+            "by_carry": summarize_by(rows, "carry")}
     md = markdown(rows, summ, meta)
     if a.no_write:
         print(md)

@@ -48,3 +48,34 @@ def test_outage_windows():
     w = outage_windows(5.0, 306.0)
     assert (65.0, 60.0) in w and (65.0, 180.0) in w and all(a + L <= 291.0 for a, L in w)
     assert not [x for x in w if x[1] == 300.0]
+
+
+def test_extra_corpus_split_carry_and_grouped_summaries(tmp_path):
+    """The --extra folder: repository from the folder name, split by repository (declared tuning vs report),
+    the carry position from its MANIFEST.tsv, a clip from COUNTS.tsv; the grouped summaries keep failures."""
+    from benchmarks.datasets.phone_walks import EXTRA, SHARED, real_walks
+    from benchmarks.real_walks import corpus_meta, summarize_by
+
+    root = tmp_path / "data"
+    (root / "gps_walks_phone" / "w0").mkdir(parents=True)
+    extra = tmp_path / "extra"
+    for repo, walk in (("fif911__ML4QS", "a"), ("someone__walks", "b"), ("someone__walks", "c")):
+        (extra / repo / walk).mkdir(parents=True)
+    (extra / "MANIFEST.tsv").write_text("repository\twalk\tlocal_file\tcarry\n"
+                                        "fif911/ML4QS\ta\tLocation.csv\tnot stated (inferred: flat in hand)\n"
+                                        "someone/walks\tb\tLocation.csv\ttrouser pocket\n")
+    (extra / "someone__walks" / "COUNTS.tsv").write_text("walk\tsteps\tpath_m\tcarry\nc\t40\t\tswinging hand\n")
+    walks = real_walks(root, extra)
+    by = {w.walk: w for w in walks}
+    assert by["w0"].corpus == SHARED and by["w0"].split == "report"
+    assert by["a"].corpus == EXTRA and by["a"].repository == "fif911/ML4QS" and by["a"].split == "tuning"
+    assert by["a"].carry == "not stated (inferred: flat in hand)"
+    assert by["b"].split == "report" and by["b"].carry == "trouser pocket"
+    assert by["c"].kind == "step_clip" and by["c"].steps_counted == 40 and by["c"].carry == "swinging hand"
+    meta = corpus_meta(root, extra, walks)
+    assert meta["walks_per_corpus"] == {EXTRA: 3, SHARED: 1} and meta["extra_manifest"]["rows"] == 2
+    assert meta["repositories_extra"] == ["fif911/ML4QS", "someone/walks"]
+    rows = [{"name": w.name, "split": w.split, "corpus": w.corpus, "carry": w.carry, "failed": "x"} for w in walks]
+    g = summarize_by(rows, "carry")
+    assert g["trouser pocket"]["report"]["failed"] == ["extdata:someone__walks/b"]  # counted, not dropped
+    assert set(summarize_by(rows, "corpus")) == {EXTRA, SHARED}
