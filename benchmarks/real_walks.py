@@ -71,6 +71,7 @@ LENGTHS_S = (60, 180, 300)
 CALIBRATION_S = 60.0
 EVERY_S = 60.0
 OFFSET_STEPS = 20
+GPS_PATH_EVERY_S = 5.0
 
 #: issue #25's targets on the report split
 TARGET_SD_DEG = 6.0
@@ -157,6 +158,24 @@ def straight_windows(fixes, t0_ns: int, t1_ns: int) -> list[tuple[int, int, floa
             continue
         out.append((int(t[idx[0]]), int(t[idx[-1]]), math.atan2(dn, de)))
     return out
+
+
+def gps_path(fixes, every_s: float = GPS_PATH_EVERY_S) -> tuple[float, int, int] | None:
+    """The GPS path length over the good fixes: chords between fixes at least ``every_s`` apart (shorter chords
+    add the fixes' noise to the length), a gap longer than 3 ``every_s`` not bridged.  ``(metres, first_ns,
+    last_ns)``, None without two good fixes."""
+    if fixes is None or len(fixes[0]) < 2:
+        return None
+    t, e, n, _ = fixes
+    keep = [0]
+    for i in range(1, len(t)):
+        if (t[i] - t[keep[-1]]) * 1e-9 >= every_s:
+            keep.append(i)
+    path = 0.0
+    for a, b in zip(keep[:-1], keep[1:]):
+        if (t[b] - t[a]) * 1e-9 <= 3.0 * every_s:
+            path += math.hypot(e[b] - e[a], n[b] - n[a])
+    return path, int(t[keep[0]]), int(t[keep[-1]])
 
 
 def stability(windows, st_t, headings, t0_ns: int) -> dict:
@@ -323,6 +342,12 @@ def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> d
                 per_mode[m] = {k: s[k] for k in ("n_windows", "sd_deg", "drift_deg_min", "mean_offset_deg")}
         row["stability_per_mode"] = per_mode
         row["outages"] = []
+        gp = gps_path(fixes) if row["gps"] else None
+        if gp is not None and gp[0] > 0:
+            inside = (st_t >= gp[1]) & (st_t <= gp[2])
+            pdr_m = float(sum(s.length_m for s, k in zip(res.steps, inside) if k))
+            row.update(gps_path_m=gp[0], pdr_distance_gps_span_m=pdr_m,
+                       distance_vs_gps_pct=100.0 * (pdr_m - gp[0]) / gp[0])
         if row["gps"]:
             row["gps_median_hacc_m"] = float(np.median(fixes[3]))
             if outages:
@@ -438,6 +463,7 @@ def summarize(rows: list[dict]) -> dict:
              "abs_drift_median_deg_min": _med([abs(r["stability"]["drift_deg_min"]) for r in gps
                                                if r["stability"]["drift_deg_min"] is not None]),
              "sign_errors": sign,
+             "distance_vs_gps_median_pct": _med([r.get("distance_vs_gps_pct") for r in gps]),
              "walks_without_windows": [r["name"] for r in gps if r["stability"]["sd_deg"] is None]}
         for length in LENGTHS_S:
             per_walk_def, per_walk_pdr, per_walk_floor, n_fail = [], [], [], 0
@@ -472,7 +498,8 @@ def corpus_meta(root: Path, extra: Path | None, walks) -> dict:
     """Which corpus a run read: the folders, the extra folder's manifest (rows, sha256) and walks per corpus."""
     import hashlib
 
-    meta = {"data_root": str(root), "extra": str(extra) if extra else None,
+    meta = {"data_root": str(root) + ("" if Path(root).is_dir() else " (missing)"),
+            "extra": str(extra) if extra else None,
             "walks_per_corpus": {c: sum(1 for w in walks if w.corpus == c) for c in sorted({w.corpus for w in walks})},
             "repositories_extra": sorted({w.repository for w in walks if w.corpus == "extra"})}
     man = Path(extra) / "MANIFEST.tsv" if extra else None
@@ -539,14 +566,16 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
             continue
         L += ["", f"### Per {title} and split", "",
               "| group | split | walks (GPS) | failed | 30-s SD median (deg) | device-axis SD median | "
-              "abs drift median (deg/min) | sign errors | 1-min default / PDR % | 3-min default / PDR % (walks) | "
-              "clips: mean abs step error % |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "abs drift median (deg/min) | sign errors | PDR distance vs GPS path, median % | 1-min default / PDR % | "
+              "3-min default / PDR % (walks) | clips: mean abs step error % |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for g, per_split in groups.items():
             for split, d in per_split.items():
                 o1, o3 = d["outage_60s"], d["outage_180s"]
                 L.append(f"| {g} | {split} | {d['walks']} ({d['gps_walks']}) | {len(d['failed'])} | "
                          f"{_f(d['sd_median_deg'])} | {_f(d['sd_device_median_deg'])} | "
                          f"{_f(d['abs_drift_median_deg_min'])} | {len(d['sign_errors'])} | "
+                         f"{_f(d.get('distance_vs_gps_median_pct'), 0)} | "
                          f"{_f(o1['default_median_pct'])} / {_f(o1['pdr_median_pct'])} | "
                          f"{_f(o3['default_median_pct'])} / {_f(o3['pdr_median_pct'])} ({o3['walks']}) | "
                          f"{_f(d['clip_abs_step_error_mean_pct'])} ({d['clips']}) |")
@@ -565,6 +594,8 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
         steps = f"{n}" + (f" ({r['steps_counted']}, {r['steps_error_pct']:+.1f})" if r.get("steps_counted") else "")
         dist = f"{r['distance_m']:.0f}" + (f" (path {r['path_m']:.0f}, {r['distance_error_pct']:+.1f} %; loop "
                                            f"closure {r['loop_closure_pct']:.1f} %)" if r.get("path_m") else "")
+        if r.get("gps_path_m"):
+            dist += f" (GPS path {r['gps_path_m']:.0f}: {r['distance_vs_gps_pct']:+.0f} %)"
         carry = ", ".join(f"{m} {100 * c / max(n, 1):.0f}" for m, c in
                           sorted(r["steps_per_mode"].items(), key=lambda kv: -kv[1]))
         s, sd = r["stability"], r["stability_device"]
