@@ -68,11 +68,12 @@ Further public recordings (issue #25, fetched into a folder outside the reposito
     By repository, listed in :data:`REAL_TUNING_REPOS` when they are declared; a repository not
     listed there is **report**.
     Declared 2026-12-06, before any number was seen on them (``/work/extra_data``, its MANIFEST.tsv;
-    two repositories, the rule: sorted by ``owner/name``, every third from the first is tuning):
-    ``fif911/ML4QS`` (one 73-s outdoor phyphox walk with GPS) is **tuning**; ``mikamartinb/ML4QS``
-    (the 11 outdoor phyphox walks of 1-2 minutes with GPS fixes and a gyroscope, one walker, of its 78 "gehen" walks) is **report**.  Honest caveat: the
-    tuning side of this corpus is one short walk, so it can guide little; the report side is one
-    repository's walkers and phones.
+    the rule: the repositories sorted by ``owner/name``, every third from the first is tuning):
+    ``fif911/ML4QS`` (one 73-s outdoor phyphox walk with GPS) is **tuning**; ``mikamartinb/ML4QS`` (the 11
+    outdoor phyphox walks of 1-2 minutes with GPS fixes and a gyroscope, one walker, of its 78 "gehen"
+    walks) is **report**; ``parabiomech/25.GPS-TRACKING`` (one 158-s Sensor Logger recording with GPS,
+    Android, added later the same day, declared before it was run) is **report**.  Honest caveat: the
+    tuning side of this corpus is one short walk, so it can guide little.
 
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
