@@ -35,6 +35,14 @@ The reference's floor
     Median reported accuracy of the good fixes over the outage's distance (%): a smaller error than this
     cannot be shown by the GPS.
 
+What can be measured without a counted truth
+    The PDR distance against the GPS path (:func:`gps_path`: 5-s chords of the good fixes) and the steps
+    against the gait's own periodicity (:func:`periodicity_steps`): proxies, labelled as such.
+Groups
+    Every number also per corpus (``shared``: ``--data``; ``extra``: ``--extra``) and per carry position as the
+    source states it (an inference in brackets, :mod:`benchmarks.datasets.phone_walks`), by split; the results
+    say which corpus ran (the folders, the extra folder's MANIFEST.tsv rows and sha256, walks per corpus).
+
 A walk that fails (an exception, no steps, no GPS) is counted and listed, never dropped.
 """
 
