@@ -98,6 +98,9 @@ def place_site(args, rec: Recording, pipeline) -> tuple[dict | None, list]:
                 ["declination   0 (place unknown: headings are magnetic; give --origin LAT,LON or --declination)"])
     off = rec.metadata.get("unix_offset_ns")
     undated = not isinstance(off, int)
+    if undated and "simulator" in rec.metadata:  # a synthetic field (its declination in its metadata), no place's
+        return ({"declination_deg": 0.0, "source": "no date"},
+                ["declination   0 (the recording has no date for the magnetic model; give --declination)"])
     when_ns = UNDATED_MODEL_UNIX_NS if undated else off + int(t_ns)
     try:
         site = pipeline.set_site(lat, lon, alt if math.isfinite(alt) else 0.0, when_ns)

@@ -216,3 +216,7 @@ def test_undated_recording_gets_the_declination_of_its_place():
     assert abs(want - expect) > 0.5  # ten years of secular change in Germany: the date matters, a little
     args = make_parser().parse_args(["replay", "x.csv", "--no-profile", "--declination", "-3.5"])
     assert place_site(args, Recording({"gps": gps}), build_pipeline(args, None, None))[0]["declination_deg"] == -3.5
+    # a simulated recording's field is synthetic (its own declination): no date stays no declination
+    args = make_parser().parse_args(["replay", "x.csv", "--no-profile"])
+    sim = Recording({"gps": gps}, metadata={"simulator": 1})
+    assert place_site(args, sim, build_pipeline(args, None, None))[0] == {"declination_deg": 0.0, "source": "no date"}
