@@ -459,7 +459,7 @@ def plot_walk(walk: RealWalk, rec, res, fixes, row, st_t, modes) -> str:
              label="PDR alone (from the start)")
     ax1.set_aspect("equal", adjustable="datalim")
     ax1.legend(fontsize=8)
-    ax1.set_title(f"{walk.name} ({walk.split} split)")
+    ax1.set_title(f"{walk.name} ({walk.split} split, {walk.corpus} corpus)\ncarry: {walk.carry}", fontsize=9)
     ax1.set_xlabel("east (m)")
     ax1.set_ylabel("north (m)")
     s = row["stability"]
