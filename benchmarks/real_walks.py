@@ -200,10 +200,11 @@ def periodicity_steps(t_s, acc, window_s: float = GAIT_WINDOW_S, band_hz=GAIT_BA
     return steps, moving
 
 
-def gps_path(fixes, every_s: float = GPS_PATH_EVERY_S) -> tuple[float, int, int] | None:
-    """The GPS path length over the good fixes: chords between fixes at least ``every_s`` apart (shorter chords
-    add the fixes' noise to the length), a gap longer than 3 ``every_s`` not bridged.  ``(metres, first_ns,
-    last_ns)``, None without two good fixes."""
+def gps_path(fixes, every_s: float = GPS_PATH_EVERY_S):
+    """The GPS path over the good fixes: chords between fixes at least ``every_s`` apart (shorter chords add the
+    fixes' noise to the length), a gap longer than 3 ``every_s`` not bridged.  ``(metres, [(start_ns, end_ns),
+    ...])``: the length and the bridged chords' times (the span a PDR distance must be taken over), None without
+    two good fixes."""
     if fixes is None or len(fixes[0]) < 2:
         return None
     t, e, n, _ = fixes
@@ -211,11 +212,23 @@ def gps_path(fixes, every_s: float = GPS_PATH_EVERY_S) -> tuple[float, int, int]
     for i in range(1, len(t)):
         if (t[i] - t[keep[-1]]) * 1e-9 >= every_s:
             keep.append(i)
-    path = 0.0
+    path, spans = 0.0, []
     for a, b in zip(keep[:-1], keep[1:]):
         if (t[b] - t[a]) * 1e-9 <= 3.0 * every_s:
             path += math.hypot(e[b] - e[a], n[b] - n[a])
-    return path, int(t[keep[0]]), int(t[keep[-1]])
+            spans.append((int(t[a]), int(t[b])))
+    return path, spans
+
+
+def distance_in_spans(st_t, lengths, spans) -> float:
+    """The summed step lengths of the steps whose time falls in one of ``spans`` ((start_ns, end_ns], sorted)."""
+    if not spans:
+        return 0.0
+    st_t = np.asarray(st_t, dtype=np.int64)
+    inside = np.zeros(len(st_t), dtype=bool)
+    for a, b in spans:
+        inside |= (st_t > a) & (st_t <= b)
+    return float(np.sum(np.asarray(lengths, dtype=float)[inside]))
 
 
 def stability(windows, st_t, headings, t0_ns: int) -> dict:
@@ -388,8 +401,7 @@ def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> d
         row["outages"] = []
         gp = gps_path(fixes) if row["gps"] else None
         if gp is not None and gp[0] > 0:
-            inside = (st_t >= gp[1]) & (st_t <= gp[2])
-            pdr_m = float(sum(s.length_m for s, k in zip(res.steps, inside) if k))
+            pdr_m = distance_in_spans(st_t, [s.length_m for s in res.steps], gp[1])
             row.update(gps_path_m=gp[0], pdr_distance_gps_span_m=pdr_m,
                        distance_vs_gps_pct=100.0 * (pdr_m - gp[0]) / gp[0])
         if row["gps"]:

@@ -84,21 +84,27 @@ def test_extra_corpus_split_carry_and_grouped_summaries(tmp_path):
 def test_gps_path_chords_not_noise():
     """5-s chords: a straight 1.3 m/s walk with 3-m fix noise measures near its true length, 1-s chords far more;
     a 60-s gap in the fixes is not bridged."""
-    from benchmarks.real_walks import gps_path
+    from benchmarks.real_walks import distance_in_spans, gps_path
 
     rng = np.random.default_rng(3)
     t = (np.arange(200) * 1e9).astype(np.int64)
     e = 1.3 * np.arange(200.0) + rng.normal(0.0, 3.0, 200)
     n = rng.normal(0.0, 3.0, 200)
     fixes = (t, e, n, np.full(200, 5.0))
-    path, a, b = gps_path(fixes)
-    true = 1.3 * (b - a) * 1e-9
+    path, spans = gps_path(fixes)
+    true = 1.3 * (spans[-1][1] - spans[0][0]) * 1e-9
     assert abs(path - true) < 0.12 * true
     assert gps_path(fixes, every_s=1.0)[0] > 1.5 * true  # why the chords are 5 s
     keep = (t < 80e9) | (t >= 140e9)
-    gapped = gps_path((t[keep], e[keep], n[keep], np.full(keep.sum(), 5.0)))[0]
+    gapped, gspans = gps_path((t[keep], e[keep], n[keep], np.full(keep.sum(), 5.0)))
     assert gapped < path - 0.8 * 1.3 * 60.0
     assert gps_path(None) is None
+    # the PDR distance is taken over the bridged chords only: steps of 0.65 m every 0.5 s, none counted in the gap
+    st_t = (np.arange(400) * 0.5e9).astype(np.int64)
+    d_all = distance_in_spans(st_t, np.full(400, 0.65), spans)
+    d_gap = distance_in_spans(st_t, np.full(400, 0.65), gspans)
+    assert abs(d_all - 1.3 * (spans[-1][1] - spans[0][0]) * 1e-9) < 0.7
+    assert abs((d_all - d_gap) - 1.3 * 65.0) < 1.0  # the 60-s gap and the chord that would bridge it
 
 
 def test_periodicity_steps_counts_a_known_cadence():
