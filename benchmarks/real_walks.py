@@ -471,9 +471,10 @@ def plot_walk(walk: RealWalk, rec, res, fixes, row, st_t, modes) -> str:
              label="PDR alone (from the start)")
     ax1.set_aspect("equal", adjustable="datalim")
     ax1.legend(fontsize=8)
-    ax1.set_title(f"{walk.name} ({walk.split} split, {walk.corpus} corpus)\ncarry: {walk.carry}", fontsize=9)
+    ax1.set_title(f"{walk.name} ({walk.split} split)")
     ax1.set_xlabel("east (m)")
     ax1.set_ylabel("north (m)")
+    ax1.set_title(f"{walk.name} ({walk.split} split, {walk.corpus} corpus)\ncarry: {walk.carry}", fontsize=9)
     s = row["stability"]
     if s["n_windows"]:
         ax2.plot(s["t_s"], s["diff_deg"], "o-", label="course - step heading (30-s windows)")
@@ -751,9 +752,9 @@ def main(argv=None) -> int:
                                 cwd=Path(__file__).parent).stdout.strip()
     except OSError:
         commit = "?"
-    meta = {"when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit, "seconds": time.time() - t,
-            "corpus": corpus_meta(root, a.extra, walks), "by_corpus": summarize_by(rows, "corpus"),
-            "by_carry": summarize_by(rows, "carry")}
+    meta = {"when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit, "seconds": time.time() - t}
+    meta.update(corpus=corpus_meta(root, a.extra, walks), by_corpus=summarize_by(rows, "corpus"),
+                by_carry=summarize_by(rows, "carry"))
     md = markdown(rows, summ, meta)
     if a.no_write:
         print(md)

@@ -70,13 +70,6 @@ def _first_gps_origin(rec: Recording):
     return None if fix is None else (fix[1], fix[2])
 
 
-#: the magnetic model's date for a recording without one (a phyphox export without meta/time.csv): the newest
-#: model's epoch.  The declination moves by a fraction of a degree a year (in Europe about 0.15 deg); leaving it
-#: at 0 would be off by the whole declination (4 deg in northern Germany, -9 deg in Korea, 13 deg in Seattle)
-UNDATED_MODEL_DATE = "2025-01-01"
-UNDATED_MODEL_UNIX_NS = 1_735_689_600_000_000_000
-
-
 def place_site(args, rec: Recording, pipeline) -> tuple[dict | None, list]:
     """Magnetic declination (and the field's strength and dip) of the World Magnetic Model at the walk's place
     and date, given to the attitude filter before the run, when the place is known (``--origin`` or a good GPS
@@ -111,6 +104,13 @@ def place_site(args, rec: Recording, pipeline) -> tuple[dict | None, list]:
         where += f"; the recording has no date: the model at {UNDATED_MODEL_DATE}, give --declination to override"
     return ({"declination_deg": d, "source": f"World Magnetic Model at {where}", "lat_deg": lat, "lon_deg": lon},
             [f"declination   {d:+.1f} deg (World Magnetic Model at {lat:.4f}, {lon:.4f}: {where})"])
+
+
+#: the magnetic model's date for a recording without one (a phyphox export without meta/time.csv): the newest
+#: model's epoch.  The declination moves by a fraction of a degree a year (in Europe about 0.15 deg); leaving it
+#: at 0 would be off by the whole declination (4 deg in northern Germany, -9 deg in Korea, 13 deg in Seattle)
+UNDATED_MODEL_DATE = "2025-01-01"
+UNDATED_MODEL_UNIX_NS = 1_735_689_600_000_000_000
 
 
 GPS_MODES = ("auto", "off", "chen", "kubrak")
