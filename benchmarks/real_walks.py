@@ -35,6 +35,14 @@ The reference's floor
     Median reported accuracy of the good fixes over the outage's distance (%): a smaller error than this
     cannot be shown by the GPS.
 
+What can be measured without a counted truth
+    The PDR distance against the GPS path (:func:`gps_path`: 5-s chords of the good fixes) and the steps
+    against the gait's own periodicity (:func:`periodicity_steps`): proxies, labelled as such.
+Groups
+    Every number also per corpus (``shared``: ``--data``; ``extra``: ``--extra``) and per carry position as the
+    source states it (an inference in brackets, :mod:`benchmarks.datasets.phone_walks`), by split; the results
+    say which corpus ran (the folders, the extra folder's MANIFEST.tsv rows and sha256, walks per corpus).
+
 A walk that fails (an exception, no steps, no GPS) is counted and listed, never dropped.
 """
 
@@ -72,6 +80,11 @@ LENGTHS_S = (60, 180, 300)
 CALIBRATION_S = 60.0
 EVERY_S = 60.0
 OFFSET_STEPS = 20
+GPS_PATH_EVERY_S = 5.0
+#: steps from the gait's own periodicity (a proxy where nobody counted): windows, step band, "moving" threshold
+GAIT_WINDOW_S = 10.0
+GAIT_BAND_HZ = (1.2, 2.4)
+GAIT_MIN_STD_M_S2 = 0.6
 
 #: issue #25's targets on the report split
 TARGET_SD_DEG = 6.0
@@ -158,6 +171,65 @@ def straight_windows(fixes, t0_ns: int, t1_ns: int) -> list[tuple[int, int, floa
             continue
         out.append((int(t[idx[0]]), int(t[idx[-1]]), math.atan2(dn, de)))
     return out
+
+
+def periodicity_steps(t_s, acc, window_s: float = GAIT_WINDOW_S, band_hz=GAIT_BAND_HZ,
+                      min_std: float = GAIT_MIN_STD_M_S2, rate_hz: float = 50.0) -> tuple[float, float]:
+    """Steps from the gait's own periodicity, a proxy where nobody counted: per ``window_s`` window whose
+    acceleration magnitude varies by more than ``min_std`` (m/s^2, SD), the strongest frequency of the magnitude
+    in ``band_hz`` (the step rate of walking, both legs) times the window's length.  ``(steps, moving_s)``.
+    A proxy: a phone swung at the stride rate or a harmonic stronger than the step can fool it."""
+    t_s = np.asarray(t_s, dtype=float)
+    if len(t_s) < 2:
+        return 0.0, 0.0
+    mag = np.linalg.norm(np.asarray(acc, dtype=float), axis=1)
+    grid = np.arange(t_s[0], t_s[-1], 1.0 / rate_hz)
+    x = np.interp(grid, t_s, mag)
+    n = int(round(window_s * rate_hz))
+    nfft = 8 * n
+    f = np.fft.rfftfreq(nfft, 1.0 / rate_hz)
+    sel = (f >= band_hz[0]) & (f <= band_hz[1])
+    win = np.hanning(n)
+    steps = moving = 0.0
+    for a in range(0, len(x) - n + 1, n):
+        w = x[a:a + n] - np.mean(x[a:a + n])
+        if np.std(w) < min_std:
+            continue
+        p = np.abs(np.fft.rfft(w * win, nfft)) ** 2
+        steps += float(f[sel][np.argmax(p[sel])]) * window_s
+        moving += window_s
+    return steps, moving
+
+
+def gps_path(fixes, every_s: float = GPS_PATH_EVERY_S):
+    """The GPS path over the good fixes: chords between fixes at least ``every_s`` apart (shorter chords add the
+    fixes' noise to the length), a gap longer than 3 ``every_s`` not bridged.  ``(metres, [(start_ns, end_ns),
+    ...])``: the length and the bridged chords' times (the span a PDR distance must be taken over), None without
+    two good fixes."""
+    if fixes is None or len(fixes[0]) < 2:
+        return None
+    t, e, n, _ = fixes
+    keep = [0]
+    for i in range(1, len(t)):
+        if (t[i] - t[keep[-1]]) * 1e-9 >= every_s:
+            keep.append(i)
+    path, spans = 0.0, []
+    for a, b in zip(keep[:-1], keep[1:]):
+        if (t[b] - t[a]) * 1e-9 <= 3.0 * every_s:
+            path += math.hypot(e[b] - e[a], n[b] - n[a])
+            spans.append((int(t[a]), int(t[b])))
+    return path, spans
+
+
+def distance_in_spans(st_t, lengths, spans) -> float:
+    """The summed step lengths of the steps whose time falls in one of ``spans`` ((start_ns, end_ns], sorted)."""
+    if not spans:
+        return 0.0
+    st_t = np.asarray(st_t, dtype=np.int64)
+    inside = np.zeros(len(st_t), dtype=bool)
+    for a, b in spans:
+        inside |= (st_t > a) & (st_t <= b)
+    return float(np.sum(np.asarray(lengths, dtype=float)[inside]))
 
 
 def stability(windows, st_t, headings, t0_ns: int) -> dict:
@@ -275,7 +347,7 @@ def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> d
     from core.importers import load_recording
 
     row = {"name": walk.name, "dataset": walk.dataset, "walk": walk.walk, "split": walk.split, "kind": walk.kind,
-           "repository": walk.repository}
+           "repository": walk.repository, "corpus": walk.corpus, "carry": walk.carry}
     try:
         rec = load_recording(str(walk.folder), warn=False)
         res, pipe, engine = run_default(rec, walk.folder, probe=True)
@@ -304,6 +376,10 @@ def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> d
         heading = np.array([s.heading_rad for s in res.steps])
         probe_log = getattr(pipe.walkdir, "log", {})
         device = np.array([probe_log.get(s.heading_rad, {}).get("device", s.heading_rad) for s in res.steps])
+        acc = rec.streams["acc"]
+        gait, moving = periodicity_steps((acc.t_ns - t0) * 1e-9, acc.values)
+        row.update(periodicity_steps=gait, periodicity_moving_s=moving,
+                   steps_vs_periodicity_pct=100.0 * (len(res.steps) - gait) / gait if gait > 0 else None)
         modes = [s.carry_mode for s in res.steps]
         row["steps_per_mode"] = {m: modes.count(m) for m in sorted(set(modes))}
         fixes = good_fixes(rec.streams[GPS]) if rec.has(GPS) and walk.kind != STEP_CLIP else None
@@ -324,6 +400,11 @@ def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> d
                 per_mode[m] = {k: s[k] for k in ("n_windows", "sd_deg", "drift_deg_min", "mean_offset_deg")}
         row["stability_per_mode"] = per_mode
         row["outages"] = []
+        gp = gps_path(fixes) if row["gps"] else None
+        if gp is not None and gp[0] > 0:
+            pdr_m = distance_in_spans(st_t, [s.length_m for s in res.steps], gp[1])
+            row.update(gps_path_m=gp[0], pdr_distance_gps_span_m=pdr_m,
+                       distance_vs_gps_pct=100.0 * (pdr_m - gp[0]) / gp[0])
         if row["gps"]:
             row["gps_median_hacc_m"] = float(np.median(fixes[3]))
             if outages:
@@ -404,6 +485,7 @@ def plot_walk(walk: RealWalk, rec, res, fixes, row, st_t, modes) -> str:
     ax1.set_title(f"{walk.name} ({walk.split} split)")
     ax1.set_xlabel("east (m)")
     ax1.set_ylabel("north (m)")
+    ax1.set_title(f"{walk.name} ({walk.split} split, {walk.corpus} corpus)\ncarry: {walk.carry}", fontsize=9)
     s = row["stability"]
     if s["n_windows"]:
         ax2.plot(s["t_s"], s["diff_deg"], "o-", label="course - step heading (30-s windows)")
@@ -449,6 +531,9 @@ def summarize(rows: list[dict]) -> dict:
              "abs_drift_median_deg_min": _med([abs(r["stability"]["drift_deg_min"]) for r in gps
                                                if r["stability"]["drift_deg_min"] is not None]),
              "sign_errors": sign,
+             "distance_vs_gps_median_pct": _med([r.get("distance_vs_gps_pct") for r in gps]),
+             "steps_vs_periodicity_median_pct": _med([r.get("steps_vs_periodicity_pct") for r in rs
+                                                      if not r.get("failed")]),
              "walks_without_windows": [r["name"] for r in gps if r["stability"]["sd_deg"] is None]}
         for length in LENGTHS_S:
             per_walk_def, per_walk_pdr, per_walk_floor, n_fail = [], [], [], 0
@@ -471,6 +556,30 @@ def summarize(rows: list[dict]) -> dict:
     return out
 
 
+def summarize_by(rows: list[dict], key: str) -> dict:
+    """:func:`summarize` of the rows grouped by ``row[key]`` (the corpus, the stated carry position)."""
+    out = {}
+    for value in sorted({str(r.get(key, "")) for r in rows}):
+        out[value] = summarize([r for r in rows if str(r.get(key, "")) == value])
+    return out
+
+
+def corpus_meta(root: Path, extra: Path | None, walks) -> dict:
+    """Which corpus a run read: the folders, the extra folder's manifest (rows, sha256) and walks per corpus."""
+    import hashlib
+
+    meta = {"data_root": str(root) + ("" if Path(root).is_dir() else " (missing)"),
+            "extra": str(extra) if extra else None,
+            "walks_per_corpus": {c: sum(1 for w in walks if w.corpus == c) for c in sorted({w.corpus for w in walks})},
+            "repositories_extra": sorted({w.repository for w in walks if w.corpus == "extra"})}
+    man = Path(extra) / "MANIFEST.tsv" if extra else None
+    if man is not None and man.exists():
+        data = man.read_bytes()
+        meta["extra_manifest"] = {"path": str(man), "rows": max(data.count(b"\n") - 1, 0),
+                                  "sha256": hashlib.sha256(data).hexdigest()[:16]}
+    return meta
+
+
 def _f(x, nd=1):
     return "–" if x is None else f"{x:.{nd}f}"
 
@@ -485,6 +594,15 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
          "starts; end error in % of the fused distance inside; PDR alone = dead reckoning from the fused position "
          "at the window's start, turned by the fusion's learnt heading offset. Floor = median reported accuracy / "
          "outage distance.", ""]
+    cm = meta.get("corpus") or {}
+    if cm:
+        man = cm.get("extra_manifest")
+        L += [f"Corpus: data root `{cm['data_root']}`"
+              + (f", extra folder `{cm['extra']}`" if cm.get("extra") else ", no extra folder")
+              + (f" (manifest `{man['path']}`, {man['rows']} files, sha256 {man['sha256']})" if man else "")
+              + "; walks per corpus: " + ", ".join(f"{k} {v}" for k, v in cm["walks_per_corpus"].items())
+              + (f"; extra repositories: {', '.join(cm['repositories_extra'])}" if cm.get("repositories_extra") else "")
+              + ".", ""]
     L += ["### Per split against the targets", "",
           "| split | walks (GPS) | failed | 30-s SD median (deg) | device-axis SD median | abs drift median (deg/min) | "
           "sign errors (|mean offset| > 90, walks with a magnetometer) | 3-min default median % | 3-min PDR alone % | "
@@ -511,19 +629,47 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
               f"<= {TARGET_3MIN_DEFAULT_PCT:g} %: {verdict(o3['default_median_pct'], TARGET_3MIN_DEFAULT_PCT)} "
               f"({_f(o3['default_median_pct'])}); 3-min PDR alone <= {TARGET_3MIN_PDR_PCT:g} %: "
               f"{verdict(o3['pdr_median_pct'], TARGET_3MIN_PDR_PCT)} ({_f(o3['pdr_median_pct'])})."]
+    for title, groups in (("corpus", meta.get("by_corpus") or {}),
+                          ("carry position (as the source states it; an inference in brackets)",
+                           meta.get("by_carry") or {})):
+        if not groups:
+            continue
+        L += ["", f"### Per {title} and split", "",
+              "| group | split | walks (GPS) | failed | 30-s SD median (deg) | device-axis SD median | "
+              "abs drift median (deg/min) | sign errors | PDR distance vs GPS path, median % | steps vs gait "
+              "periodicity, median % | 1-min default / PDR % | 3-min default / PDR % (walks) | "
+              "clips: mean abs step error % |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for g, per_split in groups.items():
+            for split, d in per_split.items():
+                o1, o3 = d["outage_60s"], d["outage_180s"]
+                L.append(f"| {g} | {split} | {d['walks']} ({d['gps_walks']}) | {len(d['failed'])} | "
+                         f"{_f(d['sd_median_deg'])} | {_f(d['sd_device_median_deg'])} | "
+                         f"{_f(d['abs_drift_median_deg_min'])} | {len(d['sign_errors'])} | "
+                         f"{_f(d.get('distance_vs_gps_median_pct'), 0)} | "
+                         f"{_f(d.get('steps_vs_periodicity_median_pct'), 0)} | "
+                         f"{_f(o1['default_median_pct'])} / {_f(o1['pdr_median_pct'])} | "
+                         f"{_f(o3['default_median_pct'])} / {_f(o3['pdr_median_pct'])} ({o3['walks']}) | "
+                         f"{_f(d['clip_abs_step_error_mean_pct'])} ({d['clips']}) |")
     L += ["", "### Per walk", "",
-          "| split | walk | kind | mag | acc Hz | steps (count, error %) | distance m | carry (share of steps) | "
+          "| split | walk | kind | stated carry | mag | acc Hz | steps (count, error %) | distance m | "
+          "detected carry (share of steps) | "
           "windows | SD deg | drift deg/min | mean offset deg | device-axis SD / mean | 1-min def / PDR % | "
           "3-min def / PDR % | 5-min def / PDR % | floor 3-min % | learnt offset median deg |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r.get("failed"):
-            L.append(f"| {r['split']} | {r['name']} | {r['kind']} | | | FAILED: {r['failed']} |" + " |" * 12)
+            L.append(f"| {r['split']} | {r['name']} | {r['kind']} | {r.get('carry', '')} | | | FAILED: {r['failed']} |"
+                     + " |" * 12)
             continue
         n = r["n_steps"]
         steps = f"{n}" + (f" ({r['steps_counted']}, {r['steps_error_pct']:+.1f})" if r.get("steps_counted") else "")
+        if r.get("periodicity_steps"):
+            steps += f" (gait ~{r['periodicity_steps']:.0f}: {r['steps_vs_periodicity_pct']:+.0f} %)"
         dist = f"{r['distance_m']:.0f}" + (f" (path {r['path_m']:.0f}, {r['distance_error_pct']:+.1f} %; loop "
                                            f"closure {r['loop_closure_pct']:.1f} %)" if r.get("path_m") else "")
+        if r.get("gps_path_m"):
+            dist += f" (GPS path {r['gps_path_m']:.0f}: {r['distance_vs_gps_pct']:+.0f} %)"
         carry = ", ".join(f"{m} {100 * c / max(n, 1):.0f}" for m, c in
                           sorted(r["steps_per_mode"].items(), key=lambda kv: -kv[1]))
         s, sd = r["stability"], r["stability_device"]
@@ -535,7 +681,8 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
                             f" (n {len(good)}{', failed ' + str(len(bad)) if bad else ''})") if good or bad else "–"
         g3 = [o for o in r.get("outages", []) if o["length_s"] == 180 and not o.get("failed")]
         learnt = _med([o.get("learnt_offset_deg") for o in r.get("outages", []) if not o.get("failed")])
-        L.append(f"| {r['split']} | {r['name']} | {r['kind']} | {'yes' if r.get('magnetometer') else 'no'} | "
+        L.append(f"| {r['split']} | {r['name']} | {r['kind']} | {r.get('carry', '')} | "
+                 f"{'yes' if r.get('magnetometer') else 'no'} | "
                  f"{r['acc_rate_hz']:.0f} | {steps} | {dist} | {carry} | {s['n_windows']} | {_f(s['sd_deg'])} | "
                  f"{_f(s['drift_deg_min'])} | {_f(s['mean_offset_deg'])} | {_f(sd['sd_deg'])} / "
                  f"{_f(sd['mean_offset_deg'])} | {outs[60]} | {outs[180]} | {outs[300]} | "
@@ -618,6 +765,8 @@ def main(argv=None) -> int:
     except OSError:
         commit = "?"
     meta = {"when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit, "seconds": time.time() - t}
+    meta.update(corpus=corpus_meta(root, a.extra, walks), by_corpus=summarize_by(rows, "corpus"),
+                by_carry=summarize_by(rows, "carry"))
     md = markdown(rows, summ, meta)
     # a subset (--only, --split, --extra, --set) or --no-write: under out/benchmarks/real_walks/ (benchmarks.options)
     subset = a.split != "all" or a.extra is not None or bool(overrides)

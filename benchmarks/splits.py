@@ -67,6 +67,13 @@ More phone walks (``phone_walks_more``, issue #25, declared 2026-12-04 before an
 Further public recordings (issue #25, fetched into a folder outside the repository)
     By repository, listed in :data:`REAL_TUNING_REPOS` when they are declared; a repository not
     listed there is **report**.
+    Declared 2026-12-06, before any number was seen on them (``/work/extra_data``, its MANIFEST.tsv;
+    the rule: the repositories sorted by ``owner/name``, every third from the first is tuning):
+    ``fif911/ML4QS`` (one 73-s outdoor phyphox walk with GPS) is **tuning**; ``mikamartinb/ML4QS`` (the 11
+    outdoor phyphox walks of 1-2 minutes with GPS fixes and a gyroscope, one walker, of its 78 "gehen"
+    walks) is **report**; ``parabiomech/25.GPS-TRACKING`` (one 158-s Sensor Logger recording with GPS,
+    Android, added later the same day, declared before it was run) is **report**.  Honest caveat: the
+    tuning side of this corpus is one short walk, so it can guide little.
 
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
@@ -91,7 +98,10 @@ SIM_GPS_FAULT_SEEDS = {TUNING: tuple(range(0, 10)), REPORT: tuple(range(2000, 20
 SIM_CARRY_SEEDS = {TUNING: tuple(range(0, 30)), REPORT: tuple(range(3000, 3030))}
 
 #: repositories of real walks whose recordings are tuning (issue #25); every other repository is report
-REAL_TUNING_REPOS = frozenset({"thomasdingemanse/ML4QS"})
+REAL_TUNING_REPOS = frozenset({
+    "thomasdingemanse/ML4QS",  # declared 2026-12-04 before any number was seen (phone_walks_more)
+    "fif911/ML4QS",  # declared 2026-12-06 before any number was seen (extra corpus; mikamartinb/ML4QS report)
+})
 
 #: the repository of each ``phone_walks_more`` walk (its MANIFEST.tsv says the same)
 PHONE_WALKS_MORE_REPOS = {

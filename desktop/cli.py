@@ -73,7 +73,8 @@ def _first_gps_origin(rec: Recording):
 def place_site(args, rec: Recording, pipeline, plan=None) -> tuple[dict | None, list]:
     """Magnetic declination (and the field's strength and dip) of the World Magnetic Model at the walk's place
     and date, given to the attitude filter before the run, when the place is known (``--origin`` or a good GPS
-    fix) and the recording has a date; ``--declination`` overrides it.  Returns (summary, lines)."""
+    fix), at the recording's date (a recording without one: :data:`UNDATED_MODEL_DATE`); ``--declination``
+    overrides it.  Returns (summary, lines)."""
     if args.declination is not None:
         return ({"declination_deg": args.declination, "source": "--declination"},
                 [f"declination   {args.declination:+.1f} deg (--declination)"])
@@ -91,16 +92,27 @@ def place_site(args, rec: Recording, pipeline, plan=None) -> tuple[dict | None, 
         return ({"declination_deg": 0.0, "source": "unknown place"},
                 ["declination   0 (place unknown: headings are magnetic; give --origin LAT,LON or --declination)"])
     off = rec.metadata.get("unix_offset_ns")
-    if not isinstance(off, int):
+    undated = not isinstance(off, int)
+    if undated and "simulator" in rec.metadata:  # a synthetic field (its declination in its metadata), no place's
         return ({"declination_deg": 0.0, "source": "no date"},
                 ["declination   0 (the recording has no date for the magnetic model; give --declination)"])
+    when_ns = UNDATED_MODEL_UNIX_NS if undated else off + int(t_ns)
     try:
-        site = pipeline.set_site(lat, lon, alt if math.isfinite(alt) else 0.0, off + int(t_ns))
+        site = pipeline.set_site(lat, lon, alt if math.isfinite(alt) else 0.0, when_ns)
     except (ImportError, ValueError) as e:
         return {"declination_deg": 0.0, "source": f"magnetic model failed: {e}"}, [f"declination   0 ({e})"]
     d = site.get("declination_deg") or 0.0
+    if undated:  # a date-less export (phyphox without meta/time.csv): the place's declination, at the model's epoch
+        where += f"; the recording has no date: the model at {UNDATED_MODEL_DATE}, give --declination to override"
     return ({"declination_deg": d, "source": f"World Magnetic Model at {where}", "lat_deg": lat, "lon_deg": lon},
             [f"declination   {d:+.1f} deg (World Magnetic Model at {lat:.4f}, {lon:.4f}: {where})"])
+
+
+#: the magnetic model's date for a recording without one (a phyphox export without meta/time.csv): the newest
+#: model's epoch.  The declination moves by a fraction of a degree a year (in Europe about 0.15 deg); leaving it
+#: at 0 would be off by the whole declination (4 deg in northern Germany, -9 deg in Korea, 13 deg in Seattle)
+UNDATED_MODEL_DATE = "2025-01-01"
+UNDATED_MODEL_UNIX_NS = 1_735_689_600_000_000_000
 
 
 GPS_MODES = ("auto", "off", "chen", "kubrak")

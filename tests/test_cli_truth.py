@@ -183,3 +183,40 @@ def test_declination_comes_from_the_magnetic_model_at_the_first_good_fix(tmp_pat
     assert abs(s["declination"]["lat_deg"] - vals[good, 0]) < 1e-9
     assert main(["replay", str(path), "--json", "--gps", "off", "--no-profile", "--declination", "-3.5"]) == 0
     assert json.loads(capsys.readouterr().out)["declination"] == {"declination_deg": -3.5, "source": "--declination"}
+
+
+def test_undated_recording_gets_the_declination_of_its_place():
+    """A recording without a date (a phyphox export without meta/time.csv) and a good fix in Lueneburg: the
+    declination is the model's at that place for UNDATED_MODEL_DATE (about +4 deg), not 0; a dated one keeps its
+    own date; --declination still overrides."""
+    import math
+
+    import numpy as np
+
+    from core.geodesy import declination_rad, unix_ns_to_datetime
+    from core.recording import Recording, Stream
+    from desktop.cli import UNDATED_MODEL_UNIX_NS, build_gnss, build_pipeline, make_parser, place_site
+
+    lat, lon = 53.2290, 10.4004
+    t = np.arange(5, dtype=np.int64) * 1_000_000_000
+    vals = np.tile([lat, lon, 20.0, 5.0, 1.3, 90.0], (5, 1))
+    gps = Stream("gps", t, vals, ("lat_deg", "lon_deg", "alt_m", "hacc_m", "speed_m_s", "course_deg"))
+    want = math.degrees(declination_rad(lat, lon, 20.0, unix_ns_to_datetime(UNDATED_MODEL_UNIX_NS)))
+    assert 2.0 < want < 7.0
+    for metadata, expect in (({}, want),
+                             ({"unix_offset_ns": 1_420_070_400_000_000_000},  # 2015-01-01: its own date
+                              math.degrees(declination_rad(lat, lon, 20.0, unix_ns_to_datetime(1_420_070_400_000_000_000))))):
+        rec = Recording({"gps": gps}, metadata=metadata)
+        args = make_parser().parse_args(["replay", "x.csv", "--no-profile"])
+        pipe = build_pipeline(args, build_gnss(args, rec, None), None)
+        summary, lines = place_site(args, rec, pipe)
+        assert abs(summary["declination_deg"] - expect) < 1e-9, (metadata, summary)
+        assert ("no date" in summary["source"]) == (not metadata)
+        assert abs(math.degrees(pipe.attitude.declination_rad) - expect) < 1e-9
+    assert abs(want - expect) > 0.5  # ten years of secular change in Germany: the date matters, a little
+    args = make_parser().parse_args(["replay", "x.csv", "--no-profile", "--declination", "-3.5"])
+    assert place_site(args, Recording({"gps": gps}), build_pipeline(args, None, None))[0]["declination_deg"] == -3.5
+    # a simulated recording's field is synthetic (its own declination): no date stays no declination
+    args = make_parser().parse_args(["replay", "x.csv", "--no-profile"])
+    sim = Recording({"gps": gps}, metadata={"simulator": 1})
+    assert place_site(args, sim, build_pipeline(args, None, None))[0] == {"declination_deg": 0.0, "source": "no date"}

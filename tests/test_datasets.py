@@ -196,6 +196,9 @@ def test_split_declarations():
         == ["report"] * 2
     assert S.split_of("anything", {"repository": "thomasdingemanse/ML4QS"}) == "tuning"
     assert S.split_of("anything", {"repository": "someone/else"}) == "report"
+    # the extra corpus (declared 2026-12-06 before any number): fif911 tuning, mikamartinb report
+    assert S.repo_split("fif911/ML4QS") == "tuning" and S.repo_split("mikamartinb/ML4QS") == "report"
+    assert S.repo_split("parabiomech/25.GPS-TRACKING") == "report"
     from benchmarks.run import DATASET_MODULES
     import importlib
 

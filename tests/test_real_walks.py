@@ -48,3 +48,76 @@ def test_outage_windows():
     w = outage_windows(5.0, 306.0)
     assert (65.0, 60.0) in w and (65.0, 180.0) in w and all(a + L <= 291.0 for a, L in w)
     assert not [x for x in w if x[1] == 300.0]
+
+
+def test_extra_corpus_split_carry_and_grouped_summaries(tmp_path):
+    """The --extra folder: repository from the folder name, split by repository (declared tuning vs report),
+    the carry position from its MANIFEST.tsv, a clip from COUNTS.tsv; the grouped summaries keep failures."""
+    from benchmarks.datasets.phone_walks import EXTRA, SHARED, real_walks
+    from benchmarks.real_walks import corpus_meta, summarize_by
+
+    root = tmp_path / "data"
+    (root / "gps_walks_phone" / "w0").mkdir(parents=True)
+    extra = tmp_path / "extra"
+    for repo, walk in (("fif911__ML4QS", "a"), ("someone__walks", "b"), ("someone__walks", "c")):
+        (extra / repo / walk).mkdir(parents=True)
+    (extra / "MANIFEST.tsv").write_text("repository\twalk\tlocal_file\tcarry\n"
+                                        "fif911/ML4QS\ta\tLocation.csv\tnot stated (inferred: flat in hand)\n"
+                                        "someone/walks\tb\tLocation.csv\ttrouser pocket\n")
+    (extra / "someone__walks" / "COUNTS.tsv").write_text("walk\tsteps\tpath_m\tcarry\nc\t40\t\tswinging hand\n")
+    walks = real_walks(root, extra)
+    by = {w.walk: w for w in walks}
+    assert by["w0"].corpus == SHARED and by["w0"].split == "report"
+    assert by["a"].corpus == EXTRA and by["a"].repository == "fif911/ML4QS" and by["a"].split == "tuning"
+    assert by["a"].carry == "not stated (inferred: flat in hand)"
+    assert by["b"].split == "report" and by["b"].carry == "trouser pocket"
+    assert by["c"].kind == "step_clip" and by["c"].steps_counted == 40 and by["c"].carry == "swinging hand"
+    meta = corpus_meta(root, extra, walks)
+    assert meta["walks_per_corpus"] == {EXTRA: 3, SHARED: 1} and meta["extra_manifest"]["rows"] == 2
+    assert meta["repositories_extra"] == ["fif911/ML4QS", "someone/walks"]
+    rows = [{"name": w.name, "split": w.split, "corpus": w.corpus, "carry": w.carry, "failed": "x"} for w in walks]
+    g = summarize_by(rows, "carry")
+    assert g["trouser pocket"]["report"]["failed"] == ["extdata:someone__walks/b"]  # counted, not dropped
+    assert set(summarize_by(rows, "corpus")) == {EXTRA, SHARED}
+
+
+def test_gps_path_chords_not_noise():
+    """5-s chords: a straight 1.3 m/s walk with 3-m fix noise measures near its true length, 1-s chords far more;
+    a 60-s gap in the fixes is not bridged."""
+    from benchmarks.real_walks import distance_in_spans, gps_path
+
+    rng = np.random.default_rng(3)
+    t = (np.arange(200) * 1e9).astype(np.int64)
+    e = 1.3 * np.arange(200.0) + rng.normal(0.0, 3.0, 200)
+    n = rng.normal(0.0, 3.0, 200)
+    fixes = (t, e, n, np.full(200, 5.0))
+    path, spans = gps_path(fixes)
+    true = 1.3 * (spans[-1][1] - spans[0][0]) * 1e-9
+    assert abs(path - true) < 0.12 * true
+    assert gps_path(fixes, every_s=1.0)[0] > 1.5 * true  # why the chords are 5 s
+    keep = (t < 80e9) | (t >= 140e9)
+    gapped, gspans = gps_path((t[keep], e[keep], n[keep], np.full(keep.sum(), 5.0)))
+    assert gapped < path - 0.8 * 1.3 * 60.0
+    assert gps_path(None) is None
+    # the PDR distance is taken over the bridged chords only: steps of 0.65 m every 0.5 s, none counted in the gap
+    st_t = (np.arange(400) * 0.5e9).astype(np.int64)
+    d_all = distance_in_spans(st_t, np.full(400, 0.65), spans)
+    d_gap = distance_in_spans(st_t, np.full(400, 0.65), gspans)
+    assert abs(d_all - 1.3 * (spans[-1][1] - spans[0][0]) * 1e-9) < 0.7
+    assert abs((d_all - d_gap) - 1.3 * 65.0) < 1.0  # the 60-s gap and the chord that would bridge it
+
+
+def test_periodicity_steps_counts_a_known_cadence():
+    """A 60-s walk at 1.8 steps/s (magnitude with a stride component at 0.9 Hz, weaker) between 20 s of
+    standing: 108 steps within 3 %, the standing not counted; a still phone gives none."""
+    from benchmarks.real_walks import periodicity_steps
+
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 100.0, 0.01)
+    walking = (t >= 20.0) & (t < 80.0)
+    mag = 9.81 + walking * (2.0 * np.sin(2 * np.pi * 1.8 * t) + 0.8 * np.sin(2 * np.pi * 0.9 * t + 0.3))
+    mag += rng.normal(0.0, 0.1, t.size)
+    acc = np.stack([np.zeros_like(t), np.zeros_like(t), mag], axis=1)
+    steps, moving = periodicity_steps(t, acc)
+    assert moving == 60.0 and abs(steps - 108.0) < 0.03 * 108.0
+    assert periodicity_steps(t, np.stack([np.zeros_like(t)] * 2 + [np.full_like(t, 9.81)], axis=1)) == (0.0, 0.0)
