@@ -271,7 +271,8 @@ def _gaps(rec, src, warn) -> None:
         if others:
             text += f" while {' and '.join(others)} ran"
         if name.partition("@")[0] == ACC:
-            text += ": no steps are counted across a gap (the distance walked in it is missing)"
+            text += (": no steps are measured across a gap; where the gyroscope shows the walk went on, the pipeline "
+                     "estimates them (see its labels), else the distance walked in it is missing")
         text += "; rates are computed without the gaps"
         add_finding(rec, Finding(StreamProblem.GAP, name, len(a), "reported", text), warn)
 
