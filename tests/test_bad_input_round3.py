@@ -297,6 +297,12 @@ def test_a_gap_in_the_accelerometer_alone_is_reported_in_the_summary_and_the_jso
     lines = out.getvalue().splitlines()
     assert any(ln.startswith("stream ") and "no steps are measured" in ln for ln in lines)
     assert any("estimated, not measured" in ln for ln in lines)
+    # the app's warning line says it too (before: only repairs were shown, a reported gap was not)
+    from app.session import reading_notes
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        note = reading_notes(read_recording(str(tmp_path / "walk.csv")))
+    assert "stream 'acc': 1 gap(s)" in note and "the longest 8.0 s" in note
 
 
 def test_a_10_s_magnetometer_spike_is_reported(tmp_path, walk):
