@@ -333,6 +333,7 @@ def test_a_gap_in_the_accelerometer_alone_is_reported_in_the_summary_and_the_jso
     lines = out.getvalue().splitlines()
     assert any(ln.startswith("stream ") and "no steps are measured" in ln for ln in lines)
     assert any("estimated, not measured" in ln for ln in lines)
+    assert any(ln.startswith("steps ") and "estimated across accelerometer gaps" in ln for ln in lines)
     # the app's warning line says it too (before: only repairs were shown, a reported gap was not)
     from app.session import reading_notes
     with warnings.catch_warnings():

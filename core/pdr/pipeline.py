@@ -619,7 +619,7 @@ class Pipeline:
 
         The confirmed steps before the gap are completed first (their headings from before it), an unconfirmed
         bout is dropped (as at the end of data), then the estimated steps follow in time order."""
-        gap, est, length = self.bridge.close(t_ns, self.attitude.initialized)
+        _, est, length = self.bridge.close(t_ns, self.attitude.initialized)
         if not est:
             return []
         done = self.finish_candidates()
