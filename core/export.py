@@ -192,7 +192,8 @@ def write_track_gpx(path: str, track, origin_lat_lon: tuple[float, float] | None
 
 
 #: the columns of a step file (:class:`StepFile`)
-STEP_FILE_COLUMNS = ("t_ns", "length_m", "heading_rad", "east_m", "north_m", "estimated", "carry_mode")
+STEP_FILE_COLUMNS = ("index", "t_ns", "length_m", "heading_rad", "east_m", "north_m", "mag_trusted", "estimated",
+                     "carry_mode")
 
 
 class StepRow:
@@ -201,10 +202,11 @@ class StepRow:
 
     __slots__ = STEP_FILE_COLUMNS
 
-    def __init__(self, t_ns: int, length_m: float, heading_rad: float, east_m: float, north_m: float,
-                 estimated: bool = False, carry_mode: str = ""):
-        self.t_ns, self.length_m, self.heading_rad = t_ns, length_m, heading_rad
-        self.east_m, self.north_m, self.estimated, self.carry_mode = east_m, north_m, estimated, carry_mode
+    def __init__(self, index: int, t_ns: int, length_m: float, heading_rad: float, east_m: float, north_m: float,
+                 mag_trusted: bool = False, estimated: bool = False, carry_mode: str = ""):
+        self.index, self.t_ns, self.length_m, self.heading_rad = index, t_ns, length_m, heading_rad
+        self.east_m, self.north_m, self.mag_trusted = east_m, north_m, mag_trusted
+        self.estimated, self.carry_mode = estimated, carry_mode
 
 
 class StepFile:
@@ -244,13 +246,15 @@ class StepFile:
         self.n += 1
         self.distance_m += float(step.length_m)
         self.last.append(step)
-        row = StepRow(int(step.t_ns), float(step.length_m), float(step.heading_rad), float(step.east_m),
-                      float(step.north_m), bool(getattr(step, "estimated", False)), str(getattr(step, "carry_mode", "")))
+        row = StepRow(int(getattr(step, "index", self.n - 1)), int(step.t_ns), float(step.length_m),
+                      float(step.heading_rad), float(step.east_m), float(step.north_m),
+                      bool(getattr(step, "mag_trusted", False)), bool(getattr(step, "estimated", False)),
+                      str(getattr(step, "carry_mode", "")))
         if self._writable:
             try:
                 self._f.seek(0, 2)
-                self._f.write(f"{row.t_ns},{row.length_m!r},{row.heading_rad!r},{row.east_m!r},{row.north_m!r},"
-                              f"{int(row.estimated)},{row.carry_mode}\n")
+                self._f.write(f"{row.index},{row.t_ns},{row.length_m!r},{row.heading_rad!r},{row.east_m!r},"
+                              f"{row.north_m!r},{int(row.mag_trusted)},{int(row.estimated)},{row.carry_mode}\n")
                 self._n_file += 1
                 return
             except OSError as e:
@@ -288,8 +292,8 @@ class StepFile:
             f.seek(0, 2)  # appends go on at the end
             left -= len(lines)
             for line in lines:
-                t, length, h, e, n, est, mode = line.rstrip("\n").split(",")
-                yield StepRow(int(t), float(length), float(h), float(e), float(n), est == "1", mode)
+                i, t, length, h, e, n, mag, est, mode = line.rstrip("\n").split(",")
+                yield StepRow(int(i), int(t), float(length), float(h), float(e), float(n), mag == "1", est == "1", mode)
 
     def track(self):
         """The whole track (:class:`core.pdr.pipeline.Track`), read back in one pass."""

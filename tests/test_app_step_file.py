@@ -25,7 +25,7 @@ def _steps(n: int, start: int = 0):
         e += length * math.cos(heading)
         n_ += length * math.sin(heading)
         yield Step(k, 10**12 + k * 550_000_000, length, heading, e, n_,
-                   StepFeatures(10**12 + k * 550_000_000, 0.55, 11.0, 8.5, 1.2), True, "handheld", k % 7 == 0)
+                   StepFeatures(10**12 + k * 550_000_000, 0.55, 11.0, 8.5, 1.2), k % 3 != 0, "handheld", k % 7 == 0)
 
 
 def test_the_step_file_reads_back_every_step_exactly(tmp_path):
@@ -40,8 +40,9 @@ def test_the_step_file_reads_back_every_step_exactly(tmp_path):
     got = first + list(it)
     assert len(got) == 200 and len(f) == 300 and f.distance_m == pytest.approx(sum(s.length_m for s in want))
     got = list(f)
-    assert [(g.t_ns, g.length_m, g.heading_rad, g.east_m, g.north_m, g.estimated, g.carry_mode) for g in got] == \
-        [(s.t_ns, s.length_m, s.heading_rad, s.east_m, s.north_m, s.estimated, s.carry_mode) for s in want]
+    assert [(g.index, g.t_ns, g.length_m, g.heading_rad, g.east_m, g.north_m, g.mag_trusted, g.estimated, g.carry_mode)
+            for g in got] == [(s.index, s.t_ns, s.length_m, s.heading_rad, s.east_m, s.north_m, s.mag_trusted,
+                               s.estimated, s.carry_mode) for s in want]
     tr, ref = f.track(), Track.from_steps(want)
     for name in ("t_ns", "length_m", "heading_rad", "east_m", "north_m", "estimated"):
         np.testing.assert_array_equal(getattr(tr, name), getattr(ref, name))
