@@ -61,7 +61,7 @@ from app import android_platform as droid
 from app.indoor import PLAN_PATTERNS
 from app.service import (InProcessService, ServiceClient, ServiceSession, ServiceUnavailable, service_answers,
                          socket_path)
-from app.session import Session, load_any_recording
+from app.session import Session, load_any_recording, reading_notes
 from app.settings import RATE_CHOICES, SETTINGS_FILE, STRIDE_MODEL_CHOICES, TRACKING_MODES, Settings
 from app.sources import REPLAY_SPEEDS, SensorStartError, make_live_source, replay_source_for
 from app.storage import is_android, new_recording_path, output_dir
@@ -665,8 +665,9 @@ class PDRApp(App):
         self._replace_session(Session(source, pipeline_factory=factory, plan=self.plan, plan_name=self.plan_name),
                               "replay", path)
         self._start_at_landmark(rec)
-        if rec.repairs:
-            self.warning = f"{len(rec.repairs)} repair(s) while reading: " + rec.repairs[0]
+        notes = reading_notes(rec)
+        if notes:
+            self.warning = notes
         self.message = (f"replaying {os.path.basename(path)} ({rec.duration_s:.0f} s)"
                         + (f", foot-mounted INS ({self.tracking_reason})" if self.tracking == "foot" else ""))
         self.session.start()

@@ -54,6 +54,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from core.conventions import CARRY_WORDS, GPS, PRESSURE, bearing_deg
+from core.export import StepFile
 from core.floors import FloorEstimator, floors_at
 from core.gnss.base import ANCHOR_MAX_HACC_M
 from core.geodesy import geodetic_to_enu
@@ -92,6 +93,20 @@ def load_any_recording(path: str):
         except ImportError:
             pass
         raise
+
+
+def reading_notes(rec) -> str:
+    """What the app's warning line says about a recording it opens ("" for a clean one): the repairs made while
+    reading (the first of them), then what the edge's validation only reported -- gaps, spikes
+    (:mod:`core.validation`, ``rec.problems``) -- as ``pdr replay`` prints them (issue #30)."""
+    parts = []
+    if rec.repairs:
+        parts.append(f"{len(rec.repairs)} repair(s) while reading: " + rec.repairs[0])
+    reported = [f for f in getattr(rec, "problems", ()) if f.action == "reported"]
+    if reported:
+        more = f" (and {len(reported) - 1} more)" if len(reported) > 1 else ""
+        parts.append(reported[0].text + more)
+    return "; ".join(parts)
 
 
 #: where each value of a ``gps`` event is (the columns of the stream spec; events carry no names)
@@ -185,7 +200,12 @@ class Session:
     def reset_track(self) -> None:
         """Start a new track (new pipeline, empty track and health); the recording goes on."""
         self.pipeline = self.pipeline_factory()
-        self.steps: list = []
+        old = getattr(self, "steps", None)
+        if old is not None:
+            old.close()
+        #: the track's steps, written to a temporary file beside the recording as they come and read back for
+        #: the exports (issue #30: a list of them grew 4.6 MB an hour); ``len``, iteration, ``distance_m``
+        self.steps = StepFile(directory=self._steps_dir())
         self.track_east = [0.0]
         self.track_north = [0.0]
         self.health = HealthMonitor()
@@ -197,6 +217,7 @@ class Session:
         self.gps_origin: tuple | None = None
         self.finished = False
         self._cal_range: tuple | None = None
+        self._cal_steps: list = []  # the calibration walk's steps, whole (their features fit the stride model)
         # the GPS fusion's output, as the view draws it (see GpsOverlay)
         self.fused_east = [0.0]
         self.fused_north = [0.0]
@@ -211,6 +232,11 @@ class Session:
         self.floors = FloorEstimator()
         # the floor plan's particle filter (app.indoor), placed again on every new track
         self.map = MapMatcher(self.plan, name=self.plan_name) if self.plan is not None else None
+
+    def _steps_dir(self) -> str | None:
+        """Where the step file goes: the recording's folder (it is writable), else the system's temporary one."""
+        d = os.path.dirname(os.path.abspath(self.record_path)) if self.record_path else None
+        return d if d and os.path.isdir(d) else None
 
     # -- lifecycle ----------------------------------------------------------------
 
@@ -376,8 +402,11 @@ class Session:
             self._sync_fixes()
 
     def _add_steps(self, steps, new: list) -> None:
+        cal = self._cal_range
         for s in steps:
             self.steps.append(s)
+            if cal is not None and s.t_ns >= cal[0] and (cal[1] is None or s.t_ns <= cal[1]):
+                self._cal_steps.append(s)  # kept whole while walked in the calibration (minutes)
             self.track_east.append(float(s.east_m))
             self.track_north.append(float(s.north_m))
             if self.map is not None:
@@ -502,7 +531,7 @@ class Session:
         heading = st.heading_rad
         return {
             "steps": len(self.steps),
-            "distance_m": float(sum(s.length_m for s in self.steps)),
+            "distance_m": float(self.steps.distance_m),
             "heading_deg": bearing_deg(heading) if heading == heading else math.nan,
             "elapsed_s": self.elapsed_s,
             "east_m": self.track_east[-1],
@@ -573,15 +602,15 @@ class Session:
         return "\n".join([self.health.format(self.source.queue_drops(), self.source.accuracy()), *floor])
 
     def track(self):
-        from core.pdr.pipeline import Track  # noqa: PLC0415
-
-        return Track.from_steps(self.steps)
+        return self.steps.track()
 
     # -- calibration --------------------------------------------------------------------
 
     def start_calibration(self) -> None:
         """The calibration walk starts now (at the newest sensor time received)."""
         self._cal_range = (self._now_ns(), None)
+        t0 = self._cal_range[0]
+        self._cal_steps = [s for s in self.steps.last if s.t_ns >= t0]  # completed after the start, walked in it
 
     def stop_calibration(self) -> float:
         """The calibration walk ends now; returns the distance measured so far (steps still in the
@@ -613,7 +642,7 @@ class Session:
         if self._cal_range is None:
             return []
         t0, t1 = self._cal_range
-        return [s for s in self.steps if t0 <= s.t_ns and (t1 is None or s.t_ns <= t1)]
+        return [s for s in self._cal_steps if t0 <= s.t_ns and (t1 is None or s.t_ns <= t1)]
 
     def calibration_distance_m(self) -> float:
         """Distance the pipeline measured for the calibration walk (with the stride model in use)."""

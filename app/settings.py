@@ -192,7 +192,8 @@ class Settings:
         use_gps = bool(self.use_gps)
         name = self.gps_fusion_name()
         gkw = settings_from_profile(name, self.profile)
-        return lambda: Pipeline(**kw, gnss=make_fusion(name, **gkw) if use_gps else None)
+        # the session keeps the steps (on disk: core.export.StepFile); the pipeline keeps none (issue #30)
+        return lambda: Pipeline(**kw, keep_steps=False, gnss=make_fusion(name, **gkw) if use_gps else None)
 
     def gps_fusion_name(self) -> str:
         """The filter :attr:`gps_fusion` stands for ("auto": the benchmark's better one)."""

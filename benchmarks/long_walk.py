@@ -15,6 +15,11 @@ the items the pipeline holds (flat), the process's peak memory, and the
 heading error against the simulator's truth (the magnetometer bounds it: it
 must not grow with time).  ``--json`` writes the rows.  Exit status 1 when a
 check fails.
+
+``--app-steps`` keeps the completed steps as the app's session keeps them (issue #30): ``file`` (now:
+:class:`core.export.StepFile`, written to a temporary file, the last few in memory) or ``list`` (before: a
+list of :class:`core.pdr.pipeline.Step`); ``app_steps_mb`` is what that store holds in memory (its objects'
+bytes, :func:`deep_bytes`), ``app_steps_mb_per_h`` its growth per walked hour.
 """
 
 from __future__ import annotations
@@ -48,13 +53,43 @@ def _segment(k: int, seed: int, minutes: float, start_en, heading_deg, clock_ns:
     return walk, tuple(route[-1]), math.degrees(math.atan2(last[1], last[0]))
 
 
+def deep_bytes(obj, seen: set | None = None) -> int:
+    """Bytes of ``obj`` and everything it refers to through lists, tuples, deques, dicts, ``__dict__`` and
+    ``__slots__`` (``sys.getsizeof`` each object once; a file object counts its buffer)."""
+    import collections
+    import io
+
+    seen = set() if seen is None else seen
+    if id(obj) in seen:
+        return 0
+    seen.add(id(obj))
+    n = sys.getsizeof(obj)
+    if isinstance(obj, (list, tuple, collections.deque, set)):
+        n += sum(deep_bytes(x, seen) for x in obj)
+    elif isinstance(obj, dict):
+        n += sum(deep_bytes(k, seen) + deep_bytes(v, seen) for k, v in obj.items())
+    elif isinstance(obj, io.IOBase):
+        n += 8192
+    elif hasattr(obj, "__dict__") and not isinstance(obj, type):
+        n += deep_bytes(vars(obj), seen)
+    for name in getattr(type(obj), "__slots__", ()):
+        if hasattr(obj, name):
+            n += deep_bytes(getattr(obj, name), seen)
+    return n
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=24.0)
     ap.add_argument("--segment-min", type=float, default=60.0)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json", help="write the per-segment rows here")
+    ap.add_argument("--app-steps", choices=("file", "list"), default="file",
+                    help="keep the steps as the app does: in a step file (now) or a list (before issue #30)")
     args = ap.parse_args(argv)
+    from core.export import StepFile
+
+    store = StepFile() if args.app_steps == "file" else []
     n_seg = max(1, math.ceil(args.hours * 60.0 / args.segment_min))
     p = Pipeline(keep_steps=False)
     start_en, heading_deg, clock = (0.0, 0.0), None, 10 ** 12
@@ -64,7 +99,11 @@ def main(argv=None) -> int:
         walk, start_en, heading_deg = _segment(k, args.seed, args.segment_min, start_en, heading_deg, clock)
         steps = []
         for name, t, v in walk.recording.events(["gyro", "acc", "mag"]):
-            steps.extend(p.update(name, t, v))
+            new = p.update(name, t, v)
+            if new:
+                steps.extend(new)
+                for s in new:
+                    store.append(s)
             clock = t
         clock += 20_000_000
         a = p.attitude
@@ -84,6 +123,8 @@ def main(argv=None) -> int:
                "P_asymmetry": float(np.abs(P - P.T).max() / np.abs(P).max()),
                "P_min_eig": float(np.linalg.eigvalsh(0.5 * (P + P.T)).min()),
                "held_items": p.held_items(), "kept_steps": len(p.steps),
+               "app_steps": len(store), "app_steps_mb": deep_bytes(store) / 1e6,
+               "app_steps_mb_per_h": deep_bytes(store) / 1e6 / ((k + 1) * args.segment_min / 60.0),
                "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
                "labels": list(p.labels()), "wall_s": round(time.time() - t_wall, 1)}
         rows.append(row)

@@ -54,8 +54,12 @@ def _points(track):
 
 def track_csv_rows(track, columns: dict | None = None) -> list[list]:
     """The track CSV as rows, header first: ``t_ns, t_s, step_length_m, heading_rad, bearing_deg, east_m,
-    north_m, distance_m`` per step, then ``columns`` (``{name: per-step values}``, e.g. lat/lon, floor)."""
-    extra = columns or {}
+    north_m, distance_m`` per step, then ``columns`` (``{name: per-step values}``, e.g. lat/lon, floor), then
+    ``estimated`` (1: a step estimated across an accelerometer gap, not measured) when the track has such steps."""
+    extra = dict(columns or {})
+    est = getattr(track, "estimated", None)
+    if est is not None and "estimated" not in extra:  # steps placed in an accelerometer gap (issue #30)
+        extra["estimated"] = [int(bool(v)) for v in est]
     t0 = int(track.t_ns[0]) if len(track) else 0
     dist = 0.0
     rows = [["t_ns", "t_s", "step_length_m", "heading_rad", "bearing_deg", "east_m", "north_m", "distance_m",
@@ -108,7 +112,10 @@ def track_geojson(track, origin_lat_lon: tuple[float, float] | None = None, prop
     ``fixes``: the GPS fixes with their verdicts (:class:`core.gnss.base.FixRecord`),
     one Point each with ``"kind": "gps_fix"``, ``used`` and ``verdict``.
     """
-    extra = point_properties or {}
+    extra = dict(point_properties or {})
+    est = getattr(track, "estimated", None)
+    if est is not None and "estimated" not in extra:  # steps placed in an accelerometer gap (issue #30)
+        extra["estimated"] = [bool(v) for v in est]
     known = origin_lat_lon is not None
     origin = origin_lat_lon if known else (0.0, 0.0)
     pts = _points(track)
@@ -187,3 +194,133 @@ def write_track_gpx(path: str, track, origin_lat_lon: tuple[float, float] | None
         seg.points.append(p)
     with open(path, "w", encoding="utf-8") as f:
         f.write(gpx.to_xml(version="1.1"))
+
+
+#: the columns of a step file (:class:`StepFile`)
+STEP_FILE_COLUMNS = ("index", "t_ns", "length_m", "heading_rad", "east_m", "north_m", "mag_trusted", "estimated",
+                     "carry_mode")
+
+
+class StepRow:
+    """A step read back from a :class:`StepFile`: the fields of :class:`core.pdr.pipeline.Step` the track, the
+    exports and the app use."""
+
+    __slots__ = STEP_FILE_COLUMNS
+
+    def __init__(self, index: int, t_ns: int, length_m: float, heading_rad: float, east_m: float, north_m: float,
+                 mag_trusted: bool = False, estimated: bool = False, carry_mode: str = ""):
+        self.index, self.t_ns, self.length_m, self.heading_rad = index, t_ns, length_m, heading_rad
+        self.east_m, self.north_m, self.mag_trusted = east_m, north_m, mag_trusted
+        self.estimated, self.carry_mode = estimated, carry_mode
+
+
+class StepFile:
+    """A session's steps, written to a file as they come and read back when the whole track is needed (issue #30).
+
+    A day-long walk is about 150 000 steps: kept as :class:`core.pdr.pipeline.Step` objects they held about
+    700 bytes each.  Here each step is one CSV line (:data:`STEP_FILE_COLUMNS`, floats in ``repr``: they read
+    back exactly); memory holds the count, the distance and the last ``keep_last`` steps.  ``len``,
+    iteration (rows read back one at a time, in order), :meth:`track` (a :class:`core.pdr.pipeline.Track`
+    read back in one pass) and :meth:`carry_modes` give everything.
+
+    ``path`` None: an anonymous temporary file (in ``directory``), gone when closed.  A file that cannot be
+    written (disk full) is given up: the steps from then on are kept in memory and :attr:`error` says why.
+    """
+
+    def __init__(self, path: str | None = None, *, directory: str | None = None, keep_last: int = 64):
+        import tempfile
+        from collections import deque
+
+        self.path = path
+        self.error = ""
+        try:
+            self._f = (open(path, "w+", encoding="utf-8", newline="") if path is not None
+                       else tempfile.TemporaryFile("w+", encoding="utf-8", newline="", dir=directory))
+            self._f.write(",".join(STEP_FILE_COLUMNS) + "\n")
+        except OSError as e:
+            self._f, self.error = None, f"step file: {e}"
+        self._writable = self._f is not None
+        self._memory: list = []  # only after the file failed
+        self._n_file = 0
+        self.n = 0
+        self.distance_m = 0.0
+        #: the last steps (as given)
+        self.last = deque(maxlen=keep_last)
+
+    def append(self, step) -> None:
+        self.n += 1
+        self.distance_m += float(step.length_m)
+        self.last.append(step)
+        row = StepRow(int(getattr(step, "index", self.n - 1)), int(step.t_ns), float(step.length_m),
+                      float(step.heading_rad), float(step.east_m), float(step.north_m),
+                      bool(getattr(step, "mag_trusted", False)), bool(getattr(step, "estimated", False)),
+                      str(getattr(step, "carry_mode", "")))
+        if self._writable:
+            try:
+                self._f.seek(0, 2)
+                self._f.write(f"{row.index},{row.t_ns},{row.length_m!r},{row.heading_rad!r},{row.east_m!r},"
+                              f"{row.north_m!r},{int(row.mag_trusted)},{int(row.estimated)},{row.carry_mode}\n")
+                self._n_file += 1
+                return
+            except OSError as e:
+                self.error = f"step file: {e}; the steps from step {self.n} on are kept in memory"
+                self._writable = False
+        self._memory.append(row)
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __bool__(self) -> bool:
+        return self.n > 0
+
+    def __iter__(self):
+        yield from self._read_file()
+        yield from list(self._memory)
+
+    def _read_file(self, block: int = 4096):
+        """The file's rows, ``block`` lines at a time; appends in between (at the end) do not disturb it."""
+        f = self._f
+        if f is None or not self._n_file:
+            return
+        left = self._n_file
+        try:
+            f.flush()
+        except OSError:
+            pass
+        f.seek(0)
+        f.readline()  # the header
+        off = f.tell()
+        while left > 0:
+            f.seek(off)
+            lines = [f.readline() for _ in range(min(block, left))]
+            off = f.tell()
+            f.seek(0, 2)  # appends go on at the end
+            left -= len(lines)
+            for line in lines:
+                i, t, length, h, e, n, mag, est, mode = line.rstrip("\n").split(",")
+                yield StepRow(int(i), int(t), float(length), float(h), float(e), float(n), mag == "1", est == "1", mode)
+
+    def track(self):
+        """The whole track (:class:`core.pdr.pipeline.Track`), read back in one pass."""
+        from array import array
+
+        import numpy as np
+
+        from core.pdr.pipeline import Track
+
+        cols = [array("q"), array("d"), array("d"), array("d"), array("d"), array("b")]
+        for r in self:
+            cols[0].append(r.t_ns)
+            cols[1].append(r.length_m)
+            cols[2].append(r.heading_rad)
+            cols[3].append(r.east_m)
+            cols[4].append(r.north_m)
+            cols[5].append(r.estimated)
+        est = np.array(cols[5], dtype=bool)
+        return Track(np.array(cols[0], dtype=np.int64), *(np.array(c, dtype=float) for c in cols[1:5]),
+                     est if est.any() else None)
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.close()
+            self._f = None

@@ -807,6 +807,43 @@ def check_values_against_units(stream: Stream, source: str, declared: str = "") 
                                      f"\"unit\": \"{unit}\"", source)
 
 
+#: a walking phone's accelerometer norm varies by at least this much (standard deviation, m/s^2; about 2-3
+#: while walking, under 0.1 for a phone at rest) ...
+MOVING_ACC_SD_M_S2 = 1.5
+#: ... and its gyroscope turns faster than this for more than 1 % of the samples (rad/s; 50-300 deg/s walking)
+MOVING_GYRO_P99_MIN_RAD_S = 0.1
+
+
+def check_gyro_against_motion(streams: dict, source: str, declared: dict) -> None:
+    """A :class:`RecordingError` for a gyroscope declared in deg/s whose values are rad/s already (issue #30).
+
+    One stream alone cannot tell (a still phone's rates look the same in both units); with the accelerometer it
+    can: while the acceleration's norm varies like a walk's (standard deviation over :data:`MOVING_ACC_SD_M_S2`),
+    a phone's gyroscope turns faster than :data:`MOVING_GYRO_P99_MIN_RAD_S` for more than 1 % of its samples.
+    Converted from deg/s, rad/s values are 57 times too small."""
+    for name, g in streams.items():
+        kind, _, dev = name.partition("@")
+        acc = streams.get(ACC + ("@" + dev if dev else ""))
+        unit = declared.get(name, "")
+        if kind != GYRO or acc is None or UNITS[GYRO].get(unit, 1.0) == 1.0:
+            continue
+        if len(g) < MIN_EVENTS_FOR_UNIT_CHECK or len(acc) < MIN_EVENTS_FOR_UNIT_CHECK:
+            continue
+        with np.errstate(all="ignore"):
+            a = np.linalg.norm(acc.values, axis=1)
+            w = np.linalg.norm(g.values, axis=1)
+        a, w = a[np.isfinite(a)], w[np.isfinite(w)]
+        if not len(a) or not len(w):
+            continue
+        sd, p99 = float(np.std(a)), float(np.percentile(w, 99))
+        if sd > MOVING_ACC_SD_M_S2 and 0.0 < p99 < MOVING_GYRO_P99_MIN_RAD_S:
+            f = UNITS[GYRO][unit]
+            raise RecordingError(f"stream '{name}' is declared in {unit} but while the accelerometer shows movement "
+                                 f"(|a| varies by {sd:.2g} m/s^2) 99 % of its samples turn slower than {p99 / f:.3g} "
+                                 f"{unit} = {p99:.3g} rad/s (a carried phone turns at 50-300 deg/s): the values look "
+                                 "like rad/s already; declare \"unit\": \"rad/s\"", source)
+
+
 # ---------------------------------------------------------------------------
 # time bases
 
@@ -1329,6 +1366,7 @@ def _parse_events(it, text, source, allow_truncated_tail, warn, check_units, che
     if check_units:
         for s in streams.values():
             check_values_against_units(s, source, declared.get(s.name, ""))
+        check_gyro_against_motion(streams, source, declared)
     rec = Recording(streams, device=dict(header.get("device") or {}), metadata=dict(header.get("metadata") or {}),
                     repairs=repairs, source=source)
     if warn:

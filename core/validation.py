@@ -17,7 +17,9 @@ Checks
 GPS fixes (:data:`~core.conventions.GPS`)
     A fix with a latitude outside +-90 deg, a longitude outside +-180 deg or a negative accuracy is
     impossible: dropped and counted (``IMPOSSIBLE_FIX``).  When every fix is impossible the stream is left
-    empty, so no origin, declination or evaluation comes from them.
+    empty, so no origin, declination or evaluation comes from them.  A speed below 0 or beyond
+    :data:`MAX_GPS_SPEED_M_S`, or a course outside 0-360 deg, is set unknown (nan), the fix kept
+    (``IMPOSSIBLE_MOTION``).
 Clocks (every stream that is not an IMU stream: GPS, GNSS status, ...)
     The IMU streams (acc, gyro, mag) share the sensor clock (the reader checks that they are nanoseconds).
     Another stream whose events lie outside the IMU's span (by more than the span, and at least a minute)
@@ -32,7 +34,8 @@ GPS rate
 Gaps (acc, gyro, mag)
     No events for over :data:`GAP_REPORT_S` (and :data:`JITTER_GAP_FACTOR` median intervals) is a gap
     (``GAP``), reported with its place.  A gap of the accelerometer while the gyroscope or the
-    magnetometer ran says that no steps are counted across it (the distance walked then is missing).
+    magnetometer ran says that no steps are measured across it: the pipeline estimates them where the
+    gyroscope shows the walk went on (:mod:`core.pdr.gapbridge`), else the distance walked then is missing.
     Rates are computed without the gaps (:attr:`core.recording.Stream.rate_hz`).
 Spikes (mag)
     ``|B|`` over :data:`MAG_SPIKE_UT` (four times the strongest Earth field) is a disturbance, not the
@@ -63,6 +66,8 @@ GAP_REPORT_S = 1.0
 JITTER_GAP_FACTOR = 2.5
 #: a magnetometer reading beyond this (uT; the Earth's field is 25-65 uT) is a spike
 MAG_SPIKE_UT = 260.0
+#: a GPS speed beyond this (m/s; 1000 knots, the receivers' export limit) or below 0 is no receiver's
+MAX_GPS_SPEED_M_S = 515.0
 #: a stream's events outside the IMU's span by more than max(this, the span) are on another clock (s)
 CLOCK_MARGIN_S = 60.0
 
@@ -71,6 +76,7 @@ class StreamProblem(Enum):
     """What can be wrong with a stream (the vocabulary of :class:`Finding`)."""
 
     IMPOSSIBLE_FIX = "impossible GPS fixes"
+    IMPOSSIBLE_MOTION = "impossible GPS speed or course"
     OTHER_CLOCK = "on another clock"
     OTHER_TIME_UNIT = "timestamps in another unit"
     RATE_TOO_HIGH = "rate too high"
@@ -126,6 +132,8 @@ def validate_recording(rec, warn: bool = True):
         return rec
     if GPS in rec.streams and len(rec.streams[GPS]):
         _impossible_fixes(rec, src, warn)
+    if GPS in rec.streams and len(rec.streams[GPS]):
+        _impossible_motion(rec, src, warn)
     span = _imu_span(rec)
     if span is not None:
         for name in list(rec.streams):
@@ -164,6 +172,32 @@ def _impossible_fixes(rec, src, warn) -> None:
                 f"longitude beyond +-180 deg or a negative accuracy; {first})")
     _replace(rec, GPS, ~bad)
     add_finding(rec, Finding(StreamProblem.IMPOSSIBLE_FIX, GPS, n, "dropped", text), warn)
+
+
+def _impossible_motion(rec, src, warn) -> None:
+    """A speed below 0 or beyond :data:`MAX_GPS_SPEED_M_S`, a course outside 0-360 deg: set unknown (nan), the
+    fix's position kept (iOS writes -1 for "unknown"; the importers already read it so)."""
+    s = rec.streams[GPS]
+    v = np.array(s.values, dtype=np.float64)
+    if v.shape[1] < 6:
+        return
+    speed, course = v[:, 4], v[:, 5]
+    with np.errstate(invalid="ignore"):
+        bad_s = (speed < 0) | (speed > MAX_GPS_SPEED_M_S)
+        bad_c = (course < 0) | (course > 360)
+    n = int(np.count_nonzero(bad_s | bad_c))
+    if not n:
+        return
+    k = int(np.flatnonzero(bad_s | bad_c)[0])
+    v[bad_s, 4] = np.nan
+    v[bad_c, 5] = np.nan
+    from core.recording import Stream
+
+    rec.streams[GPS] = Stream(s.name, s.t_ns, v, s.columns, s.unit, s.note)
+    text = (f"{src}: stream 'gps': {n} fix(es) of {len(v)} with an impossible speed or course (speed below 0 or "
+            f"beyond {MAX_GPS_SPEED_M_S:g} m/s, course outside 0-360 deg; first: speed {speed[k]:.6g} m/s, course "
+            f"{course[k]:.6g} deg): set unknown, their positions kept")
+    add_finding(rec, Finding(StreamProblem.IMPOSSIBLE_MOTION, GPS, n, "repaired", text), warn)
 
 
 def _imu_span(rec):
@@ -271,7 +305,11 @@ def _gaps(rec, src, warn) -> None:
         if others:
             text += f" while {' and '.join(others)} ran"
         if name.partition("@")[0] == ACC:
-            text += ": no steps are counted across a gap (the distance walked in it is missing)"
+            if any(o.partition("@")[0] == GYRO for o in others):
+                text += (": no steps are measured across it; where the gyroscope shows the walk went on the pipeline "
+                         "estimates them (see its labels), else the distance walked in it is missing")
+            else:
+                text += ": no steps are counted across a gap (the distance walked in it is missing)"
         text += "; rates are computed without the gaps"
         add_finding(rec, Finding(StreamProblem.GAP, name, len(a), "reported", text), warn)
 

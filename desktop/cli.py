@@ -322,7 +322,8 @@ def summary_lines(res, rec: Recording, gps_why: str = "", heading: bool = True) 
         f"recording     {rec.source}",
         f"duration      {s['duration_s']:.1f} s",
         f"sensors       {rates}",
-        f"steps         {s['n_steps']}",
+        f"steps         {s['n_steps']}" + (f" ({s['n_steps_estimated']} estimated across accelerometer gaps)"
+                                             if s.get("n_steps_estimated") else ""),
         f"distance      {dist:.1f} m",
     ]
     if not heading:  # what the recording cannot say is not made up: no position, no heading labels

@@ -299,9 +299,9 @@ def _recordings(draw):
         if name == "acc":  # the other streams on the same clock as the IMU (core.validation checks it)
             lo, hi = ts[0], ts[-1]
         vals = [[draw(_finite) for _ in range(k)] for _ in ts]
-        if name == "gps":  # possible fixes (core.validation drops impossible ones)
-            vals = [[draw(st.floats(-90, 90)), draw(st.floats(-180, 180)), v[2], abs(v[3]), v[4], v[5]]
-                    for v in vals]
+        if name == "gps":  # possible fixes (core.validation drops impossible ones, sets impossible speeds unknown)
+            vals = [[draw(st.floats(-90, 90)), draw(st.floats(-180, 180)), v[2], abs(v[3]), draw(st.floats(0, 515)),
+                     draw(st.floats(0, 360))] for v in vals]
         cols = [f"v{j}" for j in range(k)] if name == "pressure" else None
         streams[name] = make_stream(name, ts, np.array(vals, dtype=np.float64).reshape(len(ts), k), columns=cols,
                                     unit="hPa" if name == "pressure" else None)

@@ -91,6 +91,24 @@ def test_a_gps_outage_start_too_large_for_an_integer_is_a_clear_cli_error(tmp_pa
 # GPS streams
 
 
+def test_an_impossible_gps_speed_or_course_is_set_unknown_and_said(tmp_path, walk):
+    """Before: read without a word (a speed of 2000 m/s and a course of 720 deg went to the fusion as they were)."""
+    g = walk.streams["gps"]
+    v = g.values.copy()
+    v[:, 4], v[:, 5] = 2000.0, 720.0
+    v[::2, 4], v[::2, 5] = g.values[::2, 4], g.values[::2, 5]  # half of them possible: those are kept as they are
+    v[1, 4] = -1.0  # a negative speed too
+    code, s, err = _replay(tmp_path, _copy(walk, gps=make_stream("gps", g.t_ns, v)))
+    n_bad = len(g) // 2
+    assert code == 0 and s["stream_problems"] == {"IMPOSSIBLE_MOTION": n_bad} and s["gps"]["fixes"] == len(g)
+    assert "impossible speed or course" in err and "set unknown, their positions kept" in err
+    rec = _read(tmp_path, _copy(walk, gps=make_stream("gps", g.t_ns, v)))
+    got = rec.streams["gps"].values
+    assert np.isnan(got[1::2, 4]).all() and np.isnan(got[1::2, 5]).all()
+    np.testing.assert_array_equal(got[::2, 4:6], g.values[::2, 4:6])
+    np.testing.assert_array_equal(got[:, :4], g.values[:, :4])
+
+
 def test_impossible_fixes_give_no_origin_and_no_evaluation_against_them(tmp_path, walk):
     """Before: the first impossible fix became the GeoJSON origin (``origin_known: true``)."""
     g = walk.streams["gps"]
@@ -224,6 +242,24 @@ def test_malformed_map_files_name_the_file(tmp_path):
 # units and rates
 
 
+def test_a_gyroscope_declared_in_deg_s_with_data_in_rad_s_is_refused_not_converted(tmp_path, walk):
+    """Before: "converted" (x pi/180): every turn 57 times too small, the heading left to the magnetometer alone,
+    without a word (BAD_INPUT_RESULTS round 3 listed it open: a still phone looks the same in both units)."""
+    g = walk.streams["gyro"]
+    code, _, err = _replay(tmp_path, _copy(walk, gyro=make_stream("gyro", g.t_ns, g.values, unit="deg/s")))
+    assert code == 2 and "declared in deg/s" in err and "look like rad/s already" in err
+    assert "accelerometer shows movement" in err
+    # the same walk really in deg/s is read and converted
+    code, s, _ = _replay(tmp_path, _copy(walk, gyro=make_stream("gyro", g.t_ns, np.degrees(g.values), unit="deg/s")))
+    assert code == 0 and s["n_steps"] > 30
+    # a still phone cannot tell: rad/s values declared deg/s are read (the accelerometer shows no movement)
+    n = 500
+    t = walk.streams["acc"].t_ns[:n]
+    still = Recording({"acc": make_stream("acc", t, np.tile([0.1, 0.2, 9.8], (n, 1))),
+                       "gyro": make_stream("gyro", t, np.full((n, 3), 0.001), unit="deg/s")}, dict(walk.device), {})
+    assert len(_read(tmp_path, still, "still.csv").streams["gyro"]) == n
+
+
 def test_an_accelerometer_declared_in_g_with_data_in_m_s2_is_refused_not_converted(tmp_path, walk):
     """Before: "converted" from g (x 9.81): the distance +68 %."""
     a = walk.streams["acc"]
@@ -285,13 +321,25 @@ def test_a_gap_in_the_accelerometer_alone_is_reported_in_the_summary_and_the_jso
     code, s, _ = _replay(tmp_path, rec)
     assert code == 0 and s["stream_problems"] == {"GAP": 1}
     text = s["stream_findings"][0]["text"]
-    assert "the longest 8.0 s" in text and "while gyro and mag ran" in text and "no steps are counted" in text
+    assert "the longest 8.0 s" in text and "while gyro and mag ran" in text and "no steps are measured" in text
+    # the pipeline bridged it from the gyroscope's gait rhythm: estimated steps, said in the summary (#30)
+    assert s["n_steps_estimated"] > 8 and s["acc_gaps"][0]["verdict"] == "BRIDGED"
+    assert any("estimated, not measured" in lb for lb in s["labels"])
     import contextlib
     import io
     out = io.StringIO()  # the summary lines (the same file, without --json)
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
         assert main(["replay", str(tmp_path / "walk.csv"), "--no-progress"]) == 0
-    assert any(ln.startswith("stream ") and "no steps are counted" in ln for ln in out.getvalue().splitlines())
+    lines = out.getvalue().splitlines()
+    assert any(ln.startswith("stream ") and "no steps are measured" in ln for ln in lines)
+    assert any("estimated, not measured" in ln for ln in lines)
+    assert any(ln.startswith("steps ") and "estimated across accelerometer gaps" in ln for ln in lines)
+    # the app's warning line says it too (before: only repairs were shown, a reported gap was not)
+    from app.session import reading_notes
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        note = reading_notes(read_recording(str(tmp_path / "walk.csv")))
+    assert "stream 'acc': 1 gap(s)" in note and "the longest 8.0 s" in note
 
 
 def test_a_10_s_magnetometer_spike_is_reported(tmp_path, walk):

@@ -69,6 +69,7 @@ from core.dsp import GridResampler
 from core.pdr.attitude import AttitudeEKF
 from core.pdr.carry import CarryModeDetector
 from core.pdr.deadreckoning import DeadReckoner
+from core.pdr.gapbridge import AccGapBridge, EstimatedStep, GapVerdict
 from core.pdr.heading import RotationSmoother, interval_heading
 from core.pdr.steps import GENTLE, STEP_GATES, StepDetector, StepEvent
 from core.pdr.velocity import SpeedFeatureWindow
@@ -192,6 +193,8 @@ class Step:
     mag_trusted: bool  #: whether the last magnetometer reading before the step was used by the EKF
     #: carry mode in force at the peak (core.conventions.CARRY_MODES; issue #17), never "still" for a step
     carry_mode: str = CARRY_HANDHELD
+    #: not measured: placed in an accelerometer gap from the gyroscope's gait rhythm (core.pdr.gapbridge, #30)
+    estimated: bool = False
 
 
 @dataclass(frozen=True)
@@ -221,18 +224,22 @@ class Track:
     heading_rad: np.ndarray
     east_m: np.ndarray
     north_m: np.ndarray
+    #: bool per step: estimated in an accelerometer gap (:attr:`Step.estimated`); None: none was
+    estimated: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t_ns)
 
     @classmethod
     def from_steps(cls, steps: list[Step]) -> Track:
+        est = np.array([s.estimated for s in steps], dtype=bool)
         return cls(
             np.array([s.t_ns for s in steps], dtype=np.int64),
             np.array([s.length_m for s in steps], dtype=float),
             np.array([s.heading_rad for s in steps], dtype=float),
             np.array([s.east_m for s in steps], dtype=float),
             np.array([s.north_m for s in steps], dtype=float),
+            est if est.any() else None,
         )
 
 
@@ -341,8 +348,8 @@ class Pipeline:
     walkdir : core.pdr.walkdir.WalkingDirection or None
         A pre-configured walking-direction stage (default: its defaults, with the smoother's delay).
     keep_steps : bool or int
-        Keep every completed step in :attr:`steps` (True, the default; batch
-        runs need it), none (False) or the last ``n`` (an int): a live session
+        Keep every completed step in :attr:`steps` (True, the default; a batch
+        :meth:`run` keeps every step whatever this says), none (False) or the last ``n`` (an int): a live session
         that keeps its own track gives False or a small number, and the
         pipeline's memory stays flat however long the walk.  The steps returned
         by :meth:`update` and the track are the same either way.
@@ -380,6 +387,13 @@ class Pipeline:
         mode; every mode's step detector runs and its peaks of the last ``rotation_hold_s`` seconds are
         held, and at a change of mode the new mode's peaks since the last confirmed step replace the
         unconfirmed candidates (through the new mode's rotation gate) (s).
+    acc_gap_bridge : bool or core.pdr.gapbridge.AccGapBridge
+        A gap of the accelerometer alone (the gyroscope running on) of at least the bridge's ``min_gap_s``:
+        where the gyroscope shows the walker kept walking, steps are estimated across it from the gyroscope's
+        gait rhythm, the stride before the gap and the attitude filter's heading, marked
+        :attr:`Step.estimated`; otherwise nothing is added and the reason is in the labels (issue #30;
+        True: a default :class:`core.pdr.gapbridge.AccGapBridge`; False: no bridging, the walk in the gap
+        is missing from the track).
     """
 
     def __init__(self, *, height_m: float | None = None, stride_model: StrideModel | None = None,
@@ -391,8 +405,13 @@ class Pipeline:
                  mag_stream: str = MAG, log: bool = False, gnss=None, site_from_gps: bool = True,
                  unix_offset_ns: int | None = None, keep_steps: bool | int = True,
                  carry: bool | CarryModeDetector = True, step_gates: dict | None = None,
-                 swinging_max_rotation_rms_rad_s: float = 12.0, rotation_hold_s: float = 8.0):
+                 swinging_max_rotation_rms_rad_s: float = 12.0, rotation_hold_s: float = 8.0,
+                 acc_gap_bridge: bool | AccGapBridge = True):
         self.keep_steps = keep_steps
+        if acc_gap_bridge is True:
+            acc_gap_bridge = AccGapBridge()
+        #: the accelerometer-gap bridge (None: off)
+        self.bridge = acc_gap_bridge or None
         if carry is True:
             carry = CarryModeDetector(grid_rate_hz=grid_rate_hz)
         #: the carry-mode detector (None: off)
@@ -495,6 +514,11 @@ class Pipeline:
         if self.walkdir is not None:
             self.walkdir.reset()
         self._log: list[tuple] = []
+        if self.bridge is not None:
+            self.bridge.reset()
+        self._acc_last_ns = -1  # the last accelerometer reading (-1: none yet)
+        self._gyro_t_ns = -(1 << 62)  # the last gyroscope reading (the bridge checks that it ran through a gap)
+        self._t_first_ns = -1  # the first event's time (the labels' time origin)
 
     # -- streaming --------------------------------------------------------------
     def update(self, stream: str, t_ns: int, values) -> list[Step]:
@@ -512,10 +536,17 @@ class Pipeline:
                 return []
             health.update(t_ns, x, y, z)
         self.t_ns = t_ns
+        if self._t_first_ns < 0:
+            self._t_first_ns = t_ns
         if stream == GYRO:
             wx, wy, wz = values[0], values[1], values[2]
             self.attitude.predict(t_ns, wx, wy, wz)
             self._gyro_last = (wx, wy, wz)
+            b = self.bridge
+            if b is not None:
+                if self._acc_last_ns >= 0 and t_ns - self._acc_last_ns >= b.min_gap_ns:
+                    self._gap_gyro(t_ns, wx, wy, wz)
+                self._gyro_t_ns = t_ns
             w2 = wx * wx + wy * wy + wz * wz
             rot = self._rot
             rot.append((t_ns, w2))
@@ -536,8 +567,9 @@ class Pipeline:
                 self.gnss.add_status(t_ns, values)
             return []  # rotvec, ...: not used by the core PDR
         ax, ay, az = values[0], values[1], values[2]
+        done: list[Step] = self._bridge_gap(t_ns) if self.bridge is not None and self.bridge.open else []
+        self._acc_last_ns = t_ns
         self.attitude.update_acc(t_ns, ax, ay, az)
-        done: list[Step] = []
         norm = math.sqrt(ax * ax + ay * ay + az * az)  # eq. 2
         for tg, x in self.grid.update(t_ns, norm):
             if self.grid.restarted and self.detector.n_grid:
@@ -570,6 +602,43 @@ class Pipeline:
                 self._log.append((tg, a.q, heading, a.acc_sigma2, a.mag_sigma2, a.mag_rejected))
             done.extend(self._release(tg))
         return done
+
+    def _gap_gyro(self, t_ns: int, wx: float, wy: float, wz: float) -> None:
+        """A gyroscope reading inside an accelerometer gap: to the bridge, with the phone's forward axis from the
+        attitude filter (running on gyroscope and magnetometer) every ``heading_interval_s``."""
+        b = self.bridge
+        a = self.attitude
+        b.gyro(t_ns, wx, wy, wz, self._acc_last_ns, self._gyro_t_ns)
+        if b.wants_heading(t_ns) and a.initialized:
+            m = a.matrix()
+            fx, fy, fz = self.smoother.forward_b
+            b.heading(t_ns, m[0][0] * fx + m[0][1] * fy + m[0][2] * fz, m[1][0] * fx + m[1][1] * fy + m[1][2] * fz)
+
+    def _bridge_gap(self, t_ns: int) -> list[Step]:
+        """The accelerometer is back after a gap the gyroscope ran through: its estimated steps, if any.
+
+        The confirmed steps before the gap are completed first (their headings from before it), an unconfirmed
+        bout is dropped (as at the end of data), then the estimated steps follow in time order."""
+        _, est, length = self.bridge.close(t_ns, self.attitude.initialized)
+        if not est:
+            return []
+        done = self.finish_candidates()
+        for s in est:
+            done.append(self._estimated_step(s, length))
+        return done
+
+    def _estimated_step(self, s: EstimatedStep, length: float) -> Step:
+        heading = s.device_heading_rad
+        if self.walkdir is not None:
+            heading = self.walkdir.step_heading(heading, self.walking_direction,
+                                                self._carry_mode if self.carry is not None else None)
+        feats = StepFeatures(t_ns=s.t_ns, duration_s=s.period_s, acc_max_m_s2=math.nan, acc_min_m_s2=math.nan,
+                             acc_var_m2_s4=math.nan, height_m=self.height_m)
+        step = self._append_step(s.t_ns, length, heading, feats, self.attitude.mag_rejected,
+                                 self._step_carry_mode(s.t_ns), estimated=True)
+        if self.gnss is not None:
+            self.fused.append(self.gnss.add_step(step))
+        return step
 
     def _apply_site(self, anchor) -> None:
         """The anchoring fix's magnetic declination and field for the attitude filter (see ``site_from_gps``)."""
@@ -796,13 +865,22 @@ class Pipeline:
         return self.walkdir.step_heading(heading, self.walking_direction, mode)
 
     def finish(self) -> list[Step]:
-        """End of data: complete the confirmed steps still waiting for their heading; drop an unconfirmed bout."""
+        """End of data: complete the confirmed steps still waiting for their heading; drop an unconfirmed bout.
+
+        A recording that ends inside an accelerometer gap has nothing to bridge to: the gap is dropped."""
+        if self.bridge is not None and self.bridge.open:
+            self.bridge.abandon()
+        done = self.finish_candidates()
+        if self.gnss is not None:
+            self.gnss.finish()
+        return done
+
+    def finish_candidates(self) -> list[Step]:
+        """Complete the confirmed candidates now (headings from what the smoother has), drop an unconfirmed bout."""
         self._drop_unconfirmed()
         done = [self._complete(ev, self._step_heading(ev) if h is None else h, reg)
                 for ev, h, _, reg in self._candidates]
         self._candidates = []
-        if self.gnss is not None:
-            self.gnss.finish()
         return done
 
     def step_features(self, ev: StepEvent, regressors: tuple) -> StepFeatures:
@@ -827,11 +905,17 @@ class Pipeline:
         completes its steps with it too."""
         feats = self.step_features(ev, regressors)
         length = self.stride_model.length_m(feats)  # eq. 4
+        if self.bridge is not None:
+            self.bridge.note_step(ev.t_ns, length, ev.duration_s)
+        return self._append_step(ev.t_ns, length, heading, feats, mag_rejected, carry_mode)
+
+    def _append_step(self, t_ns: int, length: float, heading: float, feats: StepFeatures, mag_rejected: bool,
+                     carry_mode: str, estimated: bool = False) -> Step:
         if heading != heading:  # no attitude yet (no magnetometer reading so far)
             heading = self.attitude.initial_yaw_rad
         east, north = self.reckoner.update(length, heading)  # eq. 1
-        step = Step(self.n_steps, ev.t_ns, length, heading, east, north, feats,
-                    not mag_rejected and self.attitude.use_magnetometer, carry_mode=carry_mode)
+        step = Step(self.n_steps, t_ns, length, heading, east, north, feats,
+                    not mag_rejected and self.attitude.use_magnetometer, carry_mode=carry_mode, estimated=estimated)
         self.steps.append(step)
         self.n_steps += 1
         return step
@@ -865,6 +949,7 @@ class Pipeline:
             what = ", ".join(f"{k} {v}" for k, v in sorted(self.n_impossible.items()))
             out.append(f"impossible sensor values (beyond any phone sensor's range) skipped ({what})")
         out.extend(self._health_labels())
+        out.extend(self._gap_labels())
         carry = self._carry_label()
         if carry:
             out.append(carry)
@@ -900,6 +985,25 @@ class Pipeline:
                 out.append(f"{name} dead: {what} for {h.dead_s:.0f} s in {h.dead_runs} stretch(es); "
                            f"{self._DEAD_EFFECT[kind]}")
         return out
+
+    def _gap_labels(self) -> list[str]:
+        out = []
+        for g in (self.bridge.gaps if self.bridge is not None else ()):
+            where = (f"accelerometer gap of {g.duration_s:.1f} s ({(g.start_ns - self._t_first_ns) * 1e-9:.1f} s to "
+                     f"{(g.end_ns - self._t_first_ns) * 1e-9:.1f} s) while the gyroscope ran")
+            if g.verdict is GapVerdict.BRIDGED:
+                out.append(f"{where}: {g.n_steps} steps ({g.distance_m:.1f} m) estimated, not measured: the gyroscope "
+                           f"shows walking for {g.walking_s:.0f} s at {1 / g.step_period_s:.2f} steps/s, each step "
+                           f"{g.step_length_m:.2f} m (the mean before the gap), heading from the attitude filter")
+            else:
+                out.append(f"{where}: {g.verdict.reason}")
+        return out
+
+    def gap_counters(self) -> dict:
+        """The accelerometer gaps the bridge handled, for the summary (times from the first event)."""
+        gaps = self.bridge.gaps if self.bridge is not None else []
+        return {"acc_gaps": [g.as_dict(self._t_first_ns) for g in gaps],
+                "n_steps_estimated": sum(g.n_steps for g in gaps)}
 
     def mag_all_rejected(self) -> bool:
         """The magnetometer is on and gave readings, and the attitude filter rejected every one of them."""
@@ -943,7 +1047,11 @@ class Pipeline:
         """
         recording.stream(ACC, "step detection needs the accelerometer")
         log, self.log = self.log, True
-        self.reset()
+        keep, self.keep_steps = self.keep_steps, True  # a batch run returns every step, whatever keep_steps
+        try:
+            self.reset()
+        finally:
+            self.keep_steps = keep
         use = [n for n in (GYRO, ACC, self.mag_stream) if recording.has(n)]
         if self.gnss is not None and recording.has(GPS):
             use.append(GPS)
@@ -975,7 +1083,7 @@ class Pipeline:
         counters = {"mag_used": a.n_mag_used, "mag_rejected": a.n_mag_rejected, "acc_rejected": a.n_acc_rejected,
                     "peaks_rejected_rotation": self.n_rejected_rotation, "peaks_rejected_bout": self.n_rejected_bout,
                     "peaks_replayed_mode_change": self.n_replayed, "peaks_replaced_mode_change": self.n_replaced_mode,
-                    "nonfinite_skipped": dict(self.n_nonfinite), **self.health_counters()}
+                    "nonfinite_skipped": dict(self.n_nonfinite), **self.health_counters(), **self.gap_counters()}
         if hasattr(a, "counters"):
             counters["attitude"] = a.counters()
         if self.carry is not None:

@@ -61,6 +61,7 @@ from core.conventions import ACC, CARRY_MODES, GNSS_STATUS, GPS, GYRO
 from core.pdr.pipeline import (IMPOSSIBLE, MAG, SATURATION_FLOOR, AttitudeLog, Pipeline, PipelineResult, SensorHealth,
                                Track)
 from core.recording import Recording
+from core.pdr.gapbridge import acc_gaps_with_gyro
 from core.pdr.steps import GENTLE
 from desktop.fast import attitude as fatt
 from desktop.fast.carry import run_carry
@@ -152,9 +153,14 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         p = Pipeline(**params)
     else:
         p = pipeline
+    keep, p.keep_steps = p.keep_steps, True  # a batch run returns every step, as Pipeline.run does
+    try:
         p.reset()
+    finally:
+        p.keep_steps = keep
     ekf = p.attitude
     fatt.check_supported(ekf)
+    _check_no_acc_gap(recording, p)
     ev = _Events(recording, p)
     fusion = _FusionEvents(recording, p, ev) if p.gnss is not None else None
     clock("events", 0.10)
@@ -243,6 +249,17 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         p.t_ns = max(p.t_ns, int(fusion.t[-1])) if len(ev.t) else int(fusion.t[-1])
     clock("gates and steps", 1.0)
     return _result(p, recording, AttitudeLog(gt, att.q, att.heading, att.acc_s2, att.mag_s2, att.rejected))
+
+
+def _check_no_acc_gap(recording: Recording, p: Pipeline) -> None:
+    """Refuse a recording whose accelerometer stops while the gyroscope runs, when the pipeline bridges such gaps
+    (:mod:`core.pdr.gapbridge`, issue #30): the fast path does not mirror the bridge."""
+    if p.bridge is None or not recording.has(GYRO):
+        return
+    n = acc_gaps_with_gyro(recording.streams[ACC].t_ns, recording.streams[GYRO].t_ns, p.bridge.min_gap_s)
+    if n:
+        raise NotImplementedError(f"the accelerometer has {n} gap(s) of {p.bridge.min_gap_s:g} s or more while the "
+                                  "gyroscope ran, and the fast path does not bridge them (core.pdr.gapbridge)")
 
 
 class _Attitude:
@@ -504,6 +521,7 @@ def _result(p: Pipeline, recording: Recording, att: AttitudeLog) -> PipelineResu
     counters.update(peaks_replayed_mode_change=p.n_replayed, peaks_replaced_mode_change=p.n_replaced_mode)
     counters["nonfinite_skipped"] = dict(p.n_nonfinite)
     counters.update(p.health_counters())
+    counters.update(p.gap_counters())  # empty: a recording with a gap to bridge is refused
     counters["attitude"] = a.counters()
     if p.carry is not None:
         counters["carry"] = p.carry.counters()
