@@ -20,7 +20,7 @@ dropped as they are handed out (``keep_samples=False``), so memory does not grow
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from core.conventions import ACC, MAG
 from core.foot.devices import has_imu, stream_name
@@ -136,7 +136,8 @@ class FootTracker:
 
     def __init__(self, settings: FootSettings | None = None, *, foot_device: str = "",
                  waist_device: str | None = None, keep_samples: bool = False):
-        self.settings = settings or FootSettings()
+        # strides are shown as they come: no smoother (it would move them after the fact, and keep the walk)
+        self.settings = replace(settings or FootSettings(), rts_smoother=False)
         self.foot_device = foot_device
         self.waist_device = waist_device
         self.keep_samples = bool(keep_samples)
