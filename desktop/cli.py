@@ -7,6 +7,7 @@ and exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -561,6 +562,8 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     # the product's choice (as in the app): the TCKF with a waist magnetometer, else ZUPT only
     settings, waist = foot_settings_for(rec, aid=args.aid, detector=args.detector, waist_device=args.waist_device,
                                         gyro_delay_s=args.gyro_delay_ms * 1e-3)
+    if getattr(args, "no_smoother", False):
+        settings = dataclasses.replace(settings, rts_smoother=False)
     slow = foot_rate_problem(rec, args.foot_device or "", settings.stance.window_s)
     if slow is not None:
         raise ValueError(slow.text)
@@ -1540,6 +1543,9 @@ def make_parser() -> argparse.ArgumentParser:
                    help="foot mode: stance detector (default shoe)")
     r.add_argument("--gyro-delay-ms", type=float, default=0.0, metavar="MS",
                    help="foot mode: the gyroscope lags the accelerometer by this much (ms)")
+    r.add_argument("--no-smoother", action="store_true",
+                   help="foot mode: the forward filter's track only (default: RTS-smoothed over the whole walk, "
+                        "each sample from the samples before and after it; the live app never smooths)")
     r.add_argument("--platform", choices=("android", "ios"), default=None,
                    help="for a Sensor Logger export without Metadata.csv: the phone it came from "
                         "(or set PDR_SENSORLOGGER_PLATFORM)")

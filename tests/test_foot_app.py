@@ -3,6 +3,7 @@
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -58,7 +59,7 @@ def test_foot_settings_use_the_tckf_only_with_a_waist_magnetometer(foot_walk):
 def test_tracker_streams_the_batch_strides_and_keeps_no_samples(foot_walk):
     rec = foot_walk.recording
     fs, waist = foot_settings_for(rec)
-    batch = FootNavigator(fs, waist_device=waist).run(rec)
+    batch = FootNavigator(replace(fs, rts_smoother=False), waist_device=waist).run(rec)  # the app: no smoother
     want = [s for s in batch.strides if math.isfinite(s.length_m)]
     tr = FootTracker(fs, waist_device=waist)
     got = []
@@ -102,7 +103,7 @@ def test_app_session_replays_a_foot_recording_in_foot_mode(foot_walk, tmp_path):
     ses = _replay(rec, s.pipeline_factory(rec))
     assert isinstance(ses.pipeline, FootTracker)
     fs, waist = foot_settings_for(rec)
-    batch = FootNavigator(fs, waist_device=waist).run(rec)
+    batch = FootNavigator(replace(fs, rts_smoother=False), waist_device=waist).run(rec)  # the app: no smoother
     want = np.array([s.position_n[:2] for s in batch.strides if math.isfinite(s.length_m)])
     assert np.allclose(np.column_stack([ses.track_east[1:], ses.track_north[1:]]), want, atol=1e-9)
     summ = ses.summary()
@@ -164,7 +165,7 @@ def test_the_app_replays_a_foot_recording_file_in_foot_mode(foot_walk, tmp_path)
     assert rep["tracking"]["mode"] == "foot" and rep["tracking"]["steps_name"] == "strides"
     assert "foot" in rep["tracking"]["reason"]
     fs, waist = foot_settings_for(foot_walk.recording)
-    batch = FootNavigator(fs, waist_device=waist).run(foot_walk.recording)
+    batch = FootNavigator(replace(fs, rts_smoother=False), waist_device=waist).run(foot_walk.recording)
     want = [s for s in batch.strides if math.isfinite(s.length_m)]
     assert rep["finished"] and rep["errors"] == 0
     assert int(rep["status"]["steps"]) == len(want)

@@ -100,7 +100,9 @@ def foot_settings_for(recording: Recording | None, *, aid: str | None = None, de
     # live (no recording): the adaptive threshold's causal moving minimum, decisions window_s / 2 late
     # instead of (window_s + adaptive_floor_window_s) / 2 (0.05 s against 0.65 s with the defaults)
     stance = StanceSettings(detector=detector, adaptive_floor_causal=recording is None)
-    return FootSettings(aid=chosen, stance=stance, gyro_delay_s=gyro_delay_s), waist
+    # a replay is smoothed (the navigator's default); live tracking is not (FootTracker turns it off too)
+    return (FootSettings(aid=chosen, stance=stance, gyro_delay_s=gyro_delay_s, rts_smoother=recording is not None),
+            waist)
 
 
 @dataclass(frozen=True)
