@@ -723,7 +723,9 @@ def write_markdown(out, path=RESULTS_MD) -> None:
         L += ["", "3-D RMSE: ours (LS yaw over the first 2 m of VICON path, RMS over samples, vertical included). "
               "PyShoe's metric: what PyShoe publishes (`pyshoe_metric`: both tracks from their starts, yaw from "
               "one sample 0.8 m out, mean over samples of the per-axis RMS |e_xy|/sqrt(2)). Stance F1 is against "
-              "a fixed rule on VICON speed (`vicon_still`), not against the per-trial thresholds of zv_vicon_opt."]
+              "a fixed rule on VICON speed (`vicon_still`), not against the per-trial thresholds of zv_vicon_opt. "
+              "Our cases are RTS-smoothed replays (`FootSettings.rts_smoother`, the default of `pdr replay`) except "
+              "\"forward filter only\", which is what the live app shows."]
         if "pyshoe_labels_f1_median_walking" in ps:
             L += ["", "Stance F1 of PyShoe's own per-trial-optimal labels against the same VICON-speed rule "
                   "(walking trials, median): "
