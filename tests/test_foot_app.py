@@ -56,6 +56,15 @@ def test_foot_settings_use_the_tckf_only_with_a_waist_magnetometer(foot_walk):
     assert (fs.aid, waist) == ("zupt", None)
 
 
+def test_replays_are_smoothed_and_live_tracking_is_not(foot_walk):
+    """The RTS smoother is for replays (a recording): live settings and the app's tracker never smooth."""
+    assert foot_settings_for(foot_walk.recording)[0].rts_smoother
+    assert not foot_settings_for(None)[0].rts_smoother
+    fs, waist = foot_settings_for(foot_walk.recording)
+    tracker = FootTracker(fs, waist_device=waist)
+    assert not tracker.settings.rts_smoother and tracker.nav.ins.history is None
+
+
 def test_tracker_streams_the_batch_strides_and_keeps_no_samples(foot_walk):
     rec = foot_walk.recording
     fs, waist = foot_settings_for(rec)
