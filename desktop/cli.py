@@ -572,6 +572,7 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     s = res.summary()
     s["mode"] = "foot"
     s["mode_reason"] = why
+    s["smoothed"] = bool(settings.rts_smoother and not s.get("smoother_skipped_too_long"))
     track = _stride_track(res)
     truth = truth_of(rec)
     errs = truth_errors(track, truth) if truth else {}
@@ -580,7 +581,8 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     lines = [
         f"recording     {rec.source}",
         f"mode          foot-mounted INS ({why})",
-        f"filter        ZUPT EKF, heading aid {s['aid']}, stance detector {s['detector']}",
+        f"filter        ZUPT EKF{', RTS-smoothed' if s['smoothed'] else ''}, heading aid {s['aid']}, "
+        f"stance detector {s['detector']}",
         f"duration      {s['duration_s']:.1f} s at {s['rate_hz']:.0f} Hz",
         f"strides       {s['n_strides']} (stance {100 * s['stance_fraction']:.0f} % of the time)",
         f"distance      {s['distance_m']:.1f} m",
