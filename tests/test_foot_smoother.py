@@ -132,3 +132,31 @@ def test_smoother_refuses_a_recording_longer_than_its_memory_cap():
     assert res.counters["smoother_skipped_too_long"] == 1
     ok = np.isfinite(plain.position_n[:, 0])
     assert np.array_equal(res.position_n[ok], plain.position_n[ok])
+
+
+def test_smoother_stays_finite_over_gaps_and_bad_samples():
+    """A 0.3 s hole in the data (longer than ``max_dt_s``: the state held, the covariance grown) and a few
+    non-finite readings: the smoothed track is finite wherever the filter's is, and ends where it ends."""
+    from dataclasses import replace as dc_replace
+
+    from core.recording import make_stream
+
+    w = simulate_foot(footprints([(2.8, 0.0)]), rate_hz=200.0, acc_noise_m_s2=0.2, gyro_noise_rad_s=0.02, seed=4)
+    rec = w.recording
+    acc, gyro = rec.streams["acc"], rec.streams["gyro"]
+    t = acc.t_ns
+    hole = (t > t[0] + int(3.3e9)) & (t < t[0] + int(3.6e9))
+    keep = ~hole
+    a = acc.values[keep].copy()
+    a[700:703] = np.nan
+    streams = dict(rec.streams)
+    streams["acc"] = make_stream("acc", t[keep], a)
+    streams["gyro"] = make_stream("gyro", gyro.t_ns[keep], gyro.values[keep])
+    rec2 = dc_replace(rec, streams=streams)
+    plain = FootNavigator(FootSettings(rts_smoother=False)).run(rec2)
+    sm = FootNavigator(FootSettings(rts_smoother=True)).run(rec2)
+    ok = np.all(np.isfinite(plain.position_n), axis=1)
+    assert ok.sum() > 0.8 * len(ok)
+    assert np.array_equal(ok, np.all(np.isfinite(sm.position_n), axis=1))
+    assert np.allclose(sm.position_n[ok][-1], plain.position_n[ok][-1], atol=1e-9)
+    assert np.all(np.isfinite(sm.position_sd_m[ok]))
