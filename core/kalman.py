@@ -132,3 +132,112 @@ def correct(P: np.ndarray, y: np.ndarray, H, Rm: np.ndarray, gate: float = math.
     if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(Pn))):
         return Correction(Verdict.NUMERICAL, nis)
     return Correction(Verdict.USED, nis, dx, Pn, K)
+
+
+class RtsSmoother:
+    """Rauch-Tung-Striebel fixed-interval smoother over a forward error-state filter's stored epochs.
+
+    The forward filter calls :meth:`start` after its initialisation, :meth:`predict` at each prediction
+    (with the posterior ``P`` it predicts from, ``Phi`` and ``Q``), :meth:`inject` at each error injection
+    (``dx`` folded into the nominal state, ``G`` its reset Jacobian), and :meth:`smooth` at the end (with
+    the last posterior ``P``).  An *epoch* ``j`` is the state between two predictions: ``xhat_j``, the
+    nominal state after all of that epoch's injections, and ``P_j`` its error covariance.
+
+    Derivation (Rauch, Tung & Striebel 1965, written for the error state).  With ``xbar_{j+1}`` the
+    predicted nominal state, the error about it is ``e-_{j+1} = Phi_j e_j + w_j`` (covariance
+    ``Pp = Phi_j P_j Phi_j^T + Q_j``), so the RTS gain and the smoothed error about ``xhat_j`` are::
+
+        C_j = P_j Phi_j^T Pp^-1
+        e_j|N = C_j e-_{j+1}|N ,   P_j|N = P_j + C_j (P-_{j+1}|N - Pp) C_j^T
+
+    (the predicted error's mean is zero: the prediction moved the nominal state, not the error).  The
+    smoothed error at ``j+1`` is known about ``xhat_{j+1}``; an injection ``d`` with reset ``G`` changed
+    the reference: ``e- = d + G^-1 e`` (the reset is ``e = G (e- - d)``, see :func:`reset_jacobian`), so
+    over the epoch's injections ``d_1 .. d_m`` (in order)::
+
+        e-_{j+1}|N = D + M e_{j+1}|N ,  P-_{j+1}|N = M P_{j+1}|N M^T
+        D = d_1 + G_1^-1 d_2 + G_1^-1 G_2^-1 d_3 + ... ,  M = G_1^-1 ... G_m^-1
+
+    The smoothed state is ``xhat_j (+) e_j|N`` (the same injection as the filter's).  A measurement that
+    is not a function of the current error state alone (a Schmidt consider update) makes the smoother
+    approximate: it sees only the covariances the filter kept.
+    """
+
+    def __init__(self, n_states: int, att: slice = slice(0, 3)):
+        self.n = int(n_states)
+        self.att = att
+        self.reset()
+
+    def reset(self) -> None:
+        self._P: list = []  # posterior covariance of each closed epoch
+        self._Phi: list = []  # transition out of each closed epoch
+        self._Q: list = []
+        self._D: list = []  # injections of each closed epoch (D, M), None for none
+        self._cur_D = None
+        self._cur_M = None
+        self.started = False
+
+    def start(self) -> None:
+        """A new forward run (forgets everything stored)."""
+        self.reset()
+        self.started = True
+
+    @property
+    def n_epochs(self) -> int:
+        """Epochs so far (the open one included); the current epoch's index is ``n_epochs - 1``."""
+        return len(self._P) + 1 if self.started else 0
+
+    def predict(self, P_post: np.ndarray, Phi: np.ndarray, Q: np.ndarray) -> None:
+        """Close the current epoch with its posterior ``P_post``; ``Phi``, ``Q`` lead to the next (copied)."""
+        self._P.append(np.array(P_post, dtype=float))
+        self._D.append(None if self._cur_D is None else (self._cur_D, self._cur_M))
+        self._Phi.append(np.array(Phi, dtype=float))
+        self._Q.append(Q)
+        self._cur_D = self._cur_M = None
+
+    def inject(self, dx: np.ndarray, G: np.ndarray) -> None:
+        """The filter folded ``dx`` into the nominal state and reset its covariance with ``G``."""
+        Ginv = np.eye(self.n)
+        if G[self.att, self.att].size:
+            Ginv[self.att, self.att] = np.linalg.inv(G[self.att, self.att])
+        if self._cur_D is None:
+            self._cur_D, self._cur_M = np.array(dx, dtype=float), Ginv
+        else:
+            self._cur_D = self._cur_D + self._cur_M @ dx
+            self._cur_M = self._cur_M @ Ginv
+
+    def smooth(self, P_last: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The backward pass: ``(e (N, n), P (N, n, n))``, each epoch's smoothed error about its nominal
+        state and its covariance.  A singular predicted covariance falls back to the pseudo-inverse."""
+        P = np.array(self._P + [np.array(P_last, dtype=float)])
+        N = len(P)
+        e = np.zeros((N, self.n))
+        Ps = np.empty_like(P)
+        Ps[-1] = P[-1]
+        if N == 1:
+            return e, Ps
+        Phi = np.array(self._Phi)
+        Pp = Phi @ P[:-1] @ np.transpose(Phi, (0, 2, 1)) + np.array(self._Q)
+        Pp = 0.5 * (Pp + np.transpose(Pp, (0, 2, 1)))
+        PhiP = Phi @ P[:-1]  # Phi_j P_j = (P_j Phi_j^T)^T
+        try:
+            Ct = np.linalg.solve(Pp, PhiP)  # C_j^T = Pp^-1 Phi_j P_j
+        except np.linalg.LinAlgError:
+            Ct = np.linalg.pinv(Pp, hermitian=True) @ PhiP
+        C = np.transpose(Ct, (0, 2, 1))
+        D = self._D + [None if self._cur_D is None else (self._cur_D, self._cur_M)]
+        for j in range(N - 2, -1, -1):
+            inj = D[j + 1]
+            if inj is None:
+                em, Pm = e[j + 1], Ps[j + 1]
+            else:
+                d, M = inj
+                em = d + M @ e[j + 1]
+                Pm = M @ Ps[j + 1] @ M.T
+            Cj = C[j]
+            e[j] = Cj @ em
+            Pj = P[j] + Cj @ (Pm - Pp[j]) @ Cj.T
+            Ps[j] = 0.5 * (Pj + Pj.T)
+        if not (np.all(np.isfinite(e)) and np.all(np.isfinite(Ps))):
+            raise FloatingPointError("the RTS backward pass did not stay finite")
+        return e, Ps

@@ -7,6 +7,7 @@ and exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -576,6 +577,8 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     # the product's choice (as in the app): the TCKF with a waist magnetometer, else ZUPT only
     settings, waist = foot_settings_for(rec, aid=args.aid, detector=args.detector, waist_device=args.waist_device,
                                         gyro_delay_s=args.gyro_delay_ms * 1e-3)
+    if getattr(args, "no_smoother", False):
+        settings = dataclasses.replace(settings, rts_smoother=False)
     slow = foot_rate_problem(rec, args.foot_device or "", settings.stance.window_s)
     if slow is not None:
         raise ValueError(slow.text)
@@ -584,6 +587,7 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     s = res.summary()
     s["mode"] = "foot"
     s["mode_reason"] = why
+    s["smoothed"] = bool(settings.rts_smoother and not s.get("smoother_skipped_too_long"))
     track = _stride_track(res)
     truth = truth_of(rec)
     errs = truth_errors(track, truth) if truth else {}
@@ -592,7 +596,8 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     lines = [
         f"recording     {rec.source}",
         f"mode          foot-mounted INS ({why})",
-        f"filter        ZUPT EKF, heading aid {s['aid']}, stance detector {s['detector']}",
+        f"filter        ZUPT EKF{', RTS-smoothed' if s['smoothed'] else ''}, heading aid {s['aid']}, "
+        f"stance detector {s['detector']}",
         f"duration      {s['duration_s']:.1f} s at {s['rate_hz']:.0f} Hz",
         f"strides       {s['n_strides']} (stance {100 * s['stance_fraction']:.0f} % of the time)",
         f"distance      {s['distance_m']:.1f} m",
@@ -1588,6 +1593,9 @@ def make_parser() -> argparse.ArgumentParser:
                    help="foot mode: stance detector (default shoe)")
     r.add_argument("--gyro-delay-ms", type=float, default=0.0, metavar="MS",
                    help="foot mode: the gyroscope lags the accelerometer by this much (ms)")
+    r.add_argument("--no-smoother", action="store_true",
+                   help="foot mode: the forward filter's track only (default: RTS-smoothed over the whole walk, "
+                        "each sample from the samples before and after it; the live app never smooths)")
     r.add_argument("--platform", choices=("android", "ios"), default=None,
                    help="for a Sensor Logger export without Metadata.csv: the phone it came from "
                         "(or set PDR_SENSORLOGGER_PLATFORM)")

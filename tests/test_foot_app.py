@@ -3,6 +3,7 @@
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -55,10 +56,19 @@ def test_foot_settings_use_the_tckf_only_with_a_waist_magnetometer(foot_walk):
     assert (fs.aid, waist) == ("zupt", None)
 
 
+def test_replays_are_smoothed_and_live_tracking_is_not(foot_walk):
+    """The RTS smoother is for replays (a recording): live settings and the app's tracker never smooth."""
+    assert foot_settings_for(foot_walk.recording)[0].rts_smoother
+    assert not foot_settings_for(None)[0].rts_smoother
+    fs, waist = foot_settings_for(foot_walk.recording)
+    tracker = FootTracker(fs, waist_device=waist)
+    assert not tracker.settings.rts_smoother and tracker.nav.ins.history is None
+
+
 def test_tracker_streams_the_batch_strides_and_keeps_no_samples(foot_walk):
     rec = foot_walk.recording
     fs, waist = foot_settings_for(rec)
-    batch = FootNavigator(fs, waist_device=waist).run(rec)
+    batch = FootNavigator(replace(fs, rts_smoother=False), waist_device=waist).run(rec)  # the app: no smoother
     want = [s for s in batch.strides if math.isfinite(s.length_m)]
     tr = FootTracker(fs, waist_device=waist)
     got = []
@@ -102,7 +112,7 @@ def test_app_session_replays_a_foot_recording_in_foot_mode(foot_walk, tmp_path):
     ses = _replay(rec, s.pipeline_factory(rec))
     assert isinstance(ses.pipeline, FootTracker)
     fs, waist = foot_settings_for(rec)
-    batch = FootNavigator(fs, waist_device=waist).run(rec)
+    batch = FootNavigator(replace(fs, rts_smoother=False), waist_device=waist).run(rec)  # the app: no smoother
     want = np.array([s.position_n[:2] for s in batch.strides if math.isfinite(s.length_m)])
     assert np.allclose(np.column_stack([ses.track_east[1:], ses.track_north[1:]]), want, atol=1e-9)
     summ = ses.summary()
@@ -164,7 +174,7 @@ def test_the_app_replays_a_foot_recording_file_in_foot_mode(foot_walk, tmp_path)
     assert rep["tracking"]["mode"] == "foot" and rep["tracking"]["steps_name"] == "strides"
     assert "foot" in rep["tracking"]["reason"]
     fs, waist = foot_settings_for(foot_walk.recording)
-    batch = FootNavigator(fs, waist_device=waist).run(foot_walk.recording)
+    batch = FootNavigator(replace(fs, rts_smoother=False), waist_device=waist).run(foot_walk.recording)
     want = [s for s in batch.strides if math.isfinite(s.length_m)]
     assert rep["finished"] and rep["errors"] == 0
     assert int(rep["status"]["steps"]) == len(want)

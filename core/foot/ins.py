@@ -154,6 +154,9 @@ class ZuptEKF:
         self._q = None
         self._m_cache = None
         self._eye3 = np.eye(3)
+        #: replays: the forward run kept for the RTS smoother (:meth:`keep_history`, :meth:`smoothed`)
+        self.history: kalman.RtsSmoother | None = None
+        self._nominal: list = []  # the nominal state (q, v, p, bg, ba) of each closed epoch
         self._phi_bg = self._phi[BG, BG]  # views of the bias blocks
         self._phi_ba = self._phi[BA, BA]
         self._r_zupt = np.eye(3) * s.zupt_noise_m_s ** 2
@@ -197,6 +200,37 @@ class ZuptEKF:
                          + [s.initial_velocity_sd_m_s ** 2] * 3 + [0.0] * 3
                          + [s.gyro_bias_sd_rad_s ** 2] * 3 + [s.acc_bias_sd_m_s2 ** 2] * 3)
         self.initialized = True
+        if self.history is not None:
+            self.history.start()
+            self._nominal = []
+
+    # -- the smoother (replays) -----------------------------------------------------------------
+    def keep_history(self) -> None:
+        """Keep what the RTS smoother needs from the next :meth:`align` on (two 15 x 15 matrices and the
+        nominal state per sample: about 3.7 kB a sample; a replay only)."""
+        self.history = kalman.RtsSmoother(N_STATES, ATT)
+        self._nominal = []
+
+    @property
+    def epoch(self) -> int:
+        """Index of the current epoch of the history (the state since the last prediction); -1 without one."""
+        return self.history.n_epochs - 1 if self.history is not None else -1
+
+    def smoothed(self):
+        """The RTS-smoothed state of every epoch (:class:`core.kalman.RtsSmoother`): ``(q (N, 4), v (N, 3),
+        p (N, 3), P (N, 15, 15))``, each epoch's nominal state with its smoothed error folded in."""
+        if self.history is None or not self.history.started:
+            raise ValueError("no history: call keep_history() before align()")
+        e, Ps = self.history.smooth(self.P)
+        nom = self._nominal + [(self.q, self.v, self.p)]
+        q = np.array([kalman.inject_rotation(x[0], e[j, ATT]) for j, x in enumerate(nom)])
+        v = np.array([x[1] for x in nom]) + e[:, VEL]
+        p = np.array([x[2] for x in nom]) + e[:, POS]
+        return q, v, p, Ps
+
+    def _close_epoch(self, phi, Q) -> None:
+        self.history.predict(self.P, phi, Q)
+        self._nominal.append((self.q, self.v, self.p))
 
     # -- prediction ---------------------------------------------------------------------------
     def transition(self, acc_b, gyro_b, dt_s: float):
@@ -261,6 +295,8 @@ class ZuptEKF:
         if not (dt_s > 0):
             return
         if dt_s > s.max_dt_s:  # a gap: hold the state, let the uncertainty grow
+            if self.history is not None:
+                self._close_epoch(np.eye(N_STATES), self._q1 * dt_s)
             self.P = self.P + self._q1 * dt_s
             self._f_prev, self._w_prev = tuple(acc_b), tuple(gyro_b)
             return
@@ -268,6 +304,8 @@ class ZuptEKF:
         if not all(map(math.isfinite, v_new + p_new + q_new)):
             self.n_rejected += 1
             return
+        if self.history is not None:
+            self._close_epoch(phi, self.process_noise(dt_s))
         self.P = phi @ self.P @ phi.T + self.process_noise(dt_s)
         if self.consider is not None:
             self.consider = phi @ self.consider
@@ -292,6 +330,8 @@ class ZuptEKF:
         the consider term's cross-covariance goes through the same reset Jacobian)."""
         G = kalman.reset_jacobian(dx[ATT], N_STATES, ATT)
         self.correct(dx)
+        if self.history is not None:
+            self.history.inject(dx, G)
         self.P = kalman.reset_covariance(P_new, dx[ATT], ATT, G)
         if self.consider is not None:
             self.consider = G @ self.consider

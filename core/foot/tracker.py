@@ -20,7 +20,7 @@ dropped as they are handed out (``keep_samples=False``), so memory does not grow
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from core.conventions import ACC, MAG
 from core.foot.devices import has_imu, stream_name
@@ -100,7 +100,9 @@ def foot_settings_for(recording: Recording | None, *, aid: str | None = None, de
     # live (no recording): the adaptive threshold's causal moving minimum, decisions window_s / 2 late
     # instead of (window_s + adaptive_floor_window_s) / 2 (0.05 s against 0.65 s with the defaults)
     stance = StanceSettings(detector=detector, adaptive_floor_causal=recording is None)
-    return FootSettings(aid=chosen, stance=stance, gyro_delay_s=gyro_delay_s), waist
+    # a replay is smoothed (the navigator's default); live tracking is not (FootTracker turns it off too)
+    return (FootSettings(aid=chosen, stance=stance, gyro_delay_s=gyro_delay_s, rts_smoother=recording is not None),
+            waist)
 
 
 @dataclass(frozen=True)
@@ -136,7 +138,8 @@ class FootTracker:
 
     def __init__(self, settings: FootSettings | None = None, *, foot_device: str = "",
                  waist_device: str | None = None, keep_samples: bool = False):
-        self.settings = settings or FootSettings()
+        # strides are shown as they come: no smoother (it would move them after the fact, and keep the walk)
+        self.settings = replace(settings or FootSettings(), rts_smoother=False)
         self.foot_device = foot_device
         self.waist_device = waist_device
         self.keep_samples = bool(keep_samples)
