@@ -16,7 +16,7 @@ import pytest
 
 from core import quaternion as quat
 from core.conventions import wrap_angle
-from core.pdr.attitude import AttitudeEKF
+from core.pdr.attitude import AttitudeEKF, Outcome
 from core.pdr.pipeline import Pipeline
 from desktop.simulator import simulate_walk
 
@@ -50,7 +50,7 @@ def _run_against_truth(seed):
     bias_at_60s = None
     for name, t, v in walk.recording.events(["gyro", "acc", "mag"]):
         f = handlers[name](t, v[0], v[1], v[2])
-        if name == "gyro" or f.reason != "used" or f.nis != f.nis:
+        if name == "gyro" or f.outcome is not Outcome.USED or f.nis != f.nis:
             continue
         nis[name].append(f.nis)
         if name == "acc" and t > tr.walk_start_t_ns:

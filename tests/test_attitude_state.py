@@ -2,12 +2,13 @@
 
 import collections
 import dataclasses
+import enum
 import math
 
 import numpy as np
 import pytest
 
-from core.pdr.attitude import AttitudeEKF, AttitudeState, IntervalSum
+from core.pdr.attitude import AttitudeEKF, AttitudeState, IntervalSum, Outcome
 
 
 def _events(seconds=12.0, rate_hz=100.0, seed=3):
@@ -44,6 +45,8 @@ def _plain(x):
         return [_plain(v) for v in x]
     if isinstance(x, float) and math.isnan(x):
         return "nan"
+    if isinstance(x, enum.Enum):
+        return x
     if isinstance(x, np.floating):
         return _plain(float(x))
     slots = [n for c in type(x).__mro__ for n in getattr(c, "__slots__", ())]
@@ -115,3 +118,13 @@ def test_the_fast_path_fails_at_import_on_a_field_it_does_not_know():
     # the slot numbers follow the fields: every float state slot is a field (or one of its parts)
     names = {f.name for f in dataclasses.fields(AttitudeState)}
     assert all(k.split(".")[0] in names for k in fatt.FS)
+
+
+def test_every_reading_is_counted_under_an_outcome():
+    ev = _events(seconds=6.0)
+    ekf = AttitudeEKF()
+    _feed(ekf, ev)
+    for kind, reasons, last in (("acc", ekf.acc_reasons, ekf.last_acc), ("mag", ekf.mag_reasons, ekf.last_mag)):
+        assert sum(reasons.values()) == sum(1 for e in ev if e[0] == kind)
+        assert {Outcome(k) for k in reasons} >= {Outcome.USED, Outcome.INITIALISING}
+        assert isinstance(last.outcome, Outcome) and last.reason.startswith(last.outcome.value)

@@ -131,6 +131,7 @@ from __future__ import annotations
 
 import math
 import copy
+import enum
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -308,6 +309,33 @@ class AttitudeSettings:
                 raise ValueError(f"{name} must be a positive number, not {v!r}")
 
 
+class Outcome(enum.Enum):
+    """What one accelerometer or magnetometer reading did (:attr:`UpdateFlags.outcome`).
+
+    The filter decides on these; the counters (:attr:`AttitudeEKF.acc_reasons`, ``mag_reasons``) and
+    :attr:`UpdateFlags.reason` carry their text.
+    """
+
+    USED = "used"  #: used (the magnetometer's: also while its interval is still open)
+    PENDING = "pending"  #: an accelerometer reading in an interval still open
+    INITIALISING = "initialising"  #: before the filter's start
+    NON_FINITE = "non-finite"  #: not finite, or beyond any phone sensor's range
+    NORM_OFF = "norm off"  #: its norm too far from the reference's
+    GATE = "gate"  #: its update's NIS beyond the gate
+    NUMERICAL = "numerical"  #: its update would not have been finite
+    MAGNETOMETER_OFF = "magnetometer off"
+    CALIBRATING = "calibrating"  #: the online calibration has no fit yet (``mag_requires_calibration``)
+    INVALID_RANGE = "invalid range"  #: no geomagnetic field (``mag_valid_range_uT``)
+    NOT_QUASI_STATIC = "not quasi-static"  #: the field detector does not call it steady
+    DIP_OFF = "dip off"  #: its dip too far from the reference's
+    FIELD_VERTICAL = "field vertical"  #: the field nearly vertical: no azimuth to measure
+    NONE_YET = "none yet"  #: no reading yet
+
+
+_VERDICT_OUTCOME = {kalman.Verdict.USED: Outcome.USED, kalman.Verdict.GATE: Outcome.GATE,
+                    kalman.Verdict.NUMERICAL: Outcome.NUMERICAL}
+
+
 @dataclass(frozen=True)
 class UpdateFlags:
     """What one measurement did (returned by every ``update_*`` call)."""
@@ -315,18 +343,19 @@ class UpdateFlags:
     kind: str  #: "acc", "mag" or "zero_rate"
     t_ns: int
     used: bool
-    reason: str  #: "used" or why not (see :attr:`AttitudeEKF.mag_reasons`)
+    reason: str  #: the outcome's text, "used" or why not (see :attr:`AttitudeEKF.mag_reasons`), with any detail
     nis: float = math.nan  #: normalised innovation squared (nan when not computed)
     dof: int = 0  #: its expected value when the filter is consistent
     sigma2: float = math.nan  #: measurement variance used (eqs. 17-18; heading: of the angle, rad^2)
     innovation: tuple = ()
+    outcome: Outcome | None = None  #: ``reason`` as an :class:`Outcome` (without its detail)
 
     def __init__(self, kind: str, t_ns: int, used: bool, reason: str, nis: float = math.nan, dof: int = 0,
-                 sigma2: float = math.nan, innovation: tuple = ()):
+                 sigma2: float = math.nan, innovation: tuple = (), outcome: Outcome | None = None):
         # one is made per accelerometer and magnetometer event: filling __dict__ at once is about twice
         # as fast as the frozen dataclass's generated __init__ (one object.__setattr__ per field)
         self.__dict__.update(kind=kind, t_ns=t_ns, used=used, reason=reason, nis=nis, dof=dof, sigma2=sigma2,
-                             innovation=innovation)
+                             innovation=innovation, outcome=outcome)
 
 
 @dataclass(frozen=True)
@@ -488,8 +517,9 @@ class AttitudeState(AttitudeBaseState):
             h_ref=(0.0, 1.0, 0.0), alpha_ref=math.pi / 2, w2=0.0,
             acc_sum=IntervalSum.empty(), mag_sum=IntervalSum.empty(), gated=[], n_heading_relocks=0,
             yaw_unobserved=False, acc_sigma2=math.nan, mag_sigma2=math.nan, mag_rejected=False,
-            acc_rejected=False, last_acc=UpdateFlags("acc", 0, False, "none yet"),
-            last_mag=UpdateFlags("mag", 0, False, "none yet"), mag_reasons={}, acc_reasons={},
+            acc_rejected=False, last_acc=UpdateFlags("acc", 0, False, Outcome.NONE_YET.value, outcome=Outcome.NONE_YET),
+            last_mag=UpdateFlags("mag", 0, False, Outcome.NONE_YET.value, outcome=Outcome.NONE_YET),
+            mag_reasons={}, acc_reasons={},
             n_gyro=0, n_zero_rate=0, n_numerical_rejects=0,
             nis_sum={"acc": 0.0, "mag": 0.0, "zero_rate": 0.0}, nis_n={"acc": 0, "mag": 0, "zero_rate": 0})
 
@@ -741,15 +771,16 @@ class AttitudeEKF(AttitudeFilterBase):
     # -- counters kept for the pipeline's summary -----------------------------------------------
     @property
     def n_mag_used(self) -> int:
-        return self.state.mag_reasons.get("used", 0)
+        return self.state.mag_reasons.get(Outcome.USED.value, 0)
 
     @property
     def n_mag_rejected(self) -> int:
-        return sum(v for k, v in self.state.mag_reasons.items() if k not in ("used", "initialising"))
+        skip = (Outcome.USED.value, Outcome.INITIALISING.value)
+        return sum(v for k, v in self.state.mag_reasons.items() if k not in skip)
 
     @property
     def n_acc_rejected(self) -> int:
-        return sum(v for k, v in self.state.acc_reasons.items() if k != "used")
+        return sum(v for k, v in self.state.acc_reasons.items() if k != Outcome.USED.value)
 
     @property
     def gyro_bias(self) -> tuple:
@@ -871,7 +902,7 @@ class AttitudeEKF(AttitudeFilterBase):
     # -- the update kernel ----------------------------------------------------------------------
     def _correct(self, y: np.ndarray, H: np.ndarray, Rm: np.ndarray, gate: float, *, consider_tilt=False,
                  bias_axis=None, measures_yaw=False):
-        """Kalman update of the error state; returns (used, reason, nis).  ``H`` (m x 6), ``Rm`` (m x m).
+        """Kalman update of the error state; returns (used, :class:`Outcome`, nis).  ``H`` (m x 6), ``Rm`` (m x m).
 
         While :attr:`yaw_unobserved` (started without a magnetometer, none used since), an update that
         does not measure the heading (``measures_yaw`` False: accelerometer, zero rate) leaves the
@@ -893,11 +924,11 @@ class AttitudeEKF(AttitudeFilterBase):
         if c.verdict is kalman.Verdict.NUMERICAL:
             self.state.n_numerical_rejects += 1
         if not c.used:
-            return False, c.verdict.value, c.nis
+            return False, _VERDICT_OUTCOME[c.verdict], c.nis
         self._inject(c.dx, c.P, keep_yaw=yaw_consider)
         if measures_yaw:
             self.state.yaw_unobserved = False
-        return True, "used", c.nis
+        return True, Outcome.USED, c.nis
 
     def _inject(self, dx: np.ndarray, Pn: np.ndarray, keep_yaw: bool = False) -> None:
         """Fold the error into ``q`` and ``b`` and reset it: ``P <- G P G^T`` (:func:`core.kalman.reset_jacobian`,
@@ -932,7 +963,7 @@ class AttitudeEKF(AttitudeFilterBase):
         state = self.state
         if not _plausible(ax, ay, az, _ACC_IMPOSSIBLE):
             state.n_skipped_nonfinite += 1
-            return self._acc_flags(t_ns, False, "non-finite")
+            return self._acc_flags(t_ns, False, Outcome.NON_FINITE)
         s = self.settings
         state.acc_reading = (ax, ay, az)
         self._accumulate_references(t_ns, acc=state.acc_reading)
@@ -942,7 +973,7 @@ class AttitudeEKF(AttitudeFilterBase):
         state.acc_norm_win.update(t_ns, na)
         if not state.initialized:
             self._try_initialize(t_ns)
-            return self._acc_flags(t_ns, False, "initialising")
+            return self._acc_flags(t_ns, False, Outcome.INITIALISING)
         self._propagate_without_gyro(t_ns)
         self._maybe_zero_rate(t_ns)
         var = state.acc_var.update(t_ns, na)
@@ -950,7 +981,7 @@ class AttitudeEKF(AttitudeFilterBase):
         sigma2 = s.acc_noise_base ** 2 + s.k_a1 * dev + s.k_a2 * var + s.k_a3 * state.w2  # eq. 17 (+ turn term)
         state.acc_sigma2 = sigma2
         if dev > s.acc_reject_m_s2 or na == 0.0:
-            return self._acc_flags(t_ns, False, "norm off", sigma2=sigma2)
+            return self._acc_flags(t_ns, False, Outcome.NORM_OFF, sigma2=sigma2)
         acc = state.acc_sum
         R = quat.to_matrix(state.q)
         r0, r1, r2 = R
@@ -963,28 +994,29 @@ class AttitudeEKF(AttitudeFilterBase):
         acc.sigma2 += sigma2
         acc.n += 1
         if (t_ns - acc.t0_ns) * 1e-9 < s.update_interval_s:
-            return self._acc_flags(t_ns, True, "pending", sigma2=sigma2)
+            return self._acc_flags(t_ns, True, Outcome.PENDING, sigma2=sigma2)
         n = acc.n
         fx, fy, fz = acc.x / n, acc.y / n, acc.z / n
         sigma2 = acc.sigma2 / n
         state.acc_sum = IntervalSum.empty()
         nf = math.sqrt(fx * fx + fy * fy + fz * fz)
         if nf == 0.0:
-            return self._acc_flags(t_ns, False, "norm off", sigma2=sigma2)
+            return self._acc_flags(t_ns, False, Outcome.NORM_OFF, sigma2=sigma2)
         z = tuple(R[0][j] * fx + R[1][j] * fy + R[2][j] * fz for j in range(3))  # R^T f_n
         h = (R[2][0], R[2][1], R[2][2])  # R^T u: the third row of R
         y = np.array((z[0] / nf - h[0], z[1] / nf - h[1], z[2] / nf - h[2]))
         H = np.zeros((3, 6))
         H[:, 0:3] = direction_jacobian(R, (0.0, 0.0, 1.0))
-        used, reason, nis = self._correct(y, H, sigma2 * _I3, s.acc_gate_nis)
+        used, outcome, nis = self._correct(y, H, sigma2 * _I3, s.acc_gate_nis)
         self._record("acc", used, nis)
-        return self._acc_flags(t_ns, used, reason, nis=nis, sigma2=sigma2, innovation=tuple(y.tolist()))
+        return self._acc_flags(t_ns, used, outcome, nis=nis, sigma2=sigma2, innovation=tuple(y.tolist()))
 
-    def _acc_flags(self, t_ns, used, reason, **kw) -> UpdateFlags:
+    def _acc_flags(self, t_ns, used, outcome: Outcome, **kw) -> UpdateFlags:
         state = self.state
         state.acc_rejected = not used
-        state.acc_reasons[reason] = state.acc_reasons.get(reason, 0) + 1
-        state.last_acc = UpdateFlags("acc", t_ns, used, reason, dof=2, **kw)
+        key = outcome.value  # text only here, at the edge: the counters are keyed by it
+        state.acc_reasons[key] = state.acc_reasons.get(key, 0) + 1
+        state.last_acc = UpdateFlags("acc", t_ns, used, key, dof=2, outcome=outcome, **kw)
         return state.last_acc
 
     def _maybe_zero_rate(self, t_ns: int) -> None:
@@ -1026,19 +1058,19 @@ class AttitudeEKF(AttitudeFilterBase):
         state = self.state
         s = self.settings
         if not s.use_magnetometer:
-            return self._mag_flags(t_ns, False, "magnetometer off")
+            return self._mag_flags(t_ns, False, Outcome.MAGNETOMETER_OFF)
         if not _plausible(mx, my, mz, _MAG_IMPOSSIBLE):
             state.n_skipped_nonfinite += 1
-            return self._mag_flags(t_ns, False, "non-finite")
+            return self._mag_flags(t_ns, False, Outcome.NON_FINITE)
         if self.mag_calibrator is not None:
             m = self.mag_calibrator.update(t_ns, mx, my, mz)
             if s.mag_requires_calibration and not self.mag_calibrator.calibrated:
-                return self._mag_flags(t_ns, False, "calibrating")
+                return self._mag_flags(t_ns, False, Outcome.CALIBRATING)
             mx, my, mz = float(m[0]), float(m[1]), float(m[2])
         nm = math.sqrt(mx * mx + my * my + mz * mz)
         lo, hi = s.mag_valid_range_uT
         if not lo <= nm <= hi:
-            return self._mag_flags(t_ns, False, "invalid range")
+            return self._mag_flags(t_ns, False, Outcome.INVALID_RANGE)
         R = quat.to_matrix(state.q)
         if state.initialized and s.site_field_uT == s.site_field_uT and s.site_dip_rad == s.site_dip_rad:
             mx, my, mz = self._vertical_offset(t_ns, R, mx, my, mz)
@@ -1047,7 +1079,7 @@ class AttitudeEKF(AttitudeFilterBase):
         self._accumulate_references(t_ns, mag=state.mag_reading)
         if not state.initialized:
             self._try_initialize(t_ns)
-            return self._mag_flags(t_ns, False, "initialising")
+            return self._mag_flags(t_ns, False, Outcome.INITIALISING)
         self._propagate_without_gyro(t_ns)
         var = state.mag_var.update(t_ns, nm)
         dev = abs(nm - state.field_uT)
@@ -1060,12 +1092,12 @@ class AttitudeEKF(AttitudeFilterBase):
             st = self.field_detector.update(t_ns, (mx, my, mz), state.q)
             if not st.trusted:
                 if not math.isfinite(s.mag_unsteady_noise_scale):
-                    return self._mag_flags(t_ns, False, "not quasi-static: " + st.reason, sigma2=sigma2)
+                    return self._mag_flags(t_ns, False, Outcome.NOT_QUASI_STATIC, sigma2=sigma2, detail=st.reason)
                 sigma2 *= s.mag_unsteady_noise_scale
         if dev > s.mag_reject_ratio * state.field_uT:
-            return self._mag_flags(t_ns, False, "norm off", sigma2=sigma2)
+            return self._mag_flags(t_ns, False, Outcome.NORM_OFF, sigma2=sigma2)
         if abs(dip - state.dip_rad) > s.mag_reject_dip_rad:
-            return self._mag_flags(t_ns, False, "dip off", sigma2=sigma2)
+            return self._mag_flags(t_ns, False, Outcome.DIP_OFF, sigma2=sigma2)
         acc = state.mag_sum
         if acc.n == 0:
             acc.t0_ns = t_ns
@@ -1078,7 +1110,7 @@ class AttitudeEKF(AttitudeFilterBase):
         acc.sigma2 += sigma2
         acc.n += 1
         if (t_ns - acc.t0_ns) * 1e-9 < s.update_interval_s:
-            return self._mag_flags(t_ns, True, "used", sigma2=sigma2)
+            return self._mag_flags(t_ns, True, Outcome.USED, sigma2=sigma2)
         n = acc.n
         m_n = (acc.x / n, acc.y / n, acc.z / n)
         sigma2 = acc.sigma2 / n
@@ -1091,32 +1123,32 @@ class AttitudeEKF(AttitudeFilterBase):
             y = np.array((zb[0] - hb[0], zb[1] - hb[1], zb[2] - hb[2]))
             H = np.zeros((3, 6))
             H[:, 0:3] = direction_jacobian(R, h)
-            used, reason, nis = self._correct(y, H, sigma2 * _I3, s.mag_gate_nis + 4.0, measures_yaw=True)
+            used, outcome, nis = self._correct(y, H, sigma2 * _I3, s.mag_gate_nis + 4.0, measures_yaw=True)
             self._record("mag", used, nis)
-            return self._mag_interval_done(t_ns, n, used, reason, nis=nis, dof=2, sigma2=sigma2,
+            return self._mag_interval_done(t_ns, n, used, outcome, nis=nis, dof=2, sigma2=sigma2,
                                            innovation=tuple(y.tolist()))
         h2 = m_n[0] ** 2 + m_n[1] ** 2
         c2 = h2 / (h2 + m_n[2] ** 2)
         if c2 < 0.01:  # field nearly vertical: no azimuth to measure
-            return self._mag_interval_done(t_ns, n, False, "field vertical", sigma2=sigma2)
+            return self._mag_interval_done(t_ns, n, False, Outcome.FIELD_VERTICAL, sigma2=sigma2)
         y = np.array([wrap_angle(state.alpha_ref - math.atan2(m_n[1], m_n[0]))])
         H = np.zeros((1, 6))
         H[0, 0:3] = heading_jacobian(m_n)
         r_angle = sigma2 / c2
-        used, reason, nis = self._correct(y, H, np.array([[r_angle]]), s.mag_gate_nis, consider_tilt=True,
+        used, outcome, nis = self._correct(y, H, np.array([[r_angle]]), s.mag_gate_nis, consider_tilt=True,
                                           bias_axis=np.array(up_b), measures_yaw=True)
         self._record("mag", used, nis)
         if used:
             state.gated = []
-        elif reason == "gate":
+        elif outcome is Outcome.GATE:
             self._relock(t_ns, float(y[0]))
-        return self._mag_interval_done(t_ns, n, used, reason, nis=nis, dof=1, sigma2=r_angle,
+        return self._mag_interval_done(t_ns, n, used, outcome, nis=nis, dof=1, sigma2=r_angle,
                                        innovation=(float(y[0]),))
 
     def mag_not_calibrated(self, t_ns: int) -> UpdateFlags:
         """A magnetometer reading left out because its calibration has no fit yet (``mag_requires_calibration``):
         what :meth:`update_mag` does with it, for a caller that ran the calibrator beforehand (the fast path)."""
-        return self._mag_flags(t_ns, False, "calibrating")
+        return self._mag_flags(t_ns, False, Outcome.CALIBRATING)
 
     def _vertical_offset(self, t_ns: int, R, mx: float, my: float, mz: float):
         """Remove a hard-iron offset along the directions the phone held vertical, from the site's field.
@@ -1177,13 +1209,13 @@ class AttitudeEKF(AttitudeFilterBase):
         b = state.vertical_offset_uT
         return mx - b[0], my - b[1], mz - b[2]
 
-    def _mag_interval_done(self, t_ns, n, used, reason, **kw) -> UpdateFlags:
+    def _mag_interval_done(self, t_ns, n, used, outcome: Outcome, **kw) -> UpdateFlags:
         """Flags of the reading that closed an interval; its ``n - 1`` earlier readings are re-counted if unused."""
         if not used and n > 1:
             r = self.state.mag_reasons
-            r["used"] = r.get("used", 0) - (n - 1)
-            r[reason] = r.get(reason, 0) + (n - 1)
-        return self._mag_flags(t_ns, used, reason, **kw)
+            r[Outcome.USED.value] = r.get(Outcome.USED.value, 0) - (n - 1)
+            r[outcome.value] = r.get(outcome.value, 0) + (n - 1)
+        return self._mag_flags(t_ns, used, outcome, **kw)
 
     def _relock(self, t_ns: int, innovation: float) -> None:
         """Release the heading when the gate has rejected agreeing readings for ``mag_relock_s``."""
@@ -1205,10 +1237,11 @@ class AttitudeEKF(AttitudeFilterBase):
             self.P = P
             state.n_heading_relocks += 1
 
-    def _mag_flags(self, t_ns, used, reason, dof=1, **kw) -> UpdateFlags:
+    def _mag_flags(self, t_ns, used, outcome: Outcome, dof=1, detail: str = "", **kw) -> UpdateFlags:
         state = self.state
         state.mag_rejected = not used
-        key = reason.split(":")[0] if reason.startswith("not quasi-static") else reason
+        key = outcome.value  # text only here, at the edge: the counters are keyed by it, the flags add the detail
         state.mag_reasons[key] = state.mag_reasons.get(key, 0) + 1
-        state.last_mag = UpdateFlags("mag", t_ns, used, reason, dof=dof, **kw)
+        state.last_mag = UpdateFlags("mag", t_ns, used, f"{key}: {detail}" if detail else key, dof=dof,
+                                     outcome=outcome, **kw)
         return state.last_mag

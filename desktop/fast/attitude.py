@@ -43,19 +43,25 @@ from dataclasses import fields
 
 import numpy as np
 
-from core.pdr.attitude import AttitudeSettings, AttitudeState, IntervalSum
+from core.pdr.attitude import AttitudeSettings, AttitudeState, IntervalSum, Outcome
 from desktop.fast.jit import kernel
 from desktop.fast.magcal import calibrate_stream
 
 # event kinds of the merged arrays
 GYRO_K, ACC_K, MAG_K = 0, 1, 2
 
-#: the reasons of AttitudeEKF.acc_reasons / mag_reasons, by code
-ACC_REASONS = ("used", "initialising", "norm off", "pending", "gate", "numerical")
-MAG_REASONS = ("used", "initialising", "invalid range", "norm off", "dip off", "gate", "numerical",
-               "field vertical", "calibrating", "magnetometer off")
-A_USED, A_NORM, A_PENDING, A_GATE, A_NUM = 0, 2, 3, 4, 5
-M_USED, M_RANGE, M_NORM, M_DIP, M_GATE, M_NUM, M_VERTICAL, M_CALIBRATING, M_OFF = 0, 2, 3, 4, 5, 6, 7, 8, 9
+#: the outcomes of a reading (core's Outcome) the kernel gives, by code; AttitudeEKF.acc_reasons / mag_reasons
+#: count their text
+ACC_OUTCOMES = (Outcome.USED, Outcome.INITIALISING, Outcome.NORM_OFF, Outcome.PENDING, Outcome.GATE, Outcome.NUMERICAL)
+MAG_OUTCOMES = (Outcome.USED, Outcome.INITIALISING, Outcome.INVALID_RANGE, Outcome.NORM_OFF, Outcome.DIP_OFF,
+                Outcome.GATE, Outcome.NUMERICAL, Outcome.FIELD_VERTICAL, Outcome.CALIBRATING, Outcome.MAGNETOMETER_OFF)
+ACC_REASONS = tuple(o.value for o in ACC_OUTCOMES)
+MAG_REASONS = tuple(o.value for o in MAG_OUTCOMES)
+A_USED, A_NORM, A_PENDING, A_GATE, A_NUM = (ACC_OUTCOMES.index(o) for o in (
+    Outcome.USED, Outcome.NORM_OFF, Outcome.PENDING, Outcome.GATE, Outcome.NUMERICAL))
+M_USED, M_RANGE, M_NORM, M_DIP, M_GATE, M_NUM, M_VERTICAL, M_CALIBRATING, M_OFF = (MAG_OUTCOMES.index(o) for o in (
+    Outcome.USED, Outcome.INVALID_RANGE, Outcome.NORM_OFF, Outcome.DIP_OFF, Outcome.GATE, Outcome.NUMERICAL,
+    Outcome.FIELD_VERTICAL, Outcome.CALIBRATING, Outcome.MAGNETOMETER_OFF))
 C_USED, C_GATE, C_NUM = 0, 1, 2
 
 # -- the slot tables: derived from the fields of core's settings and state ---------------------------
@@ -174,8 +180,9 @@ SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI
 (I_TNS, I_TGYRO, I_HAS_TGYRO, I_REF_NEXT, I_HAS_REF_NEXT, I_ZR_NEXT, I_HAS_ZR_NEXT, I_STILL_NEXT, I_HAS_STILL_NEXT,
  I_ACC_N, I_ACC_T0, I_MAG_N, I_MAG_T0, I_GATED_N, I_YAW_UNOBS, I_MAG_REJ, I_N_ZR, I_N_NUM, I_N_RELOCK, I_N_GYRO,
  I_HAS_LAST_ACC) = (IS[n] for n in (
-    "t_ns", "t_gyro_ns", "has:t_gyro_ns", "ref_next_ns", "has:ref_next_ns", "next_zero_rate_ns", "has:next_zero_rate_ns",
-    "ref_still_next_ns", "has:ref_still_next_ns", "acc_sum.n", "acc_sum.t0_ns", "mag_sum.n", "mag_sum.t0_ns", "gated.n",
+    "t_ns", "t_gyro_ns", "has:t_gyro_ns", "ref_next_ns", "has:ref_next_ns", "next_zero_rate_ns",
+    "has:next_zero_rate_ns", "ref_still_next_ns", "has:ref_still_next_ns", "acc_sum.n", "acc_sum.t0_ns", "mag_sum.n",
+    "mag_sum.t0_ns", "gated.n",
     "yaw_unobserved", "mag_rejected", "n_zero_rate", "n_numerical_rejects", "n_heading_relocks", "n_gyro",
     "has:acc_reading"))
 VO_NEXT, VO_HAS_NEXT, VO_T0, VO_HAS_T0, VO_ACTIVE = (VO[n] for n in (
