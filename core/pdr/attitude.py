@@ -535,28 +535,28 @@ class AttitudeFilterBase:
     ``_mag_reference_due(t_ns)``.
     """
 
-    state: AttitudeBaseState
+    _state: AttitudeBaseState
 
     def _reset_common(self) -> None:
-        self.state = AttitudeBaseState.initial()
+        self._state = AttitudeBaseState.initial()
 
     # -- read-only views of the state (set it through snapshot() / restore()) ---------------------
     @property
     def q(self) -> tuple:
         """Attitude quaternion body -> ENU (w, x, y, z)."""
-        return self.state.q
+        return self._state.q
 
     @q.setter
     def q(self, q) -> None:
-        self.state.q = tuple(q)
+        self._state.q = tuple(q)
 
-    initialized = property(lambda self: self.state.initialized)
-    t_ns = property(lambda self: self.state.t_ns, doc="Time of the state (ns).")
-    n_skipped_nonfinite = property(lambda self: self.state.n_skipped_nonfinite,
+    initialized = property(lambda self: self._state.initialized)
+    t_ns = property(lambda self: self._state.t_ns, doc="Time of the state (ns).")
+    n_skipped_nonfinite = property(lambda self: self._state.n_skipped_nonfinite,
                                    doc="Readings skipped as non-finite or beyond any phone sensor's range.")
-    gravity_m_s2 = property(lambda self: self.state.gravity_m_s2, doc="Reference |g| (m/s^2).")
-    field_uT = property(lambda self: self.state.field_uT, doc="Reference |h| (uT; nan before any reading).")
-    dip_rad = property(lambda self: self.state.dip_rad, doc="Reference dip (rad; nan before any reading).")
+    gravity_m_s2 = property(lambda self: self._state.gravity_m_s2, doc="Reference |g| (m/s^2).")
+    field_uT = property(lambda self: self._state.field_uT, doc="Reference |h| (uT; nan before any reading).")
+    dip_rad = property(lambda self: self._state.dip_rad, doc="Reference dip (rad; nan before any reading).")
 
     def _start_heading(self, q, from_mag: bool):
         """The initial attitude as the filter keeps it (default: as TRIAD gives it)."""
@@ -565,7 +565,7 @@ class AttitudeFilterBase:
     def _try_initialize(self, t_ns: int) -> None:
         """Start from the latest accelerometer and magnetometer readings (TRIAD), or after ``mag_wait_s``
         without a magnetometer from gravity and ``initial_yaw_rad``."""
-        state = self.state
+        state = self._state
         acc = state.acc_reading
         if acc is None:
             return
@@ -593,7 +593,7 @@ class AttitudeFilterBase:
 
     def _accumulate_references(self, t_ns: int, acc=None, mag=None) -> None:
         """Collect |a|, |m| and the dip angle; refresh the references every ``reference_update_s``."""
-        state = self.state
+        state = self._state
         if acc is not None:
             state.refs.add_acc(acc)
         if mag is not None and state.acc_reading is not None and self._mag_reference_due(t_ns):
@@ -604,17 +604,17 @@ class AttitudeFilterBase:
             self._update_references()
 
     def _update_references(self) -> None:
-        refs = self.state.refs
+        refs = self._state.refs
         if refs.g.n:
-            self.state.gravity_m_s2 = refs.g.median()
+            self._state.gravity_m_s2 = refs.g.median()
         if refs.h.n:
-            self.state.field_uT = refs.h.median()
-            self.state.dip_rad = refs.dip.median()
+            self._state.field_uT = refs.h.median()
+            self._state.dip_rad = refs.dip.median()
         self._set_field_reference()
 
     def _propagate_without_gyro(self, t_ns: int) -> None:
         """A measurement at ``t_ns``: without a gyroscope event for 0.1 s, only the uncertainty grows."""
-        state = self.state
+        state = self._state
         if state.t_ns is None:
             state.t_ns = t_ns
             return
@@ -639,12 +639,12 @@ class AttitudeFilterBase:
         for name, t, v in recording.events(names):
             handlers[name](t, v[0], v[1], v[2])
             t_out.append(t)
-            q_out.append(self.state.q if self.state.initialized else nan4)
+            q_out.append(self._state.q if self._state.initialized else nan4)
         return np.array(t_out, dtype=np.int64), np.array(q_out, dtype=float).reshape(-1, 4)
 
     def matrix(self):
         """Current rotation matrix body -> ENU (3 row tuples)."""
-        return quat.to_matrix(self.state.q)
+        return quat.to_matrix(self._state.q)
 
 
 class AttitudeEKF(AttitudeFilterBase):
@@ -716,87 +716,87 @@ class AttitudeEKF(AttitudeFilterBase):
         Kept as four 3 x 3 blocks of plain floats (tilt-heading, cross, its transpose, bias): the
         prediction runs on every gyroscope event, where numpy's per-call overhead outweighs the arithmetic.
         """
-        tt, tb, bt, bb = self.state.P_tt, self.state.P_tb, self.state.P_bt, self.state.P_bb
+        tt, tb, bt, bb = self._state.P_tt, self._state.P_tb, self._state.P_bt, self._state.P_bb
         return np.array((tt[0:3] + tb[0:3], tt[3:6] + tb[3:6], tt[6:9] + tb[6:9],
                          bt[0:3] + bb[0:3], bt[3:6] + bb[3:6], bt[6:9] + bb[6:9]))
 
     @P.setter
     def P(self, P) -> None:
         rows = np.asarray(P, dtype=np.float64).reshape(6, 6).tolist()
-        self.state.P_tt = tuple(rows[0][0:3] + rows[1][0:3] + rows[2][0:3])
-        self.state.P_tb = tuple(rows[0][3:6] + rows[1][3:6] + rows[2][3:6])
-        self.state.P_bt = tuple(rows[3][0:3] + rows[4][0:3] + rows[5][0:3])
-        self.state.P_bb = tuple(rows[3][3:6] + rows[4][3:6] + rows[5][3:6])
+        self._state.P_tt = tuple(rows[0][0:3] + rows[1][0:3] + rows[2][0:3])
+        self._state.P_tb = tuple(rows[0][3:6] + rows[1][3:6] + rows[2][3:6])
+        self._state.P_bt = tuple(rows[3][0:3] + rows[4][0:3] + rows[5][0:3])
+        self._state.P_bb = tuple(rows[3][3:6] + rows[4][3:6] + rows[5][3:6])
 
     def reset(self) -> None:
-        self.state = AttitudeState.initial(self.settings)
+        self._state = AttitudeState.initial(self.settings)
 
     def snapshot(self) -> AttitudeState:
         """A copy of the whole state (the filter keeps its own)."""
-        return copy.deepcopy(self.state)
+        return copy.deepcopy(self._state)
 
     def restore(self, state: AttitudeState) -> None:
         """Continue from ``state`` (a :meth:`snapshot`, possibly changed; the filter takes a copy)."""
         if type(state) is not AttitudeState:
             raise TypeError(f"restore takes an AttitudeState, not {type(state).__name__}")
-        self.state = copy.deepcopy(state)
+        self._state = copy.deepcopy(state)
 
     # -- read-only views of the state -------------------------------------------------------------
     @property
     def b(self) -> list:
         """Gyroscope bias estimate (rad/s, body frame)."""
-        return self.state.b
+        return self._state.b
 
     @b.setter
     def b(self, b) -> None:
-        self.state.b = [float(v) for v in b]
+        self._state.b = [float(v) for v in b]
 
-    yaw_unobserved = property(lambda self: self.state.yaw_unobserved,
+    yaw_unobserved = property(lambda self: self._state.yaw_unobserved,
                               doc="No magnetometer reading has corrected the heading since a start without one.")
-    vertical_offset_uT = property(lambda self: self.state.vertical_offset_uT,
+    vertical_offset_uT = property(lambda self: self._state.vertical_offset_uT,
                                   doc="Hard-iron offset removed by _vertical_offset (uT, body frame; zero while off).")
-    n_heading_relocks = property(lambda self: self.state.n_heading_relocks)
-    acc_sigma2 = property(lambda self: self.state.acc_sigma2)
-    mag_sigma2 = property(lambda self: self.state.mag_sigma2)
-    mag_rejected = property(lambda self: self.state.mag_rejected)
-    acc_rejected = property(lambda self: self.state.acc_rejected)
-    last_acc = property(lambda self: self.state.last_acc, doc="What the last accelerometer reading did.")
-    last_mag = property(lambda self: self.state.last_mag, doc="What the last magnetometer reading did.")
-    mag_reasons = property(lambda self: self.state.mag_reasons, doc="Magnetometer readings counted by outcome.")
-    acc_reasons = property(lambda self: self.state.acc_reasons, doc="Accelerometer readings counted by outcome.")
-    n_gyro = property(lambda self: self.state.n_gyro)
-    n_zero_rate = property(lambda self: self.state.n_zero_rate)
-    n_numerical_rejects = property(lambda self: self.state.n_numerical_rejects)
+    n_heading_relocks = property(lambda self: self._state.n_heading_relocks)
+    acc_sigma2 = property(lambda self: self._state.acc_sigma2)
+    mag_sigma2 = property(lambda self: self._state.mag_sigma2)
+    mag_rejected = property(lambda self: self._state.mag_rejected)
+    acc_rejected = property(lambda self: self._state.acc_rejected)
+    last_acc = property(lambda self: self._state.last_acc, doc="What the last accelerometer reading did.")
+    last_mag = property(lambda self: self._state.last_mag, doc="What the last magnetometer reading did.")
+    mag_reasons = property(lambda self: self._state.mag_reasons, doc="Magnetometer readings counted by outcome.")
+    acc_reasons = property(lambda self: self._state.acc_reasons, doc="Accelerometer readings counted by outcome.")
+    n_gyro = property(lambda self: self._state.n_gyro)
+    n_zero_rate = property(lambda self: self._state.n_zero_rate)
+    n_numerical_rejects = property(lambda self: self._state.n_numerical_rejects)
 
     # -- counters kept for the pipeline's summary -----------------------------------------------
     @property
     def n_mag_used(self) -> int:
-        return self.state.mag_reasons.get(Outcome.USED.value, 0)
+        return self._state.mag_reasons.get(Outcome.USED.value, 0)
 
     @property
     def n_mag_rejected(self) -> int:
         skip = (Outcome.USED.value, Outcome.INITIALISING.value)
-        return sum(v for k, v in self.state.mag_reasons.items() if k not in skip)
+        return sum(v for k, v in self._state.mag_reasons.items() if k not in skip)
 
     @property
     def n_acc_rejected(self) -> int:
-        return sum(v for k, v in self.state.acc_reasons.items() if k != Outcome.USED.value)
+        return sum(v for k, v in self._state.acc_reasons.items() if k != Outcome.USED.value)
 
     @property
     def gyro_bias(self) -> tuple:
-        return tuple(self.state.b)
+        return tuple(self._state.b)
 
     def mean_nis(self) -> dict:
         """Mean NIS per measurement kind over the updates computed so far (nan where none)."""
-        return {k: (self.state.nis_sum[k] / n if n else math.nan) for k, n in self.state.nis_n.items()}
+        return {k: (self._state.nis_sum[k] / n if n else math.nan) for k, n in self._state.nis_n.items()}
 
     def counters(self) -> dict:
         c = {"mag_used": self.n_mag_used, "mag_rejected": self.n_mag_rejected,
-             "acc_rejected": self.n_acc_rejected, "zero_rate_updates": self.state.n_zero_rate,
-             "nonfinite_skipped_by_filter": self.state.n_skipped_nonfinite,
-             "numerical_rejects": self.state.n_numerical_rejects, "heading_relocks": self.state.n_heading_relocks,
-             "mag_reasons": dict(self.state.mag_reasons), "mean_nis": self.mean_nis(),
-             "gyro_bias_rad_s": list(self.state.b), "vertical_offset_uT": list(self.state.vertical_offset_uT), "heading_sd_rad": math.sqrt(max(float(self.P[2, 2]), 0.0))}
+             "acc_rejected": self.n_acc_rejected, "zero_rate_updates": self._state.n_zero_rate,
+             "nonfinite_skipped_by_filter": self._state.n_skipped_nonfinite,
+             "numerical_rejects": self._state.n_numerical_rejects, "heading_relocks": self._state.n_heading_relocks,
+             "mag_reasons": dict(self._state.mag_reasons), "mean_nis": self.mean_nis(),
+             "gyro_bias_rad_s": list(self._state.b), "vertical_offset_uT": list(self._state.vertical_offset_uT), "heading_sd_rad": math.sqrt(max(float(self.P[2, 2]), 0.0))}
         if self.mag_calibrator is not None:
             st = self.mag_calibrator.status
             c["mag_calibration"] = getattr(st, "state", str(st))
@@ -804,10 +804,10 @@ class AttitudeEKF(AttitudeFilterBase):
 
     def status(self) -> AttitudeStatus:
         P = self.P
-        return AttitudeStatus(self.state.t_ns, self.state.initialized, self.state.q, tuple(self.state.b),
+        return AttitudeStatus(self._state.t_ns, self._state.initialized, self._state.q, tuple(self._state.b),
                               tuple(math.sqrt(max(P[i, i], 0.0)) for i in (3, 4, 5)),
                               math.sqrt(max(P[0, 0], P[1, 1], 0.0)), math.sqrt(max(P[2, 2], 0.0)),
-                              not self.state.mag_rejected and self.n_mag_used > 0, self.counters())
+                              not self._state.mag_rejected and self.n_mag_used > 0, self.counters())
 
     # -- initialisation ---------------------------------------------------------------------------
     def _param(self, name: str):
@@ -820,7 +820,7 @@ class AttitudeEKF(AttitudeFilterBase):
         P = self.P
         P[2, 2] = (self.settings.initial_yaw_sd_rad if from_mag else 1e-3) ** 2
         self.P = P
-        self.state.yaw_unobserved = not from_mag
+        self._state.yaw_unobserved = not from_mag
         if not from_mag:
             return q
         return quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), -self.settings.declination_rad), q)
@@ -833,27 +833,27 @@ class AttitudeEKF(AttitudeFilterBase):
         against the 22 uT of the walk, and the walk's readings were then
         rejected as "norm off").
         """
-        w = self.state.acc_norm_win
+        w = self._state.acc_norm_win
         still = len(w.buf) >= 5 and w.variance() < self.settings.still_acc_sd_m_s2 ** 2
-        if not still or self.state.refs.h.n == 0:
+        if not still or self._state.refs.h.n == 0:
             return True
-        if self.state.ref_still_next_ns is not None and t_ns < self.state.ref_still_next_ns:
+        if self._state.ref_still_next_ns is not None and t_ns < self._state.ref_still_next_ns:
             return False
-        self.state.ref_still_next_ns = t_ns + int(1e9 / self.settings.reference_still_rate_hz)
+        self._state.ref_still_next_ns = t_ns + int(1e9 / self.settings.reference_still_rate_hz)
         return True
 
     def _set_field_reference(self) -> None:
-        dip = self.state.dip_rad if self.state.dip_rad == self.state.dip_rad else math.radians(60.0)
+        dip = self._state.dip_rad if self._state.dip_rad == self._state.dip_rad else math.radians(60.0)
         c, sn = math.cos(dip), math.sin(dip)
         d = self.settings.declination_rad
         # eq. 14, turned by the declination: magnetic north lies D east of true north
-        self.state.h_ref = (c * math.sin(d), c * math.cos(d), -sn)
-        self.state.alpha_ref = math.atan2(math.cos(d), math.sin(d))
+        self._state.h_ref = (c * math.sin(d), c * math.cos(d), -sn)
+        self._state.alpha_ref = math.atan2(math.cos(d), math.sin(d))
 
     # -- prediction -------------------------------------------------------------------------------
     def predict(self, t_ns: int, wx: float, wy: float, wz: float) -> None:
         """Propagate with one gyroscope event (rad/s) over the time since the previous one."""
-        state = self.state
+        state = self._state
         if not _plausible(wx, wy, wz, _GYRO_IMPOSSIBLE):
             state.n_skipped_nonfinite += 1
             return
@@ -910,7 +910,7 @@ class AttitudeEKF(AttitudeFilterBase):
         Its Jacobian is zero, but its correlation with the tilt and the bias would otherwise let every
         tilt or bias correction shrink the heading's variance, where nothing observes the heading.
         """
-        yaw_consider = self.state.yaw_unobserved and not measures_yaw
+        yaw_consider = self._state.yaw_unobserved and not measures_yaw
 
         def adjust(K):
             if consider_tilt:  # Schmidt update: roll and pitch are not corrected by this measurement
@@ -922,18 +922,18 @@ class AttitudeEKF(AttitudeFilterBase):
 
         c = kalman.correct(self.P, y, H, Rm, gate, adjust_gain=adjust)
         if c.verdict is kalman.Verdict.NUMERICAL:
-            self.state.n_numerical_rejects += 1
+            self._state.n_numerical_rejects += 1
         if not c.used:
             return False, _VERDICT_OUTCOME[c.verdict], c.nis
         self._inject(c.dx, c.P, keep_yaw=yaw_consider)
         if measures_yaw:
-            self.state.yaw_unobserved = False
+            self._state.yaw_unobserved = False
         return True, Outcome.USED, c.nis
 
     def _inject(self, dx: np.ndarray, Pn: np.ndarray, keep_yaw: bool = False) -> None:
         """Fold the error into ``q`` and ``b`` and reset it: ``P <- G P G^T`` (:func:`core.kalman.reset_jacobian`,
         ``G = I + [dtheta / 2]x`` for this navigation-frame error; derived in the module docstring)."""
-        state = self.state
+        state = self._state
         dth = dx[0:3]
         state.q = kalman.inject_rotation(state.q, dth)
         lim = self.settings.max_gyro_bias_rad_s
@@ -945,8 +945,8 @@ class AttitudeEKF(AttitudeFilterBase):
 
     def _record(self, kind: str, used: bool, nis: float) -> None:
         if nis == nis:
-            self.state.nis_sum[kind] += nis
-            self.state.nis_n[kind] += 1
+            self._state.nis_sum[kind] += nis
+            self._state.nis_n[kind] += 1
 
     # -- accelerometer ----------------------------------------------------------------------------
     def update_acc(self, t_ns: int, ax: float, ay: float, az: float) -> UpdateFlags:
@@ -960,7 +960,7 @@ class AttitudeEKF(AttitudeFilterBase):
         of independent measurements: one update per interval keeps the NIS
         meaningful and the filter the same at every sample rate.
         """
-        state = self.state
+        state = self._state
         if not _plausible(ax, ay, az, _ACC_IMPOSSIBLE):
             state.n_skipped_nonfinite += 1
             return self._acc_flags(t_ns, False, Outcome.NON_FINITE)
@@ -1012,7 +1012,7 @@ class AttitudeEKF(AttitudeFilterBase):
         return self._acc_flags(t_ns, used, outcome, nis=nis, sigma2=sigma2, innovation=tuple(y.tolist()))
 
     def _acc_flags(self, t_ns, used, outcome: Outcome, **kw) -> UpdateFlags:
-        state = self.state
+        state = self._state
         state.acc_rejected = not used
         key = outcome.value  # text only here, at the edge: the counters are keyed by it
         state.acc_reasons[key] = state.acc_reasons.get(key, 0) + 1
@@ -1021,7 +1021,7 @@ class AttitudeEKF(AttitudeFilterBase):
 
     def _maybe_zero_rate(self, t_ns: int) -> None:
         """Zero-rate update from the mean gyroscope reading when the phone is truly still."""
-        state = self.state
+        state = self._state
         s = self.settings
         g = state.gyro_win
         if not g.buf or (state.next_zero_rate_ns is not None and t_ns < state.next_zero_rate_ns):
@@ -1055,7 +1055,7 @@ class AttitudeEKF(AttitudeFilterBase):
         Trusted readings are rotated into the navigation frame and averaged
         over ``update_interval_s``, as for the accelerometer.
         """
-        state = self.state
+        state = self._state
         s = self.settings
         if not s.use_magnetometer:
             return self._mag_flags(t_ns, False, Outcome.MAGNETOMETER_OFF)
@@ -1170,7 +1170,7 @@ class AttitudeEKF(AttitudeFilterBase):
         offset).  Once on, it stays on until the dip error is below half the
         threshold.
         """
-        state = self.state
+        state = self._state
         s = self.settings
         u = (R[2][0], R[2][1], R[2][2])  # up in the body frame (R: the current attitude's matrix)
         nm = math.sqrt(mx * mx + my * my + mz * mz)
@@ -1212,14 +1212,14 @@ class AttitudeEKF(AttitudeFilterBase):
     def _mag_interval_done(self, t_ns, n, used, outcome: Outcome, **kw) -> UpdateFlags:
         """Flags of the reading that closed an interval; its ``n - 1`` earlier readings are re-counted if unused."""
         if not used and n > 1:
-            r = self.state.mag_reasons
+            r = self._state.mag_reasons
             r[Outcome.USED.value] = r.get(Outcome.USED.value, 0) - (n - 1)
             r[outcome.value] = r.get(outcome.value, 0) + (n - 1)
         return self._mag_flags(t_ns, used, outcome, **kw)
 
     def _relock(self, t_ns: int, innovation: float) -> None:
         """Release the heading when the gate has rejected agreeing readings for ``mag_relock_s``."""
-        state = self.state
+        state = self._state
         s = self.settings
         g = state.gated
         g.append((t_ns, innovation))
@@ -1238,7 +1238,7 @@ class AttitudeEKF(AttitudeFilterBase):
             state.n_heading_relocks += 1
 
     def _mag_flags(self, t_ns, used, outcome: Outcome, dof=1, detail: str = "", **kw) -> UpdateFlags:
-        state = self.state
+        state = self._state
         state.mag_rejected = not used
         key = outcome.value  # text only here, at the edge: the counters are keyed by it, the flags add the detail
         state.mag_reasons[key] = state.mag_reasons.get(key, 0) + 1
