@@ -10,6 +10,7 @@ product's defaults are wider, for real phones.
 
 import functools
 import math
+import os
 
 import numpy as np
 import pytest
@@ -29,7 +30,11 @@ READINGS_PER_UPDATE = 0.1 * 50.0  # magnetometer at half the rate, one update pe
 
 
 def _matched_filter():
+    # the simulator's gyroscope bias is constant (simulate_walk's gyro_bias_walk_rad_s_sqrt_s=0): told the
+    # product's 2e-5 rad/s/sqrt(s) for real phones, the bias variance never shrinks and widens the tilt's, and
+    # through the dip the heading's (heading NEES 0.71 over 84 epochs of 12 seeds instead of 0.83)
     return AttitudeEKF(gyro_noise_rad_sqrt_s=GYRO_NOISE / math.sqrt(RATE_HZ), gyro_scale_noise_sqrt_s=0.0,
+                       gyro_bias_walk_rad_s_sqrt_s=0.0,
                        mag_noise_base=MAG_NOISE_UT / FIELD_UT / math.sqrt(READINGS_PER_UPDATE), k_m1=0.0, k_m2=0.0)
 
 
@@ -82,21 +87,28 @@ def test_heading_nees_is_not_overconfident():
     no higher than the upper end of the two-sided 95 % band of the mean of chi2(1) for that count.
 
     The reported heading sigma must not be smaller than the heading errors: the failure of the TCKF that
-    issue #27 found (NEES about 82).  Measured: 0.25 over these 14 epochs (band [0.40, 1.87]); 0.71 over
-    84 epochs of 12 seeds (band [0.72, 1.32]).  See the next test for the lower end.
+    issue #27 found (NEES about 82).  Measured: 0.35 over these 14 epochs (band [0.40, 1.87]).  The next
+    test checks the lower end too, on enough walks.
     """
     x = _heading_epochs([_run_against_truth(1), _run_against_truth(2)])
     assert len(x) >= 12
     assert x.mean() <= _chi2_mean_band(len(x))[1], x.mean()
 
 
-@pytest.mark.xfail(strict=True, reason="the heading sigma is conservative on the simulator (mean NEES 0.25 here, "
-                   "0.71 over 12 seeds): it is about the tilt sigma times tan(dip), and the tilt sigma is too wide; "
-                   "cause not found (eq. 17's R is 1.6 times the variance of the averaged direction's true error, "
-                   "which is close to white over 2-20 s; quartering k_a1-3 gives 0.84 but an accelerometer NIS of 5)")
+#: seeds of the two-sided heading-NEES test (0: skipped); 12 take about 35 s on one core
+CONSISTENCY_SEEDS = int(os.environ.get("PDR_CONSISTENCY_SEEDS", "0"))
+
+
+@pytest.mark.skipif(CONSISTENCY_SEEDS < 6, reason="the two-sided band needs about 80 independent epochs: "
+                    "PDR_CONSISTENCY_SEEDS=12 (about 35 s)")
 def test_heading_nees_is_within_its_two_sided_chi2_band():
-    """The lower end too: a filter whose heading sigma is right to a factor of about 1.3 passes."""
-    x = _heading_epochs([_run_against_truth(1), _run_against_truth(2)])
+    """The lower end too, on enough walks: the heading sigma neither too small nor too large.
+
+    Measured with PDR_CONSISTENCY_SEEDS=12: 0.83 over 84 epochs (band [0.72, 1.32]); per seed 0.2 to 3.6 (a
+    seed's epochs share its hand's pose and gait, so two walks say little about the lower end).  With the
+    product's bias random walk instead of the simulator's (see _matched_filter): 0.71, outside.
+    """
+    x = _heading_epochs([_run_against_truth(seed) for seed in range(1, CONSISTENCY_SEEDS + 1)])
     lo, hi = _chi2_mean_band(len(x))
     assert lo <= x.mean() <= hi, (x.mean(), lo, hi)
 
