@@ -161,7 +161,7 @@ def test_fast_equals_plain_with_gps_fusion_on_a_real_walk():
 
     plain, pipe = _assert_same(_real(*REAL[1]), make)
     assert len(plain.steps) >= 10 and pipe.site["applied"] and pipe.site["declination_deg"] is not None
-    assert pipe.attitude._vo_active and abs(pipe.attitude.vertical_offset_uT[2]) > 30.0
+    assert pipe.attitude.snapshot().vo_active and abs(pipe.attitude.vertical_offset_uT[2]) > 30.0
     assert sum(f.accepted for f in plain.fusion.fixes) > 10
 
 

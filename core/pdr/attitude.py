@@ -130,7 +130,9 @@ Sign conventions: ENU with heading counter-clockwise from East, so a positive
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+import copy
+import enum
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -307,6 +309,33 @@ class AttitudeSettings:
                 raise ValueError(f"{name} must be a positive number, not {v!r}")
 
 
+class Outcome(enum.Enum):
+    """What one accelerometer or magnetometer reading did (:attr:`UpdateFlags.outcome`).
+
+    The filter decides on these; the counters (:attr:`AttitudeEKF.acc_reasons`, ``mag_reasons``) and
+    :attr:`UpdateFlags.reason` carry their text.
+    """
+
+    USED = "used"  #: used (the magnetometer's: also while its interval is still open)
+    PENDING = "pending"  #: an accelerometer reading in an interval still open
+    INITIALISING = "initialising"  #: before the filter's start
+    NON_FINITE = "non-finite"  #: not finite, or beyond any phone sensor's range
+    NORM_OFF = "norm off"  #: its norm too far from the reference's
+    GATE = "gate"  #: its update's NIS beyond the gate
+    NUMERICAL = "numerical"  #: its update would not have been finite
+    MAGNETOMETER_OFF = "magnetometer off"
+    CALIBRATING = "calibrating"  #: the online calibration has no fit yet (``mag_requires_calibration``)
+    INVALID_RANGE = "invalid range"  #: no geomagnetic field (``mag_valid_range_uT``)
+    NOT_QUASI_STATIC = "not quasi-static"  #: the field detector does not call it steady
+    DIP_OFF = "dip off"  #: its dip too far from the reference's
+    FIELD_VERTICAL = "field vertical"  #: the field nearly vertical: no azimuth to measure
+    NONE_YET = "none yet"  #: no reading yet
+
+
+_VERDICT_OUTCOME = {kalman.Verdict.USED: Outcome.USED, kalman.Verdict.GATE: Outcome.GATE,
+                    kalman.Verdict.NUMERICAL: Outcome.NUMERICAL}
+
+
 @dataclass(frozen=True)
 class UpdateFlags:
     """What one measurement did (returned by every ``update_*`` call)."""
@@ -314,18 +343,19 @@ class UpdateFlags:
     kind: str  #: "acc", "mag" or "zero_rate"
     t_ns: int
     used: bool
-    reason: str  #: "used" or why not (see :attr:`AttitudeEKF.mag_reasons`)
+    reason: str  #: the outcome's text, "used" or why not (see :attr:`AttitudeEKF.mag_reasons`), with any detail
     nis: float = math.nan  #: normalised innovation squared (nan when not computed)
     dof: int = 0  #: its expected value when the filter is consistent
     sigma2: float = math.nan  #: measurement variance used (eqs. 17-18; heading: of the angle, rad^2)
     innovation: tuple = ()
+    outcome: Outcome | None = None  #: ``reason`` as an :class:`Outcome` (without its detail)
 
     def __init__(self, kind: str, t_ns: int, used: bool, reason: str, nis: float = math.nan, dof: int = 0,
-                 sigma2: float = math.nan, innovation: tuple = ()):
+                 sigma2: float = math.nan, innovation: tuple = (), outcome: Outcome | None = None):
         # one is made per accelerometer and magnetometer event: filling __dict__ at once is about twice
         # as fast as the frozen dataclass's generated __init__ (one object.__setattr__ per field)
         self.__dict__.update(kind=kind, t_ns=t_ns, used=used, reason=reason, nis=nis, dof=dof, sigma2=sigma2,
-                             innovation=innovation)
+                             innovation=innovation, outcome=outcome)
 
 
 @dataclass(frozen=True)
@@ -370,6 +400,130 @@ class FieldReferences:
             self.h.add(nm)
 
 
+@dataclass(slots=True)
+class IntervalSum:
+    """Running sums of one ``update_interval_s`` of readings rotated into the navigation frame."""
+
+    x: float
+    y: float
+    z: float
+    sigma2: float  #: sum of the readings' variances (eqs. 17-18)
+    n: int  #: readings in the interval
+    t0_ns: int  #: time of its first reading
+
+    @classmethod
+    def empty(cls) -> IntervalSum:
+        return cls(0.0, 0.0, 0.0, 0.0, 0, 0)
+
+
+@dataclass(slots=True)
+class AttitudeBaseState:
+    """What both attitude filters keep for their start, references and time (see :class:`AttitudeFilterBase`)."""
+
+    initialized: bool
+    n_skipped_nonfinite: int  #: readings skipped as non-finite or beyond any phone sensor's range
+    t_ns: int | None  #: time of the state
+    t_gyro_ns: int | None  #: time of the last gyroscope event
+    acc_reading: tuple | None  #: the last accelerometer reading (m/s^2)
+    mag_reading: tuple | None  #: the last magnetometer reading used (uT)
+    first_acc_ns: int | None  #: first accelerometer reading while waiting for a magnetometer
+    ref_next_ns: int | None  #: next refresh of the references
+    refs: FieldReferences
+    gravity_m_s2: float  #: reference |g|
+    field_uT: float  #: reference |h| (nan before any reading)
+    dip_rad: float  #: reference dip (nan before any reading)
+    q: tuple  #: attitude quaternion body -> ENU (w, x, y, z)
+
+    @classmethod
+    def initial(cls) -> AttitudeBaseState:
+        return cls(initialized=False, n_skipped_nonfinite=0, t_ns=None, t_gyro_ns=None, acc_reading=None,
+                   mag_reading=None, first_acc_ns=None, ref_next_ns=None, refs=FieldReferences(),
+                   gravity_m_s2=STANDARD_GRAVITY_M_S2, field_uT=math.nan, dip_rad=math.nan, q=(1.0, 0.0, 0.0, 0.0))
+
+
+@dataclass(slots=True)
+class AttitudeState(AttitudeBaseState):
+    """Everything :class:`AttitudeEKF` changes as events come: its only state, made by :meth:`initial`.
+
+    Read and set from outside only through :meth:`AttitudeEKF.snapshot` and
+    :meth:`AttitudeEKF.restore` (the fast path hands it to its kernel and back).
+    """
+
+    b: list  #: gyroscope bias (rad/s, body frame)
+    #: error-state covariance as four 3 x 3 blocks (row-major 9-tuples): tilt-heading, cross, its transpose, bias
+    P_tt: tuple
+    P_tb: tuple
+    P_bt: tuple
+    P_bb: tuple
+    acc_var: WindowVariance  #: eq. 17's trailing variance of |a|
+    mag_var: WindowVariance  #: eq. 18's trailing variance of |m|
+    gyro_win: WindowMeanSpread  #: stillness: gyroscope mean and spread
+    accdir_win: WindowMeanSpread  #: stillness: accelerometer direction spread
+    acc_norm_win: WindowVariance  #: stillness: accelerometer norm spread
+    next_zero_rate_ns: int | None
+    ref_still_next_ns: int | None
+    #: vertical hard-iron offset from the site's field (see AttitudeEKF._vertical_offset): normal equations,
+    #: next refresh, first reading, whether on, the raw dip and strength medians, the offset removed (uT)
+    vo_S: list
+    vo_r: list
+    vo_next_ns: int | None
+    vo_t0_ns: int | None
+    vo_active: bool
+    raw_dip_med: RunningMedian
+    raw_norm_med: RunningMedian
+    vertical_offset_uT: tuple
+    h_ref: tuple  #: reference field direction (eq. 14 turned by the declination)
+    alpha_ref: float  #: its azimuth (rad)
+    w2: float  #: squared rotation rate of the last gyroscope event ((rad/s)^2)
+    acc_sum: IntervalSum
+    mag_sum: IntervalSum
+    gated: list  #: (t_ns, innovation) of heading updates gated since the last one used
+    n_heading_relocks: int
+    #: no magnetometer reading has corrected the heading since the start without one (see AttitudeEKF._correct)
+    yaw_unobserved: bool
+    acc_sigma2: float  #: diagnostics: the last measurement variances (eqs. 17-18)
+    mag_sigma2: float
+    mag_rejected: bool
+    acc_rejected: bool
+    last_acc: UpdateFlags
+    last_mag: UpdateFlags
+    mag_reasons: dict
+    acc_reasons: dict
+    n_gyro: int
+    n_zero_rate: int
+    n_numerical_rejects: int
+    nis_sum: dict
+    nis_n: dict
+
+    @classmethod
+    def initial(cls, settings: AttitudeSettings) -> AttitudeState:  # type: ignore[override]
+        s = settings
+        rows = np.diag([s.initial_tilt_sd_rad ** 2] * 2 + [s.initial_yaw_sd_rad ** 2]
+                       + [s.gyro_bias_sd_rad_s ** 2] * 3).tolist()
+        base = AttitudeBaseState.initial()
+        return cls(
+            **{f.name: getattr(base, f.name) for f in fields(AttitudeBaseState)},
+            b=[0.0, 0.0, 0.0],
+            P_tt=tuple(rows[0][0:3] + rows[1][0:3] + rows[2][0:3]),
+            P_tb=tuple(rows[0][3:6] + rows[1][3:6] + rows[2][3:6]),
+            P_bt=tuple(rows[3][0:3] + rows[4][0:3] + rows[5][0:3]),
+            P_bb=tuple(rows[3][3:6] + rows[4][3:6] + rows[5][3:6]),
+            acc_var=WindowVariance(s.variance_window_s), mag_var=WindowVariance(s.variance_window_s),
+            gyro_win=WindowMeanSpread(s.still_window_s), accdir_win=WindowMeanSpread(s.still_window_s),
+            acc_norm_win=WindowVariance(s.still_window_s), next_zero_rate_ns=None, ref_still_next_ns=None,
+            vo_S=[[0.0] * 3 for _ in range(3)], vo_r=[0.0, 0.0, 0.0], vo_next_ns=None, vo_t0_ns=None,
+            vo_active=False, raw_dip_med=RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1)),
+            raw_norm_med=RunningMedian(0.0, 200.0, 0.1), vertical_offset_uT=(0.0, 0.0, 0.0),
+            h_ref=(0.0, 1.0, 0.0), alpha_ref=math.pi / 2, w2=0.0,
+            acc_sum=IntervalSum.empty(), mag_sum=IntervalSum.empty(), gated=[], n_heading_relocks=0,
+            yaw_unobserved=False, acc_sigma2=math.nan, mag_sigma2=math.nan, mag_rejected=False,
+            acc_rejected=False, last_acc=UpdateFlags("acc", 0, False, Outcome.NONE_YET.value, outcome=Outcome.NONE_YET),
+            last_mag=UpdateFlags("mag", 0, False, Outcome.NONE_YET.value, outcome=Outcome.NONE_YET),
+            mag_reasons={}, acc_reasons={},
+            n_gyro=0, n_zero_rate=0, n_numerical_rejects=0,
+            nis_sum={"acc": 0.0, "mag": 0.0, "zero_rate": 0.0}, nis_n={"acc": 0, "mag": 0, "zero_rate": 0})
+
+
 class AttitudeFilterBase:
     """What both attitude filters share: the start from TRIAD, the field references, time keeping, ``run``.
 
@@ -381,20 +535,28 @@ class AttitudeFilterBase:
     ``_mag_reference_due(t_ns)``.
     """
 
+    _state: AttitudeBaseState
+
     def _reset_common(self) -> None:
-        self.initialized = False
-        #: readings skipped as non-finite or beyond any phone sensor's range
-        self.n_skipped_nonfinite = 0
-        self.t_ns: int | None = None  # time of the state
-        self._t_gyro: int | None = None
-        self._last_acc = None
-        self._last_mag = None
-        self._first_acc_ns: int | None = None
-        self._ref_next_ns: int | None = None
-        self._refs = FieldReferences()
-        self.gravity_m_s2 = STANDARD_GRAVITY_M_S2
-        self.field_uT = math.nan
-        self.dip_rad = math.nan
+        self._state = AttitudeBaseState.initial()
+
+    # -- read-only views of the state (set it through snapshot() / restore()) ---------------------
+    @property
+    def q(self) -> tuple:
+        """Attitude quaternion body -> ENU (w, x, y, z)."""
+        return self._state.q
+
+    @q.setter
+    def q(self, q) -> None:
+        self._state.q = tuple(q)
+
+    initialized = property(lambda self: self._state.initialized)
+    t_ns = property(lambda self: self._state.t_ns, doc="Time of the state (ns).")
+    n_skipped_nonfinite = property(lambda self: self._state.n_skipped_nonfinite,
+                                   doc="Readings skipped as non-finite or beyond any phone sensor's range.")
+    gravity_m_s2 = property(lambda self: self._state.gravity_m_s2, doc="Reference |g| (m/s^2).")
+    field_uT = property(lambda self: self._state.field_uT, doc="Reference |h| (uT; nan before any reading).")
+    dip_rad = property(lambda self: self._state.dip_rad, doc="Reference dip (rad; nan before any reading).")
 
     def _start_heading(self, q, from_mag: bool):
         """The initial attitude as the filter keeps it (default: as TRIAD gives it)."""
@@ -403,15 +565,16 @@ class AttitudeFilterBase:
     def _try_initialize(self, t_ns: int) -> None:
         """Start from the latest accelerometer and magnetometer readings (TRIAD), or after ``mag_wait_s``
         without a magnetometer from gravity and ``initial_yaw_rad``."""
-        acc = self._last_acc
+        state = self._state
+        acc = state.acc_reading
         if acc is None:
             return
         use_mag = self._param("use_magnetometer")
-        mag = self._last_mag if use_mag else None
+        mag = state.mag_reading if use_mag else None
         if use_mag and mag is None:
-            if self._first_acc_ns is None:
-                self._first_acc_ns = t_ns
-            if t_ns - self._first_acc_ns < self._param("mag_wait_s") * 1e9:
+            if state.first_acc_ns is None:
+                state.first_acc_ns = t_ns
+            if t_ns - state.first_acc_ns < self._param("mag_wait_s") * 1e9:
                 return  # wait a little for a magnetometer reading; then start without one
         try:
             if mag is not None:
@@ -420,9 +583,9 @@ class AttitudeFilterBase:
                 q = quat.from_gravity_yaw(acc, self._param("initial_yaw_rad"))
         except ValueError:
             return
-        self.q = self._start_heading(q, mag is not None)
-        self.initialized = True
-        self.t_ns = t_ns
+        state.q = self._start_heading(q, mag is not None)
+        state.initialized = True
+        state.t_ns = t_ns
         self._update_references()
 
     def _mag_reference_due(self, t_ns: int) -> bool:
@@ -430,35 +593,37 @@ class AttitudeFilterBase:
 
     def _accumulate_references(self, t_ns: int, acc=None, mag=None) -> None:
         """Collect |a|, |m| and the dip angle; refresh the references every ``reference_update_s``."""
+        state = self._state
         if acc is not None:
-            self._refs.add_acc(acc)
-        if mag is not None and self._last_acc is not None and self._mag_reference_due(t_ns):
-            self._refs.add_mag(self._last_acc, mag)
-        if (self._ref_next_ns is None or t_ns >= self._ref_next_ns
-                or (self._refs.h.n and self.field_uT != self.field_uT)):
-            self._ref_next_ns = t_ns + int(self._param("reference_update_s") * 1e9)
+            state.refs.add_acc(acc)
+        if mag is not None and state.acc_reading is not None and self._mag_reference_due(t_ns):
+            state.refs.add_mag(state.acc_reading, mag)
+        if (state.ref_next_ns is None or t_ns >= state.ref_next_ns
+                or (state.refs.h.n and state.field_uT != state.field_uT)):
+            state.ref_next_ns = t_ns + int(self._param("reference_update_s") * 1e9)
             self._update_references()
 
     def _update_references(self) -> None:
-        refs = self._refs
+        refs = self._state.refs
         if refs.g.n:
-            self.gravity_m_s2 = refs.g.median()
+            self._state.gravity_m_s2 = refs.g.median()
         if refs.h.n:
-            self.field_uT = refs.h.median()
-            self.dip_rad = refs.dip.median()
+            self._state.field_uT = refs.h.median()
+            self._state.dip_rad = refs.dip.median()
         self._set_field_reference()
 
     def _propagate_without_gyro(self, t_ns: int) -> None:
         """A measurement at ``t_ns``: without a gyroscope event for 0.1 s, only the uncertainty grows."""
-        if self.t_ns is None:
-            self.t_ns = t_ns
+        state = self._state
+        if state.t_ns is None:
+            state.t_ns = t_ns
             return
-        last = self._t_gyro
+        last = state.t_gyro_ns
         if last is None or t_ns - last > 100_000_000:
-            dt = (t_ns - self.t_ns) * 1e-9
+            dt = (t_ns - state.t_ns) * 1e-9
             if dt > 0:
                 self._random_walk(dt)
-        self.t_ns = max(self.t_ns, t_ns)
+        state.t_ns = max(state.t_ns, t_ns)
 
     def run(self, recording) -> tuple[np.ndarray, np.ndarray]:
         """Attitude after every event of a :class:`core.recording.Recording` (gyro, acc, mag in time order).
@@ -474,12 +639,12 @@ class AttitudeFilterBase:
         for name, t, v in recording.events(names):
             handlers[name](t, v[0], v[1], v[2])
             t_out.append(t)
-            q_out.append(self.q if self.initialized else nan4)
+            q_out.append(self._state.q if self._state.initialized else nan4)
         return np.array(t_out, dtype=np.int64), np.array(q_out, dtype=float).reshape(-1, 4)
 
     def matrix(self):
         """Current rotation matrix body -> ENU (3 row tuples)."""
-        return quat.to_matrix(self.q)
+        return quat.to_matrix(self._state.q)
 
 
 class AttitudeEKF(AttitudeFilterBase):
@@ -551,95 +716,87 @@ class AttitudeEKF(AttitudeFilterBase):
         Kept as four 3 x 3 blocks of plain floats (tilt-heading, cross, its transpose, bias): the
         prediction runs on every gyroscope event, where numpy's per-call overhead outweighs the arithmetic.
         """
-        tt, tb, bt, bb = self._Ptt, self._Ptb, self._Pbt, self._Pbb
+        tt, tb, bt, bb = self._state.P_tt, self._state.P_tb, self._state.P_bt, self._state.P_bb
         return np.array((tt[0:3] + tb[0:3], tt[3:6] + tb[3:6], tt[6:9] + tb[6:9],
                          bt[0:3] + bb[0:3], bt[3:6] + bb[3:6], bt[6:9] + bb[6:9]))
 
     @P.setter
     def P(self, P) -> None:
         rows = np.asarray(P, dtype=np.float64).reshape(6, 6).tolist()
-        self._Ptt = tuple(rows[0][0:3] + rows[1][0:3] + rows[2][0:3])
-        self._Ptb = tuple(rows[0][3:6] + rows[1][3:6] + rows[2][3:6])
-        self._Pbt = tuple(rows[3][0:3] + rows[4][0:3] + rows[5][0:3])
-        self._Pbb = tuple(rows[3][3:6] + rows[4][3:6] + rows[5][3:6])
+        self._state.P_tt = tuple(rows[0][0:3] + rows[1][0:3] + rows[2][0:3])
+        self._state.P_tb = tuple(rows[0][3:6] + rows[1][3:6] + rows[2][3:6])
+        self._state.P_bt = tuple(rows[3][0:3] + rows[4][0:3] + rows[5][0:3])
+        self._state.P_bb = tuple(rows[3][3:6] + rows[4][3:6] + rows[5][3:6])
 
     def reset(self) -> None:
-        s = self.settings
-        self.q = (1.0, 0.0, 0.0, 0.0)
-        self.b = [0.0, 0.0, 0.0]
-        self.P = np.diag([s.initial_tilt_sd_rad ** 2] * 2 + [s.initial_yaw_sd_rad ** 2]
-                         + [s.gyro_bias_sd_rad_s ** 2] * 3)
-        self._reset_common()
-        self._acc_var = WindowVariance(s.variance_window_s)
-        self._mag_var = WindowVariance(s.variance_window_s)
-        self._gyro_win = WindowMeanSpread(s.still_window_s)
-        self._accdir_win = WindowMeanSpread(s.still_window_s)
-        self._acc_norm_win = WindowVariance(s.still_window_s)
-        self._next_zero_rate_ns: int | None = None
-        self._ref_still_next_ns: int | None = None
-        # vertical hard-iron offset from the site's field (see _vertical_offset)
-        self._vo_S = [[0.0] * 3 for _ in range(3)]
-        self._vo_r = [0.0, 0.0, 0.0]
-        self._vo_next_ns: int | None = None
-        self._vo_t0_ns: int | None = None
-        self._vo_active = False
-        self._raw_dip_med = RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1))
-        self._raw_norm_med = RunningMedian(0.0, 200.0, 0.1)
-        #: hard-iron offset removed by :meth:`_vertical_offset` (uT, body frame; zero while inactive)
-        self.vertical_offset_uT = (0.0, 0.0, 0.0)
-        self._h_ref = (0.0, 1.0, 0.0)
-        self._alpha_ref = math.pi / 2
-        self._w2 = 0.0  # squared rotation rate of the last gyroscope event ((rad/s)^2)
-        self._acc_sum = [0.0, 0.0, 0.0, 0.0, 0, 0]  # sum of f_n (3), of sigma^2, count, first t_ns
-        self._mag_sum = [0.0, 0.0, 0.0, 0.0, 0, 0]
-        self._gated = []  # (t_ns, innovation) of heading updates gated since the last one used
-        self.n_heading_relocks = 0
-        #: no magnetometer reading has corrected the heading since the start without one: the heading is
-        #: a consider state of the other updates (see _correct)
-        self.yaw_unobserved = False
-        # diagnostics
-        self.acc_sigma2 = math.nan
-        self.mag_sigma2 = math.nan
-        self.mag_rejected = False
-        self.acc_rejected = False
-        self.last_acc = UpdateFlags("acc", 0, False, "none yet")
-        self.last_mag = UpdateFlags("mag", 0, False, "none yet")
-        self.mag_reasons: dict[str, int] = {}
-        self.acc_reasons: dict[str, int] = {}
-        self.n_gyro = 0
-        self.n_zero_rate = 0
-        self.n_numerical_rejects = 0
-        self._nis_sum = {"acc": 0.0, "mag": 0.0, "zero_rate": 0.0}
-        self._nis_n = {"acc": 0, "mag": 0, "zero_rate": 0}
+        self._state = AttitudeState.initial(self.settings)
+
+    def snapshot(self) -> AttitudeState:
+        """A copy of the whole state (the filter keeps its own)."""
+        return copy.deepcopy(self._state)
+
+    def restore(self, state: AttitudeState) -> None:
+        """Continue from ``state`` (a :meth:`snapshot`, possibly changed; the filter takes a copy)."""
+        if type(state) is not AttitudeState:
+            raise TypeError(f"restore takes an AttitudeState, not {type(state).__name__}")
+        self._state = copy.deepcopy(state)
+
+    # -- read-only views of the state -------------------------------------------------------------
+    @property
+    def b(self) -> list:
+        """Gyroscope bias estimate (rad/s, body frame)."""
+        return self._state.b
+
+    @b.setter
+    def b(self, b) -> None:
+        self._state.b = [float(v) for v in b]
+
+    yaw_unobserved = property(lambda self: self._state.yaw_unobserved,
+                              doc="No magnetometer reading has corrected the heading since a start without one.")
+    vertical_offset_uT = property(lambda self: self._state.vertical_offset_uT,
+                                  doc="Hard-iron offset removed by _vertical_offset (uT, body frame; zero while off).")
+    n_heading_relocks = property(lambda self: self._state.n_heading_relocks)
+    acc_sigma2 = property(lambda self: self._state.acc_sigma2)
+    mag_sigma2 = property(lambda self: self._state.mag_sigma2)
+    mag_rejected = property(lambda self: self._state.mag_rejected)
+    acc_rejected = property(lambda self: self._state.acc_rejected)
+    last_acc = property(lambda self: self._state.last_acc, doc="What the last accelerometer reading did.")
+    last_mag = property(lambda self: self._state.last_mag, doc="What the last magnetometer reading did.")
+    mag_reasons = property(lambda self: self._state.mag_reasons, doc="Magnetometer readings counted by outcome.")
+    acc_reasons = property(lambda self: self._state.acc_reasons, doc="Accelerometer readings counted by outcome.")
+    n_gyro = property(lambda self: self._state.n_gyro)
+    n_zero_rate = property(lambda self: self._state.n_zero_rate)
+    n_numerical_rejects = property(lambda self: self._state.n_numerical_rejects)
 
     # -- counters kept for the pipeline's summary -----------------------------------------------
     @property
     def n_mag_used(self) -> int:
-        return self.mag_reasons.get("used", 0)
+        return self._state.mag_reasons.get(Outcome.USED.value, 0)
 
     @property
     def n_mag_rejected(self) -> int:
-        return sum(v for k, v in self.mag_reasons.items() if k not in ("used", "initialising"))
+        skip = (Outcome.USED.value, Outcome.INITIALISING.value)
+        return sum(v for k, v in self._state.mag_reasons.items() if k not in skip)
 
     @property
     def n_acc_rejected(self) -> int:
-        return sum(v for k, v in self.acc_reasons.items() if k != "used")
+        return sum(v for k, v in self._state.acc_reasons.items() if k != Outcome.USED.value)
 
     @property
     def gyro_bias(self) -> tuple:
-        return tuple(self.b)
+        return tuple(self._state.b)
 
     def mean_nis(self) -> dict:
         """Mean NIS per measurement kind over the updates computed so far (nan where none)."""
-        return {k: (self._nis_sum[k] / n if n else math.nan) for k, n in self._nis_n.items()}
+        return {k: (self._state.nis_sum[k] / n if n else math.nan) for k, n in self._state.nis_n.items()}
 
     def counters(self) -> dict:
         c = {"mag_used": self.n_mag_used, "mag_rejected": self.n_mag_rejected,
-             "acc_rejected": self.n_acc_rejected, "zero_rate_updates": self.n_zero_rate,
-             "nonfinite_skipped_by_filter": self.n_skipped_nonfinite,
-             "numerical_rejects": self.n_numerical_rejects, "heading_relocks": self.n_heading_relocks,
-             "mag_reasons": dict(self.mag_reasons), "mean_nis": self.mean_nis(),
-             "gyro_bias_rad_s": list(self.b), "vertical_offset_uT": list(self.vertical_offset_uT), "heading_sd_rad": math.sqrt(max(float(self.P[2, 2]), 0.0))}
+             "acc_rejected": self.n_acc_rejected, "zero_rate_updates": self._state.n_zero_rate,
+             "nonfinite_skipped_by_filter": self._state.n_skipped_nonfinite,
+             "numerical_rejects": self._state.n_numerical_rejects, "heading_relocks": self._state.n_heading_relocks,
+             "mag_reasons": dict(self._state.mag_reasons), "mean_nis": self.mean_nis(),
+             "gyro_bias_rad_s": list(self._state.b), "vertical_offset_uT": list(self._state.vertical_offset_uT), "heading_sd_rad": math.sqrt(max(float(self.P[2, 2]), 0.0))}
         if self.mag_calibrator is not None:
             st = self.mag_calibrator.status
             c["mag_calibration"] = getattr(st, "state", str(st))
@@ -647,10 +804,10 @@ class AttitudeEKF(AttitudeFilterBase):
 
     def status(self) -> AttitudeStatus:
         P = self.P
-        return AttitudeStatus(self.t_ns, self.initialized, self.q, tuple(self.b),
+        return AttitudeStatus(self._state.t_ns, self._state.initialized, self._state.q, tuple(self._state.b),
                               tuple(math.sqrt(max(P[i, i], 0.0)) for i in (3, 4, 5)),
                               math.sqrt(max(P[0, 0], P[1, 1], 0.0)), math.sqrt(max(P[2, 2], 0.0)),
-                              not self.mag_rejected and self.n_mag_used > 0, self.counters())
+                              not self._state.mag_rejected and self.n_mag_used > 0, self.counters())
 
     # -- initialisation ---------------------------------------------------------------------------
     def _param(self, name: str):
@@ -663,7 +820,7 @@ class AttitudeEKF(AttitudeFilterBase):
         P = self.P
         P[2, 2] = (self.settings.initial_yaw_sd_rad if from_mag else 1e-3) ** 2
         self.P = P
-        self.yaw_unobserved = not from_mag
+        self._state.yaw_unobserved = not from_mag
         if not from_mag:
             return q
         return quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), -self.settings.declination_rad), q)
@@ -676,65 +833,66 @@ class AttitudeEKF(AttitudeFilterBase):
         against the 22 uT of the walk, and the walk's readings were then
         rejected as "norm off").
         """
-        w = self._acc_norm_win
+        w = self._state.acc_norm_win
         still = len(w.buf) >= 5 and w.variance() < self.settings.still_acc_sd_m_s2 ** 2
-        if not still or self._refs.h.n == 0:
+        if not still or self._state.refs.h.n == 0:
             return True
-        if self._ref_still_next_ns is not None and t_ns < self._ref_still_next_ns:
+        if self._state.ref_still_next_ns is not None and t_ns < self._state.ref_still_next_ns:
             return False
-        self._ref_still_next_ns = t_ns + int(1e9 / self.settings.reference_still_rate_hz)
+        self._state.ref_still_next_ns = t_ns + int(1e9 / self.settings.reference_still_rate_hz)
         return True
 
     def _set_field_reference(self) -> None:
-        dip = self.dip_rad if self.dip_rad == self.dip_rad else math.radians(60.0)
+        dip = self._state.dip_rad if self._state.dip_rad == self._state.dip_rad else math.radians(60.0)
         c, sn = math.cos(dip), math.sin(dip)
         d = self.settings.declination_rad
         # eq. 14, turned by the declination: magnetic north lies D east of true north
-        self._h_ref = (c * math.sin(d), c * math.cos(d), -sn)
-        self._alpha_ref = math.atan2(math.cos(d), math.sin(d))
+        self._state.h_ref = (c * math.sin(d), c * math.cos(d), -sn)
+        self._state.alpha_ref = math.atan2(math.cos(d), math.sin(d))
 
     # -- prediction -------------------------------------------------------------------------------
     def predict(self, t_ns: int, wx: float, wy: float, wz: float) -> None:
         """Propagate with one gyroscope event (rad/s) over the time since the previous one."""
+        state = self._state
         if not _plausible(wx, wy, wz, _GYRO_IMPOSSIBLE):
-            self.n_skipped_nonfinite += 1
+            state.n_skipped_nonfinite += 1
             return
-        self.n_gyro += 1
-        self._gyro_win.update(t_ns, (wx, wy, wz))
-        if not self.initialized:
-            self._t_gyro = t_ns
+        state.n_gyro += 1
+        state.gyro_win.update(t_ns, (wx, wy, wz))
+        if not state.initialized:
+            state.t_gyro_ns = t_ns
             return
         s = self.settings
-        t_prev = self._t_gyro if self._t_gyro is not None else self.t_ns
-        self._t_gyro = t_ns
+        t_prev = state.t_gyro_ns if state.t_gyro_ns is not None else state.t_ns
+        state.t_gyro_ns = t_ns
         dt = (t_ns - t_prev) * 1e-9
         if dt <= 0.0:
             return
         if dt > s.max_gyro_gap_s:  # a gap: do not integrate a stale rate over it
             self._random_walk(dt)
-            self.t_ns = t_ns
+            state.t_ns = t_ns
             return
-        b = self.b
+        b = state.b
         w = ((wx - b[0]) * dt, (wy - b[1]) * dt, (wz - b[2]) * dt)
-        (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = quat.to_matrix(self.q)
-        self.q = quat.normalize(quat.multiply(self.q, quat.from_rotation_vector(w)))  # eq. 7
+        (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = quat.to_matrix(state.q)
+        state.q = quat.normalize(quat.multiply(state.q, quat.from_rotation_vector(w)))  # eq. 7
         # F = [[I, -R dt], [0, I]] written out: P <- F P F^T + Q, on the covariance's 3 x 3 blocks in
         # plain floats (9-tuples: numpy's per-call overhead dominates for such sizes)
         Rdt = (r0 * dt, r1 * dt, r2 * dt, r3 * dt, r4 * dt, r5 * dt, r6 * dt, r7 * dt, r8 * dt)
-        bb = self._Pbb
-        A = _sub_mm3(self._Ptt, Rdt, self._Pbt)
-        B = _sub_mm3(self._Ptb, Rdt, bb)
+        bb = state.P_bb
+        A = _sub_mm3(state.P_tt, Rdt, state.P_bt)
+        B = _sub_mm3(state.P_tb, Rdt, bb)
         p0, p1, p2, p3, p4, p5, p6, p7, p8 = _sub_mm3(A, B, (r0 * dt, r3 * dt, r6 * dt, r1 * dt, r4 * dt, r7 * dt,
                                                               r2 * dt, r5 * dt, r8 * dt))  # A - B Rdt^T
         w2 = (wx - b[0]) ** 2 + (wy - b[1]) ** 2 + (wz - b[2]) ** 2
-        self._w2 = w2
+        state.w2 = w2
         qg = (s.gyro_noise_rad_sqrt_s ** 2 + s.gyro_scale_noise_sqrt_s ** 2 * w2) * dt
         qb = s.gyro_bias_walk_rad_s_sqrt_s ** 2 * dt
-        self._Ptt = (p0 + qg, p1, p2, p3, p4 + qg, p5, p6, p7, p8 + qg)
-        self._Ptb = B
-        self._Pbt = _transpose3(B)
-        self._Pbb = (bb[0] + qb, bb[1], bb[2], bb[3], bb[4] + qb, bb[5], bb[6], bb[7], bb[8] + qb)
-        self.t_ns = t_ns
+        state.P_tt = (p0 + qg, p1, p2, p3, p4 + qg, p5, p6, p7, p8 + qg)
+        state.P_tb = B
+        state.P_bt = _transpose3(B)
+        state.P_bb = (bb[0] + qb, bb[1], bb[2], bb[3], bb[4] + qb, bb[5], bb[6], bb[7], bb[8] + qb)
+        state.t_ns = t_ns
 
     def _random_walk(self, dt: float) -> None:
         P = self.P
@@ -744,7 +902,7 @@ class AttitudeEKF(AttitudeFilterBase):
     # -- the update kernel ----------------------------------------------------------------------
     def _correct(self, y: np.ndarray, H: np.ndarray, Rm: np.ndarray, gate: float, *, consider_tilt=False,
                  bias_axis=None, measures_yaw=False):
-        """Kalman update of the error state; returns (used, reason, nis).  ``H`` (m x 6), ``Rm`` (m x m).
+        """Kalman update of the error state; returns (used, :class:`Outcome`, nis).  ``H`` (m x 6), ``Rm`` (m x m).
 
         While :attr:`yaw_unobserved` (started without a magnetometer, none used since), an update that
         does not measure the heading (``measures_yaw`` False: accelerometer, zero rate) leaves the
@@ -752,7 +910,7 @@ class AttitudeEKF(AttitudeFilterBase):
         Its Jacobian is zero, but its correlation with the tilt and the bias would otherwise let every
         tilt or bias correction shrink the heading's variance, where nothing observes the heading.
         """
-        yaw_consider = self.yaw_unobserved and not measures_yaw
+        yaw_consider = self._state.yaw_unobserved and not measures_yaw
 
         def adjust(K):
             if consider_tilt:  # Schmidt update: roll and pitch are not corrected by this measurement
@@ -764,21 +922,22 @@ class AttitudeEKF(AttitudeFilterBase):
 
         c = kalman.correct(self.P, y, H, Rm, gate, adjust_gain=adjust)
         if c.verdict is kalman.Verdict.NUMERICAL:
-            self.n_numerical_rejects += 1
+            self._state.n_numerical_rejects += 1
         if not c.used:
-            return False, c.verdict.value, c.nis
+            return False, _VERDICT_OUTCOME[c.verdict], c.nis
         self._inject(c.dx, c.P, keep_yaw=yaw_consider)
         if measures_yaw:
-            self.yaw_unobserved = False
-        return True, "used", c.nis
+            self._state.yaw_unobserved = False
+        return True, Outcome.USED, c.nis
 
     def _inject(self, dx: np.ndarray, Pn: np.ndarray, keep_yaw: bool = False) -> None:
         """Fold the error into ``q`` and ``b`` and reset it: ``P <- G P G^T`` (:func:`core.kalman.reset_jacobian`,
         ``G = I + [dtheta / 2]x`` for this navigation-frame error; derived in the module docstring)."""
+        state = self._state
         dth = dx[0:3]
-        self.q = kalman.inject_rotation(self.q, dth)
+        state.q = kalman.inject_rotation(state.q, dth)
         lim = self.settings.max_gyro_bias_rad_s
-        self.b = [min(lim, max(-lim, self.b[i] + float(dx[3 + i]))) for i in range(3)]
+        state.b = [min(lim, max(-lim, state.b[i] + float(dx[3 + i]))) for i in range(3)]
         G = kalman.reset_jacobian(dth, 6)
         if keep_yaw:  # a consider heading is carried, not re-linearised: its row stays the identity's
             G[2, 0:2] = 0.0
@@ -786,8 +945,8 @@ class AttitudeEKF(AttitudeFilterBase):
 
     def _record(self, kind: str, used: bool, nis: float) -> None:
         if nis == nis:
-            self._nis_sum[kind] += nis
-            self._nis_n[kind] += 1
+            self._state.nis_sum[kind] += nis
+            self._state.nis_n[kind] += 1
 
     # -- accelerometer ----------------------------------------------------------------------------
     def update_acc(self, t_ns: int, ax: float, ay: float, az: float) -> UpdateFlags:
@@ -801,89 +960,93 @@ class AttitudeEKF(AttitudeFilterBase):
         of independent measurements: one update per interval keeps the NIS
         meaningful and the filter the same at every sample rate.
         """
+        state = self._state
         if not _plausible(ax, ay, az, _ACC_IMPOSSIBLE):
-            self.n_skipped_nonfinite += 1
-            return self._acc_flags(t_ns, False, "non-finite")
+            state.n_skipped_nonfinite += 1
+            return self._acc_flags(t_ns, False, Outcome.NON_FINITE)
         s = self.settings
-        self._last_acc = (ax, ay, az)
-        self._accumulate_references(t_ns, acc=self._last_acc)
+        state.acc_reading = (ax, ay, az)
+        self._accumulate_references(t_ns, acc=state.acc_reading)
         na = math.sqrt(ax * ax + ay * ay + az * az)
         if na > 0:
-            self._accdir_win.update(t_ns, (ax / na, ay / na, az / na))
-        self._acc_norm_win.update(t_ns, na)
-        if not self.initialized:
+            state.accdir_win.update(t_ns, (ax / na, ay / na, az / na))
+        state.acc_norm_win.update(t_ns, na)
+        if not state.initialized:
             self._try_initialize(t_ns)
-            return self._acc_flags(t_ns, False, "initialising")
+            return self._acc_flags(t_ns, False, Outcome.INITIALISING)
         self._propagate_without_gyro(t_ns)
         self._maybe_zero_rate(t_ns)
-        var = self._acc_var.update(t_ns, na)
-        dev = abs(na - self.gravity_m_s2)
-        sigma2 = s.acc_noise_base ** 2 + s.k_a1 * dev + s.k_a2 * var + s.k_a3 * self._w2  # eq. 17 (+ turn term)
-        self.acc_sigma2 = sigma2
+        var = state.acc_var.update(t_ns, na)
+        dev = abs(na - state.gravity_m_s2)
+        sigma2 = s.acc_noise_base ** 2 + s.k_a1 * dev + s.k_a2 * var + s.k_a3 * state.w2  # eq. 17 (+ turn term)
+        state.acc_sigma2 = sigma2
         if dev > s.acc_reject_m_s2 or na == 0.0:
-            return self._acc_flags(t_ns, False, "norm off", sigma2=sigma2)
-        acc = self._acc_sum
-        R = quat.to_matrix(self.q)
+            return self._acc_flags(t_ns, False, Outcome.NORM_OFF, sigma2=sigma2)
+        acc = state.acc_sum
+        R = quat.to_matrix(state.q)
         r0, r1, r2 = R
-        if acc[4] == 0:
-            acc[5] = t_ns
+        if acc.n == 0:
+            acc.t0_ns = t_ns
         # f_n = R a, written out (a comprehension over range(3) costs more than its arithmetic)
-        acc[0] += r0[0] * ax + r0[1] * ay + r0[2] * az
-        acc[1] += r1[0] * ax + r1[1] * ay + r1[2] * az
-        acc[2] += r2[0] * ax + r2[1] * ay + r2[2] * az
-        acc[3] += sigma2
-        acc[4] += 1
-        if (t_ns - acc[5]) * 1e-9 < s.update_interval_s:
-            return self._acc_flags(t_ns, True, "pending", sigma2=sigma2)
-        n = acc[4]
-        fx, fy, fz = acc[0] / n, acc[1] / n, acc[2] / n
-        sigma2 = acc[3] / n
-        self._acc_sum = [0.0, 0.0, 0.0, 0.0, 0, 0]
+        acc.x += r0[0] * ax + r0[1] * ay + r0[2] * az
+        acc.y += r1[0] * ax + r1[1] * ay + r1[2] * az
+        acc.z += r2[0] * ax + r2[1] * ay + r2[2] * az
+        acc.sigma2 += sigma2
+        acc.n += 1
+        if (t_ns - acc.t0_ns) * 1e-9 < s.update_interval_s:
+            return self._acc_flags(t_ns, True, Outcome.PENDING, sigma2=sigma2)
+        n = acc.n
+        fx, fy, fz = acc.x / n, acc.y / n, acc.z / n
+        sigma2 = acc.sigma2 / n
+        state.acc_sum = IntervalSum.empty()
         nf = math.sqrt(fx * fx + fy * fy + fz * fz)
         if nf == 0.0:
-            return self._acc_flags(t_ns, False, "norm off", sigma2=sigma2)
+            return self._acc_flags(t_ns, False, Outcome.NORM_OFF, sigma2=sigma2)
         z = tuple(R[0][j] * fx + R[1][j] * fy + R[2][j] * fz for j in range(3))  # R^T f_n
         h = (R[2][0], R[2][1], R[2][2])  # R^T u: the third row of R
         y = np.array((z[0] / nf - h[0], z[1] / nf - h[1], z[2] / nf - h[2]))
         H = np.zeros((3, 6))
         H[:, 0:3] = direction_jacobian(R, (0.0, 0.0, 1.0))
-        used, reason, nis = self._correct(y, H, sigma2 * _I3, s.acc_gate_nis)
+        used, outcome, nis = self._correct(y, H, sigma2 * _I3, s.acc_gate_nis)
         self._record("acc", used, nis)
-        return self._acc_flags(t_ns, used, reason, nis=nis, sigma2=sigma2, innovation=tuple(y.tolist()))
+        return self._acc_flags(t_ns, used, outcome, nis=nis, sigma2=sigma2, innovation=tuple(y.tolist()))
 
-    def _acc_flags(self, t_ns, used, reason, **kw) -> UpdateFlags:
-        self.acc_rejected = not used
-        self.acc_reasons[reason] = self.acc_reasons.get(reason, 0) + 1
-        self.last_acc = UpdateFlags("acc", t_ns, used, reason, dof=2, **kw)
-        return self.last_acc
+    def _acc_flags(self, t_ns, used, outcome: Outcome, **kw) -> UpdateFlags:
+        state = self._state
+        state.acc_rejected = not used
+        key = outcome.value  # text only here, at the edge: the counters are keyed by it
+        state.acc_reasons[key] = state.acc_reasons.get(key, 0) + 1
+        state.last_acc = UpdateFlags("acc", t_ns, used, key, dof=2, outcome=outcome, **kw)
+        return state.last_acc
 
     def _maybe_zero_rate(self, t_ns: int) -> None:
         """Zero-rate update from the mean gyroscope reading when the phone is truly still."""
+        state = self._state
         s = self.settings
-        g = self._gyro_win
-        if not g.buf or (self._next_zero_rate_ns is not None and t_ns < self._next_zero_rate_ns):
+        g = state.gyro_win
+        if not g.buf or (state.next_zero_rate_ns is not None and t_ns < state.next_zero_rate_ns):
             return
         # the spans first: they are cheap, and the same tests in another order decide the same
-        if g.span_ns() < 0.95 * g.window_ns or self._accdir_win.span_ns() < 0.95 * g.window_ns:
+        if g.span_ns() < 0.95 * g.window_ns or state.accdir_win.span_ns() < 0.95 * g.window_ns:
             return
         mean, sd, _ = g.stats()
         if sd > s.still_gyro_sd_rad_s:
             return
-        _, dir_sd, _ = self._accdir_win.stats()
+        _, dir_sd, _ = state.accdir_win.stats()
         if dir_sd > s.still_acc_direction_rad:
             return
-        if len(self._acc_norm_win.buf) < 5 or math.sqrt(self._acc_norm_win.variance()) > s.still_acc_sd_m_s2:
+        if len(state.acc_norm_win.buf) < 5 or math.sqrt(state.acc_norm_win.variance()) > s.still_acc_sd_m_s2:
             return
         n = len(g.buf)
         r2 = sd * sd / n + s.zero_rate_noise_rad_s ** 2
-        y = np.array([mean[i] - self.b[i] for i in range(3)])
+        y = np.array([mean[i] - state.b[i] for i in range(3)])
         H = np.zeros((3, 6))
         H[:, 3:6] = _I3
         used, _, nis = self._correct(y, H, r2 * _I3, math.inf)
         self._record("zero_rate", used, nis)
         if used:
-            self.n_zero_rate += 1
-        self._next_zero_rate_ns = t_ns + g.window_ns  # independent windows
+            state.n_zero_rate += 1
+        state.next_zero_rate_ns = t_ns + g.window_ns  # independent windows
 
     # -- magnetometer -----------------------------------------------------------------------------
     def update_mag(self, t_ns: int, mx: float, my: float, mz: float) -> UpdateFlags:
@@ -892,94 +1055,100 @@ class AttitudeEKF(AttitudeFilterBase):
         Trusted readings are rotated into the navigation frame and averaged
         over ``update_interval_s``, as for the accelerometer.
         """
+        state = self._state
         s = self.settings
         if not s.use_magnetometer:
-            return self._mag_flags(t_ns, False, "magnetometer off")
+            return self._mag_flags(t_ns, False, Outcome.MAGNETOMETER_OFF)
         if not _plausible(mx, my, mz, _MAG_IMPOSSIBLE):
-            self.n_skipped_nonfinite += 1
-            return self._mag_flags(t_ns, False, "non-finite")
+            state.n_skipped_nonfinite += 1
+            return self._mag_flags(t_ns, False, Outcome.NON_FINITE)
         if self.mag_calibrator is not None:
             m = self.mag_calibrator.update(t_ns, mx, my, mz)
             if s.mag_requires_calibration and not self.mag_calibrator.calibrated:
-                return self._mag_flags(t_ns, False, "calibrating")
+                return self._mag_flags(t_ns, False, Outcome.CALIBRATING)
             mx, my, mz = float(m[0]), float(m[1]), float(m[2])
         nm = math.sqrt(mx * mx + my * my + mz * mz)
         lo, hi = s.mag_valid_range_uT
         if not lo <= nm <= hi:
-            return self._mag_flags(t_ns, False, "invalid range")
-        R = quat.to_matrix(self.q)
-        if self.initialized and s.site_field_uT == s.site_field_uT and s.site_dip_rad == s.site_dip_rad:
+            return self._mag_flags(t_ns, False, Outcome.INVALID_RANGE)
+        R = quat.to_matrix(state.q)
+        if state.initialized and s.site_field_uT == s.site_field_uT and s.site_dip_rad == s.site_dip_rad:
             mx, my, mz = self._vertical_offset(t_ns, R, mx, my, mz)
             nm = math.sqrt(mx * mx + my * my + mz * mz)
-        self._last_mag = (mx, my, mz)
-        self._accumulate_references(t_ns, mag=self._last_mag)
-        if not self.initialized:
+        state.mag_reading = (mx, my, mz)
+        self._accumulate_references(t_ns, mag=state.mag_reading)
+        if not state.initialized:
             self._try_initialize(t_ns)
-            return self._mag_flags(t_ns, False, "initialising")
+            return self._mag_flags(t_ns, False, Outcome.INITIALISING)
         self._propagate_without_gyro(t_ns)
-        var = self._mag_var.update(t_ns, nm)
-        dev = abs(nm - self.field_uT)
+        var = state.mag_var.update(t_ns, nm)
+        dev = abs(nm - state.field_uT)
         sigma2 = s.mag_noise_base ** 2 + s.k_m1 * dev + s.k_m2 * var  # eq. 18
-        self.mag_sigma2 = sigma2
+        state.mag_sigma2 = sigma2
         up_b = (R[2][0], R[2][1], R[2][2])
         sin_dip = -(up_b[0] * mx + up_b[1] * my + up_b[2] * mz) / nm
         dip = math.asin(max(-1.0, min(1.0, sin_dip)))
         if self.field_detector is not None:
-            st = self.field_detector.update(t_ns, (mx, my, mz), self.q)
+            st = self.field_detector.update(t_ns, (mx, my, mz), state.q)
             if not st.trusted:
                 if not math.isfinite(s.mag_unsteady_noise_scale):
-                    return self._mag_flags(t_ns, False, "not quasi-static: " + st.reason, sigma2=sigma2)
+                    return self._mag_flags(t_ns, False, Outcome.NOT_QUASI_STATIC, sigma2=sigma2, detail=st.reason)
                 sigma2 *= s.mag_unsteady_noise_scale
-        if dev > s.mag_reject_ratio * self.field_uT:
-            return self._mag_flags(t_ns, False, "norm off", sigma2=sigma2)
-        if abs(dip - self.dip_rad) > s.mag_reject_dip_rad:
-            return self._mag_flags(t_ns, False, "dip off", sigma2=sigma2)
-        acc = self._mag_sum
-        if acc[4] == 0:
-            acc[5] = t_ns
+        if dev > s.mag_reject_ratio * state.field_uT:
+            return self._mag_flags(t_ns, False, Outcome.NORM_OFF, sigma2=sigma2)
+        if abs(dip - state.dip_rad) > s.mag_reject_dip_rad:
+            return self._mag_flags(t_ns, False, Outcome.DIP_OFF, sigma2=sigma2)
+        acc = state.mag_sum
+        if acc.n == 0:
+            acc.t0_ns = t_ns
         inv = 1.0 / nm
         r0, r1, r2 = R
         # the unit field in the navigation frame, written out (a loop over range(3) costs more than its sums)
-        acc[0] += (r0[0] * mx + r0[1] * my + r0[2] * mz) * inv
-        acc[1] += (r1[0] * mx + r1[1] * my + r1[2] * mz) * inv
-        acc[2] += (r2[0] * mx + r2[1] * my + r2[2] * mz) * inv
-        acc[3] += sigma2
-        acc[4] += 1
-        if (t_ns - acc[5]) * 1e-9 < s.update_interval_s:
-            return self._mag_flags(t_ns, True, "used", sigma2=sigma2)
-        n = acc[4]
-        m_n = (acc[0] / n, acc[1] / n, acc[2] / n)
-        sigma2 = acc[3] / n
-        self._mag_sum = [0.0, 0.0, 0.0, 0.0, 0, 0]
+        acc.x += (r0[0] * mx + r0[1] * my + r0[2] * mz) * inv
+        acc.y += (r1[0] * mx + r1[1] * my + r1[2] * mz) * inv
+        acc.z += (r2[0] * mx + r2[1] * my + r2[2] * mz) * inv
+        acc.sigma2 += sigma2
+        acc.n += 1
+        if (t_ns - acc.t0_ns) * 1e-9 < s.update_interval_s:
+            return self._mag_flags(t_ns, True, Outcome.USED, sigma2=sigma2)
+        n = acc.n
+        m_n = (acc.x / n, acc.y / n, acc.z / n)
+        sigma2 = acc.sigma2 / n
+        state.mag_sum = IntervalSum.empty()
         if s.mag_mode == "full":
-            h = self._h_ref
+            h = state.h_ref
             nmn = math.sqrt(m_n[0] ** 2 + m_n[1] ** 2 + m_n[2] ** 2)
             hb = tuple(R[0][j] * h[0] + R[1][j] * h[1] + R[2][j] * h[2] for j in range(3))  # R^T h
             zb = tuple((R[0][j] * m_n[0] + R[1][j] * m_n[1] + R[2][j] * m_n[2]) / nmn for j in range(3))
             y = np.array((zb[0] - hb[0], zb[1] - hb[1], zb[2] - hb[2]))
             H = np.zeros((3, 6))
             H[:, 0:3] = direction_jacobian(R, h)
-            used, reason, nis = self._correct(y, H, sigma2 * _I3, s.mag_gate_nis + 4.0, measures_yaw=True)
+            used, outcome, nis = self._correct(y, H, sigma2 * _I3, s.mag_gate_nis + 4.0, measures_yaw=True)
             self._record("mag", used, nis)
-            return self._mag_interval_done(t_ns, n, used, reason, nis=nis, dof=2, sigma2=sigma2,
+            return self._mag_interval_done(t_ns, n, used, outcome, nis=nis, dof=2, sigma2=sigma2,
                                            innovation=tuple(y.tolist()))
         h2 = m_n[0] ** 2 + m_n[1] ** 2
         c2 = h2 / (h2 + m_n[2] ** 2)
         if c2 < 0.01:  # field nearly vertical: no azimuth to measure
-            return self._mag_interval_done(t_ns, n, False, "field vertical", sigma2=sigma2)
-        y = np.array([wrap_angle(self._alpha_ref - math.atan2(m_n[1], m_n[0]))])
+            return self._mag_interval_done(t_ns, n, False, Outcome.FIELD_VERTICAL, sigma2=sigma2)
+        y = np.array([wrap_angle(state.alpha_ref - math.atan2(m_n[1], m_n[0]))])
         H = np.zeros((1, 6))
         H[0, 0:3] = heading_jacobian(m_n)
         r_angle = sigma2 / c2
-        used, reason, nis = self._correct(y, H, np.array([[r_angle]]), s.mag_gate_nis, consider_tilt=True,
+        used, outcome, nis = self._correct(y, H, np.array([[r_angle]]), s.mag_gate_nis, consider_tilt=True,
                                           bias_axis=np.array(up_b), measures_yaw=True)
         self._record("mag", used, nis)
         if used:
-            self._gated = []
-        elif reason == "gate":
+            state.gated = []
+        elif outcome is Outcome.GATE:
             self._relock(t_ns, float(y[0]))
-        return self._mag_interval_done(t_ns, n, used, reason, nis=nis, dof=1, sigma2=r_angle,
+        return self._mag_interval_done(t_ns, n, used, outcome, nis=nis, dof=1, sigma2=r_angle,
                                        innovation=(float(y[0]),))
+
+    def mag_not_calibrated(self, t_ns: int) -> UpdateFlags:
+        """A magnetometer reading left out because its calibration has no fit yet (``mag_requires_calibration``):
+        what :meth:`update_mag` does with it, for a caller that ran the calibrator beforehand (the fast path)."""
+        return self._mag_flags(t_ns, False, Outcome.CALIBRATING)
 
     def _vertical_offset(self, t_ns: int, R, mx: float, my: float, mz: float):
         """Remove a hard-iron offset along the directions the phone held vertical, from the site's field.
@@ -1001,74 +1170,78 @@ class AttitudeEKF(AttitudeFilterBase):
         offset).  Once on, it stays on until the dip error is below half the
         threshold.
         """
+        state = self._state
         s = self.settings
         u = (R[2][0], R[2][1], R[2][2])  # up in the body frame (R: the current attitude's matrix)
         nm = math.sqrt(mx * mx + my * my + mz * mz)
-        self._raw_dip_med.add(math.asin(max(-1.0, min(1.0, -(u[0] * mx + u[1] * my + u[2] * mz) / nm))))
+        state.raw_dip_med.add(math.asin(max(-1.0, min(1.0, -(u[0] * mx + u[1] * my + u[2] * mz) / nm))))
         rhs = u[0] * mx + u[1] * my + u[2] * mz + s.site_field_uT * math.sin(s.site_dip_rad)
-        S, r = self._vo_S, self._vo_r
+        S, r = state.vo_S, state.vo_r
         for i in range(3):
             r[i] += u[i] * rhs
             for j in range(3):
                 S[i][j] += u[i] * u[j]
-        if self._vo_next_ns is None or t_ns >= self._vo_next_ns:
-            self._vo_next_ns = t_ns + 1_000_000_000
-            if self._vo_t0_ns is None:
-                self._vo_t0_ns = t_ns
-            self._raw_norm_med.add(nm)
-            dip_err = abs(self._raw_dip_med.median() - s.site_dip_rad)
-            norm_err = abs(self._raw_norm_med.median() / s.site_field_uT - 1.0)
-            if self._vo_active:  # hysteresis: stays on until the dip is clearly right
+        if state.vo_next_ns is None or t_ns >= state.vo_next_ns:
+            state.vo_next_ns = t_ns + 1_000_000_000
+            if state.vo_t0_ns is None:
+                state.vo_t0_ns = t_ns
+            state.raw_norm_med.add(nm)
+            dip_err = abs(state.raw_dip_med.median() - s.site_dip_rad)
+            norm_err = abs(state.raw_norm_med.median() / s.site_field_uT - 1.0)
+            if state.vo_active:  # hysteresis: stays on until the dip is clearly right
                 active = dip_err > 0.5 * s.vertical_offset_dip_error_rad
             else:
                 active = (dip_err > s.vertical_offset_dip_error_rad and norm_err > s.vertical_offset_norm_error
-                          and (t_ns - self._vo_t0_ns) * 1e-9 >= s.vertical_offset_min_s)
+                          and (t_ns - state.vo_t0_ns) * 1e-9 >= s.vertical_offset_min_s)
             if active:
                 A = np.array(S) + (s.vertical_offset_ridge * (S[0][0] + S[1][1] + S[2][2]) / 3.0) * _I3
                 b = np.linalg.solve(A, np.array(r))
                 if np.all(np.isfinite(b)):
-                    self.vertical_offset_uT = tuple(float(v) for v in b)
-            if active != self._vo_active:  # the references were of the other field: start them again
-                self._vo_active = active
-                self._refs.reset_field()
-                self.field_uT = self.dip_rad = math.nan
+                    state.vertical_offset_uT = tuple(float(v) for v in b)
+            if active != state.vo_active:  # the references were of the other field: start them again
+                state.vo_active = active
+                state.refs.reset_field()
+                state.field_uT = state.dip_rad = math.nan
                 if not active:
-                    self.vertical_offset_uT = (0.0, 0.0, 0.0)
-        if not self._vo_active:
+                    state.vertical_offset_uT = (0.0, 0.0, 0.0)
+        if not state.vo_active:
             return mx, my, mz
-        b = self.vertical_offset_uT
+        b = state.vertical_offset_uT
         return mx - b[0], my - b[1], mz - b[2]
 
-    def _mag_interval_done(self, t_ns, n, used, reason, **kw) -> UpdateFlags:
+    def _mag_interval_done(self, t_ns, n, used, outcome: Outcome, **kw) -> UpdateFlags:
         """Flags of the reading that closed an interval; its ``n - 1`` earlier readings are re-counted if unused."""
         if not used and n > 1:
-            r = self.mag_reasons
-            r["used"] = r.get("used", 0) - (n - 1)
-            r[reason] = r.get(reason, 0) + (n - 1)
-        return self._mag_flags(t_ns, used, reason, **kw)
+            r = self._state.mag_reasons
+            r[Outcome.USED.value] = r.get(Outcome.USED.value, 0) - (n - 1)
+            r[outcome.value] = r.get(outcome.value, 0) + (n - 1)
+        return self._mag_flags(t_ns, used, outcome, **kw)
 
     def _relock(self, t_ns: int, innovation: float) -> None:
         """Release the heading when the gate has rejected agreeing readings for ``mag_relock_s``."""
+        state = self._state
         s = self.settings
-        g = self._gated
+        g = state.gated
         g.append((t_ns, innovation))
         if (g[-1][0] - g[0][0]) * 1e-9 < s.mag_relock_s:
             return
         c = sum(math.cos(v) for _, v in g) / len(g)
         sn = sum(math.sin(v) for _, v in g) / len(g)
         spread = math.sqrt(max(-2.0 * math.log(max(math.hypot(c, sn), 1e-12)), 0.0))  # circular sd
-        self._gated = []
+        state.gated = []
         if spread < s.mag_relock_spread_rad:
             P = self.P.copy()
             P[2, :] = 0.0
             P[:, 2] = 0.0
             P[2, 2] = math.pi ** 2
             self.P = P
-            self.n_heading_relocks += 1
+            state.n_heading_relocks += 1
 
-    def _mag_flags(self, t_ns, used, reason, dof=1, **kw) -> UpdateFlags:
-        self.mag_rejected = not used
-        key = reason.split(":")[0] if reason.startswith("not quasi-static") else reason
-        self.mag_reasons[key] = self.mag_reasons.get(key, 0) + 1
-        self.last_mag = UpdateFlags("mag", t_ns, used, reason, dof=dof, **kw)
-        return self.last_mag
+    def _mag_flags(self, t_ns, used, outcome: Outcome, dof=1, detail: str = "", **kw) -> UpdateFlags:
+        state = self._state
+        state.mag_rejected = not used
+        key = outcome.value  # text only here, at the edge: the counters are keyed by it, the flags add the detail
+        state.mag_reasons[key] = state.mag_reasons.get(key, 0) + 1
+        state.last_mag = UpdateFlags("mag", t_ns, used, f"{key}: {detail}" if detail else key, dof=dof,
+                                     outcome=outcome, **kw)
+        return state.last_mag

@@ -212,9 +212,8 @@ class QuaternionEKF(AttitudeFilterBase):
         self.reset()
 
     def reset(self) -> None:
-        self.q = (1.0, 0.0, 0.0, 0.0)
-        self.P = np.eye(4) * 0.05
         self._reset_common()
+        self.P = np.eye(4) * 0.05
         self._gyro_still = WindowMeanSpread(self.still_window_s)
         self._acc_sd = math.inf
         #: current gyroscope bias estimate (rad/s), subtracted before prediction
@@ -242,8 +241,8 @@ class QuaternionEKF(AttitudeFilterBase):
         return getattr(self, name)
 
     def _set_field_reference(self) -> None:
-        if self._refs.h.n:
-            c, s = math.cos(self.dip_rad), math.sin(self.dip_rad)
+        if self._state.refs.h.n:
+            c, s = math.cos(self._state.dip_rad), math.sin(self._state.dip_rad)
             d = self.declination_rad
             # eq. 14, turned by the declination: magnetic north lies D east of true north
             self._h_ref = (c * math.sin(d), c * math.cos(d), -s)
@@ -252,7 +251,7 @@ class QuaternionEKF(AttitudeFilterBase):
     def predict(self, t_ns: int, wx: float, wy: float, wz: float) -> None:
         """Propagate with one gyroscope event (rad/s) over the time since the previous one (eqs. 7, 11)."""
         if not _plausible(wx, wy, wz, _GYRO_IMPOSSIBLE):  # NaN, inf or beyond any phone gyroscope: skipped
-            self.n_skipped_nonfinite += 1
+            self._state.n_skipped_nonfinite += 1
             return
         self.n_gyro += 1
         gs = self._gyro_still
@@ -265,40 +264,40 @@ class QuaternionEKF(AttitudeFilterBase):
                 self.n_bias_updates += 1
         b = self.gyro_bias
         wx, wy, wz = wx - b[0], wy - b[1], wz - b[2]
-        if not self.initialized:
-            self._t_gyro = t_ns
+        if not self._state.initialized:
+            self._state.t_gyro_ns = t_ns
             return
-        t_prev = self._t_gyro if self._t_gyro is not None else self.t_ns
-        self._t_gyro = t_ns
+        t_prev = self._state.t_gyro_ns if self._state.t_gyro_ns is not None else self._state.t_ns
+        self._state.t_gyro_ns = t_ns
         dt = (t_ns - t_prev) * 1e-9
         if dt <= 0.0:
             return
         if dt > 0.5:  # a gap: do not integrate a stale rate over it, only grow the uncertainty
             self._random_walk(dt)
-            self.t_ns = t_ns
+            self._state.t_ns = t_ns
             return
         F = transition_matrix(wx, wy, wz, dt)
-        q = F @ np.array(self.q)
-        self.q = quat.normalize(tuple(q.tolist()))
-        w, x, y, z = self.q
+        q = F @ np.array(self._state.q)
+        self._state.q = quat.normalize(tuple(q.tolist()))
+        w, x, y, z = self._state.q
         xi = np.array([[-x, -y, -z], [w, -z, y], [z, w, -x], [-y, x, w]])
         Q = (self.gyro_noise_rad_sqrt_s ** 2 * dt * 0.25) * (xi @ xi.T)
         self.P = F @ self.P @ F.T + Q
-        self.t_ns = t_ns
+        self._state.t_ns = t_ns
 
     def _random_walk(self, dt: float) -> None:
         sigma = self.no_gyro_random_walk_rad_sqrt_s
-        w, x, y, z = self.q
+        w, x, y, z = self._state.q
         xi = np.array([[-x, -y, -z], [w, -z, y], [z, w, -x], [-y, x, w]])
         self.P = self.P + (sigma ** 2 * dt * 0.25) * (xi @ xi.T)
 
     # -- measurement updates ---------------------------------------------------
     def _vector_update(self, z, v, sigma2: float):
         """Three sequential scalar updates of ``z = R(q)^T v + noise`` (eq. 12); returns the innovation."""
-        q0 = np.array(self.q)
+        q0 = np.array(self._state.q)
         q = q0
-        hq = predicted_measurement(self.q, v)
-        H = measurement_jacobian(self.q, v)
+        hq = predicted_measurement(self._state.q, v)
+        H = measurement_jacobian(self._state.q, v)
         P = self.P
         innov = (z[0] - hq[0], z[1] - hq[1], z[2] - hq[2])
         for i in range(3):
@@ -319,24 +318,24 @@ class QuaternionEKF(AttitudeFilterBase):
         # keep P consistent with the normalisation (project out the radial direction)
         J = _EYE4 - np.outer(q, q)
         self.P = J @ P @ J.T + _EYE4 * 1e-12
-        self.q = tuple(q.tolist())
+        self._state.q = tuple(q.tolist())
         return innov
 
     def update_acc(self, t_ns: int, ax: float, ay: float, az: float) -> None:
         """Accelerometer update (m/s^2, gravity included) with the adaptive variance of eq. 17."""
         if not _plausible(ax, ay, az, _ACC_IMPOSSIBLE):
-            self.n_skipped_nonfinite += 1
+            self._state.n_skipped_nonfinite += 1
             return
-        self._last_acc = (ax, ay, az)
-        self._accumulate_references(t_ns, acc=self._last_acc)
-        if not self.initialized:
+        self._state.acc_reading = (ax, ay, az)
+        self._accumulate_references(t_ns, acc=self._state.acc_reading)
+        if not self._state.initialized:
             self._try_initialize(t_ns)
             return
         self._propagate_without_gyro(t_ns)
         na = math.sqrt(ax * ax + ay * ay + az * az)
         var = self._acc_var.update(t_ns, na)
         self._acc_sd = math.sqrt(var) if len(self._acc_var.buf) > 5 else math.inf
-        dev = abs(na - self.gravity_m_s2)
+        dev = abs(na - self._state.gravity_m_s2)
         self.acc_sigma2 = self.acc_noise_base ** 2 + self.k_a1 * dev + self.k_a2 * var  # eq. 17
         if dev > self.acc_reject_m_s2 or na == 0.0:
             self.acc_rejected = True
@@ -350,7 +349,7 @@ class QuaternionEKF(AttitudeFilterBase):
         if not self.use_magnetometer:
             return
         if not _plausible(mx, my, mz, _MAG_IMPOSSIBLE):
-            self.n_skipped_nonfinite += 1
+            self._state.n_skipped_nonfinite += 1
             return
         nm = math.sqrt(mx * mx + my * my + mz * mz)
         lo, hi = self.mag_valid_range_uT
@@ -359,20 +358,20 @@ class QuaternionEKF(AttitudeFilterBase):
             self.n_mag_rejected += 1
             self.n_mag_invalid += 1
             return
-        self._last_mag = (mx, my, mz)
-        self._accumulate_references(t_ns, mag=self._last_mag)
-        if not self.initialized:
+        self._state.mag_reading = (mx, my, mz)
+        self._accumulate_references(t_ns, mag=self._state.mag_reading)
+        if not self._state.initialized:
             self._try_initialize(t_ns)
             return
         self._propagate_without_gyro(t_ns)
         var = self._mag_var.update(t_ns, nm)
-        dev = abs(nm - self.field_uT)
+        dev = abs(nm - self._state.field_uT)
         self.mag_sigma2 = self.mag_noise_base ** 2 + self.k_m1 * dev + self.k_m2 * var  # eq. 18
         # dip angle of this reading against the current estimate of "up" in the body frame
-        up_b = predicted_measurement(self.q, (0.0, 0.0, 1.0))
+        up_b = predicted_measurement(self._state.q, (0.0, 0.0, 1.0))
         sin_dip = -(up_b[0] * mx + up_b[1] * my + up_b[2] * mz) / nm if nm > 0 else 0.0
         dip = math.asin(max(-1.0, min(1.0, sin_dip)))
-        if nm == 0.0 or dev > self.mag_reject_ratio * self.field_uT or abs(dip - self.dip_rad) > self.mag_reject_dip_rad:
+        if nm == 0.0 or dev > self.mag_reject_ratio * self._state.field_uT or abs(dip - self._state.dip_rad) > self.mag_reject_dip_rad:
             self.mag_rejected = True
             self.n_mag_rejected += 1
             return
@@ -385,11 +384,11 @@ class QuaternionEKF(AttitudeFilterBase):
 
     def _heading_only(self, m_b):
         """The unit field with the measured horizontal direction and the reference dip, in the body frame."""
-        r = quat.to_matrix(self.q)
+        r = quat.to_matrix(self._state.q)
         m_n = [r[i][0] * m_b[0] + r[i][1] * m_b[1] + r[i][2] * m_b[2] for i in range(3)]
         hn = math.hypot(m_n[0], m_n[1])
         if hn < 1e-6:
             return m_b
-        c, s = math.cos(self.dip_rad), math.sin(self.dip_rad)
+        c, s = math.cos(self._state.dip_rad), math.sin(self._state.dip_rad)
         v = (c * m_n[0] / hn, c * m_n[1] / hn, -s)
         return tuple(r[0][j] * v[0] + r[1][j] * v[1] + r[2][j] * v[2] for j in range(3))

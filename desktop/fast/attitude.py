@@ -39,42 +39,158 @@ What it does not re-implement, and why:
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 
 import numpy as np
 
+from core.pdr.attitude import AttitudeSettings, AttitudeState, IntervalSum, Outcome
 from desktop.fast.jit import kernel
 from desktop.fast.magcal import calibrate_stream
 
 # event kinds of the merged arrays
 GYRO_K, ACC_K, MAG_K = 0, 1, 2
 
-#: the reasons of AttitudeEKF.acc_reasons / mag_reasons, by code
-ACC_REASONS = ("used", "initialising", "norm off", "pending", "gate", "numerical")
-MAG_REASONS = ("used", "initialising", "invalid range", "norm off", "dip off", "gate", "numerical",
-               "field vertical", "calibrating", "magnetometer off")
-A_USED, A_NORM, A_PENDING, A_GATE, A_NUM = 0, 2, 3, 4, 5
-M_USED, M_RANGE, M_NORM, M_DIP, M_GATE, M_NUM, M_VERTICAL, M_CALIBRATING, M_OFF = 0, 2, 3, 4, 5, 6, 7, 8, 9
+#: the outcomes of a reading (core's Outcome) the kernel gives, by code; AttitudeEKF.acc_reasons / mag_reasons
+#: count their text
+ACC_OUTCOMES = (Outcome.USED, Outcome.INITIALISING, Outcome.NORM_OFF, Outcome.PENDING, Outcome.GATE, Outcome.NUMERICAL)
+MAG_OUTCOMES = (Outcome.USED, Outcome.INITIALISING, Outcome.INVALID_RANGE, Outcome.NORM_OFF, Outcome.DIP_OFF,
+                Outcome.GATE, Outcome.NUMERICAL, Outcome.FIELD_VERTICAL, Outcome.CALIBRATING, Outcome.MAGNETOMETER_OFF)
+ACC_REASONS = tuple(o.value for o in ACC_OUTCOMES)
+MAG_REASONS = tuple(o.value for o in MAG_OUTCOMES)
+A_USED, A_NORM, A_PENDING, A_GATE, A_NUM = (ACC_OUTCOMES.index(o) for o in (
+    Outcome.USED, Outcome.NORM_OFF, Outcome.PENDING, Outcome.GATE, Outcome.NUMERICAL))
+M_USED, M_RANGE, M_NORM, M_DIP, M_GATE, M_NUM, M_VERTICAL, M_CALIBRATING, M_OFF = (MAG_OUTCOMES.index(o) for o in (
+    Outcome.USED, Outcome.INVALID_RANGE, Outcome.NORM_OFF, Outcome.DIP_OFF, Outcome.GATE, Outcome.NUMERICAL,
+    Outcome.FIELD_VERTICAL, Outcome.CALIBRATING, Outcome.MAGNETOMETER_OFF))
 C_USED, C_GATE, C_NUM = 0, 1, 2
 
-# settings (float array)
-(S_GN, S_GS, S_BW, S_MAXB, S_UPD, S_A0, S_KA1, S_KA2, S_KA3, S_M0, S_KM1, S_KM2, S_ACC_REJ, S_ACC_GATE,
- S_MAG_RATIO, S_MAG_DIP, S_MAG_LO, S_MAG_HI, S_MAG_GATE, S_RELOCK_S, S_RELOCK_SPREAD, S_DECL, S_STILL_ACC_SD,
- S_STILL_DIR, S_STILL_GYRO, S_ZR_NOISE, S_MAX_GAP, S_NO_GYRO_RW, S_SITE_F, S_SITE_DIP, S_VO_DIP_ERR, S_VO_NORM_ERR,
- S_VO_MIN_S, S_VO_RIDGE) = range(34)
-# settings (int array)
-SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI_STILL_WIN_NS = range(6)
+# -- the slot tables: derived from the fields of core's settings and state ---------------------------
+#
+# Every field of AttitudeSettings and of AttitudeState says here how the kernel gets it; the slot numbers
+# follow the fields' order.  A field added to either dataclass and not named here fails at import (below),
+# instead of drifting until tests/test_fast_path.py finds a 1e-9 difference.
 
-# scalar state (float array)
+#: how each setting reaches the kernel: "f" a slot of the float array, "ns" a period in ns of the int array
+#: (or "ns/hz": the period of a rate), "i" the int array, "range" two float slots (its low and high ends);
+#: or why the kernel needs none
+SETTINGS_USE = {
+    "gyro_noise_rad_sqrt_s": "f", "gyro_scale_noise_sqrt_s": "f", "gyro_bias_walk_rad_s_sqrt_s": "f",
+    "gyro_bias_sd_rad_s": "the start (the reference's)", "max_gyro_bias_rad_s": "f",
+    "initial_tilt_sd_rad": "the start (the reference's)", "initial_yaw_sd_rad": "the start (the reference's)",
+    "update_interval_s": "f", "acc_noise_base": "f", "k_a1": "f", "k_a2": "f", "k_a3": "f", "mag_noise_base": "f",
+    "k_m1": "f", "k_m2": "f", "variance_window_s": "ns", "acc_reject_m_s2": "f", "acc_gate_nis": "f",
+    "mag_mode": "refused unless 'heading' (check_supported)",
+    "mag_unsteady_noise_scale": "used with a field detector only (refused by check_supported)",
+    "mag_requires_calibration": "i", "mag_reject_ratio": "f", "mag_reject_dip_rad": "f", "mag_valid_range_uT": "range",
+    "mag_gate_nis": "f", "mag_relock_s": "f", "mag_relock_spread_rad": "f", "reference_update_s": "ns",
+    "reference_still_rate_hz": "ns/hz", "declination_rad": "f", "site_field_uT": "f", "site_dip_rad": "f",
+    "vertical_offset_dip_error_rad": "f", "vertical_offset_norm_error": "f", "vertical_offset_min_s": "f",
+    "vertical_offset_ridge": "f", "initial_yaw_rad": "the start (the reference's)", "use_magnetometer": "i",
+    "mag_wait_s": "the start (the reference's)", "still_window_s": "ns", "still_acc_sd_m_s2": "f",
+    "still_acc_direction_rad": "f", "still_gyro_sd_rad_s": "f", "zero_rate_noise_rad_s": "f",
+    "max_gyro_gap_s": "f", "no_gyro_random_walk_rad_sqrt_s": "f",
+}
+
+#: how each field of AttitudeState reaches the kernel: "f" a slot of the float state array, "f3?" three float
+#: slots and a has-flag (None), "sum" an IntervalSum (its floats in the float array, its ints in the int array),
+#: "i" a slot of the int state array (bool as 0/1), "i?" a value and a has-flag (None), "vo"/"vo?" the same in
+#: the vertical offset's int array; "own" arrays of its own (KernelState); or why the kernel needs none
+STATE_USE = {
+    "initialized": "true at the hand-over", "n_skipped_nonfinite": "the fast pipeline drops non-finite rows first",
+    "t_ns": "i", "t_gyro_ns": "i?", "acc_reading": "f3?", "mag_reading": "the start (the reference's)",
+    "first_acc_ns": "the start (the reference's)", "ref_next_ns": "i?", "refs": "own", "gravity_m_s2": "f",
+    "field_uT": "f", "dip_rad": "f", "q": "own", "b": "own", "P_tt": "own", "P_tb": "own", "P_bt": "own",
+    "P_bb": "own", "acc_var": "own", "mag_var": "own", "gyro_win": "own", "accdir_win": "own", "acc_norm_win": "own",
+    "next_zero_rate_ns": "i?", "ref_still_next_ns": "i?", "vo_S": "own", "vo_r": "own", "vo_next_ns": "vo?",
+    "vo_t0_ns": "vo?", "vo_active": "vo", "raw_dip_med": "own", "raw_norm_med": "own", "vertical_offset_uT": "own",
+    "h_ref": "mag_mode='full' only (refused)", "alpha_ref": "f", "w2": "f", "acc_sum": "sum", "mag_sum": "sum",
+    "gated": "own", "n_heading_relocks": "i", "yaw_unobserved": "i", "acc_sigma2": "f", "mag_sigma2": "f",
+    "mag_rejected": "i", "acc_rejected": "not kept by the kernel (the pipeline reads mag_rejected)",
+    "last_acc": "one event's flags: not made by the kernel", "last_mag": "one event's flags: not made by the kernel",
+    "mag_reasons": "own", "acc_reasons": "own", "n_gyro": "i", "n_zero_rate": "i", "n_numerical_rejects": "i",
+    "nis_sum": "own", "nis_n": "own",
+}
+
+
+def _check_covered(cls, use: dict) -> None:
+    names = [f.name for f in fields(cls)]
+    missing, extra = [n for n in names if n not in use], [n for n in use if n not in names]
+    if missing or extra:
+        raise ImportError(f"desktop.fast.attitude is out of step with core's {cls.__name__}: fields without a slot "
+                          f"{missing}, slots without a field {extra} (say in SETTINGS_USE / STATE_USE how the kernel "
+                          f"gets each one)")
+
+
+_check_covered(AttitudeSettings, SETTINGS_USE)
+_check_covered(AttitudeState, STATE_USE)
+_SUM_FIELDS = [(f.name, f.type) for f in fields(IntervalSum)]
+_STATE_TYPES = {f.name: f.type for f in fields(AttitudeState)}
+
+
+def _numbered(names) -> dict:
+    return {n: i for i, n in enumerate(names)}
+
+
+#: slot numbers of the settings' float array (the float settings in their order, then the valid range's ends)
+_SETTINGS = [f.name for f in fields(AttitudeSettings)]
+SF = _numbered([n for n in _SETTINGS if SETTINGS_USE[n] == "f"] + ["mag_valid_range_uT.lo", "mag_valid_range_uT.hi"])
+#: ... and of their int array
+SI = _numbered([n for n in _SETTINGS if SETTINGS_USE[n] in ("i", "ns", "ns/hz")])
+_fs, _is, _vo = [], [], []
+for _name in _STATE_TYPES:
+    _how = STATE_USE[_name]
+    if _how == "f":
+        _fs.append(_name)
+    elif _how == "f3?":
+        _fs += [f"{_name}.{k}" for k in range(3)]
+        _is.append("has:" + _name)
+    elif _how == "sum":
+        _fs += [f"{_name}.{n}" for n, tp in _SUM_FIELDS if tp == "float"]
+        _is += [f"{_name}.{n}" for n, tp in _SUM_FIELDS if tp == "int"]
+    elif _how in ("i", "i?"):
+        _is += [_name] + (["has:" + _name] if _how == "i?" else [])
+    elif _how in ("vo", "vo?"):
+        _vo += [_name] + (["has:" + _name] if _how == "vo?" else [])
+#: slot numbers of the float state array, the int state array (plus the gated list's length) and the vertical
+#: offset's int array
+FS = _numbered(_fs)
+IS = _numbered(_is + ["gated.n"])
+VO = _numbered(_vo)
+N_FSTATE, N_ISTATE = len(FS), len(IS)
+
+# the names the kernel uses (module constants: numba compiles them in)
+(S_GN, S_GS, S_BW, S_MAXB, S_UPD, S_A0, S_KA1, S_KA2, S_KA3, S_M0, S_KM1, S_KM2, S_ACC_REJ, S_ACC_GATE, S_MAG_RATIO,
+ S_MAG_DIP, S_MAG_LO, S_MAG_HI, S_MAG_GATE, S_RELOCK_S, S_RELOCK_SPREAD, S_DECL, S_STILL_ACC_SD, S_STILL_DIR,
+ S_STILL_GYRO, S_ZR_NOISE, S_MAX_GAP, S_NO_GYRO_RW, S_SITE_F, S_SITE_DIP, S_VO_DIP_ERR, S_VO_NORM_ERR, S_VO_MIN_S,
+ S_VO_RIDGE) = (SF[n] for n in (
+    "gyro_noise_rad_sqrt_s", "gyro_scale_noise_sqrt_s", "gyro_bias_walk_rad_s_sqrt_s", "max_gyro_bias_rad_s",
+    "update_interval_s", "acc_noise_base", "k_a1", "k_a2", "k_a3", "mag_noise_base", "k_m1", "k_m2",
+    "acc_reject_m_s2", "acc_gate_nis", "mag_reject_ratio", "mag_reject_dip_rad", "mag_valid_range_uT.lo",
+    "mag_valid_range_uT.hi", "mag_gate_nis", "mag_relock_s", "mag_relock_spread_rad", "declination_rad",
+    "still_acc_sd_m_s2", "still_acc_direction_rad", "still_gyro_sd_rad_s", "zero_rate_noise_rad_s", "max_gyro_gap_s",
+    "no_gyro_random_walk_rad_sqrt_s", "site_field_uT", "site_dip_rad", "vertical_offset_dip_error_rad",
+    "vertical_offset_norm_error", "vertical_offset_min_s", "vertical_offset_ridge"))
+SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI_STILL_WIN_NS = (SI[n] for n in (
+    "reference_update_s", "reference_still_rate_hz", "use_magnetometer", "mag_requires_calibration",
+    "variance_window_s", "still_window_s"))
 (F_GRAV, F_FIELD, F_DIP, F_ALPHA_REF, F_W2, F_ACC_S2, F_MAG_S2, F_LAST_ACC0, F_LAST_ACC1, F_LAST_ACC2,
- F_ASUM0, F_ASUM1, F_ASUM2, F_ASUM3, F_MSUM0, F_MSUM1, F_MSUM2, F_MSUM3) = range(18)
-N_FSTATE = 18
-# the vertical offset's scalar state (int array): the next refresh, its first, whether it is on
-VO_NEXT, VO_HAS_NEXT, VO_T0, VO_HAS_T0, VO_ACTIVE = range(5)
-# scalar state (int array); HAS_* flags stand for the reference's None
-(I_TNS, I_TGYRO, I_HAS_TGYRO, I_REF_NEXT, I_HAS_REF_NEXT, I_ZR_NEXT, I_HAS_ZR_NEXT, I_STILL_NEXT,
- I_HAS_STILL_NEXT, I_ACC_N, I_ACC_T0, I_MAG_N, I_MAG_T0, I_GATED_N, I_YAW_UNOBS, I_MAG_REJ, I_N_ZR, I_N_NUM,
- I_N_RELOCK, I_N_GYRO, I_HAS_LAST_ACC) = range(21)
-N_ISTATE = 21
+ F_ASUM0, F_MSUM0) = (FS[n] for n in ("gravity_m_s2", "field_uT", "dip_rad", "alpha_ref", "w2", "acc_sigma2",
+                                      "mag_sigma2", "acc_reading.0", "acc_reading.1", "acc_reading.2", "acc_sum.x",
+                                      "mag_sum.x"))
+(I_TNS, I_TGYRO, I_HAS_TGYRO, I_REF_NEXT, I_HAS_REF_NEXT, I_ZR_NEXT, I_HAS_ZR_NEXT, I_STILL_NEXT, I_HAS_STILL_NEXT,
+ I_ACC_N, I_ACC_T0, I_MAG_N, I_MAG_T0, I_GATED_N, I_YAW_UNOBS, I_MAG_REJ, I_N_ZR, I_N_NUM, I_N_RELOCK, I_N_GYRO,
+ I_HAS_LAST_ACC) = (IS[n] for n in (
+    "t_ns", "t_gyro_ns", "has:t_gyro_ns", "ref_next_ns", "has:ref_next_ns", "next_zero_rate_ns",
+    "has:next_zero_rate_ns", "ref_still_next_ns", "has:ref_still_next_ns", "acc_sum.n", "acc_sum.t0_ns", "mag_sum.n",
+    "mag_sum.t0_ns", "gated.n",
+    "yaw_unobserved", "mag_rejected", "n_zero_rate", "n_numerical_rejects", "n_heading_relocks", "n_gyro",
+    "has:acc_reading"))
+VO_NEXT, VO_HAS_NEXT, VO_T0, VO_HAS_T0, VO_ACTIVE = (VO[n] for n in (
+    "vo_next_ns", "has:vo_next_ns", "vo_t0_ns", "has:vo_t0_ns", "vo_active"))
+# the interval sums' floats are consecutive (x, y, z, sigma2), as interval_add reads them
+assert [FS[f"acc_sum.{n}"] - F_ASUM0 for n in ("x", "y", "z", "sigma2")] == [0, 1, 2, 3]
+assert [FS[f"mag_sum.{n}"] - F_MSUM0 for n in ("x", "y", "z", "sigma2")] == [0, 1, 2, 3]
+assert F_LAST_ACC1 == F_LAST_ACC0 + 1 and F_LAST_ACC2 == F_LAST_ACC0 + 2
 
 
 # -- plain-float quaternion algebra (the same formulas as core.quaternion, for the compiler) -----------
@@ -794,18 +910,22 @@ def check_supported(ekf) -> None:
 
 
 def settings_arrays(ekf) -> tuple[np.ndarray, np.ndarray]:
+    """The settings as the kernel's float and int arrays (slots :data:`SF`, :data:`SI`)."""
     s = ekf.settings
-    sf = np.array([s.gyro_noise_rad_sqrt_s, s.gyro_scale_noise_sqrt_s, s.gyro_bias_walk_rad_s_sqrt_s,
-                   s.max_gyro_bias_rad_s, s.update_interval_s, s.acc_noise_base, s.k_a1, s.k_a2, s.k_a3,
-                   s.mag_noise_base, s.k_m1, s.k_m2, s.acc_reject_m_s2, s.acc_gate_nis, s.mag_reject_ratio,
-                   s.mag_reject_dip_rad, s.mag_valid_range_uT[0], s.mag_valid_range_uT[1], s.mag_gate_nis,
-                   s.mag_relock_s, s.mag_relock_spread_rad, s.declination_rad, s.still_acc_sd_m_s2,
-                   s.still_acc_direction_rad, s.still_gyro_sd_rad_s, s.zero_rate_noise_rad_s, s.max_gyro_gap_s,
-                   s.no_gyro_random_walk_rad_sqrt_s, s.site_field_uT, s.site_dip_rad, s.vertical_offset_dip_error_rad,
-                   s.vertical_offset_norm_error, s.vertical_offset_min_s, s.vertical_offset_ridge], dtype=np.float64)
-    si = np.array([int(s.reference_update_s * 1e9), int(1e9 / s.reference_still_rate_hz), int(s.use_magnetometer),
-                   int(s.mag_requires_calibration), int(s.variance_window_s * 1e9), int(s.still_window_s * 1e9)],
-                  dtype=np.int64)
+    sf = np.empty(len(SF), dtype=np.float64)
+    si = np.empty(len(SI), dtype=np.int64)
+    for name in _SETTINGS:
+        how, v = SETTINGS_USE[name], getattr(s, name)
+        if how == "f":
+            sf[SF[name]] = v
+        elif how == "range":
+            sf[SF[name + ".lo"]], sf[SF[name + ".hi"]] = v[0], v[1]
+        elif how == "ns":
+            si[SI[name]] = int(v * 1e9)
+        elif how == "ns/hz":
+            si[SI[name]] = int(1e9 / v)
+        elif how == "i":
+            si[SI[name]] = int(v)
     return sf, si
 
 
@@ -847,7 +967,7 @@ def start_with_reference(ekf, kind, t, v, cal_ok, tick_event, out_q, out_acc_s2,
         elif k == ACC_K:
             ekf.update_acc(ti, x, y, z)
         elif require and not cal_ok[i]:
-            ekf._mag_flags(ti, False, "calibrating")
+            ekf.mag_not_calibrated(ti)
         else:
             ekf.update_mag(ti, x, y, z)
         while j < n_ticks and tick_event[j] == i:
@@ -860,41 +980,43 @@ def start_with_reference(ekf, kind, t, v, cal_ok, tick_event, out_q, out_acc_s2,
 
 
 class KernelState:
-    """The reference filter's state as the kernel's arrays (after its start), and back."""
+    """The reference filter's state (:meth:`AttitudeEKF.snapshot`, after its start) as the kernel's arrays, and
+    back (:meth:`write_back`, through :meth:`AttitudeEKF.restore`)."""
 
     def __init__(self, ekf, n_gyro: int, n_acc: int, n_mag: int):
         self.sf, self.si = settings_arrays(ekf)
+        st = ekf.snapshot()
         fs = np.full(N_FSTATE, math.nan)
-        fs[F_GRAV], fs[F_FIELD], fs[F_DIP], fs[F_ALPHA_REF] = ekf.gravity_m_s2, ekf.field_uT, ekf.dip_rad, ekf._alpha_ref
-        fs[F_W2], fs[F_ACC_S2], fs[F_MAG_S2] = ekf._w2, ekf.acc_sigma2, ekf.mag_sigma2
-        la = ekf._last_acc or (math.nan,) * 3
-        fs[F_LAST_ACC0:F_LAST_ACC2 + 1] = la
-        fs[F_ASUM0:F_ASUM3 + 1] = ekf._acc_sum[0:4]
-        fs[F_MSUM0:F_MSUM3 + 1] = ekf._mag_sum[0:4]
         is_ = np.zeros(N_ISTATE, dtype=np.int64)
-        is_[I_TNS] = ekf.t_ns
-        for flag, slot, val in ((I_HAS_TGYRO, I_TGYRO, ekf._t_gyro), (I_HAS_REF_NEXT, I_REF_NEXT, ekf._ref_next_ns),
-                                (I_HAS_ZR_NEXT, I_ZR_NEXT, ekf._next_zero_rate_ns),
-                                (I_HAS_STILL_NEXT, I_STILL_NEXT, ekf._ref_still_next_ns)):
-            is_[flag], is_[slot] = (0, 0) if val is None else (1, val)
-        is_[I_ACC_N], is_[I_ACC_T0] = ekf._acc_sum[4], ekf._acc_sum[5]
-        is_[I_MAG_N], is_[I_MAG_T0] = ekf._mag_sum[4], ekf._mag_sum[5]
-        is_[I_YAW_UNOBS], is_[I_MAG_REJ] = int(ekf.yaw_unobserved), int(ekf.mag_rejected)
-        is_[I_N_ZR], is_[I_N_NUM], is_[I_N_RELOCK] = ekf.n_zero_rate, ekf.n_numerical_rejects, ekf.n_heading_relocks
-        is_[I_N_GYRO], is_[I_HAS_LAST_ACC] = ekf.n_gyro, int(ekf._last_acc is not None)
-        self.fs, self.is_ = fs, is_
-        self.q = np.array(ekf.q, dtype=np.float64)
-        self.b = np.array(ekf.b, dtype=np.float64)
+        vo_i = np.zeros(len(VO), dtype=np.int64)
+        for name, tp in _STATE_TYPES.items():
+            how, val = STATE_USE[name], getattr(st, name)
+            if how == "f":
+                fs[FS[name]] = val
+            elif how == "f3?":
+                is_[IS["has:" + name]] = val is not None
+                if val is not None:
+                    fs[FS[name + ".0"]:FS[name + ".0"] + 3] = val
+            elif how == "sum":
+                for n, t in _SUM_FIELDS:
+                    (fs if t == "float" else is_)[(FS if t == "float" else IS)[f"{name}.{n}"]] = getattr(val, n)
+            elif how in ("i", "vo"):
+                (is_ if how == "i" else vo_i)[(IS if how == "i" else VO)[name]] = int(val)
+            elif how in ("i?", "vo?"):
+                arr, slot = (is_, IS) if how == "i?" else (vo_i, VO)
+                arr[slot["has:" + name]], arr[slot[name]] = (0, 0) if val is None else (1, val)
+        self.fs, self.is_, self.vo_i = fs, is_, vo_i
+        self.q = np.array(st.q, dtype=np.float64)
+        self.b = np.array(st.b, dtype=np.float64)
         self.P = np.ascontiguousarray(ekf.P, dtype=np.float64)
-        refs = ekf._refs
         self.medians = []
-        for rm in (refs.g, refs.h, refs.dip):
+        for rm in (st.refs.g, st.refs.h, st.refs.dip):
             self.medians += [np.array(rm.counts, dtype=np.int64), np.array([rm.n], dtype=np.int64)]
         # the windows: the reference's deque contents first, room for every later event of their stream
         self.windows = []
-        for w, room, vec in ((ekf._gyro_win, n_gyro, True), (ekf._accdir_win, n_acc, True),
-                             (ekf._acc_norm_win, n_acc, False), (ekf._acc_var, n_acc, False),
-                             (ekf._mag_var, n_mag, False)):
+        for w, room, vec in ((st.gyro_win, n_gyro, True), (st.accdir_win, n_acc, True),
+                             (st.acc_norm_win, n_acc, False), (st.acc_var, n_acc, False),
+                             (st.mag_var, n_mag, False)):
             cap = len(w.buf) + room + 1
             wt = np.zeros(cap, dtype=np.int64)
             wv = np.zeros((cap, 3) if vec else cap)
@@ -904,11 +1026,12 @@ class KernelState:
             ptr = np.array([0, len(w.buf)], dtype=np.int64)
             sums = np.array(list(w.s) + list(w.s2) if vec else [w.s1, w.s2], dtype=np.float64)
             self.windows += [wt, wv, ptr, sums]
-        self.gated_t = np.zeros(len(ekf._gated) + n_mag + 1, dtype=np.int64)
+        self.gated_t = np.zeros(len(st.gated) + n_mag + 1, dtype=np.int64)
         self.gated_v = np.zeros(len(self.gated_t))
-        for k, (tk, vk) in enumerate(ekf._gated):
+        for k, (tk, vk) in enumerate(st.gated):
             self.gated_t[k], self.gated_v[k] = tk, vk
-        is_[I_GATED_N] = len(ekf._gated)
+        is_[I_GATED_N] = len(st.gated)
+        # the reasons counted from the hand-over on (added to the reference's in write_back)
         self.acc_counts = np.zeros(len(ACC_REASONS), dtype=np.int64)
         self.mag_counts = np.zeros(len(MAG_REASONS), dtype=np.int64)
         self.acc_first = np.full(len(ACC_REASONS) + 1, -1, dtype=np.int64)
@@ -917,13 +1040,11 @@ class KernelState:
         self.nis_sum = np.zeros(3)
         self.nis_n = np.zeros(3, dtype=np.int64)
         # the vertical offset of a site's field (AttitudeEKF._vertical_offset)
-        self.vo_S = np.array(ekf._vo_S, dtype=np.float64)
-        self.vo_r = np.array(ekf._vo_r, dtype=np.float64)
-        self.vo_i = np.array([ekf._vo_next_ns or 0, ekf._vo_next_ns is not None, ekf._vo_t0_ns or 0,
-                              ekf._vo_t0_ns is not None, ekf._vo_active], dtype=np.int64)
-        self.vo_b = np.array(ekf.vertical_offset_uT, dtype=np.float64)
+        self.vo_S = np.array(st.vo_S, dtype=np.float64)
+        self.vo_r = np.array(st.vo_r, dtype=np.float64)
+        self.vo_b = np.array(st.vertical_offset_uT, dtype=np.float64)
         self.vo_medians = []
-        for rm in (ekf._raw_dip_med, ekf._raw_norm_med):
+        for rm in (st.raw_dip_med, st.raw_norm_med):
             self.vo_medians += [np.array(rm.counts, dtype=np.int64), np.array([rm.n], dtype=np.int64)]
 
     def run(self, kind, t, v, cal_ok, i0, tick_event, j0, out_q, out_acc_s2, out_mag_s2, out_mag_rej) -> int:
@@ -944,32 +1065,46 @@ class KernelState:
             update_references(self.fs, *self.medians, self.sf[S_DECL])
 
     def write_back(self, ekf) -> None:
-        """The kernel's final state into the reference object, for its counters and the pipeline's labels."""
-        fs, is_ = self.fs, self.is_
-        ekf.q = tuple(float(x) for x in self.q)
-        ekf.b = [float(x) for x in self.b]
-        ekf.P = self.P
-        ekf.gravity_m_s2, ekf.field_uT, ekf.dip_rad = float(fs[F_GRAV]), float(fs[F_FIELD]), float(fs[F_DIP])
-        ekf.acc_sigma2, ekf.mag_sigma2 = float(fs[F_ACC_S2]), float(fs[F_MAG_S2])
-        ekf.mag_rejected = bool(is_[I_MAG_REJ])
-        ekf.yaw_unobserved = bool(is_[I_YAW_UNOBS])
-        ekf.t_ns = int(is_[I_TNS])
-        ekf.n_zero_rate, ekf.n_numerical_rejects = int(is_[I_N_ZR]), int(is_[I_N_NUM])
-        ekf.n_heading_relocks, ekf.n_gyro = int(is_[I_N_RELOCK]), int(is_[I_N_GYRO])
-        ekf._alpha_ref = float(fs[F_ALPHA_REF])
-        vo = self.vo_i
-        ekf._vo_S = self.vo_S.tolist()
-        ekf._vo_r = self.vo_r.tolist()
-        ekf._vo_next_ns = int(vo[VO_NEXT]) if vo[VO_HAS_NEXT] else None
-        ekf._vo_t0_ns = int(vo[VO_T0]) if vo[VO_HAS_T0] else None
-        ekf._vo_active = bool(vo[VO_ACTIVE])
-        ekf.vertical_offset_uT = tuple(float(x) for x in self.vo_b)
-        for rm, counts, n in ((ekf._raw_dip_med, *self.vo_medians[0:2]), (ekf._raw_norm_med, *self.vo_medians[2:4])):
+        """The kernel's final state into the reference object (:meth:`AttitudeEKF.restore`), for its counters and
+        the pipeline's labels.  Not written back: the trailing windows (the reference keeps its own from the
+        hand-over) and what STATE_USE says the kernel does not keep."""
+        st = ekf.snapshot()
+        fs, is_, vo_i = self.fs, self.is_, self.vo_i
+        for name, tp in _STATE_TYPES.items():
+            how = STATE_USE[name]
+            if how == "f":
+                setattr(st, name, float(fs[FS[name]]))
+            elif how == "f3?":
+                k = FS[name + ".0"]
+                setattr(st, name, tuple(float(x) for x in fs[k:k + 3]) if is_[IS["has:" + name]] else None)
+            elif how == "sum":
+                setattr(st, name, IntervalSum(**{n: (float(fs[FS[f"{name}.{n}"]]) if t == "float"
+                                                     else int(is_[IS[f"{name}.{n}"]])) for n, t in _SUM_FIELDS}))
+            elif how in ("i", "vo"):
+                v = int((is_ if how == "i" else vo_i)[(IS if how == "i" else VO)[name]])
+                setattr(st, name, bool(v) if tp == "bool" else v)
+            elif how in ("i?", "vo?"):
+                arr, slot = (is_, IS) if how == "i?" else (vo_i, VO)
+                setattr(st, name, int(arr[slot[name]]) if arr[slot["has:" + name]] else None)
+        st.q = tuple(float(x) for x in self.q)
+        st.b = [float(x) for x in self.b]
+        rows = self.P.tolist()
+        st.P_tt = tuple(rows[0][0:3] + rows[1][0:3] + rows[2][0:3])
+        st.P_tb = tuple(rows[0][3:6] + rows[1][3:6] + rows[2][3:6])
+        st.P_bt = tuple(rows[3][0:3] + rows[4][0:3] + rows[5][0:3])
+        st.P_bb = tuple(rows[3][3:6] + rows[4][3:6] + rows[5][3:6])
+        st.vo_S = self.vo_S.tolist()
+        st.vo_r = self.vo_r.tolist()
+        st.vertical_offset_uT = tuple(float(x) for x in self.vo_b)
+        for rm, (counts, n) in zip((st.refs.g, st.refs.h, st.refs.dip, st.raw_dip_med, st.raw_norm_med),
+                                   zip(*[iter(self.medians + self.vo_medians)] * 2)):
             rm.counts, rm.n = counts.tolist(), int(n[0])
-        for counts, first, names, reasons in ((self.acc_counts, self.acc_first, ACC_REASONS, ekf.acc_reasons),
-                                              (self.mag_counts, self.mag_first, MAG_REASONS, ekf.mag_reasons)):
+        st.gated = [(int(self.gated_t[k]), float(self.gated_v[k])) for k in range(int(is_[I_GATED_N]))]
+        for counts, first, names, reasons in ((self.acc_counts, self.acc_first, ACC_REASONS, st.acc_reasons),
+                                              (self.mag_counts, self.mag_first, MAG_REASONS, st.mag_reasons)):
             for code in sorted((c for c in range(len(names)) if first[c] >= 0), key=lambda c: first[c]):
                 reasons[names[code]] = reasons.get(names[code], 0) + int(counts[code])
         for k, kind_name in enumerate(("acc", "mag", "zero_rate")):
-            ekf._nis_sum[kind_name] += float(self.nis_sum[k])
-            ekf._nis_n[kind_name] += int(self.nis_n[k])
+            st.nis_sum[kind_name] += float(self.nis_sum[k])
+            st.nis_n[kind_name] += int(self.nis_n[k])
+        ekf.restore(st)
