@@ -113,6 +113,20 @@ uses the skew where most of the remembered strides (forgetting weight) took the 
 axis rule above -- else the phase: on the trunk it is the phase rule bit for bit.  ``"phase"`` is the rule of
 the section above alone.  The third moments are O(1) sums per sample like the others.
 
+One decision per placement (issue #25)
+--------------------------------------
+Which evidence decides the sign is a property of where the phone is, not of one stride: with
+``sign_method="auto"`` each device axis's state carries a **limb** flag, set once the remembered (forgetting
+weight) share of raw-axis strides reaches ``limb_enter_share`` (a half) and cleared only when it falls below
+``limb_exit_share`` (a quarter).  The rule before switched the evidence at a half, stride by stride: on the
+tuning walk ``thomasdingemanse_lopen`` (a limb; 71 % raw-axis strides, the share between 0.43 and 0.83 over a
+minute) every dip below a half handed the sign to the trunk's phase rule, which points backwards on a limb,
+and the step heading walked backwards in groups of 2-8 steps (e.g. 185-189 s and 231-240 s): a 30-s mean
+hides them, an outage does not.  A limb's axis is, with ``limb_raw_axis``, the circular mean of every
+stride's raw-covariance axis: the coherent axis of a limb's less anisotropic strides lay 20-35 deg to one
+side of the raw one on that walk (the trunk's rule for the trunk's motion), and mixing them pulled the offset
+by about 8 deg.  On the trunk nothing changes (the flag stays off: the phase rule and each stride's axis).
+
 Smoothing: circular means with forgetting
 -----------------------------------------
 Turns rotate the walk and the device together, so the offset is a constant
@@ -178,10 +192,10 @@ def _anisotropy(cxx: float, cyy: float, cxy: float) -> float:
 class _AxisState:
     """The two circular accumulators of one device axis (see the module docstring)."""
 
-    __slots__ = ("c2", "s2", "w", "w2", "gx", "gy", "n", "kx", "ky", "wp", "c2r", "s2r", "limb")
+    __slots__ = ("c2", "s2", "w", "w2", "gx", "gy", "n", "kx", "ky", "wp", "c2r", "s2r", "limb", "fwd")
 
     #: the float accumulators, in the order :meth:`values` gives them (the fast path's trace stores them)
-    FIELDS = ("c2", "s2", "w", "w2", "gx", "gy", "kx", "ky", "wp", "c2r", "s2r", "limb")
+    FIELDS = ("c2", "s2", "w", "w2", "gx", "gy", "kx", "ky", "wp", "c2r", "s2r", "limb", "fwd")
 
     def __init__(self):
         self.c2 = self.s2 = self.w = self.w2 = 0.0
@@ -193,6 +207,9 @@ class _AxisState:
         #: placement counts as a limb now (1.0) or the trunk (0.0), with hysteresis (issue #25)
         self.c2r = self.s2r = 0.0
         self.limb = 0.0
+        #: ``sign_method="auto"``: the offset after the last stride (rad; nan before any), the direction a
+        #: limb's sign holds to until the evidence turns clearly against it
+        self.fwd = math.nan
 
     def values(self) -> tuple:
         """The float accumulators (:data:`FIELDS`)."""
@@ -202,7 +219,7 @@ class _AxisState:
     def from_values(cls, values, n: int) -> "_AxisState":
         """The state of :meth:`values` (a prefix of :data:`FIELDS` is enough) and ``n`` strides."""
         st = cls()
-        for k, v in zip(cls.FIELDS, values):
+        for k, v in zip(cls.FIELDS, values):  # a prefix: the rest keep their initial values
             setattr(st, k, float(v))
         st.n = int(n)
         return st
@@ -261,6 +278,10 @@ class WalkingDirection:
     limb_raw_axis : bool
         ``sign_method="auto"``: a limb's axis is the mean of every stride's raw-covariance axis (True), or
         the mean of each stride's own choice (False, the rule before issue #25's placement decision).
+    limb_sign_margin : float
+        ``sign_method="auto"``, a limb: its direction (forward or backward along the axis) holds until the
+        mean skew evidence along it (-1..1 per stride, forgetting-weighted) falls below ``-limb_sign_margin``;
+        0: the sign of the evidence, stride by stride (the rule before).
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, delay_s: float = 0.45, vz_leak_time_s: float = 1.0,
@@ -274,7 +295,8 @@ class WalkingDirection:
                  max_strides_kept: int = 64, axis_method: str = "auto",
                  pca_min_anisotropy: float = 8.0, min_coherence: float = 0.0, reset_after_gap_s: float = 10.0,
                  sign_method: str = "auto", velocity_leak_time_s: float = 0.5, skew_scale: float = 1.0,
-                 limb_enter_share: float = 0.5, limb_exit_share: float = 0.25, limb_raw_axis: bool = True):
+                 limb_enter_share: float = 0.5, limb_exit_share: float = 0.25, limb_raw_axis: bool = True,
+                 limb_sign_margin: float = 0.1):
         self.grid_rate_hz = float(grid_rate_hz)
         self.delay_s = float(delay_s)
         self.vz_leak_time_s = float(vz_leak_time_s)
@@ -310,6 +332,7 @@ class WalkingDirection:
         self.limb_enter_share = float(limb_enter_share)
         self.limb_exit_share = float(limb_exit_share)
         self.limb_raw_axis = bool(limb_raw_axis)
+        self.limb_sign_margin = float(limb_sign_margin)
         self._vleak = math.exp(-1.0 / (self.grid_rate_hz * self.velocity_leak_time_s))
         self._gap_ns = int(self.reset_after_gap_s * 1e9)
         dt = 1.0 / self.grid_rate_hz
@@ -606,6 +629,7 @@ class WalkingDirection:
                 st.limb = 0.0
         elif share >= self.limb_enter_share:
             st.limb = 1.0
+        st.fwd = self._offset_of(st)
 
     # -- the estimate -------------------------------------------------------------
     def _sign_vector(self, st: _AxisState) -> tuple[float, float]:
@@ -626,7 +650,17 @@ class WalkingDirection:
         c2, s2 = self._axis_sums(st)
         theta = 0.5 * math.atan2(s2, c2)
         gx, gy = self._sign_vector(st)
-        if gx * math.cos(theta) + gy * math.sin(theta) < 0.0:
+        along = gx * math.cos(theta) + gy * math.sin(theta)
+        if self.sign_method == "auto" and st.limb and st.fwd == st.fwd:
+            # a limb holds its direction: the end of the axis nearer the last offset, unless the evidence along
+            # it is clearly against it (the mean skew evidence below -limb_sign_margin)
+            if math.cos(theta - st.fwd) < 0.0:
+                theta += math.pi
+                along = -along
+            if along < -self.limb_sign_margin * st.w:
+                theta += math.pi
+            return wrap_angle(theta)
+        if along < 0.0:
             theta += math.pi
         return wrap_angle(theta)
 
