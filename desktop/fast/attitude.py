@@ -62,7 +62,7 @@ C_USED, C_GATE, C_NUM = 0, 1, 2
  S_STILL_DIR, S_STILL_GYRO, S_ZR_NOISE, S_MAX_GAP, S_NO_GYRO_RW, S_SITE_F, S_SITE_DIP, S_VO_DIP_ERR, S_VO_NORM_ERR,
  S_VO_MIN_S, S_VO_RIDGE) = range(34)
 # settings (int array)
-SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI_STILL_WIN_NS = range(6)
+SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI_STILL_WIN_NS, SI_HOLD_BIAS = range(7)
 
 # scalar state (float array)
 (F_GRAV, F_FIELD, F_DIP, F_ALPHA_REF, F_W2, F_ACC_S2, F_MAG_S2, F_LAST_ACC0, F_LAST_ACC1, F_LAST_ACC2,
@@ -309,14 +309,15 @@ def inject(q, b, P, dx, Pn, keep_yaw, max_bias):
 
 @kernel
 def correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw, max_bias, is_,
-            nis_sum, nis_n, slot):
+            nis_sum, nis_n, slot, hold_bias=False):
     """Kalman update of the error state and its bookkeeping (the reference's ``_correct`` and ``_record``).
 
     Returns the outcome's code; the NIS goes into ``nis_sum[slot]``/``nis_n[slot]``, a numerical failure into
-    the state's counter, a used heading measurement ends ``yaw_unobserved``.
+    the state's counter, a used heading measurement ends ``yaw_unobserved``.  ``hold_bias``: the reference's
+    ``tilt_only`` with ``hold_vertical_bias_without_heading``.
     """
     code, nis = _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw,
-                         is_[I_YAW_UNOBS] != 0, max_bias)
+                         is_[I_YAW_UNOBS] != 0, max_bias, hold_bias)
     if code == C_USED and measures_yaw:
         is_[I_YAW_UNOBS] = 0
     if code == C_NUM:
@@ -328,7 +329,8 @@ def correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, me
 
 
 @kernel
-def _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw, yaw_unobs, max_bias):
+def _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw, yaw_unobs, max_bias,
+             hold_bias=False):
     """The Kalman update itself; returns (code, nis)."""
     PHt = mm(P, H.T)
     S = mm(H, PHt) + Rm
@@ -350,6 +352,13 @@ def _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, m
     yaw_consider = yaw_unobs and not measures_yaw
     if yaw_consider:
         K[2, :] = 0.0
+        if hold_bias:  # the gyroscope bias about the vertical (up in the body frame: R's last row)
+            R = q_to_matrix(q)
+            m_ = K.shape[1]
+            for j in range(m_):
+                pj = R[2, 0] * K[3, j] + R[2, 1] * K[4, j] + R[2, 2] * K[5, j]
+                for i in range(3):
+                    K[3 + i, j] -= R[2, i] * pj
     if use_bias_axis:
         proj = mv(K[3:6, :].T, bias_axis)
         for i in range(3):
@@ -654,7 +663,7 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                             Ha[c, 0] = R[1, c]
                             Ha[c, 1] = -R[0, c]
                         code = correct(q, b, P, ya, Ha, sigma2 * I3, sf[S_ACC_GATE], False, ya, False, False,
-                                       max_bias, is_, nis_sum, nis_n, 0)
+                                       max_bias, is_, nis_sum, nis_n, 0, si[SI_HOLD_BIAS] != 0)
                         reason = A_USED if code == C_USED else (A_GATE if code == C_GATE else A_NUM)
             count(acc_counts, acc_first, reason, 1)
         else:  # magnetometer
@@ -804,7 +813,8 @@ def settings_arrays(ekf) -> tuple[np.ndarray, np.ndarray]:
                    s.no_gyro_random_walk_rad_sqrt_s, s.site_field_uT, s.site_dip_rad, s.vertical_offset_dip_error_rad,
                    s.vertical_offset_norm_error, s.vertical_offset_min_s, s.vertical_offset_ridge], dtype=np.float64)
     si = np.array([int(s.reference_update_s * 1e9), int(1e9 / s.reference_still_rate_hz), int(s.use_magnetometer),
-                   int(s.mag_requires_calibration), int(s.variance_window_s * 1e9), int(s.still_window_s * 1e9)],
+                   int(s.mag_requires_calibration), int(s.variance_window_s * 1e9), int(s.still_window_s * 1e9),
+                   int(s.hold_vertical_bias_without_heading)],
                   dtype=np.int64)
     return sf, si
 
