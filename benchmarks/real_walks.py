@@ -20,6 +20,10 @@ Walking-direction stability
     circular mean of the steps' headings inside (the pipeline's step heading, before any GPS fusion: what
     dead reckoning has in an outage).  Per walk: the circular SD of ``course - heading`` over the windows,
     its drift (deg/min, least squares on the differences unwrapped about their mean) and the mean offset.
+    Reversed steps: the share of steps (during good fixes) whose heading is more than 90 deg from the GPS course
+    (the chord of the good fixes within :data:`REVERSED_HALF_S` of the step, at least :data:`REVERSED_MIN_CHORD_M`
+    long) turned by the walk's mean offset -- short groups of steps walked backwards (a flipped
+    forward/backward sign) that a 30-s window's mean hides but an outage does not.
     The same for the *device* heading (the smoothed device axis, without the walking-direction offset),
     recorded by :class:`benchmarks.walkdir._Probe` in the same run.  A walk without a magnetometer has no
     absolute heading: its mean offset says nothing about a sign error (reported, not judged).
@@ -85,6 +89,8 @@ GPS_PATH_EVERY_S = 5.0
 GAIT_WINDOW_S = 10.0
 GAIT_BAND_HZ = (1.2, 2.4)
 GAIT_MIN_STD_M_S2 = 0.6
+REVERSED_HALF_S = 5.0
+REVERSED_MIN_CHORD_M = 6.0
 
 #: issue #25's targets on the report split
 TARGET_SD_DEG = 6.0
@@ -257,6 +263,29 @@ def stability(windows, st_t, headings, t0_ns: int) -> dict:
     return out
 
 
+def reversed_steps(fixes, st_t, headings, mean_offset_deg) -> dict:
+    """Share of steps more than 90 deg from the local GPS course turned by the mean offset (module docstring)."""
+    if fixes is None or mean_offset_deg is None:
+        return {"n": 0, "reversed_pct": None}
+    t, e, n, _ = fixes
+    half = int(REVERSED_HALF_S * 1e9)
+    lo = np.searchsorted(t, st_t - half)
+    hi = np.searchsorted(t, st_t + half, side="right") - 1
+    off = math.radians(mean_offset_deg)
+    n_used = n_rev = 0
+    for k in range(len(st_t)):
+        a, b = lo[k], hi[k]
+        if b <= a or not np.isfinite(headings[k]):
+            continue
+        de, dn = e[b] - e[a], n[b] - n[a]
+        if math.hypot(de, dn) < REVERSED_MIN_CHORD_M or t[b] - t[a] > 2 * half:
+            continue
+        n_used += 1
+        if abs(wrap_angle(math.atan2(dn, de) - headings[k] - off)) > 0.5 * math.pi:
+            n_rev += 1
+    return {"n": n_used, "reversed_pct": 100.0 * n_rev / n_used if n_used else None}
+
+
 # -- outages ------------------------------------------------------------------------------------------------
 def outage_windows(walk_from_s: float, end_s: float) -> list[tuple[float, float]]:
     out = []
@@ -387,6 +416,7 @@ def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> d
         wins = straight_windows(fixes, t0, rec.t1_ns)
         row["stability"] = stability(wins, st_t, heading, t0)
         row["stability_device"] = stability(wins, st_t, device, t0)
+        row["reversed"] = reversed_steps(fixes, st_t, heading, row["stability"]["mean_offset_deg"])
         # per carry mode: windows whose steps are mostly in that mode
         per_mode = {}
         for m in row["steps_per_mode"]:
@@ -534,6 +564,7 @@ def summarize(rows: list[dict]) -> dict:
              "distance_vs_gps_median_pct": _med([r.get("distance_vs_gps_pct") for r in gps]),
              "steps_vs_periodicity_median_pct": _med([r.get("steps_vs_periodicity_pct") for r in rs
                                                       if not r.get("failed")]),
+             "reversed_median_pct": _med([(r.get("reversed") or {}).get("reversed_pct") for r in gps]),
              "walks_without_windows": [r["name"] for r in gps if r["stability"]["sd_deg"] is None]}
         for length in LENGTHS_S:
             per_walk_def, per_walk_pdr, per_walk_floor, n_fail = [], [], [], 0
@@ -605,14 +636,16 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
               + ".", ""]
     L += ["### Per split against the targets", "",
           "| split | walks (GPS) | failed | 30-s SD median (deg) | device-axis SD median | abs drift median (deg/min) | "
-          "sign errors (|mean offset| > 90, walks with a magnetometer) | 3-min default median % | 3-min PDR alone % | "
+          "sign errors (|mean offset| > 90, walks with a magnetometer) | reversed steps median % | "
+          "3-min default median % | 3-min PDR alone % | "
           "3-min floor % | 1-min default / PDR % | 5-min default / PDR % | clips: mean abs step error % |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for split, d in summ.items():
         o1, o3, o5 = d["outage_60s"], d["outage_180s"], d["outage_300s"]
         L.append(f"| {split} | {d['walks']} ({d['gps_walks']}) | {len(d['failed'])} {', '.join(d['failed'])} | "
                  f"{_f(d['sd_median_deg'])} | {_f(d['sd_device_median_deg'])} | {_f(d['abs_drift_median_deg_min'])} | "
-                 f"{len(d['sign_errors'])} {', '.join(d['sign_errors'])} | {_f(o3['default_median_pct'])} "
+                 f"{len(d['sign_errors'])} {', '.join(d['sign_errors'])} | {_f(d.get('reversed_median_pct'))} | "
+                 f"{_f(o3['default_median_pct'])} "
                  f"({o3['walks']} walks) | {_f(o3['pdr_median_pct'])} | {_f(o3['floor_median_pct'])} | "
                  f"{_f(o1['default_median_pct'])} / {_f(o1['pdr_median_pct'])} | "
                  f"{_f(o5['default_median_pct'])} / {_f(o5['pdr_median_pct'])} | "
@@ -654,13 +687,13 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
     L += ["", "### Per walk", "",
           "| split | walk | kind | stated carry | mag | acc Hz | steps (count, error %) | distance m | "
           "detected carry (share of steps) | "
-          "windows | SD deg | drift deg/min | mean offset deg | device-axis SD / mean | 1-min def / PDR % | "
-          "3-min def / PDR % | 5-min def / PDR % | floor 3-min % | learnt offset median deg |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "windows | SD deg | drift deg/min | mean offset deg | device-axis SD / mean | reversed steps % | "
+          "1-min def / PDR % | 3-min def / PDR % | 5-min def / PDR % | floor 3-min % | learnt offset median deg |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r.get("failed"):
             L.append(f"| {r['split']} | {r['name']} | {r['kind']} | {r.get('carry', '')} | | | FAILED: {r['failed']} |"
-                     + " |" * 12)
+                     + " |" * 13)
             continue
         n = r["n_steps"]
         steps = f"{n}" + (f" ({r['steps_counted']}, {r['steps_error_pct']:+.1f})" if r.get("steps_counted") else "")
@@ -685,7 +718,8 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
                  f"{'yes' if r.get('magnetometer') else 'no'} | "
                  f"{r['acc_rate_hz']:.0f} | {steps} | {dist} | {carry} | {s['n_windows']} | {_f(s['sd_deg'])} | "
                  f"{_f(s['drift_deg_min'])} | {_f(s['mean_offset_deg'])} | {_f(sd['sd_deg'])} / "
-                 f"{_f(sd['mean_offset_deg'])} | {outs[60]} | {outs[180]} | {outs[300]} | "
+                 f"{_f(sd['mean_offset_deg'])} | {_f((r.get('reversed') or {}).get('reversed_pct'))} | "
+                 f"{outs[60]} | {outs[180]} | {outs[300]} | "
                  f"{_f(_med([o['floor_pct'] for o in g3]))} | {_f(learnt)} |")
     L += ["", "### Per carry mode (windows with > 80 % of their steps in the mode)", "",
           "| split | walk | mode | windows | SD deg | drift deg/min | mean offset deg |", "|---|---|---|---|---|---|---|"]

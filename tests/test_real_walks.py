@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from benchmarks.real_walks import outage_windows, stability, straight_windows
+from benchmarks.real_walks import outage_windows, reversed_steps, stability, straight_windows
 
 
 def test_stability_sd_drift_and_mean_offset():
@@ -121,3 +121,21 @@ def test_periodicity_steps_counts_a_known_cadence():
     steps, moving = periodicity_steps(t, acc)
     assert moving == 60.0 and abs(steps - 108.0) < 0.03 * 108.0
     assert periodicity_steps(t, np.stack([np.zeros_like(t)] * 2 + [np.full_like(t, 9.81)], axis=1)) == (0.0, 0.0)
+
+
+def test_reversed_steps_counts_backward_groups():
+    # fixes every second walking north-east at 1.3 m/s; steps every 0.5 s, heading = course - 12 deg, except a
+    # group of 8 steps turned by 180 deg (a flipped sign) and a mean offset of 12 deg that must not count
+    t = (np.arange(120) * 1e9).astype(np.int64)
+    course = math.radians(40.0)
+    e, n = 1.3 * np.arange(120.0) * math.cos(course), 1.3 * np.arange(120.0) * math.sin(course)
+    st_t = (np.arange(10, 220) * 0.5e9).astype(np.int64)
+    head = np.full(len(st_t), course - math.radians(12.0))
+    head[100:108] += math.pi
+    head[150] = np.nan
+    r = reversed_steps((t, e, n, np.full(120, 4.0)), st_t, head, 12.0)
+    assert r["n"] == len(st_t) - 1
+    assert abs(r["reversed_pct"] - 100.0 * 8 / r["n"]) < 1e-9
+    assert reversed_steps(None, st_t, head, 12.0)["reversed_pct"] is None
+    still = reversed_steps((t, np.zeros(120), np.zeros(120), np.full(120, 4.0)), st_t, head, 12.0)
+    assert still["n"] == 0 and still["reversed_pct"] is None  # no chord: no course, nothing counted

@@ -16,7 +16,7 @@ import pytest
 
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
-from core.pdr.walkdir import SIGN_METHODS, WalkingDirection
+from core.pdr.walkdir import SIGN_METHODS, WalkingDirection, _AxisState
 from tests.test_walkdir import RATE_HZ, STEP_HZ, _feed
 
 
@@ -89,3 +89,70 @@ def test_sign_method_checked_and_no_nan():
         wd.update(k * 20_000_000, q, 0.0, 0.0, STANDARD_GRAVITY_M_S2 if k % 7 else math.nan, 0.0, 1.0, k % 25 == 0)
     assert wd.n_accepted == 0 and math.isfinite(wd.offset_rad) and wd.n_nonfinite > 0
     assert math.isfinite(wd._skew_along(0.3))
+
+
+def _strides(wd: WalkingDirection, pattern: str, truth: float = 0.3, seed: int = 1, skew=None) -> list:
+    """Accepted strides fed at the stride level (``_accumulate``), as on the real tuning walk
+    ``thomasdingemanse_lopen``: a limb whose raw-axis strides (``"p"``) have the forward skew (+0.15) and
+    whose other strides (``"c"``, the coherent axis, 25 deg to one side) carry the trunk's phase evidence,
+    reversed on a limb (-0.3 along the walk).  ``skew``: each stride's skew evidence (default 0.15).  Returns the
+    offset after each stride."""
+    rng = np.random.default_rng(seed)
+    st = _AxisState()
+    out = []
+    for i, ch in enumerate(pattern):
+        raw_axis = truth + math.radians(3.0) * rng.standard_normal()
+        theta = raw_axis if ch == "p" else truth + math.radians(25.0)
+        g = -0.3  # the phase rule's evidence along the walk: backwards on this limb
+        kev = 0.15 if skew is None else skew[i]
+        wd._accumulate(st, theta, g * math.cos(theta), g * math.sin(theta), kev, ch == "p", raw_axis)
+        st.n += 1
+        out.append(wd._offset_of(st))
+    return out
+
+
+def test_one_limb_decision_per_placement():
+    """A limb whose share of raw-axis strides hovers about a half (the lopen walk: 0.43-0.83 over a minute)
+    keeps its sign: the per-stride majority rule of the skew sign flipped the whole estimate backwards each
+    time the share dipped below a half (groups of 2-8 steps walked backwards on the real walk); the placement's
+    raw axis also removes the coherent strides' sideways pull."""
+    pattern = "pppppppppp" + "ccpcpcpccpcpccppcpcc" * 4  # the share of "p" falls from 1 to about 0.45
+    old = WalkingDirection(sign_method="auto", limb_exit_share=0.5, limb_raw_axis=False, limb_sign_margin=0.0)
+    new = WalkingDirection(sign_method="auto")
+    err_old = np.degrees(np.abs([wrap_angle(o - 0.3) for o in _strides(old, pattern)]))
+    err_new = np.degrees(np.abs([wrap_angle(o - 0.3) for o in _strides(new, pattern)]))
+    assert np.max(err_old) > 150.0  # the rule before: backwards while the share is below a half
+    assert np.max(err_new[10:]) < 5.0  # one decision: forward throughout, on the raw axis
+    with pytest.raises(ValueError, match="limb_exit_share"):
+        WalkingDirection(limb_enter_share=0.3, limb_exit_share=0.5)
+
+
+def test_axis_state_values_round_trip():
+    st = _AxisState()
+    for i, k in enumerate(_AxisState.FIELDS):
+        setattr(st, k, 0.5 + i)
+    st.n = 7
+    back = _AxisState.from_values(st.values(), st.n)
+    assert back.values() == st.values() and back.n == 7
+    part = _AxisState.from_values(st.values()[:6], 3)  # the fast kernel's rows: the phase rule's six
+    assert part.values()[:6] == st.values()[:6] and part.kx == part.limb == 0.0
+
+
+def test_limb_sign_holds_through_a_dip_of_the_skew():
+    """A limb's per-stride skew is a weak, noisy cue (right on 76 % of the lopen walk's strides; its remembered
+    mean near +0.05 and dipping to -0.05 at 37-45 s and 71 s, where the steps went backwards): the direction
+    holds until the evidence is clearly against it, and still turns when it is (the phone turned round)."""
+    rng = np.random.default_rng(3)
+    n = 120
+    skew = 0.08 + 0.3 * rng.standard_normal(n)
+    skew[40:48] = -0.25  # a dip: the mean evidence falls just below zero
+    skew[80:] = -0.4  # the phone turned round: clearly backwards from here on
+    skew = np.clip(skew, -1.0, 1.0)
+    errs = {}
+    for margin in (0.0, 0.1):
+        wd = WalkingDirection(sign_method="auto", limb_sign_margin=margin)
+        offs = _strides(wd, "p" * n, skew=skew)
+        errs[margin] = np.degrees(np.abs([wrap_angle(o - 0.3) for o in offs]))
+    assert np.max(errs[0.0][10:80]) > 150.0  # stride by stride: backwards in the dip
+    assert np.max(errs[0.1][10:80]) < 10.0  # held
+    assert np.all(errs[0.1][95:] > 170.0) and np.all(errs[0.0][95:] > 170.0)  # both follow a real turn

@@ -113,6 +113,20 @@ uses the skew where most of the remembered strides (forgetting weight) took the 
 axis rule above -- else the phase: on the trunk it is the phase rule bit for bit.  ``"phase"`` is the rule of
 the section above alone.  The third moments are O(1) sums per sample like the others.
 
+One decision per placement (issue #25)
+--------------------------------------
+Which evidence decides the sign is a property of where the phone is, not of one stride: with
+``sign_method="auto"`` each device axis's state carries a **limb** flag, set once the remembered (forgetting
+weight) share of raw-axis strides reaches ``limb_enter_share`` (a half) and cleared only when it falls below
+``limb_exit_share`` (a quarter).  The rule before switched the evidence at a half, stride by stride: on the
+tuning walk ``thomasdingemanse_lopen`` (a limb; 71 % raw-axis strides, the share between 0.43 and 0.83 over a
+minute) every dip below a half handed the sign to the trunk's phase rule, which points backwards on a limb,
+and the step heading walked backwards in groups of 2-8 steps (e.g. 185-189 s and 231-240 s): a 30-s mean
+hides them, an outage does not.  A limb's axis is, with ``limb_raw_axis``, the circular mean of every
+stride's raw-covariance axis: the coherent axis of a limb's less anisotropic strides lay 20-35 deg to one
+side of the raw one on that walk (the trunk's rule for the trunk's motion), and mixing them pulled the offset
+by about 8 deg.  On the trunk nothing changes (the flag stays off: the phase rule and each stride's axis).
+
 Smoothing: circular means with forgetting
 -----------------------------------------
 Turns rotate the walk and the device together, so the offset is a constant
@@ -178,7 +192,10 @@ def _anisotropy(cxx: float, cyy: float, cxy: float) -> float:
 class _AxisState:
     """The two circular accumulators of one device axis (see the module docstring)."""
 
-    __slots__ = ("c2", "s2", "w", "w2", "gx", "gy", "n", "kx", "ky", "wp")
+    __slots__ = ("c2", "s2", "w", "w2", "gx", "gy", "n", "kx", "ky", "wp", "c2r", "s2r", "limb", "fwd")
+
+    #: the float accumulators, in the order :meth:`values` gives them (the fast path's trace stores them)
+    FIELDS = ("c2", "s2", "w", "w2", "gx", "gy", "kx", "ky", "wp", "c2r", "s2r", "limb", "fwd")
 
     def __init__(self):
         self.c2 = self.s2 = self.w = self.w2 = 0.0
@@ -186,6 +203,26 @@ class _AxisState:
         self.n = 0
         #: ``sign_method="auto"``: the skew evidence and the weight of the limb (raw-axis) strides
         self.kx = self.ky = self.wp = 0.0
+        #: ``sign_method="auto"``: the raw covariance's axis of every stride (doubled angle) and whether the
+        #: placement counts as a limb now (1.0) or the trunk (0.0), with hysteresis (issue #25)
+        self.c2r = self.s2r = 0.0
+        self.limb = 0.0
+        #: ``sign_method="auto"``: the offset after the last stride (rad; nan before any), the direction a
+        #: limb's sign holds to until the evidence turns clearly against it
+        self.fwd = math.nan
+
+    def values(self) -> tuple:
+        """The float accumulators (:data:`FIELDS`)."""
+        return tuple(getattr(self, k) for k in self.FIELDS)
+
+    @classmethod
+    def from_values(cls, values, n: int) -> "_AxisState":
+        """The state of :meth:`values` (a prefix of :data:`FIELDS` is enough) and ``n`` strides."""
+        st = cls()
+        for k, v in zip(cls.FIELDS, values):  # a prefix: the rest keep their initial values
+            setattr(st, k, float(v))
+        st.n = int(n)
+        return st
 
 
 class WalkingDirection:
@@ -234,6 +271,17 @@ class WalkingDirection:
         Time constant of the leaky integrator from horizontal acceleration to velocity (s), for the skew.
     skew_scale : float
         A stride's skew over this is clipped to +-1 as its sign evidence.
+    limb_enter_share, limb_exit_share : float
+        ``sign_method="auto"``: the placement becomes a limb once the remembered share of raw-axis strides
+        reaches ``limb_enter_share``, and the trunk again once it falls below ``limb_exit_share``
+        (hysteresis: one decision per placement, not one per stride; see "One decision per placement").
+    limb_raw_axis : bool
+        ``sign_method="auto"``: a limb's axis is the mean of every stride's raw-covariance axis (True), or
+        the mean of each stride's own choice (False, the rule before issue #25's placement decision).
+    limb_sign_margin : float
+        ``sign_method="auto"``, a limb: its direction (forward or backward along the axis) holds until the
+        mean skew evidence along it (-1..1 per stride, forgetting-weighted) falls below ``-limb_sign_margin``;
+        0: the sign of the evidence, stride by stride (the rule before).
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, delay_s: float = 0.45, vz_leak_time_s: float = 1.0,
@@ -246,7 +294,9 @@ class WalkingDirection:
                  auto_min_offset_rad: float = math.radians(45.0),
                  max_strides_kept: int = 64, axis_method: str = "auto",
                  pca_min_anisotropy: float = 8.0, min_coherence: float = 0.0, reset_after_gap_s: float = 10.0,
-                 sign_method: str = "auto", velocity_leak_time_s: float = 0.5, skew_scale: float = 1.0):
+                 sign_method: str = "auto", velocity_leak_time_s: float = 0.5, skew_scale: float = 1.0,
+                 limb_enter_share: float = 0.5, limb_exit_share: float = 0.25, limb_raw_axis: bool = True,
+                 limb_sign_margin: float = 0.1):
         self.grid_rate_hz = float(grid_rate_hz)
         self.delay_s = float(delay_s)
         self.vz_leak_time_s = float(vz_leak_time_s)
@@ -276,6 +326,13 @@ class WalkingDirection:
         self.sign_method = sign_method
         self.velocity_leak_time_s = float(velocity_leak_time_s)
         self.skew_scale = float(skew_scale)
+        if not 0.0 <= limb_exit_share <= limb_enter_share <= 1.0:
+            raise ValueError(f"need 0 <= limb_exit_share <= limb_enter_share <= 1, got {limb_exit_share}, "
+                             f"{limb_enter_share}")
+        self.limb_enter_share = float(limb_enter_share)
+        self.limb_exit_share = float(limb_exit_share)
+        self.limb_raw_axis = bool(limb_raw_axis)
+        self.limb_sign_margin = float(limb_sign_margin)
         self._vleak = math.exp(-1.0 / (self.grid_rate_hz * self.velocity_leak_time_s))
         self._gap_ns = int(self.reset_after_gap_s * 1e9)
         dt = 1.0 / self.grid_rate_hz
@@ -500,8 +557,9 @@ class WalkingDirection:
         if method == "auto":
             method = "pca" if raw_aniso >= self.pca_min_anisotropy else "coherent"
         rec["method"] = method
+        theta_raw = 0.5 * math.atan2(2.0 * cxy, cxx - cyy)  # the raw covariance's axis, from the device heading
         if method == "pca":
-            theta = 0.5 * math.atan2(2.0 * cxy, cxx - cyy)  # axis angle from the device heading
+            theta = theta_raw
             aniso = raw_aniso
         else:
             if coherence < self.min_coherence:
@@ -535,17 +593,7 @@ class WalkingDirection:
         if st_ is None:
             st_ = self._states[self._axis_key] = _AxisState()
         smoothed_before = self._offset_of(st_) if st_.n else None
-        f = self._forget
-        st_.c2 = f * st_.c2 + math.cos(2.0 * theta)
-        st_.s2 = f * st_.s2 + math.sin(2.0 * theta)
-        st_.w = f * st_.w + 1.0
-        st_.w2 = f * f * st_.w2 + 1.0
-        st_.gx = f * st_.gx + gx
-        st_.gy = f * st_.gy + gy
-        if sm == "auto":
-            st_.kx = f * st_.kx + kev * ct
-            st_.ky = f * st_.ky + kev * st
-            st_.wp = f * st_.wp + (1.0 if method == "pca" else 0.0)
+        self._accumulate(st_, theta, gx, gy, kev, method == "pca", theta_raw)
         st_.n += 1
         self.n_accepted += 1
         rec["accepted"] = True
@@ -553,18 +601,66 @@ class WalkingDirection:
             self.n_sign_disagreements += 1
         return ""
 
+    def _accumulate(self, st: _AxisState, theta: float, gx: float, gy: float, kev: float = 0.0,
+                    raw: bool = False, theta_raw: float | None = None) -> None:
+        """One accepted stride into an axis's accumulators: its axis ``theta`` (rad from the device heading),
+        its sign evidence ``(gx, gy)`` (the phase's), its skew evidence ``kev`` (-1..1 along ``theta``),
+        whether its axis came from the raw covariance (``raw``: a limb's stride) and the raw covariance's axis
+        ``theta_raw`` (default ``theta``).  ``n`` is left to the caller."""
+        f = self._forget
+        st.c2 = f * st.c2 + math.cos(2.0 * theta)
+        st.s2 = f * st.s2 + math.sin(2.0 * theta)
+        st.w = f * st.w + 1.0
+        st.w2 = f * f * st.w2 + 1.0
+        st.gx = f * st.gx + gx
+        st.gy = f * st.gy + gy
+        if self.sign_method != "auto":
+            return
+        tr = theta if theta_raw is None else theta_raw
+        st.kx = f * st.kx + kev * math.cos(theta)
+        st.ky = f * st.ky + kev * math.sin(theta)
+        st.wp = f * st.wp + (1.0 if raw else 0.0)
+        st.c2r = f * st.c2r + math.cos(2.0 * tr)
+        st.s2r = f * st.s2r + math.sin(2.0 * tr)
+        # one decision per placement, with hysteresis: a limb until its share of raw strides falls well below half
+        share = st.wp / st.w
+        if st.limb:
+            if share < self.limb_exit_share:
+                st.limb = 0.0
+        elif share >= self.limb_enter_share:
+            st.limb = 1.0
+        st.fwd = self._offset_of(st)
+
     # -- the estimate -------------------------------------------------------------
     def _sign_vector(self, st: _AxisState) -> tuple[float, float]:
         """The accumulated sign evidence (a 2-vector pointing forward): the phase evidence, or with
         ``sign_method="auto"`` the skew evidence where most of the remembered strides were a limb's."""
-        if self.sign_method == "auto" and st.wp >= 0.5 * st.w:
+        if self.sign_method == "auto" and st.limb:
             return st.kx, st.ky
         return st.gx, st.gy
 
+    def _axis_sums(self, st: _AxisState) -> tuple[float, float]:
+        """The doubled-angle sums the offset's axis comes from: with ``sign_method="auto"`` and
+        ``limb_raw_axis``, a limb's are every stride's raw-covariance axes; else each stride's own choice."""
+        if self.sign_method == "auto" and self.limb_raw_axis and st.limb:
+            return st.c2r, st.s2r
+        return st.c2, st.s2
+
     def _offset_of(self, st: _AxisState) -> float:
-        theta = 0.5 * math.atan2(st.s2, st.c2)
+        c2, s2 = self._axis_sums(st)
+        theta = 0.5 * math.atan2(s2, c2)
         gx, gy = self._sign_vector(st)
-        if gx * math.cos(theta) + gy * math.sin(theta) < 0.0:
+        along = gx * math.cos(theta) + gy * math.sin(theta)
+        if self.sign_method == "auto" and st.limb and st.fwd == st.fwd:
+            # a limb holds its direction: the end of the axis nearer the last offset, unless the evidence along
+            # it is clearly against it (the mean skew evidence below -limb_sign_margin)
+            if math.cos(theta - st.fwd) < 0.0:
+                theta += math.pi
+                along = -along
+            if along < -self.limb_sign_margin * st.w:
+                theta += math.pi
+            return wrap_angle(theta)
+        if along < 0.0:
             theta += math.pi
         return wrap_angle(theta)
 
@@ -588,7 +684,7 @@ class WalkingDirection:
     def axis_resultant(self) -> float:
         """Mean resultant length of the doubled stride axes (1: all strides agree; 0: no axis)."""
         st = self._state()
-        return math.hypot(st.c2, st.s2) / st.w if st is not None else 0.0
+        return math.hypot(*self._axis_sums(st)) / st.w if st is not None else 0.0
 
     @property
     def offset_sigma_rad(self) -> float:
@@ -596,7 +692,7 @@ class WalkingDirection:
         st = self._state()
         if st is None:
             return math.pi
-        r = min(max(math.hypot(st.c2, st.s2) / st.w, 1e-12), 1.0)
+        r = min(max(math.hypot(*self._axis_sums(st)) / st.w, 1e-12), 1.0)
         spread = 0.5 * math.sqrt(-2.0 * math.log(r))
         n_eff = st.w * st.w / st.w2
         return min(spread / math.sqrt(n_eff), math.pi)

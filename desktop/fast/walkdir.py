@@ -353,18 +353,14 @@ assert set(_METHODS) == set(AXIS_METHODS)
 
 
 def _axis_state(row, n) -> _AxisState:
-    st = _AxisState()
-    vals = row.tolist()
-    st.c2, st.s2, st.w, st.w2, st.gx, st.gy = vals[:6]
-    if len(vals) > 6:  # fed through update (sign_method other than "phase"): the skew evidence too
-        st.kx, st.ky, st.wp = vals[6:9]
-    st.n = int(n)
-    return st
+    # the kernel's rows hold c2, s2, w, w2, gx, gy; fed through update (sign_method other than "phase"),
+    # every accumulator of core's state (_AxisState.FIELDS)
+    return _AxisState.from_values(row.tolist(), n)
 
 
 class WalkdirTrace:
     """The stage's run over a grid (:func:`walking_direction_over_grid`): the estimate after each grid sample
-    (the current axis ``key`` and its accumulators ``acc`` (n, 6: c2, s2, w, w2, gx, gy; n, 9 with kx, ky, wp
+    (the current axis ``key`` and its accumulators ``acc`` (n, 6: c2, s2, w, w2, gx, gy; n, 12: every field of core's ``_AxisState.FIELDS``
     when fed through ``update``), ``n_used`` (0: no
     estimate)), from ``j_init`` on, and the final state."""
 
@@ -490,7 +486,7 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
 def _fed(wd, t, q, acc, fe, fn, step, ids, keys, j_init) -> WalkdirTrace:
     """The trace by ``wd.update`` itself, sample by sample (fed as ``StepRelease`` fed it), and its final state."""
     n = len(t)
-    cur = np.zeros((n, 9))
+    cur = np.zeros((n, len(_AxisState.FIELDS)))
     cur_n = np.zeros(n, dtype=np.int64)
     cur_key = np.full(n, -1, dtype=np.int64)
     index = {k: i for i, k in enumerate(keys)}
@@ -505,7 +501,7 @@ def _fed(wd, t, q, acc, fe, fn, step, ids, keys, j_init) -> WalkdirTrace:
             cur_key[j] = index[key]
             st = wd._states.get(key)
             if st is not None and st.n:
-                cur[j] = (st.c2, st.s2, st.w, st.w2, st.gx, st.gy, st.kx, st.ky, st.wp)
+                cur[j] = st.values()
                 cur_n[j] = st.n
     states = dict(wd._states)  # at() replaces the dict: the final one is kept here (its states no longer change)
     return WalkdirTrace(j_init, keys, cur_key, cur, cur_n, {"_axis_key": wd._axis_key, "_states": states})
