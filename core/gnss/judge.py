@@ -25,6 +25,14 @@ Evidence over the last ``window_s`` of screened fixes
       among themselves and with the walker's motion: a stream that moves
       while the walker turns in a 10-m room, or stands while the walker
       walks on, is not a position;
+    * **or consistency among the fixes themselves** (``self_consistency``, issue #26
+      follow-up: on phone walks with a poor step heading or stride the test above
+      refused most of a good stream, and the stride could not be learnt from it):
+      each inner fix within the shape test's limit of the point interpolated between
+      its neighbours (RMS, scaled to one fix's error), consecutive fixes apart by no
+      more than a walk at ``max_walk_speed_m_s`` plus three SDs of their reported
+      accuracy, the window's fixes no further than the steps' own path (heading-free)
+      allows, and the steps going somewhere (``min_step_straightness``: not a room);
     * **the filter's innovations** (:meth:`GpsJudge.add_nis`): the mean NIS
       of the last ``nis_window`` fixes the filter took within the upper
       ``nis_quantile`` point of its chi-square band (2 degrees of freedom
