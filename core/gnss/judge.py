@@ -25,6 +25,14 @@ Evidence over the last ``window_s`` of screened fixes
       among themselves and with the walker's motion: a stream that moves
       while the walker turns in a 10-m room, or stands while the walker
       walks on, is not a position;
+    * **or consistency among the fixes themselves** (``self_consistency``, issue #26
+      follow-up: on phone walks with a poor step heading or stride the test above
+      refused most of a good stream, and the stride could not be learnt from it):
+      each inner fix within the shape test's limit of the point interpolated between
+      its neighbours (RMS, scaled to one fix's error), consecutive fixes apart by no
+      more than a walk at ``max_walk_speed_m_s`` plus three SDs of their reported
+      accuracy, the window's fixes no further than the steps' own path (heading-free)
+      allows, and the steps going somewhere (``min_step_straightness``: not a room);
     * **the filter's innovations** (:meth:`GpsJudge.add_nis`): the mean NIS
       of the last ``nis_window`` fixes the filter took within the upper
       ``nis_quantile`` point of its chi-square band (2 degrees of freedom
@@ -101,6 +109,17 @@ class JudgeSettings:
     #: a noisy minute's few fine-looking fixes between coarse ones were otherwise taken, one 30 m off).
     #: 0 turns it off (a fresh ``window_s`` + ``usable_after_s`` after every gap)
     resume_max_gap_s: float = 60.0
+    #: fixes that agree among themselves (:meth:`GpsJudge._self_residual_m` within the shape test's limit) and
+    #: move no faster than the steps do (:meth:`GpsJudge._walking_pace_ok`) are consistent whatever the steps'
+    #: heading (issue #26: on walks with a poor heading the shape test refused most of a good stream); False:
+    #: only the shape test
+    self_consistency: bool = True
+    #: the fastest walk (m/s) between two consecutive fixes (the screening's ``max_speed_m_s``)
+    max_walk_speed_m_s: float = 3.0
+    #: for the fix-to-fix test the steps must go somewhere: their displacement over the window at least this share
+    #: of their path (the issue's 10-m room: a walker going round a 5-m square in 15 s gets under 0.25; a zigzag of
+    #: +-60 deg, a poor walking direction, keeps 0.5).  Set from those two cases, not from data
+    min_step_straightness: float = 0.25
 
 
 @dataclass(frozen=True)
@@ -113,6 +132,7 @@ class Judgement:
     n_fixes: int = 0  #: screened fixes in the window
     median_hacc_m: float = math.nan
     shape_residual_m: float = math.nan  #: RMS residual against the steps after the best rigid motion (m)
+    self_residual_m: float = math.nan  #: RMS residual of each fix against its neighbours (m, ``_self_residual_m``)
     signal_fail_share: float = math.nan  #: of the window's fixes with a receiver status, the share failing
     nis_mean: float = math.nan  #: mean NIS of the filter's last accepted fixes
     nis_limit: float = math.nan  #: its chi-square band's upper point
@@ -120,7 +140,8 @@ class Judgement:
     def as_dict(self) -> dict:
         return {"t_ns": self.t_ns, "verdict": self.verdict.value, "causes": [c.value for c in self.causes],
                 "n_fixes": self.n_fixes, "median_hacc_m": self.median_hacc_m,
-                "shape_residual_m": self.shape_residual_m, "signal_fail_share": self.signal_fail_share,
+                "shape_residual_m": self.shape_residual_m, "self_residual_m": self.self_residual_m,
+                "signal_fail_share": self.signal_fail_share,
                 "nis_mean": self.nis_mean, "nis_limit": self.nis_limit}
 
 
@@ -276,14 +297,21 @@ class GpsJudge:
             causes.append(Cause.SIGNAL)
         limit = max(s.shape_residual_floor_m, s.shape_residual_per_hacc * med) if med == med else math.nan
         moved_off = self._displacement_off_m(med) if n >= s.min_fixes else math.nan
-        if n >= s.min_fixes and (not resid <= limit or moved_off > 0.0):
+        self_resid = self._self_residual_m() if n >= s.min_fixes and s.self_consistency else math.nan
+        # the fixes agree with the steps' shape, or (whatever the steps' heading and count) among themselves with
+        # their stated accuracy at a walking speed no faster than the steps allow (a phone in a pocket, a poor
+        # step count: the shape test then fails on the steps, not on GPS)
+        steps_agree = resid <= limit and not moved_off > 0.0
+        self_agree = self_resid <= limit and self._walking_pace_ok()
+        if n >= s.min_fixes and not (steps_agree or self_agree):
             causes.append(Cause.INCONSISTENT)
         if nis_mean == nis_mean and nis_mean > self.nis_limit:
             causes.append(Cause.NIS)
             self._nis.clear()  # judged once: the next window starts afresh
-        if n >= s.min_fixes and not resid <= limit:  # a jump or an offset episode in the stream itself
+        if n >= s.min_fixes and not (resid <= limit or self_agree):  # a jump or an offset episode in the stream
             self.last_inconsistent_ns = t_ns
-        kw = dict(n_fixes=n, median_hacc_m=med, shape_residual_m=resid, signal_fail_share=fail,
+        kw = dict(n_fixes=n, median_hacc_m=med, shape_residual_m=resid, self_residual_m=self_resid,
+                  signal_fail_share=fail,
                   nis_mean=nis_mean, nis_limit=self.nis_limit)
         if self._resuming and causes == [Cause.FEW_FIXES]:
             # a short gap in a stream found usable (a tunnel, a hidden window): still usable while the window
@@ -302,10 +330,53 @@ class GpsJudge:
         unknown = self.verdict is GpsVerdict.UNKNOWN and set(causes) <= {Cause.FEW_FIXES, Cause.SETTLING}
         return Judgement(t_ns, GpsVerdict.UNKNOWN if unknown else GpsVerdict.UNUSABLE, tuple(causes), **kw)
 
-    def _displacement_off_m(self, hacc_m: float) -> float:
+    def _self_residual_m(self) -> float:
+        """RMS distance (m) of each inner fix of the window from the point interpolated in time between its two
+        neighbours, times sqrt(2/3) (for white fix noise that is the RMS error of one fix, what the shape test's
+        limit is set for); nan with fewer than 3 fixes."""
+        fx = list(self._fixes)
+        if len(fx) < 3:
+            return math.nan
+        a = np.array([(f[0] * 1e-9, f[1], f[2]) for f in fx])
+        t, p = a[:, 0], a[:, 1:]
+        dt = t[2:] - t[:-2]
+        w = np.where(dt > 0, (t[1:-1] - t[:-2]) / np.where(dt > 0, dt, 1.0), 0.5)[:, None]
+        r = p[1:-1] - (p[:-2] + w * (p[2:] - p[:-2]))
+        return float(math.sqrt(2.0 / 3.0) * math.sqrt(np.mean(np.sum(r * r, axis=1))))
+
+    def _walking_pace_ok(self) -> bool:
+        """The fixes move as a walker can, whatever the steps' heading: every two consecutive fixes apart by no
+        more than ``max_walk_speed_m_s`` covers between them, and the window's fixes no further than the steps'
+        own path (the distance between the dead-reckoned positions at the fix times, summed: heading-free) times
+        ``step_scale_limits``' upper end, each give or take three SDs of the difference of the fixes compared
+        (their reported accuracy); and the steps go somewhere: their displacement over the window at least
+        ``min_step_straightness`` of their path (a walker turning around in a room while the fixes move on is not
+        a position, however well the fixes agree among themselves)."""
+        s = self.settings
+        fx = np.array([(f[0], f[1], f[2], f[3], math.nan, f[5], f[6]) for f in self._fixes], dtype=float)
+        if len(fx) < 2:
+            return False
+        t = fx[:, 0] * 1e-9
+        d_fix = np.hypot(*np.diff(fx[:, 1:3], axis=0).T)
+        sd = np.hypot(fx[:-1, 3], fx[1:, 3]) / 1.515  # hacc is a 68 % radius: 1.515 per-axis SDs
+        if not np.all(d_fix <= s.max_walk_speed_m_s * np.diff(t) + 3.0 * sd):
+            return False
+        if not np.isfinite(fx[:, 5:7]).all():
+            return True  # no steps yet: the fixes alone
+        k = min(3, len(fx) // 2)
+        a, b = fx[:k], fx[-k:]
+        span_fix = math.hypot(*(b[:, 1:3].mean(axis=0) - a[:, 1:3].mean(axis=0)))
+        span_pdr = math.hypot(*(b[:, 5:7].mean(axis=0) - a[:, 5:7].mean(axis=0)))
+        path = float(np.sum(np.hypot(*np.diff(fx[:, 5:7], axis=0).T)))
+        tol = 2.0 * math.sqrt(2.0 / k) * float(np.median(fx[:, 3])) / 1.515  # as _displacement_off_m's
+        return span_fix <= s.step_scale_limits[1] * path + tol and span_pdr >= s.min_step_straightness * path
+
+    def _displacement_off_m(self, hacc_m: float, upper_only: bool = False) -> float:
         """How far (m) the fixes' displacement over the window lies outside what the steps' allows: the mean of
         the first and of the last three fixes, against the dead-reckoned displacement times ``step_scale_limits``,
-        with twice the SD of the difference of two such means as tolerance (<= 0: they agree)."""
+        with twice the SD of the difference of two such means as tolerance (<= 0: they agree).  ``upper_only``:
+        only whether the fixes moved further than the steps (a wrong heading shortens the steps' displacement,
+        never lengthens it)."""
         fx = list(self._fixes)
         k = min(3, len(fx) // 2)
         if k < 1:
@@ -315,7 +386,7 @@ class GpsJudge:
         d_pdr = math.hypot(*(b[:, 5:7].mean(axis=0) - a[:, 5:7].mean(axis=0)))
         lo, hi = self.settings.step_scale_limits
         tol = 2.0 * math.sqrt(2.0 / k) * hacc_m / 1.515  # hacc is a 68 % radius: 1.515 per-axis SDs
-        return max(lo * d_pdr - d_fix, d_fix - hi * d_pdr) - tol
+        return (d_fix - hi * d_pdr if upper_only else max(lo * d_pdr - d_fix, d_fix - hi * d_pdr)) - tol
 
     def summary(self) -> dict:
         """What the judge said over the walk (data): fixes judged, share usable, fixes per cause, the verdict now."""
