@@ -56,7 +56,7 @@ from typing import Callable
 from core.conventions import CARRY_WORDS, GPS, PRESSURE, bearing_deg
 from core.export import StepFile
 from core.floors import FloorEstimator, floors_at
-from core.gnss.base import ANCHOR_MAX_HACC_M
+from core.gnss.base import ANCHOR_MAX_HACC_M, FusedTrack
 from core.geodesy import geodetic_to_enu
 from core.recording import STREAM_ORDER, STREAM_SPECS
 
@@ -200,6 +200,9 @@ class Session:
     def reset_track(self) -> None:
         """Start a new track (new pipeline, empty track and health); the recording goes on."""
         self.pipeline = self.pipeline_factory()
+        g = self.gnss
+        if g is not None and not g.keep_history and g.history_dir is None:
+            g.history_dir = self._steps_dir()  # its fused steps and fix records beside the recording too
         old = getattr(self, "steps", None)
         if old is not None:
             old.close()
@@ -228,6 +231,7 @@ class Session:
         self.fix_accepted: list = []
         self._fixes_seen = 0
         self._fixes_used = 0
+        self._fused_seen = 0
         # the barometer's floors (core.floors), beside the tracker: pressure events never reach the pipeline
         self.floors = FloorEstimator()
         # the floor plan's particle filter (app.indoor), placed again on every new track
@@ -412,11 +416,13 @@ class Session:
             if self.map is not None:
                 self.map.add_step(s)
             new.append(s)
-        fused = getattr(self.pipeline, "fused", ())
-        for f in fused[len(self.fused_source):]:
-            self.fused_east.append(float(f.east_m))
-            self.fused_north.append(float(f.north_m))
-            self.fused_source.append(f.source)
+        g = self.gnss
+        if g is not None and len(g.steps) > self._fused_seen:
+            for f in g.steps[self._fused_seen:]:  # the fusion's last steps (read back only if many came at once)
+                self.fused_east.append(float(f.east_m))
+                self.fused_north.append(float(f.north_m))
+                self.fused_source.append(f.source)
+            self._fused_seen = len(g.steps)
         self._sync_fixes()  # fixes wait in the fusion for the step after them
 
     def _sync_fixes(self) -> None:
@@ -682,7 +688,7 @@ def export_session(session: Session, out_dir: str, basename: str, raw_path: str 
     gnss = session.gnss
     origin = gnss.origin_lat_lon if gnss is not None and gnss.origin_lat_lon is not None else session.gps_origin
     if gnss is not None and gnss.origin_lat_lon is not None and gnss.steps:
-        fused = gnss.result().track()
+        fused = FusedTrack.from_steps(gnss.steps)  # read back from disk in one pass in the live app
         track, extra = fused, fused.point_properties()
     if session.floors.counters["readings"]:  # the barometer's floor of every step
         extra = {**(extra or {}), "floor": floors_at(session.floors.changes, track.t_ns).tolist()}
