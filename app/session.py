@@ -28,7 +28,15 @@ GPS fusion
     A pipeline built with ``gnss=GpsFusion()`` (:meth:`app.settings.Settings.pipeline_factory`
     with "Use GPS" on) gives a fused track, one :class:`core.gnss.fusion.FusedStep` per step.
     The session keeps what the track view draws as plain lists, appended as steps and fixes
-    come (never rebuilt): :meth:`Session.gps_overlay` hands them out as a :class:`GpsOverlay`.
+    come: :meth:`Session.gps_overlay` hands them out as a :class:`GpsOverlay`.
+
+View lines, bounded (issue #30)
+    A line the view draws (the dead-reckoned track, the fused one) that passes
+    :data:`app.overlay.VIEW_MAX_POINTS` is thinned (:func:`app.overlay.thin_line`: the old part
+    decimated, the last points whole) into new lists, and the fixes keep the last
+    :data:`app.overlay.VIEW_MAX_FIXES` (what the view draws); new lists are a new track to the view
+    (it redraws them whole) and :attr:`Session.view_generation` counts them (the service's UI then
+    fetches them anew).  The exports read the whole tracks back from disk (``steps``, the fusion's).
     Fixes the fusion screened out (bad accuracy) carry no local position in their record;
     once the walk is anchored they are placed from their latitude/longitude, so the view can
     show them as rejected.
@@ -62,6 +70,7 @@ from core.recording import STREAM_ORDER, STREAM_SPECS
 
 from app.health import HealthMonitor
 from app.indoor import MapMatcher
+from app.overlay import VIEW_MAX_FIXES, VIEW_MAX_POINTS, VIEW_RECENT_POINTS, thin_line
 from app.recorder import BackgroundRecorder
 
 _RANK = {n: i for i, n in enumerate(STREAM_ORDER)}
@@ -232,6 +241,8 @@ class Session:
         self._fixes_seen = 0
         self._fixes_used = 0
         self._fused_seen = 0
+        #: times the view's lists were replaced by thinned ones (see "View lines, bounded")
+        self.view_generation = 0
         # the barometer's floors (core.floors), beside the tracker: pressure events never reach the pipeline
         self.floors = FloorEstimator()
         # the floor plan's particle filter (app.indoor), placed again on every new track
@@ -424,6 +435,24 @@ class Session:
                 self.fused_source.append(f.source)
             self._fused_seen = len(g.steps)
         self._sync_fixes()  # fixes wait in the fusion for the step after them
+        self._bound_view()
+
+    def _bound_view(self) -> None:
+        """Thin the view's lines that grew past their bound into new lists (see "View lines, bounded")."""
+        if len(self.track_east) > VIEW_MAX_POINTS:
+            self.track_east, self.track_north, _, _ = thin_line(self.track_east, self.track_north,
+                                                                max_points=VIEW_MAX_POINTS, recent=VIEW_RECENT_POINTS)
+            self.view_generation += 1
+        if len(self.fused_east) > VIEW_MAX_POINTS:
+            self.fused_east, self.fused_north, self.fused_source, _ = thin_line(
+                self.fused_east, self.fused_north, self.fused_source, max_points=VIEW_MAX_POINTS,
+                recent=VIEW_RECENT_POINTS)
+            self.view_generation += 1
+        if len(self.fix_east) > VIEW_MAX_FIXES + VIEW_MAX_FIXES // 5:
+            k = len(self.fix_east) - VIEW_MAX_FIXES
+            self.fix_east, self.fix_north = self.fix_east[k:], self.fix_north[k:]
+            self.fix_hacc, self.fix_accepted = self.fix_hacc[k:], self.fix_accepted[k:]
+            self.view_generation += 1
 
     def _sync_fixes(self) -> None:
         """Append the fusion's new fix records to the view's lists (from the anchoring on: before it, no
@@ -444,6 +473,7 @@ class Session:
                 self.fix_accepted.append(bool(f.accepted))
             self._fixes_used += bool(f.accepted)
         self._fixes_seen = len(fixes)
+        self._bound_view()
 
     def _finish(self) -> list:
         if self.finished:
