@@ -27,6 +27,11 @@ fusion stage as the app builds it; ``--gps-history file`` (now, the app's: ``kee
 and fix records on disk, the last few in memory) or ``list`` (before issue #30: every one in memory).
 ``gnss_mb`` is what the fusion and the pipeline's fused steps hold (:func:`deep_bytes`), ``gnss_growth_mb_per_h``
 its growth since the first segment per walked hour (the fusion's fixed part, its filters and settings, left out).
+
+``--app-view bounded|unbounded`` runs the events through the app's own :class:`app.session.Session` (the
+settings' pipeline: steps in a step file, the fusion's history on disk) instead of a bare pipeline;
+``view_mb`` is what the session's view lines hold (the dead-reckoned and fused tracks, the fixes), ``bounded``
+as the app does now (thinned past :data:`app.overlay.VIEW_MAX_POINTS`), ``unbounded`` as before issue #30.
 """
 
 from __future__ import annotations
@@ -105,6 +110,34 @@ def _gnss_row(p, rows, hours: float) -> dict:
             "gnss_fixes_accepted": g.n_fixes_accepted}
 
 
+class _NoSource:
+    """The app session's source when the benchmark feeds it events itself."""
+
+    live, finished, running, unix_offset_ns, device, warning = False, False, False, None, {}, ""
+
+
+def _app_session(gps: bool, fusion: str, unix_offset_ns, bounded: bool):
+    """The app's session with the settings' pipeline (GPS on with ``fusion``, else off); ``bounded`` False:
+    the view lines never thinned (as before issue #30)."""
+    import app.session as S
+    from app.settings import Settings
+
+    if not bounded:
+        S.VIEW_MAX_POINTS = S.VIEW_MAX_FIXES = 1 << 62
+    make = Settings(use_gps=gps, **({"gps_fusion": fusion} if gps else {})).pipeline_factory()
+
+    def factory():
+        p = make()
+        p.unix_offset_ns = unix_offset_ns
+        return p
+    return S.Session(_NoSource(), pipeline_factory=factory)
+
+
+def _view_lists(ses) -> list:
+    return [ses.track_east, ses.track_north, ses.fused_east, ses.fused_north, ses.fused_source, ses.fix_east,
+            ses.fix_north, ses.fix_hacc, ses.fix_accepted]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=24.0)
@@ -117,6 +150,8 @@ def main(argv=None) -> int:
                     help="walk outdoors with GPS through this fusion stage (as the app's 'Use GPS')")
     ap.add_argument("--gps-history", choices=("file", "list"), default="file",
                     help="the fusion's fused steps and fix records: on disk (now, the app's) or in lists (before #30)")
+    ap.add_argument("--app-view", choices=("off", "bounded", "unbounded"), default="off",
+                    help="run the app's session and measure its view lines: thinned (now) or not (before #30)")
     args = ap.parse_args(argv)
     from core.export import StepFile
     from core.gnss import make_fusion
@@ -124,9 +159,15 @@ def main(argv=None) -> int:
     store = StepFile() if args.app_steps == "file" else []
     n_seg = max(1, math.ceil(args.hours * 60.0 / args.segment_min))
     gps = args.gps != "off"
-    gnss = make_fusion(args.gps, keep_history=args.gps_history == "list") if gps else None
     # with GPS the anchoring fix gives the site's declination, which needs the date (mid-2025, as the field)
-    p = Pipeline(keep_steps=False, gnss=gnss, unix_offset_ns=1_751_414_400 * 10 ** 9 if gps else None)
+    unix_offset = 1_751_414_400 * 10 ** 9 if gps else None
+    ses = None
+    if args.app_view != "off":
+        ses = _app_session(gps, args.gps, unix_offset, args.app_view == "bounded")
+        p, store = ses.pipeline, ses.steps
+    else:
+        gnss = make_fusion(args.gps, keep_history=args.gps_history == "list") if gps else None
+        p = Pipeline(keep_steps=False, gnss=gnss, unix_offset_ns=unix_offset)
     streams = ["gyro", "acc", "mag"] + (["gps"] if gps else [])
     start_en, heading_deg, clock = (0.0, 0.0), None, 10 ** 12
     rows, failures = [], []
@@ -135,11 +176,14 @@ def main(argv=None) -> int:
         walk, start_en, heading_deg = _segment(k, args.seed, args.segment_min, start_en, heading_deg, clock, gps)
         steps = []
         for name, t, v in walk.recording.events(streams):
-            new = p.update(name, t, v)
-            if new:
-                steps.extend(new)
-                for s in new:
-                    store.append(s)
+            if ses is not None:
+                steps.extend(ses.ingest([(name, t, v)]))
+            else:
+                new = p.update(name, t, v)
+                if new:
+                    steps.extend(new)
+                    for s in new:
+                        store.append(s)
             clock = t
         clock += 20_000_000
         a = p.attitude
@@ -162,6 +206,9 @@ def main(argv=None) -> int:
                "app_steps": len(store), "app_steps_mb": deep_bytes(store) / 1e6,
                "app_steps_mb_per_h": deep_bytes(store) / 1e6 / ((k + 1) * args.segment_min / 60.0),
                **(_gnss_row(p, rows, (k + 1) * args.segment_min / 60.0) if gps else {}),
+               **({"view_points": len(ses.track_east), "view_fixes": len(ses.fix_east),
+                   "view_mb": deep_bytes(_view_lists(ses)) / 1e6, "view_generation": ses.view_generation}
+                  if ses is not None else {}),
                "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
                "labels": list(p.labels()), "wall_s": round(time.time() - t_wall, 1)}
         rows.append(row)

@@ -63,7 +63,9 @@ def _feed(fusion, events):
 @pytest.mark.parametrize("name", ["kubrak", "chen"])
 def test_a_live_fusion_holds_the_same_bytes_after_n_and_10n_steps(tmp_path, name):
     n = 250  # steps (137 s, 137 fixes); then 10 n (23 minutes)
-    live = make_fusion(name, keep_history=False, history_dir=str(tmp_path))
+    live = make_fusion(name, keep_history=False)
+    live.history_dir = str(tmp_path)  # as the app's session sets it, after the pipeline built the fusion
+    assert live.steps.directory == live.fixes.directory == str(tmp_path)
     kept = make_fusion(name)
     live.reset()
     kept.reset()

@@ -317,6 +317,18 @@ class FixFusion:
         self.keep_history = bool(keep_history)
         self.history_dir = history_dir
 
+    @property
+    def history_dir(self) -> str | None:
+        """Where the files of ``keep_history=False`` go (None: the system's temporary folder)."""
+        return self._history_dir
+
+    @history_dir.setter
+    def history_dir(self, directory: str | None) -> None:
+        self._history_dir = directory
+        for f in (getattr(self, "steps", None), getattr(self, "fixes", None)):
+            if hasattr(f, "directory"):  # a record file opens at its first record: it goes there
+                f.directory = directory
+
     def _history(self, kind):
         """A list (``keep_history``) or a record file of ``kind`` (:class:`core.export.RecordFile`)."""
         if self.keep_history:
