@@ -76,3 +76,38 @@ def test_a_long_session_keeps_bounded_view_lists_and_exports_every_step(monkeypa
         gj = json.load(f)
     assert gj["features"][0]["properties"]["n_steps"] == n and "sigma_m" in gj["features"][1]["properties"]
     ses.close()
+
+
+def test_the_service_ui_follows_the_thinned_lists(monkeypatch, tmp_path):
+    """The UI process polls what is new since its lists; when the session thins its lists the UI gets them
+    whole again (``view``), so its lists stay the session's."""
+    import json
+
+    from app.service import ServiceSession, TrackingService
+
+    monkeypatch.setattr(S, "VIEW_MAX_POINTS", 60)
+    monkeypatch.setattr(S, "VIEW_RECENT_POINTS", 10)
+    monkeypatch.setattr(S, "VIEW_MAX_FIXES", 20)
+    w = outdoor_walk(2, minutes=1.5)
+    data = tmp_path / "data"
+    data.mkdir()
+    Settings(use_gps=True).save(str(data / "settings.json"))
+    svc = TrackingService({"data_dir": str(data), "record_path": None},
+                          source_factory=lambda rate: ReplaySource(w.recording, speed=math.inf, max_chunk=300))
+    svc.start()
+
+    class Direct:  # the socket's JSON both ways, without the socket
+        def request(self, op, **kw):
+            return json.loads(json.dumps(svc.handle(json.loads(json.dumps({"op": op, **kw})))))
+
+    ui = ServiceSession(Direct(), poll_interval_s=0.0)
+    ses, seen = svc.session, set()
+    for _ in range(10000):
+        svc.step(0.01)
+        ui.poll()
+        seen.add(ses.view_generation)
+        assert ui.track_east == ses.track_east and ui.fused_east == ses.fused_east
+        assert ui.fused_source == ses.fused_source and ui.fix_east == ses.fix_east
+        if ses.finished:
+            break
+    assert ses.finished and len(seen) >= 3 and len(ui.track_east) <= 61
