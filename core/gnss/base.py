@@ -194,7 +194,6 @@ class FusionResult:
         return FusedTrack.from_steps(self.steps)
 
 
-
 #: a hidden fix's verdict (:class:`FixRecord` ``reason``)
 HIDDEN = "hidden (outage)"
 
@@ -784,7 +783,8 @@ class FixFusion:
                 "anchored": self.origin_lat_lon is not None, "filter": self.name}
 
     def counters(self) -> dict:
-        return {"fixes": len(self.fixes), "fixes_accepted": self.n_fixes_accepted, "fixes_screened_out": self.n_screened_out,
+        return {"fixes": len(self.fixes), "fixes_accepted": self.n_fixes_accepted,
+                "fixes_screened_out": self.n_screened_out,
                 "fixes_cn0": self.n_cn0, "fixes_filter_rejected": self.n_filter_rejected,
                 "fixes_gated": self.n_gated, "fixes_relocked": self.n_relocked,
                 "fixes_hidden": self.n_fixes_hidden,
