@@ -112,3 +112,62 @@ def gps_status_text(n_fixes: int, n_used: int, cov_en_m2, anchored: bool, k_sigm
         return head + (" · waiting for a good fix" if n_fixes else " · no fix yet") + tail
     a, _, _ = covariance_ellipse(cov_en_m2, k_sigma)
     return f"{head} · ±{a:.1f} m ({k_sigma:g}σ)" + tail
+
+
+# -- the view's lines, bounded (issue #30) ------------------------------------------------------------------
+
+#: a line the session keeps for the view is thinned when it passes this many points ...
+VIEW_MAX_POINTS = 10000
+#: ... keeping its last this many at full resolution (the old part decimated to at most half the maximum)
+VIEW_RECENT_POINTS = 2000
+#: fixes the session keeps for the view: the last this many (the view draws 10 000: ``MAX_FIX_CHUNKS`` of ``FIX_CHUNK``)
+VIEW_MAX_FIXES = 10000
+
+
+def decimate_indices(xs, ys, tol: float) -> list[int]:
+    """The indices of the points of a polyline that :func:`decimate` keeps."""
+    n = len(xs)
+    if tol <= 0 or n <= 2:
+        return list(range(n))
+    t2 = tol * tol
+    out = [0]
+    lx, ly = xs[0], ys[0]
+    for i in range(1, n - 1):
+        x, y = xs[i], ys[i]
+        if (x - lx) * (x - lx) + (y - ly) * (y - ly) >= t2:
+            out.append(i)
+            lx, ly = x, y
+    out.append(n - 1)
+    return out
+
+
+def decimate(xs: list, ys: list, tol: float) -> tuple[list, list]:
+    """The points of a polyline with those closer than ``tol`` to the last kept one dropped; the first and
+    the last are always kept (chunks stay joined).  ``tol <= 0``: all of them."""
+    if tol <= 0 or len(xs) <= 2:
+        return xs, ys
+    idx = decimate_indices(xs, ys, tol)
+    return [xs[i] for i in idx], [ys[i] for i in idx]
+
+
+def thin_line(east: list, north: list, tags: list | None = None, *, max_points: int = VIEW_MAX_POINTS,
+              recent: int = VIEW_RECENT_POINTS, tol_m: float = 1.0) -> tuple[list, list, list | None, float]:
+    """A view line that grew past ``max_points``, thinned: new lists ``(east, north, tags, tol)``.
+
+    The last ``recent`` points stay; the ones before are :func:`decimate` d with the smallest tolerance of
+    ``tol_m, 2 tol_m, 4 tol_m, ...`` that leaves at most ``max_points // 2`` points in all (a day's 100 km
+    in 10 000 points: a point every 20 m or so of the old part, far below a pixel of the whole walk on a
+    phone screen; a zoom into it draws it that coarse).  ``tags`` (one per segment: point ``k + 1``'s, as
+    the fused track's source) keep the tag of the last segment each new one covers.  Thinning again costs
+    one pass, so a line costs O(1) per point on average and at most ``max_points`` in memory.
+    """
+    head = max(len(east) - recent, 1)
+    tol = tol_m
+    while True:
+        idx = decimate_indices(east[:head], north[:head], tol)
+        if len(idx) + len(east) - head <= max_points // 2 or tol > 1e7:
+            break
+        tol *= 2.0
+    idx += range(head, len(east))
+    new_tags = [tags[i - 1] for i in idx[1:]] if tags is not None else None
+    return [east[i] for i in idx], [north[i] for i in idx], new_tags, tol

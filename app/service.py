@@ -30,7 +30,9 @@ IPC: a Unix-domain stream socket, one JSON object a line
 
     request ``{"op": "poll", "track_id": k, "since": {"track": n, "fused": m, "fused_source": j,
     "fix": f}}`` -> ``{"ok": true, "track_id": k', "status": {...}, "track": [east, north], ...}``
-    with the lists' new items (all of them when ``k != k'``: a new track, or a new UI).  Every
+    with the lists' new items (all of them when ``k != k'``: a new track, or a new UI; or when the request's
+    ``"view"`` is not the session's :attr:`app.session.Session.view_generation`, returned as ``"view"``: the
+    session thinned its lists, issue #30).  Every
     other op (``pause``, ``resume``, ``record``, ``new_track``, ``calibration``, ``calibrate``,
     ``export``, ``here``, ``plan``, ``stop``) replies with the fresh ``status`` too.
 
@@ -232,6 +234,7 @@ class TrackingService:
                 out = {"ok": False, "error": f"{type(e).__name__}: {e}"}
             out.setdefault("ok", True)
             out["track_id"] = self.track_id
+            out["view"] = ses.view_generation
             out["status"] = self.status()
             return out
 
@@ -259,7 +262,8 @@ class TrackingService:
 
     def _op_poll(self, ses, req):
         since = req.get("since") or {}
-        if req.get("track_id") != self.track_id:
+        # another track, or the session thinned its lists since the UI's ("view": Session.view_generation)
+        if req.get("track_id") != self.track_id or req.get("view", ses.view_generation) != ses.view_generation:
             since = {}
         a, f, j, x, m = (int(since.get(k, 0)) for k in ("track", "fused", "fused_source", "fix", "map"))
         mm = ses.map
@@ -549,6 +553,7 @@ class ServiceSession:
         self._last_poll = -math.inf
         self.source = RemoteSource()
         self.track_id = None
+        self.view = 0  #: the session's thinning of its view lists that ours come from (Session.view_generation)
         self.status_dict: dict = {}
         self.polls = 0
         self.error = ""
@@ -580,10 +585,10 @@ class ServiceSession:
         """Fetch what is new; returns the indices of the new track points (steps)."""
         since = {"track": len(self.track_east), "fused": len(self.fused_east),
                  "fused_source": len(self.fused_source), "fix": len(self.fix_east), "map": len(self.map_east)}
-        resp = self._request("poll", track_id=self.track_id, since=since)
+        resp = self._request("poll", track_id=self.track_id, view=self.view, since=since)
         self.polls += 1
-        if resp["track_id"] != self.track_id:
-            self.track_id = resp["track_id"]
+        if resp["track_id"] != self.track_id or resp.get("view", 0) != self.view:
+            self.track_id, self.view = resp["track_id"], resp.get("view", 0)
             self._new_lists()
         n0 = len(self.track_east)
         east, north = resp["track"]

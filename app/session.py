@@ -28,7 +28,15 @@ GPS fusion
     A pipeline built with ``gnss=GpsFusion()`` (:meth:`app.settings.Settings.pipeline_factory`
     with "Use GPS" on) gives a fused track, one :class:`core.gnss.fusion.FusedStep` per step.
     The session keeps what the track view draws as plain lists, appended as steps and fixes
-    come (never rebuilt): :meth:`Session.gps_overlay` hands them out as a :class:`GpsOverlay`.
+    come: :meth:`Session.gps_overlay` hands them out as a :class:`GpsOverlay`.
+
+View lines, bounded (issue #30)
+    A line the view draws (the dead-reckoned track, the fused one) that passes
+    :data:`app.overlay.VIEW_MAX_POINTS` is thinned (:func:`app.overlay.thin_line`: the old part
+    decimated, the last points whole) into new lists, and the fixes keep the last
+    :data:`app.overlay.VIEW_MAX_FIXES` (what the view draws); new lists are a new track to the view
+    (it redraws them whole) and :attr:`Session.view_generation` counts them (the service's UI then
+    fetches them anew).  The exports read the whole tracks back from disk (``steps``, the fusion's).
     Fixes the fusion screened out (bad accuracy) carry no local position in their record;
     once the walk is anchored they are placed from their latitude/longitude, so the view can
     show them as rejected.
@@ -56,12 +64,13 @@ from typing import Callable
 from core.conventions import CARRY_WORDS, GPS, PRESSURE, bearing_deg
 from core.export import StepFile
 from core.floors import FloorEstimator, floors_at
-from core.gnss.base import ANCHOR_MAX_HACC_M
+from core.gnss.base import ANCHOR_MAX_HACC_M, FusedTrack
 from core.geodesy import geodetic_to_enu
 from core.recording import STREAM_ORDER, STREAM_SPECS
 
 from app.health import HealthMonitor
 from app.indoor import MapMatcher
+from app.overlay import VIEW_MAX_FIXES, VIEW_MAX_POINTS, VIEW_RECENT_POINTS, thin_line
 from app.recorder import BackgroundRecorder
 
 _RANK = {n: i for i, n in enumerate(STREAM_ORDER)}
@@ -200,6 +209,9 @@ class Session:
     def reset_track(self) -> None:
         """Start a new track (new pipeline, empty track and health); the recording goes on."""
         self.pipeline = self.pipeline_factory()
+        g = self.gnss
+        if g is not None and not g.keep_history and g.history_dir is None:
+            g.history_dir = self._steps_dir()  # its fused steps and fix records beside the recording too
         old = getattr(self, "steps", None)
         if old is not None:
             old.close()
@@ -228,6 +240,9 @@ class Session:
         self.fix_accepted: list = []
         self._fixes_seen = 0
         self._fixes_used = 0
+        self._fused_seen = 0
+        #: times the view's lists were replaced by thinned ones (see "View lines, bounded")
+        self.view_generation = 0
         # the barometer's floors (core.floors), beside the tracker: pressure events never reach the pipeline
         self.floors = FloorEstimator()
         # the floor plan's particle filter (app.indoor), placed again on every new track
@@ -412,12 +427,32 @@ class Session:
             if self.map is not None:
                 self.map.add_step(s)
             new.append(s)
-        fused = getattr(self.pipeline, "fused", ())
-        for f in fused[len(self.fused_source):]:
-            self.fused_east.append(float(f.east_m))
-            self.fused_north.append(float(f.north_m))
-            self.fused_source.append(f.source)
+        g = self.gnss
+        if g is not None and len(g.steps) > self._fused_seen:
+            for f in g.steps[self._fused_seen:]:  # the fusion's last steps (read back only if many came at once)
+                self.fused_east.append(float(f.east_m))
+                self.fused_north.append(float(f.north_m))
+                self.fused_source.append(f.source)
+            self._fused_seen = len(g.steps)
         self._sync_fixes()  # fixes wait in the fusion for the step after them
+        self._bound_view()
+
+    def _bound_view(self) -> None:
+        """Thin the view's lines that grew past their bound into new lists (see "View lines, bounded")."""
+        if len(self.track_east) > VIEW_MAX_POINTS:
+            self.track_east, self.track_north, _, _ = thin_line(self.track_east, self.track_north,
+                                                                max_points=VIEW_MAX_POINTS, recent=VIEW_RECENT_POINTS)
+            self.view_generation += 1
+        if len(self.fused_east) > VIEW_MAX_POINTS:
+            self.fused_east, self.fused_north, self.fused_source, _ = thin_line(
+                self.fused_east, self.fused_north, self.fused_source, max_points=VIEW_MAX_POINTS,
+                recent=VIEW_RECENT_POINTS)
+            self.view_generation += 1
+        if len(self.fix_east) > VIEW_MAX_FIXES + VIEW_MAX_FIXES // 5:
+            k = len(self.fix_east) - VIEW_MAX_FIXES
+            self.fix_east, self.fix_north = self.fix_east[k:], self.fix_north[k:]
+            self.fix_hacc, self.fix_accepted = self.fix_hacc[k:], self.fix_accepted[k:]
+            self.view_generation += 1
 
     def _sync_fixes(self) -> None:
         """Append the fusion's new fix records to the view's lists (from the anchoring on: before it, no
@@ -438,6 +473,7 @@ class Session:
                 self.fix_accepted.append(bool(f.accepted))
             self._fixes_used += bool(f.accepted)
         self._fixes_seen = len(fixes)
+        self._bound_view()
 
     def _finish(self) -> list:
         if self.finished:
@@ -682,7 +718,7 @@ def export_session(session: Session, out_dir: str, basename: str, raw_path: str 
     gnss = session.gnss
     origin = gnss.origin_lat_lon if gnss is not None and gnss.origin_lat_lon is not None else session.gps_origin
     if gnss is not None and gnss.origin_lat_lon is not None and gnss.steps:
-        fused = gnss.result().track()
+        fused = FusedTrack.from_steps(gnss.steps)  # read back from disk in one pass in the live app
         track, extra = fused, fused.point_properties()
     if session.floors.counters["readings"]:  # the barometer's floor of every step
         extra = {**(extra or {}), "floor": floors_at(session.floors.changes, track.t_ns).tolist()}

@@ -192,8 +192,10 @@ class Settings:
         use_gps = bool(self.use_gps)
         name = self.gps_fusion_name()
         gkw = settings_from_profile(name, self.profile)
-        # the session keeps the steps (on disk: core.export.StepFile); the pipeline keeps none (issue #30)
-        return lambda: Pipeline(**kw, keep_steps=False, gnss=make_fusion(name, **gkw) if use_gps else None)
+        # the session keeps the steps (on disk: core.export.StepFile); the pipeline keeps none, the GPS fusion
+        # writes its fused steps and fix records to disk too (keep_history=False; issue #30)
+        return lambda: Pipeline(**kw, keep_steps=False,
+                                gnss=make_fusion(name, keep_history=False, **gkw) if use_gps else None)
 
     def gps_fusion_name(self) -> str:
         """The filter :attr:`gps_fusion` stands for ("auto": the benchmark's better one)."""

@@ -60,8 +60,8 @@ from kivy.properties import BooleanProperty, NumericProperty, ObjectProperty
 from kivy.uix.label import Label
 from kivy.uix.widget import Widget
 
-from app.overlay import (ELLIPSE_SIGMA, circles_mesh, covariance_ellipse, ellipse_points, fan_mesh,
-                         gps_status_text, runs, squares_mesh)
+from app.overlay import (ELLIPSE_SIGMA, circles_mesh, covariance_ellipse, decimate, ellipse_points,  # noqa: F401
+                         fan_mesh, gps_status_text, runs, squares_mesh)
 from app.viewport import Viewport, format_length
 
 BACKGROUND = (0.07, 0.08, 0.10, 1)
@@ -161,24 +161,6 @@ class ChunkedLine:
     @property
     def width(self) -> float:
         return self._key[3] if self._key else 0.0
-
-
-def decimate(xs: list, ys: list, tol: float) -> tuple[list, list]:
-    """The points of a polyline with those closer than ``tol`` to the last kept one dropped; the first and
-    the last are always kept (chunks stay joined).  ``tol <= 0``: all of them."""
-    if tol <= 0 or len(xs) <= 2:
-        return xs, ys
-    t2 = tol * tol
-    ox, oy = [xs[0]], [ys[0]]
-    lx, ly = xs[0], ys[0]
-    for x, y in zip(xs[1:-1], ys[1:-1]):
-        if (x - lx) * (x - lx) + (y - ly) * (y - ly) >= t2:
-            ox.append(x)
-            oy.append(y)
-            lx, ly = x, y
-    ox.append(xs[-1])
-    oy.append(ys[-1])
-    return ox, oy
 
 
 def _hex(rgba, alpha: float | None = None) -> str:

@@ -214,59 +214,86 @@ class StepRow:
         self.estimated, self.carry_mode = estimated, carry_mode
 
 
-class StepFile:
-    """A session's steps, written to a file as they come and read back when the whole track is needed (issue #30).
+class RecordFile:
+    """Records written to a file as they come and read back when all of them are needed (issue #30).
 
-    A day-long walk is about 150 000 steps: kept as :class:`core.pdr.pipeline.Step` objects they held about
-    700 bytes each.  Here each step is one CSV line (:data:`STEP_FILE_COLUMNS`, floats in ``repr``: they read
-    back exactly); memory holds the count, the distance and the last ``keep_last`` steps.  ``len``,
-    iteration (rows read back one at a time, in order), :meth:`track` (a :class:`core.pdr.pipeline.Track`
-    read back in one pass) and :meth:`carry_modes` give everything.
+    What a live session must keep for its exports but must not hold in memory for a day: memory holds the
+    count and the last ``keep_last`` records (as given, :attr:`last`); ``len``, iteration (the records read
+    back one at a time, in order, appends in between allowed), ``[k]`` and ``[a:]`` (from :attr:`last` when
+    the records are still there, else read back) give the rest.  ``kind``, a dataclass of plain values
+    (numbers, strings, booleans, tuples of them), is written one JSON list a line (floats read back exactly,
+    nan and inf too) and read back as ``kind``; :class:`StepFile` writes its own CSV instead.
 
-    ``path`` None: an anonymous temporary file (in ``directory``), gone when closed.  A file that cannot be
-    written (disk full) is given up: the steps from then on are kept in memory and :attr:`error` says why.
+    ``path`` None: an anonymous temporary file (in ``directory``, which may be set until the first record:
+    the file opens then), gone when closed.  A file that cannot be written (disk full) is given up: the
+    records from then on are kept in memory and :attr:`error` says why.
     """
 
-    def __init__(self, path: str | None = None, *, directory: str | None = None, keep_last: int = 64):
-        import tempfile
-        from collections import deque
+    #: what the file is called in an error message
+    what = "record file"
 
+    def __init__(self, kind=None, path: str | None = None, *, directory: str | None = None, keep_last: int = 64):
+        from collections import deque
+        from dataclasses import fields
+
+        self.kind = kind
+        self._names = tuple(f.name for f in fields(kind)) if kind is not None else ()
         self.path = path
+        self.directory = directory
         self.error = ""
-        try:
-            self._f = (open(path, "w+", encoding="utf-8", newline="") if path is not None
-                       else tempfile.TemporaryFile("w+", encoding="utf-8", newline="", dir=directory))
-            self._f.write(",".join(STEP_FILE_COLUMNS) + "\n")
-        except OSError as e:
-            self._f, self.error = None, f"step file: {e}"
-        self._writable = self._f is not None
+        self._f = None
+        self._opened = False
+        self._writable = True
         self._memory: list = []  # only after the file failed
         self._n_file = 0
         self.n = 0
-        self.distance_m = 0.0
-        #: the last steps (as given)
+        #: the last records (as given)
         self.last = deque(maxlen=keep_last)
 
-    def append(self, step) -> None:
+    # -- the format (a subclass may write its own) ----------------------------------------------
+    def _header(self) -> str:
+        return json.dumps(list(self._names))
+
+    def _row(self, item):
+        """What is written (and kept, after the file failed) of ``item``."""
+        return item
+
+    def _line(self, row) -> str:
+        return json.dumps([getattr(row, k) for k in self._names])
+
+    def _parse(self, line: str):
+        return self.kind(*(tuple(v) if isinstance(v, list) else v for v in json.loads(line)))
+
+    # -- writing --------------------------------------------------------------------------------
+    def _open(self) -> None:
+        import tempfile
+
+        self._opened = True
+        try:
+            self._f = (open(self.path, "w+", encoding="utf-8", newline="") if self.path is not None
+                       else tempfile.TemporaryFile("w+", encoding="utf-8", newline="", dir=self.directory))
+            self._f.write(self._header() + "\n")
+        except OSError as e:
+            self._f, self.error, self._writable = None, f"{self.what}: {e}", False
+
+    def append(self, item) -> None:
         self.n += 1
-        self.distance_m += float(step.length_m)
-        self.last.append(step)
-        row = StepRow(int(getattr(step, "index", self.n - 1)), int(step.t_ns), float(step.length_m),
-                      float(step.heading_rad), float(step.east_m), float(step.north_m),
-                      bool(getattr(step, "mag_trusted", False)), bool(getattr(step, "estimated", False)),
-                      str(getattr(step, "carry_mode", "")))
+        self.last.append(item)
+        row = self._row(item)
+        if not self._opened:
+            self._open()
         if self._writable:
             try:
                 self._f.seek(0, 2)
-                self._f.write(f"{row.index},{row.t_ns},{row.length_m!r},{row.heading_rad!r},{row.east_m!r},"
-                              f"{row.north_m!r},{int(row.mag_trusted)},{int(row.estimated)},{row.carry_mode}\n")
+                self._f.write(self._line(row) + "\n")
                 self._n_file += 1
                 return
             except OSError as e:
-                self.error = f"step file: {e}; the steps from step {self.n} on are kept in memory"
+                self.error = f"{self.what}: {e}; the records from record {self.n} on are kept in memory"
                 self._writable = False
         self._memory.append(row)
 
+    # -- reading --------------------------------------------------------------------------------
     def __len__(self) -> int:
         return self.n
 
@@ -276,6 +303,26 @@ class StepFile:
     def __iter__(self):
         yield from self._read_file()
         yield from list(self._memory)
+
+    def __getitem__(self, k):
+        """``[k]`` (negative from the end) or ``[a:b]``: from :attr:`last` when the records are still there."""
+        import itertools
+
+        if isinstance(k, slice):
+            a, b, step = k.indices(self.n)
+            if step != 1:
+                raise ValueError("a record file reads back every record in order: no slice step")
+        else:
+            a = k + self.n if k < 0 else k
+            if not 0 <= a < self.n:
+                raise IndexError(f"record {k} of {self.n}")
+            b = a + 1
+        first = self.n - len(self.last)
+        if a >= first:
+            out = list(itertools.islice(self.last, a - first, max(b - first, 0)))
+        else:
+            out = list(itertools.islice(iter(self), a, b))
+        return out if isinstance(k, slice) else out[0]
 
     def _read_file(self, block: int = 4096):
         """The file's rows, ``block`` lines at a time; appends in between (at the end) do not disturb it."""
@@ -290,6 +337,7 @@ class StepFile:
         f.seek(0)
         f.readline()  # the header
         off = f.tell()
+        parse = self._parse
         while left > 0:
             f.seek(off)
             lines = [f.readline() for _ in range(min(block, left))]
@@ -297,8 +345,50 @@ class StepFile:
             f.seek(0, 2)  # appends go on at the end
             left -= len(lines)
             for line in lines:
-                i, t, length, h, e, n, mag, est, mode = line.rstrip("\n").split(",")
-                yield StepRow(int(i), int(t), float(length), float(h), float(e), float(n), mag == "1", est == "1", mode)
+                yield parse(line.rstrip("\n"))
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.close()
+            self._f = None
+
+
+class StepFile(RecordFile):
+    """A session's steps, written to a file as they come and read back when the whole track is needed (issue #30).
+
+    A day-long walk is about 150 000 steps: kept as :class:`core.pdr.pipeline.Step` objects they held about
+    700 bytes each.  Here each step is one CSV line (:data:`STEP_FILE_COLUMNS`, floats in ``repr``: they read
+    back exactly); memory holds the count, the distance and the last ``keep_last`` steps.  ``len``,
+    iteration (:class:`StepRow` read back one at a time, in order), :meth:`track` (a
+    :class:`core.pdr.pipeline.Track` read back in one pass) give everything; the file is a :class:`RecordFile`'s.
+    """
+
+    what = "step file"
+
+    def __init__(self, path: str | None = None, *, directory: str | None = None, keep_last: int = 64):
+        super().__init__(None, path, directory=directory, keep_last=keep_last)
+        self.distance_m = 0.0
+
+    def append(self, step) -> None:
+        self.distance_m += float(step.length_m)
+        super().append(step)
+
+    def _header(self) -> str:
+        return ",".join(STEP_FILE_COLUMNS)
+
+    def _row(self, step) -> StepRow:
+        return StepRow(int(getattr(step, "index", self.n - 1)), int(step.t_ns), float(step.length_m),
+                       float(step.heading_rad), float(step.east_m), float(step.north_m),
+                       bool(getattr(step, "mag_trusted", False)), bool(getattr(step, "estimated", False)),
+                       str(getattr(step, "carry_mode", "")))
+
+    def _line(self, row: StepRow) -> str:
+        return (f"{row.index},{row.t_ns},{row.length_m!r},{row.heading_rad!r},{row.east_m!r},"
+                f"{row.north_m!r},{int(row.mag_trusted)},{int(row.estimated)},{row.carry_mode}")
+
+    def _parse(self, line: str) -> StepRow:
+        i, t, length, h, e, n, mag, est, mode = line.split(",")
+        return StepRow(int(i), int(t), float(length), float(h), float(e), float(n), mag == "1", est == "1", mode)
 
     def track(self):
         """The whole track (:class:`core.pdr.pipeline.Track`), read back in one pass."""
@@ -319,8 +409,3 @@ class StepFile:
         est = np.array(cols[5], dtype=bool)
         return Track(np.array(cols[0], dtype=np.int64), *(np.array(c, dtype=float) for c in cols[1:5]),
                      est if est.any() else None)
-
-    def close(self) -> None:
-        if self._f is not None:
-            self._f.close()
-            self._f = None

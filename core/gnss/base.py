@@ -44,6 +44,15 @@ Outages
     the distance walked in the window, the position uncertainty before the
     update and the jump the update made (:class:`OutageResult`).
 
+History (issue #30)
+    A batch run keeps every fused step and fix record in lists (``keep_history=True``, the default:
+    the exports, the fixes file, the plots, the benchmarks read them).  A live app walking all day
+    gives ``keep_history=False``: :attr:`FixFusion.steps` and :attr:`FixFusion.fixes` are then
+    :class:`core.export.RecordFile` s (written to a temporary file in ``history_dir`` as they come,
+    the last :data:`HISTORY_KEEP_LAST` in memory, read back for the exports), and the event lists
+    (relocks, the subclass's) keep the last :data:`EVENTS_KEEP_LAST`; the algorithms only ever use
+    their own windows, so both give the same track.
+
 Everything is in the walk's local ENU frame of :mod:`core` (metres about the
 start point); latitude/longitude only at the edges (fix input, FusedStep
 output, exports) through :mod:`core.geodesy`.
@@ -61,6 +70,11 @@ from core.conventions import wrap_angle
 from core.geodesy import enu_to_geodetic, geodetic_to_enu
 from core.gnss.ekf import UpdateResult, sigma_max_m
 from core.gnss.judge import GpsJudge, GpsVerdict, JudgeSettings
+
+#: fused steps and fix records a fusion without history keeps in memory (the rest are on disk)
+HISTORY_KEEP_LAST = 64
+#: events (relocks, variability detections, training windows) a fusion without history keeps in memory
+EVENTS_KEEP_LAST = 8
 
 #: 68 % radius of a circular 2-D Gaussian, in units of its per-axis SD: hacc = 1.515 sigma
 HACC_PER_SIGMA = math.sqrt(-2.0 * math.log(1.0 - 0.68))
@@ -150,6 +164,19 @@ class FusedTrack:
     def __len__(self) -> int:
         return len(self.t_ns)
 
+    @classmethod
+    def from_steps(cls, steps) -> "FusedTrack":
+        """The arrays of fused steps (:class:`FusedStep`, any iterable: a list or a record file read back once)."""
+        from array import array
+
+        t, cols, source = array("q"), [array("d") for _ in range(5)], []
+        for s in steps:
+            t.append(s.t_ns)
+            for c, v in zip(cols, (s.length_m, s.heading_rad, s.east_m, s.north_m, sigma_max_m(s.cov_en_m2))):
+                c.append(v)
+            source.append(s.source)
+        return cls(np.array(t, dtype=np.int64), *(np.array(c, dtype=float) for c in cols), source)
+
     def point_properties(self) -> dict:
         """Per-step extras for the exports: uncertainty and source."""
         return {"sigma_m": [round(float(v), 3) for v in self.sigma_m], "source": list(self.source)}
@@ -164,13 +191,11 @@ class FusionResult:
     counters: dict = field(default_factory=dict)
 
     def track(self) -> FusedTrack:
-        st = self.steps
-        return FusedTrack(np.array([s.t_ns for s in st], dtype=np.int64), np.array([s.length_m for s in st]),
-                          np.array([s.heading_rad for s in st]), np.array([s.east_m for s in st]),
-                          np.array([s.north_m for s in st]), np.array([sigma_max_m(s.cov_en_m2) for s in st]),
-                          [s.source for s in st])
+        return FusedTrack.from_steps(self.steps)
 
 
+#: a hidden fix's verdict (:class:`FixRecord` ``reason``)
+HIDDEN = "hidden (outage)"
 
 #: a fix this accurate (reported 68 % radius, m) may place a walk on the map: the first one is the origin
 ANCHOR_MAX_HACC_M = 12.0
@@ -246,6 +271,12 @@ class FixFusion:
         with our heading that long before the fix (:meth:`course_now`).  1.5 s: on the tuning walk
         ``thomasdingemanse_lopen`` the course scatters least about the step headings 1.5 s earlier
         (12.5 deg RMS, against 13.8 deg at no lag; lags from -1 to 4 s in 0.25-s steps).  0 turns it off.
+    keep_history : bool
+        Keep every fused step and fix record in memory (True: a batch run), or write them to disk as they
+        come and keep the last few (False: a live app; see "History" in the module docstring).
+    history_dir : str or None
+        Where the files of ``keep_history=False`` go (None: the system's temporary folder); may be set
+        until the first step or fix.
     """
 
     #: the filter's name (``make_fusion``, summaries)
@@ -256,7 +287,8 @@ class FixFusion:
                  hold_s: float = 3.0, hidden_ns=(), relock_s: float = 8.0, anchor_max_hacc_m: float = ANCHOR_MAX_HACC_M,
                  anchor_max_waits: int = 30, start: tuple | None = None, min_cn0_4th_dbhz: float = 25.0,
                  status_max_age_s: float = 2.0, relock_max_drift: float | None = None, pause_s: float = 1.5,
-                 course_latency_s: float = 1.5, judge: JudgeSettings | None = JudgeSettings()):
+                 course_latency_s: float = 1.5, judge: JudgeSettings | None = JudgeSettings(),
+                 keep_history: bool = True, history_dir: str | None = None):
         self.max_hacc_m = float(max_hacc_m)
         self.default_hacc_m = float(default_hacc_m)
         self.max_speed_m_s = float(max_speed_m_s)
@@ -281,13 +313,46 @@ class FixFusion:
         self.pause_ns = int(pause_s * 1e9)
         self.course_latency_ns = int(course_latency_s * 1e9)
         self.judge_settings = judge
+        self.keep_history = bool(keep_history)
+        self.history_dir = history_dir
+
+    @property
+    def history_dir(self) -> str | None:
+        """Where the files of ``keep_history=False`` go (None: the system's temporary folder)."""
+        return self._history_dir
+
+    @history_dir.setter
+    def history_dir(self, directory: str | None) -> None:
+        self._history_dir = directory
+        for f in (getattr(self, "steps", None), getattr(self, "fixes", None)):
+            if hasattr(f, "directory"):  # a record file opens at its first record: it goes there
+                f.directory = directory
+
+    def _history(self, kind):
+        """A list (``keep_history``) or a record file of ``kind`` (:class:`core.export.RecordFile`)."""
+        if self.keep_history:
+            return []
+        from core.export import RecordFile
+
+        return RecordFile(kind, directory=self.history_dir, keep_last=HISTORY_KEEP_LAST)
+
+    def _events(self):
+        """A list for events (relocks, detections): every one (``keep_history``) or the last few."""
+        return [] if self.keep_history else deque(maxlen=EVENTS_KEEP_LAST)
 
     def reset(self) -> None:
+        for old in (getattr(self, "fixes", None), getattr(self, "steps", None)):
+            if hasattr(old, "close"):
+                old.close()
         self.origin_lat_lon: tuple[float, float] | None = None
         #: the fix that anchored the walk (or the first used, after a known start): (t_ns, lat, lon, alt); None before
         self.anchor: tuple | None = None
-        self.fixes: list[FixRecord] = []
-        self.steps: list[FusedStep] = []
+        self.fixes: list[FixRecord] = self._history(FixRecord)
+        self.steps: list[FusedStep] = self._history(FusedStep)
+        self.n_fixes_accepted = 0
+        self.n_fixes_hidden = 0
+        #: distance of the fused steps a fix was accepted shortly before (m)
+        self.fused_walked_m = 0.0
         self.outages: list[OutageResult] = []
         self._queue: deque = deque()
         self._last_step_ns: int | None = None
@@ -311,7 +376,7 @@ class FixFusion:
         self.judge = GpsJudge(self.judge_settings) if self.judge_settings is not None else None
         self.n_judged_out = 0
         self._pending_learning: list = []  # fixes the judge has not judged yet, for training once it has
-        self.relocks: list[dict] = []  #: when the filter re-locked to GPS, by how far, by which rule
+        self.relocks: list[dict] = self._events()  #: when the filter re-locked to GPS, by how far, by which rule
         if self.start is not None:
             self.origin_lat_lon = (self.start[0], self.start[1])
         self._reset_filter()
@@ -461,6 +526,8 @@ class FixFusion:
                 w.walked_m += walked
         fused = self._emit(step.index, step.t_ns)
         self.steps.append(fused)
+        if fused.source == "fused":
+            self.fused_walked_m += fused.length_m
         return fused
 
     def finish(self) -> None:
@@ -496,6 +563,8 @@ class FixFusion:
         return ""
 
     def _record(self, t_ns, v, east, north, accepted, reason, nis=math.nan, moved=0.0) -> None:
+        self.n_fixes_accepted += bool(accepted)
+        self.n_fixes_hidden += reason == HIDDEN
         self.fixes.append(FixRecord(t_ns, v[0], v[1], east, north, v[3] if len(v) > 3 else math.nan,
                                     v[4] if len(v) > 4 else math.nan, v[5] if len(v) > 5 else math.nan,
                                     accepted, reason, nis, moved))
@@ -508,7 +577,7 @@ class FixFusion:
         nan = math.nan
         hacc_eff = hacc if hacc > 0 else self.default_hacc_m
         if self._hidden(t_ns):
-            self._record(t_ns, v, nan, nan, False, "hidden (outage)")
+            self._record(t_ns, v, nan, nan, False, HIDDEN)
             return
         reason = self._screen(t_ns, lat, lon, hacc, speed)
         judged = None
@@ -714,11 +783,11 @@ class FixFusion:
                 "anchored": self.origin_lat_lon is not None, "filter": self.name}
 
     def counters(self) -> dict:
-        n_acc = sum(1 for f in self.fixes if f.accepted)
-        return {"fixes": len(self.fixes), "fixes_accepted": n_acc, "fixes_screened_out": self.n_screened_out,
+        return {"fixes": len(self.fixes), "fixes_accepted": self.n_fixes_accepted,
+                "fixes_screened_out": self.n_screened_out,
                 "fixes_cn0": self.n_cn0, "fixes_filter_rejected": self.n_filter_rejected,
                 "fixes_gated": self.n_gated, "fixes_relocked": self.n_relocked,
-                "fixes_hidden": sum(1 for f in self.fixes if f.reason == "hidden (outage)"),
+                "fixes_hidden": self.n_fixes_hidden,
                 "position_nis_mean": self._nis_sum / self._nis_n if self._nis_n else math.nan,
                 "fixes_judged_out": self.n_judged_out, "relocks": list(self.relocks),
                 "gps_judge": self.judge.summary() if self.judge is not None else None,

@@ -36,7 +36,7 @@ import copy
 import math
 
 from core.conventions import heading_from_bearing_deg, wrap_angle
-from core.gnss.base import (HACC_PER_SIGMA, FixFusion, FixRecord, FusedStep, FusedTrack,  # noqa: F401 - re-exported
+from core.gnss.base import (EVENTS_KEEP_LAST, HACC_PER_SIGMA, FixFusion, FixRecord, FusedStep, FusedTrack,  # noqa: F401 - re-exported
                             FusionResult, OutageResult)
 from core.gnss.ekf import PdrEkf, UpdateResult
 from core.gnss.heading_model import HeadingErrorModel
@@ -121,7 +121,8 @@ class GpsFusion(FixFusion):
             hm = self._heading_model0
             model = HeadingErrorModel(coefficients_rad=hm.coefficients_rad()) if hm is not None else None
             self.trainer = OnlineTrainer(learn_stride=self.learn_stride, learn_heading=self.learn_heading,
-                                         scale_prior=self._stride_scale0, heading_model=model)
+                                         scale_prior=self._stride_scale0, heading_model=model,
+                                         keep_windows=None if self.keep_history else EVENTS_KEEP_LAST)
 
     @property
     def filt(self) -> PdrEkf:

@@ -380,12 +380,12 @@ class KubrakFusion(FixFusion):
         self.n_variability = 0  #: times the variability test fired
         self.n_velocity_used = 0
         self.n_velocity_gated = 0
-        self.variability_events: list[dict] = []  #: when, how much, what the coefficients became
+        self.variability_events: list[dict] = self._events()  #: when, how much, what the coefficients became
         self._last_walked = 0.0
         self._last_verdict = ""
         #: coarse heading alignment: (course - PDR heading) of moving fixes until it is done
         self.aligned = False
-        self._align: list[float] = []
+        self._align: deque = deque(maxlen=2 * max(self.align_fixes, 1))  # only the last 2 align_fixes count
 
     @property
     def filt(self) -> KubrakKf:
@@ -445,7 +445,7 @@ class KubrakFusion(FixFusion):
         self._align.append(wrap_angle(course - kf.psi_pdr))
         if len(self._align) < self.align_fixes:
             return
-        a = np.array(self._align[-2 * self.align_fixes:])
+        a = np.array(self._align)
         r = math.hypot(float(np.mean(np.cos(a))), float(np.mean(np.sin(a))))
         sd = math.sqrt(-2.0 * math.log(max(min(r, 1.0), 1e-12)))
         if sd > self.align_max_sd_rad:
@@ -607,7 +607,7 @@ def learned_model(fusion: KubrakFusion) -> VelocityModel | None:
     """eq. 1's coefficients as the walk's GPS left them, with their SDs (never below half the prior's:
     the next walk may be at another pace); None when GPS aided too little walking to say."""
     kf = fusion.kf
-    walked = sum(s.length_m for s in fusion.steps if s.source == "fused")
+    walked = fusion.fused_walked_m
     if not kf.initialized or walked < MIN_PROFILE_WALKED_M or fusion.n_velocity_used < 60:
         return None
     prior = kf.model

@@ -145,6 +145,9 @@ class OnlineTrainer:
         A window whose mean heading differs more from the stretch's first starts a new stretch (rad).
     heading_model : HeadingErrorModel or None
         The model to refine (a persisted one); a new one if None.
+    keep_windows : int or None
+        Keep every window's flags in :attr:`windows` (None: a batch run) or the last this many (a live
+        app walking all day, issue #30); the training uses none of them.
     """
 
     def __init__(self, *, window_s: float = 10.0, min_steps: int = 8, max_hacc_m: float = 12.0,
@@ -158,8 +161,9 @@ class OnlineTrainer:
                  forgetting: float = 0.98, prior_scale_sd: float = 0.08, min_scale_sd: float = 0.015,
                  learn_stride: bool = True, learn_heading: bool = True,
                  heading_model: HeadingErrorModel | None = None, stride_chord_m: float = 30.0,
-                 stretch_turn_rad: float = math.radians(10.0)):
+                 stretch_turn_rad: float = math.radians(10.0), keep_windows: int | None = None):
         self.window_s = float(window_s)
+        self.keep_windows = None if keep_windows is None else int(keep_windows)
         self.min_steps = int(min_steps)
         self.max_hacc_m = float(max_hacc_m)
         self.max_hacc_doppler_m = float(max_hacc_doppler_m)
@@ -201,7 +205,9 @@ class OnlineTrainer:
         self._recent: deque = deque(maxlen=max(self.noisy_window, 2))
         self.n_stride_samples = 0
         self.n_heading_samples = 0
-        self.windows: list[WindowFlags] = []
+        #: every closed window's flags (or the last ``keep_windows``)
+        self.windows: list[WindowFlags] = [] if self.keep_windows is None else deque(maxlen=self.keep_windows)
+        self.n_windows = 0
         self.noisy = False
 
     @property
@@ -249,6 +255,7 @@ class OnlineTrainer:
         self._window_start_ns = int(t_ns)
         flags = self._window(window)
         self.windows.append(flags)
+        self.n_windows += 1
         return flags
 
     # -- one window ------------------------------------------------------------
@@ -374,7 +381,7 @@ class OnlineTrainer:
         return (scale, chord) if good else (nan, nan)
 
     def counters(self) -> dict:
-        return {"windows": len(self.windows), "stride_samples": self.n_stride_samples,
+        return {"windows": self.n_windows, "stride_samples": self.n_stride_samples,
                 "heading_samples": self.n_heading_samples, "stride_scale": self.stride_scale,
                 "gps_noisy": self.noisy, "heading_model": self.heading_model.to_dict()}
 

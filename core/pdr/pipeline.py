@@ -491,8 +491,10 @@ class Pipeline:
         self.steps: list[Step] | deque = [] if ks is True else deque(maxlen=0 if ks is False else max(0, int(ks)))
         #: completed steps so far (``len(steps)`` unless ``keep_steps`` bounds the list)
         self.n_steps = 0
-        #: fused steps (core.gnss.fusion.FusedStep), one per step, when there is a GPS fusion stage
-        self.fused: list = []
+        #: fused steps (core.gnss.fusion.FusedStep), one per step, when there is a GPS fusion stage: all of them,
+        #: or the last ``keep_steps`` (at least the last one) when that bounds the steps (the fusion's own
+        #: ``keep_history`` says whether it keeps them all, issue #30)
+        self.fused: list | deque = [] if ks is True else deque(maxlen=max(1, 0 if ks is False else int(ks)))
         #: the site the GPS gave the attitude filter (declination, field), or why not
         self.site: dict | None = None
         if self.gnss is not None:
