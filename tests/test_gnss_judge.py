@@ -195,3 +195,38 @@ def test_a_jump_in_a_stream_is_not_self_consistent():
     assert all(v.verdict is GpsVerdict.USABLE for v in verdicts[25:40])  # no steps: the fixes alone
     assert Cause.INCONSISTENT in verdicts[40].causes
     assert j.last_inconsistent_ns == int(53e9)  # until the fix before the jump leaves the 15-s window
+
+
+def test_a_stream_that_jumped_after_a_long_outage_is_relocked_to_once_it_is_consistent():
+    """Issue #26, "never lose a consistent stream": an outage of 3 minutes in which the steps' heading is 60 deg off
+    (the track ends 220-260 m off, far beyond its covariance), then 10 s of fixes 25 m off (the judge sees an
+    inconsistent window) and good fixes.  The gate rejects them all; the judge finds them consistent from about
+    265 s: within 30 s of that the filter re-locks to them and says so.  Before the fix the jump blocked the relock
+    until a fix was accepted, which the gate never allowed: no relock, the track ever further off."""
+    from core.geodesy import geodetic_to_enu
+    from core.gnss import make_fusion
+
+    true_steps = _walk(lambda t: 0.5, seconds=330.0)
+    drifted = _walk(lambda t: 0.5 + (math.radians(60.0) if t > 60.0 else 0.0), seconds=330.0)
+    rng = np.random.default_rng(3)
+
+    def fix(t, e, n):
+        if 60.0 <= t < 240.0:
+            return math.nan, math.nan  # the outage: no position
+        off = 25.0 if 240.0 <= t < 250.0 else 0.0  # the 10 s after the outage
+        return e + off + rng.normal(0, 1.0), n + rng.normal(0, 1.0)
+
+    gps = _gps(true_steps, fix, 3.0)
+    ts = np.array([s.t_ns for s in true_steps])
+    for name in ("chen", "kubrak"):
+        fr = make_fusion(name).run(drifted, gps)
+        relocks = [r for r in fr.counters["relocks"] if r["rule"] == "consistent stream"]
+        assert relocks, name
+        assert 265e9 <= relocks[0]["t_ns"] <= 295e9, name
+        assert relocks[0]["offset_m"] > 200.0, name  # said so, with how far the track was off
+        k = int(np.searchsorted(ts, relocks[0]["t_ns"] + 5e9))
+        s, truth = fr.steps[k], true_steps[k]
+        e, n = geodetic_to_enu(s.lat_deg, s.lon_deg, ORIGIN)
+        assert math.hypot(e - truth.east_m, n - truth.north_m) < 10.0, name
+        assert np.mean([f.accepted for f in fr.fixes if relocks[0]["t_ns"] < f.t_ns <= relocks[0]["t_ns"] + 30e9]) \
+            > 0.5, name

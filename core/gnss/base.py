@@ -28,7 +28,7 @@ Per fix, in this order; every fix gets a verdict (:class:`FixRecord`: used, or r
        fixes that keep being rejected but agree among themselves for ``relock_s`` are taken,
        with the covariance widened (after a long outage the track is more likely off than a
        steady GPS); fixes the judge found consistent with the walker's motion all along, with
-       no jump since the last fix taken, re-lock the position onto them (:meth:`FixFusion._relock`);
+       no jump away from a track that was right, re-lock the position onto them (:meth:`FixFusion._relock`);
     7. the subclass's extra use of an accepted fix (course, velocity, training).
 
 Fix times and step times
@@ -247,6 +247,10 @@ class FixFusion:
         built up since the last fix it took: at most this share of the distance walked
         since then, plus three fix SDs (a steady multipath offset right after good
         fixes is not the track's error).  None: no such limit.
+    relock_jump_hold_s : float
+        A jump in the fix stream right after the filter's last accepted fix (a multipath episode) blocks the
+        "consistent stream" relock for at most this long after the judge last saw it (s); a stream consistent
+        that long afterwards is taken back (:meth:`FixFusion._stream_jumped`).
     anchor_max_hacc_m, anchor_max_waits : float, int
         The first fix used (the anchor) must report at most this accuracy (m), unless this
         many screened fixes came without one (then any fix within ``max_hacc_m`` anchors).
@@ -286,7 +290,8 @@ class FixFusion:
                  hacc_scale: float = 1.0, min_sigma_m: float = 1.0, fused_timeout_s: float = 5.0,
                  hold_s: float = 3.0, hidden_ns=(), relock_s: float = 8.0, anchor_max_hacc_m: float = ANCHOR_MAX_HACC_M,
                  anchor_max_waits: int = 30, start: tuple | None = None, min_cn0_4th_dbhz: float = 25.0,
-                 status_max_age_s: float = 2.0, relock_max_drift: float | None = None, pause_s: float = 1.5,
+                 status_max_age_s: float = 2.0, relock_max_drift: float | None = None, relock_jump_hold_s: float = 60.0,
+                 pause_s: float = 1.5,
                  course_latency_s: float = 1.5, judge: JudgeSettings | None = JudgeSettings(),
                  keep_history: bool = True, history_dir: str | None = None):
         self.max_hacc_m = float(max_hacc_m)
@@ -298,6 +303,7 @@ class FixFusion:
         self.hold_ns = int(hold_s * 1e9)
         self.relock_ns = int(relock_s * 1e9)
         self.relock_max_drift = None if relock_max_drift is None else float(relock_max_drift)
+        self.relock_jump_hold_ns = int(relock_jump_hold_s * 1e9)
         self.anchor_max_hacc_m = float(anchor_max_hacc_m)
         self.anchor_max_waits = int(anchor_max_waits)
         self.hidden_ns = [(int(a), int(b)) for a, b in hidden_ns]
@@ -358,6 +364,7 @@ class FixFusion:
         self._last_step_ns: int | None = None
         self._last_step_dur_ns = int(0.55e9)
         self._last_accept_ns: int | None = None
+        self._first_inconsistent_ns: int | None = None  # the judge's first inconsistent window since then
         self._walked_since_accept_m = 0.0
         self._windows = [_Window(a, b) for a, b in self.hidden_ns]
         self._t_first_ns: int | None = None
@@ -588,6 +595,8 @@ class FixFusion:
                 st = self._status
                 fresh = st is not None and self.min_cn0_4th_dbhz > 0 and abs(t_ns - st[0]) <= self.status_max_age_ns
                 judged = self.judge.add_fix(t_ns, lat, lon, hacc_eff, self._pdr_at(t_ns), (not reason) if fresh else None)
+                if self.judge.last_inconsistent_ns == t_ns and self._first_inconsistent_ns is None:
+                    self._first_inconsistent_ns = int(t_ns)
         elif self.judge is not None and reason != "no position":
             self.judge.add_screened_out(t_ns)  # too coarse or too fast: the stream is bad, not merely absent
         if reason:
@@ -677,10 +686,10 @@ class FixFusion:
     def _relock(self, t_ns: int, innovation, sigma_m: float) -> bool:
         """Consecutive gated fixes that agree among themselves for ``relock_s``: the track is off, not GPS.
 
-        With a judge, gated fixes for ``relock_s`` that it found usable all along, and not inconsistent with the
-        steps at any time since the filter's last accepted fix (so the fixes did not jump: the track drifted
-        away from them), are taken back, whatever the covariance says (issue #26: on one phone walk 270 of 545 fixes that
-        formed a smooth path were rejected).  Otherwise they must agree among themselves for ``relock_s``
+        With a judge, gated fixes for ``relock_s`` that it found usable all along, with no jump in the stream away
+        from a track that was right (:meth:`_stream_jumped`: the track drifted away from the fixes, not the fixes
+        from it), are taken back, whatever the covariance says (issue #26: on one phone walk 270 of 545 fixes
+        that formed a smooth path were rejected).  Otherwise they must agree among themselves for ``relock_s``
         and, with ``relock_max_drift``, by no more than the track can have drifted.
         """
         run = self._rejected_run
@@ -689,10 +698,9 @@ class FixFusion:
             run.popleft()
         j = self.judge
         since = j.passing_since_ns if j is not None else None
-        jumped = j is not None and j.last_inconsistent_ns is not None and \
-            (self._last_accept_ns is None or j.last_inconsistent_ns >= self._last_accept_ns)
-        if since is not None and j.verdict is GpsVerdict.USABLE and not jumped and since <= run[0][0] and \
-                t_ns - run[0][0] >= self.relock_ns:
+        jumped = j is not None and self._stream_jumped(t_ns)
+        if since is not None and j.verdict is GpsVerdict.USABLE and not jumped and \
+                t_ns - max(since, run[0][0]) >= self.relock_ns:  # gated, and judged consistent, for relock_s
             self.relocks.append({"t_ns": int(t_ns), "offset_m": float(math.hypot(innovation[0], innovation[1])),
                                  "rule": "consistent stream", "consistent_s": (t_ns - since) * 1e-9})
             run.clear()
@@ -709,6 +717,21 @@ class FixFusion:
                              "rule": "gated fixes agree", "consistent_s": (t_ns - run[0][0]) * 1e-9})
         run.clear()
         return True
+
+    def _stream_jumped(self, t_ns: int) -> bool:
+        """Whether the fixes jumped away from a track that was right: the judge's first inconsistent window after
+        the last accepted fix came while that fix was recent (within the judge's window plus ``relock_s``: the
+        time a jump stays in the window, and the time the relock waits anyway), and its last inconsistent window
+        less than ``relock_jump_hold_s`` ago.  A stream that turns inconsistent long after the last accepted fix
+        says nothing of where the track is (it has drifted since), and a stream consistent for
+        ``relock_jump_hold_s`` after its jump is taken back whatever it jumped from (before: blocked until another
+        fix was accepted, which the gate could refuse for ever: on one phone walk 837 s of good fixes)."""
+        last, first = self.judge.last_inconsistent_ns, self._first_inconsistent_ns
+        if last is None or first is None or t_ns - last >= self.relock_jump_hold_ns:
+            return False
+        if self._last_accept_ns is None:
+            return True
+        return first - self._last_accept_ns <= int(self.judge.settings.window_s * 1e9) + self.relock_ns
 
     def _learn_pending(self) -> None:
         """The judge has just found the stream usable: the fixes it held back while it had too few to judge, or
@@ -731,6 +754,7 @@ class FixFusion:
 
     def _accepted(self, t_ns, v, east, north, hacc, speed, course, nis, moved) -> None:
         self._last_accept_ns = t_ns
+        self._first_inconsistent_ns = None
         self._walked_since_accept_m = 0.0
         self._record(t_ns, v, east, north, True, "", nis, moved)
         self._after_accept(t_ns, east, north, hacc if hacc > 0 else self.default_hacc_m, speed, course)
