@@ -74,6 +74,12 @@ Further public recordings (issue #25, fetched into a folder outside the reposito
     walks) is **report**; ``parabiomech/25.GPS-TRACKING`` (one 158-s Sensor Logger recording with GPS,
     Android, added later the same day, declared before it was run) is **report**.  Honest caveat: the
     tuning side of this corpus is one short walk, so it can guide little.
+    Declared 2026-12-06 (later the same day, a second search), continuing the same rule over the
+    repositories added (the 4th in ``owner/name`` order, so tuning): ``psy901/SensorActivity`` (one 57-s
+    counted clip, 100 steps by its file name, Physics Toolbox g-Force Meter, accelerometer only, carry
+    not stated) is **tuning**.  Declared before any benchmark number was run on it; honest caveat: one
+    ``pdr replay`` of the clip (105 steps) was seen while its new reader was checked, before this
+    declaration -- the split follows the rule above, not that number.
 
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
@@ -101,6 +107,7 @@ SIM_CARRY_SEEDS = {TUNING: tuple(range(0, 30)), REPORT: tuple(range(3000, 3030))
 REAL_TUNING_REPOS = frozenset({
     "thomasdingemanse/ML4QS",  # declared 2026-12-04 before any number was seen (phone_walks_more)
     "fif911/ML4QS",  # declared 2026-12-06 before any number was seen (extra corpus; mikamartinb/ML4QS report)
+    "psy901/SensorActivity",  # declared 2026-12-06, the rule's 4th extra repository (a counted clip; see the docstring)
 })
 
 #: the repository of each ``phone_walks_more`` walk (its MANIFEST.tsv says the same)
