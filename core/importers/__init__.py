@@ -25,6 +25,8 @@ Formats (name: input -> reader):
   (``.csv`` or ``.gz``) -> :func:`read_xio`
 * ``xsens``: XSens text export (``Acquisition frequency`` line, ``PacketCounter Acc_X ...`` header; ``.txt`` or
   ``.gz``); an IPOL trial's lower-back file reads the trial's foot files beside it -> :func:`read_xsens`
+* ``physics-toolbox``: Physics Toolbox Sensor Suite g-Force Meter CSV (``time,gFx,gFy,gFz,...``; ``.csv`` or
+  ``.gz``, or a folder holding one) -> :func:`read_physicstoolbox`
 * ``pyshoe``: PyShoe processed trial, a MATLAB level-5 MAT-file (``.mat`` or ``.mat.gz``; read with numpy and
   zlib, :mod:`core.importers.matv5`) -> :func:`read_pyshoe`
 
@@ -82,6 +84,7 @@ from core.importers import getsensordata as _gsd
 from core.importers import msindoor as _ms
 from core.importers import oxford as _ox
 from core.importers import phyphox as _phy
+from core.importers import physicstoolbox as _ptb
 from core.importers import sensorlogger as _sl
 from core.importers import pyshoe as _ps
 from core.importers import trundle as _tw
@@ -95,6 +98,7 @@ from core.importers.getsensordata import read_getsensordata
 from core.importers.msindoor import read_msindoor
 from core.importers.oxford import read_oxford
 from core.importers.phyphox import read_phyphox
+from core.importers.physicstoolbox import read_physicstoolbox
 from core.importers.sensorlogger import read_sensorlogger
 from core.importers.pyshoe import read_pyshoe
 from core.importers.trundle import read_trundle
@@ -112,6 +116,7 @@ TRUNDLE = _tw.FORMAT
 XIO = _xio.FORMAT
 XSENS = _xs.FORMAT
 PYSHOE = _ps.FORMAT
+PHYSICS_TOOLBOX = _ptb.FORMAT
 
 #: format name -> what it is (for messages and the CLI's help)
 FORMATS = {
@@ -133,6 +138,8 @@ FORMATS = {
     XSENS: "XSens text export ('Acquisition frequency: 100 Hz', then 'PacketCounter Acc_X ...'; .txt or .gz); an "
            "IPOL trial's <trial>_lb file reads its _lf/_rf foot files too",
     PYSHOE: "PyShoe processed trial (MATLAB level-5 MAT-file with imu and ts, VICON gt; .mat or .mat.gz)",
+    PHYSICS_TOOLBOX: "Physics Toolbox Sensor Suite g-Force Meter CSV ('time,gFx,gFy,gFz' header, g units; .csv "
+                     "or .gz)",
 }
 
 
@@ -148,6 +155,7 @@ _SHORT = {
     XIO: "x-io (NGIMU sensors.csv or x-IMU CSV)",
     XSENS: "xsens (XSens text export, IPOL trials)",
     PYSHOE: "pyshoe (PyShoe processed .mat trial)",
+    PHYSICS_TOOLBOX: "physics-toolbox (Physics Toolbox g-Force Meter CSV)",
 }
 
 
@@ -165,6 +173,7 @@ _TEXT_TESTS = [
     (_sl.looks_like_csv, SENSORLOGGER),
     (_phy.looks_like_csv, PHYPHOX),
     (_tw.looks_like_csv, TRUNDLE),
+    (_ptb.looks_like_csv, PHYSICS_TOOLBOX),
     (_bh.looks_like_text, BRAJDIC),
     (_ox.looks_like, OXFORD),
 ]
@@ -197,6 +206,8 @@ def _detect_fileset(fs: FileSet) -> str | None:
             votes[PHYPHOX] += 1
     if votes[SENSORLOGGER] or votes[PHYPHOX]:
         return max(votes, key=votes.get)
+    if _ptb.csv_files(fs):
+        return PHYSICS_TOOLBOX
     return None
 
 
@@ -276,12 +287,13 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
     if fmt == SENSORLOGGER:
         return read_sensorlogger(path, platform=platform, warn=warn, max_uncompressed_bytes=limit)
     readers = {PHYPHOX: read_phyphox, MSINDOOR: read_msindoor, BRAJDIC: read_brajdic, OXFORD: read_oxford,
-               TRUNDLE: read_trundle, XIO: read_xio, XSENS: read_xsens, PYSHOE: read_pyshoe}
+               TRUNDLE: read_trundle, XIO: read_xio, XSENS: read_xsens, PYSHOE: read_pyshoe,
+               PHYSICS_TOOLBOX: read_physicstoolbox}
     rec = readers[fmt](path, warn=warn, max_uncompressed_bytes=limit)
     return attach_truth_beside(path, rec) if truth_beside else rec
 
 
 __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",
            "read_phyphox", "read_msindoor", "read_brajdic", "read_oxford", "read_trundle", "read_xio", "read_xsens",
-           "read_pyshoe", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX", "MSINDOOR", "BRAJDIC", "OXFORD",
-           "TRUNDLE", "XIO", "XSENS", "PYSHOE"]
+           "read_pyshoe", "read_physicstoolbox", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
+           "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE", "XIO", "XSENS", "PYSHOE", "PHYSICS_TOOLBOX"]
