@@ -198,6 +198,8 @@ def test_split_declarations():
     assert S.split_of("anything", {"repository": "someone/else"}) == "report"
     # the extra corpus (declared 2026-12-06 before any number): fif911 tuning, mikamartinb report
     assert S.repo_split("fif911/ML4QS") == "tuning" and S.repo_split("mikamartinb/ML4QS") == "report"
+    # the second search's clip (declared 2026-12-06, the rule's 4th extra repository): tuning
+    assert S.repo_split("psy901/SensorActivity") == "tuning"
     assert S.repo_split("parabiomech/25.GPS-TRACKING") == "report"
     from benchmarks.run import DATASET_MODULES
     import importlib
