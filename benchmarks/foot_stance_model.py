@@ -15,7 +15,8 @@ Features: :func:`core.foot.stance_model.features` (about 1 s around each sample)
 The fit: L2-regularised logistic regression by Newton's method (deterministic), or with
 ``--hidden N`` a one-hidden-layer tanh network by full-batch gradient descent
 from a seeded start.  Each trial weighs the same (sample weights 1 / its length).
-Options: ``--hidden``, ``--name``, ``--no-write`` (report only), ``--seed``.
+Options: ``--hidden``, ``--name``, ``--no-write`` (report only), ``--seed``, ``--row-step`` (fit on every
+N-th sample), ``--iters`` (gradient-descent iterations of ``--hidden``).
 """
 
 from __future__ import annotations
@@ -107,15 +108,16 @@ def fit_mlp(x, y, w, hidden: int, seed: int = SEED, iters: int = 3000, lr: float
 
 
 def fit(data: list[dict], hidden: int = 0, seed: int = SEED, fs: FeatureSettings | None = None,
-        threshold_p: float = 0.5, meta=None) -> StanceModel:
-    x = np.vstack([d["x"] for d in data])
-    y = np.concatenate([d["y"] for d in data])
-    w = np.concatenate([np.full(len(d["y"]), 1.0 / len(d["y"])) for d in data])
+        threshold_p: float = 0.5, meta=None, row_step: int = 1, iters: int = 3000) -> StanceModel:
+    """Fit on every ``row_step``-th sample of each trial (the features vary over tenths of a second)."""
+    x = np.vstack([d["x"][::row_step] for d in data])
+    y = np.concatenate([d["y"][::row_step] for d in data])
+    w = np.concatenate([np.full(len(d["y"][::row_step]), 1.0 / len(d["y"][::row_step])) for d in data])
     w = w * (len(y) / w.sum())
     mean, sd = x.mean(0), x.std(0)
     sd = np.where(sd > 1e-9, sd, 1.0)
     z = (x - mean) / sd
-    layers = (fit_logistic(z, y, w),) if hidden <= 0 else fit_mlp(z, y, w, hidden, seed)
+    layers = (fit_logistic(z, y, w),) if hidden <= 0 else fit_mlp(z, y, w, hidden, seed, iters=iters)
     return StanceModel(mean, sd, tuple(layers), threshold_p, fs or FeatureSettings(), meta=meta)
 
 
@@ -133,11 +135,12 @@ def _f1(pred, ref) -> float:
     return 2 * tp / max(float(np.sum(pred)) + float(np.sum(ref)), 1.0)
 
 
-def leave_one_trial_out(data, hidden: int = 0, seed: int = SEED, thresholds=THRESHOLDS_P, log=print) -> dict:
+def leave_one_trial_out(data, hidden: int = 0, seed: int = SEED, thresholds=THRESHOLDS_P, log=print,
+                        row_step: int = 1, iters: int = 3000) -> dict:
     """Held-out p(stance) of every tuning trial and the navigator's errors at each threshold."""
     per = {th: [] for th in thresholds}
     for i, d in enumerate(data):
-        m = fit([e for j, e in enumerate(data) if j != i], hidden, seed)
+        m = fit([e for j, e in enumerate(data) if j != i], hidden, seed, row_step=row_step, iters=iters)
         p = m.probability(d["x"])
         for th in thresholds:
             st = p >= th
@@ -165,12 +168,15 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=SEED)
     ap.add_argument("--name", default=DEFAULT_MODEL, help="model file name in core/foot/models/")
     ap.add_argument("--no-write", action="store_true", help="report only; write no model file")
+    ap.add_argument("--row-step", type=int, default=1, help="fit on every N-th sample of each trial (speed)")
+    ap.add_argument("--iters", type=int, default=3000, help="--hidden: gradient-descent iterations")
     args = ap.parse_args(argv)
     t0 = time.time()
     print("features of the PyShoe tuning trials ...", file=sys.stderr)
     data = tuning_data()
     print(f"leave one trial out ({len(data)} tuning trials) ...", file=sys.stderr)
-    cv = leave_one_trial_out(data, args.hidden, args.seed, log=lambda s: print(s, file=sys.stderr))
+    cv = leave_one_trial_out(data, args.hidden, args.seed, log=lambda s: print(s, file=sys.stderr),
+                             row_step=args.row_step, iters=args.iters)
     best = min(cv["summary"], key=lambda k: (cv["summary"][k]["pyshoe_metric_median_m"],
                                             cv["summary"][k]["rmse_3d_median_m"]))
     for k, v in cv["summary"].items():
@@ -181,8 +187,10 @@ def main(argv=None) -> int:
             "labels": "VICON speed < 0.05 m/s (benchmarks.foot.vicon_still)",
             "threshold_chosen_by": "leave-one-trial-out within the tuning split, median PyShoe metric",
             "cv_summary": cv["summary"], "hidden": args.hidden, "seed": args.seed, "l2": L2,
+            "row_step": args.row_step, "iters": args.iters if args.hidden > 0 else None,
             "script": "python -m benchmarks.foot_stance_model"}
-    model = fit(data, args.hidden, args.seed, threshold_p=float(best), meta=meta)
+    model = fit(data, args.hidden, args.seed, threshold_p=float(best), meta=meta, row_step=args.row_step,
+                iters=args.iters)
     if not args.no_write:
         MODELS_DIR.mkdir(exist_ok=True)
         path = MODELS_DIR / f"{args.name}.json"
