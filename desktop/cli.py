@@ -1589,8 +1589,9 @@ def make_parser() -> argparse.ArgumentParser:
                    help="foot mode: the device with the waist magnetometer for the course filter (default waist)")
     r.add_argument("--aid", choices=("zupt", "foot_mag", "course", "tckf"), default=None,
                    help="foot mode: heading aid (default tckf with a waist magnetometer, else zupt only)")
-    r.add_argument("--detector", choices=("shoe", "song", "amv", "are"), default="shoe",
-                   help="foot mode: stance detector (default shoe)")
+    r.add_argument("--detector", choices=("shoe", "song", "amv", "are", "learned"), default="shoe",
+                   help="foot mode: stance detector (default shoe; learned: the logistic model in "
+                        "core/foot/models, issue #27)")
     r.add_argument("--gyro-delay-ms", type=float, default=0.0, metavar="MS",
                    help="foot mode: the gyroscope lags the accelerometer by this much (ms)")
     r.add_argument("--no-smoother", action="store_true",

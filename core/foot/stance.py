@@ -28,6 +28,9 @@ stance when the statistic is at most the threshold.
 ``"shoe"`` -- the stance hypothesis optimal detector (SHOE, generalised likelihood ratio; Skog et al. 2010)::
 
         T = 1/W sum_k ( |a_k - g a_mean/|a_mean||^2 / sigma_a^2 + |w_k|^2 / sigma_w^2 )   (dimensionless)
+``"learned"`` -- a learned stance probability (:mod:`core.foot.stance_model`, issue #27)
+    ``T = 1 - p(stance)`` of a logistic regression on about 1 s of samples around k (the
+    model file ``StanceSettings.model``); stance when ``T <= 1 - threshold_p`` of the file.
 ``"amv"`` -- acceleration moving variance: ``T = 1/W sum_k |a_k - a_mean|^2`` ((m/s^2)^2)
 ``"are"`` -- angular rate energy: ``T = 1/W sum_k |w_k|^2`` ((rad/s)^2)
 
@@ -59,18 +62,19 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from core.conventions import STANDARD_GRAVITY_M_S2
+from core.foot.stance_model import DEFAULT_MODEL, load_model, motion_probability
 
-DETECTORS = ("song", "shoe", "amv", "are")
+DETECTORS = ("song", "shoe", "amv", "are", "learned")
 WINDOW_ALIGNMENTS = ("auto", "centred", "trailing")
 
 #: default threshold of each detector: "song" the paper's J <= 1; the others chosen on the PyShoe tuning
-#: split with window_s = 0.1 (see docs/foot.md)
-DEFAULT_THRESHOLDS = {"song": 1.0, "shoe": 1.0e5, "amv": 0.02, "are": 0.2}
+#: split with window_s = 0.1 (see docs/foot.md); "learned": nan, ``1 - threshold_p`` of its model file
+DEFAULT_THRESHOLDS = {"song": 1.0, "shoe": 1.0e5, "amv": 0.02, "are": 0.2, "learned": math.nan}
 
 #: default adaptive-threshold factor of each detector (0 = fixed threshold): "shoe" chosen on the PyShoe
 #: tuning split (factor 2 with a 1.2 s window: mean 3-D RMSE of the 14 tuning trials 1.19 -> 0.11 m, the
 #: running trial 2017-11-27-11-11-53 15.1 -> 0.22 m, the walking trials unchanged); the others untuned, fixed
-DEFAULT_FLOOR_FACTORS = {"song": 0.0, "shoe": 2.0, "amv": 0.0, "are": 0.0}
+DEFAULT_FLOOR_FACTORS = {"song": 0.0, "shoe": 2.0, "amv": 0.0, "are": 0.0, "learned": 0.0}
 
 #: eq. 6 weights (w1 .. w5) of the paper
 SONG_WEIGHTS = (50.0, 100.0, 100.0, 3.0, 5.0)
@@ -108,6 +112,8 @@ class StanceSettings:
     shoe_gyro_sd_rad_s: float = math.radians(0.1)
     #: "shoe": gravity magnitude (m/s^2)
     gravity_m_s2: float = STANDARD_GRAVITY_M_S2
+    #: "learned": the model file (a name in ``core/foot/models/`` or a path to a ``.json``)
+    model: str = DEFAULT_MODEL
 
     def __post_init__(self):
         if self.detector not in DETECTORS:
@@ -125,7 +131,11 @@ class StanceSettings:
 
     @property
     def threshold_value(self) -> float:
-        return DEFAULT_THRESHOLDS[self.detector] if math.isnan(self.threshold) else float(self.threshold)
+        if not math.isnan(self.threshold):
+            return float(self.threshold)
+        if self.detector == "learned":
+            return 1.0 - load_model(self.model).threshold_p
+        return DEFAULT_THRESHOLDS[self.detector]
 
     @property
     def floor_factor(self) -> float:
@@ -142,6 +152,9 @@ class StanceSettings:
 
     def statistic_span_ns(self) -> tuple[int, int]:
         """``(back, ahead)``: how far (ns) the statistic's window reaches before and after its sample."""
+        if self.detector == "learned":  # the model's features reach this far each side (window_s unused)
+            h = int(round(load_model(self.model).feature_settings.span_s * 1e9))
+            return (h, h)
         w = int(round(self.window_s * 1e9))
         return (w, 0) if self.trailing else (w // 2, w // 2)
 
@@ -271,6 +284,8 @@ def statistic(settings: StanceSettings, t_ns, acc_b, gyro_b) -> np.ndarray:
     n = len(acc)
     if n == 0:
         return np.zeros(0)
+    if s.detector == "learned":
+        return motion_probability(load_model(s.model), t_ns, acc, gyr)
     lo, hi = _window_bounds(t_ns, *s.statistic_span_ns())
     cnt = (hi - lo).astype(float)
     if s.detector == "song":
