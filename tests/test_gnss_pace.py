@@ -43,6 +43,8 @@ def test_a_receiver_at_a_third_of_the_steps_speed_is_slow_once_its_window_holds_
 
 def test_no_speed_or_a_standing_walker_is_no_evidence():
     assert not any(x.slow_now for x in _feed(ReceiverPaceCheck(), lambda t: math.nan))
+    # a receiver without a velocity solution reports 0.0 (an outdoor cold start): no evidence either
+    assert not any(x.slow_now for x in _feed(ReceiverPaceCheck(), lambda t: 0.0))
     # standing for 60 s with the receiver at 0: the window's steps walked under min_walk_m
     states = _feed(ReceiverPaceCheck(), lambda t: 0.0 if 20.0 <= t < 80.0 else 1.4, seconds=120.0, stand=(18.0, 82.0))
     assert not any(x.slow_now for x in states)
