@@ -50,6 +50,18 @@ def test_no_speed_or_a_standing_walker_is_no_evidence():
     assert not any(x.slow_now for x in states)
 
 
+def test_a_gap_in_the_fixes_is_no_evidence():
+    """A 3-minute outage: the steps walked 250 m between two fixes at walking speed (a failing test before the
+    pairs across a gap were dropped: the ratio read 0.01)."""
+    c = ReceiverPaceCheck()
+    e = 0.0
+    for t in list(np.arange(1.0, 30.0, 1.0)) + list(np.arange(210.0, 260.0, 1.0)):
+        e = 1.4 * t
+        st = c.add_fix(int(t * 1e9), 1.4, (e, 0.0))
+        assert not st.slow_now
+    assert st.ratio == pytest.approx(1.0, abs=1e-9)
+
+
 def test_the_judge_keeps_a_slow_receiver_out_and_says_why_and_the_fused_track_is_dead_reckoning():
     from core.gnss import make_fusion
 

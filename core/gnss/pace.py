@@ -48,7 +48,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-#: the longest time (s) one fix's speed stands for (a gap in the stream is not walked at that speed)
+#: the longest time (s) between two fixes compared (the speed of one fix says nothing of a gap's walk)
 MAX_FIX_DT_S = 2.0
 
 
@@ -97,9 +97,9 @@ class ReceiverPaceCheck:
         t_ns = int(t_ns)
         pe, pn = float(pdr_en[0]), float(pdr_en[1])
         recv = steps = math.nan
-        if self._prev is not None:
-            dt = min((t_ns - self._prev[0]) * 1e-9, MAX_FIX_DT_S)
-            recv = speed_m_s * dt if (math.isfinite(speed_m_s) and speed_m_s > 0.0 and dt > 0) else math.nan
+        dt = (t_ns - self._prev[0]) * 1e-9 if self._prev is not None else math.nan
+        if 0.0 < dt <= MAX_FIX_DT_S:  # after a gap (an outage, screened-out fixes) the pair says nothing
+            recv = speed_m_s * dt if (math.isfinite(speed_m_s) and speed_m_s > 0.0) else math.nan
             steps = math.hypot(pe - self._prev[1], pn - self._prev[2])
         if math.isfinite(pe) and math.isfinite(pn):
             self._prev = (t_ns, pe, pn)
