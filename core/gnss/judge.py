@@ -317,6 +317,8 @@ class GpsJudge:
             causes.append(Cause.INCONSISTENT)
         if self.pace is not None and self.pace.last.slow_now:
             causes.append(Cause.PACE)
+        elif self.pace is not None and self.pace.pending:
+            causes.append(Cause.SETTLING)  # the receiver's pace not known yet: wait for it
         if nis_mean == nis_mean and nis_mean > self.nis_limit:
             causes.append(Cause.NIS)
             self._nis.clear()  # judged once: the next window starts afresh
