@@ -85,9 +85,10 @@ def test_the_judge_keeps_a_slow_receiver_out_and_says_why_and_the_fused_track_is
 
 
 def test_the_pace_is_pending_until_a_window_holds_the_evidence_and_never_without_speeds():
-    c = ReceiverPaceCheck()
+    assert not PaceSettings().wait_for_evidence  # off by default (no help on the tuning split)
+    c = ReceiverPaceCheck(PaceSettings(wait_for_evidence=True))
     pend = [(c.add_fix(int(t * 1e9), 1.4, (1.4 * t, 0.0)), c.pending)[1] for t in np.arange(1.0, 30.0, 1.0)]
     # 8 pairs of 1.4 m (>= 10 m walked) at the 9th fix: pending until then
     assert pend[:8] == [False] + [True] * 7 and not any(pend[8:])
-    c = ReceiverPaceCheck()
+    c = ReceiverPaceCheck(PaceSettings(wait_for_evidence=True))
     assert not any((c.add_fix(int(t * 1e9), math.nan, (1.4 * t, 0.0)), c.pending)[1] for t in np.arange(1.0, 30.0))

@@ -26,8 +26,9 @@ times) below ``min_ratio`` marks the stream **slow**; it stays slow until
 between slow windows carry the same stale solution).  The judge
 (:class:`core.gnss.judge.GpsJudge`) then calls the stream unusable and the
 fused track is the dead-reckoned one.  A fix without a speed (nan) is no
-evidence; a recording whose fixes carry no speed is never judged slow.  While
-the receiver reports speeds but no window has held the evidence yet
+evidence; a recording whose fixes carry no speed is never judged slow.  With
+``wait_for_evidence`` (off by default: it does not help on the tuning split),
+while the receiver reports speeds but no window has held the evidence yet
 (:attr:`ReceiverPaceCheck.pending`: the walk's first ``min_walk_m``) the judge
 waits, as it does while a stream settles.  Nor
 is a speed of exactly 0: phones report it without a velocity solution (two
@@ -65,6 +66,10 @@ class PaceSettings:
     min_fixes: int = 8
     #: the receiver's distance over the steps' below this: slow
     min_ratio: float = 0.5
+    #: wait (:attr:`ReceiverPaceCheck.pending`) while the receiver reports speeds but no window has held the
+    #: evidence yet.  Off: on the tuning split it does not help (IPIN tuning medians Kubrak 2.53 either way, Chen
+    #: 2.40 off against 2.53 on; the outdoor walks lose a few good fixes at their starts)
+    wait_for_evidence: bool = False
     #: the stream stays slow this long (s) after its last slow window
     memory_s: float = 60.0
 
@@ -133,7 +138,7 @@ class ReceiverPaceCheck:
     def pending(self) -> bool:
         """The receiver reports speeds but no window has held the evidence yet (the walk's first 10 m): its fixes
         wait (IPIN tuning T02r02: six fixes taken at 17-22 s, before the first window said slow at 23 s)."""
-        return self._seen_speed and not self._known
+        return self.settings.wait_for_evidence and self._seen_speed and not self._known
 
     def summary(self) -> dict:
         return {"fixes": self.n_fixes, "fixes_slow": self.n_slow,
