@@ -63,6 +63,7 @@ from enum import Enum
 import numpy as np
 
 from core.geodesy import geodetic_to_enu
+from core.gnss.pace import PaceSettings, ReceiverPaceCheck
 
 
 class GpsVerdict(Enum):
@@ -82,6 +83,7 @@ class Cause(Enum):
     INCONSISTENT = "fixes inconsistent with the steps"
     NIS = "innovations beyond the filter's chi-square band"
     SETTLING = "consistent for too short a time"
+    PACE = "the receiver's speed does not follow the steps (indoors)"
 
 
 @dataclass(frozen=True)
@@ -120,6 +122,9 @@ class JudgeSettings:
     #: of their path (the issue's 10-m room: a walker going round a 5-m square in 15 s gets under 0.25; a zigzag of
     #: +-60 deg, a poor walking direction, keeps 0.5).  Set from those two cases, not from data
     min_step_straightness: float = 0.25
+    #: the receiver's reported speed against the steps (:mod:`core.gnss.pace`): a receiver that sees the walker
+    #: cover under half the steps' distance for 30 s is not following the walker (IPIN indoors); None: not looked at
+    pace: PaceSettings | None = PaceSettings()
 
 
 @dataclass(frozen=True)
@@ -136,13 +141,14 @@ class Judgement:
     signal_fail_share: float = math.nan  #: of the window's fixes with a receiver status, the share failing
     nis_mean: float = math.nan  #: mean NIS of the filter's last accepted fixes
     nis_limit: float = math.nan  #: its chi-square band's upper point
+    pace_ratio: float = math.nan  #: the receiver's distance over the steps' in the pace window (:mod:`core.gnss.pace`)
 
     def as_dict(self) -> dict:
         return {"t_ns": self.t_ns, "verdict": self.verdict.value, "causes": [c.value for c in self.causes],
                 "n_fixes": self.n_fixes, "median_hacc_m": self.median_hacc_m,
                 "shape_residual_m": self.shape_residual_m, "self_residual_m": self.self_residual_m,
                 "signal_fail_share": self.signal_fail_share,
-                "nis_mean": self.nis_mean, "nis_limit": self.nis_limit}
+                "nis_mean": self.nis_mean, "nis_limit": self.nis_limit, "pace_ratio": self.pace_ratio}
 
 
 def chi2_mean_limit(dof_each: int, n: int, quantile: float) -> float:
@@ -223,6 +229,7 @@ class GpsJudge:
         self.last: Judgement | None = None
         self.first_usable_ns: int | None = None
         self._counts = _Counts()
+        self.pace = ReceiverPaceCheck(self.settings.pace) if self.settings.pace is not None else None
 
     @property
     def passing_since_ns(self) -> int | None:
@@ -244,9 +251,10 @@ class GpsJudge:
         self._screened_since_fix = True
         self._resuming = False
 
-    def add_fix(self, t_ns: int, lat_deg: float, lon_deg: float, hacc_m: float, pdr_en, signal_ok=None) -> Judgement:
-        """A screened fix, the dead-reckoned position ``pdr_en`` (m, the walk's frame) at its time, and whether
-        the receiver's status passed the C/N0 rule (None: no status)."""
+    def add_fix(self, t_ns: int, lat_deg: float, lon_deg: float, hacc_m: float, pdr_en, signal_ok=None,
+                speed_m_s: float = math.nan) -> Judgement:
+        """A screened fix, the dead-reckoned position ``pdr_en`` (m, the walk's frame) at its time, whether
+        the receiver's status passed the C/N0 rule (None: no status) and the receiver's speed (nan: none)."""
         s = self.settings
         if self._ref is None:
             self._ref = (float(lat_deg), float(lon_deg))
@@ -259,6 +267,8 @@ class GpsJudge:
             self._resuming = True  # cleared as soon as the window's evidence says anything but "too few fixes"
         self._screened_since_fix = False
         fx.append((int(t_ns), float(e), float(n), float(hacc_m), signal_ok, float(pdr_en[0]), float(pdr_en[1])))
+        if self.pace is not None:
+            self.pace.add_fix(int(t_ns), speed_m_s, pdr_en)
         while fx and fx[0][0] <= t_ns - int(s.window_s * 1e9):
             fx.popleft()
         j = self._judge(int(t_ns))
@@ -305,6 +315,10 @@ class GpsJudge:
         self_agree = self_resid <= limit and self._walking_pace_ok()
         if n >= s.min_fixes and not (steps_agree or self_agree):
             causes.append(Cause.INCONSISTENT)
+        if self.pace is not None and self.pace.last.slow_now:
+            causes.append(Cause.PACE)
+        elif self.pace is not None and self.pace.pending:
+            causes.append(Cause.SETTLING)  # the receiver's pace not known yet: wait for it
         if nis_mean == nis_mean and nis_mean > self.nis_limit:
             causes.append(Cause.NIS)
             self._nis.clear()  # judged once: the next window starts afresh
@@ -312,7 +326,8 @@ class GpsJudge:
             self.last_inconsistent_ns = t_ns
         kw = dict(n_fixes=n, median_hacc_m=med, shape_residual_m=resid, self_residual_m=self_resid,
                   signal_fail_share=fail,
-                  nis_mean=nis_mean, nis_limit=self.nis_limit)
+                  nis_mean=nis_mean, nis_limit=self.nis_limit,
+                  pace_ratio=self.pace.last.ratio if self.pace is not None else math.nan)
         if self._resuming and causes == [Cause.FEW_FIXES]:
             # a short gap in a stream found usable (a tunnel, a hidden window): still usable while the window
             # refills, its passing time kept (issue #26 follow-up: a 25-s gap cost a fresh 18 s of re-judging)
@@ -395,6 +410,7 @@ class GpsJudge:
                 "usable_share": c.usable / c.fixes if c.fixes else math.nan,
                 "causes": {k.value: v for k, v in sorted(c.causes.items(), key=lambda kv: -kv[1])},
                 "first_usable_ns": self.first_usable_ns,
+                "pace": self.pace.summary() if self.pace is not None else None,
                 "last": self.last.as_dict() if self.last is not None else None}
 
 
