@@ -112,6 +112,9 @@ CONFIGS = {
     "norm_dip_gates": ("the norm and dip gates (acc_reject_m_s2, mag_reject_ratio, mag_reject_dip_rad = inf)",
                        lambda: {"attitude": _attitude(acc_reject_m_s2=math.inf, mag_reject_ratio=math.inf,
                                                       mag_reject_dip_rad=math.inf)}, None),
+    # off by default (issue #27: it helped the tuning split, hurt the report split): the row turns it ON
+    "noise_scale": ("ON: the noise floors' learnt scale (noise_scale_rate = 0.05)",
+                    lambda: {"attitude": _attitude(noise_scale_rate=0.05)}, None),
     "still_reference_rate": ("ON: the still phone's reference rate (reference_still_rate_hz = 1)",
                              lambda: {"attitude": _attitude(reference_still_rate_hz=1.0)}, None),
     # inactive indoors: make_pipeline gives the site's field only to walks with good GPS (outdoors)

@@ -32,10 +32,20 @@ READINGS_PER_UPDATE = 0.1 * 50.0  # magnetometer at half the rate, one update pe
 def _matched_filter():
     # the simulator's gyroscope bias is constant (simulate_walk's gyro_bias_walk_rad_s_sqrt_s=0): told the
     # product's 2e-5 rad/s/sqrt(s) for real phones, the bias variance never shrinks and widens the tilt's, and
-    # through the dip the heading's (heading NEES 0.71 over 84 epochs of 12 seeds instead of 0.83)
+    # through the dip the heading's (heading NEES 0.71 over 84 epochs of 12 seeds instead of 0.83).  Told the
+    # noise, it has no floors to learn (noise_scale_rate=0)
     return AttitudeEKF(gyro_noise_rad_sqrt_s=GYRO_NOISE / math.sqrt(RATE_HZ), gyro_scale_noise_sqrt_s=0.0,
                        gyro_bias_walk_rad_s_sqrt_s=0.0,
-                       mag_noise_base=MAG_NOISE_UT / FIELD_UT / math.sqrt(READINGS_PER_UPDATE), k_m1=0.0, k_m2=0.0)
+                       mag_noise_base=MAG_NOISE_UT / FIELD_UT / math.sqrt(READINGS_PER_UPDATE), k_m1=0.0, k_m2=0.0,
+                       noise_scale_rate=0.0)
+
+
+#: the rate of the noise floors' learnt scale checked here (AttitudeSettings.noise_scale_rate; 0, off, by default)
+LEARNT_RATE = 0.05
+
+#: the filters the NEES is checked for: told the simulator's noise, and the product's defaults with their noise
+#: floors' scale learnt (the product's defaults as they are: heading NEES 0.27 over 12 walks, conservative)
+FILTERS = {"matched": _matched_filter, "learnt_floors": lambda: AttitudeEKF(noise_scale_rate=LEARNT_RATE)}
 
 
 def _attitude_error_n(q_true, q_est):
@@ -45,10 +55,10 @@ def _attitude_error_n(q_true, q_est):
 
 
 @functools.lru_cache(maxsize=None)
-def _run_against_truth(seed):
+def _run_against_truth(seed, filter_name="matched"):
     walk = simulate_walk(SQUARE * 2, rate_hz=RATE_HZ, seed=seed)
     tr = walk.truth
-    ekf = _matched_filter()
+    ekf = FILTERS[filter_name]()
     handlers = {"gyro": ekf.predict, "acc": ekf.update_acc, "mag": ekf.update_mag}
     nees, nis = [], {"acc": [], "mag": []}
     heading = []  # (t_ns, heading NEES) at every accelerometer update while walking
@@ -100,16 +110,33 @@ CONSISTENCY_SEEDS = int(os.environ.get("PDR_CONSISTENCY_SEEDS", "0"))
 
 
 @pytest.mark.skipif(CONSISTENCY_SEEDS < 6, reason="the two-sided band needs about 80 independent epochs: "
-                    "PDR_CONSISTENCY_SEEDS=12 (about 35 s)")
-def test_heading_nees_is_within_its_two_sided_chi2_band():
+                    "PDR_CONSISTENCY_SEEDS=12 (about 35 s per filter)")
+@pytest.mark.parametrize("filter_name", sorted(FILTERS))
+def test_heading_nees_is_within_its_two_sided_chi2_band(filter_name):
     """The lower end too, on enough walks: the heading sigma neither too small nor too large.
 
-    Measured with PDR_CONSISTENCY_SEEDS=12: 0.83 over 84 epochs (band [0.72, 1.32]); per seed 0.2 to 3.6 (a
-    seed's epochs share its hand's pose and gait, so two walks say little about the lower end).  With the
-    product's bias random walk instead of the simulator's (see _matched_filter): 0.71, outside.
+    Measured with PDR_CONSISTENCY_SEEDS=12, 84 epochs (band [0.72, 1.32]): told the simulator's noise 0.83 (per
+    seed 0.2 to 3.6: a seed's epochs share its hand's pose and gait, so two walks say little about the lower
+    end; with the product's bias random walk instead of the simulator's, see _matched_filter: 0.71, outside);
+    the product's defaults with the floors' scale learnt 0.91 (as they are, issue #27: 0.27, too conservative).
     """
-    x = _heading_epochs([_run_against_truth(seed) for seed in range(1, CONSISTENCY_SEEDS + 1)])
+    x = _heading_epochs([_run_against_truth(seed, filter_name) for seed in range(1, CONSISTENCY_SEEDS + 1)])
     lo, hi = _chi2_mean_band(len(x))
+    assert lo <= x.mean() <= hi, (x.mean(), lo, hi)
+
+
+def test_learnt_noise_floors_make_the_heading_sigma_neither_too_small_nor_too_large():
+    """The product's defaults with the noise floors' scale learnt, one simulated walk (7 epochs 30 s apart):
+    heading NEES within the two-sided 95 % band of its mean, [0.24, 2.29].
+
+    The product's noise floors are for real phones indoors; on the simulator's cleaner phone they make the
+    reported heading sigma 2-3 times the error (issue #27: NEES 0.09 on this walk, 0.27 over 12 walks: this
+    test fails with noise_scale_rate=0, the default).  Scaling the floors by what the heading innovations show
+    (AttitudeSettings.noise_scale_rate): 0.83 here, 0.91 over 12 walks (the test above, PDR_CONSISTENCY_SEEDS=12).
+    """
+    x = _heading_epochs([_run_against_truth(1, "learnt_floors")])
+    lo, hi = _chi2_mean_band(len(x))
+    assert len(x) >= 6
     assert lo <= x.mean() <= hi, (x.mean(), lo, hi)
 
 

@@ -256,6 +256,16 @@ def test_fast_equals_plain_when_the_carry_mode_changes():
     assert {CARRY_HANDHELD, CARRY_SWINGING, CARRY_POCKET} <= {s.carry_mode for s in plain.steps}
 
 
+def test_fast_equals_plain_with_learnt_noise_floors():
+    # the noise floors' learnt scale (off by default, issue #27): the kernel's quantile tracker and the scaled
+    # floors of the gyroscope, eq. 17 and eq. 18
+    from core.pdr.attitude import AttitudeEKF
+
+    plain, pipe = _assert_same(_real(REAL[0][0], 55.0, 90.0),
+                               lambda: Pipeline(attitude=AttitudeEKF(noise_scale_rate=0.05)))
+    assert pipe.attitude.snapshot().noise_scale < 1.0  # the scale moved: the test can see a difference
+
+
 def test_fast_equals_plain_with_other_settings():
     # no magnetometer, a shorter bout, a stricter rotation gate and no carry-mode stage: the other branches of the
     # kernels; the pipeline handed over ready-made (a declination set on its attitude filter)

@@ -43,7 +43,7 @@ from dataclasses import fields
 
 import numpy as np
 
-from core.pdr.attitude import AttitudeSettings, AttitudeState, IntervalSum, Outcome
+from core.pdr.attitude import CHI2_1_MEDIAN, AttitudeSettings, AttitudeState, IntervalSum, Outcome
 from desktop.fast.jit import kernel
 from desktop.fast.magcal import calibrate_stream
 
@@ -88,7 +88,7 @@ SETTINGS_USE = {
     "vertical_offset_ridge": "f", "initial_yaw_rad": "the start (the reference's)", "use_magnetometer": "i",
     "mag_wait_s": "the start (the reference's)", "still_window_s": "ns", "still_acc_sd_m_s2": "f",
     "still_acc_direction_rad": "f", "still_gyro_sd_rad_s": "f", "zero_rate_noise_rad_s": "f",
-    "max_gyro_gap_s": "f", "no_gyro_random_walk_rad_sqrt_s": "f",
+    "max_gyro_gap_s": "f", "no_gyro_random_walk_rad_sqrt_s": "f", "noise_scale_rate": "f", "noise_scale_min": "f",
 }
 
 #: how each field of AttitudeState reaches the kernel: "f" a slot of the float state array, "f3?" three float
@@ -108,7 +108,7 @@ STATE_USE = {
     "mag_rejected": "i", "acc_rejected": "not kept by the kernel (the pipeline reads mag_rejected)",
     "last_acc": "one event's flags: not made by the kernel", "last_mag": "one event's flags: not made by the kernel",
     "mag_reasons": "own", "acc_reasons": "own", "n_gyro": "i", "n_zero_rate": "i", "n_numerical_rejects": "i",
-    "nis_sum": "own", "nis_n": "own",
+    "nis_sum": "own", "nis_n": "own", "noise_scale": "f",
 }
 
 
@@ -170,13 +170,14 @@ N_FSTATE, N_ISTATE = len(FS), len(IS)
     "still_acc_sd_m_s2", "still_acc_direction_rad", "still_gyro_sd_rad_s", "zero_rate_noise_rad_s", "max_gyro_gap_s",
     "no_gyro_random_walk_rad_sqrt_s", "site_field_uT", "site_dip_rad", "vertical_offset_dip_error_rad",
     "vertical_offset_norm_error", "vertical_offset_min_s", "vertical_offset_ridge"))
+S_NS_RATE, S_NS_MIN = SF["noise_scale_rate"], SF["noise_scale_min"]
 SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI_STILL_WIN_NS = (SI[n] for n in (
     "reference_update_s", "reference_still_rate_hz", "use_magnetometer", "mag_requires_calibration",
     "variance_window_s", "still_window_s"))
 (F_GRAV, F_FIELD, F_DIP, F_ALPHA_REF, F_W2, F_ACC_S2, F_MAG_S2, F_LAST_ACC0, F_LAST_ACC1, F_LAST_ACC2,
- F_ASUM0, F_MSUM0) = (FS[n] for n in ("gravity_m_s2", "field_uT", "dip_rad", "alpha_ref", "w2", "acc_sigma2",
-                                      "mag_sigma2", "acc_reading.0", "acc_reading.1", "acc_reading.2", "acc_sum.x",
-                                      "mag_sum.x"))
+ F_ASUM0, F_MSUM0, F_NOISE_SCALE) = (FS[n] for n in ("gravity_m_s2", "field_uT", "dip_rad", "alpha_ref", "w2",
+                                                     "acc_sigma2", "mag_sigma2", "acc_reading.0", "acc_reading.1",
+                                                     "acc_reading.2", "acc_sum.x", "mag_sum.x", "noise_scale"))
 (I_TNS, I_TGYRO, I_HAS_TGYRO, I_REF_NEXT, I_HAS_REF_NEXT, I_ZR_NEXT, I_HAS_ZR_NEXT, I_STILL_NEXT, I_HAS_STILL_NEXT,
  I_ACC_N, I_ACC_T0, I_MAG_N, I_MAG_T0, I_GATED_N, I_YAW_UNOBS, I_MAG_REJ, I_N_ZR, I_N_NUM, I_N_RELOCK, I_N_GYRO,
  I_HAS_LAST_ACC) = (IS[n] for n in (
@@ -428,7 +429,7 @@ def correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, me
             nis_sum, nis_n, slot):
     """Kalman update of the error state and its bookkeeping (the reference's ``_correct`` and ``_record``).
 
-    Returns the outcome's code; the NIS goes into ``nis_sum[slot]``/``nis_n[slot]``, a numerical failure into
+    Returns the outcome's code and the NIS (nan when none); the NIS goes into ``nis_sum[slot]``/``nis_n[slot]``, a numerical failure into
     the state's counter, a used heading measurement ends ``yaw_unobserved``.
     """
     code, nis = _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw,
@@ -440,7 +441,16 @@ def correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, me
     if nis == nis:
         nis_sum[slot] += nis
         nis_n[slot] += 1
-    return code
+    return code, nis
+
+
+@kernel
+def adapt_noise_scale(fs, sf, nis):
+    """The reference's ``_adapt_noise_scale``: one quantile-tracker step of the noise floors' scale."""
+    if not (nis == nis) or sf[S_NS_RATE] <= 0.0:
+        return
+    k = fs[F_NOISE_SCALE] * math.exp(sf[S_NS_RATE] * (0.5 if nis > CHI2_1_MEDIAN else -0.5))
+    fs[F_NOISE_SCALE] = min(1.0, max(sf[S_NS_MIN], k))
 
 
 @kernel
@@ -490,7 +500,7 @@ def random_walk(P, rate2, dt):
 
 
 @kernel
-def predict(q, b, P, wx, wy, wz, dt, sf):
+def predict(q, b, P, wx, wy, wz, dt, sf, noise_scale):
     """eqs. 5-7 and 11: ``q <- q (x) exp((w - b) dt / 2)``, ``P <- F P F^T + Q`` (the reference's block order).
 
     Written out in scalars (the formulas of core.quaternion): it runs on every gyroscope event.
@@ -526,7 +536,7 @@ def predict(q, b, P, wx, wy, wz, dt, sf):
             A[i, j] = P[i, j] - (Rdt[i, 0] * P[3, j] + Rdt[i, 1] * P[4, j] + Rdt[i, 2] * P[5, j])
             B[i, j] = P[i, 3 + j] - (Rdt[i, 0] * P[3, 3 + j] + Rdt[i, 1] * P[4, 3 + j] + Rdt[i, 2] * P[5, 3 + j])
     w2 = (wx - b[0]) ** 2 + (wy - b[1]) ** 2 + (wz - b[2]) ** 2
-    qg = (sf[S_GN] ** 2 + sf[S_GS] ** 2 * w2) * dt
+    qg = (sf[S_GN] ** 2 + sf[S_GS] ** 2 * w2) * noise_scale * dt
     qb = sf[S_BW] ** 2 * dt
     for i in range(3):  # Ptt = A - B Rdt^T + qg I
         for j in range(3):
@@ -710,7 +720,7 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                 if dt > sf[S_MAX_GAP]:
                     random_walk(P, rw2, dt)
                 else:
-                    fs[F_W2] = predict(q, b, P, x, y_, z, dt, sf)
+                    fs[F_W2] = predict(q, b, P, x, y_, z, dt, sf, fs[F_NOISE_SCALE])
                 is_[I_TNS] = ti
         elif k == ACC_K:
             fs[F_LAST_ACC0], fs[F_LAST_ACC1], fs[F_LAST_ACC2] = x, y_, z
@@ -739,7 +749,7 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                             Hz = np.zeros((3, 6))
                             for c in range(3):
                                 Hz[c, 3 + c] = 1.0
-                            code = correct(q, b, P, yz, Hz, r2 * I3, math.inf, False, yz, False, False, max_bias,
+                            code, _ = correct(q, b, P, yz, Hz, r2 * I3, math.inf, False, yz, False, False, max_bias,
                                            is_, nis_sum, nis_n, 2)
                             if code == C_USED:
                                 is_[I_N_ZR] += 1
@@ -747,7 +757,8 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                             is_[I_HAS_ZR_NEXT] = 1
             var = winvar_update(av_t, av_v, av_p, av_s, var_win_ns, ti, na)
             dev = abs(na - fs[F_GRAV])
-            sigma2 = sf[S_A0] ** 2 + sf[S_KA1] * dev + sf[S_KA2] * var + sf[S_KA3] * fs[F_W2]  # eq. 17
+            # eq. 17 (+ turn term; the floors scaled by kappa)
+            sigma2 = (sf[S_A0] ** 2 + sf[S_KA3] * fs[F_W2]) * fs[F_NOISE_SCALE] + sf[S_KA1] * dev + sf[S_KA2] * var
             fs[F_ACC_S2] = sigma2
             reason = A_PENDING
             if dev > sf[S_ACC_REJ] or na == 0.0:
@@ -769,7 +780,7 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                         for c in range(3):  # R^T [u]x
                             Ha[c, 0] = R[1, c]
                             Ha[c, 1] = -R[0, c]
-                        code = correct(q, b, P, ya, Ha, sigma2 * I3, sf[S_ACC_GATE], False, ya, False, False,
+                        code, _ = correct(q, b, P, ya, Ha, sigma2 * I3, sf[S_ACC_GATE], False, ya, False, False,
                                        max_bias, is_, nis_sum, nis_n, 0)
                         reason = A_USED if code == C_USED else (A_GATE if code == C_GATE else A_NUM)
             count(acc_counts, acc_first, reason, 1)
@@ -814,7 +825,7 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                     propagate_without_gyro(P, is_, rw2, ti)
                     var = winvar_update(mv_t, mv_v, mv_p, mv_s, var_win_ns, ti, nm)
                     dev = abs(nm - fs[F_FIELD])
-                    sigma2 = sf[S_M0] ** 2 + sf[S_KM1] * dev + sf[S_KM2] * var  # eq. 18
+                    sigma2 = sf[S_M0] ** 2 * fs[F_NOISE_SCALE] + sf[S_KM1] * dev + sf[S_KM2] * var  # eq. 18
                     fs[F_MAG_S2] = sigma2
                     u0, u1, u2 = R[2, 0], R[2, 1], R[2, 2]
                     sin_dip = -(u0 * x + u1 * y_ + u2 * z) / nm
@@ -851,8 +862,9 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                                 Rm[0, 0] = sigma2 / c2
                                 up = np.empty(3)
                                 up[0], up[1], up[2] = u0, u1, u2
-                                code = correct(q, b, P, ym, Hm, Rm, sf[S_MAG_GATE], True, up, True, True, max_bias,
-                                               is_, nis_sum, nis_n, 1)
+                                code, nis = correct(q, b, P, ym, Hm, Rm, sf[S_MAG_GATE], True, up, True, True,
+                                                    max_bias, is_, nis_sum, nis_n, 1)
+                                adapt_noise_scale(fs, sf, nis)
                                 if code == C_USED:
                                     reason = M_USED
                                     is_[I_GATED_N] = 0
