@@ -12,6 +12,7 @@ from core.gnss.ekf import PdrEkf, sigma_max_m
 from core.gnss.fusion import GpsFusion
 from core.gnss.heading_model import HeadingErrorModel, regressors
 from core.gnss.training import (
+    ChordReference,
     OnlineTrainer,
     fusion_settings_from_profile,
     profile_with_gps_training,
@@ -128,8 +129,9 @@ def test_heading_model_rejects_an_outlier_but_accepts_a_new_direction():
 
 
 # -- training -------------------------------------------------------------------------------------
-def _feed_straight(tr, scale_truth=1.1, seconds=200, speed_noise=0.0, rng=None, heading=0.4, dev=0.1):
-    """Steps of 0.7 m model length at 1.8 Hz, GPS at 1 Hz measuring scale_truth * model distance.
+def _feed_straight(tr, scale_truth=1.1, seconds=200, speed_noise=0.0, rng=None, heading=0.4, dev=0.1, doppler=1.0):
+    """Steps of 0.7 m model length at 1.8 Hz, GPS at 1 Hz measuring scale_truth * model distance (its Doppler
+    speed ``doppler`` times the true speed).
 
     In the fusion's order: a step, then the fixes up to its time.
     """
@@ -144,7 +146,7 @@ def _feed_straight(tr, scale_truth=1.1, seconds=200, speed_noise=0.0, rng=None, 
             k += 1
             d = v * k
             tr.add_fix(int(k * 1e9), d * math.cos(heading + dev), d * math.sin(heading + dev), 4.0,
-                       v + rng.normal(0.0, speed_noise), heading + dev)
+                       doppler * v + rng.normal(0.0, speed_noise), heading + dev)
     return tr
 
 
@@ -154,6 +156,17 @@ def test_trainer_learns_stride_scale_and_offset_from_good_gps():
     assert tr.stride_scale == pytest.approx(1.12, rel=0.01)
     assert math.degrees(tr.heading_model.correction_rad(0.4)) == pytest.approx(math.degrees(0.1), abs=0.3)
     assert tr.n_stride_samples >= 8
+
+
+def test_trainer_measures_a_doppler_speed_that_reads_low_against_the_chords():
+    """Issue #26 bug 4: the Doppler speed 20 % low.  Against the Doppler distance the chords give 1/0.8; the stride
+    scale (against the steps) does not see the Doppler speed at all.  (2 %: the prior, 1 worth 30 m, still pulls.)"""
+    tr = _feed_straight(OnlineTrainer(reference=ChordReference.DOPPLER, learn_heading=False), scale_truth=1.12,
+                        seconds=300, doppler=0.8)
+    assert tr.stride_scale == pytest.approx(1.25, rel=0.02)
+    assert tr.n_stride_samples >= 8
+    steps = _feed_straight(OnlineTrainer(), scale_truth=1.12, seconds=300, doppler=0.8)
+    assert steps.stride_scale == pytest.approx(1.12, rel=0.01)
 
 
 def test_trainer_refuses_to_learn_from_noisy_gps():

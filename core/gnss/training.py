@@ -28,7 +28,9 @@ What a window gives
     sum of the stride model's step lengths over the same time span (a step
     counts with the part of its interval inside a window).  Not the
     receivers' Doppler speed: steadier, but on the iOS walks it reads 15-25 %
-    low against the chords (issue #26).
+    low against the chords (issue #26).  With ``reference=ChordReference.DOPPLER`` the chord is
+    compared with the Doppler speed integrated over the same fixes instead: the scale is then the
+    correction on the receiver's speed (Kubrak's velocity measurement, :mod:`core.gnss.kubrak`).
 
     *Heading*: ``delta = course - mean(our heading)`` for eq. 12
     (:class:`core.gnss.heading_model.HeadingErrorModel`), the course being the
@@ -52,6 +54,7 @@ user's profile from earlier walks).
 
 from __future__ import annotations
 
+import enum
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -60,6 +63,15 @@ import numpy as np
 
 from core.conventions import wrap_angle
 from core.gnss.heading_model import HeadingErrorModel
+
+
+class ChordReference(enum.Enum):
+    """What distance a straight stretch's chord is compared with (what :attr:`OnlineTrainer.stride_scale` scales)."""
+
+    #: the stride model's step lengths (Chen's stride scale)
+    STEPS = "steps"
+    #: the receiver's Doppler speed integrated over the fixes (Kubrak's Doppler speed correction, issue #26)
+    DOPPLER = "doppler"
 
 
 @dataclass(frozen=True)
@@ -143,6 +155,10 @@ class OnlineTrainer:
         length (m), against the model distance over the stretch; its end fixes must report ``max_hacc_m``.
     stretch_turn_rad : float
         A window whose mean heading differs more from the stretch's first starts a new stretch (rad).
+    reference : ChordReference
+        What the chord is compared with: the stride model's step lengths (the stride scale) or the
+        receivers' Doppler speed integrated over the fixes (a correction of the Doppler speed; a window
+        without Doppler speed then gives no sample).
     heading_model : HeadingErrorModel or None
         The model to refine (a persisted one); a new one if None.
     keep_windows : int or None
@@ -161,7 +177,8 @@ class OnlineTrainer:
                  forgetting: float = 0.98, prior_scale_sd: float = 0.08, min_scale_sd: float = 0.015,
                  learn_stride: bool = True, learn_heading: bool = True,
                  heading_model: HeadingErrorModel | None = None, stride_chord_m: float = 30.0,
-                 stretch_turn_rad: float = math.radians(10.0), keep_windows: int | None = None):
+                 stretch_turn_rad: float = math.radians(10.0), keep_windows: int | None = None,
+                 reference: ChordReference = ChordReference.STEPS):
         self.window_s = float(window_s)
         self.keep_windows = None if keep_windows is None else int(keep_windows)
         self.min_steps = int(min_steps)
@@ -190,6 +207,7 @@ class OnlineTrainer:
         self.learn_heading = bool(learn_heading)
         self.stride_chord_m = float(stride_chord_m)
         self.stretch_turn_rad = float(stretch_turn_rad)
+        self.reference = ChordReference(reference)
         self.heading_model = heading_model if heading_model is not None else HeadingErrorModel()
         self.reset()
 
@@ -305,7 +323,11 @@ class OnlineTrainer:
         reasons = []
         # -- stride: the chord of a long straight stretch of such windows against the model distance over it
         used_s = False
-        scale, gps_d = self._stretch_sample(fx, mean_h, model_d)
+        if self.reference is ChordReference.DOPPLER:
+            ref_d = self._doppler_distance(fx) if doppler else nan
+        else:
+            ref_d = model_d
+        scale, gps_d = self._stretch_sample(fx, mean_h, ref_d)
         if self.learn_stride and math.isfinite(scale):
             self._recent.append(scale)
             rec = np.array(self._recent)
@@ -355,9 +377,18 @@ class OnlineTrainer:
                     reasons.append(f"heading sample rejected: {fl.reason}")
         return WindowFlags(t1, used_s, used_h, scale, dev, mean_h, gps_d, "; ".join(reasons), res_h)
 
-    def _stretch_sample(self, fx, mean_h: float, model_d: float) -> tuple[float, float]:
+    @staticmethod
+    def _doppler_distance(fx) -> float:
+        """The receiver's speed integrated over a window's fixes (trapezoids between fixes that both have one; m)."""
+        t = np.array([f[0] for f in fx], dtype=float) * 1e-9
+        sp = np.array([f[4] for f in fx])
+        ok = np.isfinite(sp[1:]) & np.isfinite(sp[:-1])
+        return float(np.sum((0.5 * (sp[1:] + sp[:-1]) * np.diff(t))[ok]))
+
+    def _stretch_sample(self, fx, mean_h: float, ref_d: float) -> tuple[float, float]:
         """Add a straight window to the current stretch; ``(scale, chord_m)`` once the stretch's chord reaches
-        ``stride_chord_m`` (then a new stretch starts at its end), else ``(nan, nan)``.
+        ``stride_chord_m`` (then a new stretch starts at its end), else ``(nan, nan)``.  ``ref_d`` is the
+        window's distance by the :attr:`reference` (m): the scale is the chord over the stretch's sum of them.
 
         The chord between the stretch's end fixes, not the Doppler speed: on the iOS walks the speed reads
         15-25 % low (issue #26), and over 30 m or more the fixes' own errors are a few per cent of the chord.
@@ -367,10 +398,13 @@ class OnlineTrainer:
         nan = math.nan
         st = self._stretch
         first, last = fx[0], fx[-1]
+        if not math.isfinite(ref_d):
+            self._stretch = None  # no reference distance (no Doppler speed): the stretch ends here
+            return nan, nan
         if st is None or st["t_end"] != first[0] or abs(wrap_angle(mean_h - st["heading"])) > self.stretch_turn_rad:
             st = self._stretch = {"start": first, "t_end": first[0], "heading": mean_h, "model_m": 0.0}
         st["t_end"] = last[0]
-        st["model_m"] += model_d
+        st["model_m"] += ref_d
         a = st["start"]
         chord = math.hypot(last[1] - a[1], last[2] - a[2])
         if chord < self.stride_chord_m or st["model_m"] <= 0:
