@@ -214,6 +214,7 @@ class OnlineTrainer:
         self._stretch: dict | None = None  # the straight stretch the stride sample grows over
         # the stretches' chord / integrated Doppler speed: count, mean and sum of squared deviations (Welford)
         self._ratio_n, self._ratio_mean, self._ratio_m2 = 0, 0.0, 0.0
+        self._speed_samples = False  # a stride sample came from the receiver's speed
         self._w = self.scale_prior_weight_m
         self._ws = self.scale_prior * self.scale_prior_weight_m
         self._wss = 0.0  # weighted sum of squared deviations of the accepted samples
@@ -241,11 +242,18 @@ class OnlineTrainer:
 
     @property
     def stride_scale_sd(self) -> float:
-        """Uncertainty of :attr:`stride_scale` (relative): ``prior_scale_sd`` until samples say better."""
+        """Uncertainty of :attr:`stride_scale` (relative): ``prior_scale_sd`` until samples say better; with
+        samples from the receiver's speed, also the standard error of its scale (:attr:`doppler_factor`), or
+        ``prior_scale_sd`` while no stretch has checked it."""
         if self._n_eff < 2:
             return self.prior_scale_sd
         spread = math.sqrt(self._wss / (self._w - self.scale_prior_weight_m * self.forgetting ** self.n_stride_samples))
-        return max(min(spread / math.sqrt(self._n_eff), self.prior_scale_sd), self.min_scale_sd)
+        sd = spread / math.sqrt(self._n_eff)
+        if self._speed_samples:
+            n = self._ratio_n
+            sd = math.hypot(sd, math.sqrt(self._ratio_m2 / (n - 1) / n) / self._ratio_mean if n >= 2
+                            else self.prior_scale_sd)
+        return max(min(sd, self.prior_scale_sd), self.min_scale_sd)
 
     @property
     def stride_gps_distance_m(self) -> float:
@@ -428,6 +436,7 @@ class OnlineTrainer:
                     self._ratio_m2 += d * (r - self._ratio_mean)
             self._stretch = {"start": last, "t_end": last[0], "heading": mean_h, "model_m": 0.0, "doppler_m": 0.0}
         if doppler_m > 0 and model_d > 0:  # the speed's own distance (scaled by doppler_factor on output)
+            self._speed_samples = True
             return doppler_m / model_d, doppler_m
         k = self.doppler_factor
         if k == k and sample[0] == sample[0]:  # a chord among speed samples: in the speed's units
