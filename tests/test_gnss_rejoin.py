@@ -49,7 +49,7 @@ def test_the_stride_scale_from_a_right_doppler_speed_is_not_dragged_by_noisy_cho
     few stretches.  The speed, where it is right, gives the distance; the chords only check its scale."""
     from core.gnss.training import OnlineTrainer
 
-    tr = _feed_blocks(OnlineTrainer(), seed)
+    tr = _feed_blocks(OnlineTrainer(speed_samples=True), seed)
     assert tr.stride_scale == pytest.approx(1.1, rel=0.02)
     assert tr.n_stride_samples >= 15
 
@@ -60,7 +60,7 @@ def test_a_speed_that_reads_low_is_corrected_by_the_stretches_chords(seed):
     without the stopping bias and the stride scale comes out right (within 3 %)."""
     from core.gnss.training import OnlineTrainer
 
-    tr = _feed_blocks(OnlineTrainer(), seed, speed_bias=0.8, leg_s=60.0)
+    tr = _feed_blocks(OnlineTrainer(speed_samples=True), seed, speed_bias=0.8, leg_s=60.0)
     assert tr.doppler_factor == pytest.approx(1.25, rel=0.04)
     assert tr.stride_scale == pytest.approx(1.1, rel=0.03)
 
