@@ -128,12 +128,17 @@ class OutageResult:
     fix_t_ns: int  #: the fix that measured the end error
     fix_accepted: bool  #: whether that fix was accepted at once (else GPS was taken back later)
     rejoin_s: float = math.nan  #: from that fix to the first accepted one (s)
+    #: the first accepted fix came through a relock (the filter had refused the stream: its jump is no
+    #: consistent update, and ``jump_m / sigma_m`` measures how far off the track was, not the filter's noise)
+    relocked: bool = False
+    sigma_at_rejoin_m: float = math.nan  #: position uncertainty just before that first accepted fix
 
     def as_dict(self) -> dict:
         return {"start_s": self.start_s, "length_s": self.length_s, "walked_m": self.walked_m,
                 "end_error_m": self.end_error_m, "end_error_pct": self.end_error_pct, "sigma_m": self.sigma_m,
                 "jump_m": self.jump_m, "jump_over_3sigma": bool(self.jump_m > 3.0 * self.sigma_m),
-                "fix_accepted": self.fix_accepted, "rejoin_s": self.rejoin_s}
+                "fix_accepted": self.fix_accepted, "rejoin_s": self.rejoin_s, "relocked": self.relocked,
+                "sigma_at_rejoin_m": self.sigma_at_rejoin_m}
 
 
 @dataclass
@@ -652,6 +657,7 @@ class FixFusion:
             self._filter_rejected(t_ns, east, north, sigma, speed, course)
             return
         res = self._update_position(t_ns, east, north, sigma, True)
+        relocked = False
         if not res.accepted and self._relock(t_ns, res.innovation, sigma):
             # the track, not the GPS, is wrong: take the fix with the position uncertainty widened by
             # the disagreement (so its NIS is acceptable) instead of rejecting GPS for ever
@@ -669,6 +675,8 @@ class FixFusion:
                 filt.P[:2, :2] += np.outer(d, d)
                 res = self._update_position(t_ns, east, north, sigma, False)
             self.n_relocked += 1
+            relocked = True
+            self._after_relock(float(np.hypot(*d)), self._walked_since_accept_m)
         if not res.accepted:
             self.n_gated += 1
             self._record(t_ns, v, east, north, False, res.reason, res.nis)
@@ -679,7 +687,7 @@ class FixFusion:
             self._nis_n += 1
             if self.judge is not None:
                 self.judge.add_nis(res.nis)
-        self._outage_jump(t_ns, res.correction_m)
+        self._outage_jump(t_ns, res.correction_m, relocked, res.sigma_before_m)
         if self.anchor is None:
             self.anchor = (int(t_ns), float(lat), float(lon), float(v[2]) if len(v) > 2 else math.nan)
         self._accepted(t_ns, v, east, north, hacc, speed, course, res.nis, res.correction_m)
@@ -768,20 +776,27 @@ class FixFusion:
                 w.sigma_m = sigma
                 w.fix_t_ns = t_ns
 
-    def _outage_jump(self, t_ns, moved) -> None:
-        """... and the jump at the first fix after it that the filter accepts (the track rejoining GPS)."""
+    def _outage_jump(self, t_ns, moved, relocked: bool = False, sigma_before_m: float = math.nan) -> None:
+        """... and the jump at the first fix after it that the filter accepts (the track rejoining GPS), saying
+        whether that fix came through a relock."""
         for w in self._windows:
             if w.fix_t_ns is not None and not w.done:
-                self._close_window(w, moved, t_ns)
+                self._close_window(w, moved, t_ns, relocked, sigma_before_m)
 
-    def _close_window(self, w, jump_m: float, accept_t_ns: int | None) -> None:
+    def _after_relock(self, offset_m: float, walked_m: float) -> None:
+        """A relock moved the position by ``offset_m`` after ``walked_m`` of walking since the last accepted
+        fix: the filter's own uncertainty was wrong (the subclass may widen what caused it)."""
+
+    def _close_window(self, w, jump_m: float, accept_t_ns: int | None, relocked: bool = False,
+                      sigma_before_m: float = math.nan) -> None:
         w.done = True
         t0 = self._t_first_ns if self._t_first_ns is not None else 0
         pct = 100.0 * w.end_error_m / w.walked_m if w.walked_m > 0 else math.nan
         self.outages.append(OutageResult((w.start_ns - t0) * 1e-9, (w.end_ns - w.start_ns) * 1e-9, w.walked_m,
                                          w.end_error_m, pct, w.sigma_m, jump_m, w.fix_t_ns,
                                          accept_t_ns == w.fix_t_ns,
-                                         (accept_t_ns - w.fix_t_ns) * 1e-9 if accept_t_ns is not None else math.nan))
+                                         (accept_t_ns - w.fix_t_ns) * 1e-9 if accept_t_ns is not None else math.nan,
+                                         bool(relocked), float(sigma_before_m)))
 
     def set_time_zero(self, t0_ns: int) -> None:
         """The first sensor event's time, for outage start times in seconds."""

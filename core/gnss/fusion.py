@@ -44,6 +44,8 @@ from core.gnss.training import OnlineTrainer
 
 
 FILTERS = ("ekf", "reset")
+#: heading samples the heading model learns after a relock before the relock's heading SD is dropped
+RELOCK_HEADING_SAMPLES = 3
 
 
 class GpsFusion(FixFusion):
@@ -111,6 +113,9 @@ class GpsFusion(FixFusion):
         self.reset()
 
     def _reset_filter(self) -> None:
+        #: heading SD a relock showed the heading model did not know (rad), and the heading samples it lasts for
+        self._relock_heading_sd_rad = 0.0
+        self._relock_heading_until = 0
         # the given filter is a prototype of settings: each run starts a copy of it afresh
         self.ekf = PdrEkf() if self._ekf_proto is None else copy.copy(self._ekf_proto)
         self.ekf.reset()
@@ -173,10 +178,26 @@ class GpsFusion(FixFusion):
         ekf = self.ekf
         if not ekf.initialized:
             ekf.initialize(0.0, 0.0, self.start[2] if self.start is not None else 0.1, length, heading)
-        ekf.set_consider_sd(math.hypot(self._heading_sd(step.heading_rad), self.heading_floor_sd_rad),
+        if self._relock_heading_sd_rad and self.trainer.n_heading_samples >= self._relock_heading_until:
+            self._relock_heading_sd_rad = 0.0
+        ekf.set_consider_sd(math.hypot(self._heading_sd(step.heading_rad), self.heading_floor_sd_rad,
+                                       self._relock_heading_sd_rad),
                             self.trainer.stride_scale_sd if self.learn_stride else self.trainer.prior_scale_sd)
         ekf.step(length, heading)
         return length
+
+    def _after_relock(self, offset_m: float, walked_m: float) -> None:
+        """The track ended ``offset_m`` off after ``walked_m`` of dead reckoning: a heading error of
+        ``2 asin(offset / 2 walked)`` (pi when it walked less than half the offset), which the heading model's
+        SD did not cover (the gate refused the fixes).  That angle joins the heading-bias consider SD until the
+        heading model has learnt from ``RELOCK_HEADING_SAMPLES`` more windows, so the position's reported
+        sigma grows as the track can drift (issue #26: on liatoutou_walk2 the track was 200 m off again 90 s
+        after each relock with a reported sigma of 3-15 m)."""
+        ratio = offset_m / (2.0 * walked_m) if walked_m > 0 else math.inf
+        angle = 2.0 * math.asin(ratio) if ratio < 1.0 else math.pi
+        if angle > self._relock_heading_sd_rad:
+            self._relock_heading_sd_rad = angle
+        self._relock_heading_until = self.trainer.n_heading_samples + RELOCK_HEADING_SAMPLES
 
     def _step_output(self) -> tuple[float, float]:
         return float(self.ekf.x[2]), float(self.ekf.x[3])
