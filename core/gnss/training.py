@@ -47,8 +47,8 @@ Safeguards (flags returned with every window)
 The stride estimate (``stride_weighting``, :class:`StrideWeighting`)
     * ``INFORMATION``: a scalar Kalman (Bayes) update of the scale
       (:func:`core.kalman.correct`), started from the prior ``scale_prior``
-      with relative SD ``prior_scale_sd`` (the user's profile from earlier
-      walks).  A chord sample ``z = chord / model distance`` counts with its
+      (the user's profile from earlier walks) with relative SD
+      ``scale_prior_sd``.  A chord sample ``z = chord / model distance`` counts with its
       information: its SD is the chord's error from its end fixes' reported
       accuracies, ``sqrt(sd_a^2 + sd_b^2) / model distance`` with
       ``sd = hacc / 1.515`` (hacc is a 68 % radius, per-axis SD each end),
@@ -156,7 +156,7 @@ class OnlineTrainer:
     step_heading_sd_rad : float
         Per-step SD of our heading about its window mean (rad), for the sample weight.
     scale_prior : float
-        Starting stride scale (its SD: ``prior_scale_sd``).
+        Starting stride scale (its SD: ``scale_prior_sd``, or ``prior_scale_sd`` with ``CHORD_LENGTH``).
     scale_prior_weight_m : float
         The prior's weight in metres of walking (``CHORD_LENGTH`` weighting only).
     scale_limits : (float, float)
@@ -178,9 +178,9 @@ class OnlineTrainer:
     chord_model_sd : float
         Relative SD of a chord sample beyond its fixes' errors: the model distance's own noise
         (``INFORMATION`` weighting).
-    chord_fix_correlation : float
-        Correlation of the two end fixes' errors (the slowly wandering part of a receiver's error cancels in
-        a chord; 0: independent, the cautious choice).
+    scale_prior_sd : float
+        Relative SD of ``scale_prior`` in the ``INFORMATION`` update (and the SD reported before any sample):
+        the stride model's error for a walker it has not seen (the tuning walk needs 1.12).
     learn_stride, learn_heading : bool
         What to learn (the benchmark switches them to isolate each part).
     stride_chord_m : float
@@ -208,7 +208,7 @@ class OnlineTrainer:
                  heading_model: HeadingErrorModel | None = None, stride_chord_m: float = 30.0,
                  stretch_turn_rad: float = math.radians(10.0), keep_windows: int | None = None,
                  stride_weighting: StrideWeighting = StrideWeighting.INFORMATION, chord_model_sd: float = 0.03,
-                 chord_fix_correlation: float = 0.0):
+                 scale_prior_sd: float = 0.15):
         self.window_s = float(window_s)
         self.keep_windows = None if keep_windows is None else int(keep_windows)
         self.min_steps = int(min_steps)
@@ -235,7 +235,7 @@ class OnlineTrainer:
         self.min_scale_sd = float(min_scale_sd)
         self.stride_weighting = StrideWeighting(stride_weighting)
         self.chord_model_sd = float(chord_model_sd)
-        self.chord_fix_correlation = float(chord_fix_correlation)
+        self.scale_prior_sd = float(scale_prior_sd)
         self.learn_stride = bool(learn_stride)
         self.learn_heading = bool(learn_heading)
         self.stride_chord_m = float(stride_chord_m)
@@ -253,7 +253,7 @@ class OnlineTrainer:
         self._wss = 0.0  # weighted sum of squared deviations of the accepted samples
         self._n_eff = 0.0
         self._scale = self.scale_prior  # INFORMATION: the scale's posterior mean and variance
-        self._scale_var = (self.prior_scale_sd * self.scale_prior) ** 2
+        self._scale_var = (self.scale_prior_sd * self.scale_prior) ** 2
         self._recent: deque = deque(maxlen=max(self.noisy_window, 2))
         self.n_stride_samples = 0
         self.n_heading_samples = 0
@@ -273,9 +273,10 @@ class OnlineTrainer:
 
     @property
     def stride_scale_sd(self) -> float:
-        """Uncertainty of :attr:`stride_scale` (relative): ``prior_scale_sd`` until samples say better.
+        """Uncertainty of :attr:`stride_scale` (relative).
 
-        ``INFORMATION``: the posterior SD (at least ``min_scale_sd``); ``CHORD_LENGTH``: the weighted spread
+        ``INFORMATION``: the posterior SD (``scale_prior_sd`` before any sample, at least ``min_scale_sd``);
+        ``CHORD_LENGTH``: ``prior_scale_sd`` until two samples, then: the weighted spread
         of the samples over the root of their effective number, within [``min_scale_sd``, ``prior_scale_sd``]."""
         if self.stride_weighting is StrideWeighting.INFORMATION:
             return max(math.sqrt(self._scale_var) / max(self._scale, 1e-6), self.min_scale_sd)
@@ -455,8 +456,7 @@ class OnlineTrainer:
         self._stretch = {"start": last, "t_end": last[0], "heading": mean_h, "model_m": 0.0}
         if not good:
             return None
-        sa, sb = a[3] / HACC_PER_SIGMA, last[3] / HACC_PER_SIGMA  # the end fixes' per-axis SDs
-        chord_sd = math.sqrt(max(sa * sa + sb * sb - 2.0 * self.chord_fix_correlation * sa * sb, 0.0))
+        chord_sd = math.hypot(a[3], last[3]) / HACC_PER_SIGMA  # the end fixes' errors along the chord
         return StrideSample(scale, chord, math.hypot(chord_sd / model_m, self.chord_model_sd * scale))
 
     def counters(self) -> dict:
