@@ -150,10 +150,8 @@ def _feed_straight(tr, scale_truth=1.1, seconds=200, speed_noise=0.0, rng=None, 
 
 def test_trainer_learns_stride_scale_and_offset_from_good_gps():
     # a stride sample per 30-m straight stretch (issue #26: chords, not the Doppler speed): here three 10-s windows, 9 in 300 s
-    # (each 4-m fix pair makes a 40-m chord worth ~10 % on the scale: the prior, 1.0 +- 8 %, still pulls a little)
     tr = _feed_straight(OnlineTrainer(), scale_truth=1.12, seconds=300)
-    assert tr.stride_scale == pytest.approx(1.12, rel=0.02)
-    assert abs(tr.stride_scale - 1.12) <= tr.stride_scale_sd * tr.stride_scale  # its reported SD covers it
+    assert tr.stride_scale == pytest.approx(1.12, rel=0.01)
     assert math.degrees(tr.heading_model.correction_rad(0.4)) == pytest.approx(math.degrees(0.1), abs=0.3)
     assert tr.n_stride_samples >= 8
 
@@ -179,16 +177,14 @@ def test_trainer_refuses_to_learn_from_noisy_gps():
 
 def test_profile_keeps_what_gps_taught_and_the_next_walk_starts_from_it(tmp_path):
     tr = _feed_straight(OnlineTrainer(), scale_truth=1.08)
-    learnt = tr.stride_scale
-    assert learnt == pytest.approx(1.08, rel=0.03)  # 200 s of 4-m fixes (the prior, 1.0 +- 8 %, still pulls)
     prof = profile_with_gps_training(UserProfile(height_m=1.8), tr)
     path = tmp_path / "p.json"
     prof.save(path)
     back = UserProfile.load(path)
-    assert back.gps["stride_scale"] == pytest.approx(learnt, abs=1e-4)
+    assert back.gps["stride_scale"] == pytest.approx(1.08, rel=0.01)
     kw = fusion_settings_from_profile(back)
     fu = GpsFusion(**kw)
-    assert fu.trainer.stride_scale == pytest.approx(learnt, abs=1e-4)
+    assert fu.trainer.stride_scale == pytest.approx(1.08, rel=0.01)
     assert math.degrees(fu.heading_model.correction_rad(0.4)) == pytest.approx(math.degrees(0.1), abs=0.5)
     assert profile_with_gps_training(UserProfile(), OnlineTrainer()) == UserProfile()  # nothing learnt: unchanged
 
