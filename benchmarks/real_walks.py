@@ -105,10 +105,15 @@ def replay_args(folder: Path, outages=()):
     from desktop.cli import make_parser
 
     argv = ["replay", str(folder), "--no-profile", "--no-progress"]
+    if REPLAY_GPS is not None:
+        argv += ["--gps", REPLAY_GPS]
     for a, length in outages:
         argv += ["--gps-outage", f"{a:.3f}:{length:.3f}"]
     return make_parser().parse_args(argv)
 
+
+#: ``--gps MODE``: the replay's GPS fusion for an experiment (None: the product's default, ``auto``)
+REPLAY_GPS: str | None = None
 
 #: ``--set NAME=VALUE``: walking-direction settings for an experiment on the tuning split (None: the defaults)
 WALKDIR_OVERRIDES: dict = {}
@@ -743,7 +748,9 @@ def _change(c) -> str:
 
 
 def _task(args):
-    walk, outages, plots, overrides = args
+    global REPLAY_GPS
+    walk, outages, plots, overrides, gps = args
+    REPLAY_GPS = gps
     WALKDIR_OVERRIDES.clear()
     WALKDIR_OVERRIDES.update(overrides)
     t = time.time()
@@ -766,6 +773,8 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="a core.pdr.walkdir.WalkingDirection setting for an experiment (tuning split only)")
+    ap.add_argument("--gps", default=None, choices=("auto", "off", "chen", "kubrak"),
+                    help="the replay's --gps for an experiment (default: the product's, auto); writes under out/")
     a = ap.parse_args(argv)
     root = a.data or default_data_root()
     walks = real_walks(root, a.extra)
@@ -784,7 +793,7 @@ def main(argv=None) -> int:
             overrides[k] = v
     if overrides and any(w.split != TUNING for w in walks):
         ap.error("--set is for experiments on the tuning split: add --split tuning")
-    tasks = [(w, not a.no_outages, not a.no_plots, overrides) for w in walks]
+    tasks = [(w, not a.no_outages, not a.no_plots, overrides, a.gps) for w in walks]
     if a.jobs > 1:
         with ProcessPoolExecutor(a.jobs) as ex:
             rows = list(ex.map(_task, tasks))
@@ -803,7 +812,7 @@ def main(argv=None) -> int:
                 by_carry=summarize_by(rows, "carry"))
     md = markdown(rows, summ, meta)
     # a subset (--only, --split, --extra, --set) or --no-write: under out/benchmarks/real_walks/ (benchmarks.options)
-    subset = a.split != "all" or a.extra is not None or bool(overrides)
+    subset = a.split != "all" or a.extra is not None or bool(overrides) or a.gps is not None
     res_md = RESULTS_MD if writes_committed(a) and not subset else out_dir("real_walks") / RESULTS_MD.name
     res_json = RESULTS_JSON if writes_committed(a) and not subset else out_dir("real_walks") / RESULTS_JSON.name
     res_md.write_text(md)

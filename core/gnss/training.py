@@ -46,26 +46,60 @@ Safeguards (flags returned with every window)
       following noise into the outage that often comes next;
     * the estimate is clipped to ``scale_limits``.
 
-The stride estimate is a distance-weighted mean of the accepted samples
-with exponential forgetting (``forgetting`` per sample), started from a prior
-(``scale_prior``, worth ``scale_prior_weight_m`` metres of walking: the
-user's profile from earlier walks).
+The stride estimate (``stride_weighting``, :class:`StrideWeighting`)
+    * ``INFORMATION``: a scalar Kalman (Bayes) update of the scale
+      (:func:`core.kalman.correct`), started from the prior ``scale_prior``
+      (the user's profile from earlier walks) with relative SD
+      ``scale_prior_sd``.  A chord sample ``z = chord / model distance`` counts with its
+      information: its SD is the chord's error from its end fixes' reported
+      accuracies, ``sqrt(sd_a^2 + sd_b^2) / model distance`` with
+      ``sd = hacc / 1.515`` (hacc is a 68 % radius, per-axis SD each end),
+      combined with ``chord_model_sd`` (relative), the model distance's own
+      noise (the stride model's error changes with speed and ground from one
+      stretch to the next).  Before each accepted sample the variance is
+      divided by ``forgetting`` (the same exponential forgetting).  So a short
+      chord between 10-m fixes moves the scale little, a long one between
+      3-m fixes much, and :attr:`OnlineTrainer.stride_scale_sd` is the
+      filter's own posterior SD.
+    * ``CHORD_LENGTH`` (before issue #26's review): a chord-length-weighted
+      mean of the accepted samples with exponential forgetting (``forgetting``
+      per sample), started from the prior worth ``scale_prior_weight_m``
+      metres of walking -- one 30-m sample weighs as much as the prior,
+      whatever its fixes' accuracy.
 """
 
 from __future__ import annotations
 
-import enum
 import math
 from collections import deque
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 
 from core.conventions import wrap_angle
+from core.gnss.base import HACC_PER_SIGMA
 from core.gnss.heading_model import HeadingErrorModel
+from core.kalman import correct
 
 
-class ChordReference(enum.Enum):
+class StrideWeighting(Enum):
+    """How the chord samples of the stride scale are combined (module docstring)."""
+
+    INFORMATION = "information"  #: scalar Kalman update, each sample by its SD from its fixes' accuracies
+    CHORD_LENGTH = "chord_length"  #: the mean weighted by chord length, the prior worth ``scale_prior_weight_m``
+
+
+@dataclass(frozen=True)
+class StrideSample:
+    """One chord sample of the stride scale."""
+
+    scale: float  #: chord / model distance
+    chord_m: float
+    sd: float  #: its SD (absolute, on the scale) from the end fixes' accuracies and ``chord_model_sd``
+
+
+class ChordReference(Enum):
     """What distance a straight stretch's chord is compared with (what :attr:`OnlineTrainer.stride_scale` scales)."""
 
     #: the stride model's step lengths (Chen's stride scale)
@@ -132,8 +166,10 @@ class OnlineTrainer:
         SD of a window's mean Doppler course (rad).
     step_heading_sd_rad : float
         Per-step SD of our heading about its window mean (rad), for the sample weight.
-    scale_prior, scale_prior_weight_m : float
-        Starting stride scale and its weight in metres of walking.
+    scale_prior : float
+        Starting stride scale (its SD: ``scale_prior_sd``, or ``prior_scale_sd`` with ``CHORD_LENGTH``).
+    scale_prior_weight_m : float
+        The prior's weight in metres of walking (``CHORD_LENGTH`` weighting only).
     scale_limits : (float, float)
         The stride scale is kept within these.
     scale_gate : float
@@ -147,7 +183,21 @@ class OnlineTrainer:
     forgetting : float
         Factor on the old samples' weight per accepted sample (0 < f <= 1).
     prior_scale_sd, min_scale_sd : float
-        Relative uncertainty of the stride scale before training, and its floor after.
+        Relative uncertainty of the stride scale before training, and the floor of the one reported after.
+    stride_weighting : StrideWeighting
+        How the chord samples are combined (module docstring).  ``CHORD_LENGTH`` by default: ``INFORMATION``
+        was mixed on the tuning split (issue #26 stride weighting, measured 2026-12-06): better on the real
+        tuning walk's leave-one-out fixes (Chen's ratio 0.551 -> 0.401) and the simulated noisy minute
+        (median 10.30 -> 10.03 m), flat on its hidden windows, worse on gnss_eval's clean simulated 5-minute
+        outages (seeds 0-1: 0.77/0.31 -> 3.28/2.21 %; the guard's ``gps_outage_sim_quick_5min_pct``).
+    chord_model_sd : float
+        Relative SD of a chord sample beyond its fixes' errors: the model distance's own noise
+        (``INFORMATION`` weighting).
+    scale_prior_sd : float
+        Relative SD of ``scale_prior`` in the ``INFORMATION`` update (and the SD reported before any sample):
+        the stride model's error for a walker it has not seen.  0.08 (as ``prior_scale_sd``): on the real
+        tuning walk 0.15 was no better (leave-one-out ratio 0.420 vs 0.401); on the simulator, whose walkers
+        need 0.99-1.13, 0.15 learns faster from clean GPS (benchmarks/gnss_eval seeds 0-1, issue #26).
     learn_stride, learn_heading : bool
         What to learn (the benchmark switches them to isolate each part).
     stride_chord_m : float
@@ -178,7 +228,9 @@ class OnlineTrainer:
                  learn_stride: bool = True, learn_heading: bool = True,
                  heading_model: HeadingErrorModel | None = None, stride_chord_m: float = 30.0,
                  stretch_turn_rad: float = math.radians(10.0), keep_windows: int | None = None,
-                 reference: ChordReference = ChordReference.STEPS):
+                 reference: ChordReference = ChordReference.STEPS,
+                 stride_weighting: StrideWeighting = StrideWeighting.CHORD_LENGTH, chord_model_sd: float = 0.03,
+                 scale_prior_sd: float = 0.08):
         self.window_s = float(window_s)
         self.keep_windows = None if keep_windows is None else int(keep_windows)
         self.min_steps = int(min_steps)
@@ -203,6 +255,9 @@ class OnlineTrainer:
         self.forgetting = float(forgetting)
         self.prior_scale_sd = float(prior_scale_sd)
         self.min_scale_sd = float(min_scale_sd)
+        self.stride_weighting = StrideWeighting(stride_weighting)
+        self.chord_model_sd = float(chord_model_sd)
+        self.scale_prior_sd = float(scale_prior_sd)
         self.learn_stride = bool(learn_stride)
         self.learn_heading = bool(learn_heading)
         self.stride_chord_m = float(stride_chord_m)
@@ -220,6 +275,8 @@ class OnlineTrainer:
         self._ws = self.scale_prior * self.scale_prior_weight_m
         self._wss = 0.0  # weighted sum of squared deviations of the accepted samples
         self._n_eff = 0.0
+        self._scale = self.scale_prior  # INFORMATION: the scale's posterior mean and variance
+        self._scale_var = (self.scale_prior_sd * self.scale_prior) ** 2
         self._recent: deque = deque(maxlen=max(self.noisy_window, 2))
         self.n_stride_samples = 0
         self.n_heading_samples = 0
@@ -231,12 +288,21 @@ class OnlineTrainer:
     @property
     def stride_scale(self) -> float:
         """The learnt factor on the stride model's step length."""
-        s = self._ws / self._w if self._w > 0 else self.scale_prior
+        if self.stride_weighting is StrideWeighting.INFORMATION:
+            s = self._scale
+        else:
+            s = self._ws / self._w if self._w > 0 else self.scale_prior
         return min(max(s, self.scale_limits[0]), self.scale_limits[1])
 
     @property
     def stride_scale_sd(self) -> float:
-        """Uncertainty of :attr:`stride_scale` (relative): ``prior_scale_sd`` until samples say better."""
+        """Uncertainty of :attr:`stride_scale` (relative).
+
+        ``INFORMATION``: the posterior SD (``scale_prior_sd`` before any sample, at least ``min_scale_sd``);
+        ``CHORD_LENGTH``: ``prior_scale_sd`` until two samples, then: the weighted spread
+        of the samples over the root of their effective number, within [``min_scale_sd``, ``prior_scale_sd``]."""
+        if self.stride_weighting is StrideWeighting.INFORMATION:
+            return max(math.sqrt(self._scale_var) / max(self._scale, 1e-6), self.min_scale_sd)
         if self._n_eff < 2:
             return self.prior_scale_sd
         spread = math.sqrt(self._wss / (self._w - self.scale_prior_weight_m * self.forgetting ** self.n_stride_samples))
@@ -327,7 +393,8 @@ class OnlineTrainer:
             ref_d = self._doppler_distance(fx) if doppler else nan
         else:
             ref_d = model_d
-        scale, gps_d = self._stretch_sample(fx, mean_h, ref_d)
+        sample = self._stretch_sample(fx, mean_h, ref_d)
+        scale, gps_d = (sample.scale, sample.chord_m) if sample is not None else (nan, nan)
         if self.learn_stride and math.isfinite(scale):
             self._recent.append(scale)
             rec = np.array(self._recent)
@@ -339,14 +406,9 @@ class OnlineTrainer:
             elif self.n_stride_samples >= self.min_samples and abs(scale - est) > self.scale_gate * est:
                 reasons.append(f"stride sample {scale:.2f} too far from {est:.2f}")
             else:
-                f = self.forgetting
-                est0 = self.stride_scale
-                self._w = f * self._w + gps_d
-                self._ws = f * self._ws + gps_d * scale
-                self._wss = f * self._wss + gps_d * (scale - est0) ** 2
-                self._n_eff = f * self._n_eff + 1.0
-                self.n_stride_samples += 1
-                used_s = True
+                used_s = self._learn_stride(sample)
+                if not used_s:
+                    reasons.append(f"stride sample {scale:.2f}: numerical failure of the update")
         # -- heading
         used_h = False
         dev = nan
@@ -385,9 +447,27 @@ class OnlineTrainer:
         ok = np.isfinite(sp[1:]) & np.isfinite(sp[:-1])
         return float(np.sum((0.5 * (sp[1:] + sp[:-1]) * np.diff(t))[ok]))
 
-    def _stretch_sample(self, fx, mean_h: float, ref_d: float) -> tuple[float, float]:
-        """Add a straight window to the current stretch; ``(scale, chord_m)`` once the stretch's reference
-        distance reaches ``stride_chord_m`` (then a new stretch starts at its end), else ``(nan, nan)``.
+    def _learn_stride(self, sample: StrideSample) -> bool:
+        """Combine an accepted chord sample into the estimate; False if the update failed numerically."""
+        f = self.forgetting
+        est0 = self.stride_scale
+        if self.stride_weighting is StrideWeighting.INFORMATION:
+            P = np.array([[self._scale_var / f]])  # forgetting: the old information fades by f per sample
+            c = correct(P, np.array([sample.scale - self._scale]), slice(0, 1), np.array([[sample.sd ** 2]]))
+            if not c.used:
+                return False
+            self._scale = float(self._scale + c.dx[0])
+            self._scale_var = float(c.P[0, 0])
+        self._w = f * self._w + sample.chord_m
+        self._ws = f * self._ws + sample.chord_m * sample.scale
+        self._wss = f * self._wss + sample.chord_m * (sample.scale - est0) ** 2
+        self._n_eff = f * self._n_eff + 1.0
+        self.n_stride_samples += 1
+        return True
+
+    def _stretch_sample(self, fx, mean_h: float, ref_d: float) -> StrideSample | None:
+        """Add a straight window to the current stretch; its :class:`StrideSample` once the stretch's reference
+        distance reaches ``stride_chord_m`` (then a new stretch starts at its end), else None.
         ``ref_d`` is the window's distance by the :attr:`reference` (m): the scale is the chord over the
         stretch's sum of them.  The stretch ends on that sum, not on its noisy chord: stopping on the chord
         picks the chords the noise lengthened (the stride scale came out 5-13 % long on the simulator's city
@@ -398,12 +478,11 @@ class OnlineTrainer:
         A window continues the stretch if it starts at the stretch's last fix and its mean heading is within
         ``stretch_turn_rad`` of the stretch's first window.
         """
-        nan = math.nan
         st = self._stretch
         first, last = fx[0], fx[-1]
         if not math.isfinite(ref_d):
             self._stretch = None  # no reference distance (no Doppler speed): the stretch ends here
-            return nan, nan
+            return None
         if st is None or st["t_end"] != first[0] or abs(wrap_angle(mean_h - st["heading"])) > self.stretch_turn_rad:
             st = self._stretch = {"start": first, "t_end": first[0], "heading": mean_h, "model_m": 0.0}
         st["t_end"] = last[0]
@@ -411,11 +490,15 @@ class OnlineTrainer:
         a = st["start"]
         chord = math.hypot(last[1] - a[1], last[2] - a[2])
         if st["model_m"] < self.stride_chord_m:  # not the noisy chord: stopping on it selects long ones
-            return nan, nan
+            return None
         good = a[3] <= self.max_hacc_m and last[3] <= self.max_hacc_m
-        scale = chord / st["model_m"]
+        model_m = st["model_m"]
+        scale = chord / model_m
         self._stretch = {"start": last, "t_end": last[0], "heading": mean_h, "model_m": 0.0}
-        return (scale, chord) if good else (nan, nan)
+        if not good:
+            return None
+        chord_sd = math.hypot(a[3], last[3]) / HACC_PER_SIGMA  # the end fixes' errors along the chord
+        return StrideSample(scale, chord, math.hypot(chord_sd / model_m, self.chord_model_sd * scale))
 
     def counters(self) -> dict:
         return {"windows": self.n_windows, "stride_samples": self.n_stride_samples,
