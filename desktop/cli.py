@@ -502,6 +502,15 @@ def gps_track_label(fusion, name: str) -> str:
     return verdict_text(fusion.counters.get("gps_judge"), name)
 
 
+def _shadow_text(events) -> str:
+    """What the shadow filter did while GPS was declared unreliable (Kubrak's summary line)."""
+    relocked = sum(e["event"] == "relocked" for e in events)
+    adopted = sum(e["event"] == "adopted" for e in events)
+    if not (relocked or adopted):
+        return ""
+    return f" (the shadow filter re-locked to the fixes {relocked} time(s), took over {adopted} time(s))"
+
+
 def gps_lines(res, why: str = "") -> list[str]:
     """Summary lines of the GPS fusion: the filter, fixes and their verdicts, what was learnt, outages."""
     fu = res.fusion
@@ -540,7 +549,8 @@ def gps_lines(res, why: str = "") -> list[str]:
     elif "coefficients" in c:
         a, b, cc = c["coefficients"]
         lines.append(f"learnt        speed = {a:.4f} MEAN + {b:.3f} FREQ + {cc:.3f} STD (eq. 1); heading offset "
-                     f"{c['heading_bias_deg']:+.1f} deg; GPS declared unreliable {c['variability_detections']} time(s)")
+                     f"{c['heading_bias_deg']:+.1f} deg; GPS declared unreliable {c['variability_detections']} time(s)"
+                     + _shadow_text(c.get("shadow_events") or []))
     if fu.steps:
         last = fu.track()
         lines.append(f"fused end     E {last.east_m[-1]:+.1f} m, N {last.north_m[-1]:+.1f} m, +- {last.sigma_m[-1]:.1f} m"

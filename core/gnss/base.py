@@ -223,6 +223,16 @@ def first_good_fix(gps, max_hacc_m: float = ANCHOR_MAX_HACC_M):
     return int(gps.t_ns[k]), float(v[k, 0]), float(v[k, 1]), float(v[k, 2])
 
 
+def restart_position(filt, innovation, sigma_m: float) -> None:
+    """The position of ``filt`` (``x[:2]``, ``P``) restarted on a fix: moved by the fix's ``innovation``, its
+    correlations with the other states dropped, its per-axis SD the fix's ``sigma_m`` (the consistent-stream
+    relock: :meth:`FixFusion._relock`)."""
+    filt.x[:2] += np.asarray(innovation, dtype=float)
+    filt.P[:2, :] = 0.0
+    filt.P[:, :2] = 0.0
+    filt.P[0, 0] = filt.P[1, 1] = sigma_m ** 2
+
+
 class FixFusion:
     """The fix handling both fusion filters share (see the module docstring); a subclass filters.
 
@@ -666,10 +676,7 @@ class FixFusion:
                 # a stream consistent with the walker's motion all along: the position restarts on the fix,
                 # its correlations with the rest dropped (widening it by the disagreement let the next fixes
                 # pull the heading through them: on the tuning walk the track then ran 40-150 m off again)
-                filt.x[:2] += d
-                filt.P[:2, :] = 0.0
-                filt.P[:, :2] = 0.0
-                filt.P[0, 0] = filt.P[1, 1] = sigma ** 2
+                restart_position(filt, d, sigma)
                 res = UpdateResult(True, res.innovation, math.nan, float(np.hypot(*d)), res.sigma_before_m)
             else:
                 filt.P[:2, :2] += np.outer(d, d)
@@ -705,13 +712,10 @@ class FixFusion:
         run.append((t_ns, innovation[0], innovation[1]))
         while run and run[0][0] < t_ns - 2 * self.relock_ns:
             run.popleft()
-        j = self.judge
-        since = j.passing_since_ns if j is not None else None
-        jumped = j is not None and self._stream_jumped(t_ns)
-        if since is not None and j.verdict is GpsVerdict.USABLE and not jumped and \
-                t_ns - max(since, run[0][0]) >= self.relock_ns:  # gated, and judged consistent, for relock_s
+        if self._consistent_stream(t_ns, run[0][0]):  # gated, and judged consistent, for relock_s
             self.relocks.append({"t_ns": int(t_ns), "offset_m": float(math.hypot(innovation[0], innovation[1])),
-                                 "rule": "consistent stream", "consistent_s": (t_ns - since) * 1e-9})
+                                 "rule": "consistent stream",
+                                 "consistent_s": (t_ns - self.judge.passing_since_ns) * 1e-9})
             run.clear()
             return True
         if len(run) < 3 or t_ns - run[0][0] < self.relock_ns:
@@ -727,7 +731,16 @@ class FixFusion:
         run.clear()
         return True
 
-    def _stream_jumped(self, t_ns: int) -> bool:
+    def _consistent_stream(self, t_ns: int, gated_since_ns: int, last_accept_ns: int | None = None) -> bool:
+        """The "consistent stream" relock rule: the judge has found the stream usable, with no jump away from a
+        track that was right (:meth:`_stream_jumped`, against the filter's last accepted fix or
+        ``last_accept_ns``), for ``relock_s`` of fixes gated since ``gated_since_ns``."""
+        j = self.judge
+        since = j.passing_since_ns if j is not None else None
+        return since is not None and j.verdict is GpsVerdict.USABLE and \
+            not self._stream_jumped(t_ns, last_accept_ns) and t_ns - max(since, gated_since_ns) >= self.relock_ns
+
+    def _stream_jumped(self, t_ns: int, last_accept_ns: int | None = None) -> bool:
         """Whether the fixes jumped away from a track that was right: the judge's first inconsistent window after
         the last accepted fix came while that fix was recent (within the judge's window plus ``relock_s``: the
         time a jump stays in the window, and the time the relock waits anyway), and its last inconsistent window
@@ -738,9 +751,10 @@ class FixFusion:
         last, first = self.judge.last_inconsistent_ns, self._first_inconsistent_ns
         if last is None or first is None or t_ns - last >= self.relock_jump_hold_ns:
             return False
-        if self._last_accept_ns is None:
+        accept = self._last_accept_ns if last_accept_ns is None else last_accept_ns
+        if accept is None:
             return True
-        return first - self._last_accept_ns <= int(self.judge.settings.window_s * 1e9) + self.relock_ns
+        return first - accept <= int(self.judge.settings.window_s * 1e9) + self.relock_ns
 
     def _learn_pending(self) -> None:
         """The judge has just found the stream usable: the fixes it held back while it had too few to judge, or
