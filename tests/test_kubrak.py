@@ -465,24 +465,3 @@ def test_a_genuine_pace_change_trips_the_coefficient_test_but_the_stream_is_not_
     old = make_fusion("kubrak", adopt_shadow=False).run(steps, gps, t0)
     assert old.counters["variability_detections"] >= 3
     assert np.mean([f.accepted for f in old.fixes if f.t_ns - t0 >= 240e9]) < 0.7
-
-
-def test_the_shadow_filter_relocks_to_a_consistent_stream_instead_of_holding_gps_off_for_ever():
-    """Issue #26, as on the tuning walk thomasdingemanse_lopen: the pace change trips the coefficient test; the
-    phone turns 30 deg in the pocket then, the receiver loses its Doppler and reports coarse fixes for 8 s (the
-    judge holds the stream back for 25 s).  The shadow filter, blind meanwhile, is 40 m off when good fixes
-    return; its gate rejected them all and each rejection extended the hold: 138 good fixes refused in a row.
-    It must re-lock to the stream once the judge has found it consistent for relock_s, and say so."""
-    steps, gps, t0 = _pace_change_walk(turn=(171.0, 30.0), coarse_s=(172.0, 180.0), doppler_until_s=171.0)
-    old = make_fusion("kubrak", adopt_shadow=False).run(steps, gps, t0)
-    assert sum(f.reason.startswith("GPS unreliable") for f in old.fixes) > 100  # the failure this fixes
-    fr = make_fusion("kubrak").run(steps, gps, t0)
-    c = fr.counters
-    assert c["variability_detections"] == 1
-    ev = {e["event"]: e for e in c["shadow_events"]}
-    assert set(ev) == {"relocked", "adopted"}
-    back = min(f.t_ns for f in fr.fixes if f.t_ns - t0 > 180e9 and f.reason.startswith("GPS unreliable"))
-    assert ev["relocked"]["t_ns"] - back <= 21e9  # relock_s (20 s) after the judge let the stream through again
-    assert ev["relocked"]["offset_m"] > 20.0
-    assert _longest_refused_s(fr.fixes, back) <= 35.0
-    assert np.mean([f.accepted for f in fr.fixes if f.t_ns - t0 >= 240e9]) >= 0.95
