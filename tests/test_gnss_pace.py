@@ -68,7 +68,7 @@ def test_the_judge_keeps_a_slow_receiver_out_and_says_why_and_the_fused_track_is
     steps = _walk(lambda t: 0.3, seconds=80.0)
     gps = _gps(steps, lambda t, e, n: (e, n), 5.0)  # perfect positions, speed 1.4 m/s = the steps'
     gps.values[:, 4] = 0.5  # the receiver says the walker crawls: indoors
-    fr = make_fusion("kubrak").run(steps, gps, 0)  # the --gps auto filter
+    fr = make_fusion("kubrak").run(steps, gps, 0)  # Kubrak's filter (the --gps auto filter until bb61bda)
     assert fr.counters["gps_judge"]["causes"].get(Cause.PACE.value, 0) >= 65
     assert fr.counters["fixes_accepted"] <= 1  # the anchor only
     lat0, lon0 = fr.origin_lat_lon
