@@ -301,17 +301,17 @@ def vicon_still(t_ns, truth_pos_m, speed_m_s: float = VICON_STILL_SPEED_M_S,
 
 
 def run_pyshoe(root: Path, detectors=CASE_DETECTORS, split=None, names=None, settings_of=foot_settings,
-               only=None) -> list[dict]:
+               only=None, progress: bool = False) -> list[dict]:
+    """Every case on every PyShoe trial selected; ``progress`` prints a line per trial to stderr."""
     from benchmarks.datasets import pyshoe
 
+    trials = [tr for tr in pyshoe.trials(root)
+              if (split is None or tr.info["split"] == split) and (names is None or tr.name in names)
+              and (not only or any(o in tr.name for o in only))]
     rows = []
-    for tr in pyshoe.trials(root):
-        if split is not None and tr.info["split"] != split:
-            continue
-        if names is not None and tr.name not in names:
-            continue
-        if only and not any(o in tr.name for o in only):
-            continue
+    t_start = time.perf_counter()
+    for k, tr in enumerate(trials, 1):
+        t_trial = time.perf_counter()
         rec = tr.open()
         acc, gyr = rec.streams["acc"], rec.streams["gyro"]
         still = vicon_still(tr.truth_t_ns, tr.truth_pos_m)
@@ -358,6 +358,11 @@ def run_pyshoe(root: Path, detectors=CASE_DETECTORS, split=None, names=None, set
             row["cases"][name] = case
         row["_truth"] = tr.truth_pos_m
         rows.append(row)
+        if progress:
+            c = row["cases"].get("shoe", {})
+            print(f"[{k:2d}/{len(trials)}] pyshoe {tr.name} ({tr.info['split']}): "
+                  f"{time.perf_counter() - t_trial:.0f} s, shoe 3-D RMSE {c.get('rmse_3d_m', math.nan):.3f} m "
+                  f"({time.perf_counter() - t_start:.0f} s so far)", file=sys.stderr, flush=True)
     return rows
 
 
@@ -885,15 +890,19 @@ def main(argv=None) -> int:
         sets = {"pyshoe"}
     want = (lambda d: not sets or d in sets)
     rows = (json.loads(args.pyshoe_rows.read_text()) if args.pyshoe_rows else
-            run_pyshoe(args.data, only=names) if want("pyshoe") else [])
+            run_pyshoe(args.data, only=names, progress=True) if want("pyshoe") else [])
+    if want("ipol"):
+        print("foot: IPOL lower-back walks ...", file=sys.stderr, flush=True)
     irows = run_ipol(args.data) if want("ipol") else []
     out = {"rev": _git_rev(),
            "pyshoe": {"trials": _public(rows), TUNING: summarise_pyshoe(rows, TUNING),
                       REPORT: summarise_pyshoe(rows, REPORT)},
            "ipol": {"trials": irows, TUNING: summarise_ipol(irows, TUNING), REPORT: summarise_ipol(irows, REPORT)}}
     if want("xio"):
+        print("foot: x-io foot walks ...", file=sys.stderr, flush=True)
         out["xio"] = run_xio(args.data)
     if want("mounting"):
+        print("foot: mounting (mode detection) ...", file=sys.stderr, flush=True)
         out["mounting"] = run_mounting(args.data)
     out["headlines"] = headlines(out)
     if write:
