@@ -72,5 +72,5 @@ def test_the_reported_sd_matches_the_errors_over_many_walks():
 
 
 def test_without_samples_the_scale_and_sd_are_the_prior():
-    tr = OnlineTrainer(scale_prior=1.05, scale_prior_sd=0.1, stride_weighting=StrideWeighting.INFORMATION)
+    tr = OnlineTrainer(scale_prior=1.05, prior_scale_sd=0.1, stride_weighting=StrideWeighting.INFORMATION)
     assert tr.stride_scale == 1.05 and tr.stride_scale_sd == pytest.approx(0.1)

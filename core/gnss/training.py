@@ -50,7 +50,7 @@ The stride estimate (``stride_weighting``, :class:`StrideWeighting`)
     * ``INFORMATION``: a scalar Kalman (Bayes) update of the scale
       (:func:`core.kalman.correct`), started from the prior ``scale_prior``
       (the user's profile from earlier walks) with relative SD
-      ``scale_prior_sd``.  A chord sample ``z = chord / model distance`` counts with its
+      ``prior_scale_sd``.  A chord sample ``z = chord / model distance`` counts with its
       information: its SD is the chord's error from its end fixes' reported
       accuracies, ``sqrt(sd_a^2 + sd_b^2) / model distance`` with
       ``sd = hacc / 1.515`` (hacc is a 68 % radius, per-axis SD each end),
@@ -167,7 +167,7 @@ class OnlineTrainer:
     step_heading_sd_rad : float
         Per-step SD of our heading about its window mean (rad), for the sample weight.
     scale_prior : float
-        Starting stride scale (its SD: ``scale_prior_sd``, or ``prior_scale_sd`` with ``CHORD_LENGTH``).
+        Starting stride scale (its relative SD: ``prior_scale_sd``).
     scale_prior_weight_m : float
         The prior's weight in metres of walking (``CHORD_LENGTH`` weighting only).
     scale_limits : (float, float)
@@ -184,6 +184,10 @@ class OnlineTrainer:
         Factor on the old samples' weight per accepted sample (0 < f <= 1).
     prior_scale_sd, min_scale_sd : float
         Relative uncertainty of the stride scale before training, and the floor of the one reported after.
+        With ``INFORMATION`` weighting ``prior_scale_sd`` is the prior's SD in the update: the stride model's
+        error for a walker it has not seen.  0.08: on the real tuning walk 0.15 was no better (leave-one-out
+        ratio 0.420 vs 0.401); on the simulator, whose walkers need 0.99-1.13, 0.15 learns faster from clean
+        GPS (benchmarks/gnss_eval seeds 0-1, issue #26).
     stride_weighting : StrideWeighting
         How the chord samples are combined (module docstring).  ``CHORD_LENGTH`` by default: ``INFORMATION``
         was mixed on the tuning split (issue #26 stride weighting, measured 2026-12-06): better on the real
@@ -193,11 +197,6 @@ class OnlineTrainer:
     chord_model_sd : float
         Relative SD of a chord sample beyond its fixes' errors: the model distance's own noise
         (``INFORMATION`` weighting).
-    scale_prior_sd : float
-        Relative SD of ``scale_prior`` in the ``INFORMATION`` update (and the SD reported before any sample):
-        the stride model's error for a walker it has not seen.  0.08 (as ``prior_scale_sd``): on the real
-        tuning walk 0.15 was no better (leave-one-out ratio 0.420 vs 0.401); on the simulator, whose walkers
-        need 0.99-1.13, 0.15 learns faster from clean GPS (benchmarks/gnss_eval seeds 0-1, issue #26).
     learn_stride, learn_heading : bool
         What to learn (the benchmark switches them to isolate each part).
     stride_chord_m : float
@@ -229,8 +228,7 @@ class OnlineTrainer:
                  heading_model: HeadingErrorModel | None = None, stride_chord_m: float = 30.0,
                  stretch_turn_rad: float = math.radians(10.0), keep_windows: int | None = None,
                  reference: ChordReference = ChordReference.STEPS,
-                 stride_weighting: StrideWeighting = StrideWeighting.CHORD_LENGTH, chord_model_sd: float = 0.03,
-                 scale_prior_sd: float = 0.08):
+                 stride_weighting: StrideWeighting = StrideWeighting.CHORD_LENGTH, chord_model_sd: float = 0.03):
         self.window_s = float(window_s)
         self.keep_windows = None if keep_windows is None else int(keep_windows)
         self.min_steps = int(min_steps)
@@ -257,7 +255,6 @@ class OnlineTrainer:
         self.min_scale_sd = float(min_scale_sd)
         self.stride_weighting = StrideWeighting(stride_weighting)
         self.chord_model_sd = float(chord_model_sd)
-        self.scale_prior_sd = float(scale_prior_sd)
         self.learn_stride = bool(learn_stride)
         self.learn_heading = bool(learn_heading)
         self.stride_chord_m = float(stride_chord_m)
@@ -276,7 +273,7 @@ class OnlineTrainer:
         self._wss = 0.0  # weighted sum of squared deviations of the accepted samples
         self._n_eff = 0.0
         self._scale = self.scale_prior  # INFORMATION: the scale's posterior mean and variance
-        self._scale_var = (self.scale_prior_sd * self.scale_prior) ** 2
+        self._scale_var = (self.prior_scale_sd * self.scale_prior) ** 2
         self._recent: deque = deque(maxlen=max(self.noisy_window, 2))
         self.n_stride_samples = 0
         self.n_heading_samples = 0
@@ -298,7 +295,7 @@ class OnlineTrainer:
     def stride_scale_sd(self) -> float:
         """Uncertainty of :attr:`stride_scale` (relative).
 
-        ``INFORMATION``: the posterior SD (``scale_prior_sd`` before any sample, at least ``min_scale_sd``);
+        ``INFORMATION``: the posterior SD (``prior_scale_sd`` before any sample, at least ``min_scale_sd``);
         ``CHORD_LENGTH``: ``prior_scale_sd`` until two samples, then: the weighted spread
         of the samples over the root of their effective number, within [``min_scale_sd``, ``prior_scale_sd``]."""
         if self.stride_weighting is StrideWeighting.INFORMATION:
