@@ -133,8 +133,8 @@ measured terms (``k_1`` deviation, ``k_2`` variance) are not scaled: they are
 the phone's own evidence.  On the simulator ``kappa`` goes to its minimum and
 the heading NEES is 0.91 (95 % band [0.72, 1.32], 84 epochs of 12 walks);
 indoors it dips where the field is clean.  Off by default
-(``noise_scale_rate = 0``, the floors as given): it helped the IPIN tuning
-split and hurt the report split (see the setting).
+(``noise_scale_rate = 0``, the floors as given): mixed on the IPIN tuning
+split, its landmark error worse (see the setting).
 
 Bad numbers: a non-finite input, or one no phone sensor gives (beyond 1e4 m/s^2,
 1e3 rad/s, 1e6 uT), is skipped and counted; an update whose
@@ -319,9 +319,10 @@ class AttitudeSettings:
     #: filter learns from its heading updates: after each, ``ln kappa += rate (1[NIS > chi2_1 median] - 1/2)``, so
     #: kappa settles where the median NIS is that of chi2(1) (issue #27: a cleaner phone than the floors assume
     #: reports a heading sigma as small as its errors).  0 (the default): the floors as given.  At 0.05 the
-    #: heading NEES on the simulator is 0.91 (band [0.72, 1.32]) and the IPIN TUNING split improved (loop closure
-    #: 4.60 -> 3.96 %), but the REPORT split got worse (landmark 2.00 -> 2.50 m, loop 4.88 -> 6.46 %): off until
-    #: the lead decides (benchmarks/ABLATION_RESULTS.md)
+    #: heading NEES on the simulator is 0.91 (band [0.72, 1.32]); the IPIN TUNING split was mixed (landmark median
+    #: 2.52 -> 2.55 m, worse; loop closure 4.60 -> 3.96 %, better), and the landmark error is #27's headline: off.
+    #: The REPORT split, seen afterwards, was worse on both (landmark 2.00 -> 2.50 m, loop 4.88 -> 6.46 %;
+    #: benchmarks/ABLATION_RESULTS.md)
     noise_scale_rate: float = 0.0
     noise_scale_min: float = 1e-3
     #: gyroscope gaps longer than this are not integrated, only the uncertainty grows (s)
