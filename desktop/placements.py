@@ -341,11 +341,15 @@ class _Pocket(_Carried):
 class _Swinging(_Carried):
     placement = CARRY_SWINGING
     impact_m_s2 = 1.0
-    choices = {"side": _SIDES, "grip": ("down", "forward"), "swing_scale": None}
+    choices = {"side": _SIDES, "grip": ("down", "forward"), "swing_scale": None, "twist_deg": None}
 
     def _setup(self, rng, options):
         self.side = self._pick(rng, options, "side")
         grip = self._pick(rng, options, "grip")
+        self.twist_amp_deg = float(options.get("twist_deg", ARM_TWIST_DEG))
+        if not 0.0 <= self.twist_amp_deg <= 90.0:
+            raise ValueError(f"placement_options['twist_deg'] must be in [0, 90], got {self.twist_amp_deg!r}")
+        self.info["twist_amp_deg"] = self.twist_amp_deg
         self.swing_scale = float(options.get("swing_scale", 1.0))
         if not 0.0 < self.swing_scale <= 4.0:
             raise ValueError(f"placement_options['swing_scale'] must be in (0, 4], got {self.swing_scale!r}")
@@ -368,7 +372,7 @@ class _Swinging(_Carried):
         upper = (-5.0 * k + ARM_SWING_DEG[0] * g * swing) * _DEG
         fore = upper + (10.0 + 10.0 * k + ARM_SWING_DEG[1] * g * swing) * _DEG
         thorax = self._side_sign() * -THORAX_YAW_DEG * _DEG * k * swing  # the carrying shoulder forward
-        twist = ARM_TWIST_DEG * _DEG * g * np.sin(np.pi * (u - self.arm_phase))
+        twist = self.twist_amp_deg * _DEG * g * np.sin(np.pi * (u - self.arm_phase))
         return upper, fore, thorax, twist
 
     def offset_w(self, t):

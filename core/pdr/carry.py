@@ -396,6 +396,12 @@ class CarryModeDetector:
             return k2
         return k4
 
+    @staticmethod
+    def _gait_rotation(f: dict) -> float:
+        """Soft evidence (0..1) that the rotation is a gait's: the rotation's main axis periodic at the stride lag
+        and the norm periodic (issue #25; about one axis or not: a hand swung with a twisting wrist is gait)."""
+        return _sig(f["gyro_periodicity"], 0.5, 0.05) * _sig(f["periodicity"], 0.5, 0.05)
+
     def mode_scores(self, f: dict) -> dict:
         """Soft score of every mode (0..1) from the features (see the module docstring)."""
         # waving the phone (a compass calibration) is no gait however periodic: it turns the phone through
@@ -403,10 +409,13 @@ class CarryModeDetector:
         waving = _sig(f["tilt_rms_rad"], self.max_gait_tilt_rad, 0.05)
         if "gyro_rms_rad_s" in f:
             one_axis = _sig(f["gyro_axis_share"], self.swing_axis_share, 0.04)
-            # a gait's rotation (issue #25): about one axis, periodic at the stride, the norm periodic too
-            gait_rotation = one_axis * _sig(f["gyro_periodicity"], 0.5, 0.05) * _sig(f["periodicity"], 0.5, 0.05)
+            # a gait's rotation (issue #25): periodic at the stride, the norm periodic too.  Periodicity decides,
+            # not the axis: a real hand twists the phone about the forearm as it swings, which spreads the
+            # rotation over two axes (main-axis share 0.5-0.7) but keeps it periodic; waving is irregular
+            gait_rotation = self._gait_rotation(f)
             waving = max(waving * (1.0 - gait_rotation),
-                         _sig(f["gyro_rms_rad_s"], self.max_gait_rotation_rad_s, 0.3) * (1.0 - one_axis))
+                         _sig(f["gyro_rms_rad_s"], self.max_gait_rotation_rad_s, 0.3) * (1.0 - one_axis)
+                         * (1.0 - gait_rotation))
         std = f["acc_std_m_s2"]
         amplitude = max(_sig(std, self.min_walk_std_m_s2, 0.1),  # a walk, or a gentle one that is clearly periodic
                         _sig(min(f["r_step"], f["r_stride"]), self.gentle_min_periodicity, 0.05)
@@ -426,9 +435,7 @@ class CarryModeDetector:
             # a hand swung hard (issue #25, up to 10 rad/s): the arm's centripetal acceleration, the same at both
             # passes of the swing, makes the norm repeat every step (no stride share), but the rotation is the
             # arm's: fast, about one axis, periodic at the stride
-            hard_swing = (_sig(f["gyro_axis_share"], self.swing_axis_share, 0.04)
-                          * _sig(f["gyro_periodicity"], 0.5, 0.05)
-                          * _sig(f["gyro_rms_rad_s"], self.hard_swing_gyro_rad_s, 0.3))
+            hard_swing = self._gait_rotation(f) * _sig(f["gyro_rms_rad_s"], self.hard_swing_gyro_rad_s, 0.3)
             limb = max(limb, hard_swing)
             arm = max(arm, hard_swing)
         gx, gy, gz = f["gravity_x"], f["gravity_y"], f["gravity_z"]
@@ -469,8 +476,8 @@ class CarryModeDetector:
             std >= 0.5 * self.min_walk_std_m_s2
             or (min(f["r_step"], f["r_stride"]) >= self.gentle_min_periodicity and std >= self.gentle_min_std_m_s2))
         self.step_period_s = 0.5 * f["stride_period_s"] if periodic else math.nan
-        self.rotation_periodic = bool(walking and f.get("gyro_axis_share", 0.0) >= self.swing_axis_share
-                                      and f.get("gyro_periodicity", 0.0) >= 0.5)
+        self.rotation_periodic = bool(walking and f.get("gyro_periodicity", 0.0) >= 0.5
+                                      and f["periodicity"] >= 0.5)
         both = min(f["r_step"], f["r_stride"])  # both legs
         if not periodic or both < self.min_periodicity or std >= self.min_walk_std_m_s2:
             self.gentle = False
