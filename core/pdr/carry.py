@@ -66,7 +66,11 @@ Features and the physics they come from
     lag is high.  Waving the phone to calibrate the compass is as fast but
     irregular and about all three axes: ``rotation_periodic`` is False then,
     and the pipeline's rotation gate keeps those peaks out even in the
-    swinging mode.
+    swinging mode.  Periodicity decides, not the axis (issue #25): a real
+    hand twists the phone about the forearm as it swings, which spreads the
+    rotation over two axes (main-axis share 0.5-0.7) but keeps it periodic at
+    the stride; a rotation periodic at the stride while the norm is periodic
+    is a gait's, whatever its axes.
 
 Decision
 ========
@@ -150,8 +154,9 @@ class CarryModeDetector:
         With a gyroscope: RMS rotation above which a rotation spread over the axes
         (``gyro_axis_share`` under ``swing_axis_share``) is waving, not gait (rad/s).
     swing_axis_share : float
-        Share of the rotation's variance on its main axis from which it is a pendulum (an arm's swing);
-        also the first condition of ``rotation_periodic``.
+        Share of the rotation's variance on its main axis from which it is a pendulum: a fast rotation
+        (``max_gait_rotation_rad_s``) spread over the axes is waving unless it is periodic at the stride
+        (``rotation_periodic`` and the hard swing need the periodicity only, issue #25).
     screen_up_z : float
         ``gravity_b`` z component above which the screen faces up (hand-held).
     upright_y : float
@@ -172,7 +177,7 @@ class CarryModeDetector:
     swing_gyro_rad_s : float
         With a gyroscope: the RMS rotation at which the gyroscope is neutral in the arm evidence (rad/s).
     hard_swing_gyro_rad_s : float
-        With a gyroscope: an RMS rotation above this, about one axis and periodic at the stride, is a swinging
+        With a gyroscope: an RMS rotation above this, periodic at the stride, is a swinging
         arm whatever the norm's stride share (a hard swing's centripetal acceleration repeats every step)
         (rad/s; a thigh turns at about 1.5, an arm swung normally at 2-2.5).
     switch_s : float
@@ -252,7 +257,7 @@ class CarryModeDetector:
         self.time_s = {m: 0.0 for m in CARRY_MODES}
         #: step period (s) from the autocorrelation of the norm (nan until known or when not walking)
         self.step_period_s = math.nan
-        #: the phone's rotation is periodic about one axis (a swinging arm), not irregular (waving)
+        #: the phone's rotation is periodic at the stride while the norm is (a swinging arm), not irregular (waving)
         self.rotation_periodic = False
         #: walking gently (a periodic gait whose norm moves little; see ``gentle_max_std_m_s2``)
         self.gentle = False
