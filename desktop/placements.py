@@ -63,7 +63,10 @@ The trunk
     ``+-8 g`` deg (pronation) about a fixed offset (uniform in +-15 deg).  Grip: device y along the forearm to the fingers
     ("down") or across the hand pointing forward ("forward"), the screen facing the thigh; a fixed tilt of up
     to 10 deg; the hand drift of ``hand_drift_deg_s`` on top.  Heel-strike transients 1 m/s^2 (the arm
-    damps them).  Options: ``side``, ``grip``, ``swing_scale`` (the swing's amplitudes times this, 1 by default;
+    damps them).  Options: ``side``, ``grip``, ``twist_deg`` (the forearm's twist amplitude at the reference
+    swing, 8 by default; issue #25: a hand that twists the phone 20-30 deg as it swings spreads the rotation over
+    two axes, main-axis share 0.5-0.7 against 0.9; no real swinging walk of the tuning split calibrates it, so
+    the default is unchanged), ``swing_scale`` (the swing's amplitudes times this, 1 by default;
     issue #25: a phone swung hard in the hand, the held-back clip's 9 rad/s, is ``swing_scale`` 2.5, whose
     gyroscope peaks at 8.9 rad/s; the default arm's peaks are 3.6 rad/s at the reference speed).
 

@@ -288,7 +288,7 @@ def test_gentle_slow_walk_on_a_limb_is_walking(placement, options):
     while at the stride lag it is 0.9, and so is the rotation's (the limb swings once per stride).  The norm and
     the rotation periodic at the same stride lag are a gait: walking (70 % of the walk at least: the
     detector's 4-s window), every step counted within 2.  Before: "not
-    walking" (both lags of the norm had to reach 0.6), 0 of 17 steps."""
+    walking" (both lags of the norm had to reach 0.6): the pocket 12.5 s of 17 "not walking", the swing 0 of 18 steps."""
     w = simulate_walk([(0.0, 0.0), (10.0, 0.0)], placement=placement, seed=11, rate_hz=50.0, step_frequency_hz=1.0,
                       step_length_m=0.6, bounce_scale=0.75, still_start_s=1.0, still_end_s=0.5,
                       placement_options=options)
