@@ -504,7 +504,8 @@ class CarryModeDetector:
             std >= 0.5 * self.min_walk_std_m_s2
             or (self.gait_periodicity(f) >= self.gentle_min_periodicity and std >= self.gentle_min_std_m_s2))
         self.step_period_s = 0.5 * f["stride_period_s"] if periodic else math.nan
-        self.rotation_periodic = bool(walking and f.get("gyro_periodicity", 0.0) >= 0.5 and f["periodicity"] >= 0.5
+        # about one axis (a pendulum), or spread over the axes by a twisting wrist while the tilt is a swing's
+        self.rotation_periodic = bool(walking and f.get("gyro_periodicity", 0.0) >= 0.5
                                       and (f.get("gyro_axis_share", 0.0) >= self.swing_axis_share
                                            or f["tilt_rms_rad"] < self.twist_max_tilt_rad))
         both = self.gait_periodicity(f)  # both legs
