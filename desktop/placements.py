@@ -63,7 +63,10 @@ The trunk
     ``+-8 g`` deg (pronation) about a fixed offset (uniform in +-15 deg).  Grip: device y along the forearm to the fingers
     ("down") or across the hand pointing forward ("forward"), the screen facing the thigh; a fixed tilt of up
     to 10 deg; the hand drift of ``hand_drift_deg_s`` on top.  Heel-strike transients 1 m/s^2 (the arm
-    damps them).  Options: ``side``, ``grip``, ``swing_scale`` (the swing's amplitudes times this, 1 by default;
+    damps them).  Options: ``side``, ``grip``, ``twist_deg`` (the forearm's twist amplitude at the reference
+    swing, 8 by default; issue #25: a hand that twists the phone 20-30 deg as it swings spreads the rotation over
+    two axes, main-axis share 0.5-0.7 against 0.9; no real swinging walk of the tuning split calibrates it, so
+    the default is unchanged), ``swing_scale`` (the swing's amplitudes times this, 1 by default;
     issue #25: a phone swung hard in the hand, the held-back clip's 9 rad/s, is ``swing_scale`` 2.5, whose
     gyroscope peaks at 8.9 rad/s; the default arm's peaks are 3.6 rad/s at the reference speed).
 
@@ -341,11 +344,15 @@ class _Pocket(_Carried):
 class _Swinging(_Carried):
     placement = CARRY_SWINGING
     impact_m_s2 = 1.0
-    choices = {"side": _SIDES, "grip": ("down", "forward"), "swing_scale": None}
+    choices = {"side": _SIDES, "grip": ("down", "forward"), "swing_scale": None, "twist_deg": None}
 
     def _setup(self, rng, options):
         self.side = self._pick(rng, options, "side")
         grip = self._pick(rng, options, "grip")
+        self.twist_amp_deg = float(options.get("twist_deg", ARM_TWIST_DEG))
+        if not 0.0 <= self.twist_amp_deg <= 90.0:
+            raise ValueError(f"placement_options['twist_deg'] must be in [0, 90], got {self.twist_amp_deg!r}")
+        self.info["twist_amp_deg"] = self.twist_amp_deg
         self.swing_scale = float(options.get("swing_scale", 1.0))
         if not 0.0 < self.swing_scale <= 4.0:
             raise ValueError(f"placement_options['swing_scale'] must be in (0, 4], got {self.swing_scale!r}")
@@ -368,7 +375,7 @@ class _Swinging(_Carried):
         upper = (-5.0 * k + ARM_SWING_DEG[0] * g * swing) * _DEG
         fore = upper + (10.0 + 10.0 * k + ARM_SWING_DEG[1] * g * swing) * _DEG
         thorax = self._side_sign() * -THORAX_YAW_DEG * _DEG * k * swing  # the carrying shoulder forward
-        twist = ARM_TWIST_DEG * _DEG * g * np.sin(np.pi * (u - self.arm_phase))
+        twist = self.twist_amp_deg * _DEG * g * np.sin(np.pi * (u - self.arm_phase))
         return upper, fore, thorax, twist
 
     def offset_w(self, t):

@@ -66,7 +66,11 @@ Features and the physics they come from
     lag is high.  Waving the phone to calibrate the compass is as fast but
     irregular and about all three axes: ``rotation_periodic`` is False then,
     and the pipeline's rotation gate keeps those peaks out even in the
-    swinging mode.
+    swinging mode.  Periodicity decides, not the axis (issue #25): a real
+    hand twists the phone about the forearm as it swings, which spreads the
+    rotation over two axes (main-axis share 0.5-0.7) but keeps it periodic at
+    the stride; a rotation periodic at the stride while the norm is periodic
+    is a gait's, whatever its axes.
 
 Decision
 ========
@@ -146,12 +150,19 @@ class CarryModeDetector:
         phone through +-60-90 deg; a swinging hand mostly stays within about +-45 deg) (rad), unless the
         gyroscope shows a gait's rotation: periodic at the stride about one axis while the norm is periodic
         (a hand swung hard, up to 10 rad/s, issue #25: waving is irregular and about every axis).
+    twist_max_tilt_rad : float
+        With a gyroscope: a rotation periodic at the stride but spread over the axes (main-axis share under
+        ``swing_axis_share``: a hand swung with a twisting wrist, issue #25) is a gait's only while
+        ``tilt_rms_rad`` is under this (rad).  A compass calibration can be as rhythmic and as spread (the IPIN
+        tuning routes' first 25 s: rotation periodicity 0.8-0.95, main-axis share 0.5-0.7, 5-7 rad/s) but tilts
+        the phone by 0.6-1.1 rad; the simulator's twisting swings tilt it by 0.27-0.50.
     max_gait_rotation_rad_s : float
         With a gyroscope: RMS rotation above which a rotation spread over the axes
         (``gyro_axis_share`` under ``swing_axis_share``) is waving, not gait (rad/s).
     swing_axis_share : float
-        Share of the rotation's variance on its main axis from which it is a pendulum (an arm's swing);
-        also the first condition of ``rotation_periodic``.
+        Share of the rotation's variance on its main axis from which it is a pendulum: a fast rotation
+        (``max_gait_rotation_rad_s``) spread over the axes is waving unless it is periodic at the stride
+        (``rotation_periodic`` and the hard swing need the periodicity only, issue #25).
     screen_up_z : float
         ``gravity_b`` z component above which the screen faces up (hand-held).
     upright_y : float
@@ -172,7 +183,7 @@ class CarryModeDetector:
     swing_gyro_rad_s : float
         With a gyroscope: the RMS rotation at which the gyroscope is neutral in the arm evidence (rad/s).
     hard_swing_gyro_rad_s : float
-        With a gyroscope: an RMS rotation above this, about one axis and periodic at the stride, is a swinging
+        With a gyroscope: an RMS rotation above this, periodic at the stride, is a swinging
         arm whatever the norm's stride share (a hard swing's centripetal acceleration repeats every step)
         (rad/s; a thigh turns at about 1.5, an arm swung normally at 2-2.5).
     switch_s : float
@@ -186,7 +197,7 @@ class CarryModeDetector:
                  slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7,
                  min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
                  gentle_min_periodicity: float = 0.6, gentle_max_std_m_s2: float = 0.5,
-                 step_antiphase: float = -0.2, max_gait_tilt_rad: float = 0.6,
+                 step_antiphase: float = -0.2, max_gait_tilt_rad: float = 0.6, twist_max_tilt_rad: float = 0.55,
                  max_gait_rotation_rad_s: float = 4.5, swing_axis_share: float = 0.85, screen_up_z: float = 0.3,
                  upright_y: float = 0.6, ear_incline_x: float = 0.22, limb_tilt_rad: float = 0.16,
                  limb_stride_share: float = 0.3, min_limb_stride_share: float = 0.15, arm_evidence: float = 1.1,
@@ -207,6 +218,7 @@ class CarryModeDetector:
         self.gentle_max_std_m_s2 = float(gentle_max_std_m_s2)
         self.step_antiphase = float(step_antiphase)
         self.max_gait_tilt_rad = float(max_gait_tilt_rad)
+        self.twist_max_tilt_rad = float(twist_max_tilt_rad)
         self.max_gait_rotation_rad_s = float(max_gait_rotation_rad_s)
         self.swing_axis_share = float(swing_axis_share)
         self.screen_up_z = float(screen_up_z)
@@ -252,7 +264,7 @@ class CarryModeDetector:
         self.time_s = {m: 0.0 for m in CARRY_MODES}
         #: step period (s) from the autocorrelation of the norm (nan until known or when not walking)
         self.step_period_s = math.nan
-        #: the phone's rotation is periodic about one axis (a swinging arm), not irregular (waving)
+        #: the phone's rotation is periodic at the stride while the norm is (a swinging arm), not irregular (waving)
         self.rotation_periodic = False
         #: walking gently (a periodic gait whose norm moves little; see ``gentle_max_std_m_s2``)
         self.gentle = False
@@ -396,6 +408,28 @@ class CarryModeDetector:
             return k2
         return k4
 
+    def gait_periodicity(self, f: dict) -> float:
+        """How periodic a gait with both legs is, from one window's features (issue #25): the norm's
+        autocorrelation at both the step and the stride lag (a trunk sees both feet alike), or, with a
+        gyroscope, at the stride lag together with the rotation's there while the step lag is not in
+        anti-phase (``step_antiphase``): a limb sees its two half-strides differently (the norm's step-lag
+        autocorrelation 0.3-0.5 in a gentle walk), and the rotation, swung once per stride, repeats with the
+        norm.  An anti-phase step lag is left to the first rule: at 1 step/s a trunk's norm is then
+        ambiguous with a limb's at 2 steps/s.  Amplitude plays no part."""
+        p = min(f["r_step"], f["r_stride"])
+        if "gyro_periodicity" in f and f["r_step"] >= self.step_antiphase:
+            p = max(p, min(f["r_stride"], f["gyro_periodicity"]))
+        return p
+
+    def _gait_rotation(self, f: dict) -> float:
+        """Soft evidence (0..1) that the rotation is a gait's (issue #25): the rotation's main axis periodic at the
+        stride lag and the norm periodic, and either about one axis (a pendulum) or, spread over the axes (a hand
+        swung with a twisting wrist), while the phone tilts less than ``twist_max_tilt_rad``: a rhythmic compass
+        calibration is as periodic and as spread, but tilts the phone further."""
+        periodic = _sig(f["gyro_periodicity"], 0.5, 0.05) * _sig(f["periodicity"], 0.5, 0.05)
+        return periodic * max(_sig(f["gyro_axis_share"], self.swing_axis_share, 0.04),
+                              1.0 - _sig(f["tilt_rms_rad"], self.twist_max_tilt_rad, 0.03))
+
     def mode_scores(self, f: dict) -> dict:
         """Soft score of every mode (0..1) from the features (see the module docstring)."""
         # waving the phone (a compass calibration) is no gait however periodic: it turns the phone through
@@ -403,13 +437,16 @@ class CarryModeDetector:
         waving = _sig(f["tilt_rms_rad"], self.max_gait_tilt_rad, 0.05)
         if "gyro_rms_rad_s" in f:
             one_axis = _sig(f["gyro_axis_share"], self.swing_axis_share, 0.04)
-            # a gait's rotation (issue #25): about one axis, periodic at the stride, the norm periodic too
-            gait_rotation = one_axis * _sig(f["gyro_periodicity"], 0.5, 0.05) * _sig(f["periodicity"], 0.5, 0.05)
+            # a gait's rotation (issue #25): periodic at the stride, the norm periodic too.  Periodicity decides,
+            # not the axis: a real hand twists the phone about the forearm as it swings, which spreads the
+            # rotation over two axes (main-axis share 0.5-0.7) but keeps it periodic; waving is irregular
+            gait_rotation = self._gait_rotation(f)
             waving = max(waving * (1.0 - gait_rotation),
-                         _sig(f["gyro_rms_rad_s"], self.max_gait_rotation_rad_s, 0.3) * (1.0 - one_axis))
+                         _sig(f["gyro_rms_rad_s"], self.max_gait_rotation_rad_s, 0.3) * (1.0 - one_axis)
+                         * (1.0 - gait_rotation))
         std = f["acc_std_m_s2"]
         amplitude = max(_sig(std, self.min_walk_std_m_s2, 0.1),  # a walk, or a gentle one that is clearly periodic
-                        _sig(min(f["r_step"], f["r_stride"]), self.gentle_min_periodicity, 0.05)
+                        _sig(self.gait_periodicity(f), self.gentle_min_periodicity, 0.05)
                         * _sig(std, self.gentle_min_std_m_s2, 0.02))
         walk = _sig(f["periodicity"], self.min_periodicity, 0.05) * amplitude * (1.0 - waving)
         # a limb: the tilt swings and the norm repeats every stride rather than every step
@@ -426,9 +463,7 @@ class CarryModeDetector:
             # a hand swung hard (issue #25, up to 10 rad/s): the arm's centripetal acceleration, the same at both
             # passes of the swing, makes the norm repeat every step (no stride share), but the rotation is the
             # arm's: fast, about one axis, periodic at the stride
-            hard_swing = (_sig(f["gyro_axis_share"], self.swing_axis_share, 0.04)
-                          * _sig(f["gyro_periodicity"], 0.5, 0.05)
-                          * _sig(f["gyro_rms_rad_s"], self.hard_swing_gyro_rad_s, 0.3))
+            hard_swing = self._gait_rotation(f) * _sig(f["gyro_rms_rad_s"], self.hard_swing_gyro_rad_s, 0.3)
             limb = max(limb, hard_swing)
             arm = max(arm, hard_swing)
         gx, gy, gz = f["gravity_x"], f["gravity_y"], f["gravity_z"]
@@ -467,11 +502,13 @@ class CarryModeDetector:
         std = f["acc_std_m_s2"]
         periodic = f["periodicity"] >= self.min_periodicity and (
             std >= 0.5 * self.min_walk_std_m_s2
-            or (min(f["r_step"], f["r_stride"]) >= self.gentle_min_periodicity and std >= self.gentle_min_std_m_s2))
+            or (self.gait_periodicity(f) >= self.gentle_min_periodicity and std >= self.gentle_min_std_m_s2))
         self.step_period_s = 0.5 * f["stride_period_s"] if periodic else math.nan
-        self.rotation_periodic = bool(walking and f.get("gyro_axis_share", 0.0) >= self.swing_axis_share
-                                      and f.get("gyro_periodicity", 0.0) >= 0.5)
-        both = min(f["r_step"], f["r_stride"])  # both legs
+        # about one axis (a pendulum), or spread over the axes by a twisting wrist while the tilt is a swing's
+        self.rotation_periodic = bool(walking and f.get("gyro_periodicity", 0.0) >= 0.5
+                                      and (f.get("gyro_axis_share", 0.0) >= self.swing_axis_share
+                                           or f["tilt_rms_rad"] < self.twist_max_tilt_rad))
+        both = self.gait_periodicity(f)  # both legs
         if not periodic or both < self.min_periodicity or std >= self.min_walk_std_m_s2:
             self.gentle = False
         elif both >= self.gentle_min_periodicity and self.gentle_min_std_m_s2 <= std < self.gentle_max_std_m_s2:

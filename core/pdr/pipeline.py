@@ -379,8 +379,8 @@ class Pipeline:
         :data:`core.pdr.steps.STEP_GATES`.
     swinging_max_rotation_rms_rad_s : float
         The rotation gate in the swinging mode while the carry detector finds
-        the rotation periodic about one axis (a swinging arm turns the phone at
-        2-10 rad/s, issue #25; the irregular, multi-axis waving of a compass calibration is
+        the rotation periodic at the stride (a swinging arm turns the phone at
+        2-10 rad/s, on one axis or twisting over two, issue #25; the irregular waving of a compass calibration is
         still held to ``max_rotation_rms_rad_s``) (rad/s).
     rotation_hold_s : float
         The carry detector needs a few seconds of walking (its window, then its hysteresis) to call a
@@ -806,7 +806,7 @@ class Pipeline:
                 + "; ".join(how))
 
     def _rotation_limit_rad_s(self) -> float:
-        """The rotation gate in force: wider for a swinging arm whose rotation is periodic about one axis."""
+        """The rotation gate in force: wider for a swinging arm whose rotation is periodic at the stride."""
         if self._carry_mode == CARRY_SWINGING and self.carry.rotation_periodic:
             return max(self.max_rotation_rms_rad_s, self.swinging_max_rotation_rms_rad_s)
         return self.max_rotation_rms_rad_s

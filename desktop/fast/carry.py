@@ -159,7 +159,7 @@ class CarryTrack:
 
     mode: np.ndarray  #: index into core.conventions.CARRY_MODES of the mode in force
     step_period_s: np.ndarray  #: the detector's step period (nan: unknown)
-    rotation_periodic: np.ndarray  #: bool: the rotation is periodic about one axis
+    rotation_periodic: np.ndarray  #: bool: the rotation is periodic at the stride (core's rotation_periodic)
     gentle: np.ndarray  #: bool: a gentle walk (the detector's ``gentle``)
     n_changes: np.ndarray  #: how many mode changes were logged so far
     changes: list  #: the detector's change log at the end
