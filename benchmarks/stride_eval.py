@@ -32,6 +32,7 @@
 from __future__ import annotations
 
 import functools
+import json
 import math
 import sys
 from dataclasses import dataclass, field
@@ -847,6 +848,45 @@ def error_stats(errors) -> dict:
     return {"n": int(e.size), "failed": int(e.size - fin.size),
             "median_abs_pct": float(np.median(np.abs(e))) if e.size else math.nan,
             "mean_signed_pct": float(fin.mean()) if fin.size else math.nan}
+
+
+def write_phone_default(walks, old: dict, path, created: str = "") -> dict:
+    """Write ``old`` (a ``default.json`` dict) with C refitted on the tuning split's phones (:func:`fit_phone_c`)
+    to ``path``, stating its data, its tuning walks' own C, its tuning error and the leave-one-dataset-out
+    transfer (``training.phones``); returns the dict written.  ``python -m tools.train_stride --phones``."""
+    from core.pdr.stride_models import model_from_dict
+
+    c_new = fit_phone_c(walks, "tuning")
+    training = dict(old.get("training", {}))
+    c_old = float(training.get("phones", {}).get("c_before", old["c"]))
+    tuning = [w for w in walks if w.split == "tuning"]
+    stats = error_stats([w.error_pct(c_new) for w in tuning])
+    training["phones"] = {
+        "issue": 25, "tool": "python -m tools.train_stride --phones", "split": "tuning",
+        "data": "IPIN 2023 tuning routes 01, 02, 21, 22 (hand-held, two phones; surveyed landmark stretches) and "
+                "the tuning split's phone walks with GPS (benchmarks.splits.REAL_TUNING_REPOS) by their straight "
+                "40-s chords of good fixes: phone_walks_more/thomasdingemanse_lopen (carry detected as bag, "
+                "probably a trouser pocket); fif911/ML4QS has no straight chord, psy901/SensorActivity no distance",
+        "walks": [{"name": w.name, "dataset": w.dataset, "truth": w.truth, "distance_m": round(w.distance_m, 1),
+                   "carry_mode": mode_share(w)[0], "c": round(w.c_needed(), 4)} for w in tuning],
+        "rule": "1 / mean over the datasets of (mean over the dataset's walks of 1 / C_walk): zero mean signed "
+                "error, every source weighted alike; one C for every carry mode (a per-mode C had one walk "
+                "outside the hand and gave the same leave-one-dataset-out errors)",
+        "tuning_error_pct": {"median_abs": round(stats["median_abs_pct"], 2),
+                             "mean_signed": round(stats["mean_signed_pct"], 2), "walks": stats["n"]},
+        "leave_one_dataset_out": [
+            {"held_out": ds, "c": round(float(m), 4),
+             **{k: round(v, 2) for k, v in error_stats([e for _, e in errs]).items() if k.endswith("_pct")}}
+            for ds, m, errs in leave_one_dataset_out(walks)],
+        "c_before": c_old,
+    }
+    d = dict(old, c=c_new, training=training, placement="phone",
+             description="Weinberg, constant C refitted on the tuning split's phones (issue #25)")
+    if created:
+        d["created"] = created
+    model_from_dict(d, source=str(path))  # a file the reader takes
+    Path(path).write_text(json.dumps(d, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    return d
 
 
 def _c_text(c) -> str:

@@ -410,3 +410,25 @@ def test_phone_fit_weighs_sources_alike_and_leaves_one_out():
     st = error_stats([1.0, -3.0, float("nan")])  # a failed walk counts, at +inf in the median
     assert st == {"n": 3, "failed": 1, "median_abs_pct": 3.0, "mean_signed_pct": -1.0}
 
+
+
+def test_phone_default_file_states_its_fit_and_round_trips(tmp_path):
+    """``tools.train_stride --phones`` writes a default whose C gives its tuning walks the tuning error it states
+    (recomputed from the walks' own C it lists), names no report walk, and loads back as that Weinberg C."""
+    from benchmarks.stride_eval import write_phone_default
+    from core.pdr.stride_models import MODELS_DIR, load_stride_model
+
+    walks = [_walk(f"a{k}", "A", "tuning", 0.44 + 0.01 * k) for k in range(5)]
+    walks += [_walk("b", "B", "tuning", 0.50, truth="gps_chords", mode="bag"), _walk("r", "R", "report", 0.7)]
+    old = json.loads((MODELS_DIR / "default.json").read_text(encoding="utf-8"))
+    d = write_phone_default(walks, old, tmp_path / "default.json", created="2026-12-06T00:00:00+00:00")
+    phones = d["training"]["phones"]
+    assert [w["name"] for w in phones["walks"]] == ["a0", "a1", "a2", "a3", "a4", "b"]  # the report walk never
+    errs = np.array([100 * (d["c"] / w["c"] - 1) for w in phones["walks"]])
+    assert np.median(np.abs(errs)) == pytest.approx(phones["tuning_error_pct"]["median_abs"], abs=0.05)
+    assert phones["c_before"] == old["c"] and d["training"]["data"] == old["training"]["data"]  # IPOL's kept
+    assert {r["held_out"] for r in phones["leave_one_dataset_out"]} == {"A", "B"}
+    model = load_stride_model(tmp_path / "default.json")
+    assert model.coefficient.c == pytest.approx(d["c"], rel=1e-12)
+    f = StepFeatures(0, 0.5, 12.0, 8.0, 0.5)
+    assert model.length_m(f) == pytest.approx(d["c"] * 4.0 ** 0.25)

@@ -53,52 +53,25 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _phones(args) -> int:
-    """Refit ``default.json``'s C on the tuning split's phones (leave-one-dataset-out on the tuning split for
-    the transfer); the report split's phones are only scored.  Prints the table; writes unless ``--no-write``."""
+    """Refit the default's C on the tuning split's phones (leave-one-dataset-out on the tuning split for the
+    transfer); the report split's phones are only scored.  Prints the table; writes ``OUT_DIR/default.json``
+    unless ``--no-write`` (the shipped default's other fields kept; ``--out-dir`` elsewhere leaves it alone)."""
     import json
 
-    from core.pdr.stride_models import load_stride_model, save_stride_model
+    from core.pdr.stride_models import MODELS_DIR
 
     walks = stride_eval.phone_walks(args.data_root, args.extra)
-    c_new = stride_eval.fit_phone_c(walks, "tuning")
+    old = json.loads((MODELS_DIR / "default.json").read_text(encoding="utf-8"))
+    c_old = float(old.get("training", {}).get("phones", {}).get("c_before", old["c"]))  # the IPOL fit
     lodo = stride_eval.leave_one_dataset_out(walks)
-    path = args.out_dir / "default.json"
-    old = json.loads(path.read_text(encoding="utf-8"))
-    training = dict(old.get("training", {}))
-    c_old = float(training.get("phones", {}).get("c_before", old["c"]))  # the IPOL fit, also after a refit
-    print(stride_eval.phone_distance_markdown(walks, c_old, c_new, lodo))
+    print(stride_eval.phone_distance_markdown(walks, c_old, stride_eval.fit_phone_c(walks), lodo))
     if args.no_write:
         return 0
-    model = load_stride_model(path)
-    model.coefficient.c = c_new
-    tuning = [w for w in walks if w.split == "tuning"]
-    stats = stride_eval.error_stats([w.error_pct(c_new) for w in tuning])
-    training["phones"] = {
-        "issue": 25, "tool": "python -m tools.train_stride --phones", "split": "tuning",
-        "data": "IPIN 2023 tuning routes 01, 02, 21, 22 (hand-held, two phones; surveyed landmark stretches) and "
-                "the tuning split's phone walks with GPS (benchmarks.splits.REAL_TUNING_REPOS) by their straight "
-                "40-s chords of good fixes: phone_walks_more/thomasdingemanse_lopen (carry detected as bag, "
-                "probably a trouser pocket); fif911/ML4QS has no straight chord, psy901/SensorActivity no distance",
-        "walks": [{"name": w.name, "dataset": w.dataset, "truth": w.truth, "distance_m": round(w.distance_m, 1),
-                   "carry_mode": stride_eval.mode_share(w)[0], "c": round(w.c_needed(), 4)} for w in tuning],
-        "rule": "1 / mean over the datasets of (mean over the dataset's walks of 1 / C_walk): zero mean signed "
-                "error, every source weighted alike; one C for every carry mode (a per-mode C had one walk "
-                "outside the hand and gave the same leave-one-dataset-out errors)",
-        "tuning_error_pct": {"median_abs": round(stats["median_abs_pct"], 2),
-                             "mean_signed": round(stats["mean_signed_pct"], 2), "walks": stats["n"]},
-        "leave_one_dataset_out": [
-            {"held_out": ds, "c": round(float(m), 4),
-             **{k: round(v, 2) for k, v in stride_eval.error_stats([e for _, e in errs]).items()
-                if k.endswith("_pct")}} for ds, m, errs in lodo],
-        "c_before": c_old,
-    }
-    meta = {k: v for k, v in old.items() if k not in ("format", "format_version", "kind", "inputs", "output", "c",
-                                                      "c_unit", "length_clip_m")}
-    meta.update(description="default = Weinberg, constant C refitted on the tuning split's phones (issue #25)",
-                placement="phone", training=training,
-                created=datetime.now(timezone.utc).isoformat(timespec="seconds"))
-    save_stride_model(model, path, **meta)
-    print(f"wrote {path}: C {c_old:.4f} -> {c_new:.4f} (now also core.pdr.stride.ConstantCoefficient's default)")
+    path = args.out_dir / "default.json"
+    d = stride_eval.write_phone_default(walks, old, path,
+                                        created=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+    print(f"wrote {path}: C {c_old:.4f} -> {d['c']:.4f} (the pipeline's built-in default is "
+          "core.pdr.stride.ConstantCoefficient's: change it too to ship this)")
     return 0
 
 
