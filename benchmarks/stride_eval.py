@@ -621,12 +621,16 @@ CHORD_MIN_M = 30.0
 AYMDI_LOOP_M = 116.0
 
 
+#: the carry mode of a step whose walk did not record one (the trundle wheel: placement unknown)
+MODE_NOT_RECORDED = "not recorded"
+
+
 @dataclass
 class PhoneWalk:
     """A phone walk with a distance truth: its stretches ``(features, distance_m)`` and how they were measured.
 
-    ``modes``: per stretch, the carry mode of each of its steps (the pipeline's, issue #17; empty: all
-    hand-held).  ``steps_error_pct``: the walk's steps against its counted steps, where counted (a distance
+    ``modes``: per stretch, the carry mode of each of its steps (the pipeline's, issue #17, or the dataset's
+    declared placement; empty: :data:`MODE_NOT_RECORDED`).  ``steps_error_pct``: the walk's steps against its counted steps, where counted (a distance
     error that is a step-count error no stride model can fix)."""
 
     name: str
@@ -643,7 +647,7 @@ class PhoneWalk:
         return float(sum(d for _, d in self.stretches))
 
     def stretch_modes(self, k: int) -> list:
-        return list(self.modes[k]) if k < len(self.modes) else [CARRY_HANDHELD] * len(self.stretches[k][0])
+        return list(self.modes[k]) if k < len(self.modes) else [MODE_NOT_RECORDED] * len(self.stretches[k][0])
 
     def main_mode(self) -> str:
         """The carry mode of most of the walk's steps inside its stretches."""
@@ -651,7 +655,7 @@ class PhoneWalk:
         for k in range(len(self.stretches)):
             for m in self.stretch_modes(k):
                 counts[m] = counts.get(m, 0) + 1
-        return max(counts, key=counts.get) if counts else CARRY_HANDHELD
+        return max(counts, key=counts.get) if counts else MODE_NOT_RECORDED
 
     def c_needed(self) -> float:
         """The constant C that gives this walk's distance: the ratio of sums over its stretches, or for GPS
@@ -761,7 +765,7 @@ def phone_walks(data_root, extra=None) -> list[PhoneWalk]:
     for lw in ipin_walks(str(root)):  # surveyed landmarks, detours dropped (ipin_walks)
         route = lw.name[1:3]
         out.append(PhoneWalk(lw.name, "ipin2023_track3", split_of("ipin2023_track3", {"route": route}), "landmarks",
-                             [(lw.features, lw.distance_m)]))
+                             [(lw.features, lw.distance_m)], modes=[[CARRY_HANDHELD] * len(lw.features)]))  # "hand"
     for w in real_walks(root, Path(extra) if extra else None):
         try:
             rec = load_recording(str(w.folder), warn=False)
@@ -812,7 +816,7 @@ def mode_share(w: PhoneWalk) -> tuple[str, float]:
     """The main carry mode of ``w``'s measured steps and its share."""
     modes = [m for k in range(len(w.stretches)) for m in w.stretch_modes(k)]
     if not modes:
-        return CARRY_HANDHELD, 0.0
+        return MODE_NOT_RECORDED, 0.0
     m = w.main_mode()
     return m, modes.count(m) / len(modes)
 
@@ -920,6 +924,10 @@ def phone_distance_markdown(walks, c_before, c_after, lodo=None) -> str:
         ws = [w for w in walks if w.split == split]
         groups = [("all", ws)] + [(f"truth {t}", [w for w in ws if w.truth == t]) for t in sorted({w.truth for w in ws})]
         groups += [(f"dataset {d}", [w for w in ws if w.dataset == d]) for d in sorted({w.dataset for w in ws})]
+        modes = [(w, *mode_share(w)) for w in ws]
+        groups += [(f"carry {m} (>= {100 * CARRY_FIT_MIN_SHARE:.0f} % of steps)",
+                    [w for w, mw, sh in modes if mw == m and sh >= CARRY_FIT_MIN_SHARE])
+                   for m in sorted({mw for _, mw, sh in modes if sh >= CARRY_FIT_MIN_SHARE})]
         for label, g in groups:
             if not g:
                 continue
