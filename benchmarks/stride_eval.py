@@ -32,13 +32,16 @@
 from __future__ import annotations
 
 import functools
+import json
 import math
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
+from core.conventions import CARRY_HANDHELD
 from core.pdr.calibration import CalibrationError, calibrate_known_distance
 from core.pdr.pipeline import Pipeline
 from core.pdr.stride import StepFeatures
@@ -618,9 +621,17 @@ CHORD_MIN_M = 30.0
 AYMDI_LOOP_M = 116.0
 
 
+#: the carry mode of a step whose walk did not record one (the trundle wheel: placement unknown)
+MODE_NOT_RECORDED = "not recorded"
+
+
 @dataclass
 class PhoneWalk:
-    """A phone walk with a distance truth: its stretches ``(features, distance_m)`` and how they were measured."""
+    """A phone walk with a distance truth: its stretches ``(features, distance_m)`` and how they were measured.
+
+    ``modes``: per stretch, the carry mode of each of its steps (the pipeline's, issue #17, or the dataset's
+    declared placement; empty: :data:`MODE_NOT_RECORDED`).  ``steps_error_pct``: the walk's steps against its counted steps, where counted (a distance
+    error that is a step-count error no stride model can fix)."""
 
     name: str
     dataset: str
@@ -628,22 +639,54 @@ class PhoneWalk:
     truth: str  #: "landmarks" (surveyed), "gps_chords" (straight GPS stretches), "loop" (stated length), "wheel"
     stretches: list  #: [(features, distance_m)]
     carry_time_s: dict = field(default_factory=dict)
+    modes: list = field(default_factory=list)  #: [[carry mode of each step] per stretch]
+    steps_error_pct: float = math.nan
 
     @property
     def distance_m(self) -> float:
         return float(sum(d for _, d in self.stretches))
 
+    def stretch_modes(self, k: int) -> list:
+        return list(self.modes[k]) if k < len(self.modes) else [MODE_NOT_RECORDED] * len(self.stretches[k][0])
+
+    def main_mode(self) -> str:
+        """The carry mode of most of the walk's steps inside its stretches."""
+        counts: dict = {}
+        for k in range(len(self.stretches)):
+            for m in self.stretch_modes(k):
+                counts[m] = counts.get(m, 0) + 1
+        return max(counts, key=counts.get) if counts else MODE_NOT_RECORDED
+
     def c_needed(self) -> float:
         """The constant C that gives this walk's distance: the ratio of sums over its stretches, or for GPS
         chords the median over the stretches (a fix's jump spoils one stretch, not the walk)."""
-        roots = [float(np.sum(weinberg_root(f))) for f, _ in self.stretches]
-        if self.truth == "gps_chords":
-            return float(np.median([d / r for (_, d), r in zip(self.stretches, roots) if r > 0]))
-        return self.distance_m / sum(roots)
+        ratio = 1.0 + self.error_pct(1.0) / 100.0
+        return 1.0 / ratio if ratio > 0 else math.inf  # no step measured: no C gives its distance
 
-    def error_pct(self, c: float) -> float:
-        """Signed distance error of a constant ``c`` on this walk (%; the same robust rule as :meth:`c_needed`)."""
-        return 100.0 * (c / self.c_needed() - 1.0)
+    def error_pct(self, c) -> float:
+        """Signed distance error (%) of Weinberg's eq. 4 with ``c``: a constant, or a :class:`CarryC` (C per
+        carry mode).  Ratio of sums over the stretches; for GPS chords the median of the stretches' ratios."""
+        est = []
+        for k, (f, _) in enumerate(self.stretches):
+            cs = c.of_modes(self.stretch_modes(k)) if isinstance(c, CarryC) else float(c)
+            est.append(float(np.sum(cs * weinberg_root(f))))
+        d = np.array([d for _, d in self.stretches], float)
+        est = np.array(est)
+        if self.truth == "gps_chords":
+            return 100.0 * (float(np.median(est / d)) - 1.0)
+        return 100.0 * (float(est.sum() / d.sum()) - 1.0)
+
+
+@dataclass(frozen=True)
+class CarryC:
+    """Weinberg's C per carry mode (issue #25): ``by_mode[mode]``, else ``default``."""
+
+    default: float
+    by_mode: tuple = ()  #: ((mode, C), ...)
+
+    def of_modes(self, modes) -> np.ndarray:
+        table = dict(self.by_mode)
+        return np.array([table.get(m, self.default) for m in modes], float)
 
 
 def _run_steps(recording):
@@ -657,7 +700,12 @@ def _run_steps(recording):
 
 
 def chord_stretches(steps, gps) -> list:
-    """Straight stretches of a GPS walk: ``[(features of the steps inside, chord_m)]``.
+    """``[(features of the steps inside, chord_m)]`` of :func:`chord_spans`."""
+    return [([steps[k].features for k in sel], chord) for sel, chord in chord_spans(steps, gps)]
+
+
+def chord_spans(steps, gps) -> list:
+    """Straight stretches of a GPS walk: ``[(indices of the steps inside, chord_m)]``.
 
     Windows of ``CHORD_WINDOW_S`` over fixes whose reported accuracy is at most ``CHORD_MAX_HACC_M`` (positions
     smoothed over five fixes), kept when the chord is at least ``CHORD_MIN_M`` and ``CHORD_MIN_STRAIGHTNESS`` of
@@ -683,43 +731,64 @@ def chord_stretches(steps, gps) -> list:
         path = float(np.sum(np.hypot(np.diff(es[i:j + 1]), np.diff(ns[i:j + 1]))))
         chord = float(np.hypot(es[j] - es[i], ns[j] - ns[i]))
         sel = np.flatnonzero((t > tg[i]) & (t <= tg[j]))
-        if path > 0 and chord >= CHORD_MIN_M and chord / path >= CHORD_MIN_STRAIGHTNESS and len(sel) > 10:
-            out.append(([steps[k].features for k in sel], chord))
+        if path > 0 and chord >= CHORD_MIN_M and chord / path >= CHORD_MIN_STRAIGHTNESS:
+            out.append((sel, chord))
             i = j
         else:
             i += 2
     return out
 
 
-def phone_walks(data_root) -> list[PhoneWalk]:
-    """Every phone walk with a distance truth under ``data_root``, with its split (``benchmarks.splits``)."""
-    from benchmarks.splits import split_of, trial_split
+#: the extra corpus of issue #25 (``benchmarks.real_walks --extra``), read when it is there
+DEFAULT_EXTRA = Path("/work/extra_data")
+
+
+def _counted_steps_pct(n_steps: int, counted) -> float:
+    return 100.0 * (n_steps / counted - 1.0) if counted else math.nan
+
+
+def phone_walks(data_root, extra=None) -> list[PhoneWalk]:
+    """Every phone walk with a distance truth under ``data_root`` (and the extra corpus ``extra``, default
+    :data:`DEFAULT_EXTRA` if present), with its split (``benchmarks.splits``): IPIN 2023's surveyed landmark
+    stretches, every real walk with GPS (:func:`benchmarks.datasets.phone_walks.real_walks`) by its straight
+    chords, every counted clip with a stated path, the trundle wheel.  A walk whose run finds no step or no
+    chord is kept with an empty truth? No: a GPS walk without one straight chord has no distance truth and is
+    listed by :func:`phone_walks_without_truth`; a walk with chords but no steps inside counts at -100 %."""
+    from benchmarks.datasets.phone_walks import STEP_CLIP, real_walks
+    from benchmarks.splits import split_of
     from core.importers import load_recording
 
     root = Path(data_root)
+    if extra is None and DEFAULT_EXTRA.is_dir():
+        extra = DEFAULT_EXTRA
     out = []
     for lw in ipin_walks(str(root)):  # surveyed landmarks, detours dropped (ipin_walks)
         route = lw.name[1:3]
         out.append(PhoneWalk(lw.name, "ipin2023_track3", split_of("ipin2023_track3", {"route": route}), "landmarks",
-                             [(lw.features, lw.distance_m)]))
-    gps_folders = [("sensorlogger_gps_walk_ethz", p) for p in sorted((root / "sensorlogger_gps_walk_ethz").glob("20*"))]
-    gps_folders += [("gps_walks_phone", p) for p in sorted((root / "gps_walks_phone").iterdir()) if p.is_dir()] \
-        if (root / "gps_walks_phone").is_dir() else []
-    more = root / "phone_walks_more"
-    if more.is_dir():
-        gps_folders += [("phone_walks_more", p) for p in sorted(more.iterdir()) if p.is_dir() and p.name != "aymdi_data"]
-    for dataset, folder in gps_folders:
-        rec = load_recording(str(folder), warn=False)
+                             [(lw.features, lw.distance_m)], modes=[[CARRY_HANDHELD] * len(lw.features)]))  # "hand"
+    for w in real_walks(root, Path(extra) if extra else None):
+        try:
+            rec = load_recording(str(w.folder), warn=False)
+        except Exception as e:  # an unreadable walk is listed, never dropped silently
+            print(f"phone_walks: {w.name}: {e}", file=sys.stderr)
+            continue
+        if w.kind == STEP_CLIP:
+            if not w.path_m:
+                continue
+            steps, carry = _run_steps(rec)
+            out.append(PhoneWalk(w.walk, w.dataset, w.split, "loop" if w.closed_loop else "path",
+                                 [([s.features for s in steps], float(w.path_m))], carry,
+                                 [[s.carry_mode for s in steps]], _counted_steps_pct(len(steps), w.steps_counted)))
+            continue
         if "gps" not in rec.streams:
             continue
         steps, carry = _run_steps(rec)
-        split = split_of(dataset, {"walk": folder.name})
-        out.append(PhoneWalk(folder.name, dataset, split, "gps_chords", chord_stretches(steps, rec.streams["gps"]),
-                             carry))
-    if (more / "aymdi_data").is_dir():
-        steps, carry = _run_steps(load_recording(str(more / "aymdi_data"), warn=False))
-        out.append(PhoneWalk("aymdi_data", "phone_walks_more", split_of("phone_walks_more", {"walk": "aymdi_data"}),
-                             "loop", [([s.features for s in steps], AYMDI_LOOP_M)], carry))
+        spans = chord_spans(steps, rec.streams["gps"])
+        if not spans:
+            continue
+        out.append(PhoneWalk(w.walk, w.dataset, w.split, "gps_chords",
+                             [([steps[k].features for k in sel], chord) for sel, chord in spans], carry,
+                             [[steps[k].carry_mode for k in sel] for sel, _ in spans]))
     for lw in trundle_walks(str(root)):
         out.append(PhoneWalk(lw.name, "trundlewheel_distance", split_of("trundlewheel_distance"), "wheel",
                              [(lw.features, lw.distance_m)]))
@@ -727,34 +796,151 @@ def phone_walks(data_root) -> list[PhoneWalk]:
 
 
 def fit_phone_c(walks, split: str = "tuning") -> float:
-    """The default C from the phones of ``split`` (the tuning split: the shipped default): each walk's own C
-    (:meth:`PhoneWalk.c_needed`) weighted by its distance."""
-    ws = [w for w in walks if w.split == split]
+    """The default C from the phones of ``split`` (the tuning split: the shipped default), every source
+    (dataset) weighted alike and every walk alike within it: the C whose mean signed error over the walks is
+    zero, ``1 / mean(1 / C_walk)`` (:meth:`PhoneWalk.c_needed`; ``C / C_walk - 1`` is a walk's error)."""
+    ws = [w for w in walks if w.split == split and w.c_needed() > 0 and math.isfinite(w.c_needed())]
     if not ws:
         raise ValueError(f"no phone walk with a distance truth in the {split} split")
-    return float(sum(w.c_needed() * w.distance_m for w in ws) / sum(w.distance_m for w in ws))
+    groups: dict = {}
+    for w in ws:
+        groups.setdefault(w.dataset, []).append(1.0 / w.c_needed())
+    return float(1.0 / np.mean([np.mean(v) for v in groups.values()]))
 
 
-def phone_distance_markdown(walks, c_before: float, c_after: float) -> str:
-    """Per walk and per split: the distance error of the old and the new default C."""
+#: a walk counts for a carry mode's own C when at least this share of its measured steps are in that mode
+CARRY_FIT_MIN_SHARE = 0.8
+
+
+def mode_share(w: PhoneWalk) -> tuple[str, float]:
+    """The main carry mode of ``w``'s measured steps and its share."""
+    modes = [m for k in range(len(w.stretches)) for m in w.stretch_modes(k)]
+    if not modes:
+        return MODE_NOT_RECORDED, 0.0
+    m = w.main_mode()
+    return m, modes.count(m) / len(modes)
+
+
+def fit_carry_c(walks, split: str = "tuning") -> CarryC:
+    """C per carry mode from the phones of ``split``: a mode with walks (:data:`CARRY_FIT_MIN_SHARE` of their
+    steps in it) gets :func:`fit_phone_c` over them, every other mode the fit over all walks."""
+    default = fit_phone_c(walks, split)
+    by_mode = {}
+    for w in walks:
+        m, share = mode_share(w)
+        if w.split == split and share >= CARRY_FIT_MIN_SHARE:
+            by_mode.setdefault(m, []).append(w)
+    return CarryC(default, tuple(sorted((m, fit_phone_c(v, split)) for m, v in by_mode.items())))
+
+
+def leave_one_dataset_out(walks, fit=fit_phone_c, split: str = "tuning") -> list[tuple[str, object, list]]:
+    """Transfer on ``split``: per dataset (a source: other phones, other walkers) the fit on the other datasets
+    and that fit's signed errors on the held-out dataset's walks: ``[(dataset, fit, [(walk, error %)])]``."""
+    ws = [w for w in walks if w.split == split]
+    out = []
+    for ds in sorted({w.dataset for w in ws}):
+        model = fit([w for w in ws if w.dataset != ds], split)
+        out.append((ds, model, [(w.name, w.error_pct(model)) for w in ws if w.dataset == ds]))
+    return out
+
+
+def error_stats(errors) -> dict:
+    """Median absolute and mean signed error (%) of walks' signed errors; a failed walk (nan) counts as
+    +inf in the median and is counted, never dropped."""
+    e = np.array([x if math.isfinite(x) else math.inf for x in errors], float)
+    fin = e[np.isfinite(e)]
+    return {"n": int(e.size), "failed": int(e.size - fin.size),
+            "median_abs_pct": float(np.median(np.abs(e))) if e.size else math.nan,
+            "mean_signed_pct": float(fin.mean()) if fin.size else math.nan}
+
+
+def write_phone_default(walks, old: dict, path, created: str = "") -> dict:
+    """Write ``old`` (a ``default.json`` dict) with C refitted on the tuning split's phones (:func:`fit_phone_c`)
+    to ``path``, stating its data, its tuning walks' own C, its tuning error and the leave-one-dataset-out
+    transfer (``training.phones``); returns the dict written.  ``python -m tools.train_stride --phones``."""
+    from core.pdr.stride_models import model_from_dict
+
+    c_new = fit_phone_c(walks, "tuning")
+    training = dict(old.get("training", {}))
+    c_old = float(training.get("phones", {}).get("c_before", old["c"]))
+    tuning = [w for w in walks if w.split == "tuning"]
+    stats = error_stats([w.error_pct(c_new) for w in tuning])
+    training["phones"] = {
+        "issue": 25, "tool": "python -m tools.train_stride --phones", "split": "tuning",
+        "data": "IPIN 2023 tuning routes 01, 02, 21, 22 (hand-held, two phones; surveyed landmark stretches) and "
+                "the tuning split's phone walks with GPS (benchmarks.splits.REAL_TUNING_REPOS) by their straight "
+                "40-s chords of good fixes: phone_walks_more/thomasdingemanse_lopen (carry detected as bag, "
+                "probably a trouser pocket); fif911/ML4QS has no straight chord, psy901/SensorActivity no distance",
+        "walks": [{"name": w.name, "dataset": w.dataset, "truth": w.truth, "distance_m": round(w.distance_m, 1),
+                   "carry_mode": mode_share(w)[0], "c": round(w.c_needed(), 4)} for w in tuning],
+        "rule": "1 / mean over the datasets of (mean over the dataset's walks of 1 / C_walk): zero mean signed "
+                "error, every source weighted alike; one C for every carry mode (a per-mode C had one walk "
+                "outside the hand and gave the same leave-one-dataset-out errors)",
+        "tuning_error_pct": {"median_abs": round(stats["median_abs_pct"], 2),
+                             "mean_signed": round(stats["mean_signed_pct"], 2), "walks": stats["n"]},
+        "leave_one_dataset_out": [
+            {"held_out": ds, "c": round(float(m), 4),
+             **{k: round(v, 2) for k, v in error_stats([e for _, e in errs]).items() if k.endswith("_pct")}}
+            for ds, m, errs in leave_one_dataset_out(walks)],
+        "c_before": c_old,
+    }
+    d = dict(old, c=c_new, training=training, placement="phone",
+             description="Weinberg, constant C refitted on the tuning split's phones (issue #25)")
+    if created:
+        d["created"] = created
+    model_from_dict(d, source=str(path))  # a file the reader takes
+    Path(path).write_text(json.dumps(d, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    return d
+
+
+def _c_text(c) -> str:
+    if isinstance(c, CarryC):
+        return f"{c.default:.4f}" + "".join(f", {m} {v:.4f}" for m, v in c.by_mode)
+    return f"{float(c):.4f}"
+
+
+def phone_distance_markdown(walks, c_before, c_after, lodo=None) -> str:
+    """Per walk and per split: the distance error (no calibration, no profile) of the old and the new default
+    C (a constant or a :class:`CarryC`); ``lodo``: :func:`leave_one_dataset_out`'s rows on the tuning split."""
     lines = ["## Distance without calibration on phones (issue #25)", "",
-             f"Default Weinberg C {c_before:.4f} (fitted on IPOL's lower-back sensor) -> {c_after:.4f} (refitted on "
-             "the phones of the tuning split: IPIN tuning routes' landmark stretches, thomasdingemanse_lopen's straight "
-             "GPS chords; each walk's own C weighted by its distance).  Error = C / (the walk's own C) - 1.", "",
-             "| split | walk | dataset | truth | distance m | walk's C | error before % | error after % |",
-             "|---|---|---|---|---|---|---|---|"]
+             f"Weinberg C before: {_c_text(c_before)}; after: {_c_text(c_after)}.  Steps from `Pipeline()` (the "
+             "default step detector, carry detection on, no GPS, no profile); truth: IPIN's surveyed landmark "
+             "stretches, the straight 40-s chords of good GPS fixes (accuracy <= 10 m, chord >= 30 m, >= 97 % of the "
+             "path; chosen from the fixes alone), a counted clip's stated path, the trundle wheel.  Error = "
+             "estimated / true - 1 (GPS chords: the median over the walk's chords).  A walk that lost its steps "
+             "keeps its error (steps % where they were counted).", "",
+             "| split | walk | dataset | truth | distance m | main carry mode (share) | walk's C | steps vs count % | "
+             "error before % | error after % |", "|---|---|---|---|---|---|---|---|---|---|"]
     for split in ("tuning", "report"):
         for w in [w for w in walks if w.split == split]:
-            lines.append(f"| {split} | {w.name} | {w.dataset} | {w.truth} | {w.distance_m:.0f} | {w.c_needed():.3f} | "
-                         f"{w.error_pct(c_before):+.1f} | {w.error_pct(c_after):+.1f} |")
-    lines += ["", "| split | walks | median abs before % | mean signed before % | median abs after % | "
-              "mean signed after % |", "|---|---|---|---|---|---|"]
+            m, share = mode_share(w)
+            mode = f"{m} ({100 * share:.0f} %)" if share > 0 else "no step"
+            st = f"{w.steps_error_pct:+.1f}" if math.isfinite(w.steps_error_pct) else "–"
+            lines.append(f"| {split} | {w.name} | {w.dataset} | {w.truth} | {w.distance_m:.0f} | {mode} "
+                         f"| {w.c_needed():.3f} | {st} | {w.error_pct(c_before):+.1f} | {w.error_pct(c_after):+.1f} |")
+    lines += ["", "| split | group | walks | median abs before % | mean signed before % | median abs after % | "
+              "mean signed after % |", "|---|---|---|---|---|---|---|"]
     for split in ("tuning", "report"):
         ws = [w for w in walks if w.split == split]
-        if not ws:
-            continue
-        b = np.array([w.error_pct(c_before) for w in ws])
-        a = np.array([w.error_pct(c_after) for w in ws])
-        lines.append(f"| {split} | {len(ws)} | {np.median(np.abs(b)):.1f} | {b.mean():+.1f} | "
-                     f"{np.median(np.abs(a)):.1f} | {a.mean():+.1f} |")
+        groups = [("all", ws)] + [(f"truth {t}", [w for w in ws if w.truth == t]) for t in sorted({w.truth for w in ws})]
+        groups += [(f"dataset {d}", [w for w in ws if w.dataset == d]) for d in sorted({w.dataset for w in ws})]
+        modes = [(w, *mode_share(w)) for w in ws]
+        groups += [(f"carry {m} (>= {100 * CARRY_FIT_MIN_SHARE:.0f} % of steps)",
+                    [w for w, mw, sh in modes if mw == m and sh >= CARRY_FIT_MIN_SHARE])
+                   for m in sorted({mw for _, mw, sh in modes if sh >= CARRY_FIT_MIN_SHARE})]
+        for label, g in groups:
+            if not g:
+                continue
+            b = error_stats([w.error_pct(c_before) for w in g])
+            a = error_stats([w.error_pct(c_after) for w in g])
+            lines.append(f"| {split} | {label} | {len(g)} | {b['median_abs_pct']:.1f} | {b['mean_signed_pct']:+.1f} | "
+                         f"{a['median_abs_pct']:.1f} | {a['mean_signed_pct']:+.1f} |")
+    if lodo:
+        lines += ["", "Transfer on the tuning split, leave one dataset out (fit on the other tuning datasets, score the "
+                  "held-out one):", "", "| held-out dataset | C fitted without it | walks | median abs % | mean signed % |",
+                  "|---|---|---|---|---|"]
+        for ds, model, errs in lodo:
+            st = error_stats([e for _, e in errs])
+            lines.append(f"| {ds} | {_c_text(model)} | {st['n']} | {st['median_abs_pct']:.1f} | "
+                         f"{st['mean_signed_pct']:+.1f} |")
     return "\n".join(lines) + "\n"

@@ -378,3 +378,57 @@ def test_phone_distance_chords_and_walk_c():
     report = PhoneWalk("r", "d", "report", "landmarks", [(good[0][0], 10 * 0.9 * root)])
     c = fit_phone_c([surveyed, report])  # the report walk is never used
     assert c == pytest.approx(0.5)
+
+
+def _walk(name, dataset, split, c_walk, truth="landmarks", mode="handheld", n=10):
+    """A phone walk whose own C is ``c_walk``: ``n`` steps of (A_max - A_min) = 2 m/s^2, all in ``mode``."""
+    from benchmarks.stride_eval import PhoneWalk
+
+    feats = [StepFeatures(0, 0.5, 11.0, 9.0, 0.5)] * n
+    return PhoneWalk(name, dataset, split, truth, [(feats, n * c_walk * 2.0 ** 0.25)], modes=[[mode] * n])
+
+
+def test_phone_fit_weighs_sources_alike_and_leaves_one_out():
+    """issue #25: the phone C gives zero mean signed error with every dataset weighted alike (16 walks of one
+    source do not outvote one of another), a carry mode's own C comes from its walks only, leave-one-dataset-out
+    scores each dataset with the fit on the others, and the report split is never used."""
+    from benchmarks.stride_eval import CarryC, error_stats, fit_carry_c, fit_phone_c, leave_one_dataset_out
+
+    walks = [_walk(f"a{k}", "A", "tuning", 0.45) for k in range(16)] + [_walk("b", "B", "tuning", 0.55, mode="bag")]
+    walks.append(_walk("r", "R", "report", 0.90))
+    c = fit_phone_c(walks)
+    assert c == pytest.approx(1.0 / (0.5 / 0.45 + 0.5 / 0.55))  # harmonic mean of the two sources
+    ca, cb = (walks[0].error_pct(c), walks[16].error_pct(c))
+    assert (ca + cb) / 2 == pytest.approx(0.0, abs=1e-9)  # zero mean signed error over the sources
+    carry = fit_carry_c(walks)
+    assert dict(carry.by_mode) == pytest.approx({"handheld": 0.45, "bag": 0.55})
+    assert walks[16].error_pct(carry) == pytest.approx(0.0, abs=1e-9)
+    assert walks[16].error_pct(CarryC(0.45, (("bag", 0.66),))) == pytest.approx(20.0)
+    rows = {ds: (m, errs) for ds, m, errs in leave_one_dataset_out(walks)}
+    assert set(rows) == {"A", "B"}
+    assert rows["B"][0] == pytest.approx(0.45) and rows["B"][1][0][1] == pytest.approx(100 * (0.45 / 0.55 - 1))
+    st = error_stats([1.0, -3.0, float("nan")])  # a failed walk counts, at +inf in the median
+    assert st == {"n": 3, "failed": 1, "median_abs_pct": 3.0, "mean_signed_pct": -1.0}
+
+
+
+def test_phone_default_file_states_its_fit_and_round_trips(tmp_path):
+    """``tools.train_stride --phones`` writes a default whose C gives its tuning walks the tuning error it states
+    (recomputed from the walks' own C it lists), names no report walk, and loads back as that Weinberg C."""
+    from benchmarks.stride_eval import write_phone_default
+    from core.pdr.stride_models import MODELS_DIR, load_stride_model
+
+    walks = [_walk(f"a{k}", "A", "tuning", 0.44 + 0.01 * k) for k in range(5)]
+    walks += [_walk("b", "B", "tuning", 0.50, truth="gps_chords", mode="bag"), _walk("r", "R", "report", 0.7)]
+    old = json.loads((MODELS_DIR / "default.json").read_text(encoding="utf-8"))
+    d = write_phone_default(walks, old, tmp_path / "default.json", created="2026-12-06T00:00:00+00:00")
+    phones = d["training"]["phones"]
+    assert [w["name"] for w in phones["walks"]] == ["a0", "a1", "a2", "a3", "a4", "b"]  # the report walk never
+    errs = np.array([100 * (d["c"] / w["c"] - 1) for w in phones["walks"]])
+    assert np.median(np.abs(errs)) == pytest.approx(phones["tuning_error_pct"]["median_abs"], abs=0.05)
+    assert phones["c_before"] == old["c"] and d["training"]["data"] == old["training"]["data"]  # IPOL's kept
+    assert {r["held_out"] for r in phones["leave_one_dataset_out"]} == {"A", "B"}
+    model = load_stride_model(tmp_path / "default.json")
+    assert model.coefficient.c == pytest.approx(d["c"], rel=1e-12)
+    f = StepFeatures(0, 0.5, 12.0, 8.0, 0.5)
+    assert model.length_m(f) == pytest.approx(d["c"] * 4.0 ** 0.25)

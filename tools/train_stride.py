@@ -34,6 +34,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out-dir", type=Path, default=ROOT / "core" / "pdr" / "models")
     ap.add_argument("--no-write", action="store_true", help="only run the cross-validation")
     ap.add_argument("--seed", type=int, default=TrainConfig.seed)
+    ap.add_argument("--extra", type=Path, default=None,
+                    help="--phones: the extra corpus of issue #25 (default /work/extra_data when present)")
     ap.add_argument("--phones", action="store_true",
                     help="refit the default Weinberg C on the tuning split's phone walks (issue #25)")
     args = ap.parse_args(argv)
@@ -51,40 +53,25 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _phones(args) -> int:
-    """Refit ``default.json``'s C on the tuning split's phones; the report split's phones are only scored."""
+    """Refit the default's C on the tuning split's phones (leave-one-dataset-out on the tuning split for the
+    transfer); the report split's phones are only scored.  Prints the table; writes ``OUT_DIR/default.json``
+    unless ``--no-write`` (the shipped default's other fields kept; ``--out-dir`` elsewhere leaves it alone)."""
     import json
 
-    from core.pdr.stride_models import load_stride_model, save_stride_model
+    from core.pdr.stride_models import MODELS_DIR
 
-    walks = stride_eval.phone_walks(args.data_root)
-    c_new = stride_eval.fit_phone_c(walks, "tuning")
-    path = args.out_dir / "default.json"
-    old = json.loads(path.read_text(encoding="utf-8"))
-    c_old = float(old["c"])
-    print(stride_eval.phone_distance_markdown(walks, c_old, c_new))
+    walks = stride_eval.phone_walks(args.data_root, args.extra)
+    old = json.loads((MODELS_DIR / "default.json").read_text(encoding="utf-8"))
+    c_old = float(old.get("training", {}).get("phones", {}).get("c_before", old["c"]))  # the IPOL fit
+    lodo = stride_eval.leave_one_dataset_out(walks)
+    print(stride_eval.phone_distance_markdown(walks, c_old, stride_eval.fit_phone_c(walks), lodo))
     if args.no_write:
         return 0
-    model = load_stride_model(path)
-    model.coefficient.c = c_new
-    tuning = [w for w in walks if w.split == "tuning"]
-    training = dict(old.get("training", {}))
-    training["phones"] = {
-        "issue": 25, "tool": "tools/train_stride.py --phones", "split": "tuning",
-        "data": "IPIN 2023 tuning routes 01, 02, 21, 22 (hand-held, two phones; surveyed landmark stretches) and "
-                "phone_walks_more/thomasdingemanse_lopen (a phone on its long edge, probably a trouser pocket; "
-                "straight GPS chords)",
-        "walks": [{"name": w.name, "truth": w.truth, "distance_m": round(w.distance_m, 1),
-                   "c": round(w.c_needed(), 4)} for w in tuning],
-        "rule": "each walk's own C (ratio of sums over its stretches; median over the stretches for GPS chords), "
-                "weighted by its distance",
-        "c_before": c_old,
-    }
-    meta = {k: v for k, v in old.items() if k not in ("format", "format_version", "kind", "inputs", "output", "c",
-                                                      "c_unit", "length_clip_m")}
-    meta.update(description="default = Weinberg, constant C refitted on the tuning split's phones (issue #25)",
-                placement="phone", training=training)
-    save_stride_model(model, path, **meta)
-    print(f"wrote {path}: C {c_old:.4f} -> {c_new:.4f}")
+    path = args.out_dir / "default.json"
+    d = stride_eval.write_phone_default(walks, old, path,
+                                        created=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+    print(f"wrote {path}: C {c_old:.4f} -> {d['c']:.4f} (the pipeline's built-in default is "
+          "core.pdr.stride.ConstantCoefficient's: change it too to ship this)")
     return 0
 
 
