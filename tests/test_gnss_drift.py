@@ -1,6 +1,6 @@
 """The slow-drift check (issue #26, :mod:`core.gnss.drift`): a fix stream that walks away from dead reckoning at
 5 m/min (each fix consistent with the last one) is refused within minutes; a good stream through genuine turns
-is not."""
+is not.  The check is off by default (no help on the real tuning walk): these tests switch it on."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from core.gnss.drift import DriftSettings, DriftVerdict, StreamDriftCheck
-from core.gnss.judge import Cause, GpsJudge, GpsVerdict
+from core.gnss.judge import Cause, GpsJudge, GpsVerdict, JudgeSettings
 from tests.test_gnss_judge import ORIGIN, _gps, _walk
 
 DRIFT_START_S = 120.0
@@ -84,7 +84,7 @@ def _judged(drifting: bool, seconds=720.0, seed=1):
     """The judge fed the stream (the steps as the fusion dead-reckons them), every fix it finds usable taken."""
     from core.geodesy import enu_to_geodetic
 
-    j = GpsJudge()
+    j = GpsJudge(JudgeSettings(drift=DriftSettings()))  # off by default (see JudgeSettings.drift)
     out = []
     last = None
     for t, new, fe, fn in _stream(drifting, seconds, seed):
