@@ -540,6 +540,8 @@ class FixFusion:
         else:
             walked = self._dead_reckon(step, t_prev, dur)
         self._remember_heading(step.t_ns, step.heading_rad)
+        if self.judge is not None:  # the drift check's dead reckoning: the step as this filter walked it
+            self.judge.add_step(step.t_ns, *self._step_output())
         self._walked_since_accept_m += walked
         self._last_step_ns = step.t_ns
         self._last_step_dur_ns = dur
@@ -776,6 +778,8 @@ class FixFusion:
         judge held back before it found the stream usable (:meth:`_learn_pending`)."""
 
     def _accepted(self, t_ns, v, east, north, hacc, speed, course, nis, moved) -> None:
+        if self.judge is not None:
+            self.judge.fix_used(t_ns)
         self._last_accept_ns = t_ns
         self._first_inconsistent_ns = None
         self._walked_since_accept_m = 0.0
