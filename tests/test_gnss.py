@@ -188,6 +188,19 @@ def test_trainer_refuses_to_learn_from_noisy_gps():
     assert tr.n_stride_samples - n0 <= 2
 
 
+def test_a_reset_trainer_forgets_the_walk_it_learnt_from():
+    """A fusion reuses its trainer on every run (reset between): the heading model starts again from its
+    start model, as the stride scale does (the heading model once kept the first walk's samples)."""
+    tr = _feed_straight(OnlineTrainer(), scale_truth=1.12, seconds=300)
+    assert tr.heading_model.n_accepted > 0 and abs(tr.heading_model.correction_rad(0.4)) > math.radians(5)
+    tr.reset()
+    assert tr.heading_model.n_accepted == 0 and tr.n_heading_samples == 0
+    assert tr.heading_model.correction_rad(0.4) == 0.0 and tr.stride_scale == 1.0
+    again = _feed_straight(tr, scale_truth=1.12, seconds=300)
+    fresh = _feed_straight(OnlineTrainer(), scale_truth=1.12, seconds=300)
+    assert again.heading_model.correction_rad(0.4) == fresh.heading_model.correction_rad(0.4)
+
+
 def test_profile_keeps_what_gps_taught_and_the_next_walk_starts_from_it(tmp_path):
     tr = _feed_straight(OnlineTrainer(), scale_truth=1.08)
     prof = profile_with_gps_training(UserProfile(height_m=1.8), tr)

@@ -281,6 +281,7 @@ class OnlineTrainer:
         self.windows: list[WindowFlags] = [] if self.keep_windows is None else deque(maxlen=self.keep_windows)
         self.n_windows = 0
         self.noisy = False
+        self.heading_model.reset()  # back to its start (a persisted model stays the prior): a new walk
 
     @property
     def stride_scale(self) -> float:
