@@ -25,7 +25,7 @@ from tests._gnss_helpers import num_jac, truth_error
 # -- the EKF ---------------------------------------------------------------------------------------
 @pytest.mark.parametrize("psi", [-2.5, -0.3, 0.0, 1.2, 3.0])
 def test_ekf_jacobians_match_finite_differences(psi):
-    x = np.array([3.0, -4.0, 0.72, psi, 0.01, 0.02])
+    x = np.array([3.0, -4.0, 0.72, psi, 0.01, 0.02, 1.5, -2.0])
     J = PdrEkf.transition_jacobian(x[2], x[3])
     np.testing.assert_allclose(J, num_jac(PdrEkf.transition, x), atol=1e-7)
     for frac in (0.0, 0.4, 1.0):

@@ -438,6 +438,11 @@ class FixFusion:
     def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
         """An accepted fix's further use (course, velocity, training)."""
 
+    def _placed_on_fix(self, t_ns: int, sigma_m: float) -> None:
+        """The position was just put on the fix at ``t_ns`` (the anchor, a relock's restart) with per-axis SD
+        ``sigma_m``: a filter that models the fixes' correlated error correlates the two (Chen's:
+        :meth:`core.gnss.ekf.PdrEkf.place_on_fix`)."""
+
     def _step_output(self) -> tuple[float, float]:
         """(length_m, heading_rad) of the step just filtered, for the fused track."""
         raise NotImplementedError
@@ -642,6 +647,7 @@ class FixFusion:
             filt.P[:2, :] = 0.0
             filt.P[:, :2] = 0.0
             filt.P[0, 0] = filt.P[1, 1] = sigma ** 2
+            self._placed_on_fix(t_ns, sigma)
             self._accepted(t_ns, v, e0, n0, hacc, speed, course, nan, 0.0)
             return
         if not filt.initialized:  # a known start, and a fix before the first step
@@ -679,6 +685,7 @@ class FixFusion:
                 # its correlations with the rest dropped (widening it by the disagreement let the next fixes
                 # pull the heading through them: on the tuning walk the track then ran 40-150 m off again)
                 restart_position(filt, d, sigma)
+                self._placed_on_fix(t_ns, sigma)
                 res = UpdateResult(True, res.innovation, math.nan, float(np.hypot(*d)), res.sigma_before_m)
             else:
                 filt.P[:2, :2] += np.outer(d, d)

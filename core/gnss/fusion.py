@@ -119,6 +119,7 @@ class GpsFusion(FixFusion):
         # the given filter is a prototype of settings: each run starts a copy of it afresh
         self.ekf = PdrEkf() if self._ekf_proto is None else copy.copy(self._ekf_proto)
         self.ekf.reset()
+        self._fix_bias_t_ns: int | None = None  # the fix the fixes' correlated error was last propagated to
         if self._trainer_proto is not None:
             self.trainer = self._trainer_proto
             self.trainer.reset()
@@ -226,7 +227,15 @@ class GpsFusion(FixFusion):
             innov = (float(east - ekf.x[0]), float(north - ekf.x[1]))  # before the reset (issue #26: it was after)
             ekf.reset_position(east, north, sigma_m)
             return UpdateResult(True, innov, math.nan, math.hypot(*innov), before)
+        if self._fix_bias_t_ns != t_ns:  # once per fix (a relock updates twice with the same one)
+            dt = (t_ns - self._fix_bias_t_ns) * 1e-9 if self._fix_bias_t_ns is not None else math.inf
+            ekf.propagate_fix_bias(dt, sigma_m)
+            self._fix_bias_t_ns = int(t_ns)
         return ekf.update_position(east, north, sigma_m, self._fraction(t_ns), gate=gate)
+
+    def _placed_on_fix(self, t_ns: int, sigma_m: float) -> None:
+        self.ekf.place_on_fix(sigma_m)
+        self._fix_bias_t_ns = int(t_ns)
 
     def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
         if self.filter == "ekf" and self.origin_lat_lon is not None and self.use_course and \
