@@ -98,10 +98,13 @@ class InsSettings:
     zero_rate_update: bool = False
     #: rolling ZUPT: height (m) of the sensor above the point the foot rolls about during stance (heel, then
     #: toe); the stance measurement is then ``v = R (w x r_b)``, ``r_b = h up_b`` (``up_b``: the body's up
-    #: at the alignment), instead of ``v = 0``.  0: the plain ZUPT (eq. 9)
+    #: at the alignment), instead of ``v = 0``.  0: the plain ZUPT (eq. 9).  Off: on the PyShoe tuning split
+    #: 0.045 / 0.06 m took PyShoe's metric median 0.037 -> 0.036 / 0.036 m but the mean 0.040 -> 0.041 / 0.043
+    #: (one trial doubles; the lever scales every stride by +0.3-2.7 %; docs/foot.md)
     zupt_lever_up_m: float = 0.0
     #: rolling ZUPT noise: the zero-velocity sd becomes ``sqrt(sigma_z^2 + (|w| r)^2)`` with this ``r`` (m),
-    #: the largest lever arm the rotation may act on; 0: off
+    #: the largest lever arm the rotation may act on; 0: off (tuning split, 0.03 / 0.06 m: median 0.037 ->
+    #: 0.038 / 0.042 m)
     zupt_rate_lever_m: float = 0.0
     #: prior sd of roll/pitch and heading after the initial alignment (rad)
     initial_tilt_sd_rad: float = math.radians(1.0)
