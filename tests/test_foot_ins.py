@@ -148,3 +148,32 @@ def test_soft_zupt_noise_scale_and_streaming_equals_batch():
     assert np.allclose(stream.position_n[ok], batch.position_n[ok], atol=1e-9)
     hard = FootNavigator(FootSettings(stance=StanceSettings(threshold=1e5, window_s=0.05))).run(w.recording)
     assert not np.allclose(hard.position_n[ok], batch.position_n[ok], atol=1e-6)  # the gain does something
+
+
+def test_rolling_zupt_jacobian_matches_finite_differences():
+    """The rolling ZUPT's ``H`` is the derivative of ``v - R (w x r_b)`` w.r.t. the error state."""
+    rng = np.random.default_rng(7)
+    ekf = ZuptEKF(zupt_lever_up_m=0.08)
+    ekf.align((0.3, -0.2, 9.7), (0.0, 0.0, 0.0))
+    assert np.isclose(np.linalg.norm(ekf.lever_b), 0.08)
+    ekf.q = quat.normalize(tuple(rng.normal(size=4)))
+    ekf.v = tuple(rng.normal(size=3) * 0.1)
+    ekf.bg = tuple(rng.normal(size=3) * 0.01)
+    gyro = tuple(rng.normal(size=3))
+    u0, H = ekf.rolling_velocity(gyro)
+    h0 = np.asarray(ekf.v) - u0
+    eps = 1e-6
+    J = np.zeros((3, N_STATES))
+    for j in range(N_STATES):
+        dx = np.zeros(N_STATES)
+        dx[j] = eps
+        pert = _clone(ekf)
+        pert.lever_b = ekf.lever_b
+        pert.correct(dx)
+        J[:, j] = (np.asarray(pert.v) - pert.rolling_velocity(gyro)[0] - h0) / eps
+    assert np.max(np.abs(J - H)) < 1e-5
+    # the update pulls the velocity to the rolling one, not to zero
+    ekf.v = tuple(u0)
+    ekf.P = np.eye(N_STATES) * 1e-4
+    upd = ekf.update_zero_velocity(gyro_b=gyro)
+    assert upd.used and np.max(np.abs(upd.innovation)) < 1e-12

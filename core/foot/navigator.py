@@ -288,7 +288,7 @@ class FootNavigator:
             if not self._prev_stance:
                 self._stance_start = t
             g = self.settings.soft_zupt_gain
-            u = ins.update_zero_velocity(1.0 + g * min(max(ratio, 0.0), 1.0) if g > 0 else 1.0)
+            u = ins.update_zero_velocity(1.0 + g * min(max(ratio, 0.0), 1.0) if g > 0 else 1.0, gyro)
             if u.used:
                 self.zupt_nis.append(u.nis)
             if ins.settings.zero_rate_update and gyro is not None:
