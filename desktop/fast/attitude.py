@@ -89,6 +89,7 @@ SETTINGS_USE = {
     "mag_wait_s": "the start (the reference's)", "still_window_s": "ns", "still_acc_sd_m_s2": "f",
     "still_acc_direction_rad": "f", "still_gyro_sd_rad_s": "f", "zero_rate_noise_rad_s": "f",
     "max_gyro_gap_s": "f", "no_gyro_random_walk_rad_sqrt_s": "f", "noise_scale_rate": "f", "noise_scale_min": "f",
+    "mag_offset_sd_rad": "refused unless 0 (check_supported)", "mag_offset_time_s": "with the offset state only (refused)",
 }
 
 #: how each field of AttitudeState reaches the kernel: "f" a slot of the float state array, "f3?" three float
@@ -109,6 +110,8 @@ STATE_USE = {
     "last_acc": "one event's flags: not made by the kernel", "last_mag": "one event's flags: not made by the kernel",
     "mag_reasons": "own", "acc_reasons": "own", "n_gyro": "i", "n_zero_rate": "i", "n_numerical_rejects": "i",
     "nis_sum": "own", "nis_n": "own", "noise_scale": "f",
+    "mag_offset_rad": "the offset state only (refused)", "P_to": "the offset state only (refused)",
+    "P_bo": "the offset state only (refused)", "P_oo": "the offset state only (refused)",
 }
 
 
@@ -919,6 +922,9 @@ def check_supported(ekf) -> None:
         raise NotImplementedError(f"the fast path runs core.pdr.attitude.AttitudeEKF only, not {type(ekf).__name__}")
     if s.mag_mode != "heading" or ekf.field_detector is not None:
         raise NotImplementedError("the fast path implements mag_mode='heading' without a field detector")
+    if s.mag_offset_sd_rad > 0.0:
+        raise NotImplementedError("the fast path has no field heading-offset state (mag_offset_sd_rad > 0): "
+                                  "the reference filter runs")
 
 
 def settings_arrays(ekf) -> tuple[np.ndarray, np.ndarray]:
