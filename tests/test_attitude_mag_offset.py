@@ -4,9 +4,9 @@ A building bends the magnetic field's azimuth by tens of degrees, alike over
 metres.  With the offset state the heading update measures ``heading +
 offset``, the offset a first-order Gauss-Markov process.  Checked here: its
 Jacobian (finite differences through the filter's own update), its
-prediction (against the 7 x 7 ``F P F^T + Q`` written out), what it does on a
-bent stretch (a synthetic still phone written from the physics), and that the
-fast path refuses it.
+prediction (against the 7 x 7 ``F P F^T + Q`` written out), and what it does on a
+bent stretch (a synthetic still phone written from the physics).  The fast
+path's agreement: tests/test_fast_path.py.
 """
 
 import copy
@@ -144,11 +144,3 @@ def test_off_is_the_six_state_filter():
     assert not ekf.has_mag_offset and ekf.P_full.shape == (6, 6)
     with pytest.raises(ValueError):
         AttitudeEKF(mag_offset_sd_rad=-0.1)
-
-
-def test_the_fast_path_refuses_the_offset_state_with_its_reason():
-    from desktop.fast.attitude import check_supported
-
-    check_supported(AttitudeEKF(mag_offset_sd_rad=0.0))
-    with pytest.raises(NotImplementedError, match="heading-offset"):
-        check_supported(AttitudeEKF(mag_offset_sd_rad=SD))

@@ -155,8 +155,8 @@ offset is measured: which of the two takes a change is decided by their
 dynamics -- the gyroscope's small random walk against the offset's -- so a
 stretch of bent field (shorter than ``tau``) moves the offset, and the
 heading follows the field only on average over ``tau``.  A relock releases
-the heading and its covariance with the offset.  Not in the fast path (it
-refuses the setting, see :func:`desktop.fast.attitude.check_supported`).
+the heading and its covariance with the offset.  The fast path mirrors it
+(its kernel's covariance is 7 x 7 then).
 
 Bad numbers: a non-finite input, or one no phone sensor gives (beyond 1e4 m/s^2,
 1e3 rad/s, 1e6 uT), is skipped and counted; an update whose
