@@ -139,8 +139,12 @@ def test_a_bent_stretch_pulls_the_offset_before_the_heading_and_the_bias():
     assert b_gm < 0.65 * b_white
 
 
-def test_off_is_the_six_state_filter():
-    ekf = AttitudeEKF()
+def test_off_is_the_six_state_filter_and_a_site_turns_it_off():
+    ekf = AttitudeEKF(mag_offset_sd_rad=0.0)
     assert not ekf.has_mag_offset and ekf.P_full.shape == (6, 6)
+    ekf, _ = _started(Q_TILTED)
+    assert ekf.has_mag_offset and ekf.P_full.shape == (7, 7)
+    ekf.set_site_field(45.0, DIP)  # outdoors: no building bends the field
+    assert not ekf.has_mag_offset and ekf.P_full.shape == (6, 6) and ekf.mag_offset_rad == 0.0
     with pytest.raises(ValueError):
         AttitudeEKF(mag_offset_sd_rad=-0.1)

@@ -155,7 +155,9 @@ offset is measured: which of the two takes a change is decided by their
 dynamics -- the gyroscope's small random walk against the offset's -- so a
 stretch of bent field (shorter than ``tau``) moves the offset, and the
 heading follows the field only on average over ``tau``.  A relock releases
-the heading and its covariance with the offset.  The fast path mirrors it
+the heading and its covariance with the offset.  Outdoors (a site's field
+given, :meth:`AttitudeEKF.set_site_field`) the state is dropped: no building
+bends the field there.  The fast path mirrors it
 (its kernel's covariance is 7 x 7 then).
 
 Bad numbers: a non-finite input, or one no phone sensor gives (beyond 1e4 m/s^2,
@@ -350,9 +352,14 @@ class AttitudeSettings:
     #: the indoor field's heading offset (issue #27): a building bends the field's azimuth by 10-30 deg, alike over
     #: metres; the heading update measures ``heading + offset``, the offset a Gauss-Markov state of this stationary
     #: sd (rad) and correlation time (s), so a bent stretch pulls the offset before the heading and the vertical
-    #: gyroscope bias (see the module docstring).  0: no offset state (the field's error is white)
-    mag_offset_sd_rad: float = 0.0
-    mag_offset_time_s: float = 20.0
+    #: gyroscope bias (see the module docstring).  0: no offset state (the field's error is white).  Chosen on the
+    #: IPIN TUNING split (reference engine, PDR alone; without it landmark median 2.52 m, loop closure 4.60 %):
+    #: (0.1, 30 s) 2.29 m / 4.01 % (means 3.71 -> 3.36 m, 5.40 -> 4.96 %: the largest sum of the four relative
+    #: gains, and the only real gain in landmark error); (0.07, 45) 2.49 / 3.54,
+    #: (0.1, 60) 2.52 / 3.91, (0.17, 60) 2.52 / 3.34, (0.17, 30) 2.39 / 4.90, (0.1, 90) 2.66 / 3.95,
+    #: (0.17, 120) 2.73 / 4.11, (0.26, 20) 3.00 / 5.94, (0.26, 60) 3.35 / 4.03, (0.35, 10) 3.54 / 6.20
+    mag_offset_sd_rad: float = 0.1
+    mag_offset_time_s: float = 30.0
     #: gyroscope gaps longer than this are not integrated, only the uncertainty grows (s)
     max_gyro_gap_s: float = 0.5
     #: attitude random walk assumed while no gyroscope event comes (rad/sqrt(s))
@@ -777,8 +784,14 @@ class AttitudeEKF(AttitudeFilterBase):
         knows it is outdoors from a good GPS fix); indoors a building's steel
         bends it by tens of per cent and degrees, and the vertical-offset
         estimate it drives (see the settings) would be wrong: leave it unset there.
+
+        Outdoors there is no building to bend the field: the field's heading offset state (``mag_offset_sd_rad``)
+        is dropped (its estimate and covariance; the error state is 6 again).
         """
-        self.settings = replace(self.settings, site_field_uT=float(field_uT), site_dip_rad=float(dip_rad))
+        self.settings = replace(self.settings, site_field_uT=float(field_uT), site_dip_rad=float(dip_rad),
+                                mag_offset_sd_rad=0.0)
+        st = self._state
+        st.mag_offset_rad, st.P_to, st.P_bo, st.P_oo = 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0
 
     @property
     def P(self) -> np.ndarray:

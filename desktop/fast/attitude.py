@@ -1110,6 +1110,9 @@ class KernelState:
         settings again, and with ``refresh_references`` the references recomputed with the new declination,
         as the reference's ``declination_rad`` setter does (``_update_references``)."""
         self.sf, self.si = settings_arrays(ekf)
+        if ekf.settings.mag_offset_sd_rad == 0.0 and len(self.P) == 7:  # the offset state dropped (outdoors)
+            self.P = np.ascontiguousarray(self.P[0:6, 0:6])
+            self.fs[F_MAG_OFFSET] = 0.0
         if refresh_references:
             update_references(self.fs, *self.medians, self.sf[S_DECL])
 
