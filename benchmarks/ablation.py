@@ -115,6 +115,8 @@ CONFIGS = {
     # off by default (issue #27: it helped the tuning split, hurt the report split): the row turns it ON
     "noise_scale": ("ON: the noise floors' learnt scale (noise_scale_rate = 0.05)",
                     lambda: {"attitude": _attitude(noise_scale_rate=0.05)}, None),
+    "mag_offset": ("the field's heading offset state (mag_offset_sd_rad = 0: the field's error white)",
+                   lambda: {"attitude": _attitude(mag_offset_sd_rad=0.0)}, None),
     "still_reference_rate": ("ON: the still phone's reference rate (reference_still_rate_hz = 1)",
                              lambda: {"attitude": _attitude(reference_still_rate_hz=1.0)}, None),
     # inactive indoors: make_pipeline gives the site's field only to walks with good GPS (outdoors)

@@ -74,6 +74,6 @@ def test_the_fast_path_resets_as_the_reference(seed):
     ekf.q, ekf.b = q0, [0.0, 0.0, 0.0]
     ekf._inject(dx, P)
     q, b, Pf = np.array(q0), np.zeros(3), np.zeros((6, 6))
-    fast.inject(q, b, Pf, dx, P, False, ekf.settings.max_gyro_bias_rad_s)
+    fast.inject(q, b, Pf, dx, P, False, ekf.settings.max_gyro_bias_rad_s, np.zeros(fast.N_FSTATE))
     np.testing.assert_allclose(Pf, ekf.P, rtol=0, atol=1e-15)
     np.testing.assert_allclose(q, ekf.q, rtol=0, atol=1e-15)

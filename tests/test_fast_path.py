@@ -266,6 +266,17 @@ def test_fast_equals_plain_with_learnt_noise_floors():
     assert pipe.attitude.snapshot().noise_scale < 1.0  # the scale moved: the test can see a difference
 
 
+def test_fast_equals_plain_with_the_fields_heading_offset():
+    # the field's heading offset as a 7th error state (issue #27): the kernel's 7 x 7 covariance, its prediction,
+    # decay without a gyroscope, injection and the heading update's 7th column
+    from core.pdr.attitude import AttitudeEKF
+
+    plain, pipe = _assert_same(_real(REAL[0][0], 55.0, 90.0),
+                               lambda: Pipeline(attitude=AttitudeEKF(mag_offset_sd_rad=0.1, mag_offset_time_s=30.0)))
+    st = pipe.attitude.snapshot()
+    assert abs(st.mag_offset_rad) > 1e-3 and st.P_oo > 0.0  # the offset moved: the test can see a difference
+
+
 def test_fast_equals_plain_with_other_settings():
     # no magnetometer, a shorter bout, a stricter rotation gate and no carry-mode stage: the other branches of the
     # kernels; the pipeline handed over ready-made (a declination set on its attitude filter)

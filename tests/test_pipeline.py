@@ -141,5 +141,7 @@ def test_half_an_hour_of_streaming_keeps_the_filter_sound_the_memory_flat_and_th
     assert len(p95) == 3
     assert max(p95) < 7.0 and max(med) < 4.5, (p95, med)
     assert p95[-1] < p95[0] + 1.5 and med[-1] < med[0] + 1.0
-    assert p.attitude.counters()["heading_sd_rad"] < math.radians(3.0)
+    # the heading sd stays bounded: with the field's heading offset state (sd 0.1 rad, on by default since issue
+    # #27) the magnetometer fixes heading + offset, and the heading's sd settles at about 3.8 deg (2-3 deg without)
+    assert p.attitude.counters()["heading_sd_rad"] < math.radians(5.0)
     assert not p.labels()

@@ -14,6 +14,8 @@ the reference does after its start:
   eq. 17 (and the turn term), averaged over ``update_interval_s``;
 * the magnetometer heading update, eq. 18's noise, as a consider (Schmidt)
   update with the Joseph form, and its relock;
+* the field's heading offset, a Gauss-Markov 7th error state when
+  ``mag_offset_sd_rad > 0`` (the covariance ``P`` is 7 x 7 then, 6 x 6 else);
 * the zero-rate update, the running references (|g|, |h|, dip) and the
   trailing windows (noise variances, stillness);
 * the vertical hard-iron offset from an outdoor site's field (the WMM
@@ -89,6 +91,7 @@ SETTINGS_USE = {
     "mag_wait_s": "the start (the reference's)", "still_window_s": "ns", "still_acc_sd_m_s2": "f",
     "still_acc_direction_rad": "f", "still_gyro_sd_rad_s": "f", "zero_rate_noise_rad_s": "f",
     "max_gyro_gap_s": "f", "no_gyro_random_walk_rad_sqrt_s": "f", "noise_scale_rate": "f", "noise_scale_min": "f",
+    "mag_offset_sd_rad": "f", "mag_offset_time_s": "f",
 }
 
 #: how each field of AttitudeState reaches the kernel: "f" a slot of the float state array, "f3?" three float
@@ -109,6 +112,7 @@ STATE_USE = {
     "last_acc": "one event's flags: not made by the kernel", "last_mag": "one event's flags: not made by the kernel",
     "mag_reasons": "own", "acc_reasons": "own", "n_gyro": "i", "n_zero_rate": "i", "n_numerical_rejects": "i",
     "nis_sum": "own", "nis_n": "own", "noise_scale": "f",
+    "mag_offset_rad": "f", "P_to": "own (P's 7th column)", "P_bo": "own (P's 7th column)", "P_oo": "own (P's 7th column)",
 }
 
 
@@ -171,6 +175,8 @@ N_FSTATE, N_ISTATE = len(FS), len(IS)
     "no_gyro_random_walk_rad_sqrt_s", "site_field_uT", "site_dip_rad", "vertical_offset_dip_error_rad",
     "vertical_offset_norm_error", "vertical_offset_min_s", "vertical_offset_ridge"))
 S_NS_RATE, S_NS_MIN = SF["noise_scale_rate"], SF["noise_scale_min"]
+S_OFF_SD, S_OFF_TAU = SF["mag_offset_sd_rad"], SF["mag_offset_time_s"]
+F_MAG_OFFSET = FS["mag_offset_rad"]
 SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI_STILL_WIN_NS = (SI[n] for n in (
     "reference_update_s", "reference_still_rate_hz", "use_magnetometer", "mag_requires_calibration",
     "variance_window_s", "still_window_s"))
@@ -393,8 +399,9 @@ def winspread_sd(ptr, s):
 # -- the Kalman update and the injection of the error -----------------------------------------------
 
 @kernel
-def inject(q, b, P, dx, Pn, keep_yaw, max_bias):
-    """Fold the error ``dx`` into ``q`` and ``b`` and reset it (the reference's ``_inject``); in place."""
+def inject(q, b, P, dx, Pn, keep_yaw, max_bias, fs):
+    """Fold the error ``dx`` into ``q`` and ``b`` (and the field's heading offset, a 7th state) and reset it
+    (the reference's ``_inject``); in place."""
     dq = q_from_rotation_vector(dx[0], dx[1], dx[2])
     qn = q_normalize(q_multiply(dq, q))
     for i in range(4):
@@ -408,7 +415,9 @@ def inject(q, b, P, dx, Pn, keep_yaw, max_bias):
         if m < r:
             r = m
         b[i] = r
-    G = np.eye(6)
+    if len(dx) == 7:
+        fs[F_MAG_OFFSET] += dx[6]
+    G = np.eye(len(dx))
     sk = np.zeros((3, 3))
     sk[0, 1], sk[0, 2] = -dx[2], dx[1]
     sk[1, 0], sk[1, 2] = dx[2], -dx[0]
@@ -426,14 +435,14 @@ def inject(q, b, P, dx, Pn, keep_yaw, max_bias):
 
 @kernel
 def correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw, max_bias, is_,
-            nis_sum, nis_n, slot):
+            nis_sum, nis_n, slot, fs):
     """Kalman update of the error state and its bookkeeping (the reference's ``_correct`` and ``_record``).
 
     Returns the outcome's code and the NIS (nan when none); the NIS goes into ``nis_sum[slot]``/``nis_n[slot]``, a numerical failure into
     the state's counter, a used heading measurement ends ``yaw_unobserved``.
     """
     code, nis = _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw,
-                         is_[I_YAW_UNOBS] != 0, max_bias)
+                         is_[I_YAW_UNOBS] != 0, max_bias, fs)
     if code == C_USED and measures_yaw:
         is_[I_YAW_UNOBS] = 0
     if code == C_NUM:
@@ -454,7 +463,8 @@ def adapt_noise_scale(fs, sf, nis):
 
 
 @kernel
-def _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw, yaw_unobs, max_bias):
+def _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, measures_yaw, yaw_unobs, max_bias,
+             fs):
     """The Kalman update itself; returns (code, nis)."""
     PHt = mm(P, H.T)
     S = mm(H, PHt) + Rm
@@ -482,25 +492,41 @@ def _correct(q, b, P, y, H, Rm, gate, consider_tilt, bias_axis, use_bias_axis, m
             for j in range(m):
                 K[3 + i, j] = bias_axis[i] * proj[j]
     dx = mv(K, y)
-    IKH = np.eye(6) - mm(K, H)
+    IKH = np.eye(P.shape[0]) - mm(K, H)
     Pn = mm(mm(IKH, P), IKH.T) + mm(mm(K, Rm), K.T)  # Joseph form
     if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(Pn))):
         return C_NUM, nis
-    inject(q, b, P, dx, Pn, yaw_consider, max_bias)
+    inject(q, b, P, dx, Pn, yaw_consider, max_bias, fs)
     return C_USED, nis
 
 
 @kernel
-def random_walk(P, rate2, dt):
+def random_walk(P, rate2, dt, fs, sf):
     """Covariance growth of the attitude without gyroscope (``_random_walk``)."""
     c = rate2 * dt
     for i in range(3):
         for j in range(3):
             P[i, j] += c * (1.0 if i == j else 0.0)
+    if P.shape[0] == 7:
+        decay_offset(P, fs, sf, math.exp(-dt / sf[S_OFF_TAU]), True)
 
 
 @kernel
-def predict(q, b, P, wx, wy, wz, dt, sf, noise_scale):
+def decay_offset(P, fs, sf, phi, cross):
+    """The field's heading offset over one step of its Gauss-Markov process (the reference's ``_decay_offset``)."""
+    fs[F_MAG_OFFSET] *= phi
+    if cross:
+        for i in range(3):
+            P[i, 6] = phi * P[i, 6]
+            P[6, i] = P[i, 6]
+    for i in range(3, 6):
+        P[i, 6] = phi * P[i, 6]
+        P[6, i] = P[i, 6]
+    P[6, 6] = phi * phi * P[6, 6] + sf[S_OFF_SD] ** 2 * (1.0 - phi * phi)
+
+
+@kernel
+def predict(q, b, P, wx, wy, wz, dt, sf, noise_scale, fs):
     """eqs. 5-7 and 11: ``q <- q (x) exp((w - b) dt / 2)``, ``P <- F P F^T + Q`` (the reference's block order).
 
     Written out in scalars (the formulas of core.quaternion): it runs on every gyroscope event.
@@ -547,6 +573,14 @@ def predict(q, b, P, wx, wy, wz, dt, sf, noise_scale):
             P[i, 3 + j] = B[i, j]
             P[3 + j, i] = B[i, j]
         P[3 + i, 3 + i] += qb
+    if P.shape[0] == 7:  # the offset's row of F is (0, 0, phi): P_to <- (P_to - R dt P_bo) phi
+        phi = math.exp(-dt / sf[S_OFF_TAU])
+        to0 = phi * (P[0, 6] - (Rdt[0, 0] * P[3, 6] + Rdt[0, 1] * P[4, 6] + Rdt[0, 2] * P[5, 6]))
+        to1 = phi * (P[1, 6] - (Rdt[1, 0] * P[3, 6] + Rdt[1, 1] * P[4, 6] + Rdt[1, 2] * P[5, 6]))
+        to2 = phi * (P[2, 6] - (Rdt[2, 0] * P[3, 6] + Rdt[2, 1] * P[4, 6] + Rdt[2, 2] * P[5, 6]))
+        P[0, 6], P[1, 6], P[2, 6] = to0, to1, to2
+        P[6, 0], P[6, 1], P[6, 2] = to0, to1, to2
+        decay_offset(P, fs, sf, phi, False)
     return w2
 
 
@@ -576,12 +610,12 @@ def refresh_references(fs, is_, si, ti, g_counts, g_n, h_counts, h_n, dip_counts
 
 
 @kernel
-def propagate_without_gyro(P, is_, rw2, ti):
+def propagate_without_gyro(P, is_, rw2, ti, fs, sf):
     """A measurement at ``ti``: without a gyroscope event for 0.1 s only the attitude's uncertainty grows."""
     if (not is_[I_HAS_TGYRO]) or ti - is_[I_TGYRO] > 100_000_000:
         dtn = (ti - is_[I_TNS]) * 1e-9
         if dtn > 0:
-            random_walk(P, rw2, dtn)
+            random_walk(P, rw2, dtn, fs, sf)
     if ti > is_[I_TNS]:
         is_[I_TNS] = ti
 
@@ -705,6 +739,7 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
     site = sf[S_SITE_F] == sf[S_SITE_F] and sf[S_SITE_DIP] == sf[S_SITE_DIP]
     I3 = np.eye(3)
     mean4 = np.empty(4)
+    n_p = P.shape[0]  # 7 with the field's heading offset, else 6
     for i in range(i0, n):
         k = kind[i]
         ti = t[i]
@@ -718,9 +753,9 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
             dt = (ti - t_prev) * 1e-9
             if dt > 0.0:
                 if dt > sf[S_MAX_GAP]:
-                    random_walk(P, rw2, dt)
+                    random_walk(P, rw2, dt, fs, sf)
                 else:
-                    fs[F_W2] = predict(q, b, P, x, y_, z, dt, sf, fs[F_NOISE_SCALE])
+                    fs[F_W2] = predict(q, b, P, x, y_, z, dt, sf, fs[F_NOISE_SCALE], fs)
                 is_[I_TNS] = ti
         elif k == ACC_K:
             fs[F_LAST_ACC0], fs[F_LAST_ACC1], fs[F_LAST_ACC2] = x, y_, z
@@ -732,7 +767,7 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
             if na > 0:
                 winspread_update(ad_t, ad_v, ad_p, ad_s, still_win_ns, ti, x / na, y_ / na, z / na)
             winvar_update(an_t, an_v, an_p, an_s, still_win_ns, ti, na)
-            propagate_without_gyro(P, is_, rw2, ti)
+            propagate_without_gyro(P, is_, rw2, ti, fs, sf)
             # zero-rate update
             if gw_p[1] > gw_p[0] and not (is_[I_HAS_ZR_NEXT] and ti < is_[I_ZR_NEXT]):
                 span_g = gw_t[gw_p[1] - 1] - gw_t[gw_p[0]]
@@ -746,11 +781,11 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                             yz = np.empty(3)
                             for c in range(3):
                                 yz[c] = gw_s[c] / ng - b[c]
-                            Hz = np.zeros((3, 6))
+                            Hz = np.zeros((3, n_p))
                             for c in range(3):
                                 Hz[c, 3 + c] = 1.0
                             code, _ = correct(q, b, P, yz, Hz, r2 * I3, math.inf, False, yz, False, False, max_bias,
-                                           is_, nis_sum, nis_n, 2)
+                                           is_, nis_sum, nis_n, 2, fs)
                             if code == C_USED:
                                 is_[I_N_ZR] += 1
                             is_[I_ZR_NEXT] = ti + still_win_ns
@@ -776,12 +811,12 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                         ya = np.empty(3)
                         for c in range(3):  # z = R^T f_n / |f_n| against h = R^T u (eqs. 12-13)
                             ya[c] = (R[0, c] * fx + R[1, c] * fy + R[2, c] * fz) / nf - R[2, c]
-                        Ha = np.zeros((3, 6))
+                        Ha = np.zeros((3, n_p))
                         for c in range(3):  # R^T [u]x
                             Ha[c, 0] = R[1, c]
                             Ha[c, 1] = -R[0, c]
                         code, _ = correct(q, b, P, ya, Ha, sigma2 * I3, sf[S_ACC_GATE], False, ya, False, False,
-                                       max_bias, is_, nis_sum, nis_n, 0)
+                                       max_bias, is_, nis_sum, nis_n, 0, fs)
                         reason = A_USED if code == C_USED else (A_GATE if code == C_GATE else A_NUM)
             count(acc_counts, acc_first, reason, 1)
         else:  # magnetometer
@@ -822,7 +857,7 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                                            math.asin(max(-1.0, min(1.0, sd_))))
                                 median_add(h_counts, h_n, 0.0, 0.1, nnm)
                     refresh_references(fs, is_, si, ti, g_counts, g_n, h_counts, h_n, dip_counts, dip_n, decl)
-                    propagate_without_gyro(P, is_, rw2, ti)
+                    propagate_without_gyro(P, is_, rw2, ti, fs, sf)
                     var = winvar_update(mv_t, mv_v, mv_p, mv_s, var_win_ns, ti, nm)
                     dev = abs(nm - fs[F_FIELD])
                     sigma2 = sf[S_M0] ** 2 * fs[F_NOISE_SCALE] + sf[S_KM1] * dev + sf[S_KM2] * var  # eq. 18
@@ -850,10 +885,12 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                             if c2 < 0.01:
                                 reason = M_VERTICAL
                             else:
-                                a = fs[F_ALPHA_REF] - math.atan2(nn, e)
+                                a = fs[F_ALPHA_REF] + fs[F_MAG_OFFSET] - math.atan2(nn, e)
                                 ym = np.empty(1)
                                 ym[0] = (a + math.pi) % (2.0 * math.pi) - math.pi
-                                Hm = np.zeros((1, 6))
+                                Hm = np.zeros((1, n_p))
+                                if n_p == 7:
+                                    Hm[0, 6] = -1.0  # the field's heading offset
                                 hh = e * e + nn * nn
                                 Hm[0, 0] = -e * uu / hh
                                 Hm[0, 1] = -nn * uu / hh
@@ -863,7 +900,7 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                                 up = np.empty(3)
                                 up[0], up[1], up[2] = u0, u1, u2
                                 code, nis = correct(q, b, P, ym, Hm, Rm, sf[S_MAG_GATE], True, up, True, True,
-                                                    max_bias, is_, nis_sum, nis_n, 1)
+                                                    max_bias, is_, nis_sum, nis_n, 1, fs)
                                 adapt_noise_scale(fs, sf, nis)
                                 if code == C_USED:
                                     reason = M_USED
@@ -1020,7 +1057,7 @@ class KernelState:
         self.fs, self.is_, self.vo_i = fs, is_, vo_i
         self.q = np.array(st.q, dtype=np.float64)
         self.b = np.array(st.b, dtype=np.float64)
-        self.P = np.ascontiguousarray(ekf.P, dtype=np.float64)
+        self.P = np.ascontiguousarray(ekf.P_full, dtype=np.float64)
         self.medians = []
         for rm in (st.refs.g, st.refs.h, st.refs.dip):
             self.medians += [np.array(rm.counts, dtype=np.int64), np.array([rm.n], dtype=np.int64)]
@@ -1073,6 +1110,9 @@ class KernelState:
         settings again, and with ``refresh_references`` the references recomputed with the new declination,
         as the reference's ``declination_rad`` setter does (``_update_references``)."""
         self.sf, self.si = settings_arrays(ekf)
+        if ekf.settings.mag_offset_sd_rad == 0.0 and len(self.P) == 7:  # the offset state dropped (outdoors)
+            self.P = np.ascontiguousarray(self.P[0:6, 0:6])
+            self.fs[F_MAG_OFFSET] = 0.0
         if refresh_references:
             update_references(self.fs, *self.medians, self.sf[S_DECL])
 
@@ -1105,6 +1145,8 @@ class KernelState:
         st.P_tb = tuple(rows[0][3:6] + rows[1][3:6] + rows[2][3:6])
         st.P_bt = tuple(rows[3][0:3] + rows[4][0:3] + rows[5][0:3])
         st.P_bb = tuple(rows[3][3:6] + rows[4][3:6] + rows[5][3:6])
+        if len(rows) == 7:
+            st.P_to, st.P_bo, st.P_oo = tuple(rows[6][0:3]), tuple(rows[6][3:6]), float(rows[6][6])
         st.vo_S = self.vo_S.tolist()
         st.vo_r = self.vo_r.tolist()
         st.vertical_offset_uT = tuple(float(x) for x in self.vo_b)
