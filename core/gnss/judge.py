@@ -143,6 +143,10 @@ class JudgeSettings:
     #: 2.38 -> 3.60 m on the IPIN tuning split).  Off: on the IPIN tuning split it does not help (Chen's median
     #: landmark error 2.28 -> 2.32 m, mean 3.12 -> 3.27, PDR alone 2.52): T01r01 2.47 -> 2.38, T02r02 2.30 -> 1.89,
     #: but T01r02 2.24 -> 5.05 m, whose two early fixes help before its pace window says slow (0.39 from the first)
+    #: Outdoors no cost on the tuning split (lopen and the simulator's fault walks unchanged: the evidence comes within
+    #: the settling time).  The report split, seen once after the decision: IPIN Chen 3.77 -> 2.53 m (PDR alone 2.00,
+    #: target still missed): T24r01 10.8 -> 1.66, T05r04 4.17 -> 1.80, T04r02 3.58 -> 2.04, T24r02 4.09 -> 4.94;
+    #: T23r04 (9.86), T05r01 (5.95), T05r03 (4.47) unchanged: their receivers' pace passes
     evidence_first: bool = False
     #: without receiver speeds, the steps' path within the window (m) that counts as evidence
     evidence_min_walk_m: float = 15.0
