@@ -26,11 +26,8 @@ times) below ``min_ratio`` marks the stream **slow**; it stays slow until
 between slow windows carry the same stale solution).  The judge
 (:class:`core.gnss.judge.GpsJudge`) then calls the stream unusable and the
 fused track is the dead-reckoned one.  A fix without a speed (nan) is no
-evidence; a recording whose fixes carry no speed is never judged slow.  With
-``wait_for_evidence`` (off by default: it does not help on the tuning split),
-while the receiver reports speeds but no window has held the evidence yet
-(:attr:`ReceiverPaceCheck.pending`: the walk's first ``min_walk_m``) the judge
-waits, as it does while a stream settles.  Nor
+evidence; a recording whose fixes carry no speed is never judged slow (waiting for the evidence at a walk's start is the
+judge's ``evidence_first``, :class:`core.gnss.judge.JudgeSettings`).  Nor
 is a speed of exactly 0: phones report it without a velocity solution (two
 outdoor report walks start with 4-7 s of 0.0 while the walker walks off, the
 receiver still converging), and counted it would keep a good outdoor stream
@@ -66,10 +63,6 @@ class PaceSettings:
     min_fixes: int = 8
     #: the receiver's distance over the steps' below this: slow
     min_ratio: float = 0.5
-    #: wait (:attr:`ReceiverPaceCheck.pending`) while the receiver reports speeds but no window has held the
-    #: evidence yet.  Off: on the tuning split it does not help (IPIN tuning medians Kubrak 2.53 either way, Chen
-    #: 2.40 off against 2.53 on; the outdoor walks lose a few good fixes at their starts)
-    wait_for_evidence: bool = False
     #: the stream stays slow this long (s) after its last slow window
     memory_s: float = 60.0
 
@@ -95,8 +88,6 @@ class ReceiverPaceCheck:
         self._prev: tuple | None = None  # (t_ns, pdr_e, pdr_n) of the last fix
         self.last_slow_ns: int | None = None
         self.last = PaceState()
-        self._seen_speed = False  # a fix has reported a positive speed
-        self._known = False  # a window has held the evidence
         self.n_fixes = 0
         self.n_slow = 0
         self.min_ratio_seen = math.inf
@@ -118,13 +109,11 @@ class ReceiverPaceCheck:
             w.append((t_ns, recv, steps))
         while w and w[0][0] <= t_ns - int(s.window_s * 1e9):
             w.popleft()
-        self._seen_speed |= math.isfinite(recv)
         pairs = [(r, d) for _, r, d in w if math.isfinite(r)]
         walked = sum(d for _, d in pairs)
         ratio = math.nan
         if len(pairs) >= s.min_fixes and walked >= s.min_walk_m:
             ratio = sum(r for r, _ in pairs) / walked
-            self._known = True
             self.min_ratio_seen = min(self.min_ratio_seen, ratio)
             if ratio < s.min_ratio:
                 self.last_slow_ns = t_ns
@@ -133,12 +122,6 @@ class ReceiverPaceCheck:
         self.n_slow += slow
         self.last = PaceState(ratio, walked, slow)
         return self.last
-
-    @property
-    def pending(self) -> bool:
-        """The receiver reports speeds but no window has held the evidence yet (the walk's first 10 m): its fixes
-        wait (IPIN tuning T02r02: six fixes taken at 17-22 s, before the first window said slow at 23 s)."""
-        return self.settings.wait_for_evidence and self._seen_speed and not self._known
 
     def summary(self) -> dict:
         return {"fixes": self.n_fixes, "fixes_slow": self.n_slow,
