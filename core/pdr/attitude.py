@@ -1033,8 +1033,10 @@ class AttitudeEKF(AttitudeFilterBase):
         state = self._state
         state.mag_offset_rad *= phi
         if cross:
-            state.P_to = tuple(phi * v for v in state.P_to)
-        state.P_bo = tuple(phi * v for v in state.P_bo)
+            to = state.P_to
+            state.P_to = (phi * to[0], phi * to[1], phi * to[2])
+        bo = state.P_bo
+        state.P_bo = (phi * bo[0], phi * bo[1], phi * bo[2])  # written out: once per gyroscope sample
         state.P_oo = phi * phi * state.P_oo + self.settings.mag_offset_sd_rad ** 2 * (1.0 - phi * phi)
 
     # -- the update kernel ----------------------------------------------------------------------
