@@ -408,14 +408,14 @@ class CarryModeDetector:
         """The stride lag from the lag ``k2`` found in the norm's (unbiased) autocorrelation ``r``: twice it when
         ``k2`` is a slow walk's step and twice it is in range.  The norm in anti-phase at ``k2 / 2``
         (``step_antiphase``) makes ``k2`` one period of the norm: a trunk's step (both feet alike) or a limb's
-        stride (its two half-strides unlike).  The phone is on the trunk, and ``k2`` its step, when it tilts
-        less than ``trunk_max_tilt_rad`` (issue #25: a limb swings by +-20-45 deg, the trunk sways by a few) or
+        stride (its two half-strides unlike).  The phone is on the trunk, and ``k2`` its step, when the norm
+        clearly repeats at ``k2`` (``gentle_min_periodicity``) and the phone tilts less than ``trunk_max_tilt_rad`` (issue #25: a limb swings by +-20-45 deg, the trunk sways by a few) or
         when the rotation's main axis (autocorrelation ``r_gyro``, not yet unbiased), which a walker sways once
         per stride, is in anti-phase at ``k2`` too."""
         k4 = 2 * k2
         if k4 > self._lag_hi or r[k2 // 2] >= self.step_antiphase:
             return k2
-        if tilt_rms < self.trunk_max_tilt_rad:
+        if tilt_rms < self.trunk_max_tilt_rad and r[k2] >= self.gentle_min_periodicity:
             return k4
         if r_gyro is None or float(r_gyro[k2]) * (n / (n - k2)) >= self.step_antiphase:
             return k2

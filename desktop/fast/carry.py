@@ -91,11 +91,11 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     ang = np.arccos(cosang)
     tilt_rms = np.sqrt(np.mean(ang * ang, axis=1))
     # a slow walk's step found as the stride (core.pdr.carry.CarryModeDetector._stride_lag): the norm in
-    # anti-phase at half the lag, and the phone on the trunk (a small tilt) or the rotation in anti-phase there too
+    # anti-phase at half the lag, and the phone on the trunk (a small tilt, the norm repeating at the lag) or the rotation in anti-phase there too
     anti = det.step_antiphase
     k4 = 2 * k2
     ambiguous = (k4 <= hi) & (r[rows, k2 // 2] < anti)
-    double = ambiguous & (tilt_rms < det.trunk_max_tilt_rad)
+    double = ambiguous & (tilt_rms < det.trunk_max_tilt_rad) & (r[rows, k2] >= det.gentle_min_periodicity)
     gyro = None
     if np.any(has_gyro):
         gyr = w[:, :, 3:]
