@@ -143,8 +143,15 @@ class CarryModeDetector:
     step_antiphase : float
         A slow walk on the trunk repeats its norm every step, and a step of 0.8-1.25 s lies inside the
         stride range: when the autocorrelation at half the lag found is below this (the half lag is in
-        anti-phase: the lag is one period of the norm) and the gyroscope's rotation, which a walker sways
-        once per stride, is in anti-phase at that lag too, the lag is the step and the stride twice it.
+        anti-phase: the lag is one period of the norm) and the phone is on the trunk (``trunk_max_tilt_rad``)
+        or the gyroscope's rotation, which a walker sways once per stride, is in anti-phase at that lag too,
+        the lag is the step and the stride twice it.
+    trunk_max_tilt_rad : float
+        ``tilt_rms_rad`` under which a norm repeating at the lag found (in anti-phase at half of it) is a trunk's
+        step, not a limb's stride (rad; issue #25: at 0.8-1.2 steps/s the simulator's bag and ear tilt by
+        0.03-0.09 rad, a limb that repeats only every stride swings by 0.25-0.4, a thigh by 0.16-0.2 but its
+        norm is not in anti-phase at the step).  The step/stride ambiguity of a gentle trunk walk: its norm
+        at 1 step/s looks like a limb's at 2 steps/s; the tilt, not the amplitude, tells them apart.
     max_gait_tilt_rad : float
         ``tilt_rms_rad`` above which the motion is no gait but waving (a compass calibration turns the
         phone through +-60-90 deg; a swinging hand mostly stays within about +-45 deg) (rad), unless the
@@ -197,7 +204,7 @@ class CarryModeDetector:
                  slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7,
                  min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
                  gentle_min_periodicity: float = 0.6, gentle_max_std_m_s2: float = 0.5,
-                 step_antiphase: float = -0.2, max_gait_tilt_rad: float = 0.6, twist_max_tilt_rad: float = 0.55,
+                 step_antiphase: float = -0.2, trunk_max_tilt_rad: float = 0.15, max_gait_tilt_rad: float = 0.6, twist_max_tilt_rad: float = 0.55,
                  max_gait_rotation_rad_s: float = 4.5, swing_axis_share: float = 0.85, screen_up_z: float = 0.3,
                  upright_y: float = 0.6, ear_incline_x: float = 0.22, limb_tilt_rad: float = 0.16,
                  limb_stride_share: float = 0.3, min_limb_stride_share: float = 0.15, arm_evidence: float = 1.1,
@@ -217,6 +224,7 @@ class CarryModeDetector:
         self.gentle_min_periodicity = float(gentle_min_periodicity)
         self.gentle_max_std_m_s2 = float(gentle_max_std_m_s2)
         self.step_antiphase = float(step_antiphase)
+        self.trunk_max_tilt_rad = float(trunk_max_tilt_rad)
         self.max_gait_tilt_rad = float(max_gait_tilt_rad)
         self.twist_max_tilt_rad = float(twist_max_tilt_rad)
         self.max_gait_rotation_rad_s = float(max_gait_rotation_rad_s)
@@ -373,8 +381,7 @@ class CarryModeDetector:
         # the shortest lag that is a local maximum within 85 % of the best: the stride, not two of them
         peaks = np.flatnonzero((seg[1:-1] >= seg[:-2]) & (seg[1:-1] >= seg[2:]) & (seg[1:-1] >= 0.85 * top)) + 1
         k2 = lo + (int(peaks[0]) if len(peaks) else int(np.argmax(seg)))
-        if self._has_gyro:
-            k2 = self._stride_lag(r, r_all[2], k2, n)
+        k2 = self._stride_lag(r, r_all[2] if self._has_gyro else None, k2, n, tilt_rms)
         ks = k2 // 2
         r_step = float(r[max(1, ks - 2):ks + 3].max())
         r_stride = float(r[k2])
@@ -397,14 +404,20 @@ class CarryModeDetector:
             f.update(gyro_rms_rad_s=g_rms, gyro_axis_share=share, gyro_periodicity=float(r_all[2, k2]) * (n / (n - k2)))
         return f
 
-    def _stride_lag(self, r: np.ndarray, r_gyro: np.ndarray, k2: int, n: int) -> int:
+    def _stride_lag(self, r: np.ndarray, r_gyro: np.ndarray | None, k2: int, n: int, tilt_rms: float) -> int:
         """The stride lag from the lag ``k2`` found in the norm's (unbiased) autocorrelation ``r``: twice it when
-        ``k2`` is a slow walk's step (``step_antiphase``: the norm in anti-phase at ``k2 / 2``, the rotation's
-        main axis, autocorrelation ``r_gyro`` not yet unbiased, in anti-phase at ``k2``) and twice it is in range."""
+        ``k2`` is a slow walk's step and twice it is in range.  The norm in anti-phase at ``k2 / 2``
+        (``step_antiphase``) makes ``k2`` one period of the norm: a trunk's step (both feet alike) or a limb's
+        stride (its two half-strides unlike).  The phone is on the trunk, and ``k2`` its step, when the norm
+        clearly repeats at ``k2`` (``gentle_min_periodicity``) and the phone tilts less than ``trunk_max_tilt_rad`` (issue #25: a limb swings by +-20-45 deg, the trunk sways by a few) or
+        when the rotation's main axis (autocorrelation ``r_gyro``, not yet unbiased), which a walker sways once
+        per stride, is in anti-phase at ``k2`` too."""
         k4 = 2 * k2
         if k4 > self._lag_hi or r[k2 // 2] >= self.step_antiphase:
             return k2
-        if float(r_gyro[k2]) * (n / (n - k2)) >= self.step_antiphase:
+        if tilt_rms < self.trunk_max_tilt_rad and r[k2] >= self.gentle_min_periodicity:
+            return k4
+        if r_gyro is None or float(r_gyro[k2]) * (n / (n - k2)) >= self.step_antiphase:
             return k2
         return k4
 

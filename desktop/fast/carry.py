@@ -81,6 +81,21 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     peak[:, hs - lo - 1:] &= ~use_short[:, None]  # the short range's last lag is its edge, no peak
     has_peak = peak.any(axis=1)
     k2 = lo + np.where(has_peak, np.argmax(peak, axis=1) + 1, np.argmax(seg, axis=1))
+    # the specific force smoothed over det._smooth samples, its angle from the mean direction
+    s = det._smooth
+    c = np.cumsum(np.concatenate([np.zeros((m_w, 1, 3)), acc], axis=1), axis=1)
+    sm = (c[:, s:] - c[:, :-s]) / s
+    smn = np.sqrt(np.einsum("hij,hij->hi", sm, sm))
+    smn_c = np.maximum(smn, 1e-9)
+    cosang = np.clip(np.matmul(sm, u[:, :, None])[:, :, 0] / smn_c, -1.0, 1.0)
+    ang = np.arccos(cosang)
+    tilt_rms = np.sqrt(np.mean(ang * ang, axis=1))
+    # a slow walk's step found as the stride (core.pdr.carry.CarryModeDetector._stride_lag): the norm in
+    # anti-phase at half the lag, and the phone on the trunk (a small tilt, the norm repeating at the lag) or the rotation in anti-phase there too
+    anti = det.step_antiphase
+    k4 = 2 * k2
+    ambiguous = (k4 <= hi) & (r[rows, k2 // 2] < anti)
+    double = ambiguous & (tilt_rms < det.trunk_max_tilt_rad) & (r[rows, k2] >= det.gentle_min_periodicity)
     gyro = None
     if np.any(has_gyro):
         gyr = w[:, :, 3:]
@@ -91,13 +106,11 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
         share = ge[:, -1] / np.maximum(ge.sum(axis=1), 1e-12)
         main = np.matmul(gc, gv[:, :, -1:])[:, :, 0]
         rg = _autocorr(det, main)
-        # a slow walk's step found as the stride (core.pdr.carry.CarryModeDetector._stride_lag)
-        anti = det.step_antiphase
-        k4 = 2 * k2
-        double = (np.asarray(has_gyro, dtype=bool) & (k4 <= hi) & (r[rows, k2 // 2] < anti)
-                  & (rg[rows, k2] < anti))
+        double |= ambiguous & np.asarray(has_gyro, dtype=bool) & (rg[rows, k2] < anti)
         k2 = np.where(double, k4, k2)
         gyro = (g_rms, share, rg[rows, k2])
+    else:
+        k2 = np.where(double, k4, k2)
     ks = k2 // 2
     around = ks[:, None] + np.arange(-2, 3)[None, :]  # lags max(1, ks - 2) .. ks + 2
     r_step = np.where(around >= 1, r[rows[:, None], np.maximum(around, 0)], -np.inf).max(axis=1)
@@ -105,15 +118,6 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     edge = np.minimum(r_step, r_stride)
     r_step = np.where(has_peak, r_step, edge)
     r_stride = np.where(has_peak, r_stride, edge)
-    # the specific force smoothed over det._smooth samples, its angle from the mean direction
-    s = det._smooth
-    c = np.cumsum(np.concatenate([np.zeros((m_w, 1, 3)), acc], axis=1), axis=1)
-    sm = (c[:, s:] - c[:, :-s]) / s
-    smn = np.sqrt(np.einsum("hij,hij->hi", sm, sm))
-    smn_c = np.maximum(smn, 1e-9)
-    cosang = np.clip(np.matmul(sm, u[:, :, None])[:, :, 0] / smn_c, -1.0, 1.0)
-    ang = np.arccos(cosang)
-    tilt_rms = np.sqrt(np.mean(ang * ang, axis=1))
     d = sm / smn_c[:, :, None] - u[:, None, :]
     cov = np.matmul(d.transpose(0, 2, 1), d)
     _, evecs = np.linalg.eigh(cov)
