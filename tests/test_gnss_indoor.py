@@ -143,6 +143,6 @@ def test_dead_reckoning_sigma_before_the_heading_model_learns_is_the_steps_own_n
     fr = GpsFusion(start=(52.0, 5.0, 0.5), untrained_heading_sd_rad=math.radians(10.0)).run(steps, None, 0)
     sigma = sigma_max_m(fr.steps[-1].cov_en_m2)
     assert 0.1 * walked < sigma < 0.25 * walked
-    # None keeps the model's prior (the behaviour before)
-    fr = GpsFusion(start=(52.0, 5.0, 0.5), untrained_heading_sd_rad=None).run(steps, None, 0)
+    # the default (None) keeps the model's prior
+    fr = GpsFusion(start=(52.0, 5.0, 0.5)).run(steps, None, 0)
     assert sigma_max_m(fr.steps[-1].cov_en_m2) > 0.5 * walked
