@@ -105,6 +105,7 @@ from benchmarks.gnss_eval import REAL, VARIANTS, headlines as gnss_headlines, op
 from benchmarks.splits import REPORT, SIM_GPS_FAULT_SEEDS, SPLITS, TUNING, split_of
 from core.conventions import GPS
 from core.geodesy import enu_to_geodetic, geodetic_to_enu
+from core.gnss.ekf import sigma_max_m
 
 HERE = Path(__file__).parent
 RESULTS_JSON = HERE / "gnss_faults_results.json"
@@ -520,7 +521,12 @@ def ipin_file(root: str, index: int, filters) -> dict:
         t = np.array([s.t_ns for s in fr.steps], dtype=np.int64)
         le = M.landmark_errors(t, en[:, 0], en[:, 1], np.array([s.heading_rad for s in fr.steps]), lt, *L,
                                start=(float(st[0]), float(st[1])))
+        # consistency (issue #26): the fused position's reported sigma (largest axis) at each landmark after
+        # the first, against that landmark's error
+        k = np.clip(np.searchsorted(t, lt[1:]), 0, len(t) - 1) if len(t) else np.array([], dtype=int)
+        sig = np.array([sigma_max_m(fr.steps[i].cov_en_m2) for i in k])
         row["columns"][f] = {"lm_mean_m": le.mean_m, "known_start": started,
+                             "lm_errors_m": [float(v) for v in le.errors_m], "lm_sigma_m": [float(v) for v in sig],
                              "fixes_accepted": int(sum(1 for x in fr.fixes if x.accepted)),
                              "fixes": len(fr.fixes)}
     row["seconds"] = time.perf_counter() - t_start
