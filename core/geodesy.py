@@ -94,24 +94,29 @@ def geodetic_to_enu(lat_deg, lon_deg, origin_lat_lon: tuple[float, float]):
 
 class _Scalar:
     """The math functions of :func:`_enu_to_geodetic` for Python floats (numpy's cost ~1 us a call each)."""
-    sin, cos, sqrt, atan2, hypot, degrees, radians = (math.sin, math.cos, math.sqrt, math.atan2, math.hypot,
-                                                       math.degrees, math.radians)
+    sin, cos, sqrt, atan2, hypot, degrees = math.sin, math.cos, math.sqrt, math.atan2, math.hypot, math.degrees
 
 
 class _Array:
     """... and for arrays."""
-    sin, cos, sqrt, atan2, hypot, degrees, radians = (np.sin, np.cos, np.sqrt, np.arctan2, np.hypot,
-                                                       np.degrees, np.radians)
+    sin, cos, sqrt, atan2, hypot, degrees = np.sin, np.cos, np.sqrt, np.arctan2, np.hypot, np.degrees
+
+
+@lru_cache(maxsize=8)
+def _origin_frame(lat0_deg: float, lon0_deg: float) -> tuple:
+    """The origin's ``(sin lat, cos lat, sin lon, cos lon)`` and ECEF position (m): the same for every point of
+    a walk, so computed once per origin, not per point."""
+    la, lo = math.radians(lat0_deg), math.radians(lon0_deg)
+    sla, cla, slo, clo = math.sin(la), math.cos(la), math.sin(lo), math.cos(lo)
+    n0 = WGS84_A_M / math.sqrt(1.0 - WGS84_E2 * sla * sla)
+    return sla, cla, slo, clo, n0 * cla * clo, n0 * cla * slo, n0 * (1.0 - WGS84_E2) * sla
 
 
 def _enu_to_geodetic(e, n, up, lat0_deg: float, lon0_deg: float, xp):
     """ENU (m) about a point on the ellipsoid -> geodetic ``(lat_rad, lon_rad, h_m)``: the ENU -> ECEF rotation,
     then the fixed-point iteration ``lat = atan2(z + e2 N sin(lat), p)`` (Bowring's start, 5 iterations: 1e-15
     rad at heights below 10 km).  Written once for floats and arrays (``xp``); tested against pymap3d."""
-    la, lo = math.radians(lat0_deg), math.radians(lon0_deg)
-    sla, cla, slo, clo = math.sin(la), math.cos(la), math.sin(lo), math.cos(lo)
-    n0 = WGS84_A_M / math.sqrt(1.0 - WGS84_E2 * sla * sla)
-    x0, y0, z0 = n0 * cla * clo, n0 * cla * slo, n0 * (1.0 - WGS84_E2) * sla
+    sla, cla, slo, clo, x0, y0, z0 = _origin_frame(lat0_deg, lon0_deg)
     t = cla * up - sla * n  # the origin's ENU axes in ECEF
     x = x0 + clo * t - slo * e
     y = y0 + slo * t + clo * e
