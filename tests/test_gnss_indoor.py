@@ -146,3 +146,45 @@ def test_dead_reckoning_sigma_before_the_heading_model_learns_is_the_steps_own_n
     # the default (None) keeps the model's prior
     fr = GpsFusion(start=(52.0, 5.0, 0.5)).run(steps, None, 0)
     assert sigma_max_m(fr.steps[-1].cov_en_m2) > 0.5 * walked
+
+
+def _fixes_along(n, heading_deg, course: bool, hacc_m=4.0):
+    """``n`` exact fixes at 1 Hz of a walker going ``STEP_M / STEP_S`` along ``heading_deg`` (CCW from East) from the
+    origin (52 N, 5 E); with ``course`` the receiver's bearing of that direction, else nan (indoors: no bearing)."""
+    from core.geodesy import enu_to_geodetic
+    from core.recording import make_stream
+    t = np.arange(1, n + 1) * 1.0
+    d = t / STEP_S * STEP_M
+    a = math.radians(heading_deg)
+    lat, lon = enu_to_geodetic(d * math.cos(a), d * math.sin(a), (52.0, 5.0))
+    bearing = (90.0 - heading_deg) % 360.0 if course else math.nan
+    v = np.column_stack([lat, lon, np.zeros(n), np.full(n, hacc_m), np.full(n, STEP_M / STEP_S), np.full(n, bearing)])
+    return make_stream("gps", (t * 1e9).astype(np.int64), v)
+
+
+@pytest.mark.parametrize("course", [True, False])
+def test_the_honest_dead_reckoning_sd_keeps_the_course_aiding_spread(course):
+    """Issue #26 (indoor target): ``untrained_heading_sd_rad`` (15 deg) gives dead reckoning's POSITION an honest
+    sigma before the heading model has a sample, but before ``untrained_until_course`` it also narrowed the heading
+    that the first GPS courses correct: steps 30 deg off the walked direction, six fixes with the true course, and
+    the fused heading learnt 1.7 of the 30 deg (the default 26.8: the guard's ETH 3-min outage went 14.4 -> 19.0 %).
+    Now the first course gets the model's prior spread back (the heading as learnt as by default) and, without a
+    course (indoors: no bearing), the position's sigma stays the honest one (66 m of dead reckoning: 15.8 m against
+    the prior's 19.7 m)."""
+    from core.gnss.fusion import GpsFusion
+    steps = _straight_steps(100)  # heading 0: 30 deg off the fixes' direction
+    fixes = _fixes_along(6, 30.0, course)
+    honest = dict(start=(52.0, 5.0, 0.5), judge=None, untrained_heading_sd_rad=math.radians(15.0))
+    default = GpsFusion(start=(52.0, 5.0, 0.5), judge=None).run(steps, fixes, 0)
+    new = GpsFusion(**honest).run(steps, fixes, 0)
+    before = GpsFusion(untrained_until_course=False, **honest).run(steps, fixes, 0)
+    assert all(f.accepted for f in new.fixes)
+    h_default, h_new, h_before = (math.degrees(r.steps[-1].heading_rad) for r in (default, new, before))
+    s_default, s_new = (sigma_max_m(r.steps[-1].cov_en_m2) for r in (default, new))
+    if course:
+        assert h_default > 20.0 and abs(h_new - h_default) < 1.0  # the course teaches as without the setting
+        assert h_before < 5.0  # the behaviour before (the honest SD narrowed the course's gain)
+        assert abs(s_new - s_default) < 0.05 * s_default
+    else:
+        assert s_new < 0.85 * s_default  # indoors the honest sigma holds
+        assert sigma_max_m(before.steps[-1].cov_en_m2) == pytest.approx(s_new)
