@@ -27,6 +27,8 @@ Formats (name: input -> reader):
   ``.gz``); an IPOL trial's lower-back file reads the trial's foot files beside it -> :func:`read_xsens`
 * ``physics-toolbox``: Physics Toolbox Sensor Suite g-Force Meter CSV (``time,gFx,gFy,gFz,...``; ``.csv`` or
   ``.gz``, or a folder holding one) -> :func:`read_physicstoolbox`
+* ``accel-csv``: an accelerometer CSV ``Timestamp,Milliseconds,X,Y,Z`` (m/s^2 with gravity, Android axes; an
+  unnamed Android logger; ``.csv`` or ``.gz``, or a folder holding one) -> :func:`read_accelcsv`
 * ``pyshoe``: PyShoe processed trial, a MATLAB level-5 MAT-file (``.mat`` or ``.mat.gz``; read with numpy and
   zlib, :mod:`core.importers.matv5`) -> :func:`read_pyshoe`
 
@@ -79,6 +81,7 @@ import os
 import zipfile
 
 from core.recording import MAGIC, MAX_UNCOMPRESSED_BYTES, Recording, RecordingError, read_recording
+from core.importers import accelcsv as _acsv
 from core.importers import brajdic as _bh
 from core.importers import getsensordata as _gsd
 from core.importers import msindoor as _ms
@@ -93,6 +96,7 @@ from core.importers import xsens as _xs
 from core.importers.matv5 import looks_like as _looks_like_mat
 from core.importers._common import FileSet, head_bytes
 from core.importers.beside import attach_truth_beside
+from core.importers.accelcsv import read_accelcsv
 from core.importers.brajdic import read_brajdic
 from core.importers.getsensordata import read_getsensordata
 from core.importers.msindoor import read_msindoor
@@ -117,6 +121,7 @@ XIO = _xio.FORMAT
 XSENS = _xs.FORMAT
 PYSHOE = _ps.FORMAT
 PHYSICS_TOOLBOX = _ptb.FORMAT
+ACCEL_CSV = _acsv.FORMAT
 
 #: format name -> what it is (for messages and the CLI's help)
 FORMATS = {
@@ -140,6 +145,8 @@ FORMATS = {
     PYSHOE: "PyShoe processed trial (MATLAB level-5 MAT-file with imu and ts, VICON gt; .mat or .mat.gz)",
     PHYSICS_TOOLBOX: "Physics Toolbox Sensor Suite g-Force Meter CSV ('time,gFx,gFy,gFz' header, g units; .csv "
                      "or .gz)",
+    ACCEL_CSV: "accelerometer CSV with the header 'Timestamp,Milliseconds,X,Y,Z' (ms since the start, m/s^2 with "
+               "gravity; .csv or .gz)",
 }
 
 
@@ -156,6 +163,7 @@ _SHORT = {
     XSENS: "xsens (XSens text export, IPOL trials)",
     PYSHOE: "pyshoe (PyShoe processed .mat trial)",
     PHYSICS_TOOLBOX: "physics-toolbox (Physics Toolbox g-Force Meter CSV)",
+    ACCEL_CSV: "accel-csv (Timestamp,Milliseconds,X,Y,Z accelerometer CSV)",
 }
 
 
@@ -174,6 +182,7 @@ _TEXT_TESTS = [
     (_phy.looks_like_csv, PHYPHOX),
     (_tw.looks_like_csv, TRUNDLE),
     (_ptb.looks_like_csv, PHYSICS_TOOLBOX),
+    (_acsv.looks_like_csv, ACCEL_CSV),
     (_bh.looks_like_text, BRAJDIC),
     (_ox.looks_like, OXFORD),
 ]
@@ -208,6 +217,8 @@ def _detect_fileset(fs: FileSet) -> str | None:
         return max(votes, key=votes.get)
     if _ptb.csv_files(fs):
         return PHYSICS_TOOLBOX
+    if _acsv.csv_files(fs):
+        return ACCEL_CSV
     return None
 
 
@@ -288,12 +299,13 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
         return read_sensorlogger(path, platform=platform, warn=warn, max_uncompressed_bytes=limit)
     readers = {PHYPHOX: read_phyphox, MSINDOOR: read_msindoor, BRAJDIC: read_brajdic, OXFORD: read_oxford,
                TRUNDLE: read_trundle, XIO: read_xio, XSENS: read_xsens, PYSHOE: read_pyshoe,
-               PHYSICS_TOOLBOX: read_physicstoolbox}
+               PHYSICS_TOOLBOX: read_physicstoolbox, ACCEL_CSV: read_accelcsv}
     rec = readers[fmt](path, warn=warn, max_uncompressed_bytes=limit)
     return attach_truth_beside(path, rec) if truth_beside else rec
 
 
 __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",
            "read_phyphox", "read_msindoor", "read_brajdic", "read_oxford", "read_trundle", "read_xio", "read_xsens",
-           "read_pyshoe", "read_physicstoolbox", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
-           "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE", "XIO", "XSENS", "PYSHOE", "PHYSICS_TOOLBOX"]
+           "read_pyshoe", "read_physicstoolbox", "read_accelcsv", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
+           "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE", "XIO", "XSENS", "PYSHOE", "PHYSICS_TOOLBOX",
+           "ACCEL_CSV"]
