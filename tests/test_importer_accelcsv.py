@@ -8,7 +8,6 @@ naming the file, and the other CSV formats are not taken for it.
 
 from __future__ import annotations
 
-import gzip
 import warnings
 
 import numpy as np
@@ -17,6 +16,7 @@ import pytest
 from core.conventions import STANDARD_GRAVITY_M_S2
 from core.importers import ACCEL_CSV, PHYSICS_TOOLBOX, detect_format, load_recording, read_accelcsv
 from core.recording import RecordingError
+from tests._csv_helpers import write_lines
 
 
 def _walk(n: int = 500, seed: int = 5) -> tuple[np.ndarray, np.ndarray]:
@@ -33,15 +33,9 @@ def _walk(n: int = 500, seed: int = 5) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _write(path, ms, acc, header="Timestamp,Milliseconds,X,Y,Z", gz: bool = False):
-    lines = [header]
-    for m, a in zip(ms, acc):
-        lines.append(f"2022-05-19 23:33:{19 + m // 1000:02d},{m},{a[0]:.7f},{a[1]:.7f},{a[2]:.7f}")
-    text = "\n".join(lines) + "\n"
-    if gz:
-        path.write_bytes(gzip.compress(text.encode()))
-    else:
-        path.write_text(text)
-    return path
+    lines = [header] + [f"2022-05-19 23:33:{19 + m // 1000:02d},{m},{a[0]:.7f},{a[1]:.7f},{a[2]:.7f}"
+                        for m, a in zip(ms, acc)]
+    return write_lines(path, lines, gz)
 
 
 def _read(p):
