@@ -86,7 +86,9 @@ Further public recordings (issue #25, fetched into a folder outside the reposito
     ``20steps``, held in front by inference) is **report**.  The same day, the 6th, also before any number:
     ``Omer1Eryilmaz/SignalProcessing`` (seven MATLAB Mobile clips of 48-51 counted steps with the carry stated:
     right / left trouser pocket, a waving hand, a hand; MIT licence; kept in ``/work/extra_data/pending/``
-    because no importer reads MATLAB timetable objects yet) is **report**.
+    because no importer reads MATLAB timetable objects yet) is **report**; a reader
+    (:mod:`core.importers.matlabmobile`) was added afterwards and the clips moved into the scanned folder, still
+    before any number was run on them.
 
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
