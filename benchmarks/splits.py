@@ -80,6 +80,15 @@ Further public recordings (issue #25, fetched into a folder outside the reposito
     not stated) is **tuning**.  Declared before any benchmark number was run on it; honest caveat: one
     ``pdr replay`` of the clip (105 steps) was seen while its new reader was checked, before this
     declaration -- the split follows the rule above, not that number.
+    Declared 2026-12-06 (a third search), before any number was seen on it, continuing the same rule (the 5th
+    repository in ``owner/name`` order and in order of addition, so report): ``sgrzegorz/StepApp`` (twelve
+    20-step clips of 15-19 s, one walker and phone, 100 Hz accelerometer only, the count from the folder name
+    ``20steps``, held in front by inference) is **report**.  The same day, the 6th, also before any number:
+    ``Omer1Eryilmaz/SignalProcessing`` (seven MATLAB Mobile clips of 48-51 counted steps with the carry stated:
+    right / left trouser pocket, a waving hand, a hand; MIT licence; kept in ``/work/extra_data/pending/``
+    because no importer reads MATLAB timetable objects yet) is **report**; a reader
+    (:mod:`core.importers.matlabmobile`) was added afterwards and the clips moved into the scanned folder, still
+    before any number was run on them.
 
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was

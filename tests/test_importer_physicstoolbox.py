@@ -9,7 +9,6 @@ line naming the file.
 
 from __future__ import annotations
 
-import gzip
 import warnings
 
 import numpy as np
@@ -18,6 +17,7 @@ import pytest
 from core.conventions import STANDARD_GRAVITY_M_S2
 from core.importers import PHYSICS_TOOLBOX, PHYPHOX, detect_format, load_recording, read_physicstoolbox
 from core.recording import RecordingError
+from tests._csv_helpers import write_lines
 
 
 def _walk(n: int = 600, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -32,15 +32,9 @@ def _walk(n: int = 600, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _write(path, t, gf, header="time,gFx,gFy,gFz,TgF", extra: str = "", gz: bool = False):
-    lines = [header]
-    for ti, g in zip(t, gf):
-        lines.append(f"{ti:.6f},{g[0]:.4f},{g[1]:.4f},{g[2]:.4f},{np.linalg.norm(g):.3f}{extra}")
-    text = "\n".join(lines) + "\n"
-    if gz:
-        path.write_bytes(gzip.compress(text.encode()))
-    else:
-        path.write_text(text)
-    return path
+    lines = [header] + [f"{ti:.6f},{g[0]:.4f},{g[1]:.4f},{g[2]:.4f},{np.linalg.norm(g):.3f}{extra}"
+                        for ti, g in zip(t, gf)]
+    return write_lines(path, lines, gz)
 
 
 def test_g_force_csv_is_recognised_and_converted_to_m_s2(tmp_path):

@@ -27,6 +27,10 @@ Formats (name: input -> reader):
   ``.gz``); an IPOL trial's lower-back file reads the trial's foot files beside it -> :func:`read_xsens`
 * ``physics-toolbox``: Physics Toolbox Sensor Suite g-Force Meter CSV (``time,gFx,gFy,gFz,...``; ``.csv`` or
   ``.gz``, or a folder holding one) -> :func:`read_physicstoolbox`
+* ``accel-csv``: an accelerometer CSV ``Timestamp,Milliseconds,X,Y,Z`` (m/s^2 with gravity, Android axes; an
+  unnamed Android logger; ``.csv`` or ``.gz``, or a folder holding one) -> :func:`read_accelcsv`
+* ``matlab-mobile``: a MATLAB Mobile sensor log saved as a MAT-file (``timetable`` objects ``Acceleration``,
+  ``AngularVelocity``, ``MagneticField``, ``Position``; ``.mat`` or ``.mat.gz``) -> :func:`read_matlabmobile`
 * ``pyshoe``: PyShoe processed trial, a MATLAB level-5 MAT-file (``.mat`` or ``.mat.gz``; read with numpy and
   zlib, :mod:`core.importers.matv5`) -> :func:`read_pyshoe`
 
@@ -79,7 +83,9 @@ import os
 import zipfile
 
 from core.recording import MAGIC, MAX_UNCOMPRESSED_BYTES, Recording, RecordingError, read_recording
+from core.importers import accelcsv as _acsv
 from core.importers import brajdic as _bh
+from core.importers import matlabmobile as _mm
 from core.importers import getsensordata as _gsd
 from core.importers import msindoor as _ms
 from core.importers import oxford as _ox
@@ -93,7 +99,9 @@ from core.importers import xsens as _xs
 from core.importers.matv5 import looks_like as _looks_like_mat
 from core.importers._common import FileSet, head_bytes
 from core.importers.beside import attach_truth_beside
+from core.importers.accelcsv import read_accelcsv
 from core.importers.brajdic import read_brajdic
+from core.importers.matlabmobile import read_matlabmobile
 from core.importers.getsensordata import read_getsensordata
 from core.importers.msindoor import read_msindoor
 from core.importers.oxford import read_oxford
@@ -117,6 +125,8 @@ XIO = _xio.FORMAT
 XSENS = _xs.FORMAT
 PYSHOE = _ps.FORMAT
 PHYSICS_TOOLBOX = _ptb.FORMAT
+ACCEL_CSV = _acsv.FORMAT
+MATLAB_MOBILE = _mm.FORMAT
 
 #: format name -> what it is (for messages and the CLI's help)
 FORMATS = {
@@ -140,6 +150,10 @@ FORMATS = {
     PYSHOE: "PyShoe processed trial (MATLAB level-5 MAT-file with imu and ts, VICON gt; .mat or .mat.gz)",
     PHYSICS_TOOLBOX: "Physics Toolbox Sensor Suite g-Force Meter CSV ('time,gFx,gFy,gFz' header, g units; .csv "
                      "or .gz)",
+    ACCEL_CSV: "accelerometer CSV with the header 'Timestamp,Milliseconds,X,Y,Z' (ms since the start, m/s^2 with "
+               "gravity; .csv or .gz)",
+    MATLAB_MOBILE: "MATLAB Mobile sensor log saved as a MAT-file (timetables Acceleration, AngularVelocity, "
+                   "MagneticField, Position; .mat or .mat.gz)",
 }
 
 
@@ -156,6 +170,8 @@ _SHORT = {
     XSENS: "xsens (XSens text export, IPOL trials)",
     PYSHOE: "pyshoe (PyShoe processed .mat trial)",
     PHYSICS_TOOLBOX: "physics-toolbox (Physics Toolbox g-Force Meter CSV)",
+    ACCEL_CSV: "accel-csv (Timestamp,Milliseconds,X,Y,Z accelerometer CSV)",
+    MATLAB_MOBILE: "matlab-mobile (MATLAB Mobile sensor log .mat)",
 }
 
 
@@ -174,6 +190,7 @@ _TEXT_TESTS = [
     (_phy.looks_like_csv, PHYPHOX),
     (_tw.looks_like_csv, TRUNDLE),
     (_ptb.looks_like_csv, PHYSICS_TOOLBOX),
+    (_acsv.looks_like_csv, ACCEL_CSV),
     (_bh.looks_like_text, BRAJDIC),
     (_ox.looks_like, OXFORD),
 ]
@@ -208,7 +225,19 @@ def _detect_fileset(fs: FileSet) -> str | None:
         return max(votes, key=votes.get)
     if _ptb.csv_files(fs):
         return PHYSICS_TOOLBOX
+    if _acsv.csv_files(fs):
+        return ACCEL_CSV
     return None
+
+
+def _single_mat(path: str) -> str | None:
+    """The one MAT-file (``.mat`` or ``.mat.gz``) of a folder holding nothing else but text notes, else None."""
+    if not os.path.isdir(path):
+        return None
+    files = [n for n in os.listdir(path) if os.path.isfile(os.path.join(path, n))]
+    mats = [n for n in files if n.lower().endswith((".mat", ".mat.gz"))]
+    others = [n for n in files if n not in mats and not n.lower().endswith((".md", ".txt", ".tsv"))]
+    return os.path.join(path, mats[0]) if len(mats) == 1 and not others else None
 
 
 def detect_format(path) -> str:
@@ -216,6 +245,7 @@ def detect_format(path) -> str:
     path = str(path)
     if not os.path.exists(path):
         raise RecordingError("cannot open: no such file or folder", path)
+    path = _single_mat(path) or path
     if os.path.isdir(path):
         with FileSet(path) as fs:
             fmt = _detect_fileset(fs)
@@ -241,9 +271,12 @@ def detect_format(path) -> str:
     if _bh.looks_like_binary(head):
         return BRAJDIC
     if _looks_like_mat(head):
-        if _ps.looks_like(_ps.mat_names(path)):
+        names = _ps.mat_names(path)
+        if _ps.looks_like(names):
             return PYSHOE
-        raise _unknown(path, "a MAT-file without PyShoe's imu and ts variables")
+        if _mm.looks_like(names):
+            return MATLAB_MOBILE
+        raise _unknown(path, "a MAT-file without PyShoe's imu and ts variables or MATLAB Mobile's sensor timetables")
     if b"\x00" in head[:1024]:
         raise _unknown(path, "binary data")
     fmt = _detect_text(head.decode("utf-8", errors="replace").lstrip("\ufeff"))
@@ -278,6 +311,7 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
     path = str(path)
     limit = max_uncompressed_bytes
     fmt = detect_format(path)
+    path = _single_mat(path) or path  # a folder holding one MAT-file is read through it
     if fmt == PDR_RECORDING:
         rec = read_recording(path, warn=warn, max_uncompressed_bytes=limit)  # gzip or not by content
         rec.metadata.setdefault("source_format", PDR_RECORDING)
@@ -288,12 +322,14 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
         return read_sensorlogger(path, platform=platform, warn=warn, max_uncompressed_bytes=limit)
     readers = {PHYPHOX: read_phyphox, MSINDOOR: read_msindoor, BRAJDIC: read_brajdic, OXFORD: read_oxford,
                TRUNDLE: read_trundle, XIO: read_xio, XSENS: read_xsens, PYSHOE: read_pyshoe,
-               PHYSICS_TOOLBOX: read_physicstoolbox}
+               PHYSICS_TOOLBOX: read_physicstoolbox, ACCEL_CSV: read_accelcsv,
+               MATLAB_MOBILE: read_matlabmobile}
     rec = readers[fmt](path, warn=warn, max_uncompressed_bytes=limit)
     return attach_truth_beside(path, rec) if truth_beside else rec
 
 
 __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",
            "read_phyphox", "read_msindoor", "read_brajdic", "read_oxford", "read_trundle", "read_xio", "read_xsens",
-           "read_pyshoe", "read_physicstoolbox", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
-           "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE", "XIO", "XSENS", "PYSHOE", "PHYSICS_TOOLBOX"]
+           "read_pyshoe", "read_physicstoolbox", "read_accelcsv", "read_matlabmobile", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
+           "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE", "XIO", "XSENS", "PYSHOE", "PHYSICS_TOOLBOX",
+           "ACCEL_CSV", "MATLAB_MOBILE"]

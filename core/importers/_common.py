@@ -287,6 +287,33 @@ class FileSet:
 
 
 # ---------------------------------------------------------------------------
+# one-file CSV formats (an accelerometer CSV, alone or as the one such CSV of a folder or zip)
+
+
+def single_csv_files(fs: FileSet, looks_like) -> list[str]:
+    """The CSVs of a folder or zip (top level and one folder down) whose head ``looks_like(head)`` accepts."""
+    return [n for n in fs.names() if n.lower().endswith(".csv") and n.count("/") <= 1 and looks_like(fs.head(n))]
+
+
+def read_single_csv(path: str, looks_like, read_table, what: str, repairs: list[str],
+                    limit: int | None = MAX_UNCOMPRESSED_BYTES):
+    """``read_table(text, where, repairs)`` on one CSV file (plain or gzip), or on the one CSV of a folder or zip
+    that ``looks_like`` accepts (none, or several, is a :class:`RecordingError` naming ``what``)."""
+    if os.path.isdir(path) or is_zip(path):
+        with FileSet(path, limit) as fs:
+            names = single_csv_files(fs, looks_like)
+            if len(names) != 1:
+                raise RecordingError(f"{len(names)} {what}s in this folder or archive: replay one file" if names
+                                     else f"no {what} in this folder or archive", path)
+            with fs.text(names[0]) as text:
+                out = read_table(text, fs.where(names[0]), repairs)
+            repairs += fs.repairs
+        return out
+    with open_text(path, repairs, limit) as text:
+        return read_table(text, path, repairs)
+
+
+# ---------------------------------------------------------------------------
 # times in seconds
 
 #: largest time (s) that fits int64 nanoseconds with room to spare

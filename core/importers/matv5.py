@@ -28,7 +28,10 @@ numpy arrays of the class's dtype, shaped as in MATLAB) and character arrays
 (returned as ``str``, rows joined by newlines).  Cell arrays, structures,
 objects, sparse and complex arrays and function handles are *skipped*, their
 names listed in :attr:`MatFile.skipped` (a caller asking for one gets a
-clear error).  A level-4 or HDF5-based (``-v7.3``) file is refused.
+clear error) -- unless ``read_mat(..., objects=True)``, which reads cell
+arrays, structures, complex arrays and opaque (MATLAB class) objects too
+(:func:`value_of`, :func:`values_in`; :mod:`core.importers.matlabmobile`
+decodes the class objects of a MATLAB Mobile log from them).  A level-4 or HDF5-based (``-v7.3``) file is refused.
 
 Streaming and limits
 ====================
@@ -59,7 +62,7 @@ MI_MATRIX, MI_COMPRESSED, MI_UTF8, MI_UTF16, MI_UTF32 = 14, 15, 16, 17, 18
 MI_DTYPES = {MI_INT8: "i1", MI_UINT8: "u1", MI_INT16: "i2", MI_UINT16: "u2", MI_INT32: "i4", MI_UINT32: "u4",
              MI_SINGLE: "f4", MI_DOUBLE: "f8", MI_INT64: "i8", MI_UINT64: "u8"}
 
-MX_CELL, MX_STRUCT, MX_OBJECT, MX_CHAR, MX_SPARSE = 1, 2, 3, 4, 5
+MX_CELL, MX_STRUCT, MX_OBJECT, MX_CHAR, MX_SPARSE, MX_OPAQUE = 1, 2, 3, 4, 5, 17
 #: numeric array classes -> the numpy dtype of the array returned
 MX_DTYPES = {6: np.float64, 7: np.float32, 8: np.int8, 9: np.uint8, 10: np.int16, 11: np.uint16, 12: np.int32,
              13: np.uint32, 14: np.int64, 15: np.uint64}
@@ -139,11 +142,12 @@ class MatFile:
 
 
 def read_mat(f, source: str, *, max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES,
-             only: set[str] | None = None) -> MatFile:
+             only: set[str] | None = None, objects: bool = False) -> MatFile:
     """Read a level-5 MAT-file from the binary file object ``f`` (gzip by content); see the module doc.
 
     ``only``: read these variables and skip the others' data (their size is
-    still checked against the budget).
+    still checked against the budget).  ``objects``: also read cell arrays,
+    structures and opaque objects (:func:`value_of`) instead of skipping them.
     """
     limit = max_uncompressed_bytes
     chunks = ByteChunks(f, source, limit=limit)
@@ -176,7 +180,7 @@ def read_mat(f, source: str, *, max_uncompressed_bytes: int | None = MAX_UNCOMPR
             if inner != MI_MATRIX:
                 continue
             body = body[8:8 + isize]
-        _matrix(body, order, source, variables, skipped, only, seen)
+        _matrix(body, order, source, variables, skipped, only, seen, objects)
     return MatFile(source, head[:116].rstrip(b" \x00").decode("latin-1"), variables, skipped, seen)
 
 
@@ -224,12 +228,27 @@ def _numbers(typ: int, data: bytes, order: str, source: str, name: str) -> np.nd
     return np.frombuffer(data, dtype=dt)
 
 
-def _matrix(body: bytes, order: str, source: str, variables: dict, skipped: dict, only, seen: list) -> None:
+def _flags(body: bytes, order: str, source: str) -> tuple[int, int]:
+    """A matrix's first word of array flags and the position after them."""
     typ, flags, pos = _sub(body, 0, order, source, "")
     if typ != MI_UINT32 or len(flags) < 8:
         raise RecordingError("MAT-file: a variable without its array flags", source)
-    f0 = int(np.frombuffer(flags[:4], dtype=order + "u4")[0])
+    return int(np.frombuffer(flags[:4], dtype=order + "u4")[0]), pos
+
+
+def _matrix(body: bytes, order: str, source: str, variables: dict, skipped: dict, only, seen: list,
+            objects: bool = False) -> None:
+    f0, pos = _flags(body, order, source)
     cls = f0 & 0xFF
+    if cls == MX_OPAQUE:  # flags, name, type name, class name, data: no dimensions
+        name = _sub(body, pos, order, source, "")[1].decode("latin-1")
+        seen.append(name)
+        if only is None or name in only:
+            if objects:
+                variables[name] = value_of(body, order, source)
+            else:
+                skipped[name] = MX_NAMES[cls]
+        return
     typ, dims_b, pos = _sub(body, pos, order, source, "")
     if typ != MI_INT32:
         raise RecordingError("MAT-file: a variable without its dimensions", source)
@@ -238,6 +257,9 @@ def _matrix(body: bytes, order: str, source: str, variables: dict, skipped: dict
     name = name_b.decode("latin-1")
     seen.append(name)
     if only is not None and name not in only:
+        return
+    if objects and cls in (MX_CELL, MX_STRUCT, MX_OBJECT):
+        variables[name] = value_of(body, order, source)
         return
     if cls in MX_NAMES:
         skipped[name] = MX_NAMES[cls]
@@ -250,16 +272,7 @@ def _matrix(body: bytes, order: str, source: str, variables: dict, skipped: dict
     n = int(np.prod(dims)) if dims else 0
     typ, data, pos = _sub(body, pos, order, source, name)
     if cls == MX_CHAR:
-        if typ in (MI_UTF8, MI_INT8, MI_UINT8):
-            text = data.decode("utf-8", errors="replace")
-        elif typ in (MI_UTF16, MI_UINT16):
-            text = data.decode("utf-16-be" if order == ">" else "utf-16-le", errors="replace")
-        else:
-            raise RecordingError(f"MAT-file variable {name!r}: characters of data type {typ}", source)
-        rows = dims[0] if dims else 0
-        if rows > 1 and len(text) == n:  # column-major: character k of row i is text[k * rows + i]
-            text = "\n".join(text[i::rows] for i in range(rows))
-        variables[name] = text
+        variables[name] = _chars(typ, data, dims, order, source, name)
         return
     if cls not in MX_DTYPES:
         skipped[name] = f"array of class {cls}"
@@ -270,3 +283,111 @@ def _matrix(body: bytes, order: str, source: str, variables: dict, skipped: dict
                              f"{'x'.join(map(str, dims))}", source)
     out = v.astype(np.bool_ if f0 & FLAG_LOGICAL else MX_DTYPES[cls])
     variables[name] = out.reshape(dims, order="F") if dims else out
+
+
+def _chars(typ: int, data: bytes, dims: list[int], order: str, source: str, name: str) -> str:
+    if typ in (MI_UTF8, MI_INT8, MI_UINT8):
+        text = data.decode("utf-8", errors="replace")
+    elif typ in (MI_UTF16, MI_UINT16):
+        text = data.decode("utf-16-be" if order == ">" else "utf-16-le", errors="replace")
+    else:
+        raise RecordingError(f"MAT-file variable {name!r}: characters of data type {typ}", source)
+    rows = dims[0] if dims else 0
+    n = int(np.prod(dims)) if dims else 0
+    if rows > 1 and len(text) == n:  # column-major: character k of row i is text[k * rows + i]
+        text = "\n".join(text[i::rows] for i in range(rows))
+    return text
+
+
+class MatOpaque:
+    """An opaque object of a MAT-file (MATLAB's ``MCOS`` class objects): its type and class names and its data
+    (for an object in a variable, the ``uint32`` reference into the file's subsystem data)."""
+
+    __slots__ = ("type_name", "class_name", "data")
+
+    def __init__(self, type_name: str, class_name: str, data):
+        self.type_name, self.class_name, self.data = type_name, class_name, data
+
+
+#: nesting deeper than this is refused (a damaged file cannot recurse without end)
+MAX_NESTING = 32
+
+
+def value_of(body: bytes, order: str, source: str, depth: int = 0):
+    """The value of one ``miMATRIX`` element's body, any class: numeric and logical arrays (numpy, complex ones
+    complex), text (``str``), a cell array (a list in MATLAB's column-major order; an empty element ``None``),
+    a structure or an object (a ``dict`` of its fields for one element, a list of dicts for several) and an opaque
+    object (:class:`MatOpaque`).  Sparse arrays and function handles are a :class:`RecordingError`."""
+    if depth > MAX_NESTING:
+        raise RecordingError(f"MAT-file: values nested more than {MAX_NESTING} deep", source)
+    f0, pos = _flags(body, order, source)
+    cls = f0 & 0xFF
+    if cls == MX_OPAQUE:
+        parts = []
+        for _ in range(3):  # name, type name, class name
+            _, b, pos = _sub(body, pos, order, source, "")
+            parts.append(b.decode("latin-1"))
+        typ, inner, pos = _sub(body, pos, order, source, parts[0])
+        data = value_of(inner, order, source, depth + 1) if typ == MI_MATRIX and inner else None
+        return MatOpaque(parts[1], parts[2], data)
+    typ, dims_b, pos = _sub(body, pos, order, source, "")
+    if typ != MI_INT32:
+        raise RecordingError("MAT-file: a value without its dimensions", source)
+    dims = [int(x) for x in _numbers(MI_INT32, dims_b, order, source, "")]
+    if any(d < 0 for d in dims):
+        raise RecordingError(f"MAT-file: negative dimensions {dims}", source)
+    _, name_b, pos = _sub(body, pos, order, source, "")
+    name = name_b.decode("latin-1")
+    n = int(np.prod(dims)) if dims else 0
+    if cls == MX_CELL:
+        items = []
+        for _ in range(n):
+            typ, el, pos = _sub(body, pos, order, source, name)
+            items.append(value_of(el, order, source, depth + 1) if typ == MI_MATRIX and el else None)
+        return items
+    if cls in (MX_STRUCT, MX_OBJECT):
+        if cls == MX_OBJECT:
+            pos = _sub(body, pos, order, source, name)[2]  # the class name
+        _, fl, pos = _sub(body, pos, order, source, name)
+        width = int(_numbers(MI_INT32, fl, order, source, name)[0]) if fl else 0
+        _, raw, pos = _sub(body, pos, order, source, name)
+        fields = [raw[i:i + width].split(b"\0")[0].decode("latin-1") for i in range(0, len(raw), width)] if width else []
+        recs = []
+        for _ in range(n):
+            rec = {}
+            for fname in fields:
+                typ, el, pos = _sub(body, pos, order, source, name)
+                rec[fname] = value_of(el, order, source, depth + 1) if typ == MI_MATRIX and el else None
+            recs.append(rec)
+        return recs[0] if n == 1 else recs
+    if cls in MX_NAMES or cls not in MX_DTYPES and cls != MX_CHAR:
+        raise RecordingError(f"MAT-file value {name or '?'}: a {MX_NAMES.get(cls, f'class {cls}')}, not read here",
+                             source)
+    typ, data, pos = _sub(body, pos, order, source, name)
+    if cls == MX_CHAR:
+        return _chars(typ, data, dims, order, source, name)
+    v = _numbers(typ, data, order, source, name) if data else np.zeros(0)
+    if f0 & FLAG_COMPLEX:
+        typ, im, pos = _sub(body, pos, order, source, name)
+        v = v.astype(np.float64) + 1j * (_numbers(typ, im, order, source, name) if im else np.zeros(0))
+    if len(v) != n:
+        raise RecordingError(f"MAT-file value {name or '?'}: {len(v)} values for dimensions "
+                             f"{'x'.join(map(str, dims))}", source)
+    if not f0 & FLAG_COMPLEX:
+        v = v.astype(np.bool_ if f0 & FLAG_LOGICAL else MX_DTYPES[cls])
+    return v.reshape(dims, order="F") if dims else v
+
+
+def values_in(raw: bytes, pos: int, order: str, source: str) -> list:
+    """The values (:func:`value_of`) of the ``miMATRIX`` / ``miCOMPRESSED`` elements of ``raw`` from ``pos`` on
+    (a MAT stream without the file header: a MAT-file's subsystem data after its 8 bytes of version and order)."""
+    out = []
+    while pos + 8 <= len(raw):
+        typ, body, pos = _sub(raw, pos, order, source, "subsystem data")
+        if typ == MI_COMPRESSED:
+            body = _inflate(body, source, MAX_UNCOMPRESSED_BYTES)
+            typ, size = _tag(body[:8], order) if len(body) >= 8 else (0, 0)
+            body = body[8:8 + size]
+        if typ == MI_MATRIX and body:
+            out.append(value_of(body, order, source))
+    return out

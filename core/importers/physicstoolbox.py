@@ -48,7 +48,7 @@ from core.conventions import ACC, STANDARD_GRAVITY_M_S2
 from core.recording import (
     MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
 )
-from core.importers._common import FileSet, acceleration_in_m_s2, finish, is_zip, open_text
+from core.importers._common import FileSet, acceleration_in_m_s2, finish, read_single_csv, single_csv_files
 from core.importers._csv import Table
 
 FORMAT = "physics-toolbox"
@@ -72,7 +72,7 @@ def looks_like_csv(head: str) -> bool:
 
 def csv_files(fs: FileSet) -> list[str]:
     """The g-Force Meter CSVs of a folder or zip (top level and one folder down)."""
-    return [n for n in fs.names() if n.lower().endswith(".csv") and n.count("/") <= 1 and looks_like_csv(fs.head(n))]
+    return single_csv_files(fs, looks_like_csv)
 
 
 def read_physicstoolbox(path: str, *, warn: bool = True,
@@ -87,19 +87,8 @@ def read_physicstoolbox(path: str, *, warn: bool = True,
         raise RecordingError("cannot open: no such file or folder", path)
     repairs: list[str] = []
     notes: dict = {}
-    if os.path.isdir(path) or is_zip(path):
-        with FileSet(path, max_uncompressed_bytes) as fs:
-            names = csv_files(fs)
-            if len(names) != 1:
-                raise RecordingError(f"{len(names)} Physics Toolbox g-Force Meter CSVs in this folder or archive: "
-                                     "replay one file" if names else "no Physics Toolbox g-Force Meter CSV in this "
-                                     "folder or archive", path)
-            with fs.text(names[0]) as text:
-                table, out = _read_table(text, fs.where(names[0]), repairs)
-            repairs += fs.repairs
-    else:
-        with open_text(path, repairs, max_uncompressed_bytes) as text:
-            table, out = _read_table(text, path, repairs)
+    table, out = read_single_csv(path, looks_like_csv, _read_table, "Physics Toolbox g-Force Meter CSV", repairs,
+                                 max_uncompressed_bytes)
     v = out["v"]
     if not len(v):
         raise RecordingError("no accelerometer lines", path)
