@@ -465,3 +465,19 @@ def test_a_genuine_pace_change_trips_the_coefficient_test_but_the_stream_is_not_
     old = make_fusion("kubrak", adopt_shadow=False).run(steps, gps, t0)
     assert old.counters["variability_detections"] >= 3
     assert np.mean([f.accepted for f in old.fixes if f.t_ns - t0 >= 240e9]) < 0.7
+
+
+def test_a_shadow_that_relocks_to_a_consistent_stream_becomes_the_filter_at_once():
+    """Issue #26, never lose a consistent stream: the walker speeds up (the coefficient test holds GPS off) and the
+    phone turns 90 deg in the pocket during the hold.  The shadow filter loses the fixes too and re-locks to them
+    once the judge has found them consistent; the relock shows the stream is right, so the hold ends there and the
+    shadow becomes the filter (before: at the hold's end, 14 s later, 39 s of good fixes refused)."""
+    steps, gps, t0 = _pace_change_walk(turn=(175.0, 90.0))
+    fr = make_fusion("kubrak").run(steps, gps, t0)
+    c = fr.counters
+    first = c["variability_events"][0]["t_ns"]
+    ev = [(e["event"], e["t_ns"]) for e in c["shadow_events"]]
+    assert [e for e, _ in ev[:2]] == ["relocked", "adopted"] and ev[1][1] - ev[0][1] <= 2e9  # said so
+    assert _longest_refused_s(fr.fixes, first) <= 31.0
+    old = make_fusion("kubrak", adopt_on_relock=False).run(steps, gps, t0)
+    assert _longest_refused_s(old.fixes, first) > 35.0  # the behaviour this changes

@@ -223,6 +223,13 @@ def first_good_fix(gps, max_hacc_m: float = ANCHOR_MAX_HACC_M):
     return int(gps.t_ns[k]), float(v[k, 0]), float(v[k, 1]), float(v[k, 2])
 
 
+def relock_heading_error_rad(offset_m: float, walked_m: float) -> float:
+    """The heading error a relock showed: a track ``offset_m`` off after ``walked_m`` of dead reckoning since the
+    last accepted fix turned by ``2 asin(offset / 2 walked)`` (pi when it walked less than half the offset)."""
+    ratio = offset_m / (2.0 * walked_m) if walked_m > 0 else math.inf
+    return 2.0 * math.asin(ratio) if ratio < 1.0 else math.pi
+
+
 def restart_position(filt, innovation, sigma_m: float) -> None:
     """The position of ``filt`` (``x[:2]``, ``P``) restarted on a fix: moved by the fix's ``innovation``, its
     correlations with the other states dropped, its per-axis SD the fix's ``sigma_m`` (the consistent-stream
@@ -262,6 +269,12 @@ class FixFusion:
         built up since the last fix it took: at most this share of the distance walked
         since then, plus three fix SDs (a steady multipath offset right after good
         fixes is not the track's error).  None: no such limit.
+    relock_gated_s : float or None
+        The "consistent stream" relock (:meth:`FixFusion._consistent_stream`) counts ``relock_s`` from the start of
+        the judge's first passing window (the fixes agree with each other and the steps since then) and needs the
+        gate to have refused fixes for only this long (s), so that it fires ``relock_s`` after good fixes return,
+        whatever the judge's settling took.  None: the rule before (the gate refusing for ``relock_s`` after the
+        judge's settling: 38-40 s after the fixes return, issue #26).
     relock_jump_hold_s : float
         A jump in the fix stream right after the filter's last accepted fix (a multipath episode) blocks the
         "consistent stream" relock for at most this long after the judge last saw it (s); a stream consistent
@@ -306,6 +319,7 @@ class FixFusion:
                  hold_s: float = 3.0, hidden_ns=(), relock_s: float = 8.0, anchor_max_hacc_m: float = ANCHOR_MAX_HACC_M,
                  anchor_max_waits: int = 30, start: tuple | None = None, min_cn0_4th_dbhz: float = 25.0,
                  status_max_age_s: float = 2.0, relock_max_drift: float | None = None, relock_jump_hold_s: float = 60.0,
+                 relock_gated_s: float | None = 5.0,
                  pause_s: float = 1.5,
                  course_latency_s: float = 1.5, judge: JudgeSettings | None = JudgeSettings(),
                  keep_history: bool = True, history_dir: str | None = None):
@@ -319,6 +333,7 @@ class FixFusion:
         self.relock_ns = int(relock_s * 1e9)
         self.relock_max_drift = None if relock_max_drift is None else float(relock_max_drift)
         self.relock_jump_hold_ns = int(relock_jump_hold_s * 1e9)
+        self.relock_gated_ns = None if relock_gated_s is None else int(relock_gated_s * 1e9)
         self.anchor_max_hacc_m = float(anchor_max_hacc_m)
         self.anchor_max_waits = int(anchor_max_waits)
         self.hidden_ns = [(int(a), int(b)) for a, b in hidden_ns]
@@ -438,10 +453,11 @@ class FixFusion:
     def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
         """An accepted fix's further use (course, velocity, training)."""
 
-    def _placed_on_fix(self, t_ns: int, sigma_m: float) -> None:
-        """The position was just put on the fix at ``t_ns`` (the anchor, a relock's restart) with per-axis SD
-        ``sigma_m``: a filter that models the fixes' correlated error correlates the two (Chen's:
-        :meth:`core.gnss.ekf.PdrEkf.place_on_fix`)."""
+    def _placed_on_fix(self, t_ns: int, sigma_m: float, relock: bool = False) -> None:
+        """The position was just put on the fix at ``t_ns`` (the anchor, or with ``relock`` a consistent-stream
+        relock's restart) with per-axis SD ``sigma_m``: a filter that models the fixes' correlated error correlates
+        the two (Chen's: :meth:`core.gnss.ekf.PdrEkf.place_on_fix`; Kubrak's on a relock:
+        :meth:`core.gnss.kubrak.KubrakKf.place_on_fix`)."""
 
     def _step_output(self) -> tuple[float, float]:
         """(length_m, heading_rad) of the step just filtered, for the fused track."""
@@ -685,7 +701,7 @@ class FixFusion:
                 # its correlations with the rest dropped (widening it by the disagreement let the next fixes
                 # pull the heading through them: on the tuning walk the track then ran 40-150 m off again)
                 restart_position(filt, d, sigma)
-                self._placed_on_fix(t_ns, sigma)
+                self._placed_on_fix(t_ns, sigma, relock=True)
                 res = UpdateResult(True, res.innovation, math.nan, float(np.hypot(*d)), res.sigma_before_m)
             else:
                 filt.P[:2, :2] += np.outer(d, d)
@@ -723,8 +739,8 @@ class FixFusion:
             run.popleft()
         if self._consistent_stream(t_ns, run[0][0]):  # gated, and judged consistent, for relock_s
             self.relocks.append({"t_ns": int(t_ns), "offset_m": float(math.hypot(innovation[0], innovation[1])),
-                                 "rule": "consistent stream",
-                                 "consistent_s": (t_ns - self.judge.passing_since_ns) * 1e-9})
+                                 "rule": "consistent stream", "consistent_s": self._consistent_s(t_ns),
+                                 "gated_s": (t_ns - run[0][0]) * 1e-9})
             run.clear()
             return True
         if len(run) < 3 or t_ns - run[0][0] < self.relock_ns:
@@ -741,13 +757,24 @@ class FixFusion:
         return True
 
     def _consistent_stream(self, t_ns: int, gated_since_ns: int, last_accept_ns: int | None = None) -> bool:
-        """The "consistent stream" relock rule: the judge has found the stream usable, with no jump away from a
-        track that was right (:meth:`_stream_jumped`, against the filter's last accepted fix or
-        ``last_accept_ns``), for ``relock_s`` of fixes gated since ``gated_since_ns``."""
+        """The "consistent stream" relock rule: the judge finds the stream usable, with no jump away from a track
+        that was right (:meth:`_stream_jumped`, against the filter's last accepted fix or ``last_accept_ns``), the
+        fixes have agreed with each other and the steps for ``relock_s`` (:attr:`GpsJudge.consistent_since_ns`)
+        and the gate has refused them since ``gated_since_ns`` for ``relock_gated_s`` (with ``relock_gated_s``
+        None: for ``relock_s`` of fixes gated after the judge's passing began)."""
         j = self.judge
-        since = j.passing_since_ns if j is not None else None
-        return since is not None and j.verdict is GpsVerdict.USABLE and \
-            not self._stream_jumped(t_ns, last_accept_ns) and t_ns - max(since, gated_since_ns) >= self.relock_ns
+        if j is None or j.verdict is not GpsVerdict.USABLE or j.passing_since_ns is None or \
+                self._stream_jumped(t_ns, last_accept_ns):
+            return False
+        if self.relock_gated_ns is None:
+            return t_ns - max(j.passing_since_ns, gated_since_ns) >= self.relock_ns
+        return t_ns - j.consistent_since_ns >= self.relock_ns and t_ns - gated_since_ns >= self.relock_gated_ns
+
+    def _consistent_s(self, t_ns: int) -> float:
+        """How long (s) the judge has found the stream consistent at ``t_ns`` (the relock events' ``consistent_s``)."""
+        j = self.judge
+        since = j.passing_since_ns if self.relock_gated_ns is None else j.consistent_since_ns
+        return (t_ns - since) * 1e-9
 
     def _stream_jumped(self, t_ns: int, last_accept_ns: int | None = None) -> bool:
         """Whether the fixes jumped away from a track that was right: the judge's first inconsistent window after

@@ -37,7 +37,7 @@ import math
 
 from core.conventions import heading_from_bearing_deg, wrap_angle
 from core.gnss.base import (EVENTS_KEEP_LAST, HACC_PER_SIGMA, FixFusion, FixRecord, FusedStep, FusedTrack,  # noqa: F401 - re-exported
-                            FusionResult, OutageResult)
+                            FusionResult, OutageResult, relock_heading_error_rad)
 from core.gnss.ekf import PdrEkf, UpdateResult
 from core.gnss.heading_model import HeadingErrorModel
 from core.gnss.training import OnlineTrainer
@@ -229,8 +229,7 @@ class GpsFusion(FixFusion):
         heading model has learnt from ``RELOCK_HEADING_SAMPLES`` more windows, so the position's reported
         sigma grows as the track can drift (issue #26: on liatoutou_walk2 the track was 200 m off again 90 s
         after each relock with a reported sigma of 3-15 m)."""
-        ratio = offset_m / (2.0 * walked_m) if walked_m > 0 else math.inf
-        angle = 2.0 * math.asin(ratio) if ratio < 1.0 else math.pi
+        angle = relock_heading_error_rad(offset_m, walked_m)
         if angle > self._relock_heading_sd_rad:
             self._relock_heading_sd_rad = angle
         self._relock_heading_until = self.trainer.n_heading_samples + RELOCK_HEADING_SAMPLES
@@ -268,7 +267,7 @@ class GpsFusion(FixFusion):
             self._fix_bias_t_ns = int(t_ns)
         return ekf.update_position(east, north, sigma_m, self._fraction(t_ns), gate=gate)
 
-    def _placed_on_fix(self, t_ns: int, sigma_m: float) -> None:
+    def _placed_on_fix(self, t_ns: int, sigma_m: float, relock: bool = False) -> None:
         self.ekf.place_on_fix(sigma_m)
         self._fix_bias_t_ns = int(t_ns)
 

@@ -250,6 +250,7 @@ class GpsJudge:
         self._fixes: deque = deque()  # (t_ns, east, north, hacc, signal_ok or None, pdr_e, pdr_n)
         self._nis: deque = deque(maxlen=self.settings.nis_window)
         self._passing_since_ns: int | None = None
+        self._consistent_since_ns: int | None = None
         self._resuming = False  # refilling the window after a short gap in a usable stream
         self._prev_fix_ns: int | None = None
         self._screened_since_fix = False  # a fix screened out (coarse, fast) since the last one judged
@@ -273,6 +274,12 @@ class GpsJudge:
     def passing_since_ns(self) -> int | None:
         """Since when every piece of evidence has passed without a break (None: it fails now)."""
         return self._passing_since_ns
+
+    @property
+    def consistent_since_ns(self) -> int | None:
+        """Since when the fixes have agreed with each other and the steps without a break: the first fix of the window
+        that first passed (:attr:`passing_since_ns` looks at a whole window of fixes already); None: it fails now."""
+        return self._consistent_since_ns if self._passing_since_ns is not None else None
 
     @property
     def verdict(self) -> GpsVerdict:
@@ -391,6 +398,7 @@ class GpsJudge:
         if not causes:
             if self._passing_since_ns is None:
                 self._passing_since_ns = t_ns
+                self._consistent_since_ns = fx[0][0] if fx else t_ns
             settled = t_ns - self._passing_since_ns >= int(s.usable_after_s * 1e9)
             if settled and not no_evidence:
                 return Judgement(t_ns, GpsVerdict.USABLE, (), **kw)
