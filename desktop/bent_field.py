@@ -18,7 +18,7 @@ Magnitudes (:func:`corridor_steel`'s defaults).  A 1 m length of 16 mm rebar is 
 a steel column (an HEB 200, 78 cm^2) 0.023 m^3.  Structural steel carries a magnetisation of the order of
 1e3-1e4 A/m (induced in 50 uT plus remanent), so rebar and embedded steel around one point of a slab give moments
 of some A m^2 to tens of A m^2, a column tens to a few hundred.  With the defaults (slab steel every 1.5 m along
-the corridor, isotropic moments of 25 A m^2 sd, in the floor 1.4 m below a hand-held phone and in the ceiling
+the corridor, isotropic moments of 50 A m^2 sd, in the floor 1.4 m below a hand-held phone and in the ceiling
 1.7 m above it; a column in each wall every 6 m, 100 A m^2 along its axis and 40 A m^2 sd remanent) the
 horizontal field at the phone is off by about 3 uT rms, which turns the field's azimuth by about 5-15 deg rms
 (per walk; 20 uT of horizontal field) with an autocorrelation that halves in about 1.5 m -- the size and scale
@@ -115,7 +115,7 @@ def _distance_to_polyline(points_en_m, waypoints_en_m) -> np.ndarray:
 
 
 def corridor_steel(waypoints_en_m, *, seed: int, earth_field_enu_uT=(0.0, 20.0, -44.0), half_width_m: float = 1.2,
-                   storey_m: float = 3.0, slab_spacing_m: float = 1.5, slab_moment_sd_A_m2: float = 35.0,
+                   storey_m: float = 3.0, slab_spacing_m: float = 1.5, slab_moment_sd_A_m2: float = 50.0,
                    column_spacing_m: float = 6.0, column_moment_A_m2: float = 100.0,
                    column_remanent_sd_A_m2: float = 40.0, column_pieces: int = 6,
                    beam_moment_A_m2: float = 150.0, beam_remanent_sd_A_m2: float = 60.0,
@@ -130,8 +130,8 @@ def corridor_steel(waypoints_en_m, *, seed: int, earth_field_enu_uT=(0.0, 20.0, 
     ``column_moment_A_m2`` (times 0.5-1.5) along the Earth's vertical field plus a remanent isotropic Gaussian of
     ``column_remanent_sd_A_m2`` per axis; a beam across the ceiling (0.2 m above it) from column to column,
     ``column_pieces`` dipoles that together carry ``beam_moment_A_m2`` (times -1.5..1.5: induced by the horizontal
-    field along it, either way) along its axis plus ``beam_remanent_sd_A_m2`` per axis.  A polyline that comes back along itself gets its steel twice (two
-    corridors side by side): walk a loop, not an out-and-back, for one corridor.  Seeded: the same arguments give
+    field along it, either way) along its axis plus ``beam_remanent_sd_A_m2`` per axis.  Give the corridor once: a polyline that comes back along itself gets
+    its steel twice (for a loop walked twice, pass one lap).  Seeded: the same arguments give
     the same building.
     """
     rng = np.random.default_rng([int(seed), 27])

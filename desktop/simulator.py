@@ -138,7 +138,9 @@ Sensors
       (in order): it can turn the horizontal field in azimuth, change the
       dip and the strength, and add a field, all weighted by
       ``(1 + cos(pi d / radius)) / 2`` inside its radius.  A pure rotation
-      keeps the norm and the dip, so no gate on either can see it.  With
+      keeps the norm and the dip, so no gate on either can see it.  ``field_sources``
+      (:mod:`desktop.bent_field`) adds the field of a building's magnetised steel, point dipoles, at the
+      phone's 3-D position before the zones: a bent indoor field fixed in space.  With
       ``mag_uncalibrated_stream`` set, that stream carries the readings above
       and ``mag`` carries ``R^T h_n + noise`` (the iron removed, as the OS
       calibration would).
