@@ -17,13 +17,16 @@ model of the field's heading offset (a process in time).
 Magnitudes (:func:`corridor_steel`'s defaults).  A 1 m length of 16 mm rebar is 2e-4 m^3 of steel; a storey of
 a steel column (an HEB 200, 78 cm^2) 0.023 m^3.  Structural steel carries a magnetisation of the order of
 1e3-1e4 A/m (induced in 50 uT plus remanent), so rebar and embedded steel around one point of a slab give moments
-of some A m^2 to tens of A m^2, a column tens to a few hundred.  With the defaults (slab steel every 1.5 m along
-the corridor, isotropic moments of 50 A m^2 sd, in the floor 1.4 m below a hand-held phone and in the ceiling
-1.7 m above it; a column in each wall every 6 m, 100 A m^2 along its axis and 40 A m^2 sd remanent) the
-horizontal field at the phone is off by about 3 uT rms, which turns the field's azimuth by about 5-15 deg rms
-(per walk; 20 uT of horizontal field) with an autocorrelation that halves in about 1.5 m -- the size and scale
-of the indoor disturbances the real IPIN walks show (per-segment heading errors of about 10 deg).  Dip and
-strength move too (a few degrees, a few uT), as they do in buildings, mostly within the attitude filter's gates.
+of some A m^2 to tens of A m^2, a column tens to a few hundred, a building core (a lift shaft, a steel stair:
+tonnes of steel) thousands.  With the defaults (slab steel every 1.5 m along the corridor, isotropic moments of
+50 A m^2 sd, in the floor 1.4 m below a hand-held phone and in the ceiling 1.7 m above it; a column in each wall
+every 6 m, 100 A m^2 along its axis and 40 A m^2 sd remanent; ceiling beams between them; a core every 20 m,
+4-10 m to one side, 2000 A m^2) the field's azimuth at the phone is turned by 6-8.5 deg rms per walk (20 uT of
+horizontal field; the square walk of the tests, 24 seeds), its autocorrelation along the walk halving in 0.9-1.4
+m; the strength varies by 2.5-4 uT sd and the dip by about 3 deg, as in buildings, mostly within the attitude
+filter's gates.  The real IPIN walks show heading errors of the same size (about 10 deg per segment) but
+correlated over several segments: this steel has no disturbance that long (see benchmarks/RESULTS.md, "bent
+field").
 """
 
 from __future__ import annotations
@@ -135,12 +138,13 @@ def corridor_steel(waypoints_en_m, *, seed: int, earth_field_enu_uT=(0.0, 20.0, 
     the same building.
     """
     rng = np.random.default_rng([int(seed), 27])
-    pos, mom = [], []
+    pos, mom, clear = [], [], []  # clear: how far from every leg (horizontally) a source must stand (m)
     for z in (-0.1, storey_m + 0.1):
         p, t = _along(waypoints_en_m, slab_spacing_m, rng, 0.4)
         normal = np.stack([-t[:, 1], t[:, 0]], axis=1)
         p = p + normal * rng.uniform(-half_width_m, half_width_m, len(p))[:, None]
         pos.append(np.column_stack([p, np.full(len(p), z)]))
+        clear.append(np.zeros(len(p)))
         mom.append(rng.standard_normal((len(p), 3)) * slab_moment_sd_A_m2)
     p, t = _along(waypoints_en_m, column_spacing_m, rng, 0.2)
     normal = np.stack([-t[:, 1], t[:, 0]], axis=1)
@@ -153,25 +157,25 @@ def corridor_steel(waypoints_en_m, *, seed: int, earth_field_enu_uT=(0.0, 20.0, 
         for k in range(column_pieces):
             z = (k + 0.5) * storey_m / column_pieces
             pos.append(np.column_stack([base, np.full(len(p), z)]))
+            clear.append(np.full(len(p), half_width_m))
             mom.append(m / column_pieces)
     span = (half_width_m + 0.3) * ((np.arange(column_pieces) + 0.5) * 2.0 / column_pieces - 1.0)
     m = normal * (beam_moment_A_m2 * rng.uniform(-1.5, 1.5, len(p)))[:, None]
     m = np.column_stack([m, np.zeros(len(p))]) + rng.standard_normal((len(p), 3)) * beam_remanent_sd_A_m2
     for x in span:
         pos.append(np.column_stack([p + x * normal, np.full(len(p), storey_m + 0.2)]))
+        clear.append(np.zeros(len(p)))
         mom.append(m / column_pieces)
     p, t = _along(waypoints_en_m, core_spacing_m, rng, 0.3)
     normal = np.stack([-t[:, 1], t[:, 0]], axis=1)
     side = rng.choice((-1.0, 1.0), len(p)) * rng.uniform(*core_distance_m, len(p))
     pos.append(np.column_stack([p + side[:, None] * normal, np.full(len(p), storey_m / 2)]))
+    clear.append(np.full(len(p), core_distance_m[0]))
     m = rng.standard_normal((len(p), 3)) * core_remanent_sd_A_m2
     m[:, 2] += down * core_moment_A_m2 * rng.uniform(0.5, 1.5, len(p))
     mom.append(m)
     # a core or a column placed beside one leg may stand on another (a corner, a loop's other side): drop it
-    n_slab = len(pos[0]) + len(pos[1])
-    pos, mom = np.concatenate(pos), np.concatenate(mom)
-    clear = np.r_[np.zeros(n_slab), np.full(len(pos) - n_slab - len(p), half_width_m),
-                  np.full(len(p), core_distance_m[0])]
+    pos, mom, clear = np.concatenate(pos), np.concatenate(mom), np.concatenate(clear)
     keep = _distance_to_polyline(pos[:, :2], waypoints_en_m) >= clear - 1e-9
     pos, mom = pos[keep], mom[keep]
     params = dict(seed=int(seed), half_width_m=half_width_m, storey_m=storey_m, slab_spacing_m=slab_spacing_m,
