@@ -21,9 +21,9 @@ of some A m^2 to tens of A m^2, a column tens to a few hundred, a building core 
 tonnes of steel) thousands.  With the defaults (slab steel every 1.5 m along the corridor, isotropic moments of
 50 A m^2 sd, in the floor 1.4 m below a hand-held phone and in the ceiling 1.7 m above it; a column in each wall
 every 6 m, 100 A m^2 along its axis and 40 A m^2 sd remanent; ceiling beams between them; a core every 20 m,
-4-10 m to one side, 2000 A m^2) the field's azimuth at the phone is turned by 6-8.5 deg rms per walk (20 uT of
-horizontal field; the square walk of the tests, 24 seeds), its autocorrelation along the walk halving in 0.9-1.4
-m; the strength varies by 2.5-4 uT sd and the dip by about 3 deg, as in buildings, mostly within the attitude
+4-10 m to one side, 2000 A m^2) the field's azimuth at the phone is turned by 6.3-8.2 deg rms per walk (20 uT of
+horizontal field; the square walk of the tests, 24 seeds), its autocorrelation along the walk halving in 0.9-1.6
+m; the strength varies by 2.5-4.1 uT sd and the dip by about 3 deg, as in buildings, mostly within the attitude
 filter's gates.  The real IPIN walks show heading errors of the same size (about 10 deg per segment) but
 correlated over several segments: this steel has no disturbance that long (see benchmarks/RESULTS.md, "bent
 field").
