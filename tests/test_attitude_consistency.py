@@ -261,8 +261,9 @@ def test_defaults_heading_nees_on_a_bent_field_is_within_its_two_sided_chi2_band
     averages out; seed 9 overconfident, errors of 10 deg, where a gyroscope bias misread while the hand drifted at
     the start ramps the heading and the offset state takes the ramp for the field).  Without the offset state
     3.27 (overconfident).  Strict xfail: when a change brings the defaults into the band, this says so.
+    PDR_CONSISTENCY_SPLIT=report runs the declared report seeds instead (seen once: 0.45, white field 6.21).
     """
-    seeds = SIM_BENT_FIELD_SEEDS[TUNING][:CONSISTENCY_SEEDS]
+    seeds = SIM_BENT_FIELD_SEEDS[os.environ.get("PDR_CONSISTENCY_SPLIT", TUNING)][:CONSISTENCY_SEEDS]
     x = _heading_epochs([_run_against_truth(seed, "defaults", True) for seed in seeds])
     lo, hi = _chi2_mean_band(len(x))
     assert lo <= x.mean() <= hi, (x.mean(), lo, hi)
