@@ -45,6 +45,10 @@ Carry modes on the simulator (``sim_carry``, :mod:`benchmarks.carry`, issue #17)
     gates and the walking-direction estimator may be tuned on the tuning seeds and on the real
     tuning recordings above (IPIN tuning routes: hand-held; IPOL: waist, the nearest to a belt or
     bag); the Oxford placements (all report, below) and the outdoor phone walks are only reported.
+Attitude consistency on a bent field (``sim_bent_field``, ``tests/test_attitude_bent_field.py``, issue #27)
+    Seeds 1-12 of the simulator's square walk with :func:`desktop.bent_field.corridor_steel` (the building's
+    steel as dipoles) are **tuning** (any attitude setting chosen on the simulator is chosen there), seeds
+    4001-4012 **report** (declared 2026-12-06 before any number was seen on them).
 Oxford step counter, Brajdic-Harle, trundle wheel
     All **report**: nothing will be tuned on them.  Honest caveat: the step
     detector's thresholds and gates were developed before this split existed
@@ -111,6 +115,9 @@ SIM_GPS_FAULT_SEEDS = {TUNING: tuple(range(0, 10)), REPORT: tuple(range(2000, 20
 
 #: simulator seeds of the carry-mode benchmark (issue #17, :mod:`benchmarks.carry`)
 SIM_CARRY_SEEDS = {TUNING: tuple(range(0, 30)), REPORT: tuple(range(3000, 3030))}
+
+#: simulator seeds of the attitude filter's heading consistency on a bent field (issue #27)
+SIM_BENT_FIELD_SEEDS = {TUNING: tuple(range(1, 13)), REPORT: tuple(range(4001, 4013))}
 
 #: repositories of real walks whose recordings are tuning (issue #25); every other repository is report
 REAL_TUNING_REPOS = frozenset({

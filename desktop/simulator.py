@@ -138,7 +138,9 @@ Sensors
       (in order): it can turn the horizontal field in azimuth, change the
       dip and the strength, and add a field, all weighted by
       ``(1 + cos(pi d / radius)) / 2`` inside its radius.  A pure rotation
-      keeps the norm and the dip, so no gate on either can see it.  With
+      keeps the norm and the dip, so no gate on either can see it.  ``field_sources``
+      (:mod:`desktop.bent_field`) adds the field of a building's magnetised steel, point dipoles, at the
+      phone's 3-D position before the zones: a bent indoor field fixed in space.  With
       ``mag_uncalibrated_stream`` set, that stream carries the readings above
       and ``mag`` carries ``R^T h_n + noise`` (the iron removed, as the OS
       calibration would).
@@ -974,7 +976,7 @@ class _WalkModel:
                  sway_rad: Sequence[float], drift: np.ndarray, calibration_s: float, step_length_cv: float,
                  step_time_cv: float, bounce_scale: float, rng_gait: np.random.Generator,
                  gyro_bias: Sequence[float], bias_grid_s: np.ndarray, bias_walk: np.ndarray,
-                 earth_field_enu_uT: Sequence[float], zones: Sequence[DisturbanceZone]):
+                 earth_field_enu_uT: Sequence[float], zones: Sequence[DisturbanceZone], field_sources=None):
         self.path = path
         self.clock0_ns = int(clock0_ns)
         self.f = f = float(step_frequency_hz)
@@ -990,6 +992,7 @@ class _WalkModel:
         self.bias_grid_s, self.bias_walk = bias_grid_s, bias_walk
         self.h_earth = np.asarray(earth_field_enu_uT, float)
         self.zones = tuple(zones)
+        self.field_sources = field_sources  # a desktop.bent_field.SteelField (or None): the building's steel
 
         n = path.n_steps
         self.n_steps = n
@@ -1215,8 +1218,10 @@ class _WalkModel:
         """True magnetic field (n, 3) in ENU at the phone, uT."""
         t = np.asarray(t, float)
         h = np.tile(self.h_earth, (len(t), 1))
-        if self.zones:
+        if self.zones or self.field_sources is not None:
             pos = self.position(t)
+            if self.field_sources is not None:
+                h = h + self.field_sources.field_at(pos)
             for z in self.zones:
                 h = z.apply(h, pos[:, 0], pos[:, 1])
         return h
@@ -1457,6 +1462,7 @@ def simulate_walk(
     mag_uncalibrated_stream: str | None = None,
     earth_field_enu_uT: Sequence[float] = (0.0, 20.0, -44.0),
     disturbance_zones: Sequence[DisturbanceZone] = (),
+    field_sources=None,
     calibration_motion_s: float = 0.0,
     phone_pitch_deg: float = 25.0,
     phone_roll_deg: float = 0.0,
@@ -1520,6 +1526,10 @@ def simulate_walk(
         Local geomagnetic field (east, north, up) in uT.
     disturbance_zones : sequence of DisturbanceZone
         Local disturbances (azimuth rotation, dip/strength change, added field), applied in order.
+    field_sources : desktop.bent_field.SteelField or None
+        The building's magnetised steel (point dipoles, e.g. :func:`desktop.bent_field.corridor_steel`): its
+        field at the phone's 3-D position is added to the Earth's before the zones (a bent indoor field fixed in
+        space, issue #27).
     calibration_motion_s : float
         Duration of a tumbling figure-8 phone motion (+-90 deg about every
         axis, a few cm of hand motion) at the very start, before
@@ -1613,6 +1623,8 @@ def simulate_walk(
     zones = tuple(disturbance_zones)
     if not all(isinstance(z, DisturbanceZone) for z in zones):
         raise ValueError("disturbance_zones must be DisturbanceZone instances")
+    if field_sources is not None and not callable(getattr(field_sources, "field_at", None)):
+        raise ValueError("field_sources must have field_at(points_enu_m) (a desktop.bent_field.SteelField) or be None")
     truth_rate_hz = _positive("truth_rate_hz", truth_rate_hz)
     phone_pitch_deg = _finite("phone_pitch_deg", phone_pitch_deg)
     phone_roll_deg = _finite("phone_roll_deg", phone_roll_deg)
@@ -1665,7 +1677,7 @@ def simulate_walk(
                     sway_rad=np.radians(sway), drift=drift, calibration_s=calibration_motion_s,
                     step_length_cv=step_length_cv, step_time_cv=step_time_cv, bounce_scale=bounce_scale,
                     rng_gait=rng_gait, gyro_bias=gyro_bias, bias_grid_s=bias_grid, bias_walk=bias_walk,
-                    earth_field_enu_uT=h_earth, zones=zones)
+                    earth_field_enu_uT=h_earth, zones=zones, field_sources=field_sources)
     if placement == CARRY_HANDHELD:
         model = _WalkModel(**model_kw)
     else:
@@ -1785,6 +1797,8 @@ def simulate_walk(
     }
     if weinberg_c is not None:
         metadata["weinberg_c"] = float(weinberg_c)
+    if field_sources is not None:  # only then: recordings without it keep their header
+        metadata["field_sources"] = field_sources.as_dict()
     if placement != CARRY_HANDHELD:  # only then: hand-held recordings keep their header
         metadata.update(placement=placement, placement_info=dict(model.info))
     if gps is not None:  # only then: recordings without GPS keep their header

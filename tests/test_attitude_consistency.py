@@ -19,6 +19,8 @@ from core import quaternion as quat
 from core.conventions import wrap_angle
 from core.pdr.attitude import AttitudeEKF, Outcome
 from core.pdr.pipeline import Pipeline
+from benchmarks.splits import SIM_BENT_FIELD_SEEDS, TUNING
+from desktop.bent_field import MU0_4PI_UT, corridor_steel, dipole_field
 from desktop.simulator import simulate_walk
 
 SQUARE = [(0, 0), (0, 30), (30, 30), (30, 0), (0, 0)]
@@ -48,9 +50,17 @@ LEARNT_RATE = 0.05
 #: floors' scale learnt (the product's defaults as they are: heading NEES 0.27 over 12 walks, conservative)
 #: (the field's heading offset state is off in both: the simulator's field is not bent, and a filter told that the field
 #: may be off by mag_offset_sd_rad reports a wider heading sigma on a clean one -- the product's defaults, with it:
-#: heading NEES 0.44 over 84 epochs of 12 walks, without it 0.27)
+#: heading NEES 0.44 over 84 epochs of 12 walks, without it 0.27: below the band [0.72, 1.32], because a filter told the
+#: field's azimuth may be off by 0.1 rad, alike over 30 s, cannot tell its heading from that offset within a walk, so
+#: it reports a heading sigma of about the offset's, 5 deg, where on a uniform field only the gyroscope errs (seed 1:
+#: 0.5 deg rms, sigma 5.4 deg, NEES 0.007; the 0.44 comes from a few walks with larger errors); the bent
+#: field, where the offset is real, is checked with the defaults below)
 FILTERS = {"matched": _matched_filter,
-           "learnt_floors": lambda: AttitudeEKF(noise_scale_rate=LEARNT_RATE, mag_offset_sd_rad=0.0)}
+           "learnt_floors": lambda: AttitudeEKF(noise_scale_rate=LEARNT_RATE, mag_offset_sd_rad=0.0),
+           # the product's defaults, the field's heading offset state included (checked on the bent field below)
+           "defaults": AttitudeEKF,
+           # the defaults without the offset state: the field's error white (mag_offset_sd_rad=0)
+           "white_field": lambda: AttitudeEKF(mag_offset_sd_rad=0.0)}
 
 
 def _attitude_error_n(q_true, q_est):
@@ -60,8 +70,15 @@ def _attitude_error_n(q_true, q_est):
 
 
 @functools.lru_cache(maxsize=None)
-def _run_against_truth(seed, filter_name="matched"):
-    walk = simulate_walk(SQUARE * 2, rate_hz=RATE_HZ, seed=seed)
+def _walk(seed, bent=False):
+    """The square walked twice; ``bent``: in a corridor whose steel bends the field (desktop.bent_field)."""
+    steel = corridor_steel(SQUARE, seed=seed) if bent else None  # one lap: the second walks the same corridor
+    return simulate_walk(SQUARE * 2, rate_hz=RATE_HZ, seed=seed, field_sources=steel)
+
+
+@functools.lru_cache(maxsize=None)
+def _run_against_truth(seed, filter_name="matched", bent=False):
+    walk = _walk(seed, bent)
     tr = walk.truth
     ekf = FILTERS[filter_name]()
     handlers = {"gyro": ekf.predict, "acc": ekf.update_acc, "mag": ekf.update_mag}
@@ -116,7 +133,7 @@ CONSISTENCY_SEEDS = int(os.environ.get("PDR_CONSISTENCY_SEEDS", "0"))
 
 @pytest.mark.skipif(CONSISTENCY_SEEDS < 6, reason="the two-sided band needs about 80 independent epochs: "
                     "PDR_CONSISTENCY_SEEDS=12 (about 35 s per filter)")
-@pytest.mark.parametrize("filter_name", sorted(FILTERS))
+@pytest.mark.parametrize("filter_name", ["learnt_floors", "matched"])
 def test_heading_nees_is_within_its_two_sided_chi2_band(filter_name):
     """The lower end too, on enough walks: the heading sigma neither too small nor too large.
 
@@ -155,6 +172,101 @@ def test_nis_means_are_near_their_dimensions(walked):
 def test_gyro_bias_is_within_20_percent_after_60_s_of_walking(walked):
     _, _, (est, true), _ = walked
     assert np.linalg.norm(est - true) <= 0.2 * np.linalg.norm(true)
+
+
+# -- a bent field (issue #27): the building's steel as dipoles (desktop.bent_field), fixed in space ---------------
+
+
+def test_dipole_field_is_the_textbook_one_and_divergence_free():
+    """One dipole: on its axis ``2 k m / r^3``, across it ``-k m / r^3`` (k = mu0 / 4 pi); the summed field of random
+    dipoles has no divergence (finite differences, h = 1 mm: within 1e-4 of its gradient's scale)."""
+    m = np.array([0.0, 0.0, 50.0])
+    np.testing.assert_allclose(dipole_field([[0, 0, 2.0]], [[0, 0, 0]], [m])[0], [0, 0, 2 * MU0_4PI_UT * 50 / 8])
+    np.testing.assert_allclose(dipole_field([[2.0, 0, 0]], [[0, 0, 0]], [m])[0], [0, 0, -MU0_4PI_UT * 50 / 8])
+    rng = np.random.default_rng(3)
+    pos, mom = rng.uniform(-3, 3, (20, 3)), rng.normal(0, 30, (20, 3))
+    p, h = np.array([0.2, -0.1, 0.4]), 1e-3
+    grad = np.array([(dipole_field([p + h * e], pos, mom)[0] - dipole_field([p - h * e], pos, mom)[0]) / (2 * h)
+                     for e in np.eye(3)])  # grad[i, j] = dB_j / dx_i
+    assert abs(np.trace(grad)) < 1e-4 * np.abs(grad).max()
+
+
+def test_corridor_steel_stands_where_a_building_has_it():
+    """A straight corridor keeps every piece: slab steel below and above, columns in both walls, beams across the
+    ceiling (over the walkway too), cores 4-10 m off; on the square, nothing at phone height within the corridor's
+    half width of any leg (a column or a core placed beside one leg is dropped where it would stand on another)."""
+    pos = corridor_steel([(0, 0), (0, 60)], seed=0).positions_enu_m
+    x, z = np.abs(pos[:, 0]), pos[:, 2]
+    assert np.sum(z < 0) >= 35 and np.sum(np.isclose(z, 3.1)) >= 35  # every 1.5 m of 60 m, floor and ceiling
+    assert np.sum(np.isclose(x, 1.5) & (z > 0) & (z < 3)) == 2 * 6 * 10  # 10 bays: a column per wall, 6 pieces
+    beams = np.isclose(z, 3.2)
+    assert np.sum(beams) == 6 * 10 and np.any(beams & (x < 0.5))
+    cores = (x >= 4.0) & (x <= 10.0)
+    assert 2 <= np.sum(cores) <= 4 and np.all(np.isclose(z[cores], 1.5))
+    pos = corridor_steel(SQUARE, seed=1).positions_enu_m
+    t = np.linspace(0.0, 1.0, 301)[:, None]
+    legs = np.concatenate([np.add(a, t * np.subtract(b, a)) for a, b in zip(SQUARE[:-1], SQUARE[1:])])
+    near = np.min(np.hypot(*(pos[:, None, :2] - legs[None]).transpose(2, 0, 1)), axis=1)
+    at_phone_height = (pos[:, 2] > 0.0) & (pos[:, 2] < 3.0)
+    assert np.min(near[at_phone_height]) >= 1.2 - 0.01
+
+
+def test_bent_walk_field_is_an_indoor_one():
+    """The corridor's steel turns the field's azimuth at the phone by 5-15 deg rms (measured 7.8 on this walk, 6.3-8.0
+    on the 12 tuning seeds), its autocorrelation along the walk halving within 0.5-5 m (1.2 m), the same where the
+    walk passes twice."""
+    tr = _walk(1, True).truth
+    walking = (tr.mag_t_ns > tr.walk_start_t_ns) & (tr.mag_t_ns < tr.walk_end_t_ns)
+    h = tr.mag_field_enu_uT[walking]
+    az = wrap_angle(np.arctan2(h[:, 1], h[:, 0]) - math.pi / 2)  # the Earth's field points north
+    assert 5.0 <= math.degrees(math.sqrt(np.mean(az ** 2))) <= 15.0
+    p = tr.phone_position_at(tr.mag_t_ns[walking])
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p[:, :2], axis=0).T))]
+    a = np.interp(np.arange(0.0, s[-1], 0.1), s, az - az.mean())
+    rho = [np.mean(a[:len(a) - k] * a[k:]) / np.mean(a * a) for k in range(60)]
+    assert 0.5 <= 0.1 * np.argmax(np.array(rho) < 0.5) <= 5.0
+    # the second lap reads the first lap's field where it passes the same place (within the gait's few cm)
+    i = np.searchsorted(s, 30.0)
+    lap2 = np.arange(len(s))[s > s[-1] / 2]
+    j = lap2[np.argmin(np.hypot(*(p[lap2, :2] - p[i, :2]).T))]
+    assert np.hypot(*(p[j, :2] - p[i, :2])) < 0.1
+    assert np.linalg.norm(h[i] - h[j]) < 0.5, (h[i], h[j])
+
+
+def test_defaults_heading_nees_on_a_bent_field():
+    """The product's defaults on one bent walk (7 epochs 30 s apart): heading NEES within the two-sided 95 % band
+    of its mean, [0.24, 2.29] (measured 0.39); the same filter with the field's error white (no offset state,
+    mag_offset_sd_rad=0) is overconfident there (measured 11.0): the bent field is what the offset state is for.
+    (One walk's band is wide: the two-sided check over 12 walks below is the one the defaults miss.)"""
+    x = _heading_epochs([_run_against_truth(1, "defaults", True)])
+    lo, hi = _chi2_mean_band(len(x))
+    assert len(x) >= 6
+    assert lo <= x.mean() <= hi, (x.mean(), lo, hi)
+    white = _heading_epochs([_run_against_truth(1, "white_field", True)])
+    assert white.mean() > hi, white.mean()
+
+
+@pytest.mark.skipif(CONSISTENCY_SEEDS < 6, reason="the two-sided band needs about 80 independent epochs: "
+                    "PDR_CONSISTENCY_SEEDS=12 (about 60 s)")
+@pytest.mark.xfail(strict=True, reason="issue #27, missed: the defaults are conservative on the simulated steel "
+                   "(heading NEES 0.50 over 12 walks, band [0.72, 1.32]); the settings that would raise it make the "
+                   "IPIN tuning split worse (benchmarks/RESULTS.md, 'bent field')")
+def test_defaults_heading_nees_on_a_bent_field_is_within_its_two_sided_chi2_band():
+    """The bent walks of the declared tuning seeds (benchmarks.splits.SIM_BENT_FIELD_SEEDS, the first
+    PDR_CONSISTENCY_SEEDS of them), the product's defaults: heading NEES within the two-sided 95 % band of its mean.
+
+    Measured with PDR_CONSISTENCY_SEEDS=12, 84 epochs (band [0.72, 1.32]): 0.50, below (per seed 0.09 to 3.0: most
+    walks conservative, the heading sigma about 5 deg -- the offset's prior, a process over 30 s, about 38 m of
+    walking -- against errors of 2-4 deg, because the steel's disturbance is correlated over about 1 m and
+    averages out; seed 9 overconfident, errors of 10 deg, where a gyroscope bias misread while the hand drifted at
+    the start ramps the heading and the offset state takes the ramp for the field).  Without the offset state
+    3.27 (overconfident).  Strict xfail: when a change brings the defaults into the band, this says so.
+    PDR_CONSISTENCY_SPLIT=report runs the declared report seeds instead (seen once: 0.45, white field 6.21).
+    """
+    seeds = SIM_BENT_FIELD_SEEDS[os.environ.get("PDR_CONSISTENCY_SPLIT", TUNING)][:CONSISTENCY_SEEDS]
+    x = _heading_epochs([_run_against_truth(seed, "defaults", True) for seed in seeds])
+    lo, hi = _chi2_mean_band(len(x))
+    assert lo <= x.mean() <= hi, (x.mean(), lo, hi)
 
 
 #: heading-NEES epochs this far apart (s): the normalised heading error's autocorrelation on these walks
