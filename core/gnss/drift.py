@@ -61,6 +61,28 @@ What it can do, and why it is off by default (``JudgeSettings.drift = None``)
     within 30 m taken 4482 -> 3890 (Chen) and 4480 -> 4091 (Kubrak), mostly
     inside the drift; the noisy minute's outage unchanged (the check needs 90 s
     of fixes taken: it cannot act before the outage at 180 s).
+
+Two rules tried to keep a consistent real stream (issue #26, 2026-12-06; neither kept)
+    * *The steps' shape*: the offsets since the reference end fitted by a constant heading and
+      stride-scale error of dead reckoning (``offset = o0 + (dscale I + dtheta J) D`` over 10-s
+      medians); a drift in one direction while the walker turns should leave a residual.  On the
+      simulator's tuning fault walks it does (6-9 m RMS at the detections; seed 0 from 3.0 m), but
+      on the tuning walk (every 10th fix left out) at its detection (151 s) the residual is 9.0 m
+      too (dscale 0.21): a phone's fused dead reckoning there is no constant similarity -- its
+      offset from the fixes moves by 10-20 m within a minute.  No threshold separates them.
+    * *Dead reckoning's error learnt from the walk*: the offset's growth per metre of dead reckoning
+      beyond the fixes' errors, over the steady comparisons of the last 10 minutes (lagged by a
+      window), added to the fixed sigma.  On the tuning walk (302 s long) it never has enough
+      history to judge (so it costs nothing there, which is no evidence); on the fault walks the
+      faults every 45 s leave no steady comparison before the drift (seed 0: one at 114 s, then
+      from 760 s, inside it), so it learns the drift itself: 0.06-0.12 m per metre, what the
+      tuning walk's dead reckoning does (16 m over 117 m at 151 s).  Chen's bad fixes taken,
+      tuning: 5 -> 5.
+    A slower rate limit (``max_rate_m_per_min`` 9) restores the tuning walk (the offset there first
+    grew at 10.9 m/min) but is no rule: on synthetic walks a constant 4-10 deg heading or 10-12 %
+    scale error of dead reckoning is found drifting at either limit (on 2-3 of 3 seeds).  A 5 m/min
+    drift while walking at 1.3 m/s is a 6 % growth per metre: against a phone's dead reckoning
+    (about 10 % off for minutes) it cannot be told from a good stream by the offset alone.
 """
 
 from __future__ import annotations
