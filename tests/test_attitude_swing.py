@@ -5,7 +5,7 @@ The swing's own acceleration (tangential and centripetal, comparable to gravity 
 navigation frame over a swing period, not over the 0.1 s of ``update_interval_s``: with one accelerometer update
 per 0.1 s the simulator's swinging hand (about 2.4 rad/s RMS) tilted the estimate by 20 deg (median) and the heading
 wandered by 30 deg (SD); averaged over ``swing_update_interval_s`` (1 s) while the RMS rotation rate is above
-``swing_rate_rad_s`` both are a few degrees.
+``swing_rate_rad_s`` for ``swing_min_s`` both are a few degrees.
 """
 
 from __future__ import annotations
@@ -60,3 +60,15 @@ def test_a_slowly_turning_phone_keeps_the_short_interval():
     _, qa = AttitudeEKF().run(walk.recording)
     _, qb = AttitudeEKF(swing_rate_rad_s=math.inf).run(walk.recording)
     np.testing.assert_array_equal(qa, qb)
+
+
+def test_a_few_seconds_of_fast_turning_keep_the_short_interval(swinging_walk):
+    """A phone handled for a few seconds (put into a pocket) turns as fast as a swing: below ``swing_min_s`` of it
+    the filter is the one before, bit for bit."""
+    rec = swinging_walk.recording.slice_time(swinging_walk.recording.t0_ns,
+                                              swinging_walk.recording.t0_ns + 8 * 10**9)
+    _, qa = AttitudeEKF().run(rec)
+    _, qb = AttitudeEKF(swing_rate_rad_s=math.inf).run(rec)
+    np.testing.assert_array_equal(qa, qb)
+    _, qc = AttitudeEKF(swing_min_s=1.0).run(rec)
+    assert np.nanmax(np.abs(qc - qb)) > 1e-6  # the rule does act within those seconds when allowed to
