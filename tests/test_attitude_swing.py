@@ -72,3 +72,24 @@ def test_a_few_seconds_of_fast_turning_keep_the_short_interval(swinging_walk):
     np.testing.assert_array_equal(qa, qb)
     _, qc = AttitudeEKF(swing_min_s=1.0).run(rec)
     assert np.nanmax(np.abs(qc - qb)) > 1e-6  # the rule does act within those seconds when allowed to
+
+
+def _step_heading_error_deg(walk, attitude) -> float:
+    """Median |step heading - true walking heading| (deg) of the default pipeline, from the 11th step on."""
+    from core.conventions import wrap_angle
+    from core.metrics import circular_mean
+    from core.pdr.pipeline import Pipeline
+
+    res = Pipeline(attitude=attitude).run(walk.recording)
+    errs = []
+    for st in res.steps[10:]:
+        ts = np.linspace(st.t_ns - st.features.duration_s * 1e9, st.t_ns, 8).astype(np.int64)
+        errs.append(abs(float(wrap_angle(st.heading_rad - circular_mean(np.asarray(walk.truth.heading_at(ts)))))))
+    assert len(errs) > 40
+    return math.degrees(float(np.median(errs)))
+
+
+def test_a_swinging_hands_step_heading_follows_the_walk(swinging_walk):
+    """The product's step heading (carry mode, walking-direction offset and all) on the same walk."""
+    assert _step_heading_error_deg(swinging_walk, AttitudeEKF()) < 8.0  # 3.6 deg
+    assert _step_heading_error_deg(swinging_walk, AttitudeEKF(swing_rate_rad_s=math.inf)) > 15.0  # 18.1: the rule off
