@@ -392,3 +392,13 @@ def test_fast_equals_plain_on_a_gentle_walk_in_a_bag():
     rec.streams["gyro"] = Stream("gyro", g.t_ns[keep], g.values[keep], g.columns, g.unit, g.note)
     plain, _ = _assert_same(rec)
     assert abs(len(plain.steps) - walk.truth.n_steps) <= 3, (len(plain.steps), walk.truth.n_steps)
+
+
+def test_fast_equals_plain_on_a_swinging_hand():
+    # the attitude filter's swing interval (issue #25: 1-s accelerometer updates after 5 s above 2 rad/s RMS) is on
+    # for most of this walk (tests/test_attitude_swing.py: the same walk, 21 deg of tilt without it)
+    from desktop.simulator import street_route
+
+    walk = simulate_walk(street_route(60.0, seed=3, block_m=(20.0, 30.0)), placement="swinging", seed=3)
+    plain, _ = _assert_same(walk.recording)
+    assert CARRY_SWINGING in {s.carry_mode for s in plain.steps}

@@ -118,6 +118,23 @@ update per reading would count them as hundreds of independent measurements.
 The accelerometer noise adds a turn term ``k_a3 |w|^2`` to eq. 17 (the
 centripetal acceleration of a turning walker).
 
+A swinging phone (issue #25): a hand swinging at the side moves the phone on
+an arc at the stride frequency; its tangential and centripetal acceleration
+are as large as gravity (3 rad/s on a 0.6 m arm: 5 m/s^2 centripetal), so a
+0.1-s mean of the specific force is no gravity direction, and the simulator's
+swinging hand tilted the estimate by 20 deg (median) and let the heading
+wander by 30 deg (SD), through the tilt's coupling into the magnetometer's
+heading.  The phone comes back to where it was once per swing period, so in
+the navigation frame its acceleration averages to zero over one period: while
+the RMS rotation rate (a running mean of ``|w - b|^2`` over
+``swing_rate_time_s``, 1 s) is above ``swing_rate_rad_s`` (2 rad/s: the
+simulator's swing 2.4, a real trouser pocket 1.3, a phone held in the hand
+0.3-0.7) for at least ``swing_min_s`` (5 s: putting the real tuning walk's
+phone into the pocket turned it that fast for up to 4 s), the accelerometer's
+interval is ``swing_update_interval_s`` (1 s, about a stride) instead: tilt
+2 deg, heading SD 2 deg on the same walks (``tests/test_attitude_swing.py``).
+Otherwise the filter is the one before, bit for bit.
+
 Noise floors that learn their scale (issue #27): the constant parts of the
 noise -- the gyroscope's angle random walk and rate-proportional term, eq. 17's
 ``s_a0`` and turn term, eq. 18's ``s_m0`` -- were set for real phones indoors
@@ -264,6 +281,16 @@ class AttitudeSettings:
     initial_yaw_sd_rad: float = math.radians(15.0)
     #: accelerometer and magnetometer readings are averaged over this long per update (s)
     update_interval_s: float = 0.1
+    #: a swinging phone (issue #25): while the RMS rotation rate (the running mean of the squared rate over
+    #: ``swing_rate_time_s``) is above ``swing_rate_rad_s``, the accelerometer is averaged over
+    #: ``swing_update_interval_s`` per update instead (about a stride: see "A swinging phone" in the module
+    #: docstring); ``inf``: never
+    swing_rate_rad_s: float = 2.0
+    swing_rate_time_s: float = 1.0
+    swing_update_interval_s: float = 1.0
+    #: ... once the rate has stayed above ``swing_rate_rad_s`` this long (s): a walk swings for minutes, a phone
+    #: being handled (taken out, put into a pocket) turns as fast for a few seconds
+    swing_min_s: float = 5.0
     #: eq. 17: s_a0 (base sd of the unit accelerometer vector), k_a1 (per m/s^2), k_a2 (per (m/s^2)^2)
     acc_noise_base: float = 0.0025
     k_a1: float = 0.001
@@ -371,7 +398,8 @@ class AttitudeSettings:
         if not (self.mag_offset_sd_rad >= 0.0 and math.isfinite(self.mag_offset_sd_rad)):
             raise ValueError(f"mag_offset_sd_rad must be a number >= 0, not {self.mag_offset_sd_rad!r}")
         for name in ("gyro_noise_rad_sqrt_s", "acc_noise_base", "mag_noise_base", "variance_window_s",
-                     "still_window_s", "reference_update_s", "mag_offset_time_s"):
+                     "still_window_s", "reference_update_s", "mag_offset_time_s", "swing_rate_time_s",
+                     "swing_update_interval_s"):
             v = getattr(self, name)
             if not (v > 0 and math.isfinite(v)):
                 raise ValueError(f"{name} must be a positive number, not {v!r}")
@@ -543,6 +571,8 @@ class AttitudeState(AttitudeBaseState):
     h_ref: tuple  #: reference field direction (eq. 14 turned by the declination)
     alpha_ref: float  #: its azimuth (rad)
     w2: float  #: squared rotation rate of the last gyroscope event ((rad/s)^2)
+    w2_mean: float  #: running mean of ``w2`` over ``swing_rate_time_s`` ((rad/s)^2)
+    swing_s: float  #: how long ``w2_mean`` has been above ``swing_rate_rad_s ** 2`` without a break (s)
     acc_sum: IntervalSum
     mag_sum: IntervalSum
     gated: list  #: (t_ns, innovation) of heading updates gated since the last one used
@@ -590,7 +620,7 @@ class AttitudeState(AttitudeBaseState):
             vo_S=[[0.0] * 3 for _ in range(3)], vo_r=[0.0, 0.0, 0.0], vo_next_ns=None, vo_t0_ns=None,
             vo_active=False, raw_dip_med=RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1)),
             raw_norm_med=RunningMedian(0.0, 200.0, 0.1), vertical_offset_uT=(0.0, 0.0, 0.0),
-            h_ref=(0.0, 1.0, 0.0), alpha_ref=math.pi / 2, w2=0.0,
+            h_ref=(0.0, 1.0, 0.0), alpha_ref=math.pi / 2, w2=0.0, w2_mean=0.0, swing_s=0.0,
             acc_sum=IntervalSum.empty(), mag_sum=IntervalSum.empty(), gated=[], n_heading_relocks=0,
             yaw_unobserved=False, acc_sigma2=math.nan, mag_sigma2=math.nan, mag_rejected=False,
             acc_rejected=False, last_acc=UpdateFlags("acc", 0, False, Outcome.NONE_YET.value, outcome=Outcome.NONE_YET),
@@ -1002,6 +1032,8 @@ class AttitudeEKF(AttitudeFilterBase):
                                                               r2 * dt, r5 * dt, r8 * dt))  # A - B Rdt^T
         w2 = (wx - b[0]) ** 2 + (wy - b[1]) ** 2 + (wz - b[2]) ** 2
         state.w2 = w2
+        state.w2_mean += (1.0 - math.exp(-dt / s.swing_rate_time_s)) * (w2 - state.w2_mean)
+        state.swing_s = state.swing_s + dt if state.w2_mean > s.swing_rate_rad_s ** 2 else 0.0
         qg = (s.gyro_noise_rad_sqrt_s ** 2 + s.gyro_scale_noise_sqrt_s ** 2 * w2) * state.noise_scale * dt
         qb = s.gyro_bias_walk_rad_s_sqrt_s ** 2 * dt
         state.P_tt = (p0 + qg, p1, p2, p3, p4 + qg, p5, p6, p7, p8 + qg)
@@ -1139,7 +1171,9 @@ class AttitudeEKF(AttitudeFilterBase):
         acc.z += r2[0] * ax + r2[1] * ay + r2[2] * az
         acc.sigma2 += sigma2
         acc.n += 1
-        if (t_ns - acc.t0_ns) * 1e-9 < s.update_interval_s:
+        # a swinging phone: one update per swing period, over which the swing's own acceleration averages out
+        interval = s.swing_update_interval_s if state.swing_s >= s.swing_min_s else s.update_interval_s
+        if (t_ns - acc.t0_ns) * 1e-9 < interval:
             return self._acc_flags(t_ns, True, Outcome.PENDING, sigma2=sigma2)
         n = acc.n
         fx, fy, fz = acc.x / n, acc.y / n, acc.z / n

@@ -79,7 +79,8 @@ SETTINGS_USE = {
     "gyro_noise_rad_sqrt_s": "f", "gyro_scale_noise_sqrt_s": "f", "gyro_bias_walk_rad_s_sqrt_s": "f",
     "gyro_bias_sd_rad_s": "the start (the reference's)", "max_gyro_bias_rad_s": "f",
     "initial_tilt_sd_rad": "the start (the reference's)", "initial_yaw_sd_rad": "the start (the reference's)",
-    "update_interval_s": "f", "acc_noise_base": "f", "k_a1": "f", "k_a2": "f", "k_a3": "f", "mag_noise_base": "f",
+    "update_interval_s": "f", "swing_rate_rad_s": "f", "swing_rate_time_s": "f", "swing_update_interval_s": "f",
+    "swing_min_s": "f", "acc_noise_base": "f", "k_a1": "f", "k_a2": "f", "k_a3": "f", "mag_noise_base": "f",
     "k_m1": "f", "k_m2": "f", "variance_window_s": "ns", "acc_reject_m_s2": "f", "acc_gate_nis": "f",
     "mag_mode": "refused unless 'heading' (check_supported)",
     "mag_unsteady_noise_scale": "used with a field detector only (refused by check_supported)",
@@ -106,7 +107,7 @@ STATE_USE = {
     "P_bb": "own", "acc_var": "own", "mag_var": "own", "gyro_win": "own", "accdir_win": "own", "acc_norm_win": "own",
     "next_zero_rate_ns": "i?", "ref_still_next_ns": "i?", "vo_S": "own", "vo_r": "own", "vo_next_ns": "vo?",
     "vo_t0_ns": "vo?", "vo_active": "vo", "raw_dip_med": "own", "raw_norm_med": "own", "vertical_offset_uT": "own",
-    "h_ref": "mag_mode='full' only (refused)", "alpha_ref": "f", "w2": "f", "acc_sum": "sum", "mag_sum": "sum",
+    "h_ref": "mag_mode='full' only (refused)", "alpha_ref": "f", "w2": "f", "w2_mean": "f", "swing_s": "f", "acc_sum": "sum", "mag_sum": "sum",
     "gated": "own", "n_heading_relocks": "i", "yaw_unobserved": "i", "acc_sigma2": "f", "mag_sigma2": "f",
     "mag_rejected": "i", "acc_rejected": "not kept by the kernel (the pipeline reads mag_rejected)",
     "last_acc": "one event's flags: not made by the kernel", "last_mag": "one event's flags: not made by the kernel",
@@ -176,6 +177,9 @@ N_FSTATE, N_ISTATE = len(FS), len(IS)
     "vertical_offset_norm_error", "vertical_offset_min_s", "vertical_offset_ridge"))
 S_NS_RATE, S_NS_MIN = SF["noise_scale_rate"], SF["noise_scale_min"]
 S_OFF_SD, S_OFF_TAU = SF["mag_offset_sd_rad"], SF["mag_offset_time_s"]
+S_SWING_RATE, S_SWING_TAU, S_SWING_UPD, S_SWING_MIN = (SF[n] for n in (
+    "swing_rate_rad_s", "swing_rate_time_s", "swing_update_interval_s", "swing_min_s"))
+F_W2_MEAN, F_SWING_S = FS["w2_mean"], FS["swing_s"]
 F_MAG_OFFSET = FS["mag_offset_rad"]
 SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI_STILL_WIN_NS = (SI[n] for n in (
     "reference_update_s", "reference_still_rate_hz", "use_magnetometer", "mag_requires_calibration",
@@ -562,6 +566,8 @@ def predict(q, b, P, wx, wy, wz, dt, sf, noise_scale, fs):
             A[i, j] = P[i, j] - (Rdt[i, 0] * P[3, j] + Rdt[i, 1] * P[4, j] + Rdt[i, 2] * P[5, j])
             B[i, j] = P[i, 3 + j] - (Rdt[i, 0] * P[3, 3 + j] + Rdt[i, 1] * P[4, 3 + j] + Rdt[i, 2] * P[5, 3 + j])
     w2 = (wx - b[0]) ** 2 + (wy - b[1]) ** 2 + (wz - b[2]) ** 2
+    fs[F_W2_MEAN] += (1.0 - math.exp(-dt / sf[S_SWING_TAU])) * (w2 - fs[F_W2_MEAN])
+    fs[F_SWING_S] = fs[F_SWING_S] + dt if fs[F_W2_MEAN] > sf[S_SWING_RATE] ** 2 else 0.0
     qg = (sf[S_GN] ** 2 + sf[S_GS] ** 2 * w2) * noise_scale * dt
     qb = sf[S_BW] ** 2 * dt
     for i in range(3):  # Ptt = A - B Rdt^T + qg I
@@ -802,7 +808,8 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                 R = q_to_matrix(q)
                 if interval_add(fs, is_, F_ASUM0, I_ACC_N, I_ACC_T0, ti, R[0, 0] * x + R[0, 1] * y_ + R[0, 2] * z,
                                 R[1, 0] * x + R[1, 1] * y_ + R[1, 2] * z, R[2, 0] * x + R[2, 1] * y_ + R[2, 2] * z,
-                                sigma2, sf[S_UPD], mean4):
+                                sigma2, sf[S_SWING_UPD] if fs[F_SWING_S] >= sf[S_SWING_MIN] else sf[S_UPD],
+                                mean4):
                     fx, fy, fz, sigma2 = mean4[0], mean4[1], mean4[2], mean4[3]
                     nf = math.sqrt(fx * fx + fy * fy + fz * fz)
                     if nf == 0.0:
