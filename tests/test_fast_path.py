@@ -395,10 +395,11 @@ def test_fast_equals_plain_on_a_gentle_walk_in_a_bag():
 
 
 def test_fast_equals_plain_on_a_swinging_hand():
-    # the attitude filter's swing interval (issue #25: 1-s accelerometer updates after 5 s above 2 rad/s RMS) is on
-    # for most of this walk (tests/test_attitude_swing.py: the same walk, 21 deg of tilt without it)
+    # the attitude filter's swing interval (issue #25: 1-s accelerometer updates after 5 s above 2 rad/s RMS; off by
+    # default, turned on here) is on for most of this walk (tests/test_attitude_swing.py: 21 deg of tilt without it)
+    from core.pdr.attitude import AttitudeEKF
     from desktop.simulator import street_route
 
     walk = simulate_walk(street_route(60.0, seed=3, block_m=(20.0, 30.0)), placement="swinging", seed=3)
-    plain, _ = _assert_same(walk.recording)
+    plain, _ = _assert_same(walk.recording, lambda: Pipeline(attitude=AttitudeEKF(swing_rate_rad_s=2.0)))
     assert CARRY_SWINGING in {s.carry_mode for s in plain.steps}
