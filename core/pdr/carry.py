@@ -276,6 +276,11 @@ class CarryModeDetector:
         self.rotation_periodic = False
         #: walking gently (a periodic gait whose norm moves little; see ``gentle_max_std_m_s2``)
         self.gentle = False
+        #: the mode of a walk is not settled yet (issue #25): before the first full window, and while the mode is
+        #: ``still`` with a walking mode waiting out its hysteresis (a walk starting).  The pipeline holds its
+        #: steps meanwhile, so that the walking mode that follows counts them with its own gates (both legs of a
+        #: limb)
+        self.settling = True
         #: the last hop's features (name -> float) and mode scores (mode -> float), for diagnostics
         self.features: dict = {}
         self.scores: dict = {}
@@ -531,7 +536,13 @@ class CarryModeDetector:
             if best != self.mode:
                 self.changes.append((int(t_ns), self.mode, best, conf))
             self.mode, self.confidence = best, conf
+            self.settling = False
             return
+        self._decide_hysteresis(t_ns, best, conf, sc, total)
+        self.settling = self.mode == CARRY_STILL and self._cand is not None and self._cand != CARRY_STILL
+
+    def _decide_hysteresis(self, t_ns: int, best: str, conf: float, sc: dict, total: float) -> None:
+        """A hop's raw decision ``best`` through the hysteresis (``switch_s``, ``switch_still_s``)."""
         if best == self.mode:
             self._cand = None
             self.confidence = conf

@@ -167,6 +167,8 @@ class CarryTrack:
     gentle: np.ndarray  #: bool: a gentle walk (the detector's ``gentle``)
     n_changes: np.ndarray  #: how many mode changes were logged so far
     changes: list  #: the detector's change log at the end
+    settling: np.ndarray  #: bool: the detector's ``settling`` (a walk's mode not settled yet)
+    settling_before: bool  #: its ``settling`` before the first grid sample
 
 
 def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro: np.ndarray,
@@ -189,6 +191,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     periods = [det.step_period_s]
     periodic = [det.rotation_periodic]
     gentle = [det.gentle]
+    settling = [det.settling]
     n_changes = [len(det.changes)]
     view = np.lib.stride_tricks.sliding_window_view(rows, n, axis=0) if n_grid >= n else None
     for a in range(0, len(hops), HOP_CHUNK):
@@ -201,13 +204,14 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
             periods.append(det.step_period_s)
             periodic.append(det.rotation_periodic)
             gentle.append(det.gentle)
+            settling.append(det.settling)
             n_changes.append(len(det.changes))
     # the state after sample k: that of the last hop at or before k (the initial state before the first)
     at = np.searchsorted(hops, np.arange(n_grid), side="right")
     track = CarryTrack(np.asarray(modes, dtype=np.int64)[at], np.asarray(periods, dtype=float)[at],
                        np.asarray(periodic, dtype=bool)[at], np.asarray(gentle, dtype=bool)[at],
                        np.asarray(n_changes, dtype=np.int64)[at],
-                       det.changes)
+                       det.changes, np.asarray(settling, dtype=bool)[at], bool(settling[0]))
     # time per mode: the mode in force before each sample, added one grid period at a time as the detector does
     before = np.concatenate([[modes[0]], track.mode[:-1]]).astype(np.int64) if n_grid else np.zeros(0, np.int64)
     counts = np.bincount(before, minlength=len(CARRY_MODES))

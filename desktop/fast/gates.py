@@ -75,6 +75,9 @@ class StepRelease:
         self.hold_ns = int(pipe.rotation_hold_s * 1e9)
         self.min_gap_ns = int(pipe.detector.min_step_interval_s * 1e9)
         self.confirmed_ns = -(1 << 62)  # the last confirmed candidate's peak time
+        self.completed_ns = -(1 << 62)  # the last completed step's peak time
+        #: ``Pipeline(hold_while_settling=...)`` with carry detection: steps wait while the walk's mode settles
+        self.settle_hold = bool(getattr(pipe, "hold_while_settling", False)) and getattr(pipe, "carry", None) is not None
         self.carry = None  # the carry detector's per-sample track (desktop.fast.carry.CarryTrack), when it runs
         self.peaks: list = []
         self.k = None  # the grid sample being processed (None: the end)
@@ -126,12 +129,18 @@ class StepRelease:
         prev = np.concatenate([[0], det_at[:-1]])
         switch = det_at != prev
         ticks = [np.flatnonzero(switch)]
+        if self.settle_hold and carry is not None:
+            # the settling before each sample's decision; the release can change where it ends
+            self.settled_before = np.concatenate([[carry.settling_before], carry.settling[:-1]])
+            ticks.append(np.flatnonzero(self.settled_before & ~carry.settling))
         steps_at = set()
         for d, (tk, t, _, _, _) in enumerate(self.peaks):
             # a peak's own sample, the one where its heading falls due, the one where its bout's time runs out:
             # the release can change only there (a replayed peak's at the change of detector, in the list too)
             ticks += [tk, np.searchsorted(gt, t + self.delay_ns, side="left"),
                       np.searchsorted(gt, t + self.gap_ns, side="right")]
+            if self.settle_hold:  # where a step held by the settling is held no longer
+                ticks.append(np.searchsorted(gt, t + self.hold_ns, side="left"))
             live = tk[(det_at[tk] == d) & ~switch[tk]]
             steps_at.update(live.tolist())
         ticks = np.unique(np.concatenate(ticks))
@@ -171,10 +180,13 @@ class StepRelease:
         ``rotation_hold_s``, after the last confirmed step) replace the unconfirmed candidates
         (``Pipeline._switch_detector``)."""
         p = self.p
-        kept = [c for c in self.cands if c[2]]
+        settled = self.settle_hold and self.carry is not None and bool(self.settled_before[k])
+        kept = [] if settled else [c for c in self.cands if c[2]]
         p.n_replaced_mode += len(self.cands) - len(kept)
         self.cands = kept
         self.bout_len = 0
+        if settled:
+            self.confirmed_ns = self.completed_ns
         tk, t = self.peaks[d][:2]
         hi = int(np.searchsorted(tk, k, side="right"))
         lo = int(np.searchsorted(t[:hi], max(self.confirmed_ns + self.min_gap_ns + 1,
@@ -242,7 +254,9 @@ class StepRelease:
                 c[1] = self.heading(c[0], k)
         if not cands[-1][2] and tg - cands[-1][0].t_ns > self.gap_ns:
             self.drop_unconfirmed()
-        while cands and cands[0][2] and cands[0][1] is not None:
+        hold = self.hold_ns if self.settle_hold and self.carry is not None and bool(self.carry.settling[k]) \
+            else -(1 << 62)
+        while cands and cands[0][2] and cands[0][1] is not None and tg - cands[0][0].t_ns >= hold:
             ev, h, _, reg = cands.pop(0)
             self.complete(ev, h, reg, bool(self.mag_rejected[k]))
 
@@ -264,4 +278,5 @@ class StepRelease:
 
     def complete(self, ev: StepEvent, heading: float, regressors: tuple, mag_rejected: bool) -> Step:
         """The step completed with the pipeline's own :meth:`core.pdr.pipeline.Pipeline.add_step` (eqs. 4, 1)."""
+        self.completed_ns = ev.t_ns
         return self.p.add_step(ev, heading, regressors, mag_rejected, self._carry_mode_of(ev.t_ns))
