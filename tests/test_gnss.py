@@ -128,6 +128,34 @@ def test_heading_model_rejects_an_outlier_but_accepts_a_new_direction():
     assert hm.add(0.5 + math.pi, math.radians(-8.0), 1.0 / 0.03 ** 2).accepted  # a real harmonic elsewhere
 
 
+def test_heading_model_learns_a_new_grip_from_samples_that_agree_but_not_from_scattered_outliers():
+    """Issue #26: the phone turned 45 deg in the hand; the outlier gate rejected every later sample, so the model kept
+    the old grip's offset for the rest of the walk (before: both samples below rejected, the correction still 10 deg).
+    Two rejected samples in a row agreeing on one offset are a new grip; two that disagree stay outliers."""
+    rng = np.random.default_rng(4)
+    w = 1.0 / 0.03 ** 2
+
+    def trained():
+        hm = HeadingErrorModel()
+        for _ in range(20):
+            hm.add(0.5 + rng.normal(0, 0.02), math.radians(10.0) + rng.normal(0, 0.03), w)
+        return hm
+
+    hm = trained()
+    assert not hm.add(0.5, math.radians(55.0), w).accepted
+    fl = hm.add(0.52, math.radians(57.0), w)
+    assert fl.accepted and fl.reason == "new grip" and hm.n_regrips == 1
+    assert math.degrees(hm.correction_rad(0.5)) == pytest.approx(56.0, abs=1.5)
+    assert hm.add(0.5, math.radians(56.0), w).accepted  # the new grip's samples now pass the gate
+    hm = trained()
+    assert not hm.add(0.5, math.radians(70.0), w).accepted and not hm.add(0.5, math.radians(-50.0), w).accepted
+    assert hm.n_regrips == 0 and math.degrees(hm.correction_rad(0.5)) == pytest.approx(10.0, abs=1.5)
+    off = HeadingErrorModel(regrip_samples=0)
+    for _ in range(20):
+        off.add(0.5, math.radians(10.0), w)
+    assert not off.add(0.5, math.radians(55.0), w).accepted and not off.add(0.5, math.radians(57.0), w).accepted
+
+
 # -- training -------------------------------------------------------------------------------------
 def _feed_straight(tr, scale_truth=1.1, seconds=200, speed_noise=0.0, rng=None, heading=0.4, dev=0.1, doppler=1.0):
     """Steps of 0.7 m model length at 1.8 Hz, GPS at 1 Hz measuring scale_truth * model distance (its Doppler

@@ -33,13 +33,14 @@ def _turned(steps, t_from_ns: int, angle_rad: float):
     return out
 
 
-def diverged(seed: int = SEED, minutes: float = 4.0):
-    """The walk (the receiver without its random multipath episodes: good fixes come back), its pipeline steps
-    turned from ``TURN_AT_S`` on, and the time the fixes return (ns)."""
+def diverged(seed: int = SEED, minutes: float = 4.0, multipath: bool = False):
+    """The walk (the receiver without its random multipath episodes unless ``multipath``: good fixes come back), its
+    pipeline steps turned from ``TURN_AT_S`` on, and the time the fixes return (ns)."""
     from core.pdr.pipeline import Pipeline
     from desktop.simulator import GpsFault, GpsModel, outdoor_walk
 
-    gps = GpsModel(multipath_per_min=0.0, faults=(GpsFault("outage", *OUTAGE_S),))
+    gps = GpsModel(faults=(GpsFault("outage", *OUTAGE_S),)) if multipath else \
+        GpsModel(multipath_per_min=0.0, faults=(GpsFault("outage", *OUTAGE_S),))
     walk = outdoor_walk(seed, minutes=minutes, rate_hz=50.0, gps=gps)
     rec = walk.recording
     clock0 = int(rec.metadata["clock_start_ns"])
@@ -99,3 +100,24 @@ def test_kubrak_relock_puts_the_track_on_the_fix_not_beside_it_by_a_stale_bias()
     assert kf.fix_prediction(0)[0] == pytest.approx(fix)
     assert kf.P[0, 0] == pytest.approx(sigma ** 2 + kf.fix_bias_sd_m ** 2)
     assert np.linalg.eigvalsh(0.5 * (kf.P + kf.P.T)).min() >= -1e-9
+
+
+def test_chen_learns_the_new_grip_and_stays_on_the_fixes_after_taking_them_back():
+    """Issue #26: on the 7-minute walk (seed 1, the receiver's multipath on) Chen's filter takes the fixes back 20 s
+    after the outage, its EKF heading follows them, but the heading model's outlier gate rejected the windows that
+    showed the phone's new grip (45 deg): when the judge then refused the fixes (the steps disagree with them by
+    that angle) the step headings pulled the filter back to the old offset and the track ran 20-80 m off for three
+    minutes (before: 28 m at 70 s, 63 m at 120 s after the fixes returned).  Now the model learns the new grip
+    from two windows that agree, and the track stays within 10 m while the stream is clean."""
+    from core.gnss import make_fusion
+
+    walk, steps, back_ns = diverged(seed=1, minutes=7.0, multipath=True)
+    rec = walk.recording
+    fusion = make_fusion("chen")
+    fr = fusion.run(steps, rec.streams["gps"], rec.t0_ns)
+    ts = np.array([s.t_ns for s in fr.steps])
+    # from 40 s after the fixes return until a multipath episode at +170 s (the fixes 24 m off: a relock follows)
+    errs = [_error_m(walk, fr.steps[int(np.searchsorted(ts, back_ns + dt * 1e9))]) for dt in range(40, 161, 10)]
+    assert max(errs) < 10.0, [round(e, 1) for e in errs]
+    assert fusion.heading_model.n_regrips >= 1  # said so (training counters: heading_model.new_grips)
+    assert fr.counters["training"]["heading_model"]["new_grips"] >= 1
