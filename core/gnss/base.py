@@ -673,11 +673,15 @@ class FixFusion:
         pred = self._predict_fix(t_ns)
         self._outage_end(t_ns, east, north, pred, filt.position_sigma_m())
         if judged is not None and judged.verdict is not GpsVerdict.USABLE:
-            if judged.verdict is GpsVerdict.UNKNOWN:
-                # not yet judged (too few fixes, settling): what it teaches waits for the verdict
-                self._pending_learning.append((t_ns, east, north, hacc_eff, speed, course))
-            else:
-                self._pending_learning.clear()
+            # held back (too few fixes, settling, or a window that still holds a jump): what it teaches waits for
+            # the verdict.  Kept while a window that first passes could still cover it: since the first fix of the
+            # passing windows, or within the last window while the judge fails (issue #26: clearing them at any
+            # failure threw away the clean fixes after a multipath episode -- on the simulator's tuning seed 1 the
+            # 25 s of good fixes before the noisy minute's calibration taught nothing)
+            since = self.judge.consistent_since_ns
+            keep = since if since is not None else t_ns - int(self.judge.settings.window_s * 1e9)
+            self._pending_learning = [p for p in self._pending_learning if p[0] >= keep]
+            self._pending_learning.append((t_ns, east, north, hacc_eff, speed, course))
             self.n_judged_out += 1
             self._record(t_ns, v, east, north, False,
                          f"GPS judged {judged.verdict.value}: " + "; ".join(c.value for c in judged.causes))
@@ -798,11 +802,10 @@ class FixFusion:
         time order.  Without this a walk's first 15-20 s of good GPS taught nothing (a straight 140-m walk
         then learnt too little stride for the profile: 79 m of the 100 m needed)."""
         j = self.judge
-        since = j.passing_since_ns if j is not None else None
+        first = j.consistent_since_ns if j is not None else None  # the first fix of the window that first passed
         pending, self._pending_learning = self._pending_learning, []
-        if since is None:
+        if first is None:
             return
-        first = since - int(j.settings.window_s * 1e9)  # the window that first passed began here
         for t, e, n, h, sp, c in pending:
             if t >= first:
                 self._learn_from_fix(t, e, n, h, sp, c)
