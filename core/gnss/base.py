@@ -69,7 +69,7 @@ import numpy as np
 from core.conventions import wrap_angle
 from core.geodesy import enu_to_geodetic, geodetic_to_enu
 from core.gnss.ekf import UpdateResult, sigma_max_m
-from core.gnss.judge import GpsJudge, GpsVerdict, JudgeSettings
+from core.gnss.judge import Cause, GpsJudge, GpsVerdict, JudgeSettings
 
 #: fused steps and fix records a fusion without history keeps in memory (the rest are on disk)
 HISTORY_KEEP_LAST = 64
@@ -78,6 +78,12 @@ EVENTS_KEEP_LAST = 8
 
 #: 68 % radius of a circular 2-D Gaussian, in units of its per-axis SD: hacc = 1.515 sigma
 HACC_PER_SIGMA = math.sqrt(-2.0 * math.log(1.0 - 0.68))
+
+
+#: the judge's causes that hold a fix back without saying anything against the stream's quality: a fix judged out
+#: for these alone (and none other since the last usable verdict) still teaches once the judge's passing windows
+#: cover it (:meth:`FixFusion._learn_pending`)
+_HELD_BACK_ONLY = frozenset({Cause.FEW_FIXES, Cause.SETTLING, Cause.NO_EVIDENCE, Cause.INCONSISTENT})
 
 
 @dataclass(frozen=True)
@@ -413,6 +419,7 @@ class FixFusion:
         self.judge = GpsJudge(self.judge_settings) if self.judge_settings is not None else None
         self.n_judged_out = 0
         self._pending_learning: list = []  # fixes the judge has not judged yet, for training once it has
+        self._quality_failed = False  # the judge failed on the stream's quality since its last usable verdict
         self.relocks: list[dict] = self._events()  #: when the filter re-locked to GPS, by how far, by which rule
         if self.start is not None:
             self.origin_lat_lon = (self.start[0], self.start[1])
@@ -673,19 +680,27 @@ class FixFusion:
         pred = self._predict_fix(t_ns)
         self._outage_end(t_ns, east, north, pred, filt.position_sigma_m())
         if judged is not None and judged.verdict is not GpsVerdict.USABLE:
-            # held back (too few fixes, settling, or a window that still holds a jump): what it teaches waits for
-            # the verdict.  Kept while a window that first passes could still cover it: since the first fix of the
-            # passing windows, or within the last window while the judge fails (issue #26: clearing them at any
-            # failure threw away the clean fixes after a multipath episode -- on the simulator's tuning seed 1 the
-            # 25 s of good fixes before the noisy minute's calibration taught nothing)
-            since = self.judge.consistent_since_ns
-            keep = since if since is not None else t_ns - int(self.judge.settings.window_s * 1e9)
-            self._pending_learning = [p for p in self._pending_learning if p[0] >= keep]
-            self._pending_learning.append((t_ns, east, north, hacc_eff, speed, course))
+            if not set(judged.causes) <= _HELD_BACK_ONLY:
+                # the stream's own quality failed (accuracy, signal, pace, drift, NIS): nothing held back since the
+                # last usable verdict teaches (on the real tuning walk a cold start's converging fixes, 12-19 m
+                # reported, then 10 s settling, taught a wrong stride: Chen's leave-out ratio 0.43 -> 0.59)
+                self._quality_failed = True
+                self._pending_learning.clear()
+            elif not self._quality_failed:
+                # held back (too few fixes, settling, or a window that still holds a jump): what it teaches waits
+                # for the verdict.  Kept while a window that first passes could still cover it: since the first
+                # fix of the passing windows, or within the last window while the judge fails (issue #26: clearing
+                # them at an inconsistent window threw away the clean fixes after a multipath episode -- on the
+                # simulator's tuning seeds 1 and 7 the good fixes before the noisy minute taught nothing)
+                since = self.judge.consistent_since_ns
+                keep = since if since is not None else t_ns - int(self.judge.settings.window_s * 1e9)
+                self._pending_learning = [p for p in self._pending_learning if p[0] >= keep]
+                self._pending_learning.append((t_ns, east, north, hacc_eff, speed, course))
             self.n_judged_out += 1
             self._record(t_ns, v, east, north, False,
                          f"GPS judged {judged.verdict.value}: " + "; ".join(c.value for c in judged.causes))
             return
+        self._quality_failed = False
         if self._pending_learning:
             self._learn_pending()
         reason = self._filter_verdict(t_ns)
