@@ -235,7 +235,7 @@ def test_a_stream_that_jumped_after_a_long_outage_is_relocked_to_once_it_is_cons
 def test_the_clean_fixes_after_a_multipath_episode_teach_once_the_stream_is_usable():
     """Issue #26 (the simulator's tuning seeds 1 and 7): a multipath episode (fixes 30 m off for 17 s) keeps the
     judge failing until its window has let go of it and the stream has settled (about 25 s); the clean fixes of that
-    time, which the passing windows covered, must still train the stride once the stream is usable (before: thrown
+    time, which the passing windows covered, train the stride once the stream is usable with ``learn_held_back`` (before: thrown
     away at the first failure, so the 10 s of fixes before an outage taught no stride and the walk's 14 % longer
     stride was never learnt: 14 m off at the end of a 60-s outage)."""
     from core.geodesy import geodetic_to_enu
@@ -249,7 +249,9 @@ def test_the_clean_fixes_after_a_multipath_episode_teach_once_the_stream_is_usab
                                        scale * n + rng.normal(0, 1.5)), 5.0)
     keep = gps.t_ns < 60e9  # then an outage to the end of the walk
     gps = Stream("gps", gps.t_ns[keep], gps.values[keep], gps.columns)
-    fr = make_fusion("chen", start=(*ORIGIN, 1.0)).run(steps, gps)
+    fr = make_fusion("chen", start=(*ORIGIN, 1.0), learn_held_back=True).run(steps, gps)
+    off = make_fusion("chen", start=(*ORIGIN, 1.0)).run(steps, gps)  # the default: they teach nothing
+    assert off.counters["training"]["stride_scale"] == 1.0
     accepted = [f.t_ns * 1e-9 for f in fr.fixes if f.accepted]
     assert accepted and min(accepted) > 40.0  # the judge still keeps the episode's windows out (it did before too)
     assert fr.counters["training"]["stride_scale"] == pytest.approx(scale, rel=0.03)
