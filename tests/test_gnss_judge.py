@@ -230,3 +230,30 @@ def test_a_stream_that_jumped_after_a_long_outage_is_relocked_to_once_it_is_cons
         assert math.hypot(e - truth.east_m, n - truth.north_m) < 10.0, name
         assert np.mean([f.accepted for f in fr.fixes if relocks[0]["t_ns"] < f.t_ns <= relocks[0]["t_ns"] + 30e9]) \
             > 0.5, name
+
+
+def test_the_clean_fixes_after_a_multipath_episode_teach_once_the_stream_is_usable():
+    """Issue #26 (the simulator's tuning seeds 1 and 7): a multipath episode (fixes 30 m off for 17 s) keeps the
+    judge failing until its window has let go of it and the stream has settled (about 25 s); the clean fixes of that
+    time, which the passing windows covered, train the stride once the stream is usable with ``learn_held_back`` (before: thrown
+    away at the first failure, so the 10 s of fixes before an outage taught no stride and the walk's 14 % longer
+    stride was never learnt: 14 m off at the end of a 60-s outage)."""
+    from core.geodesy import geodetic_to_enu
+    from core.gnss import make_fusion
+    from core.recording import Stream
+
+    steps = _walk(lambda t: 0.3, seconds=120.0)
+    scale = 0.8 / 0.7  # the walker's true stride over the dead-reckoned one
+    rng = np.random.default_rng(5)
+    gps = _gps(steps, lambda t, e, n: (scale * e + (30.0 if 8.0 <= t < 25.0 else 0.0) + rng.normal(0, 1.5),
+                                       scale * n + rng.normal(0, 1.5)), 5.0)
+    keep = gps.t_ns < 60e9  # then an outage to the end of the walk
+    gps = Stream("gps", gps.t_ns[keep], gps.values[keep], gps.columns)
+    fr = make_fusion("chen", start=(*ORIGIN, 1.0), learn_held_back=True).run(steps, gps)
+    off = make_fusion("chen", start=(*ORIGIN, 1.0)).run(steps, gps)  # the default: they teach nothing
+    assert off.counters["training"]["stride_scale"] == 1.0
+    accepted = [f.t_ns * 1e-9 for f in fr.fixes if f.accepted]
+    assert accepted and min(accepted) > 40.0  # the judge still keeps the episode's windows out (it did before too)
+    assert fr.counters["training"]["stride_scale"] == pytest.approx(scale, rel=0.03)
+    e, n = geodetic_to_enu(fr.steps[-1].lat_deg, fr.steps[-1].lon_deg, ORIGIN)
+    assert math.hypot(e - scale * steps[-1].east_m, n - scale * steps[-1].north_m) < 3.0  # 60 s of dead reckoning
