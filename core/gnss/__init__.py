@@ -11,20 +11,19 @@ FUSIONS = ("chen", "kubrak")
 
 #: the filter ``--gps auto`` and the app's default use, and why: the one that meets more of issue #26's targets on
 #: the tuning split (benchmarks/splits.py; ``python -m benchmarks.gnss_faults``, both filters with the same relock
-#: settings and the GPS judge), a tie going to the one better indoors (the issue's first target).  At b967f8b:
-#: IPIN routes 01, 02, 21, 22 median landmark error Kubrak 3.06 m, Chen 3.42 m (dead reckoning alone 2.52: both
-#: miss); the outdoor tuning walk thomasdingemanse_lopen with every 10th fix left out, median distance over the
-#: fixes' median accuracy Chen 0.65, Kubrak 3.70 (target 1.2: Chen meets); longest stretch of good fixes all
-#: rejected 31 and 40 s (both meet 60 s); the simulator's fault walks (seeds 0-9): fixes more than 30 m off taken
-#: 5 and 5 of 1840 (both meet 10), the 2-minute outage after a noisy minute Kubrak 9.2 m, Chen 10.3 m (Kubrak
-#: meets 10 m).  Three targets each: Kubrak, better indoors.
+#: settings and the GPS judge), a tie going to the one better indoors (the issue's first target).  At 9d41893 both
+#: meet four: the simulator's fault walks (seeds 0-9), fixes more than 30 m off taken 5 and 5 of 1840 (target 10);
+#: the outdoor tuning walk thomasdingemanse_lopen with every 10th fix left out, median distance over the fixes'
+#: median accuracy Chen 0.43, Kubrak 1.04 (target 1.2); longest stretch of good fixes all rejected 16 and 30 s
+#: (target 60); IPIN routes 01, 02, 21, 22 median landmark error Chen 2.22 m, Kubrak 2.29 m, dead reckoning alone
+#: 2.29 m (target: no worse than it + 0.1); neither meets the 2-minute outage after a noisy minute (Chen 10.7 m,
+#: Kubrak 10.2 m, target 10).  A tie: Chen, better indoors.
 AUTO_FUSION = "chen"
 AUTO_FUSION_WHY = ("the filter meeting more of issue #26's targets on the tuning split, a tie going to the better "
-                   "indoors (gnss_faults at bb61bda): Chen's meets four (bad fixes 5 of 1840; near the left-out fixes "
-                   "outdoors, 0.43x their accuracy; longest good-fix stretch lost 16 s; IPIN fused 2.40 m against "
-                   "dead reckoning's 2.52 m), Kubrak's three (bad fixes 5; lost 57 s; IPIN 2.53 m; left-out fixes "
-                   "1.44x, missed); the tuning walk's outages agree (thomasdingemanse_lopen, 3 min: Chen 20.4 %, "
-                   "Kubrak 47.6 %)")
+                   "indoors (gnss_faults at 9d41893): both now meet the four (bad fixes 5 of 1840 each; near the "
+                   "left-out fixes outdoors, Chen 0.43x and Kubrak 1.04x their accuracy; longest good-fix stretch "
+                   "lost 16 s and 30 s), so indoors decides: IPIN fused Chen 2.22 m, Kubrak 2.29 m, dead reckoning "
+                   "2.29 m")
 
 
 def make_fusion(name: str, **settings):
