@@ -14,8 +14,8 @@ def _isolated_app_data(tmp_path_factory, monkeypatch):
 #: In a clean checkout the first call of each kernel compiles it (about 30 s of one core; then cached in
 #: desktop/fast/__pycache__).  Spread over both workers (--dist loadfile), each worker compiled every kernel; as one
 #: work unit they run in one worker, which compiles them once (and, the unit having the most tests, first) while the
-#: other runs the rest.  Module fixtures are still built once per file.  Measured on 2 quiet cores, clean numba
-#: cache: 159 s -> see README.
+#: other runs the rest.  Module fixtures are still built once per file.  Measured on 2 quiet cores, full suite:
+#: no numba cache 157-159 s -> 149-152 s; after the demo replay (CI's order) 142 -> 138 s.
 NUMBA_TEST_FILES = frozenset(
     f"test_{name}.py" for name in (
         "acc_gap_bridge", "attitude_reset", "attitude_state", "bad_input_round3", "bad_numbers", "carry",
