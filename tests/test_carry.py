@@ -327,11 +327,11 @@ def test_swinging_clip_counts_its_first_steps(seed):
     from desktop.fast import run_fast
 
     w = simulate_walk(CLIP_PATH, placement="swinging", seed=seed, rate_hz=50.0, still_start_s=3.0, still_end_s=1.0)
-    res = Pipeline().run(w.recording)
+    res = Pipeline(hold_while_settling=True).run(w.recording)  # an option, off by default
     assert abs(len(res.steps) - w.truth.n_steps) <= 1, (len(res.steps), w.truth.n_steps)
     old = Pipeline(hold_while_settling=False).run(w.recording)
     assert w.truth.n_steps - len(old.steps) >= 3, (len(old.steps), w.truth.n_steps)
-    fast = run_fast(w.recording, pipeline=Pipeline())
+    fast = run_fast(w.recording, pipeline=Pipeline(hold_while_settling=True))
     assert [s.t_ns for s in fast.steps] == [s.t_ns for s in res.steps]
     # the walk's first 5 s: as many steps as heel strikes, within 2 (before: 3-4 short, every other one missing)
     t0 = int(w.truth.step_t_ns[0]) - 300_000_000

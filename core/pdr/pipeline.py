@@ -388,7 +388,9 @@ class Pipeline:
         held, and at a change of mode the new mode's peaks since the last confirmed step replace the
         unconfirmed candidates (through the new mode's rotation gate) (s).
     hold_while_settling : bool
-        While the carry detector settles the mode of a walk (:attr:`core.pdr.carry.CarryModeDetector.settling`:
+        Off by default: it helps the simulator's swinging clips, but every real TUNING recording (lopen, psy901,
+        fif911, the IPIN tuning routes) counts the same with it, so the tuning split of real data does not show
+        that it helps, and it delays a live walk's first steps.  While the carry detector settles the mode of a walk (:attr:`core.pdr.carry.CarryModeDetector.settling`:
         before its first window, and while a walking mode waits out the hysteresis from ``still``), confirmed
         steps wait (at most ``rotation_hold_s``) instead of completing; when the settled mode has another step
         detector, its held peaks replace them.  Without it the first seconds of a walk in a swinging hand or a
@@ -414,7 +416,7 @@ class Pipeline:
                  unix_offset_ns: int | None = None, keep_steps: bool | int = True,
                  carry: bool | CarryModeDetector = True, step_gates: dict | None = None,
                  swinging_max_rotation_rms_rad_s: float = 12.0, rotation_hold_s: float = 8.0,
-                 hold_while_settling: bool = True,
+                 hold_while_settling: bool = False,
                  acc_gap_bridge: bool | AccGapBridge = True):
         self.keep_steps = keep_steps
         if acc_gap_bridge is True:
