@@ -93,6 +93,12 @@ Further public recordings (issue #25, fetched into a folder outside the reposito
     because no importer reads MATLAB timetable objects yet) is **report**; a reader
     (:mod:`core.importers.matlabmobile`) was added afterwards and the clips moved into the scanned folder, still
     before any number was run on them.
+    Declared 2026-12-07 (a fourth search, issue #25 part 1), before any number was seen on it, continuing the same
+    rule in order of addition (the 7th repository, so **tuning**): ``yh570/sensibility_testbed`` (Sensibility
+    Testbed pedometer experiments of 2016, one Android phone and walker, accelerometer only, 50-150 Hz; thirteen
+    clips of 20-500 steps whose count the ``*_result.csv`` files record (the README: "recorded steps"), the carry
+    stated per file: hand, trouser pocket, coat pocket) is **tuning**.  The next repository added (the 8th) and the
+    9th will be report, the 10th tuning.
 
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
@@ -124,6 +130,7 @@ REAL_TUNING_REPOS = frozenset({
     "thomasdingemanse/ML4QS",  # declared 2026-12-04 before any number was seen (phone_walks_more)
     "fif911/ML4QS",  # declared 2026-12-06 before any number was seen (extra corpus; mikamartinb/ML4QS report)
     "psy901/SensorActivity",  # declared 2026-12-06, the rule's 4th extra repository (a counted clip; see the docstring)
+    "yh570/sensibility_testbed",  # declared 2026-12-07 before any number was seen, the rule's 7th (counted clips)
 })
 
 #: the repository of each ``phone_walks_more`` walk (its MANIFEST.tsv says the same)

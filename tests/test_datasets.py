@@ -201,6 +201,9 @@ def test_split_declarations():
     # the second search's clip (declared 2026-12-06, the rule's 4th extra repository): tuning
     assert S.repo_split("psy901/SensorActivity") == "tuning"
     assert S.repo_split("parabiomech/25.GPS-TRACKING") == "report"
+    # the fourth search (declared 2026-12-07, the rule's 7th repository): tuning; sgrzegorz, Omer1Eryilmaz report
+    assert S.repo_split("yh570/sensibility_testbed") == "tuning"
+    assert S.repo_split("sgrzegorz/StepApp") == S.repo_split("Omer1Eryilmaz/SignalProcessing") == "report"
     from benchmarks.run import DATASET_MODULES
     import importlib
 
