@@ -8,17 +8,19 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 import zipfile
 from contextlib import contextmanager
 
 import numpy as np
 
 from core import quaternion as quat
-from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
+from core.conventions import ACC, STANDARD_GRAVITY_M_S2, wrap_angle
 from core.geodesy import geodetic_to_enu
 from core.recording import (
-    GZIP_MAGIC, MAX_BAD_LINES, MAX_UNCOMPRESSED_BYTES, READ_ERRORS, ByteChunks, Recording, RecordingError, TextLines,
-    acc_unit_guess, check_time_base, gunzip_partial, over_limit_error, repair_recording, size_text,
+    GZIP_MAGIC, MAX_BAD_LINES, MAX_UNCOMPRESSED_BYTES, READ_ERRORS, ByteChunks, DamagedFileWarning, Recording,
+    RecordingError, TextLines, acc_unit_guess, check_time_base, gunzip_partial, make_stream, over_limit_error,
+    repair_recording, size_text,
 )
 
 ZIP_MAGIC = b"PK\x03\x04"
@@ -523,6 +525,18 @@ def gps_check(t_ns: np.ndarray, values: np.ndarray, baseline_s: float = 5.0, mov
         d = np.degrees(wrap_angle(np.radians(course[i][use] - np.degrees(np.arctan2(de[use], dn[use])))))
         out["course_vs_track_deg"] = float(np.median(np.abs(d)))
     return out
+
+
+def acc_only_recording(path: str, t_ns: np.ndarray, acc: np.ndarray, meta: dict, repairs: list[str], *,
+                       warn: bool = True, device: dict | None = None) -> Recording:
+    """The recording of an accelerometer-only file (one ``acc`` stream): its repairs warned, then :func:`finish`."""
+    rec = Recording({ACC: make_stream(ACC, t_ns, acc)}, metadata=meta, repairs=repairs, source=path)
+    if device:
+        rec.device = device
+    if warn:
+        for r in repairs:
+            warnings.warn(r, DamagedFileWarning, stacklevel=3)
+    return finish(rec, warn=warn)
 
 
 def finish(rec: Recording, *, warn: bool = True, unix_offset_ns: int | None = None) -> Recording:

@@ -31,15 +31,13 @@ Streams: ``acc``.
 from __future__ import annotations
 
 import os
-import warnings
 
 import numpy as np
 
-from core.conventions import ACC
-from core.recording import (
-    MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
+from core.recording import MAX_UNCOMPRESSED_BYTES, Recording, RecordingError, skip_bad_lines
+from core.importers._common import (
+    FileSet, acc_only_recording, acceleration_in_m_s2, read_single_csv, single_csv_files,
 )
-from core.importers._common import FileSet, acceleration_in_m_s2, finish, read_single_csv, single_csv_files
 from core.importers._csv import Table
 
 FORMAT = "accel-csv"
@@ -83,11 +81,7 @@ def read_accelcsv(path: str, *, warn: bool = True,
         "acc_from": "X, Y, Z (m/s^2, gravity included, Android device axes)",
         **notes,
     }
-    rec = Recording({ACC: make_stream(ACC, t_ns, acc)}, metadata=meta, repairs=repairs, source=path)
-    if warn:
-        for r in repairs:
-            warnings.warn(r, DamagedFileWarning, stacklevel=2)
-    return finish(rec, warn=warn)
+    return acc_only_recording(path, t_ns, acc, meta, repairs, warn=warn)
 
 
 def _read_values(text, where: str, repairs: list[str]) -> np.ndarray:

@@ -40,15 +40,14 @@ Streams: ``acc``.
 from __future__ import annotations
 
 import os
-import warnings
 
 import numpy as np
 
-from core.conventions import ACC, STANDARD_GRAVITY_M_S2
-from core.recording import (
-    MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
+from core.conventions import STANDARD_GRAVITY_M_S2
+from core.recording import MAX_UNCOMPRESSED_BYTES, Recording, RecordingError, skip_bad_lines
+from core.importers._common import (
+    FileSet, acc_only_recording, acceleration_in_m_s2, read_single_csv, single_csv_files,
 )
-from core.importers._common import FileSet, acceleration_in_m_s2, finish, read_single_csv, single_csv_files
 from core.importers._csv import Table
 
 FORMAT = "physics-toolbox"
@@ -108,12 +107,7 @@ def read_physicstoolbox(path: str, *, warn: bool = True,
         "unused_columns": [h for h in table.header if h.lower() not in used],
         **notes,
     }
-    rec = Recording({ACC: make_stream(ACC, t_ns, acc)}, metadata=meta, repairs=repairs, source=path)
-    rec.device = {"app": "Physics Toolbox Sensor Suite"}
-    if warn:
-        for r in repairs:
-            warnings.warn(r, DamagedFileWarning, stacklevel=2)
-    return finish(rec, warn=warn)
+    return acc_only_recording(path, t_ns, acc, meta, repairs, warn=warn, device={"app": "Physics Toolbox Sensor Suite"})
 
 
 def _read_table(text, where: str, repairs: list[str]) -> tuple[Table, dict]:

@@ -35,15 +35,13 @@ Streams: ``acc``.
 from __future__ import annotations
 
 import os
-import warnings
 
 import numpy as np
 
-from core.conventions import ACC
-from core.recording import (
-    MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
+from core.recording import MAX_UNCOMPRESSED_BYTES, Recording, RecordingError, skip_bad_lines
+from core.importers._common import (
+    FileSet, acc_only_recording, acceleration_in_m_s2, read_single_csv, single_csv_files,
 )
-from core.importers._common import FileSet, acceleration_in_m_s2, finish, read_single_csv, single_csv_files
 from core.importers._csv import Table
 
 FORMAT = "sensibility-testbed"
@@ -117,11 +115,7 @@ def read_sensibility(path: str, *, warn: bool = True,
         "lines_without_sample": int((~keep).sum()),
         **notes,
     }
-    rec = Recording({ACC: make_stream(ACC, t_ns, acc)}, metadata=meta, repairs=repairs, source=path)
-    if warn:
-        for r in repairs:
-            warnings.warn(r, DamagedFileWarning, stacklevel=2)
-    return finish(rec, warn=warn)
+    return acc_only_recording(path, t_ns, acc, meta, repairs, warn=warn)
 
 
 def _read_values(text, where: str, repairs: list[str]) -> np.ndarray:
