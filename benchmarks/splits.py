@@ -99,6 +99,10 @@ Further public recordings (issue #25, fetched into a folder outside the reposito
     clips of 20-500 steps whose count the ``*_result.csv`` files record (the README: "recorded steps"), the carry
     stated per file: hand, trouser pocket, coat pocket) is **tuning**.  The next repository added (the 8th) and the
     9th will be report, the 10th tuning.
+    Declared 2026-12-07 (the same search), before any number was seen on it: the 8th repository,
+    ``zDrakon/SensorDataExplorer`` (a 2016 high-school class's step-counter data; three SensorLog walks of 50 counted
+    steps with the phone in the right side trouser pocket, iPhone 6 Plus, acc + gyro + mag, the count and position
+    from the student's ``data_description.txt``), is **report**.
 
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was

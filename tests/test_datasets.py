@@ -203,6 +203,7 @@ def test_split_declarations():
     assert S.repo_split("parabiomech/25.GPS-TRACKING") == "report"
     # the fourth search (declared 2026-12-07, the rule's 7th repository): tuning; sgrzegorz, Omer1Eryilmaz report
     assert S.repo_split("yh570/sensibility_testbed") == "tuning"
+    assert S.repo_split("zDrakon/SensorDataExplorer") == "report"  # the 8th, declared the same day
     assert S.repo_split("sgrzegorz/StepApp") == S.repo_split("Omer1Eryilmaz/SignalProcessing") == "report"
     from benchmarks.run import DATASET_MODULES
     import importlib
