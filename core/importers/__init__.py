@@ -32,6 +32,9 @@ Formats (name: input -> reader):
 * ``sensibility-testbed``: a Sensibility Testbed accelerometer CSV ``Time, x, y, z`` (s since the script started,
   m/s^2 with gravity, ``None`` before the first event, ``\r`` line ends; ``.csv`` or ``.gz``, or a folder holding
   one) -> :func:`read_sensibility`
+* ``sensorlog``: a SensorLog (iOS) CSV with ``accelerometerTimestamp_sinceReboot``, ``accelerometerAccelerationX``
+  ... columns (g with iOS's sign, converted; gyroscope and magnetometer where logged; ``.csv`` or ``.gz``, or a folder
+  holding one) -> :func:`read_sensorlog`
 * ``matlab-mobile``: a MATLAB Mobile sensor log saved as a MAT-file (``timetable`` objects ``Acceleration``,
   ``AngularVelocity``, ``MagneticField``, ``Position``; ``.mat`` or ``.mat.gz``) -> :func:`read_matlabmobile`
 * ``pyshoe``: PyShoe processed trial, a MATLAB level-5 MAT-file (``.mat`` or ``.mat.gz``; read with numpy and
@@ -88,6 +91,7 @@ import zipfile
 from core.recording import MAGIC, MAX_UNCOMPRESSED_BYTES, Recording, RecordingError, read_recording
 from core.importers import accelcsv as _acsv
 from core.importers import sensibility as _sens
+from core.importers import sensorlog as _slog
 from core.importers import brajdic as _bh
 from core.importers import matlabmobile as _mm
 from core.importers import getsensordata as _gsd
@@ -105,6 +109,7 @@ from core.importers._common import FileSet, head_bytes
 from core.importers.beside import attach_truth_beside
 from core.importers.accelcsv import read_accelcsv
 from core.importers.sensibility import read_sensibility
+from core.importers.sensorlog import read_sensorlog
 from core.importers.brajdic import read_brajdic
 from core.importers.matlabmobile import read_matlabmobile
 from core.importers.getsensordata import read_getsensordata
@@ -132,6 +137,7 @@ PYSHOE = _ps.FORMAT
 PHYSICS_TOOLBOX = _ptb.FORMAT
 ACCEL_CSV = _acsv.FORMAT
 SENSIBILITY = _sens.FORMAT
+SENSORLOG = _slog.FORMAT
 MATLAB_MOBILE = _mm.FORMAT
 
 #: format name -> what it is (for messages and the CLI's help)
@@ -160,6 +166,8 @@ FORMATS = {
                "gravity; .csv or .gz)",
     SENSIBILITY: "Sensibility Testbed accelerometer CSV ('Time, x, y, z' header, s since the script started, m/s^2 "
                  "with gravity; .csv or .gz)",
+    SENSORLOG: "SensorLog (iOS) CSV ('accelerometerTimestamp_sinceReboot', 'accelerometerAccelerationX', ... columns, g; "
+               ".csv or .gz)",
     MATLAB_MOBILE: "MATLAB Mobile sensor log saved as a MAT-file (timetables Acceleration, AngularVelocity, "
                    "MagneticField, Position; .mat or .mat.gz)",
 }
@@ -180,6 +188,7 @@ _SHORT = {
     PHYSICS_TOOLBOX: "physics-toolbox (Physics Toolbox g-Force Meter CSV)",
     ACCEL_CSV: "accel-csv (Timestamp,Milliseconds,X,Y,Z accelerometer CSV)",
     SENSIBILITY: "sensibility-testbed (Sensibility Testbed Time, x, y, z CSV)",
+    SENSORLOG: "sensorlog (SensorLog iOS CSV)",
     MATLAB_MOBILE: "matlab-mobile (MATLAB Mobile sensor log .mat)",
 }
 
@@ -201,6 +210,7 @@ _TEXT_TESTS = [
     (_ptb.looks_like_csv, PHYSICS_TOOLBOX),
     (_acsv.looks_like_csv, ACCEL_CSV),
     (_sens.looks_like_csv, SENSIBILITY),
+    (_slog.looks_like_csv, SENSORLOG),
     (_bh.looks_like_text, BRAJDIC),
     (_ox.looks_like, OXFORD),
 ]
@@ -239,6 +249,8 @@ def _detect_fileset(fs: FileSet) -> str | None:
         return ACCEL_CSV
     if _sens.csv_files(fs):
         return SENSIBILITY
+    if _slog.csv_files(fs):
+        return SENSORLOG
     return None
 
 
@@ -334,7 +346,7 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
         return read_sensorlogger(path, platform=platform, warn=warn, max_uncompressed_bytes=limit)
     readers = {PHYPHOX: read_phyphox, MSINDOOR: read_msindoor, BRAJDIC: read_brajdic, OXFORD: read_oxford,
                TRUNDLE: read_trundle, XIO: read_xio, XSENS: read_xsens, PYSHOE: read_pyshoe,
-               PHYSICS_TOOLBOX: read_physicstoolbox, ACCEL_CSV: read_accelcsv, SENSIBILITY: read_sensibility,
+               PHYSICS_TOOLBOX: read_physicstoolbox, ACCEL_CSV: read_accelcsv, SENSIBILITY: read_sensibility, SENSORLOG: read_sensorlog,
                MATLAB_MOBILE: read_matlabmobile}
     rec = readers[fmt](path, warn=warn, max_uncompressed_bytes=limit)
     return attach_truth_beside(path, rec) if truth_beside else rec
@@ -342,6 +354,6 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
 
 __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",
            "read_phyphox", "read_msindoor", "read_brajdic", "read_oxford", "read_trundle", "read_xio", "read_xsens",
-           "read_pyshoe", "read_physicstoolbox", "read_accelcsv", "read_sensibility", "read_matlabmobile", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
+           "read_pyshoe", "read_physicstoolbox", "read_accelcsv", "read_sensibility", "read_sensorlog", "read_matlabmobile", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
            "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE", "XIO", "XSENS", "PYSHOE", "PHYSICS_TOOLBOX",
-           "ACCEL_CSV", "SENSIBILITY", "MATLAB_MOBILE"]
+           "ACCEL_CSV", "SENSIBILITY", "SENSORLOG", "MATLAB_MOBILE"]

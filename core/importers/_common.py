@@ -300,7 +300,9 @@ def single_csv_files(fs: FileSet, looks_like) -> list[str]:
 def read_single_csv(path: str, looks_like, read_table, what: str, repairs: list[str],
                     limit: int | None = MAX_UNCOMPRESSED_BYTES):
     """``read_table(text, where, repairs)`` on one CSV file (plain or gzip), or on the one CSV of a folder or zip
-    that ``looks_like`` accepts (none, or several, is a :class:`RecordingError` naming ``what``)."""
+    that ``looks_like`` accepts (none, or several, is a :class:`RecordingError` naming ``what``; no such path too)."""
+    if not os.path.exists(path):
+        raise RecordingError("cannot open: no such file or folder", path)
     if os.path.isdir(path) or is_zip(path):
         with FileSet(path, limit) as fs:
             names = single_csv_files(fs, looks_like)

@@ -30,8 +30,6 @@ Streams: ``acc``.
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from core.recording import MAX_UNCOMPRESSED_BYTES, Recording, RecordingError, skip_bad_lines
@@ -64,8 +62,6 @@ def read_accelcsv(path: str, *, warn: bool = True,
                   max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
     """Read a ``Timestamp,Milliseconds,X,Y,Z`` CSV (plain or gzip, or the one such CSV of a folder or zip)."""
     path = str(path)
-    if not os.path.exists(path):
-        raise RecordingError("cannot open: no such file or folder", path)
     repairs: list[str] = []
     notes: dict = {}
     v = read_single_csv(path, looks_like_csv, _read_values, WHAT, repairs, max_uncompressed_bytes)

@@ -39,8 +39,6 @@ Streams: ``acc``.
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from core.conventions import STANDARD_GRAVITY_M_S2
@@ -82,8 +80,6 @@ def read_physicstoolbox(path: str, *, warn: bool = True,
     to over ``max_uncompressed_bytes`` is refused while it is read.
     """
     path = str(path)
-    if not os.path.exists(path):
-        raise RecordingError("cannot open: no such file or folder", path)
     repairs: list[str] = []
     notes: dict = {}
     table, out = read_single_csv(path, looks_like_csv, _read_table, "Physics Toolbox g-Force Meter CSV", repairs,
