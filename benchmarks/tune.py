@@ -110,7 +110,7 @@ def evaluate(pipeline_kwargs_factory=None, split: str = S.TUNING, datasets=("ipi
     return out
 
 
-def _parse_set(items) -> dict:
+def parse_set(items) -> dict:
     """``NAME=VALUE`` pairs (VALUE a Python literal) -> Pipeline keyword overrides."""
     out = {}
     for item in items or ():
@@ -138,7 +138,7 @@ def main(argv=None) -> int:
     ap.add_argument("-v", "--verbose", action="store_true", help="per-recording progress on stderr")
     args = ap.parse_args(argv)
     try:
-        overrides = _parse_set(args.set)
+        overrides = parse_set(args.set)
     except argparse.ArgumentTypeError as e:
         ap.error(str(e))
     factory = (lambda: dict(overrides)) if overrides else None

@@ -168,7 +168,7 @@ def test_tuning_harness_refuses_the_report_split(tmp_path):
     with pytest.raises(FileNotFoundError):
         tune.evaluate(split="report", allow_report=True, data_root=tmp_path / "missing")
     assert tune.main(["--split", "report", "--data", str(tmp_path)]) == 2
-    assert tune._parse_set(["min_bout_steps=2", "grid_rate_hz=50.0"]) == {"min_bout_steps": 2, "grid_rate_hz": 50.0}
+    assert tune.parse_set(["min_bout_steps=2", "grid_rate_hz=50.0"]) == {"min_bout_steps": 2, "grid_rate_hz": 50.0}
 
 
 def test_report_labels_splits_and_compares_with_the_baseline(tmp_path, monkeypatch):
