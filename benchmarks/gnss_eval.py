@@ -23,7 +23,8 @@ true position then).
 Hidden windows: lengths of 1, 3 and 5 minutes, starting every 60 s from 120 s
 after walking starts (the calibration period), as long as they end 15 s
 before the walk does.  The simulator: one 5-minute outage from minute 6 of a
-15-minute street walk.
+15-minute street walk, given its site (declination, field) as a live app
+knows it from its first fix.
 
 Before running, the site's magnetic declination (WMM, from the first good fix
 and the recording's date) is given to the attitude filter where the recording
@@ -274,13 +275,17 @@ def sim_walks(seeds, minutes: float = 15.0, start_s: float = 360.0, length_s: fl
               plot_seed: int | None = None) -> list[dict]:
     from core.geodesy import enu_to_geodetic, geodetic_to_enu
     from core.pdr.pipeline import Pipeline
-    from desktop.simulator import outdoor_walk
+    from desktop.simulator import outdoor_site, outdoor_walk
 
     out = []
     for seed in seeds:
         walk = outdoor_walk(seed, minutes=minutes)
         rec, truth = walk.recording, walk.truth
-        res = Pipeline().run(rec)
+        pipe = Pipeline()
+        # the site, as for the real walks (_site_declination) and gnss_faults' simulated ones: outdoors the attitude
+        # filter drops the field's heading-offset state (issue #26: without this the outdoor walk ran the indoor filter)
+        pipe.set_site(*outdoor_site(rec))
+        res = pipe.run(rec)
         t0 = rec.t0_ns
         row = {"seed": seed, "outages": []}
         for v in VARIANTS:

@@ -88,7 +88,6 @@ headlines with the split ``quick`` for the sim.
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import json
 import math
 import sys
@@ -210,16 +209,9 @@ def fused_en(fr, origin_lat_lon) -> np.ndarray:
 # 1. simulated walks with faults
 
 
-def _year_unix_ns(year: float) -> int:
-    y = int(year)
-    a = _dt.datetime(y, 1, 1, tzinfo=_dt.timezone.utc)
-    b = _dt.datetime(y + 1, 1, 1, tzinfo=_dt.timezone.utc)
-    return int((a + (year - y) * (b - a)).timestamp() * 1e9)
-
-
 def sim_walk(seed: int, split: str, filters) -> dict:
     from core.pdr.pipeline import Pipeline
-    from desktop.simulator import GpsModel, outdoor_walk
+    from desktop.simulator import GpsModel, outdoor_site, outdoor_walk
 
     t_start = time.perf_counter()
     walk = outdoor_walk(seed, minutes=SIM_MINUTES, rate_hz=SIM_RATE_HZ, gps=GpsModel(faults=fault_schedule(seed)))
@@ -227,7 +219,7 @@ def sim_walk(seed: int, split: str, filters) -> dict:
     g = truth.gps
     meta = rec.metadata
     pipe = Pipeline()
-    pipe.set_site(*meta["origin_lat_lon"], meta["origin_alt_m"], _year_unix_ns(meta["outdoor_walk"]["year"]))
+    pipe.set_site(*outdoor_site(rec))
     res = pipe.run(rec)
     gps, t0 = rec.streams[GPS], rec.t0_ns
     t_steps = np.array([s.t_ns for s in res.steps], dtype=np.int64)
