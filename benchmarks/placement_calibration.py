@@ -23,6 +23,9 @@ recording), independent of the pipeline's detectors:
     RMS of the norm above 8 Hz (m/s^2): the heel strikes' sharp part.
 ``gyro_rms``, ``gyro_p99``, ``axis_share``
     RMS and 99th percentile of the gyroscope's rate (rad/s) and the share of its variance on its main axis.
+``gyro_skew``
+    median over 4-s windows of the ``|skewness|`` of the rate about the window's main axis (the thigh's slow
+    stance and quick swing against an arm's pendulum).
 ``tilt_rms_deg``
     RMS angle between the 0.2-s mean of the specific force and its mean direction (deg).
 
@@ -111,8 +114,23 @@ def gait_stats(t_ns, acc, gyro=None, *, gyro_t_ns=None, trim: float = 0.1) -> di
         gc = g - g.mean(axis=0)
         ev = np.linalg.eigvalsh(gc.T @ gc)
         out.update(gyro_rms=float(np.sqrt(np.mean(rate ** 2))), gyro_p99=float(np.percentile(rate, 99)),
-                   axis_share=float(ev[-1] / ev.sum()))
+                   axis_share=float(ev[-1] / ev.sum()), gyro_skew=_window_skew(g))
     return out
+
+
+def _window_skew(g, window_s: float = 4.0, hop_s: float = 0.5, min_rms_rad_s: float = 0.5) -> float:
+    """Median over 4-s windows (turning faster than ``min_rms_rad_s`` about their main axis) of the ``|skewness|``
+    of the rate about the window's main axis (:func:`core.pdr.carry.rotation_skew`)."""
+    from core.pdr.carry import rotation_skew
+
+    n, hop = int(window_s * GRID_HZ), int(hop_s * GRID_HZ)
+    out = []
+    for i in range(0, len(g) - n, hop):
+        wc = g[i:i + n] - g[i:i + n].mean(axis=0)
+        p = wc @ np.linalg.eigh(wc.T @ wc)[1][:, -1]
+        if float(np.sqrt(np.mean(p * p))) >= min_rms_rad_s:
+            out.append(rotation_skew(p))
+    return float(np.median(out)) if out else math.nan
 
 
 def recording_stats(rec) -> dict:
@@ -128,7 +146,7 @@ REAL_TUNING = (
 )
 
 COLUMNS = ("f_step", "norm_sd", "r_step", "r_stride", "peak_ratio", "impact_hf", "tilt_rms_deg", "gyro_rms",
-           "gyro_p99", "axis_share")
+           "gyro_p99", "axis_share", "gyro_skew")
 
 
 def sim_rows(placement: str, seeds, **options) -> list[dict]:
