@@ -398,3 +398,22 @@ def test_soft_soled_pocket_is_a_pocket_and_counts_every_footfall(seed):
 
     without = Pipeline(step_gates={k: v for k, v in STEP_GATES.items() if k != UNEVEN_POCKET}).run(w.recording)
     assert len(without.steps) <= w.truth.n_steps - 10, len(without.steps)  # the weak half-strides lost
+
+
+def test_uneven_needs_unlike_half_strides_a_band_and_no_screen_up():
+    """``uneven`` (the pocket's limb gates): on from a stride share of ``uneven_on_share``, kept down to
+    ``uneven_off_share`` (a band), off below it, when not walking, or whenever the screen faces up or down."""
+    det = CarryModeDetector()
+    base = {"gravity_x": 0.1, "gravity_y": -0.99, "gravity_z": 0.05, "tilt_rms_rad": 0.15, "acc_std_m_s2": 1.5,
+            "r_stride": 0.95, "stride_period_s": 1.2, "horizontal_ratio": 1.3, "tilt_stride_corr": 0.9,
+            "coherence": 0.95}
+
+    def hop(k, share, gz=0.05, std=1.5):
+        f = dict(base, gravity_z=gz, acc_std_m_s2=std, r_step=0.95 - share, stride_share=share,
+                 periodicity=max(0.95, 0.95 - share))
+        det.decide(k * 500_000_000, f)
+        return det.uneven
+
+    seq = [hop(0, 0.5), hop(1, 0.8), hop(2, 0.65), hop(3, 0.55), hop(4, 0.8), hop(5, 0.8, gz=0.5),
+           hop(6, 0.9), hop(7, 0.9, std=0.01)]
+    assert seq == [False, True, True, False, True, False, True, False], seq
