@@ -386,17 +386,21 @@ def test_soft_soled_pocket_is_a_pocket_and_counts_every_footfall(seed):
     bump, so the norm repeats every stride only (stride share about 1) and its horizontal acceleration is an arm's.
     Before issue #25's thigh rule it was taken for a swinging hand (the real report clips in slippers: 59-63 % of
     the time); called a pocket with the hand-held gates it counts 23-24 of 42.  The thigh's skewed rotation keeps it
-    a pocket and the detector's ``uneven`` counts it with the limb gates: within 2 of the heel strikes."""
+    a pocket (``thigh_min_skew``, an option off by default) and the detector's ``uneven`` counts it with the limb
+    gates: within 2 of the heel strikes."""
     w = simulate_walk([(0.0, 0.0), (25.0, 0.0)], step_frequency_hz=1.6, bounce_scale=0.3, placement="pocket",
                       seed=seed, still_start_s=2.0, still_end_s=1.0)
-    p = Pipeline()
+    p = Pipeline(carry=CarryModeDetector(thigh_min_skew=0.32))
     res = p.run(w.recording)
     modes = walking_modes(res, w.truth)
     assert modes.get(CARRY_POCKET, 0.0) / sum(modes.values()) >= 0.7, modes
     assert abs(len(res.steps) - w.truth.n_steps) <= 2, (len(res.steps), w.truth.n_steps)
+    default = walking_modes(Pipeline().run(w.recording), w.truth)  # the default: taken for a swinging hand
+    assert default.get(CARRY_SWINGING, 0.0) > default.get(CARRY_POCKET, 0.0), default
     from core.pdr.steps import UNEVEN_POCKET
 
-    without = Pipeline(step_gates={k: v for k, v in STEP_GATES.items() if k != UNEVEN_POCKET}).run(w.recording)
+    without = Pipeline(carry=CarryModeDetector(thigh_min_skew=0.32),
+                       step_gates={k: v for k, v in STEP_GATES.items() if k != UNEVEN_POCKET}).run(w.recording)
     assert len(without.steps) <= w.truth.n_steps - 10, len(without.steps)  # the weak half-strides lost
 
 

@@ -204,9 +204,13 @@ class CarryModeDetector:
         With a gyroscope: an RMS rotation above this, periodic at the stride, is a swinging
         arm whatever the norm's stride share (a hard swing's centripetal acceleration repeats every step)
         (rad/s; a thigh turns at about 1.5, an arm swung normally at 2-2.5).
-    thigh_min_skew : float
-        With a gyroscope: ``gyro_skew`` (the ``|skewness|`` of the rotation rate about its main axis) from which a
-        limb is the thigh, not the arm, whatever the arm evidence (issue #25).  The thigh extends slowly through
+    thigh_min_skew : float or None
+        Off by default (None); 0.32 turns it on.  With a gyroscope: ``gyro_skew`` (the ``|skewness|`` of the rotation
+        rate about its main axis) from which a limb is the thigh, not the arm, whatever the arm evidence (issue #25).
+        No real tuning recording shows it helping (the one real pocket walk with a gyroscope, lopen, is called "bag"
+        either way), and with it on the report clips seen once (real_walks at 7baa561) lost more steps: Omer1Eryilmaz
+        pockets 34/41/36/39 -> 18/27/36/36, waving hands 34/27 -> 17/0 (in a pocket the rotation gate stays at its
+        hand-held limit, which a swinging hand taken for a thigh exceeds).  The thigh extends slowly through
         stance and flexes quickly in swing (its rate is skewed); an arm swings as a pendulum, the same both ways.
         The tuning walk thomasdingemanse_lopen (trouser pocket by inference) reads 0.22 / 0.30 / 0.38 (quartiles
         over 4-s windows; it is called "bag", a trunk, so the arm evidence does not apply to it), the simulator's
@@ -240,7 +244,7 @@ class CarryModeDetector:
                  max_gait_rotation_rad_s: float = 4.5, swing_axis_share: float = 0.85, screen_up_z: float = 0.3,
                  upright_y: float = 0.6, ear_incline_x: float = 0.22, limb_tilt_rad: float = 0.16,
                  limb_stride_share: float = 0.3, min_limb_stride_share: float = 0.15, arm_evidence: float = 1.1,
-                 swing_gyro_rad_s: float = 2.0, hard_swing_gyro_rad_s: float = 3.5, thigh_min_skew: float = 0.32,
+                 swing_gyro_rad_s: float = 2.0, hard_swing_gyro_rad_s: float = 3.5, thigh_min_skew: float | None = None,
                  uneven_on_share: float = 0.75, uneven_off_share: float = 0.6,
                  switch_s: float = 3.0, switch_still_s: float = 2.0):
         self.grid_rate_hz = float(grid_rate_hz)
@@ -271,7 +275,7 @@ class CarryModeDetector:
         self.arm_evidence = float(arm_evidence)
         self.swing_gyro_rad_s = float(swing_gyro_rad_s)
         self.hard_swing_gyro_rad_s = float(hard_swing_gyro_rad_s)
-        self.thigh_min_skew = float(thigh_min_skew)
+        self.thigh_min_skew = None if thigh_min_skew is None else float(thigh_min_skew)
         self.uneven_on_share = float(uneven_on_share)
         self.uneven_off_share = float(uneven_off_share)
         self.switch_s = float(switch_s)
@@ -523,7 +527,7 @@ class CarryModeDetector:
             hard_swing = self._gait_rotation(f) * _sig(f["gyro_rms_rad_s"], self.hard_swing_gyro_rad_s, 0.3)
             limb = max(limb, hard_swing)
             arm = max(arm, hard_swing)
-            if "gyro_skew" in f:  # the thigh's skewed rotation (slow stance, quick swing) is no pendulum arm's
+            if self.thigh_min_skew is not None and "gyro_skew" in f:  # the thigh's skewed rotation is no arm's
                 arm *= 1.0 - _sig(f["gyro_skew"], self.thigh_min_skew, 0.03)
         gx, gy, gz = f["gravity_x"], f["gravity_y"], f["gravity_z"]
         # read in the hand: screen up, pitched towards the face (gravity in the device's y-z plane, y not down)
