@@ -16,7 +16,8 @@ first):
    features over all hops at once (vectorised), each hop's decision core's;
    its mode and step period at every grid sample;
 5. one step detector (eqs. 2-3) per distinct carry-mode gates of
-   ``step_gates`` (usually two: the hand-held and the swinging hand's), each
+   ``step_gates`` (usually four: the hand-held, the gentle walk's, the swinging hand's
+   and the uneven pocket's limb gates), each
    over the whole grid with the carry detector's step period, and the speed
    window at their peaks (compiled);
 6. with a GPS fusion (``Pipeline(gnss=...)``) and ``site_from_gps``: the
