@@ -108,6 +108,12 @@ _SIM_TAG = 0x4341  # the benchmark's own draws per seed: default_rng([seed, tag]
 # the simulator's recordings
 
 
+#: the swinging hand's ``swing_scale`` (:mod:`desktop.placements`) is drawn per seed in this range (issue #25): the
+#: simulator's default arm turns the phone at 3.6 rad/s (peak) at 1.26 m/s, a hand swung hard in a real clip at up
+#: to 9-10 rad/s (``swing_scale`` 2.5); no tuning-split real recording of a swinging hand exists to narrow it
+SIM_SWING_SCALE = (1.0, 2.5)
+
+
 def sim_walk(placement: str, seed: int):
     """One simulated recording of ``placement`` (a walk, or 40 s of not walking for "still") for ``seed``."""
     from desktop.placements import STILL_KINDS, simulate_still
@@ -121,8 +127,11 @@ def sim_walk(placement: str, seed: int):
         return simulate_still(STILL_KINDS[seed % len(STILL_KINDS)], 40.0, seed=seed), height
     way = [(0.0, 0.0), (legs[0], 0.0), (legs[0], legs[1]), (legs[0] - legs[2], legs[1]),
            (legs[0] - legs[2], legs[1] - legs[3])]
+    options = None
+    if placement == CARRY_SWINGING:  # a gentle to a hard swing (issue #25), its own draw: the walk is unchanged
+        options = {"swing_scale": float(np.random.default_rng([seed, _SIM_TAG, 1]).uniform(*SIM_SWING_SCALE))}
     return simulate_walk(way, step_frequency_hz=f, height_m=height, placement=placement, seed=seed,
-                         still_start_s=3.0, still_end_s=3.0), height
+                         still_start_s=3.0, still_end_s=3.0, placement_options=options), height
 
 
 def sim_trial(placement: str, seed: int) -> Trial:

@@ -66,7 +66,9 @@ Features and the physics they come from
     lag is high.  Waving the phone to calibrate the compass is as fast but
     irregular and about all three axes: ``rotation_periodic`` is False then,
     and the pipeline's rotation gate keeps those peaks out even in the
-    swinging mode.  Periodicity decides, not the axis (issue #25): a real
+    swinging mode.  ``gyro_skew``: the ``|skewness|`` of the rate about the
+    main axis; a thigh's rotation is skewed (slow extension in stance, quick
+    flexion in swing), an arm's pendulum swing is not (issue #25).  Periodicity decides, not the axis (issue #25): a real
     hand twists the phone about the forearm as it swings, which spreads the
     rotation over two axes (main-axis share 0.5-0.7) but keeps it periodic at
     the stride; a rotation periodic at the stride while the norm is periodic
@@ -101,6 +103,15 @@ def _sig(x: float, x0: float, width: float) -> float:
     if z < -30.0:
         return 0.0
     return 1.0 / (1.0 + math.exp(-z))
+
+
+def rotation_skew(p: np.ndarray) -> float:
+    """``|skewness|`` of the rotation rate about its main axis ``p`` (zero-mean, rad/s): 0 for a pendulum's
+    symmetric swing (an arm), large for the thigh's slow extension in stance and quick flexion in swing."""
+    m2 = float(np.add.reduce(p * p)) / len(p)
+    if m2 < 1e-12:
+        return 0.0
+    return abs(float(np.add.reduce(p * p * p)) / len(p)) / (m2 * math.sqrt(m2))
 
 
 class CarryModeDetector:
@@ -193,6 +204,31 @@ class CarryModeDetector:
         With a gyroscope: an RMS rotation above this, periodic at the stride, is a swinging
         arm whatever the norm's stride share (a hard swing's centripetal acceleration repeats every step)
         (rad/s; a thigh turns at about 1.5, an arm swung normally at 2-2.5).
+    thigh_min_skew : float or None
+        Off by default (None); 0.32 turns it on.  With a gyroscope: ``gyro_skew`` (the ``|skewness|`` of the rotation
+        rate about its main axis) from which a limb is the thigh, not the arm, whatever the arm evidence (issue #25).
+        No real tuning recording shows it helping (the one real pocket walk with a gyroscope, lopen, is called "bag"
+        either way), and with it on the report clips seen once (real_walks at 7baa561) lost more steps: Omer1Eryilmaz
+        pockets 34/41/36/39 -> 18/27/36/36, waving hands 34/27 -> 17/0 (in a pocket the rotation gate stays at its
+        hand-held limit, which a swinging hand taken for a thigh exceeds).  The thigh extends slowly through
+        stance and flexes quickly in swing (its rate is skewed); an arm swings as a pendulum, the same both ways.
+        The tuning walk thomasdingemanse_lopen (trouser pocket by inference) reads 0.22 / 0.30 / 0.38 (quartiles
+        over 4-s windows; it is called "bag", a trunk, so the arm evidence does not apply to it), the simulator's
+        calibrated pocket 0.48-0.69, its swinging hand (gentle to hard, with a twisting wrist) 0.03-0.14 over whole
+        walks and up to 0.26 in single windows of a short hard swing (a window of a non-whole number of strides).  A soft-soled pocket walk (the simulator's pocket with a third of its heel
+        strikes) has an arm's stride share and horizontal acceleration: only the rotation's shape tells it apart.
+    uneven_on_share, uneven_off_share : float
+        :attr:`uneven` turns on when a walking window's ``stride_share`` reaches ``uneven_on_share`` and off under
+        ``uneven_off_share`` (a band, so that it does not flap), when not walking or when the screen faces up or down
+        (``|gravity_z| >= screen_up_z``: a phone in a trouser pocket stands along the thigh or on its edge; every
+        tuning pocket reads ``|gravity_z|`` under 0.2, the simulator's under 0.1): the two half-strides are so
+        unlike (the norm's step-lag autocorrelation a fifth of its stride-lag one or less) that every other valley
+        can stay above ``g`` and every other peak under ``A_th``.  The pipeline then counts a pocket's steps with
+        the limb gates (:data:`core.pdr.steps.UNEVEN_POCKET`, issue #25).  The simulator's pocket reads 0.22-0.37
+        (counted within 1 % with the hand-held gates), with a third of its heel strikes (soft soles) 0.9-1.07 (23
+        of 42 steps with the hand-held gates, 41 with the limb gates); the tuning clip psy901 0.52 in the median
+        (105 steps with 0.75 / 0.6, as without; 106 with 0.6 / 0.45: each switch of detector can add a step); the
+        tuning walk lopen 0.07.
     switch_s : float
         A new walking mode must win for this long before it replaces the current one (s).
     switch_still_s : float
@@ -208,7 +244,8 @@ class CarryModeDetector:
                  max_gait_rotation_rad_s: float = 4.5, swing_axis_share: float = 0.85, screen_up_z: float = 0.3,
                  upright_y: float = 0.6, ear_incline_x: float = 0.22, limb_tilt_rad: float = 0.16,
                  limb_stride_share: float = 0.3, min_limb_stride_share: float = 0.15, arm_evidence: float = 1.1,
-                 swing_gyro_rad_s: float = 2.0, hard_swing_gyro_rad_s: float = 3.5,
+                 swing_gyro_rad_s: float = 2.0, hard_swing_gyro_rad_s: float = 3.5, thigh_min_skew: float | None = None,
+                 uneven_on_share: float = 0.75, uneven_off_share: float = 0.6,
                  switch_s: float = 3.0, switch_still_s: float = 2.0):
         self.grid_rate_hz = float(grid_rate_hz)
         self.window_s = float(window_s)
@@ -238,6 +275,9 @@ class CarryModeDetector:
         self.arm_evidence = float(arm_evidence)
         self.swing_gyro_rad_s = float(swing_gyro_rad_s)
         self.hard_swing_gyro_rad_s = float(hard_swing_gyro_rad_s)
+        self.thigh_min_skew = None if thigh_min_skew is None else float(thigh_min_skew)
+        self.uneven_on_share = float(uneven_on_share)
+        self.uneven_off_share = float(uneven_off_share)
         self.switch_s = float(switch_s)
         self.switch_still_s = float(switch_still_s)
         self.reset()
@@ -276,6 +316,8 @@ class CarryModeDetector:
         self.rotation_periodic = False
         #: walking gently (a periodic gait whose norm moves little; see ``gentle_max_std_m_s2``)
         self.gentle = False
+        #: the two half-strides are very unlike (see ``uneven_on_share``)
+        self.uneven = False
         #: the mode of a walk is not settled yet (issue #25): before the first full window, and while the mode is
         #: ``still`` with a walking mode waiting out its hysteresis (a walk starting).  The pipeline holds its
         #: steps meanwhile, so that the walking mode that follows counts them with its own gates (both legs of a
@@ -406,7 +448,8 @@ class CarryModeDetector:
         if self._has_gyro:
             g_rms = math.sqrt(float(np.add.reduce(np.einsum("ij,ij->i", gyr, gyr))) / n)
             share = float(ge[-1] / max(float(np.sum(ge)), 1e-12))
-            f.update(gyro_rms_rad_s=g_rms, gyro_axis_share=share, gyro_periodicity=float(r_all[2, k2]) * (n / (n - k2)))
+            f.update(gyro_rms_rad_s=g_rms, gyro_axis_share=share, gyro_periodicity=float(r_all[2, k2]) * (n / (n - k2)),
+                     gyro_skew=rotation_skew(rows[2]))
         return f
 
     def _stride_lag(self, r: np.ndarray, r_gyro: np.ndarray | None, k2: int, n: int, tilt_rms: float) -> int:
@@ -484,6 +527,8 @@ class CarryModeDetector:
             hard_swing = self._gait_rotation(f) * _sig(f["gyro_rms_rad_s"], self.hard_swing_gyro_rad_s, 0.3)
             limb = max(limb, hard_swing)
             arm = max(arm, hard_swing)
+            if self.thigh_min_skew is not None and "gyro_skew" in f:  # the thigh's skewed rotation is no arm's
+                arm *= 1.0 - _sig(f["gyro_skew"], self.thigh_min_skew, 0.03)
         gx, gy, gz = f["gravity_x"], f["gravity_y"], f["gravity_z"]
         # read in the hand: screen up, pitched towards the face (gravity in the device's y-z plane, y not down)
         hand = _sig(gz, self.screen_up_z, 0.06) * (1.0 - _sig(abs(gx), 0.5, 0.06)) * _sig(gy, -0.3, 0.06)
@@ -531,6 +576,11 @@ class CarryModeDetector:
             self.gentle = False
         elif both >= self.gentle_min_periodicity and self.gentle_min_std_m_s2 <= std < self.gentle_max_std_m_s2:
             self.gentle = True
+        # a phone in a trouser pocket stands along the thigh (or on its edge): never screen up or down
+        if not walking or f["stride_share"] < self.uneven_off_share or abs(f["gravity_z"]) >= self.screen_up_z:
+            self.uneven = False
+        elif f["stride_share"] >= self.uneven_on_share:
+            self.uneven = True
         if not self._decided:
             self._decided = True
             if best != self.mode:

@@ -71,7 +71,7 @@ from core.pdr.carry import CarryModeDetector
 from core.pdr.deadreckoning import DeadReckoner
 from core.pdr.gapbridge import AccGapBridge, EstimatedStep, GapVerdict
 from core.pdr.heading import RotationSmoother, interval_heading
-from core.pdr.steps import GENTLE, STEP_GATES, StepDetector, StepEvent
+from core.pdr.steps import GENTLE, STEP_GATES, UNEVEN_POCKET, StepDetector, StepEvent
 from core.pdr.velocity import SpeedFeatureWindow
 from core.pdr.walkdir import WALKING_DIRECTIONS, WalkingDirection
 from core.pdr.stride import StepFeatures, StrideModel, WeinbergStride
@@ -737,13 +737,23 @@ class Pipeline:
                     held.popleft()
                 if det is active:
                     out = ev
-        new = self._det_of[GENTLE if c.gentle and self._gentle_applies(mode) else mode]
+        new = self._det_of[self._gates_key(mode, c.gentle, c.uneven)]
         if new is not active:
             self._switch_detector(new, tg, settling)
             return None
         if out is not None:
             self._candidate(out, regs, rot)
         return out
+
+    def _gates_key(self, mode: str, gentle: bool, uneven: bool) -> str:
+        """The key of ``step_gates`` in force: the mode's, a gentle walk's (:meth:`_gentle_applies`) or, in a pocket
+        whose two half-strides are very unlike (the carry detector's ``uneven``), the limb gates of
+        ``UNEVEN_POCKET`` (issue #25)."""
+        if gentle and self._gentle_applies(mode):
+            return GENTLE
+        if uneven and mode == CARRY_POCKET and UNEVEN_POCKET in self.step_gates:
+            return UNEVEN_POCKET
+        return mode
 
     def _gentle_applies(self, mode: str) -> bool:
         """A gentle walk (the carry detector's ``gentle``) is counted with the ``GENTLE`` gates in the modes that

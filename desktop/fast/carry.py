@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.conventions import CARRY_MODES
+from core.pdr.carry import rotation_skew
 
 #: hops whose features are batched together (bounds the memory: 512 windows of 200 x 6 floats and their FFTs)
 HOP_CHUNK = 512
@@ -108,7 +109,7 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
         rg = _autocorr(det, main)
         double |= ambiguous & np.asarray(has_gyro, dtype=bool) & (rg[rows, k2] < anti)
         k2 = np.where(double, k4, k2)
-        gyro = (g_rms, share, rg[rows, k2])
+        gyro = (g_rms, share, rg[rows, k2], [rotation_skew(mrow) for mrow in main])
     else:
         k2 = np.where(double, k4, k2)
     ks = k2 // 2
@@ -140,7 +141,7 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
              "tilt_stride_corr": ts, "horizontal_ratio": math.sqrt(ho / ve) if ve > 1e-9 else 0.0}
         if has_gyro[i]:
             f.update(gyro_rms_rad_s=float(gyro[0][i]), gyro_axis_share=float(gyro[1][i]),
-                     gyro_periodicity=float(gyro[2][i]))
+                     gyro_periodicity=float(gyro[2][i]), gyro_skew=gyro[3][i])
         out.append(f)
     return out
 
@@ -165,6 +166,7 @@ class CarryTrack:
     step_period_s: np.ndarray  #: the detector's step period (nan: unknown)
     rotation_periodic: np.ndarray  #: bool: the rotation is periodic at the stride (core's rotation_periodic)
     gentle: np.ndarray  #: bool: a gentle walk (the detector's ``gentle``)
+    uneven: np.ndarray  #: bool: the two half-strides very unlike (the detector's ``uneven``)
     n_changes: np.ndarray  #: how many mode changes were logged so far
     changes: list  #: the detector's change log at the end
     settling: np.ndarray  #: bool: the detector's ``settling`` (a walk's mode not settled yet)
@@ -191,6 +193,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     periods = [det.step_period_s]
     periodic = [det.rotation_periodic]
     gentle = [det.gentle]
+    uneven = [det.uneven]
     settling = [det.settling]
     n_changes = [len(det.changes)]
     view = np.lib.stride_tricks.sliding_window_view(rows, n, axis=0) if n_grid >= n else None
@@ -204,12 +207,14 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
             periods.append(det.step_period_s)
             periodic.append(det.rotation_periodic)
             gentle.append(det.gentle)
+            uneven.append(det.uneven)
             settling.append(det.settling)
             n_changes.append(len(det.changes))
     # the state after sample k: that of the last hop at or before k (the initial state before the first)
     at = np.searchsorted(hops, np.arange(n_grid), side="right")
     track = CarryTrack(np.asarray(modes, dtype=np.int64)[at], np.asarray(periods, dtype=float)[at],
                        np.asarray(periodic, dtype=bool)[at], np.asarray(gentle, dtype=bool)[at],
+                       np.asarray(uneven, dtype=bool)[at],
                        np.asarray(n_changes, dtype=np.int64)[at],
                        det.changes, np.asarray(settling, dtype=bool)[at], bool(settling[0]))
     # time per mode: the mode in force before each sample, added one grid period at a time as the detector does

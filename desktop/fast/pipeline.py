@@ -16,7 +16,8 @@ first):
    features over all hops at once (vectorised), each hop's decision core's;
    its mode and step period at every grid sample;
 5. one step detector (eqs. 2-3) per distinct carry-mode gates of
-   ``step_gates`` (usually two: the hand-held and the swinging hand's), each
+   ``step_gates`` (usually four: the hand-held, the gentle walk's, the swinging hand's
+   and the uneven pocket's limb gates), each
    over the whole grid with the carry detector's step period, and the speed
    window at their peaks (compiled);
 6. with a GPS fusion (``Pipeline(gnss=...)``) and ``site_from_gps``: the
@@ -57,12 +58,12 @@ import time
 
 import numpy as np
 
-from core.conventions import ACC, CARRY_MODES, GNSS_STATUS, GPS, GYRO
+from core.conventions import ACC, CARRY_MODES, CARRY_POCKET, GNSS_STATUS, GPS, GYRO
 from core.pdr.pipeline import (IMPOSSIBLE, MAG, SATURATION_FLOOR, AttitudeLog, Pipeline, PipelineResult, SensorHealth,
                                Track)
 from core.recording import Recording
 from core.pdr.gapbridge import acc_gaps_with_gyro
-from core.pdr.steps import GENTLE
+from core.pdr.steps import GENTLE, UNEVEN_POCKET
 from desktop.fast import attitude as fatt
 from desktop.fast.carry import run_carry
 from desktop.fast.gates import StepRelease, rotation_sums
@@ -190,6 +191,9 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         index = {d: i for i, d in enumerate(p._mode_detectors)}
         det_of_mode = np.array([index[p._det_of[m]] for m in CARRY_MODES], dtype=np.int64)
         det_at = det_of_mode[track.mode]
+        if UNEVEN_POCKET in p._det_of:  # a pocket with very unlike half-strides: the limb gates (Pipeline._gates_key)
+            pocket = CARRY_MODES.index(CARRY_POCKET)
+            det_at = np.where(track.uneven & (track.mode == pocket), index[p._det_of[UNEVEN_POCKET]], det_at)
         if GENTLE in p._det_of:  # a gentle walk in a trunk mode: the gentle detector (Pipeline._carry_steps)
             gentle_mode = np.array([p._gentle_applies(m) for m in CARRY_MODES], dtype=bool)
             det_at = np.where(track.gentle & gentle_mode[track.mode], index[p._det_of[GENTLE]], det_at)
