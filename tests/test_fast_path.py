@@ -412,6 +412,6 @@ def test_fast_equals_plain_on_a_soft_soled_pocket_walk():
                          bounce_scale=0.3, still_start_s=1.0, still_end_s=0.5)
     from core.pdr.carry import CarryModeDetector
 
-    plain, _ = _assert_same(walk.recording, lambda: Pipeline(carry=CarryModeDetector(thigh_min_skew=0.32)))
+    plain, _ = _assert_same(walk.recording, lambda: Pipeline(carry=CarryModeDetector(thigh_min_skew=0.32, uneven_on_share=0.75)))
     assert CARRY_POCKET in {s.carry_mode for s in plain.steps}
     assert abs(len(plain.steps) - walk.truth.n_steps) <= 2, (len(plain.steps), walk.truth.n_steps)

@@ -224,7 +224,11 @@ class CarryModeDetector:
         tuning pocket reads ``|gravity_z|`` under 0.2, the simulator's under 0.1): the two half-strides are so
         unlike (the norm's step-lag autocorrelation a fifth of its stride-lag one or less) that every other valley
         can stay above ``g`` and every other peak under ``A_th``.  The pipeline then counts a pocket's steps with
-        the limb gates (:data:`core.pdr.steps.UNEVEN_POCKET`, issue #25).  The simulator's pocket reads 0.22-0.37
+        the limb gates (:data:`core.pdr.steps.UNEVEN_POCKET`, issue #25).  **Off by default** (``inf``; 0.75 turns it
+        on, with ``thigh_min_skew=0.32`` so that a soft-soled pocket is called a pocket at all): on every real tuning
+        recording it changes nothing (the 13 yh570 counted clips, 4 of them trouser pockets, identical; psy901 105 ->
+        105) but one step of lopen (602 -> 603), so only the simulator shows its gain; the guard's Oxford placements
+        move 1.923 -> 1.940 % (a back pocket's 268 -> 269 of 257).  The simulator's pocket reads 0.22-0.37
         (counted within 1 % with the hand-held gates), with a third of its heel strikes (soft soles) 0.9-1.07 (23
         of 42 steps with the hand-held gates, 41 with the limb gates); the tuning clip psy901 0.52 in the median
         (105 steps with 0.75 / 0.6, as without; 106 with 0.6 / 0.45: each switch of detector can add a step); the
@@ -245,7 +249,7 @@ class CarryModeDetector:
                  upright_y: float = 0.6, ear_incline_x: float = 0.22, limb_tilt_rad: float = 0.16,
                  limb_stride_share: float = 0.3, min_limb_stride_share: float = 0.15, arm_evidence: float = 1.1,
                  swing_gyro_rad_s: float = 2.0, hard_swing_gyro_rad_s: float = 3.5, thigh_min_skew: float | None = None,
-                 uneven_on_share: float = 0.75, uneven_off_share: float = 0.6,
+                 uneven_on_share: float = math.inf, uneven_off_share: float = 0.6,
                  switch_s: float = 3.0, switch_still_s: float = 2.0):
         self.grid_rate_hz = float(grid_rate_hz)
         self.window_s = float(window_s)
