@@ -105,6 +105,42 @@ def test_no_flicker_on_a_steady_placement():
         assert all(c["t_ns"] <= t_first_walk for c in changes)
 
 
+def _walk_features(periodicity, std=1.2, recent_std=1.2, tilt=0.07):
+    """One hop's features of a hand-held phone (screen up), as the yh570 tuning clip hand_1_28_21_35 reads them."""
+    return {"gravity_x": 0.02, "gravity_y": 0.45, "gravity_z": 0.89, "tilt_rms_rad": tilt, "coherence": 0.99,
+            "acc_std_m_s2": std, "recent_std_m_s2": recent_std, "periodicity": periodicity, "r_step": periodicity,
+            "r_stride": periodicity - 0.05, "stride_share": -0.05, "stride_period_s": 1.3,
+            "tilt_stride_corr": 0.1, "horizontal_ratio": 0.4}
+
+
+def _modes(det, hops):
+    out = []
+    for i, f in enumerate(hops):
+        det.decide(int(i * det.hop_s * 1e9), f)
+        out.append(det.mode)
+    return out
+
+
+@pytest.mark.parametrize("turn", (0.3, 0.22))
+def test_walk_goes_on_through_a_turn_and_ends_at_a_stop(turn):
+    """Issue #25: at a lap turn the 4-s window's autocorrelation at the stride dips to 0.2-0.35 for 2-5 s while the
+    steps go on (hand_1_28_21_35: "still" for 93 s of a 372-step walk): once walking, the walk is held while the
+    norm is periodic above ``hold_periodicity`` and still moving at the window's end.  Before (the start's
+    threshold, 0.35, throughout) the turn was "still".  A stop (the window's last second quiet), a phone waved
+    (tilt) or held while standing (the norm's std) still ends the walk within the hysteresis."""
+    walk_ = [_walk_features(0.6)] * 12
+    turn_ = [_walk_features(turn)] * 10  # 5 s
+    modes = _modes(CarryModeDetector(), walk_ + turn_ + walk_)
+    assert CARRY_STILL not in modes[1:], modes
+    old = _modes(CarryModeDetector(hold_periodicity=0.35), walk_ + turn_ + walk_)
+    assert CARRY_STILL in old, old  # the test fails without the hold
+    for end in (_walk_features(turn, recent_std=0.15),  # stopped: the window's end is quiet
+                _walk_features(turn, tilt=0.9),  # waved: no gait
+                _walk_features(0.6, std=0.25, recent_std=0.25)):  # held while standing: a tremor's energy
+        modes = _modes(CarryModeDetector(), walk_ + [end] * 10)
+        assert modes[12:].index(CARRY_STILL) <= 5, (end, modes)  # 2 s of hysteresis, a hop
+
+
 def _grid(rec, t0_ns=0):
     acc, gyr = rec.streams["acc"], rec.streams[GYRO]
     g = np.column_stack([np.interp(acc.t_ns, gyr.t_ns, gyr.values[:, i]) for i in range(3)])

@@ -53,6 +53,9 @@ Features and the physics they come from
     Standard deviation of the norm: the energy of the gait.  Under
     ``min_walk_std_m_s2`` nobody is walking (a phone on a table reads
     noise of ~0.02 m/s^2, one held while standing ~0.1-0.3).
+``recent_std_m_s2``
+    The same over the window's last ``hold_recent_s``: whether the motion goes
+    on at the window's end (a walk being held through a turn) or has stopped.
 ``horizontal_ratio``
     sqrt(horizontal / vertical variance) of the specific force about
     ``gravity_b``: on the trunk the gait's acceleration is mostly vertical
@@ -237,6 +240,15 @@ class CarryModeDetector:
         A new walking mode must win for this long before it replaces the current one (s).
     switch_still_s : float
         The same for changes from or to ``still`` (s).
+    hold_periodicity, hold_recent_s, hold_min_std_m_s2 : float
+        A walk goes on while its gait is periodic (issue #25): once the mode is a walking one, the norm's
+        periodicity (``min_periodicity`` to start a walk) need only be above ``hold_periodicity`` while the norm's
+        standard deviation over the window's last ``hold_recent_s`` seconds (``recent_std_m_s2``) is at least
+        ``hold_min_std_m_s2`` (m/s^2; above a phone held while standing, 0.1-0.3).  A turn or a change of pace
+        lowers a 4-s window's autocorrelation at the stride to 0.2-0.35 for 2-5 s while the steps go on (the
+        yh570 tuning clips' lap turns: a hand-held walk was "still" 30 % of its time); a stop empties the end of the
+        window first, so the hold ends with it (IPOL's stops are called as soon as before).  Amplitude and
+        waving gates are unchanged: a phone held still, on a table or waved is not held in a walk.
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
@@ -250,7 +262,8 @@ class CarryModeDetector:
                  limb_stride_share: float = 0.3, min_limb_stride_share: float = 0.15, arm_evidence: float = 1.1,
                  swing_gyro_rad_s: float = 2.0, hard_swing_gyro_rad_s: float = 3.5, thigh_min_skew: float | None = None,
                  uneven_on_share: float = math.inf, uneven_off_share: float = 0.6,
-                 switch_s: float = 3.0, switch_still_s: float = 2.0):
+                 switch_s: float = 3.0, switch_still_s: float = 2.0, hold_periodicity: float = 0.2, hold_recent_s: float = 1.0,
+                 hold_min_std_m_s2: float = 0.3):
         self.grid_rate_hz = float(grid_rate_hz)
         self.window_s = float(window_s)
         self.hop_s = float(hop_s)
@@ -284,12 +297,16 @@ class CarryModeDetector:
         self.uneven_off_share = float(uneven_off_share)
         self.switch_s = float(switch_s)
         self.switch_still_s = float(switch_still_s)
+        self.hold_periodicity = float(hold_periodicity)
+        self.hold_recent_s = float(hold_recent_s)
+        self.hold_min_std_m_s2 = float(hold_min_std_m_s2)
         self.reset()
 
     def reset(self) -> None:
         n = self._n = max(8, int(round(self.window_s * self.grid_rate_hz)))
         self._hop = max(1, int(round(self.hop_s * self.grid_rate_hz)))
         self._smooth = max(1, int(round(self.tilt_smooth_s * self.grid_rate_hz)))
+        self._recent = min(n, max(2, int(round(self.hold_recent_s * self.grid_rate_hz))))
         self._lag_lo = max(2, int(self.min_stride_s * self.grid_rate_hz))
         self._lag_hi = min(n - 8, int(math.ceil(self.max_stride_s * self.grid_rate_hz)))
         self._lag_short = max(self._lag_lo + 2, min(self._lag_hi, int(math.ceil(self.slow_stride_s * self.grid_rate_hz))))
@@ -391,6 +408,9 @@ class CarryModeDetector:
         u = m / m_norm if m_norm > 1e-6 else np.array([0.0, 0.0, 1.0])
         x = norm - mean_norm
         std = math.sqrt(float(np.add.reduce(x * x)) / n)
+        xr = norm[n - min(self._recent, n):]
+        xr = xr - float(np.add.reduce(xr)) / len(xr)
+        recent_std = math.sqrt(float(np.add.reduce(xr * xr)) / len(xr))
         # smoothed direction of the specific force and its angle from the mean direction
         np.cumsum(acc, axis=0, out=c[1:])
         s = self._smooth
@@ -445,7 +465,7 @@ class CarryModeDetector:
         f = {
             "gravity_x": float(u[0]), "gravity_y": float(u[1]), "gravity_z": float(u[2]),
             "tilt_rms_rad": tilt_rms, "coherence": m_norm / mean_norm if mean_norm > 1e-6 else 1.0,
-            "acc_std_m_s2": std, "periodicity": max(r_step, r_stride), "r_step": r_step, "r_stride": r_stride,
+            "acc_std_m_s2": std, "recent_std_m_s2": recent_std, "periodicity": max(r_step, r_stride), "r_step": r_step, "r_stride": r_stride,
             "stride_share": r_stride - r_step, "stride_period_s": k2 / self.grid_rate_hz,
             "tilt_stride_corr": tilt_stride, "horizontal_ratio": math.sqrt(horiz / vert) if vert > 1e-9 else 0.0,
         }
@@ -495,8 +515,9 @@ class CarryModeDetector:
         return periodic * max(_sig(f["gyro_axis_share"], self.swing_axis_share, 0.04),
                               1.0 - _sig(f["tilt_rms_rad"], self.twist_max_tilt_rad, 0.03))
 
-    def mode_scores(self, f: dict) -> dict:
-        """Soft score of every mode (0..1) from the features (see the module docstring)."""
+    def mode_scores(self, f: dict, walking: bool = False) -> dict:
+        """Soft score of every mode (0..1) from the features (see the module docstring); ``walking``: the mode in
+        force is a walking one (see ``hold_periodicity``)."""
         # waving the phone (a compass calibration) is no gait however periodic: it turns the phone through
         # far larger angles than any limb, and (gyroscope) fast about all three axes
         waving = _sig(f["tilt_rms_rad"], self.max_gait_tilt_rad, 0.05)
@@ -513,7 +534,13 @@ class CarryModeDetector:
         amplitude = max(_sig(std, self.min_walk_std_m_s2, 0.1),  # a walk, or a gentle one that is clearly periodic
                         _sig(self.gait_periodicity(f), self.gentle_min_periodicity, 0.05)
                         * _sig(std, self.gentle_min_std_m_s2, 0.02))
-        walk = _sig(f["periodicity"], self.min_periodicity, 0.05) * amplitude * (1.0 - waving)
+        # a walk that goes on (issue #25): while the mode in force is a walking one and the norm still moves like a
+        # walk's at the window's end (a stop leaves only a standing phone's tremor there), the norm's periodicity
+        # need only be ``hold_periodicity``: at a turn or a change of pace the 4-s window's autocorrelation at the
+        # stride dips to 0.2-0.35 for 2-5 s while the steps go on
+        hold = walking and f.get("recent_std_m_s2", 0.0) >= self.hold_min_std_m_s2
+        p0 = min(self.min_periodicity, self.hold_periodicity) if hold else self.min_periodicity
+        walk = _sig(f["periodicity"], p0, 0.05) * amplitude * (1.0 - waving)
         # a limb: the tilt swings and the norm repeats every stride rather than every step
         ss = f["stride_share"]
         limb = (_sig(f["tilt_rms_rad"] / self.limb_tilt_rad + max(ss, 0.0) / self.limb_stride_share, 1.5, 0.12)
@@ -557,7 +584,7 @@ class CarryModeDetector:
         """One hop's decision from its window's features ``f`` (:meth:`compute_features`): the scores, the raw
         mode, the step period, the hysteresis and the change log.  The fast desktop path (desktop.fast.carry)
         computes the features of every hop at once and calls this for each."""
-        sc = self.mode_scores(f)
+        sc = self.mode_scores(f, self._decided and self.mode != CARRY_STILL)
         self.features, self.scores = f, sc
         self.n_hops += 1
         best = max(sc, key=sc.get)

@@ -66,6 +66,9 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     u = np.where(ok[:, None], mean / np.where(ok, m_norm, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
     x = norm - mean_norm[:, None]
     std = np.sqrt(np.mean(x * x, axis=1))
+    xr = norm[:, n - min(det._recent, n):]
+    xr = xr - xr.mean(axis=1)[:, None]
+    recent_std = np.sqrt(np.mean(xr * xr, axis=1))
     lo, hi = det._lag_lo, det._lag_hi
     r = _autocorr(det, x)
     rows = np.arange(m_w)
@@ -133,10 +136,11 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     rate = det.grid_rate_hz
     out = []
     cols = [u[:, 0], u[:, 1], u[:, 2], tilt_rms, m_norm, mean_norm, std, r_step, r_stride, k2, tilt_stride, vert,
-            horiz]
-    for i, (ux, uy, uz, tr, mn, mnn, sd, rs, rst, k, ts, ve, ho) in enumerate(zip(*(c.tolist() for c in cols))):
+            horiz, recent_std]
+    for i, (ux, uy, uz, tr, mn, mnn, sd, rs, rst, k, ts, ve, ho, rsd) in enumerate(zip(*(c.tolist() for c in cols))):
         f = {"gravity_x": ux, "gravity_y": uy, "gravity_z": uz, "tilt_rms_rad": tr,
-             "coherence": mn / mnn if mnn > 1e-6 else 1.0, "acc_std_m_s2": sd, "periodicity": max(rs, rst),
+             "coherence": mn / mnn if mnn > 1e-6 else 1.0, "acc_std_m_s2": sd, "recent_std_m_s2": rsd,
+             "periodicity": max(rs, rst),
              "r_step": rs, "r_stride": rst, "stride_share": rst - rs, "stride_period_s": k / rate,
              "tilt_stride_corr": ts, "horizontal_ratio": math.sqrt(ho / ve) if ve > 1e-9 else 0.0}
         if has_gyro[i]:
