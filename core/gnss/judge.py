@@ -172,7 +172,8 @@ class JudgeSettings:
     #: minute's outage 10.71 -> 10.72 m; with the jumps made 20 m (25 m) the bad fixes past the judge 15 -> 11
     #: (50 -> 38), taken 7 -> 7 (11 -> 10): the rest are taken later in a jump that outlasts the window, by the
     #: filter's gate once its covariance has grown (a memory of the jump until it jumps back was tried: 60 s of
-    #: hold cost good fixes, 61.9 -> 54.6 %, and with 25-m jumps took more bad ones, 11 -> 25).  None: off
+    #: hold cost good fixes, 61.9 -> 54.6 %, and with 25-m jumps took more bad ones, 11 -> 25; the newest pair alone
+    #: at 1.4 kept the guard at 0.97 % but took more bad fixes with 25-m jumps, 11 -> 17).  None: off
     jump_per_hacc: float | None = 2.0
     jump_floor_m: float = 5.0
     jump_max_dt_s: float = 2.0
@@ -475,7 +476,8 @@ class GpsJudge:
         """How far (m) the largest move between two consecutive fixes of the window exceeds what a walk allows
         (> 0: a jump; nan: no pair to compare): the fixes' distance against the steps' over the same interval (the
         dead-reckoned positions at the two fix times: heading-free) times ``step_scale_limits``' upper end, with the
-        larger of ``jump_floor_m`` and ``jump_per_hacc`` times the root sum square of the pair's reported accuracies as tolerance.
+        larger of ``jump_floor_m`` and ``jump_per_hacc`` times the root sum square of the pair's reported accuracies
+        as tolerance.
         Only pairs at most ``jump_max_dt_s`` apart with dead-reckoned positions: two fixes a second apart share the
         slow part of their error (a phone's bias lasts minutes), so their difference is the white part alone and
         the reported accuracy, which counts both, bounds it from above."""
