@@ -264,7 +264,15 @@ def sim_walk(seed: int, split: str, filters) -> dict:
         if not np.array_equal(g.t_ns[np.minimum(k, len(g.t_ns) - 1)], t_acc):
             raise RuntimeError(f"sim seed {seed}: {f} accepted fixes that are not in the truth")
         acc[k] = True
+        # past the judge: taken, or refused by the filter itself (its gate, its bad-GPS test), not by the judge
+        # or the screening -- the judge's power against each fault, whatever the gate did after it
+        past = np.zeros(len(g.t_ns), dtype=bool)
+        t_past = np.array([x.t_ns for x in fr.fixes
+                           if x.accepted or (x.east_m == x.east_m and not x.reason.startswith("GPS judged"))],
+                          dtype=np.int64)
+        past[np.searchsorted(g.t_ns, t_past)] = True
         d.update(fixes_accepted=int(acc.sum()), bad_fixes_accepted=int(np.sum(acc & bad)),
+                 bad_fixes_past_judge_by_kind={kk: int(np.sum(past & bad & (g.fault_kind == kk))) for kk in kinds + [""]},
                  good_fixes_accepted_pct=100.0 * float(np.sum(acc & ~bad)) / max(int(np.sum(~bad)), 1),
                  bad_fixes_accepted_by_kind={kk: int(np.sum(acc & bad & (g.fault_kind == kk))) for kk in kinds + [""]},
                  counters={kk: v for kk, v in fr.counters.items() if isinstance(v, (int, float, str))})
@@ -799,7 +807,8 @@ def markdown(data: dict) -> str:
             d = h.get(f"gps_outage_after_noise_2min_dr_from_last_fix_m_{sp}")
             lines.append(f"| end of the outage, dr from last fix (reference) | {sp} | {_f(d)} |" + " |" * (len(cols) - 1))
         lines += ["", "Bad fixes by fault (per split, summed over the walks: accepted by " + " / ".join(filters)
-                  + " of those present):", ""]
+                  + " of those present; past the judge: taken or refused by the filter itself, not by the judge "
+                  "or the screening):", ""]
         for sp in sp_sim:
             rows = [r for r in data["sim"] if r["split"] == sp]
             kinds = sorted({k for r in rows for k in r["bad_fixes_by_kind"]})
@@ -808,8 +817,11 @@ def markdown(data: dict) -> str:
                 present = sum(r["bad_fixes_by_kind"].get(k, 0) for r in rows)
                 acc = [sum(r["columns"][c]["bad_fixes_accepted_by_kind"].get(k, 0) for r in rows if c in r["columns"])
                        for c in filters]
+                past = [sum(r["columns"][c].get("bad_fixes_past_judge_by_kind", {}).get(k, 0) for r in rows
+                            if c in r["columns"]) for c in filters]
                 parts.append(f"{k or 'no fault (the receiver normal errors and multipath)'}: "
-                             f"{' / '.join(str(a) for a in acc)} of {present}")
+                             f"{' / '.join(str(a) for a in acc)} of {present} (past the judge: "
+                             f"{' / '.join(str(a) for a in past)})")
             lines.append(f"* {sp}: " + "; ".join(parts))
 
     if data["real"]:

@@ -257,3 +257,49 @@ def test_the_clean_fixes_after_a_multipath_episode_teach_once_the_stream_is_usab
     assert fr.counters["training"]["stride_scale"] == pytest.approx(scale, rel=0.03)
     e, n = geodetic_to_enu(fr.steps[-1].lat_deg, fr.steps[-1].lon_deg, ORIGIN)
     assert math.hypot(e - scale * steps[-1].east_m, n - scale * steps[-1].north_m) < 3.0  # 60 s of dead reckoning
+
+
+def _straight_then(jump_m: float, hacc: float, turn=None, offset_deg: float = 0.0, settings=None):
+    """The judge over a walk at 1.4 m/s (fixes at 1 Hz with 1-m noise reporting ``hacc``), steps turned by
+    ``offset_deg`` (the phone's heading offset), the walker's direction ``turn(k)`` (rad; None: straight east),
+    and the fixes from number 40 on shifted north by ``jump_m``: the judgements."""
+    from core.gnss.judge import JudgeSettings
+
+    j = GpsJudge(JudgeSettings(**(settings or {})))
+    rng = np.random.default_rng(11)
+    e = n = pe = pn = 0.0
+    out = []
+    off = math.radians(offset_deg)
+    for k in range(60):
+        h = turn(k) if turn is not None else 0.0
+        e, n = e + 1.4 * math.cos(h), n + 1.4 * math.sin(h)
+        pe, pn = pe + 1.4 * math.cos(h + off), pn + 1.4 * math.sin(h + off)
+        lat, lon = enu_to_geodetic(e + rng.normal(0, 1.0), n + rng.normal(0, 1.0) + (jump_m if k >= 40 else 0.0),
+                                   ORIGIN)
+        out.append(j.add_fix(int(k * 1e9), float(lat), float(lon), hacc, (pe, pn)))
+    return out
+
+
+def test_a_jump_at_the_end_of_the_window_is_caught():
+    """Issue #26 review (a): a 20-m jump of fixes reporting 5 m on a straight walk.  As the window's newest fix it
+    barely moves the shape residual (one outlier in 15: 5 m RMS, the limit 6 m) nor the displacement of the
+    window's last three fixes: the window passed (fails before: no jump test).  Against the steps' 1.4 m over the
+    same second (times 1.4), with 2x the pair's combined accuracy (14.1 m), it is a jump."""
+    before = _straight_then(20.0, 5.0, settings={"jump_per_hacc": None})
+    assert before[39].verdict is GpsVerdict.USABLE and before[40].verdict is GpsVerdict.USABLE
+    after = _straight_then(20.0, 5.0)
+    assert after[39].verdict is GpsVerdict.USABLE
+    assert Cause.INCONSISTENT in after[40].causes and after[40].jump_m > 0.0
+    # it stays inconsistent while the jump is in the window, then settles on the new (consistent) offset
+    assert all(Cause.INCONSISTENT in v.causes for v in after[40:54])
+
+
+@pytest.mark.parametrize("turn", [lambda k: 0.0 if k < 40 else math.pi / 2,  # a right-angle corner at fix 40
+                                  lambda k: 0.0 if k < 40 else math.pi,  # a U-turn
+                                  lambda k: 0.15 * k])  # walking round a 9-m circle
+def test_a_real_turn_is_not_a_jump(turn):
+    """The jump test compares distances, not directions: a turn of the walker (fixes and steps alike), with the
+    steps 40 deg off the fixes (a phone's heading offset), and fixes reporting a tight 3 m never fail it."""
+    out = _straight_then(0.0, 3.0, turn=turn, offset_deg=40.0)
+    assert all(not (v.jump_m > 0.0) for v in out)
+    assert all(v.verdict is GpsVerdict.USABLE for v in out[25:])
