@@ -512,7 +512,7 @@ def random_walk(P, rate2, dt, fs, sf):
         for j in range(3):
             P[i, j] += c * (1.0 if i == j else 0.0)
     if P.shape[0] == 7:
-        decay_offset(P, fs, sf, math.exp(-dt / sf[S_OFF_TAU]), True)
+        decay_offset(P, fs, sf, math.exp(-dt / sf[S_OFF_TAU]), np.bool_(True))  # not a literal: see run_attitude
 
 
 @kernel
@@ -586,7 +586,7 @@ def predict(q, b, P, wx, wy, wz, dt, sf, noise_scale, fs):
         to2 = phi * (P[2, 6] - (Rdt[2, 0] * P[3, 6] + Rdt[2, 1] * P[4, 6] + Rdt[2, 2] * P[5, 6]))
         P[0, 6], P[1, 6], P[2, 6] = to0, to1, to2
         P[6, 0], P[6, 1], P[6, 2] = to0, to1, to2
-        decay_offset(P, fs, sf, phi, False)
+        decay_offset(P, fs, sf, phi, np.bool_(False))  # not a literal: see run_attitude
     return w2
 
 
@@ -746,6 +746,9 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
     I3 = np.eye(3)
     mean4 = np.empty(4)
     n_p = P.shape[0]  # 7 with the field's heading offset, else 6
+    # numba compiles a called kernel once per set of literal (constant) arguments; the flags, slots and
+    # indices passed below are typed values (np.bool_, np.int64), not literals, so each callee compiles once
+    no, yes, one = np.bool_(False), np.bool_(True), np.int64(1)
     for i in range(i0, n):
         k = kind[i]
         ti = t[i]
@@ -790,8 +793,8 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                             Hz = np.zeros((3, n_p))
                             for c in range(3):
                                 Hz[c, 3 + c] = 1.0
-                            code, _ = correct(q, b, P, yz, Hz, r2 * I3, math.inf, False, yz, False, False, max_bias,
-                                           is_, nis_sum, nis_n, 2, fs)
+                            code, _ = correct(q, b, P, yz, Hz, r2 * I3, math.inf, no, yz, no, no, max_bias,
+                                              is_, nis_sum, nis_n, np.int64(2), fs)
                             if code == C_USED:
                                 is_[I_N_ZR] += 1
                             is_[I_ZR_NEXT] = ti + still_win_ns
@@ -806,8 +809,9 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                 reason = A_NORM
             else:
                 R = q_to_matrix(q)
-                if interval_add(fs, is_, F_ASUM0, I_ACC_N, I_ACC_T0, ti, R[0, 0] * x + R[0, 1] * y_ + R[0, 2] * z,
-                                R[1, 0] * x + R[1, 1] * y_ + R[1, 2] * z, R[2, 0] * x + R[2, 1] * y_ + R[2, 2] * z,
+                if interval_add(fs, is_, np.int64(F_ASUM0), np.int64(I_ACC_N), np.int64(I_ACC_T0), ti,
+                                R[0, 0] * x + R[0, 1] * y_ + R[0, 2] * z, R[1, 0] * x + R[1, 1] * y_ + R[1, 2] * z,
+                                R[2, 0] * x + R[2, 1] * y_ + R[2, 2] * z,
                                 sigma2, sf[S_SWING_UPD] if fs[F_SWING_S] >= sf[S_SWING_MIN] else sf[S_UPD],
                                 mean4):
                     fx, fy, fz, sigma2 = mean4[0], mean4[1], mean4[2], mean4[3]
@@ -822,10 +826,10 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                         for c in range(3):  # R^T [u]x
                             Ha[c, 0] = R[1, c]
                             Ha[c, 1] = -R[0, c]
-                        code, _ = correct(q, b, P, ya, Ha, sigma2 * I3, sf[S_ACC_GATE], False, ya, False, False,
-                                       max_bias, is_, nis_sum, nis_n, 0, fs)
+                        code, _ = correct(q, b, P, ya, Ha, sigma2 * I3, sf[S_ACC_GATE], no, ya, no, no,
+                                          max_bias, is_, nis_sum, nis_n, np.int64(0), fs)
                         reason = A_USED if code == C_USED else (A_GATE if code == C_GATE else A_NUM)
-            count(acc_counts, acc_first, reason, 1)
+            count(acc_counts, acc_first, reason, one)
         else:  # magnetometer
             reason = -1
             n_interval = 0
@@ -878,7 +882,8 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                         reason = M_DIP
                     else:
                         inv = 1.0 / nm
-                        n_interval = interval_add(fs, is_, F_MSUM0, I_MAG_N, I_MAG_T0, ti,
+                        n_interval = interval_add(fs, is_, np.int64(F_MSUM0), np.int64(I_MAG_N), np.int64(I_MAG_T0),
+                                                  ti,
                                                   (R[0, 0] * x + R[0, 1] * y_ + R[0, 2] * z) * inv,
                                                   (R[1, 0] * x + R[1, 1] * y_ + R[1, 2] * z) * inv,
                                                   (R[2, 0] * x + R[2, 1] * y_ + R[2, 2] * z) * inv,
@@ -906,8 +911,8 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                                 Rm[0, 0] = sigma2 / c2
                                 up = np.empty(3)
                                 up[0], up[1], up[2] = u0, u1, u2
-                                code, nis = correct(q, b, P, ym, Hm, Rm, sf[S_MAG_GATE], True, up, True, True,
-                                                    max_bias, is_, nis_sum, nis_n, 1, fs)
+                                code, nis = correct(q, b, P, ym, Hm, Rm, sf[S_MAG_GATE], yes, up, yes, yes,
+                                                    max_bias, is_, nis_sum, nis_n, np.int64(1), fs)
                                 adapt_noise_scale(fs, sf, nis)
                                 if code == C_USED:
                                     reason = M_USED
@@ -938,10 +943,10 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                                 else:
                                     reason = M_NUM
                             if reason != M_USED and n_interval > 1:  # the interval's earlier readings
-                                count(mag_counts, mag_first, M_USED, -(n_interval - 1))
+                                count(mag_counts, mag_first, np.int64(M_USED), -(n_interval - 1))
                                 count(mag_counts, mag_first, reason, n_interval - 1)
             is_[I_MAG_REJ] = 0 if reason == M_USED else 1
-            count(mag_counts, mag_first, reason, 1)
+            count(mag_counts, mag_first, reason, one)
         while j < n_ticks and tick_event[j] == i:
             for c in range(4):
                 out_q[j, c] = q[c]

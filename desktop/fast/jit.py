@@ -4,6 +4,11 @@ numba is an optional desktop extra (``pip install -e ".[fast]"``), never
 required: without it (or with ``PDR_FAST_NO_JIT=1`` in the environment) the
 same kernel functions run as plain Python -- the same code path, only slow.
 The kernels use only what both run alike: numpy arrays, scalars, ``math``.
+
+A kernel called from another is compiled once per set of argument types, and numba types a constant
+argument (``True``, ``2``, a module constant) as a literal of its value: each call site with other
+constants, and a variable first set to a constant (``c = 0`` then counted up), compile the callee (and
+everything it calls) once more.  Pass typed values (``np.bool_(True)``, ``np.int64(2)``) instead.
 """
 
 from __future__ import annotations

@@ -294,7 +294,7 @@ def _sphere(m, idx, k, out):
         dx, dy, dz = m[j, 0] - cx, m[j, 1] - cy, m[j, 2] - cz
         d[r, 0], d[r, 1], d[r, 2] = dx, dy, dz
         sq[r] = dx * dx + dy * dy + dz * dz
-    s = math.sqrt(_pairwise(sq, 0, k) / k)
+    s = math.sqrt(_pairwise(sq, np.int64(0), k) / k)  # not a literal 0: one compile of _pairwise
     if not s > 1e-9:
         return 0
     design = np.empty((k, 4))
@@ -404,7 +404,7 @@ def attempt_to_fit(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring):
     cap = nslot + tail - head
     tt = np.empty(cap, dtype=np.int64)
     mm = np.empty((cap, 3))
-    c = 0
+    c = np.int64(0)  # not a literal 0: numba would compile _trimmed_sphere (and its callees) for it too
     n_full = 0
     max_age = fs[F_MAX_AGE_S]
     for s in range(nslot):  # _stored, then keep
