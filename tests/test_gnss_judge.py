@@ -285,9 +285,9 @@ def test_a_jump_at_the_end_of_the_window_is_caught():
     barely moves the shape residual (one outlier in 15: 5 m RMS, the limit 6 m) nor the displacement of the
     window's last three fixes: the window passed (fails before: no jump test).  Against the steps' 1.4 m over the
     same second (times 1.4), with 2x the pair's combined accuracy (14.1 m), it is a jump."""
-    before = _straight_then(20.0, 5.0, settings={"jump_per_hacc": None})
+    before = _straight_then(20.0, 5.0, settings={"jump_per_hacc": None})  # the default: the test is an option
     assert before[39].verdict is GpsVerdict.USABLE and before[40].verdict is GpsVerdict.USABLE
-    after = _straight_then(20.0, 5.0)
+    after = _straight_then(20.0, 5.0, settings={"jump_per_hacc": 2.0})
     assert after[39].verdict is GpsVerdict.USABLE
     assert Cause.INCONSISTENT in after[40].causes and after[40].jump_m > 0.0
     # it stays inconsistent while the jump is in the window, then settles on the new (consistent) offset
@@ -300,6 +300,6 @@ def test_a_jump_at_the_end_of_the_window_is_caught():
 def test_a_real_turn_is_not_a_jump(turn):
     """The jump test compares distances, not directions: a turn of the walker (fixes and steps alike), with the
     steps 40 deg off the fixes (a phone's heading offset), and fixes reporting a tight 3 m never fail it."""
-    out = _straight_then(0.0, 3.0, turn=turn, offset_deg=40.0)
+    out = _straight_then(0.0, 3.0, turn=turn, offset_deg=40.0, settings={"jump_per_hacc": 2.0})
     assert all(not (v.jump_m > 0.0) for v in out)
     assert all(v.verdict is GpsVerdict.USABLE for v in out[25:])
