@@ -698,13 +698,17 @@ class Pipeline:
             return [base], {}
         default = self.step_gates[CARRY_HANDHELD]
         by_gates = {default: base}
-        for gates in self.step_gates.values():
+        # the uneven pocket's gates only where the carry detector can call a pocket uneven (an option): otherwise
+        # their detector would be fed every grid sample and never chosen
+        gates_of = {m: g for m, g in self.step_gates.items()
+                    if m != UNEVEN_POCKET or math.isfinite(self.carry.uneven_on_share)}
+        for gates in gates_of.values():
             if gates not in by_gates:
                 det = copy.copy(base)  # the same settings; reset() gives it its own state
                 det.reset()
                 det.set_gates(gates)
                 by_gates[gates] = det
-        return list(by_gates.values()), {m: by_gates[g] for m, g in self.step_gates.items()}
+        return list(by_gates.values()), {m: by_gates[g] for m, g in gates_of.items()}
 
     def _carry_steps(self, tg: int, x: float, ax: float, ay: float, az: float) -> StepEvent | None:
         """One grid sample with carry detection: the mode, every mode's step detector, the active one's peak.
@@ -751,7 +755,7 @@ class Pipeline:
         ``UNEVEN_POCKET`` (issue #25)."""
         if gentle and self._gentle_applies(mode):
             return GENTLE
-        if uneven and mode == CARRY_POCKET and UNEVEN_POCKET in self.step_gates:
+        if uneven and mode == CARRY_POCKET and UNEVEN_POCKET in self._det_of:
             return UNEVEN_POCKET
         return mode
 
