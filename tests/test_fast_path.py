@@ -165,7 +165,8 @@ def test_fast_equals_plain_with_gps_fusion_on_a_real_walk():
     assert sum(f.accepted for f in plain.fusion.fixes) > 10
 
 
-def test_fast_equals_plain_with_gps_fusion_on_the_simulator():
+@pytest.mark.parametrize("dated", [True, False])
+def test_fast_equals_plain_with_gps_fusion_on_the_simulator(dated):
     # Chen et al.'s fusion on a simulated outdoor walk with a date (the site applied from the first fix, 4 s in)
     # and a hidden window (an outage measured at its end)
     from core.gnss import make_fusion
@@ -176,10 +177,12 @@ def test_fast_equals_plain_with_gps_fusion_on_the_simulator():
 
     def make():
         return Pipeline(gnss=make_fusion("chen", hidden_ns=[(t0 + 20_000_000_000, t0 + 35_000_000_000)]),
-                        unix_offset_ns=1_751_000_000_000_000_000 - t0)
+                        unix_offset_ns=1_751_000_000_000_000_000 - t0 if dated else None)
 
     plain, pipe = _assert_same(rec, make)
-    assert pipe.site["applied"] and len(plain.fusion.outages) == 1
+    # undated: no WMM field, but the first good fix still drops the indoor field offset state (outdoors)
+    assert pipe.site["applied"] is dated and pipe.site.get("outdoors", dated) and not pipe.attitude.has_mag_offset
+    assert len(plain.fusion.outages) == 1
     assert {s.source for s in plain.fusion.steps} == {"fused", "dr"}
 
 

@@ -392,9 +392,12 @@ def test_first_fix_gives_the_attitude_filter_the_site_declination_and_field(sim_
     assert res.fusion.counters["site"]["applied"]
     assert math.degrees(p.attitude.declination_rad) == pytest.approx(math.degrees(decl), abs=1e-9)
     assert 5.0 < math.degrees(decl) < 15.0  # Helsinki, 2025
+    assert not p.attitude.has_mag_offset  # outdoors: the field's heading offset state is dropped
     undated = Pipeline(gnss=GpsFusion())
     undated.run(rec)
     assert undated.attitude.declination_rad == 0.0 and not undated.site["applied"]
+    # no WMM without a date, but the good fix still says outdoors: the same state as a dated walk
+    assert undated.site["outdoors"] and not undated.attitude.has_mag_offset
 
 
 def test_heading_model_uses_the_predictor_that_predicts_best_out_of_sample():

@@ -817,11 +817,18 @@ class AttitudeEKF(AttitudeFilterBase):
         bends it by tens of per cent and degrees, and the vertical-offset
         estimate it drives (see the settings) would be wrong: leave it unset there.
 
-        Outdoors there is no building to bend the field: the field's heading offset state (``mag_offset_sd_rad``)
-        is dropped (its estimate and covariance; the error state is 6 again).
+        Outdoors: :meth:`set_outdoors` as well.
         """
-        self.settings = replace(self.settings, site_field_uT=float(field_uT), site_dip_rad=float(dip_rad),
-                                mag_offset_sd_rad=0.0)
+        self.settings = replace(self.settings, site_field_uT=float(field_uT), site_dip_rad=float(dip_rad))
+        self.set_outdoors()
+
+    def set_outdoors(self) -> None:
+        """The walk is outdoors (a good GPS fix says so), with or without the site's WMM field.
+
+        No building bends the field there: the field's heading offset state (``mag_offset_sd_rad``) is
+        dropped (its estimate and covariance; the error state is 6 again).
+        """
+        self.settings = replace(self.settings, mag_offset_sd_rad=0.0)
         st = self._state
         st.mag_offset_rad, st.P_to, st.P_bo, st.P_oo = 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0
 

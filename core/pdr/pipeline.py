@@ -659,7 +659,10 @@ class Pipeline:
         """The anchoring fix's magnetic declination and field for the attitude filter (see ``site_from_gps``)."""
         t_ns, lat, lon, alt = anchor
         if self.unix_offset_ns is None:
-            self.site = {"applied": False, "why": "no date for the magnetic model"}
+            # no WMM field without a date, but a good fix still says the walk is outdoors, as a dated one does
+            if hasattr(self.attitude, "set_outdoors"):
+                self.attitude.set_outdoors()
+            self.site = {"applied": False, "why": "no date for the magnetic model", "outdoors": True}
             return
         try:
             self.site = self.set_site(lat, lon, alt, int(self.unix_offset_ns) + int(t_ns))
