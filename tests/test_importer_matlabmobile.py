@@ -183,3 +183,20 @@ def test_a_pyshoe_mat_file_is_still_pyshoe(tmp_path):
     p = tmp_path / "trial.mat"
     p.write_bytes(header + _double(np.zeros(6), "imu") + _double(np.arange(6.0), "ts"))
     assert detect_format(p) == PYSHOE
+
+
+def test_an_accelerometer_only_log_is_read_and_a_plain_acceleration_matrix_is_not_a_log(tmp_path):
+    # MATLAB Mobile with only the accelerometer on saves one timetable (GitHub Tclack88/MatlabSucks,
+    # NIghtwing1914/Assignment2-Ubicomp): recognised and read back; a bare 'Acceleration' double is not a log
+    ms, cols = _walk(300, rate_hz=53.0)["Acceleration"]
+    p = _log(tmp_path / "120_pocket_sensorlog.mat", {"Acceleration": (ms, cols)})
+    assert detect_format(p) == MATLAB_MOBILE
+    rec = load_recording(p)
+    assert set(rec.streams) == {"acc"}
+    np.testing.assert_array_equal(rec.streams["acc"].values, np.column_stack(list(cols.values())))
+    assert np.array_equal(rec.streams["acc"].t_ns, np.round((ms - T0_MS) * 1e6).astype(np.int64))
+    header = b"MATLAB 5.0 MAT-file, test".ljust(116, b" ") + b"\0" * 8 + b"\x00\x01IM"
+    q = tmp_path / "plain.mat"
+    q.write_bytes(header + _double(np.zeros(9), "Acceleration"))
+    with pytest.raises(RecordingError, match="MAT-file without"):
+        detect_format(q)

@@ -36,7 +36,7 @@ Formats (name: input -> reader):
   ... columns (g with iOS's sign, converted; gyroscope and magnetometer where logged; ``.csv`` or ``.gz``, or a folder
   holding one) -> :func:`read_sensorlog`
 * ``matlab-mobile``: a MATLAB Mobile sensor log saved as a MAT-file (``timetable`` objects ``Acceleration``,
-  ``AngularVelocity``, ``MagneticField``, ``Position``; ``.mat`` or ``.mat.gz``) -> :func:`read_matlabmobile`
+  ``AngularVelocity``, ``MagneticField``, ``Position`` where logged; ``.mat`` or ``.mat.gz``) -> :func:`read_matlabmobile`
 * ``pyshoe``: PyShoe processed trial, a MATLAB level-5 MAT-file (``.mat`` or ``.mat.gz``; read with numpy and
   zlib, :mod:`core.importers.matv5`) -> :func:`read_pyshoe`
 

@@ -26,7 +26,8 @@ placeholder; object ids count from 1.  A ``timetable`` saves itself as one prope
 ``data`` (a cell per column), ``varNames`` and ``rowTimes`` (a reference to a ``datetime`` object whose ``data``
 is milliseconds since 1970-01-01 UTC, complex when the imaginary part carries sub-millisecond digits).  This
 layout is MathWorks' undocumented format, read here as far as these logs need (checked on the eight logs of
-GitHub ``Omer1Eryilmaz/SignalProcessing``, MATLAB R2022-23); anything else is a :class:`RecordingError`
+GitHub ``Omer1Eryilmaz/SignalProcessing``, MATLAB R2022-23, and on the accelerometer-only logs of
+``Tclack88/MatlabSucks`` and ``NIghtwing1914/Assignment2-Ubicomp``); anything else is a :class:`RecordingError`
 naming the file.
 
 Times: ``t_ns`` from the whole millisecond of the first event of any sensor (its Unix time in
@@ -64,8 +65,10 @@ OBJECT_REF = 0xDD000000
 
 def looks_like(names: list[str]) -> bool:
     """A MAT-file whose variables (:func:`core.importers.matv5.read_mat`'s ``all_names``) are a MATLAB Mobile
-    log's: ``Acceleration`` and another sensor timetable, beside the unnamed subsystem data."""
-    return "Acceleration" in names and "" in names and sum(n in names for n in LOG_VARIABLES) >= 2
+    log's: an ``Acceleration`` timetable (alone when only the accelerometer was on, else beside other sensor
+    timetables), with the unnamed subsystem data that holds the objects; no other named variable."""
+    named = [n for n in names if n]
+    return "Acceleration" in named and "" in names and all(n in LOG_VARIABLES for n in named)
 
 
 class _Objects:
@@ -181,8 +184,8 @@ def read_matlabmobile(path: str, *, warn: bool = True,
     with open_binary(path) as f:
         mat = matv5.read_mat(f, path, max_uncompressed_bytes=max_uncompressed_bytes, objects=True)
     if not looks_like(mat.all_names):
-        raise RecordingError("not a MATLAB Mobile log: no Acceleration timetable beside another sensor's and the "
-                             "subsystem data", path)
+        raise RecordingError("not a MATLAB Mobile log: no Acceleration timetable with the subsystem data, or a "
+                             "variable a MATLAB Mobile log does not have", path)
     objs = _Objects(mat[""], path)
     raw: dict = {}
     for var, (stream, columns) in SENSORS.items():
