@@ -43,9 +43,11 @@ import warnings
 import numpy as np
 
 from core.conventions import ACC, GPS, GYRO, MAG
-from core.recording import MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream
+from core.recording import (
+    MAX_BAD_LINES, MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
+)
 from core.importers import matv5
-from core.importers._common import finish, gps_values, open_binary
+from core.importers._common import acc_csv_recording, finish, gps_values, open_binary, single_csv_files
 
 FORMAT = "matlab-mobile"
 
@@ -219,3 +221,81 @@ def read_matlabmobile(path: str, *, warn: bool = True,
         for r in rec.repairs:
             warnings.warn(r, DamagedFileWarning, stacklevel=2)
     return finish(rec, warn=warn, unix_offset_ns=t0_ns)
+
+
+# ---------------------------------------------------------------------------
+# the CSV MATLAB writes from such a log's accelerometer timetable
+
+#: the header ``writetable(splitvars(struct2table(load(log))))`` writes for an accelerometer-only log
+CSV_HEADER = ["Acceleration_Timestamp", "X", "Y", "Z"]
+CSV_FORMAT = "matlab-mobile-csv"
+CSV_WHAT = "MATLAB Mobile accelerometer CSV (Acceleration_Timestamp,X,Y,Z)"
+_MONTHS = {m: i + 1 for i, m in enumerate(("Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct",
+                                           "Nov", "Dec"))}
+
+
+def looks_like_csv(head: str) -> bool:
+    """The first line is the header ``Acceleration_Timestamp,X,Y,Z`` (quotes and spaces around names allowed)."""
+    first = head.lstrip("\ufeff").split("\n", 1)[0].strip()
+    return [n.strip().strip('"').strip() for n in first.split(",")] == CSV_HEADER
+
+
+def csv_files(fs) -> list[str]:
+    """The CSVs of this layout in a folder or zip (top level and one folder down)."""
+    return single_csv_files(fs, looks_like_csv)
+
+
+def _datetime_ms(s: str) -> float:
+    """MATLAB's default datetime text ``16-Mar-2023 13:51:57.940`` (local time, no zone) -> ms since 1970 as if UTC."""
+    day, clock = s.strip().strip('"').split(" ")
+    d, mon, y = day.split("-")
+    h, mi, sec = clock.split(":")
+    days = (np.datetime64(f"{int(y):04d}-{_MONTHS[mon]:02d}-{int(d):02d}") - np.datetime64("1970-01-01")).astype(int)
+    return ((int(days) * 24 + int(h)) * 60 + int(mi)) * 60_000.0 + float(sec) * 1000.0
+
+
+def _read_csv_values(text, where: str, repairs: list[str]) -> np.ndarray:
+    out, bad, n = [], [], 0
+    header_seen = False
+    for first_no, lines in text:
+        for k, ln in enumerate(lines):
+            if not header_seen:
+                header_seen = True
+                continue
+            if not ln.strip():
+                continue
+            n += 1
+            f = ln.split(",")
+            try:
+                if len(f) < 4:
+                    raise ValueError("missing fields")
+                out.append((_datetime_ms(f[0]), float(f[1]), float(f[2]), float(f[3])))
+            except (ValueError, KeyError) as e:
+                bad.append(RecordingError(f"not a time and three numbers ({e})", where, first_no + k))
+                if len(bad) > MAX_BAD_LINES:
+                    break
+    if text.tail.strip():
+        repairs.append(f"{where}: dropped an incomplete last line {text.tail_line} (no newline: the file was cut "
+                       "off mid-write)")
+    skip_bad_lines(bad, n, where, repairs)
+    return np.array(out, dtype=np.float64).reshape(-1, 4)
+
+
+def read_matlabmobile_csv(path: str, *, warn: bool = True,
+                          max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
+    """Read the ``Acceleration_Timestamp,X,Y,Z`` CSV MATLAB writes from a MATLAB Mobile accelerometer log.
+
+    ``Acceleration_Timestamp`` is MATLAB's datetime text (``16-Mar-2023 13:51:57.940``: local time, zone not
+    written, milliseconds); ``t_ns`` counts from the first line's.  ``X, Y, Z``: m/s^2 with gravity, Android axes
+    (the median ``|a|`` is checked, :func:`core.importers._common.acceleration_in_m_s2`).  Checked on the CSVs of
+    GitHub ``Tclack88/MatlabSucks`` (``sensor_systems/pedometer``, 53 Hz, the same samples as its MAT-files).
+    Streams: ``acc``.
+    """
+    meta = {
+        "source_format": CSV_FORMAT,
+        "app": "MATLAB Mobile (its accelerometer timetable written to CSV by MATLAB)",
+        "time_base": "t_ns = Acceleration_Timestamp (local datetime text, ms) - the first line's; absolute time "
+                     "unknown (no time zone in the file)",
+    }
+    return acc_csv_recording(path, looks_like_csv, _read_csv_values, CSV_WHAT, meta, warn=warn,
+                             max_uncompressed_bytes=max_uncompressed_bytes, from_first=True)
