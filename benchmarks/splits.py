@@ -111,7 +111,10 @@ Further public recordings (issue #25, fetched into a folder outside the reposito
     ``Tclack88/MatlabSucks`` (``sensor_systems/pedometer``: eight MATLAB Mobile accelerometer-only logs of 42-134 s,
     one walker and phone, 80-250 counted steps, the count and the carry -- ``pocket`` / ``hand`` -- in the file
     names, 2023), is **tuning**.  Only the files' rates, lengths and mean gravity were looked at (to check the
-    reader), no step count.  The 11th and 12th repository added will be report, the 13th tuning.
+    reader), no step count.  The 11th and 12th repository added will be report, the 13th tuning.  Added later the
+    same day, after the first run: four more ``Tclack88/MatlabSucks`` clips that the repository keeps only as
+    MATLAB-written CSVs (``60_pocket_slow``, ``50_hand_slow``, ``532_hand``, ``70_pause_demo``), tuning with their
+    repository.
 
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
