@@ -114,7 +114,8 @@ Further public recordings (issue #25, fetched into a folder outside the reposito
     reader), no step count.  The 11th and 12th repository added will be report, the 13th tuning.  Added later the
     same day, after the first run: four more ``Tclack88/MatlabSucks`` clips that the repository keeps only as
     MATLAB-written CSVs (``60_pocket_slow``, ``50_hand_slow``, ``532_hand``, ``70_pause_demo``), tuning with their
-    repository.
+    repository.  Of NIghtwing1914's 20 logs, 19 were copied (``Dhvani_12_6.94_14(3)`` has an 11-s gap inside a
+    clip its name says lasted 6.94 s).
 
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
