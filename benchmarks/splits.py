@@ -103,6 +103,19 @@ Further public recordings (issue #25, fetched into a folder outside the reposito
     ``zDrakon/SensorDataExplorer`` (a 2016 high-school class's step-counter data; three SensorLog walks of 50 counted
     steps with the phone in the right side trouser pocket, iPhone 6 Plus, acc + gyro + mag, the count and position
     from the student's ``data_description.txt``), is **report**.
+    Declared 2026-12-07 (a fifth search, issue #25 part 1), before any number was seen on them, in this order of
+    addition (the order chosen before either was run: the repository whose clips state their carry goes where the
+    rule puts tuning): the 9th, ``NIghtwing1914/Assignment2-Ubicomp`` (a 2021 Ubicomp class's MATLAB Mobile step
+    clips: 20 accelerometer-only logs of 6-10 s, five walkers, 12-15 steps, the count in the file name and in the
+    class's ``Evaluations/Experiment *.csv`` "Ground Truth"; the carry not stated), is **report**; the 10th,
+    ``Tclack88/MatlabSucks`` (``sensor_systems/pedometer``: eight MATLAB Mobile accelerometer-only logs of 42-134 s,
+    one walker and phone, 80-250 counted steps, the count and the carry -- ``pocket`` / ``hand`` -- in the file
+    names, 2023), is **tuning**.  Only the files' rates, lengths and mean gravity were looked at (to check the
+    reader), no step count.  The 11th and 12th repository added will be report, the 13th tuning.  Added later the
+    same day, after the first run: four more ``Tclack88/MatlabSucks`` clips that the repository keeps only as
+    MATLAB-written CSVs (``60_pocket_slow``, ``50_hand_slow``, ``532_hand``, ``70_pause_demo``), tuning with their
+    repository.  Of NIghtwing1914's 20 logs, 19 were copied (``Dhvani_12_6.94_14(3)`` has an 11-s gap inside a
+    clip its name says lasted 6.94 s).
 
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
@@ -135,6 +148,7 @@ REAL_TUNING_REPOS = frozenset({
     "fif911/ML4QS",  # declared 2026-12-06 before any number was seen (extra corpus; mikamartinb/ML4QS report)
     "psy901/SensorActivity",  # declared 2026-12-06, the rule's 4th extra repository (a counted clip; see the docstring)
     "yh570/sensibility_testbed",  # declared 2026-12-07 before any number was seen, the rule's 7th (counted clips)
+    "Tclack88/MatlabSucks",  # declared 2026-12-07 before any number was seen, the rule's 10th (counted clips)
 })
 
 #: the repository of each ``phone_walks_more`` walk (its MANIFEST.tsv says the same)

@@ -205,6 +205,9 @@ def test_split_declarations():
     assert S.repo_split("yh570/sensibility_testbed") == "tuning"
     assert S.repo_split("zDrakon/SensorDataExplorer") == "report"  # the 8th, declared the same day
     assert S.repo_split("sgrzegorz/StepApp") == S.repo_split("Omer1Eryilmaz/SignalProcessing") == "report"
+    # the fifth search (declared 2026-12-07, in order of addition): the 9th report, the 10th tuning
+    assert S.repo_split("NIghtwing1914/Assignment2-Ubicomp") == "report"
+    assert S.repo_split("Tclack88/MatlabSucks") == "tuning"
     from benchmarks.run import DATASET_MODULES
     import importlib
 

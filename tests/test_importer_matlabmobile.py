@@ -183,3 +183,47 @@ def test_a_pyshoe_mat_file_is_still_pyshoe(tmp_path):
     p = tmp_path / "trial.mat"
     p.write_bytes(header + _double(np.zeros(6), "imu") + _double(np.arange(6.0), "ts"))
     assert detect_format(p) == PYSHOE
+
+
+def test_an_accelerometer_only_log_is_read_and_a_plain_acceleration_matrix_is_not_a_log(tmp_path):
+    # MATLAB Mobile with only the accelerometer on saves one timetable (GitHub Tclack88/MatlabSucks,
+    # NIghtwing1914/Assignment2-Ubicomp): recognised and read back; a bare 'Acceleration' double is not a log
+    ms, cols = _walk(300, rate_hz=53.0)["Acceleration"]
+    p = _log(tmp_path / "120_pocket_sensorlog.mat", {"Acceleration": (ms, cols)})
+    assert detect_format(p) == MATLAB_MOBILE
+    rec = load_recording(p)
+    assert set(rec.streams) == {"acc"}
+    np.testing.assert_array_equal(rec.streams["acc"].values, np.column_stack(list(cols.values())))
+    assert np.array_equal(rec.streams["acc"].t_ns, np.round((ms - T0_MS) * 1e6).astype(np.int64))
+    header = b"MATLAB 5.0 MAT-file, test".ljust(116, b" ") + b"\0" * 8 + b"\x00\x01IM"
+    q = tmp_path / "plain.mat"
+    q.write_bytes(header + _double(np.zeros(9), "Acceleration"))
+    with pytest.raises(RecordingError, match="MAT-file without"):
+        detect_format(q)
+
+
+def test_the_csv_matlab_writes_from_an_accelerometer_log_reads_back_and_skips_a_bad_line(tmp_path):
+    # writetable(splitvars(struct2table(load(log)))) of an accelerometer-only log (GitHub Tclack88/MatlabSucks)
+    from core.importers import MATLAB_MOBILE_CSV
+    rng = np.random.default_rng(3)
+    n = 400
+    ms = np.round(np.cumsum(np.full(n, 19.0) + rng.integers(-1, 2, n)))  # about 53 Hz, whole ms as written
+    acc = np.column_stack([0.3 * rng.standard_normal(n), -9.6 + rng.standard_normal(n), rng.standard_normal(n)])
+    t0 = np.datetime64("2023-03-16T23:59:59.500")  # the day changes inside the file
+    lines = ["Acceleration_Timestamp,X,Y,Z"]
+    for m, (x, y, z) in zip(ms, acc):
+        t = (t0 + np.timedelta64(int(m), "ms")).astype(object)
+        lines.append(f"{t:%d-%b-%Y %H:%M:%S}.{t.microsecond // 1000:03d},{float(x)!r},{float(y)!r},{float(z)!r}")
+    lines.insert(200, "16-Mar-2023 25:99,1,2,3")  # a damaged line
+    p = tmp_path / "80_pocket.csv"
+    p.write_text("\n".join(lines) + "\n")
+    assert detect_format(p) == MATLAB_MOBILE_CSV
+    with pytest.warns(Warning, match="skipped 1 bad line"):
+        rec = load_recording(p)
+    a = rec.streams["acc"]
+    np.testing.assert_array_equal(a.values, acc)
+    assert np.array_equal(a.t_ns, ((ms - ms[0]) * 1_000_000).astype(np.int64))
+    folder = tmp_path / "walk"
+    folder.mkdir()
+    (folder / "80_pocket.csv").write_text(p.read_text())
+    assert detect_format(folder) == MATLAB_MOBILE_CSV

@@ -36,7 +36,9 @@ Formats (name: input -> reader):
   ... columns (g with iOS's sign, converted; gyroscope and magnetometer where logged; ``.csv`` or ``.gz``, or a folder
   holding one) -> :func:`read_sensorlog`
 * ``matlab-mobile``: a MATLAB Mobile sensor log saved as a MAT-file (``timetable`` objects ``Acceleration``,
-  ``AngularVelocity``, ``MagneticField``, ``Position``; ``.mat`` or ``.mat.gz``) -> :func:`read_matlabmobile`
+  ``AngularVelocity``, ``MagneticField``, ``Position`` where logged; ``.mat`` or ``.mat.gz``) -> :func:`read_matlabmobile`
+* ``matlab-mobile-csv``: the CSV MATLAB writes from such a log's accelerometer timetable (``Acceleration_Timestamp,X,Y,Z``,
+  datetime text; ``.csv`` or ``.gz``, or a folder holding one) -> :func:`read_matlabmobile_csv`
 * ``pyshoe``: PyShoe processed trial, a MATLAB level-5 MAT-file (``.mat`` or ``.mat.gz``; read with numpy and
   zlib, :mod:`core.importers.matv5`) -> :func:`read_pyshoe`
 
@@ -111,7 +113,7 @@ from core.importers.accelcsv import read_accelcsv
 from core.importers.sensibility import read_sensibility
 from core.importers.sensorlog import read_sensorlog
 from core.importers.brajdic import read_brajdic
-from core.importers.matlabmobile import read_matlabmobile
+from core.importers.matlabmobile import read_matlabmobile, read_matlabmobile_csv
 from core.importers.getsensordata import read_getsensordata
 from core.importers.msindoor import read_msindoor
 from core.importers.oxford import read_oxford
@@ -139,6 +141,7 @@ ACCEL_CSV = _acsv.FORMAT
 SENSIBILITY = _sens.FORMAT
 SENSORLOG = _slog.FORMAT
 MATLAB_MOBILE = _mm.FORMAT
+MATLAB_MOBILE_CSV = _mm.CSV_FORMAT
 
 #: format name -> what it is (for messages and the CLI's help)
 FORMATS = {
@@ -170,6 +173,8 @@ FORMATS = {
                ".csv or .gz)",
     MATLAB_MOBILE: "MATLAB Mobile sensor log saved as a MAT-file (timetables Acceleration, AngularVelocity, "
                    "MagneticField, Position; .mat or .mat.gz)",
+    MATLAB_MOBILE_CSV: "MATLAB Mobile accelerometer timetable written to CSV by MATLAB ('Acceleration_Timestamp,X,Y,Z' "
+                       "header, datetime text, m/s^2 with gravity; .csv or .gz)",
 }
 
 
@@ -190,6 +195,7 @@ _SHORT = {
     SENSIBILITY: "sensibility-testbed (Sensibility Testbed Time, x, y, z CSV)",
     SENSORLOG: "sensorlog (SensorLog iOS CSV)",
     MATLAB_MOBILE: "matlab-mobile (MATLAB Mobile sensor log .mat)",
+    MATLAB_MOBILE_CSV: "matlab-mobile-csv (MATLAB Mobile accelerometer CSV, Acceleration_Timestamp,X,Y,Z)",
 }
 
 
@@ -209,6 +215,7 @@ _TEXT_TESTS = [
     (_tw.looks_like_csv, TRUNDLE),
     (_ptb.looks_like_csv, PHYSICS_TOOLBOX),
     (_acsv.looks_like_csv, ACCEL_CSV),
+    (_mm.looks_like_csv, MATLAB_MOBILE_CSV),
     (_sens.looks_like_csv, SENSIBILITY),
     (_slog.looks_like_csv, SENSORLOG),
     (_bh.looks_like_text, BRAJDIC),
@@ -247,6 +254,8 @@ def _detect_fileset(fs: FileSet) -> str | None:
         return PHYSICS_TOOLBOX
     if _acsv.csv_files(fs):
         return ACCEL_CSV
+    if _mm.csv_files(fs):
+        return MATLAB_MOBILE_CSV
     if _sens.csv_files(fs):
         return SENSIBILITY
     if _slog.csv_files(fs):
@@ -347,13 +356,13 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
     readers = {PHYPHOX: read_phyphox, MSINDOOR: read_msindoor, BRAJDIC: read_brajdic, OXFORD: read_oxford,
                TRUNDLE: read_trundle, XIO: read_xio, XSENS: read_xsens, PYSHOE: read_pyshoe,
                PHYSICS_TOOLBOX: read_physicstoolbox, ACCEL_CSV: read_accelcsv, SENSIBILITY: read_sensibility, SENSORLOG: read_sensorlog,
-               MATLAB_MOBILE: read_matlabmobile}
+               MATLAB_MOBILE: read_matlabmobile, MATLAB_MOBILE_CSV: read_matlabmobile_csv}
     rec = readers[fmt](path, warn=warn, max_uncompressed_bytes=limit)
     return attach_truth_beside(path, rec) if truth_beside else rec
 
 
 __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",
            "read_phyphox", "read_msindoor", "read_brajdic", "read_oxford", "read_trundle", "read_xio", "read_xsens",
-           "read_pyshoe", "read_physicstoolbox", "read_accelcsv", "read_sensibility", "read_sensorlog", "read_matlabmobile", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
+           "read_pyshoe", "read_physicstoolbox", "read_accelcsv", "read_sensibility", "read_sensorlog", "read_matlabmobile", "read_matlabmobile_csv", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
            "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE", "XIO", "XSENS", "PYSHOE", "PHYSICS_TOOLBOX",
-           "ACCEL_CSV", "SENSIBILITY", "SENSORLOG", "MATLAB_MOBILE"]
+           "ACCEL_CSV", "SENSIBILITY", "SENSORLOG", "MATLAB_MOBILE", "MATLAB_MOBILE_CSV"]

@@ -529,6 +529,24 @@ def gps_check(t_ns: np.ndarray, values: np.ndarray, baseline_s: float = 5.0, mov
     return out
 
 
+def acc_csv_recording(path: str, looks_like, read_values, what: str, meta: dict, *, warn: bool = True,
+                      max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES,
+                      from_first: bool = False) -> Recording:
+    """An accelerometer-only CSV (plain or gzip, or the one such CSV of a folder or zip) whose ``read_values`` gives
+    rows ``ms, X, Y, Z`` (m/s^2 with gravity, Android device axes; the median ``|a|`` checked): ``t_ns = ms * 1e6``,
+    counted from the first row's with ``from_first``."""
+    path = str(path)
+    repairs: list[str] = []
+    notes: dict = {}
+    v = read_single_csv(path, looks_like, read_values, what, repairs, max_uncompressed_bytes)
+    if not len(v):
+        raise RecordingError("no accelerometer lines", path)
+    t_ns = np.round((v[:, 0] - (v[0, 0] if from_first else 0.0)) * 1e6).astype(np.int64)
+    acc = acceleration_in_m_s2(v[:, 1:4], "X/Y/Z", path, repairs, notes)
+    meta = {**meta, "acc_from": "X, Y, Z (m/s^2, gravity included, Android device axes)", **notes}
+    return acc_only_recording(path, t_ns, acc, meta, repairs, warn=warn)
+
+
 def acc_only_recording(path: str, t_ns: np.ndarray, acc: np.ndarray, meta: dict, repairs: list[str], *,
                        warn: bool = True, device: dict | None = None) -> Recording:
     """The recording of an accelerometer-only file (one ``acc`` stream): its repairs warned, then :func:`finish`."""

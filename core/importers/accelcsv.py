@@ -33,9 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from core.recording import MAX_UNCOMPRESSED_BYTES, Recording, RecordingError, skip_bad_lines
-from core.importers._common import (
-    FileSet, acc_only_recording, acceleration_in_m_s2, read_single_csv, single_csv_files,
-)
+from core.importers._common import FileSet, acc_csv_recording, single_csv_files
 from core.importers._csv import Table
 
 FORMAT = "accel-csv"
@@ -61,23 +59,14 @@ def csv_files(fs: FileSet) -> list[str]:
 def read_accelcsv(path: str, *, warn: bool = True,
                   max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
     """Read a ``Timestamp,Milliseconds,X,Y,Z`` CSV (plain or gzip, or the one such CSV of a folder or zip)."""
-    path = str(path)
-    repairs: list[str] = []
-    notes: dict = {}
-    v = read_single_csv(path, looks_like_csv, _read_values, WHAT, repairs, max_uncompressed_bytes)
-    if not len(v):
-        raise RecordingError("no accelerometer lines", path)
-    t_ns = np.round(v[:, 0] * 1e6).astype(np.int64)
-    acc = acceleration_in_m_s2(v[:, 1:4], "X/Y/Z", path, repairs, notes)
     meta = {
         "source_format": FORMAT,
         "app": "not named by the source (an Android accelerometer logger)",
         "time_base": "t_ns = the file's Milliseconds (ms since the recording started) * 1e6; the Timestamp column "
                      "(wall clock, whole seconds, time zone not stated) is not read: absolute time unknown",
-        "acc_from": "X, Y, Z (m/s^2, gravity included, Android device axes)",
-        **notes,
     }
-    return acc_only_recording(path, t_ns, acc, meta, repairs, warn=warn)
+    return acc_csv_recording(path, looks_like_csv, _read_values, WHAT, meta, warn=warn,
+                             max_uncompressed_bytes=max_uncompressed_bytes)
 
 
 def _read_values(text, where: str, repairs: list[str]) -> np.ndarray:

@@ -26,7 +26,8 @@ placeholder; object ids count from 1.  A ``timetable`` saves itself as one prope
 ``data`` (a cell per column), ``varNames`` and ``rowTimes`` (a reference to a ``datetime`` object whose ``data``
 is milliseconds since 1970-01-01 UTC, complex when the imaginary part carries sub-millisecond digits).  This
 layout is MathWorks' undocumented format, read here as far as these logs need (checked on the eight logs of
-GitHub ``Omer1Eryilmaz/SignalProcessing``, MATLAB R2022-23); anything else is a :class:`RecordingError`
+GitHub ``Omer1Eryilmaz/SignalProcessing``, MATLAB R2022-23, and on the accelerometer-only logs of
+``Tclack88/MatlabSucks`` and ``NIghtwing1914/Assignment2-Ubicomp``); anything else is a :class:`RecordingError`
 naming the file.
 
 Times: ``t_ns`` from the whole millisecond of the first event of any sensor (its Unix time in
@@ -42,9 +43,11 @@ import warnings
 import numpy as np
 
 from core.conventions import ACC, GPS, GYRO, MAG
-from core.recording import MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream
+from core.recording import (
+    MAX_BAD_LINES, MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
+)
 from core.importers import matv5
-from core.importers._common import finish, gps_values, open_binary
+from core.importers._common import acc_csv_recording, finish, gps_values, open_binary, single_csv_files
 
 FORMAT = "matlab-mobile"
 
@@ -64,8 +67,10 @@ OBJECT_REF = 0xDD000000
 
 def looks_like(names: list[str]) -> bool:
     """A MAT-file whose variables (:func:`core.importers.matv5.read_mat`'s ``all_names``) are a MATLAB Mobile
-    log's: ``Acceleration`` and another sensor timetable, beside the unnamed subsystem data."""
-    return "Acceleration" in names and "" in names and sum(n in names for n in LOG_VARIABLES) >= 2
+    log's: an ``Acceleration`` timetable (alone when only the accelerometer was on, else beside other sensor
+    timetables), with the unnamed subsystem data that holds the objects; no other named variable."""
+    named = [n for n in names if n]
+    return "Acceleration" in named and "" in names and all(n in LOG_VARIABLES for n in named)
 
 
 class _Objects:
@@ -181,8 +186,8 @@ def read_matlabmobile(path: str, *, warn: bool = True,
     with open_binary(path) as f:
         mat = matv5.read_mat(f, path, max_uncompressed_bytes=max_uncompressed_bytes, objects=True)
     if not looks_like(mat.all_names):
-        raise RecordingError("not a MATLAB Mobile log: no Acceleration timetable beside another sensor's and the "
-                             "subsystem data", path)
+        raise RecordingError("not a MATLAB Mobile log: no Acceleration timetable with the subsystem data, or a "
+                             "variable a MATLAB Mobile log does not have", path)
     objs = _Objects(mat[""], path)
     raw: dict = {}
     for var, (stream, columns) in SENSORS.items():
@@ -216,3 +221,81 @@ def read_matlabmobile(path: str, *, warn: bool = True,
         for r in rec.repairs:
             warnings.warn(r, DamagedFileWarning, stacklevel=2)
     return finish(rec, warn=warn, unix_offset_ns=t0_ns)
+
+
+# ---------------------------------------------------------------------------
+# the CSV MATLAB writes from such a log's accelerometer timetable
+
+#: the header ``writetable(splitvars(struct2table(load(log))))`` writes for an accelerometer-only log
+CSV_HEADER = ["Acceleration_Timestamp", "X", "Y", "Z"]
+CSV_FORMAT = "matlab-mobile-csv"
+CSV_WHAT = "MATLAB Mobile accelerometer CSV (Acceleration_Timestamp,X,Y,Z)"
+_MONTHS = {m: i + 1 for i, m in enumerate(("Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct",
+                                           "Nov", "Dec"))}
+
+
+def looks_like_csv(head: str) -> bool:
+    """The first line is the header ``Acceleration_Timestamp,X,Y,Z`` (quotes and spaces around names allowed)."""
+    first = head.lstrip("\ufeff").split("\n", 1)[0].strip()
+    return [n.strip().strip('"').strip() for n in first.split(",")] == CSV_HEADER
+
+
+def csv_files(fs) -> list[str]:
+    """The CSVs of this layout in a folder or zip (top level and one folder down)."""
+    return single_csv_files(fs, looks_like_csv)
+
+
+def _datetime_ms(s: str) -> float:
+    """MATLAB's default datetime text ``16-Mar-2023 13:51:57.940`` (local time, no zone) -> ms since 1970 as if UTC."""
+    day, clock = s.strip().strip('"').split(" ")
+    d, mon, y = day.split("-")
+    h, mi, sec = clock.split(":")
+    days = (np.datetime64(f"{int(y):04d}-{_MONTHS[mon]:02d}-{int(d):02d}") - np.datetime64("1970-01-01")).astype(int)
+    return ((int(days) * 24 + int(h)) * 60 + int(mi)) * 60_000.0 + float(sec) * 1000.0
+
+
+def _read_csv_values(text, where: str, repairs: list[str]) -> np.ndarray:
+    out, bad, n = [], [], 0
+    header_seen = False
+    for first_no, lines in text:
+        for k, ln in enumerate(lines):
+            if not header_seen:
+                header_seen = True
+                continue
+            if not ln.strip():
+                continue
+            n += 1
+            f = ln.split(",")
+            try:
+                if len(f) < 4:
+                    raise ValueError("missing fields")
+                out.append((_datetime_ms(f[0]), float(f[1]), float(f[2]), float(f[3])))
+            except (ValueError, KeyError) as e:
+                bad.append(RecordingError(f"not a time and three numbers ({e})", where, first_no + k))
+                if len(bad) > MAX_BAD_LINES:
+                    break
+    if text.tail.strip():
+        repairs.append(f"{where}: dropped an incomplete last line {text.tail_line} (no newline: the file was cut "
+                       "off mid-write)")
+    skip_bad_lines(bad, n, where, repairs)
+    return np.array(out, dtype=np.float64).reshape(-1, 4)
+
+
+def read_matlabmobile_csv(path: str, *, warn: bool = True,
+                          max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
+    """Read the ``Acceleration_Timestamp,X,Y,Z`` CSV MATLAB writes from a MATLAB Mobile accelerometer log.
+
+    ``Acceleration_Timestamp`` is MATLAB's datetime text (``16-Mar-2023 13:51:57.940``: local time, zone not
+    written, milliseconds); ``t_ns`` counts from the first line's.  ``X, Y, Z``: m/s^2 with gravity, Android axes
+    (the median ``|a|`` is checked, :func:`core.importers._common.acceleration_in_m_s2`).  Checked on the CSVs of
+    GitHub ``Tclack88/MatlabSucks`` (``sensor_systems/pedometer``, 53 Hz, the same samples as its MAT-files).
+    Streams: ``acc``.
+    """
+    meta = {
+        "source_format": CSV_FORMAT,
+        "app": "MATLAB Mobile (its accelerometer timetable written to CSV by MATLAB)",
+        "time_base": "t_ns = Acceleration_Timestamp (local datetime text, ms) - the first line's; absolute time "
+                     "unknown (no time zone in the file)",
+    }
+    return acc_csv_recording(path, looks_like_csv, _read_csv_values, CSV_WHAT, meta, warn=warn,
+                             max_uncompressed_bytes=max_uncompressed_bytes, from_first=True)
