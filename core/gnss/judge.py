@@ -184,18 +184,18 @@ class JudgeSettings:
     jump_floor_m: float = 5.0
     jump_max_dt_s: float = 2.0
     #: dead reckoning's own error against the fix's (issue #26: "indoors or with fixes worse than dead reckoning's own
-    #: sigma, the fused track is the PDR track"; :meth:`GpsJudge.dr_accuracy_m`): its 68 % radius from its last
-    #: reference (a known start: :meth:`GpsJudge.known_start`; the last fix the fusion took: that fix's reported
-    #: accuracy) grows by this share of the distance walked since.  A fix reporting more than ``dr_accuracy_ratio``
-    #: times it cannot make the track better (``Cause.DR_BETTER``).  Not the filter's own sigma: Chen's grows by the
-    #: heading bias it has not learnt yet (on IPIN T01r02 10 m after 15 s from a 1-m known start while dead
-    #: reckoning was 2 m off), so that a few fixes reporting 4-5 m and 5-9 m off in one direction moved the track
-    #: all the way onto them.  None: off (and no reference before a known start or a first fix: nothing to compare).
+    #: sigma, the fused track is the PDR track"; :meth:`GpsJudge.dr_accuracy_m`): from a known start
+    #: (:meth:`GpsJudge.known_start`) dead reckoning's 68 % radius grows by this share of the distance walked; a fix
+    #: reporting more than ``dr_accuracy_ratio`` times it cannot make the track better (``Cause.DR_BETTER``).  Once
+    #: the fusion has taken a fix the track follows the stream (the next fixes share its bias) and the rule rests.
+    #: Not the filter's own sigma: Chen's grows by the heading bias it has not learnt yet (on IPIN T01r02 10 m after
+    #: 15 s from a 1-m known start while dead reckoning was 2 m off), so that a few fixes reporting 4-5 m and off in
+    #: one direction move the track all the way onto them.  None: off (and without a known start it never acts).
     #: **Off by default**: on the IPIN tuning split it does not help (routes 01, 02, 21, 22; Chen's median landmark
-    #: error 2.22 m -> 2.29 m at 0.05, 0.08, 0.12 and 0.2 alike, = dead reckoning alone 2.29; mean 2.84 -> 3.36 /
-    #: 2.96 / 2.91 / 2.90 m): the fixes of route 01 on the SM-A520F are 0.5-1.5 m off (20+ satellites in use) and
-    #: help there (T01r01 6.16 m alone, 2.13 fused, 2.79-6.09 with the rule); it removes T02r02's loss (2.15 alone,
-    #: 2.60 fused, 2.16 with it)
+    #: error 2.22 m -> 2.29 m at 0.05, 0.08 and 0.12 alike, = dead reckoning alone 2.29; mean 2.84 -> 3.36 / 2.99 /
+    #: 2.91 m): the fixes of route 01 on the SM-A520F are 0.5-1.5 m off (20+ satellites in use) and help there
+    #: (T01r01 6.16 m alone, 2.13 fused, 3.11-6.09 with the rule); it does remove T02r02's loss (2.15 alone, 2.60
+    #: fused, 2.16 with it).  Outdoors (no known start) it changes nothing
     dr_growth_per_m: float | None = None
     dr_accuracy_ratio: float = 1.0
 
@@ -354,18 +354,12 @@ class GpsJudge:
         return self.last.verdict if self.last is not None else GpsVerdict.UNKNOWN
 
     def fix_used(self, t_ns: int) -> None:
-        """The fusion took the fix of ``t_ns``: a reference for the drift check (:mod:`core.gnss.drift`) and for dead
-        reckoning's own error (the fix's reported accuracy: a phone's fix errors are biased for minutes, so the
-        filter's smaller SD after many of them is not the track's)."""
+        """The fusion took the fix of ``t_ns``: a reference for the drift check (:mod:`core.gnss.drift`); the track
+        now follows the stream, so the fixes are no longer compared with dead reckoning's own error (``dr_growth_per_m``:
+        the next fixes share this one's bias, taking them changes little)."""
         if self.drift is not None:
             self.drift.fix_used(t_ns)
-        for f in reversed(self._fixes):
-            if f[0] == int(t_ns):
-                self._dr_ref_m = f[3]
-                self._dr_walked_m = 0.0
-                break
-            if f[0] < int(t_ns):
-                break
+        self._dr_ref_m = None
 
     def add_nis(self, nis: float) -> None:
         """The NIS of a fix the filter took."""
