@@ -303,3 +303,60 @@ def test_a_real_turn_is_not_a_jump(turn):
     out = _straight_then(0.0, 3.0, turn=turn, offset_deg=40.0, settings={"jump_per_hacc": 2.0})
     assert all(not (v.jump_m > 0.0) for v in out)
     assert all(v.verdict is GpsVerdict.USABLE for v in out[25:])
+
+
+# -- dead reckoning's own accuracy against the fixes' (issue #26: indoors the fused track is the PDR track) ------------
+
+def _dr_judge(growth=0.05):
+    from core.gnss.judge import JudgeSettings
+
+    return GpsJudge(JudgeSettings(dr_growth_per_m=growth))
+
+
+def test_dead_reckonings_own_accuracy_grows_from_its_reference_with_the_distance_walked():
+    j = _dr_judge(0.05)
+    assert math.isnan(j.dr_accuracy_m())  # no reference: nothing to compare
+    j.known_start(1.0)
+    assert j.dr_accuracy_m() == pytest.approx(1.515)  # a 1-m SD per axis is a 1.515-m 68 % radius
+    for k in range(100):
+        j.add_step(int(k * 5e8), 0.8, 0.3)
+    assert j.dr_accuracy_m() == pytest.approx(math.hypot(1.515, 0.05 * 80.0))
+    lat, lon = enu_to_geodetic(80.0, 0.0, ORIGIN)
+    j.add_fix(int(50e9), float(lat), float(lon), 3.0, (80.0, 0.0))
+    j.fix_used(int(50e9))  # the fusion took it: the track follows the stream, the rule rests
+    assert math.isnan(j.dr_accuracy_m())
+    assert math.isnan(GpsJudge().dr_accuracy_m())  # off by default
+
+
+def test_fixes_reporting_worse_than_dead_reckoning_from_a_known_start_are_kept_out_and_the_track_is_dead_reckoning():
+    """A biased indoor stream (6 m off in one direction, reporting 5 m, consistent with the steps) after a known
+    start: with the rule every fix is kept out (DR's radius reaches 5 m after 95 m, the walk is 84 m) and the fused
+    track is the dead-reckoned one; without it the judge lets the stream in and the track moves onto it."""
+    from core.gnss import make_fusion
+    from core.gnss.judge import JudgeSettings
+
+    steps = _walk(lambda t: 0.4 * math.sin(t / 20.0), seconds=60.0)
+    gps = _gps(steps, lambda t, e, n: (e + 5.0, n - 3.5), 5.0)
+    for name in ("chen", "kubrak"):
+        fr = make_fusion(name, start=(*ORIGIN, 1.0), judge=JudgeSettings(dr_growth_per_m=0.05)).run(steps, gps)
+        assert sum(f.accepted for f in fr.fixes) == 0
+        assert Cause.DR_BETTER.value in fr.counters["gps_judge"]["causes"]
+        assert verdict_text(fr.counters["gps_judge"], name).startswith("dead reckoning: GPS judged unusable")
+        d = [math.hypot(a.east_m - b.east_m, a.north_m - b.north_m) for a, b in zip(fr.steps, steps)]
+        assert max(d) < 1e-6
+        before = make_fusion(name, start=(*ORIGIN, 1.0)).run(steps, gps)
+        assert sum(f.accepted for f in before.fixes) > 10
+
+
+def test_fixes_better_than_dead_reckoning_are_taken_once_it_has_walked_far_enough():
+    """The same rule lets good fixes in once dead reckoning's radius exceeds their reported accuracy: 3-m fixes
+    after a 1-m known start at 5 % per metre pass from about 57 m walked (80 s at 0.7 m per 0.5 s: from ~41 s)."""
+    from core.gnss import make_fusion
+    from core.gnss.judge import JudgeSettings
+
+    steps = _walk(lambda t: 0.2, seconds=120.0)
+    rng = np.random.default_rng(7)
+    gps = _gps(steps, lambda t, e, n: (e + rng.normal(0, 1.0), n + rng.normal(0, 1.0)), 3.0)
+    fr = make_fusion("chen", start=(*ORIGIN, 1.0), judge=JudgeSettings(dr_growth_per_m=0.05)).run(steps, gps)
+    taken = [f.t_ns * 1e-9 for f in fr.fixes if f.accepted]
+    assert taken and 40.0 <= taken[0] <= 60.0

@@ -427,6 +427,8 @@ class FixFusion:
         self._headings: deque = deque()  # (t_ns, step heading unwrapped) of the last few seconds
         self._pdr: deque = deque()  # (t_ns, east, north) of the pipeline's dead-reckoned steps, last few seconds
         self.judge = GpsJudge(self.judge_settings) if self.judge_settings is not None else None
+        if self.judge is not None and self.start is not None:
+            self.judge.known_start(self.start[2])
         self.n_judged_out = 0
         self._pending_learning: list = []  # fixes the judge has not judged yet, for training once it has
         self._quality_failed = False  # the judge failed on the stream's quality since its last usable verdict

@@ -53,6 +53,17 @@ Verdict (:class:`GpsVerdict`)
     ``UNUSABLE`` lets a fix into the filter: the fused track is then the
     dead-reckoned one (:class:`core.gnss.base.FixFusion`).
 
+Tried and not kept (issue #26, 2026-12-07, tuning split)
+    *Never lose a consistent stream, in the judge*: a window whose fixes have agreed with the steps or among
+    themselves (the tests above, no jump) for 20 or 30 s made usable whatever the pace check and the window's
+    median accuracy said.  Indoors the phones' streams pass those tests: on 9 of the 16 IPIN tuning files the
+    stream was then taken (84-132 fixes each) and Chen's median landmark error went 2.22 -> 2.92 / 2.57 m (PDR
+    alone 2.29; T02r01 1.65 -> 3.68, T02r03 2.46 -> 4.62, T22r03 2.00 -> 5.89): the pace check is what keeps
+    them out, and consistency over 20-30 s cannot tell an indoor stream from a walk.  Overriding only the
+    accuracy cause (this fix within ``max_median_hacc_m``): IPIN tuning unchanged, on the outdoor tuning walk
+    (thomasdingemanse_lopen, every 10th fix left out) Chen's longest good stretch lost 16 -> 12 s (ratio 0.43 ->
+    0.43) but Kubrak's leave-out ratio 1.04 -> 1.29 (over the 1.2 target) and its longest lost 30 -> 39 s.
+
 The thresholds were chosen on the tuning split only (``benchmarks/splits.py``):
 IPIN routes 01, 02 (fixes 1.5-6 m off, reporting 4-6 m, residual against the
 steps 1.1-2.6 m: GPS helps) and 21, 22 (reporting 12-39 m, residual 3.0-3.7 m,
@@ -70,7 +81,7 @@ from enum import Enum
 import numpy as np
 
 from core.geodesy import geodetic_to_enu
-from core.gnss.drift import DriftSettings, StreamDriftCheck
+from core.gnss.drift import HACC_PER_SIGMA, DriftSettings, StreamDriftCheck
 from core.gnss.pace import PaceSettings, ReceiverPaceCheck
 
 
@@ -94,6 +105,7 @@ class Cause(Enum):
     PACE = "the receiver's speed does not follow the steps (indoors)"
     DRIFT = "the fixes walk away from dead reckoning over minutes"
     NO_EVIDENCE = "not yet enough evidence"
+    DR_BETTER = "dead reckoning more accurate than the fixes"
 
 
 @dataclass(frozen=True)
@@ -153,7 +165,10 @@ class JudgeSettings:
     #: Outdoors no cost on the tuning split (lopen and the simulator's fault walks unchanged: the evidence comes within
     #: the settling time).  The report split, seen once after the decision: IPIN Chen 3.77 -> 2.53 m (PDR alone 2.00,
     #: target still missed): T24r01 10.8 -> 1.66, T05r04 4.17 -> 1.80, T04r02 3.58 -> 2.04, T24r02 4.09 -> 4.94;
-    #: T23r04 (9.86), T05r01 (5.95), T05r03 (4.47) unchanged: their receivers' pace passes
+    #: T23r04 (9.86), T05r01 (5.95), T05r03 (4.47) unchanged: their receivers' pace passes.  Again at 7f480db
+    #: (issue #26, tuning): Chen's median 2.22 -> 2.22 m, mean 2.84 -> 2.92 (T01r02 2.01 -> 3.96, T02r02 2.60 ->
+    #: 2.16, T01r01 2.13 -> 2.01); the outdoor tuning walk unchanged (Chen 0.43, Kubrak 1.04; 16 / 30 s lost);
+    #: report seen once after: Chen 3.61 -> 2.45, Kubrak 3.65 -> 2.45 (PDR alone 2.32)
     evidence_first: bool = False
     #: without receiver speeds, the steps' path within the window (m) that counts as evidence
     evidence_min_walk_m: float = 15.0
@@ -182,6 +197,27 @@ class JudgeSettings:
     jump_per_hacc: float | None = None
     jump_floor_m: float = 5.0
     jump_max_dt_s: float = 2.0
+    #: dead reckoning's own error against the fix's (issue #26: "indoors or with fixes worse than dead reckoning's own
+    #: sigma, the fused track is the PDR track"; :meth:`GpsJudge.dr_accuracy_m`): from a known start
+    #: (:meth:`GpsJudge.known_start`) dead reckoning's 68 % radius grows by this share of the distance walked; a fix
+    #: reporting more than ``dr_accuracy_ratio`` times it cannot make the track better (``Cause.DR_BETTER``).  Once
+    #: the fusion has taken a fix the track follows the stream (the next fixes share its bias) and the rule rests.
+    #: Not the filter's own sigma: Chen's grows by the heading bias it has not learnt yet (on IPIN T01r02 10 m after
+    #: 15 s from a 1-m known start while dead reckoning was 2 m off), so that a few fixes reporting 4-5 m and off in
+    #: one direction move the track all the way onto them.  None: off (and without a known start it never acts).
+    #: **Off by default**: on the IPIN tuning split it does not help (routes 01, 02, 21, 22; Chen's median landmark
+    #: error 2.22 m -> 2.29 m at 0.05, 0.08 and 0.12 alike, = dead reckoning alone 2.29; mean 2.84 -> 3.36 / 2.99 /
+    #: 2.91 m): the fixes of route 01 on the SM-A520F are 0.5-1.5 m off (20+ satellites in use) and help there
+    #: (T01r01 6.16 m alone, 2.13 fused, 3.11-6.09 with the rule); it does remove T02r02's loss (2.15 alone, 2.60
+    #: fused, 2.16 with it).  Outdoors (no known start) it changes nothing.  Why the tuning split cannot show the
+    #: indoor failure: on routes 01 and 02 the fixes the judge lets in are 1.0 m (T01r01, T02r02), 1.7 m (T01r02)
+    #: and 5.1 m (T01r04) off where dead reckoning is 8.3, 1.8, 2.3 and 9.1 m off; T01r02's 2 and T02r02's 6 fixes
+    #: come 17-22 s after the first landmark, before the pace check has a window (``evidence_first``), the rest
+    #: after the pace check's minute.  The report split, seen once after the decision (16 files, median landmark
+    #: error, PDR alone 2.32 m): Chen / Kubrak 3.61 / 3.65 m off, 2.34 / 2.34 m at 0.08 (no fix taken in any
+    #: file; T23r04 10.47 -> 3.44, T24r01 10.45 -> 2.28, T05r01 5.99 -> 2.98); ``evidence_first`` 2.45 / 2.45
+    dr_growth_per_m: float | None = None
+    dr_accuracy_ratio: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -203,6 +239,7 @@ class Judgement:
     proven: bool = False  #: positive evidence seen since the start or the last long gap (``evidence_first``)
     drift_offset_m: float = math.nan  #: how far the fixes moved against dead reckoning (:mod:`core.gnss.drift`, m)
     drift_chi2: float = math.nan  #: that offset's chi-square against both their errors (2 dof)
+    dr_accuracy_m: float = math.nan  #: dead reckoning's own 68 % radius now (m, ``dr_growth_per_m``; nan: none)
 
     def as_dict(self) -> dict:
         return {"t_ns": self.t_ns, "verdict": self.verdict.value, "causes": [c.value for c in self.causes],
@@ -210,7 +247,8 @@ class Judgement:
                 "shape_residual_m": self.shape_residual_m, "self_residual_m": self.self_residual_m, "jump_m": self.jump_m,
                 "signal_fail_share": self.signal_fail_share,
                 "nis_mean": self.nis_mean, "nis_limit": self.nis_limit, "pace_ratio": self.pace_ratio, "proven": self.proven,
-                "drift_offset_m": self.drift_offset_m, "drift_chi2": self.drift_chi2}
+                "drift_offset_m": self.drift_offset_m, "drift_chi2": self.drift_chi2,
+                "dr_accuracy_m": self.dr_accuracy_m}
 
 
 def chi2_mean_limit(dof_each: int, n: int, quantile: float) -> float:
@@ -296,12 +334,29 @@ class GpsJudge:
         self._counts = _Counts()
         self.pace = ReceiverPaceCheck(self.settings.pace) if self.settings.pace is not None else None
         self.drift = StreamDriftCheck(self.settings.drift) if self.settings.drift is not None else None
+        self._dr_ref_m: float | None = None  # dead reckoning's 68 % radius at its last reference (None: no reference)
+        self._dr_walked_m = 0.0  # walked since that reference (m)
 
     def add_step(self, t_ns: int, length_m: float, heading_rad: float) -> None:
         """A step as the fusion dead-reckons it (its length and heading with what GPS taught): the drift check's
-        reference (:mod:`core.gnss.drift`)."""
+        reference (:mod:`core.gnss.drift`) and the distance dead reckoning's own error grows with."""
         if self.drift is not None:
             self.drift.add_step(t_ns, length_m, heading_rad)
+        if math.isfinite(length_m):
+            self._dr_walked_m += abs(float(length_m))
+
+    def known_start(self, sd_m: float) -> None:
+        """The walk starts at a known position with this SD (m, per axis): dead reckoning's first reference."""
+        self._dr_ref_m = HACC_PER_SIGMA * max(float(sd_m), 0.0)
+        self._dr_walked_m = 0.0
+
+    def dr_accuracy_m(self) -> float:
+        """Dead reckoning's own 68 % radius now (m; ``dr_growth_per_m``): its reference's, and the share of the
+        distance walked since, root sum square (nan: off, or no reference yet)."""
+        g = self.settings.dr_growth_per_m
+        if g is None or self._dr_ref_m is None:
+            return math.nan
+        return math.hypot(self._dr_ref_m, g * self._dr_walked_m)
 
     @property
     def passing_since_ns(self) -> int | None:
@@ -319,9 +374,12 @@ class GpsJudge:
         return self.last.verdict if self.last is not None else GpsVerdict.UNKNOWN
 
     def fix_used(self, t_ns: int) -> None:
-        """The fusion took the fix of ``t_ns``: a reference for the drift check (:mod:`core.gnss.drift`)."""
+        """The fusion took the fix of ``t_ns``: a reference for the drift check (:mod:`core.gnss.drift`); the track
+        now follows the stream, so the fixes are no longer compared with dead reckoning's own error (``dr_growth_per_m``:
+        the next fixes share this one's bias, taking them changes little)."""
         if self.drift is not None:
             self.drift.fix_used(t_ns)
+        self._dr_ref_m = None
 
     def add_nis(self, nis: float) -> None:
         """The NIS of a fix the filter took."""
@@ -411,6 +469,9 @@ class GpsJudge:
             causes.append(Cause.PACE)
         if self.drift is not None and self.drift.last.drifting:
             causes.append(Cause.DRIFT)
+        dr_acc = self.dr_accuracy_m()
+        if dr_acc == dr_acc and n and fx[-1][3] > s.dr_accuracy_ratio * dr_acc:
+            causes.append(Cause.DR_BETTER)
         if nis_mean == nis_mean and nis_mean > self.nis_limit:
             causes.append(Cause.NIS)
             self._nis.clear()  # judged once: the next window starts afresh
@@ -426,7 +487,7 @@ class GpsJudge:
                   pace_ratio=self.pace.last.ratio if self.pace is not None else math.nan,
                   proven=self._proven,
                   drift_offset_m=self.drift.last.offset_m if self.drift is not None else math.nan,
-                  drift_chi2=self.drift.last.chi2 if self.drift is not None else math.nan)
+                  drift_chi2=self.drift.last.chi2 if self.drift is not None else math.nan, dr_accuracy_m=dr_acc)
         if self._resuming and causes == [Cause.FEW_FIXES] and not no_evidence:
             # a short gap in a stream found usable (a tunnel, a hidden window): still usable while the window
             # refills, its passing time kept (issue #26 follow-up: a 25-s gap cost a fresh 18 s of re-judging)
