@@ -200,6 +200,7 @@ from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
 from core.kalman import skew  # noqa: F401  (re-exported: core.foot and older callers import it from here)
 from core.dsp import RunningMedian, WindowMeanSpread, WindowVariance
+from core.pdr.heading_smoother import AttitudeHistory, HeadingSmoothing
 
 _I3 = np.eye(3)
 _I3.flags.writeable = False
@@ -778,13 +779,16 @@ class AttitudeEKF(AttitudeFilterBase):
     """
 
     def __init__(self, settings: AttitudeSettings | None = None, *, mag_calibrator=None, field_detector=None,
-                 **overrides):
+                 keep_history: bool = False, **overrides):
         s = settings or AttitudeSettings()
         if overrides:
             s = replace(s, **overrides)
         self.settings = s
         self.mag_calibrator = mag_calibrator
         self.field_detector = field_detector
+        #: replays only: keep what the RTS heading smoother needs (:mod:`core.pdr.heading_smoother`) from each
+        #: :meth:`reset` on; :meth:`smoothed_heading` runs it.  The forward filter is the same either way.
+        self.keep_history = bool(keep_history)
         self.reset()
 
     # -- read-only views of settings that the pipeline asks for -------------------------------
@@ -878,6 +882,14 @@ class AttitudeEKF(AttitudeFilterBase):
 
     def reset(self) -> None:
         self._state = AttitudeState.initial(self.settings)
+        #: the forward run kept for the replay's heading smoother (None unless ``keep_history``)
+        self.history = AttitudeHistory() if self.keep_history else None
+
+    def smoothed_heading(self) -> HeadingSmoothing:
+        """The RTS-smoothed heading of the run so far (:class:`core.pdr.heading_smoother.HeadingSmoothing`)."""
+        if self.history is None:
+            raise ValueError("no history: make the filter with keep_history=True before the run")
+        return self.history.smooth()
 
     def snapshot(self) -> AttitudeState:
         """A copy of the whole state (the filter keeps its own)."""
@@ -1050,14 +1062,19 @@ class AttitudeEKF(AttitudeFilterBase):
                           phi * (to[1] - (Rdt[3] * bo[0] + Rdt[4] * bo[1] + Rdt[5] * bo[2])),
                           phi * (to[2] - (Rdt[6] * bo[0] + Rdt[7] * bo[1] + Rdt[8] * bo[2])))
             self._decay_offset(phi, cross=False)
+        if self.history is not None:
+            self.history.add_prediction(Rdt, phi if s.mag_offset_sd_rad > 0.0 else 1.0)
         state.t_ns = t_ns
 
     def _random_walk(self, dt: float) -> None:
         P = self.P
         P[0:3, 0:3] += (self.settings.no_gyro_random_walk_rad_sqrt_s ** 2 * dt) * _I3
         self.P = P
+        phi = math.exp(-dt / self.settings.mag_offset_time_s) if self.has_mag_offset else 1.0
         if self.has_mag_offset:
-            self._decay_offset(math.exp(-dt / self.settings.mag_offset_time_s), cross=True)
+            self._decay_offset(phi, cross=True)
+        if self.history is not None:
+            self.history.add_prediction(None, phi)
 
     def _decay_offset(self, phi: float, cross: bool) -> None:
         """The field's heading offset over one step of its Gauss-Markov process, ``o <- phi o + w``,
@@ -1111,6 +1128,8 @@ class AttitudeEKF(AttitudeFilterBase):
         """Fold the error into ``q`` and ``b`` and reset it: ``P <- G P G^T`` (:func:`core.kalman.reset_jacobian`,
         ``G = I + [dtheta / 2]x`` for this navigation-frame error; derived in the module docstring)."""
         state = self._state
+        if self.history is not None:
+            self.history.before_inject(state.t_ns, self.P_full)
         dth = dx[0:3]
         state.q = kalman.inject_rotation(state.q, dth)
         lim = self.settings.max_gyro_bias_rad_s
@@ -1121,6 +1140,8 @@ class AttitudeEKF(AttitudeFilterBase):
         if keep_yaw:  # a consider heading is carried, not re-linearised: its row stays the identity's
             G[2, 0:2] = 0.0
         self.P_full = kalman.reset_covariance(Pn, dth, G=G)
+        if self.history is not None:
+            self.history.after_inject(state.t_ns, dx, G, self.P_full, state.q)
 
     def _record(self, kind: str, used: bool, nis: float) -> None:
         if nis == nis:

@@ -71,6 +71,7 @@ from core.pdr.carry import CarryModeDetector
 from core.pdr.deadreckoning import DeadReckoner
 from core.pdr.gapbridge import AccGapBridge, EstimatedStep, GapVerdict
 from core.pdr.heading import RotationSmoother, interval_heading
+from core.pdr.heading_smoother import SmootherVerdict, smooth_steps
 from core.pdr.steps import GENTLE, STEP_GATES, UNEVEN_POCKET, StepDetector, StepEvent
 from core.pdr.velocity import SpeedFeatureWindow
 from core.pdr.walkdir import WALKING_DIRECTIONS, WalkingDirection
@@ -404,6 +405,15 @@ class Pipeline:
         :attr:`Step.estimated`; otherwise nothing is added and the reason is in the labels (issue #30;
         True: a default :class:`core.pdr.gapbridge.AccGapBridge`; False: no bridging, the walk in the gap
         is missing from the track).
+    heading_smoother : bool
+        Replays only (issue #27): after a batch :meth:`run`, a Rauch-Tung-Striebel backward pass over the
+        attitude filter's run (:mod:`core.pdr.heading_smoother`) turns every step's heading by the smoothed
+        heading correction at its time, and the track is dead-reckoned again: later magnetometer readings,
+        carried back by the gyroscope, correct a heading taken in a bent field (the start spot).  The streaming
+        :meth:`update` (the live app) never applies it; with a GPS fusion stage the steps are left as they were
+        (the fused track was made from them; ``counters["heading_smoother"]`` says so).  Needs
+        :class:`core.pdr.attitude.AttitudeEKF`; the fast path refuses it (the engine falls back to the
+        reference).  Off by default (see ``benchmarks/ABLATION_RESULTS.md`` for the tuning split's numbers).
     """
 
     def __init__(self, *, height_m: float | None = None, stride_model: StrideModel | None = None,
@@ -417,7 +427,7 @@ class Pipeline:
                  carry: bool | CarryModeDetector = True, step_gates: dict | None = None,
                  swinging_max_rotation_rms_rad_s: float = 12.0, rotation_hold_s: float = 8.0,
                  hold_while_settling: bool = False,
-                 acc_gap_bridge: bool | AccGapBridge = True):
+                 acc_gap_bridge: bool | AccGapBridge = True, heading_smoother: bool = False):
         self.keep_steps = keep_steps
         if acc_gap_bridge is True:
             acc_gap_bridge = AccGapBridge()
@@ -443,6 +453,12 @@ class Pipeline:
         self.attitude = attitude or AttitudeEKF(use_magnetometer=use_magnetometer)
         if not use_magnetometer:
             self.attitude.use_magnetometer = False
+        self.heading_smoother = bool(heading_smoother)
+        if self.heading_smoother:
+            if not isinstance(self.attitude, AttitudeEKF):
+                raise ValueError("heading_smoother needs core.pdr.attitude.AttitudeEKF (its error state), not "
+                                 f"{type(self.attitude).__name__}")
+            self.attitude.keep_history = True
         self.smoother = smoother or RotationSmoother(grid_rate_hz=grid_rate_hz, forward_b="auto")
         for stage in (self.detector, self.smoother):
             if abs(stage.grid_rate_hz - self.grid_rate_hz) > 1e-9:
@@ -1118,6 +1134,7 @@ class Pipeline:
             self.log = log
         att = self._log.attitude_log()
         self._log = []
+        smoothed = self._smooth_headings() if self.heading_smoother else None
         a = self.attitude
         counters = {"mag_used": a.n_mag_used, "mag_rejected": a.n_mag_rejected, "acc_rejected": a.n_acc_rejected,
                     "peaks_rejected_rotation": self.n_rejected_rotation, "peaks_rejected_bout": self.n_rejected_bout,
@@ -1127,11 +1144,29 @@ class Pipeline:
             counters["attitude"] = a.counters()
         if self.carry is not None:
             counters["carry"] = self.carry.counters()
+        if smoothed is not None:
+            counters["heading_smoother"] = smoothed
         fusion = self.gnss.result() if self.gnss is not None else None
         if fusion is not None:
             fusion.counters["site"] = self.site
         return PipelineResult(list(self.steps), Track.from_steps(self.steps), att, self.labels(), recording,
                               counters, fusion)
+
+
+    def _smooth_headings(self) -> dict:
+        """The replay's heading smoother (``heading_smoother``): turn the steps, dead-reckon them again; its counters."""
+        if self.gnss is not None:
+            return {"verdict": SmootherVerdict.GPS_FUSION.value}
+        sm = self.attitude.smoothed_heading()
+        if not len(sm.t_ns):
+            return {"verdict": SmootherVerdict.NO_HISTORY.value}
+        self.steps = smooth_steps(list(self.steps), sm)
+        c = np.degrees(np.abs(sm.correction_rad))
+        return {"verdict": SmootherVerdict.APPLIED.value, "epochs": int(len(sm.t_ns)),
+                "start_correction_deg": float(np.degrees(sm.correction_rad[0])),
+                "median_abs_correction_deg": float(np.median(c)), "max_abs_correction_deg": float(np.max(c)),
+                "median_sd_deg": float(np.degrees(np.median(sm.sd_rad))),
+                "median_forward_sd_deg": float(np.degrees(np.median(sm.forward_sd_rad)))}
 
 
 #: events a batch run turns into Python objects at a time (:func:`_event_chunks`)
