@@ -200,7 +200,7 @@ from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
 from core.kalman import skew  # noqa: F401  (re-exported: core.foot and older callers import it from here)
 from core.dsp import RunningMedian, WindowMeanSpread, WindowVariance
-from core.pdr.heading_smoother import AttitudeHistory, HeadingSmoothing
+from core.pdr.heading_smoother import AttitudeHistory, HeadingSmoothing, StartHeading
 
 _I3 = np.eye(3)
 _I3.flags.writeable = False
@@ -789,6 +789,10 @@ class AttitudeEKF(AttitudeFilterBase):
         #: replays only: keep what the RTS heading smoother needs (:mod:`core.pdr.heading_smoother`) from each
         #: :meth:`reset` on; :meth:`smoothed_heading` runs it.  The forward filter is the same either way.
         self.keep_history = bool(keep_history)
+        #: replays only (``Pipeline(heading_smoother="start")``): the start as a smoother saw it, or None -- the
+        #: heading taken from the magnetometer turned by ``correction_rad``, its prior sd ``sd_rad``, and (with the
+        #: field offset state) the offset's start value and sd: a :class:`core.pdr.heading_smoother.StartHeading`
+        self.start_heading: StartHeading | None = None
         self.reset()
 
     # -- read-only views of settings that the pipeline asks for -------------------------------
@@ -885,11 +889,12 @@ class AttitudeEKF(AttitudeFilterBase):
         #: the forward run kept for the replay's heading smoother (None unless ``keep_history``)
         self.history = AttitudeHistory() if self.keep_history else None
 
-    def smoothed_heading(self) -> HeadingSmoothing:
-        """The RTS-smoothed heading of the run so far (:class:`core.pdr.heading_smoother.HeadingSmoothing`)."""
+    def smoothed_heading(self, states=None) -> HeadingSmoothing:
+        """The RTS-smoothed heading of the run so far (:class:`core.pdr.heading_smoother.HeadingSmoothing`);
+        ``states``: see :meth:`core.pdr.heading_smoother.AttitudeHistory.smooth`."""
         if self.history is None:
             raise ValueError("no history: make the filter with keep_history=True before the run")
-        return self.history.smooth()
+        return self.history.smooth(states)
 
     def snapshot(self) -> AttitudeState:
         """A copy of the whole state (the filter keeps its own)."""
@@ -978,12 +983,16 @@ class AttitudeEKF(AttitudeFilterBase):
         # without a magnetometer reading the heading is relative to initial_yaw_rad by definition; a
         # magnetometer that starts later is let in by the relock (see _relock)
         P = self.P
-        P[2, 2] = (self.settings.initial_yaw_sd_rad if from_mag else 1e-3) ** 2
+        start = self.start_heading if from_mag else None
+        turn, sd = (start.correction_rad, start.sd_rad) if start is not None else (0.0, math.nan)
+        P[2, 2] = (sd if sd == sd else self.settings.initial_yaw_sd_rad if from_mag else 1e-3) ** 2
         self.P = P
+        if start is not None and self.has_mag_offset and start.offset_sd_rad == start.offset_sd_rad:
+            self._state.mag_offset_rad, self._state.P_oo = start.offset_rad, start.offset_sd_rad ** 2
         self._state.yaw_unobserved = not from_mag
         if not from_mag:
             return q
-        return quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), -self.settings.declination_rad), q)
+        return quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), turn - self.settings.declination_rad), q)
 
     def _mag_reference_due(self, t_ns: int) -> bool:
         """Magnetometer readings of a still phone enter the references at most ``reference_still_rate_hz``.
@@ -1141,7 +1150,7 @@ class AttitudeEKF(AttitudeFilterBase):
             G[2, 0:2] = 0.0
         self.P_full = kalman.reset_covariance(Pn, dth, G=G)
         if self.history is not None:
-            self.history.after_inject(state.t_ns, dx, G, self.P_full, state.q)
+            self.history.after_inject(state.t_ns, dx, G, self.P_full, state.q, state.mag_offset_rad)
 
     def _record(self, kind: str, used: bool, nis: float) -> None:
         if nis == nis:

@@ -39,13 +39,21 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 from core import kalman
 from core.conventions import wrap_angle
 from core.pdr.deadreckoning import DeadReckoner
+
+
+#: :class:`core.pdr.pipeline.Pipeline`'s ``heading_smoother``: none (the live app's forward heading), the RTS
+#: backward pass applied to every step, or a second forward pass started from the smoothed start heading
+HEADING_SMOOTHER_OFF = "off"
+HEADING_SMOOTHER_RTS = "rts"
+HEADING_SMOOTHER_START = "start"
+HEADING_SMOOTHERS = (HEADING_SMOOTHER_OFF, HEADING_SMOOTHER_RTS, HEADING_SMOOTHER_START)
 
 
 class SmootherVerdict(enum.Enum):
@@ -65,6 +73,8 @@ class HeadingSmoothing:
     sd_rad: np.ndarray  #: (N,) the smoothed heading's standard deviation (rad)
     forward_sd_rad: np.ndarray  #: (N,) the forward filter's (rad)
     q_wxyz: np.ndarray  #: (N, 4) the smoothed attitude, body -> ENU
+    offset_rad: np.ndarray  #: (N,) the smoothed field heading offset (rad; nan without that state)
+    offset_sd_rad: np.ndarray  #: (N,) its standard deviation (rad; nan without it)
 
     def correction_at(self, t_ns) -> np.ndarray:
         """The heading correction at times ``t_ns`` (linear in time between epochs, held beyond them; rad)."""
@@ -74,6 +84,35 @@ class HeadingSmoothing:
         # unwrap so the interpolation never crosses +-pi the long way round
         c = np.unwrap(self.correction_rad)
         return wrap_angle(np.interp(t, self.t_ns.astype(np.float64), c))
+
+
+@dataclass(frozen=True)
+class StartHeading:
+    """Where a second forward pass starts (``Pipeline(heading_smoother="start")``): the first pass's smoothed start."""
+
+    correction_rad: float  #: turn the magnetometer's start heading by this (rad, CCW about Up)
+    sd_rad: float  #: the heading's prior sd (rad)
+    offset_rad: float = math.nan  #: the field heading offset's start value (rad; nan: the filter's own start)
+    offset_sd_rad: float = math.nan  #: its prior sd (rad)
+
+    @classmethod
+    def of(cls, sm: HeadingSmoothing) -> StartHeading:
+        """The first epoch of a smoothing."""
+        return cls(float(sm.correction_rad[0]), float(sm.sd_rad[0]), float(sm.offset_rad[0]),
+                   float(sm.offset_sd_rad[0]))
+
+
+@dataclass(slots=True)
+class _Segment:
+    """The forward run between two changes of the error state's size: what the backward pass needs."""
+
+    n: int  #: error-state size
+    P: list  #: posterior covariance of each closed epoch
+    Phi: list  #: transition out of each closed epoch
+    Q: list  #: its process noise (what the filter's covariance grew by)
+    inj: list  #: per epoch (the open one included): its injections [(dx, G), ...]
+    nominal: list  #: per epoch: (t_ns, q, field offset) after its injections
+    P_last: np.ndarray | None = None  #: the open (last) epoch's posterior covariance
 
 
 class AttitudeHistory:
@@ -89,12 +128,8 @@ class AttitudeHistory:
         self.reset()
 
     def reset(self) -> None:
-        self._done: list[HeadingSmoothing] = []  # smoothed segments
-        self._rts: kalman.RtsSmoother | None = None
-        self._nominal: list = []  # (t_ns, q) of each closed epoch
-        self._cur: tuple | None = None  # (t_ns, q) of the open epoch
+        self._segments: list[_Segment] = []
         self._P_post: np.ndarray | None = None  # the open epoch's posterior covariance
-        self._fwd_sd: list = []  # the forward heading sd of each closed epoch
         self._clear_transition()
 
     def _clear_transition(self) -> None:
@@ -104,12 +139,12 @@ class AttitudeHistory:
 
     @property
     def n_epochs(self) -> int:
-        return sum(len(s.t_ns) for s in self._done) + (self._rts.n_epochs if self._rts is not None else 0)
+        return sum(len(g.nominal) for g in self._segments)
 
     def add_prediction(self, rdt, phi_o: float = 1.0) -> None:
         """One prediction: ``rdt`` the step's ``R dt`` (9-tuple, row-major; None without a gyroscope: F = I there),
         ``phi_o`` the offset's decay."""
-        if self._rts is None:
+        if self._P_post is None:
             return
         if rdt is not None:
             s = self._sum_rdt
@@ -128,53 +163,70 @@ class AttitudeHistory:
     def before_inject(self, t_ns: int, P_prior: np.ndarray) -> None:
         """A used update is about to be folded in; ``P_prior`` is the filter's covariance before it."""
         n = len(P_prior)
-        if self._rts is not None and self._rts.n != n:
-            self._finish_segment()
-        if self._rts is None:
-            self._rts = kalman.RtsSmoother(n)
-            self._rts.start()
+        seg = self._segments[-1] if self._segments else None
+        if seg is None or seg.n != n or self._P_post is None:
+            self._segments.append(_Segment(n, [], [], [], [[]], []))
             self._clear_transition()
             return
         if self._n_pred == 0 and np.array_equal(P_prior, self._P_post):
             return  # a second update at the same epoch
         Phi = self._transition(n)
         Q = P_prior - Phi @ self._P_post @ Phi.T
-        self._rts.predict(self._P_post, Phi, 0.5 * (Q + Q.T))
-        self._nominal.append(self._cur)
-        self._fwd_sd.append(math.sqrt(max(float(self._P_post[2, 2]), 0.0)))
+        seg.P.append(self._P_post)
+        seg.Phi.append(Phi)
+        seg.Q.append(0.5 * (Q + Q.T))
+        seg.inj.append([])
         self._clear_transition()
 
-    def after_inject(self, t_ns: int, dx: np.ndarray, G: np.ndarray, P_post: np.ndarray, q) -> None:
-        """The update ``dx`` was folded into the nominal state ``q`` with the reset ``G``; ``P_post`` after it."""
-        self._rts.inject(np.asarray(dx, dtype=float), G)
-        self._P_post = np.array(P_post, dtype=float)
-        self._cur = (int(t_ns), tuple(q))
+    def after_inject(self, t_ns: int, dx: np.ndarray, G: np.ndarray, P_post: np.ndarray, q, offset_rad: float) -> None:
+        """The update ``dx`` was folded into the nominal state (``q``, the field offset ``offset_rad``) with the
+        reset ``G``; ``P_post`` after it."""
+        seg = self._segments[-1]
+        seg.inj[-1].append((np.array(dx, dtype=float), np.array(G, dtype=float)))
+        self._P_post = seg.P_last = np.array(P_post, dtype=float)
+        if len(seg.nominal) < len(seg.inj):
+            seg.nominal.append(None)
+        seg.nominal[-1] = (int(t_ns), tuple(q), float(offset_rad))
 
-    def _finish_segment(self) -> None:
-        if self._rts is None or self._cur is None:
-            self._rts = None
-            return
-        e, Ps = self._rts.smooth(self._P_post)
-        nom = self._nominal + [self._cur]
-        fwd = self._fwd_sd + [math.sqrt(max(float(self._P_post[2, 2]), 0.0))]
-        q = np.array([kalman.inject_rotation(x[1], e[j, 0:3]) for j, x in enumerate(nom)])
-        self._done.append(HeadingSmoothing(np.array([x[0] for x in nom], dtype=np.int64), e[:, 2].copy(),
-                                           np.sqrt(np.maximum(Ps[:, 2, 2], 0.0)), np.array(fwd), q))
-        self._rts, self._nominal, self._cur, self._P_post, self._fwd_sd = None, [], None, None, []
+    @staticmethod
+    def _smooth_segment(seg: _Segment, P_last: np.ndarray, states) -> HeadingSmoothing:
+        idx = list(range(seg.n)) if states is None else [i for i in states if i < seg.n]
+        ix = np.ix_(idx, idx)
+        k_rot = sum(1 for i in idx if i < 3)
+        rts = kalman.RtsSmoother(len(idx), slice(0, k_rot))
+        rts.start()
+        for j in range(len(seg.P) + 1):
+            if j:
+                rts.predict(seg.P[j - 1][ix], seg.Phi[j - 1][ix], seg.Q[j - 1][ix])
+            for dx, G in seg.inj[j]:
+                rts.inject(dx[idx], G[ix])
+        e_sub, Ps_sub = rts.smooth(P_last[ix])
+        N = len(seg.nominal)
+        e = np.zeros((N, seg.n))
+        e[:, idx] = e_sub
+        var = np.full((N, seg.n), np.nan)
+        var[:, idx] = np.diagonal(Ps_sub, axis1=1, axis2=2)
+        fwd = np.array([P[2, 2] for P in seg.P] + [P_last[2, 2]])
+        q = np.array([kalman.inject_rotation(x[1], e[j, 0:3]) for j, x in enumerate(seg.nominal)])
+        has_o = seg.n == 7 and 6 in idx
+        o = np.array([x[2] for x in seg.nominal]) + e[:, 6] if has_o else np.full(N, np.nan)
+        o_sd = np.sqrt(np.maximum(var[:, 6], 0.0)) if has_o else np.full(N, np.nan)
+        return HeadingSmoothing(np.array([x[0] for x in seg.nominal], dtype=np.int64), e[:, 2].copy(),
+                                np.sqrt(np.maximum(var[:, 2], 0.0)), np.sqrt(np.maximum(fwd, 0.0)), q, o, o_sd)
 
-    def smooth(self) -> HeadingSmoothing:
-        """The backward pass over everything kept (the history stays usable: a later call smooths again)."""
-        done = list(self._done)
-        if self._rts is not None and self._cur is not None:
-            saved = (self._rts, list(self._nominal), self._cur, self._P_post, list(self._fwd_sd))
-            self._finish_segment()
-            done.append(self._done.pop())
-            self._rts, self._nominal, self._cur, self._P_post, self._fwd_sd = saved
-        if not done:
+    def smooth(self, states=None) -> HeadingSmoothing:
+        """The backward pass over everything kept (the history stays as it is: a later call smooths again).
+
+        ``states``: the error states the backward pass runs on (None: all; e.g. ``(2, 6)``, the heading and
+        the field offset, their marginal model: the filter's covariance blocks, the tilt and bias left out)."""
+        out = []
+        for seg in self._segments:
+            if seg.nominal:
+                out.append(self._smooth_segment(seg, seg.P_last, states))
+        if not out:
             z = np.zeros(0)
-            return HeadingSmoothing(np.zeros(0, dtype=np.int64), z, z, z, np.zeros((0, 4)))
-        return HeadingSmoothing(*(np.concatenate([getattr(s, f) for s in done])
-                                  for f in ("t_ns", "correction_rad", "sd_rad", "forward_sd_rad", "q_wxyz")))
+            return HeadingSmoothing(np.zeros(0, dtype=np.int64), z, z, z, np.zeros((0, 4)), z, z)
+        return HeadingSmoothing(*(np.concatenate([getattr(s, f.name) for s in out]) for f in fields(HeadingSmoothing)))
 
 
 def smooth_steps(steps: list, smoothing: HeadingSmoothing, start_en=(0.0, 0.0)) -> list:

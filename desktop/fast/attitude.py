@@ -968,9 +968,9 @@ def check_supported(ekf) -> None:
         raise NotImplementedError(f"the fast path runs core.pdr.attitude.AttitudeEKF only, not {type(ekf).__name__}")
     if s.mag_mode != "heading" or ekf.field_detector is not None:
         raise NotImplementedError("the fast path implements mag_mode='heading' without a field detector")
-    if getattr(ekf, "keep_history", False):
-        raise NotImplementedError("the replay heading smoother (heading_smoother=True, the filter's keep_history) "
-                                  "runs on the reference only: the fast path keeps no history")
+    if ekf.keep_history or ekf.start_heading is not None:
+        raise NotImplementedError("the replay heading smoother (Pipeline(heading_smoother='rts' or 'start')) runs on "
+                                  "the reference only: the fast path keeps no history for a backward pass")
 
 
 def settings_arrays(ekf) -> tuple[np.ndarray, np.ndarray]:
