@@ -181,3 +181,20 @@ def test_pipeline_refuses_an_unknown_mode_and_a_filter_without_an_error_state():
         Pipeline(heading_smoother="yes")
     with pytest.raises(ValueError, match="AttitudeEKF"):
         Pipeline(heading_smoother="rts", attitude=QuaternionEKF())
+
+
+def test_replay_command_runs_the_smoother_on_the_reference_and_says_so(tmp_path, monkeypatch, capsys):
+    import json
+
+    from core.recording import write_recording
+    from desktop.cli import main
+
+    monkeypatch.setenv("PDR_APP_DATA", str(tmp_path / "app"))
+    monkeypatch.setattr(desktop.fast, "HAVE_NUMBA", True)  # auto would take the fast path where it can
+    rec, res = _pipeline_runs()
+    path = tmp_path / "walk.csv.gz"
+    write_recording(str(path), rec)
+    assert main(["replay", str(path), "--heading-smoother", "rts", "--json", "--gps", "off"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["engine"].startswith("reference (") and "heading smoother" in out["engine"]
+    assert out["heading_smoother"]["verdict"] == "applied"
