@@ -177,6 +177,11 @@ given, :meth:`AttitudeEKF.set_site_field`) the state is dropped: no building
 bends the field there.  The fast path mirrors it
 (its kernel's covariance is 7 x 7 then).
 
+Replays (issue #27): ``AttitudeEKF(keep_history=True)`` keeps what the RTS
+smoother needs (:mod:`core.pdr.heading_smoother`, ``Pipeline(heading_smoother=...)``);
+the forward filter is the same bit for bit, and :meth:`AttitudeEKF.smoothed_heading`
+runs the backward pass.  ``start_heading`` starts a second pass from a smoothed start.
+
 Bad numbers: a non-finite input, or one no phone sensor gives (beyond 1e4 m/s^2,
 1e3 rad/s, 1e6 uT), is skipped and counted; an update whose
 correction or covariance would not be finite is discarded (the prior state
