@@ -20,6 +20,7 @@ import numpy as np
 
 from core import __version__
 from core.recording import Recording, RecordingError, read_recording, write_recording
+from core.pdr.heading_smoother import HEADING_SMOOTHERS
 from desktop.engine import ENGINES, run_pipeline
 
 DEMO_PATH = Path(__file__).with_name("data") / "demo_walk.csv.gz"
@@ -177,7 +178,8 @@ def build_pipeline(args, gnss=None, profile=None):
     from core.pdr.stride import WeinbergStride
 
     height = args.height if args.height is not None else (profile.height_m if profile is not None else None)
-    kw = {"height_m": height, "use_magnetometer": not args.no_mag}
+    kw = {"height_m": height, "use_magnetometer": not args.no_mag,
+          "heading_smoother": getattr(args, "heading_smoother", None) or "off"}
     if args.stride_c is not None:
         kw["stride_model"] = WeinbergStride(coefficient=args.stride_c)
     elif profile is not None and args.stride_model in (None, profile.model):
@@ -1015,6 +1017,10 @@ def replay_recording(args, rec: Recording, outs: dict, demo: bool = False, progr
     if engine != "reference":  # the phone's code is the default; say when another engine ran, or why not
         lines.append("engine        " + ("the fast desktop path (desktop.fast; the same results within 1e-9)"
                                          if engine == "fast" else engine))
+    hs = res.counters.get("heading_smoother")
+    if hs is not None:  # a replay's heading smoother (issue #27): what it did, in one line
+        done = ", ".join(f"{k.replace('_deg', '')} {v:+.1f} deg" for k, v in hs.items() if k.endswith("_deg"))
+        lines.append(f"heading       smoothed ({pipeline.heading_smoother}): {hs['verdict']}" + (f"; {done}" if done else ""))
     if coarse:
         lines = [ln for ln in lines if not ln.startswith(("steps ", "distance ", "final pos", "start-to-end"))]
         lines.insert(3, f"steps         not measured: the accelerometer is sampled at {acc_rate_hz(rec):.1f} Hz, step "
@@ -1610,6 +1616,12 @@ def make_parser() -> argparse.ArgumentParser:
     r.add_argument("--platform", choices=("android", "ios"), default=None,
                    help="for a Sensor Logger export without Metadata.csv: the phone it came from "
                         "(or set PDR_SENSORLOGGER_PLATFORM)")
+    r.add_argument("--heading-smoother", choices=HEADING_SMOOTHERS, default="off",
+                   help="hand-held, replays only (issue #27): off (default, the live app's heading); rts: every "
+                        "step's heading from an RTS backward pass over the attitude filter's run; start: a second "
+                        "pass started from the heading that pass gives at the start. Runs on the reference engine "
+                        "(the fast path does not mirror it); not applied with GPS fusion. Off by default: on the "
+                        "IPIN tuning split neither helped (benchmarks/ABLATION_RESULTS.md)")
     r.add_argument("--engine", choices=ENGINES, default="auto",
                    help="hand-held pipeline: the fast desktop path over whole arrays (the same results within 1e-9) "
                         "when numba is installed (auto, the default; pip install '.[fast]'), always (fast; slow "

@@ -72,7 +72,11 @@ def test_reset_gives_what_a_new_filter_has():
 def test_the_filter_keeps_no_state_outside_its_state_object():
     ekf = AttitudeEKF()
     _feed(ekf, _events(seconds=4.0))
-    assert set(vars(ekf)) == {"settings", "mag_calibrator", "field_detector", "_state"}
+    # besides the state: configuration, and the replay's history (issue #27: written by the filter, never read by it;
+    # None unless keep_history, and the state is the same with it: tests/test_heading_smoother.py)
+    assert set(vars(ekf)) == {"settings", "mag_calibrator", "field_detector", "_state", "keep_history", "start_heading",
+                              "history"}
+    assert ekf.history is None and ekf.start_heading is None
     snap = ekf.snapshot()
     with pytest.raises(AttributeError):  # slots: a misspelt field cannot be born on the state
         snap.acc_sums = IntervalSum.empty()

@@ -177,6 +177,11 @@ given, :meth:`AttitudeEKF.set_site_field`) the state is dropped: no building
 bends the field there.  The fast path mirrors it
 (its kernel's covariance is 7 x 7 then).
 
+Replays (issue #27): ``AttitudeEKF(keep_history=True)`` keeps what the RTS
+smoother needs (:mod:`core.pdr.heading_smoother`, ``Pipeline(heading_smoother=...)``);
+the forward filter is the same bit for bit, and :meth:`AttitudeEKF.smoothed_heading`
+runs the backward pass.  ``start_heading`` starts a second pass from a smoothed start.
+
 Bad numbers: a non-finite input, or one no phone sensor gives (beyond 1e4 m/s^2,
 1e3 rad/s, 1e6 uT), is skipped and counted; an update whose
 correction or covariance would not be finite is discarded (the prior state
@@ -200,6 +205,7 @@ from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
 from core.kalman import skew  # noqa: F401  (re-exported: core.foot and older callers import it from here)
 from core.dsp import RunningMedian, WindowMeanSpread, WindowVariance
+from core.pdr.heading_smoother import AttitudeHistory, HeadingSmoothing, StartHeading
 
 _I3 = np.eye(3)
 _I3.flags.writeable = False
@@ -778,13 +784,20 @@ class AttitudeEKF(AttitudeFilterBase):
     """
 
     def __init__(self, settings: AttitudeSettings | None = None, *, mag_calibrator=None, field_detector=None,
-                 **overrides):
+                 keep_history: bool = False, **overrides):
         s = settings or AttitudeSettings()
         if overrides:
             s = replace(s, **overrides)
         self.settings = s
         self.mag_calibrator = mag_calibrator
         self.field_detector = field_detector
+        #: replays only: keep what the RTS heading smoother needs (:mod:`core.pdr.heading_smoother`) from each
+        #: :meth:`reset` on; :meth:`smoothed_heading` runs it.  The forward filter is the same either way.
+        self.keep_history = bool(keep_history)
+        #: replays only (``Pipeline(heading_smoother="start")``): the start as a smoother saw it, or None -- the
+        #: heading taken from the magnetometer turned by ``correction_rad``, its prior sd ``sd_rad``, and (with the
+        #: field offset state) the offset's start value and sd: a :class:`core.pdr.heading_smoother.StartHeading`
+        self.start_heading: StartHeading | None = None
         self.reset()
 
     # -- read-only views of settings that the pipeline asks for -------------------------------
@@ -885,6 +898,15 @@ class AttitudeEKF(AttitudeFilterBase):
 
     def reset(self) -> None:
         self._state = AttitudeState.initial(self.settings)
+        #: the forward run kept for the replay's heading smoother (None unless ``keep_history``)
+        self.history = AttitudeHistory() if self.keep_history else None
+
+    def smoothed_heading(self, states=None) -> HeadingSmoothing:
+        """The RTS-smoothed heading of the run so far (:class:`core.pdr.heading_smoother.HeadingSmoothing`);
+        ``states``: see :meth:`core.pdr.heading_smoother.AttitudeHistory.smooth`."""
+        if self.history is None:
+            raise ValueError("no history: make the filter with keep_history=True before the run")
+        return self.history.smooth(states)
 
     def snapshot(self) -> AttitudeState:
         """A copy of the whole state (the filter keeps its own)."""
@@ -973,12 +995,16 @@ class AttitudeEKF(AttitudeFilterBase):
         # without a magnetometer reading the heading is relative to initial_yaw_rad by definition; a
         # magnetometer that starts later is let in by the relock (see _relock)
         P = self.P
-        P[2, 2] = (self.settings.initial_yaw_sd_rad if from_mag else 1e-3) ** 2
+        start = self.start_heading if from_mag else None
+        turn, sd = (start.correction_rad, start.sd_rad) if start is not None else (0.0, math.nan)
+        P[2, 2] = (sd if sd == sd else self.settings.initial_yaw_sd_rad if from_mag else 1e-3) ** 2
         self.P = P
+        if start is not None and self.has_mag_offset and start.offset_sd_rad == start.offset_sd_rad:
+            self._state.mag_offset_rad, self._state.P_oo = start.offset_rad, start.offset_sd_rad ** 2
         self._state.yaw_unobserved = not from_mag
         if not from_mag:
             return q
-        return quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), -self.settings.declination_rad), q)
+        return quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), turn - self.settings.declination_rad), q)
 
     def _mag_reference_due(self, t_ns: int) -> bool:
         """Magnetometer readings of a still phone enter the references at most ``reference_still_rate_hz``.
@@ -1057,14 +1083,19 @@ class AttitudeEKF(AttitudeFilterBase):
                           phi * (to[1] - (Rdt[3] * bo[0] + Rdt[4] * bo[1] + Rdt[5] * bo[2])),
                           phi * (to[2] - (Rdt[6] * bo[0] + Rdt[7] * bo[1] + Rdt[8] * bo[2])))
             self._decay_offset(phi, cross=False)
+        if self.history is not None:
+            self.history.add_prediction(Rdt, phi if s.mag_offset_sd_rad > 0.0 else 1.0)
         state.t_ns = t_ns
 
     def _random_walk(self, dt: float) -> None:
         P = self.P
         P[0:3, 0:3] += (self.settings.no_gyro_random_walk_rad_sqrt_s ** 2 * dt) * _I3
         self.P = P
+        phi = math.exp(-dt / self.settings.mag_offset_time_s) if self.has_mag_offset else 1.0
         if self.has_mag_offset:
-            self._decay_offset(math.exp(-dt / self.settings.mag_offset_time_s), cross=True)
+            self._decay_offset(phi, cross=True)
+        if self.history is not None:
+            self.history.add_prediction(None, phi)
 
     def _decay_offset(self, phi: float, cross: bool) -> None:
         """The field's heading offset over one step of its Gauss-Markov process, ``o <- phi o + w``,
@@ -1118,6 +1149,8 @@ class AttitudeEKF(AttitudeFilterBase):
         """Fold the error into ``q`` and ``b`` and reset it: ``P <- G P G^T`` (:func:`core.kalman.reset_jacobian`,
         ``G = I + [dtheta / 2]x`` for this navigation-frame error; derived in the module docstring)."""
         state = self._state
+        if self.history is not None:
+            self.history.before_inject(state.t_ns, self.P_full)
         dth = dx[0:3]
         state.q = kalman.inject_rotation(state.q, dth)
         lim = self.settings.max_gyro_bias_rad_s
@@ -1128,6 +1161,8 @@ class AttitudeEKF(AttitudeFilterBase):
         if keep_yaw:  # a consider heading is carried, not re-linearised: its row stays the identity's
             G[2, 0:2] = 0.0
         self.P_full = kalman.reset_covariance(Pn, dth, G=G)
+        if self.history is not None:
+            self.history.after_inject(state.t_ns, dx, G, self.P_full, state.q, state.mag_offset_rad)
 
     def _record(self, kind: str, used: bool, nis: float) -> None:
         if nis == nis:

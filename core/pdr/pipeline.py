@@ -71,6 +71,8 @@ from core.pdr.carry import CarryModeDetector
 from core.pdr.deadreckoning import DeadReckoner
 from core.pdr.gapbridge import AccGapBridge, EstimatedStep, GapVerdict
 from core.pdr.heading import RotationSmoother, interval_heading
+from core.pdr.heading_smoother import (HEADING_SMOOTHER_OFF, HEADING_SMOOTHER_RTS, HEADING_SMOOTHER_START,
+                                      HEADING_SMOOTHERS, SmootherVerdict, StartHeading, smooth_steps)
 from core.pdr.steps import GENTLE, STEP_GATES, UNEVEN_POCKET, StepDetector, StepEvent
 from core.pdr.velocity import SpeedFeatureWindow
 from core.pdr.walkdir import WALKING_DIRECTIONS, WalkingDirection
@@ -404,6 +406,19 @@ class Pipeline:
         :attr:`Step.estimated`; otherwise nothing is added and the reason is in the labels (issue #30;
         True: a default :class:`core.pdr.gapbridge.AccGapBridge`; False: no bridging, the walk in the gap
         is missing from the track).
+    heading_smoother : str
+        Replays only (issue #27), one of :data:`core.pdr.heading_smoother.HEADING_SMOOTHERS`: ``"off"`` (the
+        default: the live app's forward heading); ``"rts"``: after a batch :meth:`run`, a Rauch-Tung-Striebel
+        backward pass over the attitude filter's run (:mod:`core.pdr.heading_smoother`) turns every step's
+        heading by the smoothed heading correction at its time, and the track is dead-reckoned again (later
+        magnetometer readings, carried back by the gyroscope, correct a heading taken in a bent field);
+        ``"start"``: two passes, the second a forward run like the first but started from the heading that the
+        first pass's backward pass gives at the start (turned by its correction, with its smoothed sd), so the
+        walk's own gates judge the magnetometer from a start heading that the whole walk agrees on.  The
+        streaming :meth:`update` (the live app) never applies either; with a GPS fusion stage the steps are
+        left as they were (the fused track was made from them; ``counters["heading_smoother"]`` says so).
+        Needs :class:`core.pdr.attitude.AttitudeEKF`; the fast path refuses it (the engine falls back to the
+        reference).  Off by default (``benchmarks/ABLATION_RESULTS.md``: the tuning split's numbers).
     """
 
     def __init__(self, *, height_m: float | None = None, stride_model: StrideModel | None = None,
@@ -417,7 +432,7 @@ class Pipeline:
                  carry: bool | CarryModeDetector = True, step_gates: dict | None = None,
                  swinging_max_rotation_rms_rad_s: float = 12.0, rotation_hold_s: float = 8.0,
                  hold_while_settling: bool = False,
-                 acc_gap_bridge: bool | AccGapBridge = True):
+                 acc_gap_bridge: bool | AccGapBridge = True, heading_smoother: str = HEADING_SMOOTHER_OFF):
         self.keep_steps = keep_steps
         if acc_gap_bridge is True:
             acc_gap_bridge = AccGapBridge()
@@ -443,6 +458,14 @@ class Pipeline:
         self.attitude = attitude or AttitudeEKF(use_magnetometer=use_magnetometer)
         if not use_magnetometer:
             self.attitude.use_magnetometer = False
+        if heading_smoother not in HEADING_SMOOTHERS:
+            raise ValueError(f"heading_smoother must be one of {HEADING_SMOOTHERS}, got {heading_smoother!r}")
+        self.heading_smoother = heading_smoother
+        if heading_smoother != HEADING_SMOOTHER_OFF:
+            if not isinstance(self.attitude, AttitudeEKF):
+                raise ValueError("heading_smoother needs core.pdr.attitude.AttitudeEKF (its error state), not "
+                                 f"{type(self.attitude).__name__}")
+            self.attitude.keep_history = True
         self.smoother = smoother or RotationSmoother(grid_rate_hz=grid_rate_hz, forward_b="auto")
         for stage in (self.detector, self.smoother):
             if abs(stage.grid_rate_hz - self.grid_rate_hz) > 1e-9:
@@ -1088,6 +1111,51 @@ class Pipeline:
         without an accelerometer.
         """
         recording.stream(ACC, "step detection needs the accelerometer")
+        smoothed = None
+        if self.heading_smoother == HEADING_SMOOTHER_START and self.gnss is None:
+            # pass 1: the forward run and its backward pass give the start heading; pass 2 starts from it
+            self._run_pass(recording, None if progress is None else (lambda f: progress(0.5 * f)))
+            sm = self.attitude.smoothed_heading()
+            if len(sm.t_ns):
+                start = self.attitude.start_heading = StartHeading.of(sm)
+                smoothed = {"verdict": SmootherVerdict.APPLIED.value,
+                            "start_correction_deg": math.degrees(start.correction_rad),
+                            "start_sd_deg": math.degrees(start.sd_rad),
+                            "start_forward_sd_deg": math.degrees(sm.forward_sd_rad[0]),
+                            "start_offset_deg": math.degrees(start.offset_rad)}
+            else:
+                smoothed = {"verdict": SmootherVerdict.NO_HISTORY.value}
+            try:
+                self._run_pass(recording, None if progress is None else (lambda f: progress(0.5 + 0.5 * f)))
+            finally:
+                self.attitude.start_heading = None
+        else:
+            self._run_pass(recording, progress)
+        att = self._log.attitude_log()
+        self._log = []
+        if self.heading_smoother == HEADING_SMOOTHER_RTS or (self.heading_smoother == HEADING_SMOOTHER_START
+                                                              and self.gnss is not None):
+            smoothed = self._smooth_headings()
+        a = self.attitude
+        counters = {"mag_used": a.n_mag_used, "mag_rejected": a.n_mag_rejected, "acc_rejected": a.n_acc_rejected,
+                    "peaks_rejected_rotation": self.n_rejected_rotation, "peaks_rejected_bout": self.n_rejected_bout,
+                    "peaks_replayed_mode_change": self.n_replayed, "peaks_replaced_mode_change": self.n_replaced_mode,
+                    "nonfinite_skipped": dict(self.n_nonfinite), **self.health_counters(), **self.gap_counters()}
+        if hasattr(a, "counters"):
+            counters["attitude"] = a.counters()
+        if self.carry is not None:
+            counters["carry"] = self.carry.counters()
+        if smoothed is not None:
+            counters["heading_smoother"] = smoothed
+        fusion = self.gnss.result() if self.gnss is not None else None
+        if fusion is not None:
+            fusion.counters["site"] = self.site
+        return PipelineResult(list(self.steps), Track.from_steps(self.steps), att, self.labels(), recording,
+                              counters, fusion)
+
+
+    def _run_pass(self, recording: Recording, progress) -> None:
+        """One pass of the streaming kernel over the whole recording, from :meth:`reset` (the body of :meth:`run`)."""
         log, self.log = self.log, True
         keep, self.keep_steps = self.keep_steps, True  # a batch run returns every step, whatever keep_steps
         try:
@@ -1119,22 +1187,21 @@ class Pipeline:
                 progress(1.0)
         finally:
             self.log = log
-        att = self._log.attitude_log()
-        self._log = []
-        a = self.attitude
-        counters = {"mag_used": a.n_mag_used, "mag_rejected": a.n_mag_rejected, "acc_rejected": a.n_acc_rejected,
-                    "peaks_rejected_rotation": self.n_rejected_rotation, "peaks_rejected_bout": self.n_rejected_bout,
-                    "peaks_replayed_mode_change": self.n_replayed, "peaks_replaced_mode_change": self.n_replaced_mode,
-                    "nonfinite_skipped": dict(self.n_nonfinite), **self.health_counters(), **self.gap_counters()}
-        if hasattr(a, "counters"):
-            counters["attitude"] = a.counters()
-        if self.carry is not None:
-            counters["carry"] = self.carry.counters()
-        fusion = self.gnss.result() if self.gnss is not None else None
-        if fusion is not None:
-            fusion.counters["site"] = self.site
-        return PipelineResult(list(self.steps), Track.from_steps(self.steps), att, self.labels(), recording,
-                              counters, fusion)
+
+    def _smooth_headings(self) -> dict:
+        """The replay's heading smoother (``heading_smoother``): turn the steps, dead-reckon them again; its counters."""
+        if self.gnss is not None:
+            return {"verdict": SmootherVerdict.GPS_FUSION.value}
+        sm = self.attitude.smoothed_heading()
+        if not len(sm.t_ns):
+            return {"verdict": SmootherVerdict.NO_HISTORY.value}
+        self.steps = smooth_steps(list(self.steps), sm)
+        c = np.degrees(np.abs(sm.correction_rad))
+        return {"verdict": SmootherVerdict.APPLIED.value, "epochs": int(len(sm.t_ns)),
+                "start_correction_deg": float(np.degrees(sm.correction_rad[0])),
+                "median_abs_correction_deg": float(np.median(c)), "max_abs_correction_deg": float(np.max(c)),
+                "median_sd_deg": float(np.degrees(np.median(sm.sd_rad))),
+                "median_forward_sd_deg": float(np.degrees(np.median(sm.forward_sd_rad)))}
 
 
 #: events a batch run turns into Python objects at a time (:func:`_event_chunks`)

@@ -35,7 +35,12 @@ What it does not re-implement, and why:
   calibrated readings;
 * the quasi-static field detector and ``mag_mode="full"``: not used by the
   default pipeline; the fast path refuses a filter configured with them
-  (:func:`check_supported`).
+  (:func:`check_supported`);
+* the replay heading smoother (``Pipeline(heading_smoother="rts" | "start")``,
+  :mod:`core.pdr.heading_smoother`, issue #27): it needs the forward run's history
+  (the filter's ``keep_history``, ``start_heading``), which the kernel does not keep;
+  refused, so ``--engine auto`` runs the reference and says why.  Not mirrored on
+  purpose: it is off by default and the live app never runs it.
 """
 
 from __future__ import annotations
@@ -968,6 +973,9 @@ def check_supported(ekf) -> None:
         raise NotImplementedError(f"the fast path runs core.pdr.attitude.AttitudeEKF only, not {type(ekf).__name__}")
     if s.mag_mode != "heading" or ekf.field_detector is not None:
         raise NotImplementedError("the fast path implements mag_mode='heading' without a field detector")
+    if ekf.keep_history or ekf.start_heading is not None:
+        raise NotImplementedError("the replay heading smoother (Pipeline(heading_smoother='rts' or 'start')) runs on "
+                                  "the reference only: the fast path keeps no history for a backward pass")
 
 
 def settings_arrays(ekf) -> tuple[np.ndarray, np.ndarray]:
