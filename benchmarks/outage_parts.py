@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.datasets.base import default_data_root
-from benchmarks.datasets.phone_walks import real_walks
+from benchmarks.datasets.phone_walks import GPS_WALK, real_walks
 from benchmarks.options import out_dir
 from benchmarks.splits import TUNING
 from core.conventions import GPS, wrap_angle
@@ -148,7 +148,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     rw.REPLAY_GPS = a.gps
     lengths = {float(x) for x in a.lengths.split(",")}
-    walks = [w for w in real_walks(a.data or default_data_root(), a.extra) if w.split == TUNING and w.kind == "gps_walk"]
+    walks = [w for w in real_walks(a.data or default_data_root(), a.extra)
+             if w.split == TUNING and w.kind == GPS_WALK]
     if a.only:
         walks = [w for w in walks if any(k.strip() in w.name for k in a.only.split(","))]
     out = [run_walk(w, lengths) for w in walks]

@@ -26,7 +26,7 @@ def _feed_bend(tr, seed: int, scale: float = 1.12, seconds: float = 240.0, turn_
     def position(t):  # the arc (or the line), integrated in closed form
         if w == 0.0:
             return v * t * np.array([math.cos(0.3), math.sin(0.3)])
-        return np.array([v / w * (math.sin(heading(t)) - math.sin(0.3)), -v / w * (math.cos(heading(t)) - math.cos(0.3))])
+        return v / w * np.array([math.sin(heading(t)) - math.sin(0.3), math.cos(0.3) - math.cos(heading(t))])
 
     return feed_walk(tr, rng, seconds, heading, position, v,
                      lambda k: heading(k) + math.radians(3.0) * rng.normal())
@@ -46,7 +46,8 @@ def test_a_bending_street_teaches_no_stride_with_straight_stretches_only():
 def test_a_bending_street_teaches_the_stride_scale_without_bias(turn_deg_s):
     """With ``stretch_follows_bends`` every straight window continues the stretch and each window's chord is
     projected on its Doppler course: over four seeded walks the learnt scale is within 2.5 % of the truth 1.12 on
-    a straight street, a 1.2 and a 2 deg/s bend (20 deg per window, each still straight: step heading SD 5.8 deg) (the chords' lengths would add the fixes' cross-track noise), and
+    a straight street, a 1.2 and a 2 deg/s bend (20 deg per window, each still straight: step heading SD 5.8 deg;
+    the chords' lengths would add the fixes' cross-track noise), and
     each walk learns from at least 6 samples.  (Measured: 1.107, 1.121, 1.097; the prior 1.0's weight of 30 m pulls
     1.2 % on every street, a 20-deg arc's chord is 0.5 % shorter than the arc.)"""
     from core.gnss.training import OnlineTrainer
