@@ -221,7 +221,10 @@ class OnlineTrainer:
         tuning walk ``thomasdingemanse_lopen``, default path): stride samples 3 -> 5 in 5 minutes (a street
         bending 10-13 deg per window broke every stretch), but none comes before the first outage window (61 s:
         GPS usable from 48 s), so its 3-min outage stays 20.6 % (PDR alone 19.3 %), and the 1-min outages go
-        24.7 / 33.3 / 22.7 -> 24.7 / 33.8 / 23.4 %: no gain on the tuning split.
+        24.7 / 33.3 / 22.7 -> 24.7 / 33.8 / 23.4 %: no gain on the tuning split.  The simulator's street walks
+        (``gnss_eval``, TUNING seeds 0-3, 5-min outage, ``ekf``; a check, not a reason): 0.82 / 0.90 / 1.26 / 2.08
+        -> 0.85 / 1.18 / 1.15 / 1.86 %, median 1.08 -> 1.16 % (a window just after a corner may still hold the
+        receiver's lagging course, which shortens its projection).
     reference : ChordReference
         What the chord is compared with: the stride model's step lengths (the stride scale) or the
         receivers' Doppler speed integrated over the fixes (a correction of the Doppler speed; a window
