@@ -506,7 +506,8 @@ class OnlineTrainer:
         The chord between the stretch's end fixes, not the Doppler speed: on the iOS walks the speed reads
         15-25 % low (issue #26), and over 30 m or more the fixes' own errors are a few per cent of the chord.
         A window continues the stretch if it starts at the stretch's last fix and its mean heading is within
-        ``stretch_turn_rad`` of the stretch's first window.
+        ``stretch_turn_rad`` of the stretch's first window (with ``stretch_follows_bends`` and a Doppler course,
+        whatever its heading: the chord is then the sum of the windows' chords on their courses).
         """
         st = self._stretch
         first, last = fx[0], fx[-1]
