@@ -29,16 +29,32 @@ def _feed_blocks(tr, seed: int, speed_bias: float = 1.0, scale: float = 1.1, sec
             t0 += leg_s
         return p + v * (t - t0) * np.array([math.cos(heading(t0)), math.sin(heading(t0))])
 
-    bias, k, a = np.zeros(2), 0, math.exp(-1 / 120)
+    return feed_walk(tr, rng, seconds, heading, position, speed_bias * v, lambda k: heading(k - 1e-9))
+
+
+def feed_walk(tr, rng, seconds: float, heading, position, speed_m_s: float, course):
+    """Steps of 0.7 m model length at 1.8 Hz along ``heading(t)``; fixes at 1 Hz at ``position(k)`` with
+    :func:`fix_errors`, reporting 5 m, the speed ``speed_m_s`` with 0.1 m/s noise and the course ``course(k)``."""
+    dt = 1 / 1.8
+    errors = fix_errors(rng)
+    k = 0
     for i in range(1, int(seconds / dt)):
         t = i * dt
         tr.add_step(int(t * 1e9), int((t - dt) * 1e9), 0.7, heading(t))
         while k + 1 <= t:
             k += 1
-            bias = a * bias + 3.0 * math.sqrt(1 - a * a) * rng.normal(size=2)
-            e, n = position(k) + bias + rng.normal(0.0, 1.5, 2)
-            tr.add_fix(int(k * 1e9), e, n, 5.0, speed_bias * v + rng.normal(0.0, 0.1), heading(k - 1e-9))
+            e, n = position(k) + next(errors)
+            tr.add_fix(int(k * 1e9), e, n, 5.0, speed_m_s + rng.normal(0.0, 0.1), course(k))
     return tr
+
+
+def fix_errors(rng):
+    """The simulator's fix errors at 1 Hz, one (east, north) per call: 1.5-m white noise per axis on a 3-m
+    Gauss-Markov bias over 120 s."""
+    bias, a = np.zeros(2), math.exp(-1 / 120)
+    while True:
+        bias = a * bias + 3.0 * math.sqrt(1 - a * a) * rng.normal(size=2)
+        yield bias + rng.normal(0.0, 1.5, 2)
 
 
 def test_a_stretch_ends_on_its_model_distance_not_on_its_noisy_chord():
