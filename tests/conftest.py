@@ -1,4 +1,8 @@
-"""Test-wide settings: no test reads or writes the user's own app data (their stride profile)."""
+"""Test-wide settings: no test reads or writes the user's own app data (their stride profile); the test files that
+run numba's fast path are one xdist work unit, and a file outside that unit that runs a kernel is an error."""
+
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -38,3 +42,38 @@ def pytest_xdist_make_scheduler(config, log):
             return "numba-kernels" if path.rsplit("/", 1)[-1] in NUMBA_TEST_FILES else path
 
     return NumbaOnceScheduling(config, log)
+
+
+#: the fast path's modules, whose numba dispatchers :func:`_kernel_versions` counts
+_FAST_MODULES = tuple(f"desktop.fast.{p.stem}"
+                      for p in (Path(__file__).resolve().parents[1] / "desktop" / "fast").glob("*.py"))
+_KERNELS_BEFORE = pytest.StashKey[int]()
+
+
+def _kernel_versions() -> int:
+    """How many compiled versions (compiled here or loaded from numba's cache) the fast path's kernels hold in this
+    process; 0 without numba (``PDR_FAST_NO_JIT``, or not installed: the kernels are plain functions)."""
+    n = 0
+    for name in _FAST_MODULES:
+        mod = sys.modules.get(name)
+        if mod is not None:
+            n += sum(len(f.overloads) for f in vars(mod).values() if hasattr(f, "overloads") and hasattr(f, "py_func"))
+    return n
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_setup(item):
+    item.stash[_KERNELS_BEFORE] = _kernel_versions()
+    return (yield)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_teardown(item, nextitem):
+    """A test outside :data:`NUMBA_TEST_FILES` that ran a fast-path kernel in this process (its setup, call or
+    teardown) errors: in a clean checkout it would compile the kernels in the other worker too, at the same time as
+    the numba unit (about 30 s of CPU).  ``pdr replay`` in a subprocess is not seen here: list such files too."""
+    result = yield
+    if item.path.name not in NUMBA_TEST_FILES and _kernel_versions() > item.stash.get(_KERNELS_BEFORE, 0):
+        pytest.fail(f"{item.path.name} runs numba's fast path (engine auto?): add it to NUMBA_TEST_FILES in "
+                    "tests/conftest.py", pytrace=False)
+    return result
