@@ -20,8 +20,9 @@ def _isolated_app_data(tmp_path_factory, monkeypatch):
 #: work unit they run in one worker, which compiles them once (and, the unit having the most tests, first) while the
 #: other runs the rest.  Module fixtures are still built once per file.  Measured on 2 quiet cores, full suite:
 #: no numba cache 157-159 s -> 149-152 s; after the demo replay (CI's order) 142 -> 138 s.  A file missing here that
-#: reaches the fast path (test_app_bad_input's ``pdr replay``, engine auto, was one) compiles the kernels a second time
-#: in the other worker, at the same moment: about 30 s of CPU more on a cold cache.
+#: reaches the fast path (test_app_bad_input's ``pdr replay``, engine auto, was one) compiles the kernels in the other
+#: worker too where both reach them before either has written numba's cache: 30 s of CPU more for test_engine +
+#: test_app_bad_input on a cold cache; in the full suite's order it mostly compiled them first (5 s, one run each).
 NUMBA_TEST_FILES = frozenset(
     f"test_{name}.py" for name in (
         "acc_gap_bridge", "app_bad_input", "attitude_reset", "attitude_state", "bad_input_round3", "bad_numbers",
@@ -70,8 +71,9 @@ def pytest_runtest_setup(item):
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_teardown(item, nextitem):
     """A test outside :data:`NUMBA_TEST_FILES` that ran a fast-path kernel in this process (its setup, call or
-    teardown) errors: in a clean checkout it would compile the kernels in the other worker too, at the same time as
-    the numba unit (about 30 s of CPU).  ``pdr replay`` in a subprocess is not seen here: list such files too."""
+    teardown) errors: in a clean checkout it may compile the kernels in the other worker while the numba unit
+    compiles them too (up to about 30 s of CPU).  ``pdr replay`` in a subprocess is not seen here: list such files
+    too."""
     result = yield
     if item.path.name not in NUMBA_TEST_FILES and _kernel_versions() > item.stash.get(_KERNELS_BEFORE, 0):
         pytest.fail(f"{item.path.name} runs numba's fast path (engine auto?): add it to NUMBA_TEST_FILES in "
