@@ -1,4 +1,8 @@
-"""Test-wide settings: no test reads or writes the user's own app data (their stride profile)."""
+"""Test-wide settings: no test reads or writes the user's own app data (their stride profile); the test files that
+run numba's fast path are one xdist work unit, and a file outside that unit that runs a kernel is an error."""
+
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -15,12 +19,15 @@ def _isolated_app_data(tmp_path_factory, monkeypatch):
 #: desktop/fast/__pycache__).  Spread over both workers (--dist loadfile), each worker compiled every kernel; as one
 #: work unit they run in one worker, which compiles them once (and, the unit having the most tests, first) while the
 #: other runs the rest.  Module fixtures are still built once per file.  Measured on 2 quiet cores, full suite:
-#: no numba cache 157-159 s -> 149-152 s; after the demo replay (CI's order) 142 -> 138 s.
+#: no numba cache 157-159 s -> 149-152 s; after the demo replay (CI's order) 142 -> 138 s.  A file missing here that
+#: reaches the fast path (test_app_bad_input's ``pdr replay``, engine auto, was one) compiles the kernels in the other
+#: worker too where both reach them before either has written numba's cache: 30 s of CPU more for test_engine +
+#: test_app_bad_input on a cold cache; in the full suite's order it mostly compiled them first (5 s, one run each).
 NUMBA_TEST_FILES = frozenset(
     f"test_{name}.py" for name in (
-        "acc_gap_bridge", "attitude_reset", "attitude_state", "bad_input_round3", "bad_numbers", "carry",
-        "carry_outputs", "cli", "cli_batch", "cli_foot", "cli_map", "cli_truth", "engine", "fast_magcal", "fast_path",
-        "fast_walkdir", "floors", "gnss", "kubrak", "truth_beside"))
+        "acc_gap_bridge", "app_bad_input", "attitude_reset", "attitude_state", "bad_input_round3", "bad_numbers",
+        "carry", "carry_outputs", "cli", "cli_batch", "cli_foot", "cli_map", "cli_truth", "engine", "fast_magcal",
+        "fast_path", "fast_walkdir", "floors", "gnss", "kubrak", "truth_beside"))
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -36,3 +43,39 @@ def pytest_xdist_make_scheduler(config, log):
             return "numba-kernels" if path.rsplit("/", 1)[-1] in NUMBA_TEST_FILES else path
 
     return NumbaOnceScheduling(config, log)
+
+
+#: the fast path's modules, whose numba dispatchers :func:`_kernel_versions` counts
+_FAST_MODULES = tuple(f"desktop.fast.{p.stem}"
+                      for p in (Path(__file__).resolve().parents[1] / "desktop" / "fast").glob("*.py"))
+_KERNELS_BEFORE = pytest.StashKey[int]()
+
+
+def _kernel_versions() -> int:
+    """How many compiled versions (compiled here or loaded from numba's cache) the fast path's kernels hold in this
+    process; 0 without numba (``PDR_FAST_NO_JIT``, or not installed: the kernels are plain functions)."""
+    n = 0
+    for name in _FAST_MODULES:
+        mod = sys.modules.get(name)
+        if mod is not None:
+            n += sum(len(f.overloads) for f in vars(mod).values() if hasattr(f, "overloads") and hasattr(f, "py_func"))
+    return n
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_setup(item):
+    item.stash[_KERNELS_BEFORE] = _kernel_versions()
+    return (yield)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_teardown(item, nextitem):
+    """A test outside :data:`NUMBA_TEST_FILES` that ran a fast-path kernel in this process (its setup, call or
+    teardown) errors: in a clean checkout it may compile the kernels in the other worker while the numba unit
+    compiles them too (up to about 30 s of CPU).  ``pdr replay`` in a subprocess is not seen here: list such files
+    too."""
+    result = yield
+    if item.path.name not in NUMBA_TEST_FILES and _kernel_versions() > item.stash.get(_KERNELS_BEFORE, 0):
+        pytest.fail(f"{item.path.name} runs numba's fast path (engine auto?): add it to NUMBA_TEST_FILES in "
+                    "tests/conftest.py", pytrace=False)
+    return result
