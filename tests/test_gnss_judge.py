@@ -247,7 +247,9 @@ def test_the_clean_fixes_after_a_multipath_episode_teach_once_the_stream_is_usab
     rng = np.random.default_rng(5)
     gps = _gps(steps, lambda t, e, n: (scale * e + (30.0 if 8.0 <= t < 25.0 else 0.0) + rng.normal(0, 1.5),
                                        scale * n + rng.normal(0, 1.5)), 5.0)
-    keep = gps.t_ns < 60e9  # then an outage to the end of the walk
+    # then an outage to the end of the walk (70 s: from the judge's last failing window, about 39 s, the fixes walk
+    # the 30 m a stride sample needs; they do not from its first usable verdict, about 49 s)
+    keep = gps.t_ns < 70e9
     gps = Stream("gps", gps.t_ns[keep], gps.values[keep], gps.columns)
     fr = make_fusion("chen", start=(*ORIGIN, 1.0), learn_held_back=True).run(steps, gps)
     off = make_fusion("chen", start=(*ORIGIN, 1.0)).run(steps, gps)  # the default: they teach nothing
@@ -256,7 +258,7 @@ def test_the_clean_fixes_after_a_multipath_episode_teach_once_the_stream_is_usab
     assert accepted and min(accepted) > 40.0  # the judge still keeps the episode's windows out (it did before too)
     assert fr.counters["training"]["stride_scale"] == pytest.approx(scale, rel=0.03)
     e, n = geodetic_to_enu(fr.steps[-1].lat_deg, fr.steps[-1].lon_deg, ORIGIN)
-    assert math.hypot(e - scale * steps[-1].east_m, n - scale * steps[-1].north_m) < 3.0  # 60 s of dead reckoning
+    assert math.hypot(e - scale * steps[-1].east_m, n - scale * steps[-1].north_m) < 4.0  # 50 s of dead reckoning
 
 
 def _straight_then(jump_m: float, hacc: float, turn=None, offset_deg: float = 0.0, settings=None):

@@ -18,10 +18,11 @@ DT_S, HEADING = 1 / 1.8, 0.4  # a step every 0.56 s of 0.7 m (model), along a st
 
 
 def _walk(tr: OnlineTrainer, truth: float, seconds: int, rng, axis_sd_m: float = 1.0, hacc_m: float = 3.0,
-          bad_fix: tuple[int, float, float] | None = None) -> list:
+          bad_fix: tuple[int, float, float] | None = None, shift: tuple[int, float, float] | None = None) -> list:
     """Steps of 0.7 m (model) while the walker covers ``truth`` x 0.7 m a step; a fix a second off by
-    ``axis_sd_m`` along the line; ``bad_fix = (second, offset_m, hacc_m)``. The stride samples
-    ``(t_s, sample, scale, sd)``, one per 30-s stretch (three 10-s windows)."""
+    ``axis_sd_m`` along the line; ``bad_fix = (second, offset_m, hacc_m)``; ``shift = (second, along_m, across_m)``:
+    every fix from then on moved so (a multipath episode that lasts). The stride samples ``(t_s, sample, scale,
+    sd)``, one per 30-s stretch (three 10-s windows)."""
     v = truth * 0.7 / DT_S
     out, k, i = [], 0, 0
     while (i + 1) * DT_S <= seconds + 0.5:
@@ -33,7 +34,11 @@ def _walk(tr: OnlineTrainer, truth: float, seconds: int, rng, axis_sd_m: float =
             d, hacc = v * k + rng.normal(0.0, axis_sd_m), hacc_m
             if bad_fix is not None and k == bad_fix[0]:
                 d, hacc = d + bad_fix[1], bad_fix[2]
-            fl = tr.add_fix(int(k * 1e9), d * math.cos(HEADING), d * math.sin(HEADING), hacc, v, HEADING)
+            across = 0.0
+            if shift is not None and k >= shift[0]:
+                d, across = d + shift[1], shift[2]
+            fl = tr.add_fix(int(k * 1e9), d * math.cos(HEADING) - across * math.sin(HEADING),
+                            d * math.sin(HEADING) + across * math.cos(HEADING), hacc, v, HEADING)
             if fl is not None and math.isfinite(fl.scale_sample):
                 out.append((k, fl.scale_sample, tr.stride_scale, tr.stride_scale_sd))
     return out
