@@ -255,8 +255,9 @@ class CarryModeDetector:
                  tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.5,
                  slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7,
                  min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
-                 gentle_min_periodicity: float = 0.6, gentle_max_std_m_s2: float = 0.5,
-                 step_antiphase: float = -0.2, trunk_max_tilt_rad: float = 0.15, max_gait_tilt_rad: float = 0.6, twist_max_tilt_rad: float = 0.55,
+                 gentle_min_periodicity: float = 0.6, gentle_max_std_m_s2: float = 1.0,
+                 slow_min_std_m_s2: float = 0.4, slow_min_periodicity: float = 0.4,
+                 step_antiphase: float = -0.2, trunk_min_periodicity: float = 0.4, trunk_max_tilt_rad: float = 0.15, max_gait_tilt_rad: float = 0.6, twist_max_tilt_rad: float = 0.55,
                  max_gait_rotation_rad_s: float = 4.5, swing_axis_share: float = 0.85, screen_up_z: float = 0.3,
                  upright_y: float = 0.6, ear_incline_x: float = 0.22, limb_tilt_rad: float = 0.16,
                  limb_stride_share: float = 0.3, min_limb_stride_share: float = 0.15, arm_evidence: float = 1.1,
@@ -277,7 +278,10 @@ class CarryModeDetector:
         self.gentle_min_std_m_s2 = float(gentle_min_std_m_s2)
         self.gentle_min_periodicity = float(gentle_min_periodicity)
         self.gentle_max_std_m_s2 = float(gentle_max_std_m_s2)
+        self.slow_min_std_m_s2 = float(slow_min_std_m_s2)
+        self.slow_min_periodicity = float(slow_min_periodicity)
         self.step_antiphase = float(step_antiphase)
+        self.trunk_min_periodicity = float(trunk_min_periodicity)
         self.trunk_max_tilt_rad = float(trunk_max_tilt_rad)
         self.max_gait_tilt_rad = float(max_gait_tilt_rad)
         self.twist_max_tilt_rad = float(twist_max_tilt_rad)
@@ -487,7 +491,7 @@ class CarryModeDetector:
         k4 = 2 * k2
         if k4 > self._lag_hi or r[k2 // 2] >= self.step_antiphase:
             return k2
-        if tilt_rms < self.trunk_max_tilt_rad and r[k2] >= self.gentle_min_periodicity:
+        if tilt_rms < self.trunk_max_tilt_rad and r[k2] >= self.trunk_min_periodicity:
             return k4
         if r_gyro is None or float(r_gyro[k2]) * (n / (n - k2)) >= self.step_antiphase:
             return k2
@@ -505,6 +509,21 @@ class CarryModeDetector:
         if "gyro_periodicity" in f and f["r_step"] >= self.step_antiphase:
             p = max(p, min(f["r_stride"], f["gyro_periodicity"]))
         return p
+
+    def _periodic_gait(self, f: dict) -> float:
+        """Soft evidence (0..1) that a norm too small for ``min_walk_std_m_s2`` is a walk's (issue #25): periodic at
+        both legs' lags (:meth:`gait_periodicity`) above ``gentle_min_periodicity`` with a standard deviation above
+        ``gentle_min_std_m_s2``, or above ``slow_min_periodicity`` with one above ``slow_min_std_m_s2``: the more the
+        norm moves, the less periodicity it takes (a phone held while standing moves it by 0.1-0.3 m/s^2)."""
+        p = self.gait_periodicity(f)
+        std = f["acc_std_m_s2"]
+        return max(_sig(p, self.gentle_min_periodicity, 0.05) * _sig(std, self.gentle_min_std_m_s2, 0.02),
+                   _sig(p, self.slow_min_periodicity, 0.05) * _sig(std, self.slow_min_std_m_s2, 0.05))
+
+    def _periodic_gait_met(self, p: float, std: float) -> bool:
+        """The hard form of :meth:`_periodic_gait`: both legs' periodicity ``p`` and the norm's ``std`` (m/s^2)."""
+        return ((p >= self.gentle_min_periodicity and std >= self.gentle_min_std_m_s2)
+                or (p >= self.slow_min_periodicity and std >= self.slow_min_std_m_s2))
 
     def _gait_rotation(self, f: dict) -> float:
         """Soft evidence (0..1) that the rotation is a gait's (issue #25): the rotation's main axis periodic at the
@@ -531,9 +550,8 @@ class CarryModeDetector:
                          _sig(f["gyro_rms_rad_s"], self.max_gait_rotation_rad_s, 0.3) * (1.0 - one_axis)
                          * (1.0 - gait_rotation))
         std = f["acc_std_m_s2"]
-        amplitude = max(_sig(std, self.min_walk_std_m_s2, 0.1),  # a walk, or a gentle one that is clearly periodic
-                        _sig(self.gait_periodicity(f), self.gentle_min_periodicity, 0.05)
-                        * _sig(std, self.gentle_min_std_m_s2, 0.02))
+        # a walk, or a gentle one that is periodic at both legs: "still" needs a low amplitude AND no gait periodicity
+        amplitude = max(_sig(std, self.min_walk_std_m_s2, 0.1), self._periodic_gait(f))
         # a walk that goes on (issue #25): while the mode in force is a walking one and the norm still moves like a
         # walk's at the window's end (a stop leaves only a standing phone's tremor there), the norm's periodicity
         # need only be ``hold_periodicity``: at a turn or a change of pace the 4-s window's autocorrelation at the
@@ -596,7 +614,7 @@ class CarryModeDetector:
         std = f["acc_std_m_s2"]
         periodic = f["periodicity"] >= self.min_periodicity and (
             std >= 0.5 * self.min_walk_std_m_s2
-            or (self.gait_periodicity(f) >= self.gentle_min_periodicity and std >= self.gentle_min_std_m_s2))
+            or self._periodic_gait_met(self.gait_periodicity(f), std))
         self.step_period_s = 0.5 * f["stride_period_s"] if periodic else math.nan
         # about one axis (a pendulum), or spread over the axes by a twisting wrist while the tilt is a swing's
         self.rotation_periodic = bool(walking and f.get("gyro_periodicity", 0.0) >= 0.5
@@ -605,7 +623,7 @@ class CarryModeDetector:
         both = self.gait_periodicity(f)  # both legs
         if not periodic or both < self.min_periodicity or std >= self.min_walk_std_m_s2:
             self.gentle = False
-        elif both >= self.gentle_min_periodicity and self.gentle_min_std_m_s2 <= std < self.gentle_max_std_m_s2:
+        elif std < self.gentle_max_std_m_s2 and self._periodic_gait_met(both, std):
             self.gentle = True
         # a phone in a trouser pocket stands along the thigh (or on its edge): never screen up or down
         if not walking or f["stride_share"] < self.uneven_off_share or abs(f["gravity_z"]) >= self.screen_up_z:
