@@ -255,8 +255,8 @@ class CarryModeDetector:
                  tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.5,
                  slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7,
                  min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
-                 gentle_min_periodicity: float = 0.6, gentle_max_std_m_s2: float = 1.0,
-                 slow_min_std_m_s2: float = 0.4, slow_min_periodicity: float = 0.4,
+                 gentle_min_periodicity: float = 0.6, gentle_max_std_m_s2: float = 1.0, gentle_off_std_m_s2: float = 1.2,
+                 slow_min_std_m_s2: float = 0.4, slow_min_periodicity: float = 0.4, slow_hold: bool = True,
                  step_antiphase: float = -0.2, trunk_min_periodicity: float = 0.4, trunk_max_tilt_rad: float = 0.15, max_gait_tilt_rad: float = 0.6, twist_max_tilt_rad: float = 0.55,
                  max_gait_rotation_rad_s: float = 4.5, swing_axis_share: float = 0.85, screen_up_z: float = 0.3,
                  upright_y: float = 0.6, ear_incline_x: float = 0.22, limb_tilt_rad: float = 0.16,
@@ -278,8 +278,10 @@ class CarryModeDetector:
         self.gentle_min_std_m_s2 = float(gentle_min_std_m_s2)
         self.gentle_min_periodicity = float(gentle_min_periodicity)
         self.gentle_max_std_m_s2 = float(gentle_max_std_m_s2)
+        self.gentle_off_std_m_s2 = float(gentle_off_std_m_s2)
         self.slow_min_std_m_s2 = float(slow_min_std_m_s2)
         self.slow_min_periodicity = float(slow_min_periodicity)
+        self.slow_hold = bool(slow_hold)
         self.step_antiphase = float(step_antiphase)
         self.trunk_min_periodicity = float(trunk_min_periodicity)
         self.trunk_max_tilt_rad = float(trunk_max_tilt_rad)
@@ -510,15 +512,18 @@ class CarryModeDetector:
             p = max(p, min(f["r_stride"], f["gyro_periodicity"]))
         return p
 
-    def _periodic_gait(self, f: dict) -> float:
+    def _periodic_gait(self, f: dict, hold: bool = False) -> float:
         """Soft evidence (0..1) that a norm too small for ``min_walk_std_m_s2`` is a walk's (issue #25): periodic at
         both legs' lags (:meth:`gait_periodicity`) above ``gentle_min_periodicity`` with a standard deviation above
         ``gentle_min_std_m_s2``, or above ``slow_min_periodicity`` with one above ``slow_min_std_m_s2``: the more the
         norm moves, the less periodicity it takes (a phone held while standing moves it by 0.1-0.3 m/s^2)."""
         p = self.gait_periodicity(f)
         std = f["acc_std_m_s2"]
+        slow = _sig(p, self.slow_min_periodicity, 0.05)
+        if hold and self.slow_hold:
+            slow = max(slow, _sig(f["periodicity"], min(self.slow_min_periodicity, self.hold_periodicity), 0.05))
         return max(_sig(p, self.gentle_min_periodicity, 0.05) * _sig(std, self.gentle_min_std_m_s2, 0.02),
-                   _sig(p, self.slow_min_periodicity, 0.05) * _sig(std, self.slow_min_std_m_s2, 0.05))
+                   slow * _sig(std, self.slow_min_std_m_s2, 0.05))
 
     def _periodic_gait_met(self, p: float, std: float) -> bool:
         """The hard form of :meth:`_periodic_gait`: both legs' periodicity ``p`` and the norm's ``std`` (m/s^2)."""
@@ -551,12 +556,12 @@ class CarryModeDetector:
                          * (1.0 - gait_rotation))
         std = f["acc_std_m_s2"]
         # a walk, or a gentle one that is periodic at both legs: "still" needs a low amplitude AND no gait periodicity
-        amplitude = max(_sig(std, self.min_walk_std_m_s2, 0.1), self._periodic_gait(f))
+        hold = walking and f.get("recent_std_m_s2", 0.0) >= self.hold_min_std_m_s2
+        amplitude = max(_sig(std, self.min_walk_std_m_s2, 0.1), self._periodic_gait(f, hold))
         # a walk that goes on (issue #25): while the mode in force is a walking one and the norm still moves like a
         # walk's at the window's end (a stop leaves only a standing phone's tremor there), the norm's periodicity
         # need only be ``hold_periodicity``: at a turn or a change of pace the 4-s window's autocorrelation at the
         # stride dips to 0.2-0.35 for 2-5 s while the steps go on
-        hold = walking and f.get("recent_std_m_s2", 0.0) >= self.hold_min_std_m_s2
         p0 = min(self.min_periodicity, self.hold_periodicity) if hold else self.min_periodicity
         walk = _sig(f["periodicity"], p0, 0.05) * amplitude * (1.0 - waving)
         # a limb: the tilt swings and the norm repeats every stride rather than every step
@@ -621,7 +626,7 @@ class CarryModeDetector:
                                       and (f.get("gyro_axis_share", 0.0) >= self.swing_axis_share
                                            or f["tilt_rms_rad"] < self.twist_max_tilt_rad))
         both = self.gait_periodicity(f)  # both legs
-        if not periodic or both < self.min_periodicity or std >= self.min_walk_std_m_s2:
+        if not periodic or both < self.min_periodicity or std >= self.gentle_off_std_m_s2:
             self.gentle = False
         elif std < self.gentle_max_std_m_s2 and self._periodic_gait_met(both, std):
             self.gentle = True
