@@ -149,17 +149,37 @@ class CarryModeDetector:
         standard deviation is above ``gentle_min_std_m_s2`` (m/s^2; a phone on a table reads ~0.02, one
         held while standing under 0.1 by tremor) and whose autocorrelation at both the step and the stride lag
         (both legs) is above ``gentle_min_periodicity`` is walking too: periodicity decides, not amplitude.
-    gentle_max_std_m_s2 : float
-        While the norm is periodic at both legs' lags (``gentle_min_periodicity``) with a standard deviation
-        under this (m/s^2), :attr:`gentle` is True (off again from ``min_walk_std_m_s2`` or when either lag's
-        autocorrelation falls under ``min_periodicity``: a band, so that it does not flap): the pipeline then counts a trunk mode's steps with the gentle gait's
-        step detector (:data:`core.pdr.steps.GENTLE_GATES`).
+    slow_min_std_m_s2, slow_min_periodicity, slow_hold : float, float, bool
+        A slow walk whose norm moves more than a standing phone's but less than ``min_walk_std_m_s2`` (issue #25
+        part 2: the tuning clip Tclack88 50_hand_slow, 1.1 steps/s in the hand, accelerometer only: standard
+        deviation 0.5-0.8 m/s^2, autocorrelation at the step and at the stride 0.4-0.7, "still" for 36 of its 44 s
+        before) is walking when the norm's standard deviation is above ``slow_min_std_m_s2`` (m/s^2; a phone held
+        while standing moves it by 0.1-0.3) and its periodicity at both legs' lags above ``slow_min_periodicity``:
+        the more the norm moves, the less periodicity it takes; "still" needs a low amplitude AND no gait
+        periodicity.  ``slow_hold``: once walking (the hold of ``hold_periodicity``, below), the slow band needs
+        only the norm's periodicity at either lag above ``hold_periodicity`` (a 4-s window holds barely two strides
+        of such a walk: its stride-lag autocorrelation dips to 0.15-0.3 while the step-lag one stays at 0.5).
+        ``slow_min_periodicity=inf, slow_hold=False`` turn it off.
+    gentle_max_std_m_s2, gentle_off_std_m_s2 : float
+        While the norm is periodic at both legs' lags (``gentle_min_periodicity``, or ``slow_min_periodicity`` from
+        ``slow_min_std_m_s2``) with a standard deviation under ``gentle_max_std_m_s2`` (m/s^2), :attr:`gentle` is
+        True (off again from ``gentle_off_std_m_s2`` or when either lag's autocorrelation falls under
+        ``min_periodicity``: a band, so that it does not flap): the pipeline then counts the steps of a mode with
+        the hand-held gates with the gentle gait's step detector (:data:`core.pdr.steps.GENTLE_GATES`: a low
+        ``A_th`` behind the cadence gate).  Issue #25 part 2: up to 1.0 / 1.2 m/s^2 (0.5 / 0.6 before): the slow
+        clip's peaks rise 0.2-0.7 m/s^2 above ``g``, under the hand-held ``A_th`` half the time (30 of 50 steps
+        with it, 50 with the gentle gates); the TUNING counted clips otherwise unchanged but one step of one
+        (yh570 hand_1_28_21_35 364 -> 363 of 372).
     step_antiphase : float
         A slow walk on the trunk repeats its norm every step, and a step of 0.8-1.25 s lies inside the
         stride range: when the autocorrelation at half the lag found is below this (the half lag is in
         anti-phase: the lag is one period of the norm) and the phone is on the trunk (``trunk_max_tilt_rad``)
         or the gyroscope's rotation, which a walker sways once per stride, is in anti-phase at that lag too,
         the lag is the step and the stride twice it.
+    trunk_min_periodicity : float
+        The norm's autocorrelation at the lag found from which a norm in anti-phase at half of it, on a phone that
+        hardly tilts (``trunk_max_tilt_rad``), is a trunk's step (issue #25 part 2: 0.4; it was
+        ``gentle_min_periodicity``, 0.6, and the slow clip's 0.4-0.6 made its step a stride and its half-step a step).
     trunk_max_tilt_rad : float
         ``tilt_rms_rad`` under which a norm repeating at the lag found (in anti-phase at half of it) is a trunk's
         step, not a limb's stride (rad; issue #25: at 0.8-1.2 steps/s the simulator's bag and ear tilt by
@@ -487,7 +507,7 @@ class CarryModeDetector:
         ``k2`` is a slow walk's step and twice it is in range.  The norm in anti-phase at ``k2 / 2``
         (``step_antiphase``) makes ``k2`` one period of the norm: a trunk's step (both feet alike) or a limb's
         stride (its two half-strides unlike).  The phone is on the trunk, and ``k2`` its step, when the norm
-        clearly repeats at ``k2`` (``gentle_min_periodicity``) and the phone tilts less than ``trunk_max_tilt_rad`` (issue #25: a limb swings by +-20-45 deg, the trunk sways by a few) or
+        clearly repeats at ``k2`` (``trunk_min_periodicity``) and the phone tilts less than ``trunk_max_tilt_rad`` (issue #25: a limb swings by +-20-45 deg, the trunk sways by a few) or
         when the rotation's main axis (autocorrelation ``r_gyro``, not yet unbiased), which a walker sways once
         per stride, is in anti-phase at ``k2`` too."""
         k4 = 2 * k2
