@@ -479,7 +479,7 @@ def _acc_only_slow_walk(seed=1, step_time_cv=0.1):
 
 #: the detector before issue #25 part 2: the trunk's step taken for a stride unless its autocorrelation reaches 0.6,
 #: no slow band (nor its hold), the gentle gates only under 0.5 m/s^2 (off from 0.6)
-_BEFORE_SLOW = dict(trunk_min_periodicity=0.6, gentle_max_std_m_s2=0.5, gentle_off_std_m_s2=0.6,
+_BEFORE_SLOW = dict(trunk_min_periodicity=0.6, slow_max_std_m_s2=0.5, slow_off_std_m_s2=0.6,
                     slow_min_periodicity=math.inf, slow_hold=False)
 
 
