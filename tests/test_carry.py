@@ -393,8 +393,8 @@ def test_slow_swing_taken_for_a_pocket_counts_every_footfall():
     assert abs(len(res.steps) - w.truth.n_steps) <= 2, (len(res.steps), w.truth.n_steps)
     uneven = Pipeline(carry=CarryModeDetector(uneven_on_share=0.75)).run(w.recording)
     assert abs(len(uneven.steps) - w.truth.n_steps) <= 2, (len(uneven.steps), w.truth.n_steps)
-    # the hand-held gates alone (neither the uneven pocket's nor, since issue #25 part 2, the gentle gates, which a
-    # periodic gait under 1 m/s^2 gets in a pocket too)
+    # the hand-held gates alone (neither the uneven pocket's nor the gentle gates, which since issue #25 part 2 a
+    # periodic gait at a slow stride gets up to 1 m/s^2, in a pocket too)
     old = Pipeline(carry=CarryModeDetector(uneven_on_share=0.75),
                    step_gates={k: v for k, v in STEP_GATES.items() if k not in (UNEVEN_POCKET, GENTLE)}).run(w.recording)
     assert w.truth.n_steps - len(old.steps) >= 10, (len(old.steps), w.truth.n_steps)
