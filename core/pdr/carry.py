@@ -149,17 +149,40 @@ class CarryModeDetector:
         standard deviation is above ``gentle_min_std_m_s2`` (m/s^2; a phone on a table reads ~0.02, one
         held while standing under 0.1 by tremor) and whose autocorrelation at both the step and the stride lag
         (both legs) is above ``gentle_min_periodicity`` is walking too: periodicity decides, not amplitude.
-    gentle_max_std_m_s2 : float
-        While the norm is periodic at both legs' lags (``gentle_min_periodicity``) with a standard deviation
-        under this (m/s^2), :attr:`gentle` is True (off again from ``min_walk_std_m_s2`` or when either lag's
-        autocorrelation falls under ``min_periodicity``: a band, so that it does not flap): the pipeline then counts a trunk mode's steps with the gentle gait's
-        step detector (:data:`core.pdr.steps.GENTLE_GATES`).
+    slow_min_std_m_s2, slow_min_periodicity, slow_hold : float, float, bool
+        A slow walk whose norm moves more than a standing phone's but less than ``min_walk_std_m_s2`` (issue #25
+        part 2: the tuning clip Tclack88 50_hand_slow, 1.1 steps/s in the hand, accelerometer only: standard
+        deviation 0.5-0.8 m/s^2, autocorrelation at the step and at the stride 0.4-0.7, "still" for 36 of its 44 s
+        before) is walking when the norm's standard deviation is above ``slow_min_std_m_s2`` (m/s^2; a phone held
+        while standing moves it by 0.1-0.3) and its periodicity at both legs' lags above ``slow_min_periodicity``:
+        the more the norm moves, the less periodicity it takes; "still" needs a low amplitude AND no gait
+        periodicity.  Only for a slow walk's stride (``slow_stride_s`` or longer, a cadence under 1.25 steps/s):
+        for every stride, the gentle gates below moved the CI guard's IPIN report fit 1.45 -> 1.65 m and the IPIN
+        TUNING landmark median 2.29 -> 2.42 m.  ``slow_hold``: once walking (the hold of ``hold_periodicity``, below), the slow band needs
+        only the norm's periodicity at either lag above ``hold_periodicity`` (a 4-s window holds barely two strides
+        of such a walk: its stride-lag autocorrelation dips to 0.15-0.3 while the step-lag one stays at 0.5).
+        ``slow_min_periodicity=inf, slow_hold=False`` turn it off.
+    gentle_max_std_m_s2, slow_max_std_m_s2, slow_off_std_m_s2 : float
+        While the norm is periodic at both legs' lags (``gentle_min_periodicity``, or at a slow stride
+        ``slow_min_periodicity`` from ``slow_min_std_m_s2``) with a standard deviation under ``gentle_max_std_m_s2``
+        (m/s^2; at a slow stride ``slow_max_std_m_s2``), :attr:`gentle` is True (off again from ``min_walk_std_m_s2``,
+        at a slow stride ``slow_off_std_m_s2``, or when either lag's autocorrelation falls under
+        ``min_periodicity``: a band, so that it does not flap): the pipeline then counts the steps of a mode with
+        the hand-held gates with the gentle gait's step detector (:data:`core.pdr.steps.GENTLE_GATES`: a low
+        ``A_th`` behind the cadence gate).  Issue #25 part 2: a slow stride's band reaches 1.0 / 1.2 m/s^2: the slow
+        clip's peaks rise 0.2-0.7 m/s^2 above ``g``, under the hand-held ``A_th`` half the time (30 of 50 steps
+        with it, 50 with the gentle gates); every other TUNING real walk (25 counted clips, 2 GPS walks) counts the
+        same (for every stride, not only a slow one: yh570 hand_1_28_21_35 364 -> 363 of 372).
     step_antiphase : float
         A slow walk on the trunk repeats its norm every step, and a step of 0.8-1.25 s lies inside the
         stride range: when the autocorrelation at half the lag found is below this (the half lag is in
         anti-phase: the lag is one period of the norm) and the phone is on the trunk (``trunk_max_tilt_rad``)
         or the gyroscope's rotation, which a walker sways once per stride, is in anti-phase at that lag too,
         the lag is the step and the stride twice it.
+    trunk_min_periodicity : float
+        The norm's autocorrelation at the lag found from which a norm in anti-phase at half of it, on a phone that
+        hardly tilts (``trunk_max_tilt_rad``), is a trunk's step (issue #25 part 2: 0.4; it was
+        ``gentle_min_periodicity``, 0.6, and the slow clip's 0.4-0.6 made its step a stride and its half-step a step).
     trunk_max_tilt_rad : float
         ``tilt_rms_rad`` under which a norm repeating at the lag found (in anti-phase at half of it) is a trunk's
         step, not a limb's stride (rad; issue #25: at 0.8-1.2 steps/s the simulator's bag and ear tilt by
@@ -255,8 +278,10 @@ class CarryModeDetector:
                  tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.5,
                  slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7,
                  min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
-                 gentle_min_periodicity: float = 0.6, gentle_max_std_m_s2: float = 0.5,
-                 step_antiphase: float = -0.2, trunk_max_tilt_rad: float = 0.15, max_gait_tilt_rad: float = 0.6, twist_max_tilt_rad: float = 0.55,
+                 gentle_min_periodicity: float = 0.6, gentle_max_std_m_s2: float = 0.5, slow_max_std_m_s2: float = 1.0,
+                 slow_off_std_m_s2: float = 1.2,
+                 slow_min_std_m_s2: float = 0.4, slow_min_periodicity: float = 0.4, slow_hold: bool = True,
+                 step_antiphase: float = -0.2, trunk_min_periodicity: float = 0.4, trunk_max_tilt_rad: float = 0.15, max_gait_tilt_rad: float = 0.6, twist_max_tilt_rad: float = 0.55,
                  max_gait_rotation_rad_s: float = 4.5, swing_axis_share: float = 0.85, screen_up_z: float = 0.3,
                  upright_y: float = 0.6, ear_incline_x: float = 0.22, limb_tilt_rad: float = 0.16,
                  limb_stride_share: float = 0.3, min_limb_stride_share: float = 0.15, arm_evidence: float = 1.1,
@@ -277,7 +302,13 @@ class CarryModeDetector:
         self.gentle_min_std_m_s2 = float(gentle_min_std_m_s2)
         self.gentle_min_periodicity = float(gentle_min_periodicity)
         self.gentle_max_std_m_s2 = float(gentle_max_std_m_s2)
+        self.slow_max_std_m_s2 = float(slow_max_std_m_s2)
+        self.slow_off_std_m_s2 = float(slow_off_std_m_s2)
+        self.slow_min_std_m_s2 = float(slow_min_std_m_s2)
+        self.slow_min_periodicity = float(slow_min_periodicity)
+        self.slow_hold = bool(slow_hold)
         self.step_antiphase = float(step_antiphase)
+        self.trunk_min_periodicity = float(trunk_min_periodicity)
         self.trunk_max_tilt_rad = float(trunk_max_tilt_rad)
         self.max_gait_tilt_rad = float(max_gait_tilt_rad)
         self.twist_max_tilt_rad = float(twist_max_tilt_rad)
@@ -481,13 +512,13 @@ class CarryModeDetector:
         ``k2`` is a slow walk's step and twice it is in range.  The norm in anti-phase at ``k2 / 2``
         (``step_antiphase``) makes ``k2`` one period of the norm: a trunk's step (both feet alike) or a limb's
         stride (its two half-strides unlike).  The phone is on the trunk, and ``k2`` its step, when the norm
-        clearly repeats at ``k2`` (``gentle_min_periodicity``) and the phone tilts less than ``trunk_max_tilt_rad`` (issue #25: a limb swings by +-20-45 deg, the trunk sways by a few) or
+        clearly repeats at ``k2`` (``trunk_min_periodicity``) and the phone tilts less than ``trunk_max_tilt_rad`` (issue #25: a limb swings by +-20-45 deg, the trunk sways by a few) or
         when the rotation's main axis (autocorrelation ``r_gyro``, not yet unbiased), which a walker sways once
         per stride, is in anti-phase at ``k2`` too."""
         k4 = 2 * k2
         if k4 > self._lag_hi or r[k2 // 2] >= self.step_antiphase:
             return k2
-        if tilt_rms < self.trunk_max_tilt_rad and r[k2] >= self.gentle_min_periodicity:
+        if tilt_rms < self.trunk_max_tilt_rad and r[k2] >= self.trunk_min_periodicity:
             return k4
         if r_gyro is None or float(r_gyro[k2]) * (n / (n - k2)) >= self.step_antiphase:
             return k2
@@ -505,6 +536,29 @@ class CarryModeDetector:
         if "gyro_periodicity" in f and f["r_step"] >= self.step_antiphase:
             p = max(p, min(f["r_stride"], f["gyro_periodicity"]))
         return p
+
+    def _periodic_gait(self, f: dict, hold: bool = False) -> float:
+        """Soft evidence (0..1) that a norm too small for ``min_walk_std_m_s2`` is a walk's (issue #25): periodic at
+        both legs' lags (:meth:`gait_periodicity`) above ``gentle_min_periodicity`` with a standard deviation above
+        ``gentle_min_std_m_s2``, or above ``slow_min_periodicity`` with one above ``slow_min_std_m_s2``: the more the
+        norm moves, the less periodicity it takes (a phone held while standing moves it by 0.1-0.3 m/s^2)."""
+        p = self.gait_periodicity(f)
+        std = f["acc_std_m_s2"]
+        slow = _sig(p, self.slow_min_periodicity, 0.05) if self._slow_stride(f) else 0.0
+        if hold and self.slow_hold and self._slow_stride(f):
+            slow = max(slow, _sig(f["periodicity"], min(self.slow_min_periodicity, self.hold_periodicity), 0.05))
+        return max(_sig(p, self.gentle_min_periodicity, 0.05) * _sig(std, self.gentle_min_std_m_s2, 0.02),
+                   slow * _sig(std, self.slow_min_std_m_s2, 0.05))
+
+    def _periodic_gait_met(self, p: float, std: float, slow: bool) -> bool:
+        """The hard form of :meth:`_periodic_gait`: both legs' periodicity ``p``, the norm's ``std`` (m/s^2) and
+        whether the stride is a slow walk's (:meth:`_slow_stride`)."""
+        return ((p >= self.gentle_min_periodicity and std >= self.gentle_min_std_m_s2)
+                or (slow and p >= self.slow_min_periodicity and std >= self.slow_min_std_m_s2))
+
+    def _slow_stride(self, f: dict) -> bool:
+        """The stride found is a slow walk's (``slow_stride_s`` or longer: a cadence under 1.25 steps/s)."""
+        return f["stride_period_s"] >= self.slow_stride_s - 1e-9
 
     def _gait_rotation(self, f: dict) -> float:
         """Soft evidence (0..1) that the rotation is a gait's (issue #25): the rotation's main axis periodic at the
@@ -531,14 +585,13 @@ class CarryModeDetector:
                          _sig(f["gyro_rms_rad_s"], self.max_gait_rotation_rad_s, 0.3) * (1.0 - one_axis)
                          * (1.0 - gait_rotation))
         std = f["acc_std_m_s2"]
-        amplitude = max(_sig(std, self.min_walk_std_m_s2, 0.1),  # a walk, or a gentle one that is clearly periodic
-                        _sig(self.gait_periodicity(f), self.gentle_min_periodicity, 0.05)
-                        * _sig(std, self.gentle_min_std_m_s2, 0.02))
+        # a walk, or a gentle one that is periodic at both legs: "still" needs a low amplitude AND no gait periodicity
+        hold = walking and f.get("recent_std_m_s2", 0.0) >= self.hold_min_std_m_s2
+        amplitude = max(_sig(std, self.min_walk_std_m_s2, 0.1), self._periodic_gait(f, hold))
         # a walk that goes on (issue #25): while the mode in force is a walking one and the norm still moves like a
         # walk's at the window's end (a stop leaves only a standing phone's tremor there), the norm's periodicity
         # need only be ``hold_periodicity``: at a turn or a change of pace the 4-s window's autocorrelation at the
         # stride dips to 0.2-0.35 for 2-5 s while the steps go on
-        hold = walking and f.get("recent_std_m_s2", 0.0) >= self.hold_min_std_m_s2
         p0 = min(self.min_periodicity, self.hold_periodicity) if hold else self.min_periodicity
         walk = _sig(f["periodicity"], p0, 0.05) * amplitude * (1.0 - waving)
         # a limb: the tilt swings and the norm repeats every stride rather than every step
@@ -596,16 +649,18 @@ class CarryModeDetector:
         std = f["acc_std_m_s2"]
         periodic = f["periodicity"] >= self.min_periodicity and (
             std >= 0.5 * self.min_walk_std_m_s2
-            or (self.gait_periodicity(f) >= self.gentle_min_periodicity and std >= self.gentle_min_std_m_s2))
+            or self._periodic_gait_met(self.gait_periodicity(f), std, self._slow_stride(f)))
         self.step_period_s = 0.5 * f["stride_period_s"] if periodic else math.nan
         # about one axis (a pendulum), or spread over the axes by a twisting wrist while the tilt is a swing's
         self.rotation_periodic = bool(walking and f.get("gyro_periodicity", 0.0) >= 0.5
                                       and (f.get("gyro_axis_share", 0.0) >= self.swing_axis_share
                                            or f["tilt_rms_rad"] < self.twist_max_tilt_rad))
         both = self.gait_periodicity(f)  # both legs
-        if not periodic or both < self.min_periodicity or std >= self.min_walk_std_m_s2:
+        slow = self._slow_stride(f)  # a slow walk's band reaches higher (see slow_max_std_m_s2)
+        if not periodic or both < self.min_periodicity or std >= (self.slow_off_std_m_s2 if slow
+                                                                   else self.min_walk_std_m_s2):
             self.gentle = False
-        elif both >= self.gentle_min_periodicity and self.gentle_min_std_m_s2 <= std < self.gentle_max_std_m_s2:
+        elif std < (self.slow_max_std_m_s2 if slow else self.gentle_max_std_m_s2) and self._periodic_gait_met(both, std, slow):
             self.gentle = True
         # a phone in a trouser pocket stands along the thigh (or on its edge): never screen up or down
         if not walking or f["stride_share"] < self.uneven_off_share or abs(f["gravity_z"]) >= self.screen_up_z:

@@ -61,7 +61,9 @@ A slow, gentle walk (issue #25: 0.5-1 m/s^2 of user acceleration at 0.8-1.2 step
 the hand) lifts the filtered norm only 0.2-0.5 m/s^2 above ``g``, under the hand-held ``A_th``.  When the carry
 detector finds the norm periodic but gentle (:attr:`core.pdr.carry.CarryModeDetector.gentle`), a trunk mode's
 steps are counted with :data:`GENTLE_GATES`: ``A_th`` 0.15 m/s^2 with the cadence gate (the step period is
-known then).  The periodicity decides that it is walking, not the amplitude.
+known then).  The periodicity decides that it is walking, not the amplitude.  Issue #25 part 2: also a slow walk
+whose norm moves by up to 1 m/s^2 (the carry detector's slow band; the TUNING clip Tclack88 50_hand_slow counted
+30 of its 50 steps with the hand-held ``A_th``, 50 with these gates).
 """
 
 from __future__ import annotations

@@ -99,7 +99,7 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     anti = det.step_antiphase
     k4 = 2 * k2
     ambiguous = (k4 <= hi) & (r[rows, k2 // 2] < anti)
-    double = ambiguous & (tilt_rms < det.trunk_max_tilt_rad) & (r[rows, k2] >= det.gentle_min_periodicity)
+    double = ambiguous & (tilt_rms < det.trunk_max_tilt_rad) & (r[rows, k2] >= det.trunk_min_periodicity)
     gyro = None
     if np.any(has_gyro):
         gyr = w[:, :, 3:]
