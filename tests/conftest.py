@@ -32,8 +32,14 @@ NUMBA_TEST_FILES = frozenset(
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
-    """``--dist loadfile`` (pyproject's default) with :data:`NUMBA_TEST_FILES` as one work unit."""
+    """``--dist loadfile`` (pyproject's default) with :data:`NUMBA_TEST_FILES` as one work unit where numba compiles
+    the kernels; without numba (the README's ``.[test]`` install, as CI runs it: the kernels are plain Python and
+    compile nothing) plain ``loadfile``, which balances the two workers better than one unit of 21 files."""
     if config.getvalue("dist") != "loadfile":
+        return None
+    from desktop.fast.jit import HAVE_NUMBA
+
+    if not HAVE_NUMBA:
         return None
     from xdist.scheduler import LoadFileScheduling
 
