@@ -75,10 +75,12 @@ def test_an_indoor_like_stream_is_still_kept_out():
 
 def test_without_evidence_that_the_stream_follows_the_walker_the_window_median_decides():
     """No receiver speed and a slow walker (6 m in 15 s, under ``evidence_min_walk_m``): the cold-start rule does not
-    apply, the stream is judged as before."""
+    apply, the stream is judged as before (the window's median: usable at 31 s, not 24 s)."""
     def hacc(t):
-        return 16.0 if t < 8.0 else 8.0
+        return 16.0 if t < 14.0 else 8.0
 
     on = _first_usable_s(_judged(JudgeSettings(), hacc, lambda t: math.nan, walker_m_s=0.4))
     off = _first_usable_s(_judged(JudgeSettings(cold_start_run=False), hacc, lambda t: math.nan, walker_m_s=0.4))
     assert on == off < math.inf
+    walking = _first_usable_s(_judged(JudgeSettings(), hacc, lambda t: math.nan, walker_m_s=1.4))  # 21 m in 15 s
+    assert walking <= on - 5.0
