@@ -84,3 +84,36 @@ def test_without_evidence_that_the_stream_follows_the_walker_the_window_median_d
     assert on == off < math.inf
     walking = _first_usable_s(_judged(JudgeSettings(), hacc, lambda t: math.nan, walker_m_s=1.4))  # 21 m in 15 s
     assert walking <= on - 5.0
+
+
+def test_the_fusion_takes_the_good_fixes_after_a_cold_start_and_not_the_coarse_ones():
+    """Through the fusion (Chen's filter): the first fix taken comes one settling time after the reported accuracy
+    dropped within the limit (15 s), not after the window's median had caught up (the rule before: 22 s and later),
+    and no cold-start fix is taken."""
+    from core.gnss import make_fusion
+    from core.recording import Stream
+    from tests.test_gnss_judge import _walk
+
+    steps = _walk(lambda t: 0.3, seconds=90.0)
+    st = np.array([s.t_ns for s in steps])
+    e, n = np.array([s.east_m for s in steps]), np.array([s.north_m for s in steps])
+    rng = np.random.default_rng(5)
+    rows, ts = [], []
+    for t in np.arange(1.0, 85.0, 1.0):
+        lat, lon = enu_to_geodetic(np.interp(t * 1e9, st, e) + rng.normal(0.0, 1.0),
+                                   np.interp(t * 1e9, st, n) + rng.normal(0.0, 1.0), ORIGIN)
+        rows.append((float(lat), float(lon), 400.0, _cold_start(t), 1.3, math.nan))
+        ts.append(int(t * 1e9))
+    gps = Stream("gps", np.array(ts, dtype=np.int64), np.array(rows),
+                 ("lat_deg", "lon_deg", "alt_m", "hacc_m", "speed_m_s", "course_deg"),
+                 ("deg", "deg", "m", "m", "m/s", "deg"), "")
+
+    def first_taken(settings):
+        fr = make_fusion("chen", judge=settings).run(steps, gps)
+        taken = [f for f in fr.fixes if f.accepted]
+        assert all(f.hacc_m <= 10.0 for f in taken[1:])  # the anchor aside, no cold-start fix
+        return min((f.t_ns for f in taken[1:]), default=None) * 1e-9
+
+    on, off = first_taken(JudgeSettings()), first_taken(JudgeSettings(cold_start_run=False))
+    assert on <= 15.0 + JudgeSettings().usable_after_s + 1.0
+    assert off >= on + 5.0
