@@ -249,19 +249,21 @@ def sim_walk():
     from desktop.simulator import outdoor_walk
 
     walk = outdoor_walk(7, minutes=6)
-    steps = Pipeline().run(walk.recording).steps
-    return walk, steps
+    # the product's steps: a pipeline with the GPS fusion inside (its first good fix tells the attitude filter the walk
+    # is outdoors), run once for the module (as test_kubrak.py does)
+    res = Pipeline(gnss=GpsFusion()).run(walk.recording)
+    _STREAMED["fusion"] = res.fusion
+    return walk, res.steps
+
+
+_STREAMED: dict = {}
 
 
 def test_streaming_pipeline_and_batch_fusion_agree(sim_walk):
     walk, steps = sim_walk
     rec = walk.recording
-    res = Pipeline(gnss=GpsFusion()).run(rec)
-    streamed = res.fusion
-    # the batch fusion on the streamed pipeline's own steps: its first good fix told the attitude filter the walk
-    # is outdoors (the field-offset state dropped), which the fixture's pipeline without GPS does not know
-    batch = GpsFusion().run(res.steps, rec.streams["gps"], rec.t0_ns)
-    assert len(res.steps) == len(steps)
+    streamed = _STREAMED["fusion"]
+    batch = GpsFusion().run(steps, rec.streams["gps"], rec.t0_ns)
     assert len(streamed.steps) == len(batch.steps) > 300
     d = [math.hypot(a.east_m - b.east_m, a.north_m - b.north_m) for a, b in zip(streamed.steps, batch.steps)]
     assert max(d) < 0.05
@@ -331,8 +333,10 @@ def test_bad_fixes_are_screened_and_never_reach_the_state(sim_walk):
 def gps_file(tmp_path_factory, sim_walk):
     from core.recording import write_recording
 
-    path = tmp_path_factory.mktemp("gps") / "walk.csv.gz"
-    write_recording(str(path), sim_walk[0].recording)
+    # the first 320 s (the outages below end at 290 s), uncompressed: writing and reading the file is most of the cost
+    rec = sim_walk[0].recording
+    path = tmp_path_factory.mktemp("gps") / "walk.csv"
+    write_recording(str(path), rec.slice_time(rec.t0_ns, rec.t0_ns + 320 * 10 ** 9))
     return str(path)
 
 
