@@ -473,13 +473,13 @@ class GpsJudge:
             b = np.array([(f[5], f[6]) for f in fx])
             if np.all(np.isfinite(b)):
                 resid = shape_residual_m(a, b, s.step_scale_limits)
+        self_resid = self._self_residual_m() if n >= s.min_fixes and s.self_consistency else math.nan
         if s.cold_start_run and not self._acquired and self._fine_since_ns is not None and n >= s.min_fixes:
             # still acquiring: the accuracy test over the fixes since the reported accuracy last dropped within the
             # limit, where the stream shows it follows the walker (the receiver's pace, or the steps' walk)
             med_run = float(np.median([f[3] for f in fx if f[0] >= self._fine_since_ns]))
             lim_run = max(s.shape_residual_floor_m, s.shape_residual_per_hacc * med_run)
-            consistent = resid <= lim_run or (s.self_consistency and self._self_residual_m() <= lim_run
-                                              and self._walking_pace_ok())
+            consistent = resid <= lim_run or (self_resid <= lim_run and self._walking_pace_ok())
             if self._evidence_now(consistent):
                 med = med_run
         causes = []
@@ -491,7 +491,6 @@ class GpsJudge:
             causes.append(Cause.SIGNAL)
         limit = max(s.shape_residual_floor_m, s.shape_residual_per_hacc * med) if med == med else math.nan
         moved_off = self._displacement_off_m(med) if n >= s.min_fixes else math.nan
-        self_resid = self._self_residual_m() if n >= s.min_fixes and s.self_consistency else math.nan
         # the fixes agree with the steps' shape, or (whatever the steps' heading and count) among themselves with
         # their stated accuracy at a walking speed no faster than the steps allow (a phone in a pocket, a poor
         # step count: the shape test then fails on the steps, not on GPS)

@@ -432,7 +432,8 @@ class OnlineTrainer:
             sample = None
             reasons.append(f"the fixes jump {jump:.0f} m off the window's pace (multipath): no stride sample")
         else:
-            sample = self._stretch_sample(fx, mean_h, ref_d, self._doppler_course(fx, courses, speeds))
+            course = self._doppler_course(fx, courses, speeds) if self.stretch_follows_bends else math.nan
+            sample = self._stretch_sample(fx, mean_h, ref_d, course)
         scale, gps_d = (sample.scale, sample.chord_m) if sample is not None else (nan, nan)
         if self.learn_stride and math.isfinite(scale):
             self._recent.append(scale)

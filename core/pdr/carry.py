@@ -544,8 +544,9 @@ class CarryModeDetector:
         norm moves, the less periodicity it takes (a phone held while standing moves it by 0.1-0.3 m/s^2)."""
         p = self.gait_periodicity(f)
         std = f["acc_std_m_s2"]
-        slow = _sig(p, self.slow_min_periodicity, 0.05) if self._slow_stride(f) else 0.0
-        if hold and self.slow_hold and self._slow_stride(f):
+        slow_stride = self._slow_stride(f)
+        slow = _sig(p, self.slow_min_periodicity, 0.05) if slow_stride else 0.0
+        if hold and self.slow_hold and slow_stride:
             slow = max(slow, _sig(f["periodicity"], min(self.slow_min_periodicity, self.hold_periodicity), 0.05))
         return max(_sig(p, self.gentle_min_periodicity, 0.05) * _sig(std, self.gentle_min_std_m_s2, 0.02),
                    slow * _sig(std, self.slow_min_std_m_s2, 0.05))

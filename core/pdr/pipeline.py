@@ -1153,7 +1153,6 @@ class Pipeline:
         return PipelineResult(list(self.steps), Track.from_steps(self.steps), att, self.labels(), recording,
                               counters, fusion)
 
-
     def _run_pass(self, recording: Recording, progress) -> None:
         """One pass of the streaming kernel over the whole recording, from :meth:`reset` (the body of :meth:`run`)."""
         log, self.log = self.log, True
