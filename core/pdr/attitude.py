@@ -901,12 +901,11 @@ class AttitudeEKF(AttitudeFilterBase):
         #: the forward run kept for the replay's heading smoother (None unless ``keep_history``)
         self.history = AttitudeHistory() if self.keep_history else None
 
-    def smoothed_heading(self, states=None) -> HeadingSmoothing:
-        """The RTS-smoothed heading of the run so far (:class:`core.pdr.heading_smoother.HeadingSmoothing`);
-        ``states``: see :meth:`core.pdr.heading_smoother.AttitudeHistory.smooth`."""
+    def smoothed_heading(self) -> HeadingSmoothing:
+        """The RTS-smoothed heading of the run so far (:class:`core.pdr.heading_smoother.HeadingSmoothing`)."""
         if self.history is None:
             raise ValueError("no history: make the filter with keep_history=True before the run")
-        return self.history.smooth(states)
+        return self.history.smooth()
 
     def snapshot(self) -> AttitudeState:
         """A copy of the whole state (the filter keeps its own)."""

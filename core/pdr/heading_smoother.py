@@ -104,15 +104,16 @@ class StartHeading:
 
 @dataclass(slots=True)
 class _Segment:
-    """The forward run between two changes of the error state's size: what the backward pass needs."""
+    """The forward run between two changes of the error state's size, fed to its own backward pass as it runs."""
 
-    n: int  #: error-state size
-    P: list  #: posterior covariance of each closed epoch
-    Phi: list  #: transition out of each closed epoch
-    Q: list  #: its process noise (what the filter's covariance grew by)
-    inj: list  #: per epoch (the open one included): its injections [(dx, G), ...]
+    rts: kalman.RtsSmoother  #: the epochs' covariances, transitions and injections (:class:`core.kalman.RtsSmoother`)
+    forward_var: list  #: the forward heading variance of each closed epoch (rad^2)
     nominal: list  #: per epoch: (t_ns, q, field offset) after its injections
     P_last: np.ndarray | None = None  #: the open (last) epoch's posterior covariance
+
+    @property
+    def n(self) -> int:
+        return self.rts.n
 
 
 class AttitudeHistory:
@@ -165,64 +166,45 @@ class AttitudeHistory:
         n = len(P_prior)
         seg = self._segments[-1] if self._segments else None
         if seg is None or seg.n != n or self._P_post is None:
-            self._segments.append(_Segment(n, [], [], [], [[]], []))
+            rts = kalman.RtsSmoother(n, slice(0, 3))
+            rts.start()
+            self._segments.append(_Segment(rts, [], []))
             self._clear_transition()
             return
         if self._n_pred == 0 and np.array_equal(P_prior, self._P_post):
             return  # a second update at the same epoch
         Phi = self._transition(n)
         Q = P_prior - Phi @ self._P_post @ Phi.T
-        seg.P.append(self._P_post)
-        seg.Phi.append(Phi)
-        seg.Q.append(0.5 * (Q + Q.T))
-        seg.inj.append([])
+        seg.rts.predict(self._P_post, Phi, 0.5 * (Q + Q.T))  # closes the epoch
+        seg.forward_var.append(float(self._P_post[2, 2]))
         self._clear_transition()
 
     def after_inject(self, t_ns: int, dx: np.ndarray, G: np.ndarray, P_post: np.ndarray, q, offset_rad: float) -> None:
         """The update ``dx`` was folded into the nominal state (``q``, the field offset ``offset_rad``) with the
         reset ``G``; ``P_post`` after it."""
         seg = self._segments[-1]
-        seg.inj[-1].append((np.array(dx, dtype=float), np.array(G, dtype=float)))
+        seg.rts.inject(np.array(dx, dtype=float), np.array(G, dtype=float))
         self._P_post = seg.P_last = np.array(P_post, dtype=float)
-        if len(seg.nominal) < len(seg.inj):
+        if len(seg.nominal) < seg.rts.n_epochs:
             seg.nominal.append(None)
         seg.nominal[-1] = (int(t_ns), tuple(q), float(offset_rad))
 
     @staticmethod
-    def _smooth_segment(seg: _Segment, P_last: np.ndarray, states) -> HeadingSmoothing:
-        idx = list(range(seg.n)) if states is None else [i for i in states if i < seg.n]
-        ix = np.ix_(idx, idx)
-        k_rot = sum(1 for i in idx if i < 3)
-        rts = kalman.RtsSmoother(len(idx), slice(0, k_rot))
-        rts.start()
-        for j in range(len(seg.P) + 1):
-            if j:
-                rts.predict(seg.P[j - 1][ix], seg.Phi[j - 1][ix], seg.Q[j - 1][ix])
-            for dx, G in seg.inj[j]:
-                rts.inject(dx[idx], G[ix])
-        e_sub, Ps_sub = rts.smooth(P_last[ix])
+    def _smooth_segment(seg: _Segment) -> HeadingSmoothing:
+        e, Ps = seg.rts.smooth(seg.P_last)
         N = len(seg.nominal)
-        e = np.zeros((N, seg.n))
-        e[:, idx] = e_sub
-        var = np.full((N, seg.n), np.nan)
-        var[:, idx] = np.diagonal(Ps_sub, axis1=1, axis2=2)
-        fwd = np.array([P[2, 2] for P in seg.P] + [P_last[2, 2]])
+        var = np.diagonal(Ps, axis1=1, axis2=2)
+        fwd = np.array(seg.forward_var + [seg.P_last[2, 2]])
         q = np.array([kalman.inject_rotation(x[1], e[j, 0:3]) for j, x in enumerate(seg.nominal)])
-        has_o = seg.n == 7 and 6 in idx
+        has_o = seg.n == 7
         o = np.array([x[2] for x in seg.nominal]) + e[:, 6] if has_o else np.full(N, np.nan)
         o_sd = np.sqrt(np.maximum(var[:, 6], 0.0)) if has_o else np.full(N, np.nan)
         return HeadingSmoothing(np.array([x[0] for x in seg.nominal], dtype=np.int64), e[:, 2].copy(),
                                 np.sqrt(np.maximum(var[:, 2], 0.0)), np.sqrt(np.maximum(fwd, 0.0)), q, o, o_sd)
 
-    def smooth(self, states=None) -> HeadingSmoothing:
-        """The backward pass over everything kept (the history stays as it is: a later call smooths again).
-
-        ``states``: the error states the backward pass runs on (None: all; e.g. ``(2, 6)``, the heading and
-        the field offset, their marginal model: the filter's covariance blocks, the tilt and bias left out)."""
-        out = []
-        for seg in self._segments:
-            if seg.nominal:
-                out.append(self._smooth_segment(seg, seg.P_last, states))
+    def smooth(self) -> HeadingSmoothing:
+        """The backward pass over everything kept (the history stays as it is: a later call smooths again)."""
+        out = [self._smooth_segment(seg) for seg in self._segments if seg.nominal]
         if not out:
             z = np.zeros(0)
             return HeadingSmoothing(np.zeros(0, dtype=np.int64), z, z, z, np.zeros((0, 4)), z, z)
