@@ -1,7 +1,7 @@
 """Does the step length follow a walker's speed changes within a walk? (issue #25, the stride part of an outage)
 
-``python -m benchmarks.stride_speed [--data DIR] [--extra DIR] [--only TEXT,...] [--no-write]`` measures, on the **tuning**
-split only (a diagnosis to choose a stride model; the report split is refused), stretch by stretch:
+``python -m benchmarks.stride_speed [--data DIR] [--extra DIR] [--only TEXT,...] [--no-write]`` measures, on the
+**tuning** split only (a diagnosis to choose a stride model: it reads no report recording), stretch by stretch:
 
 * the real tuning walks with GPS (:mod:`benchmarks.datasets.phone_walks`, split from :mod:`benchmarks.splits`):
   consecutive :data:`STRETCH_S` stretches of good fixes (reported accuracy <= 10 m,
@@ -17,7 +17,8 @@ Per stretch: the true speed, the cadence (our steps / time), Weinberg's step len
 (eq. 4, the features the default path saw), our speed (our step lengths / time) and
 ``ratio = true distance / Weinberg distance``.  Per walk: the least-squares slope of ``log ratio`` on
 ``log cadence`` (a cadence exponent: the step length Weinberg misses goes as ``cadence^slope``) and on
-``log (A_max - A_min)^(1/4)``, each with its standard error; pooled: the within-walk slope (each walk's
+``log (A_max - A_min)^(1/4)`` and on ``log`` of the filtered norm's variance over the step, each with its standard
+error; pooled: the within-walk slope (each walk's
 means removed), with its standard error and the walks' own slopes.
 
 Measured 2026-12-07 (tuning split, ``benchmarks/STRIDE_SPEED_RESULTS.md``): no consistent within-walk cadence
@@ -31,7 +32,10 @@ constant cadence, and Weinberg's amplitude rises only 2-3 % with it, so no caden
 within-walk cadence term tried as an experiment (``length * (f_8 / f_120)^b``, EMAs of the step frequency over 8
 and 120 steps), b = -0.7 (IPIN's slope): lopen 3-min default / PDR alone 12.5 / 21.3 -> 12.7 / 21.5 %, 1-min
 17.2 / 25.1 -> 17.6 / 24.9 %; IPIN tuning landmark median 2.289 -> 2.286 m, pooled 2.517 -> 2.581 m, loop
-closure 4.011 -> 4.026 %: no gain even where the slope was measured, so not built.
+closure 4.011 -> 4.026 %; b = -0.2 (about IPOL's): lopen 12.5 / 21.4 and 17.3 / 25.0 %, IPIN 2.287 m, pooled
+2.521 m, loop 4.001 %, walked distance median abs 3.892 -> 3.696 %: no gain beyond noise even where the slope was
+measured, so not built.  Nor an amplitude or variance term: their slopes disagree in sign too (variance: IPIN
+-0.03 +- 0.05, IPOL 0.02 +- 0.02, lopen +0.60 +- 0.28 against the Doppler speed, -1.52 +- 0.50 against the chords).
 
 Writes ``benchmarks/STRIDE_SPEED_RESULTS.md`` (a full run with ``--extra``, default stretches), else
 ``out/benchmarks/stride_speed/``; the stretches as JSON always under ``out/benchmarks/stride_speed/``.
@@ -71,7 +75,8 @@ def _stretch(steps, a_ns: int, b_ns: int, true_m: float, c: float) -> dict | Non
     ours = float(sum(s.length_m for s in inside))
     return {"t_s": a_ns * 1e-9, "dt_s": dt, "true_m": true_m, "true_speed_m_s": true_m / dt,
             "cadence_hz": len(inside) / dt, "weinberg_step_m": weinberg / len(inside),
-            "amp_root": float(root.mean()), "our_speed_m_s": ours / dt, "ratio": true_m / weinberg,
+            "amp_root": float(root.mean()), "acc_var": float(np.mean([s.features.acc_var_m2_s4 for s in inside])),
+            "our_speed_m_s": ours / dt, "ratio": true_m / weinberg,
             "ratio_ours": true_m / ours if ours > 0 else float("nan")}
 
 
@@ -93,12 +98,14 @@ def walk_summary(name: str, source: str, rows: list[dict]) -> dict:
     lr = np.log([r["ratio"] for r in rows]) if rows else np.array([])
     b, se = slope(lc, lr)
     ba, sea = slope(la, lr)
+    bv, sev = slope(np.log([r["acc_var"] for r in rows]) if rows else np.array([]), lr)
     return {"walk": name, "source": source, "n": len(rows), "stretches": rows,
             "cadence_range_hz": [float(np.min(np.exp(lc))), float(np.max(np.exp(lc)))] if rows else None,
             "speed_range_m_s": [min(r["true_speed_m_s"] for r in rows), max(r["true_speed_m_s"] for r in rows)]
             if rows else None,
             "ratio_median": float(np.median(np.exp(lr))) if rows else None,
-            "slope_cadence": b, "slope_cadence_se": se, "slope_amp": ba, "slope_amp_se": sea}
+            "slope_cadence": b, "slope_cadence_se": se, "slope_amp": ba, "slope_amp_se": sea,
+            "slope_var": bv, "slope_var_se": sev}
 
 
 def pooled(walks: list[dict], key: str = "cadence_hz") -> tuple[float, float, int]:
@@ -168,7 +175,8 @@ def gps_walks(root: Path, extra: Path | None, only: list[str]) -> list[dict]:
 
 
 def _good(gps):
-    """(t_ns, east, north, Doppler speed) of the fixes with reported accuracy <= 10 m (no speed gate: a slow stretch counts)."""
+    """(t_ns, east, north, Doppler speed) of the fixes with reported accuracy <= 10 m (no speed gate: a slow
+    stretch counts)."""
     from core.geodesy import geodetic_to_enu
 
     cols = list(gps.columns)
@@ -251,23 +259,28 @@ def markdown(groups: dict, args=None) -> str:
     cmd = "python -m benchmarks.stride_speed" + (f" --extra {args.extra}" if args is not None and args.extra else "")
     lines = ["# Stride and speed within a walk (tuning split only)", "",
              f"Built by `{cmd}` ({datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC); definitions in the module "
-             f"docstring. GPS stretches {STRETCH_S:.0f} s, chord stretches straight to {STRAIGHT_MIN:.2f} of their path.",
+             f"docstring. GPS stretches {STRETCH_S:.0f} s, chord stretches straight to {STRAIGHT_MIN:.2f} of their "
+             "path.",
              "",
              "ratio = true distance / Weinberg distance (eq. 4, constant C) per stretch; slopes of log ratio on "
-             "log cadence (a cadence exponent) and on log (A_max - A_min)^(1/4), +- standard error.", ""]
+             "log cadence (a cadence exponent), on log (A_max - A_min)^(1/4) and on log of the step's variance, "
+             "+- standard error.", ""]
     for gname, walks in groups.items():
         b, se, n = pooled(walks)
         ba, sea, _ = pooled(walks, "amp_root")
+        bv, sev, _ = pooled(walks, "acc_var")
         lines += [f"## {gname}: pooled within-walk slope, cadence {_f(b, 2)} +- {_f(se, 2)}, "
-                  f"amplitude {_f(ba, 2)} +- {_f(sea, 2)} ({n} stretches)", "",
+                  f"amplitude {_f(ba, 2)} +- {_f(sea, 2)}, variance {_f(bv, 2)} +- {_f(sev, 2)} ({n} stretches)", "",
                   "| walk | reference | stretches | cadence (Hz) | true speed (m/s) | median ratio | slope cadence | "
-                  "slope amplitude |", "|---|---|---:|---|---|---:|---|---|"]
+                  "slope amplitude | slope variance |", "|---|---|---:|---|---|---:|---|---|---|"]
         for w in walks:
             cr, sr = w["cadence_range_hz"], w["speed_range_m_s"]
-            lines.append(f"| {w['walk']} | {w['source']} | {w['n']} | {_f(cr[0], 2) + '-' + _f(cr[1], 2) if cr else '--'} | "
+            cad = _f(cr[0], 2) + "-" + _f(cr[1], 2) if cr else "--"
+            lines.append(f"| {w['walk']} | {w['source']} | {w['n']} | {cad} | "
                          f"{_f(sr[0], 2) + '-' + _f(sr[1], 2) if sr else '--'} | {_f(w['ratio_median'])} | "
                          f"{_f(w['slope_cadence'], 2)} +- {_f(w['slope_cadence_se'], 2)} | "
-                         f"{_f(w['slope_amp'], 2)} +- {_f(w['slope_amp_se'], 2)} |")
+                         f"{_f(w['slope_amp'], 2)} +- {_f(w['slope_amp_se'], 2)} | "
+                         f"{_f(w['slope_var'], 2)} +- {_f(w['slope_var_se'], 2)} |")
         lines.append("")
     return "\n".join(lines)
 
