@@ -11,7 +11,8 @@
   mean over the fixes: a path speed, free of the positions' noise, but on iOS 15-25 % low against the chords,
   issue #26: a bias that a within-walk slope does not see unless it changes within the walk);
 * IPIN 2023's tuning routes: consecutive landmarks (straight line between them, their times);
-* IPOL (waist): each trial's two 10-m legs; a "walk" there is one subject (their trials at their own speeds).
+* IPOL (waist): each trial's two 10-m legs; a "walk" there is one subject (their trials at their own speeds), and
+  again one trial (its two legs).
 
 Per stretch: the true speed, the cadence (our steps / time), Weinberg's step length ``C (A_max - A_min)^(1/4)``
 (eq. 4, the features the default path saw), our speed (our step lengths / time) and
@@ -24,8 +25,8 @@ means removed), with its standard error and the walks' own slopes.
 Measured 2026-12-07 (tuning split, ``benchmarks/STRIDE_SPEED_RESULTS.md``): no consistent within-walk cadence
 slope.  Pooled slopes (+- SE): IPIN tuning routes -0.71 +- 0.22 (48 segments, 16 walks; -0.69 +- 0.11 with the
 route's segments as fixed effects too, so not the segments' geometry), IPOL (per subject, across their trials)
--0.15 +- 0.07, ``thomasdingemanse_lopen`` +3.2 +- 2.0 against the Doppler speed but -3.1 +- 5.6 against the chords
-(-5.7 +- 1.8 with 10-s stretches), ``fif911`` -3.3 +- 8.1 (Doppler; no straight 20-s chord).  On lopen the
+-0.15 +- 0.07 (within a trial, its two legs: -0.01 +- 0.09), ``thomasdingemanse_lopen`` +3.2 +- 2.0 against
+the Doppler speed but -3.1 +- 5.6 against the chords (-5.7 +- 1.8 with 10-s stretches), ``fif911`` -3.3 +- 8.1 (Doppler; no straight 20-s chord).  On lopen the
 cadence stays within 1.89-2.00 steps/s over the whole walk while the Doppler speed goes from 1.0-1.3 m/s (40-100
 s) to about 1.5 m/s: the speed change the 3-minute outage needs (best scale 1.14, learnt 0.997) comes at a
 constant cadence, and Weinberg's amplitude rises only 2-3 % with it, so no cadence term can follow it.  A
@@ -250,6 +251,15 @@ def ipol_walks(root: Path, only: list[str]) -> list[dict]:
     return [walk_summary(f"ipol/{sid}", "10-m legs", rows) for sid, rows in sorted(by_subject.items())]
 
 
+def by_trial(subjects: list[dict]) -> list[dict]:
+    """IPOL's legs regrouped by trial (the two legs of one 10-m out-and-back walk): the strict within-walk view."""
+    trials: dict[str, list[dict]] = {}
+    for w in subjects:
+        for r in w["stretches"]:
+            trials.setdefault(r["trial"], []).append(r)
+    return [walk_summary(f"ipol/{name}", "10-m legs", rows) for name, rows in trials.items()]
+
+
 # -- report ------------------------------------------------------------------------------------------------------
 def _f(x, nd=3):
     return "--" if x is None or not (isinstance(x, (int, float)) and math.isfinite(x)) else f"{x:.{nd}f}"
@@ -306,7 +316,8 @@ def main(argv=None) -> int:
     if "ipin" in src:
         groups["IPIN 2023 tuning routes"] = ipin_walks(root, only)
     if "ipol" in src:
-        groups["IPOL (waist, per subject)"] = ipol_walks(root, only)
+        groups["IPOL (waist, per subject)"] = subjects = ipol_walks(root, only)
+        groups["IPOL (waist, per trial: its two legs)"] = by_trial(subjects)
     md = markdown(groups, args)
     print(md)
     full = writes_committed(args) and src == {"gps", "ipin", "ipol"} and args.extra is not None \
