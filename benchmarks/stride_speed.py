@@ -26,8 +26,8 @@ Measured 2026-12-07 (tuning split, ``benchmarks/STRIDE_SPEED_RESULTS.md``): no c
 slope.  Pooled slopes (+- SE): IPIN tuning routes -0.71 +- 0.22 (48 segments, 16 walks; -0.69 +- 0.11 with the
 route's segments as fixed effects too, so not the segments' geometry), IPOL (per subject, across their trials)
 -0.15 +- 0.07 (within a trial, its two legs: -0.01 +- 0.09), ``thomasdingemanse_lopen`` +3.2 +- 2.0 against
-the Doppler speed but -3.1 +- 5.6 against the chords (-5.7 +- 1.8 with 10-s stretches), ``fif911`` -3.3 +- 8.1 (Doppler; no straight 20-s chord).  On lopen the
-cadence stays within 1.89-2.00 steps/s over the whole walk while the Doppler speed goes from 1.0-1.3 m/s (40-100
+the Doppler speed but -3.1 +- 5.6 against the chords (-5.7 +- 1.8 with 10-s stretches), ``fif911`` -3.3 +- 8.1
+(Doppler; no straight 20-s chord).  On lopen the cadence stays within 1.89-2.00 steps/s over the whole walk while the Doppler speed goes from 1.0-1.3 m/s (40-100
 s) to about 1.5 m/s: the speed change the 3-minute outage needs (best scale 1.14, learnt 0.997) comes at a
 constant cadence, and Weinberg's amplitude rises only 2-3 % with it, so no cadence term can follow it.  A
 within-walk cadence term tried as an experiment (``length * (f_8 / f_120)^b``, EMAs of the step frequency over 8
