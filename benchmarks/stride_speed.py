@@ -22,21 +22,21 @@ Per stretch: the true speed, the cadence (our steps / time), Weinberg's step len
 error; pooled: the within-walk slope (each walk's
 means removed), with its standard error and the walks' own slopes.
 
-Measured 2026-12-07 (tuning split, ``benchmarks/STRIDE_SPEED_RESULTS.md``): no consistent within-walk cadence
-slope.  Pooled slopes (+- SE): IPIN tuning routes -0.71 +- 0.22 (48 segments, 16 walks; -0.69 +- 0.11 with the
-route's segments as fixed effects too, so not the segments' geometry), IPOL (per subject, across their trials)
--0.15 +- 0.07 (within a trial, its two legs: -0.01 +- 0.09), ``thomasdingemanse_lopen`` +3.2 +- 2.0 against
-the Doppler speed but -3.1 +- 5.6 against the chords (-5.7 +- 1.8 with 10-s stretches), ``fif911`` -3.3 +- 8.1
-(Doppler; no straight 20-s chord).  On lopen the cadence stays within 1.89-2.00 steps/s over the whole walk while the Doppler speed goes from 1.0-1.3 m/s (40-100
-s) to about 1.5 m/s: the speed change the 3-minute outage needs (best scale 1.14, learnt 0.997) comes at a
-constant cadence, and Weinberg's amplitude rises only 2-3 % with it, so no cadence term can follow it.  A
-within-walk cadence term tried as an experiment (``length * (f_8 / f_120)^b``, EMAs of the step frequency over 8
-and 120 steps), b = -0.7 (IPIN's slope): lopen 3-min default / PDR alone 12.5 / 21.3 -> 12.7 / 21.5 %, 1-min
-17.2 / 25.1 -> 17.6 / 24.9 %; IPIN tuning landmark median 2.289 -> 2.286 m, pooled 2.517 -> 2.581 m, loop
-closure 4.011 -> 4.026 %; b = -0.2 (about IPOL's): lopen 12.5 / 21.4 and 17.3 / 25.0 %, IPIN 2.287 m, pooled
-2.521 m, loop 4.001 %, walked distance median abs 3.892 -> 3.696 %: no gain beyond noise even where the slope was
-measured, so not built.  Nor an amplitude or variance term: their slopes disagree in sign too (variance: IPIN
--0.03 +- 0.05, IPOL 0.02 +- 0.02, lopen +0.60 +- 0.28 against the Doppler speed, -1.52 +- 0.50 against the chords).
+Measured 2026-12-07 (tuning split, ``benchmarks/STRIDE_SPEED_RESULTS.md``): no consistent within-walk cadence slope.
+Pooled slopes (+- SE): IPIN tuning routes -0.71 +- 0.22 (48 segments, 16 walks; -0.69 +- 0.11 with the route's
+segments as fixed effects too, so not the segments' geometry), IPOL (per subject, across their trials) -0.15 +- 0.07
+(within a trial, its two legs: -0.01 +- 0.09), ``thomasdingemanse_lopen`` +3.2 +- 2.0 against the Doppler speed but
+-3.1 +- 5.6 against the chords (-5.7 +- 1.8 with 10-s stretches), ``fif911`` -3.3 +- 8.1 (Doppler; no straight 20-s
+chord).  On lopen the cadence stays within 1.89-2.00 steps/s over the whole walk while the Doppler speed goes from
+1.0-1.3 m/s (40-100 s) to about 1.5 m/s: the speed change the 3-minute outage needs (best scale 1.14, learnt 0.997)
+comes at a constant cadence, and Weinberg's amplitude rises only 2-3 % with it, so no cadence term can follow it.  A
+within-walk cadence term tried as an experiment (``length * (f_8 / f_120)^b``, EMAs of the step frequency over 8 and
+120 steps), b = -0.7 (IPIN's slope): lopen 3-min default / PDR alone 12.5 / 21.3 -> 12.7 / 21.5 %, 1-min 17.2 / 25.1
+-> 17.6 / 24.9 %; IPIN tuning landmark median 2.289 -> 2.286 m, pooled 2.517 -> 2.581 m, loop closure 4.011 -> 4.026
+%; b = -0.2 (about IPOL's): lopen 12.5 / 21.4 and 17.3 / 25.0 %, IPIN 2.287 m, pooled 2.521 m, loop 4.001 %, walked
+distance median abs 3.892 -> 3.696 %: no gain beyond noise even where the slope was measured, so not built.  Nor an
+amplitude or variance term: their slopes disagree in sign too (variance: IPIN -0.03 +- 0.05, IPOL 0.02 +- 0.02,
+lopen +0.60 +- 0.28 against the Doppler speed, -1.52 +- 0.50 against the chords).
 
 Writes ``benchmarks/STRIDE_SPEED_RESULTS.md`` (a full run with ``--extra``, default stretches), else
 ``out/benchmarks/stride_speed/``; the stretches as JSON always under ``out/benchmarks/stride_speed/``.
