@@ -535,6 +535,12 @@ def main(argv=None) -> int:
     cache = None if args.no_peer_cache else (args.peer_cache or here.parent / "out" / "benchmarks" / "peer_cache")
     run_info = run(root, quick=args.quick, only=args.only, jobs=args.jobs, peer_names=peer_names, split=args.split,
                    engine=args.engine, peer_cache=cache)
+    if args.only and not run_info["datasets"]:
+        names = ", ".join(sorted(DATASET_MODULES))
+        print(f"benchmark: --only {','.join(args.only)} matched no recording in {root}"
+              f"{' (split ' + args.split + ')' if args.split else ''}: give a dataset ({names}) or part of a "
+              "recording's name", file=sys.stderr)
+        return 2
     if not args.quick and not args.only and args.split is None:
         # issue #4: leave-one-subject-out study of the stride models (trains them; about a minute)
         from benchmarks.stride_eval import stride_section

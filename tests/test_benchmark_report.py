@@ -56,3 +56,12 @@ def test_landmarks_at_one_place_share_one_label():
     lm = [[0.0, 0.0], [5.0, 0.0], [5.0, 5.0], [0.1, -0.2], [5.0, 0.3]]
     assert label_groups(lm) == [(0.0, 0.0, "0,3"), (5.0, 0.0, "1,4"), (5.0, 5.0, "2")]
     assert len(label_groups(lm, radius_m=0.05)) == 5
+
+
+def test_a_subset_that_matches_nothing_is_an_error_not_an_empty_report(tmp_path, capsys):
+    # an empty data folder: no dataset is available, so `--only ipin` (a near miss of `ipin2023`) runs nothing
+    out = tmp_path / "r.md"
+    assert main(["--data", str(tmp_path), "--only", "ipin", "--jobs", "1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "matched no recording" in err and "ipin2023" in err
+    assert not out.exists()
