@@ -87,11 +87,13 @@ and all 32 IPIN logfiles have these 11 fields on every GNSS line (Speed in
 Android's "no bearing" (nan; 2728 of the 9912 IPIN lines, 98 % of them with
 a speed of 0, none above 0.6 m/s); a speed of 0 is kept.
 Lines without the Speed field read it as nan.
-``SatInView`` and ``SatInUse`` (Android's Location extra ``satellites`` and the
-app's count of the GnssStatus satellites in view) become the ``gnss_status``
-stream at each kept fix's time, columns ``n_used, cn0_4th_dbhz, n_view`` (no
-C/N0 is logged: nan), when a line has them.  On the IPIN tuning routes the
-SM-A520F reports 14-24 in view, the SM-G930F 5-16; some fixes report 0 in use.  The IPIN walks are indoors:
+``SatInView`` and ``SatInUse`` become the ``gnss_status`` stream at each kept
+fix's time, columns ``n_used, cn0_4th_dbhz, n_view`` (no C/N0 is logged: nan),
+when a line has them.  On the IPIN tuning routes (file medians) the SM-A520F
+uses 21-23 of 24-25 satellites in view on the ground floor (routes 01-02) and
+7-14 of 11-17 on level -2, the SM-G930F 9-12 of 15-16 and 4-7 of 7-12; some
+fixes report 0 in use (the C/N0 rule of :mod:`core.gnss.base` refuses fewer
+than 4).  The IPIN walks are indoors:
 the speeds there are receiver noise (median 0-0.6 m/s), not walking.
 
 Streams: ``acc``, ``gyro``, ``mag``, ``rotvec``, ``gps`` (from GNSS: lat_deg,
