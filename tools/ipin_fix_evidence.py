@@ -66,7 +66,7 @@ def file_rows(trial) -> list[dict]:
     # Chen's filter as the benchmark runs it: which fixes it took
     after = gps.t_ns >= lt[0]
     fr = fuse("chen", [s for s in res.steps if s.t_ns > lt[0]], replace(gps, t_ns=gps.t_ns[after],
-              values=gps.values[after]), rec.t0_ns, start=(*lm.origin_lat_lon, IPIN_START_SD_M))
+              values=gps.values[after]), rec.t0_ns, st, start=(*lm.origin_lat_lon, IPIN_START_SD_M))
     taken = {x.t_ns for x in fr.fixes if x.accepted}
     rows = []
     for i in np.flatnonzero(inside):
