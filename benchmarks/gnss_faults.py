@@ -62,7 +62,8 @@ filter -- left out with a note while it cannot be imported).  Columns:
    single fix within the screening's 25 m has nothing to be near: listed as n/a.
 
 3. IPIN 2023 Track 3 logfiles (:mod:`benchmarks.datasets.ipin2023`): their ``GNSS``
-   lines are the phones' own fixes (the importer's ``gps`` stream).  ``pdr`` is the
+   lines are the phones' own fixes (the importer's ``gps`` stream, with its ``gnss_status``: the satellites in use, as
+   ``Pipeline.run`` passes it).  ``pdr`` is the
    landmark error exactly as :mod:`benchmarks.run` computes it (``make_pipeline``, the
    track placed at the first landmark at its time, absolute heading; the mean over the
    landmarks after the first).  The fused tracks get the same start: the steps after the
@@ -102,7 +103,7 @@ from benchmarks import metrics as M
 from benchmarks.options import add_common, data_root, only_keys, out_dir, selected, writes_committed
 from benchmarks.gnss_eval import REAL, VARIANTS, headlines as gnss_headlines, open_walk, real_folders, windows
 from benchmarks.splits import REPORT, SIM_GPS_FAULT_SEEDS, SPLITS, TUNING, split_of
-from core.conventions import GPS
+from core.conventions import GNSS_STATUS, GPS
 from core.geodesy import enu_to_geodetic, geodetic_to_enu
 from core.gnss.ekf import sigma_max_m
 
@@ -167,13 +168,14 @@ def available_filters() -> tuple[list[str], dict]:
     return ok, missing
 
 
-def fuse(column: str, steps, gps, t0_ns: int, **settings):
-    """Run one column's fusion (``pdr``: ``gnss_eval``'s ``pdr`` variant) on a walk's steps and fixes."""
+def fuse(column: str, steps, gps, t0_ns: int, status=None, **settings):
+    """Run one column's fusion (``pdr``: ``gnss_eval``'s ``pdr`` variant) on a walk's steps and fixes (and the
+    receiver's ``gnss_status`` stream, where the recording has one, as ``Pipeline.run`` passes it)."""
     from core.gnss import make_fusion
 
     if column == "pdr":
-        return make_fusion("chen", **VARIANTS["pdr"], **settings).run(steps, gps, t0_ns)
-    return make_fusion(column, **settings).run(steps, gps, t0_ns)
+        return make_fusion("chen", **VARIANTS["pdr"], **settings).run(steps, gps, t0_ns, status)
+    return make_fusion(column, **settings).run(steps, gps, t0_ns, status)
 
 
 def _run_filters(filters, errors: dict, where: str, run):
@@ -505,14 +507,15 @@ def ipin_file(root: str, index: int, filters) -> dict:
     row["gnss"] = gnss_quality(gps, lm)
     after = gps.t_ns >= lt[0]
     gps_walk = replace(gps, t_ns=gps.t_ns[after], values=gps.values[after])
+    status = rec.streams.get(GNSS_STATUS)  # the satellites in use / in view (GetSensorData's GNSS lines)
     steps = [s for s in res.steps if s.t_ns > lt[0]]
     start = (*lm.origin_lat_lon, IPIN_START_SD_M)
 
     def run(f):
         try:
-            return fuse(f, steps, gps_walk, rec.t0_ns, start=start), True
+            return fuse(f, steps, gps_walk, rec.t0_ns, status, start=start), True
         except TypeError:  # no known start yet: scored shifted to the first landmark
-            return fuse(f, steps, gps_walk, rec.t0_ns), False
+            return fuse(f, steps, gps_walk, rec.t0_ns, status), False
 
     for f, (fr, started) in _run_filters(filters, row["errors"], trial.name, run).items():
         en = fused_en(fr, lm.origin_lat_lon) if fr.origin_lat_lon is not None else \

@@ -99,7 +99,8 @@ STREAM_SPECS: dict[str, dict] = {
         "columns": ["n_used", "cn0_4th_dbhz"],
         "unit": "1,dB-Hz",
         "note": "GNSS receiver status at a fix (Android GnssStatus or NMEA GSA/GSV): satellites used in the fix "
-                "and the carrier-to-noise density of the 4th strongest of them (nan with fewer than 4)",
+                "and the carrier-to-noise density of the 4th strongest of them (nan with fewer than 4); an "
+                "importer may add a third column, n_view, the satellites in view (unit '1,dB-Hz,1')",
     },
 }
 
@@ -111,7 +112,7 @@ UNITS: dict[str, dict[str, float]] = {
     MAG: {"uT": 1.0, "\u00b5T": 1.0, "\u03bcT": 1.0, "mT": 1000.0, "nT": 1e-3, "G": 100.0},
     GPS: {STREAM_SPECS[GPS]["unit"]: 1.0, "deg,deg,m,m": 1.0},
     ROTVEC: {"1": 1.0},
-    GNSS_STATUS: {"1,dB-Hz": 1.0},
+    GNSS_STATUS: {"1,dB-Hz": 1.0, "1,dB-Hz,1": 1.0},  # the second with a third column, satellites in view
 }
 
 #: fewest events of a stream for the checks of its values against its unit
@@ -1176,7 +1177,8 @@ def check_header(header, version: int, source: str) -> dict:
         kind = name.partition("@")[0]
         if kind in STREAM_SPECS:
             want = len(STREAM_SPECS[kind]["columns"])
-            allowed = {want, len(GPS_COLUMNS_V1)} if kind == GPS else {want}
+            allowed = {want, len(GPS_COLUMNS_V1)} if kind == GPS else {want, want + 1} if kind == GNSS_STATUS \
+                else {want}  # gnss_status may add n_view
             if len(cols) not in allowed:
                 raise RecordingError(f"header stream '{name}' declares {len(cols)} columns; a '{kind}' stream has "
                                      f"{' or '.join(str(a) for a in sorted(allowed))} "

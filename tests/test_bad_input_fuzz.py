@@ -187,6 +187,7 @@ def gsd_logs(draw):
                     lines.append((a + d, f"GNSS;{(a + d) / 1e4:.4f};{f:.3f};{la:.7f};{lo:.7f};{al:.3f};45.000;5.0;"
                                          f"1.0;12;9"))
             expected["gps"] = ((app + offset) * TICK_NS, v)
+            expected["gnss_status"] = ((app + offset) * TICK_NS, np.tile([9.0, np.nan, 12.0], (n, 1)))  # in use, view
             continue
         if tag == "AHRS":
             q = draw(arrays(np.float64, (n, 4), elements=st.floats(-1.0, 1.0, allow_nan=False)))

@@ -215,6 +215,30 @@ def test_fast_equals_plain_with_gps_fusion_and_receiver_status():
     assert plain.fusion.counters["fixes_cn0"] > 0
 
 
+def test_fast_equals_plain_with_the_satellite_rule_on_an_importers_status():
+    # a gnss_status stream as the GetSensorData importer gives it (satellites in use and in view, no C/N0) and the
+    # judge's satellite rule on (off by default): 6 satellites in use for the first 15 s, then 12
+    from core.gnss import make_fusion
+    from core.gnss.judge import Cause, JudgeSettings
+    from core.importers.getsensordata import STATUS_COLUMNS, STATUS_UNIT
+    from desktop.simulator import outdoor_walk
+
+    rec = outdoor_walk(2, minutes=0.5).recording
+    t0 = rec.t0_ns
+    t = rec.streams["gps"].t_ns
+    used = np.where(t < t0 + 15_000_000_000, 6.0, 12.0)
+    rec.streams["gnss_status"] = Stream("gnss_status", t.copy(), np.column_stack([used, np.full(len(t), np.nan),
+                                                                                   np.full(len(t), 14.0)]),
+                                        STATUS_COLUMNS, STATUS_UNIT)
+
+    def make():
+        return Pipeline(gnss=make_fusion("chen", judge=JudgeSettings(min_sats_in_use=10)),
+                        unix_offset_ns=1_751_000_000_000_000_000 - t0)
+
+    plain, _ = _assert_same(rec, make)
+    assert Cause.SATELLITES.value in plain.fusion.counters["gps_judge"]["causes"]
+
+
 def _joined(first, second, gap_ns):
     """``second`` appended to ``first``, its clock shifted to start ``gap_ns`` after ``first`` ends."""
     end = max(int(s.t_ns[-1]) for s in first.streams.values() if len(s))

@@ -362,3 +362,41 @@ def test_fixes_better_than_dead_reckoning_are_taken_once_it_has_walked_far_enoug
     fr = make_fusion("chen", start=(*ORIGIN, 1.0), judge=JudgeSettings(dr_growth_per_m=0.05)).run(steps, gps)
     taken = [f.t_ns * 1e-9 for f in fr.fixes if f.accepted]
     assert taken and 40.0 <= taken[0] <= 60.0
+
+
+def _status(gps, n_used, n_view=14.0):
+    """An IPIN-like ``gnss_status`` stream (GetSensorData: satellites in use and in view, no C/N0) at each fix."""
+    from core.importers.getsensordata import STATUS_COLUMNS, STATUS_UNIT
+    from core.recording import Stream
+
+    v = np.column_stack([np.full(len(gps), float(n_used)), np.full(len(gps), math.nan), np.full(len(gps), n_view)])
+    return Stream("gnss_status", gps.t_ns.copy(), v, STATUS_COLUMNS, STATUS_UNIT, "")
+
+
+def test_fixes_from_few_satellites_are_kept_out_with_the_satellite_rule_and_the_summary_says_why():
+    """A stream consistent with the steps, reporting 5 m but 4 m off in one direction, computed from 6 satellites
+    (an indoor receiver): with ``min_sats_in_use`` = 10 no fix is taken, the cause is in the summary, its JSON and
+    the one-line verdict, and the fused track is the dead-reckoned one; without the rule (the default) the stream is
+    taken; with 12 satellites in use the rule lets it in."""
+    from core.gnss import make_fusion
+    from core.gnss.judge import JudgeSettings
+
+    steps = _walk(lambda t: 0.3 * math.sin(t / 15.0), seconds=90.0)
+    rng = np.random.default_rng(11)
+    gps = _gps(steps, lambda t, e, n: (e + 3.0 + rng.normal(0, 0.5), n - 2.5 + rng.normal(0, 0.5)), 5.0)
+    rule = JudgeSettings(min_sats_in_use=10)
+    for name in ("chen", "kubrak"):
+        fr = make_fusion(name, start=(*ORIGIN, 1.0), judge=rule).run(steps, gps, None, _status(gps, 6))
+        assert sum(f.accepted for f in fr.fixes) == 0
+        j = fr.counters["gps_judge"]
+        assert Cause.SATELLITES.value in j["causes"] and j["last"]["few_sats_share"] == 1.0
+        assert "too few satellites in use" in verdict_text(j, name)
+        d = [math.hypot(a.east_m - b.east_m, a.north_m - b.north_m) for a, b in zip(fr.steps, steps)]
+        assert max(d) < 1e-6
+        before = make_fusion(name, start=(*ORIGIN, 1.0), judge=JudgeSettings(min_sats_in_use=None)).run(
+            steps, gps, None, _status(gps, 6))
+        assert sum(f.accepted for f in before.fixes) > 20
+        assert math.isnan(before.counters["gps_judge"]["last"]["few_sats_share"])
+        many = make_fusion(name, start=(*ORIGIN, 1.0), judge=rule).run(steps, gps, None, _status(gps, 12))
+        assert sum(f.accepted for f in many.fixes) > 20
+        assert many.counters["gps_judge"]["last"]["few_sats_share"] == 0.0

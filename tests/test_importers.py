@@ -137,7 +137,7 @@ def make_gsd(n=200, sensor0=5000.0, app0=0.05, offset=None, extra_lines=()):
 
 def test_getsensordata_synthetic_units_time_and_attitude():
     rec = parse_getsensordata(make_gsd(), "synthetic.txt")
-    assert set(rec.streams) == {"acc", "gyro", "mag", "rotvec", "pressure", "gps", "posi"}
+    assert set(rec.streams) == {"acc", "gyro", "mag", "rotvec", "pressure", "gps", "gnss_status", "posi"}
     acc = rec.streams["acc"]
     assert acc.t_ns.dtype == np.int64
     assert acc.t_ns[0] == 5_000_000_000_000 and acc.t_ns[1] - acc.t_ns[0] == 20_000_000  # sensor clock, exact ns
@@ -173,6 +173,25 @@ def test_getsensordata_synthetic_units_time_and_attitude():
     assert rec.device["model"] == "SM-TEST" and rec.device["android_api"] == 26
     assert rec.metadata["app_version"] == "2.21" and rec.metadata["source_format"] == "getsensordata"
     assert rec.repairs == []
+
+
+def test_getsensordata_satellites_become_gnss_status_and_survive_a_round_trip(tmp_path):
+    """SatInView / SatInUse of each kept fix -> gnss_status (n_used, cn0 nan, n_view) at the fix's time; a fix line
+    without them reads nan; written as a pdr-recording and read back, the same numbers."""
+    lines = [f"GNSS;{0.6 + k:.4f};{1686729700 + k:.4f};49.4613;11.1111;346.0;0.0;12.0;0.0;{v};{u}\n"
+             for k, (v, u) in enumerate([(9, 8), (9, 0), (13, 11)])]
+    lines.append("GNSS;3.6000;1686729703.0000;49.4613;11.1111;346.0;0.0;12.0;0.0\n")  # an older app: no satellites
+    rec = parse_getsensordata(make_gsd(n=10) + "".join(lines), "sats.txt")
+    st, gps = rec.streams["gnss_status"], rec.streams["gps"]
+    assert st.columns == ("n_used", "cn0_4th_dbhz", "n_view")
+    assert np.array_equal(st.t_ns, gps.t_ns)
+    assert np.array_equal(st.values[:, 0], [8, 0, 11, np.nan], equal_nan=True)
+    assert np.array_equal(st.values[:, 2], [9, 9, 13, np.nan], equal_nan=True)
+    assert np.isnan(st.values[:, 1]).all()
+    write_recording(str(tmp_path / "sats.pdr.gz"), rec)
+    back = read_recording(str(tmp_path / "sats.pdr.gz"), warn=False).streams["gnss_status"]
+    assert back.columns == st.columns and np.array_equal(back.t_ns, st.t_ns)
+    assert np.array_equal(back.values, st.values, equal_nan=True)
 
 
 def test_getsensordata_gnss_without_speed_field_reads_speed_as_nan():

@@ -655,8 +655,9 @@ class FixFusion:
             if self.judge is not None:
                 st = self._status
                 fresh = st is not None and self.min_cn0_4th_dbhz > 0 and abs(t_ns - st[0]) <= self.status_max_age_ns
+                sats = st[1] if st is not None and abs(t_ns - st[0]) <= self.status_max_age_ns else math.nan
                 judged = self.judge.add_fix(t_ns, lat, lon, hacc_eff, self._pdr_at(t_ns), (not reason) if fresh else None,
-                                            speed)
+                                            speed, sats)
                 if self.judge.last_inconsistent_ns == t_ns and self._first_inconsistent_ns is None:
                     self._first_inconsistent_ns = int(t_ns)
         elif self.judge is not None and reason != "no position":

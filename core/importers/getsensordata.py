@@ -86,13 +86,20 @@ and all 32 IPIN logfiles have these 11 fields on every GNSS line (Speed in
 ``Location.getBearing()`` unconditionally: a Bearing of exactly 0 is
 Android's "no bearing" (nan; 2728 of the 9912 IPIN lines, 98 % of them with
 a speed of 0, none above 0.6 m/s); a speed of 0 is kept.
-Lines without the Speed field read it as nan.  The IPIN walks are indoors:
+Lines without the Speed field read it as nan.
+``SatInView`` and ``SatInUse`` become the ``gnss_status`` stream at each kept
+fix's time, columns ``n_used, cn0_4th_dbhz, n_view`` (no C/N0 is logged: nan),
+when a line has them.  On the IPIN tuning routes (file medians) the SM-A520F
+uses 21-23 of 24-25 satellites in view on the ground floor (routes 01-02) and
+7-14 of 11-17 on level -2, the SM-G930F 9-12 of 15-16 and 4-7 of 7-12; some
+fixes report 0 in use (the C/N0 rule of :mod:`core.gnss.base` refuses fewer
+than 4).  The IPIN walks are indoors:
 the speeds there are receiver noise (median 0-0.6 m/s), not walking.
 
 Streams: ``acc``, ``gyro``, ``mag``, ``rotvec``, ``gps`` (from GNSS: lat_deg,
 lon_deg, alt_m, hacc_m = the ``Accuracy(m)`` field, speed_m_s = ``Speed``,
 course_deg = ``Bearing``; ``metadata["gps_check"]`` compares the last two
-with the fixes' track), ``pressure`` and
+with the fixes' track), ``gnss_status`` (the satellites, above), ``pressure`` and
 ``posi`` (lat_deg, lon_deg, floor, building_id, counter: the surveyed
 ground-truth landmarks), each only when the file has such lines.
 """
@@ -106,7 +113,7 @@ from datetime import datetime
 import numpy as np
 
 from core import quaternion as quat
-from core.conventions import ACC, GPS, GYRO, MAG, ROTVEC
+from core.conventions import ACC, GNSS_STATUS, GPS, GYRO, MAG, ROTVEC
 from core.recording import (
     MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, WholeText, make_stream, skip_bad_lines,
 )
@@ -126,7 +133,7 @@ RECORDS: dict[str, tuple[tuple[str, ...], int]] = {
     "AHRS": (("AppTimestamp", "SensorTimestamp", "PitchX", "RollY", "YawZ", "Quat(2)", "Quat(3)", "Quat(4)"), 5),
     "PRES": (("AppTimestamp", "SensorTimestamp", "Pres"), 3),
     "GNSS": (("AppTimestamp", "SensorTimeStamp", "Latitude", "Longitude", "Altitude", "Bearing", "Accuracy",
-              "Speed"), 7),
+              "Speed", "SatInView", "SatInUse"), 7),
     "POSI": (("Timestamp", "Counter", "Latitude", "Longitude", "FloorID", "BuildingID"), 4),
 }
 
@@ -135,6 +142,12 @@ POSI_SPEC = {
     "unit": "deg,deg,1,1,1",
     "note": "ground-truth landmark (GetSensorData POSI): surveyed point the walker stepped on",
 }
+
+#: the ``gnss_status`` stream of the GNSS lines: the satellites in use and in view at each fix (no C/N0 is logged)
+STATUS_COLUMNS = ("n_used", "cn0_4th_dbhz", "n_view")
+STATUS_UNIT = "1,dB-Hz,1"
+STATUS_NOTE = ("GNSS receiver status at a fix (GetSensorData GNSS SatInUse, SatInView: Android Location extras); "
+               "no C/N0 logged (nan)")
 
 #: a line starting like a GetSensorData record (for format detection)
 RECORD_RE = re.compile(r"^(ACCE|GYRO|MAGN|AHRS|PRES|GNSS|POSI|LIGH|SOUN|WIFI|BLE4|PROX);[-0-9.]", re.M)
@@ -480,6 +493,11 @@ def _parse(text, source: str, warn: bool, repairs: list[str]) -> Recording:
                                         "Location accuracy (68 %); speed_m_s = Speed(m/s) (0.1 m/s steps), "
                                         "course_deg = Bearing(deg) (exactly 0 = Android's 'no bearing' = nan)")
         meta["gps_check"] = gps_check(t_gps, streams[GPS].values)
+        sats = v[:, 8:10]  # SatInView, SatInUse (nan where the line stops before them)
+        if np.isfinite(sats[:, 1]).any():
+            streams[GNSS_STATUS] = make_stream(GNSS_STATUS, t_gps, np.column_stack([sats[:, 1], np.full(len(v), np.nan),
+                                                                                    sats[:, 0]]),
+                                               STATUS_COLUMNS, STATUS_UNIT, STATUS_NOTE)
         fix_ok = np.isfinite(v[:, 1]) & (v[:, 1] > 1e9) & (v[:, 1] < 1e10)  # a Unix time after 2001
         if fix_ok.sum() >= 1:
             d = _sec_to_ns(v[fix_ok, 1]) - t_gps[fix_ok]
