@@ -148,7 +148,9 @@ def main(argv=None) -> None:
     sd_raw = math.sqrt(np.mean(full ** 2))
     sd_noise = math.sqrt(np.mean(half_diff ** 2))
     sd = math.sqrt(max(sd_raw ** 2 - sd_noise ** 2, 0.0))
-    q = lambda x: f"median {np.nanmedian(x):.2f}, quartiles {np.nanpercentile(x, 25):.2f}-{np.nanpercentile(x, 75):.2f}"  # noqa: E731
+    def q(x):
+        return f"median {np.nanmedian(x):.2f}, quartiles {np.nanpercentile(x, 25):.2f}-{np.nanpercentile(x, 75):.2f}"
+
     print(f"\n{len(files)} files: |offset| {q(mags)} uT; horizontal part {q(horiz)} uT; ours at the waving's end "
           f"{q(ours)} uT.  Per axis: rms of the fits {sd_raw:.2f} uT, of their noise (halves) {sd_noise:.2f} uT, "
           f"so the residual's sd about {sd:.2f} uT per axis")
