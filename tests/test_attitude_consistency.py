@@ -267,7 +267,7 @@ _DEFAULTS_MISS = ("issue #27, missed: the defaults are conservative on the simul
 
 
 @pytest.mark.skipif(CONSISTENCY_SEEDS < 6, reason="the two-sided band needs about 80 independent epochs: "
-                    "PDR_CONSISTENCY_SEEDS=12 (about 60 s)")
+                    "PDR_CONSISTENCY_SEEDS=12 (about 40 s per field)")
 @pytest.mark.xfail(strict=True, reason=_DEFAULTS_MISS)
 @pytest.mark.parametrize("bent", [False, True], ids=["uniform_field", "bent_field"])
 def test_defaults_heading_nees_is_within_its_two_sided_chi2_band(bent):
