@@ -45,7 +45,7 @@ Carry modes on the simulator (``sim_carry``, :mod:`benchmarks.carry`, issue #17)
     gates and the walking-direction estimator may be tuned on the tuning seeds and on the real
     tuning recordings above (IPIN tuning routes: hand-held; IPOL: waist, the nearest to a belt or
     bag); the Oxford placements (all report, below) and the outdoor phone walks are only reported.
-Attitude consistency on a bent field (``sim_bent_field``, ``tests/test_attitude_bent_field.py``, issue #27)
+Attitude consistency on a bent field (``sim_bent_field``, ``tests/test_attitude_consistency.py``, issue #27)
     Seeds 1-12 of the simulator's square walk with :func:`desktop.bent_field.corridor_steel` (the building's
     steel as dipoles) are **tuning** (any attitude setting chosen on the simulator is chosen there), seeds
     4001-4012 **report** (declared 2026-12-06 before any number was seen on them).
