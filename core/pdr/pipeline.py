@@ -398,7 +398,7 @@ class Pipeline:
         completed step replace them.  Without it the first seconds of a walk in a swinging hand, a pocket or a gentle
         walk are counted with the hand-held gates, which miss a limb's weak half-stride or a gentle gait's low peaks
         (the simulator's swinging clips: 5 of the first 9 steps, at the start and again after a pause).  The tuning
-        split's 26 counted real clips: Tclack88 50_hand_slow 46 -> 50 of 50 (its first 7.5 s "not walking", the
+        split's 26 counted real clips: Tclack88 50_hand_slow 46 -> 50 of 50 ("not walking" until 9.5 s, the
         gentle detector's held peaks recounted), every other clip the same (mean absolute error 2.36 -> 2.06 %); the
         same clips with their first 0.1-0.4 s cut off (other hop phases): 2.43 -> 2.26 %.  **The live app sees a
         walk's first steps late**: up to ``rotation_hold_s`` (8 s) after they happened, at the start of a walk and
