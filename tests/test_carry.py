@@ -363,7 +363,7 @@ def test_swinging_clip_counts_its_first_steps(seed):
     from desktop.fast import run_fast
 
     w = simulate_walk(CLIP_PATH, placement="swinging", seed=seed, rate_hz=50.0, still_start_s=3.0, still_end_s=1.0)
-    res = Pipeline(hold_while_settling=True).run(w.recording)  # an option, off by default
+    res = Pipeline(hold_while_settling=True).run(w.recording)  # the default since issue #25 (tuning clip 50_hand_slow)
     assert abs(len(res.steps) - w.truth.n_steps) <= 1, (len(res.steps), w.truth.n_steps)
     old = Pipeline(hold_while_settling=False).run(w.recording)
     assert w.truth.n_steps - len(old.steps) >= 3, (len(old.steps), w.truth.n_steps)

@@ -35,7 +35,8 @@ interval, compensated for the smoother's delay
 (:func:`core.pdr.heading.interval_heading`): the step is completed
 ``heading_delay_s`` after its peak, when the causal smoother has caught up
 with the whole interval, and once its bout is confirmed.  The live app
-therefore sees each step about a second after it happened;
+therefore sees each step about a second after it happened (the first steps of a walk, held while the carry
+detector settles its mode, up to ``rotation_hold_s`` later: ``hold_while_settling``);
 :meth:`Pipeline.status` gives the current position at any time.
 
 Non-finite sensor values (NaN, inf) and impossible ones (beyond any phone
@@ -390,15 +391,34 @@ class Pipeline:
         held, and at a change of mode the new mode's peaks since the last confirmed step replace the
         unconfirmed candidates (through the new mode's rotation gate) (s).
     hold_while_settling : bool
-        Off by default: it helps the simulator's swinging clips, but every real TUNING recording (lopen, psy901,
-        fif911, the IPIN tuning routes) counts the same with it, so the tuning split of real data does not show
-        that it helps, and it delays a live walk's first steps.  While the carry detector settles the mode of a walk (:attr:`core.pdr.carry.CarryModeDetector.settling`:
-        before its first window, and while a walking mode waits out the hysteresis from ``still``), confirmed
-        steps wait (at most ``rotation_hold_s``) instead of completing; when the settled mode has another step
-        detector, its held peaks replace them.  Without it the first seconds of a walk in a swinging hand or a
-        pocket are counted with the hand-held gates, which miss the weak half-stride (issue #25: every other step
-        for 3-5 s, -7 % on the simulator's 50-step swinging clips).  The live app sees a walk's first steps that
-        much later.
+        On by default (issue #25, steps lost at a walk's start): while the carry detector settles the mode of a walk
+        (:attr:`core.pdr.carry.CarryModeDetector.settling`: before its first window, and while the mode is "not
+        walking" with a walking mode waiting out the hysteresis), confirmed steps wait (at most ``rotation_hold_s``)
+        instead of completing; when the settled mode has another step detector, its held peaks since the last
+        completed step replace them.  Without it the first seconds of a walk in a swinging hand, a pocket or a gentle
+        walk are counted with the hand-held gates, which miss a limb's weak half-stride or a gentle gait's low peaks
+        (the simulator's swinging clips: 5 of the first 9 steps, at the start and again after a pause).  The tuning
+        split's 26 counted real clips: Tclack88 50_hand_slow 46 -> 50 of 50 ("not walking" until 9.5 s, the
+        gentle detector's held peaks recounted), every other clip the same (mean absolute error 2.36 -> 2.06 %); the
+        same clips with their first 0.1-0.4 s cut off (other hop phases): 2.43 -> 2.26 %.  **The live app sees a
+        walk's first steps late**: up to ``rotation_hold_s`` (8 s) after they happened, at the start of a walk and
+        after a pause the carry detector called "not walking"; batch, streaming and the fast path give the same
+        steps (``tests/test_walk_start_steps.py``).
+    walk_start_step, walk_start_cadence_frac : bool, float
+        Off by default (issue #25, steps lost at a walk's start).  A walk's first step from standing rises less than
+        the steps that follow, and the hand-held gates (``A_th`` 0.6 m/s^2) can miss it.  With carry detection the
+        gentle gait's detector (:data:`core.pdr.steps.GENTLE_GATES`, ``A_th`` 0.15 m/s^2) runs on every sample: when a
+        new bout (its first step after a pause) is confirmed by another detector, that detector's held peak one step
+        period (the bout's first interval, within ``walk_start_cadence_frac``) before the bout's first step is counted
+        as the walk's first step.  Its time lies in the past; it is inserted before the bout, whose steps are never
+        completed before the bout is confirmed, so the steps stay in time order (batch = streaming).  Tuning split:
+        the 26 counted real clips 2.06 -> 1.69 % (yh570 hand_1_28_21_39 18 -> 20 of 20, hand_1_28_21_35 364 -> 375 of
+        372: its bouts after lap turns; three clips +1 too many), IPOL 6.54 -> 5.00 % (58 trials, the walks after
+        the U-turn).  Not the default: the IPIN tuning routes (hand-held, ``python -m benchmarks --split tuning``)
+        get worse with it, landmark median 2.29 -> 2.37 m, fit 1.75 -> 1.84 m, distance 3.89 -> 4.02 %, and IPOL's
+        distance 5.91 -> 6.30 % (steps added where no step was).  The live app would get the walk's first step with
+        the bout's third (about two steps late).  The same rule one step period after a bout's last step
+        overcounted the tuning clips (2.06 -> 1.98 %, both rules 2.52 %): not built.
     acc_gap_bridge : bool or core.pdr.gapbridge.AccGapBridge
         A gap of the accelerometer alone (the gyroscope running on) of at least the bridge's ``min_gap_s``:
         where the gyroscope shows the walker kept walking, steps are estimated across it from the gyroscope's
@@ -431,7 +451,7 @@ class Pipeline:
                  unix_offset_ns: int | None = None, keep_steps: bool | int = True,
                  carry: bool | CarryModeDetector = True, step_gates: dict | None = None,
                  swinging_max_rotation_rms_rad_s: float = 12.0, rotation_hold_s: float = 8.0,
-                 hold_while_settling: bool = False,
+                 hold_while_settling: bool = True, walk_start_step: bool = False, walk_start_cadence_frac: float = 0.3,
                  acc_gap_bridge: bool | AccGapBridge = True, heading_smoother: str = HEADING_SMOOTHER_OFF):
         self.keep_steps = keep_steps
         if acc_gap_bridge is True:
@@ -446,6 +466,8 @@ class Pipeline:
         self.swinging_max_rotation_rms_rad_s = float(swinging_max_rotation_rms_rad_s)
         self.rotation_hold_s = float(rotation_hold_s)
         self.hold_while_settling = bool(hold_while_settling)
+        self.walk_start_step = bool(walk_start_step)
+        self.walk_start_cadence_frac = float(walk_start_cadence_frac)
         self.gnss = gnss
         self.site_from_gps = bool(site_from_gps)
         self.unix_offset_ns = unix_offset_ns
@@ -506,6 +528,10 @@ class Pipeline:
         #: candidates replaced by them
         self.n_replayed = 0
         self.n_replaced_mode = 0
+        #: walks' first steps taken from the gentle detector's held peaks (``walk_start_step``)
+        self.n_walk_start_steps = 0
+        # the gentle gait's detector, when walk_start_step looks back with it (None: off, or no carry detection)
+        self._start_det = self._det_of.get(GENTLE) if self.walk_start_step else None
         self.attitude.reset()
         self.smoother.reset()
         self.reckoner = DeadReckoner()
@@ -883,9 +909,34 @@ class Pipeline:
         self._candidates.append([ev, None, False, self.speed_window.features() if regressors is None else regressors])
         self._bout_len += 1
         if self._bout_len >= self.min_bout_steps:
+            before_ns = self._confirmed_ns
             for c in self._candidates:
                 c[2] = True
             self._confirmed_ns = ev.t_ns
+            if self._start_det is not None and self._bout_len == self.min_bout_steps:
+                self._walk_start_step(before_ns)
+
+    def _walk_start_step(self, before_ns: int) -> None:
+        """``walk_start_step``: the bout just confirmed began after a pause: the gentle detector's held peak one step
+        period before its first step (``walk_start_cadence_frac``), after the steps before (``before_ns``: the last
+        confirmed one) and through the rotation gate, is inserted before the bout as the walk's first step."""
+        k = len(self._candidates) - self._bout_len
+        if self._start_det is self._active_det or k < 0 or self._bout_len < 2:
+            return
+        first, second = self._candidates[k][0], self._candidates[k + 1][0]
+        if first.duration_s == first.duration_s:  # not a walk's start: the detector's bout went on
+            return
+        p = second.t_ns - first.t_ns
+        f = self.walk_start_cadence_frac
+        lo, hi = first.t_ns - (1.0 + f) * p, first.t_ns - (1.0 - f) * p
+        after = max(before_ns, self._completed_ns) + self._min_gap_ns
+        for ev, regs, rot in reversed(self._held[self._start_det]):
+            if ev.t_ns < lo or ev.t_ns <= after:
+                return
+            if ev.t_ns <= hi and rot <= self._rotation_limit_rad_s():
+                self._candidates.insert(k, [ev, None, True, regs])
+                self.n_walk_start_steps += 1
+                return
 
     def _drop_unconfirmed(self) -> None:
         kept = [c for c in self._candidates if c[2]]
@@ -1140,6 +1191,7 @@ class Pipeline:
         counters = {"mag_used": a.n_mag_used, "mag_rejected": a.n_mag_rejected, "acc_rejected": a.n_acc_rejected,
                     "peaks_rejected_rotation": self.n_rejected_rotation, "peaks_rejected_bout": self.n_rejected_bout,
                     "peaks_replayed_mode_change": self.n_replayed, "peaks_replaced_mode_change": self.n_replaced_mode,
+                    "walk_start_steps": self.n_walk_start_steps,
                     "nonfinite_skipped": dict(self.n_nonfinite), **self.health_counters(), **self.gap_counters()}
         if hasattr(a, "counters"):
             counters["attitude"] = a.counters()

@@ -78,6 +78,11 @@ class StepRelease:
         self.completed_ns = -(1 << 62)  # the last completed step's peak time
         #: ``Pipeline(hold_while_settling=...)`` with carry detection: steps wait while the walk's mode settles
         self.settle_hold = bool(getattr(pipe, "hold_while_settling", False)) and getattr(pipe, "carry", None) is not None
+        #: ``Pipeline(walk_start_step=True)``: the index of the gentle detector that looks back (None: off)
+        start_det = getattr(pipe, "_start_det", None)
+        self.start_d = next(i for i, d in enumerate(pipe._mode_detectors) if d is start_det) \
+            if start_det is not None else None
+        self.active_d = 0  # the detector whose peaks are candidates at the grid sample being processed
         self.carry = None  # the carry detector's per-sample track (desktop.fast.carry.CarryTrack), when it runs
         self.peaks: list = []
         self.k = None  # the grid sample being processed (None: the end)
@@ -150,6 +155,7 @@ class StepRelease:
             self._walkdir_to(k, steps_at)
             self.k = k
             d = int(det_at[k])
+            self.active_d = d
             if switch[k]:
                 self.switch(d, k)
             else:
@@ -213,9 +219,36 @@ class StepRelease:
         self.cands.append([ev, None, False, regressors])
         self.bout_len += 1
         if self.bout_len >= p.min_bout_steps:
+            before_ns = self.confirmed_ns
             for c in self.cands:
                 c[2] = True
             self.confirmed_ns = ev.t_ns
+            if self.start_d is not None and self.bout_len == p.min_bout_steps:
+                self._walk_start_step(before_ns)
+
+    def _walk_start_step(self, before_ns: int) -> None:
+        """``Pipeline._walk_start_step``: the gentle detector's peak (found by the current grid sample) one step period
+        before a new bout's first step is inserted before the bout as the walk's first step."""
+        p = self.p
+        k = len(self.cands) - self.bout_len
+        if self.start_d == self.active_d or k < 0 or self.bout_len < 2:
+            return
+        first, second = self.cands[k][0], self.cands[k + 1][0]
+        if first.duration_s == first.duration_s:
+            return
+        period = second.t_ns - first.t_ns
+        f = p.walk_start_cadence_frac
+        lo, hi = first.t_ns - (1.0 + f) * period, first.t_ns - (1.0 - f) * period
+        after = max(before_ns, self.completed_ns) + self.min_gap_ns
+        tk, t, feats, rms, regs = self.peaks[self.start_d]
+        for m in range(int(np.searchsorted(tk, self.k, side="right")) - 1, -1, -1):
+            tm = int(t[m])
+            if tm < lo or tm <= after:
+                return
+            if tm <= hi and float(rms[m]) <= self._rotation_limit():
+                self.cands.insert(k, [StepEvent(tm, *feats[m].tolist()), None, True, tuple(regs[m].tolist())])
+                p.n_walk_start_steps += 1
+                return
 
     def drop_unconfirmed(self) -> None:
         kept = [c for c in self.cands if c[2]]

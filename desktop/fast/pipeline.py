@@ -522,7 +522,8 @@ def _result(p: Pipeline, recording: Recording, att: AttitudeLog) -> PipelineResu
     a = p.attitude
     counters = dict(mag_used=a.n_mag_used, mag_rejected=a.n_mag_rejected, acc_rejected=a.n_acc_rejected,
                     peaks_rejected_rotation=p.n_rejected_rotation, peaks_rejected_bout=p.n_rejected_bout)
-    counters.update(peaks_replayed_mode_change=p.n_replayed, peaks_replaced_mode_change=p.n_replaced_mode)
+    counters.update(peaks_replayed_mode_change=p.n_replayed, peaks_replaced_mode_change=p.n_replaced_mode,
+                    walk_start_steps=p.n_walk_start_steps)
     counters["nonfinite_skipped"] = dict(p.n_nonfinite)
     counters.update(p.health_counters())
     counters.update(p.gap_counters())  # empty: a recording with a gap to bridge is refused
