@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 
 
@@ -25,3 +26,15 @@ def num_jac(f, x, eps=1e-6):
         d[i] = eps
         J[:, i] = (f(x + d) - f(x - d)) / (2 * eps)
     return J
+
+
+@functools.cache
+def six_minute_walk():
+    """``outdoor_walk(7, minutes=6)``, simulated once per process: test_gnss.py and test_kubrak.py both walk it and
+    run in one xdist worker (tests/conftest.py's numba unit).  Shared: read it, never change it in place."""
+    from desktop.simulator import outdoor_walk
+
+    walk = outdoor_walk(7, minutes=6)
+    for s in walk.recording.streams.values():  # shared: a test that writes into it fails here, not in the other file
+        s.t_ns.flags.writeable = s.values.flags.writeable = False
+    return walk

@@ -12,7 +12,7 @@ from core.gnss import make_fusion
 from core.gnss.kubrak import DPSI, NX, KubrakFusion, KubrakKf
 from core.gnss.training import OnlineTrainer
 from core.pdr.pipeline import Pipeline
-from tests._gnss_helpers import num_jac, truth_error
+from tests._gnss_helpers import num_jac, six_minute_walk, truth_error
 from core.pdr.stride import StepFeatures
 from core.pdr.stride_models import load_stride_model
 from core.pdr.velocity import SpeedFeatureWindow, VelocityModel, VelocityStride, fit_velocity_model
@@ -154,9 +154,7 @@ def test_gps_velocity_teaches_the_coefficients_and_the_heading_offset():
 # -- the fusion on simulated walks -------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def sim_walk():
-    from desktop.simulator import outdoor_walk
-
-    walk = outdoor_walk(7, minutes=6)
+    walk = six_minute_walk()
     res = Pipeline(gnss=KubrakFusion()).run(walk.recording)  # the streaming kernel, fusion inside the pipeline
     _STREAMED["fusion"] = res.fusion
     return walk, res.steps
