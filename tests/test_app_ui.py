@@ -296,8 +296,9 @@ def test_app_lifecycle_pause_resume_and_export(walk_file, tmp_path):
     assert log["running_after_resume"] is True
     rep = log["report"]
     assert rep["finished"] and rep["paused"] == 1 and rep["resumed"] == 1
-    # pausing lost nothing: same track as the batch run
-    assert rep["summary"]["steps"] == len(Pipeline().run(w.recording).steps)
+    # pausing lost nothing: same track as the batch run (of the app's pipeline: the settings' stride model)
+    batch_steps = Pipeline(**Settings().pipeline_kwargs()).run(w.recording).steps
+    assert rep["summary"]["steps"] == len(batch_steps)
     exp = log["export"]
     assert not exp["errors"] and {"geojson", "gpx", "csv", "raw"} <= set(exp)
     assert Path(exp["raw"]).read_bytes() == path.read_bytes()
@@ -308,7 +309,6 @@ def test_app_lifecycle_pause_resume_and_export(walk_file, tmp_path):
     assert "do a calibration walk first" in log["calib_message_no_walk"]
     t0, t1 = log["calibration_range"]
     assert t0 == log["calibration_range_at_start"][0] and t1 == w.recording.t1_ns
-    batch_steps = Pipeline(**Settings().pipeline_kwargs()).run(w.recording).steps
     walked = sum(s.length_m for s in batch_steps if t0 <= s.t_ns)
     assert log["calib_text"] == f"measured {walked:.1f} m"
     assert "too short" in log["calib_errors"][0] and "must be a number of metres" in log["calib_errors"][1]
