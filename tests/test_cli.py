@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from desktop.cli import main
+from tests._demo_helpers import demo_replay_json
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,9 +55,8 @@ def test_demo_replay_prints_the_summary_and_writes_every_output(tmp_path):
     assert len(carry) == 227 and set(carry) == {"handheld"}
 
 
-def test_demo_loop_closes(capsys):
-    assert main(["replay", "--json"]) == 0
-    s = json.loads(capsys.readouterr().out)
+def test_demo_loop_closes():
+    s = json.loads(demo_replay_json())  # pdr replay --json
     assert s["n_steps"] == 227
     assert s["start_to_end_m"] < 0.02 * s["distance_m"]
 
