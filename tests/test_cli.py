@@ -18,15 +18,10 @@ def _no_stored_profile(tmp_path, monkeypatch):
     monkeypatch.setenv("PDR_APP_DATA", str(tmp_path / "app"))  # never the user's own profile (subprocesses too)
 
 
-def _run(*args):
-    """``pdr ARGS`` as a user runs it: ``python -m desktop`` in a process of its own (the demo replay below, the
-    README's command, and a closed pipe keep the process boundary; the other tests call :func:`main` here)."""
-    return subprocess.run([sys.executable, "-m", "desktop", *args], capture_output=True, text=True, cwd=ROOT)
-
-
 def _pdr(capsys, *args) -> subprocess.CompletedProcess:
     """``pdr ARGS`` in this process (``python -m desktop`` is ``sys.exit(main())``): its exit code, stdout and
-    stderr as :func:`_run` gives them, without a Python start and the imports (about 0.3 s a call)."""
+    stderr as ``subprocess.run`` would give them, without a Python start and the imports (about 0.3 s a call); a
+    closed pipe (below) keeps its own process."""
     capsys.readouterr()
     try:
         code = main(list(args))
@@ -36,9 +31,11 @@ def _pdr(capsys, *args) -> subprocess.CompletedProcess:
     return subprocess.CompletedProcess(["pdr", *args], code, out.out, out.err)
 
 
-def test_demo_replay_prints_the_summary_and_writes_every_output(tmp_path):
+def test_demo_replay_prints_the_summary_and_writes_every_output(tmp_path, capsys):
+    # in this process: CI runs the README's `pdr replay` itself before the tests, and the closed-pipe test below
+    # runs `python -m desktop`
     out = {k: tmp_path / f"t.{k}" for k in ("csv", "geojson", "gpx", "png")}
-    r = _run("replay", "--csv", str(out["csv"]), "--geojson", str(out["geojson"]), "--gpx", str(out["gpx"]),
+    r = _pdr(capsys, "replay", "--csv", str(out["csv"]), "--geojson", str(out["geojson"]), "--gpx", str(out["gpx"]),
              "--plot", str(out["png"]))
     assert r.returncode == 0, r.stderr
     assert "steps         227" in r.stdout  # the demo's truth: 227 steps
