@@ -15,6 +15,25 @@ def truth_error(walk, fused_step) -> float:
     return math.hypot(e - p[0], n - p[1])
 
 
+def truth_errors(walk, located) -> list:
+    """:func:`truth_error` of each of ``located`` (fused steps or fix records: ``t_ns``, ``lat_deg``, ``lon_deg``),
+    the simulator's true positions from one vectorised call instead of one call each."""
+    import numpy as np
+
+    from core.geodesy import geodetic_to_enu
+
+    located = list(located)
+    if not located:
+        return []
+    o = walk.truth.origin_lat_lon
+    p = walk.truth.phone_position_at(np.array([x.t_ns for x in located], dtype=np.int64))
+    out = []
+    for x, (pe, pn) in zip(located, p[:, :2].tolist()):
+        e, n = geodetic_to_enu(x.lat_deg, x.lon_deg, o)
+        out.append(math.hypot(e - pe, n - pn))
+    return out
+
+
 def num_jac(f, x, eps=1e-6):
     """Central finite-difference Jacobian of ``f`` at ``x`` (for checking the filters' analytic Jacobians)."""
     import numpy as np

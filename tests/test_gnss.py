@@ -19,7 +19,7 @@ from core.gnss.training import (
 )
 from core.pdr.calibration import UserProfile
 from core.pdr.pipeline import Pipeline
-from tests._gnss_helpers import num_jac, six_minute_walk, truth_error
+from tests._gnss_helpers import num_jac, six_minute_walk, truth_error, truth_errors
 
 
 # -- the EKF ---------------------------------------------------------------------------------------
@@ -293,17 +293,11 @@ def test_calibrated_fusion_beats_dead_reckoning_through_an_outage_and_stays_hone
 def test_fused_track_follows_gps_without_outage(sim_walk):
     walk, steps = sim_walk
     fr = GpsFusion().run(steps, walk.recording.streams["gps"], walk.recording.t0_ns)
-    err = [truth_error(walk, s) for s in fr.steps[100:]]
+    err = truth_errors(walk, fr.steps[100:])
     assert np.median(err) < 3.0  # GPS alone: 1.5 m white + 3 m wandering bias, and multipath episodes
     # the fixes near the truth are taken, those of the receiver's multipath episodes are not (issue #26's judge)
-    from core.geodesy import geodetic_to_enu
-
-    o = walk.truth.origin_lat_lon
     near = far = near_taken = far_taken = 0
-    for f in fr.fixes:
-        e, n = geodetic_to_enu(f.lat_deg, f.lon_deg, o)
-        p = walk.truth.phone_position_at(f.t_ns)
-        d = math.hypot(e - p[0], n - p[1])
+    for f, d in zip(fr.fixes, truth_errors(walk, fr.fixes)):
         near, near_taken = near + (d < 8.0), near_taken + (d < 8.0 and f.accepted)
         far, far_taken = far + (d > 20.0), far_taken + (d > 20.0 and f.accepted)
     assert near_taken > 0.7 * near and far > 10 and far_taken <= 0.1 * far  # 231 of 310 and 0 of 26 (seed 7)

@@ -12,7 +12,7 @@ from core.gnss import make_fusion
 from core.gnss.kubrak import DPSI, NX, KubrakFusion, KubrakKf
 from core.gnss.training import OnlineTrainer
 from core.pdr.pipeline import Pipeline
-from tests._gnss_helpers import num_jac, six_minute_walk, truth_error
+from tests._gnss_helpers import num_jac, six_minute_walk, truth_error, truth_errors
 from core.pdr.stride import StepFeatures
 from core.pdr.stride_models import load_stride_model
 from core.pdr.velocity import SpeedFeatureWindow, VelocityModel, VelocityStride, fit_velocity_model
@@ -179,7 +179,7 @@ def test_follows_gps_and_carries_through_an_outage_with_an_honest_sigma(sim_walk
     rec = walk.recording
     t0 = rec.t0_ns
     fr = make_fusion("kubrak").run(steps, rec.streams["gps"], t0)
-    err = [truth_error(walk, s) for s in fr.steps[100:]]
+    err = truth_errors(walk, fr.steps[100:])
     assert np.median(err) < 3.0
     assert fr.counters["variability_detections"] == 0  # clean GPS is never called unreliable
     hid = [(t0 + int(200e9), t0 + int(320e9))]
@@ -216,16 +216,7 @@ def _with_noisy_minute(walk, start_s, length_s, sd_m, hacc_m, seed=1):
 
 
 def _accepted_far(walk, fr, limit_m=30.0) -> int:
-    from core.geodesy import geodetic_to_enu
-
-    o = walk.truth.origin_lat_lon
-    n_far = 0
-    for f in fr.fixes:
-        if f.accepted:
-            e, n = geodetic_to_enu(f.lat_deg, f.lon_deg, o)
-            p = walk.truth.phone_position_at(f.t_ns)
-            n_far += math.hypot(e - p[0], n - p[1]) > limit_m
-    return n_far
+    return sum(d > limit_m for d in truth_errors(walk, [f for f in fr.fixes if f.accepted]))
 
 
 def test_a_minute_of_steady_multipath_is_not_taken_for_the_tracks_error(sim_walk):
