@@ -30,9 +30,15 @@ NUMBA_TEST_FILES = frozenset(
         "fast_path", "fast_walkdir", "floors", "gnss", "kubrak", "truth_beside", "walk_start_steps"))
 
 
+#: other files that share a worker (one xdist work unit each): their module-level caches compute once what they
+#: share (tests/test_app_logic.py's gps_walk_run: the GPS walk's batch run and session replay, 2.3 s of one core)
+SHARED_WORK_UNITS = {"app-gps-walk": frozenset({"test_app_logic.py", "test_app_ui.py"})}
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
-    """``--dist loadfile`` (pyproject's default) with :data:`NUMBA_TEST_FILES` as one work unit.  Also without numba
+    """``--dist loadfile`` (pyproject's default) with :data:`NUMBA_TEST_FILES` as one work unit (and each of
+    :data:`SHARED_WORK_UNITS`).  Also without numba
     (the README's ``.[test]`` install, as CI runs it), where the kernels compile nothing: plain ``loadfile`` there was
     slower, 164 s against 156 s on 2 quiet cores (1223 tests, 2026-12-07), and the unit lets files share a worker's
     module-level caches (the simulated GPS walk of test_gnss and test_kubrak: ``tests._gnss_helpers``)."""
@@ -43,7 +49,10 @@ def pytest_xdist_make_scheduler(config, log):
     class NumbaOnceScheduling(LoadFileScheduling):
         def _split_scope(self, nodeid: str) -> str:
             path = nodeid.split("::", 1)[0]
-            return "numba-kernels" if path.rsplit("/", 1)[-1] in NUMBA_TEST_FILES else path
+            name = path.rsplit("/", 1)[-1]
+            if name in NUMBA_TEST_FILES:
+                return "numba-kernels"
+            return next((unit for unit, files in SHARED_WORK_UNITS.items() if name in files), path)
 
     return NumbaOnceScheduling(config, log)
 

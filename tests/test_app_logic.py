@@ -1,6 +1,7 @@
 """The app's plain-Python parts (no Kivy): replay source, session, health, settings, viewport, export, GPS layer."""
 
 import dataclasses
+import functools
 import json
 import math
 import os
@@ -405,13 +406,22 @@ def test_storage_paths(tmp_path):
 # -- GPS fusion in the session ---------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def gps_run():
-    """The GPS walk, its batch run with the fusion, and the session's replay of it."""
+@functools.cache
+def gps_walk_run():
+    """The GPS walk (:func:`gps_walk`), its batch run with the fusion and the app's settings, and a session's replay
+    of it with Chen's filter (it trains the profile), computed once per process: tests/test_app_ui.py draws and
+    replays the same (the two files are one xdist work unit, tests/conftest.py).  Shared: read them, never change
+    them."""
     w = gps_walk()
     batch = Pipeline(**Settings().pipeline_kwargs(), gnss=GpsFusion()).run(w.recording)
-    ses = replay_session(w.recording, Settings(gps_fusion="chen").pipeline_factory())  # Chen's: it trains the profile
+    ses = replay_session(w.recording, Settings(gps_fusion="chen").pipeline_factory())
     return w, batch, ses
+
+
+@pytest.fixture(scope="module")
+def gps_run():
+    """The GPS walk, its batch run with the fusion, and the session's replay of it (:func:`gps_walk_run`)."""
+    return gps_walk_run()
 
 
 def test_use_gps_setting_builds_a_fresh_fusion_per_pipeline():

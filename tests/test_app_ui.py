@@ -31,8 +31,7 @@ from desktop.simulator import simulate_walk  # noqa: E402
 from core.pdr.calibration import UserProfile  # noqa: E402
 from core.pdr.stride_models import load_stride_model, with_scale  # noqa: E402
 from app.settings import Settings  # noqa: E402
-from core.gnss.fusion import GpsFusion  # noqa: E402
-from test_app_logic import gps_walk, replay_session  # noqa: E402 - tests/ is on sys.path, as for the LIVE script
+from test_app_logic import gps_walk_run  # noqa: E402 - tests/ is on sys.path, as for the LIVE script
 
 ROOT = Path(__file__).resolve().parents[1]
 WAYPOINTS = ((0.0, 0.0), (30.0, 0.0), (30.0, 20.0), (10.0, 20.0))
@@ -296,8 +295,9 @@ def test_app_lifecycle_pause_resume_and_export(walk_file, tmp_path):
     assert log["running_after_resume"] is True
     rep = log["report"]
     assert rep["finished"] and rep["paused"] == 1 and rep["resumed"] == 1
-    # pausing lost nothing: same track as the batch run
-    assert rep["summary"]["steps"] == len(Pipeline().run(w.recording).steps)
+    # pausing lost nothing: same track as the batch run (of the app's pipeline: the settings' stride model)
+    batch_steps = Pipeline(**Settings().pipeline_kwargs()).run(w.recording).steps
+    assert rep["summary"]["steps"] == len(batch_steps)
     exp = log["export"]
     assert not exp["errors"] and {"geojson", "gpx", "csv", "raw"} <= set(exp)
     assert Path(exp["raw"]).read_bytes() == path.read_bytes()
@@ -308,7 +308,6 @@ def test_app_lifecycle_pause_resume_and_export(walk_file, tmp_path):
     assert "do a calibration walk first" in log["calib_message_no_walk"]
     t0, t1 = log["calibration_range"]
     assert t0 == log["calibration_range_at_start"][0] and t1 == w.recording.t1_ns
-    batch_steps = Pipeline(**Settings().pipeline_kwargs()).run(w.recording).steps
     walked = sum(s.length_m for s in batch_steps if t0 <= s.t_ns)
     assert log["calib_text"] == f"measured {walked:.1f} m"
     assert "too short" in log["calib_errors"][0] and "must be a number of metres" in log["calib_errors"][1]
@@ -539,13 +538,13 @@ def test_live_mode_records_every_event_through_the_service(tmp_path):
 @pytest.fixture(scope="module")
 def gps_file(tmp_path_factory):
     """The GPS walk of tests/test_app_logic.py (outdoor, 2 min, a 25 s GPS gap, multipath) as a file."""
-    w = gps_walk()
+    w = gps_walk_run()[0]
     path = tmp_path_factory.mktemp("gps") / "gps-walk.csv"
     write_recording(str(path), w.recording)
     return w, path
 
 
-def test_track_view_draws_the_gps_layer(gps_file):
+def test_track_view_draws_the_gps_layer():
     """Instructions, not pixels: the fix squares sit on the fixes, the accuracy circles have radius hacc (the
     last MAX_ACCURACY_CIRCLES only), the violet lines are the "dr" stretches, the ellipse is the 2-sigma one of
     the last step's covariance, in the colours of the legend.  More fixes add no top-level instructions, a
@@ -557,8 +556,7 @@ def test_track_view_draws_the_gps_layer(gps_file):
     from app import track_view as T
     from app.overlay import runs
 
-    w, _ = gps_file
-    ses = replay_session(w.recording, Settings(gps_fusion="chen").pipeline_factory())
+    ses = gps_walk_run()[2]  # the GPS walk replayed by a session with Chen's filter (shared with test_app_logic)
     g = ses.gps_overlay()
     EventLoop.ensure_window()
     tv = T.TrackView(size=(480, 640), pos=(0, 0), size_hint=(None, None))
@@ -673,7 +671,7 @@ def test_app_replay_with_gps_shows_fused_track_and_fixes(gps_file, tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     rep = json.loads(report.read_text())
     g = rep["gps"]
-    batch = Pipeline(**Settings().pipeline_kwargs(), gnss=GpsFusion()).run(w.recording).fusion
+    batch = gps_walk_run()[1].fusion  # Pipeline(**Settings().pipeline_kwargs(), gnss=GpsFusion()).run(w.recording)
     assert rep["finished"] and rep["errors"] == 0 and g["anchored"] and g["shows_fused"]
     np.testing.assert_allclose(g["fused_east"][1:], [s.east_m for s in batch.steps], rtol=0, atol=1e-9)
     assert g["fused_source"] == [s.source for s in batch.steps]

@@ -7,7 +7,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from core import quaternion as quat
 from core.pdr.attitude_qekf import QuaternionEKF as AttitudeEKF, measurement_jacobian, predicted_measurement, transition_matrix
@@ -44,6 +43,8 @@ def test_paper_eq16_first_rows_agree_on_the_unit_sphere_only():
 
 
 def test_transition_matrix_integrates_a_constant_rate_exactly():
+    from scipy.spatial.transform import Rotation  # here, not at collection (every xdist worker collects)
+
     w = np.array([0.3, -1.2, 2.0])
     dt = 0.01
     F = transition_matrix(*w, dt)

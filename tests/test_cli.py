@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from desktop.cli import main
+from tests._demo_helpers import demo_replay_json
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -17,13 +18,24 @@ def _no_stored_profile(tmp_path, monkeypatch):
     monkeypatch.setenv("PDR_APP_DATA", str(tmp_path / "app"))  # never the user's own profile (subprocesses too)
 
 
-def _run(*args):
-    return subprocess.run([sys.executable, "-m", "desktop", *args], capture_output=True, text=True, cwd=ROOT)
+def _pdr(capsys, *args) -> subprocess.CompletedProcess:
+    """``pdr ARGS`` in this process (``python -m desktop`` is ``sys.exit(main())``): its exit code, stdout and
+    stderr as ``subprocess.run`` would give them, without a Python start and the imports (about 0.3 s a call); a
+    closed pipe (below) keeps its own process."""
+    capsys.readouterr()
+    try:
+        code = main(list(args))
+    except SystemExit as e:  # argparse: --help, usage errors
+        code = e.code
+    out = capsys.readouterr()
+    return subprocess.CompletedProcess(["pdr", *args], code, out.out, out.err)
 
 
-def test_demo_replay_prints_the_summary_and_writes_every_output(tmp_path):
+def test_demo_replay_prints_the_summary_and_writes_every_output(tmp_path, capsys):
+    # in this process: CI runs the README's `pdr replay` itself before the tests, and the closed-pipe test below
+    # runs `python -m desktop`
     out = {k: tmp_path / f"t.{k}" for k in ("csv", "geojson", "gpx", "png")}
-    r = _run("replay", "--csv", str(out["csv"]), "--geojson", str(out["geojson"]), "--gpx", str(out["gpx"]),
+    r = _pdr(capsys, "replay", "--csv", str(out["csv"]), "--geojson", str(out["geojson"]), "--gpx", str(out["gpx"]),
              "--plot", str(out["png"]))
     assert r.returncode == 0, r.stderr
     assert "steps         227" in r.stdout  # the demo's truth: 227 steps
@@ -40,9 +52,8 @@ def test_demo_replay_prints_the_summary_and_writes_every_output(tmp_path):
     assert len(carry) == 227 and set(carry) == {"handheld"}
 
 
-def test_demo_loop_closes(capsys):
-    assert main(["replay", "--json"]) == 0
-    s = json.loads(capsys.readouterr().out)
+def test_demo_loop_closes():
+    s = json.loads(demo_replay_json())  # pdr replay --json
     assert s["n_steps"] == 227
     assert s["start_to_end_m"] < 0.02 * s["distance_m"]
 
@@ -54,36 +65,36 @@ def test_demo_loop_closes(capsys):
     ("# pdr-recording 1\n# {\"streams\": {\"acc\": {\"columns\": [\"x\", \"y\", \"z\"]}}}\nacc,1,2\nacc,2,1,1,1\n",
      ":3: missing columns"),
 ])
-def test_bad_input_is_one_line_and_exit_2(tmp_path, content, needle):
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, content, needle):
     p = tmp_path / "bad.csv"
     p.write_text(content)
-    r = _run("replay", str(p))
+    r = _pdr(capsys, "replay", str(p))
     assert r.returncode == 2
     assert "Traceback" not in r.stderr
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("pdr: error: ") and str(p) in lines[0] and needle in lines[0]
 
 
-def test_missing_file_and_missing_sensor_are_clear(tmp_path):
-    r = _run("replay", str(tmp_path / "nope.csv"))
+def test_missing_file_and_missing_sensor_are_clear(tmp_path, capsys):
+    r = _pdr(capsys, "replay", str(tmp_path / "nope.csv"))
     assert r.returncode == 2 and "Traceback" not in r.stderr and "nope.csv" in r.stderr
     p = tmp_path / "gyro_only.csv"
     p.write_text('# pdr-recording 1\n# {"streams": {"gyro": {"columns": ["x", "y", "z"]}}}\ngyro,1,0,0,0\n')
-    r = _run("replay", str(p))
+    r = _pdr(capsys, "replay", str(p))
     assert r.returncode == 2 and "no 'acc' stream" in r.stderr and "Traceback" not in r.stderr
 
 
-def test_repaired_timestamps_are_reported_as_a_warning(tmp_path):
+def test_repaired_timestamps_are_reported_as_a_warning(tmp_path, capsys):
     p = tmp_path / "w.csv"
     rows = "".join(f"acc,{t},0.0,0.0,9.81\n" for t in (1000, 3000, 2000, 3000, 4000))
     p.write_text('# pdr-recording 1\n# {"streams": {"acc": {"columns": ["x", "y", "z"]}}}\n' + rows)
-    r = _run("replay", str(p))
+    r = _pdr(capsys, "replay", str(p))
     assert r.returncode == 0, r.stderr
     assert "pdr: warning:" in r.stderr and "1 timestamp(s) went backwards and 1 repeated" in r.stderr
 
 
-def test_help_explains_every_option():
-    r = _run("replay", "--help")
+def test_help_explains_every_option(capsys):
+    r = _pdr(capsys, "replay", "--help")
     assert r.returncode == 0
     for opt in ("--csv", "--geojson", "--gpx", "--plot", "--origin", "--height", "--stride-c", "--declination",
                 "--no-mag", "--json", "--progress", "--no-progress", "--gps", "--gps-outage", "--profile", "--mode",
@@ -92,18 +103,18 @@ def test_help_explains_every_option():
         assert opt in r.stdout
 
 
-def test_simulate_then_replay_round_trip(tmp_path):
+def test_simulate_then_replay_round_trip(tmp_path, capsys):
     p = tmp_path / "out" / "sq.csv.gz"  # a folder that does not exist yet, as out/ on a fresh clone (#29)
-    r = _run("simulate", str(p), "--shape", "square", "--rate", "50", "--seed", "4")
+    r = _pdr(capsys, "simulate", str(p), "--shape", "square", "--rate", "50", "--seed", "4")
     assert r.returncode == 0, r.stderr
-    info = _run("info", str(p)).stdout.splitlines()
+    info = _pdr(capsys, "info", str(p)).stdout.splitlines()
     head = next(k for k, ln in enumerate(info) if ln.startswith("stream"))
     table = info[head:head + 4]
     assert [ln.split()[0] for ln in table[1:]] == ["acc", "gyro", "mag"]
     for col in ("events", "rate Hz", "jitter ms", "gaps"):  # every number ends under the end of its header
         end = table[0].index(col) + len(col)
         assert all(ln[end - 1] != " " and ln[end] == " " for ln in table[1:]), (col, table)
-    r = _run("replay", str(p), "--json")
+    r = _pdr(capsys, "replay", str(p), "--json")
     s = json.loads(r.stdout)
     assert s["start_to_end_m"] < 0.03 * s["distance_m"]
 
@@ -141,8 +152,8 @@ def test_a_fifo_is_refused_in_one_line(tmp_path, capsys):
     assert "not a regular file" in err and str(fifo) in err
 
 
-def test_info_help_describes_every_column():
-    r = _run("info", "--help")
+def test_info_help_describes_every_column(capsys):
+    r = _pdr(capsys, "info", "--help")
     for col in ("stream", "events", "rate Hz", "jitter ms", "gaps", "rate chg", "columns [unit]"):
         assert f"  {col} " in r.stdout
 

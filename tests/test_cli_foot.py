@@ -11,6 +11,7 @@ import pytest
 from core.recording import write_recording
 from desktop.cli import main
 from desktop.foot_simulator import footprints, simulate_foot
+from tests._demo_helpers import demo_replay_json
 
 
 @pytest.fixture(scope="module")
@@ -38,8 +39,7 @@ def test_auto_mode_detects_the_foot_and_tracks_it(foot_file, capsys):
 
 
 def test_handheld_recordings_stay_handheld_and_the_mode_can_be_forced(foot_file, capsys, tmp_path):
-    assert main(["replay", "--json"]) == 0  # the bundled hand-held demo
-    s = json.loads(capsys.readouterr().out)
+    s = json.loads(demo_replay_json())  # pdr replay --json: the bundled hand-held demo
     assert s["mode"] == "handheld" and "detected" in s["mode_reason"]
     path, _ = foot_file
     csv = tmp_path / "foot.csv"

@@ -1,16 +1,20 @@
-"""Butterworth design and filters against scipy (the oracle), and the grid resampler."""
+"""Butterworth design and filters against scipy (the oracle), and the grid resampler.
+
+scipy.signal is imported in the tests that use it (about 1 s of imports, scipy.stats with it): not at
+collection, which every xdist worker does."""
 
 import math
 
 import numpy as np
 import pytest
-from scipy import signal
 
 from core.dsp import Biquad, GridResampler, butter2_group_delay_s, butter2_lowpass
 
 
 @pytest.mark.parametrize("fc,fs", [(3.0, 50.0), (0.5, 50.0), (3.0, 20.0), (10.0, 400.0), (0.2, 100.0)])
 def test_butterworth_coefficients_equal_scipy(fc, fs):
+    from scipy import signal
+
     b, a = butter2_lowpass(fc, fs)
     b_ref, a_ref = signal.butter(2, fc, fs=fs)
     np.testing.assert_allclose(b, b_ref, rtol=1e-12, atol=1e-15)
@@ -23,6 +27,8 @@ def test_butterworth_rejects_cutoff_above_nyquist():
 
 
 def test_biquad_equals_lfilter_with_steady_state_start():
+    from scipy import signal
+
     rng = np.random.default_rng(1)
     x = 9.8 + rng.normal(0, 1, 500)
     b, a = butter2_lowpass(3.0, 50.0)
@@ -34,6 +40,8 @@ def test_biquad_equals_lfilter_with_steady_state_start():
 
 
 def test_group_delay_matches_scipy_at_low_frequency():
+    from scipy import signal
+
     b, a = butter2_lowpass(0.5, 50.0)
     _, gd = signal.group_delay((b, a), w=[0.01], fs=50.0)
     assert butter2_group_delay_s(0.5) == pytest.approx(gd[0] / 50.0, rel=0.01)

@@ -285,10 +285,11 @@ def test_fast_equals_plain_when_the_carry_mode_changes():
 
 def test_fast_equals_plain_with_learnt_noise_floors():
     # the noise floors' learnt scale (off by default, issue #27): the kernel's quantile tracker and the scaled
-    # floors of the gyroscope, eq. 17 and eq. 18
+    # floors of the gyroscope, eq. 17 and eq. 18 (here and below the IPIN walk's 55-80 s: every branch of desktop.fast
+    # and core that its 55-90 s ran, traced line to line)
     from core.pdr.attitude import AttitudeEKF
 
-    plain, pipe = _assert_same(_real(REAL[0][0], 55.0, 90.0),
+    plain, pipe = _assert_same(_real(REAL[0][0], 55.0, 80.0),
                                lambda: Pipeline(attitude=AttitudeEKF(noise_scale_rate=0.05)))
     assert pipe.attitude.snapshot().noise_scale < 1.0  # the scale moved: the test can see a difference
 
@@ -298,7 +299,7 @@ def test_fast_equals_plain_with_the_fields_heading_offset():
     # decay without a gyroscope, injection and the heading update's 7th column
     from core.pdr.attitude import AttitudeEKF
 
-    plain, pipe = _assert_same(_real(REAL[0][0], 55.0, 90.0),
+    plain, pipe = _assert_same(_real(REAL[0][0], 55.0, 80.0),
                                lambda: Pipeline(attitude=AttitudeEKF(mag_offset_sd_rad=0.1, mag_offset_time_s=30.0)))
     st = pipe.attitude.snapshot()
     assert abs(st.mag_offset_rad) > 1e-3 and st.P_oo > 0.0  # the offset moved: the test can see a difference

@@ -19,7 +19,7 @@ from core.gnss.training import (
 )
 from core.pdr.calibration import UserProfile
 from core.pdr.pipeline import Pipeline
-from tests._gnss_helpers import num_jac, truth_error
+from tests._gnss_helpers import num_jac, six_minute_walk, truth_error, truth_errors
 
 
 # -- the EKF ---------------------------------------------------------------------------------------
@@ -246,9 +246,7 @@ def test_profile_keeps_what_gps_taught_and_the_next_walk_starts_from_it(tmp_path
 # -- the fusion on simulated walks ----------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def sim_walk():
-    from desktop.simulator import outdoor_walk
-
-    walk = outdoor_walk(7, minutes=6)
+    walk = six_minute_walk()
     # the product's steps: a pipeline with the GPS fusion inside (its first good fix tells the attitude filter the walk
     # is outdoors), run once for the module (as test_kubrak.py does)
     res = Pipeline(gnss=GpsFusion()).run(walk.recording)
@@ -295,17 +293,11 @@ def test_calibrated_fusion_beats_dead_reckoning_through_an_outage_and_stays_hone
 def test_fused_track_follows_gps_without_outage(sim_walk):
     walk, steps = sim_walk
     fr = GpsFusion().run(steps, walk.recording.streams["gps"], walk.recording.t0_ns)
-    err = [truth_error(walk, s) for s in fr.steps[100:]]
+    err = truth_errors(walk, fr.steps[100:])
     assert np.median(err) < 3.0  # GPS alone: 1.5 m white + 3 m wandering bias, and multipath episodes
     # the fixes near the truth are taken, those of the receiver's multipath episodes are not (issue #26's judge)
-    from core.geodesy import geodetic_to_enu
-
-    o = walk.truth.origin_lat_lon
     near = far = near_taken = far_taken = 0
-    for f in fr.fixes:
-        e, n = geodetic_to_enu(f.lat_deg, f.lon_deg, o)
-        p = walk.truth.phone_position_at(f.t_ns)
-        d = math.hypot(e - p[0], n - p[1])
+    for f, d in zip(fr.fixes, truth_errors(walk, fr.fixes)):
         near, near_taken = near + (d < 8.0), near_taken + (d < 8.0 and f.accepted)
         far, far_taken = far + (d > 20.0), far_taken + (d > 20.0 and f.accepted)
     assert near_taken > 0.7 * near and far > 10 and far_taken <= 0.1 * far  # 231 of 310 and 0 of 26 (seed 7)
@@ -333,10 +325,10 @@ def test_bad_fixes_are_screened_and_never_reach_the_state(sim_walk):
 def gps_file(tmp_path_factory, sim_walk):
     from core.recording import write_recording
 
-    # the first 320 s (the outages below end at 290 s), uncompressed: writing and reading the file is most of the cost
+    # the first 220 s (the outages below end at 190 s), uncompressed: writing and reading the file is most of the cost
     rec = sim_walk[0].recording
     path = tmp_path_factory.mktemp("gps") / "walk.csv"
-    write_recording(str(path), rec.slice_time(rec.t0_ns, rec.t0_ns + 320 * 10 ** 9))
+    write_recording(str(path), rec.slice_time(rec.t0_ns, rec.t0_ns + 220 * 10 ** 9))
     return str(path)
 
 
@@ -344,11 +336,11 @@ def test_cli_replay_with_gps_outage_reports_the_outage(gps_file, tmp_path, capsy
     from desktop.cli import main
 
     gj = tmp_path / "t.geojson"
-    assert main(["replay", gps_file, "--gps-outage", "200:60", "--gps-outage", "260:30", "--json",
+    assert main(["replay", gps_file, "--gps-outage", "100:60", "--gps-outage", "160:30", "--json",
                  "--geojson", str(gj)]) == 0
     out = capsys.readouterr().out
     s = json.loads(out[:out.rindex("}") + 1])
-    assert [o["start_s"] for o in s["outages"]] == pytest.approx([200.0, 260.0])
+    assert [o["start_s"] for o in s["outages"]] == pytest.approx([100.0, 160.0])
     assert all(o["walked_m"] > 20 and o["end_error_m"] >= 0 for o in s["outages"])
     feats = json.loads(gj.read_text())["features"]
     pts = [f for f in feats if f["geometry"]["type"] == "Point" and f["properties"].get("kind") != "gps_fix"]
@@ -390,7 +382,8 @@ def test_first_fix_gives_the_attitude_filter_the_site_declination_and_field(sim_
     from core.recording import Recording
 
     walk, _ = sim_walk
-    rec = walk.recording.slice_time(walk.recording.t0_ns, walk.recording.t0_ns + 60 * 10 ** 9)  # the first minute
+    # the first half minute: the site is set at the first good fix, seconds in
+    rec = walk.recording.slice_time(walk.recording.t0_ns, walk.recording.t0_ns + 30 * 10 ** 9)
     dated = Recording(dict(rec.streams), dict(rec.device), {**rec.metadata, "unix_offset_ns": 1_750_000_000 * 10 ** 9},
                       list(rec.repairs), rec.source)
     p = Pipeline(gnss=GpsFusion())

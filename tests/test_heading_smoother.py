@@ -65,12 +65,13 @@ def _smoothed(seed):
         handlers[name](t, v[0], v[1], v[2])
     sm = ekf.smoothed_heading()
     w = sm.t_ns > walk.truth.walk_start_t_ns
-    es = np.array([_heading_error(walk.truth.attitude_at(t), q) for t, q in zip(sm.t_ns[w], sm.q_wxyz[w])])
+    t = sm.t_ns[w]  # the truth at every epoch from one vectorised call each, not one call per epoch
+    es = np.array([_heading_error(qt, q) for qt, q in zip(walk.truth.attitude_at(t), sm.q_wxyz[w])])
     # the smoothed attitude is the forward nominal turned by the correction: true - forward = es + correction
     ef = es + sm.correction_rad[w]
     # the truth's turn rate about Up over +-0.1 s (rad/s)
-    rate = np.array([_heading_error(walk.truth.attitude_at(t + 100_000_000), walk.truth.attitude_at(t - 100_000_000))
-                     for t in sm.t_ns[w]]) / 0.2
+    rate = np.array([_heading_error(a, b) for a, b in zip(walk.truth.attitude_at(t + 100_000_000),
+                                                         walk.truth.attitude_at(t - 100_000_000))]) / 0.2
     return ef, es, sm.forward_sd_rad[w], sm.sd_rad[w], sm.t_ns[w], rate
 
 

@@ -9,6 +9,7 @@ checkout and are skipped when it is absent.
 from __future__ import annotations
 
 import csv
+import functools
 import gzip
 import json
 import math
@@ -1029,12 +1030,20 @@ def gyro_explains_mag(rec, smooth_s=0.1) -> tuple[float, float]:
     return float(x @ y / (x @ x)), float(np.corrcoef(x, y)[0, 1])
 
 
+@functools.cache
+def _walk_recording(folder) -> Recording:
+    """``load_recording(folder, warn=False)`` once per process: the tests below check several things of the same
+    real walk's load (``warn`` only says whether repaired timestamps also warn; they are in ``repairs`` either way).
+    Shared: read it, never change it."""
+    return load_recording(folder, warn=False)
+
+
 @needs_gps_walks
 @pytest.mark.parametrize("walk", list(WALKS))
 def test_real_walk_units_signs_and_gps_speed_course(walk):
     folder, fmt, _cols, has_mag, (acc_lo, acc_hi) = WALKS[walk]
     assert detect_format(folder) == fmt
-    rec = load_recording(folder, warn=False)  # babur, liatoutou: repeated timestamps (listed in rec.repairs)
+    rec = _walk_recording(folder)  # babur, liatoutou: repeated timestamps (listed in rec.repairs)
     acc, gyro = rec.streams["acc"], rec.streams["gyro"]
     an = np.linalg.norm(acc.values, axis=1)
     assert acc_lo < np.median(an) < acc_hi
@@ -1068,14 +1077,14 @@ def test_real_walk_units_signs_and_gps_speed_course(walk):
 def test_real_walk_fix_times_are_the_files_times_on_the_sensor_clock():
     # phyphox without a pause: t_ns is the experiment time
     f = csv_fixes("bahramib_walk_stan1")
-    gps = load_recording(WALKS["bahramib_walk_stan1"][0]).streams["gps"]
+    gps = _walk_recording(WALKS["bahramib_walk_stan1"][0]).streams["gps"]
     assert np.array_equal(gps.t_ns, np.rint(f["t"] * 1e9).astype(np.int64))
     # Sensor Logger: t_ns + unix_offset_ns is the file's 'time' (Unix ns), the cached fixes left out
     folder = WALKS["siberiawolfp_walking2"][0]
     c = read_csv_columns(folder, "Location.csv")
     with open(folder / "Location.csv", encoding="utf-8", newline="") as fh:
         unix_ns = np.array([int(r[0]) for r in list(csv.reader(fh))[1:] if r])
-    rec = load_recording(folder)
+    rec = _walk_recording(folder)
     gps = rec.streams["gps"]
     kept = c["seconds_elapsed"] >= 0
     assert (~kept).sum() == 2 and len(gps) == kept.sum() == 265
@@ -1088,7 +1097,7 @@ def test_real_walk_fix_times_are_the_files_times_on_the_sensor_clock():
 def test_real_ios_sensorlogger_acceleration_matches_the_raw_accelerometer():
     """iOS 1.15: Accelerometer.csv (no gravity) + Gravity.csv, both with the iOS sign, against the raw sensor in g."""
     folder = WALKS["siberiawolfp_walking2"][0]
-    rec = load_recording(folder)
+    rec = _walk_recording(folder)
     acc = rec.streams["acc"]
     assert rec.device["platform"] == "ios" and rec.metadata["acc_from"] == "Accelerometer.csv + Gravity.csv"
     raw = read_csv_columns(folder, "AccelerometerUncalibrated.csv")
@@ -1101,7 +1110,7 @@ def test_real_ios_sensorlogger_acceleration_matches_the_raw_accelerometer():
 @needs_gps_walks
 def test_real_android_phyphox_walk_with_a_pause_and_a_swinging_phone():
     folder = WALKS["liatoutou_walk2"][0]
-    rec = load_recording(folder, warn=False)
+    rec = _walk_recording(folder)
     assert rec.device["platform"] == "android" and rec.metadata["pauses"] == 1
     assert "swinging" in rec.metadata["acc_unit_check"]
     # phyphox wrote some samples twice (same time, same values) and three 10 ms steps back: repaired

@@ -12,7 +12,7 @@ from core.gnss import make_fusion
 from core.gnss.kubrak import DPSI, NX, KubrakFusion, KubrakKf
 from core.gnss.training import OnlineTrainer
 from core.pdr.pipeline import Pipeline
-from tests._gnss_helpers import num_jac, truth_error
+from tests._gnss_helpers import num_jac, six_minute_walk, truth_error, truth_errors
 from core.pdr.stride import StepFeatures
 from core.pdr.stride_models import load_stride_model
 from core.pdr.velocity import SpeedFeatureWindow, VelocityModel, VelocityStride, fit_velocity_model
@@ -154,9 +154,7 @@ def test_gps_velocity_teaches_the_coefficients_and_the_heading_offset():
 # -- the fusion on simulated walks -------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def sim_walk():
-    from desktop.simulator import outdoor_walk
-
-    walk = outdoor_walk(7, minutes=6)
+    walk = six_minute_walk()
     res = Pipeline(gnss=KubrakFusion()).run(walk.recording)  # the streaming kernel, fusion inside the pipeline
     _STREAMED["fusion"] = res.fusion
     return walk, res.steps
@@ -181,7 +179,7 @@ def test_follows_gps_and_carries_through_an_outage_with_an_honest_sigma(sim_walk
     rec = walk.recording
     t0 = rec.t0_ns
     fr = make_fusion("kubrak").run(steps, rec.streams["gps"], t0)
-    err = [truth_error(walk, s) for s in fr.steps[100:]]
+    err = truth_errors(walk, fr.steps[100:])
     assert np.median(err) < 3.0
     assert fr.counters["variability_detections"] == 0  # clean GPS is never called unreliable
     hid = [(t0 + int(200e9), t0 + int(320e9))]
@@ -218,16 +216,7 @@ def _with_noisy_minute(walk, start_s, length_s, sd_m, hacc_m, seed=1):
 
 
 def _accepted_far(walk, fr, limit_m=30.0) -> int:
-    from core.geodesy import geodetic_to_enu
-
-    o = walk.truth.origin_lat_lon
-    n_far = 0
-    for f in fr.fixes:
-        if f.accepted:
-            e, n = geodetic_to_enu(f.lat_deg, f.lon_deg, o)
-            p = walk.truth.phone_position_at(f.t_ns)
-            n_far += math.hypot(e - p[0], n - p[1]) > limit_m
-    return n_far
+    return sum(d > limit_m for d in truth_errors(walk, [f for f in fr.fixes if f.accepted]))
 
 
 def test_a_minute_of_steady_multipath_is_not_taken_for_the_tracks_error(sim_walk):
@@ -322,7 +311,7 @@ def test_cli_gps_kubrak_and_auto_say_which_filter(tmp_path, capsys):
     from desktop.cli import main
     from desktop.simulator import outdoor_walk
 
-    walk = outdoor_walk(3, minutes=2)
+    walk = outdoor_walk(3, minutes=0.5)  # what the CLI says, not how the filter does: half a minute of fixes
     path = tmp_path / "walk.csv.gz"
     write_recording(str(path), walk.recording)
     assert main(["replay", str(path), "--gps", "kubrak", "--no-progress", "--fixes", str(tmp_path / "f.csv")]) == 0

@@ -3,7 +3,6 @@
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from core import quaternion as quat
 
@@ -13,6 +12,8 @@ def _random_q(rng):
 
 
 def test_to_matrix_matches_scipy_and_round_trips():
+    from scipy.spatial.transform import Rotation  # here, not at collection (every xdist worker collects)
+
     rng = np.random.default_rng(3)
     for _ in range(50):
         q = _random_q(rng)
@@ -24,6 +25,8 @@ def test_to_matrix_matches_scipy_and_round_trips():
 
 
 def test_multiply_composes_rotations():
+    from scipy.spatial.transform import Rotation  # here, not at collection (every xdist worker collects)
+
     rng = np.random.default_rng(4)
     p, q = _random_q(rng), _random_q(rng)
     ref = (Rotation.from_quat(p, scalar_first=True) * Rotation.from_quat(q, scalar_first=True)).as_matrix()

@@ -89,8 +89,12 @@ def test_gps_stream_has_the_six_columns_and_survives_the_file_format(tmp_path, o
     json.dumps(rec.metadata)
     assert rec.metadata["gps"]["rate_hz"] == 1.0 and rec.metadata["origin_lat_lon"] == [60.1699, 24.9384]
 
+    # the file: the walk's last minute (its last fixes, standing, have no course), not ten minutes of 100 Hz IMU
+    last = rec.slice_time(rec.t1_ns - 60 * 10 ** 9, rec.t1_ns + 1)
+    gps = last.streams["gps"]
+    assert np.isnan(gps.values[:, 5]).sum() == 2
     path = tmp_path / "outdoor.csv.gz"
-    write_recording(str(path), rec)
+    write_recording(str(path), last)
     back = read_recording(str(path))
     assert back.streams["gps"].columns == GPS_COLUMNS
     np.testing.assert_array_equal(back.streams["gps"].t_ns, gps.t_ns)

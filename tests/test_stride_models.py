@@ -1,5 +1,6 @@
 """Stride models (issue #4): file format, inference, training, calibration, backpropagation."""
 
+import functools
 import json
 import math
 
@@ -265,11 +266,18 @@ def test_training_is_reproducible():
 
 
 def _sim_steps(length_m, step_length_m=0.70, seed=21):
+    """The steps of a simulated straight walk (a new list of the same frozen steps: each walk run once per process,
+    the 20 m one is walked by seven tests)."""
+    return list(_sim_steps_once(length_m, step_length_m, seed))
+
+
+@functools.cache
+def _sim_steps_once(length_m, step_length_m, seed):
     from core.pdr.pipeline import Pipeline
     from desktop.simulator import simulate_walk
 
     walk = simulate_walk([(0, 0), (0, length_m)], step_length_m=step_length_m, seed=seed)
-    return Pipeline(height_m=1.75).run(walk.recording).steps
+    return tuple(Pipeline(height_m=1.75).run(walk.recording).steps)
 
 
 def test_calibration_on_a_synthetic_walk_reaches_the_known_length(tmp_path):
