@@ -14,8 +14,8 @@ import pytest
 
 from core.pdr.pipeline import Pipeline
 from core.pdr.steps import STEP_GATES, TRUNK_GATES, StepDetector, StepGates
-from core.recording import Recording, Stream
 from desktop.simulator import simulate_walk
+from tests._sim_helpers import scale_acc_motion
 
 RATE_HZ = 50.0
 PERIOD_S = 0.55
@@ -82,15 +82,10 @@ def _weak_heel_strikes(seed: int, ks=(12, 24, 36), scale: float = 0.2):
                       step_frequency_hz=1.8, still_start_s=3.0, still_end_s=2.0)
     truth = np.asarray(w.truth.step_t_ns)
     acc = w.recording.streams["acc"]
-    v = acc.values.copy()
     half = (truth[1] - truth[0]) // 2
-    for k in ks:
-        rest = v[np.abs(acc.t_ns - truth[k]) < 1_000_000_000].mean(axis=0)
-        near = np.abs(acc.t_ns - truth[k]) < half
-        v[near] = rest + scale * (v[near] - rest)
-    streams = dict(w.recording.streams)
-    streams["acc"] = Stream("acc", acc.t_ns, v, acc.columns, acc.unit, acc.note)
-    return Recording(streams, dict(w.recording.device), dict(w.recording.metadata)), truth
+    spans = [(np.abs(acc.t_ns - truth[k]) < half, acc.values[np.abs(acc.t_ns - truth[k]) < 1_000_000_000].mean(axis=0))
+             for k in ks]
+    return scale_acc_motion(w.recording, spans, scale), truth
 
 
 @pytest.mark.parametrize("seed", (1, 2, 3))
