@@ -17,6 +17,7 @@ from core.pdr.carry import CarryModeDetector
 from core.pdr.pipeline import Pipeline
 from core.recording import Recording, Stream
 from desktop.simulator import simulate_walk
+from tests._sim_helpers import scale_acc_motion
 
 PATH = [(0.0, 0.0), (20.0, 0.0)]
 _CACHE: dict = {}
@@ -133,11 +134,7 @@ def _weak_first_step(seed: int, scale: float = 0.25):
     acc = w.recording.streams["acc"]
     rest = acc.values[acc.t_ns < truth[0] - 1_000_000_000].mean(axis=0)
     early = acc.t_ns < truth[0] + (truth[1] - truth[0]) // 2
-    v = acc.values.copy()
-    v[early] = rest + scale * (v[early] - rest)
-    streams = dict(w.recording.streams)
-    streams["acc"] = Stream("acc", acc.t_ns, v, acc.columns, acc.unit, acc.note)
-    return Recording(streams, dict(w.recording.device), dict(w.recording.metadata)), truth
+    return scale_acc_motion(w.recording, [(early, rest)], scale), truth
 
 
 @pytest.mark.parametrize("seed", (1, 2, 3))

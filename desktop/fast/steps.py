@@ -33,7 +33,8 @@ def biquad_reset(c, x0):
 
 @kernel
 def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_valley, g0,
-           comb_lag, gate_dt_ns, min_raw_range, range_back, hist, ev_tick, ev_t, ev_f):
+           comb_lag, gate_dt_ns, min_raw_range, range_back, hist, ev_tick, ev_t, ev_f, period, rescue_h, rescue_lo,
+           rescue_hi, pos_lo, pos_hi):
     """The peaks of eq. 3 on the grid, with a carry mode's gates (:class:`core.pdr.steps.StepGates`); returns how
     many.
 
@@ -42,7 +43,9 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
     raw samples the echo gate looks back (``min_raw_range`` <= 0: no echo gate).  ``hist``: the comb's ring of raw
     norms (its length is the detector's).  ``ev_tick[k]``: the grid sample at which step ``k`` is found; ``ev_t[k]``
     its time (the peak less the low-pass delay); ``ev_f[k]``: A_max, A_min, variance, duration (nan: first of a
-    bout), gravity.
+    bout), gravity.  ``period``: the step period per grid sample (nan: unknown); ``rescue_h`` (0: off),
+    ``rescue_lo``, ``rescue_hi``, ``pos_lo``, ``pos_hi``: the weak-step rescue's height, interval (periods) and
+    position (:class:`core.pdr.steps.StepGates`).
     """
     n_hist = len(hist)
     hist_k = 0
@@ -64,6 +67,15 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
     seg_n = 0
     z1 = 0.0
     z2 = 0.0
+    # the weak-step rescue: the weak peak held since the last step, the step given out a sample late
+    has_weak = False
+    w_t = 0
+    w_y = w_g = w_min = w_sum = w_sum2 = 0.0
+    w_n = 0
+    after_min = math.inf
+    has_stash = False
+    s_t = 0
+    s_f0 = s_f1 = s_f2 = s_f3 = s_f4 = 0.0
     b0, b1, b2, a1, a2 = c[0], c[1], c[2], c[3], c[4]
     for k in range(len(t_ns)):
         tk = t_ns[k]
@@ -76,6 +88,14 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
             seg_sum = seg_sum2 = 0.0
             seg_n = 0
             hist_n = 0
+            has_weak = False
+            after_min = math.inf
+        if has_stash:  # the step found with a rescued one, given out at this sample
+            ev_tick[n_ev] = k
+            ev_t[n_ev] = s_t
+            ev_f[n_ev, 0], ev_f[n_ev, 1], ev_f[n_ev, 2], ev_f[n_ev, 3], ev_f[n_ev, 4] = s_f0, s_f1, s_f2, s_f3, s_f4
+            n_ev += 1
+            has_stash = False
         if not have1:
             z1, z2 = biquad_reset(c, norm)
             if n_grid == 0:
@@ -98,8 +118,10 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
         if have1 and have2 and y1 > y2 and y1 >= y:  # a local maximum at the previous sample
             t_peak = t1
             since = t_peak - last
-            passed = y1 - g > min_peak and ((not has_last) or since > gate_dt_ns[k]) and armed  # eq. 3
-            if passed and min_raw_range > 0.0:  # the echo gate: the raw norm's range over the last half period
+            pk = period[k]
+            timed = ((not has_last) or since > gate_dt_ns[k]) and armed  # eq. 3, the time threshold; the valley
+            echo = True
+            if min_raw_range > 0.0:  # the echo gate: the raw norm's range over the last half period
                 back = min(n_hist, hist_n, range_back[k])
                 rng = 0.0
                 if back >= 2:
@@ -110,23 +132,48 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
                         lo_v = min(lo_v, v)
                         hi_v = max(hi_v, v)
                     rng = hi_v - lo_v
-                passed = rng >= min_raw_range
-            if passed:
-                mean = seg_sum / seg_n if seg_n else y1
-                var = max(seg_sum2 / seg_n - mean * mean, 0.0) if seg_n else 0.0
-                acc_min = seg_min if seg_min < math.inf else y1
-                duration = since * 1e-9 if has_last and since <= max_dt_ns else math.nan
-                ev_tick[n_ev] = k
-                ev_t[n_ev] = t_peak - delay_ns
-                ev_f[n_ev, 0], ev_f[n_ev, 1], ev_f[n_ev, 2] = y1, acc_min, var
-                ev_f[n_ev, 3], ev_f[n_ev, 4] = duration, g
-                n_ev += 1
+                echo = rng >= min_raw_range
+            if y1 - g > min_peak and timed and echo:  # eq. 3
+                rescue = (has_weak and pk > 0.0 and rescue_lo * pk * 1e9 <= since <= rescue_hi * pk * 1e9
+                          and pos_lo * since <= w_t - last <= pos_hi * since and t_peak - w_t > gate_dt_ns[k])
+                if rescue:  # the weak step now, this one at the next sample
+                    mean = w_sum / w_n if w_n else w_y
+                    var = max(w_sum2 / w_n - mean * mean, 0.0) if w_n else 0.0
+                    ev_tick[n_ev] = k
+                    ev_t[n_ev] = w_t - delay_ns
+                    ev_f[n_ev, 0], ev_f[n_ev, 1], ev_f[n_ev, 2] = w_y, w_min if w_min < math.inf else w_y, var
+                    ev_f[n_ev, 3], ev_f[n_ev, 4] = (w_t - last) * 1e-9, w_g
+                    n_ev += 1
+                    n2 = seg_n - w_n
+                    mean = (seg_sum - w_sum) / n2 if n2 else y1
+                    var = max((seg_sum2 - w_sum2) / n2 - mean * mean, 0.0) if n2 else 0.0
+                    has_stash = True
+                    s_t = t_peak - delay_ns
+                    s_f0, s_f1, s_f2 = y1, after_min if after_min < math.inf else y1, var
+                    s_f3, s_f4 = (t_peak - w_t) * 1e-9, g
+                else:
+                    mean = seg_sum / seg_n if seg_n else y1
+                    var = max(seg_sum2 / seg_n - mean * mean, 0.0) if seg_n else 0.0
+                    acc_min = seg_min if seg_min < math.inf else y1
+                    duration = since * 1e-9 if has_last and since <= max_dt_ns else math.nan
+                    ev_tick[n_ev] = k
+                    ev_t[n_ev] = t_peak - delay_ns
+                    ev_f[n_ev, 0], ev_f[n_ev, 1], ev_f[n_ev, 2] = y1, acc_min, var
+                    ev_f[n_ev, 3], ev_f[n_ev, 4] = duration, g
+                    n_ev += 1
                 last = t_peak
                 has_last = True
                 armed = not require_valley
                 seg_min = math.inf
                 seg_sum = seg_sum2 = 0.0
                 seg_n = 0
+                has_weak = False
+                after_min = math.inf
+            elif (rescue_h > 0.0 and has_last and timed and echo and pk > 0.0 and y1 - g > rescue_h
+                  and ((not has_weak) or y1 - g > w_y - w_g)):  # a weak peak only the amplitude refused: held
+                has_weak = True
+                w_t, w_y, w_g, w_min, w_sum, w_sum2, w_n = t_peak, y1, g, seg_min, seg_sum, seg_sum2, seg_n
+                after_min = math.inf
         if y < g:
             armed = True
         if has_last and tk - last > max_dt_ns:  # a pause
@@ -134,8 +181,12 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
             seg_min = math.inf
             seg_sum = seg_sum2 = 0.0
             seg_n = 0
+            has_weak = False
+            after_min = math.inf
         if y < seg_min:
             seg_min = y
+        if y < after_min:
+            after_min = y
         seg_sum += y
         seg_sum2 += y * y
         seg_n += 1
@@ -183,7 +234,9 @@ def detect_steps(detector, t_ns, x, restart, gates=None, step_period_s=None):
                int(round(butter2_group_delay_s(detector.cutoff_hz) * 1e9)), detector.require_valley,
                STANDARD_GRAVITY_M_S2, np.ascontiguousarray(comb_lag), np.ascontiguousarray(gate_dt),
                float(gates.min_raw_range_m_s2), np.ascontiguousarray(range_back.astype(np.int64)), np.zeros(n_hist),
-               ev_tick, ev_t, ev_f)
+               ev_tick, ev_t, ev_f, np.ascontiguousarray(period), float(gates.rescue_peak_height_m_s2),
+               float(gates.rescue_interval_periods[0]), float(gates.rescue_interval_periods[1]),
+               float(gates.rescue_position_frac[0]), float(gates.rescue_position_frac[1]))
     return ev_tick[:k].copy(), ev_t[:k].copy(), ev_f[:k].copy()
 
 
