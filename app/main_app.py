@@ -1058,7 +1058,8 @@ class PDRApp(App):
         tv.set_map(ses.map_overlay())
         summ = ses.summary()
         tv.set_heading(summ["heading_rad"])
-        self.steps_text = str(summ["steps"])
+        held = summ.get("steps_held", 0)  # a walk's first steps, held while the carry mode settles
+        self.steps_text = f"{summ['steps']} +{held}" if held else str(summ["steps"])
         self.distance_text = f"{summ['distance_m']:.1f} m"
         h = summ["heading_deg"]
         self.heading_text = f"{h:.0f}°" if h == h else "–"

@@ -567,6 +567,8 @@ class Session:
         heading = st.heading_rad
         return {
             "steps": len(self.steps),
+            #: steps found at a walk's start but held until the carry mode settles (counted up to 8 s later)
+            "steps_held": int(getattr(st, "n_held", 0)),
             "distance_m": float(self.steps.distance_m),
             "heading_deg": bearing_deg(heading) if heading == heading else math.nan,
             "elapsed_s": self.elapsed_s,

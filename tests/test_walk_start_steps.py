@@ -92,14 +92,24 @@ def test_held_first_steps_same_in_batch_streaming_and_fast_path():
     fast path give the same step times, lengths and headings; no step is completed before the one before it."""
     from desktop.fast import run_fast
 
-    rec, _, _ = _paused_walk(1)
+    rec, ta, tb = _paused_walk(1)
     batch = Pipeline().run(rec)
     live = Pipeline()
     live.reset()
     streamed = []
-    for name, t, v in rec.events():
+    held = []  # (t, Status.n_held): what the app shows as steps found but not yet counted
+    for i, (name, t, v) in enumerate(rec.events()):
         streamed.extend(live.update(name, t, v))
+        if i % 25 == 0:
+            held.append((t, live.status().n_held))
     streamed.extend(live.finish())
+    assert live.status().n_held == 0
+    held_t, held_n = np.array(held).T
+    for start in (ta[0], tb[0]):  # each walk's start: its first steps are held, and the status says how many
+        near = (held_t >= start) & (held_t < start + 8e9)
+        assert held_n[near].max() >= 3, held_n[near].max()
+    mid = (held_t > ta[0] + 12e9) & (held_t < ta[-1])  # the first walk, its mode settled: nothing held
+    assert mid.any() and held_n[mid].max() == 0
     assert [s.t_ns for s in streamed] == [s.t_ns for s in batch.steps]
     assert np.allclose([s.length_m for s in streamed], [s.length_m for s in batch.steps], rtol=0, atol=1e-12)
     assert np.allclose([s.heading_rad for s in streamed], [s.heading_rad for s in batch.steps], rtol=0, atol=1e-12)
@@ -155,3 +165,29 @@ def test_weak_first_step_counted_from_the_gentle_detector(seed):
     fast = run_fast(rec, pipeline=Pipeline(walk_start_step=True))
     assert [s.t_ns for s in fast.steps] == [s.t_ns for s in res.steps]
     assert fast.counters["walk_start_steps"] == 1
+
+
+def test_the_app_session_shows_the_held_steps_then_counts_them():
+    """The live app's status strip (``Session.summary``): while a walk's first steps are held its ``steps_held`` says
+    how many were found (the strip shows "n +held"); once the mode settles they are counted, and at the end none is
+    held and the count is the batch run's."""
+    import math
+
+    from app.session import Session
+    from app.sources import ReplaySource
+
+    w = _walk(1, 3.0, 1.0)
+    ses = Session(ReplaySource(w.recording, speed=math.inf), pipeline_factory=Pipeline)
+    ses.start()
+    seen = []
+    for _ in range(100000):
+        ses.tick(budget_s=1e-6, chunk=50)  # a chunk per tick: 50 events, about 0.3 s of the walk
+        s = ses.summary()
+        seen.append((s["steps"], s["steps_held"]))
+        if ses.finished:
+            break
+    assert ses.finished
+    most = max(seen, key=lambda x: x[1])
+    assert most[1] >= 3, most  # the first steps were shown as held ...
+    assert seen[-1] == (len(Pipeline().run(w.recording).steps), 0)  # ... and all counted in the end
+    assert seen.index(most) < len(seen) // 2

@@ -216,6 +216,9 @@ class Status:
     labels: tuple[str, ...]  #: degraded modes in force
     carry_mode: str = CARRY_HANDHELD  #: how the phone is carried (core.conventions.CARRY_MODES; issue #17)
     carry_confidence: float = math.nan  #: the carry detector's confidence in it, 0..1 (nan: detection off)
+    #: steps found but held while the carry detector settles a walk's mode (``hold_while_settling``): they are
+    #: counted (or replaced by the settled mode's detector) up to ``rotation_hold_s`` later; 0 otherwise
+    n_held: int = 0
 
 
 @dataclass
@@ -1151,7 +1154,9 @@ class Pipeline:
                       self.reckoner.north_m, self.smoother.heading_rad,
                       a.use_magnetometer and a.n_mag_used > 0 and not a.mag_rejected,
                       a.acc_sigma2, a.mag_sigma2, self.labels(), self._carry_mode,
-                      self.carry.confidence if self.carry is not None else math.nan)
+                      self.carry.confidence if self.carry is not None else math.nan,
+                      len(self._candidates) if self.hold_while_settling and self.carry is not None
+                      and self.carry.settling else 0)
 
     # -- batch -----------------------------------------------------------------
     def run(self, recording: Recording, progress=None) -> PipelineResult:
