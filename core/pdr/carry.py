@@ -144,9 +144,9 @@ class CarryModeDetector:
         has a local maximum within 2 samples of half of it at least this fraction of its value there (0: off):
         over a 4-s window the unbiased autocorrelation at two strides' lag (2.1 s: 1.9 s of overlap) is noisy and
         often higher than at one.  TUNING (yh570/sensibility_testbed): the step period read two steps (2x) on
-        4-11 % of the walking hops of its pocket, coat and hand walks, 1-4 % with it; the 26 counted clips
+        3-11 % of the hops of its long pocket, coat and hand walks, 0.4-4.3 % with it; the 26 counted clips
         1.50 -> 1.49 % (one two-step gap rescued); most missed steps there sit in gaps the period already judges
-        right (benchmarks/REAL_WALKS_RESULTS.md).
+        right (benchmarks/REAL_WALKS_RESULTS.md, "The carry detector's step period").
     min_walk_std_m_s2 : float
         Norm standard deviation from which a periodic norm is a normal walk (m/s^2).
     min_periodicity : float
