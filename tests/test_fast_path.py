@@ -443,3 +443,12 @@ def test_fast_equals_plain_on_a_soft_soled_pocket_walk():
     plain, _ = _assert_same(walk.recording, lambda: Pipeline(carry=CarryModeDetector(thigh_min_skew=0.32, uneven_on_share=0.75)))
     assert CARRY_POCKET in {s.carry_mode for s in plain.steps}
     assert abs(len(plain.steps) - walk.truth.n_steps) <= 2, (len(plain.steps), walk.truth.n_steps)
+
+
+def test_fast_equals_plain_when_two_strides_correlate_better():
+    # strides alternately strong and weak: the carry detector halves a lag of two strides (half_stride_ratio)
+    from test_carry import strong_and_weak_strides
+
+    _, rec = strong_and_weak_strides()
+    plain, _ = _assert_same(rec)
+    assert len(plain.steps) >= 40

@@ -85,6 +85,13 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     peak[:, hs - lo - 1:] &= ~use_short[:, None]  # the short range's last lag is its edge, no peak
     has_peak = peak.any(axis=1)
     k2 = lo + np.where(has_peak, np.argmax(peak, axis=1) + 1, np.argmax(seg, axis=1))
+    if det.half_stride_ratio > 0.0:  # two strides' lag halved (CarryModeDetector._half_stride)
+        half = k2 // 2
+        idx = half[:, None] + np.arange(-2, 3)[None, :]
+        vals = r[rows[:, None], np.minimum(idx, r.shape[1] - 1)]
+        j = np.argmax(vals, axis=1)
+        ok = ~use_short & has_peak & (half >= lo) & (j > 0) & (j < 4) & (vals[rows, j] >= det.half_stride_ratio * r[rows, k2])
+        k2 = np.where(ok, idx[rows, j], k2)
     # the specific force smoothed over det._smooth samples, its angle from the mean direction
     s = det._smooth
     c = np.cumsum(np.concatenate([np.zeros((m_w, 1, 3)), acc], axis=1), axis=1)
