@@ -322,6 +322,11 @@ class StepDetector:
         seg = [h[(k - 1 - i) % n] for i in range(back)]
         return max(seg) - min(seg)
 
+    def _echo_ok(self) -> bool:
+        """The echo gate (``min_raw_range_m_s2``, module docstring): computed only for a peak the cheaper tests passed."""
+        r = self.gates.min_raw_range_m_s2
+        return r <= 0.0 or self._raw_range() >= r
+
     def update_grid(self, t_ns: int, norm: float) -> StepEvent | None:
         """Process one sample of the uniform grid (the kernel shared by streaming and batch)."""
         stash = self._stash
@@ -349,8 +354,7 @@ class StepDetector:
                 min_dt = max(min_dt, int(frac * period * 1e9))
             a_th = self.min_peak_height_m_s2 if gates.min_peak_height_m_s2 is None else gates.min_peak_height_m_s2
             timed = (since is None or since > min_dt) and self._armed  # eq. 3, time threshold; the valley
-            echo = gates.min_raw_range_m_s2 <= 0.0 or self._raw_range() >= gates.min_raw_range_m_s2
-            if y1 - g > a_th and timed and echo:  # eq. 3, amplitude threshold
+            if y1 - g > a_th and timed and self._echo_ok():  # eq. 3, amplitude threshold
                 n = self._seg_n
                 weak = self._weak
                 rescue = (weak is not None and period > 0.0
@@ -384,8 +388,8 @@ class StepDetector:
                 self._seg_sum = self._seg_sum2 = 0.0
                 self._seg_n = 0
                 self._clear_weak()
-            elif (gates.rescue_peak_height_m_s2 > 0.0 and since is not None and timed and echo and period > 0.0
-                  and y1 - g > gates.rescue_peak_height_m_s2
+            elif (gates.rescue_peak_height_m_s2 > 0.0 and since is not None and timed and period > 0.0
+                  and y1 - g > gates.rescue_peak_height_m_s2 and self._echo_ok()
                   and (self._weak is None or y1 - g > self._weak[1] - self._weak[2])):
                 # a weak peak that only the amplitude refused: held for the rescue (the highest since the last step)
                 self._weak = (t_peak, y1, g, self._seg_min, self._seg_sum, self._seg_sum2, self._seg_n)
