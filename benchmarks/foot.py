@@ -23,7 +23,8 @@ PyShoe VICON
     failed (an infinite error in the medians, :func:`median`).
 
 Options: ``--data`` (the data folder), ``--only`` (a subset: datasets and/or
-PyShoe trial names; writes nothing), ``--no-write``.  Plots:
+PyShoe trial names; writes nothing), ``--split`` (one split's PyShoe and IPOL trials; writes nothing),
+``--no-write``.  Plots:
 ``benchmarks/plots/foot_pyshoe_{typical,worst}.png``.
 x-io foot loops
     Loop closure: distance from the start to the final stance position, in
@@ -622,10 +623,11 @@ def _git_rev() -> str:
         return ""
 
 
-def headlines(out) -> dict:
-    ps = out.get("pyshoe", {}).get(REPORT) or {}
-    ip = out.get("ipol", {}).get(REPORT) or {}
-    h: dict = {"split": REPORT}
+def headlines(out, split: str = REPORT) -> dict:
+    """The headline numbers of ``split`` (the report split's are the published ones)."""
+    ps = out.get("pyshoe", {}).get(split) or {}
+    ip = out.get("ipol", {}).get(split) or {}
+    h: dict = {"split": split}
     if ps:
         c = ps["cases"]
         h.update({
@@ -866,11 +868,14 @@ def main(argv=None) -> int:
     ap.add_argument("--no-write", action="store_true",
                     help="write foot_results.json under out/benchmarks/foot/; do not rewrite foot_results.json, "
                          "FOOT_RESULTS.md or the plots")
+    ap.add_argument("--split", choices=(TUNING, REPORT), default=None,
+                    help="run only the PyShoe and IPOL trials of this split (x-io is report only: skipped with "
+                         "--split tuning); writes nothing (implies --no-write)")
     ap.add_argument("--pyshoe-rows", type=Path, default=None, help="reuse PyShoe rows from a JSON file")
     ap.add_argument("--mounting-only", action="store_true",
                     help="rerun only the mode detection, keeping the other results of foot_results.json")
     args = ap.parse_args(argv)
-    write = not args.no_write and not args.only
+    write = not args.no_write and not args.only and not args.split
     if args.mounting_only:
         out = json.loads(RESULTS_JSON.read_text())
         out["mounting"] = run_mounting(args.data)
@@ -888,12 +893,14 @@ def main(argv=None) -> int:
     names = [p for p in parts if p not in sets] or None
     if names and not sets:
         sets = {"pyshoe"}
+    if args.split == TUNING and not sets:
+        sets = {"pyshoe", "ipol"}  # x-io and the mode detection's report numbers: nothing of a tuning split
     want = (lambda d: not sets or d in sets)
     rows = (json.loads(args.pyshoe_rows.read_text()) if args.pyshoe_rows else
-            run_pyshoe(args.data, only=names, progress=True) if want("pyshoe") else [])
+            run_pyshoe(args.data, split=args.split, only=names, progress=True) if want("pyshoe") else [])
     if want("ipol"):
         print("foot: IPOL lower-back walks ...", file=sys.stderr, flush=True)
-    irows = run_ipol(args.data) if want("ipol") else []
+    irows = run_ipol(args.data, split=args.split) if want("ipol") else []
     out = {"rev": _git_rev(),
            "pyshoe": {"trials": _public(rows), TUNING: summarise_pyshoe(rows, TUNING),
                       REPORT: summarise_pyshoe(rows, REPORT)},
@@ -904,7 +911,7 @@ def main(argv=None) -> int:
     if want("mounting"):
         print("foot: mounting (mode detection) ...", file=sys.stderr, flush=True)
         out["mounting"] = run_mounting(args.data)
-    out["headlines"] = headlines(out)
+    out["headlines"] = headlines(out, args.split or REPORT)
     if write:
         out["plots"] = write_plots(rows)
         RESULTS_JSON.write_text(json.dumps(out, indent=1, default=float))
