@@ -82,3 +82,25 @@ def test_a_failed_recording_counts_in_the_median():
     assert n_failed([0.1, float("nan"), None, math.inf]) == 3
     e = position_errors(np.full((10, 3), np.nan), np.zeros((10, 3)))
     assert math.isnan(e["rmse_3d_m"]) and median([e["rmse_3d_m"], 0.1, 0.2]) == 0.2
+
+
+def test_headlines_of_the_split_asked_for():
+    """``python -m benchmarks.foot --split tuning`` prints the tuning split's headlines, not the report's."""
+    from benchmarks.foot import headlines
+
+    def case(v):
+        return {"rmse_3d_median_m": v, "rmse_3d_median_walking_m": v, "rmse_3d_max_m": v, "n_failed": 0,
+                "n_above_0p5_m": 0, "pyshoe_2d_median_m": v / 2, "stance_f1_median_walking": 0.9,
+                "stance_f1_median_all": 0.9, "us_per_sample_median": 1.0}
+
+    def split(v):
+        return {"n_trials": 14, "pyshoe_best_per_trial_median_m": 0.04,
+                "cases": {c: case(v) for c in ("shoe", "shoe_filter", "shoe_fixed", "song", "reference",
+                                               "peer_shoe_fixed")}}
+
+    out = {"pyshoe": {"tuning": split(0.06), "report": split(0.1)}}
+    t, r = headlines(out, "tuning"), headlines(out)
+    assert t["split"] == "tuning" and r["split"] == "report"
+    assert t["pyshoe_metric_median_m"] == 0.03 and t["target_pyshoe_metric_median_not_worse_than_oracle"]
+    assert r["pyshoe_metric_median_m"] == 0.05 and not r["target_pyshoe_metric_median_not_worse_than_oracle"]
+    assert "pyshoe_metric_median_m" not in headlines({"pyshoe": {"report": split(0.1)}}, "tuning")
