@@ -269,7 +269,9 @@ def foot_settings(detector: str = "shoe", aid: str = "zupt", gyro_delay_s: float
         stance_overrides.setdefault("window_s", 0.15)
     if detector == "shoe_fixed":
         detector = "shoe"
+        stance_overrides.setdefault("threshold", 1.0e5)
         stance_overrides.setdefault("adaptive_floor_factor", 0.0)
+        stance_overrides.setdefault("adaptive_ceiling_ratio", 0.0)
     smoother = detector != "shoe_filter"
     if detector == "shoe_filter":
         detector = "shoe"

@@ -137,10 +137,10 @@ def _shaky_walk(seed=0):
 
 
 def test_adaptive_threshold_follows_a_raised_floor_and_leaves_a_quiet_walk_alone():
-    fixed = StanceSettings(detector="shoe", threshold=1e5, adaptive_floor_factor=0.0)
+    fixed = StanceSettings(detector="shoe", threshold=1e5, adaptive_floor_factor=0.0, adaptive_ceiling_ratio=0.0)
     assert StanceSettings().floor_factor == 2.0  # the default (chosen on the PyShoe tuning split)
     adaptive = StanceSettings(detector="shoe", threshold=1e5, adaptive_floor_factor=3.0,
-                              adaptive_floor_window_s=1.2)
+                              adaptive_floor_window_s=1.2, adaptive_ceiling_ratio=0.0)
     w = _shaky_walk()
     acc, gyr = w.recording.streams["acc"].values, w.recording.streams["gyro"].values
     f_fixed = _f1(StanceDetector(fixed).detect(w.t_ns, acc, gyr).stance, w.stance)
@@ -152,6 +152,49 @@ def test_adaptive_threshold_follows_a_raised_floor_and_leaves_a_quiet_walk_alone
     acc, gyr = q.recording.streams["acc"].values, q.recording.streams["gyro"].values
     assert np.array_equal(StanceDetector(fixed).detect(q.t_ns, acc, gyr).stance,
                           StanceDetector(adaptive).detect(q.t_ns, acc, gyr).stance)
+
+
+def _hard_landings(ring_rad_s, seed=3):
+    """A fast walk (swing 0.35 s, pitch 1.4 rad: peak rate ~25 rad/s) whose every landing rings: a 25 Hz
+    oscillation of ``ring_rad_s`` about the foot's x axis decaying over 0.08 s from the start of each stance
+    (the foot stays put: the truth stance includes the ringing)."""
+    from core.foot.stance import runs
+
+    w = simulate_foot(footprints([(8.4, 0.0)]), rate_hz=200.0, acc_noise_m_s2=0.05, gyro_noise_rad_s=0.01,
+                      swing_s=0.35, pitch_rad=1.4, seed=seed)
+    acc, gyr = w.recording.streams["acc"].values, w.recording.streams["gyro"].values.copy()
+    t = (w.t_ns - w.t_ns[0]) * 1e-9
+    for a, b in runs(w.stance)[1:]:  # the first stance is the standing start: no landing
+        tt = t[a:b + 1] - t[a]
+        gyr[a:b + 1, 0] += ring_rad_s * np.exp(-tt / 0.08) * np.sin(2 * np.pi * 25.0 * tt)
+    return w, acc, gyr
+
+
+def test_stride_peak_ceiling_finds_the_ringing_stances_a_fixed_threshold_misses():
+    """The default SHOE threshold also follows the swing's peak (``adaptive_ceiling_ratio``): on hard landings
+    it finds the stance a fixed threshold (old 1e5, or the new 3e4 alone) loses to the ringing, without
+    taking swing samples; on a gentle walk it loses nothing."""
+    from core.foot.stance import ThresholdSource
+
+    assert StanceSettings().ceiling_ratio == 0.01 and StanceSettings().threshold_value == 3e4
+    assert StanceSettings(detector="are").ceiling_ratio == 0.0
+    w, acc, gyr = _hard_landings(3.0)
+    old = StanceDetector(threshold=1e5, adaptive_ceiling_ratio=0.0).detect(w.t_ns, acc, gyr).stance
+    low = StanceDetector(adaptive_ceiling_ratio=0.0).detect(w.t_ns, acc, gyr).stance
+    res = StanceDetector().detect(w.t_ns, acc, gyr)
+
+    def recall(p):
+        return np.sum(p & w.stance) / np.sum(w.stance)
+
+    assert recall(old) < 0.87 and recall(low) < 0.84, (recall(old), recall(low))
+    assert recall(res.stance) > 0.93, recall(res.stance)
+    assert np.sum(res.stance & ~w.stance) <= np.sum(old & ~w.stance) + 2  # no swing taken
+    assert np.mean(res.threshold_source[w.stance] == ThresholdSource.CEILING) > 0.5
+    q, qa, qg = _hard_landings(0.0)  # the same walk landing softly: nothing lost against the old threshold
+    assert _f1(StanceDetector().detect(q.t_ns, qa, qg).stance, q.stance) >= _f1(
+        StanceDetector(threshold=1e5, adaptive_ceiling_ratio=0.0).detect(q.t_ns, qa, qg).stance, q.stance)
+    with pytest.raises(ValueError, match="adaptive_ceiling_ratio"):
+        StanceSettings(adaptive_ceiling_ratio=-0.1)
 
 
 @pytest.mark.parametrize("causal", [False, True])

@@ -34,15 +34,19 @@ stance when the statistic is at most the threshold.
 ``"amv"`` -- acceleration moving variance: ``T = 1/W sum_k |a_k - a_mean|^2`` ((m/s^2)^2)
 ``"are"`` -- angular rate energy: ``T = 1/W sum_k |w_k|^2`` ((rad/s)^2)
 
-Adaptive threshold (``adaptive_floor_factor > 0``; the default for "shoe", :data:`DEFAULT_FLOOR_FACTORS`): the threshold of sample k is
-``max(threshold, adaptive_floor_factor * floor_k)`` where ``floor_k`` is the
-minimum of the statistic (in its own units) over ``adaptive_floor_window_s``
-around k: centred (``|t_j - t_k| <= window / 2``, for replays) or trailing
+Adaptive threshold (``adaptive_floor_factor > 0`` or ``adaptive_ceiling_ratio > 0``; both the default for
+"shoe", :data:`DEFAULT_FLOOR_FACTORS`, :data:`DEFAULT_CEILING_RATIOS`): the threshold of sample k is
+``max(threshold, adaptive_floor_factor * floor_k, adaptive_ceiling_ratio * ceiling_k)`` where ``floor_k``
+and ``ceiling_k`` are the minimum and the maximum of the statistic (in its own units) over
+``adaptive_floor_window_s`` around k: centred (``|t_j - t_k| <= window / 2``, for replays) or trailing
 (``t_k - window <= t_j <= t_k``, causal, ``adaptive_floor_causal``).  When
 running, the foot is never as still as in a walking stance: the statistic's
 floor rises by orders of magnitude and a fixed threshold finds no stance; a
 threshold relative to the floor follows it, while in walking (floor far below
-``threshold / factor``) nothing changes.
+``threshold / factor``) nothing changes.  The ceiling is the swing's peak (for SHOE
+about ``|w|^2 / sigma_w^2`` at the stride's peak angular rate): a stride swung harder lands harder, its
+stance rings and rolls more, and the threshold rises with it (issue #27: a threshold that follows the
+stride's own intensity instead of one per trial); a gentle stride keeps the fixed threshold.
 
 Batch (:meth:`StanceDetector.detect`) works on whole arrays with cumulative
 sums and a sparse table for the moving minimum (O(n log n), no Python loop
@@ -58,6 +62,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, replace
+from enum import IntEnum
 
 import numpy as np
 
@@ -68,13 +73,20 @@ DETECTORS = ("song", "shoe", "amv", "are", "learned")
 WINDOW_ALIGNMENTS = ("auto", "centred", "trailing")
 
 #: default threshold of each detector: "song" the paper's J <= 1; the others chosen on the PyShoe tuning
-#: split with window_s = 0.1 (see docs/foot.md); "learned": nan, ``1 - threshold_p`` of its model file
-DEFAULT_THRESHOLDS = {"song": 1.0, "shoe": 1.0e5, "amv": 0.02, "are": 0.2, "learned": math.nan}
+#: split with window_s = 0.1 (see docs/foot.md; "shoe" 1e5 until the stride-peak ceiling, 3e4 with it);
+#: "learned": nan, ``1 - threshold_p`` of its model file
+DEFAULT_THRESHOLDS = {"song": 1.0, "shoe": 3.0e4, "amv": 0.02, "are": 0.2, "learned": math.nan}
 
 #: default adaptive-threshold factor of each detector (0 = fixed threshold): "shoe" chosen on the PyShoe
 #: tuning split (factor 2 with a 1.2 s window: mean 3-D RMSE of the 14 tuning trials 1.19 -> 0.11 m, the
 #: running trial 2017-11-27-11-11-53 15.1 -> 0.22 m, the walking trials unchanged); the others untuned, fixed
 DEFAULT_FLOOR_FACTORS = {"song": 0.0, "shoe": 2.0, "amv": 0.0, "are": 0.0, "learned": 0.0}
+
+#: default ratio of the threshold to the statistic's moving maximum (the stride's swing peak; 0 = off):
+#: "shoe" chosen on the PyShoe tuning split with the threshold 3e4 (PyShoe's metric, median / mean of the 14
+#: trials, RTS replay 0.0366 / 0.0396 -> 0.0361 / 0.0384 m, forward filter 0.053 / 0.054 -> 0.045 / 0.052 m;
+#: ratio 0.007 / 0.015: 0.0358 / 0.0383, 0.0396 / 0.0394; docs/foot.md); the others untuned, off
+DEFAULT_CEILING_RATIOS = {"song": 0.0, "shoe": 0.01, "amv": 0.0, "are": 0.0, "learned": 0.0}
 
 #: eq. 6 weights (w1 .. w5) of the paper
 SONG_WEIGHTS = (50.0, 100.0, 100.0, 3.0, 5.0)
@@ -95,9 +107,12 @@ class StanceSettings:
     #: adaptive threshold: ``max(threshold, factor * moving minimum of the statistic)``; 0 = off; nan: the
     #: detector's entry of :data:`DEFAULT_FLOOR_FACTORS`
     adaptive_floor_factor: float = math.nan
-    #: the window of that moving minimum (s)
+    #: ... and at least this ratio times the moving maximum of the statistic (the stride's swing peak, its
+    #: own units per the statistic's units); 0 = off; nan: the detector's entry of :data:`DEFAULT_CEILING_RATIOS`
+    adaptive_ceiling_ratio: float = math.nan
+    #: the window of that moving minimum and maximum (s)
     adaptive_floor_window_s: float = 1.2
-    #: the moving minimum over the trailing window (causal, for live use) instead of the centred one
+    #: the moving minimum and maximum over the trailing window (causal, for live use) instead of the centred one
     adaptive_floor_causal: bool = False
     #: "song": eq. 6 weights
     song_weights: tuple = SONG_WEIGHTS
@@ -126,7 +141,10 @@ class StanceSettings:
         if not (math.isnan(self.adaptive_floor_factor)
                 or (self.adaptive_floor_factor >= 0 and math.isfinite(self.adaptive_floor_factor))):
             raise ValueError(f"adaptive_floor_factor must be >= 0, not {self.adaptive_floor_factor!r}")
-        if self.floor_factor > 0 and not (self.adaptive_floor_window_s > 0):
+        r = self.adaptive_ceiling_ratio
+        if not (math.isnan(r) or (r >= 0 and math.isfinite(r))):
+            raise ValueError(f"adaptive_ceiling_ratio must be >= 0, not {r!r}")
+        if self.adaptive and not (self.adaptive_floor_window_s > 0):
             raise ValueError(f"adaptive_floor_window_s must be positive, not {self.adaptive_floor_window_s!r}")
 
     @property
@@ -144,6 +162,17 @@ class StanceSettings:
         return DEFAULT_FLOOR_FACTORS[self.detector] if math.isnan(f) else float(f)
 
     @property
+    def ceiling_ratio(self) -> float:
+        """The stride-peak ratio of the adaptive threshold in use (0: none)."""
+        r = self.adaptive_ceiling_ratio
+        return DEFAULT_CEILING_RATIOS[self.detector] if math.isnan(r) else float(r)
+
+    @property
+    def adaptive(self) -> bool:
+        """Whether the threshold moves with the statistic (its floor, its ceiling or both)."""
+        return self.floor_factor > 0 or self.ceiling_ratio > 0
+
+    @property
     def trailing(self) -> bool:
         """Whether the statistic's window is trailing (``k - k0 .. k``) rather than centred."""
         if self.window_alignment == "auto":
@@ -159,8 +188,8 @@ class StanceSettings:
         return (w, 0) if self.trailing else (w // 2, w // 2)
 
     def floor_span_ns(self) -> tuple[int, int]:
-        """``(back, ahead)`` of the adaptive threshold's moving minimum ((0, 0) when off)."""
-        if self.floor_factor <= 0:
+        """``(back, ahead)`` of the adaptive threshold's moving minimum and maximum ((0, 0) when off)."""
+        if not self.adaptive:
             return (0, 0)
         w = int(round(self.adaptive_floor_window_s * 1e9))
         return (w, 0) if self.adaptive_floor_causal else (w // 2, w // 2)
@@ -182,6 +211,8 @@ class StanceResult:
     detector: str
     #: (n,) the threshold of every sample (the fixed one, or the adaptive one)
     thresholds: np.ndarray | None = None
+    #: (n,) int8 :class:`ThresholdSource`: which bound set each sample's threshold
+    threshold_source: np.ndarray | None = None
 
     def phases(self) -> np.ndarray:
         """Stance phases as ``(m, 2)`` sample index pairs ``[start, end]`` (inclusive)."""
@@ -226,15 +257,40 @@ def window_min(x, lo, hi) -> np.ndarray:
     return out
 
 
-def thresholds(settings: "StanceSettings", t_ns, stat) -> np.ndarray:
-    """The threshold of every sample: fixed, or ``max(threshold, factor * moving minimum)`` (adaptive)."""
+class ThresholdSource(IntEnum):
+    """Which bound set a sample's threshold (:attr:`StanceResult.threshold_source`)."""
+
+    FIXED = 0  #: the fixed threshold
+    FLOOR = 1  #: ``adaptive_floor_factor`` times the moving minimum (a foot never quite still: running)
+    CEILING = 2  #: ``adaptive_ceiling_ratio`` times the moving maximum (a stride swung hard)
+
+
+def threshold_parts(settings: "StanceSettings", t_ns, stat) -> tuple[np.ndarray, np.ndarray]:
+    """The threshold of every sample, ``max(threshold, factor * moving minimum, ratio * moving maximum)``
+    (the fixed one when not adaptive), and which of the three set it (:class:`ThresholdSource`, int8)."""
     s = settings
     stat = np.asarray(stat, dtype=float)
     base = np.full(len(stat), s.threshold_value)
-    if s.floor_factor <= 0 or len(stat) == 0:
-        return base
+    source = np.full(len(stat), ThresholdSource.FIXED, dtype=np.int8)
+    if not s.adaptive or len(stat) == 0:
+        return base, source
     lo, hi = _window_bounds(t_ns, *s.floor_span_ns())
-    return np.maximum(base, s.floor_factor * window_min(stat, lo, hi))
+    thr = base
+    if s.floor_factor > 0:
+        floor = s.floor_factor * window_min(stat, lo, hi)
+        source[floor > thr] = ThresholdSource.FLOOR
+        thr = np.maximum(thr, floor)
+    if s.ceiling_ratio > 0:
+        finite = np.where(np.isfinite(stat), stat, -np.inf)  # a bad sample (inf) is no swing peak
+        ceiling = s.ceiling_ratio * -window_min(-finite, lo, hi)
+        source[ceiling > thr] = ThresholdSource.CEILING
+        thr = np.maximum(thr, ceiling)
+    return thr, source
+
+
+def thresholds(settings: "StanceSettings", t_ns, stat) -> np.ndarray:
+    """The threshold of every sample (:func:`threshold_parts` without the sources)."""
+    return threshold_parts(settings, t_ns, stat)[0]
 
 
 def _wsum(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -325,8 +381,8 @@ class StanceDetector:
         t = np.asarray(t_ns, dtype=np.int64)
         stat = statistic(self.settings, t, acc_b, gyro_b)
         stat = np.where(np.isfinite(stat), stat, np.inf)  # a bad number is never stance
-        thr = thresholds(self.settings, t, stat)
-        return StanceResult(t, stat <= thr, stat, self.threshold, self.settings.detector, thr)
+        thr, source = threshold_parts(self.settings, t, stat)
+        return StanceResult(t, stat <= thr, stat, self.threshold, self.settings.detector, thr, source)
 
     @property
     def delay_s(self) -> float:
@@ -397,12 +453,15 @@ class StanceStream:
                 st.popleft()
                 self._dnext -= 1
             thr = thr0
-            if s.floor_factor > 0:
-                floor = min(v for tj, v in st if tj <= tk + self._fahead)
-                thr = max(thr0, s.floor_factor * floor)
+            if s.adaptive:
+                win = [v for tj, v in st if tj <= tk + self._fahead]
+                if s.floor_factor > 0:
+                    thr = max(thr, s.floor_factor * min(win))
+                if s.ceiling_ratio > 0:
+                    thr = max(thr, s.ceiling_ratio * max((v for v in win if math.isfinite(v)), default=-math.inf))
             out.append((tk, stat <= thr, stat, thr))
             self._dnext += 1
-        if s.floor_factor <= 0:  # no floor window: keep nothing
+        if not s.adaptive:  # no floor window: keep nothing
             while self._dnext > 0:
                 st.popleft()
                 self._dnext -= 1
