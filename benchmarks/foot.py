@@ -669,7 +669,8 @@ def headlines(out, split: str = REPORT) -> dict:
 
 
 CASE_LABELS = {
-    "shoe": "**ours, SHOE (default: adaptive threshold, factor 2 over 1.2 s; RTS smoother of replays)**",
+    "shoe": "**ours, SHOE (default: threshold max(3e4, 2 x floor, 0.01 x swing peak) over 1.2 s; RTS smoother of "
+            "replays)**",
     "shoe_filter": "ours, SHOE default, forward filter only (no smoother: the live app)",
     "shoe_fixed": "ours, SHOE at the fixed threshold 1e5 alone",
     "song": "ours, Song & Park eq. 6 as written (g, J <= 1, trailing 0.15 s)",
