@@ -49,7 +49,7 @@ stance rings and rolls more, and the threshold rises with it (issue #27: a thres
 stride's own intensity instead of one per trial); a gentle stride keeps the fixed threshold.
 
 Batch (:meth:`StanceDetector.detect`) works on whole arrays with cumulative
-sums and a sparse table for the moving minimum (O(n log n), no Python loop
+sums and a sparse table for the moving minimum and maximum (O(n log n), no Python loop
 per sample).  Streaming (:class:`StanceStream`) buffers what the windows need
 and calls the same kernels on the buffer, so it decides each sample
 :attr:`StanceDetector.delay_s` late (the look-ahead of the statistic's window,
