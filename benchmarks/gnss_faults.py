@@ -127,6 +127,8 @@ FAULT_TAIL_S = 30.0
 IPIN_START_SD_M = 1.0
 GOOD_GNSS_MIN_FIXES = 30
 GOOD_GNSS_MEDIAN_M = 10.0
+#: the chi-square 95 % point for 2 degrees of freedom (a consistent filter's NEES exceeds it at 5 % of landmarks)
+CHI2_2DOF_95 = 5.991
 #: the quick subset
 QUICK_SEEDS = (0,)
 QUICK_IPIN = ("T01r01", "T24r01")
@@ -470,6 +472,20 @@ def _ipin_trials(root: Path):
     return ipin2023.trials(root) if ipin2023.available(root) else []
 
 
+def position_nees(err_en_m, cov_en_m2) -> float:
+    """``e^T P^-1 e`` of a 2-D position error ``(east, north)`` (m) against its covariance ``(var_e, cov_en, var_n)``
+    (m^2): chi-square with 2 degrees of freedom for a consistent filter (mean 2, median 1.39, 95 % point 5.99).
+    inf for a covariance that is not positive definite, nan for a non-finite error."""
+    a, b, c = (float(v) for v in cov_en_m2)
+    e, n = (float(v) for v in err_en_m)
+    if not (math.isfinite(e) and math.isfinite(n)):
+        return math.nan
+    det = a * c - b * b
+    if not (det > 0 and a > 0):
+        return math.inf
+    return (c * e * e - 2.0 * b * e * n + a * n * n) / det
+
+
 def gnss_quality(gps, lm) -> dict:
     """How good a file's fixes are against the landmark path (interpolated in time) between the first and last
     landmark: the count, the median reported accuracy and the median distance (m); ``good`` by the module's rule."""
@@ -528,8 +544,12 @@ def ipin_file(root: str, index: int, filters) -> dict:
         # the first, against that landmark's error
         k = np.clip(np.searchsorted(t, lt[1:]), 0, len(t) - 1) if len(t) else np.array([], dtype=int)
         sig = np.array([sigma_max_m(fr.steps[i].cov_en_m2) for i in k])
+        # ... and its normalised error squared (NEES, 2 dof: chi-square mean 2) with the full 2 x 2 covariance
+        d_en = le.est_at_landmarks[1:] - np.column_stack(L)[1:]
+        nees = [position_nees(d, fr.steps[i].cov_en_m2) for d, i in zip(d_en, k)]
         row["columns"][f] = {"lm_mean_m": le.mean_m, "known_start": started,
                              "lm_errors_m": [float(v) for v in le.errors_m], "lm_sigma_m": [float(v) for v in sig],
+                             "lm_nees": [float(v) for v in nees],
                              "fixes_accepted": int(sum(1 for x in fr.fixes if x.accepted)),
                              "fixes": len(fr.fixes)}
     row["seconds"] = time.perf_counter() - t_start
@@ -703,6 +723,14 @@ def headlines(data: dict) -> dict:
             for c in FILTERS:
                 put(f"ipin_fused_landmark_median_m{tag}_{sp}_{c}",
                     _median([r["columns"][c]["lm_mean_m"] for r in sel if c in r["columns"]]))
+        for c in FILTERS:
+            # consistency (issue #26): the NEES of the fused position at every landmark of the split's files
+            nees = np.array([v for r in rows if c in r["columns"] for v in r["columns"][c].get("lm_nees", [])])
+            nees = nees[~np.isnan(nees)]
+            if len(nees):
+                put(f"ipin_fused_nees_median_{sp}_{c}", float(np.median(nees)))
+                put(f"ipin_fused_nees_beyond_95pct_share_{sp}_{c}", float(np.mean(nees > CHI2_2DOF_95)))
+                put(f"ipin_fused_nees_landmarks_{sp}_{c}", len(nees))
     return h
 
 

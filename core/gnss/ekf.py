@@ -107,6 +107,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core import kalman
 from core.conventions import wrap_angle
 
 #: chi-square 99.9 % points for 1 and 2 degrees of freedom
@@ -129,33 +130,26 @@ def sigma_max_m(cov_en_m2) -> float:
 
 def kalman_update(x: np.ndarray, P: np.ndarray, innov: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float, *,
                   zero_gain_rows=(), angle_index: int | None = None) -> tuple[bool, float, np.ndarray, np.ndarray]:
-    """One gated EKF measurement update in Joseph form: ``(accepted, nis, x, P)``.
+    """One gated EKF measurement update in Joseph form: ``(accepted, nis, x, P)``, the update of
+    :func:`core.kalman.correct` applied to a state vector.
 
-    Rejected (NIS beyond ``gate``, a singular innovation covariance, a non-finite
+    Rejected (NIS beyond ``gate``, a singular innovation covariance -- NIS inf --, a non-finite
     correction) returns the state unchanged.  ``zero_gain_rows`` are states not
     estimated (Schmidt consider states; the Joseph form stays valid for that gain);
     ``angle_index`` is wrapped to [-pi, pi).  The filters of this package share it.
     """
-    S = H @ P @ H.T + R
-    try:
-        Si = np.linalg.inv(S)
-    except np.linalg.LinAlgError:
-        return False, math.inf, x, P
-    nis = float(innov @ Si @ innov)
-    if not math.isfinite(nis) or nis > gate:
-        return False, nis, x, P
-    K = P @ H.T @ Si
-    if len(zero_gain_rows):
-        K[list(zero_gain_rows), :] = 0.0
-    dx = K @ innov
-    if not np.all(np.isfinite(dx)):
-        return False, nis, x, P
-    x = x + dx
+    rows = list(zero_gain_rows)
+
+    def consider(K):
+        K[rows, :] = 0.0
+
+    c = kalman.correct(P, innov, H, R, gate, adjust_gain=consider if rows else None)
+    if not c.used:
+        return False, (c.nis if c.nis == c.nis else math.inf), x, P
+    x = x + c.dx
     if angle_index is not None:
         x[angle_index] = wrap_angle(float(x[angle_index]))
-    ikh = np.eye(len(x)) - K @ H
-    P = ikh @ P @ ikh.T + K @ R @ K.T
-    return True, nis, x, 0.5 * (P + P.T)
+    return True, c.nis, x, 0.5 * (c.P + c.P.T)
 
 
 def covariance_cover(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -347,10 +341,15 @@ class PdrEkf:
         return H
 
     def update_position(self, east_m: float, north_m: float, sigma_m: float, fraction: float = 0.0,
-                        *, gate: bool = True) -> UpdateResult:
-        """A GPS position (local ENU, m) with its per-axis SD (m)."""
+                        *, gate: bool = True, noise_scale: float = 1.0) -> UpdateResult:
+        """A GPS position (local ENU, m) with its per-axis SD (m).
+
+        ``noise_scale`` (>= 1): the update uses the fix's white variance times this factor (the fixes' error
+        decorrelation, :class:`core.gnss.fusion.GpsFusion`'s ``gps_error_correlation_s``), while the gate and the
+        NIS it reports use the variance a single fix has (``H P H^T + R``: how far off one fix may be)."""
         sig_before = self.position_sigma_m()
-        if not (math.isfinite(east_m) and math.isfinite(north_m) and sigma_m > 0 and math.isfinite(sigma_m)):
+        if not (math.isfinite(east_m) and math.isfinite(north_m) and sigma_m > 0 and math.isfinite(sigma_m)
+                and noise_scale >= 1.0 and math.isfinite(noise_scale)):
             return UpdateResult(False, (math.nan, math.nan), math.nan, 0.0, sig_before, "not finite")
         f = min(max(float(fraction), 0.0), 1.0)
         # the fix measures the position plus its correlated error (the module docstring's "Honest fixes")
@@ -360,7 +359,14 @@ class PdrEkf:
         before = self.x[:2].copy()
         frozen = () if self.position_updates_heading else (PSI,)
         white_var = (1.0 - self.fix_bias_share) * sigma_m ** 2
-        ok, nis = self._update(innov, H, np.eye(2) * white_var, self.gate_nis_2d if gate else math.inf, frozen)
+        gate_nis = self.gate_nis_2d if gate else math.inf
+        if noise_scale > 1.0:
+            # gate on one fix's spread, update with the decorrelated (inflated) one
+            ok, nis, _, _ = kalman_update(self.x, self.P, innov, H, np.eye(2) * white_var, gate_nis)
+            if ok:
+                ok, _ = self._update(innov, H, np.eye(2) * white_var * noise_scale, math.inf, frozen)
+        else:
+            ok, nis = self._update(innov, H, np.eye(2) * white_var, gate_nis, frozen)
         moved = float(np.hypot(*(self.x[:2] - before))) if ok else 0.0
         reason = "" if ok else f"innovation gate: NIS {nis:.1f} > {self.gate_nis_2d:.1f}"
         return UpdateResult(ok, (float(innov[0]), float(innov[1])), nis, moved, sig_before, reason)

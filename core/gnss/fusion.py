@@ -36,7 +36,7 @@ import copy
 import math
 
 from core.conventions import heading_from_bearing_deg, wrap_angle
-from core.gnss.base import (EVENTS_KEEP_LAST, HACC_PER_SIGMA, FixFusion, FixRecord, FusedStep, FusedTrack,  # noqa: F401 - re-exported
+from core.gnss.base import (EVENTS_KEEP_LAST, HACC_PER_SIGMA, FixDecorrelation, FixFusion, FixRecord, FusedStep, FusedTrack,  # noqa: F401 - re-exported
                             FusionResult, OutageResult, relock_heading_error_rad)
 from core.gnss.ekf import PdrEkf, UpdateResult
 from core.gnss.heading_model import HeadingErrorModel
@@ -117,8 +117,11 @@ class GpsFusion(FixFusion):
                  uncalibrated_heading_sd_rad: float = math.radians(10.0),
                  untrained_heading_sd_rad: float | None = None, untrained_until_course: bool = True,
                  relock_s: float = 20.0,
-                 relock_max_drift: float | None = 0.15, **shared):
+                 relock_max_drift: float | None = 0.15, gps_error_correlation_s: float = 0.0, **shared):
         super().__init__(relock_s=relock_s, relock_max_drift=relock_max_drift, **shared)
+        if not (gps_error_correlation_s >= 0.0 and math.isfinite(gps_error_correlation_s)):
+            raise ValueError(f"gps_error_correlation_s must be finite and >= 0, got {gps_error_correlation_s!r}")
+        self.gps_error_correlation_s = float(gps_error_correlation_s)
         if filter not in FILTERS:
             raise ValueError(f"filter must be one of {FILTERS}, got {filter!r}")
         self.filter = filter
@@ -146,6 +149,7 @@ class GpsFusion(FixFusion):
         self.ekf = PdrEkf() if self._ekf_proto is None else copy.copy(self._ekf_proto)
         self.ekf.reset()
         self._fix_bias_t_ns: int | None = None  # the fix the fixes' correlated error was last propagated to
+        self.decorrelation = FixDecorrelation(self.gps_error_correlation_s)
         if self._trainer_proto is not None:
             self.trainer = self._trainer_proto
             self.trainer.reset()
@@ -265,13 +269,15 @@ class GpsFusion(FixFusion):
             dt = (t_ns - self._fix_bias_t_ns) * 1e-9 if self._fix_bias_t_ns is not None else math.inf
             ekf.propagate_fix_bias(dt, sigma_m)
             self._fix_bias_t_ns = int(t_ns)
-        return ekf.update_position(east, north, sigma_m, self._fraction(t_ns), gate=gate)
+        return ekf.update_position(east, north, sigma_m, self._fraction(t_ns), gate=gate,
+                                   noise_scale=self.decorrelation.noise_scale(t_ns))
 
     def _placed_on_fix(self, t_ns: int, sigma_m: float, relock: bool = False) -> None:
         self.ekf.place_on_fix(sigma_m)
         self._fix_bias_t_ns = int(t_ns)
 
     def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
+        self.decorrelation.used(t_ns)
         if self.filter == "ekf" and self.origin_lat_lon is not None and self.use_course and \
                 speed >= self.course_min_speed_m_s and math.isfinite(course) and self.anchor[0] != t_ns:
             if self.untrained_until_course and not self._course_used and self.untrained_heading_sd_rad is not None \
@@ -294,4 +300,5 @@ class GpsFusion(FixFusion):
         return {**super().status(), "stride_scale": self.stride_scale}
 
     def counters(self) -> dict:
-        return {**super().counters(), "filter": self.filter, "training": self.trainer.counters()}
+        return {**super().counters(), "filter": self.filter, "training": self.trainer.counters(),
+                "fix_decorrelation": self.decorrelation.summary()}
