@@ -1,6 +1,7 @@
-"""Issue #26: a phone's fix error is correlated in time; the fixes' decorrelation (``GpsFusion(gps_error_correlation_s)``,
-:class:`core.gnss.base.FixDecorrelation`) keeps the filter's sigma honest where white fixes collapse it (each
-consistency test failed before the change: the setting did not exist)."""
+"""Issue #26: a phone's fix error is correlated in time.  The reported covariance (``PdrEkf(reported_fix_bias_share)``,
+on by default) and the fixes' decorrelation (``GpsFusion(gps_error_correlation_s)``, off,
+:class:`core.gnss.base.FixDecorrelation`) keep the sigma honest where white fixes collapse it (each consistency test
+failed before the change: the white filter's own P was what the fused track reported)."""
 
 from __future__ import annotations
 
@@ -113,39 +114,124 @@ def test_the_gate_and_the_nis_see_one_fix_s_spread_not_the_inflated_one():
         assert not r.accepted and np.all(np.isfinite(b.x))
 
 
-def test_the_fusion_reports_its_decorrelation_and_a_standing_walker_keeps_an_honest_sigma():
-    """GpsFusion end to end (IPIN T01r04's standstill, tuning: the receiver held one position 5.3 m off for 30 s and
-    the white filter's sigma fell to 0.5 m): 40 identical fixes 5 m off while the walker stands; white, the
-    position sigma ends below 1 m, 5 m from the truth; decorrelated (45 s), the sigma covers the error."""
-    from core.geodesy import enu_to_geodetic
-    from core.gnss.fusion import GpsFusion
-    from core.recording import make_stream
+def _standing_walk():
+    """20 steps East, then the walker stands 60 s while the receiver gives 40 identical fixes 5 m off (IPIN T01r04's
+    standstill, tuning: one position 5.3 m off for 30 s, where the white filter's sigma fell to 0.5 m)."""
     from types import SimpleNamespace
+
+    from core.geodesy import enu_to_geodetic
     from core.pdr.pipeline import Step
+    from core.recording import make_stream
 
     steps = [Step(index=k, t_ns=int((k + 1) * STEP_S * 1e9), length_m=STEP_M, heading_rad=0.0,
                   east_m=(k + 1) * STEP_M, north_m=0.0, features=SimpleNamespace(duration_s=STEP_S),
                   mag_trusted=True) for k in range(20)]
-    stop = 20 * STEP_M
-    t_end = 20 * STEP_S
+    stop, t_end = 20 * STEP_M, 20 * STEP_S
     steps.append(Step(index=20, t_ns=int((t_end + 60.0) * 1e9), length_m=0.0, heading_rad=0.0, east_m=stop,
                       north_m=0.0, features=SimpleNamespace(duration_s=STEP_S), mag_trusted=True))
     t = t_end + 1.0 + np.arange(40)
     lat, lon = enu_to_geodetic(np.full(40, stop - 4.0), np.full(40, 3.0), (52.0, 5.0))
     fixes = make_stream("gps", (t * 1e9).astype(np.int64),
                         np.column_stack([lat, lon, np.zeros(40), np.full(40, 4.0), np.zeros(40), np.full(40, np.nan)]))
-    out = {}
-    for tau in (0.0, 45.0):
-        f = GpsFusion(start=(52.0, 5.0, 0.5), judge=None, untrained_heading_sd_rad=math.radians(10.0),
-                      gps_error_correlation_s=tau)
-        fr = f.run(steps, fixes, 0)
-        last = fr.steps[-1]
-        err = math.hypot(last.east_m - stop, last.north_m)
-        out[tau] = (err, sigma_max_m(last.cov_en_m2), fr.counters["fix_decorrelation"])
-    (e0, s0, c0), (e1, s1, c1) = out[0.0], out[45.0]
-    assert c0["fixes_used"] == c1["fixes_used"] == 40 and c0["noise_scale_max"] == 1.0
-    assert c1["noise_scale_max"] > 30.0
-    assert s0 < 1.0 and e0 > 3.0 * s0  # white: overconfident
-    assert e1 < 2.5 * s1  # decorrelated: the sigma covers the error (2-D, 95 %: 2.45 sigma)
+    return steps, fixes, stop
+
+
+@pytest.mark.parametrize("how", ["white", "reported", "decorrelated"])
+def test_a_standing_walker_under_a_steady_fix_error_gets_an_honest_sigma(how):
+    """GpsFusion end to end: white (the behaviour before: ``reported_fix_bias_share=0``), the position sigma ends
+    below 1 m, 4-5 m from the truth; with the reported covariance (the default) the track is the same and its sigma
+    covers the error; decorrelated (45 s) the fixes pull less and the sigma covers the error too."""
+    from core.gnss.fusion import GpsFusion
+
+    steps, fixes, stop = _standing_walk()
+    kw = dict(start=(52.0, 5.0, 0.5), judge=None, untrained_heading_sd_rad=math.radians(10.0))
+    white = GpsFusion(ekf=PdrEkf(reported_fix_bias_share=0.0), **kw).run(steps, fixes, 0)
+    fr = {"white": white, "reported": GpsFusion(**kw).run(steps, fixes, 0),
+          "decorrelated": GpsFusion(gps_error_correlation_s=45.0, **kw).run(steps, fixes, 0)}[how]
+    last = fr.steps[-1]
+    err, sigma = math.hypot(last.east_m - stop, last.north_m), sigma_max_m(last.cov_en_m2)
+    dec = fr.counters["fix_decorrelation"]
+    assert dec["fixes_used"] == 40
+    if how == "white":
+        assert sigma < 1.0 and err > 3.0 * sigma  # overconfident
+    else:
+        assert err < 2.5 * sigma  # covered (2-D, 95 %: 2.45 sigma)
+    if how == "reported":  # a report, not a filter change: the same track
+        assert [(s.east_m, s.north_m) for s in fr.steps] == [(s.east_m, s.north_m) for s in white.steps]
+    assert (dec["noise_scale_max"] > 30.0) == (how == "decorrelated")
     with pytest.raises(ValueError):
         GpsFusion(gps_error_correlation_s=-5.0)
+
+
+def test_the_reported_covariance_is_consistent_under_a_correlated_fix_error_and_leaves_the_track_alone():
+    """The white filter's own P against fixes off by a Gauss-Markov error (5 m, 45 s) is far too small (NEES ~ 60);
+    the reported covariance (the same gain, the fixes' error modelled as 95 % Gauss-Markov: the error covariance of
+    that filter's estimate) is in a chi-square band, and the estimate is the white filter's to the bit."""
+    own, rep = [], []
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        dt = FIX_EVERY * STEP_S
+        errs = _gm_errors(rng, 121, 5.0, 45.0, dt)
+        a, b = PdrEkf(reported_fix_bias_share=0.0), PdrEkf(reported_fix_bias_share=0.95)
+        start = rng.normal(0.0, 10.0, 2)
+        for f in (a, b):
+            f.initialize(*start, 10.0, STEP_M, 0.0, heading_sd_rad=math.radians(2.0), bias_sd_rad=1e-4,
+                         scale_sd=1e-4)
+        truth = np.zeros(2)
+        for k in range(240):
+            h = rng.normal(0.0, math.radians(4.0))
+            truth += (STEP_M, 0.0)
+            for f in (a, b):
+                f.set_consider_sd(1e-4, 1e-4)
+                f.step(STEP_M, h)
+            if k % FIX_EVERY:
+                continue
+            j = k // FIX_EVERY
+            z = truth + errs[j]
+            for f in (a, b):
+                f.propagate_fix_bias(dt if j else math.inf, 5.0)
+                assert f.update_position(z[0], z[1], 5.0, gate=False).accepted
+            if j >= 20 and j % 20 == 0:
+                d = a.x[:2] - truth
+                own.append(float(d @ np.linalg.solve(a.P[:2, :2], d)))
+                rep.append(float(d @ np.linalg.solve(b.reported_cov[:2, :2], d)))
+                assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+        assert np.all(np.linalg.eigvalsh(b.C) > -1e-9)
+    assert np.mean(own) > 10.0  # the white filter's own sigma: far too small (the behaviour before)
+    assert 0.8 < np.mean(rep) < 3.6
+    assert np.mean(np.array(rep) > 5.991) < 0.15
+
+
+@pytest.mark.parametrize("psi", [-2.5, 0.0, 1.2])
+def test_the_fix_measurement_jacobian_matches_finite_differences(psi):
+    from tests._gnss_helpers import num_jac
+
+    x = np.array([3.0, -4.0, 0.72, psi, 0.01, 0.02, 1.5, -2.0])
+    for frac in (0.0, 0.4, 1.0):
+        np.testing.assert_allclose(PdrEkf.fix_measurement_jacobian(x, frac),
+                                   num_jac(lambda v, f=frac: PdrEkf.fix_measurement(v, f), x), atol=1e-7)
+
+
+def test_the_reported_covariance_follows_every_change_of_the_filter_s_and_stays_finite():
+    """Anchor, relock widening, reset, consider SDs, a non-finite fix: ``C`` moves with ``P`` (its position block
+    never below the filter's own after a fix update, PSD, finite)."""
+    f = PdrEkf()
+    f.initialize(0.0, 0.0, 1.0, STEP_M, 0.0)
+    f.place_on_fix(3.0)
+    assert f.C[0, 6] == pytest.approx(-0.95 * 9.0) and f.P[0, 6] == 0.0
+    for k in range(10):
+        f.set_consider_sd(math.radians(5.0), 0.02)
+        f.step(STEP_M, 0.0)
+        f.propagate_fix_bias(1.2, 3.0)
+        f.update_position(STEP_M * (k + 1) + 1.0, 2.0, 3.0)
+    assert f.C[0, 0] > f.P[0, 0] and f.C[1, 1] > f.P[1, 1]
+    f.widen_position((3.0, -4.0))
+    before = f.C.copy()
+    assert not f.update_position(math.nan, 0.0, 3.0).accepted and np.array_equal(f.C, before)
+    f.propagate_fix_bias(math.nan, 3.0)
+    assert np.array_equal(f.C, before)
+    f.reset_position(5.0, 5.0, 2.0)
+    assert f.C[0, 0] == f.P[0, 0] == 4.0
+    assert np.all(np.isfinite(f.C)) and np.all(np.linalg.eigvalsh(f.C) > -1e-9)
+    with pytest.raises(ValueError):
+        PdrEkf(reported_fix_bias_share=1.0)

@@ -557,6 +557,15 @@ class FixFusion:
         """(length_m, heading_rad) of the step just filtered, for the fused track."""
         raise NotImplementedError
 
+    def _reported_cov(self) -> np.ndarray:
+        """The covariance the fused track reports (its ``[:2, :2]``): the filter's ``P`` unless the subclass keeps
+        one that models what its gain does not (Chen's: :attr:`core.gnss.ekf.PdrEkf.reported_cov`)."""
+        return self.filt.P
+
+    def _widen_position(self, offset_m) -> None:
+        """A relock takes a gated fix with the position's covariance widened by ``offset_m`` (E, N) outer itself."""
+        self.filt.P[:2, :2] += np.outer(offset_m, offset_m)
+
     # -- input ------------------------------------------------------------------------
     def add_fix(self, t_ns: int, values) -> None:
         """A GPS event (``values`` as the ``gps`` stream: lat, lon, alt, hacc, speed, course)."""
@@ -817,7 +826,7 @@ class FixFusion:
                 self._placed_on_fix(t_ns, sigma, relock=True)
                 res = UpdateResult(True, res.innovation, math.nan, float(np.hypot(*d)), res.sigma_before_m)
             else:
-                filt.P[:2, :2] += np.outer(d, d)
+                self._widen_position(d)
                 res = self._update_position(t_ns, east, north, sigma, False)
             self.n_relocked += 1
             relocked = True
@@ -981,7 +990,7 @@ class FixFusion:
         if self.origin_lat_lon is not None:
             lat, lon = enu_to_geodetic(e, n, self.origin_lat_lon)
         fused = self._last_accept_ns is not None and t_ns - self._last_accept_ns <= self.fused_timeout_ns
-        P = filt.P
+        P = self._reported_cov()
         length, heading = self._step_output()
         return FusedStep(index, t_ns, e, n, float(lat), float(lon), float(length), float(heading),
                          (float(P[0, 0]), float(P[0, 1]), float(P[1, 1])), "fused" if fused else "dr")
@@ -990,7 +999,8 @@ class FixFusion:
         """Live position and uncertainty for the app (local ENU)."""
         filt = self.filt
         return {"east_m": float(filt.x[0]), "north_m": float(filt.x[1]),
-                "sigma_m": filt.position_sigma_m() if filt.initialized else math.nan,
+                "sigma_m": sigma_max_m(tuple(self._reported_cov()[[0, 0, 1], [0, 1, 1]])) if filt.initialized
+                else math.nan,
                 "anchored": self.origin_lat_lon is not None, "filter": self.name}
 
     def counters(self) -> dict:
