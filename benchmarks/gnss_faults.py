@@ -261,7 +261,13 @@ def sim_walk(seed: int, split: str, filters) -> dict:
     lat, lon = enu_to_geodetic(e, n, origin)
     row["columns"]["pdr"] = measures(np.column_stack(geodetic_to_enu(lat, lon, truth.origin_lat_lon)))
     for f, fr in frs.items():
-        d = measures(fused_en(fr, truth.origin_lat_lon))
+        fen = fused_en(fr, truth.origin_lat_lon)
+        d = measures(fen)
+        # consistency (issue #26): the fused position's NEES against the truth at every step (2 dof)
+        nees = np.array([position_nees(x, s.cov_en_m2) for x, s in zip(fen - truth_en, fr.steps)])
+        nees = nees[~np.isnan(nees)]
+        d["nees_median"] = float(np.median(nees)) if len(nees) else None
+        d["nees_beyond_95pct_share"] = float(np.mean(nees > CHI2_2DOF_95)) if len(nees) else None
         acc = np.zeros(len(g.t_ns), dtype=bool)
         t_acc = np.array([x.t_ns for x in fr.fixes if x.accepted], dtype=np.int64)
         k = np.searchsorted(g.t_ns, t_acc)
@@ -689,6 +695,10 @@ def headlines(data: dict) -> dict:
                     _median([r["columns"][c]["outage_end_m"] for r in rows if c in r["columns"]
                              and r["noise_hacc"] == hacc]))
             put(f"gps_track_median_m_{sp}_{c}", _median([x["track_median_m"] for x in cols]))
+            if c != "pdr":
+                put(f"gps_track_nees_median_{sp}_{c}", _median([x.get("nees_median") for x in cols]))
+                put(f"gps_track_nees_beyond_95pct_share_{sp}_{c}",
+                    _median([x.get("nees_beyond_95pct_share") for x in cols]))
             put(f"gps_track_max_m_{sp}_{c}", _median([x["track_max_m"] for x in cols]))
             put(f"gps_track_worst_m_{sp}_{c}", max((x["track_max_m"] for x in cols if x["track_max_m"] is not None),
                                                    default=None))
