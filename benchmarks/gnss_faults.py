@@ -840,6 +840,9 @@ def markdown(data: dict) -> str:
                 ("max error in the jumps (+30 s)", "gps_fault_jump_max_m", 1),
                 ("max error in the lying window (+30 s)", "gps_fault_lying_max_m", 1),
                 ("max error in the drift (+30 s)", "gps_fault_drift_max_m", 1),
+                ("fused NEES against the truth, median per walk (chi2 2 dof: 1.39)", "gps_track_nees_median", 2),
+                ("... share of steps beyond its 95 % point (median over walks)",
+                 "gps_track_nees_beyond_95pct_share", 2),
             ]
             for label, key, nd in rows:
                 vals = [h.get(f"{key}_{sp}_{c}") for c in cols]
@@ -938,6 +941,14 @@ def markdown(data: dict) -> str:
                     [h.get(f"ipin_fused_landmark_median_m{tag}_{sp}_{c}") for c in filters]
                 if n:
                     lines.append(f"| {sp}, {label} (median) | {n} | " + " | ".join(_f(v, 2) for v in vals) + " |")
+            nees = [(h.get(f"ipin_fused_nees_median_{sp}_{c}"), h.get(f"ipin_fused_nees_beyond_95pct_share_{sp}_{c}"))
+                    for c in filters]
+            if any(m is not None for m, _ in nees):
+                # consistency (issue #26): chi-square 2 dof, median 1.39, 5 % beyond its 95 % point
+                lines.append(f"| {sp}: fused NEES at the landmarks, median / % beyond the chi2(2) 95 % point | "
+                             f"{int(h.get(f'ipin_fused_nees_landmarks_{sp}_{filters[0]}', 0))} landmarks | - | "
+                             + " | ".join(f"{_f(m, 2)} / {_f(None if b is None else 100.0 * b)}" for m, b in nees)
+                             + " |")
         lines += ["", "| file | split | phone | fixes | reported accuracy median (m) | fix error median (m) | GNSS good | "
                   + " | ".join(cols) + " | " + " | ".join(f"{c} fixes used" for c in filters) + " |",
                   "|---|---|---|---|---|---|---|" + "---|" * (len(cols) + len(filters))]
