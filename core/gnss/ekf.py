@@ -1,8 +1,8 @@
 """The PDR extended Kalman filter of Chen et al. (2010), eq. 13, with GPS updates.
 
 State ``x = [E, N, l, psi, b, k, gE, gN]`` (``b, k`` are consider states, ``gE, gN`` the fixes' correlated
-error, below; beside ``P`` the filter keeps ``C``, the covariance it reports, below): East and North position (m, the walk's local
-ENU frame), step length (m) and walking heading (rad, counter-clockwise from
+error, below; beside ``P`` the filter keeps ``C``, the covariance it reports, below): East and North position
+(m, the walk's local ENU frame), step length (m) and walking heading (rad, counter-clockwise from
 East as everywhere in :mod:`core`).  The paper writes eq. 13 with a compass
 bearing ``a`` (clockwise from North)::
 

@@ -36,8 +36,8 @@ import copy
 import math
 
 from core.conventions import heading_from_bearing_deg, wrap_angle
-from core.gnss.base import (EVENTS_KEEP_LAST, HACC_PER_SIGMA, FixDecorrelation, FixFusion, FixRecord, FusedStep, FusedTrack,  # noqa: F401 - re-exported
-                            FusionResult, OutageResult, relock_heading_error_rad)
+from core.gnss.base import (EVENTS_KEEP_LAST, HACC_PER_SIGMA, FixDecorrelation, FixFusion,  # noqa: F401 - re-exported
+                            FixRecord, FusedStep, FusedTrack, FusionResult, OutageResult, relock_heading_error_rad)
 from core.gnss.ekf import PdrEkf, UpdateResult
 from core.gnss.heading_model import HeadingErrorModel
 from core.gnss.training import OnlineTrainer
