@@ -127,6 +127,8 @@ FAULT_TAIL_S = 30.0
 IPIN_START_SD_M = 1.0
 GOOD_GNSS_MIN_FIXES = 30
 GOOD_GNSS_MEDIAN_M = 10.0
+#: the chi-square 95 % point for 2 degrees of freedom (a consistent filter's NEES exceeds it at 5 % of landmarks)
+CHI2_2DOF_95 = 5.991
 #: the quick subset
 QUICK_SEEDS = (0,)
 QUICK_IPIN = ("T01r01", "T24r01")
@@ -259,7 +261,13 @@ def sim_walk(seed: int, split: str, filters) -> dict:
     lat, lon = enu_to_geodetic(e, n, origin)
     row["columns"]["pdr"] = measures(np.column_stack(geodetic_to_enu(lat, lon, truth.origin_lat_lon)))
     for f, fr in frs.items():
-        d = measures(fused_en(fr, truth.origin_lat_lon))
+        fen = fused_en(fr, truth.origin_lat_lon)
+        d = measures(fen)
+        # consistency (issue #26): the fused position's NEES against the truth at every step (2 dof)
+        nees = np.array([position_nees(x, s.cov_en_m2) for x, s in zip(fen - truth_en, fr.steps)])
+        nees = nees[~np.isnan(nees)]
+        d["nees_median"] = float(np.median(nees)) if len(nees) else None
+        d["nees_beyond_95pct_share"] = float(np.mean(nees > CHI2_2DOF_95)) if len(nees) else None
         acc = np.zeros(len(g.t_ns), dtype=bool)
         t_acc = np.array([x.t_ns for x in fr.fixes if x.accepted], dtype=np.int64)
         k = np.searchsorted(g.t_ns, t_acc)
@@ -470,6 +478,20 @@ def _ipin_trials(root: Path):
     return ipin2023.trials(root) if ipin2023.available(root) else []
 
 
+def position_nees(err_en_m, cov_en_m2) -> float:
+    """``e^T P^-1 e`` of a 2-D position error ``(east, north)`` (m) against its covariance ``(var_e, cov_en, var_n)``
+    (m^2): chi-square with 2 degrees of freedom for a consistent filter (mean 2, median 1.39, 95 % point 5.99).
+    inf for a covariance that is not positive definite, nan for a non-finite error."""
+    a, b, c = (float(v) for v in cov_en_m2)
+    e, n = (float(v) for v in err_en_m)
+    if not (math.isfinite(e) and math.isfinite(n)):
+        return math.nan
+    det = a * c - b * b
+    if not (det > 0 and a > 0):
+        return math.inf
+    return (c * e * e - 2.0 * b * e * n + a * n * n) / det
+
+
 def gnss_quality(gps, lm) -> dict:
     """How good a file's fixes are against the landmark path (interpolated in time) between the first and last
     landmark: the count, the median reported accuracy and the median distance (m); ``good`` by the module's rule."""
@@ -528,8 +550,12 @@ def ipin_file(root: str, index: int, filters) -> dict:
         # the first, against that landmark's error
         k = np.clip(np.searchsorted(t, lt[1:]), 0, len(t) - 1) if len(t) else np.array([], dtype=int)
         sig = np.array([sigma_max_m(fr.steps[i].cov_en_m2) for i in k])
+        # ... and its normalised error squared (NEES, 2 dof: chi-square mean 2) with the full 2 x 2 covariance
+        d_en = le.est_at_landmarks[1:] - np.column_stack(L)[1:]
+        nees = [position_nees(d, fr.steps[i].cov_en_m2) for d, i in zip(d_en, k)]
         row["columns"][f] = {"lm_mean_m": le.mean_m, "known_start": started,
                              "lm_errors_m": [float(v) for v in le.errors_m], "lm_sigma_m": [float(v) for v in sig],
+                             "lm_nees": [float(v) for v in nees],
                              "fixes_accepted": int(sum(1 for x in fr.fixes if x.accepted)),
                              "fixes": len(fr.fixes)}
     row["seconds"] = time.perf_counter() - t_start
@@ -669,6 +695,10 @@ def headlines(data: dict) -> dict:
                     _median([r["columns"][c]["outage_end_m"] for r in rows if c in r["columns"]
                              and r["noise_hacc"] == hacc]))
             put(f"gps_track_median_m_{sp}_{c}", _median([x["track_median_m"] for x in cols]))
+            if c != "pdr":
+                put(f"gps_track_nees_median_{sp}_{c}", _median([x.get("nees_median") for x in cols]))
+                put(f"gps_track_nees_beyond_95pct_share_{sp}_{c}",
+                    _median([x.get("nees_beyond_95pct_share") for x in cols]))
             put(f"gps_track_max_m_{sp}_{c}", _median([x["track_max_m"] for x in cols]))
             put(f"gps_track_worst_m_{sp}_{c}", max((x["track_max_m"] for x in cols if x["track_max_m"] is not None),
                                                    default=None))
@@ -703,6 +733,14 @@ def headlines(data: dict) -> dict:
             for c in FILTERS:
                 put(f"ipin_fused_landmark_median_m{tag}_{sp}_{c}",
                     _median([r["columns"][c]["lm_mean_m"] for r in sel if c in r["columns"]]))
+        for c in FILTERS:
+            # consistency (issue #26): the NEES of the fused position at every landmark of the split's files
+            nees = np.array([v for r in rows if c in r["columns"] for v in r["columns"][c].get("lm_nees", [])])
+            nees = nees[~np.isnan(nees)]
+            if len(nees):
+                put(f"ipin_fused_nees_median_{sp}_{c}", float(np.median(nees)))
+                put(f"ipin_fused_nees_beyond_95pct_share_{sp}_{c}", float(np.mean(nees > CHI2_2DOF_95)))
+                put(f"ipin_fused_nees_landmarks_{sp}_{c}", len(nees))
     return h
 
 
@@ -802,6 +840,9 @@ def markdown(data: dict) -> str:
                 ("max error in the jumps (+30 s)", "gps_fault_jump_max_m", 1),
                 ("max error in the lying window (+30 s)", "gps_fault_lying_max_m", 1),
                 ("max error in the drift (+30 s)", "gps_fault_drift_max_m", 1),
+                ("fused NEES against the truth, median per walk (chi2 2 dof: 1.39)", "gps_track_nees_median", 2),
+                ("... share of steps beyond its 95 % point (median over walks)",
+                 "gps_track_nees_beyond_95pct_share", 2),
             ]
             for label, key, nd in rows:
                 vals = [h.get(f"{key}_{sp}_{c}") for c in cols]
@@ -900,6 +941,14 @@ def markdown(data: dict) -> str:
                     [h.get(f"ipin_fused_landmark_median_m{tag}_{sp}_{c}") for c in filters]
                 if n:
                     lines.append(f"| {sp}, {label} (median) | {n} | " + " | ".join(_f(v, 2) for v in vals) + " |")
+            nees = [(h.get(f"ipin_fused_nees_median_{sp}_{c}"), h.get(f"ipin_fused_nees_beyond_95pct_share_{sp}_{c}"))
+                    for c in filters]
+            if any(m is not None for m, _ in nees):
+                # consistency (issue #26): chi-square 2 dof, median 1.39, 5 % beyond its 95 % point
+                lines.append(f"| {sp}: fused NEES at the landmarks, median / % beyond the chi2(2) 95 % point | "
+                             f"{int(h.get(f'ipin_fused_nees_landmarks_{sp}_{filters[0]}', 0))} landmarks | - | "
+                             + " | ".join(f"{_f(m, 2)} / {_f(None if b is None else 100.0 * b)}" for m, b in nees)
+                             + " |")
         lines += ["", "| file | split | phone | fixes | reported accuracy median (m) | fix error median (m) | GNSS good | "
                   + " | ".join(cols) + " | " + " | ".join(f"{c} fixes used" for c in filters) + " |",
                   "|---|---|---|---|---|---|---|" + "---|" * (len(cols) + len(filters))]

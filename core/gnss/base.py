@@ -229,6 +229,77 @@ def first_good_fix(gps, max_hacc_m: float = ANCHOR_MAX_HACC_M):
     return int(gps.t_ns[k]), float(v[k, 0]), float(v[k, 1]), float(v[k, 2])
 
 
+class FixDecorrelation:
+    """What a fix adds to the fixes the filter took before it, when their errors are correlated in time: the cheap
+    form of a time-correlated fix error (issue #26).
+
+    A phone's position error is not white: on IPIN's tuning routes the per-axis error of consecutive fixes
+    correlates 0.99 at 1 s, 0.80 at 10 s, 0.54 at 30 s (see :mod:`core.gnss.ekf`, "Honest fixes"), a first-order
+    Gauss-Markov process, ``rho(dt) = exp(-dt / tau)``.  A filter that takes each 1-Hz fix as independent
+    believes the mean of ``n`` of them to ``sigma / sqrt(n)`` while they are off together: its covariance
+    collapses and the track follows a biased stream.  For samples of such a process (per-axis SD ``sigma``) the
+    best estimate of a constant from ``n`` fixes ``dt`` apart has the information (generalised least squares with
+    the covariance ``sigma^2 rho^|i - j|``, whose inverse is tridiagonal)::
+
+        1^T C^-1 1 = (1 + (n - 1) (1 - rho) / (1 + rho)) / sigma^2
+
+    the first fix counts whole, every further one ``(1 - rho) / (1 + rho)`` of an independent fix: the new part of
+    its error (``e_k - rho e_{k-1}``, white, variance ``sigma^2 (1 - rho^2)``) measures ``(1 - rho)`` of the
+    position.  So a fix ``dt`` after the last one the filter used gets its variance multiplied by::
+
+        s = (1 + rho) / (1 - rho),   rho = exp(-dt / tau)
+
+    (``2 tau / dt`` for ``dt << tau``: one independent fix per ``2 tau``; 1 after a gap of several ``tau``).  This
+    is the Kalman filter's weighting of that information for a position that stays put; for a walker it gives up
+    what the fixes' differences say about the motion (the state-augmenting form that keeps it, a Gauss-Markov
+    error state, is :class:`core.gnss.ekf.PdrEkf`'s ``fix_bias_share``, after Brown & Hwang, Chen et al. 2010's
+    ref. [19], which the EKF of eq. 13 follows).
+
+    ``tau_s`` 0: white fixes (the scale is 1).  State: the last used fix's time, set in :meth:`reset`;
+    diagnostics as data: :meth:`summary`.
+    """
+
+    #: the largest variance factor (two fixes at one time: the second adds nothing)
+    MAX_SCALE = 1e6
+
+    def __init__(self, tau_s: float = 0.0):
+        if not (tau_s >= 0.0 and math.isfinite(tau_s)):
+            raise ValueError(f"tau_s must be finite and >= 0, got {tau_s!r}")
+        self.tau_s = float(tau_s)
+        self.reset()
+
+    def reset(self) -> None:
+        self._t_last_ns: int | None = None
+        self.n_used = 0
+        self._scale_sum = 0.0
+        self.scale_max = 1.0
+
+    def noise_scale(self, t_ns: int) -> float:
+        """The factor on a fix's variance at ``t_ns`` (>= 1; 1 with ``tau_s`` 0 or before any fix was used)."""
+        if self._t_last_ns is None or self.tau_s <= 0.0:
+            return 1.0
+        x = max(int(t_ns) - self._t_last_ns, 0) * 1e-9 / self.tau_s
+        if x <= 0.0:
+            return self.MAX_SCALE
+        # (1 + rho) / (1 - rho) = coth(x / 2), written so that it stays exact for small x
+        return min(1.0 + 2.0 / math.expm1(x), self.MAX_SCALE)
+
+    def used(self, t_ns: int) -> None:
+        """The filter took the fix at ``t_ns`` (its scale joins the diagnostics)."""
+        t_ns = int(t_ns)
+        scale = self.noise_scale(t_ns)
+        self.n_used += 1
+        self._scale_sum += scale
+        self.scale_max = max(self.scale_max, scale)
+        self._t_last_ns = t_ns if self._t_last_ns is None else max(t_ns, self._t_last_ns)
+
+    def summary(self) -> dict:
+        """``tau_s``, the fixes used, the mean and largest variance factor they were given."""
+        return {"tau_s": self.tau_s, "fixes_used": self.n_used,
+                "noise_scale_mean": self._scale_sum / self.n_used if self.n_used else math.nan,
+                "noise_scale_max": self.scale_max}
+
+
 def relock_heading_error_rad(offset_m: float, walked_m: float) -> float:
     """The heading error a relock showed: a track ``offset_m`` off after ``walked_m`` of dead reckoning since the
     last accepted fix turned by ``2 asin(offset / 2 walked)`` (pi when it walked less than half the offset)."""
@@ -485,6 +556,15 @@ class FixFusion:
     def _step_output(self) -> tuple[float, float]:
         """(length_m, heading_rad) of the step just filtered, for the fused track."""
         raise NotImplementedError
+
+    def _reported_cov(self) -> np.ndarray:
+        """The covariance the fused track reports (its ``[:2, :2]``): the filter's ``P`` unless the subclass keeps
+        one that models what its gain does not (Chen's: :attr:`core.gnss.ekf.PdrEkf.reported_cov`)."""
+        return self.filt.P
+
+    def _widen_position(self, offset_m) -> None:
+        """A relock takes a gated fix with the position's covariance widened by ``offset_m`` (E, N) outer itself."""
+        self.filt.P[:2, :2] += np.outer(offset_m, offset_m)
 
     # -- input ------------------------------------------------------------------------
     def add_fix(self, t_ns: int, values) -> None:
@@ -746,7 +826,7 @@ class FixFusion:
                 self._placed_on_fix(t_ns, sigma, relock=True)
                 res = UpdateResult(True, res.innovation, math.nan, float(np.hypot(*d)), res.sigma_before_m)
             else:
-                filt.P[:2, :2] += np.outer(d, d)
+                self._widen_position(d)
                 res = self._update_position(t_ns, east, north, sigma, False)
             self.n_relocked += 1
             relocked = True
@@ -910,7 +990,7 @@ class FixFusion:
         if self.origin_lat_lon is not None:
             lat, lon = enu_to_geodetic(e, n, self.origin_lat_lon)
         fused = self._last_accept_ns is not None and t_ns - self._last_accept_ns <= self.fused_timeout_ns
-        P = filt.P
+        P = self._reported_cov()
         length, heading = self._step_output()
         return FusedStep(index, t_ns, e, n, float(lat), float(lon), float(length), float(heading),
                          (float(P[0, 0]), float(P[0, 1]), float(P[1, 1])), "fused" if fused else "dr")
@@ -919,7 +999,8 @@ class FixFusion:
         """Live position and uncertainty for the app (local ENU)."""
         filt = self.filt
         return {"east_m": float(filt.x[0]), "north_m": float(filt.x[1]),
-                "sigma_m": filt.position_sigma_m() if filt.initialized else math.nan,
+                "sigma_m": sigma_max_m(tuple(self._reported_cov()[[0, 0, 1], [0, 1, 1]])) if filt.initialized
+                else math.nan,
                 "anchored": self.origin_lat_lon is not None, "filter": self.name}
 
     def counters(self) -> dict:

@@ -36,8 +36,8 @@ import copy
 import math
 
 from core.conventions import heading_from_bearing_deg, wrap_angle
-from core.gnss.base import (EVENTS_KEEP_LAST, HACC_PER_SIGMA, FixFusion, FixRecord, FusedStep, FusedTrack,  # noqa: F401 - re-exported
-                            FusionResult, OutageResult, relock_heading_error_rad)
+from core.gnss.base import (EVENTS_KEEP_LAST, HACC_PER_SIGMA, FixDecorrelation, FixFusion,  # noqa: F401 - re-exported
+                            FixRecord, FusedStep, FusedTrack, FusionResult, OutageResult, relock_heading_error_rad)
 from core.gnss.ekf import PdrEkf, UpdateResult
 from core.gnss.heading_model import HeadingErrorModel
 from core.gnss.training import OnlineTrainer
@@ -100,6 +100,18 @@ class GpsFusion(FixFusion):
         base's 8 s and no drift limit): on the simulator's tuning fault walks (seeds 0-9) the fixes more
         than 30 m off that the filter took fell from 211 to 5 (Kubrak's: 5), the noisy minute's outage
         unchanged (median 12.3 m).
+    gps_error_correlation_s : float
+        The fixes' error correlation time (s) for their decorrelation (:class:`core.gnss.base.FixDecorrelation`): a
+        fix ``dt`` after the last one used has its variance multiplied by ``(1 + rho) / (1 - rho)``,
+        ``rho = exp(-dt / tau)``, so that a stream of fixes off together counts as one fix per ``2 tau``; the gate
+        and the NIS keep one fix's variance.  0 (the default): white fixes (the paper).  **Off**: decided on the
+        tuning split (issue #26, 2026-12-07) at 45 s (the IPIN tuning fixes' own correlation time): IPIN median
+        landmark error 2.236 -> 2.367 m (dead reckoning alone 2.287; route 01's good fixes are followed less:
+        T01r01 2.23 -> 5.86 m), the outdoor tuning walk's distance to left-out fixes 0.43 -> 1.77 of their
+        accuracy (lopen's 3-min outage 12.5 -> 11.9 %, 1-min 17.2 -> 22.8 %), the simulator's tuning fault walks
+        better (2-min outage after the noisy minute 10.7 -> 9.4 m; the simulator does not set defaults); at 1-15 s
+        IPIN 2.29-2.37 m.  The fused sigma is made honest instead by the reported covariance
+        (:class:`core.gnss.ekf.PdrEkf`'s ``reported_fix_bias_share``), which leaves the track alone.
     **shared
         The fix handling's settings (:class:`core.gnss.base.FixFusion`): ``max_hacc_m``,
         ``default_hacc_m``, ``max_speed_m_s``, ``hacc_scale``, ``min_sigma_m``, ``fused_timeout_s``,
@@ -117,8 +129,11 @@ class GpsFusion(FixFusion):
                  uncalibrated_heading_sd_rad: float = math.radians(10.0),
                  untrained_heading_sd_rad: float | None = None, untrained_until_course: bool = True,
                  relock_s: float = 20.0,
-                 relock_max_drift: float | None = 0.15, **shared):
+                 relock_max_drift: float | None = 0.15, gps_error_correlation_s: float = 0.0, **shared):
         super().__init__(relock_s=relock_s, relock_max_drift=relock_max_drift, **shared)
+        if not (gps_error_correlation_s >= 0.0 and math.isfinite(gps_error_correlation_s)):
+            raise ValueError(f"gps_error_correlation_s must be finite and >= 0, got {gps_error_correlation_s!r}")
+        self.gps_error_correlation_s = float(gps_error_correlation_s)
         if filter not in FILTERS:
             raise ValueError(f"filter must be one of {FILTERS}, got {filter!r}")
         self.filter = filter
@@ -146,6 +161,7 @@ class GpsFusion(FixFusion):
         self.ekf = PdrEkf() if self._ekf_proto is None else copy.copy(self._ekf_proto)
         self.ekf.reset()
         self._fix_bias_t_ns: int | None = None  # the fix the fixes' correlated error was last propagated to
+        self.decorrelation = FixDecorrelation(self.gps_error_correlation_s)
         if self._trainer_proto is not None:
             self.trainer = self._trainer_proto
             self.trainer.reset()
@@ -237,6 +253,12 @@ class GpsFusion(FixFusion):
     def _step_output(self) -> tuple[float, float]:
         return float(self.ekf.x[2]), float(self.ekf.x[3])
 
+    def _reported_cov(self):
+        return self.ekf.reported_cov
+
+    def _widen_position(self, offset_m) -> None:
+        self.ekf.widen_position(offset_m)
+
     def _dead_reckoned_step(self, step) -> tuple[float, float]:
         length, heading = self.stride_scale * step.length_m, self.compensated_heading(step.heading_rad)
         if math.isfinite(length) and math.isfinite(heading):
@@ -265,13 +287,15 @@ class GpsFusion(FixFusion):
             dt = (t_ns - self._fix_bias_t_ns) * 1e-9 if self._fix_bias_t_ns is not None else math.inf
             ekf.propagate_fix_bias(dt, sigma_m)
             self._fix_bias_t_ns = int(t_ns)
-        return ekf.update_position(east, north, sigma_m, self._fraction(t_ns), gate=gate)
+        return ekf.update_position(east, north, sigma_m, self._fraction(t_ns), gate=gate,
+                                   noise_scale=self.decorrelation.noise_scale(t_ns))
 
     def _placed_on_fix(self, t_ns: int, sigma_m: float, relock: bool = False) -> None:
         self.ekf.place_on_fix(sigma_m)
         self._fix_bias_t_ns = int(t_ns)
 
     def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
+        self.decorrelation.used(t_ns)
         if self.filter == "ekf" and self.origin_lat_lon is not None and self.use_course and \
                 speed >= self.course_min_speed_m_s and math.isfinite(course) and self.anchor[0] != t_ns:
             if self.untrained_until_course and not self._course_used and self.untrained_heading_sd_rad is not None \
@@ -294,4 +318,5 @@ class GpsFusion(FixFusion):
         return {**super().status(), "stride_scale": self.stride_scale}
 
     def counters(self) -> dict:
-        return {**super().counters(), "filter": self.filter, "training": self.trainer.counters()}
+        return {**super().counters(), "filter": self.filter, "training": self.trainer.counters(),
+                "fix_decorrelation": self.decorrelation.summary()}
