@@ -5,8 +5,6 @@ here the whole pipeline and the CLI summary on the bundled demo.
 """
 
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -52,14 +50,18 @@ def test_bad_values_in_every_sensor_change_the_demo_closure_by_less_than_10_cm(d
     assert any("non-finite" in lab for lab in s["labels"])
 
 
-def test_the_cli_summary_reports_the_skipped_values(tmp_path, demo):
+def test_the_cli_summary_reports_the_skipped_values(tmp_path, demo, capsys):
+    # ``pdr replay`` in this process (``python -m desktop`` is ``sys.exit(main())``): no Python start and imports
+    from desktop.cli import main
+
     rec, _ = demo
     path = tmp_path / "bad.csv.gz"
     write_recording(str(path), _with_bad_value(rec, "gyro", math.nan))
-    out = subprocess.run([sys.executable, "-m", "desktop", "replay", str(path)], capture_output=True, text=True,
-                         cwd=ROOT)
-    assert out.returncode == 0, out.stderr
-    assert "1 non-finite gyro value(s)" in out.stdout
+    capsys.readouterr()
+    code = main(["replay", str(path)])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    assert "1 non-finite gyro value(s)" in out.out
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf, 1e300])

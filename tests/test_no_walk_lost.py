@@ -19,18 +19,10 @@ import pytest
 
 from app.recorder import BackgroundRecorder
 from app.session import Session, load_any_recording
-from app.sources import SensorSource
-from core.recording import STREAM_SPECS, RecordingError, read_recording
+from core.recording import RecordingError, read_recording
+from tests._recorder_helpers import STREAMS, FakeSource, NullPipeline, event
 
 ROOT = Path(__file__).resolve().parents[1]
-STREAMS = {n: STREAM_SPECS[n] for n in ("acc", "gyro")}
-
-
-def event(k: int, t0_ns: int = 0, dt_ns: int = 5_000_000):
-    """Event k of the fake source: alternating acc/gyro, values that name k (exact in the file)."""
-    if k % 2 == 0:  # plausible values (the reader checks the units), none with a short repr
-        return "acc", t0_ns + k * dt_ns, (0.1 + (k % 97) / 3e3, -0.2 - k / 7e7, 9.81 + (k % 7) * 1e-5)
-    return "gyro", t0_ns + k * dt_ns, ((k % 101) / 3e3, 0.01 + k / 7e7, -0.02)
 
 
 def events_in(rec):
@@ -149,40 +141,6 @@ def test_a_full_queue_is_an_error_not_a_blocked_ui(tmp_path):
     assert r.error.startswith("storage does not keep up")
 
 
-class FakeSource(SensorSource):
-    """Events from a list, delivered on drain (a live source's interface)."""
-
-    def __init__(self, events=()):
-        super().__init__()
-        self.pending = list(events)
-        self.device = {"model": "fake"}
-
-    def start(self):
-        self.running = True
-
-    def stop(self):
-        self.running = False
-
-    def drain(self, max_events=None):
-        n = len(self.pending) if max_events is None else max_events
-        out, self.pending = self.pending[:n], self.pending[n:]
-        return out
-
-    @property
-    def finished(self):
-        return False
-
-
-class NullPipeline:
-    """Enough of a pipeline for the recorder's tests."""
-
-    def update(self, name, t, vals):
-        return []
-
-    def finish(self):
-        return []
-
-
 def test_a_write_error_in_a_session_is_shown_and_stops_recording_cleanly(tmp_path):
     files = []
 
@@ -261,7 +219,7 @@ def test_a_header_only_file_from_an_older_recorder_gets_a_clear_message(tmp_path
 CHILD = r"""
 import sys, time
 sys.path.insert(0, sys.argv[2])
-from tests.test_no_walk_lost import FakeSource, NullPipeline, STREAMS, event
+from tests._recorder_helpers import FakeSource, NullPipeline, STREAMS, event
 from app.session import Session
 
 src = FakeSource()
