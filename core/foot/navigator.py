@@ -269,7 +269,7 @@ class FootNavigator:
         self.heading_updates: list = []
         self.course_updates: list = []
         self.counters = {"skipped_nonfinite": 0, "aid_unavailable": 0, "aid_gated": 0, "alignments_rejected": 0,
-                         "aligned_on_short_stance": 0, "smoother_skipped_too_long": 0}
+                         "aligned_on_short_stance": 0, "smoother_skipped_too_long": 0, "zero_rate_updates": 0}
 
     # -- the per-sample kernel ----------------------------------------------------------------
     def _sample(self, t: int, acc, gyro, stance: bool, ratio: float = 0.0) -> None:
@@ -298,7 +298,7 @@ class FootNavigator:
             if u.used:
                 self.zupt_nis.append(u.nis)
             if ins.settings.zero_rate_update and gyro is not None:
-                ins.update_zero_rate(gyro)
+                self.counters["zero_rate_updates"] += ins.update_zero_rate(gyro).used
             self._stance_end = t
         self._prev_stance = stance
         self._emit(t, stance)
