@@ -94,13 +94,16 @@ class InsSettings:
     acc_bias_tau_s: float = 300.0
     #: zero-velocity measurement noise sigma_z (m/s)
     zupt_noise_m_s: float = 0.01
-    #: zero-rate measurement noise (rad/s), used when ``zero_rate_update`` is on
-    zaru_noise_rad_s: float = 0.01
-    zero_rate_update: bool = False
-    #: stricter stillness for the zero-rate update: a stance sample is used only if every axis of
-    #: ``w_meas - b_g`` is within this (rad/s); inf: every stance sample.  The stance phases the detectors find
-    #: hold the heel-to-toe roll (tenths of rad/s): the foot is truly still only in parts of them
-    zaru_gate_rad_s: float = math.inf
+    #: zero angular rate updates in stance (the reading is the gyroscope bias: the one measurement of the
+    #: vertical bias, which ZUPT does not observe), per sample, with this noise (rad/s) ...
+    zero_rate_update: bool = True
+    zaru_noise_rad_s: float = 0.02
+    #: ... only where the foot is truly still: every axis of ``w_meas - b_g`` within this (rad/s; about 4 x the
+    #: PyShoe IMU's per-sample noise at rest, 0.005 rad/s); inf: every stance sample.  The stance phases the
+    #: detectors find hold the heel-to-toe roll (tenths of rad/s): ungated, ZARU made tracks 2-5x worse.  On
+    #: (2026-12-07, issue #27): PyShoe tuning split, PyShoe's metric median 0.0328 -> 0.0319 m, mean 0.0369 ->
+    #: 0.0355 m (docs/foot.md, "A fifth pass")
+    zaru_gate_rad_s: float = 0.02
     #: rolling ZUPT: height (m) of the sensor above the point the foot rolls about during stance (heel, then
     #: toe); the stance measurement is then ``v = R (w x r_b)``, ``r_b = h up_b`` (``up_b``: the body's up
     #: at the alignment), instead of ``v = 0``.  0: the plain ZUPT (eq. 9).  Off: on the PyShoe tuning split
