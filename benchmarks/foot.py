@@ -262,7 +262,7 @@ CASE_DETECTORS = ("shoe", "shoe_filter", "shoe_fixed", "song", "amv", "are", "le
 
 
 def foot_settings(detector: str = "shoe", aid: str = "zupt", gyro_delay_s: float = 0.0,
-                  **stance_overrides) -> FootSettings:
+                  gyro_range_rad_s: float = math.nan, **stance_overrides) -> FootSettings:
     """One fixed configuration per detector: the defaults (RTS smoother on); "song" with the paper's 0.15 s
     window, "shoe_fixed" SHOE without the adaptive threshold, "shoe_filter" the default without the smoother."""
     if detector == "song":
@@ -275,7 +275,8 @@ def foot_settings(detector: str = "shoe", aid: str = "zupt", gyro_delay_s: float
     smoother = detector != "shoe_filter"
     if detector == "shoe_filter":
         detector = "shoe"
-    return FootSettings(aid=aid, gyro_delay_s=gyro_delay_s, rts_smoother=smoother,
+    return FootSettings(aid=aid, gyro_delay_s=gyro_delay_s, gyro_range_rad_s=gyro_range_rad_s,
+                        rts_smoother=smoother,
                         stance=StanceSettings(detector=detector, **stance_overrides))
 
 
@@ -324,7 +325,8 @@ def run_pyshoe(root: Path, detectors=CASE_DETECTORS, split=None, names=None, set
                "pyshoe_labels_f1": {k: stance_scores(v, still)["f1"] for k, v in tr.zv_labels.items()}}
         for det in list(detectors) + ["reference", "vicon_rule"]:
             fs = settings_of(detector="shoe" if det in ("reference", "vicon_rule") else det,
-                             gyro_delay_s=tr.info["gyro_delay_s"])
+                             gyro_delay_s=tr.info["gyro_delay_s"],
+                             gyro_range_rad_s=tr.info["gyro_range_rad_s"])
             nav = FootNavigator(fs)
             labels = {"reference": tr.zv_reference, "vicon_rule": still}.get(det)
             t0 = time.perf_counter()
@@ -345,7 +347,8 @@ def run_pyshoe(root: Path, detectors=CASE_DETECTORS, split=None, names=None, set
         # the PyShoe-style peer on those labels (reproduces the files' errors), on the VICON labels, and
         # with SHOE at one fixed threshold (the tuning split's median per-trial optimum)
         a, g = acc.values, gyr.values
-        res = FootNavigator(settings_of(detector="shoe", gyro_delay_s=tr.info["gyro_delay_s"])).run(
+        res = FootNavigator(settings_of(detector="shoe", gyro_delay_s=tr.info["gyro_delay_s"],
+                                        gyro_range_rad_s=tr.info["gyro_range_rad_s"])).run(
             rec, stance=tr.zv_labels["shoe"])
         row["cases"]["ours_pyshoe_shoe_labels"] = position_errors(res.position_n, tr.truth_pos_m)
         for name, zv in (("peer_pyshoe_shoe_labels", tr.zv_labels["shoe"]),
@@ -557,7 +560,8 @@ def quick(root: Path | None) -> dict:
         errs = []
         for tr in trs:
             rec = tr.open()
-            res = FootNavigator(foot_settings("shoe", gyro_delay_s=tr.info["gyro_delay_s"])).run(rec)
+            res = FootNavigator(foot_settings("shoe", gyro_delay_s=tr.info["gyro_delay_s"],
+                                              gyro_range_rad_s=tr.info["gyro_range_rad_s"])).run(rec)
             errs.append(position_errors(res.position_n, tr.truth_pos_m)["rmse_3d_m"])
         h[f"foot_pyshoe_{split}_quick_rmse_median_m"] = median(errs)
     loops = []

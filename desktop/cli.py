@@ -591,6 +591,8 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
                                         gyro_delay_s=args.gyro_delay_ms * 1e-3)
     if getattr(args, "no_smoother", False):
         settings = dataclasses.replace(settings, rts_smoother=False)
+    if math.isfinite(getattr(args, "gyro_range", math.nan)):
+        settings = dataclasses.replace(settings, gyro_range_rad_s=args.gyro_range)
     slow = foot_rate_problem(rec, args.foot_device or "", settings.stance.window_s)
     if slow is not None:
         raise ValueError(slow.text)
@@ -1610,6 +1612,9 @@ def make_parser() -> argparse.ArgumentParser:
                         "core/foot/models, issue #27)")
     r.add_argument("--gyro-delay-ms", type=float, default=0.0, metavar="MS",
                    help="foot mode: the gyroscope lags the accelerometer by this much (ms)")
+    r.add_argument("--gyro-range", type=float, default=float("nan"), metavar="RAD_S",
+                   help="foot mode: the gyroscope's full scale (rad/s): readings within 1 %% of it are clipped "
+                        "and repaired (default: unknown, none repaired)")
     r.add_argument("--no-smoother", action="store_true",
                    help="foot mode: the forward filter's track only (default: RTS-smoothed over the whole walk, "
                         "each sample from the samples before and after it; the live app never smooths)")

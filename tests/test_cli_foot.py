@@ -62,3 +62,18 @@ def test_device_streams_get_their_kinds_columns():
 
     s = make_stream("gyro@left_foot", [1, 2], [[0.0, 0.1, 0.2], [0.0, 0.1, 0.3]])
     assert s.columns == ("x", "y", "z") and s.unit == "rad/s"
+
+
+def test_gyro_range_repairs_clipped_swings(tmp_path, capsys):
+    """``--gyro-range``: the swings of a walk clipped at 80 % of the peak rate are repaired (and without it,
+    none are)."""
+    from tests.test_foot_saturation import _clipped_walk
+
+    w, rec, level = _clipped_walk(1)
+    path = str(tmp_path / "clipped.csv.gz")
+    write_recording(path, rec)
+    out = {}
+    for name, extra in (("off", []), ("on", ["--gyro-range", str(level / 0.995)])):
+        assert main(["replay", path, "--json", "--no-smoother"] + extra) == 0
+        out[name] = json.loads(capsys.readouterr().out)
+    assert out["off"]["gyro_clipped_runs_repaired"] == 0 and out["on"]["gyro_clipped_runs_repaired"] >= 5

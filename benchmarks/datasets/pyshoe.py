@@ -39,7 +39,9 @@ What the reader returns (one :class:`PyshoeTrial` per file):
 The 3DM-GX3's gyroscope readings lag its accelerometer's in these files: the
 benchmark runs the navigator with ``gyro_delay_s = GYRO_DELAY_S`` (chosen on
 the tuning split from 0, 2.5, 5, 7.5, 10 ms; without it the stance positions
-climb by about 1 cm per stride).
+climb by about 1 cm per stride).  Its gyroscope clips at about 9.15 rad/s
+(``GYRO_RANGE_RAD_S``, ``FootSettings.gyro_range_rad_s``: the clipped runs are
+repaired).
 """
 
 from __future__ import annotations
@@ -61,6 +63,9 @@ NAME = "pyshoe_vicon"
 PYSHOE_DETECTORS = DETECTORS
 #: the gyroscope's lag behind the accelerometer (s), chosen on the tuning split (see above)
 GYRO_DELAY_S = 0.005
+#: the gyroscope's full scale in these files (rad/s): hard strides read flat at 9.10-9.19 rad/s about the
+#: pitch axis for 5-15 samples (the 3DM-GX3-25's calibrated output clipped; :mod:`core.foot.saturation`)
+GYRO_RANGE_RAD_S = 9.15
 
 
 @dataclass
@@ -111,7 +116,7 @@ def trials(root: Path) -> list[PyshoeTrial]:
         name = p.name[: -len(".mat.gz")]
         tr = PyshoeTrial(dataset=NAME, name=name, load=lambda: None, placement="foot",
                          info={"position": i, "split": pyshoe_split(i), "walking": pyshoe_is_walking(name),
-                               "gyro_delay_s": GYRO_DELAY_S})
+                               "gyro_delay_s": GYRO_DELAY_S, "gyro_range_rad_s": GYRO_RANGE_RAD_S})
         tr.load = lambda tr=tr, p=p: _fill(tr, p)
         out.append(tr)
     return out

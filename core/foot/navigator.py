@@ -52,6 +52,7 @@ from core.conventions import ACC, GYRO, MAG, wrap_angle
 from core.foot.course import CourseErrorFilter, CourseSettings, body_heading
 from core.foot.devices import stream_name
 from core.foot.ins import InsSettings, ZuptEKF, horizontal_axis
+from core.foot.saturation import GyroClipRepair
 from core.foot.stance import StanceDetector, StanceSettings, infer_foot_axes
 from core.pdr.attitude import heading_jacobian
 from core.recording import MissingSensorError, Recording
@@ -73,6 +74,10 @@ class FootSettings:
     #: the gyroscope's readings lag the accelerometer's by this much (s): each accelerometer sample is
     #: paired with the gyroscope interpolated at its time plus this (a property of the sensor)
     gyro_delay_s: float = 0.0
+    #: the gyroscope's full scale (rad/s, a property of the sensor; nan: unknown): readings within 1 % of it
+    #: are clipped, and a clipped run is repaired by a parabola through the readings around it
+    #: (:mod:`core.foot.saturation`)
+    gyro_range_rad_s: float = math.nan
     #: the alignment needs a first still period at least this long (s) ...
     align_min_s: float = 0.3
     #: ... in which gaps of non-stance up to this long do not count as motion (s)
@@ -236,6 +241,7 @@ class FootNavigator:
         self.course = CourseErrorFilter(s.course)
         self._stream = None
         self._gyros: deque = deque()  # streaming: recent gyroscope readings (t_ns, values)
+        self._clip = GyroClipRepair(s.gyro_range_rad_s)
         self._acc_wait: deque = deque()  # streaming: accelerometer readings waiting for their gyroscope
         self._pending: deque = deque()  # streaming: samples waiting for their stance decision
         self._foot_mag = _Window()
@@ -263,7 +269,7 @@ class FootNavigator:
         self.heading_updates: list = []
         self.course_updates: list = []
         self.counters = {"skipped_nonfinite": 0, "aid_unavailable": 0, "aid_gated": 0, "alignments_rejected": 0,
-                         "aligned_on_short_stance": 0, "smoother_skipped_too_long": 0}
+                         "aligned_on_short_stance": 0, "smoother_skipped_too_long": 0, "zero_rate_updates": 0}
 
     # -- the per-sample kernel ----------------------------------------------------------------
     def _sample(self, t: int, acc, gyro, stance: bool, ratio: float = 0.0) -> None:
@@ -292,7 +298,7 @@ class FootNavigator:
             if u.used:
                 self.zupt_nis.append(u.nis)
             if ins.settings.zero_rate_update and gyro is not None:
-                ins.update_zero_rate(gyro)
+                self.counters["zero_rate_updates"] += ins.update_zero_rate(gyro).used
             self._stance_end = t
         self._prev_stance = stance
         self._emit(t, stance)
@@ -500,13 +506,16 @@ class FootNavigator:
         acc_s = recording.stream(self.names[ACC], "foot-mounted navigation")
         gyr_s = recording.stream(self.names[GYRO], "foot-mounted navigation")
         t = acc_s.t_ns
-        gyro = gyro_at(gyr_s.t_ns, gyr_s.values, t + int(round(self.settings.gyro_delay_s * 1e9)))
+        clip = GyroClipRepair(self.settings.gyro_range_rad_s)
+        gyro = gyro_at(gyr_s.t_ns, clip.repair(gyr_s.t_ns, gyr_s.values),
+                       t + int(round(self.settings.gyro_delay_s * 1e9)))
         valid = np.ones(len(t), dtype=bool)
         st = self.settings.stance
         if st.detector == "song" and self.settings.song_axes == "auto":
             ax = infer_foot_axes(acc_s.values[valid], gyro[valid])
             st = replace(st, acc_axes=ax["acc_axes"], gyro_axes=ax["gyro_axes"])
         self.reset(st)
+        self._clip = clip
         det = StanceDetector(st)
         finite = valid & np.all(np.isfinite(acc_s.values), axis=1) & np.all(np.isfinite(gyro), axis=1)
         if stance is not None:
@@ -548,7 +557,8 @@ class FootNavigator:
             self._stream = StanceDetector(self.stance_settings).stream()
         n0 = len(self.out_t)
         if stream == self.names[GYRO]:
-            self._gyros.append((int(t_ns), tuple(values)))
+            for tg, vg in self._clip.update(int(t_ns), tuple(values)):
+                self._gyros.append((tg, vg))
             self._pair(final=False)
         elif stream == self.names[ACC]:
             self._acc_wait.append((int(t_ns), tuple(values)))
@@ -599,6 +609,7 @@ class FootNavigator:
     def finish(self) -> FootResult:
         """End of a stream: decide the last samples and return the result."""
         if self._stream is not None:
+            self._gyros.extend(self._clip.flush())
             self._pair(final=True)
             self._feed(self._stream.flush())
         return self._finish(None)
@@ -626,7 +637,8 @@ class FootNavigator:
             zupt_nis=np.array(self.zupt_nis, dtype=float),
             heading_updates=list(self.heading_updates),
             course_updates=list(self.course_updates),
-            counters={**self.counters, "ins_rejected": self.ins.n_rejected},
+            counters={**self.counters, "ins_rejected": self.ins.n_rejected,
+                      "gyro_clipped_runs_repaired": self._clip.n_repaired},
             settings=self.settings,
             recording=recording,
             position_sd_m=np.array(self.out_sd, dtype=float),

@@ -1,0 +1,116 @@
+"""Gyroscope readings clipped at the sensor's full scale, and their repair (issue #27).
+
+A foot's swing turns faster than some IMUs measure: the PyShoe trials' MicroStrain 3DM-GX3-25 reads flat at
+9.10-9.19 rad/s about its pitch axis for 5-15 samples (25-75 ms) of a hard stride, while the foot turns
+faster.  The rotation missing from each such stride is an attitude error of several degrees that the next
+stance's zero-velocity update can only partly explain (as tilt, and through its correlations as gyroscope
+bias, the vertical one included); the rest is heading drift.
+
+A run of readings of one axis at or beyond ``(1 - margin) x range`` is clipped.  Its values are replaced by a
+parabola fitted by least squares (in time) to the ``flank`` unclipped readings on each side of the run, where
+the parabola is beyond the reading (never below it: a clipped reading is a lower bound of the true rate).  A
+run without ``flank`` unclipped readings of that axis on both sides is left as it was.
+
+Batch (:meth:`GyroClipRepair.repair`) and streaming (:meth:`GyroClipRepair.update` / :meth:`flush`) give the
+same readings (tested): the stream holds the readings from the first clipped one until ``flank`` readings
+unclipped on every axis follow, so a reading comes out up to the run's length plus ``flank`` samples late
+(no delay while nothing is clipped).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+
+def clipped_runs(values, level: float) -> list[tuple[int, int, int]]:
+    """``(axis, first, end)`` of every maximal run of ``|values[:, axis]| >= level`` (``end`` exclusive)."""
+    w = np.asarray(values, dtype=float).reshape(len(values), -1)
+    out = []
+    for ax in range(w.shape[1]):
+        m = np.abs(w[:, ax]) >= level
+        d = np.diff(np.r_[0, m.astype(np.int8), 0])
+        out += [(ax, int(i), int(j)) for i, j in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1))]
+    return out
+
+
+def repair_block(t_ns, values, level: float, flank: int, start: int = 0) -> tuple[np.ndarray, int]:
+    """The readings with every clipped run that begins at or after ``start`` repaired (module docstring);
+    ``(repaired copy, number of runs repaired)``."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    w = np.array(values, dtype=float).reshape(len(t), -1)
+    n = 0
+    for ax, i, j in clipped_runs(w, level):
+        if i < start or i < flank or j + flank > len(t):
+            continue
+        idx = np.r_[i - flank:i, j:j + flank]
+        if np.any(np.abs(w[idx, ax]) >= level):  # another run too close: no clean flank
+            continue
+        x = (t[idx] - t[i]) * 1e-9
+        c = np.polyfit(x, w[idx, ax], 2)
+        fit = np.polyval(c, (t[i:j] - t[i]) * 1e-9)
+        sgn = 1.0 if w[i, ax] > 0 else -1.0
+        w[i:j, ax] = sgn * np.maximum(sgn * fit, sgn * w[i:j, ax])
+        n += 1
+    return w, n
+
+
+class GyroClipRepair:
+    """Repairs clipped gyroscope readings (module docstring); ``range_rad_s`` nan: passes them through.
+
+    ``repair(t_ns, values)`` for a whole stream; ``update(t_ns, values)`` -> the readings released (a list of
+    ``(t_ns, values)``), ``flush()`` at the end.  ``n_repaired``: runs repaired so far.
+    """
+
+    def __init__(self, range_rad_s: float = math.nan, margin: float = 0.01, flank: int = 3):
+        self.level = (1.0 - margin) * range_rad_s if math.isfinite(range_rad_s) and range_rad_s > 0 else math.nan
+        self.flank = int(flank)
+        self.reset()
+
+    @property
+    def active(self) -> bool:
+        return math.isfinite(self.level)
+
+    def reset(self) -> None:
+        self.n_repaired = 0
+        self._before: deque = deque(maxlen=self.flank)  # the last readings released (all unclipped)
+        self._held: list = []  # readings from the first clipped one on
+
+    def repair(self, t_ns, values) -> np.ndarray:
+        """A whole stream at once (same result as :meth:`update` reading by reading, then :meth:`flush`)."""
+        if not self.active:
+            return np.asarray(values, dtype=float)
+        w, n = repair_block(t_ns, values, self.level, self.flank)
+        self.n_repaired += n
+        return w
+
+    def _clipped(self, v) -> bool:
+        return any(abs(x) >= self.level for x in v)
+
+    def update(self, t_ns: int, values) -> list:
+        if not self.active:
+            return [(t_ns, values)]
+        if not self._held and not self._clipped(values):
+            self._before.append((t_ns, values))
+            return [(t_ns, values)]
+        self._held.append((t_ns, values))
+        f = self.flank
+        if len(self._held) > f and not any(self._clipped(v) for _, v in self._held[-f:]):
+            return self.flush()
+        return []
+
+    def flush(self) -> list:
+        """Release the held readings (a run without its trailing flank stays as it was)."""
+        if not self._held:
+            return []
+        block = list(self._before) + self._held
+        w, n = repair_block([b[0] for b in block], [b[1] for b in block], self.level, self.flank,
+                            start=len(self._before))
+        self.n_repaired += n
+        out = [(block[k][0], tuple(float(x) for x in w[k])) for k in range(len(self._before), len(block))]
+        for item in self._held[-self.flank:]:
+            self._before.append(item)
+        self._held = []
+        return out
