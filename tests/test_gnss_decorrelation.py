@@ -235,3 +235,57 @@ def test_the_reported_covariance_follows_every_change_of_the_filter_s_and_stays_
     assert np.all(np.isfinite(f.C)) and np.all(np.linalg.eigvalsh(f.C) > -1e-9)
     with pytest.raises(ValueError):
         PdrEkf(reported_fix_bias_share=1.0)
+
+
+# -- dead reckoning's own sigma (issue #26, 2026-12-07: built, off by default) --------------------------------------
+
+def test_matching_widening_brings_one_fix_s_nis_to_its_target():
+    from core.gnss.ekf import matching_widening
+
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        a = rng.normal(size=(2, 2))
+        S = a @ a.T + 0.1 * np.eye(2)
+        d = rng.normal(0.0, 10.0, 2)
+        nis = float(d @ np.linalg.solve(S, d))
+        target = float(rng.uniform(0.5, 6.0))
+        o = matching_widening(d, nis, target)
+        after = float(d @ np.linalg.solve(S + np.outer(o, o), d))
+        assert after == pytest.approx(min(nis, target), rel=1e-9)
+    assert not np.any(matching_widening(np.array([3.0, 4.0]), math.nan, 1.0))
+
+
+def test_a_turn_widens_the_heading_bias_by_the_bias_turn_gain():
+    widened = {}
+    for gain in (0.0, 0.3):
+        ekf = PdrEkf(bias_turn_gain=gain, reported_fix_bias_share=0.0)
+        ekf.initialize(0.0, 0.0, 1.0, STEP_M, 0.0)
+        ekf.step(STEP_M, 0.0)
+        before = ekf.P[4, 4]
+        ekf.step(STEP_M, math.pi / 2)  # a 90-degree turn
+        widened[gain] = ekf.P[4, 4] - before
+    # the step's own update leaves the consider state's variance alone (its gain row is zero)
+    assert widened[0.0] == pytest.approx(ekf.bias_walk_rad ** 2, rel=1e-9)
+    assert widened[0.3] - widened[0.0] == pytest.approx((0.3 * math.pi / 2) ** 2, rel=1e-9)
+    with pytest.raises(ValueError):
+        PdrEkf(bias_turn_gain=-1.0)
+
+
+@pytest.mark.parametrize("scale", [1.0, 90.0])
+def test_covariance_matching_lets_a_decorrelated_fix_pull_a_wrong_dead_reckoning(scale):
+    """Dead reckoning 15 m off with a 2-m sigma, a 3-m fix at the truth: one fix's spread cannot explain the
+    innovation.  Decorrelated (scale 90) the filter hardly moves; with matching the position's variance becomes
+    ``d^2 - R`` (one fix's NIS 1) and the fix pulls by ``(d^2 - R) / (d^2 - R + 90 R)`` of the innovation.  Without
+    decorrelation (scale 1) matching changes nothing."""
+    moved = {}
+    for match in (0.0, 1.0):
+        ekf = PdrEkf(dr_match_nis=match, gate_nis_2d=math.inf)
+        ekf.initialize(0.0, 0.0, 2.0, STEP_M, 0.0)
+        res = ekf.update_position(15.0, 0.0, 3.0, noise_scale=scale)
+        assert res.accepted
+        moved[match] = float(ekf.x[0])
+    if scale == 1.0:
+        assert moved[1.0] == moved[0.0]
+    else:
+        assert moved[0.0] < 0.1
+        assert moved[1.0] == pytest.approx(15.0 * (225.0 - 9.0) / (225.0 - 9.0 + 90.0 * 9.0), rel=1e-9)

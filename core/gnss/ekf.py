@@ -240,6 +240,16 @@ class PdrEkf:
         (correlation time ``fix_bias_tau_s``); the gain, the track and the gate do not change (see "What the
         filter reports" in the module docstring).  0.95, on by default (IPIN tuning: identical tracks, NEES
         beyond the 95 % point 8.5 -> 5.1 %); 0: the filter's own ``P`` is reported.
+    bias_turn_gain : float
+        Extra random walk of the heading-bias consider state per step: this factor times the step's turn (rad per
+        rad), for a heading error that changes with the corridor indoors (the building turns the field 10-30 deg
+        per segment).  0, the default: measured with and without the fixes' decorrelation on the tuning split
+        (issue #26, 2026-12-07, ``benchmarks/discussion.md``), no gain.
+    dr_match_nis : float
+        Covariance matching of dead reckoning's sigma, with the fixes' decorrelation only (``noise_scale > 1``):
+        a fix inside the gate whose NIS against ONE fix's spread exceeds this value widens the position along its
+        innovation until that NIS is this value (:func:`matching_widening`), then updates with the decorrelated
+        spread.  0 (the default): off; no gain on the tuning split (issue #26, 2026-12-07).
     """
 
     def __init__(self, *, length_walk_m: float = 0.03, heading_walk_rad: float = math.radians(1.5),
@@ -248,7 +258,12 @@ class PdrEkf:
                  bias_walk_rad: float = math.radians(0.05), scale_walk: float = 0.0005,
                  position_updates_heading: bool = True, fix_bias_share: float = 0.0,
                  fix_bias_tau_s: float = 45.0, heading_carries_bias: bool = True,
-                 reported_fix_bias_share: float = 0.95):
+                 reported_fix_bias_share: float = 0.95, bias_turn_gain: float = 0.0,
+                 dr_match_nis: float = 0.0):
+        if not (bias_turn_gain >= 0.0 and dr_match_nis >= 0.0 and math.isfinite(bias_turn_gain)
+                and math.isfinite(dr_match_nis)):
+            raise ValueError(f"bias_turn_gain and dr_match_nis must be finite and >= 0, got {bias_turn_gain}, "
+                             f"{dr_match_nis}")
         if not (0.0 <= fix_bias_share < 1.0 and fix_bias_tau_s > 0 and 0.0 <= reported_fix_bias_share < 1.0):
             raise ValueError(f"fix_bias_share and reported_fix_bias_share must be in [0, 1) and fix_bias_tau_s > 0, "
                              f"got {fix_bias_share}, {reported_fix_bias_share}, {fix_bias_tau_s}")
@@ -266,6 +281,8 @@ class PdrEkf:
         self.fix_bias_tau_s = float(fix_bias_tau_s)
         self.heading_carries_bias = bool(heading_carries_bias)
         self.reported_fix_bias_share = float(reported_fix_bias_share)
+        self.bias_turn_gain = float(bias_turn_gain)
+        self.dr_match_nis = float(dr_match_nis)
         self.reset()
 
     def reset(self) -> None:
@@ -354,7 +371,7 @@ class PdrEkf:
         for M in (self.P,) if self.C is None else (self.P, self.C):
             M[L, L] += self.length_walk_m ** 2
             M[PSI, PSI] += self.heading_walk_rad ** 2 + (self.turn_gain * turn) ** 2
-            M[B, B] += self.bias_walk_rad ** 2
+            M[B, B] += self.bias_walk_rad ** 2 + (self.bias_turn_gain * turn) ** 2
             M[K, K] += self.scale_walk ** 2
         # z_l = l (1 + k), z_psi = psi + b, with the consider states at 0
         innov = np.array([length_m - self.x[L], wrap_angle(heading_rad - self.x[PSI])])
@@ -446,6 +463,10 @@ class PdrEkf:
         if noise_scale > 1.0:
             # gate on one fix's spread, update with the decorrelated (inflated) one
             ok, nis, _, _ = kalman_update(self.x, self.P, innov, H, np.eye(2) * white_var, gate_nis)
+            if ok and self.dr_match_nis > 0.0 and nis > self.dr_match_nis:
+                # covariance matching: one fix's spread cannot explain this innovation, so dead reckoning's sigma
+                # was too small; widen the position along the innovation until its NIS is dr_match_nis
+                self.widen_position(matching_widening(innov, nis, self.dr_match_nis))
             if ok:
                 ok, _ = self._update(innov, H, np.eye(2) * white_var * noise_scale, math.inf, frozen, R_rep)
         else:
@@ -524,6 +545,17 @@ class PdrEkf:
         """
         for M in (self.P,) if self.C is None else (self.P, self.C):
             _set_consider_sd(M, heading_bias_sd_rad, scale_sd, self.heading_carries_bias)
+
+
+def matching_widening(innov, nis: float, target_nis: float) -> np.ndarray:
+    """The offset ``o`` (m, E and N) whose outer product, added to the position covariance, brings an innovation
+    ``d`` of NIS ``nis`` (against ``S = H P H^T + R``) down to ``target_nis``: ``o = d sqrt(1/target - 1/nis)``,
+    since ``d^T (S + beta d d^T)^-1 d = nis / (1 + beta nis)`` (Sherman-Morrison).  Zero when ``nis <= target``
+    or an input is not finite (covariance matching of dead reckoning's sigma, :class:`PdrEkf`'s ``dr_match_nis``)."""
+    d = np.asarray(innov, dtype=float)
+    if not (target_nis > 0 and math.isfinite(nis) and nis > target_nis and np.all(np.isfinite(d))):
+        return np.zeros_like(d)
+    return d * math.sqrt(1.0 / target_nis - 1.0 / nis)
 
 
 def _set_consider_sd(P: np.ndarray, heading_bias_sd_rad: float, scale_sd: float, heading_carries_bias: bool) -> None:
