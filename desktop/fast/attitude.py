@@ -51,7 +51,7 @@ from dataclasses import fields
 import numpy as np
 
 from core.pdr.attitude import CHI2_1_MEDIAN, AttitudeSettings, AttitudeState, IntervalSum, Outcome
-from desktop.fast.jit import kernel
+from desktop.fast.jit import kernel, kernel_or
 from desktop.fast.magcal import calibrate_stream
 
 # event kinds of the merged arrays
@@ -258,9 +258,9 @@ def q_to_matrix(q):
 
 # -- small dense algebra, written out: a BLAS or LAPACK call costs more than these matrices' arithmetic ----
 
-@kernel
+@kernel_or(np.matmul)
 def mm(a, b):
-    """``a @ b`` of small matrices."""
+    """``a @ b`` of small matrices (without numba: ``np.matmul`` itself)."""
     n, k = a.shape
     m = b.shape[1]
     out = np.zeros((n, m))
@@ -273,9 +273,9 @@ def mm(a, b):
     return out
 
 
-@kernel
+@kernel_or(np.matmul)
 def mv(a, x):
-    """``a @ x`` of a small matrix and a vector."""
+    """``a @ x`` of a small matrix and a vector (without numba: ``np.matmul`` itself)."""
     out = np.zeros(a.shape[0])
     for i in range(a.shape[0]):
         acc = 0.0

@@ -31,3 +31,14 @@ def kernel(fn):
     if not HAVE_NUMBA:
         return fn
     return numba.njit(cache=True, fastmath=False)(fn)
+
+
+def kernel_or(plain):
+    """:func:`kernel`, or without numba ``plain`` in the kernel's place: for a kernel that only writes out, for
+    numba, what numpy does in one call (a small matrix product), which as plain Python runs element by element
+    about fifty times slower than the call.  ``plain`` must compute the same thing (up to rounding)."""
+
+    def wrap(fn):
+        return kernel(fn) if HAVE_NUMBA else plain
+
+    return wrap
