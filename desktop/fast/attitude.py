@@ -310,7 +310,13 @@ def inverse(S):
 
 # -- running statistics on arrays (the reference's deques and histograms) --------------------------
 
-@kernel
+def _median_of_numpy(counts, n, lo, width):
+    """:func:`median_of` without numba: the cumulative counts and the search in two numpy calls."""
+    i = int(np.searchsorted(np.cumsum(counts), 0.5 * n, side="left"))  # the first bin with cum >= n / 2
+    return lo + (i + 0.5) * width if i < len(counts) else math.nan
+
+
+@kernel_or(_median_of_numpy)
 def median_of(counts, n, lo, width):
     """Median of a fixed-bin histogram: the first bin whose cumulative count reaches half."""
     half = 0.5 * n
@@ -538,7 +544,13 @@ def decay_offset(P, fs, sf, phi, cross):
 _I0, _I3 = np.int64(0), np.int64(3)
 
 
-@kernel
+def _block3_numpy(P, r, c):
+    """:func:`block3` without numba: one slice's ``tolist`` (the same floats)."""
+    (a, b, c_), (d, e, f), (g, h, i) = P[r:r + 3, c:c + 3].tolist()
+    return a, b, c_, d, e, f, g, h, i
+
+
+@kernel_or(_block3_numpy)
 def block3(P, r, c):
     """The 3 x 3 block of ``P`` at row ``r``, column ``c`` as nine floats (row-major): read once into locals, as
     plain Python reads an array's elements one by one at about a microsecond each."""
