@@ -564,11 +564,14 @@ def predict(q, b, P, wx, wy, wz, dt, sf, noise_scale, fs):
 
     Written out in scalars (the formulas of core.quaternion): it runs on every gyroscope event.
     """
-    w, x, y, z = q[0], q[1], q[2], q[3]
+    # the inputs as floats: a no-op for numba; without it Python's float arithmetic, not numpy scalars' (slower)
+    w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    wx, wy, wz, dt = float(wx), float(wy), float(wz), float(dt)
     r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
     r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
     r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
-    ax, ay, az = (wx - b[0]) * dt, (wy - b[1]) * dt, (wz - b[2]) * dt
+    ax, ay, az = (wx - b0) * dt, (wy - b1) * dt, (wz - b2) * dt
     theta = math.sqrt(ax * ax + ay * ay + az * az)  # the rotation vector's quaternion
     if theta < 1e-12:
         pw, px, py, pz = 1.0, 0.5 * ax, 0.5 * ay, 0.5 * az
@@ -612,7 +615,7 @@ def predict(q, b, P, wx, wy, wz, dt, sf, noise_scale, fs):
     b20 = c20 - (d20 * e00 + d21 * e10 + d22 * e20)
     b21 = c21 - (d20 * e01 + d21 * e11 + d22 * e21)
     b22 = c22 - (d20 * e02 + d21 * e12 + d22 * e22)
-    w2 = (wx - b[0]) ** 2 + (wy - b[1]) ** 2 + (wz - b[2]) ** 2
+    w2 = (wx - b0) ** 2 + (wy - b1) ** 2 + (wz - b2) ** 2
     fs[F_W2_MEAN] += (1.0 - math.exp(-dt / sf[S_SWING_TAU])) * (w2 - fs[F_W2_MEAN])
     fs[F_SWING_S] = fs[F_SWING_S] + dt if fs[F_W2_MEAN] > sf[S_SWING_RATE] ** 2 else 0.0
     qg = (sf[S_GN] ** 2 + sf[S_GS] ** 2 * w2) * noise_scale * dt
