@@ -54,13 +54,31 @@ def skew(v) -> np.ndarray:
 
 def inject_rotation(q, dtheta) -> tuple:
     """``normalize(exp(dtheta / 2) (x) q)``: a navigation-frame rotation error folded into ``q`` (w, x, y, z)."""
-    return quat.normalize(quat.multiply(quat.from_rotation_vector(tuple(float(v) for v in dtheta)), q))
+    return quat.normalize(quat.multiply(quat.from_rotation_vector((float(dtheta[0]), float(dtheta[1]),
+                                                                   float(dtheta[2]))), q))
+
+
+_EYES: dict = {}
+
+
+def _eye(n: int) -> np.ndarray:
+    """The n x n identity, made once (read-only): the updates use it per measurement."""
+    e = _EYES.get(n)
+    if e is None:
+        e = _EYES[n] = np.eye(n)
+        e.flags.writeable = False
+    return e
 
 
 def reset_jacobian(dtheta, n_states: int, att: slice = slice(0, 3)) -> np.ndarray:
     """``G`` of the reset after injecting ``dtheta``: identity, with ``I + [dtheta / 2]x`` on the rotation block."""
     G = np.eye(n_states)
-    G[att, att] += 0.5 * skew(dtheta)
+    a = att.start or 0
+    # [dtheta / 2]x's six entries written into the identity (per update: a skew array and a slice sum cost more)
+    x, y, z = 0.5 * float(dtheta[0]), 0.5 * float(dtheta[1]), 0.5 * float(dtheta[2])
+    G[a, a + 1], G[a, a + 2] = -z, y
+    G[a + 1, a], G[a + 1, a + 2] = z, -x
+    G[a + 2, a], G[a + 2, a + 1] = -y, x
     return G
 
 
@@ -111,10 +129,16 @@ def correct(P: np.ndarray, y: np.ndarray, H, Rm: np.ndarray, gate: float = math.
     else:
         PHt = P @ H.T
         S = H @ PHt + Rm
-    try:
-        Sinv = np.linalg.inv(S)
-    except np.linalg.LinAlgError:
-        return Correction(Verdict.NUMERICAL, math.nan)
+    if len(S) == 1:  # a scalar measurement: 1 / s is LAPACK's inverse bit for bit, without its call's cost
+        s = float(S[0, 0])
+        if s == 0.0:  # singular (LAPACK's LinAlgError)
+            return Correction(Verdict.NUMERICAL, math.nan)
+        Sinv = np.array(((1.0 / s,),))
+    else:
+        try:
+            Sinv = np.linalg.inv(S)
+        except np.linalg.LinAlgError:
+            return Correction(Verdict.NUMERICAL, math.nan)
     nis = float(y @ Sinv @ y)
     if not math.isfinite(nis):
         return Correction(Verdict.NUMERICAL, nis)
@@ -127,9 +151,9 @@ def correct(P: np.ndarray, y: np.ndarray, H, Rm: np.ndarray, gate: float = math.
     if isinstance(H, slice):
         Pn = P - K @ PHt.T
     else:
-        IKH = np.eye(len(P)) - K @ H
+        IKH = _eye(len(P)) - K @ H
         Pn = IKH @ P @ IKH.T + K @ Rm @ K.T
-    if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(Pn))):
+    if not (np.isfinite(dx).all() and np.isfinite(Pn).all()):
         return Correction(Verdict.NUMERICAL, nis)
     return Correction(Verdict.USED, nis, dx, Pn, K)
 

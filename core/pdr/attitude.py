@@ -1150,12 +1150,15 @@ class AttitudeEKF(AttitudeFilterBase):
         state = self._state
         if self.history is not None:
             self.history.before_inject(state.t_ns, self.P_full)
-        dth = dx[0:3]
+        d = dx.tolist()  # plain floats: what follows is per-element arithmetic
+        dth = (d[0], d[1], d[2])
         state.q = kalman.inject_rotation(state.q, dth)
         lim = self.settings.max_gyro_bias_rad_s
-        state.b = [min(lim, max(-lim, state.b[i] + float(dx[3 + i]))) for i in range(3)]
-        if len(dx) == 7:  # the field's heading offset: additive, its reset the identity
-            state.mag_offset_rad += float(dx[6])
+        b = state.b
+        state.b = [min(lim, max(-lim, b[0] + d[3])), min(lim, max(-lim, b[1] + d[4])),
+                   min(lim, max(-lim, b[2] + d[5]))]
+        if len(d) == 7:  # the field's heading offset: additive, its reset the identity
+            state.mag_offset_rad += d[6]
         G = kalman.reset_jacobian(dth, len(dx))
         if keep_yaw:  # a consider heading is carried, not re-linearised: its row stays the identity's
             G[2, 0:2] = 0.0

@@ -594,12 +594,12 @@ class Pipeline:
         health = self.health.get(stream)
         if health is not None:
             x, y, z = values[0], values[1], values[2]
-            if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-                self.n_nonfinite[stream] = self.n_nonfinite.get(stream, 0) + 1
-                return []
             lim = IMPOSSIBLE[stream if stream in IMPOSSIBLE else MAG]
-            if not (-lim <= x <= lim and -lim <= y <= lim and -lim <= z <= lim):
-                self.n_impossible[stream] = self.n_impossible.get(stream, 0) + 1
+            if not (-lim <= x <= lim and -lim <= y <= lim and -lim <= z <= lim):  # false for NaN too
+                if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+                    self.n_nonfinite[stream] = self.n_nonfinite.get(stream, 0) + 1
+                else:
+                    self.n_impossible[stream] = self.n_impossible.get(stream, 0) + 1
                 return []
             health.update(t_ns, x, y, z)
         self.t_ns = t_ns

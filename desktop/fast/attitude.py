@@ -51,7 +51,7 @@ from dataclasses import fields
 import numpy as np
 
 from core.pdr.attitude import CHI2_1_MEDIAN, AttitudeSettings, AttitudeState, IntervalSum, Outcome
-from desktop.fast.jit import kernel
+from desktop.fast.jit import kernel, kernel_or
 from desktop.fast.magcal import calibrate_stream
 
 # event kinds of the merged arrays
@@ -258,9 +258,9 @@ def q_to_matrix(q):
 
 # -- small dense algebra, written out: a BLAS or LAPACK call costs more than these matrices' arithmetic ----
 
-@kernel
+@kernel_or(np.matmul)
 def mm(a, b):
-    """``a @ b`` of small matrices."""
+    """``a @ b`` of small matrices (without numba: ``np.matmul`` itself)."""
     n, k = a.shape
     m = b.shape[1]
     out = np.zeros((n, m))
@@ -273,9 +273,9 @@ def mm(a, b):
     return out
 
 
-@kernel
+@kernel_or(np.matmul)
 def mv(a, x):
-    """``a @ x`` of a small matrix and a vector."""
+    """``a @ x`` of a small matrix and a vector (without numba: ``np.matmul`` itself)."""
     out = np.zeros(a.shape[0])
     for i in range(a.shape[0]):
         acc = 0.0
@@ -310,7 +310,13 @@ def inverse(S):
 
 # -- running statistics on arrays (the reference's deques and histograms) --------------------------
 
-@kernel
+def _median_of_numpy(counts, n, lo, width):
+    """:func:`median_of` without numba: the cumulative counts and the search in two numpy calls."""
+    i = int(np.searchsorted(np.cumsum(counts), 0.5 * n, side="left"))  # the first bin with cum >= n / 2
+    return lo + (i + 0.5) * width if i < len(counts) else math.nan
+
+
+@kernel_or(_median_of_numpy)
 def median_of(counts, n, lo, width):
     """Median of a fixed-bin histogram: the first bin whose cumulative count reaches half."""
     half = 0.5 * n
@@ -534,17 +540,38 @@ def decay_offset(P, fs, sf, phi, cross):
     P[6, 6] = phi * phi * P[6, 6] + sf[S_OFF_SD] ** 2 * (1.0 - phi * phi)
 
 
+# typed block offsets for block3 (a literal argument would compile it once per value: see desktop.fast.jit)
+_I0, _I3 = np.int64(0), np.int64(3)
+
+
+def _block3_numpy(P, r, c):
+    """:func:`block3` without numba: one slice's ``tolist`` (the same floats)."""
+    (a, b, c_), (d, e, f), (g, h, i) = P[r:r + 3, c:c + 3].tolist()
+    return a, b, c_, d, e, f, g, h, i
+
+
+@kernel_or(_block3_numpy)
+def block3(P, r, c):
+    """The 3 x 3 block of ``P`` at row ``r``, column ``c`` as nine floats (row-major): read once into locals, as
+    plain Python reads an array's elements one by one at about a microsecond each."""
+    return (float(P[r, c]), float(P[r, c + 1]), float(P[r, c + 2]), float(P[r + 1, c]), float(P[r + 1, c + 1]),
+            float(P[r + 1, c + 2]), float(P[r + 2, c]), float(P[r + 2, c + 1]), float(P[r + 2, c + 2]))
+
+
 @kernel
 def predict(q, b, P, wx, wy, wz, dt, sf, noise_scale, fs):
     """eqs. 5-7 and 11: ``q <- q (x) exp((w - b) dt / 2)``, ``P <- F P F^T + Q`` (the reference's block order).
 
     Written out in scalars (the formulas of core.quaternion): it runs on every gyroscope event.
     """
-    w, x, y, z = q[0], q[1], q[2], q[3]
+    # the inputs as floats: a no-op for numba; without it Python's float arithmetic, not numpy scalars' (slower)
+    w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    wx, wy, wz, dt = float(wx), float(wy), float(wz), float(dt)
     r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
     r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
     r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
-    ax, ay, az = (wx - b[0]) * dt, (wy - b[1]) * dt, (wz - b[2]) * dt
+    ax, ay, az = (wx - b0) * dt, (wy - b1) * dt, (wz - b2) * dt
     theta = math.sqrt(ax * ax + ay * ay + az * az)  # the rotation vector's quaternion
     if theta < 1e-12:
         pw, px, py, pz = 1.0, 0.5 * ax, 0.5 * ay, 0.5 * az
@@ -560,35 +587,62 @@ def predict(q, b, P, wx, wy, wz, dt, sf, noise_scale, fs):
     mz = w * pz + x * py - y * px + z * pw
     sc = 1.0 / math.sqrt(mw * mw + mx * mx + my * my + mz * mz)
     q[0], q[1], q[2], q[3] = mw * sc, mx * sc, my * sc, mz * sc
-    Rdt = np.empty((3, 3))
-    Rdt[0, 0], Rdt[0, 1], Rdt[0, 2] = r00 * dt, r01 * dt, r02 * dt
-    Rdt[1, 0], Rdt[1, 1], Rdt[1, 2] = r10 * dt, r11 * dt, r12 * dt
-    Rdt[2, 0], Rdt[2, 1], Rdt[2, 2] = r20 * dt, r21 * dt, r22 * dt
-    A = np.empty((3, 3))
-    B = np.empty((3, 3))
-    for i in range(3):  # A = Ptt - Rdt Pbt, B = Ptb - Rdt Pbb
-        for j in range(3):
-            A[i, j] = P[i, j] - (Rdt[i, 0] * P[3, j] + Rdt[i, 1] * P[4, j] + Rdt[i, 2] * P[5, j])
-            B[i, j] = P[i, 3 + j] - (Rdt[i, 0] * P[3, 3 + j] + Rdt[i, 1] * P[4, 3 + j] + Rdt[i, 2] * P[5, 3 + j])
-    w2 = (wx - b[0]) ** 2 + (wy - b[1]) ** 2 + (wz - b[2]) ** 2
+    # every element of P this step reads, once, as a float (block3): the arithmetic and its order are those of
+    # the loops over P's elements these lines replaced, which without numba cost about a microsecond per access
+    d00, d01, d02 = r00 * dt, r01 * dt, r02 * dt  # R dt
+    d10, d11, d12 = r10 * dt, r11 * dt, r12 * dt
+    d20, d21, d22 = r20 * dt, r21 * dt, r22 * dt
+    t00, t01, t02, t10, t11, t12, t20, t21, t22 = block3(P, _I0, _I0)  # Ptt
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = block3(P, _I0, _I3)  # Ptb
+    u00, u01, u02, u10, u11, u12, u20, u21, u22 = block3(P, _I3, _I0)  # Pbt
+    e00, e01, e02, e10, e11, e12, e20, e21, e22 = block3(P, _I3, _I3)  # Pbb
+    # A = Ptt - Rdt Pbt, B = Ptb - Rdt Pbb
+    a00 = t00 - (d00 * u00 + d01 * u10 + d02 * u20)
+    a01 = t01 - (d00 * u01 + d01 * u11 + d02 * u21)
+    a02 = t02 - (d00 * u02 + d01 * u12 + d02 * u22)
+    a10 = t10 - (d10 * u00 + d11 * u10 + d12 * u20)
+    a11 = t11 - (d10 * u01 + d11 * u11 + d12 * u21)
+    a12 = t12 - (d10 * u02 + d11 * u12 + d12 * u22)
+    a20 = t20 - (d20 * u00 + d21 * u10 + d22 * u20)
+    a21 = t21 - (d20 * u01 + d21 * u11 + d22 * u21)
+    a22 = t22 - (d20 * u02 + d21 * u12 + d22 * u22)
+    b00 = c00 - (d00 * e00 + d01 * e10 + d02 * e20)
+    b01 = c01 - (d00 * e01 + d01 * e11 + d02 * e21)
+    b02 = c02 - (d00 * e02 + d01 * e12 + d02 * e22)
+    b10 = c10 - (d10 * e00 + d11 * e10 + d12 * e20)
+    b11 = c11 - (d10 * e01 + d11 * e11 + d12 * e21)
+    b12 = c12 - (d10 * e02 + d11 * e12 + d12 * e22)
+    b20 = c20 - (d20 * e00 + d21 * e10 + d22 * e20)
+    b21 = c21 - (d20 * e01 + d21 * e11 + d22 * e21)
+    b22 = c22 - (d20 * e02 + d21 * e12 + d22 * e22)
+    w2 = (wx - b0) ** 2 + (wy - b1) ** 2 + (wz - b2) ** 2
     fs[F_W2_MEAN] += (1.0 - math.exp(-dt / sf[S_SWING_TAU])) * (w2 - fs[F_W2_MEAN])
     fs[F_SWING_S] = fs[F_SWING_S] + dt if fs[F_W2_MEAN] > sf[S_SWING_RATE] ** 2 else 0.0
     qg = (sf[S_GN] ** 2 + sf[S_GS] ** 2 * w2) * noise_scale * dt
     qb = sf[S_BW] ** 2 * dt
-    for i in range(3):  # Ptt = A - B Rdt^T + qg I
-        for j in range(3):
-            v = A[i, j] - (B[i, 0] * Rdt[j, 0] + B[i, 1] * Rdt[j, 1] + B[i, 2] * Rdt[j, 2])
-            P[i, j] = v + qg if i == j else v
-    for i in range(3):
-        for j in range(3):
-            P[i, 3 + j] = B[i, j]
-            P[3 + j, i] = B[i, j]
-        P[3 + i, 3 + i] += qb
+    # Ptt = A - B Rdt^T + qg I
+    P[0, 0] = (a00 - (b00 * d00 + b01 * d01 + b02 * d02)) + qg
+    P[0, 1] = a01 - (b00 * d10 + b01 * d11 + b02 * d12)
+    P[0, 2] = a02 - (b00 * d20 + b01 * d21 + b02 * d22)
+    P[1, 0] = a10 - (b10 * d00 + b11 * d01 + b12 * d02)
+    P[1, 1] = (a11 - (b10 * d10 + b11 * d11 + b12 * d12)) + qg
+    P[1, 2] = a12 - (b10 * d20 + b11 * d21 + b12 * d22)
+    P[2, 0] = a20 - (b20 * d00 + b21 * d01 + b22 * d02)
+    P[2, 1] = a21 - (b20 * d10 + b21 * d11 + b22 * d12)
+    P[2, 2] = (a22 - (b20 * d20 + b21 * d21 + b22 * d22)) + qg
+    P[0, 3], P[0, 4], P[0, 5] = b00, b01, b02  # Ptb = B, Pbt = B^T
+    P[1, 3], P[1, 4], P[1, 5] = b10, b11, b12
+    P[2, 3], P[2, 4], P[2, 5] = b20, b21, b22
+    P[3, 0], P[3, 1], P[3, 2] = b00, b10, b20
+    P[4, 0], P[4, 1], P[4, 2] = b01, b11, b21
+    P[5, 0], P[5, 1], P[5, 2] = b02, b12, b22
+    P[3, 3], P[4, 4], P[5, 5] = e00 + qb, e11 + qb, e22 + qb
     if P.shape[0] == 7:  # the offset's row of F is (0, 0, phi): P_to <- (P_to - R dt P_bo) phi
         phi = math.exp(-dt / sf[S_OFF_TAU])
-        to0 = phi * (P[0, 6] - (Rdt[0, 0] * P[3, 6] + Rdt[0, 1] * P[4, 6] + Rdt[0, 2] * P[5, 6]))
-        to1 = phi * (P[1, 6] - (Rdt[1, 0] * P[3, 6] + Rdt[1, 1] * P[4, 6] + Rdt[1, 2] * P[5, 6]))
-        to2 = phi * (P[2, 6] - (Rdt[2, 0] * P[3, 6] + Rdt[2, 1] * P[4, 6] + Rdt[2, 2] * P[5, 6]))
+        o3, o4, o5 = float(P[3, 6]), float(P[4, 6]), float(P[5, 6])
+        to0 = phi * (float(P[0, 6]) - (d00 * o3 + d01 * o4 + d02 * o5))
+        to1 = phi * (float(P[1, 6]) - (d10 * o3 + d11 * o4 + d12 * o5))
+        to2 = phi * (float(P[2, 6]) - (d20 * o3 + d21 * o4 + d22 * o5))
         P[0, 6], P[1, 6], P[2, 6] = to0, to1, to2
         P[6, 0], P[6, 1], P[6, 2] = to0, to1, to2
         decay_offset(P, fs, sf, phi, np.bool_(False))  # not a literal: see run_attitude

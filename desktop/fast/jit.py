@@ -4,6 +4,10 @@ numba is an optional desktop extra (``pip install -e ".[fast]"``), never
 required: without it (or with ``PDR_FAST_NO_JIT=1`` in the environment) the
 same kernel functions run as plain Python -- the same code path, only slow.
 The kernels use only what both run alike: numpy arrays, scalars, ``math``.
+A few small ones that only write out, for numba, what one numpy call does (a
+small matrix product, a histogram's median, a block read into floats) are
+declared with :func:`kernel_or`: without numba that numpy call runs in their
+place, as element loops in plain Python cost tens of times more.
 
 A kernel called from another is compiled once per set of argument types, and numba types a constant
 argument (``True``, ``2``, a module constant) as a literal of its value: each call site with other
@@ -31,3 +35,14 @@ def kernel(fn):
     if not HAVE_NUMBA:
         return fn
     return numba.njit(cache=True, fastmath=False)(fn)
+
+
+def kernel_or(plain):
+    """:func:`kernel`, or without numba ``plain`` in the kernel's place: for a kernel that only writes out, for
+    numba, what numpy does in one call (a small matrix product), which as plain Python runs element by element
+    about fifty times slower than the call.  ``plain`` must compute the same thing (up to rounding)."""
+
+    def wrap(fn):
+        return kernel(fn) if HAVE_NUMBA else plain
+
+    return wrap
