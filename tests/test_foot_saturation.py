@@ -59,6 +59,27 @@ def test_streaming_equals_batch_and_no_range_passes_through():
     assert np.array_equal(off.repair(t, clipped), clipped) and off.update(5, (1.0, 2.0, 3.0)) == [(5, (1.0, 2.0, 3.0))]
 
 
+def test_a_stuck_gyroscope_is_released_as_it_comes_and_left_as_it_reads():
+    """A gyroscope at full scale for 2 s (stuck, or spinning past its range) is no swing peak: the batch leaves
+    it, and the stream releases it within the 0.25-s run limit instead of holding the live track (and a growing
+    list) until it ends; a swing's short run before it is still repaired, the same in both."""
+    t, w = _pulses(seed=3, n=1600)
+    clipped = np.clip(w, -9.0, 9.0)
+    clipped[600:1000, 2] = 9.0  # 2 s at 200 Hz
+    batch = GyroClipRepair(9.0).repair(t, clipped)
+    assert np.array_equal(batch[600:1000, 2], clipped[600:1000, 2])
+    s = GyroClipRepair(9.0)
+    out, most_held = [], 0
+    for k in range(len(t)):
+        out += s.update(int(t[k]), tuple(clipped[k]))
+        most_held = max(most_held, k + 1 - len(out))
+    out += s.flush()
+    assert most_held <= 0.25 * 200 + 5  # the run limit plus the flank, never the stuck run's 400 readings
+    assert [o[0] for o in out] == list(t)
+    assert np.allclose(np.array([o[1] for o in out]), batch, atol=1e-12, rtol=0)
+    assert s.n_repaired >= 1 and not np.array_equal(batch[:600], clipped[:600])  # the earlier swings repaired
+
+
 def _clipped_walk(seed):
     w = simulate_foot(footprints([(5.6, 0.0), (2.8, math.pi / 2)]), rate_hz=200.0, pitch_rad=1.3, swing_s=0.4,
                       acc_noise_m_s2=0.05, gyro_noise_rad_s=0.005, seed=seed)

@@ -9,12 +9,15 @@ bias, the vertical one included); the rest is heading drift.
 A run of readings of one axis at or beyond ``(1 - margin) x range`` is clipped.  Its values are replaced by a
 parabola fitted by least squares (in time) to the ``flank`` unclipped readings on each side of the run, where
 the parabola is beyond the reading (never below it: a clipped reading is a lower bound of the true rate).  A
-run without ``flank`` unclipped readings of that axis on both sides is left as it was.
+run without ``flank`` unclipped readings of that axis on both sides is left as it was, and so is a run longer
+than ``max_run_s`` (0.25 s: a swing's peak is shorter; a gyroscope at full scale for longer is stuck or spinning,
+and no parabola over its flanks says what it missed).
 
 Batch (:meth:`GyroClipRepair.repair`) and streaming (:meth:`GyroClipRepair.update` / :meth:`flush`) give the
 same readings (tested): the stream holds the readings from the first clipped one until ``flank`` readings
 unclipped on every axis follow, so a reading comes out up to the run's length plus ``flank`` samples late
-(no delay while nothing is clipped).
+(no delay while nothing is clipped); a run longer than ``max_run_s`` is released as it comes, so a stuck
+gyroscope neither holds the live track nor grows the held list.
 """
 
 from __future__ import annotations
@@ -36,14 +39,15 @@ def clipped_runs(values, level: float) -> list[tuple[int, int, int]]:
     return out
 
 
-def repair_block(t_ns, values, level: float, flank: int, start: int = 0) -> tuple[np.ndarray, int]:
-    """The readings with every clipped run that begins at or after ``start`` repaired (module docstring);
-    ``(repaired copy, number of runs repaired)``."""
+def repair_block(t_ns, values, level: float, flank: int, start: int = 0,
+                 max_run_s: float = math.inf) -> tuple[np.ndarray, int]:
+    """The readings with every clipped run that begins at or after ``start`` and lasts at most ``max_run_s``
+    repaired (module docstring); ``(repaired copy, number of runs repaired)``."""
     t = np.asarray(t_ns, dtype=np.int64)
     w = np.array(values, dtype=float).reshape(len(t), -1)
     n = 0
     for ax, i, j in clipped_runs(w, level):
-        if i < start or i < flank or j + flank > len(t):
+        if i < start or i < flank or j + flank > len(t) or (t[j - 1] - t[i]) * 1e-9 > max_run_s:
             continue
         idx = np.r_[i - flank:i, j:j + flank]
         if np.any(np.abs(w[idx, ax]) >= level):  # another run too close: no clean flank
@@ -64,9 +68,11 @@ class GyroClipRepair:
     ``(t_ns, values)``), ``flush()`` at the end.  ``n_repaired``: runs repaired so far.
     """
 
-    def __init__(self, range_rad_s: float = math.nan, margin: float = 0.01, flank: int = 3):
+    def __init__(self, range_rad_s: float = math.nan, margin: float = 0.01, flank: int = 3,
+                 max_run_s: float = 0.25):
         self.level = (1.0 - margin) * range_rad_s if math.isfinite(range_rad_s) and range_rad_s > 0 else math.nan
         self.flank = int(flank)
+        self.max_run_s = float(max_run_s)
         self.reset()
 
     @property
@@ -77,12 +83,13 @@ class GyroClipRepair:
         self.n_repaired = 0
         self._before: deque = deque(maxlen=self.flank)  # the last readings released (all unclipped)
         self._held: list = []  # readings from the first clipped one on
+        self._run_start_ns: dict = {}  # axis -> the first reading of that axis's current clipped run
 
     def repair(self, t_ns, values) -> np.ndarray:
         """A whole stream at once (same result as :meth:`update` reading by reading, then :meth:`flush`)."""
         if not self.active:
             return np.asarray(values, dtype=float)
-        w, n = repair_block(t_ns, values, self.level, self.flank)
+        w, n = repair_block(t_ns, values, self.level, self.flank, max_run_s=self.max_run_s)
         self.n_repaired += n
         return w
 
@@ -96,6 +103,11 @@ class GyroClipRepair:
             self._before.append((t_ns, values))
             return [(t_ns, values)]
         self._held.append((t_ns, values))
+        for ax, x in enumerate(values):
+            if not abs(x) >= self.level:  # as _clipped: nan is not clipped
+                self._run_start_ns.pop(ax, None)
+            elif (t_ns - self._run_start_ns.setdefault(ax, t_ns)) * 1e-9 > self.max_run_s:
+                return self.flush()  # too long to repair (the batch leaves it too): released as it comes
         f = self.flank
         if len(self._held) > f and not any(self._clipped(v) for _, v in self._held[-f:]):
             return self.flush()
@@ -107,7 +119,7 @@ class GyroClipRepair:
             return []
         block = list(self._before) + self._held
         w, n = repair_block([b[0] for b in block], [b[1] for b in block], self.level, self.flank,
-                            start=len(self._before))
+                            start=len(self._before), max_run_s=self.max_run_s)
         self.n_repaired += n
         out = [(block[k][0], tuple(float(x) for x in w[k])) for k in range(len(self._before), len(block))]
         for item in self._held[-self.flank:]:
