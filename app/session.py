@@ -209,6 +209,7 @@ class Session:
     def reset_track(self) -> None:
         """Start a new track (new pipeline, empty track and health); the recording goes on."""
         self.pipeline = self.pipeline_factory()
+        self._describe_sensors()
         g = self.gnss
         if g is not None and not g.keep_history and g.history_dir is None:
             g.history_dir = self._steps_dir()  # its fused steps and fix records beside the recording too
@@ -248,6 +249,13 @@ class Session:
         # the floor plan's particle filter (app.indoor), placed again on every new track
         self.map = MapMatcher(self.plan, name=self.plan_name) if self.plan is not None else None
 
+    def _describe_sensors(self) -> None:
+        """The source's device description to a tracker that reads it (the foot INS: the gyroscope's full
+        scale, :meth:`core.foot.tracker.FootTracker.use_device`); a live source has it once started."""
+        use = getattr(self.pipeline, "use_device", None)
+        if use is not None and self.source.device:
+            use(self.source.device)
+
     def _steps_dir(self) -> str | None:
         """Where the step file goes: the recording's folder (it is writable), else the system's temporary one."""
         d = os.path.dirname(os.path.abspath(self.record_path)) if self.record_path else None
@@ -258,6 +266,7 @@ class Session:
     def start(self) -> None:
         """Start the source, then (if asked) open the recording with the source's device description."""
         self.source.start()
+        self._describe_sensors()
         if self.record_path and self.writer is None:
             device, metadata = self._record_meta
             streams = self._record_streams or {**{n: STREAM_SPECS[n] for n in ("acc", "gyro", "mag", "gps", "gnss_status")},
@@ -295,6 +304,7 @@ class Session:
             self.health.pause(self._max_t)
         self.source = source
         source.start()
+        self._describe_sensors()
 
     @property
     def recording(self) -> bool:

@@ -583,16 +583,19 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     if args.gps == "chen" or args.gps == "kubrak" or args.gps_outage:
         raise ValueError("GPS fusion with the foot-mounted INS is not built; use --gps off (or auto) with --mode foot")
     from core.foot.navigator import FootNavigator
-    from core.foot.tracker import foot_settings_for
+    from core.foot.tracker import foot_settings_for, recording_gyro_range
     from core.metrics import truth_errors, truth_of
 
-    # the product's choice (as in the app): the TCKF with a waist magnetometer, else ZUPT only
+    # the product's choice (as in the app): the TCKF with a waist magnetometer, else ZUPT only; the gyroscope's
+    # full scale the recording declares (the app writes Android's getMaximumRange), --gyro-range over it
     settings, waist = foot_settings_for(rec, aid=args.aid, detector=args.detector, waist_device=args.waist_device,
-                                        gyro_delay_s=args.gyro_delay_ms * 1e-3)
+                                        gyro_delay_s=args.gyro_delay_ms * 1e-3, foot_device=args.foot_device or "")
     if getattr(args, "no_smoother", False):
         settings = dataclasses.replace(settings, rts_smoother=False)
+    range_from, range_problem = "the recording's gyroscope", recording_gyro_range(rec, args.foot_device or "")[1]
     if math.isfinite(getattr(args, "gyro_range", math.nan)):
         settings = dataclasses.replace(settings, gyro_range_rad_s=args.gyro_range)
+        range_from, range_problem = "--gyro-range", ""
     slow = foot_rate_problem(rec, args.foot_device or "", settings.stance.window_s)
     if slow is not None:
         raise ValueError(slow.text)
@@ -602,6 +605,11 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
     s["mode"] = "foot"
     s["mode_reason"] = why
     s["smoothed"] = bool(settings.rts_smoother and not s.get("smoother_skipped_too_long"))
+    s["gyro_range_rad_s"] = settings.gyro_range_rad_s
+    gyro_range = (f"{settings.gyro_range_rad_s:.2f} rad/s ({range_from}): {s['gyro_clipped_runs_repaired']} "
+                  "clipped runs repaired" if math.isfinite(settings.gyro_range_rad_s) else
+                  "unknown, clipped readings not repaired (--gyro-range RAD_S gives it)"
+                  + (f"; {range_problem}" if range_problem else ""))
     track = _stride_track(res)
     truth = truth_of(rec)
     errs = truth_errors(track, truth) if truth else {}
@@ -614,6 +622,7 @@ def replay_foot(args, rec: Recording, why: str, outs: dict) -> dict:
         f"stance detector {s['detector']}",
         f"duration      {s['duration_s']:.1f} s at {s['rate_hz']:.0f} Hz",
         f"strides       {s['n_strides']} (stance {100 * s['stance_fraction']:.0f} % of the time)",
+        f"gyro range    {gyro_range}",
         f"distance      {s['distance_m']:.1f} m",
         f"final pos     E {s['final_east_m']:+.2f} m, N {s['final_north_m']:+.2f} m, U {s['final_up_m']:+.2f} m",
         f"start-to-end  {s['start_to_end_m']:.2f} m"
@@ -1614,7 +1623,8 @@ def make_parser() -> argparse.ArgumentParser:
                    help="foot mode: the gyroscope lags the accelerometer by this much (ms)")
     r.add_argument("--gyro-range", type=float, default=float("nan"), metavar="RAD_S",
                    help="foot mode: the gyroscope's full scale (rad/s): readings within 1 %% of it are clipped "
-                        "and repaired (default: unknown, none repaired)")
+                        "and repaired (default: the one the recording declares, as the app writes it; else "
+                        "unknown, none repaired)")
     r.add_argument("--no-smoother", action="store_true",
                    help="foot mode: the forward filter's track only (default: RTS-smoothed over the whole walk, "
                         "each sample from the samples before and after it; the live app never smooths)")

@@ -1070,3 +1070,81 @@ def test_the_fake_resolves_overloads_by_pyjnius_1_7_scores():
             sm_java.unregisterListener(listener)
         except Exception:  # noqa: BLE001 - as app code would
             pass
+
+
+class RangedSensor(FakeSensor):
+    """A sensor with Android's ``getMaximumRange()`` (in the sensor's unit: rad/s for the gyroscope)."""
+
+    def __init__(self, type_, max_range):
+        super().__init__(type_)
+        self.max_range = max_range
+
+    def getMaximumRange(self):
+        return self.max_range
+
+
+def _live_foot_session(gyro_max_range, path, events=()):
+    """A live foot-mode session on the fake sensors (the gyroscope declaring ``gyro_max_range``), recording to
+    ``path``, fed ``events`` ((stream, t_ns, values)) through the sensor thread, then closed."""
+    from app.settings import Settings
+
+    sm = FakeSensorManager()
+    sm.sensors[4] = RangedSensor(4, gyro_max_range)
+    src = AndroidSource(rate_hz=200, gps=False, jnius=make_fake_jnius(sm))
+    ses = Session(src, pipeline_factory=Settings(tracking_mode="foot").pipeline_factory(), record_path=str(path))
+    ses.start()
+    types_ = {"acc": 1, "gyro": 4}
+    for k, (name, t, v) in enumerate(events):
+        sm.deliver(types_[name], t, v)
+        if k % 500 == 499:
+            ses.tick(budget_s=10.0)
+    ses.tick(budget_s=10.0)
+    ses.close()
+    return ses
+
+
+def test_live_foot_mode_repairs_clipping_at_the_gyroscopes_maximum_range(tmp_path):
+    """Android's getMaximumRange of the gyroscope reaches the foot INS of a live foot-mode session (clipped
+    swings repaired), the recording keeps it, and a replay of that recording uses it.  Before: nan, none."""
+    from core.foot.tracker import FootTracker, foot_settings_for
+    from tests.test_foot_saturation import _clipped_walk
+
+    w, rec, level = _clipped_walk(1)
+    events = [e for e in rec.events() if e[0] in ("acc", "gyro")]
+    path = tmp_path / "live.csv"
+    ses = _live_foot_session(level / 0.995, path, events)
+    tr = ses.pipeline
+    assert isinstance(tr, FootTracker)
+    assert tr.settings.gyro_range_rad_s == tr.nav.settings.gyro_range_rad_s == pytest.approx(level / 0.995, abs=1e-12)
+    d = tr.diagnostics()
+    assert d["gyro_clipped_runs_repaired"] >= 5 and d["gyro_range_refused"] == 0  # a run per stride
+    assert any("clipped runs repaired" in line for line in tr.health_lines())
+    back = read_recording(str(path), warn=False)
+    assert back.device["sensors"]["gyro"]["max_range"] == pytest.approx(level / 0.995, abs=1e-12)
+    assert foot_settings_for(back)[0].gyro_range_rad_s == pytest.approx(level / 0.995, abs=1e-12)
+    ses.reset_track()  # a new track of the same sensors keeps it
+    assert ses.pipeline.nav.settings.gyro_range_rad_s == pytest.approx(level / 0.995, abs=1e-12)
+
+
+def test_the_gyroscopes_maximum_range_reaches_a_foot_session(tmp_path):
+    ses = _live_foot_session(8.7, tmp_path / "a.csv", [("acc", 10**9, (0.0, 0.0, 9.81))])
+    assert ses.pipeline.nav.settings.gyro_range_rad_s == pytest.approx(8.7, abs=1e-12)
+    assert read_recording(str(tmp_path / "a.csv"), warn=False).device["sensors"]["gyro"]["max_range"] == 8.7
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, 0.0, -8.7, 0.5])
+def test_a_broken_maximum_range_is_ignored_and_said(tmp_path, bad):
+    """nan / inf / 0 / negative / implausibly small from a broken sensor: nothing repaired, counted and said
+    in the diagnostics and the health panel, no crash; the recording stays readable and its replay ignores it."""
+    from core.foot.tracker import foot_settings_for, recording_gyro_range
+
+    path = tmp_path / "bad.csv"
+    ses = _live_foot_session(bad, path, [("acc", 10**9, (0.0, 0.0, 9.81)), ("gyro", 10**9 + 1, (0.0, 0.0, 0.0))])
+    tr = ses.pipeline
+    assert math.isnan(tr.settings.gyro_range_rad_s) and math.isnan(tr.nav.settings.gyro_range_rad_s)
+    d = tr.diagnostics()
+    assert d["gyro_range_refused"] == 1 and d["gyro_clipped_runs_repaired"] == 0
+    assert any("not repaired" in line and "maximum range" in line for line in tr.health_lines())
+    back = read_recording(str(path), warn=False)
+    assert math.isnan(foot_settings_for(back)[0].gyro_range_rad_s)
+    assert "maximum range" in recording_gyro_range(back)[1]

@@ -77,3 +77,26 @@ def test_gyro_range_repairs_clipped_swings(tmp_path, capsys):
         assert main(["replay", path, "--json", "--no-smoother"] + extra) == 0
         out[name] = json.loads(capsys.readouterr().out)
     assert out["off"]["gyro_clipped_runs_repaired"] == 0 and out["on"]["gyro_clipped_runs_repaired"] >= 5
+
+
+def test_replay_uses_the_gyro_range_the_recording_declares_and_the_flag_overrides_it(tmp_path, capsys):
+    """A recording that declares its gyroscope's full scale (``device["sensors"]["gyro"]["max_range"]``, as
+    the app writes Android's getMaximumRange) is repaired without ``--gyro-range``; the flag wins over it."""
+    from dataclasses import replace
+
+    from tests.test_foot_saturation import _clipped_walk
+
+    w, rec, level = _clipped_walk(1)
+    path = str(tmp_path / "declared.csv.gz")
+    write_recording(path, replace(rec, device={**rec.device, "sensors": {"gyro": {"max_range": level / 0.995}}}))
+    out = {}
+    for name, extra in (("declared", []), ("flag", ["--gyro-range", str(level / 0.995)]),
+                        ("override", ["--gyro-range", "100"])):
+        assert main(["replay", path, "--json", "--no-smoother"] + extra) == 0
+        out[name] = json.loads(capsys.readouterr().out)
+    assert out["declared"]["gyro_clipped_runs_repaired"] >= 5
+    assert out["declared"]["final_east_m"] == out["flag"]["final_east_m"]
+    assert out["declared"]["gyro_range_rad_s"] == pytest.approx(level / 0.995, abs=1e-12)
+    assert out["override"]["gyro_clipped_runs_repaired"] == 0 and out["override"]["gyro_range_rad_s"] == 100
+    assert main(["replay", path, "--no-smoother"]) == 0
+    assert "(the recording's gyroscope):" in capsys.readouterr().out

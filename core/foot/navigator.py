@@ -638,12 +638,17 @@ class FootNavigator:
             heading_updates=list(self.heading_updates),
             course_updates=list(self.course_updates),
             counters={**self.counters, "ins_rejected": self.ins.n_rejected,
-                      "gyro_clipped_runs_repaired": self._clip.n_repaired},
+                      "gyro_clipped_runs_repaired": self.clipped_runs_repaired},
             settings=self.settings,
             recording=recording,
             position_sd_m=np.array(self.out_sd, dtype=float),
         )
 
+
+    @property
+    def clipped_runs_repaired(self) -> int:
+        """Clipped gyroscope runs repaired so far (:class:`core.foot.saturation.GyroClipRepair`)."""
+        return self._clip.n_repaired
 
     def _smooth(self) -> None:
         """Replace every sample's state by the RTS-smoothed one (:meth:`core.foot.ins.ZuptEKF.smoothed`)

@@ -18,6 +18,10 @@ same readings (tested): the stream holds the readings from the first clipped one
 unclipped on every axis follow, so a reading comes out up to the run's length plus ``flank`` samples late
 (no delay while nothing is clipped); a run longer than ``max_run_s`` is released as it comes, so a stuck
 gyroscope neither holds the live track nor grows the held list.
+
+The range is a property of the sensor: a file or a live source declares it as Android's
+``Sensor.getMaximumRange()`` of the gyroscope (rad/s, the sensor's unit), ``device["sensors"]["gyro"]["max_range"]``
+(what the app writes in a recording's header); :func:`declared_gyro_range` reads it and refuses what cannot be one.
 """
 
 from __future__ import annotations
@@ -26,6 +30,28 @@ import math
 from collections import deque
 
 import numpy as np
+
+from core.conventions import GYRO
+
+#: a declared full scale below this is refused (rad/s): the smallest full scale of MEMS gyroscopes is
+#: +-125 deg/s = 2.18 rad/s, and a range too small would "repair" ordinary swings
+MIN_GYRO_RANGE_RAD_S = 2.0
+
+
+def declared_gyro_range(device) -> tuple[float, str]:
+    """``(range_rad_s, problem)``: the gyroscope's full scale a device description declares
+    (``device["sensors"]["gyro"]["max_range"]``, rad/s; module docstring).  Nothing declared: ``(nan, "")``.
+    A value that cannot be a full scale (nan, inf, 0, negative, below :data:`MIN_GYRO_RANGE_RAD_S`, not a
+    number: a broken sensor's report) is refused: ``(nan, why)``, and nothing is repaired."""
+    sensors = device.get("sensors") if isinstance(device, dict) else None
+    gyro = sensors.get(GYRO) if isinstance(sensors, dict) else None
+    if not isinstance(gyro, dict) or gyro.get("max_range") is None:
+        return math.nan, ""
+    v = gyro["max_range"]
+    r = float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else math.nan
+    if math.isfinite(r) and r >= MIN_GYRO_RANGE_RAD_S:
+        return r, ""
+    return math.nan, f"the gyroscope reports a maximum range of {v!r} rad/s: not a full scale, ignored"
 
 
 def clipped_runs(values, level: float) -> list[tuple[int, int, int]]:

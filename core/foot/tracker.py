@@ -6,7 +6,8 @@ The app (:class:`app.session.Session`) and the command line run either chain:
   else the placement the recording declares (``device["placement"]``, ``metadata["devices"]``), else
   the IMU's signals (:func:`core.foot.mounting.detect_mounting`).  It returns the mode and why.
 * :func:`foot_settings_for` gives the settings the product uses on a recording: the TCKF of
-  Song & Park when a waist magnetometer is there, ZUPT only otherwise.
+  Song & Park when a waist magnetometer is there, ZUPT only otherwise; the gyroscope's full scale the
+  recording declares (:func:`core.foot.saturation.declared_gyro_range`), so clipped readings are repaired.
 * :class:`FootTracker` has the streaming interface of :class:`core.pdr.pipeline.Pipeline`
   (``update(stream, t_ns, values)`` -> completed strides, ``finish()``, ``status()``) over
   :class:`core.foot.navigator.FootNavigator`, so the session, the track view, the exports and the
@@ -26,6 +27,7 @@ from core.conventions import ACC, MAG
 from core.foot.devices import has_imu, stream_name
 from core.foot.mounting import FOOT, HANDHELD, detect_mounting
 from core.foot.navigator import FootNavigator, FootSettings
+from core.foot.saturation import declared_gyro_range
 from core.foot.stance import StanceSettings
 from core.recording import Recording
 
@@ -33,15 +35,27 @@ from core.recording import Recording
 MODES = ("auto", HANDHELD, FOOT)
 
 
-def _declared_placement(recording: Recording, device: str) -> str:
-    """The placement the recording declares for ``device`` ("" = primary), lower case, "" if none."""
+def _device_info(recording: Recording, device: str) -> dict:
+    """What the recording declares of ``device`` ("" = primary: ``recording.device``, else
+    ``metadata["devices"][device]``); {} if nothing."""
     if device:
         devs = recording.metadata.get("devices")
         info = devs.get(device) if isinstance(devs, dict) else None
-        p = info.get("placement") if isinstance(info, dict) else None
     else:
-        p = recording.device.get("placement") if isinstance(recording.device, dict) else None
+        info = recording.device
+    return info if isinstance(info, dict) else {}
+
+
+def _declared_placement(recording: Recording, device: str) -> str:
+    """The placement the recording declares for ``device`` ("" = primary), lower case, "" if none."""
+    p = _device_info(recording, device).get("placement")
     return p.strip().lower() if isinstance(p, str) else ""
+
+
+def recording_gyro_range(recording: Recording, device: str = "") -> tuple[float, str]:
+    """``(range_rad_s, problem)``: the full scale of ``device``'s gyroscope ("" = primary) as the recording
+    declares it (:func:`core.foot.saturation.declared_gyro_range`; nan: unknown or refused, and why)."""
+    return declared_gyro_range(_device_info(recording, device))
 
 
 def _foot_devices(recording: Recording) -> list[str]:
@@ -84,13 +98,16 @@ def choose_mode(recording: Recording, mode: str = "auto", foot_device: str = "")
 
 
 def foot_settings_for(recording: Recording | None, *, aid: str | None = None, detector: str = "shoe",
-                      waist_device: str | None = "waist", gyro_delay_s: float = 0.0) -> tuple[FootSettings, str | None]:
+                      waist_device: str | None = "waist", gyro_delay_s: float = 0.0,
+                      foot_device: str = "") -> tuple[FootSettings, str | None]:
     """The product's foot settings for ``recording`` and the waist device to use (None: no waist IMU).
 
     ``aid`` None: "tckf" when the recording has the waist device's accelerometer and magnetometer,
     else "zupt" (a single foot IMU: its magnetometer near the floor is too disturbed to be the default,
     see the benchmark's IPOL table).  ``recording`` None (a live phone on the shoe): no waist device, and
     the stance detector's adaptive threshold causal (:class:`core.foot.stance.StanceSettings`).
+    The gyroscope's full scale is the one the recording declares for ``foot_device`` (:func:`recording_gyro_range`;
+    live: :meth:`FootTracker.use_device` when the sensors have started).
     """
     waist = waist_device or None
     if waist is not None and (recording is None or not (recording.has(stream_name(ACC, waist))
@@ -101,8 +118,9 @@ def foot_settings_for(recording: Recording | None, *, aid: str | None = None, de
     # instead of (window_s + adaptive_floor_window_s) / 2 (0.05 s against 0.65 s with the defaults)
     stance = StanceSettings(detector=detector, adaptive_floor_causal=recording is None)
     # a replay is smoothed (the navigator's default); live tracking is not (FootTracker turns it off too)
-    return (FootSettings(aid=chosen, stance=stance, gyro_delay_s=gyro_delay_s, rts_smoother=recording is not None),
-            waist)
+    gyro_range = recording_gyro_range(recording, foot_device)[0] if recording is not None else math.nan
+    return (FootSettings(aid=chosen, stance=stance, gyro_delay_s=gyro_delay_s, rts_smoother=recording is not None,
+                         gyro_range_rad_s=gyro_range), waist)
 
 
 @dataclass(frozen=True)
@@ -143,6 +161,8 @@ class FootTracker:
         self.foot_device = foot_device
         self.waist_device = waist_device
         self.keep_samples = bool(keep_samples)
+        #: why the gyroscope's declared full scale was refused ("" when it was not; :meth:`use_device`)
+        self.gyro_range_problem = ""
         self.reset()
 
     def reset(self) -> None:
@@ -158,6 +178,19 @@ class FootTracker:
         self._stance_samples = 0
         self._nis_sum = 0.0
         self._nis_n = 0
+
+    def use_device(self, device: dict) -> None:
+        """The sensors' description (the session gives its source's ``device`` once they have started): the
+        full scale of the gyroscope it declares (:func:`core.foot.saturation.declared_gyro_range`) becomes
+        ``settings.gyro_range_rad_s``, so clipped readings are repaired.  Only for the primary device's IMU,
+        when the settings have no range yet and before the first sample; a value that cannot be a full scale
+        is ignored (nothing repaired) and said in :meth:`diagnostics` and :meth:`health_lines`."""
+        if self.foot_device or math.isfinite(self.settings.gyro_range_rad_s) or self.t_ns is not None:
+            return
+        r, self.gyro_range_problem = declared_gyro_range(device)
+        if math.isfinite(r):
+            self.settings = replace(self.settings, gyro_range_rad_s=r)
+            self.reset()
 
     def input_streams(self, recording: Recording) -> list[str]:
         """The streams of ``recording`` the tracker reads (a replay must deliver the other devices' too)."""
@@ -253,12 +286,19 @@ class FootTracker:
             "strides": len(self.steps),
             **nav.counters,
             "ins_rejected": nav.ins.n_rejected,
+            "gyro_range_rad_s": self.settings.gyro_range_rad_s,
+            "gyro_range_refused": int(bool(self.gyro_range_problem)),
+            "gyro_clipped_runs_repaired": nav.clipped_runs_repaired,
         }
 
     def health_lines(self) -> list[str]:
         """Lines the health panel adds below the sensor table."""
         d = self.diagnostics()
         lines = [f"foot INS: ZUPT EKF, heading aid {d['aid']}, stance detector {d['detector']}"]
+        r = d["gyro_range_rad_s"]
+        lines.append(f"gyroscope full scale {r:.2f} rad/s: {d['gyro_clipped_runs_repaired']} clipped runs repaired"
+                     if math.isfinite(r) else "gyroscope full scale unknown: clipped readings not repaired"
+                     + (f" ({self.gyro_range_problem})" if self.gyro_range_problem else ""))
         if not d["aligned"]:
             lines.append(f"not aligned yet: stand still {self.settings.align_min_s:g} s")
             return lines
@@ -274,4 +314,4 @@ class FootTracker:
         return lines
 
 
-__all__ = ["MODES", "FootStep", "FootTracker", "choose_mode", "foot_settings_for"]
+__all__ = ["MODES", "FootStep", "FootTracker", "choose_mode", "foot_settings_for", "recording_gyro_range"]
