@@ -112,6 +112,13 @@ class FootSettings:
     #: the smoother keeps about 3.7 kB per sample; a longer recording is not smoothed (counted in
     #: ``smoother_skipped_too_long``; 150000 samples: 12.5 min at 200 Hz, about 560 MB)
     rts_max_samples: int = 150_000
+    #: heuristic drift reduction (HDR, Borenstein et al. 2009): at the end of a stance whose foot heading is
+    #: within ``hdr_gate_rad`` of the previous stance's (the walker goes straight), a heading pseudo-measurement
+    #: pulls the heading toward the previous stance's with sd ``hdr_noise_rad`` (it observes the vertical gyro
+    #: bias); only after a stride of at least ``hdr_min_stride_m``.  0: off
+    hdr_gate_rad: float = 0.0
+    hdr_noise_rad: float = math.radians(1.0)
+    hdr_min_stride_m: float = 0.3
 
     def __post_init__(self):
         if self.aid not in AIDS:
@@ -153,6 +160,7 @@ class FootResult:
     recording: Recording | None = None
     #: position sd (m) of every sample (sqrt of the largest eigenvalue of the horizontal block)
     position_sd_m: np.ndarray | None = None
+    hdr_updates: list = field(default_factory=list)  #: core.foot.ins.Update of every HDR pseudo-measurement
 
     def stride_positions(self) -> np.ndarray:
         return np.array([s.position_n for s in self.strides], dtype=float).reshape(-1, 3)
@@ -268,8 +276,11 @@ class FootNavigator:
         self.zupt_nis: list[float] = []
         self.heading_updates: list = []
         self.course_updates: list = []
+        self.hdr_updates: list = []  #: core.foot.ins.Update of every HDR pseudo-measurement
+        self._hdr_ref_rad = math.nan  # the foot heading at the end of the previous stance (HDR)
         self.counters = {"skipped_nonfinite": 0, "aid_unavailable": 0, "aid_gated": 0, "alignments_rejected": 0,
-                         "aligned_on_short_stance": 0, "smoother_skipped_too_long": 0, "zero_rate_updates": 0}
+                         "aligned_on_short_stance": 0, "smoother_skipped_too_long": 0, "zero_rate_updates": 0,
+                         "hdr_updates": 0}
 
     # -- the per-sample kernel ----------------------------------------------------------------
     def _sample(self, t: int, acc, gyro, stance: bool, ratio: float = 0.0) -> None:
@@ -465,10 +476,35 @@ class FootNavigator:
                 self.counters["aid_gated" if cu.reason in ("gated", "turning", "short stride")
                               else "aid_unavailable"] += 1
             x1, p1 = cu.x_rad, cu.p_rad2
+        if s.hdr_gate_rad > 0:
+            self._hdr(length)
         self._prev_course, self._prev_waist = course, psi_w
         self.strides.append(Stride(t0, t1, tuple(ins.p), length, course, psi_w, aid, innov, nis, x1, p1))
         self._last_stride_t = t1
         self._last_stride_pos = np.array(ins.p)
+
+    def _hdr(self, length: float) -> None:
+        """Heuristic drift reduction (see :attr:`FootSettings.hdr_gate_rad`): the innovation is the previous
+        stance's foot heading minus this one's, ``H`` the tilt-coupled heading row of the foot axis."""
+        s = self.settings
+        fwd_n = self.ins.matrix() @ self._foot_axis
+        psi = self._azimuth(fwd_n)
+        innov = wrap_angle(self._hdr_ref_rad - psi) if math.isfinite(self._hdr_ref_rad) else math.nan
+        relative = s.aid != "tckf"  # the TCKF keeps its own consider term (core.foot.course)
+        if abs(innov) <= s.hdr_gate_rad and length >= s.hdr_min_stride_m:
+            h = heading_jacobian(fwd_n)
+            if relative:
+                u = self.ins.update_heading_relative(innov, h, s.hdr_noise_rad ** 2)
+            else:
+                u = self.ins.update_heading(innov, h, s.hdr_noise_rad ** 2)
+            self.hdr_updates.append(u)
+            self.counters["hdr_updates"] += u.used
+            if u.used:
+                fwd_n = self.ins.matrix() @ self._foot_axis
+                psi = self._azimuth(fwd_n)
+        if relative:  # the next stance's measurement is relative to this heading and its error
+            self.ins.consider_heading(heading_jacobian(fwd_n))
+        self._hdr_ref_rad = psi
 
     def _stride_gate(self, length, course, psi_w) -> str:
         """Why a stride gives no course-type measurement ("" if it does): the gates of :mod:`core.foot.course`."""
@@ -637,6 +673,7 @@ class FootNavigator:
             zupt_nis=np.array(self.zupt_nis, dtype=float),
             heading_updates=list(self.heading_updates),
             course_updates=list(self.course_updates),
+            hdr_updates=list(self.hdr_updates),
             counters={**self.counters, "ins_rejected": self.ins.n_rejected,
                       "gyro_clipped_runs_repaired": self.clipped_runs_repaired},
             settings=self.settings,
