@@ -140,7 +140,7 @@ def test_gated_zero_rate_update_learns_the_vertical_gyro_bias():
     bias = (0.001, -0.0015, 0.003)
     w = simulate_foot(footprints([(7.0, 0.0), (2.8, math.pi / 2), (7.0, math.pi)]), rate_hz=200.0,
                       acc_noise_m_s2=0.05, gyro_noise_rad_s=0.005, gyro_bias_rad_s=bias, seed=5)
-    plain = FootSettings(rts_smoother=False, ins=InsSettings(zero_rate_update=False))
+    plain = FootSettings(rts_smoother=False, ins=InsSettings(zero_rate_update=False), hdr_gate_rad=0.0)  # ZARU alone
     zaru = dc_replace(plain, ins=InsSettings(zero_rate_update=True, zaru_noise_rad_s=0.02, zaru_gate_rad_s=0.02))
     assert zaru.ins == InsSettings()  # the default
     nav0, nav1 = FootNavigator(plain), FootNavigator(zaru)

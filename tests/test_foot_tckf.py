@@ -20,7 +20,7 @@ def _walk(seed=0):
 def _final_error(w, aid, zero_rate_update=False):
     # the zero-rate updates (on by default) learn this constant bias in the simulator's perfectly still
     # stances; off here, the drift is what ZUPT alone cannot see and the heading aids must hold
-    fs = FootSettings(aid=aid, ins=InsSettings(zero_rate_update=zero_rate_update))
+    fs = FootSettings(aid=aid, ins=InsSettings(zero_rate_update=zero_rate_update), hdr_gate_rad=0.0)  # no HDR
     res = FootNavigator(fs, waist_device="waist").run(w.recording, stance=w.stance)
     sp = res.stride_positions()
     # the track's frame: magnetic north from the (disturbed) foot magnetometer at the start; compare the
