@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from core.geodesy import enu_to_geodetic
-from core.gnss.judge import Cause, GpsJudge, GpsVerdict, chi2_mean_limit, shape_residual_m, verdict_text
+from core.gnss.judge import Cause, GpsJudge, GpsVerdict, JudgeSettings, chi2_mean_limit, shape_residual_m, verdict_text
 
 ORIGIN = (47.37, 8.54)
 
@@ -181,7 +181,8 @@ def test_fixes_that_agree_among_themselves_are_usable_whatever_the_steps_heading
     """Issue #26 follow-up: on walks with a poor step heading the shape test refused most of a good stream. Fixes
     that agree among themselves (their stated accuracy), at a walking pace, are consistent (fails before: 0 %)."""
     assert _poor_heading_judged({}) > 0.9
-    assert _poor_heading_judged({"self_consistency": False}) < 0.1
+    # (the stream lock, ``lock_window_s``, would take this stream too after 30 s: off here)
+    assert _poor_heading_judged({"self_consistency": False, "lock_window_s": None}) < 0.1
 
 
 def test_a_jump_in_a_stream_is_not_self_consistent():
@@ -400,3 +401,37 @@ def test_fixes_from_few_satellites_are_kept_out_with_the_satellite_rule_and_the_
         many = make_fusion(name, start=(*ORIGIN, 1.0), judge=rule).run(steps, gps, None, _status(gps, 12))
         assert sum(f.accepted for f in many.fixes) > 20
         assert many.counters["gps_judge"]["last"]["few_sats_share"] == 0.0
+
+
+def _lock_stream(receiver_speed_m_s: float, step_scale: float = 2.4, **settings) -> list:
+    """75 s of fixes reporting 4 m along a walk at 1.2 m/s with a 60-deg turn at 40 s; the steps walk the same path
+    ``step_scale`` times too long (so the pace check says the receiver sees under half the walk); the receiver
+    reports ``receiver_speed_m_s``.  The judgements."""
+    j = GpsJudge(JudgeSettings(**settings))
+    rng = np.random.default_rng(11)
+    out = []
+    e = n = 0.0
+    for k in range(75):
+        h = 0.0 if k < 40 else math.radians(60.0)
+        if k:
+            e, n = e + 1.2 * math.cos(h), n + 1.2 * math.sin(h)
+        lat, lon = enu_to_geodetic(e + rng.normal(0, 1.5), n + rng.normal(0, 1.5), ORIGIN)
+        out.append(j.add_fix(int(k * 1e9), float(lat), float(lon), 4.0, (step_scale * e, step_scale * n),
+                             speed_m_s=receiver_speed_m_s))
+    return out
+
+
+def test_the_stream_lock_takes_fixes_the_steps_scale_refuses_but_not_a_receiver_whose_speed_disagrees_with_its_fixes():
+    """Issue #26, the stream lock: the steps 2.4x too long make the pace check refuse a good stream (the receiver's
+    speed is under half the steps'); fixes that agree among themselves and with the steps' turns for 30 s at a walking
+    pace are usable all the same (before: unusable from 30 s on), and the judgement says what it overrode.  Indoors
+    the receiver's own speed reads 0.41-0.62 of its positions' (IPIN tuning routes 01-02, windows at a walking pace):
+    a receiver reporting 0.55 m/s while its fixes move at 1.2 m/s does not agree with itself and stays out."""
+    good = _lock_stream(1.2)
+    assert all(v.verdict is GpsVerdict.USABLE for v in good[40:])
+    assert any(Cause.PACE in v.locked_over for v in good[40:])
+    indoor = _lock_stream(0.55)
+    assert not any(v.verdict is GpsVerdict.USABLE for v in indoor[40:])
+    assert not any(v.locked_over for v in indoor)
+    # without the lock (``lock_window_s=None``, the rule before) the good stream is lost from 40 s on
+    assert not any(v.verdict is GpsVerdict.USABLE for v in _lock_stream(1.2, lock_window_s=None)[40:])

@@ -121,3 +121,47 @@ def test_chen_learns_the_new_grip_and_stays_on_the_fixes_after_taking_them_back(
     assert max(errs) < 10.0, [round(e, 1) for e in errs]
     assert fusion.heading_model.n_regrips >= 1  # said so (training counters: heading_model.new_grips)
     assert fr.counters["training"]["heading_model"]["new_grips"] >= 1
+
+
+def _rescaled(steps, factor: float):
+    """The pipeline's steps with every length times ``factor`` (positions re-integrated): a stride model or step count
+    that is that far off."""
+    out, e, n = [], None, None
+    for s in steps:
+        length = s.length_m * factor
+        if e is None:
+            e, n = s.east_m, s.north_m
+        else:
+            e, n = e + length * math.cos(s.heading_rad), n + length * math.sin(s.heading_rad)
+        out.append(replace(s, length_m=length, east_m=e, north_m=n))
+    return out
+
+
+@pytest.mark.parametrize("name, factor, cause", [("chen", 2.4, "receiver's speed"),
+                                                 ("kubrak", 0.4, "inconsistent with the steps")])
+def test_good_fixes_the_steps_scale_refuses_are_taken_as_a_consistent_stream_and_said(diverged_walk, name, factor,
+                                                                                       cause):
+    """Never lose a consistent stream (issue #26, the stream lock): the same walk with the steps 2.4x too long (the
+    pace check then says the receiver sees under half the walk) or 0.4x (the shape test's 0.7-1.4 scale band
+    fails).  The judge compares the fixes with the pipeline's own steps, whose stride the fusion never corrects, so
+    before the lock the good fixes were refused for most of the walk (2.4x: 1 of 147 fixes taken, 147 s lost besides
+    the 90-s outage, the track 301 m off at the end; 0.4x: 19 taken, 83 s lost).  Now the fixes, agreeing among
+    themselves and with the walker's turns at a walking pace for 30 s, are taken within 60 s of the walk's start
+    and of the outage's end (35 s), the track ends within 10 m, and the summary says so."""
+    from core.gnss import make_fusion
+    from core.gnss.judge import verdict_text
+
+    walk, steps, back_ns = diverged_walk
+    rec = walk.recording
+    gps = rec.streams["gps"]
+    fr = make_fusion(name).run(_rescaled(steps, factor), gps, rec.t0_ns)
+    taken = np.array([f.t_ns for f in fr.fixes if f.accepted])
+    outage = (rec.t0_ns + int(OUTAGE_S[0] * 1e9), back_ns)
+    bounds = np.concatenate([[gps.t_ns[0]], taken, [gps.t_ns[-1]]])
+    lost = [(b - a) * 1e-9 - ((outage[1] - outage[0]) * 1e-9 if a <= outage[0] and b >= outage[1] else 0.0)
+            for a, b in zip(bounds[:-1], bounds[1:])]
+    assert max(lost) <= 60.0, max(lost)
+    assert _error_m(walk, fr.steps[-1]) < 10.0
+    j = fr.counters["gps_judge"]
+    assert j["fixes_locked"] >= 20 and any(cause in c for c in j["locked_over"]), j["locked_over"]
+    assert "taken as a consistent stream" in verdict_text(j, name)

@@ -862,7 +862,9 @@ class FixFusion:
         if self._consistent_stream(t_ns, run[0][0]):  # gated, and judged consistent, for relock_s
             self.relocks.append({"t_ns": int(t_ns), "offset_m": float(math.hypot(innovation[0], innovation[1])),
                                  "rule": "consistent stream", "consistent_s": self._consistent_s(t_ns),
-                                 "gated_s": (t_ns - run[0][0]) * 1e-9})
+                                 "gated_s": (t_ns - run[0][0]) * 1e-9,
+                                 # usable by the judge's stream lock (``JudgeSettings.lock_window_s``): what it overrode
+                                 "stream_lock": [c.value for c in self.judge.last.locked_over]})
             run.clear()
             return True
         if len(run) < 3 or t_ns - run[0][0] < self.relock_ns:

@@ -262,6 +262,31 @@ class JudgeSettings:
     #: fine run (31-41 s) teaching once usable (verdict UNKNOWN during the cold start): 3-min 12.5 -> 16.9 %, 1-min
     #: 10.7 / 38.5 / 24.2 % (their Doppler course runs 24 deg off the steps)
     cold_start_run: bool = True
+    #: **the stream lock** (issue #26, "never lose a consistent stream": :meth:`GpsJudge._stream_lock`): over the
+    #: last ``lock_window_s`` every screened fix reports at most ``lock_max_hacc_m`` (the issue's "good fixes"),
+    #: they come at least ``lock_min_rate_hz`` with no gap over ``lock_max_gap_s``, agree among themselves (the
+    #: neighbour residual and the fix-to-fix speed of ``self_consistency``), move at a walking speed
+    #: (``lock_speed_m_s``: their 10-s chords), the steps walk in every third of the window and go somewhere
+    #: (``min_step_straightness``), and the fixes' path has the steps' shape after a rotation, a translation and
+    #: a scale anywhere in ``lock_scale_limits`` (the turns line up; the stride, the step count and the receiver's
+    #: speed may be wrong).  Such a window is usable whatever the window's accuracy median, the shape test's scale
+    #: band and the pace check say (``Cause.ACCURACY``, ``Cause.INCONSISTENT``, ``Cause.PACE``; never a signal,
+    #: satellite, drift, NIS or jump cause).  Why: those three compare the fixes with the pipeline's own steps,
+    #: whose stride the fusion never corrects; a walk whose steps are 2x too long (the pace check: the receiver
+    #: "sees" half the walk) or 0.5x (the shape test's 0.7-1.4 band) is refused for ever, and the stride cannot be
+    #: learnt from fixes never taken (the simulator: 250-260 s of good fixes lost, the track 190 m off).  The
+    #: thresholds are set a priori, not tuned: 30 s is the issue's "20-30 s" at its upper end; 10 m the issue's
+    #: good fix; 0.8 m/s a slow walk (comfortable walking speeds are 1.2-1.5 m/s) and 2.5 m/s a fast one; the scale
+    #: band 0.4-2.5 a stride (or step count) off by a factor 2.5 either way.  Indoors the phones' streams move at
+    #: 0.3-0.55 of the steps' pace (:mod:`core.gnss.pace`) and report up to 39 m; a stream that moves while the
+    #: walker turns in a room fails the shape.  None: off
+    lock_window_s: float | None = 30.0
+    lock_max_hacc_m: float = 10.0
+    lock_min_rate_hz: float = 0.7
+    lock_max_gap_s: float = 3.0
+    lock_speed_m_s: tuple = (0.8, 2.5)
+    lock_scale_limits: tuple = (0.4, 2.5)
+    lock_doppler_ratio: tuple = (0.7, 1.6)
 
 
 @dataclass(frozen=True)
@@ -285,6 +310,11 @@ class Judgement:
     drift_offset_m: float = math.nan  #: how far the fixes moved against dead reckoning (:mod:`core.gnss.drift`, m)
     drift_chi2: float = math.nan  #: that offset's chi-square against both their errors (2 dof)
     dr_accuracy_m: float = math.nan  #: dead reckoning's own 68 % radius now (m, ``dr_growth_per_m``; nan: none)
+    #: usable by the stream lock (``lock_window_s``: the fixes agree among themselves and with the walker's motion over
+    #: the lock window while the causes listed failed): those causes, else ()
+    locked_over: tuple = ()
+    lock_speed_m_s: float = math.nan  #: the lock window's fix speed (m/s, its 10-s chords; nan: not computed)
+    lock_shape_m: float = math.nan  #: its shape residual against the steps, scale free within the lock band (m)
 
     def as_dict(self) -> dict:
         return {"t_ns": self.t_ns, "verdict": self.verdict.value, "causes": [c.value for c in self.causes],
@@ -293,7 +323,8 @@ class Judgement:
                 "signal_fail_share": self.signal_fail_share, "few_sats_share": self.few_sats_share,
                 "nis_mean": self.nis_mean, "nis_limit": self.nis_limit, "pace_ratio": self.pace_ratio, "proven": self.proven,
                 "drift_offset_m": self.drift_offset_m, "drift_chi2": self.drift_chi2,
-                "dr_accuracy_m": self.dr_accuracy_m}
+                "dr_accuracy_m": self.dr_accuracy_m, "locked_over": [c.value for c in self.locked_over],
+                "lock_speed_m_s": self.lock_speed_m_s, "lock_shape_m": self.lock_shape_m}
 
 
 def chi2_mean_limit(dof_each: int, n: int, quantile: float) -> float:
@@ -345,11 +376,18 @@ def shape_residual_m(a: np.ndarray, b: np.ndarray, scale_limits=(1.0, 1.0)) -> f
     return float(math.sqrt(np.mean(np.sum((a0 - scale * (b0 @ r)) ** 2, axis=1))))
 
 
+#: what the stream lock overrides (``JudgeSettings.lock_window_s``): the tests that compare the fixes with the pipeline's
+#: own stride and pace, and the window's accuracy median; never the signal, satellites, drift, NIS or a jump
+_LOCK_OVERRIDES = frozenset({Cause.ACCURACY, Cause.INCONSISTENT, Cause.PACE, Cause.FEW_FIXES})
+
+
 @dataclass
 class _Counts:
     fixes: int = 0
     usable: int = 0
     causes: dict = field(default_factory=dict)
+    locked: int = 0  #: fixes usable by the stream lock only
+    locked_over: dict = field(default_factory=dict)  #: of those, per cause it overrode
 
 
 class GpsJudge:
@@ -364,6 +402,7 @@ class GpsJudge:
     def reset(self) -> None:
         self._ref: tuple | None = None  # (lat, lon) of the judge's own frame
         self._fixes: deque = deque()  # (t_ns, east, north, hacc, signal_ok or None, pdr_e, pdr_n, n_used or nan)
+        self._lock_fixes: deque = deque()  # the same over ``lock_window_s``, since the last screened-out fix
         self._nis: deque = deque(maxlen=self.settings.nis_window)
         self._passing_since_ns: int | None = None
         self._consistent_since_ns: int | None = None
@@ -438,6 +477,7 @@ class GpsJudge:
         to resume after (``resume_max_gap_s``)."""
         self._screened_since_fix = True
         self._resuming = False
+        self._lock_fixes.clear()  # a coarse or fast fix: the lock's window of good fixes starts afresh
 
     def add_fix(self, t_ns: int, lat_deg: float, lon_deg: float, hacc_m: float, pdr_en, signal_ok=None,
                 speed_m_s: float = math.nan, n_used: float = math.nan) -> Judgement:
@@ -471,6 +511,11 @@ class GpsJudge:
             self.drift.add_fix(int(t_ns), float(e), float(n), float(hacc_m))
         while fx and fx[0][0] <= t_ns - int(s.window_s * 1e9):
             fx.popleft()
+        if s.lock_window_s is not None:
+            lf = self._lock_fixes
+            lf.append(fx[-1] + (float(speed_m_s),))
+            while lf and lf[0][0] <= t_ns - int(s.lock_window_s * 1e9):
+                lf.popleft()
         j = self._judge(int(t_ns))
         self.last = j
         c = self._counts
@@ -478,6 +523,10 @@ class GpsJudge:
         if j.verdict is GpsVerdict.USABLE:
             self._acquired = True
             c.usable += 1
+            if j.locked_over:
+                c.locked += 1
+                for cause in j.locked_over:
+                    c.locked_over[cause] = c.locked_over.get(cause, 0) + 1
             if self.first_usable_ns is None:
                 self.first_usable_ns = int(t_ns)
         for cause in j.causes:
@@ -543,7 +592,21 @@ class GpsJudge:
         if nis_mean == nis_mean and nis_mean > self.nis_limit:
             causes.append(Cause.NIS)
             self._nis.clear()  # judged once: the next window starts afresh
-        if (n >= s.min_fixes and not (resid <= limit or self_agree)) or jumped:  # a jump or an offset episode
+        # the stream lock (``lock_window_s``): good fixes agreeing among themselves and with the walker's motion for
+        # the lock window are usable whatever the steps' scale, the receiver's pace and the window's median accuracy
+        lock_ok, lock_speed, lock_shape = self._stream_lock() if s.lock_window_s is not None else \
+            (False, math.nan, math.nan)
+        locked_over = ()
+        if lock_ok and causes and set(causes) <= _LOCK_OVERRIDES and not jumped:
+            locked_over, causes = tuple(causes), []
+        # the fixes off the steps by their scale only (their shape within the lock's scale band, agreeing among
+        # themselves) is no jump or offset episode: the relock's jump memory (:meth:`FixFusion._stream_jumped`)
+        # must not hold a stream back that only the stride keeps from the shape test
+        scale_only = s.lock_window_s is not None and n >= 3 and self_resid <= limit and \
+            shape_residual_m(np.array([(f[1], f[2]) for f in fx]), np.array([(f[5], f[6]) for f in fx]),
+                             s.lock_scale_limits) <= limit if np.isfinite([f[5] for f in fx]).all() else False
+        if ((n >= s.min_fixes and not (resid <= limit or self_agree)) or jumped) and not locked_over and \
+                not (scale_only and not jumped):  # a jump or an offset episode
             self.last_inconsistent_ns = t_ns
         # evidence_first: no positive evidence yet is a wait, not a failure: the settling time runs meanwhile
         if s.evidence_first and not self._proven and not causes and self._evidence_now(resid <= limit or self_agree):
@@ -555,7 +618,8 @@ class GpsJudge:
                   pace_ratio=self.pace.last.ratio if self.pace is not None else math.nan,
                   proven=self._proven,
                   drift_offset_m=self.drift.last.offset_m if self.drift is not None else math.nan,
-                  drift_chi2=self.drift.last.chi2 if self.drift is not None else math.nan, dr_accuracy_m=dr_acc)
+                  drift_chi2=self.drift.last.chi2 if self.drift is not None else math.nan, dr_accuracy_m=dr_acc,
+                  locked_over=locked_over, lock_speed_m_s=lock_speed, lock_shape_m=lock_shape)
         if self._resuming and causes == [Cause.FEW_FIXES] and not no_evidence:
             # a short gap in a stream found usable (a tunnel, a hidden window): still usable while the window
             # refills, its passing time kept (issue #26 follow-up: a 25-s gap cost a fresh 18 s of re-judging)
@@ -565,6 +629,9 @@ class GpsJudge:
             if self._passing_since_ns is None:
                 self._passing_since_ns = t_ns
                 self._consistent_since_ns = fx[0][0] if fx else t_ns
+                if locked_over:  # the lock window is its own settling: consistent since its first fix
+                    self._consistent_since_ns = self._lock_fixes[0][0]
+                    self._passing_since_ns = t_ns - int(s.usable_after_s * 1e9)
             settled = t_ns - self._passing_since_ns >= int(s.usable_after_s * 1e9)
             if settled and not no_evidence:
                 return Judgement(t_ns, GpsVerdict.USABLE, (), **kw)
@@ -592,11 +659,62 @@ class GpsJudge:
             return False
         return consistent and float(np.sum(np.hypot(*np.diff(p, axis=0).T))) >= self.settings.evidence_min_walk_m
 
-    def _self_residual_m(self) -> float:
-        """RMS distance (m) of each inner fix of the window from the point interpolated in time between its two
-        neighbours, times sqrt(2/3) (for white fix noise that is the RMS error of one fix, what the shape test's
-        limit is set for); nan with fewer than 3 fixes."""
-        fx = list(self._fixes)
+    def _stream_lock(self) -> tuple[bool, float, float]:
+        """The stream lock's evidence over the last ``lock_window_s`` (see the setting): (whether it holds, the fixes'
+        walking speed in m/s, their shape residual against the steps in m with a scale in ``lock_scale_limits``).
+        Every test is on the fixes and on the steps' own shape, none on the steps' length: the fixes cover the
+        window densely, report at most ``lock_max_hacc_m``, agree among themselves (:meth:`_self_residual_m`, and
+        consecutive fixes no further apart than ``max_walk_speed_m_s`` plus three SDs of their difference), move at
+        a walking speed over each of the window's 10-s thirds (chord over time), while the steps walk in each third
+        and go somewhere (``min_step_straightness``), and the fixes' path is the steps' turned, shifted and scaled."""
+        s = self.settings
+        nan = math.nan
+        lf = list(self._lock_fixes)
+        if len(lf) < 3:
+            return False, nan, nan
+        a = np.array([(f[0] * 1e-9, f[1], f[2], f[3], f[5], f[6]) for f in lf], dtype=float)
+        t, hacc = a[:, 0], a[:, 3]
+        w = float(s.lock_window_s)
+        dt = np.diff(t)
+        if t[-1] - t[0] < w - s.lock_max_gap_s or len(a) < s.lock_min_rate_hz * w or dt.max() > s.lock_max_gap_s \
+                or not (hacc <= s.lock_max_hacc_m).all() or not np.isfinite(a[:, 4:6]).all():
+            return False, nan, nan
+        med = float(np.median(hacc))
+        limit = max(s.shape_residual_floor_m, s.shape_residual_per_hacc * med)
+        d_fix = np.hypot(*np.diff(a[:, 1:3], axis=0).T)
+        sd = np.hypot(hacc[:-1], hacc[1:]) / HACC_PER_SIGMA
+        if not np.all(d_fix <= s.max_walk_speed_m_s * dt + 3.0 * sd) or not self._self_residual_m(lf) <= limit:
+            return False, nan, nan
+        # the fixes' speed and the steps' walk over each third of the window
+        edges = t[0] + (t[-1] - t[0]) * np.array([0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0])
+        chord = span = 0.0
+        for k in range(3):
+            i = np.flatnonzero((t >= edges[k]) & (t <= edges[k + 1]))
+            if len(i) < 2:
+                return False, nan, nan
+            chord += math.hypot(*(a[i[-1], 1:3] - a[i[0], 1:3]))
+            span += t[i[-1]] - t[i[0]]
+            if float(np.sum(np.hypot(*np.diff(a[i, 4:6], axis=0).T))) <= 0.0:
+                return False, nan, nan  # the walker stood while the fixes went on
+        speed = chord / span if span > 0 else nan
+        # the receiver's own speed against its positions' (where it reports one: at least half the fixes)
+        rs = np.array([f[8] for f in lf], dtype=float)
+        rs = rs[np.isfinite(rs) & (rs > 0.0)]
+        doppler = float(np.mean(rs)) / speed if len(rs) >= 0.5 * len(lf) and speed > 0 else nan
+        self._lock_doppler = doppler
+        path = float(np.sum(np.hypot(*np.diff(a[:, 4:6], axis=0).T)))
+        if not math.hypot(*(a[-1, 4:6] - a[0, 4:6])) >= s.min_step_straightness * path:
+            return False, speed, nan
+        shape = shape_residual_m(a[:, 1:3], a[:, 4:6], s.lock_scale_limits)
+        lo, hi = s.lock_speed_m_s
+        dlo, dhi = s.lock_doppler_ratio
+        return bool(lo <= speed <= hi and shape <= limit and not (doppler < dlo or doppler > dhi)), speed, shape
+
+    def _self_residual_m(self, fixes=None) -> float:
+        """RMS distance (m) of each inner fix of the window (or of ``fixes``) from the point interpolated in time
+        between its two neighbours, times sqrt(2/3) (for white fix noise that is the RMS error of one fix, what the
+        shape test's limit is set for); nan with fewer than 3 fixes."""
+        fx = list(self._fixes) if fixes is None else list(fixes)
         if len(fx) < 3:
             return math.nan
         a = np.array([(f[0] * 1e-9, f[1], f[2]) for f in fx])
@@ -678,7 +796,9 @@ class GpsJudge:
         return {"verdict": self.verdict.value, "fixes_judged": c.fixes, "fixes_usable": c.usable,
                 "usable_share": c.usable / c.fixes if c.fixes else math.nan,
                 "causes": {k.value: v for k, v in sorted(c.causes.items(), key=lambda kv: -kv[1])},
-                "first_usable_ns": self.first_usable_ns,
+                "first_usable_ns": self.first_usable_ns, "fixes_locked": c.locked,
+                "lock_window_s": self.settings.lock_window_s,
+                "locked_over": {k.value: v for k, v in sorted(c.locked_over.items(), key=lambda kv: -kv[1])},
                 "pace": self.pace.summary() if self.pace is not None else None,
                 "drift": self.drift.summary() if self.drift is not None else None,
                 "last": self.last.as_dict() if self.last is not None else None}
@@ -697,6 +817,12 @@ def verdict_text(summary: dict | None, filter_name: str = "") -> str:
         return "dead reckoning: GPS judged unusable" + (f" ({why})" if why else "")
     share = summary.get("usable_share", math.nan)
     head = f"fused with GPS ({filter_name})" if filter_name else "fused with GPS"
+    locked = summary.get("fixes_locked") or 0
+    if locked:  # the stream lock (``JudgeSettings.lock_window_s``): said, with what it overrode
+        over = ", ".join(list(summary.get("locked_over", {}))[:3])
+        head += f"; {locked} fixes taken as a consistent stream (good fixes agreeing among themselves and with the " \
+                f"walker's turns at a walking pace for {summary.get('lock_window_s', 30):.0f} s" + \
+                (f"; overriding: {over}" if over else "") + ")"
     if share == share and share < 0.995:
         return f"{head}; GPS judged unusable for {100.0 * (1.0 - share):.0f} % of the fixes" + \
             (f" ({why}): dead reckoning there" if why else "")
