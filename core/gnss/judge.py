@@ -45,6 +45,13 @@ Evidence over the last ``window_s`` of screened fixes
       plus ``jump_per_hacc`` times their combined reported accuracy (at least ``jump_floor_m``).  The shape test
       has little power against a jump at the end of its window (one outlier in 15 fixes: a 20-m jump of fixes
       reporting 5 m passes it), and the fix-to-fix speed test applies only where the steps' shape fails;
+    * **or the stream lock** (``lock_window_s``, :meth:`GpsJudge._stream_lock`; issue #26, "never lose a
+      consistent stream"): 30 s of good fixes (each reporting <= 10 m) that agree among themselves, move at a
+      walking speed that the receiver's own speed confirms, while the steps walk and turn as the fixes do (their
+      path the steps' turned, shifted and scaled by 0.4-2.5) are usable whatever the accuracy median, the shape
+      test's scale band and the pace check say: those compare the fixes with the pipeline's own stride, which the
+      fusion never corrects, so a stride or step count off by 2x refused a good stream for good.  The judgement
+      says so (``locked_over``; the summary's ``fixes_locked``, :func:`verdict_text`);
     * **the filter's innovations** (:meth:`GpsJudge.add_nis`): the mean NIS
       of the last ``nis_window`` fixes the filter took within the upper
       ``nis_quantile`` point of its chi-square band (2 degrees of freedom
@@ -68,6 +75,10 @@ Tried and not kept (issue #26, 2026-12-07, tuning split)
     accuracy cause (this fix within ``max_median_hacc_m``): IPIN tuning unchanged, on the outdoor tuning walk
     (thomasdingemanse_lopen, every 10th fix left out) Chen's longest good stretch lost 16 -> 12 s (ratio 0.43 ->
     0.43) but Kubrak's leave-out ratio 1.04 -> 1.29 (over the 1.2 target) and its longest lost 30 -> 39 s.
+    What the stream lock (``lock_window_s``, kept) adds to that: a walking speed, the steps' turns (any scale) and
+    the receiver's own speed against its positions.  Without the last, the lock took IPIN T02r03 and T02r04 (48 and
+    33 fixes, 2.43 -> 4.96 and 3.08 -> 5.54 m): their fixes move at 0.80-0.88 m/s with the steps' shape, while
+    the receiver's speed reads 0.41-0.62 of its positions' (lopen, outdoors: median 0.90).
 
 The thresholds were chosen on the tuning split only (``benchmarks/splits.py``):
 IPIN routes 01, 02 (fixes 1.5-6 m off, reporting 4-6 m, residual against the
@@ -286,6 +297,12 @@ class JudgeSettings:
     lock_max_gap_s: float = 3.0
     lock_speed_m_s: tuple = (0.8, 2.5)
     lock_scale_limits: tuple = (0.4, 2.5)
+    #: the receiver's own speed (its mean over the window's fixes reporting one) over its positions' (the 10-s chords):
+    #: a stream whose velocity and positions disagree does not agree with itself.  Applied where at least half the
+    #: window's fixes report a positive speed.  0.7: the iOS walks' Doppler reads 15-25 % low (issue #26); 1.6: a
+    #: 90-degree turn inside a 10-s chord shortens it to 0.71 of the path.  Measured after it was set (TUNING): IPIN
+    #: routes 01-02, windows moving at >= 0.8 m/s, 0.41-0.62 (5th-95th percentile per file); lopen 0.62 / 0.90 / 1.00
+    #: (5th / 50th / 95th)
     lock_doppler_ratio: tuple = (0.7, 1.6)
 
 
