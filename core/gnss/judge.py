@@ -616,19 +616,15 @@ class GpsJudge:
             self._nis.clear()  # judged once: the next window starts afresh
         # the stream lock (``lock_window_s``): good fixes agreeing among themselves and with the walker's motion for
         # the lock window are usable whatever the steps' scale, the receiver's pace and the window's median accuracy
-        lock_ok, lock_speed, lock_shape = self._stream_lock() if s.lock_window_s is not None else \
-            (False, math.nan, math.nan)
+        # (looked at only where it could override: a usable stream pays nothing for it)
+        lock_ok, lock_speed, lock_shape = False, math.nan, math.nan
         locked_over = ()
-        if lock_ok and causes and set(causes) <= _LOCK_OVERRIDES and not jumped:
-            locked_over, causes = tuple(causes), []
-        # the fixes off the steps by their scale only (their shape within the lock's scale band, agreeing among
-        # themselves) is no jump or offset episode: the relock's jump memory (:meth:`FixFusion._stream_jumped`)
-        # must not hold a stream back that only the stride keeps from the shape test
-        scale_only = s.lock_window_s is not None and n >= 3 and self_resid <= limit and \
-            shape_residual_m(np.array([(f[1], f[2]) for f in fx]), np.array([(f[5], f[6]) for f in fx]),
-                             s.lock_scale_limits) <= limit if np.isfinite([f[5] for f in fx]).all() else False
+        if s.lock_window_s is not None and causes and set(causes) <= _LOCK_OVERRIDES and not jumped:
+            lock_ok, lock_speed, lock_shape = self._stream_lock()
+            if lock_ok:
+                locked_over, causes = tuple(causes), []
         if ((n >= s.min_fixes and not (resid <= limit or self_agree)) or jumped) and not locked_over and \
-                not (scale_only and not jumped):  # a jump or an offset episode
+                not (not jumped and self._scale_only(limit, self_resid)):  # a jump or an offset episode
             self.last_inconsistent_ns = t_ns
         # evidence_first: no positive evidence yet is a wait, not a failure: the settling time runs meanwhile
         if s.evidence_first and not self._proven and not causes and self._evidence_now(resid <= limit or self_agree):
@@ -680,6 +676,20 @@ class GpsJudge:
         if len(p) < 2 or not np.isfinite(p).all():
             return False
         return consistent and float(np.sum(np.hypot(*np.diff(p, axis=0).T))) >= self.settings.evidence_min_walk_m
+
+    def _scale_only(self, limit: float, self_resid: float) -> bool:
+        """With the stream lock on: whether the window's fixes are off the steps by their scale only (agreeing among
+        themselves, their shape the steps' within ``lock_scale_limits``): no jump or offset episode, so the relock's
+        jump memory (:meth:`core.gnss.base.FixFusion._stream_jumped`) must not hold back a stream that only the
+        stride keeps from the shape test."""
+        s = self.settings
+        fx = self._fixes
+        if s.lock_window_s is None or len(fx) < 3 or not self_resid <= limit:
+            return False
+        b = np.array([(f[5], f[6]) for f in fx])
+        if not np.isfinite(b).all():
+            return False
+        return shape_residual_m(np.array([(f[1], f[2]) for f in fx]), b, s.lock_scale_limits) <= limit
 
     def _stream_lock(self) -> tuple[bool, float, float]:
         """The stream lock's evidence over the last ``lock_window_s`` (see the setting): (whether it holds, the fixes'
