@@ -251,8 +251,11 @@ for i, path in enumerate(sys.argv[2:]):
     if pid == 0:
         try:
             record(i, path)
-        finally:
-            os._exit(3)  # not killed: an error (its traceback is on stderr)
+        except BaseException:
+            import traceback
+            traceback.print_exc()
+            sys.stderr.flush()
+        os._exit(3)  # not killed: an error (its traceback on stderr)
     children[pid] = i
 while children:
     pid, status = os.wait()
@@ -272,15 +275,17 @@ def test_kill_9_at_random_moments_loses_at_most_the_last_second(tmp_path):
     delays = [rnd.uniform(0.0, 0.4) for _ in range(4)] + [rnd.uniform(0.4, 2.0) for _ in range(10)]
     rnd.shuffle(delays)
     paths = [tmp_path / f"kill{i}.csv" for i in range(len(delays))]
+    # its own session: the finally below ends the parent and every recording process (its group) whatever happened
     zygote = subprocess.Popen([sys.executable, "-c", ZYGOTE, str(ROOT), *map(str, paths)], cwd=ROOT,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     pids, t0s, kills, statuses = {}, {}, {}, {}
+    failure = None
     sel = selectors.DefaultSelector()
     sel.register(zygote.stdout, selectors.EVENT_READ)
     fd, buf = zygote.stdout.fileno(), b""
     try:
         due = {}  # process -> monotonic ns of its kill
-        while len(statuses) < len(delays):
+        while len(statuses) < len(delays) and failure is None:
             now = time.monotonic_ns()
             for i in [i for i, t in due.items() if t <= now]:
                 kills[i] = time.monotonic_ns()
@@ -289,11 +294,12 @@ def test_kill_9_at_random_moments_loses_at_most_the_last_second(tmp_path):
             timeout = max(0.0, (min(due.values()) - time.monotonic_ns()) * 1e-9) if due else 30.0
             if not sel.select(timeout):
                 if not due:
-                    raise AssertionError("no recording process started (or ended) within 30 s")
+                    failure = "no recording process started (or ended) within 30 s"
                 continue
             chunk = os.read(fd, 65536)
             if not chunk:
-                raise AssertionError(f"the recording processes' parent ended early: {zygote.stderr.read()!r}")
+                failure = "the recording processes' parent ended early"
+                break
             *lines, buf = (buf + chunk).split(b"\n")
             for line in lines:
                 what, i, a, *b = line.decode().split()
@@ -303,16 +309,18 @@ def test_kill_9_at_random_moments_loses_at_most_the_last_second(tmp_path):
                     due[i] = t0s[i] + int(delays[i] * 1e9)
                 else:
                     statuses[i] = int(a)
-                    assert i in kills, f"recording process {i} ended by itself: {zygote.stderr.read()!r}"
-        zygote.wait(timeout=10)
+                    if i not in kills:
+                        failure = f"recording process {i} ended by itself (wait status {a})"
+        if failure is None:
+            zygote.wait(timeout=10)
     finally:
-        for i, pid in pids.items():
-            if i not in statuses:
-                os.kill(pid, signal.SIGKILL)
-        if zygote.poll() is None:
-            zygote.kill()
+        try:
+            os.killpg(zygote.pid, signal.SIGKILL)  # the parent and any recording process left (none when passed)
+        except ProcessLookupError:
+            pass
         zygote.wait(timeout=10)
         sel.close()
+    assert failure is None, (failure, zygote.stderr.read().decode(errors="replace")[-3000:])
     results = []
     for i, delay in enumerate(delays):
         assert os.WIFSIGNALED(statuses[i]) and os.WTERMSIG(statuses[i]) == signal.SIGKILL, statuses[i]
