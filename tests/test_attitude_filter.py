@@ -305,13 +305,14 @@ def _flat_turning_events(seconds, *, z_offset_uT, seed=21, rate=50.0, t0=10**12)
 
 def test_the_sites_field_removes_a_vertical_offset_no_rotation_can_see():
     """ETH-like: a flat phone's calibration 40 uT off in z gives heading errors as it wobbles; the WMM field fixes it."""
+    events = list(_flat_turning_events(150.0, z_offset_uT=40.0))  # the same readings for both (tuples: not changed)
+
     def run(with_site):
         # the field's heading offset state off in both (a site's field drops it; without one it would carry part
         # of the miscalibration's heading error: 3.6 deg instead of 4+)
         ekf = AttitudeEKF(mag_offset_sd_rad=0.0)
         if with_site:
             ekf.set_site_field(48.0, DIP)
-        events = list(_flat_turning_events(150.0, z_offset_uT=40.0))
         errs = []
         t_end = events[-1][1]
         for name, t, v in events:

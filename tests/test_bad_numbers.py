@@ -55,7 +55,7 @@ def test_the_cli_summary_reports_the_skipped_values(tmp_path, demo, capsys):
     from desktop.cli import main
 
     rec, _ = demo
-    path = tmp_path / "bad.csv.gz"
+    path = tmp_path / "bad.csv"
     write_recording(str(path), _with_bad_value(rec, "gyro", math.nan))
     capsys.readouterr()
     code = main(["replay", str(path)])

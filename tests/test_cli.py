@@ -160,7 +160,7 @@ def test_info_help_describes_every_column(capsys):
 
 @pytest.fixture(scope="module")
 def _square_file(tmp_path_factory):
-    p = tmp_path_factory.mktemp("square") / "sq.csv.gz"
+    p = tmp_path_factory.mktemp("square") / "sq.csv"
     assert main(["simulate", str(p), "--shape", "square", "--rate", "50", "--seed", "4"]) == 0
     return p
 
@@ -259,7 +259,7 @@ def test_an_accelerometer_only_recording_gets_steps_and_distance_not_a_made_up_t
     from desktop.simulator import simulate_walk
 
     w = simulate_walk(((0.0, 0.0), (15.0, 0.0), (15.0, 10.0)), seed=8, still_start_s=1.0, still_end_s=1.0)
-    path = tmp_path / "acc-only.csv.gz"
+    path = tmp_path / "acc-only.csv"
     write_recording(str(path), Recording({"acc": w.recording.streams["acc"]}, device=w.recording.device,
                                          metadata=w.recording.metadata))
     png, out_csv = tmp_path / "steps.png", tmp_path / "steps.csv"
@@ -290,7 +290,7 @@ def test_an_accelerometer_too_slow_for_steps_is_said_not_scored(tmp_path, capsys
     w = simulate_walk(((0.0, 0.0), (15.0, 0.0)), seed=9, still_start_s=1.0, still_end_s=1.0)
     acc = w.recording.streams["acc"]
     slow = make_stream("acc", acc.t_ns[::50], acc.values[::50])  # 100 Hz -> 2 Hz
-    path = tmp_path / "slow.csv.gz"
+    path = tmp_path / "slow.csv"
     write_recording(str(path), Recording({"acc": slow}, device=w.recording.device, metadata=w.recording.metadata))
     assert main(["replay", str(path), "--no-progress"]) == 0
     out = capsys.readouterr().out
@@ -305,7 +305,7 @@ def test_a_nominal_10_hz_export_counts_its_steps(tmp_path, capsys, rate_hz, meas
     from desktop.simulator import simulate_walk
 
     walk = simulate_walk([(0, 0), (0, 20)], rate_hz=rate_hz, seed=3)
-    path = tmp_path / "walk.csv.gz"
+    path = tmp_path / "walk.csv"
     write_recording(str(path), walk.recording)
     assert main(["replay", str(path), "--json", "--no-progress", "--gps", "off"]) == 0
     s = json.loads(capsys.readouterr().out)

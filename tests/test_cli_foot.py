@@ -19,7 +19,7 @@ def foot_file(tmp_path_factory):
     """A simulated foot walk: 20 m East, a left turn, 10 m North, written in the project format."""
     prints = footprints([(20.0, 0.0), (10.0, math.pi / 2)])
     walk = simulate_foot(prints, rate_hz=200.0, acc_noise_m_s2=0.02, gyro_noise_rad_s=0.002, seed=3)
-    path = tmp_path_factory.mktemp("foot") / "foot.csv.gz"
+    path = tmp_path_factory.mktemp("foot") / "foot.csv"
     write_recording(str(path), walk.recording)
     return str(path), walk
 
@@ -70,7 +70,7 @@ def test_gyro_range_repairs_clipped_swings(tmp_path, capsys):
     from tests.test_foot_saturation import _clipped_walk
 
     w, rec, level = _clipped_walk(1)
-    path = str(tmp_path / "clipped.csv.gz")
+    path = str(tmp_path / "clipped.csv")
     write_recording(path, rec)
     out = {}
     for name, extra in (("off", []), ("on", ["--gyro-range", str(level / 0.995)])):
@@ -87,7 +87,7 @@ def test_replay_uses_the_gyro_range_the_recording_declares_and_the_flag_override
     from tests.test_foot_saturation import _clipped_walk
 
     w, rec, level = _clipped_walk(1)
-    path = str(tmp_path / "declared.csv.gz")
+    path = str(tmp_path / "declared.csv")
     write_recording(path, replace(rec, device={**rec.device, "sensors": {"gyro": {"max_range": level / 0.995}}}))
     out = {}
     for name, extra in (("declared", []), ("flag", ["--gyro-range", str(level / 0.995)]),

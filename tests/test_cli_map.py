@@ -25,7 +25,7 @@ def walk_and_plan(tmp_path_factory):
     w = simulate_walk(((0.0, 0.0), (30.0, 0.0), (30.0, 20.0)), seed=12, still_start_s=1.5, still_end_s=1.5,
                       phone_yaw_offset_deg=12.0)
     rec = w.recording
-    path = d / "walk.csv.gz"
+    path = d / "walk.csv"
     write_recording(str(path), Recording(dict(rec.streams), device=rec.device, metadata=rec.metadata))
     return str(path), str(d / "plan.geojson"), w
 
@@ -93,7 +93,7 @@ def test_a_geo_referenced_plan_gives_the_declination(walk_and_plan, tmp_path, ca
     path, _, _ = walk_and_plan
     rec = read_recording(path)
     rec.metadata = {**rec.metadata, "unix_offset_ns": 1_751_328_000_000_000_000 - rec.t0_ns}  # 2025-07-01
-    dated = tmp_path / "dated.csv.gz"
+    dated = tmp_path / "dated.csv"
     write_recording(str(dated), rec)
     plan = FloorPlan(areas=[(np.array(CORRIDOR), [])], name="corridor", georef=Georeference(30.3011, 120.1301))
     write_geojson(plan, tmp_path / "p.geojson", units="m")

@@ -22,7 +22,7 @@ def _no_stored_profile(tmp_path, monkeypatch):
 def square(tmp_path_factory):
     """A simulated 20 m square at 50 Hz, its file, and the pipeline's own track of it (run here, not by the CLI)."""
     walk = simulate_walk([(0, 0), (20, 0), (20, 20), (0, 20), (0, 0)], rate_hz=50.0, seed=4)
-    path = tmp_path_factory.mktemp("truth") / "square.csv.gz"
+    path = tmp_path_factory.mktemp("truth") / "square.csv"
     write_recording(str(path), walk.recording)
     track = Pipeline(stride_model=load_stride_model("default")).run(read_recording(str(path))).track
     return walk, path, track
@@ -60,7 +60,7 @@ def _with_landmarks(walk, track, every: int, columns=("east_m", "north_m")):
 def test_landmark_errors_equal_an_independent_computation(square, tmp_path, capsys, monkeypatch):
     walk, _, track = square
     rec, idx, true = _with_landmarks(walk, track, every=12)
-    path = tmp_path / "with_posi.csv.gz"
+    path = tmp_path / "with_posi.csv"
     write_recording(str(path), rec)
     ours = np.column_stack([track.east_m[idx], track.north_m[idx]])
     err = np.hypot(*((ours - ours[0]) - (true - true[0])).T)[1:]  # placed at the first landmark, absolute heading
@@ -106,7 +106,7 @@ def test_calibrate_from_gps_stores_what_gps_taught_in_the_profile(tmp_path, caps
     from desktop.simulator import GpsModel
 
     walk = simulate_walk([(0, 0), (0, 140)], rate_hz=50.0, gps=GpsModel(multipath_per_min=0.0), seed=5)
-    path = tmp_path / "gps_walk.csv.gz"
+    path = tmp_path / "gps_walk.csv"
     write_recording(str(path), walk.recording)
     assert main(["calibrate", str(path), "--from-gps", "--json", "--no-progress"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -171,7 +171,7 @@ def test_declination_comes_from_the_magnetic_model_at_the_first_good_fix(tmp_pat
     vals[0, 0] += 0.5  # ... and far off (half a degree north)
     rec.streams["gps"] = dataclasses.replace(g, values=vals)
     rec.metadata = {**rec.metadata, "unix_offset_ns": 1_751_328_000_000_000_000 - rec.t0_ns}  # walked 2025-07-01
-    path = tmp_path / "walk.csv.gz"
+    path = tmp_path / "walk.csv"
     write_recording(str(path), rec)
     assert main(["replay", str(path), "--json", "--gps", "off", "--no-profile"]) == 0
     s = json.loads(capsys.readouterr().out)

@@ -32,7 +32,7 @@ def _no_stored_profile(tmp_path, monkeypatch):
 
 @pytest.fixture(scope="module")
 def line_walk(tmp_path_factory):
-    p = tmp_path_factory.mktemp("engine") / "line.csv.gz"
+    p = tmp_path_factory.mktemp("engine") / "line.csv"
     assert main(["simulate", str(p), "--shape", "line", "--rate", "50", "--seed", "3"]) == 0
     return p
 
@@ -60,7 +60,7 @@ def test_auto_is_the_reference_without_numba(line_walk, capsys, monkeypatch):
 
 @pytest.fixture(scope="module")
 def gps_walk(tmp_path_factory):
-    p = tmp_path_factory.mktemp("engine_gps") / "outdoor.csv.gz"
+    p = tmp_path_factory.mktemp("engine_gps") / "outdoor.csv"
     write_recording(str(p), outdoor_walk(2, minutes=0.5).recording)
     return p
 

@@ -155,7 +155,7 @@ def test_pdr_replay_reports_floors_and_writes_them_per_step(tmp_path, capsys):
     t = np.arange(rec.t0_ns, rec.t0_ns + int(rec.duration_s * 1e9), 100_000_000)
     t_s = (t - t[0]) * 1e-9
     down = floor_profile(t_s, [(0.4 * t_s[-1], 0.0), (6.0, -7.0), (t_s[-1], 0.0)])  # a lift, two floors down
-    path = tmp_path / "walk.csv.gz"
+    path = tmp_path / "walk.csv"
     write_recording(str(path), Recording(dict(rec.streams, pressure=simulate_pressure(t, down, seed=6)),
                                          device=rec.device, metadata=rec.metadata))
     out_csv = tmp_path / "track.csv"

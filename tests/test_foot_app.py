@@ -161,7 +161,7 @@ def test_the_app_replays_a_foot_recording_file_in_foot_mode(foot_walk, tmp_path)
     from core.recording import write_recording
 
     root = Path(__file__).resolve().parents[1]
-    path = tmp_path / "foot-walk.csv.gz"
+    path = tmp_path / "foot-walk.csv"
     write_recording(str(path), foot_walk.recording)
     report = tmp_path / "report.json"
     env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))

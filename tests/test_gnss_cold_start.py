@@ -92,7 +92,7 @@ def test_the_fusion_takes_the_good_fixes_after_a_cold_start_and_not_the_coarse_o
     and no cold-start fix is taken."""
     from core.gnss import make_fusion
     from core.recording import Stream
-    from tests.test_gnss_judge import _walk
+    from test_gnss_judge import _walk
 
     steps = _walk(lambda t: 0.3, seconds=90.0)
     st = np.array([s.t_ns for s in steps])

@@ -10,7 +10,7 @@ import numpy as np
 
 from core.gnss.drift import DriftSettings, DriftVerdict, StreamDriftCheck
 from core.gnss.judge import Cause, GpsJudge, GpsVerdict, JudgeSettings
-from tests.test_gnss_judge import ORIGIN, _gps, _walk
+from test_gnss_judge import ORIGIN, _gps, _walk
 
 DRIFT_START_S = 120.0
 DRIFT_M_PER_MIN = 5.0

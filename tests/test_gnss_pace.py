@@ -11,7 +11,7 @@ import pytest
 from core.gnss.judge import Cause, GpsJudge, GpsVerdict
 from core.geodesy import enu_to_geodetic
 from core.gnss.pace import PaceSettings, ReceiverPaceCheck
-from tests.test_gnss_judge import ORIGIN, _gps, _walk
+from test_gnss_judge import ORIGIN, _gps, _walk
 
 
 def _feed(check, speed_of_t, seconds=90.0, walk_m_s=1.4, stand=(None, None)):

@@ -11,7 +11,7 @@ own pace by more than their reported accuracies allow, and ends the stretch ther
 import numpy as np
 
 from core.gnss.training import OnlineTrainer
-from tests.test_gnss_stride_weighting import _walk
+from test_gnss_stride_weighting import _walk
 
 
 def test_a_chord_across_a_multipath_jump_is_not_a_stride_sample():

@@ -193,7 +193,7 @@ def test_replay_command_runs_the_smoother_on_the_reference_and_says_so(tmp_path,
     monkeypatch.setenv("PDR_APP_DATA", str(tmp_path / "app"))
     monkeypatch.setattr(desktop.fast, "HAVE_NUMBA", True)  # auto would take the fast path where it can
     rec, res = _pipeline_runs()
-    path = tmp_path / "walk.csv.gz"
+    path = tmp_path / "walk.csv"
     write_recording(str(path), rec)
     assert main(["replay", str(path), "--heading-smoother", "rts", "--json", "--gps", "off"]) == 0
     out = json.loads(capsys.readouterr().out)

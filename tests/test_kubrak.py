@@ -312,7 +312,7 @@ def test_cli_gps_kubrak_and_auto_say_which_filter(tmp_path, capsys):
     from desktop.simulator import outdoor_walk
 
     walk = outdoor_walk(3, minutes=0.5)  # what the CLI says, not how the filter does: half a minute of fixes
-    path = tmp_path / "walk.csv.gz"
+    path = tmp_path / "walk.csv"
     write_recording(str(path), walk.recording)
     assert main(["replay", str(path), "--gps", "kubrak", "--no-progress", "--fixes", str(tmp_path / "f.csv")]) == 0
     out = capsys.readouterr().out

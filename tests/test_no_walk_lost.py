@@ -216,78 +216,114 @@ def test_a_header_only_file_from_an_older_recorder_gets_a_clear_message(tmp_path
 
 # -- kill -9 at random moments -----------------------------------------------------------------
 
-CHILD = r"""
-import sys, time
-sys.path.insert(0, sys.argv[2])
+#: the recording processes' parent: it imports the session once, then forks one recording process per file (a fork
+#: costs next to nothing, a fresh interpreter importing numpy and the session about 0.2 s of CPU each, 14 of them);
+#: each child records as the app's clock does and never returns: it is killed.  The parent reports every child's
+#: start ("start I PID T0") and how it ended ("exit I WAIT_STATUS") on its stdout, one short line each (atomic).
+ZYGOTE = r"""
+import os, sys, time
+sys.path.insert(0, sys.argv[1])
 from tests._recorder_helpers import FakeSource, NullPipeline, STREAMS, event
 from app.session import Session
 
-src = FakeSource()
-ses = Session(src, pipeline_factory=NullPipeline, record_path=sys.argv[1], record_streams=STREAMS)
-ses.start()
-t0 = time.monotonic_ns()
-print(t0, flush=True)
-k = 0
-while True:  # a 200 Hz sensor, delivered in 30 Hz ticks like the app's clock
-    now = time.monotonic_ns()
-    while event(k, t0)[1] <= now:
-        src.pending.append(event(k, t0))
-        k += 1
-    ses.tick()
-    time.sleep(1 / 30)
+
+def record(i, path):
+    src = FakeSource()
+    ses = Session(src, pipeline_factory=NullPipeline, record_path=path, record_streams=STREAMS)
+    ses.start()
+    t0 = time.monotonic_ns()
+    os.write(1, f"start {i} {os.getpid()} {t0}\n".encode())
+    k = 0
+    while True:  # a 200 Hz sensor, delivered in 30 Hz ticks like the app's clock
+        now = time.monotonic_ns()
+        while event(k, t0)[1] <= now:
+            src.pending.append(event(k, t0))
+            k += 1
+        ses.tick()
+        time.sleep(1 / 30)
+
+
+children = {}
+for i, path in enumerate(sys.argv[2:]):
+    sys.stdout.flush()
+    sys.stderr.flush()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            record(i, path)
+        except BaseException:
+            import traceback
+            traceback.print_exc()
+            sys.stderr.flush()
+        os._exit(3)  # not killed: an error (its traceback on stderr)
+    children[pid] = i
+while children:
+    pid, status = os.wait()
+    os.write(1, f"exit {children.pop(pid)} {status}\n".encode())
 """
 
 
-@pytest.mark.skipif(os.name != "posix", reason="SIGKILL")
+@pytest.mark.skipif(os.name != "posix", reason="SIGKILL, fork")
 def test_kill_9_at_random_moments_loses_at_most_the_last_second(tmp_path):
     """Fourteen recording processes killed at seeded random moments after their start. They run side by
     side (each killed at its own moment on the shared monotonic clock), so the test takes the longest
-    delay, not their sum."""
+    delay, not their sum.  They are forked from one parent that imported the session (not fourteen fresh
+    interpreters): each is a process of its own, opens its file after the fork and dies by SIGKILL."""
     import selectors
 
     rnd = random.Random(12)
     delays = [rnd.uniform(0.0, 0.4) for _ in range(4)] + [rnd.uniform(0.4, 2.0) for _ in range(10)]
     rnd.shuffle(delays)
-    procs, t0s, kills = [], {}, {}
+    paths = [tmp_path / f"kill{i}.csv" for i in range(len(delays))]
+    # its own session: the finally below ends the parent and every recording process (its group) whatever happened
+    zygote = subprocess.Popen([sys.executable, "-c", ZYGOTE, str(ROOT), *map(str, paths)], cwd=ROOT,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    pids, t0s, kills, statuses = {}, {}, {}, {}
+    failure = None
     sel = selectors.DefaultSelector()
+    sel.register(zygote.stdout, selectors.EVENT_READ)
+    fd, buf = zygote.stdout.fileno(), b""
     try:
-        for i in range(len(delays)):
-            proc = subprocess.Popen([sys.executable, "-c", CHILD, str(tmp_path / f"kill{i}.csv"), str(ROOT)],
-                                    cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-            procs.append(proc)
-            sel.register(proc.stdout, selectors.EVENT_READ, i)
         due = {}  # process -> monotonic ns of its kill
-        while len(kills) < len(procs):
+        while len(statuses) < len(delays) and failure is None:
             now = time.monotonic_ns()
             for i in [i for i, t in due.items() if t <= now]:
                 kills[i] = time.monotonic_ns()
-                os.kill(procs[i].pid, signal.SIGKILL)  # no close(), no atexit, no finally
+                os.kill(pids[i], signal.SIGKILL)  # no close(), no atexit, no finally
                 del due[i]
-            waiting = sel.get_map()
-            if not due and not waiting:
-                break
             timeout = max(0.0, (min(due.values()) - time.monotonic_ns()) * 1e-9) if due else 30.0
-            ready = sel.select(timeout) if waiting else time.sleep(timeout) or []
-            if waiting and not ready and not due:
-                raise AssertionError("no recording process started within 30 s")
-            for key, _ in ready:
-                i = key.data
-                sel.unregister(key.fileobj)
-                line = procs[i].stdout.readline()
-                assert line.strip().isdigit(), procs[i].stderr.read()
-                t0s[i] = int(line)
-                due[i] = t0s[i] + int(delays[i] * 1e9)
-        for proc in procs:
-            proc.wait(timeout=10)
+            if not sel.select(timeout):
+                if not due:
+                    failure = "no recording process started (or ended) within 30 s"
+                continue
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                failure = "the recording processes' parent ended early"
+                break
+            *lines, buf = (buf + chunk).split(b"\n")
+            for line in lines:
+                what, i, a, *b = line.decode().split()
+                i = int(i)
+                if what == "start":
+                    pids[i], t0s[i] = int(a), int(b[0])
+                    due[i] = t0s[i] + int(delays[i] * 1e9)
+                else:
+                    statuses[i] = int(a)
+                    if i not in kills:
+                        failure = f"recording process {i} ended by itself (wait status {a})"
+        if failure is None:
+            zygote.wait(timeout=10)
     finally:
-        for proc in procs:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait(timeout=10)
+        try:
+            os.killpg(zygote.pid, signal.SIGKILL)  # the parent and any recording process left (none when passed)
+        except ProcessLookupError:
+            pass
+        zygote.wait(timeout=10)
         sel.close()
+    assert failure is None, (failure, zygote.stderr.read().decode(errors="replace")[-3000:])
     results = []
-    for i, (delay, proc) in enumerate(zip(delays, procs)):
-        assert proc.returncode == -signal.SIGKILL
+    for i, delay in enumerate(delays):
+        assert os.WIFSIGNALED(statuses[i]) and os.WTERMSIG(statuses[i]) == signal.SIGKILL, statuses[i]
         path, t0 = tmp_path / f"kill{i}.csv", t0s[i]
         if path.exists():
             got = events_in(read_recording(str(path), warn=False))  # reads back without error

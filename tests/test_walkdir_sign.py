@@ -17,7 +17,7 @@ import pytest
 from core import quaternion as quat
 from core.conventions import STANDARD_GRAVITY_M_S2, wrap_angle
 from core.pdr.walkdir import SIGN_METHODS, WalkingDirection, _AxisState
-from tests.test_walkdir import RATE_HZ, STEP_HZ, _feed
+from test_walkdir import RATE_HZ, STEP_HZ, _feed
 
 
 def _limb_velocity(t: float, v_m_s: float = 0.8, swing_share: float = 0.4) -> float:
