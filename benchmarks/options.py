@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import traceback
 from pathlib import Path
 
@@ -36,7 +37,13 @@ def add_common(ap: argparse.ArgumentParser, *, what: str = "recording names") ->
 
 
 def data_root(args) -> Path:
-    return Path(args.data) if getattr(args, "data", None) else default_data_root()
+    """The data root: ``--data`` or the default; a missing folder is said on stderr (every real recording would be
+    skipped without it, and a run of nothing must not look like a run)."""
+    root = Path(args.data) if getattr(args, "data", None) else default_data_root()
+    if not root.is_dir():
+        print(f"benchmarks: the data root {root} does not exist: no real recording can be read "
+              "(give --data DIR, the folder laid out as ../shared/data)", file=sys.stderr)
+    return root
 
 
 def only_keys(args) -> list[str] | None:

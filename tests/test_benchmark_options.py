@@ -46,6 +46,14 @@ def test_only_is_comma_separated_and_repeatable_and_implies_no_write(tmp_path):
     assert O.data_root(_args(["--data", str(tmp_path)])) == tmp_path
 
 
+def test_a_missing_data_root_is_said(tmp_path, capsys):
+    """A run from a checkout without ../shared/data beside it read nothing and said nothing before."""
+    O.data_root(_args(["--data", str(tmp_path)]))
+    assert capsys.readouterr().err == ""
+    O.data_root(_args(["--data", str(tmp_path / "nowhere")]))
+    assert "does not exist" in capsys.readouterr().err
+
+
 def test_a_failed_recording_counts_as_inf_never_dropped():
     assert O.median_inf([1.0, None, 3.0]) == 3.0  # [1, 3, inf]: dropping the failure would give 2.0
     assert O.median_inf([None]) == math.inf and math.isnan(O.median_inf([]))
