@@ -279,6 +279,22 @@ def test_hand_swung_hard_counts_its_steps(scale):
 SHORT_PATH = [(0.0, 0.0), (16.0, 0.0)]
 
 
+def test_hard_swing_at_a_slow_cadence_taken_for_a_pocket_counts_its_steps():
+    """A hand swung hard (``swing_scale`` 2.5) at 1.5 steps/s turns the phone at 3.4 rad/s RMS (peaks 5): its
+    rotation is periodic at the stride, but the arm evidence is weaker than at a brisk cadence and the carry
+    detector calls it a pocket (or a bag).  The rotation gate keeps only waving out (issue #25): the wide gate holds
+    in the limb's modes while the rotation is periodic (``Pipeline(wide_rotation_modes=...)``), so the steps count,
+    within 6 of the heel strikes (the walk's first steps fall in "not walking", before the detector's window shows
+    a periodic rotation).  Before (the wide gate in "swinging" only): 0 of 29, every peak refused by the 3 rad/s
+    gate."""
+    w = simulate_walk(SHORT_PATH, placement="swinging", seed=7, rate_hz=50.0, still_start_s=1.0, still_end_s=0.5,
+                      step_frequency_hz=1.5, placement_options={"swing_scale": 2.5})
+    res = Pipeline().run(w.recording)
+    modes = walking_modes(res, w.truth)
+    assert modes.get(CARRY_SWINGING, 0.0) / sum(modes.values()) <= 0.5, modes  # the limb taken for another
+    assert abs(len(res.steps) - w.truth.n_steps) <= 6, (len(res.steps), w.truth.n_steps)
+
+
 @pytest.mark.parametrize("scale,twist_deg", ((1.0, 30.0), (2.8, 20.0)))
 def test_hand_swung_with_a_twisting_wrist_counts_its_steps(scale, twist_deg):
     """A hand swung with the forearm twisting 20-30 deg each way (the rotation spread over two axes: its main axis

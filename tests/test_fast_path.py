@@ -349,6 +349,11 @@ def test_fast_refuses_what_it_does_not_implement():
     walk = simulate_walk([(0.0, 0.0), (5.0, 0.0)], seed=1)
     with pytest.raises(NotImplementedError, match="AttitudeEKF only"):
         run_fast(walk.recording, attitude=QuaternionEKF())
+    from core.pdr.steps import STEP_GATES
+
+    periodic = {m: dataclasses.replace(g, rescue_min_periodicity=0.6) for m, g in STEP_GATES.items()}
+    with pytest.raises(NotImplementedError, match="periodic weak-step rescue"):  # issue #25, off by default
+        run_fast(walk.recording, step_gates=periodic)
     with pytest.raises(TypeError):
         run_fast(walk.recording, pipeline=Pipeline(), carry=False)  # a pipeline or its parameters, not both
 
@@ -454,3 +459,13 @@ def test_fast_equals_plain_when_two_strides_correlate_better():
     _, rec = strong_and_weak_strides()
     plain, _ = _assert_same(rec)
     assert len(plain.steps) >= 40
+
+
+def test_fast_equals_plain_on_a_hard_swing_taken_for_a_pocket():
+    # a hand swung hard at 1.5 steps/s, taken for a pocket and a bag (issue #25): the wide rotation gate outside
+    # "swinging" while the rotation is periodic (``wide_rotation_modes``: pocket, bag), closed while a change to a mode
+    # with other gates is pending (the detector's ``pending_mode``, per grid sample in the fast path)
+    walk = simulate_walk([(0.0, 0.0), (16.0, 0.0)], placement="swinging", seed=7, rate_hz=50.0, still_start_s=1.0,
+                         still_end_s=0.5, step_frequency_hz=1.5, placement_options={"swing_scale": 2.5})
+    plain, _ = _assert_same(walk.recording)
+    assert abs(len(plain.steps) - walk.truth.n_steps) <= 6, (len(plain.steps), walk.truth.n_steps)

@@ -7,6 +7,7 @@ is counted when the steps around it are two step periods apart and its peak sits
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -73,6 +74,21 @@ def test_the_rescue_needs_height_a_period_and_a_following_step(weak_at, weak_amp
     t, x = _norm(weak_at, weak_amp)
     d, new = _detect(t, x, TRUNK_GATES, period_s)
     assert len(new) == expect and d.n_rescued == 0, (len(new), d.n_rescued)
+
+
+def test_the_periodic_rescue_takes_a_low_bump_only_while_the_gait_is_periodic():
+    """The periodic rescue (``StepGates.rescue_min_periodicity``, issue #25, off by default): the weak crest that
+    rises only 0.08 m/s^2 above ``g`` (under the rescue's 0.15, refused above) is a step while the carry detector's
+    periodicity at both legs' lags is at least the setting's 0.6, and not at 0.5 or unknown."""
+    t, x = _norm(10, 0.0)
+    gates = dataclasses.replace(TRUNK_GATES, rescue_min_periodicity=0.6)
+    for both, expect in ((0.8, 20), (0.5, 19), (math.nan, 19)):
+        d = StepDetector(grid_rate_hz=RATE_HZ)
+        d.set_gates(gates)
+        d.step_period_s, d.both_periodicity = PERIOD_S, both
+        d.reset()
+        new = [e for e in (d.update_grid(int(a), float(v)) for a, v in zip(t, x)) if e is not None]
+        assert len(new) == expect and d.n_rescued == expect - 19, (both, len(new), d.n_rescued)
 
 
 def _weak_heel_strikes(seed: int, ks=(12, 24, 36), scale: float = 0.2):

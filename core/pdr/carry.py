@@ -388,6 +388,9 @@ class CarryModeDetector:
         self.step_period_s = math.nan
         #: the phone's rotation is periodic at the stride while the norm is (a swinging arm), not irregular (waving)
         self.rotation_periodic = False
+        #: the last window's periodicity at both legs' lags (:meth:`gait_periodicity`) while the step period is known
+        #: (nan otherwise)
+        self.both_periodicity = math.nan
         #: walking gently (a periodic gait whose norm moves little; see ``gentle_max_std_m_s2``)
         self.gentle = False
         #: the two half-strides are very unlike (see ``uneven_on_share``)
@@ -667,6 +670,11 @@ class CarryModeDetector:
             CARRY_STILL: 1.0 - walk,
         }
 
+    @property
+    def pending_mode(self) -> str | None:
+        """The mode the hysteresis is waiting to switch to (the last hops' best, not yet in force), or None."""
+        return self._cand
+
     def _hop_decision(self, t_ns: int) -> None:
         k = self._k
         w = np.concatenate([self._buf[k:], self._buf[:k]]) if k else self._buf
@@ -695,6 +703,7 @@ class CarryModeDetector:
                                       and (f.get("gyro_axis_share", 0.0) >= self.swing_axis_share
                                            or f["tilt_rms_rad"] < self.twist_max_tilt_rad))
         both = self.gait_periodicity(f)  # both legs
+        self.both_periodicity = both if periodic else math.nan
         slow = self._slow_stride(f)  # a slow walk's band reaches higher (see slow_max_std_m_s2)
         if not periodic or both < self.min_periodicity or std >= (self.slow_off_std_m_s2 if slow
                                                                    else self.min_walk_std_m_s2):

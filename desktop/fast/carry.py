@@ -182,6 +182,7 @@ class CarryTrack:
     changes: list  #: the detector's change log at the end
     settling: np.ndarray  #: bool: the detector's ``settling`` (a walk's mode not settled yet)
     settling_before: bool  #: its ``settling`` before the first grid sample
+    pending: np.ndarray = None  #: index into CARRY_MODES of the detector's ``pending_mode`` (-1: None)
 
 
 def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro: np.ndarray,
@@ -207,6 +208,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     uneven = [det.uneven]
     settling = [det.settling]
     n_changes = [len(det.changes)]
+    pending = [mode_idx.get(det.pending_mode, -1)]
     view = np.lib.stride_tricks.sliding_window_view(rows, n, axis=0) if n_grid >= n else None
     for a in range(0, len(hops), HOP_CHUNK):
         h = hops[a:a + HOP_CHUNK]
@@ -221,13 +223,15 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
             uneven.append(det.uneven)
             settling.append(det.settling)
             n_changes.append(len(det.changes))
+            pending.append(mode_idx.get(det.pending_mode, -1))
     # the state after sample k: that of the last hop at or before k (the initial state before the first)
     at = np.searchsorted(hops, np.arange(n_grid), side="right")
     track = CarryTrack(np.asarray(modes, dtype=np.int64)[at], np.asarray(periods, dtype=float)[at],
                        np.asarray(periodic, dtype=bool)[at], np.asarray(gentle, dtype=bool)[at],
                        np.asarray(uneven, dtype=bool)[at],
                        np.asarray(n_changes, dtype=np.int64)[at],
-                       det.changes, np.asarray(settling, dtype=bool)[at], bool(settling[0]))
+                       det.changes, np.asarray(settling, dtype=bool)[at], bool(settling[0]),
+                       np.asarray(pending, dtype=np.int64)[at])
     # time per mode: the mode in force before each sample, added one grid period at a time as the detector does
     before = np.concatenate([[modes[0]], track.mode[:-1]]).astype(np.int64) if n_grid else np.zeros(0, np.int64)
     counts = np.bincount(before, minlength=len(CARRY_MODES))

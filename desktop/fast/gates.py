@@ -177,9 +177,14 @@ class StepRelease:
         p = self.p
         c = self.carry
         k = -1 if self.k is None else self.k
-        swinging = c is not None and CARRY_MODES[int(c.mode[k])] == CARRY_SWINGING and bool(c.rotation_periodic[k])
-        return max(p.max_rotation_rms_rad_s, p.swinging_max_rotation_rms_rad_s) if swinging \
-            else p.max_rotation_rms_rad_s
+        if c is None or not bool(c.rotation_periodic[k]):
+            return p.max_rotation_rms_rad_s
+        mode = CARRY_MODES[int(c.mode[k])]
+        if mode not in p.wide_rotation_modes:
+            return p.max_rotation_rms_rad_s
+        pending = int(c.pending[k])
+        wide = mode == CARRY_SWINGING or pending < 0 or p.step_gates.get(CARRY_MODES[pending]) == p.step_gates.get(mode)
+        return max(p.max_rotation_rms_rad_s, p.swinging_max_rotation_rms_rad_s) if wide else p.max_rotation_rms_rad_s
 
     def switch(self, d: int, k: int) -> None:
         """The mode at grid sample ``k`` has detector ``d``: its held peaks (found by ``k``, within

@@ -54,6 +54,7 @@ fixes' verdicts, outages and site.  Desktop only: nothing in ``core/`` or
 from __future__ import annotations
 
 import copy
+import math
 import time
 
 import numpy as np
@@ -162,6 +163,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     ekf = p.attitude
     fatt.check_supported(ekf)
     _check_no_acc_gap(recording, p)
+    _check_gates(p)
     ev = _Events(recording, p)
     fusion = _FusionEvents(recording, p, ev) if p.gnss is not None else None
     clock("events", 0.10)
@@ -253,6 +255,14 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         p.t_ns = max(p.t_ns, int(fusion.t[-1])) if len(ev.t) else int(fusion.t[-1])
     clock("gates and steps", 1.0)
     return _result(p, recording, AttitudeLog(gt, att.q, att.heading, att.acc_s2, att.mag_s2, att.rejected))
+
+
+def _check_gates(p: Pipeline) -> None:
+    """Refuse the periodic weak-step rescue (``StepGates.rescue_min_periodicity``, issue #25, off by default): the
+    fast step kernel does not mirror it."""
+    if any(math.isfinite(g.rescue_min_periodicity) for g in p.step_gates.values()):
+        raise NotImplementedError("the periodic weak-step rescue (StepGates.rescue_min_periodicity) runs on the "
+                                  "reference only")
 
 
 def _check_no_acc_gap(recording: Recording, p: Pipeline) -> None:
