@@ -112,7 +112,7 @@ The attitude filter's lag (issue #26, 2026-12-07; ``LaggedRegressors``, off by d
     lag step by step (:class:`LaggedRegressors`; a window's sample uses the mean of its steps' lagged
     regressors, the correction at a step its own): the model stays linear in its five coefficients, the
     constant term is untouched, and a lag of 0 is eq. 12.  Fitted to the truth over minutes 1-6 of the 20
-    tuning walks (the model's own ridge on the harmonics loosened to 20 deg), a lag of 15-20 s leaves the
+    tuning walks (a ridge of 1 rad on the harmonics, not the model's 5 deg), a lag of 15-20 s leaves the
     least heading error over the 5-minute outage (RMS median 1.9 deg without a lag, 1.3 deg at 15-20 s, 1.7
     at 30 s); :class:`core.gnss.fusion.GpsFusion`'s ``heading_lag_s`` (20 s) is where it is used.
 
