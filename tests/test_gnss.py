@@ -8,9 +8,10 @@ import math
 import numpy as np
 import pytest
 
+from core.conventions import wrap_angle
 from core.gnss.ekf import PdrEkf, sigma_max_m
 from core.gnss.fusion import GpsFusion
-from core.gnss.heading_model import HeadingErrorModel, regressors
+from core.gnss.heading_model import HeadingErrorModel, LaggedRegressors, regressors
 from core.gnss.training import (
     ChordReference,
     OnlineTrainer,
@@ -154,6 +155,71 @@ def test_heading_model_learns_a_new_grip_from_samples_that_agree_but_not_from_sc
     for _ in range(20):
         off.add(0.5, math.radians(10.0), w)
     assert not off.add(0.5, math.radians(55.0), w).accepted and not off.add(0.5, math.radians(57.0), w).accepted
+
+
+def test_lagged_regressors_follow_the_heading_with_a_first_order_lag():
+    """Issue #26 (the attitude filter's lag): each step moves the regressors by ``1 - exp(-dt / lag)`` of the way to
+    its heading's own; a lag of 0 is eq. 12's regressors."""
+    lr = LaggedRegressors(20.0)
+    np.testing.assert_allclose(lr.update(0, 0.0), regressors(0.0))  # the first step starts on its own heading
+    x = lr.update(int(20e9), math.pi / 2)  # one time constant after a turn to North
+    np.testing.assert_allclose(x, regressors(0.0) + (1.0 - math.exp(-1.0)) * (regressors(math.pi / 2) - regressors(0.0)),
+                               atol=1e-12)
+    assert lr.update(int(21e9), math.nan) is x  # a step without a heading leaves them
+    np.testing.assert_allclose(LaggedRegressors(0.0).update(5, 1.0), regressors(1.0))
+    with pytest.raises(ValueError):
+        LaggedRegressors(-1.0)
+
+
+def _lagged_walk(lag_s=20.0, true_deg=(3.0, 5.0, -4.0, 0.0, 0.0)):
+    """Steps at 2 Hz along four streets in turn (40 s each), and the heading error of an attitude filter that reaches a
+    heading's magnetic error (eq. 12's harmonics, ``true_deg``) with a first-order lag of ``lag_s``."""
+    t = np.arange(0.0, 900.0, 0.5)
+    h = 0.3 + (np.floor(t / 40.0) % 4) * (math.pi / 2)
+    h = np.arctan2(np.sin(h), np.cos(h))
+    lr = LaggedRegressors(lag_s)
+    x = np.array([lr.update(int(a * 1e9), b).copy() for a, b in zip(t, h)])
+    return t, h, x, x @ np.radians(true_deg)
+
+
+def test_heading_model_on_lagged_regressors_learns_an_error_that_lags_the_heading():
+    """Issue #26: after a turn the attitude filter's heading error still holds the old heading's magnetic error and
+    reaches the new one's with a lag (the simulator's street walks: some 20 s), so eq. 12, a function of the heading
+    alone, mispredicts every turn's first half minute; the same model on the lagged regressors learns it (before:
+    no ``x`` argument, no LaggedRegressors)."""
+    t, h, x, err = _lagged_walk()
+    lagged, plain = HeadingErrorModel(), HeadingErrorModel()
+    train, test = t < 600.0, t >= 600.0
+    for a in np.arange(0.0, 600.0, 10.0):  # 10-s windows, as OnlineTrainer's
+        m = (t >= a) & (t < a + 10.0)
+        mh = math.atan2(np.mean(np.sin(h[m])), np.mean(np.cos(h[m])))
+        w = 1.0 / math.radians(4.0) ** 2
+        lagged.add(mh, float(np.mean(err[m])), w, x[m].mean(axis=0))
+        plain.add(mh, float(np.mean(err[m])), w)
+    assert train.any() and lagged.selected == "full"
+    miss_lagged = max(abs(lagged.correction_rad(a, b) - e) for a, b, e in zip(h[test], x[test], err[test]))
+    miss_plain = max(abs(plain.correction_rad(a) - e) for a, e in zip(h[test], err[test]))
+    assert math.degrees(miss_lagged) < 0.3
+    assert math.degrees(miss_plain) > 3.0
+
+
+def test_fusion_compensates_with_the_lagged_regressors():
+    """``GpsFusion(heading_lag_s)`` corrects each step with the model at that step's lagged regressors (and the
+    trainer gets them); 0, the default, is eq. 12 at the step's own heading."""
+    from types import SimpleNamespace
+    true = np.radians([3.0, 5.0, -4.0, 0.0, 0.0])
+    t, h, x, err = _lagged_walk()
+    for lag, want in ((20.0, err), (0.0, np.array([regressors(a) @ true for a in h]))):
+        fu = GpsFusion(heading_lag_s=lag, heading_model=HeadingErrorModel(coefficients_rad=true))
+        got = []
+        for k in range(0, 200):
+            step = SimpleNamespace(t_ns=int(t[k] * 1e9), length_m=0.7, heading_rad=float(h[k]))
+            fu._before_fixes(step, step.t_ns - int(0.5e9))
+            got.append(wrap_angle(fu.compensated_heading(step.heading_rad) - step.heading_rad))
+        np.testing.assert_allclose(got, want[:200], atol=1e-9)
+        assert (fu.trainer._steps[-1][4] is None) == (lag == 0.0)
+    with pytest.raises(ValueError):
+        GpsFusion(heading_lag_s=-1.0)
 
 
 # -- training -------------------------------------------------------------------------------------

@@ -99,6 +99,23 @@ Which predictor (out-of-sample selection)
     harmonics fitted there predicted worse out of sample (residual SD 10.6
     deg) than no compensation (7.7 deg).
 
+The attitude filter's lag (issue #26, 2026-12-07; ``LaggedRegressors``, off by default)
+    Eq. 12 makes the heading error a function of the heading alone.  Our heading is not a compass's: the
+    attitude filter (:mod:`core.pdr.attitude`) carries the heading through a turn on the gyroscope and pulls
+    it to the magnetometer's slowly, so after each turn its error still holds the old heading's magnetic
+    error (a residual hard iron: a first harmonic of several degrees) and reaches the new heading's with a
+    time constant of some 20 s.  On the simulator's street walks (``gnss_eval``, TUNING seeds 0-19, the
+    attitude error against the truth in 20-s bins) that is what the heading error left after eq. 12 is made
+    of: seed 4 at 180-300 s, a turn from 206 to 136 deg, -2.4, -0.4, +0.4, +0.7, +0.9, +1.1 deg; a street
+    block is walked in 30-90 s, so an outage's heading error is mostly such transients.  With
+    ``lag_s > 0`` the regressors ``(1, sin psi, cos psi, sin 2psi, cos 2psi)`` go through that first-order
+    lag step by step (:class:`LaggedRegressors`; a window's sample uses the mean of its steps' lagged
+    regressors, the correction at a step its own): the model stays linear in its five coefficients, the
+    constant term is untouched, and a lag of 0 is eq. 12.  Fitted to the truth over minutes 1-6 of the 20
+    tuning walks (a ridge of 1 rad on the harmonics, not the model's 5 deg), a lag of 15-20 s leaves the
+    least heading error over the 5-minute outage (RMS median 1.9 deg without a lag, 1.3 deg at 15-20 s, 1.7
+    at 30 s); :class:`core.gnss.fusion.GpsFusion`'s ``heading_lag_s`` (20 s) is where it is used.
+
 Forgetting
     A hand-held phone is re-gripped now and then, which changes ``A``: every
     accepted sample scales the old information by ``forgetting`` (0.98 keeps
@@ -137,6 +154,40 @@ def regressors(heading_rad: float) -> np.ndarray:
     """``(1, sin psi, cos psi, sin 2psi, cos 2psi)`` of eq. 12 in our convention."""
     s, c = math.sin(heading_rad), math.cos(heading_rad)
     return np.array([1.0, s, c, 2.0 * s * c, c * c - s * s])
+
+
+def _x(heading_rad: float, x) -> np.ndarray:
+    return regressors(heading_rad) if x is None else np.asarray(x, dtype=float)
+
+
+class LaggedRegressors:
+    """The regressors of eq. 12 at the steps, each through a first-order lag of time constant ``lag_s`` (s):
+    ``x_k = x_{k-1} + (1 - exp(-dt / lag_s)) (regressors(psi_k) - x_{k-1})`` (module docstring, "The attitude
+    filter's lag").  ``lag_s = 0``: the regressors themselves (the paper's model)."""
+
+    def __init__(self, lag_s: float = 0.0):
+        if not (lag_s >= 0.0 and math.isfinite(lag_s)):
+            raise ValueError(f"lag_s must be finite and >= 0, got {lag_s!r}")
+        self.lag_s = float(lag_s)
+        self.reset()
+
+    def reset(self) -> None:
+        self.x: np.ndarray | None = None
+        self._t_ns: int | None = None
+
+    def update(self, t_ns: int, heading_rad: float) -> np.ndarray:
+        """The lagged regressors after a step at ``t_ns`` with our heading ``heading_rad`` (a non-finite heading
+        leaves them as they were)."""
+        if not math.isfinite(heading_rad):
+            return self.x if self.x is not None else regressors(0.0)
+        r = regressors(heading_rad)
+        if self.lag_s <= 0.0 or self.x is None or self._t_ns is None:
+            self.x = r
+        else:
+            dt = max((int(t_ns) - self._t_ns) * 1e-9, 0.0)
+            self.x = self.x + (1.0 - math.exp(-dt / self.lag_s)) * (r - self.x)
+        self._t_ns = int(t_ns)
+        return self.x
 
 
 @dataclass(frozen=True)
@@ -220,7 +271,7 @@ class HeadingErrorModel:
         self._pq = {"start": 0.0, "offset": 0.0, "full": 0.0}
         self._pq_n = 0.0
         #: the consecutive rejected samples (heading, deviation, weight), for the new-grip rule
-        self._rejected_run: list[tuple[float, float, float]] = []
+        self._rejected_run: list[tuple] = []
         self.n_regrips = 0  #: new grips found (kept across the reset a new grip makes)
 
     # -- the estimate ---------------------------------------------------------
@@ -260,9 +311,10 @@ class HeadingErrorModel:
             return self._start.copy()
         return self._offset_only()
 
-    def correction_rad(self, heading_rad: float) -> float:
-        """``delta(psi)`` of eq. 12: add it to our heading to get the course."""
-        return float(regressors(heading_rad) @ self.coefficients_rad())
+    def correction_rad(self, heading_rad: float, x=None) -> float:
+        """``delta(psi)`` of eq. 12: add it to our heading to get the course.  ``x``: the regressors to use instead
+        of ``regressors(heading_rad)`` (the lagged ones of :class:`LaggedRegressors`)."""
+        return float(_x(heading_rad, x) @ self.coefficients_rad())
 
     def _effective_n(self) -> float:
         return min(float(self.n_accepted), 1.0 / (1.0 - self.forgetting) if self.forgetting < 1.0 else math.inf)
@@ -273,12 +325,13 @@ class HeadingErrorModel:
             return 1.0
         return max(1.0, self.residual_sd_rad() ** 2 * self._sum_w / max(self._effective_n(), 1.0))
 
-    def full_fit_variance_rad2(self, heading_rad: float) -> float:
-        """Predictive variance of the five-term fit at a heading (rad^2): large where no sample was."""
-        x = regressors(heading_rad)
+    def full_fit_variance_rad2(self, heading_rad: float, x=None) -> float:
+        """Predictive variance of the five-term fit at a heading (rad^2; at the regressors ``x`` if given): large
+        where no sample was."""
+        x = _x(heading_rad, x)
         return float(x @ np.linalg.solve(self._info, x)) * self._scatter()
 
-    def correction_sd_rad(self, heading_rad: float) -> float:
+    def correction_sd_rad(self, heading_rad: float, x=None) -> float:
         """Standard deviation of :meth:`correction_rad` (rad).
 
         With the full fit, its predictive SD; with ``A`` alone, the larger of
@@ -286,7 +339,7 @@ class HeadingErrorModel:
         never walked (where the untrusted harmonics could be anything their
         prior allows) is honestly uncertain and the walked one is not.
         """
-        full = self.full_fit_variance_rad2(heading_rad)
+        full = self.full_fit_variance_rad2(heading_rad, x)
         if self.harmonics_trusted:
             return math.sqrt(full)
         var_a = self._scatter() / self._w_a if self._w_a > 0 else self.offset_prior_sd_rad ** 2
@@ -302,31 +355,33 @@ class HeadingErrorModel:
         return {"A": -a, "B": -c, "C": -b, "D": -d, "E": e}
 
     # -- learning ---------------------------------------------------------------
-    def add(self, heading_rad: float, deviation_rad: float, weight: float = 1.0) -> SampleFlags:
-        """One sample: our heading ``psi`` and ``delta = course - psi`` (rad), with a weight (1/rad^2 scale)."""
+    def add(self, heading_rad: float, deviation_rad: float, weight: float = 1.0, x=None) -> SampleFlags:
+        """One sample: our heading ``psi`` and ``delta = course - psi`` (rad), with a weight (1/rad^2 scale); ``x``:
+        the sample's regressors if not ``regressors(psi)`` (the window's mean lagged ones, :class:`LaggedRegressors`;
+        the spread check keeps ``psi``)."""
         if not (math.isfinite(heading_rad) and math.isfinite(deviation_rad) and weight > 0 and math.isfinite(weight)):
             self.n_rejected += 1
             return SampleFlags(False, math.nan, "not finite")
         dev = wrap_angle(float(deviation_rad))
-        pred = self.correction_rad(heading_rad)
+        x = _x(heading_rad, x)
+        pred = self.correction_rad(heading_rad, x)
         res = wrap_angle(dev - pred)
         if self.n_accepted >= self.min_samples:
             # the gate knows what the model can know: the full fit's predictive variance is large at a
             # heading never walked before (a one-direction A is no prediction for the opposite direction)
-            full = float(regressors(heading_rad) @ np.linalg.solve(self._info, self._vec))
+            full = float(x @ np.linalg.solve(self._info, self._vec))
             r_full = wrap_angle(dev - full)
-            limit = max(self.outlier_k * math.sqrt(1.0 / weight + self.full_fit_variance_rad2(heading_rad)),
+            limit = max(self.outlier_k * math.sqrt(1.0 / weight + self.full_fit_variance_rad2(heading_rad, x)),
                         self.outlier_floor_rad)
             if abs(r_full) > limit:
                 self.n_rejected += 1
-                self._rejected_run.append((float(heading_rad), dev, float(weight)))
+                self._rejected_run.append((float(heading_rad), dev, float(weight), x))
                 if self._new_grip():
                     return self._regrip(res)
                 return SampleFlags(False, res, f"residual {math.degrees(r_full):.1f} deg > "
                                                f"{math.degrees(limit):.1f} deg")
         self._rejected_run.clear()
         # out-of-sample errors of the three predictors, for the selection (before this sample is learnt)
-        x = regressors(heading_rad)
         g = self.selection_forgetting
         for k, p in (("start", float(x @ self._start)), ("offset", float(x @ self._offset_only())),
                      ("full", float(x @ np.linalg.solve(self._info, self._vec)))):
@@ -359,7 +414,7 @@ class HeadingErrorModel:
         run = self._rejected_run[-n:] if n > 0 else []
         if n <= 0 or len(run) < n:
             return False
-        r = np.array([wrap_angle(d - self.correction_rad(h)) for h, d, _ in run])
+        r = np.array([wrap_angle(d - self.correction_rad(h, x)) for h, d, _, x in run])
         mean = math.atan2(float(np.mean(np.sin(r))), float(np.mean(np.cos(r))))
         return all(abs(wrap_angle(float(v) - mean)) <= self.outlier_floor_rad for v in r)
 
@@ -369,8 +424,8 @@ class HeadingErrorModel:
         n_rejected, n_regrips = self.n_rejected - len(run), self.n_regrips + 1
         self.reset()
         self.n_rejected, self.n_regrips = n_rejected, n_regrips
-        for h, d, w in run:
-            self.add(h, d, w)
+        for h, d, w, x in run:
+            self.add(h, d, w, x)
         return SampleFlags(True, residual_rad, "new grip")
 
     # -- persistence ------------------------------------------------------------

@@ -298,7 +298,7 @@ class OnlineTrainer:
         self.reset()
 
     def reset(self) -> None:
-        self._steps: deque = deque()  # (t_ns, t_prev_ns, length_m, heading_rad)
+        self._steps: deque = deque()  # (t_ns, t_prev_ns, length_m, heading_rad, regressors or None)
         self._fixes: deque = deque()  # (t_ns, east, north, hacc, speed, course_rad)
         self._window_start_ns: int | None = None
         self._stretch: dict | None = None  # the straight stretch the stride sample grows over
@@ -345,10 +345,12 @@ class OnlineTrainer:
         """Metres of GPS walking behind the stride estimate (its weight, after forgetting)."""
         return self._w - self.scale_prior_weight_m * self.forgetting ** self.n_stride_samples
 
-    def add_step(self, t_ns: int, t_prev_ns: int, length_m: float, heading_rad: float) -> None:
-        """A step of the raw track: its time, the previous step's time, model length and our heading."""
+    def add_step(self, t_ns: int, t_prev_ns: int, length_m: float, heading_rad: float, x=None) -> None:
+        """A step of the raw track: its time, the previous step's time, model length and our heading; ``x``: the
+        heading model's regressors at the step if not its heading's own (the lagged ones,
+        :class:`core.gnss.heading_model.LaggedRegressors`)."""
         if math.isfinite(length_m) and math.isfinite(heading_rad):
-            self._steps.append((int(t_ns), int(t_prev_ns), float(length_m), float(heading_rad)))
+            self._steps.append((int(t_ns), int(t_prev_ns), float(length_m), float(heading_rad), x))
         keep = int(t_ns) - int(3 * self.window_s * 1e9)
         while self._steps and self._steps[0][0] < keep:
             self._steps.popleft()
@@ -390,13 +392,14 @@ class OnlineTrainer:
         if not np.all(hacc <= limit):
             return refuse(f"fix accuracy up to {np.nanmax(hacc):.0f} m > {limit:.0f} m")
         # steps with the part of their interval inside [t0, t1]
-        parts, heads = [], []
-        for ts, tp, ln, hd in self._steps:
+        parts, heads, xs = [], [], []
+        for ts, tp, ln, hd, x in self._steps:
             lo, hi = max(tp, t0), min(ts, t1)
             if hi > lo and ts > tp:
                 parts.append(ln * (hi - lo) / (ts - tp))
                 heads.append(hd)
-        n_steps = sum(1 for ts, _, _, _ in self._steps if t0 < ts <= t1)
+                xs.append(x)
+        n_steps = sum(1 for ts, _, _, _, _ in self._steps if t0 < ts <= t1)
         if n_steps < self.min_steps:
             return refuse(f"{n_steps} steps < {self.min_steps}: not walking")
         mean_h, sd_h = _circ_mean_sd(heads, parts)
@@ -470,7 +473,10 @@ class OnlineTrainer:
             if math.isfinite(course):
                 dev = wrap_angle(course - mean_h)
                 var = ref_sd ** 2 + self.step_heading_sd_rad ** 2 / max(len(heads), 1)
-                fl = self.heading_model.add(mean_h, dev, 1.0 / var)
+                # the window's regressors: the steps' own (lagged) ones, averaged as the heading is
+                x_win = None if any(x is None for x in xs) or not sum(parts) > 0 else \
+                    np.average(np.array(xs, dtype=float), axis=0, weights=parts)
+                fl = self.heading_model.add(mean_h, dev, 1.0 / var, x_win)
                 used_h = fl.accepted
                 res_h = fl.residual_rad
                 if used_h:
