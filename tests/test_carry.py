@@ -351,6 +351,38 @@ def test_gentle_slow_walk_on_a_limb_is_walking(placement, options):
     assert modes.get(CARRY_STILL, 0.0) / sum(modes.values()) <= 0.3, modes
 
 
+def test_gentle_swing_at_1_2_steps_per_s_is_walking():
+    """A hand swung gently (``swing_scale`` 1.5, 1.4 rad/s RMS) at 1.2 steps/s, the norm's standard deviation
+    about 0.45 m/s^2 (issue #25 section 2: a gentle walk is walking while its gait is periodic).  Its stride, 1.67 s,
+    lies just past ``slow_stride_s`` (1.6 s): the autocorrelation of the norm rises through the normal cadence's
+    range's edge to 0.85-0.9 at the stride (the rotation's 0.9-0.97), and the edge, no peak, gave a periodicity of
+    0.2-0.3 at both lags.  The peak that straddles the edge is the stride (``slow_stride_edge``): walking (no more
+    than 20 % of the walk "not walking", the detector's 4-s window on a 23-s walk), every step counted within 2.
+    Before (``slow_stride_edge=False``): "not walking" for 90 % of the walk, 10 of 28 steps (seed 11: 11, seed 3:
+    6; at ``swing_scale`` 1: 0)."""
+    w = simulate_walk(SHORT_PATH, placement="swinging", seed=7, rate_hz=50.0, step_frequency_hz=1.2,
+                      step_length_m=0.6, bounce_scale=0.75, still_start_s=1.0, still_end_s=0.5,
+                      placement_options={"swing_scale": 1.5})
+    res = Pipeline().run(w.recording)
+    modes = walking_modes(res, w.truth)
+    assert modes.get(CARRY_STILL, 0.0) / sum(modes.values()) <= 0.2, modes
+    assert abs(len(res.steps) - w.truth.n_steps) <= 2, (len(res.steps), w.truth.n_steps)
+
+
+def test_gentle_swing_called_swinging_counts_its_steps():
+    """A hand swung at 1 step/s with a gentle gait (bounce 0.5: the norm's standard deviation about 0.3 m/s^2) is
+    taken for a swinging hand and called gentle (periodic at both legs' lags); its steps are counted with the
+    swinging gates' comb and cadence gate but the gentle gait's height (``GENTLE_SWING_GATES``): within 2 of the
+    heel strikes (the fast path: ``tests/test_fast_path.py``).  Before (the swinging gates, ``A_th`` 0.3 and an echo
+    gate of 0.5 m/s^2, whatever the amplitude): 0 of 28."""
+    w = simulate_walk(SHORT_PATH, placement="swinging", seed=5, rate_hz=50.0, step_frequency_hz=1.0,
+                      step_length_m=0.6, bounce_scale=0.5, still_start_s=1.0, still_end_s=0.5)
+    res = Pipeline().run(w.recording)
+    modes = walking_modes(res, w.truth)
+    assert modes.get(CARRY_SWINGING, 0.0) / sum(modes.values()) >= 0.7, modes  # the premise
+    assert abs(len(res.steps) - w.truth.n_steps) <= 2, (len(res.steps), w.truth.n_steps)
+
+
 @pytest.mark.parametrize("placement", ("bag", "ear"))
 def test_gentle_slow_walk_on_the_trunk_is_walking(placement):
     """A gentle walk at 1 step/s with the phone in a bag or at the ear (issue #25): the trunk sees both feet alike,

@@ -139,6 +139,17 @@ class CarryModeDetector:
         autocorrelation has no peak within ``slow_stride_margin`` of its best at the shorter lags: at a
         normal cadence the autocorrelation over a 4 s window at two strides' lag is as high as at one,
         and noisier.
+    slow_stride_edge : bool
+        On by default (issue #25 section 2).  When the autocorrelation has no peak within the normal cadence's range
+        (up to ``slow_stride_s``) and that range is taken (``slow_stride_margin``), the stride is the peak that
+        straddles its edge (the lags past it while the autocorrelation still rises, up to its first fall): a walk at
+        about 1.2 steps/s has its stride (1.6-1.75 s) there, and the edge, no peak, gave the norm's autocorrelation on
+        the way up (0.2-0.3) at both lags, "not walking".  Simulator (a gently swung hand at 1.2 steps/s,
+        ``swing_scale`` 1-1.5, bounce 0.5-1, seeds 7 and 11, 30 m): 243 of 624 steps before ("not walking" 97 % of
+        the walk at bounce 0.5-0.75), 589 after (with :data:`core.pdr.steps.GENTLE_SWING_GATES`).  TUNING: the 28 real walks, IPIN (16), Microsoft (18), IPOL (58) and the
+        simulator's carry seeds 0-9 count the same steps (benchmarks/discussion.md).  A first version that extended
+        the range whenever it rose through its edge (with a peak inside or not) moved the tuning clip Tclack88
+        50_hand_slow 50 -> 51 of 50.  False: as before.
     half_stride_ratio : float
         A slow stride's lag (one found past ``slow_stride_s``) is taken for two strides when the autocorrelation
         has a local maximum within 2 samples of half of it at least this fraction of its value there (0: off):
@@ -296,7 +307,8 @@ class CarryModeDetector:
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
                  tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.5,
-                 slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7, half_stride_ratio: float = 0.5,
+                 slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7, slow_stride_edge: bool = True,
+                 half_stride_ratio: float = 0.5,
                  min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
                  gentle_min_periodicity: float = 0.6, gentle_max_std_m_s2: float = 0.5, slow_max_std_m_s2: float = 1.0,
                  slow_off_std_m_s2: float = 1.2,
@@ -317,6 +329,7 @@ class CarryModeDetector:
         self.max_stride_s = float(max_stride_s)
         self.slow_stride_s = float(slow_stride_s)
         self.slow_stride_margin = float(slow_stride_margin)
+        self.slow_stride_edge = bool(slow_stride_edge)
         self.half_stride_ratio = float(half_stride_ratio)
         self.min_walk_std_m_s2 = float(min_walk_std_m_s2)
         self.min_periodicity = float(min_periodicity)
@@ -503,11 +516,21 @@ class CarryModeDetector:
         top = float(seg.max())
         short = seg[:self._lag_short - lo + 1]
         use_short = float(short.max()) >= self.slow_stride_margin * top
+        full = seg
         if use_short:  # a normal cadence's stride (see slow_stride_s)
             seg = short
             top = float(seg.max())
         # the shortest lag that is a local maximum within 85 % of the best: the stride, not two of them
         peaks = np.flatnonzero((seg[1:-1] >= seg[:-2]) & (seg[1:-1] >= seg[2:]) & (seg[1:-1] >= 0.85 * top)) + 1
+        if use_short and not len(peaks) and self.slow_stride_edge:
+            # no peak in the normal cadence's range, its best on the edge (``slow_stride_edge``): the stride is the
+            # peak that straddles the edge (1.2 steps/s: a stride of 1.67 s just past slow_stride_s)
+            e = len(short) - 1
+            while e + 1 < len(full) and full[e + 1] >= full[e]:
+                e += 1
+            seg = full[:e + 2]
+            top = float(seg.max())
+            peaks = np.flatnonzero((seg[1:-1] >= seg[:-2]) & (seg[1:-1] >= seg[2:]) & (seg[1:-1] >= 0.85 * top)) + 1
         k2 = lo + (int(peaks[0]) if len(peaks) else int(np.argmax(seg)))
         if not use_short and len(peaks):
             k2 = self._half_stride(r, k2)

@@ -74,7 +74,7 @@ from core.pdr.gapbridge import AccGapBridge, EstimatedStep, GapVerdict
 from core.pdr.heading import RotationSmoother, interval_heading
 from core.pdr.heading_smoother import (HEADING_SMOOTHER_OFF, HEADING_SMOOTHER_RTS, HEADING_SMOOTHER_START,
                                       HEADING_SMOOTHERS, SmootherVerdict, StartHeading, smooth_steps)
-from core.pdr.steps import GENTLE, STEP_GATES, UNEVEN_POCKET, StepDetector, StepEvent
+from core.pdr.steps import GENTLE, GENTLE_SWING, STEP_GATES, UNEVEN_POCKET, StepDetector, StepEvent
 from core.pdr.velocity import SpeedFeatureWindow
 from core.pdr.walkdir import WALKING_DIRECTIONS, WalkingDirection
 from core.pdr.stride import StepFeatures, StrideModel, WeinbergStride
@@ -833,6 +833,8 @@ class Pipeline:
         ``UNEVEN_POCKET`` (issue #25)."""
         if gentle and self._gentle_applies(mode):
             return GENTLE
+        if gentle and mode == CARRY_SWINGING and GENTLE_SWING in self._det_of:  # a gently swung hand (issue #25)
+            return GENTLE_SWING
         if uneven and mode == CARRY_POCKET and UNEVEN_POCKET in self._det_of:
             return UNEVEN_POCKET
         return mode

@@ -169,6 +169,19 @@ GENTLE = "gentle"
 GENTLE_GATES = StepGates(min_interval_period_frac=0.6, min_peak_height_m_s2=0.15)
 STEP_GATES[GENTLE] = GENTLE_GATES
 
+#: the key of :data:`STEP_GATES` (and ``Pipeline(step_gates=...)``) of a gentle walk in a swinging hand
+GENTLE_SWING = "gentle_swinging"
+#: a slow, gentle walk with the phone swung in the hand (issue #25 section 2: a gentle walk is walking, in every carry
+#: mode; the carry detector's :attr:`core.pdr.carry.CarryModeDetector.gentle` in the swinging mode): the swinging
+#: hand's gates (the stride comb, the cadence gate, the 1-s running mean ``g``) with the gentle gait's ``A_th`` of
+#: 0.15 m/s^2 and an echo gate of 0.2 m/s^2: a gently swung hand's combed peaks rise 0.15-0.3 m/s^2 above ``g`` and
+#: its raw norm moves by 0.2-0.5 m/s^2 in half a step, under the swinging gates' 0.3 and 0.5 (the simulator's gentle
+#: swing at 1 step/s, ``swing_scale`` 1-1.5, bounce 0.5-0.75: 0 of 28 steps with the swinging gates, 26-28 with these).
+#: The echo gate stays (0.2 m/s^2: a stopped walk's raw norm moves by a standing hand's 0.02-0.1)
+GENTLE_SWING_GATES = StepGates(stride_comb=True, min_interval_period_frac=0.6, min_peak_height_m_s2=0.15,
+                               gravity_time_constant_s=1.0, min_raw_range_m_s2=0.2)
+STEP_GATES[GENTLE_SWING] = GENTLE_SWING_GATES
+
 #: the key of :data:`STEP_GATES` of a pocket whose two half-strides are very unlike (the carry detector's
 #: :attr:`core.pdr.carry.CarryModeDetector.uneven`, issue #25: a soft-soled walk, the far leg's footfall a small
 #: bump): such a pocket is counted with the limb gates :data:`POCKET_GATES`, one step per footfall.  The

@@ -78,11 +78,28 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     hs = det._lag_short
     short_top = seg[:, :hs - lo + 1].max(axis=1)
     use_short = short_top >= det.slow_stride_margin * top
-    seg = np.where(use_short[:, None], np.where(np.arange(hi - lo + 1)[None, :] <= hs - lo, seg, -np.inf), seg)
-    top = np.where(use_short, short_top, top)
-    mid = seg[:, 1:-1]
-    peak = (mid >= seg[:, :-2]) & (mid >= seg[:, 2:]) & (mid >= 0.85 * top[:, None])
-    peak[:, hs - lo - 1:] &= ~use_short[:, None]  # the short range's last lag is its edge, no peak
+    lags = np.arange(hi - lo + 1)[None, :]
+
+    def peaks_upto(seg, last):
+        """Local maxima within 85 % of the best of ``seg`` up to lag index ``last`` (per row) for the rows that
+        use the short range (no peak at ``last``: its edge), of the whole range for the others."""
+        sg = np.where(use_short[:, None], np.where(lags <= last[:, None], seg, -np.inf), seg)
+        tp = np.where(use_short, sg.max(axis=1), top)
+        mid = sg[:, 1:-1]
+        pk = (mid >= sg[:, :-2]) & (mid >= sg[:, 2:]) & (mid >= 0.85 * tp[:, None])
+        pk &= ~(use_short[:, None] & (lags[:, 1:-1] >= last[:, None]))
+        return sg, pk
+
+    seg0 = seg
+    seg, peak = peaks_upto(seg0, np.full(m_w, hs - lo))
+    if det.slow_stride_edge:  # no peak in the short range: up to the peak that straddles its edge (CarryModeDetector)
+        ext = use_short & ~peak.any(axis=1)
+        if np.any(ext):
+            falls = np.concatenate([seg0[:, 1:] < seg0[:, :-1], np.ones((m_w, 1), dtype=bool)], axis=1)
+            falls[:, :hs - lo] = False
+            seg_e, peak_e = peaks_upto(seg0, np.argmax(falls, axis=1) + 1)
+            seg = np.where(ext[:, None], seg_e, seg)
+            peak = np.where(ext[:, None], peak_e, peak)
     has_peak = peak.any(axis=1)
     k2 = lo + np.where(has_peak, np.argmax(peak, axis=1) + 1, np.argmax(seg, axis=1))
     if det.half_stride_ratio > 0.0:  # two strides' lag halved (CarryModeDetector._half_stride)

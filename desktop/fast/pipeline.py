@@ -59,12 +59,12 @@ import time
 
 import numpy as np
 
-from core.conventions import ACC, CARRY_MODES, CARRY_POCKET, GNSS_STATUS, GPS, GYRO
+from core.conventions import ACC, CARRY_MODES, CARRY_POCKET, CARRY_SWINGING, GNSS_STATUS, GPS, GYRO
 from core.pdr.pipeline import (IMPOSSIBLE, MAG, SATURATION_FLOOR, AttitudeLog, Pipeline, PipelineResult, SensorHealth,
                                Track)
 from core.recording import Recording
 from core.pdr.gapbridge import acc_gaps_with_gyro
-from core.pdr.steps import GENTLE, UNEVEN_POCKET
+from core.pdr.steps import GENTLE, GENTLE_SWING, UNEVEN_POCKET
 from desktop.fast import attitude as fatt
 from desktop.fast.carry import run_carry
 from desktop.fast.gates import StepRelease, rotation_sums
@@ -196,6 +196,9 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         if UNEVEN_POCKET in p._det_of:  # a pocket with very unlike half-strides: the limb gates (Pipeline._gates_key)
             pocket = CARRY_MODES.index(CARRY_POCKET)
             det_at = np.where(track.uneven & (track.mode == pocket), index[p._det_of[UNEVEN_POCKET]], det_at)
+        if GENTLE_SWING in p._det_of:  # a gentle walk in a swinging hand (Pipeline._gates_key)
+            swinging = CARRY_MODES.index(CARRY_SWINGING)
+            det_at = np.where(track.gentle & (track.mode == swinging), index[p._det_of[GENTLE_SWING]], det_at)
         if GENTLE in p._det_of:  # a gentle walk in a trunk mode: the gentle detector (Pipeline._carry_steps)
             gentle_mode = np.array([p._gentle_applies(m) for m in CARRY_MODES], dtype=bool)
             det_at = np.where(track.gentle & gentle_mode[track.mode], index[p._det_of[GENTLE]], det_at)
