@@ -455,9 +455,10 @@ def test_a_lock_window_that_holds_ends_the_settling_after_a_failure_it_overrides
     assert out[109].verdict is GpsVerdict.UNUSABLE and out[109].causes == (Cause.SETTLING,)
     assert all(v.verdict is GpsVerdict.USABLE for v in out[110:])
     assert out[110].locked_over == (Cause.SETTLING,)
-    # a settling after a failure the lock does not override (here: the stream lock off) keeps its 10 s
-    off = _lock_stream(1.2, seconds=125, scale_until_s=40, coarse_at_s=80, lock_window_s=None)
-    assert off[118].causes == (Cause.SETTLING,) and off[119].verdict is GpsVerdict.USABLE
+    # the stream lock off, or this part of it (``lock_ends_settling=False``, the rule before): the settling keeps its 10 s
+    for off in (_lock_stream(1.2, seconds=125, scale_until_s=40, coarse_at_s=80, lock_window_s=None),
+                _lock_stream(1.2, seconds=125, scale_until_s=40, coarse_at_s=80, lock_ends_settling=False)):
+        assert off[118].causes == (Cause.SETTLING,) and off[119].verdict is GpsVerdict.USABLE
 
 
 def test_the_stream_lock_holds_while_the_steps_heading_drifts_as_issue_25_measured():
