@@ -312,12 +312,26 @@ def test_hand_swung_with_a_twisting_wrist_counts_its_steps(scale, twist_deg):
     assert modes.get(CARRY_SWINGING, 0.0) / sum(modes.values()) >= 0.5, modes
 
 
+def test_hard_twisting_swing_at_a_brisk_cadence_is_no_waving():
+    """A hand swung hard with a twisting wrist at a brisk cadence (``swing_scale`` 2, twist 20 deg at the reference
+    swing: 40 deg each way, 2.2 steps/s, 9.8 rad/s RMS) tilts the phone by 0.52-0.57 rad, at the twisting swing's
+    tilt limit (``twist_max_tilt_rad`` 0.55), with its rotation periodic at the stride at 0.98-1.00: the stride's
+    periodicity, not the tilt, makes it a gait (``twist_min_gyro_periodicity``, issue #25).  Within 3 steps and never
+    "not walking".  Before (the tilt limit alone): 8 of 20 steps, "not walking" for the walk's last 2 s."""
+    w = simulate_walk(SHORT_PATH, placement="swinging", seed=11, rate_hz=50.0, still_start_s=1.0, still_end_s=0.5,
+                      step_frequency_hz=2.2, placement_options={"swing_scale": 2.0, "twist_deg": 20.0})
+    res = Pipeline().run(w.recording)
+    assert abs(len(res.steps) - w.truth.n_steps) <= 3, (len(res.steps), w.truth.n_steps)
+    assert walking_modes(res, w.truth).get(CARRY_STILL, 0.0) == 0.0, walking_modes(res, w.truth)
+
+
 def test_periodic_rotation_is_gait_irregular_rotation_is_waving():
     """The decision rule alone (features as a twisting swing and a compass calibration give them): a fast
     rotation on two axes (main-axis share 0.5) periodic at the stride, the phone tilting 0.45 rad (the simulator's
-    hard twisting swing), is a swinging arm and its rotation gate opens; the same with no periodicity at the stride
-    (irregular waving), or periodic but tilting 0.9 rad (the rhythmic calibration of the IPIN tuning routes'
-    first 25 s), is "not walking"."""
+    hard twisting swing), is a swinging arm and its rotation gate opens, and so it is tilting 0.57 rad (a harder
+    swing at a brisk cadence: its rotation repeats at the stride at 0.99, ``twist_min_gyro_periodicity``); the same
+    with no periodicity at the stride (irregular waving), or tilting 0.9 rad and repeating at 0.9 (the rhythmic
+    calibration of the IPIN tuning routes' first 25 s: 0.8-0.95), is "not walking"."""
     swing = {"gravity_x": 0.1, "gravity_y": -0.95, "gravity_z": 0.2, "tilt_rms_rad": 0.45, "coherence": 0.8,
              "acc_std_m_s2": 9.0, "periodicity": 0.96, "r_step": 0.88, "r_stride": 0.96, "stride_share": 0.08,
              "stride_period_s": 1.1, "tilt_stride_corr": 0.9, "horizontal_ratio": 1.2,
@@ -327,7 +341,12 @@ def test_periodic_rotation_is_gait_irregular_rotation_is_waving():
     assert max(sc, key=sc.get) == CARRY_SWINGING, sc
     d.decide(0, swing)
     assert d.rotation_periodic
-    for waving in (dict(swing, gyro_periodicity=0.0), dict(swing, tilt_rms_rad=0.9)):
+    hard = dict(swing, tilt_rms_rad=0.57)
+    sc = d.mode_scores(hard)
+    assert max(sc, key=sc.get) == CARRY_SWINGING, sc
+    d.decide(1, hard)
+    assert d.rotation_periodic
+    for waving in (dict(swing, gyro_periodicity=0.0), dict(swing, tilt_rms_rad=0.9, gyro_periodicity=0.9)):
         sc = d.mode_scores(waving)
         assert max(sc, key=sc.get) == CARRY_STILL, (waving, sc)
         d.decide(1, waving)

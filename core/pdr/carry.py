@@ -219,6 +219,14 @@ class CarryModeDetector:
         ``tilt_rms_rad`` is under this (rad).  A compass calibration can be as rhythmic and as spread (the IPIN
         tuning routes' first 25 s: rotation periodicity 0.8-0.95, main-axis share 0.5-0.7, 5-7 rad/s) but tilts
         the phone by 0.6-1.1 rad; the simulator's twisting swings tilt it by 0.27-0.50.
+    twist_min_gyro_periodicity : float or None
+        With a gyroscope: the rotation's periodicity at the stride (``gyro_periodicity``) from which a rotation spread
+        over the axes is a gait's whatever its tilt (``twist_max_tilt_rad`` no longer applies); None: the tilt limit
+        always applies.  Issue #25: the stride's periodicity, not the tilt, separates a gait from waving; a hand
+        swung hard with a twisting wrist at a brisk cadence (the simulator's ``swing_scale`` 2 at 2.2 steps/s,
+        twist 40 deg each way, 9.8 rad/s RMS) tilts by 0.52-0.57 rad with its rotation periodic at 0.98-1.00
+        and was taken for waving ("not walking", 29 of 36 steps); the IPIN tuning routes' rhythmic calibrations
+        repeat at 0.8-0.95.
     max_gait_rotation_rad_s : float
         With a gyroscope: RMS rotation above which a rotation spread over the axes
         (``gyro_axis_share`` under ``swing_axis_share``) is waving, not gait (rad/s).
@@ -314,6 +322,7 @@ class CarryModeDetector:
                  slow_off_std_m_s2: float = 1.2,
                  slow_min_std_m_s2: float = 0.4, slow_min_periodicity: float = 0.4, slow_hold: bool = True,
                  step_antiphase: float = -0.2, trunk_min_periodicity: float = 0.4, trunk_max_tilt_rad: float = 0.15, max_gait_tilt_rad: float = 0.6, twist_max_tilt_rad: float = 0.55,
+                 twist_min_gyro_periodicity: float | None = 0.97,
                  max_gait_rotation_rad_s: float = 4.5, swing_axis_share: float = 0.85, screen_up_z: float = 0.3,
                  upright_y: float = 0.6, ear_incline_x: float = 0.22, limb_tilt_rad: float = 0.16,
                  limb_stride_share: float = 0.3, min_limb_stride_share: float = 0.15, arm_evidence: float = 1.1,
@@ -346,6 +355,7 @@ class CarryModeDetector:
         self.trunk_max_tilt_rad = float(trunk_max_tilt_rad)
         self.max_gait_tilt_rad = float(max_gait_tilt_rad)
         self.twist_max_tilt_rad = float(twist_max_tilt_rad)
+        self.twist_min_gyro_periodicity = None if twist_min_gyro_periodicity is None else float(twist_min_gyro_periodicity)
         self.max_gait_rotation_rad_s = float(max_gait_rotation_rad_s)
         self.swing_axis_share = float(swing_axis_share)
         self.screen_up_z = float(screen_up_z)
@@ -631,8 +641,10 @@ class CarryModeDetector:
         swung with a twisting wrist), while the phone tilts less than ``twist_max_tilt_rad``: a rhythmic compass
         calibration is as periodic and as spread, but tilts the phone further."""
         periodic = _sig(f["gyro_periodicity"], 0.5, 0.05) * _sig(f["periodicity"], 0.5, 0.05)
-        return periodic * max(_sig(f["gyro_axis_share"], self.swing_axis_share, 0.04),
-                              1.0 - _sig(f["tilt_rms_rad"], self.twist_max_tilt_rad, 0.03))
+        spread = 1.0 - _sig(f["tilt_rms_rad"], self.twist_max_tilt_rad, 0.03)
+        if self.twist_min_gyro_periodicity is not None:  # a stride's periodicity, whatever the tilt
+            spread = max(spread, _sig(f["gyro_periodicity"], self.twist_min_gyro_periodicity, 0.01))
+        return periodic * max(_sig(f["gyro_axis_share"], self.swing_axis_share, 0.04), spread)
 
     def mode_scores(self, f: dict, walking: bool = False) -> dict:
         """Soft score of every mode (0..1) from the features (see the module docstring); ``walking``: the mode in
@@ -722,9 +734,12 @@ class CarryModeDetector:
             or self._periodic_gait_met(self.gait_periodicity(f), std, self._slow_stride(f)))
         self.step_period_s = 0.5 * f["stride_period_s"] if periodic else math.nan
         # about one axis (a pendulum), or spread over the axes by a twisting wrist while the tilt is a swing's
-        self.rotation_periodic = bool(walking and f.get("gyro_periodicity", 0.0) >= 0.5
+        gp = f.get("gyro_periodicity", 0.0)
+        self.rotation_periodic = bool(walking and gp >= 0.5
                                       and (f.get("gyro_axis_share", 0.0) >= self.swing_axis_share
-                                           or f["tilt_rms_rad"] < self.twist_max_tilt_rad))
+                                           or f["tilt_rms_rad"] < self.twist_max_tilt_rad
+                                           or (self.twist_min_gyro_periodicity is not None
+                                               and gp >= self.twist_min_gyro_periodicity)))
         both = self.gait_periodicity(f)  # both legs
         self.both_periodicity = both if periodic else math.nan
         slow = self._slow_stride(f)  # a slow walk's band reaches higher (see slow_max_std_m_s2)
