@@ -306,7 +306,8 @@ class CarryModeDetector:
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
-                 tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.5,
+                 tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.8,
+                 slow_window_s: float = 5.0, slow_window_stride_s: float = 2.1,
                  slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7, slow_stride_edge: bool = True,
                  half_stride_ratio: float = 0.5,
                  min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
@@ -327,6 +328,8 @@ class CarryModeDetector:
         self.tilt_smooth_s = float(tilt_smooth_s)
         self.min_stride_s = float(min_stride_s)
         self.max_stride_s = float(max_stride_s)
+        self.slow_window_s = float(slow_window_s)
+        self.slow_window_stride_s = float(slow_window_stride_s)
         self.slow_stride_s = float(slow_stride_s)
         self.slow_stride_margin = float(slow_stride_margin)
         self.slow_stride_edge = bool(slow_stride_edge)
@@ -370,15 +373,17 @@ class CarryModeDetector:
 
     def reset(self) -> None:
         n = self._n = max(8, int(round(self.window_s * self.grid_rate_hz)))
+        #: the ring's length: the long window of a very slow walk's stride (``slow_window_s``), else the window
+        self._n_long = max(n, int(round(self.slow_window_s * self.grid_rate_hz)))
         self._hop = max(1, int(round(self.hop_s * self.grid_rate_hz)))
         self._smooth = max(1, int(round(self.tilt_smooth_s * self.grid_rate_hz)))
         self._recent = min(n, max(2, int(round(self.hold_recent_s * self.grid_rate_hz))))
         self._lag_lo = max(2, int(self.min_stride_s * self.grid_rate_hz))
         self._lag_hi = min(n - 8, int(math.ceil(self.max_stride_s * self.grid_rate_hz)))
         self._lag_short = max(self._lag_lo + 2, min(self._lag_hi, int(math.ceil(self.slow_stride_s * self.grid_rate_hz))))
-        self._nfft = 1 << int(math.ceil(math.log2(2 * n)))
+        self._nfft = 1 << int(math.ceil(math.log2(2 * self._n_long)))
         self._scratch_n = {}  # window length -> compute_features' work arrays
-        self._buf = np.zeros((n, 6))  # ax ay az gx gy gz, ring
+        self._buf = np.zeros((self._n_long, 6))  # ax ay az gx gy gz, ring
         self._k = 0  # next row of the ring
         self._filled = 0
         self._since_hop = 0
@@ -429,8 +434,8 @@ class CarryModeDetector:
         else:
             row[0], row[1], row[2], row[3], row[4], row[5] = ax, ay, az, gx, gy, gz
             self._has_gyro = True
-        self._k = (self._k + 1) % self._n
-        if self._filled < self._n:
+        self._k = (self._k + 1) % self._n_long
+        if self._filled < self._n_long:
             self._filled += 1
         self.time_s[self.mode] += self._dt
         self._since_hop += 1
@@ -701,7 +706,15 @@ class CarryModeDetector:
     def _hop_decision(self, t_ns: int) -> None:
         k = self._k
         w = np.concatenate([self._buf[k:], self._buf[:k]]) if k else self._buf
-        self.decide(t_ns, self.compute_features(w))
+        f = self.compute_features(w[len(w) - self._n:])
+        if self.slow_window(f, self._filled >= self._n_long):
+            f = self.compute_features(w)
+        self.decide(t_ns, f)
+
+    def slow_window(self, f: dict, full: bool) -> bool:
+        """Whether the hop whose (``window_s``) features are ``f`` takes its features over the long window
+        (``slow_window_s``) instead; ``full``: the long window is full."""
+        return full and self._n_long > self._n and f["stride_period_s"] >= self.slow_window_stride_s - 1e-9
 
     def decide(self, t_ns: int, f: dict) -> None:
         """One hop's decision from its window's features ``f`` (:meth:`compute_features`): the scores, the raw

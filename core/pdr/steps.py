@@ -192,7 +192,7 @@ UNEVEN_POCKET = "pocket_uneven"
 STEP_GATES[UNEVEN_POCKET] = POCKET_GATES
 
 #: longest step period the stride comb keeps a history for (s)
-MAX_COMB_PERIOD_S = 1.0
+MAX_COMB_PERIOD_S = 1.3
 
 
 @dataclass(frozen=True)

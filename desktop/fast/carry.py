@@ -227,10 +227,28 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     n_changes = [len(det.changes)]
     pending = [mode_idx.get(det.pending_mode, -1)]
     view = np.lib.stride_tricks.sliding_window_view(rows, n, axis=0) if n_grid >= n else None
+    # a very slow walk's hops take the long window (CarryModeDetector.slow_window): full once n_long samples of
+    # the hop's grid segment are in
+    n_long = det._n_long
+    view_long = (np.lib.stride_tricks.sliding_window_view(rows, n_long, axis=0)
+                 if n_long > n and n_grid >= n_long else None)
+    starts = np.flatnonzero(restart)
+    if n_grid and (not len(starts) or starts[0] != 0):
+        starts = np.concatenate([[0], starts])
+    seg_start = starts[np.searchsorted(starts, hops, side="right") - 1] if len(hops) else hops
     for a in range(0, len(hops), HOP_CHUNK):
         h = hops[a:a + HOP_CHUNK]
         w = view[h - (n - 1)].transpose(0, 2, 1)
-        for k, f in zip(h.tolist(), window_features(det, w, seen_gyro[h])):
+        feats = window_features(det, w, seen_gyro[h])
+        if view_long is not None:
+            full = (h - seg_start[a:a + HOP_CHUNK]) >= n_long - 1
+            slow = [i for i, f in enumerate(feats) if det.slow_window(f, bool(full[i]))]
+            if slow:
+                hl = h[slow]
+                for i, f in zip(slow, window_features(det, view_long[hl - (n_long - 1)].transpose(0, 2, 1),
+                                                      seen_gyro[hl])):
+                    feats[i] = f
+        for k, f in zip(h.tolist(), feats):
             det._has_gyro = bool(seen_gyro[k])
             det.decide(int(t_ns[k]), f)  # core's decision, on these features
             modes.append(mode_idx[det.mode])
