@@ -708,12 +708,15 @@ class CarryModeDetector:
         w = np.concatenate([self._buf[k:], self._buf[:k]]) if k else self._buf
         f = self.compute_features(w[len(w) - self._n:])
         if self.slow_window(f, self._filled >= self._n_long):
-            f = self.compute_features(w)
+            f_long = self.compute_features(w)
+            if self.slow_window(f_long, True):  # the long window finds a very slow stride too
+                f = f_long
         self.decide(t_ns, f)
 
     def slow_window(self, f: dict, full: bool) -> bool:
-        """Whether the hop whose (``window_s``) features are ``f`` takes its features over the long window
-        (``slow_window_s``) instead; ``full``: the long window is full."""
+        """Whether the features ``f`` (of the ``window_s`` window, then of the long one) find a very slow walk's
+        stride (``slow_window_stride_s``) with the long window (``slow_window_s``) full (``full``): a hop takes the
+        long window's features when both do."""
         return full and self._n_long > self._n and f["stride_period_s"] >= self.slow_window_stride_s - 1e-9
 
     def decide(self, t_ns: int, f: dict) -> None:

@@ -247,7 +247,8 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
                 hl = h[slow]
                 for i, f in zip(slow, window_features(det, view_long[hl - (n_long - 1)].transpose(0, 2, 1),
                                                       seen_gyro[hl])):
-                    feats[i] = f
+                    if det.slow_window(f, True):  # the long window finds a very slow stride too
+                        feats[i] = f
         for k, f in zip(h.tolist(), feats):
             det._has_gyro = bool(seen_gyro[k])
             det.decide(int(t_ns[k]), f)  # core's decision, on these features
