@@ -485,6 +485,16 @@ def test_fast_equals_plain_on_a_gentle_swing():
     assert abs(len(plain.steps) - walk.truth.n_steps) <= 2, (len(plain.steps), walk.truth.n_steps)
 
 
+def test_fast_equals_plain_on_a_walk_at_0_8_steps_per_s():
+    # a gentle pocket walk at 0.8 steps/s (issue #25 section 2): its stride, 2.5 s, takes the long window's features
+    # (``slow_window_s``), hop by hop in the fast path too (before the mirror: the fast path's carry decisions used the
+    # 4-s window's and its steps differed)
+    walk = simulate_walk([(0.0, 0.0), (9.0, 0.0)], placement="pocket", seed=7, rate_hz=50.0, step_frequency_hz=0.8,
+                         step_length_m=0.6, bounce_scale=0.75, still_start_s=1.0, still_end_s=0.5)
+    plain, _ = _assert_same(walk.recording)
+    assert abs(len(plain.steps) - walk.truth.n_steps) <= 2, (len(plain.steps), walk.truth.n_steps)
+
+
 def test_fast_equals_plain_on_a_hard_swing_taken_for_a_pocket():
     # a hand swung hard at 1.5 steps/s, taken for a pocket and a bag (issue #25): the wide rotation gate outside
     # "swinging" while the rotation is periodic (``wide_rotation_modes``: pocket, bag), closed while a change to a mode
