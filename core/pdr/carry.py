@@ -133,7 +133,20 @@ class CarryModeDetector:
     min_stride_s, max_stride_s : float
         Range of the stride period searched in the autocorrelation (s); a
         walking cadence of 0.8-2.5 steps/s is a stride of 0.8-2.5 s (issue #25: a slow, gentle walk at
-        0.8-1.2 steps/s is a stride of 1.7-2.5 s).
+        0.8-1.2 steps/s is a stride of 1.7-2.5 s).  ``max_stride_s`` is 2.8 s (issue #25 section 2, h9/slow08): a
+        stride of 2.5 s on the range's last lag is no local maximum, and 0.8 steps/s must lie inside it.
+    slow_window_s, slow_window_stride_s : float
+        Issue #25 section 2: a walk at 0.8-0.95 steps/s (a stride of 2.1-2.5 s) fills most of the ``window_s``
+        window, its autocorrelation at the stride lag has 1.5-1.9 s of overlap and is noisy, and the decision flapped
+        between walking and "not walking" (the hysteresis then never left "not walking": the simulator's gentle swing
+        and pocket at 0.8 steps/s 0 and 8 of 22 steps).  The ring holds ``slow_window_s`` (s; two strides at
+        0.8 steps/s); a hop whose ``window_s`` features find a stride of ``slow_window_stride_s`` (s) or longer
+        computes them again over the long window and takes those when they find such a stride too (a slow walk on
+        the trunk's window at three steps' lag, the long one at one stride, keeps the short window's: the tuning clip
+        50_hand_slow).  The FFT length is the same (512 at 50 Hz); the cost doubles only on the hops of a very slow
+        walk.  ``slow_window_s=0``: off.  Simulator (16 m, seed 7): at 0.8 steps/s a gently swung hand 0 -> 27 of 28
+        steps, a pocket 15 -> 28; TUNING real walks, IPIN, Microsoft, IPOL and the simulator's carry seeds: the same
+        steps (benchmarks/discussion.md).
     slow_stride_s, slow_stride_margin : float
         A stride longer than ``slow_stride_s`` (s; a cadence under 1.25 steps/s) is taken only when the
         autocorrelation has no peak within ``slow_stride_margin`` of its best at the shorter lags: at a
