@@ -639,10 +639,9 @@ def test_gentle_walk_at_0_8_steps_per_s_is_walking(placement):
     carry detector's raw decision is a walking mode on 85 % of the hops at least and the step period is 1.25 s
     (within 0.1).  The stride fills most of a 4-s window: its autocorrelation at the stride lag (1.5 s of overlap) is
     noisy and the stride sat on ``max_stride_s`` (2.5 s), so the decision flapped and the hysteresis never left "not
-    walking".  A stride of 2.1 s or more takes its features over 5 s (``slow_window_s``: two strides) and the stride
-    range reaches 2.8 s.  Here 100 % of the hops; before (``slow_window_s=0, max_stride_s=2.5``) 60 % and 58 %, with the
-    longer stride range alone 78 % (the pipeline on the pocket's walk: 8 of 22 steps before, "not walking" 74 % of it,
-    23 of 22 and 17 % after)."""
+    walking".  A gentle norm's stride range reaches 2.8 s, and a stride of 2.1 s or more takes its features over 5 s
+    (``slow_window_s``: two strides).  Here 100 % of the hops; before (``slow_window_s=0``) 60 % and 58 % (the pipeline
+    on the pocket's walk: 8 of 22 steps before, "not walking" 74 % of it, 23 of 22 and 17 % after)."""
     w = simulate_walk([(0.0, 0.0), (12.0, 0.0)], placement=placement, seed=7, rate_hz=50.0, step_frequency_hz=0.8,
                       step_length_m=0.6, bounce_scale=0.75, still_start_s=1.0, still_end_s=0.5,
                       )

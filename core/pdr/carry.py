@@ -133,9 +133,8 @@ class CarryModeDetector:
     min_stride_s, max_stride_s : float
         Range of the stride period searched in the autocorrelation (s); a
         walking cadence of 0.8-2.5 steps/s is a stride of 0.8-2.5 s (issue #25: a slow, gentle walk at
-        0.8-1.2 steps/s is a stride of 1.7-2.5 s).  ``max_stride_s`` is 2.8 s (issue #25 section 2, h9/slow08): a
-        stride of 2.5 s on the range's last lag is no local maximum, and 0.8 steps/s must lie inside it.
-    slow_window_s, slow_window_stride_s : float
+        0.8-1.2 steps/s is a stride of 1.7-2.5 s).  ``max_stride_s`` is the range of a brisk norm's window (``slow_window_max_std_m_s2``).
+    slow_window_s, slow_window_stride_s, slow_window_max_std_m_s2, slow_window_max_stride_s : float
         Issue #25 section 2: a walk at 0.8-0.95 steps/s (a stride of 2.1-2.5 s) fills most of the ``window_s``
         window, its autocorrelation at the stride lag has 1.5-1.9 s of overlap and is noisy, and the decision flapped
         between walking and "not walking" (the hysteresis then never left "not walking": the simulator's gentle swing
@@ -143,7 +142,12 @@ class CarryModeDetector:
         0.8 steps/s); a hop whose ``window_s`` features find a stride of ``slow_window_stride_s`` (s) or longer
         computes them again over the long window and takes those when they find such a stride too (a slow walk on
         the trunk's window at three steps' lag, the long one at one stride, keeps the short window's: the tuning clip
-        50_hand_slow).  The FFT length is the same (512 at 50 Hz); the cost doubles only on the hops of a very slow
+        50_hand_slow), and only while the norm moves less than ``slow_window_max_std_m_s2`` (m/s^2; the slow band's
+        ``slow_off_std_m_s2``), and a window whose norm moves less than that searches the stride up to
+        ``slow_window_max_stride_s`` (s; a 2.5-s stride on ``max_stride_s``, the range's last lag, is no local
+        maximum).  A brisk walk's 4-s window can peak at two or three steps' lag too (the Microsoft tuning traces'
+        first seconds, 1.5-3 m/s^2): that range and the long window for every amplitude called three hand-held traces
+        a pocket for 4-10 s (their landmark errors 5.2/1.8/4.0 -> 4.4/1.5/5.4 m).  The FFT length is the same (512 at 50 Hz); the cost doubles only on the hops of a very slow
         walk.  ``slow_window_s=0``: off.  Simulator (16 m, seed 7): at 0.8 steps/s a gently swung hand 0 -> 27 of 28
         steps, a pocket 15 -> 28; TUNING real walks, IPIN, Microsoft, IPOL and the simulator's carry seeds: the same
         steps (benchmarks/discussion.md).
@@ -319,8 +323,8 @@ class CarryModeDetector:
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
-                 tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.8,
-                 slow_window_s: float = 5.0, slow_window_stride_s: float = 2.1,
+                 tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.5,
+                 slow_window_s: float = 5.0, slow_window_max_stride_s: float = 2.8, slow_window_stride_s: float = 2.1, slow_window_max_std_m_s2: float = 1.2,
                  slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7, slow_stride_edge: bool = True,
                  half_stride_ratio: float = 0.5,
                  min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
@@ -343,6 +347,8 @@ class CarryModeDetector:
         self.max_stride_s = float(max_stride_s)
         self.slow_window_s = float(slow_window_s)
         self.slow_window_stride_s = float(slow_window_stride_s)
+        self.slow_window_max_stride_s = float(slow_window_max_stride_s)
+        self.slow_window_max_std_m_s2 = float(slow_window_max_std_m_s2)
         self.slow_stride_s = float(slow_stride_s)
         self.slow_stride_margin = float(slow_stride_margin)
         self.slow_stride_edge = bool(slow_stride_edge)
@@ -393,6 +399,9 @@ class CarryModeDetector:
         self._recent = min(n, max(2, int(round(self.hold_recent_s * self.grid_rate_hz))))
         self._lag_lo = max(2, int(self.min_stride_s * self.grid_rate_hz))
         self._lag_hi = min(n - 8, int(math.ceil(self.max_stride_s * self.grid_rate_hz)))
+        #: the longest stride lag of a gentle norm's window (slow_window_max_stride_s), before the window's own bound
+        self._lag_hi_slow = (int(math.ceil(self.slow_window_max_stride_s * self.grid_rate_hz))
+                             if self._n_long > n else self._lag_hi)
         self._lag_short = max(self._lag_lo + 2, min(self._lag_hi, int(math.ceil(self.slow_stride_s * self.grid_rate_hz))))
         self._nfft = 1 << int(math.ceil(math.log2(2 * self._n_long)))
         self._scratch_n = {}  # window length -> compute_features' work arrays
@@ -529,7 +538,7 @@ class CarryModeDetector:
             np.matmul(gc, gv[:, -1], out=rows[2])
         r_all = self._autocorr(rows)
         r = r_all[0] * unbias
-        lo, hi = self._lag_lo, self._lag_hi
+        lo, hi = self._lag_lo, self.lag_hi(n, std)
         seg = r[lo:hi + 1]
         top = float(seg.max())
         short = seg[:self._lag_short - lo + 1]
@@ -552,7 +561,7 @@ class CarryModeDetector:
         k2 = lo + (int(peaks[0]) if len(peaks) else int(np.argmax(seg)))
         if not use_short and len(peaks):
             k2 = self._half_stride(r, k2)
-        k2 = self._stride_lag(r, r_all[2] if self._has_gyro else None, k2, n, tilt_rms)
+        k2 = self._stride_lag(r, r_all[2] if self._has_gyro else None, k2, n, tilt_rms, hi)
         ks = k2 // 2
         r_step = float(r[max(1, ks - 2):ks + 3].max())
         r_stride = float(r[k2])
@@ -576,6 +585,14 @@ class CarryModeDetector:
                      gyro_skew=rotation_skew(rows[2]))
         return f
 
+    def lag_hi(self, n: int, std: float) -> int:
+        """The longest stride lag searched in a window of ``n`` samples whose norm's standard deviation is ``std``
+        (m/s^2): ``slow_window_max_stride_s`` for a gentle norm (``slow_window_max_std_m_s2``) while the long window
+        is on, ``max_stride_s`` otherwise."""
+        if self._n_long > self._n and std < self.slow_window_max_std_m_s2:
+            return min(n - 8, self._lag_hi_slow)
+        return min(n - 8, self._lag_hi)
+
     def _half_stride(self, r: np.ndarray, k2: int) -> int:
         """A slow stride's lag ``k2`` (past ``slow_stride_s``) halved when the norm's (unbiased) autocorrelation
         ``r`` has a local maximum within 2 samples of ``k2 / 2`` at least ``half_stride_ratio`` of ``r[k2]``: the
@@ -589,7 +606,8 @@ class CarryModeDetector:
             return half - 2 + j
         return k2
 
-    def _stride_lag(self, r: np.ndarray, r_gyro: np.ndarray | None, k2: int, n: int, tilt_rms: float) -> int:
+    def _stride_lag(self, r: np.ndarray, r_gyro: np.ndarray | None, k2: int, n: int, tilt_rms: float,
+                    hi: int) -> int:
         """The stride lag from the lag ``k2`` found in the norm's (unbiased) autocorrelation ``r``: twice it when
         ``k2`` is a slow walk's step and twice it is in range.  The norm in anti-phase at ``k2 / 2``
         (``step_antiphase``) makes ``k2`` one period of the norm: a trunk's step (both feet alike) or a limb's
@@ -598,7 +616,7 @@ class CarryModeDetector:
         when the rotation's main axis (autocorrelation ``r_gyro``, not yet unbiased), which a walker sways once
         per stride, is in anti-phase at ``k2`` too."""
         k4 = 2 * k2
-        if k4 > self._lag_hi or r[k2 // 2] >= self.step_antiphase:
+        if k4 > hi or r[k2 // 2] >= self.step_antiphase:
             return k2
         if tilt_rms < self.trunk_max_tilt_rad and r[k2] >= self.trunk_min_periodicity:
             return k4
@@ -730,7 +748,8 @@ class CarryModeDetector:
         """Whether the features ``f`` (of the ``window_s`` window, then of the long one) find a very slow walk's
         stride (``slow_window_stride_s``) with the long window (``slow_window_s``) full (``full``): a hop takes the
         long window's features when both do."""
-        return full and self._n_long > self._n and f["stride_period_s"] >= self.slow_window_stride_s - 1e-9
+        return (full and self._n_long > self._n and f["stride_period_s"] >= self.slow_window_stride_s - 1e-9
+                and f["acc_std_m_s2"] < self.slow_window_max_std_m_s2)
 
     def decide(self, t_ns: int, f: dict) -> None:
         """One hop's decision from its window's features ``f`` (:meth:`compute_features`): the scores, the raw

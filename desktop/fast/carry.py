@@ -48,12 +48,24 @@ def _autocorr(det, x: np.ndarray) -> np.ndarray:
     return out
 
 
-def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
+def window_features(det, w: np.ndarray, has_gyro: np.ndarray, hi: int | None = None) -> list[dict]:
     """The features of windows ``w`` (m, n, 6: acc xyz, gyro xyz, oldest first) as ``det.compute_features`` gives
-    them, one dict per window; ``has_gyro[i]``: the detector had seen a gyroscope reading by window ``i``."""
+    them, one dict per window; ``has_gyro[i]``: the detector had seen a gyroscope reading by window ``i``; ``hi``:
+    the longest stride lag of every window (None: each window's, ``det.lag_hi``, the windows grouped by it)."""
     m_w, n, _ = w.shape
     if m_w == 0:
         return []
+    if hi is None:
+        acc = w[:, :, :3]
+        norm = np.sqrt(np.einsum("hij,hij->hi", acc, acc))
+        x = norm - norm.mean(axis=1)[:, None]
+        his = np.array([det.lag_hi(n, s) for s in np.sqrt(np.mean(x * x, axis=1)).tolist()])
+        out = [None] * m_w
+        for h in np.unique(his).tolist():
+            idx = np.flatnonzero(his == h)
+            for i, f in zip(idx.tolist(), window_features(det, w[idx], np.asarray(has_gyro)[idx], h)):
+                out[i] = f
+        return out
     acc = w[:, :, :3]
     norm = np.sqrt(np.einsum("hij,hij->hi", acc, acc))
     mean = acc.mean(axis=1)
@@ -69,7 +81,7 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     xr = norm[:, n - min(det._recent, n):]
     xr = xr - xr.mean(axis=1)[:, None]
     recent_std = np.sqrt(np.mean(xr * xr, axis=1))
-    lo, hi = det._lag_lo, det._lag_hi
+    lo = det._lag_lo
     r = _autocorr(det, x)
     rows = np.arange(m_w)
     seg = r[:, lo:hi + 1]
