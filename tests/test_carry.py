@@ -632,3 +632,57 @@ def test_step_period_is_one_step_when_two_strides_correlate_better():
     p.run(rec)
     off = np.abs(np.asarray(periods) / interval - 1.0) > 0.1
     assert len(periods) > 20 and off.mean() <= 0.05, (np.median(periods) / interval, off.mean())
+
+
+# -- issue #25 section 2: a gentle walk at 0.8-1.0 steps/s ----------------------------------------------------------
+def _raw_walking_share(w, **kw):
+    """The share of the carry detector's hops, their window wholly within the walk, whose raw mode is a walking one
+    (the detector fed the simulator's 50-Hz grid directly), and the median step period of those hops."""
+    det = CarryModeDetector(**kw)
+    acc, gyro = w.recording.streams[ACC], w.recording.streams[GYRO]
+    m = min(len(acc.t_ns), len(gyro.t_ns))
+    t0, t1 = int(w.truth.step_t_ns[0]), int(w.truth.step_t_ns[-1])
+    walking, periods = [], []
+    for t, a, g in zip(acc.t_ns[:m].tolist(), acc.values[:m].tolist(), gyro.values[:m].tolist()):
+        n = det.n_hops
+        det.update_grid(t, *a, *g)
+        if det.n_hops > n and t - getattr(det, "_n_long", det._n) * 20_000_000 >= t0 and t <= t1:
+            walking.append(det.raw_mode != CARRY_STILL)
+            periods.append(det.step_period_s)
+    return float(np.mean(walking)), float(np.nanmedian(periods)) if not all(map(math.isnan, periods)) else math.nan
+
+
+@pytest.mark.parametrize("placement", ("swinging", "pocket"))
+def test_gentle_walk_at_0_8_steps_per_s_is_walking(placement):
+    """A gentle walk at 0.8 steps/s (a stride of 2.5 s, issue #25 section 2) in a gently swung hand or a pocket: the
+    carry detector's raw decision is a walking mode on 85 % of the hops at least and the step period is 1.25 s
+    (within 0.1).  The stride fills most of a 4-s window: its autocorrelation at the stride lag (1.5 s of overlap) is
+    noisy and the stride sat on ``max_stride_s`` (2.5 s), so the decision flapped and the hysteresis never left "not
+    walking".  A gentle norm's stride range reaches 2.8 s, and a stride of 2.1 s or more takes its features over 5 s
+    (``slow_window_s``: two strides).  Here 100 % of the hops; before (``slow_window_s=0``) 60 % and 58 % (the pipeline
+    on the pocket's walk: 8 of 22 steps before, "not walking" 74 % of it, 23 of 22 and 17 % after)."""
+    w = simulate_walk([(0.0, 0.0), (12.0, 0.0)], placement=placement, seed=7, rate_hz=50.0, step_frequency_hz=0.8,
+                      step_length_m=0.6, bounce_scale=0.75, still_start_s=1.0, still_end_s=0.5,
+                      )
+    share, period = _raw_walking_share(w)
+    assert share >= 0.85, share
+    assert period == pytest.approx(1.25, abs=0.1)
+
+
+def test_stride_comb_reaches_a_slow_step():
+    """The stride comb averages the norm with itself one step earlier: its history (``MAX_COMB_PERIOD_S``) must hold
+    the step of the slowest walk the carry detector finds (0.8 steps/s: 1.25 s).  A hand swung gently at 0.9 steps/s
+    (bounce 0.5), the gentle swinging gates and the step period known: within 2 of the heel strikes.  Before (a 1-s
+    history): the comb did not act on the 1.1-s step and the weak half-stride's peaks (0.13 m/s^2 above ``g``) stayed
+    under ``A_th``: 16 of 28."""
+    from core.pdr.steps import GENTLE_SWING_GATES
+
+    w = simulate_walk(SHORT_PATH, placement="swinging", seed=7, rate_hz=50.0, step_frequency_hz=0.9, step_length_m=0.6,
+                      bounce_scale=0.5, still_start_s=1.0, still_end_s=0.5)
+    acc = w.recording.streams[ACC]
+    d = StepDetector()
+    d.set_gates(GENTLE_SWING_GATES)
+    d.step_period_s = 1.0 / 0.9
+    n = sum(d.update_grid(t, x) is not None
+            for t, x in zip(acc.t_ns.tolist(), np.linalg.norm(acc.values, axis=1).tolist()))
+    assert abs(n - w.truth.n_steps) <= 2, (n, w.truth.n_steps)

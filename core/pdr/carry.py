@@ -133,7 +133,24 @@ class CarryModeDetector:
     min_stride_s, max_stride_s : float
         Range of the stride period searched in the autocorrelation (s); a
         walking cadence of 0.8-2.5 steps/s is a stride of 0.8-2.5 s (issue #25: a slow, gentle walk at
-        0.8-1.2 steps/s is a stride of 1.7-2.5 s).
+        0.8-1.2 steps/s is a stride of 1.7-2.5 s).  ``max_stride_s`` is the range of a brisk norm's window (``slow_window_max_std_m_s2``).
+    slow_window_s, slow_window_stride_s, slow_window_max_std_m_s2, slow_window_max_stride_s : float
+        Issue #25 section 2: a walk at 0.8-0.95 steps/s (a stride of 2.1-2.5 s) fills most of the ``window_s``
+        window, its autocorrelation at the stride lag has 1.5-1.9 s of overlap and is noisy, and the decision flapped
+        between walking and "not walking" (the hysteresis then never left "not walking": the simulator's gentle swing
+        and pocket at 0.8 steps/s 0 and 8 of 22 steps).  The ring holds ``slow_window_s`` (s; two strides at
+        0.8 steps/s); a hop whose ``window_s`` features find a stride of ``slow_window_stride_s`` (s) or longer
+        computes them again over the long window and takes those when they find such a stride too (a slow walk on
+        the trunk's window at three steps' lag, the long one at one stride, keeps the short window's: the tuning clip
+        50_hand_slow), and only while the norm moves less than ``slow_window_max_std_m_s2`` (m/s^2; the slow band's
+        ``slow_off_std_m_s2``), and a window whose norm moves less than that searches the stride up to
+        ``slow_window_max_stride_s`` (s; a 2.5-s stride on ``max_stride_s``, the range's last lag, is no local
+        maximum).  A brisk walk's 4-s window can peak at two or three steps' lag too (the Microsoft tuning traces'
+        first seconds, 1.5-3 m/s^2): that range and the long window for every amplitude called three hand-held traces
+        a pocket for 4-10 s (their landmark errors 5.2/1.8/4.0 -> 4.4/1.5/5.4 m).  The FFT length is the same (512 at 50 Hz); the cost doubles only on the hops of a very slow
+        walk.  ``slow_window_s=0``: off.  Simulator (16 m, seed 7): at 0.8 steps/s a gently swung hand 0 -> 27 of 28
+        steps, a pocket 15 -> 28; TUNING real walks, IPIN, Microsoft, IPOL and the simulator's carry seeds: the same
+        steps (benchmarks/discussion.md).
     slow_stride_s, slow_stride_margin : float
         A stride longer than ``slow_stride_s`` (s; a cadence under 1.25 steps/s) is taken only when the
         autocorrelation has no peak within ``slow_stride_margin`` of its best at the shorter lags: at a
@@ -315,6 +332,7 @@ class CarryModeDetector:
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
                  tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.5,
+                 slow_window_s: float = 5.0, slow_window_max_stride_s: float = 2.8, slow_window_stride_s: float = 2.1, slow_window_max_std_m_s2: float = 1.2,
                  slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7, slow_stride_edge: bool = True,
                  half_stride_ratio: float = 0.5,
                  min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
@@ -336,6 +354,10 @@ class CarryModeDetector:
         self.tilt_smooth_s = float(tilt_smooth_s)
         self.min_stride_s = float(min_stride_s)
         self.max_stride_s = float(max_stride_s)
+        self.slow_window_s = float(slow_window_s)
+        self.slow_window_stride_s = float(slow_window_stride_s)
+        self.slow_window_max_stride_s = float(slow_window_max_stride_s)
+        self.slow_window_max_std_m_s2 = float(slow_window_max_std_m_s2)
         self.slow_stride_s = float(slow_stride_s)
         self.slow_stride_margin = float(slow_stride_margin)
         self.slow_stride_edge = bool(slow_stride_edge)
@@ -380,15 +402,20 @@ class CarryModeDetector:
 
     def reset(self) -> None:
         n = self._n = max(8, int(round(self.window_s * self.grid_rate_hz)))
+        #: the ring's length: the long window of a very slow walk's stride (``slow_window_s``), else the window
+        self._n_long = max(n, int(round(self.slow_window_s * self.grid_rate_hz)))
         self._hop = max(1, int(round(self.hop_s * self.grid_rate_hz)))
         self._smooth = max(1, int(round(self.tilt_smooth_s * self.grid_rate_hz)))
         self._recent = min(n, max(2, int(round(self.hold_recent_s * self.grid_rate_hz))))
         self._lag_lo = max(2, int(self.min_stride_s * self.grid_rate_hz))
         self._lag_hi = min(n - 8, int(math.ceil(self.max_stride_s * self.grid_rate_hz)))
+        #: the longest stride lag of a gentle norm's window (slow_window_max_stride_s), before the window's own bound
+        self._lag_hi_slow = (int(math.ceil(self.slow_window_max_stride_s * self.grid_rate_hz))
+                             if self._n_long > n else self._lag_hi)
         self._lag_short = max(self._lag_lo + 2, min(self._lag_hi, int(math.ceil(self.slow_stride_s * self.grid_rate_hz))))
-        self._nfft = 1 << int(math.ceil(math.log2(2 * n)))
+        self._nfft = 1 << int(math.ceil(math.log2(2 * self._n_long)))
         self._scratch_n = {}  # window length -> compute_features' work arrays
-        self._buf = np.zeros((n, 6))  # ax ay az gx gy gz, ring
+        self._buf = np.zeros((self._n_long, 6))  # ax ay az gx gy gz, ring
         self._k = 0  # next row of the ring
         self._filled = 0
         self._since_hop = 0
@@ -439,8 +466,8 @@ class CarryModeDetector:
         else:
             row[0], row[1], row[2], row[3], row[4], row[5] = ax, ay, az, gx, gy, gz
             self._has_gyro = True
-        self._k = (self._k + 1) % self._n
-        if self._filled < self._n:
+        self._k = (self._k + 1) % self._n_long
+        if self._filled < self._n_long:
             self._filled += 1
         self.time_s[self.mode] += self._dt
         self._since_hop += 1
@@ -521,7 +548,7 @@ class CarryModeDetector:
             np.matmul(gc, gv[:, -1], out=rows[2])
         r_all = self._autocorr(rows)
         r = r_all[0] * unbias
-        lo, hi = self._lag_lo, self._lag_hi
+        lo, hi = self._lag_lo, self.lag_hi(n, std)
         seg = r[lo:hi + 1]
         top = float(seg.max())
         short = seg[:self._lag_short - lo + 1]
@@ -544,7 +571,7 @@ class CarryModeDetector:
         k2 = lo + (int(peaks[0]) if len(peaks) else int(np.argmax(seg)))
         if not use_short and len(peaks):
             k2 = self._half_stride(r, k2)
-        k2 = self._stride_lag(r, r_all[2] if self._has_gyro else None, k2, n, tilt_rms)
+        k2 = self._stride_lag(r, r_all[2] if self._has_gyro else None, k2, n, tilt_rms, hi)
         ks = k2 // 2
         r_step = float(r[max(1, ks - 2):ks + 3].max())
         r_stride = float(r[k2])
@@ -568,6 +595,14 @@ class CarryModeDetector:
                      gyro_skew=rotation_skew(rows[2]))
         return f
 
+    def lag_hi(self, n: int, std: float) -> int:
+        """The longest stride lag searched in a window of ``n`` samples whose norm's standard deviation is ``std``
+        (m/s^2): ``slow_window_max_stride_s`` for a gentle norm (``slow_window_max_std_m_s2``) while the long window
+        is on, ``max_stride_s`` otherwise."""
+        if self._n_long > self._n and std < self.slow_window_max_std_m_s2:
+            return min(n - 8, self._lag_hi_slow)
+        return min(n - 8, self._lag_hi)
+
     def _half_stride(self, r: np.ndarray, k2: int) -> int:
         """A slow stride's lag ``k2`` (past ``slow_stride_s``) halved when the norm's (unbiased) autocorrelation
         ``r`` has a local maximum within 2 samples of ``k2 / 2`` at least ``half_stride_ratio`` of ``r[k2]``: the
@@ -581,7 +616,8 @@ class CarryModeDetector:
             return half - 2 + j
         return k2
 
-    def _stride_lag(self, r: np.ndarray, r_gyro: np.ndarray | None, k2: int, n: int, tilt_rms: float) -> int:
+    def _stride_lag(self, r: np.ndarray, r_gyro: np.ndarray | None, k2: int, n: int, tilt_rms: float,
+                    hi: int) -> int:
         """The stride lag from the lag ``k2`` found in the norm's (unbiased) autocorrelation ``r``: twice it when
         ``k2`` is a slow walk's step and twice it is in range.  The norm in anti-phase at ``k2 / 2``
         (``step_antiphase``) makes ``k2`` one period of the norm: a trunk's step (both feet alike) or a limb's
@@ -590,7 +626,7 @@ class CarryModeDetector:
         when the rotation's main axis (autocorrelation ``r_gyro``, not yet unbiased), which a walker sways once
         per stride, is in anti-phase at ``k2`` too."""
         k4 = 2 * k2
-        if k4 > self._lag_hi or r[k2 // 2] >= self.step_antiphase:
+        if k4 > hi or r[k2 // 2] >= self.step_antiphase:
             return k2
         if tilt_rms < self.trunk_max_tilt_rad and r[k2] >= self.trunk_min_periodicity:
             return k4
@@ -713,7 +749,19 @@ class CarryModeDetector:
     def _hop_decision(self, t_ns: int) -> None:
         k = self._k
         w = np.concatenate([self._buf[k:], self._buf[:k]]) if k else self._buf
-        self.decide(t_ns, self.compute_features(w))
+        f = self.compute_features(w[len(w) - self._n:])
+        if self.slow_window(f, self._filled >= self._n_long):
+            f_long = self.compute_features(w)
+            if self.slow_window(f_long, True):  # the long window finds a very slow stride too
+                f = f_long
+        self.decide(t_ns, f)
+
+    def slow_window(self, f: dict, full: bool) -> bool:
+        """Whether the features ``f`` (of the ``window_s`` window, then of the long one) find a very slow walk's
+        stride (``slow_window_stride_s``) with the long window (``slow_window_s``) full (``full``): a hop takes the
+        long window's features when both do."""
+        return (full and self._n_long > self._n and f["stride_period_s"] >= self.slow_window_stride_s - 1e-9
+                and f["acc_std_m_s2"] < self.slow_window_max_std_m_s2)
 
     def decide(self, t_ns: int, f: dict) -> None:
         """One hop's decision from its window's features ``f`` (:meth:`compute_features`): the scores, the raw

@@ -191,8 +191,10 @@ STEP_GATES[GENTLE_SWING] = GENTLE_SWING_GATES
 UNEVEN_POCKET = "pocket_uneven"
 STEP_GATES[UNEVEN_POCKET] = POCKET_GATES
 
-#: longest step period the stride comb keeps a history for (s)
-MAX_COMB_PERIOD_S = 1.0
+#: longest step period the stride comb keeps a history for (s): the carry detector's slowest step (issue #25 section 2,
+#: 0.8 steps/s: 1.25 s; it was 1.0, and a gently swung hand at 0.9 steps/s, its step 1.1 s, was not combed: 16 of 28
+#: steps with its step period known, 26 with 1.3)
+MAX_COMB_PERIOD_S = 1.3
 
 
 @dataclass(frozen=True)

@@ -48,12 +48,24 @@ def _autocorr(det, x: np.ndarray) -> np.ndarray:
     return out
 
 
-def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
+def window_features(det, w: np.ndarray, has_gyro: np.ndarray, hi: int | None = None) -> list[dict]:
     """The features of windows ``w`` (m, n, 6: acc xyz, gyro xyz, oldest first) as ``det.compute_features`` gives
-    them, one dict per window; ``has_gyro[i]``: the detector had seen a gyroscope reading by window ``i``."""
+    them, one dict per window; ``has_gyro[i]``: the detector had seen a gyroscope reading by window ``i``; ``hi``:
+    the longest stride lag of every window (None: each window's, ``det.lag_hi``, the windows grouped by it)."""
     m_w, n, _ = w.shape
     if m_w == 0:
         return []
+    if hi is None:
+        acc = w[:, :, :3]
+        norm = np.sqrt(np.einsum("hij,hij->hi", acc, acc))
+        x = norm - norm.mean(axis=1)[:, None]
+        his = np.array([det.lag_hi(n, s) for s in np.sqrt(np.mean(x * x, axis=1)).tolist()])
+        out = [None] * m_w
+        for h in np.unique(his).tolist():
+            idx = np.flatnonzero(his == h)
+            for i, f in zip(idx.tolist(), window_features(det, w[idx], np.asarray(has_gyro)[idx], h)):
+                out[i] = f
+        return out
     acc = w[:, :, :3]
     norm = np.sqrt(np.einsum("hij,hij->hi", acc, acc))
     mean = acc.mean(axis=1)
@@ -69,7 +81,7 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray) -> list[dict]:
     xr = norm[:, n - min(det._recent, n):]
     xr = xr - xr.mean(axis=1)[:, None]
     recent_std = np.sqrt(np.mean(xr * xr, axis=1))
-    lo, hi = det._lag_lo, det._lag_hi
+    lo = det._lag_lo
     r = _autocorr(det, x)
     rows = np.arange(m_w)
     seg = r[:, lo:hi + 1]
@@ -227,10 +239,29 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     n_changes = [len(det.changes)]
     pending = [mode_idx.get(det.pending_mode, -1)]
     view = np.lib.stride_tricks.sliding_window_view(rows, n, axis=0) if n_grid >= n else None
+    # a very slow walk's hops take the long window (CarryModeDetector.slow_window): full once n_long samples of
+    # the hop's grid segment are in
+    n_long = det._n_long
+    view_long = (np.lib.stride_tricks.sliding_window_view(rows, n_long, axis=0)
+                 if n_long > n and n_grid >= n_long else None)
+    starts = np.flatnonzero(restart)
+    if n_grid and (not len(starts) or starts[0] != 0):
+        starts = np.concatenate([[0], starts])
+    seg_start = starts[np.searchsorted(starts, hops, side="right") - 1] if len(hops) else hops
     for a in range(0, len(hops), HOP_CHUNK):
         h = hops[a:a + HOP_CHUNK]
         w = view[h - (n - 1)].transpose(0, 2, 1)
-        for k, f in zip(h.tolist(), window_features(det, w, seen_gyro[h])):
+        feats = window_features(det, w, seen_gyro[h])
+        if view_long is not None:
+            full = (h - seg_start[a:a + HOP_CHUNK]) >= n_long - 1
+            slow = [i for i, f in enumerate(feats) if det.slow_window(f, bool(full[i]))]
+            if slow:
+                hl = h[slow]
+                for i, f in zip(slow, window_features(det, view_long[hl - (n_long - 1)].transpose(0, 2, 1),
+                                                      seen_gyro[hl])):
+                    if det.slow_window(f, True):  # the long window finds a very slow stride too
+                        feats[i] = f
+        for k, f in zip(h.tolist(), feats):
             det._has_gyro = bool(seen_gyro[k])
             det.decide(int(t_ns[k]), f)  # core's decision, on these features
             modes.append(mode_idx[det.mode])
