@@ -404,12 +404,12 @@ def test_fixes_from_few_satellites_are_kept_out_with_the_satellite_rule_and_the_
 
 
 def _lock_stream(receiver_speed_m_s: float, step_scale: float = 2.4, seconds: int = 75, scale_until_s: int = 10 ** 9,
-                 coarse_at_s: int = -1, drift_deg_per_30_s: float = 0.0, **settings) -> list:
+                 coarse_at_s: int = -1, drift_deg_per_30_s: float = 0.0, counted=None, **settings) -> list:
     """``seconds`` of fixes reporting 4 m (12 m at ``coarse_at_s``) along a walk at 1.2 m/s with a 60-deg turn at 40
     s; the steps walk the same path ``step_scale`` times too long (so the pace check says the receiver sees under half
     the walk) until ``scale_until_s``, then at the right scale, their heading drifting off the walk's by
-    ``drift_deg_per_30_s`` (a triangle: back and forth every 30 s); the receiver reports ``receiver_speed_m_s``.  The
-    judgements."""
+    ``drift_deg_per_30_s`` (a triangle: back and forth every 30 s), of each second's walk the share ``counted(k)`` (all
+    if None: the steps counted); the receiver reports ``receiver_speed_m_s``.  The judgements."""
     j = GpsJudge(JudgeSettings(**settings))
     rng = np.random.default_rng(11)
     out = []
@@ -417,7 +417,7 @@ def _lock_stream(receiver_speed_m_s: float, step_scale: float = 2.4, seconds: in
     for k in range(seconds):
         h = 0.0 if k < 40 else math.radians(60.0)
         if k:
-            c = step_scale if k <= scale_until_s else 1.0
+            c = (step_scale if k <= scale_until_s else 1.0) * (1.0 if counted is None else counted(k))
             e, n = e + 1.2 * math.cos(h), n + 1.2 * math.sin(h)
             x = k % 60
             hs = h + math.radians(drift_deg_per_30_s) * ((x if x < 30 else 60 - x) / 30.0 - 0.5)
@@ -473,3 +473,28 @@ def test_the_stream_lock_holds_while_the_steps_heading_drifts_as_issue_25_measur
     assert all(v.lock_shape_m < 3.0 for v in drifting[40:] if v.locked_over)
     spinning = _lock_stream(1.2, drift_deg_per_30_s=360.0)
     assert sum(v.verdict is GpsVerdict.USABLE for v in spinning[40:]) < 0.5 * len(spinning[40:])
+
+
+def test_the_stream_lock_holds_while_the_steps_are_counted_in_bursts_and_far_too_few():
+    """Issue #26 with #25's step counts (a swinging hand counted 3 of 27 steps): the steps counted in 4 s of every 12
+    and then only 0.3 of them (0.1 of the walk), so the fixes move ten times further than the steps, in jumps.  The
+    lock is about the fixes agreeing among themselves and with the walker's turns, not the step count: its shape is
+    now the steps' direction of travel at one walking pace (``lock_heading_path``), and the good stream is taken from
+    the lock's first full window on (27 s; shape residual 1.7-2.9 m against a 4.8-m limit).  Before (the dead-reckoned
+    positions, scaled by at most 2.5) the count bent the positions' time scale and the scale stopped at 2.5: shape
+    residual 7.0-8.4 m, the stream refused to the end (checked: the test failed before the change).  The steps' heading
+    spinning against the fixes' course, or a receiver's speed disagreeing with its positions, stay out."""
+    def bursts(k):
+        return 0.3 if k % 12 < 4 else 0.0
+
+    taken = _lock_stream(1.2, step_scale=1.0, counted=bursts)
+    assert all(v.verdict is GpsVerdict.USABLE for v in taken[40:])
+    assert all(v.lock_shape_m < 3.0 for v in taken[40:] if v.locked_over)
+    assert any(Cause.INCONSISTENT in v.locked_over for v in taken[40:])
+    before = _lock_stream(1.2, step_scale=1.0, counted=bursts, lock_heading_path=False)
+    assert not any(v.verdict is GpsVerdict.USABLE for v in before[40:])
+    # the steps' heading spinning against the fixes' course, or a receiver whose speed disagrees with its positions
+    # (indoors), stay out whatever the count
+    spinning = _lock_stream(1.2, step_scale=1.0, counted=bursts, drift_deg_per_30_s=360.0)
+    assert sum(v.verdict is GpsVerdict.USABLE for v in spinning[40:]) < 0.5 * len(spinning[40:])
+    assert not any(v.verdict is GpsVerdict.USABLE for v in _lock_stream(0.55, step_scale=1.0, counted=bursts)[40:])
