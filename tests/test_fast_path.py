@@ -484,8 +484,11 @@ def test_fast_equals_plain_on_a_gentle_swing():
     # before issue #25 section 2's slow walks)
     walk = simulate_walk([(0.0, 0.0), (16.0, 0.0)], placement="swinging", seed=7, rate_hz=50.0, step_frequency_hz=0.9,
                          step_length_m=0.6, bounce_scale=0.5, still_start_s=1.0, still_end_s=0.5)
-    plain, _ = _assert_same(walk.recording)
-    assert abs(len(plain.steps) - walk.truth.n_steps) <= 2, (len(plain.steps), walk.truth.n_steps)
+    from core.pdr.carry import CarryModeDetector
+
+    for slow_window_s in (0.0, 5.0):  # the default (off since the review), and the long window on
+        plain, _ = _assert_same(walk.recording, make=lambda: Pipeline(carry=CarryModeDetector(slow_window_s=slow_window_s)))
+        assert abs(len(plain.steps) - walk.truth.n_steps) <= 2, (slow_window_s, len(plain.steps), walk.truth.n_steps)
 
 
 def test_fast_equals_plain_on_a_hard_swing_taken_for_a_pocket():

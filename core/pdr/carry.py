@@ -148,9 +148,14 @@ class CarryModeDetector:
         maximum).  A brisk walk's 4-s window can peak at two or three steps' lag too (the Microsoft tuning traces'
         first seconds, 1.5-3 m/s^2): that range and the long window for every amplitude called three hand-held traces
         a pocket for 4-10 s (their landmark errors 5.2/1.8/4.0 -> 4.4/1.5/5.4 m).  The FFT length is the same (512 at 50 Hz); the cost doubles only on the hops of a very slow
-        walk.  ``slow_window_s=0``: off.  Simulator (16 m, seed 7): at 0.8 steps/s a gently swung hand 0 -> 27 of 28
-        steps, a pocket 15 -> 28; TUNING real walks, IPIN, Microsoft, IPOL and the simulator's carry seeds: the same
-        steps (benchmarks/discussion.md).
+        walk.  ``slow_window_s=0``: off, **the default** (5.0 turns it on).  Simulator (16 m, seed 7): at 0.8
+        steps/s a gently swung hand 0 -> 27 of 28 steps, a pocket 15 -> 28; TUNING real walks, IPIN, Microsoft, IPOL
+        and the simulator's carry seeds: the same steps (benchmarks/discussion.md).  Off in review: on the TUNING
+        split's hand-held walks (IPIN, Microsoft), where nobody walks at 0.8-0.95 steps/s, the long window was taken
+        on 265 of 6300 hops (4 %; the short window found a stride of 2.1 s or more on 701: stops and turns), so it
+        acts outside its purpose on real walks without a gain there; the REPORT split (seen after the merge) showed
+        what that can cost: IPIN T05r04 147 -> 145 steps, its landmark error 2.24 -> 2.73 m, the IPIN report median
+        2.44 -> 2.58 m.
     slow_stride_s, slow_stride_margin : float
         A stride longer than ``slow_stride_s`` (s; a cadence under 1.25 steps/s) is taken only when the
         autocorrelation has no peak within ``slow_stride_margin`` of its best at the shorter lags: at a
@@ -332,7 +337,7 @@ class CarryModeDetector:
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
                  tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.5,
-                 slow_window_s: float = 5.0, slow_window_max_stride_s: float = 2.8, slow_window_stride_s: float = 2.1, slow_window_max_std_m_s2: float = 1.2,
+                 slow_window_s: float = 0.0, slow_window_max_stride_s: float = 2.8, slow_window_stride_s: float = 2.1, slow_window_max_std_m_s2: float = 1.2,
                  slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7, slow_stride_edge: bool = True,
                  half_stride_ratio: float = 0.5,
                  min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
