@@ -795,7 +795,6 @@ class GpsJudge:
         rs = np.array([f[8] for f in lf], dtype=float)
         rs = rs[np.isfinite(rs) & (rs > 0.0)]
         doppler = float(np.mean(rs)) / speed if len(rs) >= 0.5 * len(lf) and speed > 0 else nan
-        self._lock_doppler = doppler
         path = float(np.sum(np.hypot(*np.diff(a[:, 4:6], axis=0).T)))
         if not math.hypot(*(a[-1, 4:6] - a[0, 4:6])) >= s.min_step_straightness * path:
             return False, speed, nan
