@@ -635,9 +635,10 @@ def test_step_period_is_one_step_when_two_strides_correlate_better():
 
 
 # -- issue #25 section 2: a gentle walk at 0.8-1.0 steps/s ----------------------------------------------------------
-def _raw_walking_share(w, **kw):
-    """The share of the carry detector's hops, their window wholly within the walk, whose raw mode is a walking one
-    (the detector fed the simulator's 50-Hz grid directly), and the median step period of those hops."""
+def _walking_share(w, **kw):
+    """The share of the carry detector's hops between the walk's first and last heel strike whose mode in force (after
+    the hysteresis: what the summary's "not walking" time counts) is a walking one, the median step period of those
+    hops, and the detector (fed the simulator's 50-Hz grid directly)."""
     det = CarryModeDetector(**kw)
     acc, gyro = w.recording.streams[ACC], w.recording.streams[GYRO]
     m = min(len(acc.t_ns), len(gyro.t_ns))
@@ -646,27 +647,50 @@ def _raw_walking_share(w, **kw):
     for t, a, g in zip(acc.t_ns[:m].tolist(), acc.values[:m].tolist(), gyro.values[:m].tolist()):
         n = det.n_hops
         det.update_grid(t, *a, *g)
-        if det.n_hops > n and t - getattr(det, "_n_long", det._n) * 20_000_000 >= t0 and t <= t1:
-            walking.append(det.raw_mode != CARRY_STILL)
+        if det.n_hops > n and t0 <= t <= t1:
+            walking.append(det.mode != CARRY_STILL)
             periods.append(det.step_period_s)
-    return float(np.mean(walking)), float(np.nanmedian(periods)) if not all(map(math.isnan, periods)) else math.nan
+    return float(np.mean(walking)), float(np.nanmedian(periods)), det
 
 
 @pytest.mark.parametrize("placement", ("swinging", "pocket"))
 def test_gentle_walk_at_0_8_steps_per_s_is_walking(placement):
-    """A gentle walk at 0.8 steps/s (a stride of 2.5 s, issue #25 section 2) in a gently swung hand or a pocket: the
-    carry detector's raw decision is a walking mode on 85 % of the hops at least and the step period is 1.25 s
-    (within 0.1).  The stride fills most of a 4-s window: its autocorrelation at the stride lag (1.5 s of overlap) is
-    noisy and the stride sat on ``max_stride_s`` (2.5 s), so the decision flapped and the hysteresis never left "not
-    walking".  A gentle norm's stride range reaches 2.8 s, and a stride of 2.1 s or more takes its features over 5 s
-    (``slow_window_s``: two strides).  Here 100 % of the hops; before (``slow_window_s=0``) 60 % and 58 % (the pipeline
-    on the pocket's walk: 8 of 22 steps before, "not walking" 74 % of it, 23 of 22 and 17 % after)."""
+    """A gentle walk at 0.8 steps/s (a stride of 2.5 s, issue #25 section 2) in a gently swung hand or a pocket, with
+    the shipped carry detector: its mode in force is a walking one on 70 % of the walk's hops at least (the first 4-s
+    window and the hysteresis take the first 20 %), the step period is 1.25 s (within 0.1), and the long window
+    (``slow_window_s``) is taken only to start the walk (10 hops at most of 50).  The stride fills most of a 4-s
+    window: its autocorrelation at the stride lag is noisy and the raw decision flapped (walking on 26-58 % of the
+    hops), so the hysteresis never left "not walking".  Here 0.82 and 0.80, the long window on 6 hops; before (the long
+    window off by default since the review of h9/slow08) 0.0 and 0.0; the ninth session's ungated window also 0.82 and
+    0.80, but taken on 43 of the 50 hops."""
     w = simulate_walk([(0.0, 0.0), (12.0, 0.0)], placement=placement, seed=7, rate_hz=50.0, step_frequency_hz=0.8,
-                      step_length_m=0.6, bounce_scale=0.75, still_start_s=1.0, still_end_s=0.5,
-                      )
-    share, period = _raw_walking_share(w, slow_window_s=5.0)  # the long window, off by default since the review
-    assert share >= 0.85, share
+                      step_length_m=0.6, bounce_scale=0.75, still_start_s=1.0, still_end_s=0.5)
+    share, period, det = _walking_share(w)
+    assert share >= 0.7, share
     assert period == pytest.approx(1.25, abs=0.1)
+    assert 1 <= det.n_slow_window_hops <= 10, det.n_slow_window_hops
+
+
+def test_the_long_window_only_starts_a_periodic_walk():
+    """The long window (``slow_window_s``) decides a hop only while the mode in force is "not walking" and only when
+    its gait is periodic at both legs' lags (``slow_window_min_periodicity`` 0.6): on the TUNING split's real walks
+    (IPIN, Microsoft, IPOL, the 28 real walks) the hops where both windows found a stride of 2.1 s or more (stops,
+    turns) read at most 0.36 there with the mode "not walking" (0.59 while walking), and the ungated window was taken
+    on 4 % of their hops."""
+    det = CarryModeDetector()
+    short = dict(_walk_features(0.3, std=0.5), stride_period_s=2.3)
+    gait = dict(short, periodicity=0.8, r_step=0.8, r_stride=0.75, stride_period_s=2.5)
+    stop = dict(gait, periodicity=0.4, r_step=0.36, r_stride=0.4)
+    assert det.take_slow_window(short, gait) is gait  # before the first decision
+    det.decide(0, dict(short, periodicity=0.05, r_step=0.05, r_stride=0.0, acc_std_m_s2=0.05))
+    assert det.mode == CARRY_STILL
+    assert det.take_slow_window(short, gait) is gait
+    assert det.take_slow_window(short, stop) is short
+    assert det.take_slow_window(short, dict(gait, stride_period_s=1.6)) is short  # no very slow stride there
+    _modes(det, [_walk_features(0.6)] * 8)
+    assert det.mode == CARRY_HANDHELD
+    assert det.take_slow_window(short, gait) is short  # a walk goes on with the 4-s window
+    assert det.n_slow_window_hops == 2
 
 
 def test_stride_comb_reaches_a_slow_step():

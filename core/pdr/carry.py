@@ -133,7 +133,7 @@ class CarryModeDetector:
     min_stride_s, max_stride_s : float
         Range of the stride period searched in the autocorrelation (s); a
         walking cadence of 0.8-2.5 steps/s is a stride of 0.8-2.5 s (issue #25: a slow, gentle walk at
-        0.8-1.2 steps/s is a stride of 1.7-2.5 s).  ``max_stride_s`` is the range of a brisk norm's window (``slow_window_max_std_m_s2``).
+        0.8-1.2 steps/s is a stride of 1.7-2.5 s).  ``max_stride_s`` is the range of the ``window_s`` window and of a brisk norm's long one (``slow_window_max_std_m_s2``).
     slow_window_s, slow_window_stride_s, slow_window_max_std_m_s2, slow_window_max_stride_s : float
         Issue #25 section 2: a walk at 0.8-0.95 steps/s (a stride of 2.1-2.5 s) fills most of the ``window_s``
         window, its autocorrelation at the stride lag has 1.5-1.9 s of overlap and is noisy, and the decision flapped
@@ -147,15 +147,22 @@ class CarryModeDetector:
         ``slow_window_max_stride_s`` (s; a 2.5-s stride on ``max_stride_s``, the range's last lag, is no local
         maximum).  A brisk walk's 4-s window can peak at two or three steps' lag too (the Microsoft tuning traces'
         first seconds, 1.5-3 m/s^2): that range and the long window for every amplitude called three hand-held traces
-        a pocket for 4-10 s (their landmark errors 5.2/1.8/4.0 -> 4.4/1.5/5.4 m).  The FFT length is the same (512 at 50 Hz); the cost doubles only on the hops of a very slow
-        walk.  ``slow_window_s=0``: off, **the default** (5.0 turns it on).  Simulator (16 m, seed 7): at 0.8
-        steps/s a gently swung hand 0 -> 27 of 28 steps, a pocket 15 -> 28; TUNING real walks, IPIN, Microsoft, IPOL
-        and the simulator's carry seeds: the same steps (benchmarks/discussion.md).  Off in review: on the TUNING
-        split's hand-held walks (IPIN, Microsoft), where nobody walks at 0.8-0.95 steps/s, the long window was taken
-        on 265 of 6300 hops (4 %; the short window found a stride of 2.1 s or more on 701: stops and turns), so it
-        acts outside its purpose on real walks without a gain there; the REPORT split (seen after the merge) showed
-        what that can cost: IPIN T05r04 147 -> 145 steps, its landmark error 2.24 -> 2.73 m, the IPIN report median
-        2.44 -> 2.58 m.
+        a pocket for 4-10 s (their landmark errors 5.2/1.8/4.0 -> 4.4/1.5/5.4 m); the ``window_s`` window's own range
+        stays ``max_stride_s`` (:meth:`lag_hi`).  The FFT length is the same (512 at 50 Hz); the cost doubles only on
+        the hops of a very slow walk.  ``slow_window_s=0``: off.  The ninth session's window (taken on every such hop)
+        was off in review: on the TUNING split's hand-held walks (IPIN, Microsoft), where nobody walks at 0.8-0.95
+        steps/s, it was taken on 265 of 6300 hops (4 %: stops and turns, where the 4-s window found a stride of 2.1 s
+        or more), without a gain there; the REPORT split (seen after the merge) showed what that can cost: IPIN T05r04
+        147 -> 145 steps, its landmark error 2.24 -> 2.73 m.  Hence the two gates below; **on by default** with them.
+    slow_window_min_periodicity, slow_window_while_still : float, bool
+        The long window decides a hop only when its gait is periodic at both legs' lags (:meth:`gait_periodicity`)
+        at least ``slow_window_min_periodicity`` (the gentle gait's 0.6) and, with ``slow_window_while_still``, only
+        while the mode in force is "not walking" (it starts a very slow walk; once walking, the ``window_s`` window's
+        hold keeps it: :meth:`slow_window_open`).  TUNING (IPIN, Microsoft, IPOL, the 28 real walks): of 16493 hops
+        none takes it (the 203 hops where both windows find a very slow stride, stops and turns, read at most 0.36
+        at both legs' lags), every step and carry time identical to the window off.  Simulator
+        (16 m, seed 5, 0.8-0.95 steps/s, six placements and bounces 0.5-1, 72 walks): 1567 -> 1811 of 2016 steps,
+        "not walking" 35 -> 20 % of the walk, the long window on 498 of 4302 hops (the ungated window: 1805, on 3074).
     slow_stride_s, slow_stride_margin : float
         A stride longer than ``slow_stride_s`` (s; a cadence under 1.25 steps/s) is taken only when the
         autocorrelation has no peak within ``slow_stride_margin`` of its best at the shorter lags: at a
@@ -337,7 +344,8 @@ class CarryModeDetector:
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
                  tilt_smooth_s: float = 0.2, min_stride_s: float = 0.8, max_stride_s: float = 2.5,
-                 slow_window_s: float = 0.0, slow_window_max_stride_s: float = 2.8, slow_window_stride_s: float = 2.1, slow_window_max_std_m_s2: float = 1.2,
+                 slow_window_s: float = 5.0, slow_window_max_stride_s: float = 2.8, slow_window_stride_s: float = 2.1, slow_window_max_std_m_s2: float = 1.2,
+                 slow_window_min_periodicity: float = 0.6, slow_window_while_still: bool = True,
                  slow_stride_s: float = 1.6, slow_stride_margin: float = 0.7, slow_stride_edge: bool = True,
                  half_stride_ratio: float = 0.5,
                  min_walk_std_m_s2: float = 0.6, min_periodicity: float = 0.35, gentle_min_std_m_s2: float = 0.12,
@@ -363,6 +371,8 @@ class CarryModeDetector:
         self.slow_window_stride_s = float(slow_window_stride_s)
         self.slow_window_max_stride_s = float(slow_window_max_stride_s)
         self.slow_window_max_std_m_s2 = float(slow_window_max_std_m_s2)
+        self.slow_window_min_periodicity = float(slow_window_min_periodicity)
+        self.slow_window_while_still = bool(slow_window_while_still)
         self.slow_stride_s = float(slow_stride_s)
         self.slow_stride_margin = float(slow_stride_margin)
         self.slow_stride_edge = bool(slow_stride_edge)
@@ -459,6 +469,8 @@ class CarryModeDetector:
         self.features: dict = {}
         self.scores: dict = {}
         self.n_hops = 0
+        #: hops that took the long window's features (``slow_window_s``), for diagnostics
+        self.n_slow_window_hops = 0
         self._dt = 1.0 / self.grid_rate_hz
 
     # -- streaming ------------------------------------------------------------
@@ -602,9 +614,11 @@ class CarryModeDetector:
 
     def lag_hi(self, n: int, std: float) -> int:
         """The longest stride lag searched in a window of ``n`` samples whose norm's standard deviation is ``std``
-        (m/s^2): ``slow_window_max_stride_s`` for a gentle norm (``slow_window_max_std_m_s2``) while the long window
-        is on, ``max_stride_s`` otherwise."""
-        if self._n_long > self._n and std < self.slow_window_max_std_m_s2:
+        (m/s^2): ``slow_window_max_stride_s`` in the long window (``slow_window_s``) of a gentle norm
+        (``slow_window_max_std_m_s2``), ``max_stride_s`` otherwise (the ``window_s`` window's range is the same with
+        the long window on or off: on the TUNING walk yh570 hand_1_28_21_35 the longer range there alone called a
+        hand-held walk a pocket for 7 s)."""
+        if n == self._n_long > self._n and std < self.slow_window_max_std_m_s2:
             return min(n - 8, self._lag_hi_slow)
         return min(n - 8, self._lag_hi)
 
@@ -755,11 +769,26 @@ class CarryModeDetector:
         k = self._k
         w = np.concatenate([self._buf[k:], self._buf[:k]]) if k else self._buf
         f = self.compute_features(w[len(w) - self._n:])
-        if self.slow_window(f, self._filled >= self._n_long):
-            f_long = self.compute_features(w)
-            if self.slow_window(f_long, True):  # the long window finds a very slow stride too
-                f = f_long
+        if self.slow_window(f, self._filled >= self._n_long) and self.slow_window_open():
+            f = self.take_slow_window(f, self.compute_features(w))
         self.decide(t_ns, f)
+
+    def take_slow_window(self, f: dict, f_long: dict) -> dict:
+        """The features a hop decides on: the long window's ``f_long`` when it finds a very slow stride too
+        (:meth:`slow_window`), its gait is periodic at both legs' lags (:meth:`gait_periodicity`) at least
+        ``slow_window_min_periodicity`` and (``slow_window_while_still``) the mode in force is "not walking"; else
+        ``f``.  Called before the hop's :meth:`decide` (it reads the mode in force); the fast path calls it too."""
+        if not self.slow_window(f_long, True) or self.gait_periodicity(f_long) < self.slow_window_min_periodicity:
+            return f
+        if not self.slow_window_open():
+            return f
+        self.n_slow_window_hops += 1
+        return f_long
+
+    def slow_window_open(self) -> bool:
+        """Whether a hop may take the long window's features now (``slow_window_while_still``: only while the mode
+        in force is "not walking")."""
+        return not (self.slow_window_while_still and self._decided and self.mode != CARRY_STILL)
 
     def slow_window(self, f: dict, full: bool) -> bool:
         """Whether the features ``f`` (of the ``window_s`` window, then of the long one) find a very slow walk's

@@ -252,17 +252,18 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
         h = hops[a:a + HOP_CHUNK]
         w = view[h - (n - 1)].transpose(0, 2, 1)
         feats = window_features(det, w, seen_gyro[h])
+        longs = {}
         if view_long is not None:
             full = (h - seg_start[a:a + HOP_CHUNK]) >= n_long - 1
             slow = [i for i, f in enumerate(feats) if det.slow_window(f, bool(full[i]))]
             if slow:
                 hl = h[slow]
-                for i, f in zip(slow, window_features(det, view_long[hl - (n_long - 1)].transpose(0, 2, 1),
-                                                      seen_gyro[hl])):
-                    if det.slow_window(f, True):  # the long window finds a very slow stride too
-                        feats[i] = f
-        for k, f in zip(h.tolist(), feats):
+                longs = dict(zip(slow, window_features(det, view_long[hl - (n_long - 1)].transpose(0, 2, 1),
+                                                       seen_gyro[hl])))
+        for i, (k, f) in enumerate(zip(h.tolist(), feats)):
             det._has_gyro = bool(seen_gyro[k])
+            if i in longs:  # core's choice of the long window (it reads the mode in force)
+                f = det.take_slow_window(f, longs[i])
             det.decide(int(t_ns[k]), f)  # core's decision, on these features
             modes.append(mode_idx[det.mode])
             periods.append(det.step_period_s)
