@@ -424,6 +424,18 @@ class Pipeline:
         walk's first steps late**: up to ``rotation_hold_s`` (8 s) after they happened, at the start of a walk and
         after a pause the carry detector called "not walking"; batch, streaming and the fast path give the same
         steps (``tests/test_walk_start_steps.py``).
+    recount_at_settle : bool
+        Issue #25, a swinging hand's first steps (with ``hold_while_settling``).  When the carry mode changes while
+        the carry detector is :attr:`core.pdr.carry.CarryModeDetector.settling` (before this sample) to a mode
+        counted by the same step detector, the held candidates are recounted as at a change of detector: that
+        detector's held peaks since the last completed step (at most ``rotation_hold_s`` old) replace them, through
+        the new mode's rotation gate (with the rotation RMS each peak had).  Without it the peaks that the rotation gate refused while the mode
+        was still "not walking" (3 rad/s: a hand swung at 3-4 rad/s) stay refused when the walk is then called a
+        pocket or a bag, whose periodic rotation opens the wide gate.  With the detector's ``settle_walk_s`` (the
+        walk's start held a few seconds longer, also through a first call's hysteresis towards another mode) the
+        swinging mode that follows a first call of a pocket or a bag recounts the walk's first steps with its own
+        gates.  Steps are never completed before the recount, so they stay in time order (batch = streaming = fast
+        path).
     walk_start_step, walk_start_cadence_frac : bool, float
         Off by default (issue #25, steps lost at a walk's start).  A walk's first step from standing rises less than
         the steps that follow, and the hand-held gates (``A_th`` 0.6 m/s^2) can miss it.  With carry detection the
@@ -472,7 +484,8 @@ class Pipeline:
                  carry: bool | CarryModeDetector = True, step_gates: dict | None = None,
                  swinging_max_rotation_rms_rad_s: float = 12.0,
                  wide_rotation_modes: tuple = (CARRY_SWINGING, CARRY_POCKET, CARRY_BAG), rotation_hold_s: float = 8.0,
-                 hold_while_settling: bool = True, walk_start_step: bool = False, walk_start_cadence_frac: float = 0.3,
+                 hold_while_settling: bool = True, recount_at_settle: bool = False, walk_start_step: bool = False,
+                 walk_start_cadence_frac: float = 0.3,
                  acc_gap_bridge: bool | AccGapBridge = True, heading_smoother: str = HEADING_SMOOTHER_OFF):
         self.keep_steps = keep_steps
         if acc_gap_bridge is True:
@@ -488,6 +501,7 @@ class Pipeline:
         self.wide_rotation_modes = tuple(wide_rotation_modes)
         self.rotation_hold_s = float(rotation_hold_s)
         self.hold_while_settling = bool(hold_while_settling)
+        self.recount_at_settle = bool(recount_at_settle)
         self.walk_start_step = bool(walk_start_step)
         self.walk_start_cadence_frac = float(walk_start_cadence_frac)
         self.gnss = gnss
@@ -799,6 +813,8 @@ class Pipeline:
         c = self.carry
         g = self._gyro_last
         settling = self.hold_while_settling and c.settling  # before this sample's decision
+        walk_start = c.settling_walk  # only the walk's start held open (the detector's settle_walk_s)
+        n_changes = len(c.changes)
         mode = c.update_grid(tg, ax, ay, az) if g is None else c.update_grid(tg, ax, ay, az, g[0], g[1], g[2])
         self._carry_mode = mode
         period = c.step_period_s
@@ -820,8 +836,14 @@ class Pipeline:
                 if det is active:
                     out = ev
         new = self._det_of[self._gates_key(mode, c.gentle, c.uneven)]
+        changed = len(c.changes) != n_changes
         if new is not active:
-            self._switch_detector(new, tg, settling)
+            # while the walk's start is only held open, a gentle or uneven walk's detector without a change of mode
+            # switches as outside the settling (its confirmed steps stay)
+            self._switch_detector(new, tg, settling and (changed or not walk_start))
+            return None
+        if settling and changed and self.recount_at_settle:  # a change of mode on the same detector: recount
+            self._switch_detector(new, tg, True)
             return None
         if out is not None:
             self._candidate(out, regs, rot)

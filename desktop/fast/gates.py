@@ -78,6 +78,8 @@ class StepRelease:
         self.completed_ns = -(1 << 62)  # the last completed step's peak time
         #: ``Pipeline(hold_while_settling=...)`` with carry detection: steps wait while the walk's mode settles
         self.settle_hold = bool(getattr(pipe, "hold_while_settling", False)) and getattr(pipe, "carry", None) is not None
+        #: ``Pipeline(recount_at_settle=True)``: where the settling ends on the same detector, its held peaks recount
+        self.recount = self.settle_hold and bool(getattr(pipe, "recount_at_settle", False))
         #: ``Pipeline(walk_start_step=True)``: the index of the gentle detector that looks back (None: off)
         start_det = getattr(pipe, "_start_det", None)
         self.start_d = next(i for i, d in enumerate(pipe._mode_detectors) if d is start_det) \
@@ -138,6 +140,12 @@ class StepRelease:
             # the settling before each sample's decision; the release can change where it ends
             self.settled_before = np.concatenate([[carry.settling_before], carry.settling[:-1]])
             ticks.append(np.flatnonzero(self.settled_before & ~carry.settling))
+            # a change of mode at the sample, and the walk's start only held open before it (settle_walk_s)
+            self.changed = np.diff(carry.n_changes, prepend=0) != 0
+            self.walk_before = np.concatenate([[carry.settling_walk_before], carry.settling_walk[:-1]])
+            if self.recount:  # a change of mode while settling, on the same detector: recount (Pipeline._carry_steps)
+                switch = switch | (self.settled_before & self.changed)
+                ticks.append(np.flatnonzero(switch))
         steps_at = set()
         for d, (tk, t, _, _, _) in enumerate(self.peaks):
             # a peak's own sample, the one where its heading falls due, the one where its bout's time runs out:
@@ -191,7 +199,8 @@ class StepRelease:
         ``rotation_hold_s``, after the last confirmed step) replace the unconfirmed candidates
         (``Pipeline._switch_detector``)."""
         p = self.p
-        settled = self.settle_hold and self.carry is not None and bool(self.settled_before[k])
+        settled = (self.settle_hold and self.carry is not None and bool(self.settled_before[k])
+                   and (bool(self.changed[k]) or not bool(self.walk_before[k])))
         kept = [] if settled else [c for c in self.cands if c[2]]
         p.n_replaced_mode += len(self.cands) - len(kept)
         self.cands = kept
