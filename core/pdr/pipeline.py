@@ -261,6 +261,13 @@ class AttitudeLog:
     mag_rejected: np.ndarray  #: bool: last magnetometer reading rejected
 
 
+def heading_key(ev: StepEvent) -> tuple:
+    """What a step's heading depends on of its :class:`StepEvent` (its interval: peak time and duration; nan, the
+    first step of a bout, as -1): a recount (``Pipeline(recount_at_settle=True)``) keeps the heading of a candidate
+    whose peak comes back with the same key.  The fast path (desktop.fast.gates) uses it too."""
+    return ev.t_ns, ev.duration_s if ev.duration_s == ev.duration_s else -1.0
+
+
 def _mode_at(t_ns: int, changes: list, mode: str) -> str:
     """The carry mode in force at ``t_ns`` from a detector's change log ``(t_ns, from, to, confidence)`` and its
     current ``mode``: the last change at or before it, else the first change's "from", else ``mode``."""
@@ -429,13 +436,21 @@ class Pipeline:
         the carry detector is :attr:`core.pdr.carry.CarryModeDetector.settling` (before this sample) to a mode
         counted by the same step detector, the held candidates are recounted as at a change of detector: that
         detector's held peaks since the last completed step (at most ``rotation_hold_s`` old) replace them, through
-        the new mode's rotation gate (with the rotation RMS each peak had).  Without it the peaks that the rotation gate refused while the mode
-        was still "not walking" (3 rad/s: a hand swung at 3-4 rad/s) stay refused when the walk is then called a
-        pocket or a bag, whose periodic rotation opens the wide gate.  With the detector's ``settle_walk_s`` (the
-        walk's start held a few seconds longer, also through a first call's hysteresis towards another mode) the
-        swinging mode that follows a first call of a pocket or a bag recounts the walk's first steps with its own
-        gates.  Steps are never completed before the recount, so they stay in time order (batch = streaming = fast
-        path).
+        the new mode's rotation gate (with the rotation RMS each peak had).  Without it the peaks that the 3 rad/s
+        rotation gate refused while the mode was "not walking" (a hand swung hard, 3-3.6 rad/s RMS) stay refused
+        when the walk is then called a pocket or a bag, whose periodic rotation opens the wide gate.  With the
+        detector's ``settle_walk_s`` (a walk's start held open for a second after its first walking call, and on
+        through that call's hysteresis towards another walking mode) a hand first called a pocket or a bag and a
+        swinging hand 3 s later has its first steps recounted by the swinging detector; while the start is only
+        held open, a gentle or uneven walk's detector switched in without a change of mode keeps the confirmed
+        steps (as outside the settling).  Steps are never completed before a recount, so they stay in time order
+        (batch = streaming = fast path).  The live app then sees a walk's first steps up to ``settle_walk_s`` plus
+        the detector's ``switch_s`` later (never more than ``rotation_hold_s``).  A recount (with this option, at
+        every change of detector that ends or happens in the settling) keeps the heading a replaced candidate had
+        when its peak comes back with the same interval (:func:`heading_key`): the recount decides which peaks are
+        steps, not their headings (without this, a hand-held Microsoft tuning trace whose first window was called a
+        pocket had its first steps' headings taken again with the pocket's walking-direction offset: landmark error
+        1.0 -> 13.9 m).
     walk_start_step, walk_start_cadence_frac : bool, float
         Off by default (issue #25, steps lost at a walk's start).  A walk's first step from standing rises less than
         the steps that follow, and the hand-held gates (``A_th`` 0.6 m/s^2) can miss it.  With carry detection the
@@ -874,6 +889,9 @@ class Pipeline:
         held meanwhile, ``hold_while_settling``) every candidate not yet completed: the walk's first steps are
         counted with its mode's gates (a limb's weak half-stride too: one step per footfall, issue #25)."""
         self._active_det = det
+        # a recount keeps the headings the replaced candidates had (the same peak comes back: the same interval)
+        headings = {heading_key(c[0]): c[1] for c in self._candidates
+                    if c[1] is not None} if settled and self.recount_at_settle else None
         kept = [] if settled else [c for c in self._candidates if c[2]]
         self.n_replaced_mode += len(self._candidates) - len(kept)
         self._candidates = kept
@@ -887,6 +905,10 @@ class Pipeline:
                 self.n_replayed += 1
                 self._candidate(ev, regs, rot)
         self.n_rejected_rotation = n_rot
+        if headings:
+            for c in self._candidates:
+                if c[1] is None:
+                    c[1] = headings.get(heading_key(c[0]))
 
     def _step_carry_mode(self, t_ns: int, changes: list | None = None, mode: str | None = None) -> str:
         """The carry mode a step is labelled with: the mode in force at its peak, except that a counted step is

@@ -28,7 +28,7 @@ import numpy as np
 
 from core.conventions import CARRY_MODES, CARRY_SWINGING
 from core.pdr.heading import interval_heading
-from core.pdr.pipeline import DEFAULT_STEP_DURATION_S, Step
+from core.pdr.pipeline import DEFAULT_STEP_DURATION_S, Step, heading_key
 from core.pdr.steps import StepEvent
 from desktop.fast.jit import kernel
 from desktop.fast.walkdir import walking_direction_over_grid
@@ -201,6 +201,8 @@ class StepRelease:
         p = self.p
         settled = (self.settle_hold and self.carry is not None and bool(self.settled_before[k])
                    and (bool(self.changed[k]) or not bool(self.walk_before[k])))
+        headings = {heading_key(c[0]): c[1] for c in self.cands
+                    if c[1] is not None} if settled and self.recount else None
         kept = [] if settled else [c for c in self.cands if c[2]]
         p.n_replaced_mode += len(self.cands) - len(kept)
         self.cands = kept
@@ -216,6 +218,10 @@ class StepRelease:
             p.n_replayed += 1
             self._peak(d, m)
         p.n_rejected_rotation = n_rot
+        if headings:  # a recount keeps the replaced candidates' headings (Pipeline._switch_detector)
+            for c in self.cands:
+                if c[1] is None:
+                    c[1] = headings.get(heading_key(c[0]))
 
     def _peak(self, d: int, m: int) -> None:
         """Peak ``m`` of detector ``d`` made a candidate (its StepEvent built only now: most are never needed)."""
