@@ -858,8 +858,8 @@ class Pipeline:
             self._switch_detector(new, tg, settling and (changed or not walk_start))
             return None
         if settling and changed and self.recount_at_settle:  # a change of mode on the same detector: recount
-            self._switch_detector(new, tg, True)
-            return None
+            self._switch_detector(new, tg, True)  # (this sample's peak among the held ones: still a peak now)
+            return out
         if out is not None:
             self._candidate(out, regs, rot)
         return out

@@ -135,6 +135,7 @@ class StepRelease:
             det_at = np.zeros(n_grid, dtype=np.int64)
         prev = np.concatenate([[0], det_at[:-1]])
         switch = det_at != prev
+        det_switch = switch  # a change of detector: no live peak at that sample (a recount keeps it)
         ticks = [np.flatnonzero(switch)]
         if self.settle_hold and carry is not None:
             # the settling before each sample's decision; the release can change where it ends
@@ -154,7 +155,7 @@ class StepRelease:
                       np.searchsorted(gt, t + self.gap_ns, side="right")]
             if self.settle_hold:  # where a step held by the settling is held no longer
                 ticks.append(np.searchsorted(gt, t + self.hold_ns, side="left"))
-            live = tk[(det_at[tk] == d) & ~switch[tk]]
+            live = tk[(det_at[tk] == d) & ~det_switch[tk]]
             steps_at.update(live.tolist())
         ticks = np.unique(np.concatenate(ticks))
         ticks = ticks[ticks < n_grid]
