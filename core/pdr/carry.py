@@ -361,7 +361,7 @@ class CarryModeDetector:
                  swing_gyro_rad_s: float = 2.0, hard_swing_gyro_rad_s: float = 3.5, thigh_min_skew: float | None = None,
                  uneven_on_share: float = math.inf, uneven_off_share: float = 0.6,
                  switch_s: float = 3.0, switch_still_s: float = 2.0, hold_periodicity: float = 0.2, hold_recent_s: float = 1.0,
-                 hold_min_std_m_s2: float = 0.3, settle_while_still: bool = False, settle_walk_s: float = 0.0):
+                 hold_min_std_m_s2: float = 0.3, settle_while_still: bool = False, settle_walk_s: float = 1.0):
         self.grid_rate_hz = float(grid_rate_hz)
         self.window_s = float(window_s)
         self.hop_s = float(hop_s)

@@ -499,7 +499,7 @@ class Pipeline:
                  carry: bool | CarryModeDetector = True, step_gates: dict | None = None,
                  swinging_max_rotation_rms_rad_s: float = 12.0,
                  wide_rotation_modes: tuple = (CARRY_SWINGING, CARRY_POCKET, CARRY_BAG), rotation_hold_s: float = 8.0,
-                 hold_while_settling: bool = True, recount_at_settle: bool = False, walk_start_step: bool = False,
+                 hold_while_settling: bool = True, recount_at_settle: bool = True, walk_start_step: bool = False,
                  walk_start_cadence_frac: float = 0.3,
                  acc_gap_bridge: bool | AccGapBridge = True, heading_smoother: str = HEADING_SMOOTHER_OFF):
         self.keep_steps = keep_steps
@@ -583,6 +583,7 @@ class Pipeline:
         self.n_replaced_mode = 0
         #: walks' first steps taken from the gentle detector's held peaks (``walk_start_step``)
         self.n_walk_start_steps = 0
+        self._start_counted_ns = None  # the last one's peak time
         # the gentle gait's detector, when walk_start_step looks back with it (None: off, or no carry detection)
         self._start_det = self._det_of.get(GENTLE) if self.walk_start_step else None
         self.attitude.reset()
@@ -1013,7 +1014,9 @@ class Pipeline:
                 return
             if ev.t_ns <= hi and rot <= self._rotation_limit_rad_s():
                 self._candidates.insert(k, [ev, None, True, regs])
-                self.n_walk_start_steps += 1
+                if ev.t_ns != self._start_counted_ns:  # a recount inserts the same one again: counted once
+                    self.n_walk_start_steps += 1
+                    self._start_counted_ns = ev.t_ns
                 return
 
     def _drop_unconfirmed(self) -> None:

@@ -268,7 +268,9 @@ class StepRelease:
                 return
             if tm <= hi and float(rms[m]) <= self._rotation_limit():
                 self.cands.insert(k, [StepEvent(tm, *feats[m].tolist()), None, True, tuple(regs[m].tolist())])
-                p.n_walk_start_steps += 1
+                if tm != p._start_counted_ns:  # a recount inserts the same one again (Pipeline._walk_start_step)
+                    p.n_walk_start_steps += 1
+                    p._start_counted_ns = tm
                 return
 
     def drop_unconfirmed(self) -> None:
