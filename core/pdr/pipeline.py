@@ -432,25 +432,24 @@ class Pipeline:
         after a pause the carry detector called "not walking"; batch, streaming and the fast path give the same
         steps (``tests/test_walk_start_steps.py``).
     recount_at_settle : bool
-        Issue #25, a swinging hand's first steps (with ``hold_while_settling``).  When the carry mode changes while
-        the carry detector is :attr:`core.pdr.carry.CarryModeDetector.settling` (before this sample) to a mode
-        counted by the same step detector, the held candidates are recounted as at a change of detector: that
-        detector's held peaks since the last completed step (at most ``rotation_hold_s`` old) replace them, through
-        the new mode's rotation gate (with the rotation RMS each peak had).  Without it the peaks that the 3 rad/s
-        rotation gate refused while the mode was "not walking" (a hand swung hard, 3-3.6 rad/s RMS) stay refused
-        when the walk is then called a pocket or a bag, whose periodic rotation opens the wide gate.  With the
-        detector's ``settle_walk_s`` (a walk's start held open for a second after its first walking call, and on
-        through that call's hysteresis towards another walking mode) a hand first called a pocket or a bag and a
-        swinging hand 3 s later has its first steps recounted by the swinging detector; while the start is only
-        held open, a gentle or uneven walk's detector switched in without a change of mode keeps the confirmed
-        steps (as outside the settling).  Steps are never completed before a recount, so they stay in time order
-        (batch = streaming = fast path).  The live app then sees a walk's first steps up to ``settle_walk_s`` plus
-        the detector's ``switch_s`` later (never more than ``rotation_hold_s``).  A recount (with this option, at
-        every change of detector that ends or happens in the settling) keeps the heading a replaced candidate had
-        when its peak comes back with the same interval (:func:`heading_key`): the recount decides which peaks are
-        steps, not their headings (without this, a hand-held Microsoft tuning trace whose first window was called a
-        pocket had its first steps' headings taken again with the pocket's walking-direction offset: landmark error
-        1.0 -> 13.9 m).
+        On by default (issue #25, a swinging hand's first steps; with ``hold_while_settling``).  When the carry mode
+        changes while the carry detector is :attr:`core.pdr.carry.CarryModeDetector.settling` (before this sample) to a
+        mode counted by the same step detector, the held candidates are recounted as at a change of detector: that
+        detector's held peaks since the last completed step (at most ``rotation_hold_s`` old) replace them, through the
+        new mode's rotation gate (with the rotation RMS each peak had).  Without it the peaks that the 3 rad/s rotation
+        gate refused while the mode was "not walking" (a hand swung hard, 3-3.6 rad/s RMS) stay refused when the walk is
+        then called a pocket or a bag, whose periodic rotation opens the wide gate.  With the detector's
+        ``settle_walk_s`` (a walk's start held open for a second after its first walking call, and on through that
+        call's hysteresis towards another walking mode) a hand first called a pocket or a bag and a swinging hand 3 s
+        later has its first steps recounted by the swinging detector; while the start is only held open, a gentle or
+        uneven walk's detector switched in without a change of mode keeps the confirmed steps (as outside the settling).
+        Steps are never completed before a recount, so they stay in time order (batch = streaming = fast path).  The
+        live app then sees a walk's first steps up to ``settle_walk_s`` plus the detector's ``switch_s`` later (never
+        more than ``rotation_hold_s``).  A recount (with this option, at every change of detector that ends or happens
+        in the settling) keeps the heading a replaced candidate had when its peak comes back with the same interval
+        (:func:`heading_key`): the recount decides which peaks are steps, not their headings (without this, a hand-held
+        Microsoft tuning trace whose first window was called a pocket had its first steps' headings taken again with the
+        pocket's walking-direction offset: landmark error 1.0 -> 13.9 m).
     walk_start_step, walk_start_cadence_frac : bool, float
         Off by default (issue #25, steps lost at a walk's start).  A walk's first step from standing rises less than
         the steps that follow, and the hand-held gates (``A_th`` 0.6 m/s^2) can miss it.  With carry detection the
