@@ -340,6 +340,20 @@ class CarryModeDetector:
         tuning swinging clip (seed 3, ``tests/test_carry.py``) it counts 40 of 44 instead of 43, because the settled
         mode's detector, whose first seconds miss steps of their own (no step period yet), then replaces every held
         step, also those the hand-held gates had right.
+    settle_walk_s : float
+        Issue #25, a swinging hand's first steps.  A walk's mode is first decided on one 4-s window (the first
+        window of the recording, or the change from ``still``), and that first call is often a neighbour of the
+        right one (a hand swung at 3-9 rad/s is first called a pocket or a bag, then a swinging hand 3 s later,
+        after ``switch_s``).  With ``settle_walk_s`` > 0 :attr:`settling` stays True for this long (s) after that
+        first walking decision, and on while a change to another walking mode that began within it waits out its
+        hysteresis (:attr:`pending_mode`; so at most ``settle_walk_s + switch_s``): the pipeline holds the walk's
+        first steps meanwhile and the settled mode's detector recounts them
+        (``Pipeline(hold_while_settling=True, recount_at_settle=True)``).  **1.0, the default** (two hops: the
+        first call's rival shows within a hop or two; 0: off, as before).  Simulator (64 swinging 34-m walks,
+        ``swing_scale`` 1-2.5, twist 8 or 25 deg, 1.6-2.0 steps/s, standing 0.3 or 3 s first, seeds 1-2): heel
+        strikes missed 248 -> 217 of 3232 (in the walk's first 8 s 148 -> 117), no step added; with 3.0, 214.  TUNING
+        (real walks, IPIN, Microsoft, IPOL): identical (benchmarks/discussion.md).  The live app sees such a walk's
+        first steps up to ``settle_walk_s + switch_s`` late (never more than the pipeline's ``rotation_hold_s``).
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
@@ -360,7 +374,7 @@ class CarryModeDetector:
                  swing_gyro_rad_s: float = 2.0, hard_swing_gyro_rad_s: float = 3.5, thigh_min_skew: float | None = None,
                  uneven_on_share: float = math.inf, uneven_off_share: float = 0.6,
                  switch_s: float = 3.0, switch_still_s: float = 2.0, hold_periodicity: float = 0.2, hold_recent_s: float = 1.0,
-                 hold_min_std_m_s2: float = 0.3, settle_while_still: bool = False):
+                 hold_min_std_m_s2: float = 0.3, settle_while_still: bool = False, settle_walk_s: float = 1.0):
         self.grid_rate_hz = float(grid_rate_hz)
         self.window_s = float(window_s)
         self.hop_s = float(hop_s)
@@ -413,6 +427,7 @@ class CarryModeDetector:
         self.hold_recent_s = float(hold_recent_s)
         self.hold_min_std_m_s2 = float(hold_min_std_m_s2)
         self.settle_while_still = bool(settle_while_still)
+        self.settle_walk_s = float(settle_walk_s)
         self.reset()
 
     def reset(self) -> None:
@@ -465,6 +480,10 @@ class CarryModeDetector:
         #: pipeline holds its steps meanwhile, so that the walking mode that follows counts them with its own gates
         #: (both legs of a limb)
         self.settling = True
+        #: when the walk's first walking mode was decided (``settle_walk_s``; None: no walk start open)
+        self._walk_start_ns = None
+        #: :attr:`settling` only by ``settle_walk_s`` (a walking mode in force, the walk's start held open)
+        self.settling_walk = False
         #: the last hop's features (name -> float) and mode scores (mode -> float), for diagnostics
         self.features: dict = {}
         self.scores: dict = {}
@@ -841,10 +860,33 @@ class CarryModeDetector:
                 self.changes.append((int(t_ns), self.mode, best, conf))
             self.mode, self.confidence = best, conf
             self.settling = self.settle_while_still and best == CARRY_STILL
+            self._settle_walk(t_ns, True)
             return
+        was_still = self.mode == CARRY_STILL
         self._decide_hysteresis(t_ns, best, conf, sc, total)
         self.settling = self.mode == CARRY_STILL and (self.settle_while_still
                                                       or (self._cand is not None and self._cand != CARRY_STILL))
+        self._settle_walk(t_ns, was_still)
+
+    def _settle_walk(self, t_ns: int, started: bool) -> None:
+        """``settle_walk_s``: keep :attr:`settling` for that long after a walk's first walking decision (``started``:
+        this hop's decision may be one: the first window's, or a change from ``still``), and while a change to
+        another walking mode that began within it waits out its hysteresis."""
+        self.settling_walk = False
+        if self.settle_walk_s <= 0.0 or self.mode == CARRY_STILL:
+            self._walk_start_ns = None
+            return
+        if started:
+            self._walk_start_ns = int(t_ns)
+        t0 = self._walk_start_ns
+        if t0 is None:
+            return
+        limit = self.settle_walk_s * 1e9
+        if t_ns - t0 < limit - 1e3 or (self._cand is not None and self._cand != CARRY_STILL
+                                       and self._cand_ns - t0 < limit - 1e3):
+            self.settling = self.settling_walk = True
+        else:
+            self._walk_start_ns = None
 
     def _decide_hysteresis(self, t_ns: int, best: str, conf: float, sc: dict, total: float) -> None:
         """A hop's raw decision ``best`` through the hysteresis (``switch_s``, ``switch_still_s``)."""

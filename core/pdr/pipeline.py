@@ -261,6 +261,13 @@ class AttitudeLog:
     mag_rejected: np.ndarray  #: bool: last magnetometer reading rejected
 
 
+def heading_key(ev: StepEvent) -> tuple:
+    """What a step's heading depends on of its :class:`StepEvent` (its interval: peak time and duration; nan, the
+    first step of a bout, as -1): a recount (``Pipeline(recount_at_settle=True)``) keeps the heading of a candidate
+    whose peak comes back with the same key.  The fast path (desktop.fast.gates) uses it too."""
+    return ev.t_ns, ev.duration_s if ev.duration_s == ev.duration_s else -1.0
+
+
 def _mode_at(t_ns: int, changes: list, mode: str) -> str:
     """The carry mode in force at ``t_ns`` from a detector's change log ``(t_ns, from, to, confidence)`` and its
     current ``mode``: the last change at or before it, else the first change's "from", else ``mode``."""
@@ -424,6 +431,25 @@ class Pipeline:
         walk's first steps late**: up to ``rotation_hold_s`` (8 s) after they happened, at the start of a walk and
         after a pause the carry detector called "not walking"; batch, streaming and the fast path give the same
         steps (``tests/test_walk_start_steps.py``).
+    recount_at_settle : bool
+        On by default (issue #25, a swinging hand's first steps; with ``hold_while_settling``).  When the carry mode
+        changes while the carry detector is :attr:`core.pdr.carry.CarryModeDetector.settling` (before this sample) to a
+        mode counted by the same step detector, the held candidates are recounted as at a change of detector: that
+        detector's held peaks since the last completed step (at most ``rotation_hold_s`` old) replace them, through the
+        new mode's rotation gate (with the rotation RMS each peak had).  Without it the peaks that the 3 rad/s rotation
+        gate refused while the mode was "not walking" (a hand swung hard, 3-3.6 rad/s RMS) stay refused when the walk is
+        then called a pocket or a bag, whose periodic rotation opens the wide gate.  With the detector's
+        ``settle_walk_s`` (a walk's start held open for a second after its first walking call, and on through that
+        call's hysteresis towards another walking mode) a hand first called a pocket or a bag and a swinging hand 3 s
+        later has its first steps recounted by the swinging detector; while the start is only held open, a gentle or
+        uneven walk's detector switched in without a change of mode keeps the confirmed steps (as outside the settling).
+        Steps are never completed before a recount, so they stay in time order (batch = streaming = fast path).  The
+        live app then sees a walk's first steps up to ``settle_walk_s`` plus the detector's ``switch_s`` later (never
+        more than ``rotation_hold_s``).  A recount (with this option, at every change of detector that ends or happens
+        in the settling) keeps the heading a replaced candidate had when its peak comes back with the same interval
+        (:func:`heading_key`): the recount decides which peaks are steps, not their headings (without this, a hand-held
+        Microsoft tuning trace whose first window was called a pocket had its first steps' headings taken again with the
+        pocket's walking-direction offset: landmark error 1.0 -> 13.9 m).
     walk_start_step, walk_start_cadence_frac : bool, float
         Off by default (issue #25, steps lost at a walk's start).  A walk's first step from standing rises less than
         the steps that follow, and the hand-held gates (``A_th`` 0.6 m/s^2) can miss it.  With carry detection the
@@ -472,7 +498,8 @@ class Pipeline:
                  carry: bool | CarryModeDetector = True, step_gates: dict | None = None,
                  swinging_max_rotation_rms_rad_s: float = 12.0,
                  wide_rotation_modes: tuple = (CARRY_SWINGING, CARRY_POCKET, CARRY_BAG), rotation_hold_s: float = 8.0,
-                 hold_while_settling: bool = True, walk_start_step: bool = False, walk_start_cadence_frac: float = 0.3,
+                 hold_while_settling: bool = True, recount_at_settle: bool = True, walk_start_step: bool = False,
+                 walk_start_cadence_frac: float = 0.3,
                  acc_gap_bridge: bool | AccGapBridge = True, heading_smoother: str = HEADING_SMOOTHER_OFF):
         self.keep_steps = keep_steps
         if acc_gap_bridge is True:
@@ -488,6 +515,7 @@ class Pipeline:
         self.wide_rotation_modes = tuple(wide_rotation_modes)
         self.rotation_hold_s = float(rotation_hold_s)
         self.hold_while_settling = bool(hold_while_settling)
+        self.recount_at_settle = bool(recount_at_settle)
         self.walk_start_step = bool(walk_start_step)
         self.walk_start_cadence_frac = float(walk_start_cadence_frac)
         self.gnss = gnss
@@ -554,6 +582,7 @@ class Pipeline:
         self.n_replaced_mode = 0
         #: walks' first steps taken from the gentle detector's held peaks (``walk_start_step``)
         self.n_walk_start_steps = 0
+        self._start_counted_ns = None  # the last one's peak time
         # the gentle gait's detector, when walk_start_step looks back with it (None: off, or no carry detection)
         self._start_det = self._det_of.get(GENTLE) if self.walk_start_step else None
         self.attitude.reset()
@@ -799,6 +828,8 @@ class Pipeline:
         c = self.carry
         g = self._gyro_last
         settling = self.hold_while_settling and c.settling  # before this sample's decision
+        walk_start = c.settling_walk  # only the walk's start held open (the detector's settle_walk_s)
+        n_changes = len(c.changes)
         mode = c.update_grid(tg, ax, ay, az) if g is None else c.update_grid(tg, ax, ay, az, g[0], g[1], g[2])
         self._carry_mode = mode
         period = c.step_period_s
@@ -820,9 +851,15 @@ class Pipeline:
                 if det is active:
                     out = ev
         new = self._det_of[self._gates_key(mode, c.gentle, c.uneven)]
+        changed = len(c.changes) != n_changes
         if new is not active:
-            self._switch_detector(new, tg, settling)
+            # while the walk's start is only held open, a gentle or uneven walk's detector without a change of mode
+            # switches as outside the settling (its confirmed steps stay)
+            self._switch_detector(new, tg, settling and (changed or not walk_start))
             return None
+        if settling and changed and self.recount_at_settle:  # a change of mode on the same detector: recount
+            self._switch_detector(new, tg, True)  # (this sample's peak among the held ones: still a peak now)
+            return out
         if out is not None:
             self._candidate(out, regs, rot)
         return out
@@ -852,6 +889,9 @@ class Pipeline:
         held meanwhile, ``hold_while_settling``) every candidate not yet completed: the walk's first steps are
         counted with its mode's gates (a limb's weak half-stride too: one step per footfall, issue #25)."""
         self._active_det = det
+        # a recount keeps the headings the replaced candidates had (the same peak comes back: the same interval)
+        headings = {heading_key(c[0]): c[1] for c in self._candidates
+                    if c[1] is not None} if settled and self.recount_at_settle else None
         kept = [] if settled else [c for c in self._candidates if c[2]]
         self.n_replaced_mode += len(self._candidates) - len(kept)
         self._candidates = kept
@@ -865,6 +905,10 @@ class Pipeline:
                 self.n_replayed += 1
                 self._candidate(ev, regs, rot)
         self.n_rejected_rotation = n_rot
+        if headings:
+            for c in self._candidates:
+                if c[1] is None:
+                    c[1] = headings.get(heading_key(c[0]))
 
     def _step_carry_mode(self, t_ns: int, changes: list | None = None, mode: str | None = None) -> str:
         """The carry mode a step is labelled with: the mode in force at its peak, except that a counted step is
@@ -969,7 +1013,9 @@ class Pipeline:
                 return
             if ev.t_ns <= hi and rot <= self._rotation_limit_rad_s():
                 self._candidates.insert(k, [ev, None, True, regs])
-                self.n_walk_start_steps += 1
+                if ev.t_ns != self._start_counted_ns:  # a recount inserts the same one again: counted once
+                    self.n_walk_start_steps += 1
+                    self._start_counted_ns = ev.t_ns
                 return
 
     def _drop_unconfirmed(self) -> None:

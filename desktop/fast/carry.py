@@ -212,6 +212,8 @@ class CarryTrack:
     settling: np.ndarray  #: bool: the detector's ``settling`` (a walk's mode not settled yet)
     settling_before: bool  #: its ``settling`` before the first grid sample
     pending: np.ndarray = None  #: index into CARRY_MODES of the detector's ``pending_mode`` (-1: None)
+    settling_walk: np.ndarray = None  #: bool: the detector's ``settling_walk`` (settling only by ``settle_walk_s``)
+    settling_walk_before: bool = False  #: its ``settling_walk`` before the first grid sample
 
 
 def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro: np.ndarray,
@@ -238,6 +240,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     settling = [det.settling]
     n_changes = [len(det.changes)]
     pending = [mode_idx.get(det.pending_mode, -1)]
+    settling_walk = [det.settling_walk]
     view = np.lib.stride_tricks.sliding_window_view(rows, n, axis=0) if n_grid >= n else None
     # a very slow walk's hops take the long window (CarryModeDetector.slow_window): full once n_long samples of
     # the hop's grid segment are in
@@ -273,6 +276,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
             settling.append(det.settling)
             n_changes.append(len(det.changes))
             pending.append(mode_idx.get(det.pending_mode, -1))
+            settling_walk.append(det.settling_walk)
     # the state after sample k: that of the last hop at or before k (the initial state before the first)
     at = np.searchsorted(hops, np.arange(n_grid), side="right")
     track = CarryTrack(np.asarray(modes, dtype=np.int64)[at], np.asarray(periods, dtype=float)[at],
@@ -280,7 +284,8 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
                        np.asarray(uneven, dtype=bool)[at],
                        np.asarray(n_changes, dtype=np.int64)[at],
                        det.changes, np.asarray(settling, dtype=bool)[at], bool(settling[0]),
-                       np.asarray(pending, dtype=np.int64)[at])
+                       np.asarray(pending, dtype=np.int64)[at], np.asarray(settling_walk, dtype=bool)[at],
+                       bool(settling_walk[0]))
     # time per mode: the mode in force before each sample, added one grid period at a time as the detector does
     before = np.concatenate([[modes[0]], track.mode[:-1]]).astype(np.int64) if n_grid else np.zeros(0, np.int64)
     counts = np.bincount(before, minlength=len(CARRY_MODES))

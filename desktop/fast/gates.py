@@ -28,7 +28,7 @@ import numpy as np
 
 from core.conventions import CARRY_MODES, CARRY_SWINGING
 from core.pdr.heading import interval_heading
-from core.pdr.pipeline import DEFAULT_STEP_DURATION_S, Step
+from core.pdr.pipeline import DEFAULT_STEP_DURATION_S, Step, heading_key
 from core.pdr.steps import StepEvent
 from desktop.fast.jit import kernel
 from desktop.fast.walkdir import walking_direction_over_grid
@@ -78,6 +78,8 @@ class StepRelease:
         self.completed_ns = -(1 << 62)  # the last completed step's peak time
         #: ``Pipeline(hold_while_settling=...)`` with carry detection: steps wait while the walk's mode settles
         self.settle_hold = bool(getattr(pipe, "hold_while_settling", False)) and getattr(pipe, "carry", None) is not None
+        #: ``Pipeline(recount_at_settle=True)``: where the settling ends on the same detector, its held peaks recount
+        self.recount = self.settle_hold and bool(getattr(pipe, "recount_at_settle", False))
         #: ``Pipeline(walk_start_step=True)``: the index of the gentle detector that looks back (None: off)
         start_det = getattr(pipe, "_start_det", None)
         self.start_d = next(i for i, d in enumerate(pipe._mode_detectors) if d is start_det) \
@@ -133,11 +135,18 @@ class StepRelease:
             det_at = np.zeros(n_grid, dtype=np.int64)
         prev = np.concatenate([[0], det_at[:-1]])
         switch = det_at != prev
+        det_switch = switch  # a change of detector: no live peak at that sample (a recount keeps it)
         ticks = [np.flatnonzero(switch)]
         if self.settle_hold and carry is not None:
             # the settling before each sample's decision; the release can change where it ends
             self.settled_before = np.concatenate([[carry.settling_before], carry.settling[:-1]])
             ticks.append(np.flatnonzero(self.settled_before & ~carry.settling))
+            # a change of mode at the sample, and the walk's start only held open before it (settle_walk_s)
+            self.changed = np.diff(carry.n_changes, prepend=0) != 0
+            self.walk_before = np.concatenate([[carry.settling_walk_before], carry.settling_walk[:-1]])
+            if self.recount:  # a change of mode while settling, on the same detector: recount (Pipeline._carry_steps)
+                switch = switch | (self.settled_before & self.changed)
+                ticks.append(np.flatnonzero(switch))
         steps_at = set()
         for d, (tk, t, _, _, _) in enumerate(self.peaks):
             # a peak's own sample, the one where its heading falls due, the one where its bout's time runs out:
@@ -146,7 +155,7 @@ class StepRelease:
                       np.searchsorted(gt, t + self.gap_ns, side="right")]
             if self.settle_hold:  # where a step held by the settling is held no longer
                 ticks.append(np.searchsorted(gt, t + self.hold_ns, side="left"))
-            live = tk[(det_at[tk] == d) & ~switch[tk]]
+            live = tk[(det_at[tk] == d) & ~det_switch[tk]]
             steps_at.update(live.tolist())
         ticks = np.unique(np.concatenate(ticks))
         ticks = ticks[ticks < n_grid]
@@ -191,7 +200,10 @@ class StepRelease:
         ``rotation_hold_s``, after the last confirmed step) replace the unconfirmed candidates
         (``Pipeline._switch_detector``)."""
         p = self.p
-        settled = self.settle_hold and self.carry is not None and bool(self.settled_before[k])
+        settled = (self.settle_hold and self.carry is not None and bool(self.settled_before[k])
+                   and (bool(self.changed[k]) or not bool(self.walk_before[k])))
+        headings = {heading_key(c[0]): c[1] for c in self.cands
+                    if c[1] is not None} if settled and self.recount else None
         kept = [] if settled else [c for c in self.cands if c[2]]
         p.n_replaced_mode += len(self.cands) - len(kept)
         self.cands = kept
@@ -207,6 +219,10 @@ class StepRelease:
             p.n_replayed += 1
             self._peak(d, m)
         p.n_rejected_rotation = n_rot
+        if headings:  # a recount keeps the replaced candidates' headings (Pipeline._switch_detector)
+            for c in self.cands:
+                if c[1] is None:
+                    c[1] = headings.get(heading_key(c[0]))
 
     def _peak(self, d: int, m: int) -> None:
         """Peak ``m`` of detector ``d`` made a candidate (its StepEvent built only now: most are never needed)."""
@@ -252,7 +268,9 @@ class StepRelease:
                 return
             if tm <= hi and float(rms[m]) <= self._rotation_limit():
                 self.cands.insert(k, [StepEvent(tm, *feats[m].tolist()), None, True, tuple(regs[m].tolist())])
-                p.n_walk_start_steps += 1
+                if tm != p._start_counted_ns:  # a recount inserts the same one again (Pipeline._walk_start_step)
+                    p.n_walk_start_steps += 1
+                    p._start_counted_ns = tm
                 return
 
     def drop_unconfirmed(self) -> None:
