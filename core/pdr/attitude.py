@@ -655,6 +655,11 @@ class AttitudeFilterBase:
 
     def _reset_common(self) -> None:
         self._state = AttitudeBaseState.initial()
+        self._forget_matrix()
+
+    def _forget_matrix(self) -> None:
+        #: :meth:`matrix`'s cache: the last matrix and the quaternion object it is of
+        self._R_q = self._R = None
 
     # -- read-only views of the state (set it through snapshot() / restore()) ---------------------
     @property
@@ -759,8 +764,16 @@ class AttitudeFilterBase:
         return np.array(t_out, dtype=np.int64), np.array(q_out, dtype=float).reshape(-1, 4)
 
     def matrix(self):
-        """Current rotation matrix body -> ENU (3 row tuples)."""
-        return quat.to_matrix(self._state.q)
+        """Current rotation matrix body -> ENU (3 row tuples).
+
+        Kept while ``q`` is the same object (a tuple: never changed in place, only replaced): between two
+        changes of the attitude it is asked for several times (the next prediction, the accelerometer and
+        magnetometer updates, the heading smoother).  The cache is no state: a function of ``q`` alone."""
+        q = self._state.q
+        if q is not self._R_q:
+            self._R = quat.to_matrix(q)
+            self._R_q = q
+        return self._R
 
 
 class AttitudeEKF(AttitudeFilterBase):
@@ -898,6 +911,7 @@ class AttitudeEKF(AttitudeFilterBase):
 
     def reset(self) -> None:
         self._state = AttitudeState.initial(self.settings)
+        self._forget_matrix()
         #: the forward run kept for the replay's heading smoother (None unless ``keep_history``)
         self.history = AttitudeHistory() if self.keep_history else None
 
@@ -1054,7 +1068,7 @@ class AttitudeEKF(AttitudeFilterBase):
             return
         b = state.b
         w = ((wx - b[0]) * dt, (wy - b[1]) * dt, (wz - b[2]) * dt)
-        (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = quat.to_matrix(state.q)
+        (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = self.matrix()
         state.q = quat.normalize(quat.multiply(state.q, quat.from_rotation_vector(w)))  # eq. 7
         # F = [[I, -R dt], [0, I]] written out: P <- F P F^T + Q, on the covariance's 3 x 3 blocks in
         # plain floats (9-tuples: numpy's per-call overhead dominates for such sizes)
@@ -1207,7 +1221,7 @@ class AttitudeEKF(AttitudeFilterBase):
         if dev > s.acc_reject_m_s2 or na == 0.0:
             return self._acc_flags(t_ns, False, Outcome.NORM_OFF, sigma2=sigma2)
         acc = state.acc_sum
-        R = quat.to_matrix(state.q)
+        R = self.matrix()
         r0, r1, r2 = R
         if acc.n == 0:
             acc.t0_ns = t_ns
@@ -1297,7 +1311,7 @@ class AttitudeEKF(AttitudeFilterBase):
         lo, hi = s.mag_valid_range_uT
         if not lo <= nm <= hi:
             return self._mag_flags(t_ns, False, Outcome.INVALID_RANGE)
-        R = quat.to_matrix(state.q)
+        R = self.matrix()
         if state.initialized and s.site_field_uT == s.site_field_uT and s.site_dip_rad == s.site_dip_rad:
             mx, my, mz = self._vertical_offset(t_ns, R, mx, my, mz)
             nm = math.sqrt(mx * mx + my * my + mz * mz)
