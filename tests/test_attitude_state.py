@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from core import quaternion as quat
 from core.pdr.attitude import AttitudeEKF, AttitudeState, IntervalSum, Outcome
 
 
@@ -73,9 +74,11 @@ def test_the_filter_keeps_no_state_outside_its_state_object():
     ekf = AttitudeEKF()
     _feed(ekf, _events(seconds=4.0))
     # besides the state: configuration, and the replay's history (issue #27: written by the filter, never read by it;
-    # None unless keep_history, and the state is the same with it: tests/test_heading_smoother.py)
+    # None unless keep_history, and the state is the same with it: tests/test_heading_smoother.py), and matrix()'s
+    # cache (_R of the quaternion object _R_q: a function of the state's q, never state)
     assert set(vars(ekf)) == {"settings", "mag_calibrator", "field_detector", "_state", "keep_history", "start_heading",
-                              "history"}
+                              "history", "_R_q", "_R"}
+    assert ekf._R_q is None or ekf._R == quat.to_matrix(ekf._R_q)
     assert ekf.history is None and ekf.start_heading is None
     snap = ekf.snapshot()
     with pytest.raises(AttributeError):  # slots: a misspelt field cannot be born on the state

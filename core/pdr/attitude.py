@@ -655,6 +655,11 @@ class AttitudeFilterBase:
 
     def _reset_common(self) -> None:
         self._state = AttitudeBaseState.initial()
+        self._forget_matrix()
+
+    def _forget_matrix(self) -> None:
+        #: :meth:`matrix`'s cache: the last matrix and the quaternion object it is of
+        self._R_q = self._R = None
 
     # -- read-only views of the state (set it through snapshot() / restore()) ---------------------
     @property
@@ -759,8 +764,16 @@ class AttitudeFilterBase:
         return np.array(t_out, dtype=np.int64), np.array(q_out, dtype=float).reshape(-1, 4)
 
     def matrix(self):
-        """Current rotation matrix body -> ENU (3 row tuples)."""
-        return quat.to_matrix(self._state.q)
+        """Current rotation matrix body -> ENU (3 row tuples).
+
+        Kept while ``q`` is the same object (a tuple: never changed in place, only replaced): between two
+        changes of the attitude it is asked for several times (the next prediction, the accelerometer and
+        magnetometer updates, the heading smoother).  The cache is no state: a function of ``q`` alone."""
+        q = self._state.q
+        if q is not self._R_q:
+            self._R = quat.to_matrix(q)
+            self._R_q = q
+        return self._R
 
 
 class AttitudeEKF(AttitudeFilterBase):
@@ -858,7 +871,10 @@ class AttitudeEKF(AttitudeFilterBase):
 
     @P.setter
     def P(self, P) -> None:
-        rows = np.asarray(P, dtype=np.float64).reshape(6, 6).tolist()
+        self._set_blocks(np.asarray(P, dtype=np.float64).reshape(6, 6).tolist())
+
+    def _set_blocks(self, rows: list) -> None:
+        """The covariance's four 3 x 3 blocks from its first six rows (lists of floats, 6 or more columns)."""
         self._state.P_tt = tuple(rows[0][0:3] + rows[1][0:3] + rows[2][0:3])
         self._state.P_tb = tuple(rows[0][3:6] + rows[1][3:6] + rows[2][3:6])
         self._state.P_bt = tuple(rows[3][0:3] + rows[4][0:3] + rows[5][0:3])
@@ -872,32 +888,31 @@ class AttitudeEKF(AttitudeFilterBase):
     @property
     def P_full(self) -> np.ndarray:
         """The whole error-state covariance: :attr:`P` with the field's heading offset as a 7th state (when on)."""
-        P = self.P
         if not self.has_mag_offset:
-            return P
+            return self.P
+        # one array from the blocks' floats (per update: a 6 x 6 array copied into a 7 x 7 costs more)
         st = self._state
-        Pf = np.zeros((7, 7))
-        Pf[0:6, 0:6] = P
-        Pf[0:3, 6] = Pf[6, 0:3] = st.P_to
-        Pf[3:6, 6] = Pf[6, 3:6] = st.P_bo
-        Pf[6, 6] = st.P_oo
-        return Pf
+        tt, tb, bt, bb, to, bo = st.P_tt, st.P_tb, st.P_bt, st.P_bb, st.P_to, st.P_bo
+        return np.array((tt[0:3] + tb[0:3] + to[0:1], tt[3:6] + tb[3:6] + to[1:2], tt[6:9] + tb[6:9] + to[2:3],
+                         bt[0:3] + bb[0:3] + bo[0:1], bt[3:6] + bb[3:6] + bo[1:2], bt[6:9] + bb[6:9] + bo[2:3],
+                         to + bo + (st.P_oo,)), dtype=np.float64)
 
     @P_full.setter
     def P_full(self, Pf) -> None:
-        Pf = np.asarray(Pf, dtype=np.float64)
-        self.P = Pf[0:6, 0:6]
-        if len(Pf) == 7:
+        rows = np.asarray(Pf, dtype=np.float64).tolist()
+        self._set_blocks(rows)
+        if len(rows) == 7:
             st = self._state
-            st.P_to = tuple(Pf[0:3, 6].tolist())
-            st.P_bo = tuple(Pf[3:6, 6].tolist())
-            st.P_oo = float(Pf[6, 6])
+            st.P_to = (rows[0][6], rows[1][6], rows[2][6])
+            st.P_bo = (rows[3][6], rows[4][6], rows[5][6])
+            st.P_oo = rows[6][6]
 
     mag_offset_rad = property(lambda self: self._state.mag_offset_rad,
                               doc="The field's heading offset estimate (rad; 0 without the offset state).")
 
     def reset(self) -> None:
         self._state = AttitudeState.initial(self.settings)
+        self._forget_matrix()
         #: the forward run kept for the replay's heading smoother (None unless ``keep_history``)
         self.history = AttitudeHistory() if self.keep_history else None
 
@@ -1054,7 +1069,7 @@ class AttitudeEKF(AttitudeFilterBase):
             return
         b = state.b
         w = ((wx - b[0]) * dt, (wy - b[1]) * dt, (wz - b[2]) * dt)
-        (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = quat.to_matrix(state.q)
+        (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = self.matrix()
         state.q = quat.normalize(quat.multiply(state.q, quat.from_rotation_vector(w)))  # eq. 7
         # F = [[I, -R dt], [0, I]] written out: P <- F P F^T + Q, on the covariance's 3 x 3 blocks in
         # plain floats (9-tuples: numpy's per-call overhead dominates for such sizes)
@@ -1144,6 +1159,10 @@ class AttitudeEKF(AttitudeFilterBase):
             self._state.yaw_unobserved = False
         return True, Outcome.USED, c.nis
 
+    def _jacobian(self, m: int) -> np.ndarray:
+        """A zero measurement Jacobian of ``m`` rows over the whole error state (7 columns with the offset)."""
+        return np.zeros((m, 7 if self.has_mag_offset else 6))
+
     def _inject(self, dx: np.ndarray, Pn: np.ndarray, keep_yaw: bool = False) -> None:
         """Fold the error into ``q`` and ``b`` and reset it: ``P <- G P G^T`` (:func:`core.kalman.reset_jacobian`,
         ``G = I + [dtheta / 2]x`` for this navigation-frame error; derived in the module docstring)."""
@@ -1207,7 +1226,7 @@ class AttitudeEKF(AttitudeFilterBase):
         if dev > s.acc_reject_m_s2 or na == 0.0:
             return self._acc_flags(t_ns, False, Outcome.NORM_OFF, sigma2=sigma2)
         acc = state.acc_sum
-        R = quat.to_matrix(state.q)
+        R = self.matrix()
         r0, r1, r2 = R
         if acc.n == 0:
             acc.t0_ns = t_ns
@@ -1231,7 +1250,7 @@ class AttitudeEKF(AttitudeFilterBase):
         z = tuple(R[0][j] * fx + R[1][j] * fy + R[2][j] * fz for j in range(3))  # R^T f_n
         h = (R[2][0], R[2][1], R[2][2])  # R^T u: the third row of R
         y = np.array((z[0] / nf - h[0], z[1] / nf - h[1], z[2] / nf - h[2]))
-        H = np.zeros((3, 6))
+        H = self._jacobian(3)
         H[:, 0:3] = direction_jacobian(R, (0.0, 0.0, 1.0))
         used, outcome, nis = self._correct(y, H, sigma2 * _I3, s.acc_gate_nis)
         self._record("acc", used, nis)
@@ -1266,7 +1285,7 @@ class AttitudeEKF(AttitudeFilterBase):
         n = len(g.buf)
         r2 = sd * sd / n + s.zero_rate_noise_rad_s ** 2
         y = np.array([mean[i] - state.b[i] for i in range(3)])
-        H = np.zeros((3, 6))
+        H = self._jacobian(3)
         H[:, 3:6] = _I3
         used, _, nis = self._correct(y, H, r2 * _I3, math.inf)
         self._record("zero_rate", used, nis)
@@ -1297,7 +1316,7 @@ class AttitudeEKF(AttitudeFilterBase):
         lo, hi = s.mag_valid_range_uT
         if not lo <= nm <= hi:
             return self._mag_flags(t_ns, False, Outcome.INVALID_RANGE)
-        R = quat.to_matrix(state.q)
+        R = self.matrix()
         if state.initialized and s.site_field_uT == s.site_field_uT and s.site_dip_rad == s.site_dip_rad:
             mx, my, mz = self._vertical_offset(t_ns, R, mx, my, mz)
             nm = math.sqrt(mx * mx + my * my + mz * mz)
@@ -1347,7 +1366,7 @@ class AttitudeEKF(AttitudeFilterBase):
             hb = tuple(R[0][j] * h[0] + R[1][j] * h[1] + R[2][j] * h[2] for j in range(3))  # R^T h
             zb = tuple((R[0][j] * m_n[0] + R[1][j] * m_n[1] + R[2][j] * m_n[2]) / nmn for j in range(3))
             y = np.array((zb[0] - hb[0], zb[1] - hb[1], zb[2] - hb[2]))
-            H = np.zeros((3, 6))
+            H = self._jacobian(3)
             H[:, 0:3] = direction_jacobian(R, h)
             used, outcome, nis = self._correct(y, H, sigma2 * _I3, s.mag_gate_nis + 4.0, measures_yaw=True)
             self._record("mag", used, nis)
@@ -1360,7 +1379,7 @@ class AttitudeEKF(AttitudeFilterBase):
         offset = self.has_mag_offset
         # with the offset state the field's azimuth is alpha_ref + o: y = H dtheta - do (H's 7th entry -1)
         y = np.array([wrap_angle(state.alpha_ref + state.mag_offset_rad - math.atan2(m_n[1], m_n[0]))])
-        H = np.zeros((1, 7 if offset else 6))
+        H = self._jacobian(1)
         H[0, 0:3] = heading_jacobian(m_n)
         if offset:
             H[0, 6] = -1.0

@@ -124,13 +124,13 @@ class RotationSmoother:
     def update(self, mat_nb) -> float:
         """Filter one rotation matrix (3 row tuples, body -> ENU); returns the smoothed heading (rad)."""
         r0, r1 = mat_nb[0], mat_nb[1]
-        elems = (r0[0], r0[1], r0[2], r1[0], r1[1], r1[2])
         fs = self._filters
         if not self._started:
-            for f, x in zip(fs, elems):
+            for f, x in zip(fs, (r0[0], r0[1], r0[2], r1[0], r1[1], r1[2])):
                 f.reset(x)
             self._started = True
-        y = [f.step(x) for f, x in zip(fs, elems)]
+        f0, f1, f2, f3, f4, f5 = fs  # written out: a comprehension over the six costs more than their steps
+        y = (f0.step(r0[0]), f1.step(r0[1]), f2.step(r0[2]), f3.step(r1[0]), f4.step(r1[1]), f5.step(r1[2]))
         if self.auto_axis:
             y_norm = math.hypot(y[1], y[4])
             if not self.upright and y_norm < self.upright_enter:

@@ -686,10 +686,11 @@ class Pipeline:
         ax, ay, az = values[0], values[1], values[2]
         done: list[Step] = self._bridge_gap(t_ns) if self.bridge is not None and self.bridge.open else []
         self._acc_last_ns = t_ns
-        self.attitude.update_acc(t_ns, ax, ay, az)
+        att, grid, sm = self.attitude, self.grid, self.smoother  # (locals: read on every grid sample)
+        att.update_acc(t_ns, ax, ay, az)
         norm = math.sqrt(ax * ax + ay * ay + az * az)  # eq. 2
-        for tg, x in self.grid.update(t_ns, norm):
-            if self.grid.restarted and self.detector.n_grid:
+        for tg, x in grid.update(t_ns, norm):
+            if grid.restarted and self.detector.n_grid:
                 self.detector.restart_bout()
                 self.speed_window.reset()
                 if self.carry is not None:
@@ -703,20 +704,19 @@ class Pipeline:
                     self._candidate(ev)
             else:
                 ev = self._carry_steps(tg, x, ax, ay, az)
-            if self.attitude.initialized:
-                heading = self.smoother.update(self.attitude.matrix())
+            if att.initialized:
+                heading = sm.update(att.matrix())
+                fe, fn = sm.forward_east, sm.forward_north
                 fwd = self._fwd
-                fwd.append((tg, self.smoother.forward_east, self.smoother.forward_north))
+                fwd.append((tg, fe, fn))
                 while fwd[0][0] < tg - self._fwd_keep_ns:
                     fwd.popleft()
                 if self.walkdir is not None:
-                    self.walkdir.update(tg, self.attitude.q, ax, ay, az, self.smoother.forward_east,
-                                        self.smoother.forward_north, ev is not None, self.smoother.forward_b)
+                    self.walkdir.update(tg, att.q, ax, ay, az, fe, fn, ev is not None, sm.forward_b)
             else:
                 heading = math.nan
             if self.log:
-                a = self.attitude
-                self._log.append((tg, a.q, heading, a.acc_sigma2, a.mag_sigma2, a.mag_rejected))
+                self._log.append((tg, att.q, heading, att.acc_sigma2, att.mag_sigma2, att.mag_rejected))
             done.extend(self._release(tg))
         return done
 

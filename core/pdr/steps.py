@@ -327,15 +327,16 @@ class StepDetector:
         k = self._hist_k
         h[k] = norm
         self._hist_k = (k + 1) % n
-        if self._hist_n < n:
-            self._hist_n += 1
+        filled = self._hist_n
+        if filled < n:  # (so never more than n)
+            filled = self._hist_n = filled + 1
         if not self.gates.stride_comb:
             return norm
         period = self.step_period_s
         if not period > 0.0:
             return norm
-        lag = int(round(period * self.grid_rate_hz))
-        if lag < 1 or lag >= min(n, self._hist_n):
+        lag = round(period * self.grid_rate_hz)  # (an int: round of a float)
+        if lag < 1 or lag >= filled:
             return norm
         return 0.5 * (norm + h[(k - lag) % n])
 

@@ -94,16 +94,18 @@ class SpeedFeatureWindow:
             self._started = True
         buf = self._buf
         buf.append((t_ns, norm_m_s2))
-        self._s1 += norm_m_s2
-        self._s2 += norm_m_s2 * norm_m_s2
+        # the sums in locals (every grid sample), the same operations in the same order
+        s1 = self._s1 + norm_m_s2
+        s2 = self._s2 + norm_m_s2 * norm_m_s2
         limit = t_ns - self._window_ns
         while buf[0][0] <= limit:
             _, old = buf.popleft()
-            self._s1 -= old
-            self._s2 -= old * old
+            s1 -= old
+            s2 -= old * old
+        self._s1, self._s2 = s1, s2
         n = len(buf)
-        mean = self._s1 / n
-        sd = math.sqrt(max(self._s2 / n - mean * mean, 0.0))
+        mean = s1 / n
+        sd = math.sqrt(max(s2 / n - mean * mean, 0.0))
         h = max(0.25 * sd, self.min_hysteresis_m_s2)
         y = self._lp.step(norm_m_s2) - mean
         if y < -h:
