@@ -176,7 +176,9 @@ class GpsFusion(FixFusion):
         self._fix_bias_t_ns: int | None = None  # the fix the fixes' correlated error was last propagated to
         self.decorrelation = FixDecorrelation(self.gps_error_correlation_s)
         self.lagged.reset()
-        self._x = None  # the heading model's regressors at the current step (lagged with ``heading_lag_s``)
+        #: the heading model's regressors at the current step, lagged with ``heading_lag_s`` (None without a lag: the
+        #: model then takes its heading's own)
+        self._x = None
         if self._trainer_proto is not None:
             self.trainer = self._trainer_proto
             self.trainer.reset()
@@ -200,10 +202,6 @@ class GpsFusion(FixFusion):
     def heading_model(self) -> HeadingErrorModel:
         return self.trainer.heading_model
 
-    def _regressors(self):
-        """The current step's regressors for the heading model: None (its heading's own) without a lag."""
-        return self._x if self.heading_lag_s > 0.0 else None
-
     def _heading_sd(self, heading_rad: float) -> float:
         """What the heading model does not know at this heading (rad).
 
@@ -225,12 +223,12 @@ class GpsFusion(FixFusion):
         prior while it has no sample)."""
         hm = self.heading_model
         res = hm.residual_sd_rad()
-        return math.hypot(hm.correction_sd_rad(heading_rad, self._regressors()), res if math.isfinite(res) else 0.0)
+        return math.hypot(hm.correction_sd_rad(heading_rad, self._x), res if math.isfinite(res) else 0.0)
 
     def compensated_heading(self, heading_rad: float) -> float:
         """Our heading plus the eq.-12 correction (only when the model is learnt or was given)."""
         if self.learn_heading or self._heading_model0 is not None:
-            return heading_rad + self.heading_model.correction_rad(heading_rad, self._regressors())
+            return heading_rad + self.heading_model.correction_rad(heading_rad, self._x)
         return heading_rad
 
     # -- the filter's hooks -----------------------------------------------------------
@@ -238,8 +236,9 @@ class GpsFusion(FixFusion):
         # the trainer gets the step before the fixes it spans: a window closed by a fix inside this step's
         # interval must count the part of the step before the fix (without it the model distance of every
         # window missed half a step on average, and the stride scale came out 2.4 % long on the simulator)
-        self._x = self.lagged.update(step.t_ns, step.heading_rad)
-        self.trainer.add_step(step.t_ns, t_prev_ns, step.length_m, step.heading_rad, self._regressors())
+        if self.heading_lag_s > 0.0:  # (off by default: no regressors built per step then)
+            self._x = self.lagged.update(step.t_ns, step.heading_rad)
+        self.trainer.add_step(step.t_ns, t_prev_ns, step.length_m, step.heading_rad, self._x)
 
     def _init_filter_at(self, sigma_m: float) -> None:
         self.ekf.initialize(0.0, 0.0, sigma_m, 0.7, 0.0, heading_sd_rad=math.pi)
