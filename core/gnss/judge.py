@@ -53,8 +53,10 @@ Evidence over the last ``window_s`` of screened fixes
       median, the shape test's scale band and the pace check say: those compare the fixes with the pipeline's own
       stride, which the fusion never corrects, so a stride or step count off by 2x refused a good stream for good.
       The lock window is its own settling, also where the normal tests pass first after a failure the lock
-      overrides (the judgement then says it overrode ``Cause.SETTLING``).  The judgement says so
-      (``locked_over``; the summary's ``fixes_locked``, :func:`verdict_text`);
+      overrides (the judgement then says it overrode ``Cause.SETTLING``).  A lock that holds over a whole window
+      since the judge's last inconsistent one, where the fixes never disagreed among themselves, ends the relock's
+      jump memory (``lock_ends_jump_memory``: a jump of the steps' heading is no jump of the stream).  The judgement
+      says so (``locked_over``; the summary's ``fixes_locked``, :func:`verdict_text`);
     * **the filter's innovations** (:meth:`GpsJudge.add_nis`): the mean NIS
       of the last ``nis_window`` fixes the filter took within the upper
       ``nis_quantile`` point of its chi-square band (2 degrees of freedom
@@ -361,10 +363,19 @@ class JudgeSettings:
     #: 3-minute outages, Kubrak 113.4 -> 109.9 %); the lost stretches and the leave-out identical
     lock_memory_heading_path: bool = True
     #: the relock's jump memory (:meth:`core.gnss.base.FixFusion._stream_jumped`) ends where the stream lock holds
-    #: over a whole window that began after the judge's last inconsistent window (:meth:`GpsJudge.lock_holds_since`):
-    #: 30 s of good fixes agreeing among themselves and with the walker's turns since then say the stream did not jump
-    #: away from a right track (h11/lockturns).  False: the memory's ``relock_jump_hold_s`` (60 s) whatever the lock
-    #: says (the rule before)
+    #: over a whole window that began after the judge's last inconsistent window, and in none of the memory's windows
+    #: did the fixes disagree among themselves (:meth:`GpsJudge.lock_holds_since`; issue #26, h11/lockturns).  Why: a
+    #: jump of the steps' heading (a swinging hand's walking direction, #25: 100-160 deg every 15-75 s on the
+    #: simulator) fails the judge's windows that hold it, the gate then refuses the good fixes (the track runs off),
+    #: and the memory took those windows for the stream jumping away from a right track, holding the relock back for
+    #: ``relock_jump_hold_s`` (60 s) although the lock held 30 s after it (synthetic walk, a 160-deg jump: 62-64 s of
+    #: good fixes lost, now 32-34 s; the relock walk with the offset jumping 90-180 deg every 15 s on average, seeds
+    #: 1 and 7: 78-82 s -> 48-52 s).  A jump of the fixes themselves (two consecutive fixes further apart than a walk,
+    #: or the neighbour residual over the limit, :meth:`_fix_to_fix_ok`) keeps the memory: without that condition the
+    #: simulator's tuning fault walks took 38 instead of 5 bad fixes (their 60-s multipath jump).  The relock event
+    #: says so (``jump_memory_ended_by_lock``).  False: the memory's 60 s whatever the lock says (the rule before).
+    #: **On** (the lock's bar: a defect fix, a test that fails before, no loss on tuning): TUNING ``gnss_faults``
+    #: identical in every field (it acts nowhere there)
     lock_ends_jump_memory: bool = True
 
 
