@@ -486,6 +486,7 @@ class FixFusion:
         self._last_step_dur_ns = int(0.55e9)
         self._last_accept_ns: int | None = None
         self._first_inconsistent_ns: int | None = None  # the judge's first inconsistent window since then
+        self._memory_ended_by_lock = False  # the last :meth:`_stream_jumped` said no jump because the lock held
         self._walked_since_accept_m = 0.0
         self._windows = [_Window(a, b) for a, b in self.hidden_ns]
         self._t_first_ns: int | None = None
@@ -864,7 +865,10 @@ class FixFusion:
                                  "rule": "consistent stream", "consistent_s": self._consistent_s(t_ns),
                                  "gated_s": (t_ns - run[0][0]) * 1e-9,
                                  # usable by the judge's stream lock (``JudgeSettings.lock_window_s``): what it overrode
-                                 "stream_lock": [c.value for c in self.judge.last.locked_over]})
+                                 "stream_lock": [c.value for c in self.judge.last.locked_over],
+                                 # the jump memory would still hold it back, but the stream lock held over a whole
+                                 # window since its last inconsistent one (``JudgeSettings.lock_ends_jump_memory``)
+                                 "jump_memory_ended_by_lock": self._memory_ended_by_lock})
             run.clear()
             return True
         if len(run) < 3 or t_ns - run[0][0] < self.relock_ns:
@@ -909,7 +913,11 @@ class FixFusion:
         ``relock_jump_hold_s`` after its jump is taken back whatever it jumped from (before: blocked until another
         fix was accepted, which the gate could refuse for ever: on one phone walk 837 s of good fixes)."""
         last, first = self.judge.last_inconsistent_ns, self._first_inconsistent_ns
+        self._memory_ended_by_lock = False
         if last is None or first is None or t_ns - last >= self.relock_jump_hold_ns:
+            return False
+        if self.judge.lock_holds_since(last, first):  # the stream lock's whole window since: no jump (``lock_ends_jump_memory``)
+            self._memory_ended_by_lock = True
             return False
         accept = self._last_accept_ns if last_accept_ns is None else last_accept_ns
         if accept is None:

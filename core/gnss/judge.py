@@ -53,8 +53,10 @@ Evidence over the last ``window_s`` of screened fixes
       median, the shape test's scale band and the pace check say: those compare the fixes with the pipeline's own
       stride, which the fusion never corrects, so a stride or step count off by 2x refused a good stream for good.
       The lock window is its own settling, also where the normal tests pass first after a failure the lock
-      overrides (the judgement then says it overrode ``Cause.SETTLING``).  The judgement says so
-      (``locked_over``; the summary's ``fixes_locked``, :func:`verdict_text`);
+      overrides (the judgement then says it overrode ``Cause.SETTLING``).  A lock that holds over a whole window
+      since the judge's last inconsistent one, where the fixes never disagreed among themselves, ends the relock's
+      jump memory (``lock_ends_jump_memory``: a jump of the steps' heading is no jump of the stream).  The judgement
+      says so (``locked_over``; the summary's ``fixes_locked``, :func:`verdict_text`);
     * **the filter's innovations** (:meth:`GpsJudge.add_nis`): the mean NIS
       of the last ``nis_window`` fixes the filter took within the upper
       ``nis_quantile`` point of its chi-square band (2 degrees of freedom
@@ -360,6 +362,21 @@ class JudgeSettings:
     #: change (its outage at 362 s rejoined 68 s after it instead of 168 s; the phone walks without a magnetometer,
     #: 3-minute outages, Kubrak 113.4 -> 109.9 %); the lost stretches and the leave-out identical
     lock_memory_heading_path: bool = True
+    #: the relock's jump memory (:meth:`core.gnss.base.FixFusion._stream_jumped`) ends where the stream lock holds
+    #: over a whole window that began after the judge's last inconsistent window, and in none of the memory's windows
+    #: did the fixes disagree among themselves (:meth:`GpsJudge.lock_holds_since`; issue #26, h11/lockturns).  Why: a
+    #: jump of the steps' heading (a swinging hand's walking direction, #25: 100-160 deg every 15-75 s on the
+    #: simulator) fails the judge's windows that hold it, the gate then refuses the good fixes (the track runs off),
+    #: and the memory took those windows for the stream jumping away from a right track, holding the relock back for
+    #: ``relock_jump_hold_s`` (60 s) although the lock held 30 s after it (synthetic walk, a 160-deg jump: 62-64 s of
+    #: good fixes lost, now 32-34 s; the relock walk with the offset jumping 90-180 deg every 15 s on average, seeds
+    #: 1 and 7: 78-82 s -> 48-52 s).  A jump of the fixes themselves (two consecutive fixes further apart than a walk,
+    #: or the neighbour residual over the limit, :meth:`_fix_to_fix_ok`) keeps the memory: without that condition the
+    #: simulator's tuning fault walks took 38 instead of 5 bad fixes (their 60-s multipath jump).  The relock event
+    #: says so (``jump_memory_ended_by_lock``).  False: the memory's 60 s whatever the lock says (the rule before).
+    #: **On** (the lock's bar: a defect fix, a test that fails before, no loss on tuning): TUNING ``gnss_faults``
+    #: identical in every field (it acts nowhere there)
+    lock_ends_jump_memory: bool = True
 
 
 @dataclass(frozen=True)
@@ -553,6 +570,10 @@ class GpsJudge:
         self._speeds_seen = False  # a fix has reported a positive speed
         #: the last time the fixes' shape disagreed with the steps (a jump, multipath): None if never
         self.last_inconsistent_ns: int | None = None
+        #: of those, the last where the window's fixes also disagreed among themselves (:meth:`_self_residual_m` over
+        #: the limit, or two consecutive fixes further apart than a walk: :meth:`_fix_to_fix_ok`): a jump of the stream
+        #: itself, not only of the steps' heading (``lock_ends_jump_memory``); None if never
+        self.last_fixes_disagreed_ns: int | None = None
         self.last: Judgement | None = None
         self.first_usable_ns: int | None = None
         self._counts = _Counts()
@@ -742,6 +763,8 @@ class GpsJudge:
         if ((n >= s.min_fixes and not (resid <= limit or self_agree)) or jumped) and not locked_over and \
                 not (not jumped and self._scale_only(limit, self_resid)):  # a jump or an offset episode
             self.last_inconsistent_ns = t_ns
+            if not (self_resid <= limit and self._fix_to_fix_ok(list(fx))):
+                self.last_fixes_disagreed_ns = t_ns  # the fixes themselves jumped, not (only) the steps
         # evidence_first: no positive evidence yet is a wait, not a failure: the settling time runs meanwhile
         if s.evidence_first and not self._proven and not causes and self._evidence_now(resid <= limit or self_agree):
             self._proven = True
@@ -824,6 +847,19 @@ class GpsJudge:
             return shape_residual_m(a, heading_path(t, b), s.lock_speed_m_s) <= limit
         return shape_residual_m(a, b, s.lock_scale_limits) <= limit
 
+    def lock_holds_since(self, t_ns: int, first_ns: int) -> bool:
+        """Whether the relock's jump memory, whose inconsistent windows ran from ``first_ns`` to ``t_ns``, may end
+        (``lock_ends_jump_memory``; False with the lock or that setting off): in none of the judge's windows since
+        ``first_ns`` did the fixes disagree among themselves (the inconsistency was the steps': their heading jumped,
+        their count stalled), and the stream lock (:meth:`_stream_lock`) holds now over a window whose first fix came
+        after ``t_ns``."""
+        s = self.settings
+        lf = self._lock_fixes
+        if s.lock_window_s is None or not s.lock_ends_jump_memory or not lf or lf[0][0] <= t_ns or \
+                (self.last_fixes_disagreed_ns is not None and self.last_fixes_disagreed_ns >= first_ns):
+            return False
+        return self._stream_lock()[0]
+
     def _stream_lock(self) -> tuple[bool, float, float]:
         """The stream lock's evidence over the last ``lock_window_s`` (see the setting): (whether it holds, the fixes'
         walking speed in m/s, their shape residual against the steps in m with a scale in ``lock_scale_limits``).
@@ -849,9 +885,7 @@ class GpsJudge:
             return False, nan, nan
         med = float(np.median(hacc))
         limit = max(s.shape_residual_floor_m, s.shape_residual_per_hacc * med)
-        d_fix = np.hypot(*np.diff(a[:, 1:3], axis=0).T)
-        sd = np.hypot(hacc[:-1], hacc[1:]) / HACC_PER_SIGMA
-        if not np.all(d_fix <= s.max_walk_speed_m_s * dt + 3.0 * sd) or not self._self_residual_m(lf) <= limit:
+        if not self._fix_to_fix_ok(lf) or not self._self_residual_m(lf) <= limit:
             return False, nan, nan
         # the fixes' speed and the steps' walk over each third of the window
         edges = t[0] + (t[-1] - t[0]) * np.array([0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0])
@@ -880,6 +914,16 @@ class GpsJudge:
         lo, hi = s.lock_speed_m_s
         dlo, dhi = s.lock_doppler_ratio
         return bool(lo <= speed <= hi and shape <= limit and not (doppler < dlo or doppler > dhi)), speed, shape
+
+    def _fix_to_fix_ok(self, fixes) -> bool:
+        """Every two consecutive ``fixes`` apart by no more than a walk at ``max_walk_speed_m_s`` covers between their
+        times plus three SDs of their difference (their reported accuracies); True with fewer than two."""
+        a = np.array([(f[0] * 1e-9, f[1], f[2], f[3]) for f in fixes], dtype=float).reshape(-1, 4)
+        if len(a) < 2:
+            return True
+        d_fix = np.hypot(*np.diff(a[:, 1:3], axis=0).T)
+        sd = np.hypot(a[:-1, 3], a[1:, 3]) / HACC_PER_SIGMA
+        return bool(np.all(d_fix <= self.settings.max_walk_speed_m_s * np.diff(a[:, 0]) + 3.0 * sd))
 
     def _self_residual_m(self, fixes=None) -> float:
         """RMS distance (m) of each inner fix of the window (or of ``fixes``) from the point interpolated in time
@@ -929,10 +973,7 @@ class GpsJudge:
         fx = np.array([(f[0], f[1], f[2], f[3], math.nan, f[5], f[6]) for f in self._fixes], dtype=float)
         if len(fx) < 2:
             return False
-        t = fx[:, 0] * 1e-9
-        d_fix = np.hypot(*np.diff(fx[:, 1:3], axis=0).T)
-        sd = np.hypot(fx[:-1, 3], fx[1:, 3]) / 1.515  # hacc is a 68 % radius: 1.515 per-axis SDs
-        if not np.all(d_fix <= s.max_walk_speed_m_s * np.diff(t) + 3.0 * sd):
+        if not self._fix_to_fix_ok(self._fixes):
             return False
         if not np.isfinite(fx[:, 5:7]).all():
             return True  # no steps yet: the fixes alone
