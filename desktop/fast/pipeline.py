@@ -261,8 +261,11 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
 
 
 def _check_gates(p: Pipeline) -> None:
-    """Refuse the periodic weak-step rescue (``StepGates.rescue_min_periodicity``, issue #25, off by default): the
-    fast step kernel does not mirror it."""
+    """Refuse the periodic weak-step rescue (``StepGates.rescue_min_periodicity``, issue #25, off by default) and the
+    end-of-data flush (``Pipeline(flush_at_end=True)``, issue #25, off by default): the fast step kernel does not
+    mirror them."""
+    if getattr(p, "flush_at_end", False):
+        raise NotImplementedError("the end-of-data step flush (Pipeline(flush_at_end=True)) runs on the reference only")
     if any(math.isfinite(g.rescue_min_periodicity) for g in p.step_gates.values()):
         raise NotImplementedError("the periodic weak-step rescue (StepGates.rescue_min_periodicity) runs on the "
                                   "reference only")
