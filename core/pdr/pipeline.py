@@ -473,7 +473,7 @@ class Pipeline:
         gates as any peak, in time order, the same in batch and streaming.  Never a step without a rising peak.
         TUNING: the 26 counted real clips end standing and count the same; cut at 156 seeded times inside their
         walking, 37 steps missing against the full run without it, 11 with it, none added
-        (:mod:`core.pdr.steps`).  The fast path refuses it (the engine falls back to the reference).
+        (:mod:`core.pdr.steps`).  The fast path mirrors it (:func:`desktop.fast.steps.detect`).
     acc_gap_bridge : bool or core.pdr.gapbridge.AccGapBridge
         A gap of the accelerometer alone (the gyroscope running on) of at least the bridge's ``min_gap_s``:
         where the gyroscope shows the walker kept walking, steps are estimated across it from the gyroscope's

@@ -87,7 +87,7 @@ heel strike (five placements, 3 seeds): that heel strike missed in 15 of 15, cou
 the 26 counted real clips all end standing (0.3-29 s after their last step): every count the same (mean absolute
 error 1.489 %), and lopen 602, alex_walking 137 the same; the same clips cut at 156 seeded times inside their
 walking (the full run's steps up to the cut as the reference): 37 steps missing in 31 cuts without the flush, 11 in
-7 with it, none added. Off because the counted clips show nothing to gain; the fast path refuses it. A walk that
+7 with it, none added. Off because the counted clips show nothing to gain; the fast path mirrors it. A walk that
 stops and stands is not concerned: its last step comes out live within one step period of its heel strike
 (``tests/test_end_steps.py``).
 
