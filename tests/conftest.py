@@ -37,8 +37,9 @@ def _isolated_app_data(tmp_path_factory, monkeypatch):
 NUMBA_TEST_FILES = frozenset(
     f"test_{name}.py" for name in (
         "acc_gap_bridge", "app_bad_input", "attitude_reset", "attitude_state", "bad_input_round3", "bad_numbers",
-        "carry", "carry_outputs", "cli", "cli_batch", "cli_foot", "cli_map", "cli_truth", "engine", "fast_magcal",
-        "fast_path", "fast_walkdir", "floors", "gnss", "kubrak", "truth_beside", "walk_start_steps", "weak_steps"))
+        "carry", "carry_outputs", "cli", "cli_batch", "cli_foot", "cli_map", "cli_truth", "end_steps", "engine",
+        "fast_magcal", "fast_path", "fast_walkdir", "floors", "gnss", "kubrak", "truth_beside", "walk_start_steps",
+        "weak_steps"))
 
 
 #: other files that share a worker (one xdist work unit each): their module-level caches compute once what they

@@ -155,6 +155,7 @@ class StepRelease:
                       np.searchsorted(gt, t + self.gap_ns, side="right")]
             if self.settle_hold:  # where a step held by the settling is held no longer
                 ticks.append(np.searchsorted(gt, t + self.hold_ns, side="left"))
+            tk = tk[tk < n_grid]  # (the end-of-data flush's steps are no live peaks)
             live = tk[(det_at[tk] == d) & ~det_switch[tk]]
             steps_at.update(live.tolist())
         ticks = np.unique(np.concatenate(ticks))
@@ -317,6 +318,19 @@ class StepRelease:
             self.complete(ev, h, reg, bool(self.mag_rejected[k]))
 
     def finish(self) -> None:
+        p = self.p
+        if getattr(p, "flush_at_end", False) and len(self.grid_t):  # Pipeline._flush_detector: the active detector's
+            n_grid = len(self.grid_t)                                 # steps found at the end (grid sample n_grid)
+            # the detector in force after the last sample (the fast pipeline set the pipeline's from det_at[-1])
+            self.active_d = next(i for i, d in enumerate(p._mode_detectors) if d is p._active_det) \
+                if getattr(p, "carry", None) is not None else 0
+            tk = self.peaks[self.active_d][0]
+            self.k = n_grid - 1  # the state after the last sample (the rotation gate, a walk-start look-back)
+            ms = range(int(np.searchsorted(tk, n_grid, side="left")), len(tk))
+            for m in ms:
+                self._peak(self.active_d, m)
+            p.n_flushed = len(ms)
+            self.k = None
         self.drop_unconfirmed()
         last = len(self.grid_t) - 1
         rejected = self.p.attitude.mag_rejected  # the filter's state after the last event

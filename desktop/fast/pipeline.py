@@ -210,9 +210,11 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     for det in p._mode_detectors:
         det.n_grid = n_ticks
         ev_tick, ev_t, ev_f = detect_steps(det, gt, gx, restart, det.gates,
-                                           None if track is None else track.step_period_s)
+                                           None if track is None else track.step_period_s, p.flush_at_end)
         found.append((ev_tick, ev_t, ev_f))
-    all_ticks = np.unique(np.concatenate([f[0] for f in found]))
+    # a step of the end-of-data flush is found at grid sample n_ticks: the speed window and the rotation are then
+    # what they are after the last sample and the last gyroscope event (Pipeline.finish)
+    all_ticks = np.unique(np.concatenate([np.minimum(f[0], n_ticks - 1) for f in found]))
     speed = speed_at(p.speed_window, gt, gx, restart, all_ticks)
     clock("steps, speed window", 0.40)
     rot_sum = np.empty(len(gyro_pos))
@@ -220,11 +222,12 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     rotation_sums(ev.t[gyro_pos], np.ascontiguousarray(ev.v[gyro_pos]), p._rot_window_ns, rot_sum, rot_n)
     peaks = []
     for ev_tick, ev_t, ev_f in found:
-        g = np.searchsorted(gyro_pos, tick_event[ev_tick], side="left") - 1
+        at = np.minimum(ev_tick, n_ticks - 1)
+        g = np.where(ev_tick < n_ticks, np.searchsorted(gyro_pos, tick_event[at], side="left") - 1, len(gyro_pos) - 1)
         gi = np.maximum(g, 0)
         rms = np.where(g >= 0, np.sqrt(np.maximum(rot_sum[gi], 0.0) / np.maximum(rot_n[gi], 1)), 0.0) \
             if len(gyro_pos) else np.zeros(len(ev_tick))
-        peaks.append((ev_tick, ev_t, ev_f, rms, speed[np.searchsorted(all_ticks, ev_tick)]))
+        peaks.append((ev_tick, ev_t, ev_f, rms, speed[np.searchsorted(all_ticks, at)]))
     # 6. the sensor event before which the first anchoring fix gives the attitude filter its site (-1: none)
     site_at, anchor, att = -1, None, None
     if fusion is not None and p.site_from_gps and np.any(fusion.is_gps):
@@ -537,6 +540,8 @@ def _result(p: Pipeline, recording: Recording, att: AttitudeLog) -> PipelineResu
                     peaks_rejected_rotation=p.n_rejected_rotation, peaks_rejected_bout=p.n_rejected_bout)
     counters.update(peaks_replayed_mode_change=p.n_replayed, peaks_replaced_mode_change=p.n_replaced_mode,
                     walk_start_steps=p.n_walk_start_steps)
+    if p.flush_at_end:
+        counters["steps_flushed_at_end"] = p.n_flushed
     counters["nonfinite_skipped"] = dict(p.n_nonfinite)
     counters.update(p.health_counters())
     counters.update(p.gap_counters())  # empty: a recording with a gap to bridge is refused

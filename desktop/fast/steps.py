@@ -34,7 +34,7 @@ def biquad_reset(c, x0):
 @kernel
 def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_valley, g0,
            comb_lag, gate_dt_ns, min_raw_range, range_back, hist, ev_tick, ev_t, ev_f, period, rescue_h, rescue_lo,
-           rescue_hi, pos_lo, pos_hi):
+           rescue_hi, pos_lo, pos_hi, flush):
     """The peaks of eq. 3 on the grid, with a carry mode's gates (:class:`core.pdr.steps.StepGates`); returns how
     many.
 
@@ -45,7 +45,10 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
     its time (the peak less the low-pass delay); ``ev_f[k]``: A_max, A_min, variance, duration (nan: first of a
     bout), gravity.  ``period``: the step period per grid sample (nan: unknown); ``rescue_h`` (0: off),
     ``rescue_lo``, ``rescue_hi``, ``pos_lo``, ``pos_hi``: the weak-step rescue's height, interval (periods) and
-    position (:class:`core.pdr.steps.StepGates`).
+    position (:class:`core.pdr.steps.StepGates`).  ``flush``: the end of data
+    (:meth:`core.pdr.steps.StepDetector.flush`, ``Pipeline(flush_at_end=True)``): after the last sample, the step
+    waiting behind a rescued one and a filtered norm still rising at the last sample (the peak tests with the last
+    sample's gates), found at grid sample ``len(t_ns)``.
     """
     n_hist = len(hist)
     hist_k = 0
@@ -77,10 +80,13 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
     s_t = 0
     s_f0 = s_f1 = s_f2 = s_f3 = s_f4 = 0.0
     b0, b1, b2, a1, a2 = c[0], c[1], c[2], c[3], c[4]
-    for k in range(len(t_ns)):
-        tk = t_ns[k]
-        norm = x[k]
-        if restart[k] and n_grid:  # restart_bout
+    n_t = len(t_ns)
+    for k in range(n_t + 1 if flush and n_t else n_t):
+        end = k == n_t  # the flush: no sample, the tests on the last one (its gates: kk)
+        kk = n_t - 1 if end else k
+        tk = t_ns[kk]
+        norm = x[kk]
+        if not end and restart[k] and n_grid:  # restart_bout
             have1 = have2 = False
             has_last = False
             armed = True
@@ -96,33 +102,37 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
             ev_f[n_ev, 0], ev_f[n_ev, 1], ev_f[n_ev, 2], ev_f[n_ev, 3], ev_f[n_ev, 4] = s_f0, s_f1, s_f2, s_f3, s_f4
             n_ev += 1
             has_stash = False
-        if not have1:
-            z1, z2 = biquad_reset(c, norm)
-            if n_grid == 0:
-                gravity = norm
-        n_grid += 1
-        gravity = gravity + alpha_g * (norm - gravity)
-        g = gravity
-        hist[hist_k] = norm  # the stride comb's delay line (core.pdr.steps.StepDetector._comb)
-        written = hist_k
-        hist_k = (hist_k + 1) % n_hist
-        if hist_n < n_hist:
-            hist_n += 1
-        lag = comb_lag[k]
-        xin = norm
-        if lag >= 1 and lag < min(n_hist, hist_n):
-            xin = 0.5 * (norm + hist[(written - lag) % n_hist])
-        y = b0 * xin + z1  # the biquad, direct form II transposed
-        z1 = b1 * xin - a1 * y + z2
-        z2 = b2 * xin - a2 * y
+        if end:
+            g = gravity
+            y = -math.inf  # the last sample, still rising, is the data's maximum
+        else:
+            if not have1:
+                z1, z2 = biquad_reset(c, norm)
+                if n_grid == 0:
+                    gravity = norm
+            n_grid += 1
+            gravity = gravity + alpha_g * (norm - gravity)
+            g = gravity
+            hist[hist_k] = norm  # the stride comb's delay line (core.pdr.steps.StepDetector._comb)
+            written = hist_k
+            hist_k = (hist_k + 1) % n_hist
+            if hist_n < n_hist:
+                hist_n += 1
+            lag = comb_lag[k]
+            xin = norm
+            if lag >= 1 and lag < min(n_hist, hist_n):
+                xin = 0.5 * (norm + hist[(written - lag) % n_hist])
+            y = b0 * xin + z1  # the biquad, direct form II transposed
+            z1 = b1 * xin - a1 * y + z2
+            z2 = b2 * xin - a2 * y
         if have1 and have2 and y1 > y2 and y1 >= y:  # a local maximum at the previous sample
             t_peak = t1
             since = t_peak - last
-            pk = period[k]
-            timed = ((not has_last) or since > gate_dt_ns[k]) and armed  # eq. 3, the time threshold; the valley
+            pk = period[kk]
+            timed = ((not has_last) or since > gate_dt_ns[kk]) and armed  # eq. 3, the time threshold; the valley
             echo = True
             if min_raw_range > 0.0:  # the echo gate: the raw norm's range over the last half period
-                back = min(n_hist, hist_n, range_back[k])
+                back = min(n_hist, hist_n, range_back[kk])
                 rng = 0.0
                 if back >= 2:
                     lo_v = math.inf
@@ -135,7 +145,7 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
                 echo = rng >= min_raw_range
             if y1 - g > min_peak and timed and echo:  # eq. 3
                 rescue = (has_weak and pk > 0.0 and rescue_lo * pk * 1e9 <= since <= rescue_hi * pk * 1e9
-                          and pos_lo * since <= w_t - last <= pos_hi * since and t_peak - w_t > gate_dt_ns[k])
+                          and pos_lo * since <= w_t - last <= pos_hi * since and t_peak - w_t > gate_dt_ns[kk])
                 if rescue:  # the weak step now, this one at the next sample
                     mean = w_sum / w_n if w_n else w_y
                     var = max(w_sum2 / w_n - mean * mean, 0.0) if w_n else 0.0
@@ -174,6 +184,15 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
                 has_weak = True
                 w_t, w_y, w_g, w_min, w_sum, w_sum2, w_n = t_peak, y1, g, seg_min, seg_sum, seg_sum2, seg_n
                 after_min = math.inf
+        if end:
+            if has_stash:  # the step found with the flush's rescued one
+                ev_tick[n_ev] = k
+                ev_t[n_ev] = s_t
+                ev_f[n_ev, 0], ev_f[n_ev, 1], ev_f[n_ev, 2], ev_f[n_ev, 3] = s_f0, s_f1, s_f2, s_f3
+                ev_f[n_ev, 4] = s_f4
+                n_ev += 1
+                has_stash = False
+            break
         if y < g:
             armed = True
         if has_last and tk - last > max_dt_ns:  # a pause
@@ -195,8 +214,9 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
     return n_ev
 
 
-def detect_steps(detector, t_ns, x, restart, gates=None, step_period_s=None):
-    """StepEvent fields of every step the reference ``detector`` (its settings) finds on the grid.
+def detect_steps(detector, t_ns, x, restart, gates=None, step_period_s=None, flush=False):
+    """StepEvent fields of every step the reference ``detector`` (its settings) finds on the grid (``flush``: and
+    those its :meth:`core.pdr.steps.StepDetector.flush` gives at the end, found at grid sample ``len(t_ns)``).
 
     ``gates``: the carry mode's :class:`core.pdr.steps.StepGates` in force (default: the detector's own);
     ``step_period_s``: the step period the detector is given at each grid sample (the carry detector's; default:
@@ -227,7 +247,7 @@ def detect_steps(detector, t_ns, x, restart, gates=None, step_period_s=None):
         gate_dt = np.where(known, np.maximum(min_dt, np.trunc(frac * p * 1e9).astype(np.int64)), min_dt)
     delay_samples = int(round(butter2_group_delay_s(detector.cutoff_hz) * rate))
     range_back = np.where(known, np.trunc(0.5 * p * rate).astype(np.int64) + delay_samples + 2, n_hist)
-    ev_tick = np.empty(n // 2 + 1, dtype=np.int64)
+    ev_tick = np.empty(n // 2 + 3, dtype=np.int64)
     ev_t = np.empty(len(ev_tick), dtype=np.int64)
     ev_f = np.empty((len(ev_tick), 5))
     k = detect(t_ns, x, restart, c, alpha_g, a_th, int(detector.max_step_interval_s * 1e9),
@@ -236,7 +256,7 @@ def detect_steps(detector, t_ns, x, restart, gates=None, step_period_s=None):
                float(gates.min_raw_range_m_s2), np.ascontiguousarray(range_back.astype(np.int64)), np.zeros(n_hist),
                ev_tick, ev_t, ev_f, np.ascontiguousarray(period), float(gates.rescue_peak_height_m_s2),
                float(gates.rescue_interval_periods[0]), float(gates.rescue_interval_periods[1]),
-               float(gates.rescue_position_frac[0]), float(gates.rescue_position_frac[1]))
+               float(gates.rescue_position_frac[0]), float(gates.rescue_position_frac[1]), bool(flush))
     return ev_tick[:k].copy(), ev_t[:k].copy(), ev_f[:k].copy()
 
 
