@@ -58,7 +58,7 @@ def test_recording_stopped_mid_step_counts_its_last_heel_strike(placement):
     t_cut = int(truth[-4] + 0.3 * period)
     rec = _cut(w.recording, t_cut)
     n_true = int(np.sum(truth <= t_cut))
-    off = Pipeline().run(rec)
+    off = Pipeline(flush_at_end=False).run(rec)
     assert len(off.steps) == n_true - 1, (len(off.steps), n_true)  # the bite
     p = Pipeline(flush_at_end=True)
     on = p.run(rec)
@@ -74,7 +74,7 @@ def test_walk_ending_standing_gets_nothing_from_the_flush():
     them; streaming gives the last step out within one step period of its heel strike, before the end of data."""
     w = _walk("handheld", 1)
     truth = np.asarray(w.truth.step_t_ns)
-    off = Pipeline().run(w.recording)
+    off = Pipeline(flush_at_end=False).run(w.recording)
     on = Pipeline(flush_at_end=True).run(w.recording)
     assert [s.t_ns for s in on.steps] == [s.t_ns for s in off.steps]
     assert len(on.steps) == len(truth)

@@ -466,14 +466,15 @@ class Pipeline:
         the bout's third (about two steps late).  The same rule one step period after a bout's last step
         overcounted the tuning clips (2.06 -> 1.98 %, both rules 2.52 %): not built.
     flush_at_end : bool
-        Off by default (issue #25, a walk's last step lost when the recording stops mid-walk).  At :meth:`finish`
+        On by default (issue #25, a walk's last step lost when the recording stops mid-walk).  At :meth:`finish`
         (the end of a replay, the app's Stop) the step detector in force gives out the steps that only the missing
         next samples kept back (:meth:`core.pdr.steps.StepDetector.flush`: the norm still rising at the last sample
         through every other test, and a step held one sample behind a rescued one); they pass the rotation and bout
         gates as any peak, in time order, the same in batch and streaming.  Never a step without a rising peak.
         TUNING: the 26 counted real clips end standing and count the same; cut at 156 seeded times inside their
         walking, 37 steps missing against the full run without it, 11 with it, none added
-        (:mod:`core.pdr.steps`).  The fast path mirrors it (:func:`desktop.fast.steps.detect`).
+        (:mod:`core.pdr.steps`): on by that tuning gain (h11, the lead's decision; the helper had left it off because
+        the uncut clips show nothing).  The fast path mirrors it (:func:`desktop.fast.steps.detect`).
     acc_gap_bridge : bool or core.pdr.gapbridge.AccGapBridge
         A gap of the accelerometer alone (the gyroscope running on) of at least the bridge's ``min_gap_s``:
         where the gyroscope shows the walker kept walking, steps are estimated across it from the gyroscope's
@@ -508,7 +509,7 @@ class Pipeline:
                  swinging_max_rotation_rms_rad_s: float = 12.0,
                  wide_rotation_modes: tuple = (CARRY_SWINGING, CARRY_POCKET, CARRY_BAG), rotation_hold_s: float = 8.0,
                  hold_while_settling: bool = True, recount_at_settle: bool = True, walk_start_step: bool = False,
-                 walk_start_cadence_frac: float = 0.3, flush_at_end: bool = False,
+                 walk_start_cadence_frac: float = 0.3, flush_at_end: bool = True,
                  acc_gap_bridge: bool | AccGapBridge = True, heading_smoother: str = HEADING_SMOOTHER_OFF):
         self.keep_steps = keep_steps
         if acc_gap_bridge is True:

@@ -76,7 +76,7 @@ position and cadence tests stay).  TUNING, at 0.6 (the carry detector's ``gentle
 priori): 3 of the 26 counted clips gain a step (mean absolute error 1.489 -> 1.440 %), too little to tell from the
 choice itself, so it stays off; the fast path refuses it.
 
-**End-of-data flush** (:meth:`StepDetector.flush`, ``Pipeline(flush_at_end=True)``, issue #25, OFF by default). A
+**End-of-data flush** (:meth:`StepDetector.flush`, ``Pipeline(flush_at_end=True)``, issue #25, ON by default). A
 peak is found one grid sample after it, and the low-pass puts it after the heel strike (on the simulator the norm
 peaks about 0.09 s after the heel strike and the 3-Hz filter adds 0.075 s): a recording stopped within about 0.18 s
 of a heel strike has no peak for it, and a step the rescue found waits for the next sample (the stash). At the end
@@ -87,7 +87,7 @@ heel strike (five placements, 3 seeds): that heel strike missed in 15 of 15, cou
 the 26 counted real clips all end standing (0.3-29 s after their last step): every count the same (mean absolute
 error 1.489 %), and lopen 602, alex_walking 137 the same; the same clips cut at 156 seeded times inside their
 walking (the full run's steps up to the cut as the reference): 37 steps missing in 31 cuts without the flush, 11 in
-7 with it, none added. Off because the counted clips show nothing to gain; the fast path mirrors it. A walk that
+7 with it, none added: ON by that tuning gain (the uncut clips show nothing either way); the fast path mirrors it. A walk that
 stops and stands is not concerned: its last step comes out live within one step period of its heel strike
 (``tests/test_end_steps.py``).
 
