@@ -454,8 +454,8 @@ def test_slow_swing_taken_for_a_pocket_counts_every_footfall():
     gates for every pocket (the default): 46 of 65 steps, every other weak half-stride lost."""
     from core.pdr.steps import UNEVEN_POCKET
 
-    w = simulate_walk([(0.0, 0.0), (35.0, 0.0)], step_frequency_hz=1.515, height_m=1.62, placement="swinging", seed=7, rate_hz=50.0,
-                      still_start_s=3.0, still_end_s=2.0)
+    w = simulate_walk([(0.0, 0.0), (35.0, 0.0)], step_frequency_hz=1.515, height_m=1.62, placement="swinging", seed=7,
+                      rate_hz=50.0, still_start_s=3.0, still_end_s=2.0)
     res = Pipeline(step_gates={**STEP_GATES, CARRY_POCKET: POCKET_GATES}).run(w.recording)
     modes = walking_modes(res, w.truth)
     assert modes.get(CARRY_POCKET, 0.0) / sum(modes.values()) >= 0.5, modes  # the premise: taken for a pocket
