@@ -49,11 +49,12 @@ def num_jac(f, x, eps=1e-6):
 
 @functools.cache
 def six_minute_walk():
-    """``outdoor_walk(7, minutes=6)``, simulated once per process: test_gnss.py and test_kubrak.py both walk it and
-    run in one xdist worker (tests/conftest.py's numba unit).  Shared: read it, never change it in place."""
+    """``outdoor_walk(7, minutes=6)`` at 50 Hz (not its 100: the pipeline over it is the costliest fixture of both
+    files), simulated once per process: test_gnss.py and test_kubrak.py both walk it and run in one xdist worker
+    (tests/conftest.py's numba unit).  Shared: read it, never change it in place."""
     from desktop.simulator import outdoor_walk
 
-    walk = outdoor_walk(7, minutes=6)
+    walk = outdoor_walk(7, minutes=6, rate_hz=50.0)
     for s in walk.recording.streams.values():  # shared: a test that writes into it fails here, not in the other file
         s.t_ns.flags.writeable = s.values.flags.writeable = False
     return walk

@@ -20,7 +20,7 @@ from core.recording import Recording, make_stream
 def walk():
     from desktop.simulator import simulate_walk
 
-    return simulate_walk([(0, 0), (40, 0), (40, 30)], seed=5, still_start_s=2.0, still_end_s=25.0)
+    return simulate_walk([(0, 0), (40, 0), (40, 30)], seed=5, rate_hz=50.0, still_start_s=2.0, still_end_s=25.0)
 
 
 def _without_acc(rec: Recording, t0_s: float, t1_s: float) -> Recording:

@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def walk():
-    return simulate_walk(((0.0, 0.0), (20.0, 0.0), (20.0, 10.0)), seed=4).recording
+    return simulate_walk(((0.0, 0.0), (20.0, 0.0), (20.0, 10.0)), seed=4, rate_hz=50.0).recording
 
 
 def with_values(rec, name, fn):

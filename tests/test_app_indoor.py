@@ -34,7 +34,7 @@ def corridor(tmp_path_factory):
     plan = FloorPlan(areas=[(np.array(CORRIDOR), [])], wall_lines=[[10.0, -1.0, 10.0, -0.2]], name="corridor")
     write_geojson(plan, d / "corridor.geojson")
     # a 12 degree heading error: the raw track leaves the corridor, the map keeps it in
-    w = simulate_walk(((0.0, 0.0), (30.0, 0.0), END), seed=12, still_start_s=1.5, still_end_s=1.5,
+    w = simulate_walk(((0.0, 0.0), (30.0, 0.0), END), seed=12, rate_hz=50.0, still_start_s=1.5, still_end_s=1.5,
                       phone_yaw_offset_deg=12.0)
     return plan, str(d / "corridor.geojson"), w
 

@@ -32,7 +32,7 @@ WAYPOINTS = ((0.0, 0.0), (20.0, 0.0), (20.0, 12.0))
 
 @pytest.fixture(scope="module")
 def walk():
-    return simulate_walk(WAYPOINTS, seed=11, still_start_s=1.5, still_end_s=1.5)
+    return simulate_walk(WAYPOINTS, seed=11, rate_hz=50.0, still_start_s=1.5, still_end_s=1.5)
 
 
 #: a GPS gap cut into the outdoor walk (s after the first event): the fused track dead-reckons through it

@@ -26,7 +26,7 @@ WAYPOINTS = ((0.0, 0.0), (25.0, 0.0), (25.0, 15.0))
 
 @pytest.fixture(scope="module")
 def walk():
-    return simulate_walk(WAYPOINTS, seed=11, still_start_s=1.0, still_end_s=1.0)
+    return simulate_walk(WAYPOINTS, seed=11, rate_hz=50.0, still_start_s=1.0, still_end_s=1.0)
 
 
 class LiveReplay(ReplaySource):

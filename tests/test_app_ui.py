@@ -126,7 +126,7 @@ def _run(args, timeout=60):
 
 @pytest.fixture(scope="module")
 def walk_file(tmp_path_factory):
-    w = simulate_walk(WAYPOINTS, seed=SEED, still_start_s=1.5, still_end_s=1.5)
+    w = simulate_walk(WAYPOINTS, seed=SEED, rate_hz=50.0, still_start_s=1.5, still_end_s=1.5)
     path = tmp_path_factory.mktemp("walk") / "sim-walk.csv"
     write_recording(str(path), w.recording)
     return w, path

@@ -22,7 +22,7 @@ def _no_stored_profile(tmp_path, monkeypatch):
 @pytest.fixture(scope="module")
 def pocket_walk():
     # 60 m out and back: about 45 s of walking with the phone in a trouser pocket (seed of the tuning split)
-    return simulate_walk([(0.0, 0.0), (30.0, 0.0), (30.0, 2.0), (0.0, 2.0)], placement=CARRY_POCKET, seed=3)
+    return simulate_walk([(0.0, 0.0), (30.0, 0.0), (30.0, 2.0), (0.0, 2.0)], placement=CARRY_POCKET, seed=3, rate_hz=50.0)
 
 
 def test_pdr_replay_says_how_the_phone_was_carried_and_exports_it_per_step(pocket_walk, tmp_path, capsys):

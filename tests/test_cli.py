@@ -258,7 +258,7 @@ def test_an_accelerometer_only_recording_gets_steps_and_distance_not_a_made_up_t
     from core.recording import Recording, write_recording
     from desktop.simulator import simulate_walk
 
-    w = simulate_walk(((0.0, 0.0), (15.0, 0.0), (15.0, 10.0)), seed=8, still_start_s=1.0, still_end_s=1.0)
+    w = simulate_walk(((0.0, 0.0), (15.0, 0.0), (15.0, 10.0)), seed=8, rate_hz=50.0, still_start_s=1.0, still_end_s=1.0)
     path = tmp_path / "acc-only.csv"
     write_recording(str(path), Recording({"acc": w.recording.streams["acc"]}, device=w.recording.device,
                                          metadata=w.recording.metadata))

@@ -22,8 +22,8 @@ def walk_and_plan(tmp_path_factory):
     d = tmp_path_factory.mktemp("map")
     plan = FloorPlan(areas=[(np.array(CORRIDOR), [])], name="corridor")
     write_geojson(plan, d / "plan.geojson")
-    w = simulate_walk(((0.0, 0.0), (30.0, 0.0), (30.0, 20.0)), seed=12, still_start_s=1.5, still_end_s=1.5,
-                      phone_yaw_offset_deg=12.0)
+    w = simulate_walk(((0.0, 0.0), (30.0, 0.0), (30.0, 20.0)), seed=12, rate_hz=50.0, still_start_s=1.5,
+                      still_end_s=1.5, phone_yaw_offset_deg=12.0)
     rec = w.recording
     path = d / "walk.csv"
     write_recording(str(path), Recording(dict(rec.streams), device=rec.device, metadata=rec.metadata))

@@ -120,7 +120,7 @@ def test_the_app_session_shows_floors_and_exports_them_per_step(tmp_path):
     from core.recording import Recording
     from desktop.simulator import simulate_walk
 
-    w = simulate_walk(((0.0, 0.0), (40.0, 0.0), (40.0, 30.0)), seed=5, still_start_s=2.0, still_end_s=2.0)
+    w = simulate_walk(((0.0, 0.0), (40.0, 0.0), (40.0, 30.0)), seed=5, rate_hz=50.0, still_start_s=2.0, still_end_s=2.0)
     rec = w.recording
     t = np.arange(rec.t0_ns, rec.t0_ns + int(rec.duration_s * 1e9), 100_000_000)
     t_s = (t - t[0]) * 1e-9
@@ -150,7 +150,7 @@ def test_pdr_replay_reports_floors_and_writes_them_per_step(tmp_path, capsys):
     from desktop.cli import main
     from desktop.simulator import simulate_walk
 
-    w = simulate_walk(((0.0, 0.0), (30.0, 0.0), (30.0, 20.0)), seed=6, still_start_s=2.0, still_end_s=2.0)
+    w = simulate_walk(((0.0, 0.0), (30.0, 0.0), (30.0, 20.0)), seed=6, rate_hz=50.0, still_start_s=2.0, still_end_s=2.0)
     rec = w.recording
     t = np.arange(rec.t0_ns, rec.t0_ns + int(rec.duration_s * 1e9), 100_000_000)
     t_s = (t - t[0]) * 1e-9

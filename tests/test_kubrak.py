@@ -51,7 +51,7 @@ def test_pipeline_steps_carry_the_walkers_cadence():
     """On the simulator (an inverted-pendulum gait, not eq. 1) FREQ is the true step frequency within 5 %."""
     from desktop.simulator import simulate_walk
 
-    walk = simulate_walk([(0, 0), (0, 60)], seed=5, step_frequency_hz=1.9)
+    walk = simulate_walk([(0, 0), (0, 60)], seed=5, rate_hz=50.0, step_frequency_hz=1.9)
     steps = Pipeline().run(walk.recording).steps
     f = [s.features.window_freq_hz for s in steps[5:]]
     assert len(f) > 50

@@ -66,7 +66,7 @@ def test_missing_accelerometer_is_a_clear_error():
 
 
 def test_without_magnetometer_the_track_is_labelled_and_shape_kept():
-    walk = simulate_walk([(0, 0), (0, 20), (20, 20)], seed=2)
+    walk = simulate_walk([(0, 0), (0, 20), (20, 20)], seed=2, rate_hz=50.0)
     rec = Recording({k: v for k, v in walk.recording.streams.items() if k != "mag"})
     res = Pipeline().run(rec)
     assert any("no magnetometer" in lab for lab in res.labels)
@@ -79,7 +79,7 @@ def test_without_magnetometer_the_track_is_labelled_and_shape_kept():
 
 
 def test_without_gyroscope_the_track_is_labelled_and_still_usable():
-    walk = simulate_walk([(0, 0), (0, 20), (20, 20)], seed=2)
+    walk = simulate_walk([(0, 0), (0, 20), (20, 20)], seed=2, rate_hz=50.0)
     rec = Recording({k: v for k, v in walk.recording.streams.items() if k != "gyro"})
     res = Pipeline().run(rec)
     assert any("no gyroscope" in lab for lab in res.labels)

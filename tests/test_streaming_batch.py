@@ -73,7 +73,7 @@ def _walk():
 @cache
 def _cut_walk():
     """A walk cut off mid-stride: steps are still waiting for their heading when the data ends."""
-    rec = simulate_walk([(0.0, 0.0), (10.0, 0.0), (10.0, 6.0)], seed=5).recording
+    rec = simulate_walk([(0.0, 0.0), (10.0, 0.0), (10.0, 6.0)], seed=5, rate_hz=50.0).recording
     # 0.25 s after a step's peak: detected (one grid sample plus the low-pass delay after it), but its
     # heading is read only heading_delay_s (0.45 s) after it -- so finish() has to complete it
     t_cut = int(Pipeline().run(rec).steps[15].t_ns) + 250_000_000

@@ -135,7 +135,7 @@ def test_simulator_offset_phone_with_a_turn():
     """A phone held 70 deg off the walk, a 90 deg corner: the step heading after 10 steps follows the truth."""
     from desktop.simulator import simulate_walk
 
-    walk = simulate_walk([(0.0, 0.0), (25.0, 0.0), (25.0, 20.0)], phone_yaw_offset_deg=70.0, seed=3)
+    walk = simulate_walk([(0.0, 0.0), (25.0, 0.0), (25.0, 20.0)], phone_yaw_offset_deg=70.0, seed=3, rate_hz=50.0)
     pipe = Pipeline(walking_direction="acceleration")
     res, after = _sim_errors(walk, pipe)
     assert np.median(after) < 5.0
@@ -149,7 +149,7 @@ def test_handheld_auto_is_device_exactly():
     """A hand-held phone (the simulator's default, 3 deg off the walk): "auto" changes no heading, not even by 1 ulp."""
     from desktop.simulator import simulate_walk
 
-    walk = simulate_walk([(0.0, 0.0), (15.0, 0.0), (15.0, 12.0)], seed=5)
+    walk = simulate_walk([(0.0, 0.0), (15.0, 0.0), (15.0, 12.0)], seed=5, rate_hz=50.0)
     a = Pipeline().run(walk.recording)
     b = Pipeline(walking_direction="device").run(walk.recording)
     assert [s.t_ns for s in a.steps] == [s.t_ns for s in b.steps]
@@ -164,7 +164,7 @@ def test_simulator_placements(placement):
     from desktop.simulator import simulate_walk
 
     try:
-        walk = simulate_walk([(0.0, 0.0), (25.0, 0.0), (25.0, 15.0)], placement=placement, seed=1)
+        walk = simulate_walk([(0.0, 0.0), (25.0, 0.0), (25.0, 15.0)], placement=placement, seed=1, rate_hz=50.0)
     except TypeError:
         pytest.skip("the simulator has no placements")
     pipe = Pipeline(walking_direction="acceleration")
