@@ -393,9 +393,12 @@ class CarryModeDetector:
     antiphase_in_range : bool
         Issue #25 section 2 (h11/slowhand), **on by default**.  :meth:`gait_periodicity` leaves a step lag in
         anti-phase (``step_antiphase``) to the norm's rule only while twice the stride found is a walk's stride too
-        (``max_stride_s``): only then can the lag be a trunk's step.  Past it (a gently swung hand at 1.2 steps/s:
-        stride 1.64 s, step lag -0.16..-0.34, rotation periodic at 0.93-0.98) the lag is a limb's stride; the rule
-        called it "not walking" whenever the step lag dipped under -0.2 (10 of 34 steps).  False: as before.
+        (up to the longest stride searched, ``max(max_stride_s, slow_window_max_stride_s)``, 2.8 s): only then can
+        the lag be a trunk's step.  Past it (a gently swung hand at 1.2 steps/s: stride 1.64 s, step lag
+        -0.16..-0.34, rotation periodic at 0.93-0.98) the lag is a limb's stride; the rule called it "not walking"
+        whenever the step lag dipped under -0.2 (10 of 34 steps).  With ``max_stride_s`` (2.5 s) as the bound, a
+        trunk at 0.8 steps/s (its step 1.25-1.3 s) was taken for a limb (the simulator's ear, 26 -> 24 of 26 steps).
+        False: as before.
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
@@ -741,8 +744,9 @@ class CarryModeDetector:
         gp = f["gyro_periodicity"]
         stride = f["stride_period_s"]
         # the step lag in anti-phase is ambiguous only while twice the stride found is a walk's stride too (a trunk's
-        # step); past the range (``antiphase_in_range``) the lag found is a limb's stride, whatever the step lag reads
-        if f["r_step"] >= self.step_antiphase or (self.antiphase_in_range and 2.0 * stride > self.max_stride_s + 1e-9):
+        # step); past the longest stride searched (``antiphase_in_range``) the lag found is a limb's stride
+        longest = max(self.max_stride_s, self.slow_window_max_stride_s)
+        if f["r_step"] >= self.step_antiphase or (self.antiphase_in_range and 2.0 * stride > longest + 1e-9):
             p = max(p, min(f["r_stride"], gp))
         sway = self.sway_min_gyro_periodicity
         if (sway is not None and gp >= sway and f["tilt_rms_rad"] < self.trunk_max_tilt_rad
