@@ -379,6 +379,26 @@ class CarryModeDetector:
         strikes missed 248 -> 217 of 3232 (in the walk's first 8 s 148 -> 117), no step added; with 3.0, 214.  TUNING
         (real walks, IPIN, Microsoft, IPOL): identical (benchmarks/discussion.md).  The live app sees such a walk's
         first steps up to ``settle_walk_s + switch_s`` late (never more than the pipeline's ``rotation_hold_s``).
+    sway_min_gyro_periodicity : float or None
+        Issue #25 section 2 (h11/slowhand), **0.9 by default**; None: off.  With a gyroscope, at a slow stride
+        (``slow_stride_s`` or longer) on the trunk (``tilt_rms_rad`` under ``trunk_max_tilt_rad``), a gait with both
+        legs is also the norm repeating from one foot to the other (the step lag's autocorrelation) while the trunk's
+        sway, once per stride, repeats at the stride lag with at least this periodicity: :meth:`gait_periodicity`
+        takes ``min(r_step, gyro_periodicity)`` too.  At 1 step/s the stride lag (2 s) of a 4-s window overlaps one
+        stride and its autocorrelation reads 0.2-0.5 where the step lag reads 0.6-0.75 (the step times' jitter adds
+        up over two steps); the simulator's hand-held walk at 1 step/s, bounce 1.6 (user acceleration 0.5 m/s^2 RMS),
+        was "not walking" 95 % of the time and counted 0 of 40.  A phone held while standing reads at most 0.62 at
+        the stride lag of its rotation, a vehicle 0.40 (the simulator's ten not-walking recordings, the fidgeting
+        hand of ``tests/test_carry.py``).
+    antiphase_in_range : bool
+        Issue #25 section 2 (h11/slowhand), **on by default**.  :meth:`gait_periodicity` leaves a step lag in
+        anti-phase (``step_antiphase``) to the norm's rule only while twice the stride found is a walk's stride too
+        (up to the longest stride searched, ``max(max_stride_s, slow_window_max_stride_s)``, 2.8 s): only then can
+        the lag be a trunk's step.  Past it (a gently swung hand at 1.2 steps/s: stride 1.64 s, step lag
+        -0.16..-0.34, rotation periodic at 0.93-0.98) the lag is a limb's stride; the rule called it "not walking"
+        whenever the step lag dipped under -0.2 (10 of 34 steps).  With ``max_stride_s`` (2.5 s) as the bound, a
+        trunk at 0.8 steps/s (its step 1.25-1.3 s) was taken for a limb (the simulator's ear, 26 -> 24 of 26 steps).
+        False: as before.
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
@@ -401,7 +421,8 @@ class CarryModeDetector:
                  thigh_min_skew: float | None = None,
                  uneven_on_share: float = math.inf, uneven_off_share: float = 0.6,
                  switch_s: float = 3.0, switch_still_s: float = 2.0, hold_periodicity: float = 0.2, hold_recent_s: float = 1.0,
-                 hold_min_std_m_s2: float = 0.3, settle_while_still: bool = False, settle_walk_s: float = 1.0):
+                 hold_min_std_m_s2: float = 0.3, settle_while_still: bool = False, settle_walk_s: float = 1.0,
+                 sway_min_gyro_periodicity: float | None = 0.9, antiphase_in_range: bool = True):
         self.grid_rate_hz = float(grid_rate_hz)
         self.window_s = float(window_s)
         self.hop_s = float(hop_s)
@@ -457,6 +478,9 @@ class CarryModeDetector:
         self.hold_min_std_m_s2 = float(hold_min_std_m_s2)
         self.settle_while_still = bool(settle_while_still)
         self.settle_walk_s = float(settle_walk_s)
+        self.sway_min_gyro_periodicity = (None if sway_min_gyro_periodicity is None
+                                          else float(sway_min_gyro_periodicity))
+        self.antiphase_in_range = bool(antiphase_in_range)
         self.reset()
 
     def reset(self) -> None:
@@ -500,6 +524,9 @@ class CarryModeDetector:
         #: the last window's periodicity at both legs' lags (:meth:`gait_periodicity`) while the step period is known
         #: (nan otherwise)
         self.both_periodicity = math.nan
+        #: the last window's norm standard deviation (m/s^2) while the step period is known (nan otherwise): the
+        #: gait's own amplitude, for the step detector's ``relative_peak_height`` (:class:`core.pdr.steps.StepGates`)
+        self.gait_std_m_s2 = math.nan
         #: walking gently (a periodic gait whose norm moves little; see ``gentle_max_std_m_s2``)
         self.gentle = False
         #: the two half-strides are very unlike (see ``uneven_on_share``)
@@ -707,11 +734,26 @@ class CarryModeDetector:
         gyroscope, at the stride lag together with the rotation's there while the step lag is not in
         anti-phase (``step_antiphase``): a limb sees its two half-strides differently (the norm's step-lag
         autocorrelation 0.3-0.5 in a gentle walk), and the rotation, swung once per stride, repeats with the
-        norm.  An anti-phase step lag is left to the first rule: at 1 step/s a trunk's norm is then
-        ambiguous with a limb's at 2 steps/s.  Amplitude plays no part."""
+        norm.  An anti-phase step lag is left to the first rule while twice the stride is in range
+        (``antiphase_in_range``): at 1 step/s a trunk's norm is then ambiguous with a limb's at 2 steps/s.  And, at a
+        slow stride on the trunk, the norm's step lag together with the sway's stride lag
+        (``sway_min_gyro_periodicity``).  Amplitude plays no part."""
         p = min(f["r_step"], f["r_stride"])
-        if "gyro_periodicity" in f and f["r_step"] >= self.step_antiphase:
-            p = max(p, min(f["r_stride"], f["gyro_periodicity"]))
+        if "gyro_periodicity" not in f:
+            return p
+        gp = f["gyro_periodicity"]
+        stride = f["stride_period_s"]
+        # the step lag in anti-phase is ambiguous only while twice the stride found is a walk's stride too (a trunk's
+        # step); past the longest stride searched (``antiphase_in_range``) the lag found is a limb's stride
+        longest = max(self.max_stride_s, self.slow_window_max_stride_s)
+        if f["r_step"] >= self.step_antiphase or (self.antiphase_in_range and 2.0 * stride > longest + 1e-9):
+            p = max(p, min(f["r_stride"], gp))
+        sway = self.sway_min_gyro_periodicity
+        if (sway is not None and gp >= sway and f["tilt_rms_rad"] < self.trunk_max_tilt_rad
+                and stride >= self.slow_stride_s - 1e-9):
+            # a slow walk on the trunk (``sway_min_gyro_periodicity``): the norm repeats from one foot to the other
+            # (the step lag) while the trunk's sway repeats every stride
+            p = max(p, min(f["r_step"], gp))
         return p
 
     def _periodic_gait(self, f: dict, hold: bool = False) -> float:
@@ -878,6 +920,7 @@ class CarryModeDetector:
                                                and gp >= self.twist_min_gyro_periodicity)))
         both = self.gait_periodicity(f)  # both legs
         self.both_periodicity = both if periodic else math.nan
+        self.gait_std_m_s2 = std if periodic else math.nan
         slow = self._slow_stride(f)  # a slow walk's band reaches higher (see slow_max_std_m_s2)
         if not periodic or both < self.min_periodicity or std >= (self.slow_off_std_m_s2 if slow
                                                                    else self.min_walk_std_m_s2):

@@ -571,6 +571,7 @@ class Pipeline:
         self.detector.set_gates(self.step_gates[CARRY_HANDHELD])
         self.detector.step_period_s = math.nan
         self.detector.both_periodicity = math.nan
+        self.detector.gait_std_m_s2 = math.nan
         if self.carry is not None:
             self.carry.reset()
         self._carry_mode = CARRY_HANDHELD
@@ -581,6 +582,7 @@ class Pipeline:
                 d.reset()
             d.step_period_s = math.nan
             d.both_periodicity = math.nan
+            d.gait_std_m_s2 = math.nan
         self._held = {d: deque() for d in self._mode_detectors}
         self._active_det = self.detector
         self._rot_hold_ns = int(self.rotation_hold_s * 1e9)
@@ -850,9 +852,11 @@ class Pipeline:
         out = None
         regs = None
         both = c.both_periodicity
+        amp = c.gait_std_m_s2
         for det in self._mode_detectors:
             det.step_period_s = period
             det.both_periodicity = both
+            det.gait_std_m_s2 = amp
             ev = det.update_grid(tg, x)
             if ev is not None:
                 if regs is None:

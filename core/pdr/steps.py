@@ -97,7 +97,10 @@ detector finds the norm periodic but gentle (:attr:`core.pdr.carry.CarryModeDete
 steps are counted with :data:`GENTLE_GATES`: ``A_th`` 0.15 m/s^2 with the cadence gate (the step period is
 known then).  The periodicity decides that it is walking, not the amplitude.  Issue #25 part 2: also a slow walk
 whose norm moves by up to 1 m/s^2 (the carry detector's slow band; the TUNING clip Tclack88 50_hand_slow counted
-30 of its 50 steps with the hand-held ``A_th``, 50 with these gates).
+30 of its 50 steps with the hand-held ``A_th``, 50 with these gates).  The gentle gates' ``A_th`` is relative to the
+gait's own amplitude (:data:`GENTLE_RELATIVE_PEAK_HEIGHT`, issue #25 section 2): at most 0.3 of the norm's standard
+deviation over the carry detector's window while it knows the step period; a still or fidgeting phone is never
+gentle, so never counted so.
 """
 
 from __future__ import annotations
@@ -133,6 +136,10 @@ class StepGates:
     #: (:attr:`core.pdr.carry.CarryModeDetector.both_periodicity`) is at least this, the weak peak held for the rescue
     #: needs neither ``rescue_peak_height_m_s2`` nor the valley test, only to rise above ``g`` (inf: off)
     rescue_min_periodicity: float = math.inf
+    #: the amplitude threshold relative to the gait's own amplitude (issue #25): while the carry detector knows the
+    #: step period (the gait is periodic), ``A_th`` is at most this fraction of the norm's standard deviation over its
+    #: window (:attr:`core.pdr.carry.CarryModeDetector.gait_std_m_s2`; 0: off)
+    relative_peak_height: float = 0.0
 
 
 #: the limb gates of a phone in a trouser pocket (issue #25: one step per footfall): the stride comb, the cadence
@@ -175,13 +182,21 @@ STEP_GATES = {
                               gravity_time_constant_s=1.0, min_raw_range_m_s2=0.5),
 }
 
+#: the gentle gates' ``A_th`` relative to the gait's own amplitude (:attr:`StepGates.relative_peak_height`, issue #25
+#: section 2): at most this fraction of the norm's standard deviation over the carry detector's window.  A gently
+#: swung hand at 1-1.2 steps/s (the simulator's ``bounce_scale`` 0.6) lifts its combed weak leg 0.12-0.14 m/s^2
+#: above ``g`` (norm SD 0.25): under the fixed 0.15 every other step was lost, the steps then 1.7 s apart, over
+#: ``max_step_interval_s``, and each a new bout that the bout gate refused (3 and 16 of 34).  Applies only under the
+#: gentle gates, i.e. while the carry detector finds the gait periodic at both legs (a still or fidgeting phone is
+#: never gentle).  0: off (the fixed 0.15)
+GENTLE_RELATIVE_PEAK_HEIGHT = 0.3
 #: the key of :data:`STEP_GATES` (and ``Pipeline(step_gates=...)``) of a gentle walk, beside the carry modes
 GENTLE = "gentle"
 #: a slow, gentle walk on the trunk (issue #25: 0.5-1 m/s^2 of user acceleration, 0.8-1.2 steps/s; the carry
 #: detector's :attr:`core.pdr.carry.CarryModeDetector.gentle`): its steps rise 0.2-0.5 m/s^2 above ``g``, under
 #: the hand-held ``A_th`` of 0.6.  The carry detector has found the norm periodic, so ``A_th`` is 0.15 m/s^2;
 #: the cadence gate keeps a second bump within a step out (the step period is known)
-GENTLE_GATES = StepGates(min_interval_period_frac=0.6, min_peak_height_m_s2=0.15)
+GENTLE_GATES = StepGates(min_interval_period_frac=0.6, min_peak_height_m_s2=0.15, relative_peak_height=GENTLE_RELATIVE_PEAK_HEIGHT)
 STEP_GATES[GENTLE] = GENTLE_GATES
 
 #: the key of :data:`STEP_GATES` (and ``Pipeline(step_gates=...)``) of a gentle walk in a swinging hand
@@ -194,7 +209,8 @@ GENTLE_SWING = "gentle_swinging"
 #: swing at 1 step/s, ``swing_scale`` 1-1.5, bounce 0.5-0.75: 0 of 28 steps with the swinging gates, 26-28 with these).
 #: The echo gate stays (0.2 m/s^2: a stopped walk's raw norm moves by a standing hand's 0.02-0.1)
 GENTLE_SWING_GATES = StepGates(stride_comb=True, min_interval_period_frac=0.6, min_peak_height_m_s2=0.15,
-                               gravity_time_constant_s=1.0, min_raw_range_m_s2=0.2)
+                               gravity_time_constant_s=1.0, min_raw_range_m_s2=0.2,
+                               relative_peak_height=GENTLE_RELATIVE_PEAK_HEIGHT)
 STEP_GATES[GENTLE_SWING] = GENTLE_SWING_GATES
 
 #: the key of :data:`STEP_GATES` of a pocket whose two half-strides are very unlike (the carry detector's
@@ -265,6 +281,8 @@ class StepDetector:
         self.step_period_s = math.nan
         #: the carry detector's periodicity at both legs' lags (nan: unknown; the periodic rescue waits)
         self.both_periodicity = math.nan
+        #: the carry detector's gait amplitude (the norm's standard deviation, m/s^2; nan: unknown)
+        self.gait_std_m_s2 = math.nan
         self.reset()
 
     def set_gates(self, gates: StepGates) -> None:
@@ -387,6 +405,8 @@ class StepDetector:
         if frac > 0.0 and period > 0.0:  # the cadence gate (module docstring)
             min_dt = max(min_dt, int(frac * period * 1e9))
         a_th = self.min_peak_height_m_s2 if gates.min_peak_height_m_s2 is None else gates.min_peak_height_m_s2
+        if gates.relative_peak_height > 0.0 and self.gait_std_m_s2 > 0.0:  # the gait's own amplitude (issue #25)
+            a_th = min(a_th, gates.relative_peak_height * self.gait_std_m_s2)
         timed = (since is None or since > min_dt) and self._armed  # eq. 3, time threshold; the valley
         if y1 - g > a_th and timed and self._echo_ok():  # eq. 3, amplitude threshold
             n = self._seg_n

@@ -214,6 +214,7 @@ class CarryTrack:
     pending: np.ndarray = None  #: index into CARRY_MODES of the detector's ``pending_mode`` (-1: None)
     settling_walk: np.ndarray = None  #: bool: the detector's ``settling_walk`` (settling only by ``settle_walk_s``)
     settling_walk_before: bool = False  #: its ``settling_walk`` before the first grid sample
+    gait_std_m_s2: np.ndarray = None  #: the detector's ``gait_std_m_s2`` (nan: the step period unknown)
 
 
 def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro: np.ndarray,
@@ -234,6 +235,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     mode_idx = {m: i for i, m in enumerate(CARRY_MODES)}
     modes = [mode_idx[det.mode]]
     periods = [det.step_period_s]
+    amps = [det.gait_std_m_s2]
     periodic = [det.rotation_periodic]
     gentle = [det.gentle]
     uneven = [det.uneven]
@@ -270,6 +272,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
             det.decide(int(t_ns[k]), f)  # core's decision, on these features
             modes.append(mode_idx[det.mode])
             periods.append(det.step_period_s)
+            amps.append(det.gait_std_m_s2)
             periodic.append(det.rotation_periodic)
             gentle.append(det.gentle)
             uneven.append(det.uneven)
@@ -285,7 +288,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
                        np.asarray(n_changes, dtype=np.int64)[at],
                        det.changes, np.asarray(settling, dtype=bool)[at], bool(settling[0]),
                        np.asarray(pending, dtype=np.int64)[at], np.asarray(settling_walk, dtype=bool)[at],
-                       bool(settling_walk[0]))
+                       bool(settling_walk[0]), np.asarray(amps, dtype=float)[at])
     # time per mode: the mode in force before each sample, added one grid period at a time as the detector does
     before = np.concatenate([[modes[0]], track.mode[:-1]]).astype(np.int64) if n_grid else np.zeros(0, np.int64)
     counts = np.bincount(before, minlength=len(CARRY_MODES))

@@ -210,7 +210,8 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     for det in p._mode_detectors:
         det.n_grid = n_ticks
         ev_tick, ev_t, ev_f = detect_steps(det, gt, gx, restart, det.gates,
-                                           None if track is None else track.step_period_s, p.flush_at_end)
+                                           None if track is None else track.step_period_s, p.flush_at_end,
+                                           None if track is None else track.gait_std_m_s2)
         found.append((ev_tick, ev_t, ev_f))
     # a step of the end-of-data flush is found at grid sample n_ticks: the speed window and the rotation are then
     # what they are after the last sample and the last gyroscope event (Pipeline.finish)

@@ -143,7 +143,7 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
                         hi_v = max(hi_v, v)
                     rng = hi_v - lo_v
                 echo = rng >= min_raw_range
-            if y1 - g > min_peak and timed and echo:  # eq. 3
+            if y1 - g > min_peak[kk] and timed and echo:  # eq. 3 (A_th per sample: relative_peak_height)
                 rescue = (has_weak and pk > 0.0 and rescue_lo * pk * 1e9 <= since <= rescue_hi * pk * 1e9
                           and pos_lo * since <= w_t - last <= pos_hi * since and t_peak - w_t > gate_dt_ns[kk])
                 if rescue:  # the weak step now, this one at the next sample
@@ -214,13 +214,14 @@ def detect(t_ns, x, restart, c, alpha_g, min_peak, max_dt_ns, delay_ns, require_
     return n_ev
 
 
-def detect_steps(detector, t_ns, x, restart, gates=None, step_period_s=None, flush=False):
+def detect_steps(detector, t_ns, x, restart, gates=None, step_period_s=None, flush=False, gait_std_m_s2=None):
     """StepEvent fields of every step the reference ``detector`` (its settings) finds on the grid (``flush``: and
     those its :meth:`core.pdr.steps.StepDetector.flush` gives at the end, found at grid sample ``len(t_ns)``).
 
     ``gates``: the carry mode's :class:`core.pdr.steps.StepGates` in force (default: the detector's own);
     ``step_period_s``: the step period the detector is given at each grid sample (the carry detector's; default:
-    none, nan), which the stride comb, the cadence gate and the echo gate use.
+    none, nan), which the stride comb, the cadence gate and the echo gate use; ``gait_std_m_s2``: the carry
+    detector's gait amplitude at each grid sample (nan: unknown), for ``gates.relative_peak_height``.
     """
     from core.conventions import STANDARD_GRAVITY_M_S2
     from core.pdr.steps import MAX_COMB_PERIOD_S
@@ -234,6 +235,11 @@ def detect_steps(detector, t_ns, x, restart, gates=None, step_period_s=None, flu
     a_th = detector.min_peak_height_m_s2 if gates.min_peak_height_m_s2 is None else gates.min_peak_height_m_s2
     n = len(t_ns)
     period = np.full(n, np.nan) if step_period_s is None else np.asarray(step_period_s, dtype=float)
+    min_peak = np.full(n, float(a_th))
+    if gates.relative_peak_height > 0.0 and gait_std_m_s2 is not None:  # the reference's min(A_th, rel * std)
+        amp = np.asarray(gait_std_m_s2, dtype=float)
+        rel = np.minimum(a_th, gates.relative_peak_height * np.where(amp > 0.0, amp, np.inf))
+        min_peak = np.where(amp > 0.0, rel, min_peak)
     known = period > 0.0
     p = np.where(known, period, 0.0)
     n_hist = int(MAX_COMB_PERIOD_S * rate) + 2
@@ -250,7 +256,7 @@ def detect_steps(detector, t_ns, x, restart, gates=None, step_period_s=None, flu
     ev_tick = np.empty(n // 2 + 3, dtype=np.int64)
     ev_t = np.empty(len(ev_tick), dtype=np.int64)
     ev_f = np.empty((len(ev_tick), 5))
-    k = detect(t_ns, x, restart, c, alpha_g, a_th, int(detector.max_step_interval_s * 1e9),
+    k = detect(t_ns, x, restart, c, alpha_g, np.ascontiguousarray(min_peak), int(detector.max_step_interval_s * 1e9),
                int(round(butter2_group_delay_s(detector.cutoff_hz) * 1e9)), detector.require_valley,
                STANDARD_GRAVITY_M_S2, np.ascontiguousarray(comb_lag), np.ascontiguousarray(gate_dt),
                float(gates.min_raw_range_m_s2), np.ascontiguousarray(range_back.astype(np.int64)), np.zeros(n_hist),
