@@ -84,22 +84,15 @@ class RotationSmoother:
     upright_enter, upright_exit : float
         ``"auto"``: the horizontal length of the filtered y axis below which the
         phone counts as upright, and above which it counts as not upright again
-        (hysteresis, so the axis does not flicker).  ``upright_exit`` is 0.85 (the top
-        edge 58 deg from the vertical; 0.65, 49 deg, before issue #25 section 3): a
-        phone hanging top down in a swinging hand leans its smoothed top edge 40-50 deg
-        off the vertical (the forearm's flexion, the swing, the attitude's tilt error
-        under the swing), so at 0.65 the axis flickered between the back and the top
-        edge, up to every step, and each switch handed the step heading to the other
-        axis's walking-direction offset, whose top edge, near the vertical, has hardly
-        a heading (simulator, 36 swinging walks with a magnetometer: 30-s SD of the
-        step heading minus the true walking direction, median 6.3 -> 2.5 deg, walks
-        over 6 deg 18 -> 10).  A phone held in front of the chest keeps the back until
-        it is pitched below 32 deg; in between, its back points where its top edge
-        does (both in the sagittal plane), so the heading is the same up to the roll.
+        (hysteresis, so the axis does not flicker).  A phone hanging top down in a
+        swinging hand leans its smoothed top edge 40-50 deg off the vertical (the
+        forearm's flexion, the swing, the attitude's tilt error under the swing),
+        past 0.65: the pipeline widens the exit to 0.85 while the phone is on a
+        limb (``Pipeline(limb_upright_exit)``, issue #25 section 3).
     """
 
     def __init__(self, *, cutoff_hz: float = 0.5, grid_rate_hz: float = 50.0, forward_b=(0.0, 1.0, 0.0),
-                 upright_enter: float = 0.45, upright_exit: float = 0.85):
+                 upright_enter: float = 0.45, upright_exit: float = 0.65):
         self.cutoff_hz = float(cutoff_hz)
         self.grid_rate_hz = float(grid_rate_hz)
         self.auto_axis = isinstance(forward_b, str)
