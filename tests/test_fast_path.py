@@ -455,6 +455,17 @@ def test_fast_equals_plain_on_a_swinging_hand():
     assert CARRY_SWINGING in {s.carry_mode for s in plain.steps}
 
 
+def test_fast_equals_plain_when_a_swinging_hand_keeps_the_back_of_the_phone():
+    # the smoother's exit of the upright state per carry mode (Pipeline(limb_upright_exit), issue #25 section 3): on
+    # this walk the axis flickers 11 times without it (tests/test_heading_axis.py), once with it
+    walk = simulate_walk([(0.0, 0.0), (22.0, 0.0)], placement="swinging", seed=0, step_frequency_hz=1.7,
+                         truth_rate_hz=100.0, placement_options={"swing_scale": 1.75}, still_start_s=1.0,
+                         still_end_s=1.0)
+    for exit_ in (0.85, None):
+        plain, _ = _assert_same(walk.recording, limb_upright_exit=exit_)
+        assert CARRY_SWINGING in {s.carry_mode for s in plain.steps}
+
+
 def test_fast_equals_plain_on_a_soft_soled_pocket_walk():
     # a pocket walk with a third of the heel strikes (soft soles, issue #25): the two half-strides so unlike that
     # the carry detector's ``uneven`` switches the pocket to the limb gates (UNEVEN_POCKET) and back

@@ -84,7 +84,11 @@ class RotationSmoother:
     upright_enter, upright_exit : float
         ``"auto"``: the horizontal length of the filtered y axis below which the
         phone counts as upright, and above which it counts as not upright again
-        (hysteresis, so the axis does not flicker).
+        (hysteresis, so the axis does not flicker).  A phone hanging top down in a
+        swinging hand leans its smoothed top edge 40-50 deg off the vertical (the
+        forearm's flexion, the swing, the attitude's tilt error under the swing),
+        past 0.65: the pipeline widens the exit to 0.85 while the phone is on a
+        limb (``Pipeline(limb_upright_exit)``, issue #25 section 3).
     """
 
     def __init__(self, *, cutoff_hz: float = 0.5, grid_rate_hz: float = 50.0, forward_b=(0.0, 1.0, 0.0),

@@ -24,8 +24,9 @@ from desktop.fast.jit import kernel
 def smooth(q, c, auto_axis, fwd0, up_enter, up_exit, out_east, out_north, out_heading, out_upright, counters):
     """Filter ``R(q)`` row by row of ``q`` (n, 4); the forward vector's East, North and heading per row.
 
-    ``out_upright``: whether the back of the phone was the forward axis at each row; ``counters`` (in/out):
-    [upright, axis switches, samples upright].
+    ``up_exit``: the exit threshold of the upright state per row (the reference's ``upright_exit`` at that grid
+    sample: ``Pipeline(limb_upright_exit)`` changes it with the carry mode).  ``out_upright``: whether the back of
+    the phone was the forward axis at each row; ``counters`` (in/out): [upright, axis switches, samples upright].
     """
     b0, b1, b2, a1, a2 = c[0], c[1], c[2], c[3], c[4]
     z1 = np.empty(6)
@@ -57,7 +58,7 @@ def smooth(q, c, auto_axis, fwd0, up_enter, up_exit, out_east, out_north, out_he
                 upright = True
                 fx, fy, fz = 0.0, 0.0, -1.0
                 counters[1] += 1
-            elif upright and y_norm > up_exit:
+            elif upright and y_norm > up_exit[k]:
                 upright = False
                 fx, fy, fz = 0.0, 1.0, 0.0
                 counters[1] += 1
@@ -72,9 +73,10 @@ def smooth(q, c, auto_axis, fwd0, up_enter, up_exit, out_east, out_north, out_he
     counters[0] = 1 if upright else 0
 
 
-def smooth_headings(smoother, q: np.ndarray):
+def smooth_headings(smoother, q: np.ndarray, up_exit=None):
     """(east, north, heading, upright) of the reference ``smoother``'s settings over the attitudes ``q``
-    (n, 4), and its counters (upright at the end, axis switches, samples upright)."""
+    (n, 4), and its counters (upright at the end, axis switches, samples upright).  ``up_exit``: the exit
+    threshold per row (n,), default the smoother's ``upright_exit`` everywhere."""
     b, a = butter2_lowpass(smoother.cutoff_hz, smoother.grid_rate_hz)
     c = np.array([b[0] / a[0], b[1] / a[0], b[2] / a[0], a[1] / a[0], a[2] / a[0]])
     n = len(q)
@@ -82,6 +84,7 @@ def smooth_headings(smoother, q: np.ndarray):
     upright = np.zeros(n, dtype=np.bool_)
     counters = np.zeros(3, dtype=np.int64)
     fwd0 = np.array((0.0, 1.0, 0.0) if smoother.auto_axis else smoother.forward_b, dtype=np.float64)
-    smooth(np.ascontiguousarray(q), c, smoother.auto_axis, fwd0, smoother.upright_enter, smoother.upright_exit,
+    up_exit = np.full(n, smoother.upright_exit) if up_exit is None else np.ascontiguousarray(up_exit, dtype=np.float64)
+    smooth(np.ascontiguousarray(q), c, smoother.auto_axis, fwd0, smoother.upright_enter, up_exit,
            east, north, heading, upright, counters)
     return east, north, heading, upright, counters

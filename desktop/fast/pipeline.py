@@ -204,6 +204,13 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
             det_at = np.where(track.gentle & gentle_mode[track.mode], index[p._det_of[GENTLE]], det_at)
         p._carry_mode = CARRY_MODES[int(track.mode[-1])] if n_ticks else p._carry_mode
         p._active_det = p._mode_detectors[int(det_at[-1])] if n_ticks else p._active_det
+    # the smoother's exit of the upright state per grid sample (Pipeline(limb_upright_exit), issue #25)
+    exit_at = None
+    if p.limb_upright_exit is not None:
+        exit_at = np.full(n_ticks, p._upright_exit)
+        if track is not None:
+            limb = np.isin(track.mode, [CARRY_MODES.index(CARRY_SWINGING), CARRY_MODES.index(CARRY_POCKET)])
+            exit_at[limb] = p.limb_upright_exit
     clock("carry-mode detector", 0.35)
     # 5. every step detector (one per distinct gates), the speed window at their peaks
     found = []
@@ -233,7 +240,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     site_at, anchor, att = -1, None, None
     if fusion is not None and p.site_from_gps and np.any(fusion.is_gps):
         if getattr(p.gnss, "start", None) is not None:  # the anchor waits on the fused track: the headings first
-            att = _attitude_and_smoother(p, ev, v, cal_ok, tick_event, -1, None)
+            att = _attitude_and_smoother(p, ev, v, cal_ok, tick_event, -1, None, exit_at)
             clock("attitude, smoother (without the site)", 0.55)
         site_at, anchor = fusion.site_event(p, gt, tick_event, peaks, track, det_at, att, acc_at)
         clock("GPS site (the fusion's fixes and the steps' schedule)", 0.45)
@@ -243,7 +250,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
             att = None
     # 7, 8. the attitude (in two segments around the site) and the smoother
     if att is None:
-        att = _attitude_and_smoother(p, ev, v, cal_ok, tick_event, site_at, anchor)
+        att = _attitude_and_smoother(p, ev, v, cal_ok, tick_event, site_at, anchor, exit_at)
         clock("attitude, smoother", 0.70)
     # 9. gates and steps (the GPS fusion fed as they complete)
     feed = _Feed(p, fusion, tick_event, site_at) if fusion is not None else None
@@ -304,7 +311,8 @@ class _Attitude:
         return release
 
 
-def _attitude_and_smoother(p: Pipeline, ev: _Events, v, cal_ok, tick_event, site_at: int, anchor) -> _Attitude:
+def _attitude_and_smoother(p: Pipeline, ev: _Events, v, cal_ok, tick_event, site_at: int, anchor,
+                           exit_at=None) -> _Attitude:
     """The attitude filter over all events, taken at each grid sample (``tick_event[j]``: the event behind sample
     ``j``), the site given before event ``site_at`` (``Pipeline._apply_site(anchor)``; -1: none); then the
     rotation smoother over the grid's attitudes (section 4.3), its final state into ``p.smoother``."""
@@ -341,7 +349,10 @@ def _attitude_and_smoother(p: Pipeline, ev: _Events, v, cal_ok, tick_event, site
     finally:
         ekf.mag_calibrator = calibrator
     east, north, heading = (np.full(n_ticks, np.nan) for _ in range(3))
-    e, nn, h, upright, counters = smooth_headings(p.smoother, out_q[j_init:])
+    e, nn, h, upright, counters = smooth_headings(p.smoother, out_q[j_init:],
+                                                  None if exit_at is None else exit_at[j_init:])
+    if exit_at is not None and j_init < n_ticks:
+        p.smoother.upright_exit = float(exit_at[-1])  # as the reference leaves it after its last smoothed sample
     east[j_init:], north[j_init:], heading[j_init:] = e, nn, h
     p.smoother.upright = bool(counters[0])
     p.smoother.n_axis_switches, p.smoother.n_upright = int(counters[1]), int(counters[2])
