@@ -453,6 +453,10 @@ def test_fast_equals_plain_on_a_swinging_hand():
     walk = simulate_walk(street_route(40.0, seed=3, block_m=(20.0, 30.0)), placement="swinging", seed=3)
     plain, _ = _assert_same(walk.recording, lambda: Pipeline(attitude=AttitudeEKF(swing_rate_rad_s=2.0)))
     assert CARRY_SWINGING in {s.carry_mode for s in plain.steps}
+    # without a magnetometer the swing freezes the bias's accelerometer correction
+    # (AttitudeEKF.unobserved_bias_swing_rate_rad_s, issue #25 section 3): the first 20 s
+    rec = walk.recording.slice_time(walk.recording.t0_ns, walk.recording.t0_ns + 20 * 10**9)
+    _assert_same(rec, use_magnetometer=False)
 
 
 def test_fast_equals_plain_when_a_swinging_hand_keeps_the_back_of_the_phone():

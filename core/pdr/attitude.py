@@ -135,6 +135,28 @@ interval is ``swing_update_interval_s`` (1 s, about a stride) instead: tilt
 2 deg, heading SD 2 deg on the same walks (``tests/test_attitude_swing.py``).
 Otherwise the filter is the one before, bit for bit.
 
+The bias of a swinging phone without a magnetometer (issue #25 section 3, #27):
+with no heading measurement the gyroscope bias is seen only through the tilt,
+and a swinging phone's 0.1-s accelerometer means carry the arm's tangential
+and centripetal acceleration, an error correlated over the swing that the
+update's white noise (eq. 17 with the turn term) does not describe.  The
+update then corrects part of that "tilt" into the bias (its tilt-bias
+covariance is large while the phone turns fast), the phone's rotation carries
+it onto the vertical, and nothing pulls it back: on the simulator's swinging
+hand, 300 s without a magnetometer, the bias about the true vertical went 0.004-
+0.025 rad/s off (true 0.0015) and the heading turned 8-56 deg/min.  Freezing
+only the vertical component does not help (the horizontal components rotate
+into it: 128 deg/min on the worst walk).  So while
+:attr:`AttitudeEKF.yaw_unobserved` and the RMS rotation rate is above
+``unobserved_bias_swing_rate_rad_s`` (1.5 rad/s: a swinging arm, not a pocket
+or a hand) the accelerometer update treats the whole bias as a consider state
+(its gain rows zero, the Joseph form keeps the covariance right): the bias
+keeps what the still start's zero-rate update and the slower motion learnt,
+0.0015-0.0085 rad/s off about the vertical on the same walks, the heading
+turning 1-27 deg/min (the rest: the swing's tilt error itself, and the still
+start's zero-rate update reading a hanging hand's slow drift as bias, 0.008
+rad/s on the worst two).  ``tests/test_attitude_swing.py``.
+
 Noise floors that learn their scale (issue #27): the constant parts of the
 noise -- the gyroscope's angle random walk and rate-proportional term, eq. 17's
 ``s_a0`` and turn term, eq. 18's ``s_m0`` -- were set for real phones indoors
@@ -209,6 +231,9 @@ from core.pdr.heading_smoother import AttitudeHistory, HeadingSmoothing, StartHe
 
 _I3 = np.eye(3)
 _I3.flags.writeable = False
+#: a bias axis of zero length: ``_correct(bias_axis=_ZERO3)`` corrects no bias component
+_ZERO3 = np.zeros(3)
+_ZERO3.flags.writeable = False
 #: median of chi2 with 1 degree of freedom (scipy.stats.chi2.ppf(0.5, 1))
 CHI2_1_MEDIAN = 0.454936423119572
 
@@ -299,6 +324,12 @@ class AttitudeSettings:
     #: ... once the rate has stayed above ``swing_rate_rad_s`` this long (s): a walk swings for minutes, a phone
     #: being handled (taken out, put into a pocket) turns as fast for a few seconds
     swing_min_s: float = 5.0
+    #: without a magnetometer (while :attr:`AttitudeEKF.yaw_unobserved`) and while the RMS rotation rate (the
+    #: running mean of ``swing_rate_time_s``) is above this, the accelerometer update does not correct the gyroscope
+    #: bias (a consider state: its gain rows are zero); see "The bias of a swinging phone without a magnetometer" in
+    #: the module docstring.  1.5 rad/s: a swinging arm (the simulator's 2.4), not a trouser pocket (1.3) nor a
+    #: phone held in the hand (0.3-0.7); ``inf``: never
+    unobserved_bias_swing_rate_rad_s: float = 1.5
     #: eq. 17: s_a0 (base sd of the unit accelerometer vector), k_a1 (per m/s^2), k_a2 (per (m/s^2)^2)
     acc_noise_base: float = 0.0025
     k_a1: float = 0.001
@@ -1252,7 +1283,10 @@ class AttitudeEKF(AttitudeFilterBase):
         y = np.array((z[0] / nf - h[0], z[1] / nf - h[1], z[2] / nf - h[2]))
         H = self._jacobian(3)
         H[:, 0:3] = direction_jacobian(R, (0.0, 0.0, 1.0))
-        used, outcome, nis = self._correct(y, H, sigma2 * _I3, s.acc_gate_nis)
+        # nothing measures the heading and the phone swings: the bias is a consider state (see the setting)
+        frozen = state.yaw_unobserved and state.w2_mean > s.unobserved_bias_swing_rate_rad_s ** 2
+        used, outcome, nis = self._correct(y, H, sigma2 * _I3, s.acc_gate_nis,
+                                           bias_axis=_ZERO3 if frozen else None)
         self._record("acc", used, nis)
         return self._acc_flags(t_ns, used, outcome, nis=nis, sigma2=sigma2, innovation=tuple(y.tolist()))
 

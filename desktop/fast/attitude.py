@@ -97,7 +97,7 @@ SETTINGS_USE = {
     "mag_wait_s": "the start (the reference's)", "still_window_s": "ns", "still_acc_sd_m_s2": "f",
     "still_acc_direction_rad": "f", "still_gyro_sd_rad_s": "f", "zero_rate_noise_rad_s": "f",
     "max_gyro_gap_s": "f", "no_gyro_random_walk_rad_sqrt_s": "f", "noise_scale_rate": "f", "noise_scale_min": "f",
-    "mag_offset_sd_rad": "f", "mag_offset_time_s": "f",
+    "mag_offset_sd_rad": "f", "mag_offset_time_s": "f", "unobserved_bias_swing_rate_rad_s": "f",
 }
 
 #: how each field of AttitudeState reaches the kernel: "f" a slot of the float state array, "f3?" three float
@@ -185,6 +185,7 @@ S_OFF_SD, S_OFF_TAU = SF["mag_offset_sd_rad"], SF["mag_offset_time_s"]
 S_SWING_RATE, S_SWING_TAU, S_SWING_UPD, S_SWING_MIN = (SF[n] for n in (
     "swing_rate_rad_s", "swing_rate_time_s", "swing_update_interval_s", "swing_min_s"))
 F_W2_MEAN, F_SWING_S = FS["w2_mean"], FS["swing_s"]
+S_UNOBS_BIAS_RATE = SF["unobserved_bias_swing_rate_rad_s"]
 F_MAG_OFFSET = FS["mag_offset_rad"]
 SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI_STILL_WIN_NS = (SI[n] for n in (
     "reference_update_s", "reference_still_rate_hz", "use_magnetometer", "mag_requires_calibration",
@@ -885,8 +886,11 @@ def run_attitude(kind, t, v, cal_ok, i0, tick_event, j0, sf, si, fs, is_, q, b, 
                         for c in range(3):  # R^T [u]x
                             Ha[c, 0] = R[1, c]
                             Ha[c, 1] = -R[0, c]
-                        code, _ = correct(q, b, P, ya, Ha, sigma2 * I3, sf[S_ACC_GATE], no, ya, no, no,
-                                          max_bias, is_, nis_sum, nis_n, np.int64(0), fs)
+                        # no heading measured and a swinging phone: no bias correction (the reference's
+                        # bias_axis=_ZERO3: a zero axis, every bias gain row zero)
+                        frozen = is_[I_YAW_UNOBS] != 0 and fs[F_W2_MEAN] > sf[S_UNOBS_BIAS_RATE] ** 2
+                        code, _ = correct(q, b, P, ya, Ha, sigma2 * I3, sf[S_ACC_GATE], no, ya * 0.0,
+                                          yes if frozen else no, no, max_bias, is_, nis_sum, nis_n, np.int64(0), fs)
                         reason = A_USED if code == C_USED else (A_GATE if code == C_GATE else A_NUM)
             count(acc_counts, acc_first, reason, one)
         else:  # magnetometer
