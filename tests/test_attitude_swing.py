@@ -106,10 +106,14 @@ def test_without_a_magnetometer_the_swing_is_not_learnt_as_gyroscope_bias():
     from desktop.simulator import simulate_walk, street_route
 
     walk = simulate_walk(street_route(45.0, seed=1, block_m=(20.0, 30.0)), placement="swinging", seed=1, rate_hz=50.0)
-    ekf = AttitudeEKF(use_magnetometer=False)
-    ekf.run(walk.recording)
     t = walk.truth.att_t_ns[:: 50]
     up_b = quat.to_matrix_array(walk.truth.attitude_at(t))[:, 2, :].mean(axis=0)  # the mean vertical, body frame
     up_b /= np.linalg.norm(up_b)
-    err = np.array(ekf.b) - np.array((0.002, -0.0015, 0.001))  # the simulator's default bias
-    assert abs(float(err @ up_b)) < 0.003, err  # 0.0003 rad/s; 0.0085 before the rule
+    errs = []
+    for rate in (1.5, math.inf):  # the rule on (off by default: no real tuning gain), and off
+        ekf = AttitudeEKF(use_magnetometer=False, unobserved_bias_swing_rate_rad_s=rate)
+        ekf.run(walk.recording)
+        err = np.array(ekf.b) - np.array((0.002, -0.0015, 0.001))  # the simulator's default bias
+        errs.append(abs(float(err @ up_b)))
+    assert errs[0] < 0.003, errs  # 0.0003 rad/s with the rule
+    assert errs[1] > 0.006, errs  # 0.0085 without it (the default)

@@ -456,7 +456,8 @@ def test_fast_equals_plain_on_a_swinging_hand():
     # without a magnetometer the swing freezes the bias's accelerometer correction
     # (AttitudeEKF.unobserved_bias_swing_rate_rad_s, issue #25 section 3): the first 20 s
     rec = walk.recording.slice_time(walk.recording.t0_ns, walk.recording.t0_ns + 20 * 10**9)
-    _assert_same(rec, use_magnetometer=False)
+    _assert_same(rec, lambda: Pipeline(attitude=AttitudeEKF(use_magnetometer=False,
+                                                       unobserved_bias_swing_rate_rad_s=1.5)))  # off by default
 
 
 def test_fast_equals_plain_when_a_swinging_hand_keeps_the_back_of_the_phone():
