@@ -505,7 +505,8 @@ class Pipeline:
         up to every step, and each switch handed the step heading to the other axis's walking-direction offset
         (the top edge near the vertical has hardly a heading).  Simulator, 36 swinging walks with a magnetometer:
         30-s SD of step heading minus true walking direction, median 6.3 -> 2.5 deg (mean 15.7 -> 7.2), walks over
-        6 deg 18 -> 10.  Not in every mode: in the hand-held mode, the IPIN routes (a phone held in front that had
+        6 deg 18 -> 10.  Not in every mode: in the hand-held mode, the IPIN routes (TUNING T21r03; REPORT T04r01 also
+        seen when the choice was made) (a phone held in front that had
         stood upright kept its back at 32-49 deg of pitch, where the back's heading turns with the roll and the top
         edge's does not) got worse with 0.85 everywhere.  TUNING: the real walks and every guard recording
         identical (no tuning walk swings a phone that switches axis), so on by the bar for defect fixes.  The fast
