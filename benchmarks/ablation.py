@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import metrics as M
 from benchmarks import splits as S
 from benchmarks.options import add_common, data_root, only_keys, result_path
 
@@ -130,17 +131,6 @@ CONFIGS = {
 # numbers
 
 
-def _median_counting_failures(values, nan_is_failure: bool = True) -> float:
-    """Median with a failed recording (None) counted as +inf; nan when there are no values.
-
-    ``nan_is_failure``: a nan value is a failure too (landmark error, GPS distance); else it is "does not
-    apply" and left out (loop closure of a walk that is no loop).
-    """
-    v = [math.inf if (x is None or (nan_is_failure and x != x)) else float(x) for x in values
-         if x is None or nan_is_failure or x == x]
-    return float(np.median(v)) if v else math.nan
-
-
 def summarise(results: list[dict], split: str, peer: str | None = None) -> dict:
     """The table's numbers of one split (``peer``: that heading source instead of ours)."""
     src = peer or "ours"
@@ -157,12 +147,12 @@ def summarise(results: list[dict], split: str, peer: str | None = None) -> dict:
         if peer is not None and any(s is None for s, r in zip(ok, rows) if "error" not in r):
             continue  # a peer's median only over the same recordings as ours
         if kind == "landmarks":
-            out[f"{short}_lm_m"] = _median_counting_failures([s and s["lm_mean_m"] for s in ok])
-            out[f"{short}_loop_pct"] = _median_counting_failures([s and s["loop_pct"] for s in ok],
+            out[f"{short}_lm_m"] = M.median_counting_failures([s and s["lm_mean_m"] for s in ok])
+            out[f"{short}_loop_pct"] = M.median_counting_failures([s and s["loop_pct"] for s in ok],
                                                                  nan_is_failure=False)
             out[f"{short}_n"] = len(rows)
         else:
-            out[f"{short}_gps_m"] = _median_counting_failures([s and s["median_m"] for s in ok])
+            out[f"{short}_gps_m"] = M.median_counting_failures([s and s["median_m"] for s in ok])
     return out
 
 

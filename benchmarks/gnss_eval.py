@@ -47,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import metrics as M
 from benchmarks.options import (add_common, data_root, failed_row, failures_line, failures_markdown, only_keys,
                                 out_dir, result_path, selected, writes_committed)
 from benchmarks.splits import REPORT, SIM_GPS_SEEDS, TUNING
@@ -319,9 +320,8 @@ def sim_walks(seeds, minutes: float = 15.0, start_s: float = 360.0, length_s: fl
     return out
 
 
-def _median(v):
-    v = [x for x in v if x is not None and math.isfinite(x)]
-    return float(np.median(v)) if v else None
+#: None = does not apply; a non-finite value is a failed run, counted as +inf (never dropped)
+_median = M.median_where_applicable
 
 
 def headlines(real: list[dict], sim: dict) -> dict:

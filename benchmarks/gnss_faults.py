@@ -607,6 +607,19 @@ def jobs_of(root: Path | None, splits, quick: bool, parts=PARTS, keys=None) -> l
     return items
 
 
+def _item_split(item) -> str | None:
+    """The split of a work item (for counting it when it fails)."""
+    kind, args = item
+    if kind == "sim":
+        return args[1]
+    if kind == "ipin":
+        t = _ipin_trials(Path(args[0]))[args[1]]
+        return split_of(t.dataset, t.info)
+    if kind == "loo":
+        return split_of(args[0], {"walk": Path(args[1]).name})
+    return REPORT if kind == "real" else None
+
+
 def run(root: Path | None, splits=SPLITS, quick: bool = False, jobs: int = 2, parts=PARTS, keys=None) -> dict:
     t = time.time()
     items = jobs_of(root, splits, quick, parts, keys)
@@ -620,7 +633,7 @@ def run(root: Path | None, splits=SPLITS, quick: bool = False, jobs: int = 2, pa
         data["missing"].update(missing)
         head = f"  [{done}/{len(items)}] {item[0]} {item[1]}"
         if error is not None:
-            data["failed"].append({"item": list(item), "error": error})
+            data["failed"].append({"item": list(item), "split": _item_split(item), "error": error})
             print(f"{head}: FAILED\n{error}", file=sys.stderr)
         elif result is None:
             print(f"{head}: no GPS", file=sys.stderr)
@@ -663,9 +676,21 @@ def _revision() -> str | None:
 # headlines and the report
 
 
-def _median(v):
-    v = [x for x in v if x is not None and math.isfinite(x)]
-    return float(np.median(v)) if v else None
+#: None = does not apply; a non-finite value is a failed run, counted as +inf (never dropped)
+_median = M.median_where_applicable
+
+
+def _failed_items(data: dict, part: str, split: str) -> int:
+    """How many work items of ``part`` and ``split`` raised (each counts as an infinite error in the medians)."""
+    return sum(1 for f in data.get("failed", []) if f["item"][0] == part and f.get("split") == split)
+
+
+def _ipin_fused_m(row: dict, c: str) -> float:
+    """A file's fused landmark error for filter ``c``: +inf when that filter failed on it, the dead-reckoned error
+    when the file has no GNSS stream at all (the fused track is then the PDR track)."""
+    if c in row["columns"]:
+        return row["columns"][c]["lm_mean_m"]
+    return math.inf if c in row.get("errors", {}) else row["columns"]["pdr"]["lm_mean_m"]
 
 
 def headlines(data: dict) -> dict:
@@ -675,31 +700,37 @@ def headlines(data: dict) -> dict:
         if value is not None:
             h[name] = float(value)
 
+    put("gps_failed_runs", len(data.get("failed", [])))
     sims = {}
     for r in data["sim"]:
         sims.setdefault(r["split"], []).append(r)
+    for f in data.get("failed", []):
+        if f["item"][0] == "sim":
+            sims.setdefault(f.get("split"), [])
     for sp, rows in sims.items():
         put(f"gps_bad_fixes_present_{sp}", sum(r["bad_fixes"] for r in rows))
         put(f"gps_outage_after_noise_2min_dr_from_last_fix_m_{sp}",
             _median([r["dr_from_last_fix_outage_end_m"] for r in rows]))
         for c in COLUMNS:
             cols = [r["columns"][c] for r in rows if c in r["columns"]]
-            if not cols:
+            # a walk whose run, or this filter, failed: an infinite error, counted, never dropped
+            nf = [math.inf] * (_failed_items(data, "sim", sp) + sum(1 for r in rows if c in r.get("errors", {})))
+            if not cols and not nf:
                 continue
             if c != "pdr":
                 put(f"gps_bad_fixes_accepted_{sp}_{c}", sum(x["bad_fixes_accepted"] for x in cols))
                 put(f"gps_good_fixes_accepted_pct_{sp}_{c}", _median([x["good_fixes_accepted_pct"] for x in cols]))
-            put(f"gps_outage_after_noise_2min_m_{sp}_{c}", _median([x["outage_end_m"] for x in cols]))
+            put(f"gps_outage_after_noise_2min_m_{sp}_{c}", _median([x["outage_end_m"] for x in cols] + nf))
             for tag, hacc in (("honest", "honest"), ("lying", "normal")):
                 put(f"gps_outage_after_noise_{tag}_2min_m_{sp}_{c}",
                     _median([r["columns"][c]["outage_end_m"] for r in rows if c in r["columns"]
                              and r["noise_hacc"] == hacc]))
-            put(f"gps_track_median_m_{sp}_{c}", _median([x["track_median_m"] for x in cols]))
+            put(f"gps_track_median_m_{sp}_{c}", _median([x["track_median_m"] for x in cols] + nf))
             if c != "pdr":
                 put(f"gps_track_nees_median_{sp}_{c}", _median([x.get("nees_median") for x in cols]))
                 put(f"gps_track_nees_beyond_95pct_share_{sp}_{c}",
                     _median([x.get("nees_beyond_95pct_share") for x in cols]))
-            put(f"gps_track_max_m_{sp}_{c}", _median([x["track_max_m"] for x in cols]))
+            put(f"gps_track_max_m_{sp}_{c}", _median([x["track_max_m"] for x in cols] + nf))
             put(f"gps_track_worst_m_{sp}_{c}", max((x["track_max_m"] for x in cols if x["track_max_m"] is not None),
                                                    default=None))
             for kind in ("noise", "outage", "jump", "lying", "drift"):
@@ -714,6 +745,9 @@ def headlines(data: dict) -> dict:
         rows = [r for r in data.get("loo", []) if r["split"] == sp]
         for c in FILTERS:
             cols = [r["columns"][c] for r in rows if c in r["columns"] and r["columns"][c].get("applicable", True)]
+            # a walk whose run or filter failed: an infinite ratio and lost stretch (counted, never dropped)
+            cols += [{"ratio": math.inf, "longest_lost_s": math.inf}] * (
+                _failed_items(data, "loo", sp) + sum(1 for r in rows if c in r.get("errors", {})))
             if not cols:
                 continue
             ratios = [x["ratio"] if x["ratio"] is not None else math.inf for x in cols]
@@ -729,14 +763,16 @@ def headlines(data: dict) -> dict:
             continue
         for tag, sel in (("", rows), ("_good_gnss", [r for r in rows if r["gnss"].get("good")]),
                          ("_poor_gnss", [r for r in rows if not r["gnss"].get("good")])):
-            put(f"ipin_pdr_landmark_median_m{tag}_{sp}", _median([r["columns"]["pdr"]["lm_mean_m"] for r in sel]))
+            failed = [math.inf] * (_failed_items(data, "ipin", sp) if tag == "" else 0)  # counted, never dropped
+            put(f"ipin_pdr_landmark_median_m{tag}_{sp}",
+                _median([r["columns"]["pdr"]["lm_mean_m"] for r in sel] + failed))
             for c in FILTERS:
-                put(f"ipin_fused_landmark_median_m{tag}_{sp}_{c}",
-                    _median([r["columns"][c]["lm_mean_m"] for r in sel if c in r["columns"]]))
+                put(f"ipin_fused_landmark_median_m{tag}_{sp}_{c}", _median([_ipin_fused_m(r, c) for r in sel] + failed))
         for c in FILTERS:
-            # consistency (issue #26): the NEES of the fused position at every landmark of the split's files
+            # consistency (issue #26): the NEES of the fused position at every landmark of the split's files (a
+            # non-finite error at a landmark is a failure: inf, beyond the 95 % point, never dropped)
             nees = np.array([v for r in rows if c in r["columns"] for v in r["columns"][c].get("lm_nees", [])])
-            nees = nees[~np.isnan(nees)]
+            nees[np.isnan(nees)] = math.inf
             if len(nees):
                 put(f"ipin_fused_nees_median_{sp}_{c}", float(np.median(nees)))
                 put(f"ipin_fused_nees_beyond_95pct_share_{sp}_{c}", float(np.mean(nees > CHI2_2DOF_95)))

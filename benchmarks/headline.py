@@ -27,8 +27,19 @@ REFERENCE_DATASETS = (("sensorlogger_gps_walk_ethz", "eth_walk"),)
 
 
 def _select(results, dataset, split, placement=None):
-    return [r for r in results if r["dataset"] == dataset and "error" not in r and r.get("split") == split
-            and (placement is None or r["placement"] == placement)]
+    """The recordings of a dataset and split, those whose run failed included (they are counted, never dropped:
+    :func:`_step_err`, :func:`benchmarks.metrics.median_counting_failures`)."""
+    return [r for r in results if r["dataset"] == dataset and r.get("split") == split
+            and (placement is None or r.get("placement") == placement)]
+
+
+def _step_err(r: dict):
+    """A recording's signed step-count error (%): a failed run gave no steps."""
+    return M.FAILED_STEP_ERR_PCT if "error" in r else r.get("step_err_pct")
+
+
+def _distance_err(r: dict, key: str):
+    return M.FAILED_STEP_ERR_PCT if "error" in r else r.get(key)
 
 
 def headline_split(results: list[dict], split: str) -> dict:
@@ -42,45 +53,58 @@ def headline_split(results: list[dict], split: str) -> dict:
     ox = _select(results, "oxford_step_counter", split)
     ox_hand = [r for r in ox if r["placement"] == "hand"]
     bh = _select(results, "brajdic_harle_handheld", split)
-    put(f"oxford_{split}_hand_step_mae_pct", M.mean_abs([r.get("step_err_pct") for r in ox_hand]))
-    put(f"oxford_{split}_all_step_mae_pct", M.mean_abs([r.get("step_err_pct") for r in ox]))
-    put(f"oxford_{split}_step_f1_median", M.nanmedian([r.get("step_f1") for r in ox]))
-    put(f"brajdic_harle_{split}_step_mae_pct", M.mean_abs([r.get("step_err_pct") for r in bh]))
-    put(f"handheld_{split}_step_mae_pct", M.mean_abs([r.get("step_err_pct") for r in ox_hand + bh]))
+    put(f"oxford_{split}_hand_step_mae_pct", M.mean_abs([_step_err(r) for r in ox_hand]))
+    put(f"oxford_{split}_all_step_mae_pct", M.mean_abs([_step_err(r) for r in ox]))
+    put(f"oxford_{split}_step_f1_median", M.median_counting_failures([0.0 if "error" in r else r.get("step_f1") for r in ox if "error" in r
+                                   or r.get("step_f1") is not None], nan_is_failure=False))
+    put(f"brajdic_harle_{split}_step_mae_pct", M.mean_abs([_step_err(r) for r in bh]))
+    put(f"handheld_{split}_step_mae_pct", M.mean_abs([_step_err(r) for r in ox_hand + bh]))
+    failure = M.median_counting_failures
     for ds, short in LANDMARK_DATASETS:
-        rs = [r for r in _select(results, ds, split) if "sources" in r]
-        if not rs:
+        sel = _select(results, ds, split)
+        rs = [r for r in sel if "error" not in r and "sources" in r]
+        n_failed = sum(1 for r in sel if "error" in r)  # counted as an infinite error, never dropped
+        if not rs and not n_failed:
             continue
         p = f"{short}_{split}"
-        ours = [r["sources"]["ours"] for r in rs]
-        put(f"{p}_landmark_median_m", M.nanmedian([s["lm_mean_m"] for s in ours]))
-        put(f"{p}_landmark_fit_median_m", M.nanmedian([s["lm_fit_mean_m"] for s in ours]))
-        put(f"{p}_landmark_pooled_median_m", M.nanmedian([e for s in ours for e in s.get("lm_errors_m", [])]))
-        put(f"{p}_loop_closure_median_pct", M.nanmedian([s["loop_pct"] for s in ours]))
-        put(f"{p}_segment_heading_median_deg", M.nanmedian([s["seg_heading_deg"] for s in ours]))
-        put(f"{p}_distance_median_abs_pct", M.nanmedian([abs(r["lm_distance_err_pct"]) for r in rs]))
+        ours = [r["sources"]["ours"] for r in rs] + [None] * n_failed
+        put(f"{p}_landmark_median_m", failure([s and s["lm_mean_m"] for s in ours]))
+        put(f"{p}_landmark_fit_median_m", failure([s and s["lm_fit_mean_m"] for s in ours]))
+        put(f"{p}_landmark_pooled_median_m",
+            failure([e for s in ours for e in (s.get("lm_errors_m", []) if s else [None])]))
+        put(f"{p}_loop_closure_median_pct", failure([s and s["loop_pct"] for s in ours], nan_is_failure=False))
+        put(f"{p}_segment_heading_median_deg", failure([s and s["seg_heading_deg"] for s in ours],
+                                                       nan_is_failure=False))
+        put(f"{p}_distance_median_abs_pct", failure([abs(r["lm_distance_err_pct"]) for r in rs] + [None] * n_failed,
+                                                    nan_is_failure=False))
         for peer in PEERS:
             srcs = [r["sources"][peer] for r in rs if peer in r["sources"]]
-            if len(srcs) == len(rs):  # a peer's median only over the same recordings as ours
-                put(f"{p}_{peer}_landmark_median_m", M.nanmedian([s["lm_mean_m"] for s in srcs]))
-                put(f"{p}_{peer}_loop_closure_median_pct", M.nanmedian([s["loop_pct"] for s in srcs]))
+            if len(srcs) == len(rs):  # a peer's median only over the same recordings as ours (a failed run of
+                srcs += [None] * n_failed  # ours leaves the peers without steps: failed for them too)
+                put(f"{p}_{peer}_landmark_median_m", failure([s and s["lm_mean_m"] for s in srcs]))
+                put(f"{p}_{peer}_loop_closure_median_pct", failure([s and s["loop_pct"] for s in srcs],
+                                                                   nan_is_failure=False))
     for ds, short in REFERENCE_DATASETS:
-        rs = [r for r in _select(results, ds, split) if "ref_sources" in r]
-        if not rs:
+        sel = _select(results, ds, split)
+        rs = [r for r in sel if "error" not in r and "ref_sources" in r]
+        n_failed = sum(1 for r in sel if "error" in r)
+        if not rs and not n_failed:
             continue
         p = f"{short}_{split}"
-        put(f"{p}_gps_median_m", M.nanmedian([r["ref_sources"]["ours"]["median_m"] for r in rs]))
-        put(f"{p}_gps_fit_median_m", M.nanmedian([r["ref_sources"]["ours"]["fit_median_m"] for r in rs]))
+        ours = [r["ref_sources"]["ours"] for r in rs] + [None] * n_failed
+        put(f"{p}_gps_median_m", failure([s and s["median_m"] for s in ours]))
+        put(f"{p}_gps_fit_median_m", failure([s and s["fit_median_m"] for s in ours]))
         for peer in PEERS:
             srcs = [r["ref_sources"][peer] for r in rs if peer in r["ref_sources"]]
             if len(srcs) == len(rs):
-                put(f"{p}_{peer}_gps_median_m", M.nanmedian([s["median_m"] for s in srcs]))
-                put(f"{p}_{peer}_gps_fit_median_m", M.nanmedian([s["fit_median_m"] for s in srcs]))
+                srcs += [None] * n_failed
+                put(f"{p}_{peer}_gps_median_m", failure([s and s["median_m"] for s in srcs]))
+                put(f"{p}_{peer}_gps_fit_median_m", failure([s and s["fit_median_m"] for s in srcs]))
     ip = _select(results, "ipol_healthy_gait_xsens", split)
-    put(f"ipol_{split}_step_mae_pct", M.mean_abs([r.get("step_err_pct") for r in ip]))
-    put(f"ipol_{split}_distance_mae_pct", M.mean_abs([r.get("distance_err_pct") for r in ip]))
+    put(f"ipol_{split}_step_mae_pct", M.mean_abs([_step_err(r) for r in ip]))
+    put(f"ipol_{split}_distance_mae_pct", M.mean_abs([_distance_err(r, "distance_err_pct") for r in ip]))
     tw = _select(results, "trundlewheel_distance", split)
-    put(f"trundlewheel_{split}_distance_mae_pct", M.mean_abs([r.get("distance_err_pct") for r in tw]))
+    put(f"trundlewheel_{split}_distance_mae_pct", M.mean_abs([_distance_err(r, "distance_err_pct") for r in tw]))
     return h
 
 

@@ -118,6 +118,29 @@ def nanmedian(values) -> float:
     return float(np.median(v)) if len(v) else math.nan
 
 
+def median_counting_failures(values, nan_is_failure: bool = True) -> float:
+    """Median with a failed recording (None, or an inf error) counted as +inf, never dropped; nan when there are
+    no values.
+
+    ``nan_is_failure``: a nan value is a failure too (landmark error, GPS distance); else it is "does not
+    apply" and left out (loop closure of a walk that is no loop).
+    """
+    v = [math.inf if (x is None or (nan_is_failure and x != x)) else float(x) for x in values
+         if x is None or nan_is_failure or x == x]
+    return float(np.median(v)) if v else math.nan
+
+
+def median_where_applicable(values) -> float | None:
+    """Median over the values that apply (None: does not apply, left out); a non-finite value is a failed run and
+    enters as +inf, never dropped.  None when nothing applies."""
+    v = [x if math.isfinite(x) else math.inf for x in values if x is not None]
+    return float(np.median(v)) if v else None
+
+
+#: the step-count error of a recording whose run failed: it gave no steps (-100 %)
+FAILED_STEP_ERR_PCT = -100.0
+
+
 def mean_abs(values) -> float:
     """Mean of ``|x|`` over the finite values (e.g. step-count MAE from signed errors)."""
     v = np.asarray([x for x in values if x is not None], dtype=float)

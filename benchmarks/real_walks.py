@@ -546,6 +546,7 @@ def plot_walk(walk: RealWalk, rec, res, fixes, row, st_t, modes) -> str:
 
 # -- summaries ----------------------------------------------------------------------------------------------
 def _med(v):
+    """Median over the values present (None / nan: not measured here); +inf (a failure) is kept."""
     v = [x for x in v if x is not None and x == x]
     return float(np.median(v)) if v else None
 
@@ -558,7 +559,9 @@ def summarize(rows: list[dict]) -> dict:
             continue
         gps = [r for r in rs if r.get("gps") and not r.get("failed")]
         failed = [r["name"] for r in rs if r.get("failed")]
-        sds = [r["stability"]["sd_deg"] for r in gps]
+        # a GPS walk whose run failed counts as an infinite error in the medians, never dropped
+        failed_gps = [math.inf for r in rs if r.get("failed") and r.get("kind") == "gps_walk"]
+        sds = [r["stability"]["sd_deg"] for r in gps] + failed_gps
         sign = [r["name"] for r in gps if r.get("magnetometer") and r["stability"]["mean_offset_deg"] is not None
                 and abs(r["stability"]["mean_offset_deg"]) > TARGET_SIGN_DEG]
         d = {"walks": len(rs), "failed": failed, "gps_walks": len(gps),
@@ -576,18 +579,24 @@ def summarize(rows: list[dict]) -> dict:
             for r in gps:
                 os_ = [o for o in r.get("outages", []) if o["length_s"] == length]
                 n_fail += sum(1 for o in os_ if o.get("failed") or o.get("pdr_pct") is None)
-                good = [o for o in os_ if not o.get("failed")]
-                if good:
-                    per_walk_def.append(_med([o["default_pct"] for o in good]))
-                    per_walk_pdr.append(_med([o["pdr_pct"] for o in good]))
-                    per_walk_floor.append(_med([o["floor_pct"] for o in good]))
+                if os_:  # an outage that failed or could not be scored (e.g. no distance walked by the
+                    # track while the fixes moved) is an infinite error in its walk's median, never dropped
+                    def pct(o, key):
+                        v = None if o.get("failed") else o.get(key)
+                        return math.inf if v is None else v
+                    per_walk_def.append(_med([pct(o, "default_pct") for o in os_]))
+                    per_walk_pdr.append(_med([pct(o, "pdr_pct") for o in os_]))
+                    per_walk_floor.append(_med([o["floor_pct"] for o in os_ if not o.get("failed")]))
             d[f"outage_{length}s"] = {"walks": len(per_walk_def), "default_median_pct": _med(per_walk_def),
                                       "pdr_median_pct": _med(per_walk_pdr), "floor_median_pct": _med(per_walk_floor),
                                       "failed_or_unmeasured": n_fail}
         clips = [r for r in rs if r.get("steps_counted")]
         d["clips"] = len(clips)
-        d["clip_abs_step_error_mean_pct"] = (float(np.mean([abs(r["steps_error_pct"]) for r in clips
-                                                            if "steps_error_pct" in r])) if clips else None)
+        # a counted clip whose run failed gave no steps: -100 %, counted
+        d["clip_abs_step_error_mean_pct"] = (float(np.mean([abs(r["steps_error_pct"]) if not r.get("failed")
+                                                            else 100.0 for r in clips
+                                                            if "steps_error_pct" in r or r.get("failed")]))
+                                             if clips else None)
         out[split] = d
     return out
 

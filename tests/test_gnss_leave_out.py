@@ -42,3 +42,26 @@ def test_the_leave_out_measure_on_a_track_that_follows_the_fixes_until_it_reject
     assert m["ratio"] == pytest.approx(0.4, abs=1e-6)
     assert m["longest_lost_s"] == 78.0  # fixes 100..178 rejected (179 is left out, not counted)
     assert m["good_fixes"] == n - left.sum() and m["good_fixes_accepted"] == n - left.sum() - 72
+
+
+def test_a_failed_run_counts_in_the_headlines_never_dropped():
+    import math
+
+    from benchmarks.gnss_faults import headlines
+
+    def ipin(name, pdr, chen, kubrak=None, errors=None):
+        cols = {"pdr": {"lm_mean_m": pdr}, "chen": {"lm_mean_m": chen, "lm_nees": [1.0, math.nan]}}
+        if kubrak is not None:
+            cols["kubrak"] = {"lm_mean_m": kubrak, "lm_nees": [1.0]}
+        return {"name": name, "split": "tuning", "gnss": {"good": True}, "columns": cols, "errors": errors or {}}
+
+    data = {"sim": [], "real": [], "loo": [],
+            "ipin": [ipin("a", 1.0, 1.0, 1.0), ipin("b", 2.0, 2.0, errors={"kubrak": "ValueError"}),
+                     ipin("c", 3.0, math.nan, 3.0)],
+            "failed": [{"item": ["ipin", ["root", 7]], "split": "tuning", "error": "boom"}]}
+    h = headlines(data)
+    assert h["gps_failed_runs"] == 1
+    assert h["ipin_pdr_landmark_median_m_tuning"] == 2.5  # (1, 2, 3, inf)
+    assert h["ipin_fused_landmark_median_m_tuning_chen"] == math.inf  # (1, 2, inf: nan, inf: failed)
+    assert h["ipin_fused_landmark_median_m_tuning_kubrak"] == math.inf  # (1, inf: kubrak failed on b, 3, inf)
+    assert h["ipin_fused_nees_beyond_95pct_share_tuning_chen"] == 0.5  # a non-finite error is beyond, not dropped

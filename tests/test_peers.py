@@ -83,7 +83,6 @@ def test_headline_targets_and_guard_compare():
                      "ekf": {"lm_mean_m": 2.2, "lm_fit_mean_m": 1.0, "loop_pct": math.nan, "seg_heading_deg": 5.0}}},
         {"dataset": "sensorlogger_gps_walk_ethz", "name": "g", "split": "report", "placement": "hand_flat",
          "ref_sources": {"ours": {"median_m": 12.0, "fit_median_m": 5.0}}},
-        {"dataset": "ipin2023_track3", "name": "h", "split": "report", "error": "ValueError: broken"},
     ]
     h = run.headline(results)
     assert h["handheld_report_step_mae_pct"] == pytest.approx(2.0)
@@ -111,6 +110,33 @@ def test_headline_targets_and_guard_compare():
     assert th["handheld_report_step_mae_pct"] == {"max": 2.5, "baseline": 2.0}
     assert th["ipin2023_tuning_landmark_median_m"] == {"max": 9.9, "baseline": 9.0}
     assert "ipin2023_report_rotvec_landmark_median_m" not in th  # peers are not guarded
+
+
+def test_a_failed_recording_counts_in_every_headline_never_dropped():
+    ok_ipin = {"dataset": "ipin2023_track3", "split": "report", "placement": "hand", "lm_distance_err_pct": 2.0,
+               "sources": {"ours": {"lm_mean_m": 1.5, "lm_fit_mean_m": 1.0, "loop_pct": 1.5, "seg_heading_deg": 5.0,
+                                    "lm_errors_m": [1.0, 2.0]},
+                           "rotvec": {"lm_mean_m": 4.0, "lm_fit_mean_m": 1.0, "loop_pct": 3.0,
+                                      "seg_heading_deg": 5.0}}}
+    failed = {"split": "report", "placement": "hand", "error": "ValueError: broken"}
+    results = [dict(ok_ipin, name="a"), dict(ok_ipin, name="b"), dict(failed, dataset="ipin2023_track3", name="c"),
+               {"dataset": "oxford_step_counter", "name": "d", "split": "report", "placement": "hand",
+                "step_err_pct": 2.0, "step_f1": 0.9},
+               dict(failed, dataset="oxford_step_counter", name="e"),
+               {"dataset": "sensorlogger_gps_walk_ethz", "name": "g", "split": "report", "placement": "hand_flat",
+                "ref_sources": {"ours": {"median_m": 12.0, "fit_median_m": 5.0}}},
+               dict(failed, dataset="sensorlogger_gps_walk_ethz", name="h"),
+               dict(failed, dataset="sensorlogger_gps_walk_ethz", name="i")]
+    h = run.headline(results)
+    assert h["ipin2023_report_landmark_median_m"] == 1.5  # median of (1.5, 1.5, inf): counted, not dropped
+    assert h["ipin2023_report_landmark_pooled_median_m"] == 2.0  # (1, 2, 1, 2, inf)
+    assert h["ipin2023_report_rotvec_landmark_median_m"] == 4.0  # the failed run left the peers without steps
+    assert h["ipin2023_report_loop_closure_median_pct"] == 1.5
+    assert h["oxford_report_all_step_mae_pct"] == pytest.approx(51.0)  # (|2| + |-100|) / 2: no steps
+    assert h["oxford_report_step_f1_median"] == pytest.approx(0.45)  # (0.9, 0)
+    assert h["eth_walk_report_gps_median_m"] == math.inf  # (12, inf, inf)
+    results.append(dict(failed, dataset="ipin2023_track3", name="j"))
+    assert run.headline(results)["ipin2023_report_landmark_median_m"] == math.inf  # (1.5, 1.5, inf, inf)
 
 
 def test_ekf_peer_gets_the_site_dip_not_the_recordings():

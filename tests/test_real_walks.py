@@ -139,3 +139,29 @@ def test_reversed_steps_counts_backward_groups():
     assert reversed_steps(None, st_t, head, 12.0)["reversed_pct"] is None
     still = reversed_steps((t, np.zeros(120), np.zeros(120), np.full(120, 4.0)), st_t, head, 12.0)
     assert still["n"] == 0 and still["reversed_pct"] is None  # no chord: no course, nothing counted
+
+
+def test_a_failed_walk_or_outage_counts_in_the_medians_never_dropped():
+    import math
+
+    from benchmarks.real_walks import summarize
+
+    def gps_walk(name, sd, outages, failed=None):
+        r = {"name": name, "split": "report", "kind": "gps_walk", "gps": True,
+             "stability": {"sd_deg": sd, "drift_deg_min": 1.0, "mean_offset_deg": 0.0},
+             "stability_device": {"sd_deg": sd}, "outages": outages}
+        return dict(r, failed=failed) if failed else r
+
+    def out(pct):
+        return {"length_s": 180.0, "default_pct": pct, "pdr_pct": pct, "floor_pct": 1.0}
+
+    rows = [gps_walk("a", 5.0, [out(10.0), out(20.0)]),
+            gps_walk("b", 7.0, [out(30.0), out(None)]),  # an outage not scored: counted as inf in its walk
+            gps_walk("c", None, [], failed="ValueError"),
+            {"name": "d", "split": "report", "kind": "step_clip", "steps_counted": 10, "steps_error_pct": 10.0},
+            {"name": "e", "split": "report", "kind": "step_clip", "steps_counted": 10, "failed": "ValueError"}]
+    s = summarize(rows)["report"]
+    assert s["sd_median_deg"] == 7.0  # (5, 7, inf)
+    assert s["outage_180s"]["default_median_pct"] == math.inf  # walks (15, inf)
+    assert s["outage_180s"]["failed_or_unmeasured"] == 1
+    assert s["clip_abs_step_error_mean_pct"] == 55.0  # (10, 100: a failed clip gave no steps)
