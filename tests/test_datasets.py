@@ -219,6 +219,12 @@ def test_split_declarations():
         assert S.split_of(ox, info) == want and S.declared(ox, info), (pl, d, k)
     other = {"placement": "handbag", "data_folder": "data1", "sequence": 1}
     assert S.split_of(ox, other) == "report" and not S.declared(ox, other)
+    # the same search's RIDI copies (declared 2026-12-07 by sequence, the same rule): 11 of 28 tuning
+    rd = S.RIDI_TRUTH_DATASET
+    assert len(S.RIDI_DECLARED_SEQUENCES) == 28 and len(S.RIDI_TUNING_SEQUENCES) == 11
+    assert S.split_of(rd, {"sequence": "dan_leg1"}) == "tuning" and S.split_of(rd, {"sequence": "hao_leg2"}) == "report"
+    assert S.split_of(rd, {"sequence": "hang_bag_side1"}) == "report" and S.declared(rd, {"sequence": "hang_bag_side1"})
+    assert S.split_of(rd, {"sequence": "tang_bag1"}) == "report" and not S.declared(rd, {"sequence": "tang_bag1"})
     from benchmarks.run import DATASET_MODULES
     import importlib
 
