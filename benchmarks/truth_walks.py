@@ -1,25 +1,33 @@
-"""Truth walks (issue #25): the walking direction against a motion-capture track, per carry position.
+"""Truth walks (issue #25): the walking direction against a truth track (motion capture or Tango), per carry position.
 
 ``python -m benchmarks.truth_walks --extra2 DIR [--split tuning|report|all] [--only TEXT,...] [--no-write]``
 writes ``benchmarks/TRUTH_WALKS_RESULTS.md`` and ``benchmarks/truth_walks_results.json``.  ``DIR`` is a folder the
-user gives (as ``real_walks --extra``), e.g. ``/work/extra_data2`` (its REBUILD.md says how to rebuild it): OxIOD
-``syn`` pairs ``<owner>__<repo>/<placement>/<dataN>/syn/imuK.csv`` + ``viK.csv`` (:mod:`core.importers.oxiod`).
+user gives (as ``real_walks --extra``), e.g. ``/work/extra_data2`` (its REBUILD.md says how to rebuild it), holding
+
+* OxIOD ``syn`` pairs ``<owner>__<repo>/<placement>/<dataN>/syn/imuK.csv`` + ``viK.csv`` (iPhone, Vicon truth in a
+  room of about 3.5 x 6 m; :mod:`core.importers.oxiod`), and
+* RIDI tables ``<owner>__<repo>/**/<name>_data_with_errors.xlsx`` or ``<name>/processed/data.csv`` (Android, Google
+  Tango truth, the placement the name's second word: leg = trouser pocket, bag, body, handheld;
+  :mod:`core.importers.ridi`).
+
 Without the folder the benchmark says "not available" and writes nothing (CI has no such folder).
 
 Every walk runs through **the product's default path**, the call :mod:`benchmarks.real_walks` makes for
 ``pdr replay WALK --no-profile`` (:func:`benchmarks.real_walks.run_default`; the recordings have no GPS, so no
-fusion).  Per walk, labelled with its split (:func:`benchmarks.splits.split_of`, dataset
-:data:`benchmarks.splits.OXIOD_TRUTH_DATASET`, declared by sequence before any number was seen):
+fusion).  Per walk, labelled with its split (:func:`benchmarks.splits.split_of`, datasets
+:data:`benchmarks.splits.OXIOD_TRUTH_DATASET` and :data:`~benchmarks.splits.RIDI_TRUTH_DATASET`, declared by sequence
+before any number was seen):
 
 Steps and carry
     The number of steps, the carry detector's share of time per mode and the steps per mode.
 Walking-direction stability against the truth
-    Consecutive :data:`WINDOW_S`-s windows (5 s: the Vicon room's straight stretches are a few metres) in which
+    Consecutive :data:`WINDOW_S`-s windows (5 s: the Vicon room's straight stretches are a few metres; the same
+    for RIDI) in which
     the truth walks straight (its chord at least :data:`STRAIGHT_MIN` of its path over :data:`PATH_EVERY_S`-s
     samples, and at least :data:`MIN_SPEED_M_S`); the truth's course is the chord's direction, the step heading
     the circular mean of the steps' headings inside (at least :data:`MIN_STEPS` steps).  As
     :func:`benchmarks.real_walks.stability` defines them: the circular SD of ``course - heading`` over the
-    windows, its drift (deg/min) and the mean offset (here in the Vicon room's frame: its absolute value says
+    windows, its drift (deg/min) and the mean offset (here in the truth's own frame: its absolute value says
     nothing; the SD and the drift do).  Also per carry mode (windows whose steps are over 80 % in one mode) and for
     the device heading (the smoothed device axis, :class:`benchmarks.walkdir._Probe`).
 Distance and shape
@@ -47,7 +55,7 @@ import numpy as np
 from benchmarks.foot import _git_rev
 from benchmarks.options import out_dir
 from benchmarks.real_walks import STRAIGHT_MIN, _jsonable, _med, run_default, stability, step_arrays
-from benchmarks.splits import OXIOD_TRUTH_DATASET, REPORT, TUNING, split_of
+from benchmarks.splits import OXIOD_TRUTH_DATASET, REPORT, RIDI_TRUTH_DATASET, TUNING, split_of
 
 RESULTS_MD = Path(__file__).with_name("TRUTH_WALKS_RESULTS.md")
 RESULTS_JSON = Path(__file__).with_name("truth_walks_results.json")
@@ -62,29 +70,54 @@ PER_MODE_SHARE = 0.8
 @dataclass
 class TruthWalk:
     name: str
-    imu_path: Path
+    path: Path  #: OxIOD: the imuK.csv (its viK.csv beside); RIDI: the table (.xlsx or data.csv)
+    dataset: str  #: :data:`benchmarks.splits.OXIOD_TRUTH_DATASET` or :data:`~benchmarks.splits.RIDI_TRUTH_DATASET`
     repository: str
     placement: str
-    data_folder: str
-    sequence: int
     split: str
 
 
+RIDI_SUFFIX = "_data_with_errors.xlsx"
+
+
 def truth_walks(root: Path | None) -> list[TruthWalk]:
-    """The OxIOD syn pairs under ``root`` (``<owner>__<repo>/<placement>/<dataN>/syn/imuK.csv``), sorted."""
+    """The truth walks under ``root``, sorted by name: OxIOD syn pairs
+    ``<owner>__<repo>/<placement>/<dataN>/syn/imuK.csv`` (+ ``viK.csv``) and RIDI tables
+    ``<owner>__<repo>/**/<name>_data_with_errors.xlsx`` (or RIDI's own ``<name>/processed/data.csv``)."""
     out = []
     if root is None or not Path(root).is_dir():
         return out
-    for imu in sorted(Path(root).glob("*/*/*/syn/imu*.csv")):
+    root = Path(root)
+    for imu in root.glob("*/*/*/syn/imu*.csv"):
         k = imu.stem[3:]
         if not k.isdigit() or not imu.with_name(f"vi{k}.csv").is_file():
             continue
         data_folder, placement, repo_dir = imu.parent.parent.name, imu.parent.parent.parent.name, imu.parents[3].name
         info = {"placement": placement, "data_folder": data_folder, "sequence": int(k)}
-        out.append(TruthWalk(f"oxiod_{placement.replace(' ', '_')}_{data_folder}_seq{k}", imu,
-                             repo_dir.replace("__", "/", 1), placement, data_folder, int(k),
-                             split_of(OXIOD_TRUTH_DATASET, info)))
-    return out
+        out.append(TruthWalk(f"oxiod_{placement.replace(' ', '_')}_{data_folder}_seq{k}", imu, OXIOD_TRUTH_DATASET,
+                             repo_dir.replace("__", "/", 1), placement, split_of(OXIOD_TRUTH_DATASET, info)))
+    tables = [(t, t.name[:-len(RIDI_SUFFIX)]) for t in root.glob(f"*/**/*{RIDI_SUFFIX}")]
+    tables += [(t, t.parent.parent.name) for t in root.glob("*/**/processed/data.csv")]
+    for table, seq in tables:
+        words = seq.split("_")
+        if len(words) < 2:
+            continue
+        placement = words[1].rstrip("0123456789")
+        repo_dir = table.relative_to(root).parts[0]
+        out.append(TruthWalk(f"ridi_{seq}", table, RIDI_TRUTH_DATASET, repo_dir.replace("__", "/", 1), placement,
+                             split_of(RIDI_TRUTH_DATASET, {"sequence": seq})))
+    return sorted(out, key=lambda w: w.name)
+
+
+def read_walk(walk: TruthWalk):
+    """The walk's recording (with its truth as ``posi``)."""
+    if walk.dataset == OXIOD_TRUTH_DATASET:
+        from core.importers.oxiod import read_oxiod
+
+        return read_oxiod(str(walk.path), warn=False)
+    from core.importers.ridi import read_ridi
+
+    return read_ridi(str(walk.path), warn=False)
 
 
 # -- the truth: straight windows, path, best-rotation end error ---------------------------------------------
@@ -135,13 +168,11 @@ def best_rotation_end_error(pdr_xy: np.ndarray, truth_xy: np.ndarray) -> tuple[f
 
 # -- one walk -------------------------------------------------------------------------------------------------
 def evaluate_walk(walk: TruthWalk) -> dict:
-    from core.importers.oxiod import read_oxiod
-
-    row = {"name": walk.name, "split": walk.split, "placement": walk.placement, "repository": walk.repository,
-           "file": f"{walk.placement}/{walk.data_folder}/syn/{walk.imu_path.name}"}
+    row = {"name": walk.name, "dataset": walk.dataset, "split": walk.split, "placement": walk.placement,
+           "repository": walk.repository, "file": str(walk.path)}
     try:
-        rec = read_oxiod(str(walk.imu_path), warn=False)
-        res, pipe, engine = run_default(rec, walk.imu_path.parent, probe=True)
+        rec = read_walk(walk)
+        res, pipe, engine = run_default(rec, walk.path.parent, probe=True)
         t0 = rec.t0_ns
         carry = (res.summary().get("carry") or {})
         time_s = carry.get("time_s") or {}
@@ -193,10 +224,10 @@ def summarize(rows: list[dict]) -> dict:
     """Medians per split and placement (failed walks counted, not in the medians)."""
     out: dict = {}
     for split in (TUNING, REPORT):
-        for pl in sorted({r["placement"] for r in rows if r["split"] == split}):
-            rs = [r for r in rows if r["split"] == split and r["placement"] == pl]
+        for pl in sorted({(r["dataset"], r["placement"]) for r in rows if r["split"] == split}):
+            rs = [r for r in rows if r["split"] == split and (r["dataset"], r["placement"]) == pl]
             ok = [r for r in rs if not r.get("failed")]
-            out.setdefault(split, {})[pl] = {
+            out.setdefault(split, {})[f"{pl[0]}: {pl[1]}"] = {
                 "walks": len(rs), "failed": [r["name"] for r in rs if r.get("failed")],
                 "sd_deg_median": _med([r["stability"]["sd_deg"] for r in ok]),
                 "abs_drift_deg_min_median": _med([abs(r["stability"]["drift_deg_min"]) for r in ok
@@ -218,13 +249,13 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
     L = ["# Truth walks: the walking direction against a motion-capture track (issue #25)", "",
          f"Generated by `python -m benchmarks.truth_walks` at {meta['when']} (commit {meta['commit']}, "
          f"{meta['seconds']:.0f} s). Data: `{meta['folder']}` (OxIOD copies, see its REBUILD.md). Splits run: {seen}.",
-         "", f"Windows: consecutive {WINDOW_S:g}-s stretches where the Vicon track is straight (chord >= "
+         "", f"Windows: consecutive {WINDOW_S:g}-s stretches where the truth track (Vicon / Tango) is straight (chord >= "
          f"{STRAIGHT_MIN:g} of the path, >= {MIN_SPEED_M_S:g} m/s), at least {MIN_STEPS} steps. SD / drift: circular "
-         "SD and drift of (truth course - step heading) over those windows; offset: their mean, in the Vicon "
-         "room's frame (not north: its value says nothing). Distance: PDR steps against the truth's path "
+         "SD and drift of (truth course - step heading) over those windows; offset: their mean, in the truth's "
+         "frame (not north: its value says nothing). Distance: PDR steps against the truth's path "
          f"({PATH_EVERY_S:g}-s samples). End error: after the best rotation of the whole track about its first step.",
          "", "## Per split and placement (medians)", "",
-         "| split | placement | walks | failed | windows | SD deg | abs drift deg/min | device SD deg | "
+         "| split | dataset: placement | walks | failed | windows | SD deg | abs drift deg/min | device SD deg | "
          "distance err % | end err % of path |", "|---|---|---|---|---|---|---|---|---|---|"]
     for split, by in summ.items():
         label = "report, seen once" if split == REPORT else "tuning"

@@ -48,3 +48,18 @@ def test_no_folder_means_not_available(tmp_path, capsys):
     assert TW.truth_walks(None) == [] and TW.truth_walks(tmp_path / "absent") == []
     assert TW.main(["--extra2", str(tmp_path / "absent")]) == 0
     assert "not available" in capsys.readouterr().out
+
+
+def test_walks_are_found_and_split_as_declared(tmp_path):
+    syn = tmp_path / "o__r" / "pocket" / "data1" / "syn"
+    syn.mkdir(parents=True)
+    (syn / "imu5.csv").write_text("")
+    (syn / "vi5.csv").write_text("")
+    (syn / "imu6.csv").write_text("")  # no vi6.csv: not a walk
+    err = tmp_path / "w__p" / "data" / "error"
+    err.mkdir(parents=True)
+    for n in ("dan_leg1", "hao_leg2"):
+        (err / f"{n}_data_with_errors.xlsx").write_text("")
+    walks = {w.name: (w.placement, w.split, w.repository) for w in TW.truth_walks(tmp_path)}
+    assert walks == {"oxiod_pocket_data1_seq5": ("pocket", "tuning", "o/r"), "ridi_dan_leg1": ("leg", "tuning", "w/p"),
+                     "ridi_hao_leg2": ("leg", "report", "w/p")}
