@@ -243,14 +243,15 @@ def distance_in_spans(st_t, lengths, spans) -> float:
     return float(np.sum(np.asarray(lengths, dtype=float)[inside]))
 
 
-def stability(windows, st_t, headings, t0_ns: int) -> dict:
-    """Course minus heading per window, and the walk's circular SD, drift per minute and mean offset."""
+def stability(windows, st_t, headings, t0_ns: int, min_steps: int = 10) -> dict:
+    """Course minus heading per window (of at least ``min_steps`` steps), and the walk's circular SD, drift per
+    minute and mean offset."""
     diffs, times = [], []
     for a, b, course in windows:
         idx = np.flatnonzero((st_t >= a) & (st_t <= b))
         h = headings[idx]
         h = h[np.isfinite(h)]
-        if len(h) < 10:
+        if len(h) < min_steps:
             continue
         diffs.append(float(wrap_angle(course - circular_mean(h))))
         times.append(0.5 * (a + b - 2 * t0_ns) * 1e-9)
@@ -377,6 +378,16 @@ def walking_from_s(steps, t0_ns: int) -> float:
     return walking_start_s(steps, t0_ns)
 
 
+def step_arrays(res, pipe):
+    """``(t_ns, heading_rad, device_heading_rad)`` of a run's steps; the device heading from the probe's log
+    (:class:`benchmarks.walkdir._Probe`), else the step heading."""
+    st_t = np.array([s.t_ns for s in res.steps], dtype=np.int64)
+    heading = np.array([s.heading_rad for s in res.steps])
+    probe_log = getattr(pipe.walkdir, "log", {})
+    device = np.array([probe_log.get(s.heading_rad, {}).get("device", s.heading_rad) for s in res.steps])
+    return st_t, heading, device
+
+
 def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> dict:
     from core.importers import load_recording
 
@@ -406,10 +417,7 @@ def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> d
         if not res.steps:
             row["failed"] = "no steps"
             return row
-        st_t = np.array([s.t_ns for s in res.steps], dtype=np.int64)
-        heading = np.array([s.heading_rad for s in res.steps])
-        probe_log = getattr(pipe.walkdir, "log", {})
-        device = np.array([probe_log.get(s.heading_rad, {}).get("device", s.heading_rad) for s in res.steps])
+        st_t, heading, device = step_arrays(res, pipe)
         acc = rec.streams["acc"]
         gait, moving = periodicity_steps((acc.t_ns - t0) * 1e-9, acc.values)
         row.update(periodicity_steps=gait, periodicity_moving_s=moving,

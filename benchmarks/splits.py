@@ -117,6 +117,31 @@ Further public recordings (issue #25, fetched into a folder outside the reposito
     repository.  Of NIghtwing1914's 20 logs, 19 were copied (``Dhvani_12_6.94_14(3)`` has an 11-s gap inside a
     clip its name says lasted 6.94 s).
 
+Truth walks: OxIOD copies with a Vicon track (``oxiod_truth_walks``, :mod:`benchmarks.truth_walks`, issue #25)
+    Declared 2026-12-07 (a seventh search, h12/oxdata), **before any number was seen on them** (only the files'
+    row and column counts were read, to check the copy).  One repository, ``CantLooseToAMoose/IMU_RELATIVE_POSITIONING``,
+    holds the Oxford Inertial Odometry Dataset; the copies present in its snapshot (``/work/extra_data2``, its
+    MANIFEST.tsv) are 14 ``syn`` sequences of four placements (handheld 4, pocket 1, running 2, trolley 7), so they
+    are split by sequence, not by repository.  The rule: within each placement folder, the sequences sorted by
+    (data folder, sequence number); the 1st, 4th, 7th, ... are **tuning**, the others **report** (every third
+    from the first, as the extra corpus's repositories are).  So: handheld data1 seq2 and seq7 tuning, seq3 and
+    seq4 report; pocket data1 seq5 (the only pocket walk) tuning; running data1 seq6 tuning, seq7 report; trolley
+    data1 seq7, data2 seq3 and data2 seq6 tuning, data2 seq1, seq2, seq4, seq5 report.  Honest caveats: the small
+    groups make it 7 tuning of 14, not a third; the pocket placement has no report walk (its one walk goes where
+    the rule puts it), so a pocket number from here is a tuning number only.  A sequence this does not list
+    (another copy, another OxIOD placement) is **report**.
+
+Truth walks: RIDI copies with a Tango track (``ridi_truth_walks``, :mod:`benchmarks.truth_walks`, issue #25)
+    Declared 2026-12-07 (the same seventh search, later), **before any number was seen on them** (only the file
+    names and the sizes of the snapshot were read).  ``Wdong886/PDR_CNN_BiLSTM_Transformer`` (MIT) holds RIDI
+    sequences (Yan, Shan & Furukawa 2018: Android phone, Tango truth) as ``data/error/<name>_data_with_errors.xlsx``;
+    28 of them are in the snapshot (the others over 4 MiB): bag 5, body 13, handheld 7, leg (trouser pocket) 3.
+    The same rule as OxIOD's: within each placement (the name's second word without its digits), the sequence
+    names sorted; the 1st, 4th, 7th, ... are **tuning**, the others **report**.  So tuning: bag ``dan_bag1``,
+    ``huayi_bag2``; body ``dan_body1``, ``hang_body_fast1``, ``hao_body2``, ``ma_body2``, ``zhicheng_body2``;
+    handheld ``dan_handheld1``, ``ma_handheld3``, ``xiaojing_handheld2``; leg ``dan_leg1`` (11 of 28); every other
+    sequence report.  Honest caveat: split by sequence, not by walker, so a walker (``dan`` most) is on both sides.
+
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
 named.
@@ -158,6 +183,48 @@ PHONE_WALKS_MORE_REPOS = {
     "aymdi_data": "Aymdi/DeadReckoning",
 }
 
+#: the OxIOD truth walks' dataset name (:mod:`benchmarks.truth_walks`)
+OXIOD_TRUTH_DATASET = "oxiod_truth_walks"
+#: OxIOD sequences declared tuning (placement, data folder, sequence number), 2026-12-07 before any number was seen;
+#: every other OxIOD sequence is report (see the docstring's rule)
+OXIOD_TUNING_SEQUENCES = frozenset({
+    ("handheld", "data1", 2), ("handheld", "data1", 7),
+    ("pocket", "data1", 5),
+    ("running", "data1", 6),
+    ("trolley", "data1", 7), ("trolley", "data2", 3), ("trolley", "data2", 6),
+})
+#: the OxIOD sequences the declaration names (both splits)
+OXIOD_DECLARED_SEQUENCES = OXIOD_TUNING_SEQUENCES | frozenset({
+    ("handheld", "data1", 3), ("handheld", "data1", 4),
+    ("running", "data1", 7),
+    ("trolley", "data2", 1), ("trolley", "data2", 2), ("trolley", "data2", 4), ("trolley", "data2", 5),
+})
+
+
+#: the RIDI truth walks' dataset name (:mod:`benchmarks.truth_walks`)
+RIDI_TRUTH_DATASET = "ridi_truth_walks"
+#: RIDI sequences declared tuning, 2026-12-07 before any number was seen (every other RIDI sequence is report)
+RIDI_TUNING_SEQUENCES = frozenset({
+    "dan_bag1", "huayi_bag2",
+    "dan_body1", "hang_body_fast1", "hao_body2", "ma_body2", "zhicheng_body2",
+    "dan_handheld1", "ma_handheld3", "xiaojing_handheld2",
+    "dan_leg1",
+})
+#: the RIDI sequences the declaration names (both splits)
+RIDI_DECLARED_SEQUENCES = RIDI_TUNING_SEQUENCES | frozenset({
+    "dan_bag2", "hang_bag_side1", "huayi_bag_test1",
+    "dan_body2", "dan_body3", "hang_body_test1", "hao_body1", "huayi_body_test1", "ma_body1", "ruixuan_body2",
+    "yajie_body2",
+    "dan_handheld2", "hang_handheld_side_test2", "ruixuan_handheld2", "shali_handheld1",
+    "hao_leg2", "zhicheng_leg2",
+})
+
+
+def oxiod_split(placement: str, data_folder: str, sequence: int) -> str:
+    """An OxIOD truth walk by (placement folder, ``dataN`` folder, sequence number): tuning only if declared so."""
+    return TUNING if (placement, data_folder, int(sequence)) in OXIOD_TUNING_SEQUENCES else REPORT
+
+
 #: datasets whose every recording is in one split
 WHOLE_DATASET = {
     "oxford_step_counter": REPORT,
@@ -198,6 +265,10 @@ def split_of(dataset: str, info: dict | None = None) -> str:
         return WHOLE_DATASET[dataset]
     if dataset == "ipin2023_track3" and "route" in info:
         return ipin_split(info["route"])
+    if dataset == OXIOD_TRUTH_DATASET and "sequence" in info:
+        return oxiod_split(info.get("placement", ""), info.get("data_folder", ""), info["sequence"])
+    if dataset == RIDI_TRUTH_DATASET and "sequence" in info:
+        return TUNING if info["sequence"] in RIDI_TUNING_SEQUENCES else REPORT
     if dataset == "ms_indoor_location_2020" and "file_no" in info:
         return ms_indoor_split(info["file_no"])
     if "repository" in info:
@@ -218,6 +289,10 @@ def declared(dataset: str, info: dict | None = None) -> bool:
         return "file_no" in info
     if dataset == "phone_walks_more":
         return info.get("walk") in PHONE_WALKS_MORE_REPOS
+    if dataset == RIDI_TRUTH_DATASET:
+        return info.get("sequence") in RIDI_DECLARED_SEQUENCES
+    if dataset == OXIOD_TRUTH_DATASET:
+        return (info.get("placement"), info.get("data_folder"), int(info.get("sequence", -1))) in OXIOD_DECLARED_SEQUENCES
     return "repository" in info
 
 

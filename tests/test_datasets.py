@@ -208,6 +208,23 @@ def test_split_declarations():
     # the fifth search (declared 2026-12-07, in order of addition): the 9th report, the 10th tuning
     assert S.repo_split("NIghtwing1914/Assignment2-Ubicomp") == "report"
     assert S.repo_split("Tclack88/MatlabSucks") == "tuning"
+    # the seventh search (OxIOD truth walks, declared 2026-12-07 by sequence): every third per placement from the first
+    ox = S.OXIOD_TRUTH_DATASET
+    tun = [("handheld", "data1", 2), ("handheld", "data1", 7), ("pocket", "data1", 5), ("running", "data1", 6),
+           ("trolley", "data1", 7), ("trolley", "data2", 3), ("trolley", "data2", 6)]
+    rep = [("handheld", "data1", 3), ("handheld", "data1", 4), ("running", "data1", 7)] + \
+        [("trolley", "data2", k) for k in (1, 2, 4, 5)]
+    for (pl, d, k), want in [(t, "tuning") for t in tun] + [(r, "report") for r in rep]:
+        info = {"placement": pl, "data_folder": d, "sequence": k}
+        assert S.split_of(ox, info) == want and S.declared(ox, info), (pl, d, k)
+    other = {"placement": "handbag", "data_folder": "data1", "sequence": 1}
+    assert S.split_of(ox, other) == "report" and not S.declared(ox, other)
+    # the same search's RIDI copies (declared 2026-12-07 by sequence, the same rule): 11 of 28 tuning
+    rd = S.RIDI_TRUTH_DATASET
+    assert len(S.RIDI_DECLARED_SEQUENCES) == 28 and len(S.RIDI_TUNING_SEQUENCES) == 11
+    assert S.split_of(rd, {"sequence": "dan_leg1"}) == "tuning" and S.split_of(rd, {"sequence": "hao_leg2"}) == "report"
+    assert S.split_of(rd, {"sequence": "hang_bag_side1"}) == "report" and S.declared(rd, {"sequence": "hang_bag_side1"})
+    assert S.split_of(rd, {"sequence": "tang_bag1"}) == "report" and not S.declared(rd, {"sequence": "tang_bag1"})
     from benchmarks.run import DATASET_MODULES
     import importlib
 

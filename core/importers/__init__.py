@@ -122,6 +122,8 @@ from core.importers.physicstoolbox import read_physicstoolbox
 from core.importers.sensorlogger import read_sensorlogger
 from core.importers.pyshoe import read_pyshoe
 from core.importers.trundle import read_trundle
+from core.importers.oxiod import read_oxiod
+from core.importers.ridi import read_ridi
 from core.importers.xio import read_xio
 from core.importers.xsens import read_xsens
 
@@ -363,6 +365,6 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
 
 __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",
            "read_phyphox", "read_msindoor", "read_brajdic", "read_oxford", "read_trundle", "read_xio", "read_xsens",
-           "read_pyshoe", "read_physicstoolbox", "read_accelcsv", "read_sensibility", "read_sensorlog", "read_matlabmobile", "read_matlabmobile_csv", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
+           "read_pyshoe", "read_physicstoolbox", "read_accelcsv", "read_sensibility", "read_sensorlog", "read_oxiod", "read_ridi", "read_matlabmobile", "read_matlabmobile_csv", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
            "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE", "XIO", "XSENS", "PYSHOE", "PHYSICS_TOOLBOX",
            "ACCEL_CSV", "SENSIBILITY", "SENSORLOG", "MATLAB_MOBILE", "MATLAB_MOBILE_CSV"]

@@ -1,0 +1,338 @@
+"""Truth walks (issue #25): the walking direction against a truth track (motion capture or Tango), per carry position.
+
+``python -m benchmarks.truth_walks --extra2 DIR [--split tuning|report|all] [--only TEXT,...] [--no-write]``
+writes ``benchmarks/TRUTH_WALKS_RESULTS.md`` and ``benchmarks/truth_walks_results.json``.  ``DIR`` is a folder the
+user gives (as ``real_walks --extra``), e.g. ``/work/extra_data2`` (its REBUILD.md says how to rebuild it), holding
+
+* OxIOD ``syn`` pairs ``<owner>__<repo>/<placement>/<dataN>/syn/imuK.csv`` + ``viK.csv`` (iPhone, Vicon truth in a
+  room of about 3.5 x 6 m; :mod:`core.importers.oxiod`), and
+* RIDI tables ``<owner>__<repo>/**/<name>_data_with_errors.xlsx`` or ``<name>/processed/data.csv`` (Android, Google
+  Tango truth, the placement the name's second word: leg = trouser pocket, bag, body, handheld;
+  :mod:`core.importers.ridi`).
+
+Without the folder the benchmark says "not available" and writes nothing (CI has no such folder).
+
+Every walk runs through **the product's default path**, the call :mod:`benchmarks.real_walks` makes for
+``pdr replay WALK --no-profile`` (:func:`benchmarks.real_walks.run_default`; the recordings have no GPS, so no
+fusion).  Per walk, labelled with its split (:func:`benchmarks.splits.split_of`, datasets
+:data:`benchmarks.splits.OXIOD_TRUTH_DATASET` and :data:`~benchmarks.splits.RIDI_TRUTH_DATASET`, declared by sequence
+before any number was seen):
+
+Steps and carry
+    The number of steps, the carry detector's share of time per mode and the steps per mode.
+Walking-direction stability against the truth
+    Consecutive :data:`WINDOW_S`-s windows (5 s: the Vicon room's straight stretches are a few metres; the same
+    for RIDI) in which
+    the truth walks straight (its chord at least :data:`STRAIGHT_MIN` of its path over :data:`PATH_EVERY_S`-s
+    samples, and at least :data:`MIN_SPEED_M_S`); the truth's course is the chord's direction, the step heading
+    the circular mean of the steps' headings inside (at least :data:`MIN_STEPS` steps).  As
+    :func:`benchmarks.real_walks.stability` defines them: the circular SD of ``course - heading`` over the
+    windows, its drift (deg/min) and the mean offset (here in the truth's own frame: its absolute value says
+    nothing; the SD and the drift do).  Also per carry mode (windows whose steps are over 80 % in one mode) and for
+    the device heading (the smoothed device axis, :class:`benchmarks.walkdir._Probe`).
+Reversed steps
+    As :func:`benchmarks.real_walks.reversed_steps`, the truth (every :data:`PATH_EVERY_S` s) standing in for the
+    GPS fixes: the share of steps more than 90 deg from the truth's chord within 5 s of the step (at least 6 m long),
+    turned by the walk's mean offset -- steps walked "backwards" (a flipped sign).
+Distance and shape
+    The PDR distance (sum of step lengths) against the truth's horizontal path (:data:`PATH_EVERY_S`-s samples,
+    from the first step to the last), in %; the 2-D end error after the rotation about the first step that best
+    fits the whole PDR track to the truth at the step times (least squares, no scale), in m and in % of the
+    truth's path.
+
+A walk that fails (an exception, no steps) is counted and listed, never dropped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.foot import _git_rev
+from benchmarks.options import out_dir
+from benchmarks.real_walks import (
+    STRAIGHT_MIN, _jsonable, _med, reversed_steps, run_default, stability, step_arrays,
+)
+from benchmarks.splits import OXIOD_TRUTH_DATASET, REPORT, RIDI_TRUTH_DATASET, TUNING, split_of
+
+RESULTS_MD = Path(__file__).with_name("TRUTH_WALKS_RESULTS.md")
+RESULTS_JSON = Path(__file__).with_name("truth_walks_results.json")
+
+WINDOW_S = 5.0
+PATH_EVERY_S = 0.5
+MIN_SPEED_M_S = 0.5
+MIN_STEPS = 4
+PER_MODE_SHARE = 0.8
+
+
+@dataclass
+class TruthWalk:
+    name: str
+    path: Path  #: OxIOD: the imuK.csv (its viK.csv beside); RIDI: the table (.xlsx or data.csv)
+    dataset: str  #: :data:`benchmarks.splits.OXIOD_TRUTH_DATASET` or :data:`~benchmarks.splits.RIDI_TRUTH_DATASET`
+    repository: str
+    placement: str
+    split: str
+
+
+RIDI_SUFFIX = "_data_with_errors.xlsx"
+
+
+def truth_walks(root: Path | None) -> list[TruthWalk]:
+    """The truth walks under ``root``, sorted by name: OxIOD syn pairs
+    ``<owner>__<repo>/<placement>/<dataN>/syn/imuK.csv`` (+ ``viK.csv``) and RIDI tables
+    ``<owner>__<repo>/**/<name>_data_with_errors.xlsx`` (or RIDI's own ``<name>/processed/data.csv``)."""
+    out = []
+    if root is None or not Path(root).is_dir():
+        return out
+    root = Path(root)
+    for imu in root.glob("*/*/*/syn/imu*.csv"):
+        k = imu.stem[3:]
+        if not k.isdigit() or not imu.with_name(f"vi{k}.csv").is_file():
+            continue
+        data_folder, placement, repo_dir = imu.parent.parent.name, imu.parent.parent.parent.name, imu.parents[3].name
+        info = {"placement": placement, "data_folder": data_folder, "sequence": int(k)}
+        out.append(TruthWalk(f"oxiod_{placement.replace(' ', '_')}_{data_folder}_seq{k}", imu, OXIOD_TRUTH_DATASET,
+                             repo_dir.replace("__", "/", 1), placement, split_of(OXIOD_TRUTH_DATASET, info)))
+    tables = [(t, t.name[:-len(RIDI_SUFFIX)]) for t in root.glob(f"*/**/*{RIDI_SUFFIX}")]
+    tables += [(t, t.parent.parent.name) for t in root.glob("*/**/processed/data.csv")]
+    for table, seq in tables:
+        words = seq.split("_")
+        if len(words) < 2:
+            continue
+        placement = words[1].rstrip("0123456789")
+        repo_dir = table.relative_to(root).parts[0]
+        out.append(TruthWalk(f"ridi_{seq}", table, RIDI_TRUTH_DATASET, repo_dir.replace("__", "/", 1), placement,
+                             split_of(RIDI_TRUTH_DATASET, {"sequence": seq})))
+    return sorted(out, key=lambda w: w.name)
+
+
+def read_walk(walk: TruthWalk):
+    """The walk's recording (with its truth as ``posi``)."""
+    if walk.dataset == OXIOD_TRUTH_DATASET:
+        from core.importers.oxiod import read_oxiod
+
+        return read_oxiod(str(walk.path), warn=False)
+    from core.importers.ridi import read_ridi
+
+    return read_ridi(str(walk.path), warn=False)
+
+
+# -- the truth: straight windows, path, best-rotation end error ---------------------------------------------
+def resample(t_ns: np.ndarray, xy: np.ndarray, every_s: float = PATH_EVERY_S, with_end: bool = True):
+    """The truth's horizontal position every ``every_s`` seconds (nearest earlier sample) and at its end."""
+    grid = np.arange(t_ns[0], t_ns[-1] + 1, int(round(every_s * 1e9)), dtype=np.int64)
+    if with_end and grid[-1] < t_ns[-1]:
+        grid = np.append(grid, t_ns[-1])  # the last sample too: the path ends where the truth does
+    idx = np.clip(np.searchsorted(t_ns, grid, side="right") - 1, 0, len(t_ns) - 1)
+    return grid, xy[idx]
+
+
+def straight_windows(t_ns: np.ndarray, xy: np.ndarray, window_s: float = WINDOW_S) -> list[tuple[int, int, float]]:
+    """``(a_ns, b_ns, course_rad)`` of the consecutive windows in which the truth walks straight (module doc)."""
+    grid, p = resample(t_ns, xy, with_end=False)
+    per = max(1, int(round(window_s / PATH_EVERY_S)))
+    out = []
+    for i in range(0, len(grid) - per, per):
+        seg = p[i:i + per + 1]
+        path = float(np.sum(np.hypot(*np.diff(seg, axis=0).T)))
+        d = seg[-1] - seg[0]
+        chord = float(math.hypot(d[0], d[1]))
+        if chord >= STRAIGHT_MIN * path and chord >= MIN_SPEED_M_S * window_s:
+            out.append((int(grid[i]), int(grid[i + per]), math.atan2(d[1], d[0])))
+    return out
+
+
+def path_length_m(t_ns: np.ndarray, xy: np.ndarray, a_ns: int, b_ns: int) -> float:
+    """The truth's horizontal path from ``a_ns`` to ``b_ns`` over :data:`PATH_EVERY_S`-s samples."""
+    keep = (t_ns >= a_ns) & (t_ns <= b_ns)
+    if keep.sum() < 2:
+        return 0.0
+    _, p = resample(t_ns[keep], xy[keep])
+    return float(np.sum(np.hypot(*np.diff(p, axis=0).T)))
+
+
+def best_rotation_end_error(pdr_xy: np.ndarray, truth_xy: np.ndarray) -> tuple[float, float]:
+    """``(end error m, rotation rad)``: both tracks relative to their first point; the rotation of the PDR track
+    about it that fits the truth best (least squares over all points, no scale), then the distance at the end."""
+    p = pdr_xy - pdr_xy[0]
+    q = truth_xy - truth_xy[0]
+    # argmin_theta sum |R(theta) p - q|^2: theta = atan2(sum p x q, sum p . q)
+    cross = float(np.sum(p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]))
+    theta = math.atan2(cross, float(np.sum(p[:, 0] * q[:, 0] + p[:, 1] * q[:, 1])))
+    c, s = math.cos(theta), math.sin(theta)
+    end = np.array([c * p[-1, 0] - s * p[-1, 1], s * p[-1, 0] + c * p[-1, 1]])
+    return float(np.hypot(*(end - q[-1]))), theta
+
+
+# -- one walk -------------------------------------------------------------------------------------------------
+def evaluate_walk(walk: TruthWalk) -> dict:
+    row = {"name": walk.name, "dataset": walk.dataset, "split": walk.split, "placement": walk.placement,
+           "repository": walk.repository, "file": str(walk.path)}
+    try:
+        rec = read_walk(walk)
+        res, pipe, engine = run_default(rec, walk.path.parent, probe=True)
+        t0 = rec.t0_ns
+        carry = (res.summary().get("carry") or {})
+        time_s = carry.get("time_s") or {}
+        total = sum(time_s.values()) or 1.0
+        row.update(engine=engine, duration_s=(rec.t1_ns - t0) * 1e-9, n_steps=len(res.steps),
+                   carry_share={m: v / total for m, v in sorted(time_s.items())},
+                   carry_changes=len(carry.get("changes") or []))
+        if not res.steps:
+            row["failed"] = "no steps"
+            return row
+        st_t, heading, device = step_arrays(res, pipe)
+        modes = [s.carry_mode for s in res.steps]
+        row["steps_per_mode"] = {m: modes.count(m) for m in sorted(set(modes))}
+        posi = rec.streams["posi"]
+        txy = posi.values[:, :2]
+        wins = straight_windows(posi.t_ns, txy)
+        row["n_straight_windows"] = len(wins)
+        row["stability"] = stability(wins, st_t, heading, t0, MIN_STEPS)
+        row["stability_device"] = stability(wins, st_t, device, t0, MIN_STEPS)
+        per_mode = {}
+        for m in row["steps_per_mode"]:
+            mw = [w for w in wins if _mostly(modes, st_t, w, m)]
+            s = stability(mw, st_t, heading, t0, MIN_STEPS)
+            if s["n_windows"]:
+                per_mode[m] = {k: s[k] for k in ("n_windows", "sd_deg", "drift_deg_min", "mean_offset_deg")}
+        row["stability_per_mode"] = per_mode
+        g, gp = resample(posi.t_ns, txy)
+        row["reversed"] = reversed_steps((g, gp[:, 0], gp[:, 1], None), st_t, heading,
+                                         row["stability"]["mean_offset_deg"])
+        truth_m = path_length_m(posi.t_ns, txy, int(st_t[0]), int(st_t[-1]))
+        pdr_m = float(sum(s.length_m for s in res.steps[1:]))  # the steps after the first, as the truth's span
+        row.update(truth_path_m=truth_m, pdr_distance_m=pdr_m,
+                   distance_error_pct=100.0 * (pdr_m - truth_m) / truth_m if truth_m > 0 else None)
+        pdr_xy = np.array([[s.east_m, s.north_m] for s in res.steps])
+        idx = np.clip(np.searchsorted(posi.t_ns, st_t), 0, len(posi.t_ns) - 1)
+        end_m, rot = best_rotation_end_error(pdr_xy, txy[idx])
+        row.update(end_error_m=end_m, best_rotation_deg=math.degrees(rot),
+                   end_error_pct=100.0 * end_m / truth_m if truth_m > 0 else None)
+    except Exception as e:  # a walk that fails is listed
+        row["failed"] = f"{type(e).__name__}: {e}"
+        row["traceback"] = traceback.format_exc(limit=3)
+    return row
+
+
+def _mostly(modes, st_t, w, m) -> bool:
+    idx = np.flatnonzero((st_t >= w[0]) & (st_t <= w[1]))
+    return bool(len(idx)) and sum(modes[i] == m for i in idx) > PER_MODE_SHARE * len(idx)
+
+
+# -- summaries and the report --------------------------------------------------------------------------------
+def summarize(rows: list[dict]) -> dict:
+    """Medians per split and placement (failed walks counted, not in the medians)."""
+    out: dict = {}
+    for split in (TUNING, REPORT):
+        for pl in sorted({(r["dataset"], r["placement"]) for r in rows if r["split"] == split}):
+            rs = [r for r in rows if r["split"] == split and (r["dataset"], r["placement"]) == pl]
+            ok = [r for r in rs if not r.get("failed")]
+            out.setdefault(split, {})[f"{pl[0]}: {pl[1]}"] = {
+                "walks": len(rs), "failed": [r["name"] for r in rs if r.get("failed")],
+                "sd_deg_median": _med([r["stability"]["sd_deg"] for r in ok]),
+                "abs_drift_deg_min_median": _med([abs(r["stability"]["drift_deg_min"]) for r in ok
+                                                  if r["stability"]["drift_deg_min"] is not None]),
+                "device_sd_deg_median": _med([r["stability_device"]["sd_deg"] for r in ok]),
+                "distance_error_pct_median": _med([r.get("distance_error_pct") for r in ok]),
+                "end_error_pct_median": _med([r.get("end_error_pct") for r in ok]),
+                "reversed_pct_median": _med([(r.get("reversed") or {}).get("reversed_pct") for r in ok]),
+                "windows": int(sum(r["stability"]["n_windows"] for r in ok)),
+            }
+    return out
+
+
+def _f(x, nd=1):
+    return "-" if x is None else f"{x:.{nd}f}"
+
+
+def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
+    seen = "; ".join(f"{s}: {'report, seen once' if s == REPORT else 'tuning'}" for s in meta["splits"])
+    L = ["# Truth walks: the walking direction against a motion-capture track (issue #25)", "",
+         f"Generated by `python -m benchmarks.truth_walks` at {meta['when']} (commit {meta['commit']}, "
+         f"{meta['seconds']:.0f} s). Data: `{meta['folder']}` (OxIOD copies, see its REBUILD.md). Splits run: {seen}.",
+         "", f"Windows: consecutive {WINDOW_S:g}-s stretches where the truth track (Vicon / Tango) is straight "
+         f"(chord >= "
+         f"{STRAIGHT_MIN:g} of the path, >= {MIN_SPEED_M_S:g} m/s), at least {MIN_STEPS} steps. SD / drift: circular "
+         "SD and drift of (truth course - step heading) over those windows; offset: their mean, in the truth's "
+         "frame (not north: its value says nothing). Distance: PDR steps against the truth's path "
+         f"({PATH_EVERY_S:g}-s samples). End error: after the best rotation of the whole track about its first step.",
+         "", "## Per split and placement (medians)", "",
+         "| split | dataset: placement | walks | failed | windows | SD deg | abs drift deg/min | device SD deg | "
+         "distance err % | end err % of path | reversed steps % |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for split, by in summ.items():
+        label = "report, seen once" if split == REPORT else "tuning"
+        for pl, s in by.items():
+            L.append(f"| {label} | {pl} | {s['walks']} | {len(s['failed'])} | {s['windows']} | {_f(s['sd_deg_median'])}"
+                     f" | {_f(s['abs_drift_deg_min_median'], 2)} | {_f(s['device_sd_deg_median'])} | "
+                     f"{_f(s['distance_error_pct_median'])} | {_f(s['end_error_pct_median'])} | "
+                     f"{_f(s['reversed_pct_median'])} |")
+    L += ["", "## Per walk", "",
+          "| split | walk | s | steps | carry share (detector) | windows | SD deg | drift deg/min | offset deg | "
+          "device SD deg | per mode SD deg | PDR m / truth m (err %) | end err m (% of path) | reversed % (steps) |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if r.get("failed"):
+            L.append(f"| {r['split']} | {r['name']} | | | | | FAILED: {r['failed']} | | | | | | | |")
+            continue
+        st, dv = r["stability"], r["stability_device"]
+        share = ", ".join(f"{m} {100 * v:.0f}%" for m, v in r["carry_share"].items())
+        pm = ", ".join(f"{m} {_f(v['sd_deg'])} ({v['n_windows']})" for m, v in r["stability_per_mode"].items())
+        L.append(f"| {r['split']} | {r['name']} | {r['duration_s']:.0f} | {r['n_steps']} | {share} | "
+                 f"{st['n_windows']} | {_f(st['sd_deg'])} | {_f(st['drift_deg_min'], 2)} | "
+                 f"{_f(st['mean_offset_deg'])} | "
+                 f"{_f(dv['sd_deg'])} | {pm} | {r['pdr_distance_m']:.0f} / {r['truth_path_m']:.0f} "
+                 f"({_f(r['distance_error_pct'])}) | {r['end_error_m']:.1f} ({_f(r['end_error_pct'])}) | "
+                 f"{_f(r['reversed']['reversed_pct'])} ({r['reversed']['n']}) |")
+    return "\n".join(L) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.truth_walks", description=__doc__.split("\n")[0])
+    ap.add_argument("--extra2", type=Path, default=None,
+                    help="the folder of OxIOD copies (<owner>__<repo>/<placement>/<dataN>/syn/imuK.csv + viK.csv)")
+    ap.add_argument("--split", choices=(TUNING, REPORT, "all"), default=TUNING)
+    ap.add_argument("--only", default=None, help="comma-separated substrings of walk names")
+    ap.add_argument("--no-write", action="store_true", help="write under out/benchmarks/truth_walks/ instead")
+    a = ap.parse_args(argv)
+    walks = truth_walks(a.extra2)
+    if not walks:
+        print(f"truth walks not available: no OxIOD syn pairs under {a.extra2} (give --extra2 DIR)")
+        return 0
+    if a.split != "all":
+        walks = [w for w in walks if w.split == a.split]
+    if a.only:
+        keys = [k.strip() for k in a.only.split(",") if k.strip()]
+        walks = [w for w in walks if any(k in w.name for k in keys)]
+    t = time.time()
+    rows = []
+    for w in walks:
+        t1 = time.time()
+        rows.append(evaluate_walk(w))
+        print(f"  {w.name} ({w.split}): {rows[-1].get('failed') or 'ok'} in {time.time() - t1:.1f} s", file=sys.stderr)
+    meta = {"when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": _git_rev() or "?",
+            "seconds": time.time() - t, "folder": str(a.extra2),
+            "splits": sorted({w.split for w in walks}, key=(TUNING, REPORT).index),
+            "window_s": WINDOW_S, "path_every_s": PATH_EVERY_S, "min_speed_m_s": MIN_SPEED_M_S, "min_steps": MIN_STEPS}
+    summ = summarize(rows)
+    md = markdown(rows, summ, meta)
+    where = out_dir("truth_walks") if a.no_write or a.only else RESULTS_MD.parent
+    (where / RESULTS_MD.name).write_text(md)
+    (where / RESULTS_JSON.name).write_text(json.dumps(_jsonable({"meta": meta, "summary": summ, "walks": rows}),
+                                                      indent=1))
+    print(md)
+    print(f"wrote {RESULTS_MD.name} and {RESULTS_JSON.name} in {where}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,156 @@
+"""Reader for an Oxford Inertial Odometry Dataset sequence (OxIOD; Chen et al. 2018, arXiv:1809.07491): a ``syn``
+pair ``imuK.csv`` + ``viK.csv``.
+
+Format (the dataset's ``ReadMe.txt``)
+=====================================
+Both files are headerless, ``,``-separated, one row per sample; in ``syn/`` the two files have the same number of
+rows and row ``i`` of one is row ``i`` of the other ("synchronised data but without high precise timestep").
+
+``imuK.csv`` (16 fields; an iPhone's Core Motion ``CMDeviceMotion`` at 100 Hz)::
+
+    Time, attitude_roll, attitude_pitch, attitude_yaw (rad), rotation_rate_x/y/z (rad/s),
+    gravity_x/y/z (g), user_acc_x/y/z (g), magnetic_field_x/y/z (uT)
+
+``viK.csv`` (9 fields; the Vicon motion capture of the phone)::
+
+    Time, Header, translation.x/y/z (m), rotation.x/y/z/w (quaternion, scalar last)
+
+Time
+    The ``syn`` files' ``Time`` column is not a usable clock (the copies read ``1.50E+11`` on every row: the
+    value was written with three significant digits), so the reader does not read it: ``t_ns = round(i * 1e9 /
+    rate_hz)`` for row ``i``, at the dataset's stated 100 Hz (``rate_hz``).  Checked: the rows of the sequences
+    copied (``/work/extra_data2``) over 100 Hz give the durations of the dataset's own table (pocket data1
+    seq5: 24045 rows, 240 s).  This is the one place where a nominal rate makes the time.
+Acceleration
+    Core Motion's total acceleration is ``gravity + userAcceleration`` (Apple's documentation of
+    ``CMDeviceMotion.gravity`` and ``.userAcceleration``: "The total acceleration of the device is equal to
+    gravity plus the acceleration the user imparts to the device"), in g, with iOS's sign: at rest, screen up,
+    ``gravity = (0, 0, -1)`` (it points to the ground).  The project's accelerometer reads the specific force
+    (screen up ``+9.8``), so ``acc = -9.80665 * (gravity + user_acc)`` -- the same sign flip as
+    :mod:`core.importers.sensorlog`.  The device axes are the same as Android's (x right, y to the top edge,
+    z out of the screen).
+Angular rate, magnetic field
+    ``rotation_rate`` (rad/s, right-handed, Core Motion's bias-corrected rate) and ``magnetic_field`` (uT, Core
+    Motion's calibrated field) are kept as they are.  The attitude angles are not read.
+Truth
+    ``posi`` (columns ``east_m, north_m, up_m``): the Vicon translation ``(x, y, z)`` of every row.  The Vicon
+    frame has z up (the phone's height in a trouser pocket reads about 0.9 m); its x and y are taken as a
+    right-handed horizontal pair in an unknown rotation about the vertical (not geographic East and North):
+    compare headings through offsets and tracks after a rotation.  The Vicon quaternion is not read.
+
+A row of either file that is not 16 (9) numbers is a bad line: it stays in place as a gap (the rows must stay
+aligned) and is counted in ``repairs``; more than :func:`core.recording.bad_lines_tolerated` allows is a
+:class:`RecordingError`.  Files of different row counts are a :class:`RecordingError`.
+
+Streams: ``acc``, ``gyro``, ``mag``, ``posi``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import warnings
+
+import numpy as np
+
+from core.conventions import ACC, GYRO, MAG, STANDARD_GRAVITY_M_S2
+from core.recording import (
+    MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
+)
+from core.importers._common import POSI, finish, open_text
+
+FORMAT = "oxiod"
+#: the dataset's sampling rate (its paper and README: "recorded by smartphones at 100 Hz")
+RATE_HZ = 100.0
+IMU_FIELDS = 16
+VI_FIELDS = 9
+#: column slices of imuK.csv
+ROTATION_RATE = slice(4, 7)
+GRAVITY = slice(7, 10)
+USER_ACC = slice(10, 13)
+MAGNETIC_FIELD = slice(13, 16)
+#: column slice of viK.csv: the translation
+TRANSLATION = slice(2, 5)
+POSI_COLUMNS = ["east_m", "north_m", "up_m"]
+_IMU_NAME = re.compile(r"^imu(\d+)\.csv(\.gz)?$", re.IGNORECASE)
+
+
+def vicon_path(imu_path: str) -> str:
+    """The ``viK.csv`` beside an ``imuK.csv`` (same folder, same K); a :class:`RecordingError` for another name."""
+    folder, name = os.path.split(str(imu_path))
+    m = _IMU_NAME.match(name)
+    if not m:
+        raise RecordingError("not an OxIOD sensor file: the name is not imu<K>.csv", str(imu_path))
+    return os.path.join(folder, f"vi{m.group(1)}.csv{m.group(2) or ''}")
+
+
+def _rows(path: str, n_fields: int, repairs: list[str], limit: int | None) -> np.ndarray:
+    """Every line of a headerless numeric CSV as a row of ``n_fields`` floats (a bad line: a row of nan)."""
+    rows: list[list[float]] = []
+    bad: list[RecordingError] = []
+    nan = [float("nan")] * n_fields
+    with open_text(path, repairs, limit) as text:
+        for first, lines in text:
+            for j, line in enumerate(lines):
+                if not line.strip():
+                    continue
+                parts = line.split(",")
+                try:
+                    if len(parts) != n_fields:
+                        raise ValueError(f"{len(parts)} fields, not {n_fields}")
+                    rows.append([float(p) for p in parts])
+                except ValueError as e:
+                    bad.append(RecordingError(f"bad line: {e}", path, first + j))
+                    rows.append(nan)
+        if text.tail.strip():  # a last line without its newline: read if complete
+            parts = text.tail.split(",")
+            try:
+                rows.append([float(p) for p in parts] if len(parts) == n_fields else nan)
+            except ValueError:
+                rows.append(nan)
+    skip_bad_lines(bad, len(rows), path, repairs)
+    if not rows:
+        raise RecordingError("empty file", path)
+    return np.asarray(rows, dtype=np.float64)
+
+
+def read_oxiod(path: str, *, rate_hz: float = RATE_HZ, warn: bool = True,
+               max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
+    """Read an OxIOD ``syn`` pair from its ``imuK.csv`` (the ``viK.csv`` beside it is the truth; see the module doc)."""
+    path = str(path)
+    if not os.path.isfile(path):
+        raise RecordingError("cannot open: no such file", path)
+    vi_path = vicon_path(path)
+    repairs: list[str] = []
+    imu = _rows(path, IMU_FIELDS, repairs, max_uncompressed_bytes)
+    vi = _rows(vi_path, VI_FIELDS, repairs, max_uncompressed_bytes) if os.path.isfile(vi_path) else None
+    if vi is not None and len(vi) != len(imu):
+        raise RecordingError(f"{len(imu)} sensor rows but {len(vi)} Vicon rows in {os.path.basename(vi_path)}: a "
+                             "syn pair has one row of each per sample", path)
+    if not rate_hz > 0:
+        raise ValueError(f"rate_hz must be positive, got {rate_hz!r}")
+    t_ns = np.round(np.arange(len(imu)) * (1e9 / rate_hz)).astype(np.int64)
+    ok = np.all(np.isfinite(imu[:, 1:]), axis=1)
+    acc = -STANDARD_GRAVITY_M_S2 * (imu[ok, GRAVITY] + imu[ok, USER_ACC])
+    streams = {
+        ACC: make_stream(ACC, t_ns[ok], acc, note="Core Motion gravity + userAcceleration (g, iOS sign) * -g0"),
+        GYRO: make_stream(GYRO, t_ns[ok], imu[ok, ROTATION_RATE], note="Core Motion rotationRate (bias-corrected)"),
+        MAG: make_stream(MAG, t_ns[ok], imu[ok, MAGNETIC_FIELD], note="Core Motion calibrated magnetic field"),
+    }
+    if vi is not None:
+        good = np.all(np.isfinite(vi[:, TRANSLATION]), axis=1)
+        streams[POSI] = make_stream(POSI, t_ns[good], vi[good, TRANSLATION], POSI_COLUMNS, "m,m,m",
+                                    "ground truth: Vicon translation of the phone at every row (x, y, z); z up, "
+                                    "x and y a horizontal pair in the room's frame, not geographic")
+    meta = {
+        "source_format": FORMAT,
+        "app": "OxIOD (Core Motion device motion, iPhone; Vicon truth)",
+        "time_base": f"t_ns = row * 1e9 / {rate_hz:g} Hz: the syn files' Time column is not a usable clock "
+                     "(absolute time unknown)",
+        "acc_from": f"(gravity + user_acc) (g, iOS sign) * -{STANDARD_GRAVITY_M_S2} m/s^2",
+        "truth_file": os.path.basename(vi_path) if vi is not None else None,
+    }
+    if warn and repairs:
+        warnings.warn("; ".join(repairs), DamagedFileWarning, stacklevel=2)
+    return finish(Recording(streams, device={"app": "OxIOD", "platform": "ios"}, metadata=meta, repairs=repairs,
+                            source=path), warn=warn)

@@ -1,0 +1,57 @@
+"""OxIOD syn pairs (core.importers.oxiod): a synthetic pair written by the test, never a copy of the data."""
+
+import numpy as np
+import pytest
+
+from core.conventions import STANDARD_GRAVITY_M_S2
+from core.importers.oxiod import read_oxiod, vicon_path
+from core.recording import RecordingError
+
+
+def _write_pair(folder, n=300, k=3, seed=7):
+    rng = np.random.default_rng(seed)
+    att = rng.normal(size=(n, 3))
+    rate = rng.normal(scale=0.5, size=(n, 3))
+    grav = np.tile([0.1, -0.2, -0.97], (n, 1)) + rng.normal(scale=0.01, size=(n, 3))  # iOS sign: points down
+    user = rng.normal(scale=0.2, size=(n, 3))
+    mag = rng.normal(scale=20.0, size=(n, 3))
+    imu = np.column_stack([np.full(n, 1.5e11), att, rate, grav, user, mag])
+    pos = np.cumsum(rng.normal(scale=0.01, size=(n, 3)), axis=0) + [1.0, 2.0, 0.9]
+    quat = rng.normal(size=(n, 4))
+    vi = np.column_stack([np.full(n, 1.5e11), np.full(n, 2.1e5), pos, quat])
+    fmt = lambda a: "".join(",".join(f"{x:.6g}" for x in row) + "\n" for row in a)  # noqa: E731
+    (folder / f"imu{k}.csv").write_text(fmt(imu))
+    (folder / f"vi{k}.csv").write_text(fmt(vi))
+    return imu, vi
+
+
+def test_oxiod_pair_round_trip(tmp_path):
+    imu, vi = _write_pair(tmp_path)
+    rec = read_oxiod(str(tmp_path / "imu3.csv"), warn=False)
+    acc, gyro, mag, posi = (rec.streams[s] for s in ("acc", "gyro", "mag", "posi"))
+    # the total acceleration is gravity + user acceleration (g, iOS sign), turned into the specific force in m/s^2
+    assert np.allclose(acc.values, -STANDARD_GRAVITY_M_S2 * (imu[:, 7:10] + imu[:, 10:13]), rtol=1e-5, atol=1e-4)
+    assert np.mean(acc.values[:, 2]) > 9.0  # screen up reads +g (the specific force)
+    assert np.allclose(gyro.values, imu[:, 4:7], rtol=1e-5, atol=1e-6)
+    assert np.allclose(mag.values, imu[:, 13:16], rtol=1e-5, atol=1e-4)
+    assert np.allclose(posi.values, vi[:, 2:5], rtol=1e-5, atol=1e-5)
+    # rows at 100 Hz: the syn files' Time column is not read
+    assert np.all(np.diff(acc.t_ns) == 10_000_000) and acc.t_ns[0] == 0
+    assert np.array_equal(posi.t_ns, acc.t_ns)
+
+
+def test_oxiod_bad_line_keeps_rows_aligned_and_mismatch_refused(tmp_path):
+    imu, vi = _write_pair(tmp_path, n=400)
+    lines = (tmp_path / "imu3.csv").read_text().splitlines(True)
+    lines[10] = "1.5e11,oops\n"
+    (tmp_path / "imu3.csv").write_text("".join(lines))
+    rec = read_oxiod(str(tmp_path / "imu3.csv"), warn=False)
+    assert len(rec.streams["acc"].t_ns) == 399 and 100_000_000 not in set(rec.streams["acc"].t_ns.tolist())
+    assert len(rec.streams["posi"].t_ns) == 400 and rec.repairs  # the truth keeps row 10; the gap is counted
+    assert np.allclose(rec.streams["posi"].values[11], vi[11, 2:5], atol=1e-5)
+    (tmp_path / "vi3.csv").write_text("".join((tmp_path / "vi3.csv").read_text().splitlines(True)[:-5]))
+    with pytest.raises(RecordingError, match="Vicon rows"):
+        read_oxiod(str(tmp_path / "imu3.csv"), warn=False)
+    assert vicon_path("/a/b/imu12.csv").endswith("/a/b/vi12.csv")
+    with pytest.raises(RecordingError):
+        vicon_path("/a/b/data.csv")

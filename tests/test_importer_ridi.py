@@ -1,0 +1,69 @@
+"""RIDI processed tables (core.importers.ridi): synthetic CSV and .xlsx files written by the test, never the data."""
+
+import zipfile
+
+import numpy as np
+import pytest
+
+from core.importers.ridi import read_ridi
+from core.recording import RecordingError
+
+HEADER = ["", "time", "gyro_x", "gyro_y", "gyro_z", "acce_x", "acce_y", "acce_z", "magnet_x", "magnet_y", "magnet_z",
+          "pos_x", "pos_y", "pos_z", "ori_w", "Distance Error"]
+
+
+def _table(n=250, seed=5):
+    rng = np.random.default_rng(seed)
+    t = 86672.13 + np.arange(n) / 200.0
+    v = rng.normal(size=(n, len(HEADER) - 2))
+    v[:, 3:6] += [0.0, 9.8, 0.6]  # upright phone: gravity on y
+    return np.column_stack([np.arange(n), t, v])
+
+
+def _col(j):
+    s = ""
+    j += 1
+    while j:
+        j, r = divmod(j - 1, 26)
+        s = chr(65 + r) + s
+    return s
+
+
+def _write_xlsx(path, table, shared=False):
+    ns = "http://schemas.openxmlformats.org/spreadsheetml/2006/main"
+    strings = [h for h in HEADER if h]
+    head = "".join(
+        (f'<c r="{_col(j)}1" t="s"><v>{strings.index(h)}</v></c>' if shared else
+         f'<c r="{_col(j)}1" t="inlineStr"><is><t>{h}</t></is></c>') for j, h in enumerate(HEADER) if h)
+    body = "".join(f'<row r="{i + 2}">' + "".join(f'<c r="{_col(j)}{i + 2}" t="n"><v>{x:.17g}</v></c>'
+                                                  for j, x in enumerate(row)) + "</row>" for i, row in enumerate(table))
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("xl/worksheets/sheet1.xml", f'<worksheet xmlns="{ns}"><sheetData><row r="1">{head}</row>{body}'
+                                               "</sheetData></worksheet>")
+        if shared:
+            z.writestr("xl/sharedStrings.xml", f'<sst xmlns="{ns}">' + "".join(f"<si><t>{s}</t></si>" for s in strings)
+                       + "</sst>")
+
+
+@pytest.mark.parametrize("form", ["csv", "xlsx", "xlsx-shared"])
+def test_ridi_round_trip(tmp_path, form):
+    table = _table()
+    path = tmp_path / ("data.csv" if form == "csv" else "seq.xlsx")
+    if form == "csv":
+        path.write_text(",".join(HEADER) + "\n" + "".join(",".join(f"{x:.17g}" for x in r) + "\n" for r in table))
+    else:
+        _write_xlsx(path, table, shared=form.endswith("shared"))
+    rec = read_ridi(str(path), warn=False)
+    assert np.array_equal(rec.streams["acc"].t_ns, np.round(table[:, 1] * 1e9).astype(np.int64))
+    assert np.allclose(rec.streams["gyro"].values, table[:, 2:5])
+    assert np.allclose(rec.streams["acc"].values, table[:, 5:8])
+    assert np.allclose(rec.streams["mag"].values, table[:, 8:11])
+    assert np.allclose(rec.streams["posi"].values, table[:, 11:14])
+    assert abs(rec.streams["acc"].rate_hz - 200.0) < 1.0
+
+
+def test_ridi_refuses_a_table_without_its_columns(tmp_path):
+    p = tmp_path / "other.csv"
+    p.write_text("time,x,y,z\n0,1,2,3\n")
+    with pytest.raises(RecordingError, match="acce_x"):
+        read_ridi(str(p), warn=False)

@@ -1,0 +1,65 @@
+"""The truth-walk benchmark's measures (benchmarks.truth_walks) on synthetic tracks: no data, no pipeline run."""
+
+import math
+
+import numpy as np
+
+from benchmarks import truth_walks as TW
+
+
+def _square_walk(speed=1.2, side_m=12.0, laps=2, rate_hz=100.0):
+    """A walk around a square (counter-clockwise, turning on the spot at the corners): (t_ns, xy)."""
+    pts = []
+    corners = [(0, 0), (side_m, 0), (side_m, side_m), (0, side_m)] * laps + [(0, 0)]
+    for (x0, y0), (x1, y1) in zip(corners[:-1], corners[1:]):
+        n = int(round(side_m / speed * rate_hz))
+        f = np.arange(n) / n
+        pts.append(np.column_stack([x0 + f * (x1 - x0), y0 + f * (y1 - y0)]))
+    xy = np.vstack(pts)
+    return np.round(np.arange(len(xy)) * 1e9 / rate_hz).astype(np.int64), xy
+
+
+def test_straight_windows_find_the_sides_and_their_courses():
+    t, xy = _square_walk()
+    wins = TW.straight_windows(t, xy)
+    courses = {round(math.degrees(c)) % 360 for _, _, c in wins}
+    assert courses == {0, 90, 180, 270}
+    assert all(b - a == int(TW.WINDOW_S * 1e9) for a, b, _ in wins)
+    # a 5-s window crossing a corner is not straight: fewer windows than 5-s slices of the walk
+    assert len(wins) < (t[-1] - t[0]) * 1e-9 / TW.WINDOW_S
+    assert abs(TW.path_length_m(t, xy, int(t[0]), int(t[-1])) - 8 * 12.0) < 0.2
+
+
+def test_best_rotation_end_error_removes_a_rotation_but_not_a_scale():
+    rng = np.random.default_rng(3)
+    _, xy = _square_walk()
+    truth = xy[::50]
+    a = math.radians(37.0)
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    pdr = truth @ rot.T + [5.0, -2.0] + rng.normal(scale=0.01, size=truth.shape)
+    end, theta = TW.best_rotation_end_error(pdr, truth)
+    assert end < 0.05 and abs(math.degrees(theta) + 37.0) < 0.5
+    open_ = truth[: 3 * len(truth) // 8]  # an open track (the square's loop would hide a scale at its end)
+    end_scaled, _ = TW.best_rotation_end_error(1.1 * (open_ - open_[0]) + [0.0, 3.0], open_)
+    assert end_scaled > 0.5  # a stride-length error shows up
+
+
+def test_no_folder_means_not_available(tmp_path, capsys):
+    assert TW.truth_walks(None) == [] and TW.truth_walks(tmp_path / "absent") == []
+    assert TW.main(["--extra2", str(tmp_path / "absent")]) == 0
+    assert "not available" in capsys.readouterr().out
+
+
+def test_walks_are_found_and_split_as_declared(tmp_path):
+    syn = tmp_path / "o__r" / "pocket" / "data1" / "syn"
+    syn.mkdir(parents=True)
+    (syn / "imu5.csv").write_text("")
+    (syn / "vi5.csv").write_text("")
+    (syn / "imu6.csv").write_text("")  # no vi6.csv: not a walk
+    err = tmp_path / "w__p" / "data" / "error"
+    err.mkdir(parents=True)
+    for n in ("dan_leg1", "hao_leg2"):
+        (err / f"{n}_data_with_errors.xlsx").write_text("")
+    walks = {w.name: (w.placement, w.split, w.repository) for w in TW.truth_walks(tmp_path)}
+    assert walks == {"oxiod_pocket_data1_seq5": ("pocket", "tuning", "o/r"), "ridi_dan_leg1": ("leg", "tuning", "w/p"),
+                     "ridi_hao_leg2": ("leg", "report", "w/p")}
