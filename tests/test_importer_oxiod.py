@@ -4,13 +4,14 @@ import numpy as np
 import pytest
 
 from core.conventions import STANDARD_GRAVITY_M_S2
+from core.importers import OXIOD, detect_format, load_recording
 from core.importers.oxiod import read_oxiod, vicon_path
 from core.recording import RecordingError
 
 
 def _write_pair(folder, n=300, k=3, seed=7):
     rng = np.random.default_rng(seed)
-    att = rng.normal(size=(n, 3))
+    att = rng.uniform(-1.5, 1.5, size=(n, 3))  # roll, pitch, yaw (rad): Core Motion's ranges
     rate = rng.normal(scale=0.5, size=(n, 3))
     grav = np.tile([0.1, -0.2, -0.97], (n, 1)) + rng.normal(scale=0.01, size=(n, 3))  # iOS sign: points down
     user = rng.normal(scale=0.2, size=(n, 3))
@@ -18,6 +19,7 @@ def _write_pair(folder, n=300, k=3, seed=7):
     imu = np.column_stack([np.full(n, 1.5e11), att, rate, grav, user, mag])
     pos = np.cumsum(rng.normal(scale=0.01, size=(n, 3)), axis=0) + [1.0, 2.0, 0.9]
     quat = rng.normal(size=(n, 4))
+    quat /= np.linalg.norm(quat, axis=1, keepdims=True)  # the Vicon's unit quaternion
     vi = np.column_stack([np.full(n, 1.5e11), np.full(n, 2.1e5), pos, quat])
     fmt = lambda a: "".join(",".join(f"{x:.6g}" for x in row) + "\n" for row in a)  # noqa: E731
     (folder / f"imu{k}.csv").write_text(fmt(imu))
@@ -55,3 +57,48 @@ def test_oxiod_bad_line_keeps_rows_aligned_and_mismatch_refused(tmp_path):
     assert vicon_path("/a/b/imu12.csv").endswith("/a/b/vi12.csv")
     with pytest.raises(RecordingError):
         vicon_path("/a/b/data.csv")
+
+
+def test_oxiod_is_detected_by_content_as_a_file_or_its_folder_and_the_truth_comes_along(tmp_path):
+    # fails before the wiring: detect_format refused the headerless file ("unrecognised recording format")
+    imu, vi = _write_pair(tmp_path, n=200)
+    assert detect_format(str(tmp_path / "imu3.csv")) == OXIOD
+    assert detect_format(str(tmp_path)) == OXIOD  # a syn folder with one pair is read through its imu3.csv
+    rec = load_recording(str(tmp_path), warn=False)
+    assert rec.metadata["source_format"] == OXIOD and rec.metadata["truth_file"] == "vi3.csv"
+    assert np.allclose(rec.streams["posi"].values, vi[:, 2:5], atol=1e-5)
+    with pytest.raises(RecordingError, match="Vicon truth of the OxIOD sequence imu3.csv beside it"):
+        detect_format(str(tmp_path / "vi3.csv"))
+    other = tmp_path / "walk.csv"  # the content without the pair's name: its truth cannot be found
+    other.write_bytes((tmp_path / "imu3.csv").read_bytes())
+    with pytest.raises(RecordingError, match="not named imu<K>.csv"):
+        detect_format(str(other))
+    other.unlink()
+    _write_pair(tmp_path, n=200, k=4)
+    with pytest.raises(RecordingError, match=r"2 OxIOD/RIDI recordings in this folder \(imu3.csv, imu4.csv\)"):
+        detect_format(str(tmp_path))
+
+
+def _near_miss(imu: np.ndarray, what: str) -> str:
+    v = imu.copy()
+    if what == "gravity in m/s^2":
+        v[:, 7:10] *= STANDARD_GRAVITY_M_S2
+    elif what == "pitch past 90 deg":
+        v[:, 2] = 2.0
+    elif what == "a spinning gyroscope":
+        v[:, 4] = 50.0
+    elif what == "15 fields":
+        v = v[:, :15]
+    elif what == "17 fields":
+        v = np.column_stack([v, v[:, :1]])
+    text = "".join(",".join(f"{x:.6g}" for x in row) + "\n" for row in v)
+    return "Time,roll,pitch,yaw,rx,ry,rz,gx,gy,gz,ux,uy,uz,mx,my,mz\n" + text if what == "a header line" else text
+
+
+@pytest.mark.parametrize("what", ["gravity in m/s^2", "pitch past 90 deg", "a spinning gyroscope", "15 fields",
+                                  "17 fields", "a header line"])
+def test_oxiod_lookalikes_are_not_detected(tmp_path, what):
+    imu, _ = _write_pair(tmp_path, n=30)
+    (tmp_path / "imu3.csv").write_text(_near_miss(imu, what))
+    with pytest.raises(RecordingError, match="unrecognised recording format"):
+        detect_format(str(tmp_path / "imu3.csv"))

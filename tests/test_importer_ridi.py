@@ -5,6 +5,7 @@ import zipfile
 import numpy as np
 import pytest
 
+from core.importers import RIDI, detect_format, load_recording
 from core.importers.ridi import read_ridi
 from core.recording import RecordingError
 
@@ -29,12 +30,16 @@ def _col(j):
     return s
 
 
-def _write_xlsx(path, table, shared=False):
+def _write_csv(path, table, header=HEADER):
+    path.write_text(",".join(header) + "\n" + "".join(",".join(f"{x:.17g}" for x in r) + "\n" for r in table))
+
+
+def _write_xlsx(path, table, shared=False, header=HEADER):
     ns = "http://schemas.openxmlformats.org/spreadsheetml/2006/main"
-    strings = [h for h in HEADER if h]
+    strings = [h for h in header if h]
     head = "".join(
         (f'<c r="{_col(j)}1" t="s"><v>{strings.index(h)}</v></c>' if shared else
-         f'<c r="{_col(j)}1" t="inlineStr"><is><t>{h}</t></is></c>') for j, h in enumerate(HEADER) if h)
+         f'<c r="{_col(j)}1" t="inlineStr"><is><t>{h}</t></is></c>') for j, h in enumerate(header) if h)
     body = "".join(f'<row r="{i + 2}">' + "".join(f'<c r="{_col(j)}{i + 2}" t="n"><v>{x:.17g}</v></c>'
                                                   for j, x in enumerate(row)) + "</row>" for i, row in enumerate(table))
     with zipfile.ZipFile(path, "w") as z:
@@ -50,7 +55,7 @@ def test_ridi_round_trip(tmp_path, form):
     table = _table()
     path = tmp_path / ("data.csv" if form == "csv" else "seq.xlsx")
     if form == "csv":
-        path.write_text(",".join(HEADER) + "\n" + "".join(",".join(f"{x:.17g}" for x in r) + "\n" for r in table))
+        _write_csv(path, table)
     else:
         _write_xlsx(path, table, shared=form.endswith("shared"))
     rec = read_ridi(str(path), warn=False)
@@ -67,3 +72,37 @@ def test_ridi_refuses_a_table_without_its_columns(tmp_path):
     p.write_text("time,x,y,z\n0,1,2,3\n")
     with pytest.raises(RecordingError, match="acce_x"):
         read_ridi(str(p), warn=False)
+
+
+@pytest.mark.parametrize("form", ["csv", "xlsx"])
+def test_ridi_is_detected_as_a_file_or_its_folder(tmp_path, form):
+    # fails before the wiring: detect_format did not know the table (csv) or the workbook (xlsx: "zip archive")
+    folder = tmp_path / "processed"
+    folder.mkdir()
+    table = _table(n=120)
+    path = folder / ("data.csv" if form == "csv" else "seq.xlsx")
+    _write_csv(path, table) if form == "csv" else _write_xlsx(path, table)
+    assert detect_format(str(path)) == RIDI and detect_format(str(folder)) == RIDI
+    rec = load_recording(str(folder), warn=False)
+    assert rec.metadata["source_format"] == RIDI and np.allclose(rec.streams["posi"].values, table[:, 11:14])
+
+
+@pytest.mark.parametrize("form", ["csv", "xlsx"])
+def test_ridi_half_matches_name_what_is_missing(tmp_path, form):
+    table = _table(n=20)
+    header = ["", "t", *HEADER[2:]]  # "time" renamed: RIDI's sensor columns without its time
+    path = tmp_path / ("data.csv" if form == "csv" else "seq.xlsx")
+    _write_csv(path, table, header) if form == "csv" else _write_xlsx(path, table, header=header)
+    with pytest.raises(RecordingError, match=r"without its column\(s\) time|lacks RIDI's time"):
+        detect_format(str(path))
+    if form == "xlsx":  # a workbook of other columns is said to be one
+        _write_xlsx(path, table, header=["", "a", "b", "c", "d", "e", "f", "g", "h", "i", "j", "k", "l", "m", "n",
+                                         "o"])
+        with pytest.raises(RecordingError, match="an Excel workbook without RIDI's columns"):
+            detect_format(str(path))
+        with zipfile.ZipFile(path, "w") as z:  # a worksheet cut short: one clean error, not the XML parser's
+            z.writestr("xl/worksheets/sheet1.xml", '<worksheet><sheetData><row r="1"><c r="A1" t="s">')
+        with pytest.raises(RecordingError, match="damaged .xlsx worksheet"):
+            detect_format(str(path))
+        with pytest.raises(RecordingError, match="damaged .xlsx worksheet"):
+            read_ridi(str(path), warn=False)

@@ -41,6 +41,11 @@ Formats (name: input -> reader):
   datetime text; ``.csv`` or ``.gz``, or a folder holding one) -> :func:`read_matlabmobile_csv`
 * ``pyshoe``: PyShoe processed trial, a MATLAB level-5 MAT-file (``.mat`` or ``.mat.gz``; read with numpy and
   zlib, :mod:`core.importers.matv5`) -> :func:`read_pyshoe`
+* ``oxiod``: an OxIOD ``syn`` pair, the headerless ``imu<K>.csv`` (recognised by 16 numbers a line and Core Motion's
+  unit gravity; the name must be ``imu<K>.csv``) with the Vicon truth ``vi<K>.csv`` beside it as ``posi``, or a
+  folder holding one such pair -> :func:`read_oxiod`
+* ``ridi``: a RIDI processed table, ``data.csv`` or an ``.xlsx`` of the same columns (``time``, ``acce_x/y/z``,
+  ``gyro_x/y/z`` in its header), Tango truth as ``posi``, or a folder holding one -> :func:`read_ridi`
 
 The format is recognised by content (magic line, record tags, CSV headers,
 binary record layout, archive members), never by the file name alone.  Every reader raises
@@ -69,7 +74,8 @@ of the first event at import).  Streams besides ``acc``, ``gyro``, ``mag``,
 ``pressure`` (hPa), ``mag_uncal`` and ``gyro_uncal`` (Sensor Logger,
 Microsoft/XYZ10), and ground truth that is part of a file format:
 ``waypoint`` (Microsoft/XYZ10 surveyor positions, floor-map metres), ``posi`` in metres (PyShoe's VICON
-foot positions, ``east_m, north_m, up_m``), ``zero_velocity`` (PyShoe's reference still/moving labels),
+foot positions, ``east_m, north_m, up_m``; OxIOD's Vicon and RIDI's Tango positions, the same columns in the
+room's or Tango's frame), ``zero_velocity`` (PyShoe's reference still/moving labels),
 ``wheel`` (trundle-wheel distance) and ``step_counts`` (cumulative step
 counts of other counters logged in the file: the TrundleWheel phone's, the
 Oxford validation files' app, ground-truth device and hardware counter);
@@ -99,10 +105,12 @@ from core.importers import matlabmobile as _mm
 from core.importers import getsensordata as _gsd
 from core.importers import msindoor as _ms
 from core.importers import oxford as _ox
+from core.importers import oxiod as _oxi
 from core.importers import phyphox as _phy
 from core.importers import physicstoolbox as _ptb
 from core.importers import sensorlogger as _sl
 from core.importers import pyshoe as _ps
+from core.importers import ridi as _ridi
 from core.importers import trundle as _tw
 from core.importers import xio as _xio
 from core.importers import xsens as _xs
@@ -144,6 +152,8 @@ SENSIBILITY = _sens.FORMAT
 SENSORLOG = _slog.FORMAT
 MATLAB_MOBILE = _mm.FORMAT
 MATLAB_MOBILE_CSV = _mm.CSV_FORMAT
+OXIOD = _oxi.FORMAT
+RIDI = _ridi.FORMAT
 
 #: format name -> what it is (for messages and the CLI's help)
 FORMATS = {
@@ -177,6 +187,10 @@ FORMATS = {
                    "MagneticField, Position; .mat or .mat.gz)",
     MATLAB_MOBILE_CSV: "MATLAB Mobile accelerometer timetable written to CSV by MATLAB ('Acceleration_Timestamp,X,Y,Z' "
                        "header, datetime text, m/s^2 with gravity; .csv or .gz)",
+    OXIOD: "OxIOD syn pair: headerless imu<K>.csv (16 numbers a line, Core Motion; the name imu<K>.csv is needed) "
+           "with its Vicon truth vi<K>.csv beside it (.csv or .gz), or a folder holding one pair",
+    RIDI: "RIDI processed table: data.csv or an .xlsx of its columns ('time', 'acce_x/y/z', 'gyro_x/y/z', ... "
+          "'pos_x/y/z' the Tango truth), or a folder holding one",
 }
 
 
@@ -198,6 +212,8 @@ _SHORT = {
     SENSORLOG: "sensorlog (SensorLog iOS CSV)",
     MATLAB_MOBILE: "matlab-mobile (MATLAB Mobile sensor log .mat)",
     MATLAB_MOBILE_CSV: "matlab-mobile-csv (MATLAB Mobile accelerometer CSV, Acceleration_Timestamp,X,Y,Z)",
+    OXIOD: "oxiod (OxIOD syn imu<K>.csv with vi<K>.csv)",
+    RIDI: "ridi (RIDI data.csv or .xlsx)",
 }
 
 
@@ -220,7 +236,9 @@ _TEXT_TESTS = [
     (_mm.looks_like_csv, MATLAB_MOBILE_CSV),
     (_sens.looks_like_csv, SENSIBILITY),
     (_slog.looks_like_csv, SENSORLOG),
+    (_ridi.looks_like_csv, RIDI),
     (_bh.looks_like_text, BRAJDIC),
+    (_oxi.looks_like, OXIOD),
     (_ox.looks_like, OXFORD),
 ]
 
@@ -275,6 +293,32 @@ def _single_mat(path: str) -> str | None:
     return os.path.join(path, mats[0]) if len(mats) == 1 and not others else None
 
 
+def _folder_file(path: str) -> str | None:
+    """The one OxIOD ``imu<K>.csv`` or RIDI table at the top of a folder (read through it), None without one;
+    several are a :class:`RecordingError` naming them (replay one; ``pdr replay`` given the folder replays each)."""
+    if not os.path.isdir(path):
+        return None
+    files = _oxi.imu_files(path) + _ridi.folder_files(path)
+    if len(files) > 1:
+        names = ", ".join(os.path.basename(f) for f in files[:8]) + (", ..." if len(files) > 8 else "")
+        raise RecordingError(f"{len(files)} OxIOD/RIDI recordings in this folder ({names}): replay one file", path)
+    return files[0] if files else None
+
+
+def _half_match(path: str, head: str) -> RecordingError | None:
+    """A clear error for a file that looks like part of a format but is not readable as it, else None."""
+    if _oxi.looks_like_vicon(head):
+        imu = _oxi.imu_partner(path)
+        if imu is not None:
+            return RecordingError(f"the Vicon truth of the OxIOD sequence {os.path.basename(imu)} beside it: replay "
+                                  "that file, which reads this one as its truth", path)
+    missing = _ridi.half_match(_ridi.header_names(head))
+    if missing:
+        return RecordingError(f"a RIDI-like table without its column(s) {', '.join(missing)} (RIDI's data.csv has "
+                              f"{', '.join(_ridi.DETECT)})", path)
+    return None
+
+
 def detect_format(path) -> str:
     """The format of ``path`` (file or folder), from its content; :class:`RecordingError` if unknown."""
     path = str(path)
@@ -285,13 +329,29 @@ def detect_format(path) -> str:
         with FileSet(path) as fs:
             fmt = _detect_fileset(fs)
         if fmt is None:
-            raise _unknown(path, "a folder without Sensor Logger, phyphox, Oxford step-counter or NGIMU CSV files")
+            inner = _folder_file(path)
+            if inner is not None:
+                return detect_format(inner)
+            raise _unknown(path, "a folder without Sensor Logger, phyphox, Oxford step-counter, NGIMU, OxIOD or "
+                                 "RIDI files")
         return fmt
     try:
         head = head_bytes(path, 65536)
     except OSError as e:
         raise RecordingError(f"cannot open: {e.strerror or e}", path) from None
     if head[:4] in (b"PK\x03\x04", b"PK\x05\x06"):
+        try:
+            with zipfile.ZipFile(path) as z:
+                workbook = _ridi.is_xlsx(z.namelist())
+        except (zipfile.BadZipFile, OSError) as e:
+            raise RecordingError(f"unreadable zip archive: {e}", path) from None
+        if workbook:
+            names = _ridi.xlsx_header(path)
+            if _ridi.looks_like_header(names):
+                return RIDI
+            missing = _ridi.half_match(names)
+            raise _unknown(path, f"an Excel workbook whose first row lacks RIDI's {', '.join(missing)}" if missing
+                           else "an Excel workbook without RIDI's columns (time, acce_x, ...) in its first row")
         try:
             with FileSet(path) as fs:
                 fmt = _detect_fileset(fs)
@@ -314,9 +374,13 @@ def detect_format(path) -> str:
         raise _unknown(path, "a MAT-file without PyShoe's imu and ts variables or MATLAB Mobile's sensor timetables")
     if b"\x00" in head[:1024]:
         raise _unknown(path, "binary data")
-    fmt = _detect_text(head.decode("utf-8", errors="replace").lstrip("\ufeff"))
+    text = head.decode("utf-8", errors="replace").lstrip("\ufeff")
+    fmt = _detect_text(text)
     if fmt is None:
-        raise _unknown(path, "the content matches none of them")
+        raise _half_match(path, text) or _unknown(path, "the content matches none of them")
+    if fmt == OXIOD and not _oxi.is_imu_name(path):
+        raise RecordingError("an OxIOD sensor file by its content, but not named imu<K>.csv: its Vicon truth "
+                             "vi<K>.csv is found by that name (rename it, or keep the pair's names)", path)
     if fmt == XSENS:
         part = _xs.trial_primary(path)
         if part is not None:
@@ -347,6 +411,8 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
     limit = max_uncompressed_bytes
     fmt = detect_format(path)
     path = _single_mat(path) or path  # a folder holding one MAT-file is read through it
+    if fmt in (OXIOD, RIDI):
+        path = _folder_file(path) or path  # and one holding one OxIOD pair or RIDI table through that
     if fmt == PDR_RECORDING:
         rec = read_recording(path, warn=warn, max_uncompressed_bytes=limit)  # gzip or not by content
         rec.metadata.setdefault("source_format", PDR_RECORDING)
@@ -358,7 +424,8 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
     readers = {PHYPHOX: read_phyphox, MSINDOOR: read_msindoor, BRAJDIC: read_brajdic, OXFORD: read_oxford,
                TRUNDLE: read_trundle, XIO: read_xio, XSENS: read_xsens, PYSHOE: read_pyshoe,
                PHYSICS_TOOLBOX: read_physicstoolbox, ACCEL_CSV: read_accelcsv, SENSIBILITY: read_sensibility, SENSORLOG: read_sensorlog,
-               MATLAB_MOBILE: read_matlabmobile, MATLAB_MOBILE_CSV: read_matlabmobile_csv}
+               MATLAB_MOBILE: read_matlabmobile, MATLAB_MOBILE_CSV: read_matlabmobile_csv, OXIOD: read_oxiod,
+               RIDI: read_ridi}
     rec = readers[fmt](path, warn=warn, max_uncompressed_bytes=limit)
     return attach_truth_beside(path, rec) if truth_beside else rec
 
@@ -367,4 +434,4 @@ __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "
            "read_phyphox", "read_msindoor", "read_brajdic", "read_oxford", "read_trundle", "read_xio", "read_xsens",
            "read_pyshoe", "read_physicstoolbox", "read_accelcsv", "read_sensibility", "read_sensorlog", "read_oxiod", "read_ridi", "read_matlabmobile", "read_matlabmobile_csv", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
            "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE", "XIO", "XSENS", "PYSHOE", "PHYSICS_TOOLBOX",
-           "ACCEL_CSV", "SENSIBILITY", "SENSORLOG", "MATLAB_MOBILE", "MATLAB_MOBILE_CSV"]
+           "ACCEL_CSV", "SENSIBILITY", "SENSORLOG", "MATLAB_MOBILE", "MATLAB_MOBILE_CSV", "OXIOD", "RIDI"]

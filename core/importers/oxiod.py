@@ -43,6 +43,18 @@ aligned) and is counted in ``repairs``; more than :func:`core.recording.bad_line
 :class:`RecordingError`.  Files of different row counts are a :class:`RecordingError`.
 
 Streams: ``acc``, ``gyro``, ``mag``, ``posi``.
+
+Detection (:func:`core.importers.detect_format`)
+================================================
+The files have no header, so the content is tested conservatively (:func:`looks_like`): the first line, and at least
+3 and nine in ten of the first 20, are 16 numbers; the attitude angles are within +-pi (pitch +-pi/2); the gravity
+columns are Core Motion's unit vector (median norm 0.97-1.03 g, every row 0.9-1.1 g; the copies read 1.0); the
+rotation rates are under 35 rad/s. No other format read here has 16 fields a line. The name must then be
+``imu<K>.csv`` (``.gz`` allowed): the truth ``vi<K>.csv`` is found by it, and a matching file of another name is
+refused saying so. ``vi<K>.csv`` itself (9 numbers a line, a unit quaternion in the last four:
+:func:`looks_like_vicon`) is refused pointing at the ``imu<K>.csv`` beside it. A folder holding one ``imu<K>.csv``
+of this content (top level only, e.g. a ``syn`` folder with one pair) is read through it; with several, replay one
+file (``pdr replay`` given such a folder replays each). Zip archives are not read.
 """
 
 from __future__ import annotations
@@ -57,7 +69,7 @@ from core.conventions import ACC, GYRO, MAG, STANDARD_GRAVITY_M_S2
 from core.recording import (
     MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
 )
-from core.importers._common import POSI, finish, open_text
+from core.importers._common import POSI, finish, head_bytes, head_lines, open_text
 
 FORMAT = "oxiod"
 #: the dataset's sampling rate (its paper and README: "recorded by smartphones at 100 Hz")
@@ -73,6 +85,78 @@ MAGNETIC_FIELD = slice(13, 16)
 TRANSLATION = slice(2, 5)
 POSI_COLUMNS = ["east_m", "north_m", "up_m"]
 _IMU_NAME = re.compile(r"^imu(\d+)\.csv(\.gz)?$", re.IGNORECASE)
+_VI_NAME = re.compile(r"^vi(\d+)\.csv(\.gz)?$", re.IGNORECASE)
+
+
+def _numeric_rows(head: str, n_fields: int) -> np.ndarray | None:
+    """The first lines of ``head`` that are ``n_fields`` numbers, if the first line and at least 3, and nine in ten,
+    of them are (the files have no header line)."""
+    lines = head_lines(head)
+    rows = []
+    for i, ln in enumerate(lines):
+        parts = ln.strip().split(",")
+        try:
+            if len(parts) != n_fields:
+                raise ValueError
+            rows.append([float(p) for p in parts])
+        except ValueError:
+            if i == 0:
+                return None
+    if len(rows) < max(3, 0.9 * len(lines)):
+        return None
+    v = np.asarray(rows, dtype=np.float64)
+    return v if np.all(np.isfinite(v)) else None
+
+
+def looks_like(head: str) -> bool:
+    """True if the first lines of a text are rows of an ``imuK.csv`` (see the module doc, *Detection*)."""
+    v = _numeric_rows(head, IMU_FIELDS)
+    if v is None:
+        return False
+    roll, pitch, yaw = v[:, 1], v[:, 2], v[:, 3]
+    g = np.linalg.norm(v[:, GRAVITY], axis=1)
+    return bool(np.all(np.abs(roll) <= np.pi + 1e-3) and np.all(np.abs(pitch) <= np.pi / 2 + 1e-3)
+                and np.all(np.abs(yaw) <= np.pi + 1e-3) and 0.97 <= np.median(g) <= 1.03
+                and np.all((g > 0.9) & (g < 1.1)) and np.all(np.abs(v[:, ROTATION_RATE]) < 35.0))
+
+
+def looks_like_vicon(head: str) -> bool:
+    """True if the first lines of a text are rows of a ``viK.csv``: 9 numbers, a unit quaternion in the last four."""
+    v = _numeric_rows(head, VI_FIELDS)
+    return v is not None and bool(np.all(np.abs(np.linalg.norm(v[:, 5:9], axis=1) - 1.0) < 0.05))
+
+
+def is_imu_name(path: str) -> bool:
+    """The name is ``imu<K>.csv`` (or ``.csv.gz``)."""
+    return _IMU_NAME.match(os.path.basename(str(path))) is not None
+
+
+def imu_partner(vi_path: str) -> str | None:
+    """The ``imuK.csv`` beside a ``viK.csv`` when it exists, else None."""
+    folder, name = os.path.split(str(vi_path))
+    m = _VI_NAME.match(name)
+    if not m:
+        return None
+    imu = os.path.join(folder, f"imu{m.group(1)}.csv{m.group(2) or ''}")
+    return imu if os.path.isfile(imu) else None
+
+
+def imu_files(folder: str) -> list[str]:
+    """The ``imuK.csv`` files at the top of ``folder`` whose content :func:`looks_like` accepts (sorted by K)."""
+    if not os.path.isdir(folder):
+        return []
+    found = []
+    for name in os.listdir(folder):
+        m = _IMU_NAME.match(name)
+        full = os.path.join(folder, name)
+        if m and os.path.isfile(full):
+            try:
+                head = head_bytes(full, 65536)
+            except OSError:
+                continue
+            if looks_like(head.decode("utf-8", errors="replace")):
+                found.append((int(m.group(1)), full))
+    return [f for _, f in sorted(found)]
 
 
 def vicon_path(imu_path: str) -> str:

@@ -24,10 +24,19 @@ usable time or acceleration is a bad line (skipped and counted, or, past what
 :func:`core.recording.bad_lines_tolerated` allows, a :class:`RecordingError`).
 
 Streams: ``acc``, ``gyro``, ``mag`` and ``posi`` where present.
+
+Detection (:func:`core.importers.detect_format`)
+================================================
+A CSV whose first line names ``time``, ``acce_x/y/z`` and ``gyro_x/y/z`` (:data:`DETECT`; in any order, other
+columns allowed), or an ``.xlsx`` (a zip with ``xl/worksheets/sheet*.xml``) whose first worksheet's first row
+does.  A header naming three or more of RIDI's sensor columns (``acce_x``, ``gyro_y``, ``pos_z``, ...) but missing
+one of :data:`DETECT` is refused naming what is missing; another workbook is refused as such.  A folder holding
+one such CSV or workbook at its top (RIDI's ``processed/`` folder) is read through it.
 """
 
 from __future__ import annotations
 
+import os
 import re
 import warnings
 import zipfile
@@ -39,7 +48,7 @@ from core.conventions import ACC, GYRO, MAG
 from core.recording import (
     MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
 )
-from core.importers._common import POSI, finish, first_bad_time, open_text
+from core.importers._common import POSI, finish, first_bad_time, head_bytes, open_text
 
 FORMAT = "ridi"
 #: stream -> its three columns (RIDI's names)
@@ -50,6 +59,11 @@ COLUMNS = {
     POSI: ("pos_x", "pos_y", "pos_z"),
 }
 REQUIRED = ("time", *COLUMNS[ACC])
+#: the columns detection requires (RIDI always logs the gyroscope; the reader itself needs only REQUIRED)
+DETECT = (*REQUIRED, *COLUMNS[GYRO])
+#: RIDI's own sensor column names (for a half-match's error)
+RIDI_NAMES = frozenset(f"{s}_{a}" for s in ("acce", "gyro", "linacce", "grav", "magnet", "pos", "ori", "rv",
+                                            "game_rv") for a in "xyzw")
 POSI_COLUMNS = ["east_m", "north_m", "up_m"]
 _NS = "{http://schemas.openxmlformats.org/spreadsheetml/2006/main}"
 _CELL = re.compile(r"([A-Z]+)(\d+)$")
@@ -64,51 +78,127 @@ def _col_index(ref: str) -> int:
     return n - 1
 
 
-def _xlsx_rows(path: str, limit: int | None):
-    """``(header, rows)`` of the first worksheet of an .xlsx: header strings, rows as lists (floats, nan gaps)."""
+def _sheet_rows(z: zipfile.ZipFile, path: str, limit: int | None):
+    """The rows of the first worksheet of an open .xlsx, each a dict column -> float or str (streamed)."""
+    names = z.namelist()
+    sheets = sorted(n for n in names if n.startswith("xl/worksheets/sheet") and n.endswith(".xml"))
+    if not sheets:
+        raise RecordingError("an .xlsx without a worksheet", path)
+    if limit is not None and z.getinfo(sheets[0]).file_size > limit:
+        raise RecordingError(f"worksheet over {limit} bytes uncompressed: refused", path)
+    shared: list[str] = []
+    if "xl/sharedStrings.xml" in names:
+        root = ElementTree.fromstring(z.read("xl/sharedStrings.xml"))
+        shared = ["".join(t.text or "" for t in si.iter(_NS + "t")) for si in root.iter(_NS + "si")]
+    with z.open(sheets[0]) as f:
+        for _, el in ElementTree.iterparse(f):
+            if el.tag != _NS + "row":
+                continue
+            cells: dict[int, object] = {}
+            for c in el.iter(_NS + "c"):
+                j = _col_index(c.get("r", "A1"))
+                kind = c.get("t")
+                v = c.find(_NS + "v")
+                if kind == "inlineStr":
+                    cells[j] = "".join(t.text or "" for t in c.iter(_NS + "t"))
+                elif kind == "s" and v is not None:
+                    cells[j] = shared[int(v.text)]
+                elif v is not None and v.text is not None:
+                    try:
+                        cells[j] = float(v.text)
+                    except ValueError:
+                        cells[j] = v.text
+            el.clear()
+            yield cells
+
+
+def _header_of(cells: dict) -> list[str]:
+    return [str(cells.get(j, "")).strip() for j in range(max(cells) + 1 if cells else 0)]
+
+
+def _open_xlsx(path: str) -> zipfile.ZipFile:
     try:
-        z = zipfile.ZipFile(path)
+        return zipfile.ZipFile(path)
     except (zipfile.BadZipFile, OSError) as e:
         raise RecordingError(f"not a readable .xlsx: {e}", path) from None
-    with z:
-        names = z.namelist()
-        sheets = sorted(n for n in names if n.startswith("xl/worksheets/sheet") and n.endswith(".xml"))
-        if not sheets:
-            raise RecordingError("an .xlsx without a worksheet", path)
-        if limit is not None and z.getinfo(sheets[0]).file_size > limit:
-            raise RecordingError(f"worksheet over {limit} bytes uncompressed: refused", path)
-        shared: list[str] = []
-        if "xl/sharedStrings.xml" in names:
-            root = ElementTree.fromstring(z.read("xl/sharedStrings.xml"))
-            shared = ["".join(t.text or "" for t in si.iter(_NS + "t")) for si in root.iter(_NS + "si")]
-        header: list[str] = []
-        rows: list[list[float]] = []
-        with z.open(sheets[0]) as f:
-            for _, el in ElementTree.iterparse(f):
-                if el.tag != _NS + "row":
-                    continue
-                cells: dict[int, object] = {}
-                for c in el.iter(_NS + "c"):
-                    j = _col_index(c.get("r", "A1"))
-                    kind = c.get("t")
-                    v = c.find(_NS + "v")
-                    if kind == "inlineStr":
-                        cells[j] = "".join(t.text or "" for t in c.iter(_NS + "t"))
-                    elif kind == "s" and v is not None:
-                        cells[j] = shared[int(v.text)]
-                    elif v is not None and v.text is not None:
-                        try:
-                            cells[j] = float(v.text)
-                        except ValueError:
-                            cells[j] = v.text
-                el.clear()
-                width = max(cells) + 1 if cells else 0
+
+
+#: what a damaged workbook raises while it is read (turned into a RecordingError)
+_XLSX_ERRORS = (ElementTree.ParseError, zipfile.BadZipFile, EOFError, OSError, KeyError, IndexError, ValueError,
+                AttributeError)
+
+
+def _xlsx_rows(path: str, limit: int | None):
+    """``(header, rows)`` of the first worksheet of an .xlsx: header strings, rows as lists (floats, nan gaps)."""
+    header: list[str] = []
+    rows: list[list[float]] = []
+    try:
+        with _open_xlsx(path) as z:
+            for cells in _sheet_rows(z, path, limit):
                 if not header:
-                    header = [str(cells.get(j, "")).strip() for j in range(width)]
+                    header = _header_of(cells)
                     continue
                 rows.append([x if isinstance(x, float) else float("nan")
                              for x in (cells.get(j) for j in range(len(header)))])
+    except _XLSX_ERRORS as e:
+        raise RecordingError(f"damaged .xlsx worksheet: {e}", path) from None
     return header, rows
+
+
+def is_xlsx(names) -> bool:
+    """A zip archive's member names are an Excel workbook's (a worksheet under ``xl/worksheets/``)."""
+    return any(n.startswith("xl/worksheets/sheet") and n.endswith(".xml") for n in names)
+
+
+def xlsx_header(path: str, limit: int | None = MAX_UNCOMPRESSED_BYTES) -> list[str]:
+    """The first row of an .xlsx's first worksheet (read alone: the sheet is streamed and left after it)."""
+    try:
+        with _open_xlsx(path) as z:
+            return next((_header_of(cells) for cells in _sheet_rows(z, path, limit)), [])
+    except _XLSX_ERRORS as e:
+        raise RecordingError(f"damaged .xlsx worksheet: {e}", path) from None
+
+
+def header_names(head: str) -> list[str]:
+    """The names of a CSV head's first line (``,``-separated, spaces and quotes stripped)."""
+    first = head.lstrip("\ufeff").replace("\r", "\n").split("\n", 1)[0]
+    return [n.strip().strip('"').strip() for n in first.split(",")]
+
+
+def looks_like_header(names) -> bool:
+    """The header names RIDI's ``time``, ``acce_x/y/z`` and ``gyro_x/y/z`` (see the module doc, *Detection*)."""
+    return all(n in names for n in DETECT)
+
+
+def half_match(names) -> list[str]:
+    """The detection columns missing from a header that names at least three of RIDI's sensor columns but not
+    all of :data:`DETECT` (for an error that says what is missing); ``[]`` otherwise."""
+    ridi = [n for n in names if n in RIDI_NAMES]
+    missing = [n for n in DETECT if n not in names]
+    return missing if len(ridi) >= 3 and missing else []
+
+
+def looks_like_csv(head: str) -> bool:
+    """The first line of a CSV is RIDI's header (:func:`looks_like_header`)."""
+    return looks_like_header(header_names(head))
+
+
+def _file_matches(path: str) -> bool:
+    try:
+        if zipfile.is_zipfile(path):
+            return looks_like_header(xlsx_header(path))
+        return looks_like_csv(head_bytes(path, 65536).decode("utf-8", errors="replace"))
+    except (RecordingError, *_XLSX_ERRORS):
+        return False
+
+
+def folder_files(folder: str) -> list[str]:
+    """The RIDI tables (``.csv``, ``.csv.gz``, ``.xlsx``) at the top of ``folder`` (sorted by name)."""
+    if not os.path.isdir(folder):
+        return []
+    names = sorted(n for n in os.listdir(folder) if n.lower().endswith((".csv", ".csv.gz", ".xlsx")))
+    return [os.path.join(folder, n) for n in names
+            if os.path.isfile(os.path.join(folder, n)) and _file_matches(os.path.join(folder, n))]
 
 
 def _csv_rows(path: str, repairs: list[str], limit: int | None):
