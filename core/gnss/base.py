@@ -68,6 +68,7 @@ import numpy as np
 
 from core.conventions import wrap_angle
 from core.geodesy import enu_to_geodetic, geodetic_to_enu
+from core.gnss.accuracy import HACC_PER_SIGMA  # the one reported-accuracy-to-SD ratio (also imported from here)
 from core.gnss.ekf import UpdateResult, sigma_max_m
 from core.gnss.judge import Cause, GpsJudge, GpsVerdict, JudgeSettings
 
@@ -75,9 +76,6 @@ from core.gnss.judge import Cause, GpsJudge, GpsVerdict, JudgeSettings
 HISTORY_KEEP_LAST = 64
 #: events (relocks, variability detections, training windows) a fusion without history keeps in memory
 EVENTS_KEEP_LAST = 8
-
-#: 68 % radius of a circular 2-D Gaussian, in units of its per-axis SD: hacc = 1.515 sigma
-HACC_PER_SIGMA = math.sqrt(-2.0 * math.log(1.0 - 0.68))
 
 
 #: the judge's causes that hold a fix back without saying anything against the stream's quality: a fix judged out
