@@ -557,7 +557,10 @@ def ipin_file(root: str, index: int, filters) -> dict:
                              "lm_errors_m": [float(v) for v in le.errors_m], "lm_sigma_m": [float(v) for v in sig],
                              "lm_nees": [float(v) for v in nees],
                              "fixes_accepted": int(sum(1 for x in fr.fixes if x.accepted)),
-                             "fixes": len(fr.fixes)}
+                             "fixes": len(fr.fixes),
+                             # how far GPS moved the track, by kind of event (updates, relocks, adoptions), and the
+                             # first and largest move with the filter's sigma before it (issue #26; JSON only)
+                             "gps_moves": fr.counters.get("gps_moves")}
     row["seconds"] = time.perf_counter() - t_start
     return row
 

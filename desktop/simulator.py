@@ -200,6 +200,7 @@ from core import quaternion as quat
 from core.conventions import (ACC, CARRY_HANDHELD, CARRY_MODES, GPS, GYRO, MAG, STANDARD_GRAVITY_M_S2, bearing_deg,
                               wrap_angle)
 from core.geodesy import enu_to_geodetic, magnetic_field
+from core.gnss.accuracy import HACC_PROBABILITY  # the reported accuracy's radius holds the truth this often
 from core.recording import Recording, Stream, make_stream
 
 __all__ = ["simulate_walk", "demo_walk", "street_route", "outdoor_walk", "residual_hard_iron_uT", "SimulatedWalk",
@@ -254,7 +255,6 @@ _DRIFT_BAND_HZ = (0.03, 0.3)
 _BIAS_GRID_HZ = 2.0
 _RAMP_STEPS = 1.5  # a change of speed by the cruise speed takes this many step periods (start, stop, corners)
 _STEP_AR = 0.7  # AR(1) coefficient of the walker's offset from the plan at heel strikes
-HACC_PROBABILITY = 0.68  #: the reported horizontal accuracy is the radius holding the true position this often
 
 
 def default_step_length_m(height_m: float, step_frequency_hz: float) -> float:

@@ -316,14 +316,24 @@ def _dr_judge(growth=0.05):
     return GpsJudge(JudgeSettings(dr_growth_per_m=growth))
 
 
+def test_one_reported_accuracy_to_sigma_ratio_for_every_gps_stage():
+    """A reported accuracy (a 68 % radius) is sqrt(-2 ln 0.32) = 1.5096 per-axis SDs everywhere (before: the fusion's
+    1.5096, the judge's and the drift check's 1.515)."""
+    from core.gnss import accuracy, base, drift, judge, training
+
+    assert accuracy.HACC_PER_SIGMA == pytest.approx(math.sqrt(-2.0 * math.log(1.0 - 0.68)), rel=1e-12)
+    for module in (base, drift, judge, training):
+        assert module.HACC_PER_SIGMA is accuracy.HACC_PER_SIGMA, module.__name__
+
+
 def test_dead_reckonings_own_accuracy_grows_from_its_reference_with_the_distance_walked():
     j = _dr_judge(0.05)
     assert math.isnan(j.dr_accuracy_m())  # no reference: nothing to compare
     j.known_start(1.0)
-    assert j.dr_accuracy_m() == pytest.approx(1.515)  # a 1-m SD per axis is a 1.515-m 68 % radius
+    assert j.dr_accuracy_m() == pytest.approx(1.5096, abs=1e-4)  # a 1-m SD per axis is a 1.5096-m 68 % radius
     for k in range(100):
         j.add_step(int(k * 5e8), 0.8, 0.3)
-    assert j.dr_accuracy_m() == pytest.approx(math.hypot(1.515, 0.05 * 80.0))
+    assert j.dr_accuracy_m() == pytest.approx(math.hypot(1.5096, 0.05 * 80.0), abs=1e-4)
     lat, lon = enu_to_geodetic(80.0, 0.0, ORIGIN)
     j.add_fix(int(50e9), float(lat), float(lon), 3.0, (80.0, 0.0))
     j.fix_used(int(50e9))  # the fusion took it: the track follows the stream, the rule rests

@@ -78,6 +78,18 @@ def test_a_diverged_filter_relocks_to_good_fixes_within_30_s_and_says_so(diverge
     assert r["offset_m"] > 30.0 and 20.0 <= r["consistent_s"] <= 30.0  # says how far off, and on what evidence
     after = fr.steps[int(np.searchsorted(ts, r["t_ns"] + 10e9))]
     assert _error_m(walk, after) < 10.0
+    # how far GPS moved the track, by kind (diagnostics as data): the relock's jump is its offset, the largest of the
+    # walk; every other accepted fix but the anchor is an ordinary update
+    moves = fr.counters["gps_moves"]
+    by = moves["by_kind"]
+    n_cs = sum(x["rule"] == "consistent stream" for x in fr.counters["relocks"])
+    assert by["relock (consistent stream)"]["n"] == n_cs
+    assert moves["largest"]["kind"] == "relock (consistent stream)" and moves["largest"]["moved_m"] > 30.0
+    assert any(abs(x["offset_m"] - moves["largest"]["moved_m"]) < 1e-6 for x in relocks)
+    assert sum(v["n"] for v in by.values()) == sum(f.accepted for f in fr.fixes) - 1  # the anchor moves nothing
+    assert by["update"]["moved_m"] == pytest.approx(sum(f.correction_m for f in fr.fixes if f.accepted) -
+                                                    sum(v["moved_m"] for k, v in by.items() if k != "update"))
+    assert moves["first"]["kind"] == "update" and moves["first"]["sigma_before_m"] > 0.0
 
 
 def test_kubrak_relock_puts_the_track_on_the_fix_not_beside_it_by_a_stale_bias():

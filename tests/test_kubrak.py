@@ -468,6 +468,8 @@ def test_a_shadow_that_relocks_to_a_consistent_stream_becomes_the_filter_at_once
     first = c["variability_events"][0]["t_ns"]
     ev = [(e["event"], e["t_ns"]) for e in c["shadow_events"]]
     assert [e for e, _ in ev[:2]] == ["relocked", "adopted"] and ev[1][1] - ev[0][1] <= 2e9  # said so
+    adopted = c["gps_moves"]["by_kind"]["shadow adopted"]  # and how far the adoption moved the track (data)
+    assert adopted["n"] == sum(e == "adopted" for e, _ in ev) and adopted["max_m"] > 0.0
     assert _longest_refused_s(fr.fixes, first) <= 31.0
     # the behaviour this changes (the fixes held back and the speed trainer as they were then: h6/faults)
     old = make_fusion("kubrak", adopt_on_relock=False, learn_held_back=False,

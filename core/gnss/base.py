@@ -68,6 +68,7 @@ import numpy as np
 
 from core.conventions import wrap_angle
 from core.geodesy import enu_to_geodetic, geodetic_to_enu
+from core.gnss.accuracy import HACC_PER_SIGMA  # the one reported-accuracy-to-SD ratio (also imported from here)
 from core.gnss.ekf import UpdateResult, sigma_max_m
 from core.gnss.judge import Cause, GpsJudge, GpsVerdict, JudgeSettings
 
@@ -75,9 +76,6 @@ from core.gnss.judge import Cause, GpsJudge, GpsVerdict, JudgeSettings
 HISTORY_KEEP_LAST = 64
 #: events (relocks, variability detections, training windows) a fusion without history keeps in memory
 EVENTS_KEEP_LAST = 8
-
-#: 68 % radius of a circular 2-D Gaussian, in units of its per-axis SD: hacc = 1.515 sigma
-HACC_PER_SIGMA = math.sqrt(-2.0 * math.log(1.0 - 0.68))
 
 
 #: the judge's causes that hold a fix back without saying anything against the stream's quality: a fix judged out
@@ -509,6 +507,10 @@ class FixFusion:
         self._pending_learning: list = []  # fixes the judge has not judged yet, for training once it has
         self._quality_failed = False  # the judge failed on the stream's quality since its last usable verdict
         self.relocks: list[dict] = self._events()  #: when the filter re-locked to GPS, by how far, by which rule
+        #: how far GPS moved the fused position, by kind of event (:meth:`_count_move`; :meth:`counters`' ``gps_moves``)
+        self.moves: dict = {}
+        self._first_move: dict | None = None
+        self._largest_move: dict | None = None
         if self.start is not None:
             self.origin_lat_lon = (self.start[0], self.start[1])
         self._reset_filter()
@@ -843,6 +845,8 @@ class FixFusion:
             if self.judge is not None:
                 self.judge.add_nis(res.nis)
         self._outage_jump(t_ns, res.correction_m, relocked, res.sigma_before_m)
+        self._count_move(f"relock ({self.relocks[-1]['rule']})" if relocked else "update", t_ns, res.correction_m,
+                         res.sigma_before_m)
         if self.anchor is None:
             self.anchor = (int(t_ns), float(lat), float(lon), float(v[2]) if len(v) > 2 else math.nan)
         self._accepted(t_ns, v, east, north, hacc, speed, course, res.nis, res.correction_m)
@@ -973,6 +977,30 @@ class FixFusion:
             if w.fix_t_ns is not None and not w.done:
                 self._close_window(w, moved, t_ns, relocked, sigma_before_m)
 
+    def _count_move(self, kind: str, t_ns: int, moved_m: float, sigma_before_m: float = math.nan) -> None:
+        """GPS moved the fused position by ``moved_m`` at ``t_ns`` through an event of ``kind`` ("update": a fix the
+        gate took; "relock (consistent stream)", "relock (gated fixes agree)": :meth:`_relock`; a subclass's own, e.g.
+        Kubrak's "shadow adopted"), the position's SD before it ``sigma_before_m``: the per-kind count, sum and
+        largest jump, and the first and the largest event (diagnostics as data, issue #26: on IPIN's tuning files
+        every move is an ordinary update, the first at a sigma of 8-13 m)."""
+        if not math.isfinite(moved_m):
+            return
+        m = self.moves.setdefault(kind, {"n": 0, "moved_m": 0.0, "max_m": 0.0})
+        m["n"] += 1
+        m["moved_m"] += float(moved_m)
+        m["max_m"] = max(m["max_m"], float(moved_m))
+        event = {"t_ns": int(t_ns), "kind": kind, "moved_m": float(moved_m), "sigma_before_m": float(sigma_before_m)}
+        self._first_move = self._first_move or event
+        if self._largest_move is None or moved_m > self._largest_move["moved_m"]:
+            self._largest_move = event
+
+    def gps_moves(self) -> dict:
+        """How far GPS moved the fused position (:meth:`_count_move`): ``{"by_kind": {kind: {n, moved_m, max_m}},
+        "first": event, "largest": event}`` (an event: ``t_ns``, ``kind``, ``moved_m``, ``sigma_before_m``; None
+        before any)."""
+        return {"by_kind": {k: dict(v) for k, v in self.moves.items()}, "first": self._first_move,
+                "largest": self._largest_move}
+
     def _after_relock(self, offset_m: float, walked_m: float) -> None:
         """A relock moved the position by ``offset_m`` after ``walked_m`` of walking since the last accepted
         fix: the filter's own uncertainty was wrong (the subclass may widen what caused it)."""
@@ -1020,7 +1048,7 @@ class FixFusion:
                 "fixes_gated": self.n_gated, "fixes_relocked": self.n_relocked,
                 "fixes_hidden": self.n_fixes_hidden,
                 "position_nis_mean": self._nis_sum / self._nis_n if self._nis_n else math.nan,
-                "fixes_judged_out": self.n_judged_out, "relocks": list(self.relocks),
+                "fixes_judged_out": self.n_judged_out, "relocks": list(self.relocks), "gps_moves": self.gps_moves(),
                 "gps_judge": self.judge.summary() if self.judge is not None else None,
                 "fusion": self.name}
 

@@ -20,7 +20,7 @@ offset walks.  At each fix the median offset of the fixes of the last
 ``average_s`` is compared with the median offset of the fixes ``window_s``
 earlier (same span), against
 
-* the fixes' own errors: their reported accuracy at each end (a 68 % radius, ``hacc / 1.515`` per-axis SD,
+* the fixes' own errors: their reported accuracy at each end (a 68 % radius, ``hacc / 1.5096`` per-axis SD,
   not averaged down: the error of a phone fix is mostly a bias that lasts minutes);
 * dead reckoning's: a heading error of ``heading_sd_rad`` across its displacement ``D`` between the two ends
   and a stride-scale error of ``scale_sd`` along it (both errors repeat at every step, so they grow with
@@ -94,8 +94,7 @@ from enum import Enum
 
 import numpy as np
 
-#: hacc is a 68 % radius: this many per-axis SDs of a circular Gaussian
-HACC_PER_SIGMA = 1.515
+from core.gnss.accuracy import HACC_PER_SIGMA  # hacc is a 68 % radius: this many per-axis SDs
 
 
 class DriftVerdict(Enum):

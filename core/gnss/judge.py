@@ -102,7 +102,8 @@ from enum import Enum
 import numpy as np
 
 from core.geodesy import geodetic_to_enu
-from core.gnss.drift import HACC_PER_SIGMA, DriftSettings, StreamDriftCheck
+from core.gnss.accuracy import HACC_PER_SIGMA
+from core.gnss.drift import DriftSettings, StreamDriftCheck
 from core.gnss.pace import PaceSettings, ReceiverPaceCheck
 
 
@@ -982,7 +983,7 @@ class GpsJudge:
         span_fix = math.hypot(*(b[:, 1:3].mean(axis=0) - a[:, 1:3].mean(axis=0)))
         span_pdr = math.hypot(*(b[:, 5:7].mean(axis=0) - a[:, 5:7].mean(axis=0)))
         path = float(np.sum(np.hypot(*np.diff(fx[:, 5:7], axis=0).T)))
-        tol = 2.0 * math.sqrt(2.0 / k) * float(np.median(fx[:, 3])) / 1.515  # as _displacement_off_m's
+        tol = 2.0 * math.sqrt(2.0 / k) * float(np.median(fx[:, 3])) / HACC_PER_SIGMA  # as _displacement_off_m's
         return span_fix <= s.step_scale_limits[1] * path + tol and span_pdr >= s.min_step_straightness * path
 
     def _displacement_off_m(self, hacc_m: float, upper_only: bool = False) -> float:
@@ -999,7 +1000,7 @@ class GpsJudge:
         d_fix = math.hypot(*(b[:, 1:3].mean(axis=0) - a[:, 1:3].mean(axis=0)))
         d_pdr = math.hypot(*(b[:, 5:7].mean(axis=0) - a[:, 5:7].mean(axis=0)))
         lo, hi = self.settings.step_scale_limits
-        tol = 2.0 * math.sqrt(2.0 / k) * hacc_m / 1.515  # hacc is a 68 % radius: 1.515 per-axis SDs
+        tol = 2.0 * math.sqrt(2.0 / k) * hacc_m / HACC_PER_SIGMA  # hacc is a 68 % radius
         return (d_fix - hi * d_pdr if upper_only else max(lo * d_pdr - d_fix, d_fix - hi * d_pdr)) - tol
 
     def summary(self) -> dict:

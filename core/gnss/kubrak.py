@@ -594,6 +594,8 @@ class KubrakFusion(FixFusion):
                     t_ns - self._shadow_accept_ns <= self.relock_ns:
                 # the shadow follows the fixes (it took one within relock_s): its state, learnt from them while the
                 # main filter waited with the reverted coefficients, becomes the filter's
+                self._count_move("shadow adopted", t_ns, float(np.hypot(*(sh.x[:2] - self.kf.x[:2]))),
+                                 self.kf.position_sigma_m())
                 self.kf = sh
                 self._coef_hist.clear()
                 self._record_coef(self._coef_hist, t_ns, sh)

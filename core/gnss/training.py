@@ -53,7 +53,7 @@ The stride estimate (``stride_weighting``, :class:`StrideWeighting`)
       ``prior_scale_sd``.  A chord sample ``z = chord / model distance`` counts with its
       information: its SD is the chord's error from its end fixes' reported
       accuracies, ``sqrt(sd_a^2 + sd_b^2) / model distance`` with
-      ``sd = hacc / 1.515`` (hacc is a 68 % radius, per-axis SD each end),
+      ``sd = hacc / 1.5096`` (hacc is a 68 % radius, per-axis SD each end),
       combined with ``chord_model_sd`` (relative), the model distance's own
       noise (the stride model's error changes with speed and ground from one
       stretch to the next).  Before each accepted sample the variance is
