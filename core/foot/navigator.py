@@ -84,8 +84,8 @@ class FootSettings:
     #: rotation's error at the clip instead of spreading it over the stride; 0: off.  1 rad/s is the size of the
     #: repair itself (the parabola's peak above the reading on the PyShoe tuning split: median 0.12, 90th
     #: percentile 0.96, largest 2.7 rad/s).  ON (issue #27, docs/foot.md "A seventh pass"): PyShoe tuning split,
-    #: PyShoe's metric median / mean 0.0319 / 0.0355 -> 0.0315 / 0.0332 m, 5 trials better, none worse (the 8
-    #: without clipping unchanged); forward filter 0.0436 / 0.0509 -> 0.0433 / 0.0491 m
+    #: PyShoe's metric median / mean 0.0319 / 0.0355 -> 0.0315 / 0.0330 m, 5 trials better, none worse (the 6
+    #: without a clipped step unchanged); forward filter 0.0436 / 0.0509 -> 0.0433 / 0.0489 m
     clipped_gyro_sd_rad_s: float = 1.0
     #: the alignment needs a first still period at least this long (s) ...
     align_min_s: float = 0.3
