@@ -70,6 +70,45 @@ def test_transition_matrix_matches_finite_differences(seed):
     assert np.max(np.abs(J - phi)[mask]) < 1e-5
 
 
+def test_clipped_rate_noise_is_the_bias_columns_of_the_transition():
+    """``propagate(..., rate_var_rad2_s2)``: an error of the step's rate (both readings off by ``dw``) moves the
+    state by ``G dw`` (finite differences of the mechanisation); Q gains ``G diag(var) G^T``, nothing in the bias
+    rows; a variance that is not finite is ignored (no NaN into the covariance)."""
+    rng = np.random.default_rng(4)
+    ekf = ZuptEKF()
+    ekf.align((0.3, -0.2, 9.7), (0.0, 0.0, 0.0))
+    ekf.q = quat.normalize(tuple(rng.normal(size=4)))
+    ekf.v, ekf.p = tuple(rng.normal(size=3)), tuple(rng.normal(size=3))
+    acc, gyro = tuple(rng.normal(size=3) * 3 + [0, 0, 9.8]), (9.0, -2.0, 1.0)
+    ekf._f_prev, ekf._w_prev = tuple(np.asarray(acc) + 0.3), (8.0, -1.5, 0.5)
+    dt, eps = 0.005, 1e-6
+    nominal = _clone(ekf)
+    nominal.propagate(acc, gyro, dt)
+    G = np.zeros((N_STATES, 3))
+    for k in range(3):
+        pert = _clone(ekf)
+        pert._w_prev = tuple(np.add(ekf._w_prev, np.eye(3)[k] * eps))
+        pert.propagate(acc, tuple(np.add(gyro, np.eye(3)[k] * eps)), dt)
+        G[:, k] = _error(pert, nominal) / eps
+    assert np.max(np.abs(G[9:])) == 0.0
+    var = np.array([1.0, 0.0, 0.25])
+    with_var = _clone(ekf)
+    with_var.P = ekf.P.copy()
+    with_var.propagate(acc, gyro, dt, var)
+    plain = _clone(ekf)
+    plain.P = ekf.P.copy()
+    plain.propagate(acc, gyro, dt)
+    dQ = with_var.P - plain.P
+    expect = (G * var) @ G.T
+    # the attitude-from-bias block of Phi neglects the right Jacobian of SO(3): ~ |w| T / 2 = 2 % at 9 rad/s
+    assert np.linalg.norm(dQ - expect) < 0.05 * np.linalg.norm(expect), np.linalg.norm(dQ - expect)
+    assert np.max(np.abs(dQ[9:, :])) == 0.0 and dQ[0, 0] > 0.5 * dt * dt  # an attitude variance of about T^2
+    bad = _clone(ekf)
+    bad.P = ekf.P.copy()
+    bad.propagate(acc, gyro, dt, (math.nan, 1.0, 1.0))
+    assert np.array_equal(bad.P, plain.P)
+
+
 def _walk(seed=0, **kw):
     legs = [(8.4, 0.0), (4.2, math.pi / 2), (8.4, math.pi / 2), (4.2, math.pi / 2)]
     args = dict(rate_hz=200.0, acc_noise_m_s2=0.02, gyro_noise_rad_s=0.002, seed=seed)

@@ -44,6 +44,11 @@ the paper's yaw row of eq. 22 (``[.., .., -1]`` on ``dphi_D``) is
 The transition matrix ``Phi`` is the exact first-order error propagation of
 the discrete mechanisation above (tested by finite differences).
 
+A clipped gyroscope reading (option; :mod:`core.foot.saturation`) carries an error beyond the white noise:
+an error ``dw`` of a step's rate (the mean of its two readings) moves the error state as a bias error does,
+``dx <- dx + Phi[:, BG] dw`` (the bias rows left out: the bias itself is not changed), so the step's ``Q``
+gains ``Phi[:9, BG] diag(var) Phi[:9, BG]^T`` (:meth:`ZuptEKF.propagate`).
+
 Measurements (eq. 9 and the options):
 
 * zero velocity during stance: ``z = 0 = v + dv`` -> ``y = -v``, ``H = [0 I 0 0 0]``, ``R = sigma_z^2 I``;
@@ -314,8 +319,16 @@ class ZuptEKF:
             self._q = self._q1 * dt_s + self._q2 * (dt_s * dt_s) + self._q3 * (dt_s * dt_s * dt_s)
         return self._q
 
-    def propagate(self, acc_b, gyro_b, dt_s: float) -> None:
-        """One strapdown step (measured ``dt_s``) and the covariance propagation ``P <- Phi P Phi^T + Q``."""
+    def propagate(self, acc_b, gyro_b, dt_s: float, rate_var_rad2_s2=None) -> None:
+        """One strapdown step (measured ``dt_s``) and the covariance propagation ``P <- Phi P Phi^T + Q``.
+
+        ``rate_var_rad2_s2``: optional variance ((rad/s)^2, per body axis) of an error of this step's rate
+        (the mean of the previous and this reading) beyond the white noise (a clipped reading, repaired or
+        not: the true rate is beyond the range by an unknown amount).  Over the step such an error moves the
+        error state as a gyroscope bias error does, so it adds ``G diag(var) G^T`` to ``Q``, ``G`` the bias
+        columns of ``Phi`` without the bias rows (attitude ``-R T``, velocity ``[f1]x R T^2 / 2``, position
+        ``[f1]x R T^3 / 6``; module docstring).  A variance that is not finite and >= 0 is ignored.
+        """
         s = self.settings
         if not (dt_s > 0):
             return
@@ -329,9 +342,16 @@ class ZuptEKF:
         if not all(map(math.isfinite, v_new + p_new + q_new)):
             self.n_rejected += 1
             return
+        Q = self.process_noise(dt_s)
+        if rate_var_rad2_s2 is not None:
+            var = np.asarray(rate_var_rad2_s2, dtype=float)
+            if np.all(np.isfinite(var)) and np.all(var >= 0.0) and np.any(var > 0.0):
+                G = phi[0:9, BG]
+                Q = Q.copy()
+                Q[0:9, 0:9] += (G * var) @ G.T
         if self.history is not None:
-            self._close_epoch(phi, self.process_noise(dt_s))
-        self.P = phi @ self.P @ phi.T + self.process_noise(dt_s)
+            self._close_epoch(phi, Q)
+        self.P = phi @ self.P @ phi.T + Q
         if self.consider is not None:
             self.consider = phi @ self.consider
         self.q, self.v, self.p = q_new, v_new, p_new
