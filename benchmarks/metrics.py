@@ -142,7 +142,8 @@ FAILED_STEP_ERR_PCT = -100.0
 
 
 def mean_abs(values) -> float:
-    """Mean of ``|x|`` over the finite values (e.g. step-count MAE from signed errors)."""
+    """Mean of ``|x|`` (e.g. step-count MAE from signed errors) over the values present: None and nan (not
+    measured) are left out, an infinite error (a failure) is kept and makes the mean infinite."""
     v = np.asarray([x for x in values if x is not None], dtype=float)
-    v = v[np.isfinite(v)]
+    v = v[~np.isnan(v)]
     return float(np.mean(np.abs(v))) if len(v) else math.nan

@@ -573,14 +573,15 @@ def summarize(rows: list[dict]) -> dict:
         sign = [r["name"] for r in gps if r.get("magnetometer") and r["stability"]["mean_offset_deg"] is not None
                 and abs(r["stability"]["mean_offset_deg"]) > TARGET_SIGN_DEG]
         d = {"walks": len(rs), "failed": failed, "gps_walks": len(gps),
-             "sd_median_deg": _med(sds), "sd_device_median_deg": _med([r["stability_device"]["sd_deg"] for r in gps]),
+             "sd_median_deg": _med(sds), "sd_device_median_deg": _med([r["stability_device"]["sd_deg"] for r in gps] + failed_gps),
              "abs_drift_median_deg_min": _med([abs(r["stability"]["drift_deg_min"]) for r in gps
-                                               if r["stability"]["drift_deg_min"] is not None]),
+                                               if r["stability"]["drift_deg_min"] is not None] + failed_gps),
              "sign_errors": sign,
-             "distance_vs_gps_median_pct": _med([r.get("distance_vs_gps_pct") for r in gps]),
-             "steps_vs_periodicity_median_pct": _med([r.get("steps_vs_periodicity_pct") for r in rs
-                                                      if not r.get("failed")]),
-             "reversed_median_pct": _med([(r.get("reversed") or {}).get("reversed_pct") for r in gps]),
+             "distance_vs_gps_median_pct": _med([r.get("distance_vs_gps_pct") for r in gps]
+                                                 + [-100.0] * len(failed_gps)),  # a failed run: no distance
+             "steps_vs_periodicity_median_pct": _med([r.get("steps_vs_periodicity_pct") if not r.get("failed")
+                                                      else -100.0 for r in rs]),  # a failed run: no steps
+             "reversed_median_pct": _med([(r.get("reversed") or {}).get("reversed_pct") for r in gps] + failed_gps),
              "walks_without_windows": [r["name"] for r in gps if r["stability"]["sd_deg"] is None]}
         for length in LENGTHS_S:
             per_walk_def, per_walk_pdr, per_walk_floor, n_fail = [], [], [], 0
@@ -595,6 +596,9 @@ def summarize(rows: list[dict]) -> dict:
                     per_walk_def.append(_med([pct(o, "default_pct") for o in os_]))
                     per_walk_pdr.append(_med([pct(o, "pdr_pct") for o in os_]))
                     per_walk_floor.append(_med([o["floor_pct"] for o in os_ if not o.get("failed")]))
+            # a GPS walk whose run failed has no outage scored: an infinite error in the medians, never dropped
+            per_walk_def += failed_gps
+            per_walk_pdr += failed_gps
             d[f"outage_{length}s"] = {"walks": len(per_walk_def), "default_median_pct": _med(per_walk_def),
                                       "pdr_median_pct": _med(per_walk_pdr), "floor_median_pct": _med(per_walk_floor),
                                       "failed_or_unmeasured": n_fail}

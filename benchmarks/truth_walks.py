@@ -231,21 +231,23 @@ def _mostly(modes, st_t, w, m) -> bool:
 
 # -- summaries and the report --------------------------------------------------------------------------------
 def summarize(rows: list[dict]) -> dict:
-    """Medians per split and placement (failed walks counted, not in the medians)."""
+    """Medians per split and placement; a failed walk (an exception, no steps) is counted in every median as the
+    worst value (+inf; its distance error -100 %: no steps), never dropped."""
     out: dict = {}
     for split in (TUNING, REPORT):
         for pl in sorted({(r["dataset"], r["placement"]) for r in rows if r["split"] == split}):
             rs = [r for r in rows if r["split"] == split and (r["dataset"], r["placement"]) == pl]
             ok = [r for r in rs if not r.get("failed")]
+            inf = [math.inf] * (len(rs) - len(ok))
             out.setdefault(split, {})[f"{pl[0]}: {pl[1]}"] = {
                 "walks": len(rs), "failed": [r["name"] for r in rs if r.get("failed")],
-                "sd_deg_median": _med([r["stability"]["sd_deg"] for r in ok]),
+                "sd_deg_median": _med([r["stability"]["sd_deg"] for r in ok] + inf),
                 "abs_drift_deg_min_median": _med([abs(r["stability"]["drift_deg_min"]) for r in ok
-                                                  if r["stability"]["drift_deg_min"] is not None]),
-                "device_sd_deg_median": _med([r["stability_device"]["sd_deg"] for r in ok]),
-                "distance_error_pct_median": _med([r.get("distance_error_pct") for r in ok]),
-                "end_error_pct_median": _med([r.get("end_error_pct") for r in ok]),
-                "reversed_pct_median": _med([(r.get("reversed") or {}).get("reversed_pct") for r in ok]),
+                                                  if r["stability"]["drift_deg_min"] is not None] + inf),
+                "device_sd_deg_median": _med([r["stability_device"]["sd_deg"] for r in ok] + inf),
+                "distance_error_pct_median": _med([r.get("distance_error_pct") for r in ok] + [-100.0] * len(inf)),
+                "end_error_pct_median": _med([r.get("end_error_pct") for r in ok] + inf),
+                "reversed_pct_median": _med([(r.get("reversed") or {}).get("reversed_pct") for r in ok] + inf),
                 "windows": int(sum(r["stability"]["n_windows"] for r in ok)),
             }
     return out
@@ -299,14 +301,15 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.truth_walks", description=__doc__.split("\n")[0])
     ap.add_argument("--extra2", type=Path, default=None,
-                    help="the folder of OxIOD copies (<owner>__<repo>/<placement>/<dataN>/syn/imuK.csv + viK.csv)")
+                    help="the folder of the truth walks' copies: OxIOD (<owner>__<repo>/<placement>/<dataN>/syn/imuK.csv + "
+                         "viK.csv) and RIDI (<owner>__<repo>/.../<name>.xlsx or data.csv); see its REBUILD.md")
     ap.add_argument("--split", choices=(TUNING, REPORT, "all"), default=TUNING)
     ap.add_argument("--only", default=None, help="comma-separated substrings of walk names")
     ap.add_argument("--no-write", action="store_true", help="write under out/benchmarks/truth_walks/ instead")
     a = ap.parse_args(argv)
     walks = truth_walks(a.extra2)
     if not walks:
-        print(f"truth walks not available: no OxIOD syn pairs under {a.extra2} (give --extra2 DIR)")
+        print(f"truth walks not available: no OxIOD syn pair or RIDI table under {a.extra2} (give --extra2 DIR)")
         return 0
     if a.split != "all":
         walks = [w for w in walks if w.split == a.split]

@@ -13,7 +13,9 @@ Time
     from other apps it is whatever monotonic clock the file uses, shifted
     to integer nanoseconds.  Time differences used in filters are seconds
     (``dt_s = (t_ns - t_prev_ns) * 1e-9``) and always come from the
-    measured timestamps, never from a nominal rate.
+    measured timestamps, never from a nominal rate.  One exception, said where it is made: OxIOD's ``syn``
+    files (:mod:`core.importers.oxiod`) carry no usable clock (their time column is one constant), so their
+    rows are placed at the dataset's stated 100 Hz.
 
 Units (SI inside ``core/``)
     ==============  ===========================================

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from core.gnss.accuracy import HACC_PER_SIGMA
 from core.gnss.training import OnlineTrainer, StrideWeighting
 
 DT_S, HEADING = 1 / 1.8, 0.4  # a step every 0.56 s of 0.7 m (model), along a straight line
@@ -69,7 +70,7 @@ def test_the_reported_sd_matches_the_errors_over_many_walks():
     for _ in range(40):
         truth = 1.0 + 0.08 * rng.normal()
         tr = OnlineTrainer(stride_weighting=StrideWeighting.INFORMATION)
-        _walk(tr, truth, 151, rng, axis_sd_m=3.0 / 1.515)
+        _walk(tr, truth, 151, rng, axis_sd_m=3.0 / HACC_PER_SIGMA)
         z.append((tr.stride_scale - truth) / (tr.stride_scale_sd * tr.stride_scale))
     z = np.array(z)
     assert 0.4 <= math.sqrt(np.mean(z ** 2)) <= 1.3

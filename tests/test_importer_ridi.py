@@ -67,6 +67,25 @@ def test_ridi_round_trip(tmp_path, form):
     assert abs(rec.streams["acc"].rate_hz - 200.0) < 1.0
 
 
+def test_ridi_data_csv_in_nanoseconds_and_a_last_line_without_its_newline(tmp_path):
+    """RIDI's own processed/data.csv keeps the sensor clock in ns (the .xlsx copies in s); a complete last line
+    without a newline is a row, a cut one is skipped and said."""
+    table = _table(n=400)
+    ns = table.copy()
+    ns[:, 1] = np.round(table[:, 1] * 1e9)
+    path = tmp_path / "data.csv"
+    _write_csv(path, ns)
+    path.write_text(path.read_text().rstrip("\n"))  # no newline after the last row
+    rec = read_ridi(str(path), warn=False)
+    assert len(rec.streams["acc"].t_ns) == 400
+    assert np.array_equal(rec.streams["acc"].t_ns, ns[:, 1].astype(np.int64))
+    assert abs(rec.streams["acc"].rate_hz - 200.0) < 1.0 and "ns" in rec.metadata["time_base"]
+    text = path.read_text()
+    path.write_text(text[:text.rfind(",")])  # the last line cut inside its fields
+    rec = read_ridi(str(path), warn=False)
+    assert len(rec.streams["acc"].t_ns) == 399 and any("cut off" in r for r in rec.repairs)
+
+
 def test_ridi_refuses_a_table_without_its_columns(tmp_path):
     p = tmp_path / "other.csv"
     p.write_text("time,x,y,z\n0,1,2,3\n")

@@ -63,3 +63,24 @@ def test_walks_are_found_and_split_as_declared(tmp_path):
     walks = {w.name: (w.placement, w.split, w.repository) for w in TW.truth_walks(tmp_path)}
     assert walks == {"oxiod_pocket_data1_seq5": ("pocket", "tuning", "o/r"), "ridi_dan_leg1": ("leg", "tuning", "w/p"),
                      "ridi_hao_leg2": ("leg", "report", "w/p")}
+
+
+def test_a_failed_walk_counts_in_every_median_never_dropped():
+    import math
+
+    from benchmarks.truth_walks import summarize
+
+    def row(name, sd, failed=None):
+        r = {"name": name, "dataset": "ridi_truth_walks", "placement": "bag", "split": "tuning"}
+        if failed:
+            return dict(r, failed=failed)
+        return dict(r, stability={"sd_deg": sd, "drift_deg_min": 1.0, "n_windows": 3},
+                    stability_device={"sd_deg": sd}, distance_error_pct=5.0, end_error_pct=3.0,
+                    reversed={"reversed_pct": 0.0})
+
+    s = summarize([row("a", 4.0), row("b", 6.0), row("c", None, failed="no steps")])["tuning"]["ridi_truth_walks: bag"]
+    assert s["failed"] == ["c"] and s["walks"] == 3
+    assert s["sd_deg_median"] == 6.0 and s["end_error_pct_median"] == 3.0  # (4, 6, inf) and (3, 3, inf)
+    assert s["distance_error_pct_median"] == 5.0  # (5, 5, -100: no steps)
+    s = summarize([row("a", 4.0), row("c", None, failed="no steps")])["tuning"]["ridi_truth_walks: bag"]
+    assert s["sd_deg_median"] == math.inf  # (4, inf)

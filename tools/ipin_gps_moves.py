@@ -18,6 +18,9 @@ Beside them, from the default run: the fixes used, how far GPS moved the fused p
 (:meth:`core.gnss.base.FixFusion.gps_moves`), and the first move with the filter's position SD before it, dead
 reckoning's own error then and the fix's (the truth: the landmarks interpolated in time).  Kubrak's filter's relock
 and shadow-adoption counts too (``kubrak_relocks``, ``kubrak_shadow_adoptions``).
+
+A diagnostic, not a benchmark: a file without GNSS is skipped and an exception stops the run, so its medians are not
+the headline numbers (``benchmarks.gnss_faults`` counts every file, failures as +inf).
 """
 
 from __future__ import annotations

@@ -81,9 +81,12 @@ class FootSettings:
     #: the rate of a reading at or beyond that clip level (repaired or not) is uncertain by this much (rad/s,
     #: sd per clipped axis): its step's attitude, velocity and position get the matching process noise
     #: (:meth:`core.foot.ins.ZuptEKF.propagate`), so the next stance's ZUPT, and the smoother, put the clipped
-    #: rotation's error at the clip instead of spreading it over the stride; 0: off.  1 rad/s is the size of the
-    #: repair itself (the parabola's peak above the reading on the PyShoe tuning split: median 0.12, 90th
-    #: percentile 0.96, largest 2.7 rad/s).  ON (issue #27, docs/foot.md "A seventh pass"): PyShoe tuning split,
+    #: rotation's error at the clip instead of spreading it over the stride; 0: off.  1 rad/s is of the order of
+    #: the repair itself (the parabola's peak above the reading on the PyShoe tuning split: median 0.12, 90th
+    #: percentile 0.96, largest 2.7 rad/s), but the model is a white-noise equivalent, not that error's law: a
+    #: clipped run's rate error is one-signed and correlated over the run (its attitude variance grows as
+    #: (N sd T)^2, not N sd^2 T^2), and a step with one clipped reading of two errs by half; so the value is a
+    #: tuned setting (0.3, 1 and 3 rad/s improved the same five tuning trials), not a derived one.  ON (issue #27, docs/foot.md "A seventh pass"): PyShoe tuning split,
     #: PyShoe's metric median / mean 0.0319 / 0.0355 -> 0.0315 / 0.0330 m, 5 trials better, none worse (the 6
     #: without a clipped step unchanged); forward filter 0.0436 / 0.0509 -> 0.0433 / 0.0489 m
     clipped_gyro_sd_rad_s: float = 1.0

@@ -73,7 +73,8 @@ Honest fixes: their error is not white (issue #26)
     not: its receiver smooths, and the satellite geometry, multipath and (indoors) the walls change
     slowly, so consecutive fixes are off by nearly the same vector.  On the IPIN tuning routes
     (01, 02, 22: 1.2 k fixes against the landmark path) the per-axis error over the reported SD
-    (``hacc / 1.515``) has a mean square of 1.25, and its correlation between fixes ``dt`` apart is
+    (``hacc / 1.515``; :data:`core.gnss.accuracy.HACC_PER_SIGMA` is now 1.5096, a 0.35 % difference that does not
+    move these statistics) has a mean square of 1.25, and its correlation between fixes ``dt`` apart is
     0.99 at 1 s, 0.80 at 10 s, 0.54 at 30 s, 0.17 at 60 s: a first-order Gauss-Markov process with a
     correlation time of about 45 s, nearly all of the error.  A filter that takes 1 Hz fixes as white
     averages 45 of them into a position it believes to ``sigma / 7`` while they are all off together:

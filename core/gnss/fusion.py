@@ -361,8 +361,9 @@ class GpsFusion(FixFusion):
 
     def _course_sd(self, course_rad: float) -> float:
         """The SD (rad) a course at ``course_rad`` is used with: ``course_sd_rad``, or with ``course_scatter_n`` the
-        circular SD of the last ``course_scatter_n`` course innovations (this one's included) about their circular
-        mean, if larger, once ``course_scatter_min_n`` are in."""
+        robust spread (1.4826 x the median absolute deviation) of the last ``course_scatter_n`` course innovations
+        (this one's included) about their circular mean, less the heading state's mean variance over them, if
+        larger, once ``course_scatter_min_n`` are in."""
         sd = self.course_sd_rad
         if self.course_scatter_n > 0 and math.isfinite(course_rad):
             q = self._course_innov

@@ -205,23 +205,44 @@ def _csv_rows(path: str, repairs: list[str], limit: int | None):
     """``(header, rows)`` of RIDI's ``data.csv`` (a field that is not a number is a gap)."""
     header: list[str] = []
     rows: list[list[float]] = []
+
+    def take(line: str, last: bool = False) -> None:
+        parts = line.split(",")
+        if not header:
+            header.extend(p.strip() for p in parts)
+            return
+        if last and len(parts) < len(header):  # a last line cut off before its end: not a row
+            repairs.append(f"the last line (no newline, {len(parts)} of {len(header)} fields) was cut off: skipped")
+            return
+        row = []
+        for p in parts[:len(header)]:
+            try:
+                row.append(float(p))
+            except ValueError:
+                row.append(float("nan"))
+        rows.append(row + [float("nan")] * (len(header) - len(row)))
+
     with open_text(path, repairs, limit) as text:
         for _, lines in text:
             for line in lines:
-                if not line.strip():
-                    continue
-                parts = line.split(",")
-                if not header:
-                    header = [p.strip() for p in parts]
-                    continue
-                row = []
-                for p in parts[:len(header)]:
-                    try:
-                        row.append(float(p))
-                    except ValueError:
-                        row.append(float("nan"))
-                rows.append(row + [float("nan")] * (len(header) - len(row)))
+                if line.strip():
+                    take(line)
+        if text.tail.strip():  # a last line without its newline: read if complete
+            take(text.tail, last=True)
     return header, rows
+
+
+#: RIDI's ``processed/data.csv`` keeps the Android sensor clock in nanoseconds (its loaders divide by 1e9); the
+#: ``.xlsx`` copies hold seconds.  A median step between samples above this many units is nanoseconds (a sensor
+#: at 1 Hz to 10 kHz has a step of 1e-4 to 1 s, or 1e5 to 1e9 ns)
+NANOSECOND_MIN_STEP = 1e3
+
+
+def time_unit_s(t: np.ndarray) -> float:
+    """Seconds per unit of a RIDI ``time`` column: 1e-9 when its median step says nanoseconds, else 1 (seconds)."""
+    d = np.diff(t[np.isfinite(t)])
+    d = d[d > 0]
+    return 1e-9 if len(d) and float(np.median(d)) > NANOSECOND_MIN_STEP else 1.0
 
 
 def read_ridi(path: str, *, warn: bool = True,
@@ -244,7 +265,8 @@ def read_ridi(path: str, *, warn: bool = True,
     def block(names):
         return v[:, [col[n] for n in names]] if all(n in col for n in names) else None
 
-    t = v[:, col["time"]]
+    unit_s = time_unit_s(v[:, col["time"]])
+    t = v[:, col["time"]] * unit_s
     acc = block(COLUMNS[ACC])
     good = np.isfinite(t) & np.all(np.isfinite(acc), axis=1)
     bad = [RecordingError("no usable time or acceleration", path, int(i) + 2) for i in np.flatnonzero(~good)]
@@ -267,7 +289,8 @@ def read_ridi(path: str, *, warn: bool = True,
         else:
             streams[name] = make_stream(name, t_ns[ok], vals[ok])
     meta = {"source_format": FORMAT, "app": "RIDI (Android; Google Tango truth)",
-            "time_base": "t_ns = round(time * 1e9): RIDI's time (s, the Android sensor clock)",
+            "time_base": ("t_ns = round(time * 1e9): RIDI's time in s (the Android sensor clock)" if unit_s == 1.0 else
+                          "t_ns = time: RIDI's time in ns (the Android sensor clock, processed/data.csv)"),
             "columns_ignored": [h for h in header if h and h not in REQUIRED and
                                 not any(h in c for c in COLUMNS.values())][:40]}
     if warn and repairs:
