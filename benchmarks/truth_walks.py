@@ -29,7 +29,12 @@ Walking-direction stability against the truth
     :func:`benchmarks.real_walks.stability` defines them: the circular SD of ``course - heading`` over the
     windows, its drift (deg/min) and the mean offset (here in the truth's own frame: its absolute value says
     nothing; the SD and the drift do).  Also per carry mode (windows whose steps are over 80 % in one mode) and for
-    the device heading (the smoothed device axis, :class:`benchmarks.walkdir._Probe`).
+    the device heading (the smoothed device axis, :class:`benchmarks.walkdir._Probe`).  **SD unmixed**: the same
+    SD over the windows whose steps are all in the walk's usual state, with the walking-direction offset or
+    without it (:func:`unmixed_windows`): a window with steps in the other state (the first strides of a walk,
+    or after a reset, before the offset applies) holds the whole offset as a jump, and a 180 deg offset then dominates a walk's SD of eight windows (issue #25: the
+    tuning pocket and bag walks); its mean offset is in the truth's unknown frame, so neither SD can tell a
+    right constant offset from a wrong one.
 Reversed steps
     As :func:`benchmarks.real_walks.reversed_steps`, the truth (every :data:`PATH_EVERY_S` s) standing in for the
     GPS fixes: the share of steps more than 90 deg from the truth's chord within 5 s of the step (at least 6 m long),
@@ -199,6 +204,8 @@ def evaluate_walk(walk: TruthWalk) -> dict:
         row["n_straight_windows"] = len(wins)
         row["stability"] = stability(wins, st_t, heading, t0, MIN_STEPS)
         row["stability_device"] = stability(wins, st_t, device, t0, MIN_STEPS)
+        row["stability_unmixed"] = stability(unmixed_windows(wins, st_t, heading, device), st_t, heading, t0,
+                                             MIN_STEPS)
         per_mode = {}
         for m in row["steps_per_mode"]:
             mw = [w for w in wins if _mostly(modes, st_t, w, m)]
@@ -224,6 +231,21 @@ def evaluate_walk(walk: TruthWalk) -> dict:
     return row
 
 
+def unmixed_windows(wins, st_t, heading, device) -> list:
+    """The windows whose steps are all in the walk's usual state: all with the walking-direction offset where
+    most of the walk's steps got it, all without it where most did not (module doc, issue #25).  A window with
+    steps in the other state (the first strides of a walk, or after a reset, before the offset applies) holds
+    the whole offset as a jump, whatever the estimate does once it applies."""
+    applied = heading != device
+    usual = bool(applied.mean() > 0.5) if len(applied) else False
+    out = []
+    for w in wins:
+        idx = np.flatnonzero((st_t >= w[0]) & (st_t <= w[1]))
+        if len(idx) and bool(np.all(applied[idx] == usual)):
+            out.append(w)
+    return out
+
+
 def _mostly(modes, st_t, w, m) -> bool:
     idx = np.flatnonzero((st_t >= w[0]) & (st_t <= w[1]))
     return bool(len(idx)) and sum(modes[i] == m for i in idx) > PER_MODE_SHARE * len(idx)
@@ -245,6 +267,7 @@ def summarize(rows: list[dict]) -> dict:
                 "abs_drift_deg_min_median": _med([abs(r["stability"]["drift_deg_min"]) for r in ok
                                                   if r["stability"]["drift_deg_min"] is not None] + inf),
                 "device_sd_deg_median": _med([r["stability_device"]["sd_deg"] for r in ok] + inf),
+                "unmixed_sd_deg_median": _med([(r.get("stability_unmixed") or {}).get("sd_deg") for r in ok] + inf),
                 "distance_error_pct_median": _med([r.get("distance_error_pct") for r in ok] + [-100.0] * len(inf)),
                 "end_error_pct_median": _med([r.get("end_error_pct") for r in ok] + inf),
                 "reversed_pct_median": _med([(r.get("reversed") or {}).get("reversed_pct") for r in ok] + inf),
@@ -270,29 +293,32 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
          f"({PATH_EVERY_S:g}-s samples). End error: after the best rotation of the whole track about its first step.",
          "", "## Per split and placement (medians)", "",
          "| split | dataset: placement | walks | failed | windows | SD deg | abs drift deg/min | device SD deg | "
-         "distance err % | end err % of path | reversed steps % |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+         "SD unmixed deg | distance err % | end err % of path | reversed steps % |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for split, by in summ.items():
         label = "report, seen once" if split == REPORT else "tuning"
         for pl, s in by.items():
             L.append(f"| {label} | {pl} | {s['walks']} | {len(s['failed'])} | {s['windows']} | {_f(s['sd_deg_median'])}"
                      f" | {_f(s['abs_drift_deg_min_median'], 2)} | {_f(s['device_sd_deg_median'])} | "
+                     f"{_f(s['unmixed_sd_deg_median'])} | "
                      f"{_f(s['distance_error_pct_median'])} | {_f(s['end_error_pct_median'])} | "
                      f"{_f(s['reversed_pct_median'])} |")
     L += ["", "## Per walk", "",
           "| split | walk | s | steps | carry share (detector) | windows | SD deg | drift deg/min | offset deg | "
-          "device SD deg | per mode SD deg | PDR m / truth m (err %) | end err m (% of path) | reversed % (steps) |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "device SD deg | SD unmixed deg (windows) | per mode SD deg | PDR m / truth m (err %) | end err m (% of path) | "
+          "reversed % (steps) |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r.get("failed"):
-            L.append(f"| {r['split']} | {r['name']} | | | | | FAILED: {r['failed']} | | | | | | | |")
+            L.append(f"| {r['split']} | {r['name']} | | | | | FAILED: {r['failed']} | | | | | | | | |")
             continue
-        st, dv = r["stability"], r["stability_device"]
+        st, dv, um = r["stability"], r["stability_device"], r.get("stability_unmixed") or {}
         share = ", ".join(f"{m} {100 * v:.0f}%" for m, v in r["carry_share"].items())
         pm = ", ".join(f"{m} {_f(v['sd_deg'])} ({v['n_windows']})" for m, v in r["stability_per_mode"].items())
         L.append(f"| {r['split']} | {r['name']} | {r['duration_s']:.0f} | {r['n_steps']} | {share} | "
                  f"{st['n_windows']} | {_f(st['sd_deg'])} | {_f(st['drift_deg_min'], 2)} | "
                  f"{_f(st['mean_offset_deg'])} | "
-                 f"{_f(dv['sd_deg'])} | {pm} | {r['pdr_distance_m']:.0f} / {r['truth_path_m']:.0f} "
+                 f"{_f(dv['sd_deg'])} | {_f(um.get('sd_deg'))} ({um.get('n_windows', 0)}) | {pm} | {r['pdr_distance_m']:.0f} / {r['truth_path_m']:.0f} "
                  f"({_f(r['distance_error_pct'])}) | {r['end_error_m']:.1f} ({_f(r['end_error_pct'])}) | "
                  f"{_f(r['reversed']['reversed_pct'])} ({r['reversed']['n']}) |")
     return "\n".join(L) + "\n"

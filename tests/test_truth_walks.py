@@ -84,3 +84,24 @@ def test_a_failed_walk_counts_in_every_median_never_dropped():
     assert s["distance_error_pct_median"] == 5.0  # (5, 5, -100: no steps)
     s = summarize([row("a", 4.0), row("c", None, failed="no steps")])["tuning"]["ridi_truth_walks: bag"]
     assert s["sd_deg_median"] == math.inf  # (4, inf)
+
+
+def test_unmixed_windows_leave_out_the_steps_before_the_offset_applies():
+    """A pocket walk whose first steps are on the device axis (before the walking-direction offset applies) and
+    whose offset then holds: the one window mixing the two holds the whole 150 deg offset as a jump and rules
+    the walk's SD; the unmixed windows keep only the steady state (issue #25).  A hand-held walk (no step got
+    the offset) keeps every window."""
+    rng = np.random.default_rng(5)
+    t0 = 10**12
+    st_t = t0 + np.arange(80, dtype=np.int64) * 500_000_000  # a step every 0.5 s for 40 s
+    course = 0.4
+    device = course - math.radians(150.0) + math.radians(2.0) * rng.standard_normal(80)
+    heading = device + math.radians(150.0)
+    heading[:7] = device[:7]  # the first 7 steps: no offset yet
+    wins = [(int(t0 + k * 5e9), int(t0 + (k + 1) * 5e9) - 1, course) for k in range(8)]
+    mixed = TW.stability(wins, st_t, heading, t0, TW.MIN_STEPS)
+    kept = TW.unmixed_windows(wins, st_t, heading, device)
+    steady = TW.stability(kept, st_t, heading, t0, TW.MIN_STEPS)
+    assert len(kept) == 7 and kept[0] == wins[1]
+    assert mixed["sd_deg"] > 30.0 and steady["sd_deg"] < 3.0
+    assert TW.unmixed_windows(wins, st_t, device, device) == wins  # hand-held: nothing left out

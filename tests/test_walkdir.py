@@ -176,3 +176,28 @@ def test_simulator_placements(placement):
     v = quat.to_matrix_array(walk.truth.attitude_at(t))[:, :2, :] @ axis
     true = circular_mean(walk.truth.heading_at(t) - np.arctan2(v[:, 1], v[:, 0]))
     assert abs(math.degrees(wrap_angle(pipe.walkdir.offset_rad - true))) < 5.0
+
+
+def test_gap_keeps_turning_holds_the_estimate_through_a_long_turn():
+    """12 s straight, 13 s of walking in a circle (45 deg/s: every stride turns over 30 deg and is rejected),
+    then straight on: the rule before forgot the estimate after 10 s of turning strides (reset_after_gap_s)
+    although the walk went on; ``gap_keeps_turning`` keeps it (the offset right after the circle within
+    8 deg of the truth, where it was before the circle)."""
+    def circle(t):
+        return 20.0 + 45.0 * min(max(t - 12.0, 0.0), 13.0)
+
+    seen = {}
+    for keep in (False, True):
+        wd = WalkingDirection(gap_keeps_turning=keep)
+        samples = []
+        _feed(wd, offset_deg=-110.0, seconds=26.0, heading_deg=circle, samples=samples)
+        seen[keep] = (wd, samples)
+    before, after = seen[False][0], seen[True][0]
+    assert before.n_gap_resets == 1 and after.n_gap_resets == 0
+    assert after.rejected["turning"] >= 9
+    # right after the circle (25.6 s: no stride accepted since 12 s) the estimate is still there
+    held = [o for t, o in seen[True][1] if 12.9 <= t <= 13.0][-1]
+    off = [o for t, o in seen[True][1] if 25.5 <= t <= 25.7]
+    assert after.n_used >= 8 and all(o == held for o in off)
+    assert abs(math.degrees(wrap_angle(held + math.radians(110.0)))) < 8.0
+    assert all(o == 0.0 for t, o in seen[False][1] if 22.5 <= t <= 25.7)  # forgotten: no estimate
