@@ -75,7 +75,9 @@ import numpy as np
 from benchmarks import metrics as M
 from benchmarks import splits as S
 from benchmarks.datasets.base import Trial
-from benchmarks.options import add_common, data_root, failed_row, failures_line, only_keys, result_path, selected
+from benchmarks.options import (
+    add_common, data_root, failed_row, failures_line, jsonable, only_keys, result_path, selected,
+)
 from benchmarks.run import _in_window, make_pipeline
 from core.conventions import (ACC, CARRY_BAG, CARRY_HANDHELD, CARRY_MODES, CARRY_POCKET, CARRY_STILL,
                               CARRY_SWINGING, GYRO, MAG)
@@ -481,18 +483,6 @@ def markdown(summary: dict, meta: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return None if not math.isfinite(float(x)) else round(float(x), 4)
-    return x
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.carry", description=__doc__.split("\n")[0])
     add_common(ap, what="datasets (sim, oxford, brajdic_harle, ipol, ipin2023) or recording names")
@@ -523,7 +513,7 @@ def main(argv=None) -> int:
     summary = summarize(results)
     here = Path(__file__).resolve().parent
     res_json, res_md = result_path(args, here / "carry_results.json", "carry"), result_path(args, here / "CARRY_RESULTS.md", "carry")
-    res_json.write_text(json.dumps(_jsonable({"meta": meta, "summary": summary, "results": results}), indent=1))
+    res_json.write_text(json.dumps(jsonable({"meta": meta, "summary": summary, "results": results}), indent=1))
     res_md.write_text(markdown(summary, meta))
     if summary.get("failed"):
         print("carry benchmark: " + failures_line(summary["failed"]), file=sys.stderr)

@@ -44,7 +44,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import subprocess
 import sys
 import time
 from dataclasses import replace
@@ -55,6 +54,7 @@ import numpy as np
 from benchmarks.datasets.base import default_data_root
 from benchmarks.foot_splits import REPORT, TUNING
 from benchmarks.metrics import best_fit_rotation, rotate
+from benchmarks.options import git_rev
 from core.conventions import wrap_angle
 from core.foot.navigator import AIDS, FootNavigator, FootSettings
 from core.foot.stance import DETECTORS, StanceDetector, StanceSettings
@@ -621,14 +621,6 @@ def run_mounting(root: Path) -> dict:
             "errors": [r for r in rows if r["mode"] != r["truth"]]}
 
 
-def _git_rev() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                              cwd=HERE).stdout.strip()
-    except OSError:
-        return ""
-
-
 def headlines(out, split: str = REPORT) -> dict:
     """The headline numbers of ``split`` (the report split's are the published ones)."""
     ps = out.get("pyshoe", {}).get(split) or {}
@@ -908,7 +900,7 @@ def main(argv=None) -> int:
     if want("ipol"):
         print("foot: IPOL lower-back walks ...", file=sys.stderr, flush=True)
     irows = run_ipol(args.data, split=args.split) if want("ipol") else []
-    out = {"rev": _git_rev(),
+    out = {"rev": git_rev(),
            "pyshoe": {"trials": _public(rows), TUNING: summarise_pyshoe(rows, TUNING),
                       REPORT: summarise_pyshoe(rows, REPORT)},
            "ipol": {"trials": irows, TUNING: summarise_ipol(irows, TUNING), REPORT: summarise_ipol(irows, REPORT)}}

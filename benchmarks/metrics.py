@@ -130,6 +130,13 @@ def median_counting_failures(values, nan_is_failure: bool = True) -> float:
     return float(np.median(v)) if v else math.nan
 
 
+def median_present(values) -> float | None:
+    """Median over the values present (None and nan: not measured here, left out); +inf (a failure) is kept.
+    None when nothing is present."""
+    v = [x for x in values if x is not None and x == x]
+    return float(np.median(v)) if v else None
+
+
 def median_where_applicable(values) -> float | None:
     """Median over the values that apply (None: does not apply, left out); a non-finite value is a failed run and
     enters as +inf, never dropped.  None when nothing applies."""

@@ -16,9 +16,12 @@ from __future__ import annotations
 
 import argparse
 import math
+import subprocess
 import sys
 import traceback
 from pathlib import Path
+
+import numpy as np
 
 from benchmarks.datasets.base import default_data_root
 
@@ -77,6 +80,29 @@ def out_dir(module: str) -> Path:
 def result_path(args, committed: Path, module: str) -> Path:
     """``committed`` for a full run, else the same file name under :func:`out_dir`."""
     return Path(committed) if writes_committed(args) else out_dir(module) / Path(committed).name
+
+
+def git_rev() -> str:
+    """The checkout's short commit (``git rev-parse --short HEAD``), ``""`` when git cannot say."""
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                              cwd=HERE).stdout.strip()
+    except OSError:
+        return ""
+
+
+def jsonable(x):
+    """Results as JSON can hold them: dict keys as strings, numpy integers as ints, floats rounded to 4 decimals,
+    a non-finite float as ``None`` (nan and inf are not JSON)."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return None if not math.isfinite(float(x)) else round(float(x), 4)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    return x
 
 
 def failed_row(name: str, split: str, exc: BaseException, **extra) -> dict:

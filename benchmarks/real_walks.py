@@ -65,7 +65,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.datasets.base import default_data_root
-from benchmarks.options import out_dir, writes_committed
+from benchmarks.metrics import median_present
+from benchmarks.options import git_rev, jsonable, out_dir, writes_committed
 from benchmarks.datasets.phone_walks import STEP_CLIP, RealWalk, real_walks
 from benchmarks.splits import REPORT, TUNING
 from core.conventions import GPS, wrap_angle
@@ -404,7 +405,7 @@ def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> d
                    distance_m=float(sum(s.length_m for s in res.steps)),
                    carry_time_s=carry.get("time_s"),
                    carry_changes=[{"t_s": (c["t_ns"] - t0) * 1e-9, "to": c["to"]} for c in carry.get("changes") or []],
-                   walkdir=_jsonable(pipe.walkdir.diagnostics()) if pipe.walkdir is not None else None)
+                   walkdir=jsonable(pipe.walkdir.diagnostics()) if pipe.walkdir is not None else None)
         if walk.steps_counted:
             row["steps_counted"] = walk.steps_counted
             row["steps_error_pct"] = 100.0 * (len(res.steps) - walk.steps_counted) / walk.steps_counted
@@ -481,18 +482,6 @@ def evaluate_walk(walk: RealWalk, outages: bool = True, plots: bool = True) -> d
     return row
 
 
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return None if not math.isfinite(float(x)) else round(float(x), 4)
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    return x
-
-
 def plot_walk(walk: RealWalk, rec, res, fixes, row, st_t, modes) -> str:
     import matplotlib
 
@@ -553,12 +542,6 @@ def plot_walk(walk: RealWalk, rec, res, fixes, row, st_t, modes) -> str:
 
 
 # -- summaries ----------------------------------------------------------------------------------------------
-def _med(v):
-    """Median over the values present (None / nan: not measured here); +inf (a failure) is kept."""
-    v = [x for x in v if x is not None and x == x]
-    return float(np.median(v)) if v else None
-
-
 def summarize(rows: list[dict]) -> dict:
     out = {}
     for split in (TUNING, REPORT):
@@ -573,15 +556,19 @@ def summarize(rows: list[dict]) -> dict:
         sign = [r["name"] for r in gps if r.get("magnetometer") and r["stability"]["mean_offset_deg"] is not None
                 and abs(r["stability"]["mean_offset_deg"]) > TARGET_SIGN_DEG]
         d = {"walks": len(rs), "failed": failed, "gps_walks": len(gps),
-             "sd_median_deg": _med(sds), "sd_device_median_deg": _med([r["stability_device"]["sd_deg"] for r in gps] + failed_gps),
-             "abs_drift_median_deg_min": _med([abs(r["stability"]["drift_deg_min"]) for r in gps
-                                               if r["stability"]["drift_deg_min"] is not None] + failed_gps),
+             "sd_median_deg": median_present(sds),
+             "sd_device_median_deg": median_present([r["stability_device"]["sd_deg"] for r in gps] + failed_gps),
+             "abs_drift_median_deg_min": median_present([abs(r["stability"]["drift_deg_min"]) for r in gps
+                                                         if r["stability"]["drift_deg_min"] is not None]
+                                                        + failed_gps),
              "sign_errors": sign,
-             "distance_vs_gps_median_pct": _med([r.get("distance_vs_gps_pct") for r in gps]
-                                                 + [-100.0] * len(failed_gps)),  # a failed run: no distance
-             "steps_vs_periodicity_median_pct": _med([r.get("steps_vs_periodicity_pct") if not r.get("failed")
-                                                      else -100.0 for r in rs]),  # a failed run: no steps
-             "reversed_median_pct": _med([(r.get("reversed") or {}).get("reversed_pct") for r in gps] + failed_gps),
+             "distance_vs_gps_median_pct": median_present([r.get("distance_vs_gps_pct") for r in gps]
+                                                           + [-100.0] * len(failed_gps)),  # a failed run: no distance
+             "steps_vs_periodicity_median_pct": median_present([r.get("steps_vs_periodicity_pct")
+                                                                if not r.get("failed") else -100.0
+                                                                for r in rs]),  # a failed run: no steps
+             "reversed_median_pct": median_present([(r.get("reversed") or {}).get("reversed_pct") for r in gps]
+                                                   + failed_gps),
              "walks_without_windows": [r["name"] for r in gps if r["stability"]["sd_deg"] is None]}
         for length in LENGTHS_S:
             per_walk_def, per_walk_pdr, per_walk_floor, n_fail = [], [], [], 0
@@ -593,14 +580,15 @@ def summarize(rows: list[dict]) -> dict:
                     def pct(o, key):
                         v = None if o.get("failed") else o.get(key)
                         return math.inf if v is None else v
-                    per_walk_def.append(_med([pct(o, "default_pct") for o in os_]))
-                    per_walk_pdr.append(_med([pct(o, "pdr_pct") for o in os_]))
-                    per_walk_floor.append(_med([o["floor_pct"] for o in os_ if not o.get("failed")]))
+                    per_walk_def.append(median_present([pct(o, "default_pct") for o in os_]))
+                    per_walk_pdr.append(median_present([pct(o, "pdr_pct") for o in os_]))
+                    per_walk_floor.append(median_present([o["floor_pct"] for o in os_ if not o.get("failed")]))
             # a GPS walk whose run failed has no outage scored: an infinite error in the medians, never dropped
             per_walk_def += failed_gps
             per_walk_pdr += failed_gps
-            d[f"outage_{length}s"] = {"walks": len(per_walk_def), "default_median_pct": _med(per_walk_def),
-                                      "pdr_median_pct": _med(per_walk_pdr), "floor_median_pct": _med(per_walk_floor),
+            d[f"outage_{length}s"] = {"walks": len(per_walk_def), "default_median_pct": median_present(per_walk_def),
+                                      "pdr_median_pct": median_present(per_walk_pdr),
+                                      "floor_median_pct": median_present(per_walk_floor),
                                       "failed_or_unmeasured": n_fail}
         clips = [r for r in rs if r.get("steps_counted")]
         d["clips"] = len(clips)
@@ -736,17 +724,18 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
         for length in LENGTHS_S:
             good = [o for o in r.get("outages", []) if o["length_s"] == length and not o.get("failed")]
             bad = [o for o in r.get("outages", []) if o["length_s"] == length and o.get("failed")]
-            outs[length] = (f"{_f(_med([o['default_pct'] for o in good]))} / {_f(_med([o['pdr_pct'] for o in good]))}"
+            outs[length] = (f"{_f(median_present([o['default_pct'] for o in good]))} / "
+                            f"{_f(median_present([o['pdr_pct'] for o in good]))}"
                             f" (n {len(good)}{', failed ' + str(len(bad)) if bad else ''})") if good or bad else "–"
         g3 = [o for o in r.get("outages", []) if o["length_s"] == 180 and not o.get("failed")]
-        learnt = _med([o.get("learnt_offset_deg") for o in r.get("outages", []) if not o.get("failed")])
+        learnt = median_present([o.get("learnt_offset_deg") for o in r.get("outages", []) if not o.get("failed")])
         L.append(f"| {r['split']} | {r['name']} | {r['kind']} | {r.get('carry', '')} | "
                  f"{'yes' if r.get('magnetometer') else 'no'} | "
                  f"{r['acc_rate_hz']:.0f} | {steps} | {dist} | {carry} | {s['n_windows']} | {_f(s['sd_deg'])} | "
                  f"{_f(s['drift_deg_min'])} | {_f(s['mean_offset_deg'])} | {_f(sd['sd_deg'])} / "
                  f"{_f(sd['mean_offset_deg'])} | {_f((r.get('reversed') or {}).get('reversed_pct'))} | "
                  f"{outs[60]} | {outs[180]} | {outs[300]} | "
-                 f"{_f(_med([o['floor_pct'] for o in g3]))} | {_f(learnt)} |")
+                 f"{_f(median_present([o['floor_pct'] for o in g3]))} | {_f(learnt)} |")
     L += ["", "### Per carry mode (windows with > 80 % of their steps in the mode)", "",
           "| split | walk | mode | windows | SD deg | drift deg/min | mean offset deg |", "|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -821,13 +810,7 @@ def main(argv=None) -> int:
     else:
         rows = [_task(x) for x in tasks]
     summ = summarize(rows)
-    import subprocess
-
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=Path(__file__).parent).stdout.strip()
-    except OSError:
-        commit = "?"
+    commit = git_rev() or "?"
     meta = {"when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit, "seconds": time.time() - t}
     meta.update(corpus=corpus_meta(root, a.extra, walks), by_corpus=summarize_by(rows, "corpus"),
                 by_carry=summarize_by(rows, "carry"))
@@ -837,7 +820,7 @@ def main(argv=None) -> int:
     res_md = RESULTS_MD if writes_committed(a) and not subset else out_dir("real_walks") / RESULTS_MD.name
     res_json = RESULTS_JSON if writes_committed(a) and not subset else out_dir("real_walks") / RESULTS_JSON.name
     res_md.write_text(md)
-    res_json.write_text(json.dumps(_jsonable({"meta": meta, "summary": summ, "walks": rows}), indent=1))
+    res_json.write_text(json.dumps(jsonable({"meta": meta, "summary": summ, "walks": rows}), indent=1))
     print(md)
     print(f"wrote {res_md} and {res_json}", file=sys.stderr)
     return 0

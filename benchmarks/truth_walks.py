@@ -61,11 +61,9 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.foot import _git_rev
-from benchmarks.options import out_dir
-from benchmarks.real_walks import (
-    STRAIGHT_MIN, _jsonable, _med, reversed_steps, run_default, stability, step_arrays,
-)
+from benchmarks.metrics import median_present
+from benchmarks.options import git_rev, jsonable, out_dir
+from benchmarks.real_walks import STRAIGHT_MIN, reversed_steps, run_default, stability, step_arrays
 from benchmarks.splits import OXIOD_TRUTH_DATASET, REPORT, RIDI_TRUTH_DATASET, TUNING, split_of
 
 RESULTS_MD = Path(__file__).with_name("TRUTH_WALKS_RESULTS.md")
@@ -263,14 +261,17 @@ def summarize(rows: list[dict]) -> dict:
             inf = [math.inf] * (len(rs) - len(ok))
             out.setdefault(split, {})[f"{pl[0]}: {pl[1]}"] = {
                 "walks": len(rs), "failed": [r["name"] for r in rs if r.get("failed")],
-                "sd_deg_median": _med([r["stability"]["sd_deg"] for r in ok] + inf),
-                "abs_drift_deg_min_median": _med([abs(r["stability"]["drift_deg_min"]) for r in ok
-                                                  if r["stability"]["drift_deg_min"] is not None] + inf),
-                "device_sd_deg_median": _med([r["stability_device"]["sd_deg"] for r in ok] + inf),
-                "unmixed_sd_deg_median": _med([(r.get("stability_unmixed") or {}).get("sd_deg") for r in ok] + inf),
-                "distance_error_pct_median": _med([r.get("distance_error_pct") for r in ok] + [-100.0] * len(inf)),
-                "end_error_pct_median": _med([r.get("end_error_pct") for r in ok] + inf),
-                "reversed_pct_median": _med([(r.get("reversed") or {}).get("reversed_pct") for r in ok] + inf),
+                "sd_deg_median": median_present([r["stability"]["sd_deg"] for r in ok] + inf),
+                "abs_drift_deg_min_median": median_present([abs(r["stability"]["drift_deg_min"]) for r in ok
+                                                            if r["stability"]["drift_deg_min"] is not None] + inf),
+                "device_sd_deg_median": median_present([r["stability_device"]["sd_deg"] for r in ok] + inf),
+                "unmixed_sd_deg_median": median_present([(r.get("stability_unmixed") or {}).get("sd_deg")
+                                                         for r in ok] + inf),
+                "distance_error_pct_median": median_present([r.get("distance_error_pct") for r in ok]
+                                                            + [-100.0] * len(inf)),
+                "end_error_pct_median": median_present([r.get("end_error_pct") for r in ok] + inf),
+                "reversed_pct_median": median_present([(r.get("reversed") or {}).get("reversed_pct") for r in ok]
+                                                      + inf),
                 "windows": int(sum(r["stability"]["n_windows"] for r in ok)),
             }
     return out
@@ -348,7 +349,7 @@ def main(argv=None) -> int:
         t1 = time.time()
         rows.append(evaluate_walk(w))
         print(f"  {w.name} ({w.split}): {rows[-1].get('failed') or 'ok'} in {time.time() - t1:.1f} s", file=sys.stderr)
-    meta = {"when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": _git_rev() or "?",
+    meta = {"when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": git_rev() or "?",
             "seconds": time.time() - t, "folder": str(a.extra2),
             "splits": sorted({w.split for w in walks}, key=(TUNING, REPORT).index),
             "window_s": WINDOW_S, "path_every_s": PATH_EVERY_S, "min_speed_m_s": MIN_SPEED_M_S, "min_steps": MIN_STEPS}
@@ -356,7 +357,7 @@ def main(argv=None) -> int:
     md = markdown(rows, summ, meta)
     where = out_dir("truth_walks") if a.no_write or a.only else RESULTS_MD.parent
     (where / RESULTS_MD.name).write_text(md)
-    (where / RESULTS_JSON.name).write_text(json.dumps(_jsonable({"meta": meta, "summary": summ, "walks": rows}),
+    (where / RESULTS_JSON.name).write_text(json.dumps(jsonable({"meta": meta, "summary": summ, "walks": rows}),
                                                       indent=1))
     print(md)
     print(f"wrote {RESULTS_MD.name} and {RESULTS_JSON.name} in {where}", file=sys.stderr)

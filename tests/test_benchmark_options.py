@@ -67,3 +67,16 @@ def test_a_failed_recording_counts_as_inf_never_dropped():
     assert bad == [row] and ok == [{"name": "a"}]
     assert "1 failed" in O.failures_line(bad) and "x/T05r01.txt" in O.failures_line(bad)
     assert any("bad file" in ln for ln in O.failures_markdown(bad))
+
+
+def test_shared_result_helpers():
+    # one place for what real_walks, truth_walks, carry and foot used privately (before: ImportError)
+    import numpy as np
+
+    from benchmarks.metrics import median_present
+    from benchmarks.options import git_rev, jsonable
+
+    assert jsonable({1: [np.float64(1.234567), math.nan, np.int64(3), (math.inf, "a")]}) == {"1": [1.2346, None, 3,
+                                                                                                  [None, "a"]]}
+    assert median_present([None, math.nan, 1.0, math.inf, 2.0]) == 2.0 and median_present([None, math.nan]) is None
+    assert isinstance(git_rev(), str)

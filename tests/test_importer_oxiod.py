@@ -102,3 +102,35 @@ def test_oxiod_lookalikes_are_not_detected(tmp_path, what):
     (tmp_path / "imu3.csv").write_text(_near_miss(imu, what))
     with pytest.raises(RecordingError, match="unrecognised recording format"):
         detect_format(str(tmp_path / "imu3.csv"))
+
+
+def test_oxiod_drops_repeated_magnetometer_rows_and_reads_or_gaps_the_last_line(tmp_path):
+    # fails before the change: every row's field was a mag sample (Core Motion repeats it at about half the rows)
+    imu, vi = _write_pair(tmp_path, n=200)
+    imu[1::2, 13:16] = imu[0:-1:2, 13:16]  # each field on two rows ...
+    imu[4:8, 13:16] = imu[4, 13:16]  # ... and one on four (rows 4-7)
+    text = "".join(",".join(f"{x:.6g}" for x in row) + "\n" for row in imu)
+    (tmp_path / "imu3.csv").write_text(text.rstrip("\n"))  # the last line without its newline: a row
+    rec = read_oxiod(str(tmp_path / "imu3.csv"), warn=False)
+    mag = rec.streams["mag"]
+    kept = [i for i in range(200) if i % 2 == 0 and i != 6]  # the first row of each run
+    assert np.array_equal(mag.t_ns, np.asarray(kept) * 10_000_000)
+    assert np.allclose(mag.values, imu[kept, 13:16], rtol=1e-5, atol=1e-4)
+    assert rec.metadata["mag_repeats_dropped"] == 200 - len(kept) and not rec.repairs
+    assert len(rec.streams["acc"].t_ns) == 200  # the other streams keep every row
+    (tmp_path / "imu3.csv").write_text(text.rstrip("\n")[:-12])  # the last line cut inside its fields: a gap
+    rec = read_oxiod(str(tmp_path / "imu3.csv"), warn=False)
+    assert len(rec.streams["acc"].t_ns) == 199 and len(rec.streams["posi"].t_ns) == 200
+    assert any("cut off" in r for r in rec.repairs)
+
+
+def test_oxiod_gzip_pair_is_read_and_its_size_limit_holds(tmp_path):
+    import gzip
+
+    imu, vi = _write_pair(tmp_path, n=100)
+    for name in ("imu3.csv", "vi3.csv"):
+        (tmp_path / (name + ".gz")).write_bytes(gzip.compress((tmp_path / name).read_bytes()))
+    rec = read_oxiod(str(tmp_path / "imu3.csv.gz"), warn=False)
+    assert len(rec.streams["acc"].t_ns) == 100 and rec.metadata["truth_file"] == "vi3.csv.gz"
+    with pytest.raises(RecordingError, match="1000"):
+        read_oxiod(str(tmp_path / "imu3.csv.gz"), warn=False, max_uncompressed_bytes=1000)

@@ -125,3 +125,35 @@ def test_ridi_half_matches_name_what_is_missing(tmp_path, form):
             detect_format(str(path))
         with pytest.raises(RecordingError, match="damaged .xlsx worksheet"):
             read_ridi(str(path), warn=False)
+
+
+def test_ridi_csv_acceleration_unit_check_and_bad_lines(tmp_path):
+    # fails before the change: acceleration in g was kept as it was (read as m/s^2, a ninth of gravity)
+    table = _table(n=300)
+    g = table.copy()
+    g[:, 5:8] /= 9.80665
+    path = tmp_path / "data.csv"
+    _write_csv(path, g)
+    lines = path.read_text().splitlines(True)
+    lines[20] = lines[20].replace(lines[20].split(",")[6], "oops", 1)  # acce_x not a number: a bad line
+    lines.insert(40, "\n")  # a blank line is not a line of data (the line numbers after it move)
+    path.write_text("".join(lines))
+    rec = read_ridi(str(path), warn=False)
+    assert np.allclose(rec.streams["acc"].values, np.delete(table[:, 5:8], 19, axis=0), rtol=1e-9)
+    assert any("values are in g" in r for r in rec.repairs)
+    assert any("skipped 1 bad line(s) of 300 (first: line 21" in r for r in rec.repairs)
+    assert len(rec.streams["gyro"].t_ns) == 299
+
+
+@pytest.mark.parametrize("form", ["csv.gz", "xlsx"])
+def test_ridi_size_limit_holds(tmp_path, form):
+    import gzip
+
+    path = tmp_path / ("data.csv" if form == "csv.gz" else "seq.xlsx")
+    _write_csv(path, _table(n=50)) if form == "csv.gz" else _write_xlsx(path, _table(n=50))
+    if form == "csv.gz":
+        path = tmp_path / "data.csv.gz"
+        path.write_bytes(gzip.compress((tmp_path / "data.csv").read_bytes()))
+    assert len(read_ridi(str(path), warn=False).streams["acc"].t_ns) == 50
+    with pytest.raises(RecordingError, match="1000"):
+        read_ridi(str(path), warn=False, max_uncompressed_bytes=1000)

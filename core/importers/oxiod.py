@@ -27,20 +27,27 @@ Acceleration
     gravity plus the acceleration the user imparts to the device"), in g, with iOS's sign: at rest, screen up,
     ``gravity = (0, 0, -1)`` (it points to the ground).  The project's accelerometer reads the specific force
     (screen up ``+9.8``), so ``acc = -9.80665 * (gravity + user_acc)`` -- the same sign flip as
-    :mod:`core.importers.sensorlog`.  The device axes are the same as Android's (x right, y to the top edge,
+    :mod:`core.importers.sensorlog`, and the same unit check after it
+    (:func:`core.importers._common.acceleration_in_m_s2`: a median ``|a|`` of about 9.8 m/s^2).  The device axes are the same as Android's (x right, y to the top edge,
     z out of the screen).
 Angular rate, magnetic field
     ``rotation_rate`` (rad/s, right-handed, Core Motion's bias-corrected rate) and ``magnetic_field`` (uT, Core
-    Motion's calibrated field) are kept as they are.  The attitude angles are not read.
+    Motion's calibrated field) are kept as they are.  The attitude angles are not read.  Core Motion updates the
+    field at about half the row rate, so about half the rows repeat the previous row's field exactly (12,014 of
+    24,045 in ``pocket/data1/syn/imu5.csv``, 12,031 kept): such a row is not a new measurement (fed to the attitude filter, it
+    would count one twice) and is dropped -- the first row of each run of equal vectors is kept -- counted in
+    ``metadata["mag_repeats_dropped"]``.
 Truth
     ``posi`` (columns ``east_m, north_m, up_m``): the Vicon translation ``(x, y, z)`` of every row.  The Vicon
     frame has z up (the phone's height in a trouser pocket reads about 0.9 m); its x and y are taken as a
     right-handed horizontal pair in an unknown rotation about the vertical (not geographic East and North):
     compare headings through offsets and tracks after a rotation.  The Vicon quaternion is not read.
 
-A row of either file that is not 16 (9) numbers is a bad line: it stays in place as a gap (the rows must stay
-aligned) and is counted in ``repairs``; more than :func:`core.recording.bad_lines_tolerated` allows is a
-:class:`RecordingError`.  Files of different row counts are a :class:`RecordingError`.
+Both files are read as a stream (:func:`core.importers._csv.fixed_rows`).  A row of either file that is not 16 (9)
+numbers is a bad line: it stays in place as a gap (the rows must stay aligned) and is counted in ``repairs``; more
+than :func:`core.recording.bad_lines_tolerated` allows is a :class:`RecordingError`.  A last line without its
+newline is read when it has all its fields, else it is a gap (a file cut off mid-write, said in ``repairs``).
+Files of different row counts are a :class:`RecordingError`.
 
 Streams: ``acc``, ``gyro``, ``mag``, ``posi``.
 
@@ -69,7 +76,10 @@ from core.conventions import ACC, GYRO, MAG, STANDARD_GRAVITY_M_S2
 from core.recording import (
     MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
 )
-from core.importers._common import POSI, finish, head_bytes, head_lines, open_text
+from core.importers._common import (
+    POSI, acceleration_in_m_s2, feed_lines, finish, head_bytes, head_lines, open_text,
+)
+from core.importers._csv import ColumnBuffer, fixed_rows
 
 FORMAT = "oxiod"
 #: the dataset's sampling rate (its paper and README: "recorded by smartphones at 100 Hz")
@@ -169,33 +179,43 @@ def vicon_path(imu_path: str) -> str:
 
 
 def _rows(path: str, n_fields: int, repairs: list[str], limit: int | None) -> np.ndarray:
-    """Every line of a headerless numeric CSV as a row of ``n_fields`` floats (a bad line: a row of nan)."""
-    rows: list[list[float]] = []
+    """Every non-blank line of a headerless numeric CSV as a row of ``n_fields`` floats, streamed
+    (:func:`core.importers._csv.fixed_rows`; a bad line, or a last line cut off without its newline: a row of nan,
+    so that the two files stay aligned)."""
+    out = ColumnBuffer(n_fields)
     bad: list[RecordingError] = []
-    nan = [float("nan")] * n_fields
+    n_lines = 0
+
+    def chunk(first: int, lines: list[str]) -> None:
+        nonlocal n_lines
+        nos = [first + j for j, ln in enumerate(lines) if ln.strip()]
+        rows = [ln for ln in lines if ln.strip()]
+        if not rows:
+            return
+        n_lines += len(rows)
+        _, v, kept, errs = fixed_rows(rows, list(range(n_fields)), ",", (n_fields, n_fields), int_first=False)
+        bad.extend(RecordingError(msg, path, nos[j]) for j, msg in errs)
+        if not kept.all():
+            v, full = np.full((len(rows), n_fields), np.nan), v
+            v[kept] = full
+        out.append(v)
+
+    def tail(lineno: int, last: str) -> None:
+        if not last.strip():
+            return
+        if last.count(",") + 1 == n_fields:
+            chunk(lineno, [last])
+        else:
+            out.append(np.full((1, n_fields), np.nan))
+            repairs.append(f"{path}: the last line {lineno} (no newline, {last.count(',') + 1} of {n_fields} "
+                           "fields) was cut off mid-write: a gap")
+
     with open_text(path, repairs, limit) as text:
-        for first, lines in text:
-            for j, line in enumerate(lines):
-                if not line.strip():
-                    continue
-                parts = line.split(",")
-                try:
-                    if len(parts) != n_fields:
-                        raise ValueError(f"{len(parts)} fields, not {n_fields}")
-                    rows.append([float(p) for p in parts])
-                except ValueError as e:
-                    bad.append(RecordingError(f"bad line: {e}", path, first + j))
-                    rows.append(nan)
-        if text.tail.strip():  # a last line without its newline: read if complete
-            parts = text.tail.split(",")
-            try:
-                rows.append([float(p) for p in parts] if len(parts) == n_fields else nan)
-            except ValueError:
-                rows.append(nan)
-    skip_bad_lines(bad, len(rows), path, repairs)
-    if not rows:
+        feed_lines(text, path, repairs, chunk, bad, tail)
+    skip_bad_lines(bad, n_lines, path, repairs)
+    if not len(out):
         raise RecordingError("empty file", path)
-    return np.asarray(rows, dtype=np.float64)
+    return out.array()
 
 
 def read_oxiod(path: str, *, rate_hz: float = RATE_HZ, warn: bool = True,
@@ -215,11 +235,19 @@ def read_oxiod(path: str, *, rate_hz: float = RATE_HZ, warn: bool = True,
         raise ValueError(f"rate_hz must be positive, got {rate_hz!r}")
     t_ns = np.round(np.arange(len(imu)) * (1e9 / rate_hz)).astype(np.int64)
     ok = np.all(np.isfinite(imu[:, 1:]), axis=1)
-    acc = -STANDARD_GRAVITY_M_S2 * (imu[ok, GRAVITY] + imu[ok, USER_ACC])
+    if not ok.any():
+        raise RecordingError("no sensor row", path)
+    notes: dict = {}
+    acc = acceleration_in_m_s2(-STANDARD_GRAVITY_M_S2 * (imu[ok, GRAVITY] + imu[ok, USER_ACC]),
+                               "gravity + user_acc", path, repairs, notes)
+    mag, mag_t = imu[ok, MAGNETIC_FIELD], t_ns[ok]
+    new = np.ones(len(mag), dtype=bool)
+    new[1:] = np.any(mag[1:] != mag[:-1], axis=1)  # Core Motion's field, updated at about half the row rate
     streams = {
         ACC: make_stream(ACC, t_ns[ok], acc, note="Core Motion gravity + userAcceleration (g, iOS sign) * -g0"),
         GYRO: make_stream(GYRO, t_ns[ok], imu[ok, ROTATION_RATE], note="Core Motion rotationRate (bias-corrected)"),
-        MAG: make_stream(MAG, t_ns[ok], imu[ok, MAGNETIC_FIELD], note="Core Motion calibrated magnetic field"),
+        MAG: make_stream(MAG, mag_t[new], mag[new], note="Core Motion calibrated magnetic field, a row repeating "
+                                                         "the previous field exactly dropped"),
     }
     if vi is not None:
         good = np.all(np.isfinite(vi[:, TRANSLATION]), axis=1)
@@ -233,6 +261,8 @@ def read_oxiod(path: str, *, rate_hz: float = RATE_HZ, warn: bool = True,
                      "(absolute time unknown)",
         "acc_from": f"(gravity + user_acc) (g, iOS sign) * -{STANDARD_GRAVITY_M_S2} m/s^2",
         "truth_file": os.path.basename(vi_path) if vi is not None else None,
+        "mag_repeats_dropped": int((~new).sum()),
+        **notes,
     }
     if warn and repairs:
         warnings.warn("; ".join(repairs), DamagedFileWarning, stacklevel=2)

@@ -14,14 +14,19 @@ added ``Estimated X`` / ``Distance Error``, are not)::
     pos_x, pos_y, pos_z        m, the Google Tango device's position (the truth; optional)
 
 The values are Android's, in this project's units and axes already: kept as they are, ``t_ns = round(time *
-1e9)``.  The Tango frame is gravity-aligned with z up; its x and y are a horizontal pair in the frame Tango started
+1e9)`` (``time`` in nanoseconds, as RIDI's own ``processed/data.csv`` has it, is told by its step:
+:func:`time_unit_s`); the acceleration passes the importers' unit check
+(:func:`core.importers._common.acceleration_in_m_s2`: about 9.8 is m/s^2, about 1 is g and converted).  The Tango frame is gravity-aligned with z up; its x and y are a horizontal pair in the frame Tango started
 in (not geographic East and North): ``posi`` (``east_m, north_m, up_m``) is ``(pos_x, pos_y, pos_z)``, to be compared
 through offsets and after a rotation.
 
-The Excel form is read with the standard library (``zipfile`` and ``xml.etree``): the first worksheet, numbers
-(``<v>``) and text (inline ``<is><t>`` or shared strings); a cell that is not a number is a gap.  A row without a
-usable time or acceleration is a bad line (skipped and counted, or, past what
-:func:`core.recording.bad_lines_tolerated` allows, a :class:`RecordingError`).
+The CSV is read as a stream (:class:`core.importers._csv.Table`): a field read that is not a number, or a line
+without its time or acceleration fields, is a bad line; an empty or absent gyroscope, magnetometer or position field
+is a gap; a last line without its newline is a row when it has the header's fields, else it was cut off mid-write
+(dropped and said in ``repairs``).  The Excel form is read with the standard library (``zipfile`` and
+``xml.etree``): the first worksheet, numbers (``<v>``) and text (inline ``<is><t>`` or shared strings); a cell that
+is not a number is a gap.  In both, a row without a usable time or acceleration is a bad line (skipped and counted,
+or, past what :func:`core.recording.bad_lines_tolerated` allows, a :class:`RecordingError`).
 
 Streams: ``acc``, ``gyro``, ``mag`` and ``posi`` where present.
 
@@ -40,6 +45,7 @@ import os
 import re
 import warnings
 import zipfile
+from array import array
 from xml.etree import ElementTree
 
 import numpy as np
@@ -48,7 +54,8 @@ from core.conventions import ACC, GYRO, MAG
 from core.recording import (
     MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
 )
-from core.importers._common import POSI, finish, first_bad_time, head_bytes, open_text
+from core.importers._common import POSI, acceleration_in_m_s2, finish, first_bad_time, head_bytes, open_text
+from core.importers._csv import Table
 
 FORMAT = "ridi"
 #: stream -> its three columns (RIDI's names)
@@ -65,6 +72,8 @@ DETECT = (*REQUIRED, *COLUMNS[GYRO])
 RIDI_NAMES = frozenset(f"{s}_{a}" for s in ("acce", "gyro", "linacce", "grav", "magnet", "pos", "ori", "rv",
                                             "game_rv") for a in "xyzw")
 POSI_COLUMNS = ["east_m", "north_m", "up_m"]
+#: the columns read, in this order (``time``, then the streams' columns)
+READ = ("time", *(n for names in COLUMNS.values() for n in names))
 _NS = "{http://schemas.openxmlformats.org/spreadsheetml/2006/main}"
 _CELL = re.compile(r"([A-Z]+)(\d+)$")
 
@@ -128,21 +137,28 @@ _XLSX_ERRORS = (ElementTree.ParseError, zipfile.BadZipFile, EOFError, OSError, K
                 AttributeError)
 
 
-def _xlsx_rows(path: str, limit: int | None):
-    """``(header, rows)`` of the first worksheet of an .xlsx: header strings, rows as lists (floats, nan gaps)."""
+def _xlsx_table(path: str, limit: int | None):
+    """The columns :data:`READ` of the first worksheet of an .xlsx: ``(header, present, values, row numbers, [], n)``
+    as :func:`_csv_table` (a cell that is not a number, or absent, is nan)."""
     header: list[str] = []
-    rows: list[list[float]] = []
+    where: list[int] = []
+    flat = array("d")
+    nan = float("nan")
     try:
         with _open_xlsx(path) as z:
             for cells in _sheet_rows(z, path, limit):
                 if not header:
                     header = _header_of(cells)
+                    if any(c not in header for c in REQUIRED):
+                        break
+                    where = [header.index(n) if n in header else -1 for n in READ]
                     continue
-                rows.append([x if isinstance(x, float) else float("nan")
-                             for x in (cells.get(j) for j in range(len(header)))])
+                flat.extend(x if isinstance(x, float) else nan for x in (cells.get(j) for j in where))
     except _XLSX_ERRORS as e:
         raise RecordingError(f"damaged .xlsx worksheet: {e}", path) from None
-    return header, rows
+    _require(header, path)
+    v = (np.frombuffer(flat, dtype=np.float64) if flat else np.zeros(0)).reshape(-1, len(READ))  # no copy
+    return header, [n for n in READ if n in header], v, np.arange(len(v)) + 2, [], len(v)
 
 
 def is_xlsx(names) -> bool:
@@ -201,35 +217,26 @@ def folder_files(folder: str) -> list[str]:
             if os.path.isfile(os.path.join(folder, n)) and _file_matches(os.path.join(folder, n))]
 
 
-def _csv_rows(path: str, repairs: list[str], limit: int | None):
-    """``(header, rows)`` of RIDI's ``data.csv`` (a field that is not a number is a gap)."""
-    header: list[str] = []
-    rows: list[list[float]] = []
+def _require(header: list[str], path: str) -> None:
+    missing = [c for c in REQUIRED if c not in header]
+    if missing:
+        raise RecordingError(f"not a RIDI table: no column {', '.join(missing)}", path)
 
-    def take(line: str, last: bool = False) -> None:
-        parts = line.split(",")
-        if not header:
-            header.extend(p.strip() for p in parts)
-            return
-        if last and len(parts) < len(header):  # a last line cut off before its end: not a row
-            repairs.append(f"the last line (no newline, {len(parts)} of {len(header)} fields) was cut off: skipped")
-            return
-        row = []
-        for p in parts[:len(header)]:
-            try:
-                row.append(float(p))
-            except ValueError:
-                row.append(float("nan"))
-        rows.append(row + [float("nan")] * (len(header) - len(row)))
 
-    with open_text(path, repairs, limit) as text:
-        for _, lines in text:
-            for line in lines:
-                if line.strip():
-                    take(line)
-        if text.tail.strip():  # a last line without its newline: read if complete
-            take(text.tail, last=True)
-    return header, rows
+def _csv_table(path: str, repairs: list[str], limit: int | None):
+    """RIDI's ``data.csv`` read once as a stream (:class:`core.importers._csv.Table`): ``(header, present, values
+    (n, len(READ)) with nan for the absent columns, file line numbers (n,), bad lines, data lines)``."""
+    with open_text(path, repairs, limit) as text, np.errstate(all="ignore"):
+        table = Table(text, path, ",")
+        _require(table.header, path)
+        present = [n for n in READ if n in table.header]
+        out = table.read([(table.header.index(n), "f" if n in REQUIRED else "o") for n in present], with_lines=True)
+    if table.dropped_tail is not None:
+        repairs.append(f"{path}: dropped an incomplete last line {table.dropped_tail} (no newline: the file was cut "
+                       "off mid-write)")
+    v = np.full((len(out["v"]), len(READ)), np.nan)
+    v[:, [READ.index(n) for n in present]] = out["v"]
+    return table.header, present, v, out["line"], table.bad, table.n_lines
 
 
 #: RIDI's ``processed/data.csv`` keeps the Android sensor clock in nanoseconds (its loaders divide by 1e9); the
@@ -251,31 +258,27 @@ def read_ridi(path: str, *, warn: bool = True,
     path = str(path)
     repairs: list[str] = []
     if zipfile.is_zipfile(path):
-        header, rows = _xlsx_rows(path, max_uncompressed_bytes)
+        header, present, v, line, bad, n_lines = _xlsx_table(path, max_uncompressed_bytes)
     else:
-        header, rows = _csv_rows(path, repairs, max_uncompressed_bytes)
-    missing = [c for c in REQUIRED if c not in header]
-    if missing:
-        raise RecordingError(f"not a RIDI table: no column {', '.join(missing)}", path)
-    if not rows:
+        header, present, v, line, bad, n_lines = _csv_table(path, repairs, max_uncompressed_bytes)
+    if not len(v):
         raise RecordingError("no sensor events found", path)
-    v = np.asarray(rows, dtype=np.float64)
-    col = {name: header.index(name) for name in header if name}
 
     def block(names):
-        return v[:, [col[n] for n in names]] if all(n in col for n in names) else None
+        return v[:, [READ.index(n) for n in names]] if all(n in present for n in names) else None
 
-    unit_s = time_unit_s(v[:, col["time"]])
-    t = v[:, col["time"]] * unit_s
-    acc = block(COLUMNS[ACC])
-    good = np.isfinite(t) & np.all(np.isfinite(acc), axis=1)
-    bad = [RecordingError("no usable time or acceleration", path, int(i) + 2) for i in np.flatnonzero(~good)]
-    skip_bad_lines(bad, len(v), path, repairs)
+    unit_s = time_unit_s(v[:, 0])
+    t = v[:, 0] * unit_s
+    good = np.isfinite(t) & np.all(np.isfinite(block(COLUMNS[ACC])), axis=1)
+    bad = sorted(bad + [RecordingError("no usable time or acceleration", path, int(line[i]))
+                        for i in np.flatnonzero(~good)], key=lambda e: e.line)
+    skip_bad_lines(bad, n_lines, path, repairs)
     v, t = v[good], t[good]
     j = first_bad_time(t)
     if j is not None:
         raise RecordingError(f"time value {j + 1} is not a usable time: {float(t[j])!r}", path)
     t_ns = np.round(t * 1e9).astype(np.int64)
+    notes: dict = {}
     streams = {}
     for name, names in COLUMNS.items():
         vals = block(names)
@@ -286,13 +289,15 @@ def read_ridi(path: str, *, warn: bool = True,
             streams[POSI] = make_stream(POSI, t_ns[ok], vals[ok], POSI_COLUMNS, "m,m,m",
                                         "ground truth: Google Tango position (pos_x, pos_y, pos_z), z up, x and y "
                                         "in Tango's start frame, not geographic")
+        elif name == ACC:
+            streams[ACC] = make_stream(ACC, t_ns, acceleration_in_m_s2(vals, "acce_x/y/z", path, repairs, notes))
         else:
             streams[name] = make_stream(name, t_ns[ok], vals[ok])
     meta = {"source_format": FORMAT, "app": "RIDI (Android; Google Tango truth)",
             "time_base": ("t_ns = round(time * 1e9): RIDI's time in s (the Android sensor clock)" if unit_s == 1.0 else
                           "t_ns = time: RIDI's time in ns (the Android sensor clock, processed/data.csv)"),
             "columns_ignored": [h for h in header if h and h not in REQUIRED and
-                                not any(h in c for c in COLUMNS.values())][:40]}
+                                not any(h in c for c in COLUMNS.values())][:40], **notes}
     if warn and repairs:
         warnings.warn("; ".join(repairs), DamagedFileWarning, stacklevel=2)
     return finish(Recording(streams, device={"app": "RIDI", "platform": "android"}, metadata=meta, repairs=repairs,
