@@ -97,16 +97,17 @@ def test_kubrak_relock_puts_the_track_on_the_fix_not_beside_it_by_a_stale_bias()
     the bias a drifting track built up against the fixes must not stay (before: the track ran 6-10 m beside the
     fixes for minutes after a relock on the tuning walk).  Afterwards the predicted fix is the fix, the position's
     variance is the fix's white plus correlated error, and the covariance stays one."""
-    from core.gnss.base import restart_position
     from core.gnss.kubrak import BE, BN, KubrakKf
 
     kf = KubrakKf()
     kf.initialize(0.0, 0.0, 2.0)
-    kf.x[BE], kf.x[BN] = 6.0, -4.0  # what the bias states absorbed while the track drifted
-    kf.P[BE, BE] = kf.P[BN, BN] = 0.5 ** 2
+    st = kf.snapshot()
+    st.x[BE], st.x[BN] = 6.0, -4.0  # what the bias states absorbed while the track drifted
+    st.P[BE, BE] = st.P[BN, BN] = 0.5 ** 2
+    kf.restore(st)
     fix, sigma = np.array([40.0, 25.0]), 3.0
     pred, _ = kf.fix_prediction(0)
-    restart_position(kf, fix - pred, sigma)
+    kf.restart_position(fix - pred, sigma)
     kf.place_on_fix(sigma)
     assert kf.x[:2] == pytest.approx(fix) and kf.x[BE:BN + 1] == pytest.approx([0.0, 0.0])
     assert kf.fix_prediction(0)[0] == pytest.approx(fix)

@@ -137,7 +137,9 @@ def test_the_coefficients_revert_in_the_filter_is_positive_semidefinite(monkeypa
     f.kf.initialize(0.0, 0.0, 3.0)
     keep = np.array([[0.3, -1.2, -0.6], [-1.2, 5.9, 3.4], [-0.6, 3.4, 5.0]]) * 1e-3
     Pc = np.array([[0.7, -0.1, 2.6], [-0.1, 2.8, -1.9], [2.6, -1.9, 10.9]]) * 1e-3
-    f.kf.P[COEF, COEF] = keep
+    st = f.kf.snapshot()
+    st.P[COEF, COEF] = keep
+    f.kf.restore(st)
     f._revert_coefficients(f.kf.x[COEF].copy(), Pc, True)
     assert np.linalg.eigvalsh(f.kf.P).min() > -1e-12
 

@@ -99,20 +99,23 @@ def test_kf_jacobians_match_finite_differences(psi):
         np.testing.assert_allclose(J, num_jac(lambda v: KubrakKf.move(v, reg, psi, dt), x), atol=1e-7)
     kf = KubrakKf()
     kf.initialize(0.0, 0.0, 1.0)
-    kf.x = x.copy()
-    kf.reg, kf.psi_pdr, kf.t_ns = reg, psi, 0
+
+    def at(v):  # the filter at state v after an epoch of regressors reg and heading psi at t = 0
+        st = kf.snapshot()
+        st.x, st.reg, st.psi_pdr, st.t_ns = v.copy(), reg, psi, 0
+        kf.restore(st)
+        return kf
 
     def vel(v):
-        kf.x = v
-        return kf.velocity_prediction()[0]
+        return at(v).velocity_prediction()[0]
 
-    H = kf.velocity_prediction()[1]
+    H = at(x).velocity_prediction()[1]
     np.testing.assert_allclose(H, num_jac(vel, x.copy()), atol=1e-7)
-    kf.x = x.copy()
 
     def pos(v):
-        kf.x = v
-        return kf.fix_prediction(int(0.7e9))[0]
+        return at(v).fix_prediction(int(0.7e9))[0]
+
+    at(x)
 
     H = kf.fix_prediction(int(0.7e9))[1]
     np.testing.assert_allclose(H, num_jac(pos, x.copy()), atol=1e-7)

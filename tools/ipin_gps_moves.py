@@ -49,7 +49,7 @@ class _KeepPosition(GpsFusion):
         before = self.ekf.x[:2].copy()
         res = super()._update_position(t_ns, east, north, sigma_m, gate)
         if res.accepted:
-            self.ekf.x[:2] = before
+            self.ekf.set_position(*before)
         return res
 
 

@@ -305,16 +305,6 @@ def relock_heading_error_rad(offset_m: float, walked_m: float) -> float:
     return 2.0 * math.asin(ratio) if ratio < 1.0 else math.pi
 
 
-def restart_position(filt, innovation, sigma_m: float) -> None:
-    """The position of ``filt`` (``x[:2]``, ``P``) restarted on a fix: moved by the fix's ``innovation``, its
-    correlations with the other states dropped, its per-axis SD the fix's ``sigma_m`` (the consistent-stream
-    relock: :meth:`FixFusion._relock`)."""
-    filt.x[:2] += np.asarray(innovation, dtype=float)
-    filt.P[:2, :] = 0.0
-    filt.P[:, :2] = 0.0
-    filt.P[0, 0] = filt.P[1, 1] = sigma_m ** 2
-
-
 class FixFusion:
     """The fix handling both fusion filters share (see the module docstring); a subclass filters.
 
@@ -521,7 +511,9 @@ class FixFusion:
 
     @property
     def filt(self):
-        """The Kalman filter: ``x[0:2]`` is the position (E, N), ``P[:2, :2]`` its covariance."""
+        """The Kalman filter (:class:`core.gnss.ekf.PdrEkf`, :class:`core.gnss.kubrak.KubrakKf`): ``x[0:2]`` is the
+        position (E, N), ``P[:2, :2]`` its covariance, both read-only here; this class changes them only through the
+        filter's ``set_position``, ``restart_position`` and ``widen_position``."""
         raise NotImplementedError
 
     def _init_filter_at(self, sigma_m: float) -> None:
@@ -567,7 +559,7 @@ class FixFusion:
 
     def _widen_position(self, offset_m) -> None:
         """A relock takes a gated fix with the position's covariance widened by ``offset_m`` (E, N) outer itself."""
-        self.filt.P[:2, :2] += np.outer(offset_m, offset_m)
+        self.filt.widen_position(offset_m)
 
     # -- input ------------------------------------------------------------------------
     def add_fix(self, t_ns: int, values) -> None:
@@ -644,8 +636,7 @@ class FixFusion:
         length, heading = self._dead_reckoned_step(step)
         if not (math.isfinite(length) and math.isfinite(heading)):
             return 0.0
-        filt.x[0] = e0 + length * math.cos(heading)
-        filt.x[1] = n0 + length * math.sin(heading)
+        filt.set_position(e0 + length * math.cos(heading), n0 + length * math.sin(heading))
         return length
 
     def _dead_reckoned_step(self, step) -> tuple[float, float]:
@@ -767,9 +758,7 @@ class FixFusion:
             if not filt.initialized:
                 self._init_filter_at(sigma)
                 filt = self.filt
-            filt.P[:2, :] = 0.0
-            filt.P[:, :2] = 0.0
-            filt.P[0, 0] = filt.P[1, 1] = sigma ** 2
+            filt.restart_position(None, sigma)  # where it is: its correlations dropped, the fix's SD
             self._placed_on_fix(t_ns, sigma)
             self._accepted(t_ns, v, e0, n0, hacc, speed, course, nan, 0.0)
             return
@@ -825,7 +814,7 @@ class FixFusion:
                 # a stream consistent with the walker's motion all along: the position restarts on the fix,
                 # its correlations with the rest dropped (widening it by the disagreement let the next fixes
                 # pull the heading through them: on the tuning walk the track then ran 40-150 m off again)
-                restart_position(filt, d, sigma)
+                filt.restart_position(d, sigma)
                 self._placed_on_fix(t_ns, sigma, relock=True)
                 res = UpdateResult(True, res.innovation, math.nan, float(np.hypot(*d)), res.sigma_before_m)
             else:

@@ -127,6 +127,7 @@ refuses non-finite input, so the state never holds a NaN or an inf.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -204,8 +205,56 @@ class UpdateResult:
     reason: str = ""
 
 
-class PdrEkf:
+@dataclass(slots=True)
+class PdrEkfState:
+    """Everything :class:`PdrEkf` changes as steps and fixes come: its only state, made by :meth:`initial`.
+
+    Read and set from outside only through :meth:`PdrEkf.snapshot` and :meth:`PdrEkf.restore`.
+    """
+
+    initialized: bool
+    x: np.ndarray  #: ``[E, N, l, psi, b, k, gE, gN]`` (m, m, m, rad, rad, -, m, m)
+    P: np.ndarray  #: its covariance, the gain's (NX x NX)
+    #: the reported covariance (the error covariance of this filter's estimate under the correlated fix-error
+    #: model, ``reported_fix_bias_share``; see "What the filter reports"); None: the filter's own ``P``
+    C: np.ndarray | None
+    last_heading_meas: float  #: the last step's measured heading (rad; nan before any): the turn's process noise
+    n_steps: int
+    fix_bias_var_m2: float  #: the fix-error process's own variance per axis now (m^2; 0 before the first fix)
+    c_fix_bias_var_m2: float  #: the same for the reported covariance's own fix-error state (m^2)
+
+    @classmethod
+    def initial(cls) -> PdrEkfState:
+        return cls(initialized=False, x=np.zeros(NX), P=np.eye(NX), C=None, last_heading_meas=math.nan, n_steps=0,
+                   fix_bias_var_m2=0.0, c_fix_bias_var_m2=0.0)
+
+
+class StateSnapshots:
+    """``snapshot()`` / ``restore()`` of a filter whose whole state is one dataclass in ``self._state``, of the
+    class's ``State`` (made by ``State.initial``, as :class:`core.pdr.attitude.AttitudeState`): the only way in or
+    out of it (:class:`PdrEkf`, :class:`core.gnss.kubrak.KubrakKf`)."""
+
+    State: type
+    _state: object
+
+    def snapshot(self):
+        """A copy of the whole state (the filter keeps its own)."""
+        return copy.deepcopy(self._state)
+
+    def restore(self, state) -> None:
+        """Continue from ``state`` (a :meth:`snapshot`, possibly changed; the filter takes a copy)."""
+        if type(state) is not self.State:
+            raise TypeError(f"restore takes a {self.State.__name__}, not {type(state).__name__}")
+        self._state = copy.deepcopy(state)
+
+
+class PdrEkf(StateSnapshots):
     """Eq. 13 with the step-length and heading measurements of each step and GPS updates.
+
+    Settings are the keywords below; the state is one :class:`PdrEkfState` (``x``, ``P``, ``C`` ... are read-only
+    views of it), changed only by the methods (the fusion's :meth:`set_position`, :meth:`set_step`,
+    :meth:`restart_position`, :meth:`widen_position`) and taken out or put back whole by ``snapshot()`` /
+    ``restore()``.
 
     Parameters
     ----------
@@ -286,19 +335,20 @@ class PdrEkf:
         self.dr_match_nis = float(dr_match_nis)
         self.reset()
 
+    State = PdrEkfState
+
     def reset(self) -> None:
         """Forget the state (the settings stay): :meth:`initialize` starts it again."""
-        self.initialized = False
-        self.x = np.zeros(NX)
-        self.P = np.eye(NX)
-        self._last_heading_meas = math.nan
-        self.n_steps = 0
-        #: the fix-error process's own variance per axis now (m^2; 0 before the first fix)
-        self.fix_bias_var_m2 = 0.0
-        #: the reported covariance (the error covariance of this filter's estimate under the correlated fix-error
-        #: model, ``reported_fix_bias_share``; see "What the filter reports"); None: the filter's own ``P``
-        self.C: np.ndarray | None = None
-        self._c_fix_bias_var_m2 = 0.0
+        self._state = PdrEkfState.initial()
+
+    # -- read-only views of the state (set it through the methods below, or snapshot() / restore()) ----------
+    x = property(lambda self: self._state.x, doc="The state vector ``[E, N, l, psi, b, k, gE, gN]``.")
+    P = property(lambda self: self._state.P, doc="Its covariance (the gain's).")
+    C = property(lambda self: self._state.C, doc="The reported covariance (None: ``P`` is reported).")
+    initialized = property(lambda self: self._state.initialized)
+    n_steps = property(lambda self: self._state.n_steps)
+    fix_bias_var_m2 = property(lambda self: self._state.fix_bias_var_m2,
+                               doc="The fix-error process's own variance per axis now (m^2; 0 before the first fix).")
 
     def initialize(self, east_m: float, north_m: float, pos_sd_m: float, length_m: float, heading_rad: float,
                    *, length_sd_m: float = 0.15, heading_sd_rad: float = math.radians(10.0),
@@ -307,27 +357,27 @@ class PdrEkf:
         vals = (east_m, north_m, pos_sd_m, length_m, heading_rad)
         if not all(math.isfinite(v) for v in vals):
             raise ValueError(f"PdrEkf.initialize needs finite values, got {vals}")
-        self.x = np.array([east_m, north_m, length_m, wrap_angle(float(heading_rad)), 0.0, 0.0, 0.0, 0.0],
-                          dtype=float)
+        st = self._state
+        st.x = np.array([east_m, north_m, length_m, wrap_angle(float(heading_rad)), 0.0, 0.0, 0.0, 0.0], dtype=float)
         # the fix error's variance is set by the first fix's reported accuracy (propagate_fix_bias)
-        self.P = np.diag([pos_sd_m ** 2, pos_sd_m ** 2, length_sd_m ** 2, heading_sd_rad ** 2, bias_sd_rad ** 2,
-                          scale_sd ** 2, 0.0, 0.0])
-        self.fix_bias_var_m2 = 0.0
-        self.C = self.P.copy() if self.reported_fix_bias_share > 0.0 else None
-        self._c_fix_bias_var_m2 = 0.0
-        self._last_heading_meas = math.nan
-        self.initialized = True
+        st.P = np.diag([pos_sd_m ** 2, pos_sd_m ** 2, length_sd_m ** 2, heading_sd_rad ** 2, bias_sd_rad ** 2,
+                        scale_sd ** 2, 0.0, 0.0])
+        st.fix_bias_var_m2 = 0.0
+        st.C = st.P.copy() if self.reported_fix_bias_share > 0.0 else None
+        st.c_fix_bias_var_m2 = 0.0
+        st.last_heading_meas = math.nan
+        st.initialized = True
 
     # -- helpers --------------------------------------------------------------
     @property
     def position_cov_m2(self) -> np.ndarray:
-        return self.P[:2, :2].copy()
+        return self._state.P[:2, :2].copy()
 
     @property
     def reported_cov(self) -> np.ndarray:
         """The covariance the filter reports (the fused track's ``cov_en_m2``): ``C`` with
         ``reported_fix_bias_share``, else ``P`` (see "What the filter reports" in the module docstring)."""
-        return self.P if self.C is None else self.C
+        return self._state.P if self._state.C is None else self._state.C
 
     def reported_sigma_m(self) -> float:
         """sqrt of the largest eigenvalue of the reported position covariance (m)."""
@@ -337,23 +387,24 @@ class PdrEkf:
     def _report_update(self, K: np.ndarray, H: np.ndarray, R: np.ndarray) -> None:
         """The reported covariance after an update with gain ``K`` (Joseph form: the error covariance of any
         gain), ``H`` and ``R`` the measurement as the reported model has it."""
-        if self.C is None:
+        if self._state.C is None:
             return
         ikh = np.eye(NX) - K @ H
-        C = ikh @ self.C @ ikh.T + K @ R @ K.T
+        C = ikh @ self._state.C @ ikh.T + K @ R @ K.T
         if np.all(np.isfinite(C)):
-            self.C = 0.5 * (C + C.T)
+            self._state.C = 0.5 * (C + C.T)
 
     def position_sigma_m(self) -> float:
         """sqrt of the largest eigenvalue of the position covariance (m)."""
-        P = self.P
+        P = self._state.P
         return sigma_max_m((P[0, 0], P[0, 1], P[1, 1]))
 
     def _update(self, innov: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float,
                 frozen: tuple = (), R_reported: np.ndarray | None = None) -> tuple[bool, float]:
         # Schmidt: the consider (and frozen) states are not estimated
-        ok, nis, self.x, self.P, K = kalman_update_gain(self.x, self.P, innov, H, R, gate,
-                                                        zero_gain_rows=list(CONSIDER) + list(frozen), angle_index=PSI)
+        st = self._state
+        ok, nis, st.x, st.P, K = kalman_update_gain(st.x, st.P, innov, H, R, gate,
+                                                    zero_gain_rows=list(CONSIDER) + list(frozen), angle_index=PSI)
         if ok:
             self._report_update(K, H, R if R_reported is None else R_reported)
         return ok, nis
@@ -361,23 +412,23 @@ class PdrEkf:
     # -- per step ---------------------------------------------------------------
     def step(self, length_m: float, heading_rad: float) -> UpdateResult:
         """One step: random walk (eq. 13), update with the step's length and heading, move the position."""
-        if not self.initialized:
+        if not self._state.initialized:
             raise RuntimeError("PdrEkf.step before initialize")
         if not (math.isfinite(length_m) and math.isfinite(heading_rad)):
             return UpdateResult(False, (math.nan, math.nan), math.nan, reason="not finite")
-        turn = 0.0 if self._last_heading_meas != self._last_heading_meas else \
-            wrap_angle(heading_rad - self._last_heading_meas)
-        self._last_heading_meas = float(heading_rad)
+        turn = 0.0 if self._state.last_heading_meas != self._state.last_heading_meas else \
+            wrap_angle(heading_rad - self._state.last_heading_meas)
+        self._state.last_heading_meas = float(heading_rad)
         # eq. 13: l and psi as random walks (+ the walker's own turn)
-        for M in (self.P,) if self.C is None else (self.P, self.C):
+        for M in (self._state.P,) if self._state.C is None else (self._state.P, self._state.C):
             M[L, L] += self.length_walk_m ** 2
             M[PSI, PSI] += self.heading_walk_rad ** 2 + (self.turn_gain * turn) ** 2
             M[B, B] += self.bias_walk_rad ** 2 + (self.bias_turn_gain * turn) ** 2
             M[K, K] += self.scale_walk ** 2
         # z_l = l (1 + k), z_psi = psi + b, with the consider states at 0
-        innov = np.array([length_m - self.x[L], wrap_angle(heading_rad - self.x[PSI])])
+        innov = np.array([length_m - self._state.x[L], wrap_angle(heading_rad - self._state.x[PSI])])
         H = np.zeros((2, NX))
-        H[0, L], H[0, K] = 1.0, self.x[L]
+        H[0, L], H[0, K] = 1.0, self._state.x[L]
         H[1, PSI], H[1, B] = 1.0, 1.0
         R = np.diag([self.length_sd_m ** 2, self.heading_sd_rad ** 2])
         # the step's own length and heading say nothing about where the walker already is: the position rows
@@ -385,14 +436,14 @@ class PdrEkf:
         # every step, each turn moved the dead-reckoned position sideways, 166-174 m over a 3-minute outage)
         ok, nis = self._update(innov, H, R, math.inf, frozen=(E, N))
         # eq. 13: the position moves by the step
-        F = self.transition_jacobian(self.x[L], self.x[PSI])
-        self.x = self.transition(self.x)
-        P = F @ self.P @ F.T
-        self.P = 0.5 * (P + P.T)
-        if self.C is not None:
-            C = F @ self.C @ F.T
-            self.C = 0.5 * (C + C.T)
-        self.n_steps += 1
+        F = self.transition_jacobian(self._state.x[L], self._state.x[PSI])
+        self._state.x = self.transition(self._state.x)
+        P = F @ self._state.P @ F.T
+        self._state.P = 0.5 * (P + P.T)
+        if self._state.C is not None:
+            C = F @ self._state.C @ F.T
+            self._state.C = 0.5 * (C + C.T)
+        self._state.n_steps += 1
         return UpdateResult(ok, (float(innov[0]), float(innov[1])), nis)
 
     @staticmethod
@@ -453,9 +504,9 @@ class PdrEkf:
             return UpdateResult(False, (math.nan, math.nan), math.nan, 0.0, sig_before, "not finite")
         f = min(max(float(fraction), 0.0), 1.0)
         # the fix measures the position plus its correlated error (the module docstring's "Honest fixes")
-        innov = np.array([east_m, north_m]) - self.fix_measurement(self.x, f)
-        H = self.fix_measurement_jacobian(self.x, f)
-        before = self.x[:2].copy()
+        innov = np.array([east_m, north_m]) - self.fix_measurement(self._state.x, f)
+        H = self.fix_measurement_jacobian(self._state.x, f)
+        before = self._state.x[:2].copy()
         frozen = () if self.position_updates_heading else (PSI,)
         white_var = (1.0 - self.fix_bias_share) * sigma_m ** 2
         gate_nis = self.gate_nis_2d if gate else math.inf
@@ -463,7 +514,7 @@ class PdrEkf:
         R_rep = np.eye(2) * (1.0 - self.reported_fix_bias_share) * sigma_m ** 2
         if noise_scale > 1.0:
             # gate on one fix's spread, update with the decorrelated (inflated) one
-            ok, nis, _, _ = kalman_update(self.x, self.P, innov, H, np.eye(2) * white_var, gate_nis)
+            ok, nis, _, _ = kalman_update(self._state.x, self._state.P, innov, H, np.eye(2) * white_var, gate_nis)
             if ok and self.dr_match_nis > 0.0 and nis > self.dr_match_nis:
                 # covariance matching: one fix's spread cannot explain this innovation, so dead reckoning's sigma
                 # was too small; widen the position along the innovation until its NIS is dr_match_nis
@@ -472,7 +523,7 @@ class PdrEkf:
                 ok, _ = self._update(innov, H, np.eye(2) * white_var * noise_scale, math.inf, frozen, R_rep)
         else:
             ok, nis = self._update(innov, H, np.eye(2) * white_var, gate_nis, frozen, R_rep)
-        moved = float(np.hypot(*(self.x[:2] - before))) if ok else 0.0
+        moved = float(np.hypot(*(self._state.x[:2] - before))) if ok else 0.0
         reason = "" if ok else f"innovation gate: NIS {nis:.1f} > {self.gate_nis_2d:.1f}"
         return UpdateResult(ok, (float(innov[0]), float(innov[1])), nis, moved, sig_before, reason)
 
@@ -488,12 +539,13 @@ class PdrEkf:
         if not (dt_s >= 0.0 and math.isfinite(sigma_m) and sigma_m > 0):
             return
         a = math.exp(-max(dt_s, 0.0) / self.fix_bias_tau_s)
+        st = self._state
         if self.fix_bias_share > 0.0:
-            self.x[FIX_BIAS] *= a
-            self.fix_bias_var_m2 = _gauss_markov(self.P, a, self.fix_bias_share * sigma_m ** 2, self.fix_bias_var_m2)
-        if self.C is not None:
-            self._c_fix_bias_var_m2 = _gauss_markov(self.C, a, self.reported_fix_bias_share * sigma_m ** 2,
-                                                    self._c_fix_bias_var_m2)
+            st.x[FIX_BIAS] *= a
+            st.fix_bias_var_m2 = _gauss_markov(st.P, a, self.fix_bias_share * sigma_m ** 2, st.fix_bias_var_m2)
+        if st.C is not None:
+            st.c_fix_bias_var_m2 = _gauss_markov(st.C, a, self.reported_fix_bias_share * sigma_m ** 2,
+                                                 st.c_fix_bias_var_m2)
 
     def place_on_fix(self, sigma_m: float) -> None:
         """The position was just put on a fix (an anchor, a relock's restart): its variance ``sigma_m^2`` per axis,
@@ -505,16 +557,16 @@ class PdrEkf:
         if not (math.isfinite(sigma_m) and sigma_m > 0):
             return
         if self.fix_bias_share > 0.0:
-            self.x[FIX_BIAS] = 0.0
-            self.fix_bias_var_m2 = _on_fix(self.P, sigma_m, self.fix_bias_share)
-        if self.C is not None:
-            self._c_fix_bias_var_m2 = _on_fix(self.C, sigma_m, self.reported_fix_bias_share)
+            self._state.x[FIX_BIAS] = 0.0
+            self._state.fix_bias_var_m2 = _on_fix(self._state.P, sigma_m, self.fix_bias_share)
+        if self._state.C is not None:
+            self._state.c_fix_bias_var_m2 = _on_fix(self._state.C, sigma_m, self.reported_fix_bias_share)
 
     def update_course(self, course_rad: float, sigma_rad: float) -> UpdateResult:
         """A GPS course (rad, CCW from East) as a direct measurement of the heading."""
         if not (math.isfinite(course_rad) and sigma_rad > 0 and math.isfinite(sigma_rad)):
             return UpdateResult(False, (math.nan,), math.nan, reason="not finite")
-        innov = np.array([wrap_angle(course_rad - self.x[3])])
+        innov = np.array([wrap_angle(course_rad - self._state.x[3])])
         H = np.zeros((1, NX))
         H[0, PSI] = 1.0
         ok, nis = self._update(innov, H, np.array([[sigma_rad ** 2]]), self.gate_nis_1d)
@@ -523,18 +575,36 @@ class PdrEkf:
     def reset_position(self, east_m: float, north_m: float, sigma_m: float) -> None:
         """Put the position on a fix (the paper's architecture: GPS is the solution while it is there)."""
         if math.isfinite(east_m) and math.isfinite(north_m) and sigma_m > 0:
-            self.x[0], self.x[1] = east_m, north_m
-            for M in (self.P,) if self.C is None else (self.P, self.C):
+            self._state.x[0], self._state.x[1] = east_m, north_m
+            for M in (self._state.P,) if self._state.C is None else (self._state.P, self._state.C):
                 M[:2, :] = 0.0
                 M[:, :2] = 0.0
                 M[0, 0] = M[1, 1] = sigma_m ** 2
+
+    def set_position(self, east_m: float, north_m: float) -> None:
+        """Move the position to ``(east_m, north_m)`` (m), its covariance unchanged (a dead-reckoned step while GPS
+        is not trusted: :meth:`core.gnss.base.FixFusion._dead_reckon`)."""
+        self._state.x[E], self._state.x[N] = east_m, north_m
+
+    def set_step(self, length_m: float, heading_rad: float) -> None:
+        """Set the step length (m) and heading (rad; wrapped) states, their covariance unchanged (the dead-reckoned
+        step's, so that the track's output follows it)."""
+        self._state.x[L], self._state.x[PSI] = length_m, wrap_angle(heading_rad)
+
+    def restart_position(self, innovation, sigma_m: float) -> None:
+        """Restart the position on a fix: moved by the fix's ``innovation`` (E, N; None: not moved), its correlations
+        with the other states dropped, its per-axis SD the fix's ``sigma_m`` -- in ``P``; the reported covariance
+        follows in :meth:`place_on_fix`, which the caller applies next (the anchor, the consistent-stream relock:
+        :class:`core.gnss.base.FixFusion`).  :meth:`reset_position` instead puts the position on the fix itself
+        in both."""
+        restart_position_of(self._state.x, self._state.P, innovation, sigma_m)
 
     def widen_position(self, offset_m) -> None:
         """Widen the position's covariance by the outer product of ``offset_m`` (E, N) (a relock's disagreement)."""
         d = np.asarray(offset_m, dtype=float)
         if not np.all(np.isfinite(d)):
             return
-        for M in (self.P,) if self.C is None else (self.P, self.C):
+        for M in (self._state.P,) if self._state.C is None else (self._state.P, self._state.C):
             M[:2, :2] += np.outer(d, d)
 
     def set_consider_sd(self, heading_bias_sd_rad: float, scale_sd: float) -> None:
@@ -544,8 +614,19 @@ class PdrEkf:
         correlations stay); a larger one adds to its variance (the heading bias's also to the heading's,
         anti-correlated, with ``heading_carries_bias``).
         """
-        for M in (self.P,) if self.C is None else (self.P, self.C):
+        for M in (self._state.P,) if self._state.C is None else (self._state.P, self._state.C):
             _set_consider_sd(M, heading_bias_sd_rad, scale_sd, self.heading_carries_bias)
+
+
+def restart_position_of(x: np.ndarray, P: np.ndarray, innovation, sigma_m: float) -> None:
+    """The position of a state ``x`` (``x[:2]``) and covariance ``P`` restarted on a fix, in place: moved by the
+    fix's ``innovation`` (None: not moved), its correlations dropped, its per-axis variance ``sigma_m^2``
+    (:meth:`PdrEkf.restart_position`, :meth:`core.gnss.kubrak.KubrakKf.restart_position`)."""
+    if innovation is not None:
+        x[:2] += np.asarray(innovation, dtype=float)
+    P[:2, :] = 0.0
+    P[:, :2] = 0.0
+    P[0, 0] = P[1, 1] = sigma_m ** 2
 
 
 def matching_widening(innov, nis: float, target_nis: float) -> np.ndarray:

@@ -305,13 +305,10 @@ class GpsFusion(FixFusion):
     def _reported_cov(self):
         return self.ekf.reported_cov
 
-    def _widen_position(self, offset_m) -> None:
-        self.ekf.widen_position(offset_m)
-
     def _dead_reckoned_step(self, step) -> tuple[float, float]:
         length, heading = self.stride_scale * step.length_m, self.compensated_heading(step.heading_rad)
         if math.isfinite(length) and math.isfinite(heading):
-            self.ekf.x[2], self.ekf.x[3] = length, wrap_angle(heading)
+            self.ekf.set_step(length, heading)
         return length, heading
 
     def _fraction(self, t_ns: int) -> float:

@@ -83,12 +83,14 @@ import copy
 import enum
 import math
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 
 from core.conventions import heading_from_bearing_deg, wrap_angle
-from core.gnss.base import EVENTS_KEEP_LAST, FixFusion, relock_heading_error_rad, restart_position
-from core.gnss.ekf import CHI2_999, UpdateResult, covariance_cover, kalman_update, sigma_max_m
+from core.gnss.base import EVENTS_KEEP_LAST, FixFusion, relock_heading_error_rad
+from core.gnss.ekf import (CHI2_999, StateSnapshots, UpdateResult, covariance_cover, kalman_update, restart_position_of,
+                           sigma_max_m)
 from core.gnss.training import ChordReference, OnlineTrainer
 from core.pdr.velocity import VelocityModel, step_regressors
 
@@ -110,8 +112,32 @@ NX = 9
 COEF = slice(A, C + 1)
 
 
-class KubrakKf:
+@dataclass(slots=True)
+class KubrakKfState:
+    """Everything :class:`KubrakKf` changes as epochs and fixes come: its only state, made by :meth:`initial`.
+
+    Read and set from outside only through :meth:`KubrakKf.snapshot` and :meth:`KubrakKf.restore`.
+    """
+
+    initialized: bool
+    x: np.ndarray  #: ``[E, N, dv, dpsi, A, B, C, bE, bN]`` (m, m, m/s, rad, s, m, s, m, m)
+    P: np.ndarray  #: its covariance (NX x NX)
+    reg: np.ndarray  #: the last epoch's eq.-1 regressors (3,; nan before any)
+    psi_pdr: float  #: the last epoch's PDR heading (rad, CCW from East; nan before any)
+    t_ns: int | None  #: the last epoch's time (ns)
+
+    @classmethod
+    def initial(cls) -> KubrakKfState:
+        return cls(initialized=False, x=np.zeros(NX), P=np.eye(NX), reg=np.full(3, math.nan), psi_pdr=math.nan,
+                   t_ns=None)
+
+
+class KubrakKf(StateSnapshots):
     """The 7-state filter of Kubrak et al. (2006), Fig. 8, plus a GPS bias (see the module docstring).
+
+    Settings are the keywords below; the state is one :class:`KubrakKfState` (``x``, ``P``, ``reg``, ``psi_pdr``
+    ... are read-only views of it), changed only by the methods and taken out or put back whole by
+    ``snapshot()`` / ``restore()``.
 
     Parameters
     ----------
@@ -166,23 +192,28 @@ class KubrakKf:
         self.fix_bias_tau_s = float(fix_bias_tau_s)
         self.reset()
 
+    State = KubrakKfState
+
     def reset(self) -> None:
-        self.initialized = False
-        self.x = np.zeros(NX)
-        self.P = np.eye(NX)
-        #: the last epoch: regressors (3,), PDR heading (rad), time (ns)
-        self.reg = np.full(3, math.nan)
-        self.psi_pdr = math.nan
-        self.t_ns: int | None = None
+        """Forget the state (the settings stay): :meth:`initialize` starts it again."""
+        self._state = KubrakKfState.initial()
+
+    # -- read-only views of the state (set it through the methods below, or snapshot() / restore()) ----------
+    x = property(lambda self: self._state.x, doc="The state vector ``[E, N, dv, dpsi, A, B, C, bE, bN]``.")
+    P = property(lambda self: self._state.P, doc="Its covariance.")
+    reg = property(lambda self: self._state.reg, doc="The last epoch's eq.-1 regressors (nan before any).")
+    psi_pdr = property(lambda self: self._state.psi_pdr, doc="The last epoch's PDR heading (rad; nan before any).")
+    t_ns = property(lambda self: self._state.t_ns, doc="The last epoch's time (ns; None before any).")
+    initialized = property(lambda self: self._state.initialized)
 
     def initialize(self, east_m: float, north_m: float, pos_sd_m: float) -> None:
         if not all(math.isfinite(v) for v in (east_m, north_m, pos_sd_m)):
             raise ValueError(f"KubrakKf.initialize needs finite values, got {(east_m, north_m, pos_sd_m)}")
-        m = self.model
-        self.x = np.array([east_m, north_m, 0.0, 0.0, m.a_s, m.b_m, m.c_s, 0.0, 0.0])
-        self.P = np.diag([pos_sd_m ** 2, pos_sd_m ** 2, self.dv_sd_m_s ** 2, self.heading_bias_sd_rad ** 2,
-                          *np.square(m.sd), self.fix_bias_sd_m ** 2, self.fix_bias_sd_m ** 2])
-        self.initialized = True
+        m, st = self.model, self._state
+        st.x = np.array([east_m, north_m, 0.0, 0.0, m.a_s, m.b_m, m.c_s, 0.0, 0.0])
+        st.P = np.diag([pos_sd_m ** 2, pos_sd_m ** 2, self.dv_sd_m_s ** 2, self.heading_bias_sd_rad ** 2,
+                        *np.square(m.sd), self.fix_bias_sd_m ** 2, self.fix_bias_sd_m ** 2])
+        st.initialized = True
 
     # -- the model ------------------------------------------------------------------
     @staticmethod
@@ -192,7 +223,7 @@ class KubrakKf:
 
     def heading(self) -> float:
         """The corrected heading of the last epoch (rad, CCW from East)."""
-        return wrap_angle(self.psi_pdr + float(self.x[DPSI]))
+        return wrap_angle(self._state.psi_pdr + float(self._state.x[DPSI]))
 
     @staticmethod
     def move(x: np.ndarray, reg: np.ndarray, psi_pdr: float, dt_s: float) -> np.ndarray:
@@ -221,11 +252,11 @@ class KubrakKf:
     def epoch(self, t_ns: int, dt_s: float, reg, psi_pdr: float) -> float:
         """One epoch (a step): predict by eq. 2; returns the distance moved (m)."""
         reg = np.asarray(reg, dtype=float)
-        if not (self.initialized and dt_s > 0 and math.isfinite(dt_s) and math.isfinite(psi_pdr)
+        if not (self._state.initialized and dt_s > 0 and math.isfinite(dt_s) and math.isfinite(psi_pdr)
                 and np.all(np.isfinite(reg))):
             return 0.0
-        F = self.move_jacobian(self.x, reg, psi_pdr, dt_s)
-        x = self.move(self.x, reg, psi_pdr, dt_s)
+        F = self.move_jacobian(self._state.x, reg, psi_pdr, dt_s)
+        x = self.move(self._state.x, reg, psi_pdr, dt_s)
         a = math.exp(-dt_s / self.dv_tau_s)
         F[DV, DV] = a
         x[DV] *= a
@@ -240,24 +271,34 @@ class KubrakKf:
             x[BN] *= ab
             Q[BE, BE] = Q[BN, BN] = self.fix_bias_sd_m ** 2 * (1.0 - ab * ab)
         # the epoch's own white speed and heading noise, mapped into the position
-        v = self.speed(self.x, reg)
-        psi = psi_pdr + self.x[DPSI]
+        v = self.speed(self._state.x, reg)
+        psi = psi_pdr + self._state.x[DPSI]
         c, s = math.cos(psi), math.sin(psi)
         G = np.array([[dt_s * c, -v * dt_s * s], [dt_s * s, v * dt_s * c]])
         Q[:2, :2] += G @ np.diag([self.step_speed_sd_m_s ** 2, self.step_heading_sd_rad ** 2]) @ G.T
-        P = F @ self.P @ F.T + Q
+        P = F @ self._state.P @ F.T + Q
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
             return 0.0
-        moved = math.hypot(x[E] - self.x[E], x[N] - self.x[N])
-        self.x, self.P = x, 0.5 * (P + P.T)
-        self.reg, self.psi_pdr, self.t_ns = reg, float(psi_pdr), int(t_ns)
+        st = self._state
+        moved = math.hypot(x[E] - st.x[E], x[N] - st.x[N])
+        st.x, st.P = x, 0.5 * (P + P.T)
+        st.reg, st.psi_pdr, st.t_ns = reg, float(psi_pdr), int(t_ns)
         return moved
+
+    def dead_reckon(self, t_ns: int, length_m: float, heading_rad: float) -> None:
+        """An epoch without eq.-1 regressors (the first 2 s): the position moves by the step model's ``length_m``
+        along the PDR heading ``heading_rad`` corrected by the heading error; the covariance stays."""
+        st = self._state
+        psi = heading_rad + float(st.x[DPSI])
+        st.x[E] += length_m * math.cos(psi)
+        st.x[N] += length_m * math.sin(psi)
+        st.psi_pdr, st.t_ns = float(heading_rad), int(t_ns)
 
     # -- GPS ----------------------------------------------------------------------------
     def _since_s(self, t_ns: int, max_s: float) -> float:
-        if self.t_ns is None or not np.all(np.isfinite(self.reg)):
+        if self._state.t_ns is None or not np.all(np.isfinite(self._state.reg)):
             return 0.0
-        since = (t_ns - self.t_ns) * 1e-9
+        since = (t_ns - self._state.t_ns) * 1e-9
         return min(since, max_s) if since > 0.0 else 0.0
 
     def fix_prediction(self, t_ns: int, max_s: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
@@ -268,33 +309,34 @@ class KubrakKf:
         if tau == 0.0:
             H = np.zeros((2, NX))
             H[0, E] = H[1, N] = 1.0
-            pos = self.x[:2].copy()
+            pos = self._state.x[:2].copy()
         else:
-            pos = self.move(self.x, self.reg, self.psi_pdr, tau)[:2]
-            H = self.move_jacobian(self.x, self.reg, self.psi_pdr, tau)[:2]
+            pos = self.move(self._state.x, self._state.reg, self._state.psi_pdr, tau)[:2]
+            H = self.move_jacobian(self._state.x, self._state.reg, self._state.psi_pdr, tau)[:2]
         H[0, BE] = H[1, BN] = 1.0
-        return pos + self.x[BE:BN + 1], H
+        return pos + self._state.x[BE:BN + 1], H
 
     def update_position(self, t_ns: int, east_m: float, north_m: float, sigma_m: float, *,
                         gate: bool = True, frozen=()) -> UpdateResult:
-        sig_before = sigma_max_m((self.P[0, 0], self.P[0, 1], self.P[1, 1]))
+        sig_before = sigma_max_m((self._state.P[0, 0], self._state.P[0, 1], self._state.P[1, 1]))
         if not (math.isfinite(east_m) and math.isfinite(north_m) and sigma_m > 0 and math.isfinite(sigma_m)):
             return UpdateResult(False, (math.nan, math.nan), math.nan, 0.0, sig_before, "not finite")
         pred, H = self.fix_prediction(t_ns)
         innov = np.array([east_m, north_m]) - pred
-        before = self.x[:2].copy()
-        ok, nis, self.x, self.P = kalman_update(self.x, self.P, innov, H, np.eye(2) * sigma_m ** 2,
-                                                self.gate_nis_2d if gate else math.inf, zero_gain_rows=frozen,
-                                                angle_index=DPSI)
-        moved = float(np.hypot(*(self.x[:2] - before))) if ok else 0.0
+        before = self._state.x[:2].copy()
+        st = self._state
+        ok, nis, st.x, st.P = kalman_update(st.x, st.P, innov, H, np.eye(2) * sigma_m ** 2,
+                                            self.gate_nis_2d if gate else math.inf, zero_gain_rows=frozen,
+                                            angle_index=DPSI)
+        moved = float(np.hypot(*(st.x[:2] - before))) if ok else 0.0
         reason = "" if ok else f"innovation gate: NIS {nis:.1f} > {self.gate_nis_2d:.1f}"
         return UpdateResult(ok, (float(innov[0]), float(innov[1])), nis, moved, sig_before, reason)
 
     def velocity_prediction(self) -> tuple[np.ndarray, np.ndarray]:
         """``h(x) = v (cos psi, sin psi)`` of a GPS velocity and its Jacobian."""
-        x, reg = self.x, self.reg
+        x, reg = self._state.x, self._state.reg
         v = self.speed(x, reg)
-        psi = self.psi_pdr + x[DPSI]
+        psi = self._state.psi_pdr + x[DPSI]
         c, s = math.cos(psi), math.sin(psi)
         H = np.zeros((2, NX))
         for row, u, du in ((0, c, -s), (1, s, c)):
@@ -310,7 +352,7 @@ class KubrakKf:
         ``use_speed=False``: the course alone, as the velocity's component across it (``z = 0``; the speed is
         left to the position fixes).  ``speed_sd_m_s``: a further SD of the speed along the course (a scale's
         uncertainty), added to the along-track variance."""
-        if not (self.initialized and np.all(np.isfinite(self.reg)) and math.isfinite(self.psi_pdr)
+        if not (self._state.initialized and np.all(np.isfinite(self._state.reg)) and math.isfinite(self._state.psi_pdr)
                 and math.isfinite(speed_m_s) and sigma_m_s > 0):
             return UpdateResult(False, (math.nan,), math.nan, reason="no epoch or not finite")
         if math.isfinite(course_rad):
@@ -325,10 +367,10 @@ class KubrakKf:
                 pred, z = np.array([self.heading()]), np.array([course_rad])
                 gate, R = self.gate_nis_1d, np.array([[(sigma_m_s / max(speed_m_s, 0.1)) ** 2]])
         elif use_speed:
-            pred = np.array([self.speed(self.x, self.reg)])
+            pred = np.array([self.speed(self._state.x, self._state.reg)])
             H = np.zeros((1, NX))
             H[0, DV] = 1.0
-            H[0, A:C + 1] = self.reg
+            H[0, A:C + 1] = self._state.reg
             z = np.array([speed_m_s])
             gate, R = self.gate_nis_1d, np.array([[sigma_m_s ** 2 + speed_sd_m_s ** 2]])
         else:
@@ -336,7 +378,8 @@ class KubrakKf:
         innov = z - pred
         if math.isfinite(course_rad) and not use_speed:
             innov[0] = wrap_angle(float(innov[0]))
-        ok, nis, self.x, self.P = kalman_update(self.x, self.P, innov, H, R, gate, angle_index=DPSI)
+        st = self._state
+        ok, nis, st.x, st.P = kalman_update(st.x, st.P, innov, H, R, gate, angle_index=DPSI)
         return UpdateResult(ok, tuple(float(v) for v in innov), nis,
                             reason="" if ok else f"velocity gate: NIS {nis:.1f} > {gate:.1f}")
 
@@ -350,25 +393,59 @@ class KubrakKf:
         if self.fix_bias_sd_m <= 0.0 or not (math.isfinite(sigma_m) and sigma_m > 0):
             return
         b2 = self.fix_bias_sd_m ** 2
-        self.x[:2] += self.x[BE:BN + 1]
-        self.x[BE:BN + 1] = 0.0
+        x, P = self._state.x, self._state.P
+        x[:2] += x[BE:BN + 1]
+        x[BE:BN + 1] = 0.0
         for rows in ([E, N], [BE, BN]):
-            self.P[rows, :] = 0.0
-            self.P[:, rows] = 0.0
-        self.P[E, E] = self.P[N, N] = sigma_m ** 2 + b2
-        self.P[BE, BE] = self.P[BN, BN] = b2
-        self.P[E, BE] = self.P[BE, E] = self.P[N, BN] = self.P[BN, N] = -b2
+            P[rows, :] = 0.0
+            P[:, rows] = 0.0
+        P[E, E] = P[N, N] = sigma_m ** 2 + b2
+        P[BE, BE] = P[BN, BN] = b2
+        P[E, BE] = P[BE, E] = P[N, BN] = P[BN, N] = -b2
+
+    def set_position(self, east_m: float, north_m: float) -> None:
+        """Move the position to ``(east_m, north_m)`` (m), its covariance unchanged (a dead-reckoned step while GPS
+        is not trusted: :meth:`core.gnss.base.FixFusion._dead_reckon`)."""
+        self._state.x[E], self._state.x[N] = east_m, north_m
+
+    def restart_position(self, innovation, sigma_m: float) -> None:
+        """Restart the position on a fix: moved by the fix's ``innovation`` (E, N; None: not moved), its correlations
+        with the other states dropped, its per-axis SD the fix's ``sigma_m`` (the anchor, the consistent-stream
+        relock of :class:`core.gnss.base.FixFusion` and of the shadow filter; :meth:`place_on_fix` may follow)."""
+        restart_position_of(self._state.x, self._state.P, innovation, sigma_m)
+
+    def widen_position(self, offset_m) -> None:
+        """Widen the position's covariance by the outer product of ``offset_m`` (E, N) (a relock's disagreement)."""
+        self._state.P[:2, :2] += np.outer(offset_m, offset_m)
+
+    def widen_heading(self, sd_rad: float) -> None:
+        """The heading error's variance at least ``sd_rad^2`` (its correlations kept: a larger diagonal stays a
+        covariance; a relock's heading error, :meth:`KubrakFusion._after_relock`)."""
+        P = self._state.P
+        P[DPSI, DPSI] = max(float(P[DPSI, DPSI]), sd_rad ** 2)
+
+    def revert_coefficients(self, coef: np.ndarray, Pc: np.ndarray, cover: bool) -> None:
+        """The coefficients set to ``coef`` with covariance ``Pc`` (``cover``: at least the current one too, in
+        the PSD sense), uncorrelated with the other states, as a new start of them (the coefficient test's
+        correction, :meth:`KubrakFusion._check_variability`)."""
+        x, P = self._state.x, self._state.P
+        x[COEF] = coef
+        keep = P[COEF, COEF].copy()
+        P[COEF, :] = 0.0
+        P[:, COEF] = 0.0
+        P[COEF, COEF] = covariance_cover(Pc, keep) if cover else Pc
 
     def position_sigma_m(self) -> float:
-        P = self.P
+        P = self._state.P
         return sigma_max_m((P[0, 0], P[0, 1], P[1, 1]))
 
     def align_heading(self, offset_rad: float, sd_rad: float) -> None:
         """Coarse alignment: the heading error set from GPS courses (its correlations dropped, as a new start)."""
-        self.x[DPSI] = wrap_angle(float(offset_rad))
-        self.P[DPSI, :] = 0.0
-        self.P[:, DPSI] = 0.0
-        self.P[DPSI, DPSI] = sd_rad ** 2
+        x, P = self._state.x, self._state.P
+        x[DPSI] = wrap_angle(float(offset_rad))
+        P[DPSI, :] = 0.0
+        P[:, DPSI] = 0.0
+        P[DPSI, DPSI] = sd_rad ** 2
 
 
 class KubrakFusion(FixFusion):
@@ -534,10 +611,7 @@ class KubrakFusion(FixFusion):
             reg = kf.reg if np.all(np.isfinite(kf.reg)) else None
         if reg is None:
             walked = step.length_m
-            psi = step.heading_rad + float(kf.x[DPSI])
-            kf.x[E] += walked * math.cos(psi)
-            kf.x[N] += walked * math.sin(psi)
-            kf.psi_pdr, kf.t_ns = float(step.heading_rad), int(step.t_ns)
+            kf.dead_reckon(step.t_ns, walked, step.heading_rad)
         else:
             walked = kf.epoch(step.t_ns, dt, reg, step.heading_rad)
             self._reg_hist.append((step.t_ns, reg))
@@ -714,12 +788,7 @@ class KubrakFusion(FixFusion):
     def _revert_coefficients(self, coef: np.ndarray, Pc: np.ndarray, cover: bool) -> None:
         """The coefficients set to ``coef`` with covariance ``Pc`` (``cover``: at least the current one too, in
         the PSD sense), uncorrelated with the other states, as a new start of them."""
-        kf = self.kf
-        kf.x[COEF] = coef
-        keep = kf.P[COEF, COEF].copy()
-        kf.P[COEF, :] = 0.0
-        kf.P[:, COEF] = 0.0
-        kf.P[COEF, COEF] = covariance_cover(Pc, keep) if cover else Pc
+        self.kf.revert_coefficients(coef, Pc, cover)
 
     def _placed_on_fix(self, t_ns: int, sigma_m: float, relock: bool = False) -> None:
         if relock:
@@ -731,9 +800,7 @@ class KubrakFusion(FixFusion):
         a larger diagonal stays a covariance), so that the next fixes correct the heading instead of the track
         drifting off again with it (issue #26: on a simulated walk whose phone turned 45 deg in the hand during an
         outage the track was 17-21 m off again 2-7 s after the relock, and the filter needed a second one)."""
-        kf = self.kf
-        angle = relock_heading_error_rad(offset_m, walked_m)
-        kf.P[DPSI, DPSI] = max(float(kf.P[DPSI, DPSI]), angle ** 2)
+        self.kf.widen_heading(relock_heading_error_rad(offset_m, walked_m))
 
     def _filter_rejected(self, t_ns: int, east: float, north: float, sigma_m: float, speed: float,
                          course: float) -> None:
@@ -750,7 +817,7 @@ class KubrakFusion(FixFusion):
                 self.unreliable_until_ns = max(self.unreliable_until_ns, t_ns + self.unreliable_hold_ns // 2)
                 return
             # the base class's consistent-stream relock, for the shadow: it lost the track, not GPS
-            restart_position(sh, res.innovation, sigma_m)
+            sh.restart_position(res.innovation, sigma_m)
             sh.place_on_fix(sigma_m)
             self.shadow_events.append({"t_ns": int(t_ns), "event": "relocked",
                                        "offset_m": float(math.hypot(*res.innovation)),
