@@ -23,10 +23,16 @@ def _error(a: ZuptEKF, b: ZuptEKF) -> np.ndarray:
 
 def _clone(e: ZuptEKF) -> ZuptEKF:
     c = ZuptEKF(e.settings)
-    c.align((0.0, 0.0, 9.8), (0.0, 0.0, 0.0))
-    c.q, c.v, c.p, c.bg, c.ba, c.g = e.q, e.v, e.p, e.bg, e.ba, e.g
-    c._f_prev, c._w_prev = e._f_prev, e._w_prev  # the previous reading of the trapezoidal step
+    c.restore(e.snapshot())  # with the previous reading of the trapezoidal step
     return c
+
+
+def _set(ekf: ZuptEKF, **fields) -> None:
+    """Change fields of the filter's state (:class:`core.foot.ins.InsState`) through snapshot / restore."""
+    st = ekf.snapshot()
+    for k, v in fields.items():
+        setattr(st, k, v)
+    ekf.restore(st)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -34,15 +40,12 @@ def test_transition_matrix_matches_finite_differences(seed):
     rng = np.random.default_rng(seed)
     ekf = ZuptEKF()
     ekf.align((0.3, -0.2, 9.7), (0.0, 0.0, 0.0))
-    ekf.q = quat.normalize(tuple(rng.normal(size=4)))
-    ekf.v = tuple(rng.normal(size=3))
-    ekf.p = tuple(rng.normal(size=3))
-    ekf.bg = tuple(rng.normal(size=3) * 0.01)
-    ekf.ba = tuple(rng.normal(size=3) * 0.1)
+    _set(ekf, q=quat.normalize(tuple(rng.normal(size=4))), v=tuple(rng.normal(size=3)), p=tuple(rng.normal(size=3)),
+         bg=tuple(rng.normal(size=3) * 0.01), ba=tuple(rng.normal(size=3) * 0.1))
     acc = tuple(rng.normal(size=3) * 3 + [0, 0, 9.8])
     gyro = tuple(rng.normal(size=3) * 2)
-    ekf._f_prev = tuple(np.asarray(acc) + rng.normal(size=3) * 0.5)
-    ekf._w_prev = tuple(np.asarray(gyro) + rng.normal(size=3) * 0.1)
+    _set(ekf, f_prev=tuple(np.asarray(acc) + rng.normal(size=3) * 0.5),
+         w_prev=tuple(np.asarray(gyro) + rng.normal(size=3) * 0.1))
     dt = 0.005
     phi = ekf.transition(acc, gyro, dt)[0].copy()
     nominal = _clone(ekf)
@@ -77,26 +80,23 @@ def test_clipped_rate_noise_is_the_bias_columns_of_the_transition():
     rng = np.random.default_rng(4)
     ekf = ZuptEKF()
     ekf.align((0.3, -0.2, 9.7), (0.0, 0.0, 0.0))
-    ekf.q = quat.normalize(tuple(rng.normal(size=4)))
-    ekf.v, ekf.p = tuple(rng.normal(size=3)), tuple(rng.normal(size=3))
+    _set(ekf, q=quat.normalize(tuple(rng.normal(size=4))), v=tuple(rng.normal(size=3)), p=tuple(rng.normal(size=3)))
     acc, gyro = tuple(rng.normal(size=3) * 3 + [0, 0, 9.8]), (9.0, -2.0, 1.0)
-    ekf._f_prev, ekf._w_prev = tuple(np.asarray(acc) + 0.3), (8.0, -1.5, 0.5)
+    _set(ekf, f_prev=tuple(np.asarray(acc) + 0.3), w_prev=(8.0, -1.5, 0.5))
     dt, eps = 0.005, 1e-6
     nominal = _clone(ekf)
     nominal.propagate(acc, gyro, dt)
     G = np.zeros((N_STATES, 3))
     for k in range(3):
         pert = _clone(ekf)
-        pert._w_prev = tuple(np.add(ekf._w_prev, np.eye(3)[k] * eps))
+        _set(pert, w_prev=tuple(np.add(ekf.snapshot().w_prev, np.eye(3)[k] * eps)))
         pert.propagate(acc, tuple(np.add(gyro, np.eye(3)[k] * eps)), dt)
         G[:, k] = _error(pert, nominal) / eps
     assert np.max(np.abs(G[9:])) == 0.0
     var = np.array([1.0, 0.0, 0.25])
     with_var = _clone(ekf)
-    with_var.P = ekf.P.copy()
     with_var.propagate(acc, gyro, dt, var)
     plain = _clone(ekf)
-    plain.P = ekf.P.copy()
     plain.propagate(acc, gyro, dt)
     dQ = with_var.P - plain.P
     expect = (G * var) @ G.T
@@ -104,7 +104,6 @@ def test_clipped_rate_noise_is_the_bias_columns_of_the_transition():
     assert np.linalg.norm(dQ - expect) < 0.05 * np.linalg.norm(expect), np.linalg.norm(dQ - expect)
     assert np.max(np.abs(dQ[9:, :])) == 0.0 and dQ[0, 0] > 0.5 * dt * dt  # an attitude variance of about T^2
     bad = _clone(ekf)
-    bad.P = ekf.P.copy()
     bad.propagate(acc, gyro, dt, (math.nan, 1.0, 1.0))
     assert np.array_equal(bad.P, plain.P)
 
@@ -173,7 +172,7 @@ def test_soft_zupt_noise_scale_and_streaming_equals_batch():
     e1, e3 = ZuptEKF(), ZuptEKF()
     for e in (e1, e3):
         e.align((0.0, 0.0, 9.8), (0.0, 0.0, 0.0))
-        e.v = (0.05, -0.02, 0.01)
+        _set(e, v=(0.05, -0.02, 0.01))
     p_vv = e1.P[3, 3]
     u1, u3 = e1.update_zero_velocity(), e3.update_zero_velocity(noise_scale=3.0)
     v2 = 0.05 ** 2 + 0.02 ** 2 + 0.01 ** 2
@@ -195,9 +194,8 @@ def test_rolling_zupt_jacobian_matches_finite_differences():
     ekf = ZuptEKF(zupt_lever_up_m=0.08)
     ekf.align((0.3, -0.2, 9.7), (0.0, 0.0, 0.0))
     assert np.isclose(np.linalg.norm(ekf.lever_b), 0.08)
-    ekf.q = quat.normalize(tuple(rng.normal(size=4)))
-    ekf.v = tuple(rng.normal(size=3) * 0.1)
-    ekf.bg = tuple(rng.normal(size=3) * 0.01)
+    _set(ekf, q=quat.normalize(tuple(rng.normal(size=4))), v=tuple(rng.normal(size=3) * 0.1),
+         bg=tuple(rng.normal(size=3) * 0.01))
     gyro = tuple(rng.normal(size=3))
     u0, H = ekf.rolling_velocity(gyro)
     h0 = np.asarray(ekf.v) - u0
@@ -206,13 +204,11 @@ def test_rolling_zupt_jacobian_matches_finite_differences():
     for j in range(N_STATES):
         dx = np.zeros(N_STATES)
         dx[j] = eps
-        pert = _clone(ekf)
-        pert.lever_b = ekf.lever_b
+        pert = _clone(ekf)  # with the lever arm
         pert.correct(dx)
         J[:, j] = (np.asarray(pert.v) - pert.rolling_velocity(gyro)[0] - h0) / eps
     assert np.max(np.abs(J - H)) < 1e-5
     # the update pulls the velocity to the rolling one, not to zero
-    ekf.v = tuple(u0)
-    ekf.P = np.eye(N_STATES) * 1e-4
+    _set(ekf, v=tuple(u0), P=np.eye(N_STATES) * 1e-4)
     upd = ekf.update_zero_velocity(gyro_b=gyro)
     assert upd.used and np.max(np.abs(upd.innovation)) < 1e-12

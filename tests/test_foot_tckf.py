@@ -104,7 +104,7 @@ def test_tckf_heading_nees_within_its_chi_square_band():
         assert sum(u.used for u in res.heading_updates) > 10
         dq = quat.multiply(tuple(w.q_wxyz[-1]), quat.conjugate(nav.ins.q))
         e = float(quat.to_rotation_vector_array(np.array(dq))[0][2])
-        if nav._foot_axis[1] == 1.0:  # the heading was given for the body y axis: a quarter turn apart
+        if nav.foot_axis_b[1] == 1.0:  # the heading was given for the body y axis: a quarter turn apart
             e = e - math.pi / 2 if e > 0 else e + math.pi / 2
         nees.append(e * e / nav.ins.P[2, 2])
     assert 0.21 < float(np.mean(nees)) < 2.41, nees

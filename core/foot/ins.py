@@ -69,6 +69,7 @@ shared with the phone's attitude filter.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, replace
 
@@ -148,47 +149,60 @@ def _mv(m, v) -> tuple:
             m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2])
 
 
+@dataclass(slots=True)
+class InsState:
+    """Everything :class:`ZuptEKF` changes as samples come: its only state, made by :meth:`initial`.
+
+    Read and set from outside only through :meth:`ZuptEKF.snapshot` and :meth:`ZuptEKF.restore` (the
+    read-only properties of :class:`ZuptEKF` show single fields).
+    """
+
+    initialized: bool  #: :meth:`ZuptEKF.align` was called
+    #: nominal state: plain float tuples (fast per sample); v, p in ENU (m/s, m), biases in the body frame
+    q: tuple  #: attitude quaternion body -> ENU (w, x, y, z)
+    v: tuple
+    p: tuple
+    bg: tuple  #: gyroscope bias (rad/s)
+    ba: tuple  #: accelerometer bias (m/s^2)
+    P: np.ndarray  #: error-state covariance (15, 15)
+    g: float  #: gravity magnitude (m/s^2)
+    n_rejected: int  #: updates and steps discarded as not finite
+    last_dx: np.ndarray  #: the last error estimate folded in (15,)
+    #: Schmidt "consider" term (see :meth:`ZuptEKF.consider_heading`): cross-covariance (15,) of the error state
+    #: with a past heading error that later measurements are relative to, and that error's variance
+    consider: np.ndarray | None
+    consider_var: float
+    f_prev: tuple  #: the previous accelerometer reading (m/s^2; the trapezoidal mechanisation)
+    w_prev: tuple  #: the previous gyroscope reading (rad/s)
+    lever_b: tuple  #: rolling ZUPT lever arm (body, m): set by :meth:`ZuptEKF.align`
+
+    @classmethod
+    def initial(cls, settings: InsSettings) -> InsState:  # noqa: ARG003 - nothing depends on it before align()
+        return cls(initialized=False, q=(1.0, 0.0, 0.0, 0.0), v=(0.0, 0.0, 0.0), p=(0.0, 0.0, 0.0),
+                   bg=(0.0, 0.0, 0.0), ba=(0.0, 0.0, 0.0), P=np.zeros((N_STATES, N_STATES)),
+                   g=STANDARD_GRAVITY_M_S2, n_rejected=0, last_dx=np.zeros(N_STATES), consider=None,
+                   consider_var=math.nan, f_prev=(0.0, 0.0, STANDARD_GRAVITY_M_S2), w_prev=(0.0, 0.0, 0.0),
+                   lever_b=(0.0, 0.0, 0.0))
+
+
 class ZuptEKF:
     """The INS-EKF-ZUPT kernel (see the module docstring): :meth:`align`, :meth:`propagate`, updates.
 
     ``ZuptEKF(settings)`` or ``ZuptEKF(zupt_noise_m_s=0.02)`` (keyword overrides of :class:`InsSettings`).
+    Settings (frozen), state (:class:`InsState`, in and out through :meth:`snapshot` / :meth:`restore`) and
+    results (:class:`Update`) are kept apart, as in :class:`core.pdr.attitude.AttitudeEKF`.
     """
+
+    _state: InsState
 
     def __init__(self, settings: InsSettings | None = None, **overrides):
         s = settings or InsSettings()
         self.settings = replace(s, **overrides) if overrides else s
         s = self.settings
-        self.initialized = False
-        #: nominal state: plain float tuples (fast per sample); v, p in ENU (m/s, m), biases in the body frame
-        self.q = (1.0, 0.0, 0.0, 0.0)
-        self.v = (0.0, 0.0, 0.0)
-        self.p = (0.0, 0.0, 0.0)
-        self.bg = (0.0, 0.0, 0.0)
-        self.ba = (0.0, 0.0, 0.0)
-        self.P = np.zeros((N_STATES, N_STATES))
-        self.g = STANDARD_GRAVITY_M_S2
-        self.n_rejected = 0
-        self.last_dx = np.zeros(N_STATES)
-        #: Schmidt "consider" term (see :meth:`consider_heading`): cross-covariance (15,) of the error state
-        #: with a past heading error that later measurements are relative to, and that error's variance
-        self.consider = None
-        self.consider_var = math.nan
-        self._f_prev = (0.0, 0.0, STANDARD_GRAVITY_M_S2)
-        self._w_prev = (0.0, 0.0, 0.0)
-        self._phi = np.eye(N_STATES)
-        self._dt_phi = math.nan
-        self._dt_q = math.nan
-        self._q = None
-        self._m_cache = None
+        # constants of the settings
         self._eye3 = np.eye(3)
-        #: replays: the forward run kept for the RTS smoother (:meth:`keep_history`, :meth:`smoothed`)
-        self.history: kalman.RtsSmoother | None = None
-        self._nominal: list = []  # the nominal state (q, v, p, bg, ba) of each closed epoch
-        self._phi_bg = self._phi[BG, BG]  # views of the bias blocks
-        self._phi_ba = self._phi[BA, BA]
         self._r_zupt = np.eye(3) * s.zupt_noise_m_s ** 2
         self._r_zaru = np.eye(3) * s.zaru_noise_rad_s ** 2
-        self.lever_b = (0.0, 0.0, 0.0)  #: rolling ZUPT lever arm (body, m): set by :meth:`align`
         # Q = q1 T + q2 T^2 + q3 T^3: gyro and accelerometer white noise integrated into attitude, velocity
         # and position; Gauss-Markov bias driving noise 2 sd^2 / tau per second
         qv = s.acc_noise_m_s_sqrt_s ** 2
@@ -199,6 +213,56 @@ class ZuptEKF:
         self._q2[VEL, POS] = self._q2[POS, VEL] = np.eye(3) * (qv / 2.0)
         self._q3 = np.zeros((N_STATES, N_STATES))
         self._q3[POS, POS] = np.eye(3) * (qv / 3.0)
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to a new filter's state (not aligned, no history)."""
+        self._state = InsState.initial(self.settings)
+        self._forget_caches()
+        #: replays: the forward run kept for the RTS smoother (:meth:`keep_history`, :meth:`smoothed`)
+        self.history: kalman.RtsSmoother | None = None
+        self._nominal: list = []  # the nominal state (q, v, p) of each closed epoch
+
+    def _forget_caches(self) -> None:
+        """Caches of values the state and settings determine (recomputed on the next use)."""
+        self._phi = np.eye(N_STATES)  # transition buffer (see transition)
+        self._phi_bg = self._phi[BG, BG]  # views of the bias blocks
+        self._phi_ba = self._phi[BA, BA]
+        self._dt_phi = math.nan  # the step the time-step parts of _phi are for
+        self._dt_q = math.nan  # ... and of the process noise _q
+        self._q = None
+        self._m_cache = None  # (q, rotation matrix rows, array) of the last new attitude
+
+    def snapshot(self) -> InsState:
+        """A copy of the whole state (the filter keeps its own)."""
+        return copy.deepcopy(self._state)
+
+    def restore(self, state: InsState) -> None:
+        """Continue from ``state`` (a :meth:`snapshot`, possibly changed; the filter takes a copy)."""
+        if type(state) is not InsState:
+            raise TypeError(f"restore takes an InsState, not {type(state).__name__}")
+        self._state = copy.deepcopy(state)
+
+    # -- read-only views of the state (set it through snapshot() / restore()) -------------------
+    initialized = property(lambda self: self._state.initialized, doc="align() was called.")
+    q = property(lambda self: self._state.q, doc="Attitude quaternion body -> ENU (w, x, y, z).")
+    v = property(lambda self: self._state.v, doc="Velocity (ENU, m/s).")
+    p = property(lambda self: self._state.p, doc="Position (ENU, m).")
+    bg = property(lambda self: self._state.bg, doc="Gyroscope bias (body, rad/s).")
+    ba = property(lambda self: self._state.ba, doc="Accelerometer bias (body, m/s^2).")
+    P = property(lambda self: self._state.P, doc="Error-state covariance (15, 15); do not change it.")
+    g = property(lambda self: self._state.g, doc="Gravity magnitude (m/s^2).")
+    n_rejected = property(lambda self: self._state.n_rejected, doc="Steps and updates discarded as not finite.")
+    lever_b = property(lambda self: self._state.lever_b, doc="Rolling ZUPT lever arm (body, m).")
+
+    def horizontal_position_sd_m(self) -> float:
+        """The larger of the East and North position sd (m)."""
+        P = self._state.P
+        return math.sqrt(max(P[6, 6], P[7, 7], 0.0))
+
+    def heading_variance(self, h_att) -> float:
+        """Variance (rad^2) of the heading error ``h_att . dtheta``."""
+        return float(h_att @ self._state.P[ATT, ATT] @ h_att)
 
     # -- start --------------------------------------------------------------------------------
     def align(self, acc_mean_b, gyro_mean_b, *, heading_axis_b=None, heading_rad: float = 0.0,
@@ -206,6 +270,7 @@ class ZuptEKF:
         """Initial alignment from a still period: tilt from the mean specific force, gyroscope bias from
         the mean rate, heading either from the magnetometer (``mag_mean_b``: magnetic north is +y) or
         ``heading_rad`` for the body axis ``heading_axis_b`` (default: the most horizontal body axis)."""
+        st = self._state
         s = self.settings
         f = np.asarray(acc_mean_b, dtype=float)
         if mag_mean_b is not None:
@@ -216,20 +281,20 @@ class ZuptEKF:
             # TRIAD with a pseudo "north" along the chosen axis, then turned to the wanted heading
             q0 = quat.from_two_vectors_enu(tuple(f), tuple(axis))
             q = quat.multiply(quat.from_axis_angle((0.0, 0.0, 1.0), heading_rad - math.pi / 2), q0)
-        self.q = quat.normalize(q)
-        self.g = float(np.linalg.norm(f)) if math.isnan(s.gravity_m_s2) else s.gravity_m_s2
-        self.v = (0.0, 0.0, 0.0)
-        self.p = (0.0, 0.0, 0.0)
-        self.bg = tuple(float(x) for x in gyro_mean_b)
-        self.ba = (0.0, 0.0, 0.0)
+        st.q = quat.normalize(q)
+        st.g = float(np.linalg.norm(f)) if math.isnan(s.gravity_m_s2) else s.gravity_m_s2
+        st.v = (0.0, 0.0, 0.0)
+        st.p = (0.0, 0.0, 0.0)
+        st.bg = tuple(float(x) for x in gyro_mean_b)
+        st.ba = (0.0, 0.0, 0.0)
         h = s.zupt_lever_up_m
-        self.lever_b = tuple(float(x) for x in f * (h / np.linalg.norm(f))) if h else (0.0, 0.0, 0.0)
-        self._f_prev = tuple(float(x) for x in f)  # the previous reading (trapezoidal mechanisation)
-        self._w_prev = self.bg
-        self.P = np.diag([s.initial_tilt_sd_rad ** 2] * 2 + [s.initial_heading_sd_rad ** 2]
-                         + [s.initial_velocity_sd_m_s ** 2] * 3 + [0.0] * 3
-                         + [s.gyro_bias_sd_rad_s ** 2] * 3 + [s.acc_bias_sd_m_s2 ** 2] * 3)
-        self.initialized = True
+        st.lever_b = tuple(float(x) for x in f * (h / np.linalg.norm(f))) if h else (0.0, 0.0, 0.0)
+        st.f_prev = tuple(float(x) for x in f)  # the previous reading (trapezoidal mechanisation)
+        st.w_prev = st.bg
+        st.P = np.diag([s.initial_tilt_sd_rad ** 2] * 2 + [s.initial_heading_sd_rad ** 2]
+                       + [s.initial_velocity_sd_m_s ** 2] * 3 + [0.0] * 3
+                       + [s.gyro_bias_sd_rad_s ** 2] * 3 + [s.acc_bias_sd_m_s2 ** 2] * 3)
+        st.initialized = True
         if self.history is not None:
             self.history.start()
             self._nominal = []
@@ -241,6 +306,11 @@ class ZuptEKF:
         self.history = kalman.RtsSmoother(N_STATES, ATT)
         self._nominal = []
 
+    def drop_history(self) -> None:
+        """Stop keeping the history (the smoother is then not run)."""
+        self.history = None
+        self._nominal = []
+
     @property
     def epoch(self) -> int:
         """Index of the current epoch of the history (the state since the last prediction); -1 without one."""
@@ -249,45 +319,48 @@ class ZuptEKF:
     def smoothed(self):
         """The RTS-smoothed state of every epoch (:class:`core.kalman.RtsSmoother`): ``(q (N, 4), v (N, 3),
         p (N, 3), P (N, 15, 15))``, each epoch's nominal state with its smoothed error folded in."""
+        st = self._state
         if self.history is None or not self.history.started:
             raise ValueError("no history: call keep_history() before align()")
-        e, Ps = self.history.smooth(self.P)
-        nom = self._nominal + [(self.q, self.v, self.p)]
+        e, Ps = self.history.smooth(st.P)
+        nom = self._nominal + [(st.q, st.v, st.p)]
         q = np.array([kalman.inject_rotation(x[0], e[j, ATT]) for j, x in enumerate(nom)])
         v = np.array([x[1] for x in nom]) + e[:, VEL]
         p = np.array([x[2] for x in nom]) + e[:, POS]
         return q, v, p, Ps
 
     def _close_epoch(self, phi, Q) -> None:
-        self.history.predict(self.P, phi, Q)
-        self._nominal.append((self.q, self.v, self.p))
+        st = self._state
+        self.history.predict(st.P, phi, Q)
+        self._nominal.append((st.q, st.v, st.p))
 
     # -- prediction ---------------------------------------------------------------------------
     def transition(self, acc_b, gyro_b, dt_s: float):
         """``(Phi, q_new, v_new, p_new)`` of one mechanisation step, without changing the state.
 
-        Second order (trapezoidal) between the previous reading (``_f_prev``, ``_w_prev``, taken with
+        Second order (trapezoidal) between the previous reading (the state's ``f_prev``, ``w_prev``, taken with
         the attitude of its own time, ``q``) and this one (taken with the new attitude).  ``Phi`` is a
         buffer reused by the next call (copy it to keep it).
         """
-        bg, ba, v, p = self.bg, self.ba, self.v, self.p
-        wp = self._w_prev
-        q_new = quat.normalize(quat.multiply(self.q, quat.from_rotation_vector(
+        st = self._state
+        bg, ba, v, p = st.bg, st.ba, st.v, st.p
+        wp = st.w_prev
+        q_new = quat.normalize(quat.multiply(st.q, quat.from_rotation_vector(
             ((0.5 * (gyro_b[0] + wp[0]) - bg[0]) * dt_s, (0.5 * (gyro_b[1] + wp[1]) - bg[1]) * dt_s,
              (0.5 * (gyro_b[2] + wp[2]) - bg[2]) * dt_s))))
         c = self._m_cache  # the previous step's new attitude is this step's old one (unless corrected since)
-        if c is not None and c[0] is self.q:
+        if c is not None and c[0] is st.q:
             m0, mat0 = c[1], c[2]
         else:
-            m0 = quat.to_matrix(self.q)  # attitude at the previous reading
+            m0 = quat.to_matrix(st.q)  # attitude at the previous reading
             mat0 = np.array(m0)
         m1 = quat.to_matrix(q_new)  # ... and at this one
         mat1 = np.array(m1)
         self._m_cache = (q_new, m1, mat1)
-        fp = self._f_prev
+        fp = st.f_prev
         f0 = _mv(m0, (fp[0] - ba[0], fp[1] - ba[1], fp[2] - ba[2]))
         f1 = _mv(m1, (acc_b[0] - ba[0], acc_b[1] - ba[1], acc_b[2] - ba[2]))
-        g = self.g
+        g = st.g
         a0 = (f0[0], f0[1], f0[2] - g)
         a1 = (f1[0], f1[1], f1[2] - g)
         h = dt_s * dt_s / 6.0
@@ -329,18 +402,19 @@ class ZuptEKF:
         columns of ``Phi`` without the bias rows (attitude ``-R T``, velocity ``[f1]x R T^2 / 2``, position
         ``[f1]x R T^3 / 6``; module docstring).  A variance that is not finite and >= 0 is ignored.
         """
+        st = self._state
         s = self.settings
         if not (dt_s > 0):
             return
         if dt_s > s.max_dt_s:  # a gap: hold the state, let the uncertainty grow
             if self.history is not None:
                 self._close_epoch(np.eye(N_STATES), self._q1 * dt_s)
-            self.P = self.P + self._q1 * dt_s
-            self._f_prev, self._w_prev = tuple(acc_b), tuple(gyro_b)
+            st.P = st.P + self._q1 * dt_s
+            st.f_prev, st.w_prev = tuple(acc_b), tuple(gyro_b)
             return
         phi, q_new, v_new, p_new = self.transition(acc_b, gyro_b, dt_s)
         if not all(map(math.isfinite, v_new + p_new + q_new)):
-            self.n_rejected += 1
+            st.n_rejected += 1
             return
         Q = self.process_noise(dt_s)
         if rate_var_rad2_s2 is not None:
@@ -351,36 +425,38 @@ class ZuptEKF:
                 Q[0:9, 0:9] += (G * var) @ G.T
         if self.history is not None:
             self._close_epoch(phi, Q)
-        self.P = phi @ self.P @ phi.T + Q
-        if self.consider is not None:
-            self.consider = phi @ self.consider
-        self.q, self.v, self.p = q_new, v_new, p_new
-        self._f_prev, self._w_prev = tuple(acc_b), tuple(gyro_b)
+        st.P = phi @ st.P @ phi.T + Q
+        if st.consider is not None:
+            st.consider = phi @ st.consider
+        st.q, st.v, st.p = q_new, v_new, p_new
+        st.f_prev, st.w_prev = tuple(acc_b), tuple(gyro_b)
 
     # -- updates ------------------------------------------------------------------------------
     def _update(self, kind: str, y: np.ndarray, H, Rm: np.ndarray) -> Update:
         """One update through the shared kernel (:func:`core.kalman.correct`; ``H`` an array, or the slice of
         the states it selects), the error folded in and reset (:func:`core.kalman.reset_covariance`)."""
-        c = kalman.correct(self.P, y, H, Rm)
+        st = self._state
+        c = kalman.correct(st.P, y, H, Rm)
         if not c.used:
-            self.n_rejected += 1
+            st.n_rejected += 1
             return Update(kind, False, tuple(float(v) for v in y), c.nis, len(y))
-        if self.consider is not None:  # the considered error is not estimated; its correlation shrinks
-            hc = self.consider[H] if isinstance(H, slice) else H @ self.consider
-            self.consider = self.consider - c.K @ hc
+        if st.consider is not None:  # the considered error is not estimated; its correlation shrinks
+            hc = st.consider[H] if isinstance(H, slice) else H @ st.consider
+            st.consider = st.consider - c.K @ hc
         return self._fold(kind, y, c.dx, c.P, c.nis)
 
     def _fold(self, kind: str, y: np.ndarray, dx: np.ndarray, P_new: np.ndarray, nis: float) -> Update:
         """Fold a used update's ``dx`` into the nominal state and reset the error (:func:`core.kalman.reset_covariance`;
         the consider term's cross-covariance goes through the same reset Jacobian)."""
+        st = self._state
         G = kalman.reset_jacobian(dx[ATT], N_STATES, ATT)
         self.correct(dx)
         if self.history is not None:
             self.history.inject(dx, G)
-        self.P = kalman.reset_covariance(P_new, dx[ATT], ATT, G)
-        if self.consider is not None:
-            self.consider = G @ self.consider
-        self.last_dx = dx
+        st.P = kalman.reset_covariance(P_new, dx[ATT], ATT, G)
+        if st.consider is not None:
+            st.consider = G @ st.consider
+        st.last_dx = dx
         return Update(kind, True, tuple(float(v) for v in y), nis, len(y))
 
     def _update_block(self, kind: str, y: np.ndarray, sl: slice, Rm: np.ndarray) -> Update:
@@ -389,40 +465,43 @@ class ZuptEKF:
 
     def correct(self, dx) -> None:
         """Fold an error estimate into the nominal state (and reset it to zero)."""
-        self.q = kalman.inject_rotation(self.q, dx[ATT])
+        st = self._state
+        st.q = kalman.inject_rotation(st.q, dx[ATT])
         d = dx.tolist()
-        v, p, bg, ba = self.v, self.p, self.bg, self.ba
-        self.v = (v[0] + d[3], v[1] + d[4], v[2] + d[5])
-        self.p = (p[0] + d[6], p[1] + d[7], p[2] + d[8])
-        self.bg = (bg[0] + d[9], bg[1] + d[10], bg[2] + d[11])
-        self.ba = (ba[0] + d[12], ba[1] + d[13], ba[2] + d[14])
+        v, p, bg, ba = st.v, st.p, st.bg, st.ba
+        st.v = (v[0] + d[3], v[1] + d[4], v[2] + d[5])
+        st.p = (p[0] + d[6], p[1] + d[7], p[2] + d[8])
+        st.bg = (bg[0] + d[9], bg[1] + d[10], bg[2] + d[11])
+        st.ba = (ba[0] + d[12], ba[1] + d[13], ba[2] + d[14])
 
     def update_zero_velocity(self, noise_scale: float = 1.0, gyro_b=None) -> Update:
         """eq. 9: ``z = 0`` during stance (``H = [0 I 0 0 0]``); ``noise_scale`` multiplies ``sigma_z``
         (a soft ZUPT: less weight where the detector is less sure).  With ``gyro_b`` (the rate reading) and
         a rolling lever arm or rate noise in the settings: the rolling ZUPT of the module docstring."""
+        st = self._state
         s = self.settings
         r = self._r_zupt if noise_scale == 1.0 else self._r_zupt * (noise_scale * noise_scale)
         if gyro_b is None or not (s.zupt_lever_up_m or s.zupt_rate_lever_m):
-            y = np.array((-self.v[0], -self.v[1], -self.v[2]))
+            y = np.array((-st.v[0], -st.v[1], -st.v[2]))
             return self._update_block("zupt", y, VEL, r)
-        bg = self.bg
+        bg = st.bg
         w = (gyro_b[0] - bg[0], gyro_b[1] - bg[1], gyro_b[2] - bg[2])
         if s.zupt_rate_lever_m:
             r = r + np.eye(3) * ((s.zupt_rate_lever_m * math.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)) ** 2)
         if not s.zupt_lever_up_m:
-            y = np.array((-self.v[0], -self.v[1], -self.v[2]))
+            y = np.array((-st.v[0], -st.v[1], -st.v[2]))
             return self._update_block("zupt", y, VEL, r)
         u, H = self.rolling_velocity(gyro_b)
-        return self._update("zupt", u - np.asarray(self.v), H, r)
+        return self._update("zupt", u - np.asarray(st.v), H, r)
 
     def rolling_velocity(self, gyro_b):
         """Rolling ZUPT: the sensor's velocity ``u = R (w x r_b)`` (ENU, m/s) for the rate reading ``gyro_b``,
         and the Jacobian ``H`` (3 x 15) of ``v - R (w x r_b)`` w.r.t. the error state (module docstring)."""
-        bg = self.bg
+        st = self._state
+        bg = st.bg
         w = (gyro_b[0] - bg[0], gyro_b[1] - bg[1], gyro_b[2] - bg[2])
         m = self.matrix()
-        lb = np.asarray(self.lever_b)
+        lb = np.asarray(st.lever_b)
         u = m @ np.cross(w, lb)
         H = np.zeros((3, N_STATES))
         H[:, ATT] = skew(u)
@@ -433,7 +512,8 @@ class ZuptEKF:
     def update_zero_rate(self, gyro_b) -> Update:
         """Zero angular rate during stance: the reading is the bias (``H = [0 0 0 I 0]``).  Not used (not a
         rejection: ``used`` False, NIS nan) where an axis of ``w_meas - b_g`` exceeds ``zaru_gate_rad_s``."""
-        y = np.array((gyro_b[0] - self.bg[0], gyro_b[1] - self.bg[1], gyro_b[2] - self.bg[2]))
+        st = self._state
+        y = np.array((gyro_b[0] - st.bg[0], gyro_b[1] - st.bg[1], gyro_b[2] - st.bg[2]))
         g = self.settings.zaru_gate_rad_s
         if not (abs(y[0]) <= g and abs(y[1]) <= g and abs(y[2]) <= g):
             return Update("zaru", False, tuple(float(v) for v in y), math.nan, 3)
@@ -450,34 +530,36 @@ class ZuptEKF:
         as a constant that later measurements are relative to (:meth:`update_heading_relative`): a Schmidt
         consider parameter, never estimated, its cross-covariance with the error state carried."""
         h = np.asarray(h_att, dtype=float)
-        self.consider = self.P[:, ATT] @ h
-        self.consider_var = float(h @ self.P[ATT, ATT] @ h) + float(extra_var_rad2)
+        st = self._state
+        st.consider = st.P[:, ATT] @ h
+        st.consider_var = self.heading_variance(h) + float(extra_var_rad2)
 
     def update_heading_relative(self, innovation_rad: float, h_att, variance_rad2: float) -> Update:
         """A heading measurement relative to the considered one: ``innovation = h_att . dtheta - c + v``
         (Schmidt-Kalman: ``c`` is not estimated, the gain and covariance account for it)."""
-        if self.consider is None:
+        st = self._state
+        if st.consider is None:
             return self.update_heading(innovation_rad, h_att, variance_rad2)
         h = np.asarray(h_att, dtype=float)
         y = np.array([float(innovation_rad)])
-        ph = self.P[:, ATT] @ h - self.consider  # P_a H_a^T (state rows), H_a = [h, -1]
-        hc = float(h @ self.consider[ATT]) - self.consider_var  # H_a P_a[:, c]
-        s_ = float(h @ ph[ATT]) - float(h @ self.consider[ATT]) + self.consider_var + float(variance_rad2)
+        ph = st.P[:, ATT] @ h - st.consider  # P_a H_a^T (state rows), H_a = [h, -1]
+        hc = float(h @ st.consider[ATT]) - st.consider_var  # H_a P_a[:, c]
+        s_ = float(h @ ph[ATT]) - float(h @ st.consider[ATT]) + st.consider_var + float(variance_rad2)
         if not s_ > 0:
-            self.n_rejected += 1
+            st.n_rejected += 1
             return Update("heading", False, (float(y[0]),), math.nan, 1)
         K = (ph / s_).reshape(-1, 1)
-        P_new = self.P - s_ * (K @ K.T)
+        P_new = st.P - s_ * (K @ K.T)
         dx = K[:, 0] * float(y[0])
         if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(P_new))):
-            self.n_rejected += 1
+            st.n_rejected += 1
             return Update("heading", False, (float(y[0]),), math.nan, 1)
-        self.consider = self.consider - K[:, 0] * hc
+        st.consider = st.consider - K[:, 0] * hc
         return self._fold("heading", y, dx, P_new, float(y[0] * y[0] / s_))
 
     # -- views --------------------------------------------------------------------------------
     def matrix(self) -> np.ndarray:
-        return np.array(quat.to_matrix(self.q))
+        return np.array(quat.to_matrix(self._state.q))
 
     def heading_of(self, axis_b) -> float:
         """Azimuth (rad, CCW from East) of a body axis in the navigation frame."""

@@ -277,6 +277,7 @@ class FootNavigator:
         self._gyro_prev = None  # the rate reading of the previous step (clipped-rate noise)
         self._prev_stance = False
         self._stance_start: int | None = None
+        self._stance_end: int | None = None  # last sample of the current (or last) stance
         self._align = [np.zeros(3), np.zeros(3), 0, None, None]  # sum acc, sum gyro, n, t_first, t_last
         self._short_stances = 0  # stances before the alignment too short for it (see align_fallback_stances)
         self._held: list = []  # samples of the alignment stance (t_ns) waiting for their state
@@ -355,11 +356,11 @@ class FootNavigator:
         self.out_v.append(ins.v)
         self.out_q.append(ins.q)
         self.out_st.append(bool(stance))
-        self.out_sd.append(math.sqrt(max(ins.P[6, 6], ins.P[7, 7], 0.0)))
+        self.out_sd.append(ins.horizontal_position_sd_m())
         if ins.history is not None:
             self.out_epoch.append(ins.epoch)
             if len(self.out_epoch) > self.settings.rts_max_samples:
-                ins.history = None
+                ins.drop_history()
                 self.out_epoch = []
                 self.counters["smoother_skipped_too_long"] = 1
 
@@ -448,6 +449,11 @@ class FootNavigator:
         self._last_stride_pos = np.array(self.ins.p)
         self.strides.append(Stride(a[3], a[4], tuple(self.ins.p), math.nan, math.nan, math.nan, ""))
 
+    @property
+    def foot_axis_b(self):
+        """The body axis the foot's heading is of (the most horizontal at the alignment); None before it."""
+        return self._foot_axis
+
     @staticmethod
     def _azimuth(v) -> float:
         return math.atan2(v[1], v[0])
@@ -494,7 +500,7 @@ class FootNavigator:
             fwd_n = ins.matrix() @ self._foot_axis
             h = heading_jacobian(fwd_n)  # eq. 22's first row in ENU: the tilt-coupled heading of the foot
             started = self.course.started
-            cu = self.course.update(t1, psi_w, d[0], d[1], prior_var_rad2=float(h @ ins.P[0:3, 0:3] @ h))
+            cu = self.course.update(t1, psi_w, d[0], d[1], prior_var_rad2=ins.heading_variance(h))
             self.course_updates.append(cu)
             if self.course.started and not started:
                 # the waist-to-course offset holds the INS heading error of the boresight strides: every

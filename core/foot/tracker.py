@@ -248,9 +248,9 @@ class FootTracker:
     def heading_rad(self) -> float:
         """Heading of the foot's forward axis (rad, CCW from East); nan before the alignment."""
         nav = self.nav
-        if not nav.ins.initialized or nav._foot_axis is None:
+        if not nav.ins.initialized or nav.foot_axis_b is None:
             return math.nan
-        return float(nav.ins.heading_of(nav._foot_axis))
+        return float(nav.ins.heading_of(nav.foot_axis_b))
 
     def labels(self) -> tuple[str, ...]:
         """What the user should know now (like the hand-held pipeline's degraded-mode labels)."""
