@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from core.foot.course import CourseErrorFilter
+from core.foot.course import CourseErrorFilter, CourseVerdict
 from core.foot.ins import InsSettings
 from core.foot.navigator import FootNavigator, FootSettings
 from desktop.foot_simulator import footprints, simulate_foot
@@ -57,7 +57,8 @@ def test_course_error_filter_equations():
     assert f.update(0, 0.3, 1.0, 0.0).reason == "turning"
     # boresight stride: waist 0.3 rad, course 0 -> offset 0.3
     u = f.update(0, 0.3, 1.0, 0.0)
-    assert u.reason == "boresight" and math.isclose(f.offset_rad, 0.3)
+    assert u.verdict is CourseVerdict.BORESIGHT and u.reason == "boresight"  # the enum decides, its text is shown
+    assert math.isclose(f.offset_rad, 0.3)
     f.update(1 * ns, 0.3, 1.0, 0.0)  # z = 0 exactly
     x0, p0 = f.x, f.p
     f.predict(11 * ns)  # eq. 15 over 10 s

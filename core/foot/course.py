@@ -24,6 +24,7 @@ NIS exceeds ``gate_nis`` is not used.
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, replace
 
@@ -59,6 +60,21 @@ class CourseSettings:
     handover_strides: int = 1
 
 
+class CourseVerdict(enum.Enum):
+    """What one stride's course measurement did (:attr:`CourseUpdate.verdict`); the text is its value."""
+
+    USED = "used"
+    NO_WAIST_HEADING = "no waist heading"  #: the waist magnetometer gave no heading over the stride
+    SHORT_STRIDE = "short stride"  #: shorter than ``min_stride_m``
+    TURNING = "turning"  #: course or waist heading turned more than ``max_turn_rad`` (or no previous stride)
+    BORESIGHT = "boresight"  #: one of the strides of the waist-to-course offset, before the filter starts
+    GATED = "gated"  #: its NIS beyond ``gate_nis``
+
+
+#: the verdicts of a stride the gates refused (as against one without a waist heading, or the boresight)
+GATED_VERDICTS = frozenset({CourseVerdict.SHORT_STRIDE, CourseVerdict.TURNING, CourseVerdict.GATED})
+
+
 @dataclass(frozen=True)
 class CourseUpdate:
     """One stride's course measurement and what the filter did with it."""
@@ -66,12 +82,17 @@ class CourseUpdate:
     t_ns: int
     z_rad: float  #: eq. 18 minus the offset (nan when there was none)
     used: bool
-    reason: str
+    verdict: CourseVerdict
     x_rad: float  #: estimate after the update
     p_rad2: float  #: its variance (eq. 25 hands it to the second filter)
     nis: float = math.nan
     #: this update completes a hand-over: ``x_rad, p_rad2`` go to the second filter, then :meth:`restart`
     handover: bool = False
+
+    @property
+    def reason(self) -> str:
+        """The verdict in words."""
+        return self.verdict.value
 
 
 class CourseErrorFilter:
@@ -125,11 +146,11 @@ class CourseErrorFilter:
         if self.started:
             self.predict(t_ns)
         if not math.isfinite(waist_heading_rad):
-            return CourseUpdate(t_ns, math.nan, False, "no waist heading", self.x, self.p)
+            return CourseUpdate(t_ns, math.nan, False, CourseVerdict.NO_WAIST_HEADING, self.x, self.p)
         if length < s.min_stride_m:
-            return CourseUpdate(t_ns, math.nan, False, "short stride", self.x, self.p)
+            return CourseUpdate(t_ns, math.nan, False, CourseVerdict.SHORT_STRIDE, self.x, self.p)
         if max(turn_c, turn_w) > s.max_turn_rad:
-            return CourseUpdate(t_ns, math.nan, False, "turning", self.x, self.p)
+            return CourseUpdate(t_ns, math.nan, False, CourseVerdict.TURNING, self.x, self.p)
         z_raw = wrap_angle(waist_heading_rad - course)  # eq. 18
         if not self.started:
             self._bore.append(z_raw)
@@ -137,7 +158,7 @@ class CourseErrorFilter:
                 a = np.asarray(self._bore)
                 self.offset_rad = math.atan2(float(np.mean(np.sin(a))), float(np.mean(np.cos(a))))
                 self.t_ns = t_ns
-            return CourseUpdate(t_ns, math.nan, False, "boresight", self.x, self.p)
+            return CourseUpdate(t_ns, math.nan, False, CourseVerdict.BORESIGHT, self.x, self.p)
         z = wrap_angle(z_raw - self.offset_rad)
         r = s.gamma * s.mag_heading_sd_rad ** 2  # eq. 19
         if self.fresh:  # no information: the gate predicts z = 0 with the second filter's variance
@@ -147,7 +168,7 @@ class CourseErrorFilter:
             y = wrap_angle(z - self.x)
             nis = y * y / (self.p + r)
         if nis > s.gate_nis:
-            return CourseUpdate(t_ns, z, False, "gated", self.x, self.p, nis)
+            return CourseUpdate(t_ns, z, False, CourseVerdict.GATED, self.x, self.p, nis)
         if self.fresh:  # eq. 16 with an uninformative prior
             self.x, self.p, self.fresh = z, r, False
         else:
@@ -155,7 +176,7 @@ class CourseErrorFilter:
             self.x += k * y
             self.p *= 1.0 - k
         self.n_since_handover += 1
-        return CourseUpdate(t_ns, z, True, "used", self.x, self.p, nis,
+        return CourseUpdate(t_ns, z, True, CourseVerdict.USED, self.x, self.p, nis,
                             handover=self.n_since_handover >= s.handover_strides)
 
 

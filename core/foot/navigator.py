@@ -49,7 +49,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from core.conventions import ACC, GYRO, MAG, wrap_angle
-from core.foot.course import CourseErrorFilter, CourseSettings, body_heading
+from core.foot.course import GATED_VERDICTS, CourseErrorFilter, CourseSettings, CourseVerdict, body_heading
 from core.foot.devices import stream_name
 from core.foot.ins import InsSettings, ZuptEKF, horizontal_axis
 from core.foot.saturation import GyroClipRepair
@@ -209,6 +209,17 @@ class FootResult:
         }
 
 
+@dataclass(slots=True)
+class _AlignSums:
+    """The still period collected for the initial alignment (:meth:`FootNavigator._align_step`)."""
+
+    sum_acc_m_s2: np.ndarray = field(default_factory=lambda: np.zeros(3))  #: sum of its specific forces
+    sum_gyro_rad_s: np.ndarray = field(default_factory=lambda: np.zeros(3))  #: sum of its rates
+    n: int = 0  #: its stance samples
+    t_first_ns: int | None = None  #: its first stance sample
+    t_last_ns: int | None = None  #: its last stance sample
+
+
 class _Window:
     """Timestamped readings kept until a window consumes them (mean over ``(t0, t1]``)."""
 
@@ -278,7 +289,7 @@ class FootNavigator:
         self._prev_stance = False
         self._stance_start: int | None = None
         self._stance_end: int | None = None  # last sample of the current (or last) stance
-        self._align = [np.zeros(3), np.zeros(3), 0, None, None]  # sum acc, sum gyro, n, t_first, t_last
+        self._align = _AlignSums()
         self._short_stances = 0  # stances before the alignment too short for it (see align_fallback_stances)
         self._held: list = []  # samples of the alignment stance (t_ns) waiting for their state
         self._gap: list = []  # samples of a gap in the alignment stance (t, acc, gyro, stance)
@@ -380,25 +391,25 @@ class FootNavigator:
         a = self._align
         s = self.settings
         if stance:
-            if a[2] == 0:
-                a[3] = t
-            a[0] += acc
-            a[1] += gyro
-            a[2] += 1
-            a[4] = t
+            if a.n == 0:
+                a.t_first_ns = t
+            a.sum_acc_m_s2 += acc
+            a.sum_gyro_rad_s += gyro
+            a.n += 1
+            a.t_last_ns = t
             for g in self._gap:  # a short gap inside the still period: its samples count as still
                 self._held.append(g[0])
             self._gap = []
             self._held.append(t)
             return
-        if a[2] == 0:
+        if a.n == 0:
             self._emit_nan(t)
             return
         self._gap.append((t, acc, gyro, stance))
-        if (t - a[4]) * 1e-9 <= s.align_max_gap_s:
+        if (t - a.t_last_ns) * 1e-9 <= s.align_max_gap_s:
             return
         gap, self._gap = self._gap, []
-        dur = (a[4] - a[3]) * 1e-9
+        dur = (a.t_last_ns - a.t_first_ns) * 1e-9
         short_ok = self._short_stances >= s.align_fallback_stances and dur >= s.align_fallback_min_s
         if dur >= s.align_min_s or short_ok:
             if dur < s.align_min_s:
@@ -407,10 +418,10 @@ class FootNavigator:
             for th in self._held:
                 self._emit(th, True)
             self._held = []
-            self._t_prev = a[4]
+            self._t_prev = a.t_last_ns
             self._prev_stance = False  # the alignment stance is already the first stride
-            self._stance_start = a[3]
-            self._stance_end = a[4]
+            self._stance_start = a.t_first_ns
+            self._stance_end = a.t_last_ns
             for g in gap:  # the motion that ended the still period, from its first sample
                 self._sample(*g)
             return
@@ -420,34 +431,34 @@ class FootNavigator:
         for th in self._held:
             self._emit_nan(th)
         self._held = []
-        self._align = [np.zeros(3), np.zeros(3), 0, None, None]
+        self._align = _AlignSums()
         for g in gap:
             self._emit_nan(g[0])
 
     def _do_align(self) -> None:
         s = self.settings
         a = self._align
-        acc_m, gyro_m = a[0] / a[2], a[1] / a[2]
+        acc_m, gyro_m = a.sum_acc_m_s2 / a.n, a.sum_gyro_rad_s / a.n
         up_b = acc_m / np.linalg.norm(acc_m)
         self._foot_axis = horizontal_axis(up_b)
-        mag = self._foot_mag.mean(a[3] - 1, a[4]) if (self.names[MAG] is not None) else None
+        mag = self._foot_mag.mean(a.t_first_ns - 1, a.t_last_ns) if (self.names[MAG] is not None) else None
         use_mag = mag is not None and s.initial_heading_from_mag
-        if (a[4] - a[3]) * 1e-9 < s.align_gyro_bias_min_s:
+        if (a.t_last_ns - a.t_first_ns) * 1e-9 < s.align_gyro_bias_min_s:
             gyro_m = np.zeros(3)
         self.ins.align(acc_m, gyro_m, heading_axis_b=self._foot_axis, heading_rad=s.initial_heading_rad,
                        mag_mean_b=mag if use_mag else None)
         if mag is not None:
             self._mag_ref_rad = self._azimuth(self.ins.matrix() @ np.asarray(mag))
-        wacc = self._waist_acc.mean(a[3] - 1, a[4])
-        wmag = self._waist_mag.mean(a[3] - 1, a[4])
+        wacc = self._waist_acc.mean(a.t_first_ns - 1, a.t_last_ns)
+        wmag = self._waist_mag.mean(a.t_first_ns - 1, a.t_last_ns)
         if wacc is not None and wmag is not None:
             wup = np.asarray(wacc) / np.linalg.norm(wacc)
             self._waist_axis = horizontal_axis(wup)
             psi_w = body_heading(wacc, wmag, self._waist_axis)
             self._course_c0 = wrap_angle(self.ins.heading_of(self._foot_axis) - psi_w)
-        self._last_stride_t = a[4]
+        self._last_stride_t = a.t_last_ns
         self._last_stride_pos = np.array(self.ins.p)
-        self.strides.append(Stride(a[3], a[4], tuple(self.ins.p), math.nan, math.nan, math.nan, ""))
+        self.strides.append(Stride(a.t_first_ns, a.t_last_ns, tuple(self.ins.p), math.nan, math.nan, math.nan, ""))
 
     @property
     def foot_axis_b(self):
@@ -487,15 +498,15 @@ class FootNavigator:
             else:
                 self.counters["aid_unavailable"] += 1
         elif s.aid == "course":
-            reason = self._stride_gate(length, course, psi_w)
-            if reason == "" and math.isfinite(self._course_c0):
+            refused = self._stride_gate(length, course, psi_w)
+            if refused is None and math.isfinite(self._course_c0):
                 fwd_n = ins.matrix() @ self._foot_axis
                 innov = wrap_angle(psi_w + self._course_c0 - self._azimuth(fwd_n))
                 u = ins.update_heading(innov, heading_jacobian(fwd_n), s.course_heading_sd_rad ** 2)
                 self.heading_updates.append(u)
                 aid, nis = "course", u.nis
             else:
-                self.counters["aid_unavailable" if reason in ("", "no waist heading") else "aid_gated"] += 1
+                self.counters["aid_gated" if refused in GATED_VERDICTS else "aid_unavailable"] += 1
         elif s.aid == "tckf":
             fwd_n = ins.matrix() @ self._foot_axis
             h = heading_jacobian(fwd_n)  # eq. 22's first row in ENU: the tilt-coupled heading of the foot
@@ -513,9 +524,8 @@ class FootNavigator:
                 self.heading_updates.append(u)
                 self.course.restart()
                 aid, innov, nis = "tckf", cu.x_rad, u.nis
-            elif not cu.used and cu.reason not in ("boresight",):
-                self.counters["aid_gated" if cu.reason in ("gated", "turning", "short stride")
-                              else "aid_unavailable"] += 1
+            elif not cu.used and cu.verdict is not CourseVerdict.BORESIGHT:
+                self.counters["aid_gated" if cu.verdict in GATED_VERDICTS else "aid_unavailable"] += 1
             x1, p1 = cu.x_rad, cu.p_rad2
         if s.hdr_gate_rad > 0 and s.aid != "tckf" and not final:  # the TCKF keeps its own consider term (core.foot.course)
             self._hdr(length)
@@ -542,17 +552,17 @@ class FootNavigator:
         self.ins.consider_heading(heading_jacobian(fwd_n))
         self._hdr_ref_rad = psi
 
-    def _stride_gate(self, length, course, psi_w) -> str:
-        """Why a stride gives no course-type measurement ("" if it does): the gates of :mod:`core.foot.course`."""
+    def _stride_gate(self, length, course, psi_w) -> CourseVerdict | None:
+        """Why a stride gives no course-type measurement (None if it does): the gates of :mod:`core.foot.course`."""
         c = self.settings.course
         if not math.isfinite(psi_w):
-            return "no waist heading"
+            return CourseVerdict.NO_WAIST_HEADING
         if length < c.min_stride_m:
-            return "short stride"
+            return CourseVerdict.SHORT_STRIDE
         if math.isnan(self._prev_course) or math.isnan(self._prev_waist):
-            return "turning"
+            return CourseVerdict.TURNING
         turn = max(abs(wrap_angle(course - self._prev_course)), abs(wrap_angle(psi_w - self._prev_waist)))
-        return "turning" if turn > c.max_turn_rad else ""
+        return CourseVerdict.TURNING if turn > c.max_turn_rad else None
 
     # -- other streams --------------------------------------------------------------------------
     def _other(self, name: str, t: int, v) -> None:
