@@ -611,10 +611,10 @@ class Session:
         said = CARRY_WORDS.get(st.carry_mode, st.carry_mode)
         last = ""
         if det.changes:
-            t, _, to, _ = det.changes[-1]
-            t0 = self.first_t_ns if self.first_t_ns is not None else t
-            dt = max(0, int((t - t0) * 1e-9))
-            last = f", last at {dt // 60}:{dt % 60:02d} to {CARRY_WORDS.get(to, to)}"
+            ch = det.changes[-1]
+            t0 = self.first_t_ns if self.first_t_ns is not None else ch.t_ns
+            dt = max(0, int((ch.t_ns - t0) * 1e-9))
+            last = f", last at {dt // 60}:{dt % 60:02d} to {CARRY_WORDS.get(ch.to_mode, ch.to_mode)}"
         n = len(det.changes)
         return (f"carried: {said} ({100 * st.carry_confidence:.0f} % sure); "
                 f"{n} change{'s' if n != 1 else ''}{last}")

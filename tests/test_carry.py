@@ -157,11 +157,11 @@ def test_change_is_followed():
     t_change = t2[0]
     for t, x in zip(t1 + t2, x1 + x2):
         d.update_grid(t, *x)
-    ch = [c for c in d.changes if c[0] > t_change and c[2] == CARRY_POCKET]
-    assert ch and ch[0][0] - t_change <= 9e9, d.changes
+    ch = [c for c in d.changes if c.t_ns > t_change and c.to_mode == CARRY_POCKET]
+    assert ch and ch[0].t_ns - t_change <= 9e9, d.changes
     assert d.mode == CARRY_POCKET and 0.0 < d.confidence <= 1.0
     # the pocket walk begins with 2 s standing: hand -> still -> pocket at most, nothing after
-    assert len([c for c in d.changes if c[0] > t_change]) <= 2
+    assert len([c for c in d.changes if c.t_ns > t_change]) <= 2
 
 
 def test_calibration_waving_still_rejected():

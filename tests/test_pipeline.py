@@ -101,6 +101,10 @@ def test_keep_steps_false_streams_the_same_steps_as_the_batch_run():
         assert got == batch.steps  # same steps, same indices, same positions
         assert p.n_steps == len(batch.steps)
         assert list(p.steps) == ([] if keep is False else batch.steps[-5:])
+        # every attribute is born in reset(), with one type: after a walk and a reset, a new pipeline's
+        p.reset()
+        new = vars(Pipeline(keep_steps=keep))
+        assert {k: type(v) for k, v in vars(p).items()} == {k: type(v) for k, v in new.items()}
 
 
 def test_ten_minutes_of_streaming_keep_the_filter_sound_the_memory_flat_and_the_heading_bounded():

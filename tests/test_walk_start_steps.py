@@ -77,7 +77,7 @@ def test_walk_resumed_after_a_pause_counts_its_first_steps(seed):
     rec, ta, tb = _paused_walk(seed)
     p = Pipeline()
     res = p.run(rec)
-    changes = [c[2] for c in p.carry.changes]
+    changes = [c.to_mode for c in p.carry.changes]
     assert CARRY_STILL in changes[1:], changes  # the premise: the pause was "not walking"
     for truth in (ta, tb):
         n_true, n_found = _first_seconds(truth, res.steps)
@@ -226,7 +226,7 @@ def test_swing_first_called_a_pocket_recounts_its_first_steps():
 
     p = pipe()
     res = p.run(w.recording)
-    assert [c[2] for c in p.carry.changes] == ["pocket", "swinging"]  # the premise: first called a pocket
+    assert [c.to_mode for c in p.carry.changes] == ["pocket", "swinging"]  # the premise: first called a pocket
     assert len(truth) - 1 <= len(res.steps) <= len(truth), (len(res.steps), len(truth))
     assert np.all(np.diff([s.t_ns for s in res.steps]) > 0)
     old = _before_recount().run(w.recording)
@@ -273,10 +273,10 @@ def test_hard_swing_at_a_slow_cadence_is_a_swinging_hand_not_a_pocket():
     truth = np.asarray(w.truth.step_t_ns)
     old_p = Pipeline(carry=CarryModeDetector(hard_arm_gyro_rad_s=None))
     old = old_p.run(w.recording)
-    assert "pocket" in [c[2] for c in old_p.carry.changes] and len(old.steps) <= len(truth) - 4  # the premise
+    assert "pocket" in [c.to_mode for c in old_p.carry.changes] and len(old.steps) <= len(truth) - 4  # the premise
     p = Pipeline()
     res = p.run(w.recording)
-    modes = [c[2] for c in p.carry.changes]
+    modes = [c.to_mode for c in p.carry.changes]
     assert "pocket" not in modes and modes[-1] == "swinging", modes
     assert len(truth) - 2 <= len(res.steps) <= len(truth), (len(res.steps), len(truth))
     fast = run_fast(w.recording)

@@ -91,11 +91,21 @@ Every change is logged as ``(t_ns, from, to, confidence)``.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from core.conventions import (CARRY_BAG, CARRY_EAR, CARRY_HANDHELD, CARRY_MODES, CARRY_POCKET, CARRY_STILL,
                               CARRY_SWINGING)
+
+
+class CarryChange(NamedTuple):
+    """One entry of :attr:`CarryModeDetector.changes`: the decided mode changed at a grid sample."""
+
+    t_ns: int  #: the grid sample whose decision changed the mode
+    from_mode: str  #: the mode in force before (one of core.conventions.CARRY_MODES)
+    to_mode: str  #: the mode in force from ``t_ns`` on
+    confidence: float  #: the new mode's confidence 0..1 at the change
 
 
 def _sig(x: float, x0: float, width: float) -> float:
@@ -513,8 +523,8 @@ class CarryModeDetector:
         #: raw (per-hop) decision and its confidence, before the hysteresis
         self.raw_mode = CARRY_HANDHELD
         self.raw_confidence = 0.0
-        #: mode changes: (t_ns, from, to, confidence)
-        self.changes: list[tuple[int, str, str, float]] = []
+        #: mode changes in time order
+        self.changes: list[CarryChange] = []
         #: seconds spent in each mode (grid samples / rate)
         self.time_s = {m: 0.0 for m in CARRY_MODES}
         #: step period (s) from the autocorrelation of the norm (nan until known or when not walking)
@@ -935,7 +945,7 @@ class CarryModeDetector:
         if not self._decided:
             self._decided = True
             if best != self.mode:
-                self.changes.append((int(t_ns), self.mode, best, conf))
+                self.changes.append(CarryChange(int(t_ns), self.mode, best, conf))
             self.mode, self.confidence = best, conf
             self.settling = self.settle_while_still and best == CARRY_STILL
             self._settle_walk(t_ns, True)
@@ -976,7 +986,7 @@ class CarryModeDetector:
             self._cand, self._cand_ns = best, t_ns
         need = self.switch_still_s if CARRY_STILL in (best, self.mode) else self.switch_s
         if (t_ns - self._cand_ns) * 1e-9 >= need - 1e-9:
-            self.changes.append((int(t_ns), self.mode, best, conf))
+            self.changes.append(CarryChange(int(t_ns), self.mode, best, conf))
             self.mode, self.confidence = best, conf
             self._cand = None
         else:
@@ -987,8 +997,8 @@ class CarryModeDetector:
         """Time per mode (s), the changes and their number: the ``carry`` counters of a batch run."""
         return {"time_s": {m: round(v, 2) for m, v in self.time_s.items() if v > 0},
                 "n_changes": len(self.changes),
-                "changes": [{"t_ns": t, "from": a, "to": b, "confidence": round(c, 3)}
-                            for t, a, b, c in self.changes],
+                "changes": [{"t_ns": c.t_ns, "from": c.from_mode, "to": c.to_mode,
+                             "confidence": round(c.confidence, 3)} for c in self.changes],
                 "mode": self.mode, "confidence": round(self.confidence, 3)}
 
 

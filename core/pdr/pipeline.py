@@ -68,7 +68,7 @@ from core.conventions import (ACC, CARRY_BAG, CARRY_EAR, CARRY_HANDHELD, CARRY_P
                               GNSS_STATUS, GPS, GYRO, MAG)
 from core.dsp import GridResampler
 from core.pdr.attitude import AttitudeEKF
-from core.pdr.carry import CarryModeDetector
+from core.pdr.carry import CarryChange, CarryModeDetector
 from core.pdr.deadreckoning import DeadReckoner
 from core.pdr.gapbridge import AccGapBridge, EstimatedStep, GapVerdict
 from core.pdr.heading import RotationSmoother, interval_heading
@@ -200,6 +200,18 @@ class Step:
     estimated: bool = False
 
 
+@dataclass(slots=True)
+class StepCandidate:
+    """A peak through the rotation gate, waiting in :class:`Pipeline` (and the fast path's ``StepRelease``) to be
+    completed as a :class:`Step` once its bout is confirmed and its heading is due."""
+
+    event: StepEvent  #: the step detector's peak
+    #: the walking heading over its interval (rad, CCW from East), None until due (``heading_delay_s`` after the peak)
+    heading_rad: float | None
+    confirmed: bool  #: its bout reached ``min_bout_steps`` (or it is a walk's first step, ``walk_start_step``)
+    regressors: tuple  #: Kubrak's eq.-1 speed regressors at the peak (:class:`core.pdr.velocity.SpeedFeatureWindow`)
+
+
 @dataclass(frozen=True)
 class Status:
     """Snapshot of the pipeline for a live display."""
@@ -268,13 +280,13 @@ def heading_key(ev: StepEvent) -> tuple:
     return ev.t_ns, ev.duration_s if ev.duration_s == ev.duration_s else -1.0
 
 
-def _mode_at(t_ns: int, changes: list, mode: str) -> str:
-    """The carry mode in force at ``t_ns`` from a detector's change log ``(t_ns, from, to, confidence)`` and its
-    current ``mode``: the last change at or before it, else the first change's "from", else ``mode``."""
+def _mode_at(t_ns: int, changes: list[CarryChange], mode: str) -> str:
+    """The carry mode in force at ``t_ns`` from a detector's change log and its current ``mode``: the last change
+    at or before it, else the first change's "from", else ``mode``."""
     for k in range(len(changes) - 1, -1, -1):
-        if changes[k][0] <= t_ns:
-            return changes[k][2]
-    return changes[0][1] if changes else mode
+        if changes[k].t_ns <= t_ns:
+            return changes[k].to_mode
+    return changes[0].from_mode if changes else mode
 
 
 @dataclass
@@ -627,8 +639,8 @@ class Pipeline:
         self.grid = GridResampler(rate_hz=self.grid_rate_hz)
         #: Kubrak et al.'s eq.-1 regressors of |a| over the last 2 s (every step carries them)
         self.speed_window = SpeedFeatureWindow(grid_rate_hz=self.grid_rate_hz)
-        # candidate steps in time order: [event, heading or None, confirmed, eq.-1 regressors at the peak]
-        self._candidates: list[list] = []
+        # candidate steps in time order
+        self._candidates: list[StepCandidate] = []
         self._bout_len = 0
         self._delay_ns = int(self.heading_delay_s * 1e9)
         self._bout_gap_ns = int(self.detector.max_step_interval_s * 1e9)
@@ -931,9 +943,9 @@ class Pipeline:
         counted with its mode's gates (a limb's weak half-stride too: one step per footfall, issue #25)."""
         self._active_det = det
         # a recount keeps the headings the replaced candidates had (the same peak comes back: the same interval)
-        headings = {heading_key(c[0]): c[1] for c in self._candidates
-                    if c[1] is not None} if settled and self.recount_at_settle else None
-        kept = [] if settled else [c for c in self._candidates if c[2]]
+        headings = {heading_key(c.event): c.heading_rad for c in self._candidates
+                    if c.heading_rad is not None} if settled and self.recount_at_settle else None
+        kept = [] if settled else [c for c in self._candidates if c.confirmed]
         self.n_replaced_mode += len(self._candidates) - len(kept)
         self._candidates = kept
         self._bout_len = 0
@@ -948,10 +960,10 @@ class Pipeline:
         self.n_rejected_rotation = n_rot
         if headings:
             for c in self._candidates:
-                if c[1] is None:
-                    c[1] = headings.get(heading_key(c[0]))
+                if c.heading_rad is None:
+                    c.heading_rad = headings.get(heading_key(c.event))
 
-    def _step_carry_mode(self, t_ns: int, changes: list | None = None, mode: str | None = None) -> str:
+    def _step_carry_mode(self, t_ns: int, changes: list[CarryChange] | None = None, mode: str | None = None) -> str:
         """The carry mode a step is labelled with: the mode in force at its peak, except that a counted step is
         never "not walking" (the detector's hysteresis lags the first steps of a walk): then the walking mode
         that follows, or the one before, or hand-held.  ``changes`` and ``mode``: the detector's change log and
@@ -963,10 +975,10 @@ class Pipeline:
         at = _mode_at(t_ns, changes, current)
         if at != CARRY_STILL:
             return at
-        after = [c[2] for c in changes if c[0] > t_ns and c[2] != CARRY_STILL]
+        after = [c.to_mode for c in changes if c.t_ns > t_ns and c.to_mode != CARRY_STILL]
         if after:
             return after[0]
-        before = [c[1] for c in changes if c[0] <= t_ns and c[1] != CARRY_STILL]
+        before = [c.from_mode for c in changes if c.t_ns <= t_ns and c.from_mode != CARRY_STILL]
         return before[-1] if before else (current if current != CARRY_STILL else CARRY_HANDHELD)
 
     def carry_mode_at(self, t_ns: int) -> str:
@@ -1025,12 +1037,13 @@ class Pipeline:
             self.n_rejected_rotation += 1
             self._drop_unconfirmed()
             return
-        self._candidates.append([ev, None, False, self.speed_window.features() if regressors is None else regressors])
+        self._candidates.append(StepCandidate(ev, None, False,
+                                              self.speed_window.features() if regressors is None else regressors))
         self._bout_len += 1
         if self._bout_len >= self.min_bout_steps:
             before_ns = self._confirmed_ns
             for c in self._candidates:
-                c[2] = True
+                c.confirmed = True
             self._confirmed_ns = ev.t_ns
             if self._start_det is not None and self._bout_len == self.min_bout_steps:
                 self._walk_start_step(before_ns)
@@ -1042,7 +1055,7 @@ class Pipeline:
         k = len(self._candidates) - self._bout_len
         if self._start_det is self._active_det or k < 0 or self._bout_len < 2:
             return
-        first, second = self._candidates[k][0], self._candidates[k + 1][0]
+        first, second = self._candidates[k].event, self._candidates[k + 1].event
         if first.duration_s == first.duration_s:  # not a walk's start: the detector's bout went on
             return
         p = second.t_ns - first.t_ns
@@ -1053,14 +1066,14 @@ class Pipeline:
             if ev.t_ns < lo or ev.t_ns <= after:
                 return
             if ev.t_ns <= hi and rot <= self._rotation_limit_rad_s():
-                self._candidates.insert(k, [ev, None, True, regs])
+                self._candidates.insert(k, StepCandidate(ev, None, True, regs))
                 if ev.t_ns != self._start_counted_ns:  # a recount inserts the same one again: counted once
                     self.n_walk_start_steps += 1
                     self._start_counted_ns = ev.t_ns
                 return
 
     def _drop_unconfirmed(self) -> None:
-        kept = [c for c in self._candidates if c[2]]
+        kept = [c for c in self._candidates if c.confirmed]
         self.n_rejected_bout += len(self._candidates) - len(kept)
         self._candidates = kept
         self._bout_len = 0
@@ -1071,17 +1084,18 @@ class Pipeline:
         if not cands:
             return []
         for c in cands:
-            if c[1] is None and c[0].t_ns + self._delay_ns <= t_grid_ns:
-                c[1] = self._step_heading(c[0])
-        if not cands[-1][2] and t_grid_ns - cands[-1][0].t_ns > self._bout_gap_ns:
+            if c.heading_rad is None and c.event.t_ns + self._delay_ns <= t_grid_ns:
+                c.heading_rad = self._step_heading(c.event)
+        if not cands[-1].confirmed and t_grid_ns - cands[-1].event.t_ns > self._bout_gap_ns:
             self._drop_unconfirmed()  # the bout ended too short
         done = []
         # while the carry detector settles a walk's mode, its steps wait (within the peaks' hold)
         hold = self._rot_hold_ns if self.hold_while_settling and self.carry is not None and self.carry.settling \
             else -(1 << 62)
-        while cands and cands[0][2] and cands[0][1] is not None and t_grid_ns - cands[0][0].t_ns >= hold:
-            ev, h, _, reg = cands.pop(0)
-            done.append(self._complete(ev, h, reg))
+        while cands and cands[0].confirmed and cands[0].heading_rad is not None \
+                and t_grid_ns - cands[0].event.t_ns >= hold:
+            c = cands.pop(0)
+            done.append(self._complete(c.event, c.heading_rad, c.regressors))
         return done
 
     def _step_heading(self, ev: StepEvent) -> float:
@@ -1097,7 +1111,7 @@ class Pipeline:
         if self.walkdir is None:
             return heading
         # the carry mode in force, when a carry-mode detector runs (core.pdr.carry); None without one
-        mode = getattr(self, "_carry_mode", None) if getattr(self, "carry", None) is not None else None
+        mode = self._carry_mode if self.carry is not None else None
         return self.walkdir.step_heading(heading, self.walking_direction, mode)
 
     def finish(self) -> list[Step]:
@@ -1124,8 +1138,8 @@ class Pipeline:
     def finish_candidates(self) -> list[Step]:
         """Complete the confirmed candidates now (headings from what the smoother has), drop an unconfirmed bout."""
         self._drop_unconfirmed()
-        done = [self._complete(ev, self._step_heading(ev) if h is None else h, reg)
-                for ev, h, _, reg in self._candidates]
+        done = [self._complete(c.event, self._step_heading(c.event) if c.heading_rad is None else c.heading_rad,
+                               c.regressors) for c in self._candidates]
         self._candidates = []
         return done
 

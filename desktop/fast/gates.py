@@ -28,7 +28,7 @@ import numpy as np
 
 from core.conventions import CARRY_MODES, CARRY_SWINGING
 from core.pdr.heading import interval_heading
-from core.pdr.pipeline import DEFAULT_STEP_DURATION_S, Step, heading_key
+from core.pdr.pipeline import DEFAULT_STEP_DURATION_S, Step, StepCandidate, heading_key
 from core.pdr.steps import StepEvent
 from desktop.fast.jit import kernel
 from desktop.fast.walkdir import walking_direction_over_grid
@@ -65,7 +65,7 @@ class StepRelease:
         self.grid_t = grid_t
         self.fwd_t, self.fwd_e, self.fwd_n = fwd_t, fwd_e, fwd_n
         self.mag_rejected = mag_rejected
-        self.cands: list[list] = []  # [event, heading or None, confirmed, regressors]
+        self.cands: list[StepCandidate] = []
         self.bout_len = 0
         self.delay_ns = int(pipe.heading_delay_s * 1e9)
         self.gap_ns = int(pipe.detector.max_step_interval_s * 1e9)
@@ -203,9 +203,9 @@ class StepRelease:
         p = self.p
         settled = (self.settle_hold and self.carry is not None and bool(self.settled_before[k])
                    and (bool(self.changed[k]) or not bool(self.walk_before[k])))
-        headings = {heading_key(c[0]): c[1] for c in self.cands
-                    if c[1] is not None} if settled and self.recount else None
-        kept = [] if settled else [c for c in self.cands if c[2]]
+        headings = {heading_key(c.event): c.heading_rad for c in self.cands
+                    if c.heading_rad is not None} if settled and self.recount else None
+        kept = [] if settled else [c for c in self.cands if c.confirmed]
         p.n_replaced_mode += len(self.cands) - len(kept)
         self.cands = kept
         self.bout_len = 0
@@ -222,8 +222,8 @@ class StepRelease:
         p.n_rejected_rotation = n_rot
         if headings:  # a recount keeps the replaced candidates' headings (Pipeline._switch_detector)
             for c in self.cands:
-                if c[1] is None:
-                    c[1] = headings.get(heading_key(c[0]))
+                if c.heading_rad is None:
+                    c.heading_rad = headings.get(heading_key(c.event))
 
     def _peak(self, d: int, m: int) -> None:
         """Peak ``m`` of detector ``d`` made a candidate (its StepEvent built only now: most are never needed)."""
@@ -238,12 +238,12 @@ class StepRelease:
             p.n_rejected_rotation += 1
             self.drop_unconfirmed()
             return
-        self.cands.append([ev, None, False, regressors])
+        self.cands.append(StepCandidate(ev, None, False, regressors))
         self.bout_len += 1
         if self.bout_len >= p.min_bout_steps:
             before_ns = self.confirmed_ns
             for c in self.cands:
-                c[2] = True
+                c.confirmed = True
             self.confirmed_ns = ev.t_ns
             if self.start_d is not None and self.bout_len == p.min_bout_steps:
                 self._walk_start_step(before_ns)
@@ -255,7 +255,7 @@ class StepRelease:
         k = len(self.cands) - self.bout_len
         if self.start_d == self.active_d or k < 0 or self.bout_len < 2:
             return
-        first, second = self.cands[k][0], self.cands[k + 1][0]
+        first, second = self.cands[k].event, self.cands[k + 1].event
         if first.duration_s == first.duration_s:
             return
         period = second.t_ns - first.t_ns
@@ -268,14 +268,15 @@ class StepRelease:
             if tm < lo or tm <= after:
                 return
             if tm <= hi and float(rms[m]) <= self._rotation_limit():
-                self.cands.insert(k, [StepEvent(tm, *feats[m].tolist()), None, True, tuple(regs[m].tolist())])
+                self.cands.insert(k, StepCandidate(StepEvent(tm, *feats[m].tolist()), None, True,
+                                                   tuple(regs[m].tolist())))
                 if tm != p._start_counted_ns:  # a recount inserts the same one again (Pipeline._walk_start_step)
                     p.n_walk_start_steps += 1
                     p._start_counted_ns = tm
                 return
 
     def drop_unconfirmed(self) -> None:
-        kept = [c for c in self.cands if c[2]]
+        kept = [c for c in self.cands if c.confirmed]
         self.p.n_rejected_bout += len(self.cands) - len(kept)
         self.cands = kept
         self.bout_len = 0
@@ -307,15 +308,15 @@ class StepRelease:
             return
         tg = int(self.grid_t[k])
         for c in cands:
-            if c[1] is None and c[0].t_ns + self.delay_ns <= tg:
-                c[1] = self.heading(c[0], k)
-        if not cands[-1][2] and tg - cands[-1][0].t_ns > self.gap_ns:
+            if c.heading_rad is None and c.event.t_ns + self.delay_ns <= tg:
+                c.heading_rad = self.heading(c.event, k)
+        if not cands[-1].confirmed and tg - cands[-1].event.t_ns > self.gap_ns:
             self.drop_unconfirmed()
         hold = self.hold_ns if self.settle_hold and self.carry is not None and bool(self.carry.settling[k]) \
             else -(1 << 62)
-        while cands and cands[0][2] and cands[0][1] is not None and tg - cands[0][0].t_ns >= hold:
-            ev, h, _, reg = cands.pop(0)
-            self.complete(ev, h, reg, bool(self.mag_rejected[k]))
+        while cands and cands[0].confirmed and cands[0].heading_rad is not None and tg - cands[0].event.t_ns >= hold:
+            c = cands.pop(0)
+            self.complete(c.event, c.heading_rad, c.regressors, bool(self.mag_rejected[k]))
 
     def finish(self) -> None:
         p = self.p
@@ -334,8 +335,9 @@ class StepRelease:
         self.drop_unconfirmed()
         last = len(self.grid_t) - 1
         rejected = self.p.attitude.mag_rejected  # the filter's state after the last event
-        for ev, h, _, reg in self.cands:
-            self.complete(ev, self.heading(ev, last) if h is None else h, reg, rejected)
+        for c in self.cands:
+            self.complete(c.event, self.heading(c.event, last) if c.heading_rad is None else c.heading_rad,
+                          c.regressors, rejected)
         self.cands = []
 
     def _carry_mode_of(self, t_ns: int) -> str:
