@@ -149,3 +149,22 @@ def test_ten_minutes_of_streaming_keep_the_filter_sound_the_memory_flat_and_the_
     # #27) the magnetometer fixes heading + offset, and the heading's sd settles at about 3.8 deg (2-3 deg without)
     assert p.attitude.counters()["heading_sd_rad"] < math.radians(5.0)
     assert not p.labels()
+
+
+def test_a_step_released_as_a_stale_short_bout_is_dropped_is_released_once():
+    """A confirmed step waiting at the front while the bout after it ends too short: the release drops the bout
+    and completes the step from the list it kept (before, from the old list: the step stayed in the kept list
+    and came out again at the next release, a duplicate)."""
+    from core.pdr.pipeline import StepCandidate
+    from core.pdr.steps import StepEvent
+
+    p = Pipeline()
+
+    def cand(t_s, confirmed):
+        return StepCandidate(StepEvent(int(t_s * 1e9), 11.0, 9.0, 1.0, 0.5, 9.81), 0.3, confirmed,
+                             p.speed_window.features())
+
+    p._candidates = [cand(1.0, True), cand(2.0, False)]
+    first = p._release(int(20e9))
+    assert [s.t_ns for s in first] == [int(1e9)] and p._candidates == []
+    assert p._release(int(21e9)) == [] and p.n_rejected_bout == 1

@@ -1088,6 +1088,7 @@ class Pipeline:
                 c.heading_rad = self._step_heading(c.event)
         if not cands[-1].confirmed and t_grid_ns - cands[-1].event.t_ns > self._bout_gap_ns:
             self._drop_unconfirmed()  # the bout ended too short
+            cands = self._candidates  # the list it kept (before: the old list, whose released steps stayed in it)
         done = []
         # while the carry detector settles a walk's mode, its steps wait (within the peaks' hold)
         hold = self._rot_hold_ns if self.hold_while_settling and self.carry is not None and self.carry.settling \

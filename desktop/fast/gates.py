@@ -312,6 +312,7 @@ class StepRelease:
                 c.heading_rad = self.heading(c.event, k)
         if not cands[-1].confirmed and tg - cands[-1].event.t_ns > self.gap_ns:
             self.drop_unconfirmed()
+            cands = self.cands  # the list it kept (Pipeline._release)
         hold = self.hold_ns if self.settle_hold and self.carry is not None and bool(self.carry.settling[k]) \
             else -(1 << 62)
         while cands and cands[0].confirmed and cands[0].heading_rad is not None and tg - cands[0].event.t_ns >= hold:
