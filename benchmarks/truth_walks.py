@@ -234,7 +234,7 @@ def unmixed_windows(wins, st_t, heading, device) -> list:
     most of the walk's steps got it, all without it where most did not (module doc, issue #25).  A window with
     steps in the other state (the first strides of a walk, or after a reset, before the offset applies) holds
     the whole offset as a jump, whatever the estimate does once it applies."""
-    applied = heading != device
+    applied = np.isfinite(heading) & np.isfinite(device) & (heading != device)  # a nan heading has no offset
     usual = bool(applied.mean() > 0.5) if len(applied) else False
     out = []
     for w in wins:

@@ -47,6 +47,16 @@ import numpy as np
 from core import quaternion as quat
 
 
+def read_only(a):
+    """A view of the array ``a`` that cannot be written (``None`` stays ``None``): how a filter hands out its state
+    (the values, no copy; a write raises instead of changing the filter behind its back)."""
+    if a is None:
+        return None
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
 def skew(v) -> np.ndarray:
     """Cross-product matrix ``[v]x`` (``[v]x w = v x w``)."""
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])

@@ -517,3 +517,26 @@ def test_fast_equals_plain_on_a_hard_swing_taken_for_a_pocket():
                          still_end_s=0.5, step_frequency_hz=1.5, placement_options={"swing_scale": 2.5})
     plain, _ = _assert_same(walk.recording)
     assert abs(len(plain.steps) - walk.truth.n_steps) <= 6, (len(plain.steps), walk.truth.n_steps)
+
+
+def test_fast_release_of_a_step_as_a_stale_short_bout_is_dropped_is_once():
+    """The fast path's StepRelease twin of test_pipeline's duplicate-release test: the confirmed step at the front
+    comes out once when the short bout behind it is dropped in the same call."""
+    from core.pdr.pipeline import StepCandidate
+    from core.pdr.steps import StepEvent
+    from desktop.fast.gates import StepRelease
+
+    p = Pipeline()
+    p.reset()
+    grid = np.array([int(20e9), int(21e9)], dtype=np.int64)
+    sr = StepRelease(p, grid, np.array([], dtype=np.int64), np.array([]), np.array([]), np.array([False, False]))
+
+    def cand(t_s, confirmed):
+        return StepCandidate(StepEvent(int(t_s * 1e9), 11.0, 9.0, 1.0, 0.5, 9.81), 0.3, confirmed,
+                             p.speed_window.features())
+
+    sr.cands = [cand(1.0, True), cand(2.0, False)]
+    for k in (0, 1):
+        sr.k = k
+        sr.release(k)
+    assert [s.t_ns for s in p.steps] == [int(1e9)] and sr.cands == [] and p.n_rejected_bout == 1

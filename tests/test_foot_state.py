@@ -103,6 +103,11 @@ def test_ins_snapshot_restore_continues_bit_identically():
     assert first.snapshot().P is not first.snapshot().P  # ... and hands out copies
     with pytest.raises(TypeError):
         second.restore(dataclasses.asdict(snap))
+    second.keep_history()  # a filter that keeps the smoother's history refuses (two runs would mix) ...
+    with pytest.raises(ValueError):
+        second.restore(snap)
+    with pytest.raises(ValueError):  # ... and its covariance is read only from outside
+        second.P[0, 0] = 1.0
 
 
 def test_navigator_reset_sets_every_attribute():

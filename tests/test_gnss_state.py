@@ -152,6 +152,9 @@ def test_the_gps_filters_state_is_read_only_from_outside():
             f.x = np.zeros(3)
         with pytest.raises(AttributeError):
             f.P = np.eye(3)
+        for arr in (f.x, f.P):  # nor written in place through the views
+            with pytest.raises(ValueError):
+                arr[0] = 1.0
     kf = _kubrak()
     kf.revert_coefficients(np.array([0.1, 0.2, 0.3]), np.eye(3) * 1e-3, False)
     assert kf.x[COEF].tolist() == [0.1, 0.2, 0.3] and kf.P[COEF, COEF].tolist() == (np.eye(3) * 1e-3).tolist()

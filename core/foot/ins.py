@@ -238,9 +238,13 @@ class ZuptEKF:
         return copy.deepcopy(self._state)
 
     def restore(self, state: InsState) -> None:
-        """Continue from ``state`` (a :meth:`snapshot`, possibly changed; the filter takes a copy)."""
+        """Continue from ``state`` (a :meth:`snapshot`, possibly changed; the filter takes a copy).  A filter that
+        keeps the smoother's history refuses: the history would mix two runs (:meth:`drop_history` first)."""
         if type(state) is not InsState:
             raise TypeError(f"restore takes an InsState, not {type(state).__name__}")
+        if self.history is not None:
+            raise ValueError("restore into a filter that keeps the RTS history would mix two runs in smoothed(): "
+                             "drop_history() first")
         self._state = copy.deepcopy(state)
 
     # -- read-only views of the state (set it through snapshot() / restore()) -------------------
@@ -250,7 +254,7 @@ class ZuptEKF:
     p = property(lambda self: self._state.p, doc="Position (ENU, m).")
     bg = property(lambda self: self._state.bg, doc="Gyroscope bias (body, rad/s).")
     ba = property(lambda self: self._state.ba, doc="Accelerometer bias (body, m/s^2).")
-    P = property(lambda self: self._state.P, doc="Error-state covariance (15, 15); do not change it.")
+    P = property(lambda self: kalman.read_only(self._state.P), doc="Error-state covariance (15, 15), read only.")
     g = property(lambda self: self._state.g, doc="Gravity magnitude (m/s^2).")
     n_rejected = property(lambda self: self._state.n_rejected, doc="Steps and updates discarded as not finite.")
     lever_b = property(lambda self: self._state.lever_b, doc="Rolling ZUPT lever arm (body, m).")

@@ -342,9 +342,9 @@ class PdrEkf(StateSnapshots):
         self._state = PdrEkfState.initial()
 
     # -- read-only views of the state (set it through the methods below, or snapshot() / restore()) ----------
-    x = property(lambda self: self._state.x, doc="The state vector ``[E, N, l, psi, b, k, gE, gN]``.")
-    P = property(lambda self: self._state.P, doc="Its covariance (the gain's).")
-    C = property(lambda self: self._state.C, doc="The reported covariance (None: ``P`` is reported).")
+    x = property(lambda self: kalman.read_only(self._state.x), doc="The state vector ``[E, N, l, psi, b, k, gE, gN]``.")
+    P = property(lambda self: kalman.read_only(self._state.P), doc="Its covariance (the gain's).")
+    C = property(lambda self: kalman.read_only(self._state.C), doc="The reported covariance (None: ``P`` is reported).")
     initialized = property(lambda self: self._state.initialized)
     n_steps = property(lambda self: self._state.n_steps)
     fix_bias_var_m2 = property(lambda self: self._state.fix_bias_var_m2,

@@ -87,6 +87,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core import kalman
 from core.conventions import heading_from_bearing_deg, wrap_angle
 from core.gnss.base import EVENTS_KEEP_LAST, FixFusion, relock_heading_error_rad
 from core.gnss.ekf import (CHI2_999, StateSnapshots, UpdateResult, covariance_cover, kalman_update, restart_position_of,
@@ -199,9 +200,10 @@ class KubrakKf(StateSnapshots):
         self._state = KubrakKfState.initial()
 
     # -- read-only views of the state (set it through the methods below, or snapshot() / restore()) ----------
-    x = property(lambda self: self._state.x, doc="The state vector ``[E, N, dv, dpsi, A, B, C, bE, bN]``.")
-    P = property(lambda self: self._state.P, doc="Its covariance.")
-    reg = property(lambda self: self._state.reg, doc="The last epoch's eq.-1 regressors (nan before any).")
+    x = property(lambda self: kalman.read_only(self._state.x), doc="The state vector ``[E, N, dv, dpsi, A, B, C, bE, bN]``.")
+    P = property(lambda self: kalman.read_only(self._state.P), doc="Its covariance.")
+    reg = property(lambda self: kalman.read_only(self._state.reg),
+                   doc="The last epoch's eq.-1 regressors (nan before any).")
     psi_pdr = property(lambda self: self._state.psi_pdr, doc="The last epoch's PDR heading (rad; nan before any).")
     t_ns = property(lambda self: self._state.t_ns, doc="The last epoch's time (ns; None before any).")
     initialized = property(lambda self: self._state.initialized)
@@ -415,8 +417,11 @@ class KubrakKf(StateSnapshots):
         restart_position_of(self._state.x, self._state.P, innovation, sigma_m)
 
     def widen_position(self, offset_m) -> None:
-        """Widen the position's covariance by the outer product of ``offset_m`` (E, N) (a relock's disagreement)."""
-        self._state.P[:2, :2] += np.outer(offset_m, offset_m)
+        """Widen the position's covariance by the outer product of ``offset_m`` (E, N) (a relock's disagreement; a
+        non-finite offset is ignored, as :meth:`core.gnss.ekf.PdrEkf.widen_position` does)."""
+        d = np.asarray(offset_m, dtype=float)
+        if np.all(np.isfinite(d)):
+            self._state.P[:2, :2] += np.outer(d, d)
 
     def widen_heading(self, sd_rad: float) -> None:
         """The heading error's variance at least ``sd_rad^2`` (its correlations kept: a larger diagonal stays a

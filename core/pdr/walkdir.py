@@ -170,6 +170,8 @@ from core.quaternion import to_matrix
 
 #: why strides were rejected (keys of :attr:`WalkingDirection.rejected`)
 REJECT_REASONS = ("duration", "samples", "still", "incoherent", "isotropic", "turning", "vertical_axis")
+#: the rejection of a stride whose device heading turned too much (:attr:`WalkingDirection.gap_keeps_turning`)
+REJECT_TURNING = REJECT_REASONS[5]
 #: how a stride's axis is found (see the module docstring)
 AXIS_METHODS = ("auto", "pca", "coherent", "phase")
 #: how a stride's sign (forward or backward along its axis) is found (see the module docstring)
@@ -366,7 +368,9 @@ class WalkingDirection:
         self._stride_skipped = 0  # samples of the stride without a device heading
         self._axis_key = None
         self._states: dict = {}
-        self._last_accepted_ns = None  # time of the last accepted stride
+        #: the gap clock: the time of the last accepted stride (with ``gap_keeps_turning`` also of the last stride
+        #: rejected only for turning), from which ``reset_after_gap_s`` is counted
+        self._last_accepted_ns = None
         #: times the estimate was forgotten after a gap of ``reset_after_gap_s`` without an accepted stride
         self.n_gap_resets = 0
         #: :meth:`estimate` just before the last such reset (None before any)
@@ -518,7 +522,7 @@ class WalkingDirection:
         if reason:
             self.rejected[reason] += 1
             rec["reason"] = reason
-            if reason == "turning" and self.gap_keeps_turning and self._last_accepted_ns is not None:
+            if reason == REJECT_TURNING and self.gap_keeps_turning and self._last_accepted_ns is not None:
                 self._last_accepted_ns = t_ns  # the walk goes on, turning: the phone stays where it is
         self.strides.append(rec)
 
@@ -536,7 +540,7 @@ class WalkingDirection:
         turn = math.atan2(e0 * fn - n0 * fe, e0 * fe + n0 * fn)  # device heading change over the stride
         rec["turn_rad"] = turn
         if abs(turn) > self.max_stride_turn_rad:
-            return "turning"
+            return REJECT_TURNING
         inv = 1.0 / n
         mx, my, mv = s[1] * inv, s[2] * inv, s[6] * inv
         cxx = max(s[3] * inv - mx * mx, 0.0)
