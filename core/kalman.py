@@ -38,6 +38,7 @@ non-finite ever enters it.
 
 from __future__ import annotations
 
+import copy
 import enum
 import math
 from dataclasses import dataclass
@@ -45,6 +46,27 @@ from dataclasses import dataclass
 import numpy as np
 
 from core import quaternion as quat
+
+
+class StateSnapshots:
+    """``snapshot()`` / ``restore()`` of a filter whose whole state is one dataclass in ``self._state``, of the
+    class's ``State`` (made by ``State.initial``): the only way to take it out or put it back whole
+    (:class:`core.pdr.attitude.AttitudeEKF`, :class:`core.foot.ins.ZuptEKF`, :class:`core.gnss.ekf.PdrEkf`,
+    :class:`core.gnss.kubrak.KubrakKf`)."""
+
+    State: type
+    _state: object
+
+    def snapshot(self):
+        """A copy of the whole state (the filter keeps its own)."""
+        return copy.deepcopy(self._state)
+
+    def restore(self, state) -> None:
+        """Continue from ``state`` (a :meth:`snapshot`, possibly changed; the filter takes a copy)."""
+        if type(state) is not self.State:
+            raise TypeError(f"restore takes {'an' if self.State.__name__[0] in 'AEIOU' else 'a'} "
+                            f"{self.State.__name__}, not {type(state).__name__}")
+        self._state = copy.deepcopy(state)
 
 
 def read_only(a):

@@ -69,7 +69,6 @@ shared with the phone's attitude filter.
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass, replace
 
@@ -185,13 +184,15 @@ class InsState:
                    lever_b=(0.0, 0.0, 0.0))
 
 
-class ZuptEKF:
+class ZuptEKF(kalman.StateSnapshots):
     """The INS-EKF-ZUPT kernel (see the module docstring): :meth:`align`, :meth:`propagate`, updates.
 
     ``ZuptEKF(settings)`` or ``ZuptEKF(zupt_noise_m_s=0.02)`` (keyword overrides of :class:`InsSettings`).
     Settings (frozen), state (:class:`InsState`, in and out through :meth:`snapshot` / :meth:`restore`) and
     results (:class:`Update`) are kept apart, as in :class:`core.pdr.attitude.AttitudeEKF`.
     """
+
+    State = InsState
 
     _state: InsState
 
@@ -233,19 +234,13 @@ class ZuptEKF:
         self._q = None
         self._m_cache = None  # (q, rotation matrix rows, array) of the last new attitude
 
-    def snapshot(self) -> InsState:
-        """A copy of the whole state (the filter keeps its own)."""
-        return copy.deepcopy(self._state)
-
     def restore(self, state: InsState) -> None:
         """Continue from ``state`` (a :meth:`snapshot`, possibly changed; the filter takes a copy).  A filter that
         keeps the smoother's history refuses: the history would mix two runs (:meth:`drop_history` first)."""
-        if type(state) is not InsState:
-            raise TypeError(f"restore takes an InsState, not {type(state).__name__}")
-        if self.history is not None:
+        if self.history is not None and type(state) is InsState:
             raise ValueError("restore into a filter that keeps the RTS history would mix two runs in smoothed(): "
                              "drop_history() first")
-        self._state = copy.deepcopy(state)
+        super().restore(state)
 
     # -- read-only views of the state (set it through snapshot() / restore()) -------------------
     initialized = property(lambda self: self._state.initialized, doc="align() was called.")

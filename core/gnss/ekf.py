@@ -127,7 +127,6 @@ refuses non-finite input, so the state never holds a NaN or an inf.
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass
 
@@ -229,26 +228,7 @@ class PdrEkfState:
                    fix_bias_var_m2=0.0, c_fix_bias_var_m2=0.0)
 
 
-class StateSnapshots:
-    """``snapshot()`` / ``restore()`` of a filter whose whole state is one dataclass in ``self._state``, of the
-    class's ``State`` (made by ``State.initial``, as :class:`core.pdr.attitude.AttitudeState`): the only way in or
-    out of it (:class:`PdrEkf`, :class:`core.gnss.kubrak.KubrakKf`)."""
-
-    State: type
-    _state: object
-
-    def snapshot(self):
-        """A copy of the whole state (the filter keeps its own)."""
-        return copy.deepcopy(self._state)
-
-    def restore(self, state) -> None:
-        """Continue from ``state`` (a :meth:`snapshot`, possibly changed; the filter takes a copy)."""
-        if type(state) is not self.State:
-            raise TypeError(f"restore takes a {self.State.__name__}, not {type(state).__name__}")
-        self._state = copy.deepcopy(state)
-
-
-class PdrEkf(StateSnapshots):
+class PdrEkf(kalman.StateSnapshots):
     """Eq. 13 with the step-length and heading measurements of each step and GPS updates.
 
     Settings are the keywords below; the state is one :class:`PdrEkfState` (``x``, ``P``, ``C`` ... are read-only

@@ -90,7 +90,7 @@ import numpy as np
 from core import kalman
 from core.conventions import heading_from_bearing_deg, wrap_angle
 from core.gnss.base import EVENTS_KEEP_LAST, FixFusion, relock_heading_error_rad
-from core.gnss.ekf import (CHI2_999, StateSnapshots, UpdateResult, covariance_cover, kalman_update, restart_position_of,
+from core.gnss.ekf import (CHI2_999, UpdateResult, covariance_cover, kalman_update, restart_position_of,
                            sigma_max_m)
 from core.gnss.training import ChordReference, OnlineTrainer
 from core.pdr.velocity import VelocityModel, step_regressors
@@ -133,7 +133,7 @@ class KubrakKfState:
                    t_ns=None)
 
 
-class KubrakKf(StateSnapshots):
+class KubrakKf(kalman.StateSnapshots):
     """The 7-state filter of Kubrak et al. (2006), Fig. 8, plus a GPS bias (see the module docstring).
 
     Settings are the keywords below; the state is one :class:`KubrakKfState` (``x``, ``P``, ``reg``, ``psi_pdr``

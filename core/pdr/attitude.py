@@ -217,7 +217,6 @@ Sign conventions: ENU with heading counter-clockwise from East, so a positive
 from __future__ import annotations
 
 import math
-import copy
 import enum
 from dataclasses import dataclass, field, fields, replace
 
@@ -811,7 +810,7 @@ class AttitudeFilterBase:
         return self._R
 
 
-class AttitudeEKF(AttitudeFilterBase):
+class AttitudeEKF(AttitudeFilterBase, kalman.StateSnapshots):
     """Error-state EKF of the attitude and gyroscope bias (see the module docstring).
 
     Feed events in time order: :meth:`predict` (gyroscope), :meth:`update_acc`,
@@ -830,6 +829,8 @@ class AttitudeEKF(AttitudeFilterBase):
         Quasi-static field detector (:class:`core.pdr.magcal.QuasiStaticField`):
         readings it does not call steady are not used.
     """
+
+    State = AttitudeState
 
     def __init__(self, settings: AttitudeSettings | None = None, *, mag_calibrator=None, field_detector=None,
                  keep_history: bool = False, **overrides):
@@ -956,16 +957,6 @@ class AttitudeEKF(AttitudeFilterBase):
         if self.history is None:
             raise ValueError("no history: make the filter with keep_history=True before the run")
         return self.history.smooth()
-
-    def snapshot(self) -> AttitudeState:
-        """A copy of the whole state (the filter keeps its own)."""
-        return copy.deepcopy(self._state)
-
-    def restore(self, state: AttitudeState) -> None:
-        """Continue from ``state`` (a :meth:`snapshot`, possibly changed; the filter takes a copy)."""
-        if type(state) is not AttitudeState:
-            raise TypeError(f"restore takes an AttitudeState, not {type(state).__name__}")
-        self._state = copy.deepcopy(state)
 
     # -- read-only views of the state -------------------------------------------------------------
     @property
