@@ -28,17 +28,13 @@ REFERENCE_DATASETS = (("sensorlogger_gps_walk_ethz", "eth_walk"),)
 
 def _select(results, dataset, split, placement=None):
     """The recordings of a dataset and split, those whose run failed included (they are counted, never dropped:
-    :func:`_step_err`, :func:`benchmarks.metrics.median_counting_failures`)."""
+    :func:`_err`, :func:`benchmarks.metrics.median_counting_failures`)."""
     return [r for r in results if r["dataset"] == dataset and r.get("split") == split
             and (placement is None or r.get("placement") == placement)]
 
 
-def _step_err(r: dict):
-    """A recording's signed step-count error (%): a failed run gave no steps."""
-    return M.FAILED_STEP_ERR_PCT if "error" in r else r.get("step_err_pct")
-
-
-def _distance_err(r: dict, key: str):
+def _err(r: dict, key: str = "step_err_pct"):
+    """A recording's signed step-count (or distance) error (%): a failed run gave no steps, -100 %."""
     return M.FAILED_STEP_ERR_PCT if "error" in r else r.get(key)
 
 
@@ -53,12 +49,13 @@ def headline_split(results: list[dict], split: str) -> dict:
     ox = _select(results, "oxford_step_counter", split)
     ox_hand = [r for r in ox if r["placement"] == "hand"]
     bh = _select(results, "brajdic_harle_handheld", split)
-    put(f"oxford_{split}_hand_step_mae_pct", M.mean_abs([_step_err(r) for r in ox_hand]))
-    put(f"oxford_{split}_all_step_mae_pct", M.mean_abs([_step_err(r) for r in ox]))
-    put(f"oxford_{split}_step_f1_median", M.median_counting_failures([0.0 if "error" in r else r.get("step_f1") for r in ox if "error" in r
-                                   or r.get("step_f1") is not None], nan_is_failure=False))
-    put(f"brajdic_harle_{split}_step_mae_pct", M.mean_abs([_step_err(r) for r in bh]))
-    put(f"handheld_{split}_step_mae_pct", M.mean_abs([_step_err(r) for r in ox_hand + bh]))
+    put(f"oxford_{split}_hand_step_mae_pct", M.mean_abs([_err(r) for r in ox_hand]))
+    put(f"oxford_{split}_all_step_mae_pct", M.mean_abs([_err(r) for r in ox]))
+    f1 = [0.0 if "error" in r else r.get("step_f1") for r in ox]  # a failed run found no step: F1 0
+    put(f"oxford_{split}_step_f1_median", M.median_counting_failures([v for v in f1 if v is not None],
+                                                                     nan_is_failure=False))
+    put(f"brajdic_harle_{split}_step_mae_pct", M.mean_abs([_err(r) for r in bh]))
+    put(f"handheld_{split}_step_mae_pct", M.mean_abs([_err(r) for r in ox_hand + bh]))
     failure = M.median_counting_failures
     for ds, short in LANDMARK_DATASETS:
         sel = _select(results, ds, split)
@@ -101,10 +98,10 @@ def headline_split(results: list[dict], split: str) -> dict:
                 put(f"{p}_{peer}_gps_median_m", failure([s and s["median_m"] for s in srcs]))
                 put(f"{p}_{peer}_gps_fit_median_m", failure([s and s["fit_median_m"] for s in srcs]))
     ip = _select(results, "ipol_healthy_gait_xsens", split)
-    put(f"ipol_{split}_step_mae_pct", M.mean_abs([_step_err(r) for r in ip]))
-    put(f"ipol_{split}_distance_mae_pct", M.mean_abs([_distance_err(r, "distance_err_pct") for r in ip]))
+    put(f"ipol_{split}_step_mae_pct", M.mean_abs([_err(r) for r in ip]))
+    put(f"ipol_{split}_distance_mae_pct", M.mean_abs([_err(r, "distance_err_pct") for r in ip]))
     tw = _select(results, "trundlewheel_distance", split)
-    put(f"trundlewheel_{split}_distance_mae_pct", M.mean_abs([_distance_err(r, "distance_err_pct") for r in tw]))
+    put(f"trundlewheel_{split}_distance_mae_pct", M.mean_abs([_err(r, "distance_err_pct") for r in tw]))
     return h
 
 

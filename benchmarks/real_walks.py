@@ -542,6 +542,13 @@ def plot_walk(walk: RealWalk, rec, res, fixes, row, st_t, modes) -> str:
 
 
 # -- summaries ----------------------------------------------------------------------------------------------
+def _outage_pct(o: dict, key: str) -> float:
+    """An outage's end error (%): one that failed or could not be scored (e.g. no distance walked by the track
+    while the fixes moved) is an infinite error in its walk's median, never dropped."""
+    v = None if o.get("failed") else o.get(key)
+    return math.inf if v is None else v
+
+
 def summarize(rows: list[dict]) -> dict:
     out = {}
     for split in (TUNING, REPORT):
@@ -575,13 +582,9 @@ def summarize(rows: list[dict]) -> dict:
             for r in gps:
                 os_ = [o for o in r.get("outages", []) if o["length_s"] == length]
                 n_fail += sum(1 for o in os_ if o.get("failed") or o.get("pdr_pct") is None)
-                if os_:  # an outage that failed or could not be scored (e.g. no distance walked by the
-                    # track while the fixes moved) is an infinite error in its walk's median, never dropped
-                    def pct(o, key):
-                        v = None if o.get("failed") else o.get(key)
-                        return math.inf if v is None else v
-                    per_walk_def.append(median_present([pct(o, "default_pct") for o in os_]))
-                    per_walk_pdr.append(median_present([pct(o, "pdr_pct") for o in os_]))
+                if os_:
+                    per_walk_def.append(median_present([_outage_pct(o, "default_pct") for o in os_]))
+                    per_walk_pdr.append(median_present([_outage_pct(o, "pdr_pct") for o in os_]))
                     per_walk_floor.append(median_present([o["floor_pct"] for o in os_ if not o.get("failed")]))
             # a GPS walk whose run failed has no outage scored: an infinite error in the medians, never dropped
             per_walk_def += failed_gps
