@@ -62,7 +62,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import math
 import os
 import sys
@@ -76,7 +75,7 @@ from benchmarks import metrics as M
 from benchmarks import splits as S
 from benchmarks.datasets.base import Trial
 from benchmarks.options import (
-    add_common, data_root, failed_row, failures_line, jsonable, only_keys, result_path, selected,
+    add_common, data_root, failed_row, failures_line, only_keys, read_json, result_path, selected, write_json,
 )
 from benchmarks.run import _in_window, make_pipeline
 from core.conventions import (ACC, CARRY_BAG, CARRY_HANDHELD, CARRY_MODES, CARRY_POCKET, CARRY_STILL,
@@ -503,7 +502,7 @@ def main(argv=None) -> int:
         have = {(r["dataset"], r["split"]) for r in results if "error" not in r}
         meta["merged"] = {}
         for path in args.merge:
-            old = json.loads(Path(path).read_text())
+            old = read_json(path)
             add = [r for r in old["results"] if "error" not in r and (r["dataset"], r["split"]) not in have]
             results += add
             meta["merged"][str(path)] = {"argv": old["meta"].get("argv"), "n": len(add)}
@@ -513,7 +512,7 @@ def main(argv=None) -> int:
     summary = summarize(results)
     here = Path(__file__).resolve().parent
     res_json, res_md = result_path(args, here / "carry_results.json", "carry"), result_path(args, here / "CARRY_RESULTS.md", "carry")
-    res_json.write_text(json.dumps(jsonable({"meta": meta, "summary": summary, "results": results}), indent=1))
+    write_json(res_json, {"meta": meta, "summary": summary, "results": results})
     res_md.write_text(markdown(summary, meta))
     if summary.get("failed"):
         print("carry benchmark: " + failures_line(summary["failed"]), file=sys.stderr)

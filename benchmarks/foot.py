@@ -54,7 +54,7 @@ import numpy as np
 from benchmarks.datasets.base import default_data_root
 from benchmarks.foot_splits import REPORT, TUNING
 from benchmarks.metrics import best_fit_rotation, rotate
-from benchmarks.options import git_rev
+from benchmarks.options import git_rev, read_json, write_json
 from core.conventions import wrap_angle
 from core.foot.navigator import AIDS, FootNavigator, FootSettings
 from core.foot.stance import DETECTORS, StanceDetector, StanceSettings
@@ -876,11 +876,11 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     write = not args.no_write and not args.only and not args.split
     if args.mounting_only:
-        out = json.loads(RESULTS_JSON.read_text())
+        out = read_json(RESULTS_JSON)
         out["mounting"] = run_mounting(args.data)
         out["headlines"] = headlines(out)
         if write:
-            RESULTS_JSON.write_text(json.dumps(out, indent=1, default=float))
+            write_json(RESULTS_JSON, out, digits=None)
             write_markdown(out)
         m = out["mounting"]
         print(f"mode detection: report {100 * m['accuracy_report']:.1f} % of {m['n_report']}, "
@@ -895,7 +895,7 @@ def main(argv=None) -> int:
     if args.split == TUNING and not sets:
         sets = {"pyshoe", "ipol"}  # x-io and the mode detection's report numbers: nothing of a tuning split
     want = (lambda d: not sets or d in sets)
-    rows = (json.loads(args.pyshoe_rows.read_text()) if args.pyshoe_rows else
+    rows = (read_json(args.pyshoe_rows) if args.pyshoe_rows else
             run_pyshoe(args.data, split=args.split, only=names, progress=True) if want("pyshoe") else [])
     if want("ipol"):
         print("foot: IPOL lower-back walks ...", file=sys.stderr, flush=True)
@@ -913,12 +913,12 @@ def main(argv=None) -> int:
     out["headlines"] = headlines(out, args.split or REPORT)
     if write:
         out["plots"] = write_plots(rows)
-        RESULTS_JSON.write_text(json.dumps(out, indent=1, default=float))
+        write_json(RESULTS_JSON, out, digits=None)
         write_markdown(out)
     else:  # a subset or --no-write: under out/benchmarks/foot/, nothing tracked by git (benchmarks.options)
         from benchmarks.options import out_dir
 
-        (out_dir("foot") / RESULTS_JSON.name).write_text(json.dumps(out, indent=1, default=float))
+        write_json(out_dir("foot") / RESULTS_JSON.name, out, digits=None)
         print(f"foot: wrote {out_dir('foot') / RESULTS_JSON.name}", file=sys.stderr)
         for r in out["pyshoe"]["trials"]:
             c = r["cases"]

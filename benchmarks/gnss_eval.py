@@ -39,7 +39,6 @@ report; simulator seeds 0-19 tuning, 1000-1019 report.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -49,7 +48,7 @@ import numpy as np
 
 from benchmarks import metrics as M
 from benchmarks.options import (add_common, data_root, failed_row, failures_line, failures_markdown, only_keys,
-                                out_dir, result_path, selected, writes_committed)
+                                out_dir, read_json, result_path, selected, write_json, writes_committed)
 from benchmarks.splits import REPORT, SIM_GPS_SEEDS, TUNING
 from core.conventions import GPS
 from core.gnss.ekf import sigma_max_m
@@ -488,7 +487,7 @@ def main(argv=None) -> int:
     if not writes_committed(args):
         PLOTS = out_dir("gnss_eval") / "plots"
     if args.markdown_only:
-        out_md.write_text(markdown(json.loads(out_json.read_text())))
+        out_md.write_text(markdown(read_json(out_json)))
         return 0
     root = data_root(args)
     t = time.time()
@@ -497,16 +496,16 @@ def main(argv=None) -> int:
             real_walks(Path(root), plots=True, keys=keys, failed=failed))
     splits = (TUNING, REPORT) if args.split == "both" else (args.split,)
     if args.keep_sim:
-        sim = json.loads(RESULTS_JSON.read_text())["sim"]
+        sim = read_json(RESULTS_JSON)["sim"]
     elif selected(keys, "sim"):
         sim = {sp: sim_walks(SIM_GPS_SEEDS[sp][:args.sim_walks], plot_seed=SIM_GPS_SEEDS[REPORT][0])
                for sp in splits}
     else:
         sim = {}
     h = headlines(real, sim)
-    out_json.write_text(json.dumps({"headlines": h, "real": real, "sim": sim, "failed": failed,
-                                    "seconds": time.time() - t}, indent=1, default=float))
-    out_md.write_text(markdown(json.loads(out_json.read_text())))
+    write_json(out_json, {"headlines": h, "real": real, "sim": sim, "failed": failed, "seconds": time.time() - t},
+               digits=None)
+    out_md.write_text(markdown(read_json(out_json)))
     if failed:
         print("gnss_eval: " + failures_line(failed), file=sys.stderr)
     print(f"gnss_eval: wrote {out_md}", file=sys.stderr)

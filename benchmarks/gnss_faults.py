@@ -89,7 +89,6 @@ headlines with the split ``quick`` for the sim.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -100,7 +99,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import metrics as M
-from benchmarks.options import add_common, data_root, only_keys, out_dir, selected, writes_committed
+from benchmarks.options import (add_common, data_root, only_keys, out_dir, read_json, selected, write_json,
+                                writes_committed)
 from benchmarks.gnss_eval import REAL, VARIANTS, headlines as gnss_headlines, open_walk, real_folders, windows
 from benchmarks.splits import REPORT, SIM_GPS_FAULT_SEEDS, SPLITS, TUNING, split_of
 from core.conventions import GNSS_STATUS, GPS
@@ -1026,14 +1026,14 @@ def main(argv=None) -> int:
     from benchmarks.report import refresh_sections
 
     if args.markdown_only:
-        RESULTS_MD.write_text(markdown(json.loads((args.out or RESULTS_JSON).read_text())))
+        RESULTS_MD.write_text(markdown(read_json(args.out or RESULTS_JSON)))
         refresh_sections()
         return 0
     root = data_root(args)
     splits = SPLITS if args.split == "all" else (args.split,)
     data = run(root, splits, quick=args.quick, jobs=args.jobs, parts=parts, keys=only_keys(args))
     out = args.out or (out_dir("gnss_faults") / RESULTS_JSON.name if subset else RESULTS_JSON)
-    out.write_text(json.dumps(data, indent=1, default=float))
+    write_json(out, data, digits=None)
     if not subset:
         RESULTS_MD.write_text(markdown(data))
         refresh_sections()

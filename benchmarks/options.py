@@ -15,6 +15,7 @@ median: its errors count as +inf (the company's rule).
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import subprocess
 import sys
@@ -91,18 +92,52 @@ def git_rev() -> str:
         return ""
 
 
-def jsonable(x):
-    """Results as JSON can hold them: dict keys as strings, numpy integers as ints, floats rounded to 4 decimals,
-    a non-finite float as ``None`` (nan and inf are not JSON)."""
+#: how a non-finite float is written in a results file: JSON has no NaN or Infinity, and ``null`` already means
+#: "not measured" there, so a counted failure (+inf) or an unscored value (nan) is kept apart as a string
+NONFINITE_TEXT = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+
+
+def jsonable(x, digits: int | None = 4):
+    """Results as JSON can hold them: dict keys as strings, numpy numbers as Python's, floats rounded to
+    ``digits`` decimals (None: as they are), a non-finite float as the string ``"nan"``, ``"inf"`` or ``"-inf"``
+    (:func:`read_json` turns them back; ``None`` stays ``null``).  Standard JSON that other tools open."""
     if isinstance(x, dict):
-        return {str(k): jsonable(v) for k, v in x.items()}
+        return {str(k): jsonable(v, digits) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [jsonable(v) for v in x]
+        return [jsonable(v, digits) for v in x]
+    if isinstance(x, np.ndarray):
+        return jsonable(x.tolist(), digits)
     if isinstance(x, (np.floating, float)):
-        return None if not math.isfinite(float(x)) else round(float(x), 4)
+        v = float(x)
+        if not math.isfinite(v):
+            return "nan" if math.isnan(v) else "inf" if v > 0 else "-inf"
+        return v if digits is None else round(v, digits)
     if isinstance(x, (np.integer,)):
         return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
     return x
+
+
+def write_json(path: Path, obj, *, digits: int | None = 4, indent: int | None = 1) -> None:
+    """``obj`` through :func:`jsonable` into ``path`` (strict JSON: a NaN left anywhere raises)."""
+    Path(path).write_text(json.dumps(jsonable(obj, digits), indent=indent, allow_nan=False) + "\n")
+
+
+def _restored(x):
+    if isinstance(x, dict):
+        return {k: _restored(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_restored(v) for v in x]
+    if isinstance(x, str) and x in NONFINITE_TEXT:
+        return NONFINITE_TEXT[x]
+    return x
+
+
+def read_json(path: Path):
+    """A results file as :func:`write_json` wrote it, its ``"nan"``/``"inf"``/``"-inf"`` strings floats again
+    (an older file's bare ``NaN``/``Infinity`` reads too)."""
+    return _restored(json.loads(Path(path).read_text()))
 
 
 def failed_row(name: str, split: str, exc: BaseException, **extra) -> dict:

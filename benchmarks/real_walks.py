@@ -54,7 +54,6 @@ from __future__ import annotations
 
 import argparse
 import ast
-import json
 import math
 import sys
 import time
@@ -66,7 +65,7 @@ import numpy as np
 
 from benchmarks.datasets.base import default_data_root
 from benchmarks.metrics import median_present
-from benchmarks.options import git_rev, jsonable, out_dir, writes_committed
+from benchmarks.options import git_rev, jsonable, out_dir, write_json, writes_committed
 from benchmarks.datasets.phone_walks import STEP_CLIP, RealWalk, real_walks
 from benchmarks.splits import REPORT, TUNING
 from core.conventions import GPS, wrap_angle
@@ -823,7 +822,7 @@ def main(argv=None) -> int:
     res_md = RESULTS_MD if writes_committed(a) and not subset else out_dir("real_walks") / RESULTS_MD.name
     res_json = RESULTS_JSON if writes_committed(a) and not subset else out_dir("real_walks") / RESULTS_JSON.name
     res_md.write_text(md)
-    res_json.write_text(json.dumps(jsonable({"meta": meta, "summary": summ, "walks": rows}), indent=1))
+    write_json(res_json, {"meta": meta, "summary": summ, "walks": rows})
     print(md)
     print(f"wrote {res_md} and {res_json}", file=sys.stderr)
     return 0

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-import json
 
 from benchmarks import metrics as M
 from benchmarks.headline import PEERS, evaluate_targets, headline
+from benchmarks.options import read_json
 from benchmarks.splits import SPLITS
 
 #: the "before" column of issue #8 (headlines of the code before it, per split)
@@ -361,7 +361,7 @@ def headline_table(h: dict) -> str:
 
 def load_baseline(path: Path | None = None) -> dict | None:
     try:
-        return json.loads(Path(BASELINE if path is None else path).read_text())
+        return read_json(Path(BASELINE if path is None else path))
     except (OSError, ValueError):
         return None
 
@@ -398,7 +398,7 @@ def before_after_table(h: dict, baseline: dict, peers: bool = False) -> str:
 def _section_headlines(name: str) -> dict:
     """The headlines a benchmark of its own saved in ``benchmarks/<name>`` ({} if it has not run)."""
     try:
-        return json.loads(Path(__file__).with_name(name).read_text()).get("headlines", {})
+        return read_json(Path(__file__).with_name(name)).get("headlines", {})
     except (OSError, ValueError):
         return {}
 
@@ -476,7 +476,7 @@ def what_to_expect(results: list, h: dict) -> list[str]:
 def _carry_expectation() -> str | None:
     """The walking direction per carry mode on the simulator's report seeds (benchmarks/walkdir_results.json)."""
     try:
-        sim = json.loads(Path(__file__).with_name("walkdir_results.json").read_text()).get("sim", {})
+        sim = read_json(Path(__file__).with_name("walkdir_results.json")).get("sim", {})
     except (OSError, ValueError):
         return None
     med = {k.split("/", 1)[1]: v["auto"]["median_abs_deg"] for k, v in sim.items() if k.startswith("report/")}

@@ -51,7 +51,6 @@ A walk that fails (an exception, no steps) is counted and listed, never dropped.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -62,7 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.metrics import median_present
-from benchmarks.options import git_rev, jsonable, out_dir
+from benchmarks.options import git_rev, out_dir, write_json
 from benchmarks.real_walks import STRAIGHT_MIN, reversed_steps, run_default, stability, step_arrays
 from benchmarks.splits import OXIOD_TRUTH_DATASET, REPORT, RIDI_TRUTH_DATASET, TUNING, split_of
 
@@ -357,8 +356,7 @@ def main(argv=None) -> int:
     md = markdown(rows, summ, meta)
     where = out_dir("truth_walks") if a.no_write or a.only else RESULTS_MD.parent
     (where / RESULTS_MD.name).write_text(md)
-    (where / RESULTS_JSON.name).write_text(json.dumps(jsonable({"meta": meta, "summary": summ, "walks": rows}),
-                                                      indent=1))
+    write_json(where / RESULTS_JSON.name, {"meta": meta, "summary": summ, "walks": rows})
     print(md)
     print(f"wrote {RESULTS_MD.name} and {RESULTS_JSON.name} in {where}", file=sys.stderr)
     return 0

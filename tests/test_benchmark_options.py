@@ -76,7 +76,22 @@ def test_shared_result_helpers():
     from benchmarks.metrics import median_present
     from benchmarks.options import git_rev, jsonable
 
-    assert jsonable({1: [np.float64(1.234567), math.nan, np.int64(3), (math.inf, "a")]}) == {"1": [1.2346, None, 3,
-                                                                                                  [None, "a"]]}
+    assert jsonable({1: [np.float64(1.234567), math.nan, np.int64(3), (math.inf, "a", None)]}) == {
+        "1": [1.2346, "nan", 3, ["inf", "a", None]]}
     assert median_present([None, math.nan, 1.0, math.inf, 2.0]) == 2.0 and median_present([None, math.nan]) is None
     assert isinstance(git_rev(), str)
+
+
+def test_results_json_keeps_a_failure_apart_from_not_measured(tmp_path):
+    # before, a counted failure (+inf) and "not measured" were both written as null
+    import json
+
+    from benchmarks.options import read_json, write_json
+
+    path = tmp_path / "r.json"
+    write_json(path, {"median": math.inf, "low": -math.inf, "unscored": math.nan, "absent": None, "x": 1.23456},
+               digits=None)
+    json.loads(path.read_text(), parse_constant=lambda c: pytest.fail(f"not standard JSON: {c}"))
+    back = read_json(path)
+    assert back["median"] == math.inf and back["low"] == -math.inf and math.isnan(back["unscored"])
+    assert back["absent"] is None and back["x"] == 1.23456
