@@ -10,6 +10,7 @@ import pytest
 from core.foot.ins import InsState, ZuptEKF
 from core.foot.navigator import FootNavigator, FootSettings
 from desktop.foot_simulator import footprints, simulate_foot
+from tests._state_helpers import scalar_attributes
 
 
 def _walk():
@@ -121,3 +122,7 @@ def test_navigator_reset_sets_every_attribute():
     assert vars(nav).keys() == vars(new).keys(), set(vars(nav)) ^ set(vars(new))
     assert {k: type(v) for k, v in vars(nav).items()} == {k: type(v) for k, v in vars(new).items()}
     assert _same(nav.ins.snapshot(), new.ins.snapshot())
+    assert scalar_attributes(nav) == scalar_attributes(new)  # plain values as a new one's (nan equal to nan)
+    # ... and its values: the reset navigator walks the same walk again to the same track as a new one
+    a, b = nav.run(w.recording, stance=w.stance), new.run(w.recording, stance=w.stance)
+    assert np.array_equal(a.position_n, b.position_n, equal_nan=True) and a.counters == b.counters

@@ -9,6 +9,7 @@ from core.conventions import wrap_angle
 from core.pdr.pipeline import Pipeline
 from core.recording import MissingSensorError, Recording
 from desktop.simulator import simulate_walk, street_route
+from tests._state_helpers import scalar_attributes
 
 
 def _heading_change(track, t_before_ns, t_after_ns):
@@ -105,6 +106,13 @@ def test_keep_steps_false_streams_the_same_steps_as_the_batch_run():
         p.reset()
         new = vars(Pipeline(keep_steps=keep))
         assert {k: type(v) for k, v in vars(p).items()} == {k: type(v) for k, v in new.items()}
+        assert scalar_attributes(p) == scalar_attributes(Pipeline(keep_steps=keep))  # plain values too
+    # ... and its values: the reset pipeline walks the same walk again step for step (nothing remembered)
+    again = []
+    for name, t, v in walk.recording.events(["gyro", "acc", "mag"]):
+        again.extend(p.update(name, t, v))
+    again.extend(p.finish())
+    assert again == batch.steps
 
 
 def test_ten_minutes_of_streaming_keep_the_filter_sound_the_memory_flat_and_the_heading_bounded():
