@@ -747,13 +747,14 @@ def _counted_steps_pct(n_steps: int, counted) -> float:
     return 100.0 * (n_steps / counted - 1.0) if counted else math.nan
 
 
-def phone_walks(data_root, extra=None) -> list[PhoneWalk]:
+def phone_walks(data_root, extra=None, *, split: str | None = None, ipin: bool = True) -> list[PhoneWalk]:
     """Every phone walk with a distance truth under ``data_root`` (and the extra corpus ``extra``, default
     :data:`DEFAULT_EXTRA` if present), with its split (``benchmarks.splits``): IPIN 2023's surveyed landmark
     stretches, every real walk with GPS (:func:`benchmarks.datasets.phone_walks.real_walks`) by its straight
     chords, every counted clip with a stated path, the trundle wheel.  A walk whose run finds no step or no
     chord is kept with an empty truth? No: a GPS walk without one straight chord has no distance truth and is
-    listed by :func:`phone_walks_without_truth`; a walk with chords but no steps inside counts at -100 %."""
+    listed by :func:`phone_walks_without_truth`; a walk with chords but no steps inside counts at -100 %.
+    ``split``: only that split's walks (the others are not run); ``ipin``: False leaves IPIN 2023 out."""
     from benchmarks.datasets.phone_walks import STEP_CLIP, real_walks
     from benchmarks.splits import split_of
     from core.importers import load_recording
@@ -762,11 +763,15 @@ def phone_walks(data_root, extra=None) -> list[PhoneWalk]:
     if extra is None and DEFAULT_EXTRA.is_dir():
         extra = DEFAULT_EXTRA
     out = []
-    for lw in ipin_walks(str(root)):  # surveyed landmarks, detours dropped (ipin_walks)
+    for lw in ipin_walks(str(root)) if ipin else ():  # surveyed landmarks, detours dropped (ipin_walks)
         route = lw.name[1:3]
+        if split is not None and split_of("ipin2023_track3", {"route": route}) != split:
+            continue
         out.append(PhoneWalk(lw.name, "ipin2023_track3", split_of("ipin2023_track3", {"route": route}), "landmarks",
                              [(lw.features, lw.distance_m)], modes=[[CARRY_HANDHELD] * len(lw.features)]))  # "hand"
     for w in real_walks(root, Path(extra) if extra else None):
+        if split is not None and w.split != split:
+            continue
         try:
             rec = load_recording(str(w.folder), warn=False)
         except Exception as e:  # an unreadable walk is listed, never dropped silently
@@ -789,7 +794,7 @@ def phone_walks(data_root, extra=None) -> list[PhoneWalk]:
         out.append(PhoneWalk(w.walk, w.dataset, w.split, "gps_chords",
                              [([steps[k].features for k in sel], chord) for sel, chord in spans], carry,
                              [[steps[k].carry_mode for k in sel] for sel, _ in spans]))
-    for lw in trundle_walks(str(root)):
+    for lw in trundle_walks(str(root)) if split in (None, split_of("trundlewheel_distance")) else ():
         out.append(PhoneWalk(lw.name, "trundlewheel_distance", split_of("trundlewheel_distance"), "wheel",
                              [(lw.features, lw.distance_m)]))
     return [w for w in out if w.stretches]
