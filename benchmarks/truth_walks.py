@@ -35,6 +35,16 @@ Walking-direction stability against the truth
     or after a reset, before the offset applies) holds the whole offset as a jump, and a 180 deg offset then dominates a walk's SD of eight windows (issue #25: the
     tuning pocket and bag walks); its mean offset is in the truth's unknown frame, so neither SD can tell a
     right constant offset from a wrong one.
+Offset against the truth's own attitude (RIDI)
+    Where the recording has the truth's attitude of the same device (``truth_attitude``: RIDI's Tango pose), the
+    true offset of each step is known in the truth's frame: the truth's course over :data:`TRUE_OFFSET_HALF_S` s
+    either side of the step (a chord of at least :data:`TRUE_OFFSET_MIN_CHORD_M`) minus the mean heading, over the
+    same samples, of the device axis the step's heading follows (the smoother's ``y`` or ``-z``).  The offset the
+    step used (its heading minus the smoothed device heading: 0 where the offset does not apply) against it:
+    median and p90 of the absolute error, and the share of steps more than 90 deg off (**wrong**: a sign or axis
+    error that the SD cannot see, since it removes the walk's mean).  :func:`truth_offset`.  OxIOD's Vicon
+    quaternion is of the marker body, not the phone (its tilt disagrees with Core Motion's gravity by 45-170 deg):
+    not used.
 Reversed steps
     As :func:`benchmarks.real_walks.reversed_steps`, the truth (every :data:`PATH_EVERY_S` s) standing in for the
     GPS fixes: the share of steps more than 90 deg from the truth's chord within 5 s of the step (at least 6 m long),
@@ -62,6 +72,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.metrics import median_present
+from core.conventions import wrap_angle
+from core.importers._common import TRUTH_ATTITUDE
+from core.quaternion import to_matrix_array
 from benchmarks.options import git_rev, jsonable, out_dir
 from benchmarks.real_walks import STRAIGHT_MIN, reversed_steps, run_default, stability, step_arrays
 from benchmarks.splits import OXIOD_TRUTH_DATASET, REPORT, RIDI_TRUTH_DATASET, TUNING, split_of
@@ -74,6 +87,12 @@ PATH_EVERY_S = 0.5
 MIN_SPEED_M_S = 0.5
 MIN_STEPS = 4
 PER_MODE_SHARE = 0.8
+#: the true offset per step: the truth's course and the device axis's heading over this many seconds either side
+TRUE_OFFSET_HALF_S = 1.0
+#: ... from a chord of the truth at least this long (m); shorter: the step is not scored
+TRUE_OFFSET_MIN_CHORD_M = 1.0
+#: a device axis whose horizontal part (mean over the window) is shorter than this has no heading: not scored
+TRUE_OFFSET_MIN_HORIZONTAL = 0.2
 
 
 @dataclass
@@ -194,6 +213,13 @@ def evaluate_walk(walk: TruthWalk) -> dict:
             row["failed"] = "no steps"
             return row
         st_t, heading, device = step_arrays(res, pipe)
+        if rec.has(TRUTH_ATTITUDE):
+            probe_log = getattr(pipe.walkdir, "log", {})
+            axes = [probe_log.get(s.heading_rad, {}).get("axis") for s in res.steps]
+            att = rec.streams[TRUTH_ATTITUDE]
+            pos = rec.streams["posi"]
+            row["offset_truth"] = truth_offset(att.t_ns, att.values, pos.t_ns, pos.values[:, :2], st_t, heading, device,
+                                               axes)
         modes = [s.carry_mode for s in res.steps]
         row["steps_per_mode"] = {m: modes.count(m) for m in sorted(set(modes))}
         posi = rec.streams["posi"]
@@ -227,6 +253,46 @@ def evaluate_walk(walk: TruthWalk) -> dict:
         row["failed"] = f"{type(e).__name__}: {e}"
         row["traceback"] = traceback.format_exc(limit=3)
     return row
+
+
+def truth_offset(att_t_ns, att_q, pos_t_ns, pos_xy, st_t, heading, device, axes) -> dict:
+    """The offset each step used against the true offset from the truth's attitude (module doc).  ``att_q``: (n, 4)
+    quaternions w, x, y, z, device -> the frame of ``pos_xy``; ``axes``: per step the smoothed device axis (a 3-tuple
+    in device coordinates, None: ``y``).  Returns the counts, the true offset's circular mean and the absolute
+    errors' median / p90 (deg) and the share of steps more than 90 deg off (%)."""
+    att_t_ns = np.asarray(att_t_ns, dtype=np.int64)
+    mats = to_matrix_array(np.asarray(att_q, dtype=float))  # (n, 3, 3)
+    half = int(TRUE_OFFSET_HALF_S * 1e9)
+    lo_a, hi_a = np.searchsorted(att_t_ns, st_t - half), np.searchsorted(att_t_ns, st_t + half, side="right")
+    lo_p = np.searchsorted(pos_t_ns, st_t - half)
+    hi_p = np.searchsorted(pos_t_ns, st_t + half, side="right") - 1
+    cums: dict = {}
+    errs, trues = [], []
+    for k in range(len(st_t)):
+        a, b, pa, pb = lo_a[k], hi_a[k], lo_p[k], hi_p[k]
+        if b <= a or pb <= pa or not (np.isfinite(heading[k]) and np.isfinite(device[k])):
+            continue
+        d = pos_xy[pb] - pos_xy[pa]
+        if math.hypot(d[0], d[1]) < TRUE_OFFSET_MIN_CHORD_M:
+            continue
+        ax = tuple(axes[k]) if axes[k] is not None else (0.0, 1.0, 0.0)
+        if ax not in cums:  # the axis's horizontal components in the truth frame, cumulated over the samples
+            v = mats @ np.asarray(ax, dtype=float)
+            cums[ax] = np.vstack([np.zeros(2), np.cumsum(v[:, :2], axis=0)])
+        c = cums[ax]
+        h = (c[b] - c[a]) / (b - a)
+        if math.hypot(h[0], h[1]) < TRUE_OFFSET_MIN_HORIZONTAL:
+            continue
+        true = wrap_angle(math.atan2(d[1], d[0]) - math.atan2(h[1], h[0]))
+        trues.append(true)
+        errs.append(abs(wrap_angle(wrap_angle(heading[k] - device[k]) - true)))
+    if not errs:
+        return {"n": 0, "true_offset_deg": None, "abs_err_deg_median": None, "abs_err_deg_p90": None,
+                "wrong_pct": None}
+    e = np.degrees(np.asarray(errs))
+    return {"n": len(e), "true_offset_deg": math.degrees(math.atan2(np.mean(np.sin(trues)), np.mean(np.cos(trues)))),
+            "abs_err_deg_median": float(np.median(e)), "abs_err_deg_p90": float(np.percentile(e, 90)),
+            "wrong_pct": float(100.0 * np.mean(e > 90.0))}
 
 
 def unmixed_windows(wins, st_t, heading, device) -> list:
@@ -273,12 +339,26 @@ def summarize(rows: list[dict]) -> dict:
                 "reversed_pct_median": median_present([(r.get("reversed") or {}).get("reversed_pct") for r in ok]
                                                       + inf),
                 "windows": int(sum(r["stability"]["n_windows"] for r in ok)),
+                # against the truth's attitude (RIDI only; a walk without it is no walk of this median)
+                "offset_truth_err_deg_median": median_present(
+                    [r["offset_truth"]["abs_err_deg_median"] for r in ok if r.get("offset_truth")]
+                    + (inf if any(r.get("offset_truth") for r in ok) else [])),
+                "offset_truth_wrong_pct_median": median_present(
+                    [r["offset_truth"]["wrong_pct"] for r in ok if r.get("offset_truth")]
+                    + (inf if any(r.get("offset_truth") for r in ok) else [])),
             }
     return out
 
 
 def _f(x, nd=1):
     return "-" if x is None else f"{x:.{nd}f}"
+
+
+def _truth_cells(o) -> str:
+    if not o or not o.get("n"):
+        return "- | -"
+    return (f"{_f(o['true_offset_deg'])} | {_f(o['abs_err_deg_median'])} / {_f(o['abs_err_deg_p90'])} "
+            f"({_f(o['wrong_pct'])})")
 
 
 def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
@@ -294,8 +374,9 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
          f"({PATH_EVERY_S:g}-s samples). End error: after the best rotation of the whole track about its first step.",
          "", "## Per split and placement (medians)", "",
          "| split | dataset: placement | walks | failed | windows | SD deg | abs drift deg/min | device SD deg | "
-         "SD unmixed deg | distance err % | end err % of path | reversed steps % |",
-         "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+         "SD unmixed deg | distance err % | end err % of path | reversed steps % | offset err vs truth attitude deg "
+         "| steps > 90 deg off truth % |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for split, by in summ.items():
         label = "report, seen once" if split == REPORT else "tuning"
         for pl, s in by.items():
@@ -303,15 +384,16 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
                      f" | {_f(s['abs_drift_deg_min_median'], 2)} | {_f(s['device_sd_deg_median'])} | "
                      f"{_f(s['unmixed_sd_deg_median'])} | "
                      f"{_f(s['distance_error_pct_median'])} | {_f(s['end_error_pct_median'])} | "
-                     f"{_f(s['reversed_pct_median'])} |")
+                     f"{_f(s['reversed_pct_median'])} | {_f(s.get('offset_truth_err_deg_median'))} | "
+                     f"{_f(s.get('offset_truth_wrong_pct_median'))} |")
     L += ["", "## Per walk", "",
           "| split | walk | s | steps | carry share (detector) | windows | SD deg | drift deg/min | offset deg | "
           "device SD deg | SD unmixed deg (windows) | per mode SD deg | PDR m / truth m (err %) | end err m (% of path) | "
-          "reversed % (steps) |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "reversed % (steps) | true offset deg | offset err vs truth deg, median / p90 (> 90 deg %) |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r.get("failed"):
-            L.append(f"| {r['split']} | {r['name']} | | | | | FAILED: {r['failed']} | | | | | | | | |")
+            L.append(f"| {r['split']} | {r['name']} | | | | | FAILED: {r['failed']} | | | | | | | | | | |")
             continue
         st, dv, um = r["stability"], r["stability_device"], r.get("stability_unmixed") or {}
         share = ", ".join(f"{m} {100 * v:.0f}%" for m, v in r["carry_share"].items())
@@ -321,7 +403,7 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
                  f"{_f(st['mean_offset_deg'])} | "
                  f"{_f(dv['sd_deg'])} | {_f(um.get('sd_deg'))} ({um.get('n_windows', 0)}) | {pm} | {r['pdr_distance_m']:.0f} / {r['truth_path_m']:.0f} "
                  f"({_f(r['distance_error_pct'])}) | {r['end_error_m']:.1f} ({_f(r['end_error_pct'])}) | "
-                 f"{_f(r['reversed']['reversed_pct'])} ({r['reversed']['n']}) |")
+                 f"{_f(r['reversed']['reversed_pct'])} ({r['reversed']['n']}) | {_truth_cells(r.get('offset_truth'))} |")
     return "\n".join(L) + "\n"
 
 

@@ -105,3 +105,34 @@ def test_unmixed_windows_leave_out_the_steps_before_the_offset_applies():
     assert len(kept) == 7 and kept[0] == wins[1]
     assert mixed["sd_deg"] > 30.0 and steady["sd_deg"] < 3.0
     assert TW.unmixed_windows(wins, st_t, device, device) == wins  # hand-held: nothing left out
+
+
+def test_the_offset_is_scored_against_the_truth_attitude_whatever_the_frames():
+    """RIDI's Tango pose gives the device's own heading in the truth's frame, so the true offset is known per step
+    (issue #25, h13/bagsign): on the tuning bag walk ``ridi_dan_bag1`` the step headings held within a few degrees
+    of a constant (SD unmixed 5.6 deg) while that constant was 100 deg off.  A square walk with the phone's top edge
+    100 deg right of the walk: the right offset scores ~0, a constant -150 deg (dan_bag1's) 110 deg on every step,
+    the device axis alone 100 deg; the smoothed device heading may be in any frame; a vertical axis is not scored."""
+    rng = np.random.default_rng(8)
+    from core.quaternion import about_axis_array
+
+    t, xy = _square_walk()
+    d = np.diff(xy, axis=0, append=xy[-1:] + (xy[-1:] - xy[-2:-1]))
+    course = np.arctan2(d[:, 1], d[:, 0])
+    psi = course - math.radians(100.0) - math.pi / 2  # yaw: the device y axis 100 deg clockwise of the course
+    att = about_axis_array(2, psi)
+    st_t = t[::50][2:-2]  # a step every 0.5 s
+    device = rng.uniform(-math.pi, math.pi) + np.zeros(len(st_t))  # the EKF's frame: unrelated to the truth's
+    axes = [None] * len(st_t)
+
+    def score(off_deg):
+        heading = device + math.radians(off_deg)
+        return TW.truth_offset(t, att, t, xy, st_t, heading, device, axes)
+
+    right, dan, device_only = score(100.0), score(-150.0), score(0.0)
+    assert right["n"] > 0.8 * len(st_t) and abs(right["true_offset_deg"] - 100.0) < 1.0
+    assert right["abs_err_deg_median"] < 1.0 and right["wrong_pct"] == 0.0
+    assert abs(dan["abs_err_deg_median"] - 110.0) < 1.0 and dan["wrong_pct"] == 100.0
+    assert abs(device_only["abs_err_deg_median"] - 100.0) < 1.0 and device_only["wrong_pct"] == 100.0
+    upright = TW.truth_offset(t, att, t, xy, st_t, device, device, [(0.0, 0.0, -1.0)] * len(st_t))
+    assert upright["n"] == 0 and upright["wrong_pct"] is None  # the back of a flat phone has no heading
