@@ -44,7 +44,10 @@ Offset against the truth's own attitude (RIDI)
     median and p90 of the absolute error, and the share of steps more than 90 deg off (**wrong**: a sign or axis
     error that the SD cannot see, since it removes the walk's mean).  :func:`truth_offset`.  OxIOD's Vicon
     quaternion is of the marker body, not the phone (its tilt disagrees with Core Motion's gravity by 45-170 deg):
-    not used.
+    the constant rotation from the body to the phone is fitted per walk from the gyroscope
+    (:func:`device_attitude`: the body's rates from consecutive Vicon rotations against the phone's gyroscope,
+    least squares; on the tuning and report copies it puts the phone's vertical within 1.2-4.7 deg of Core
+    Motion's gravity, a residual of 0.12-0.21 rad/s, and a hand-held top edge 9-12 deg off the walk).
 Reversed steps
     As :func:`benchmarks.real_walks.reversed_steps`, the truth (every :data:`PATH_EVERY_S` s) standing in for the
     GPS fixes: the share of steps more than 90 deg from the truth's chord within 5 s of the step (at least 6 m long),
@@ -72,8 +75,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.metrics import median_present
-from core.conventions import wrap_angle
-from core.importers._common import TRUTH_ATTITUDE
+from core.conventions import GYRO, wrap_angle
+from core.importers._common import TRUTH_ATTITUDE, TRUTH_BODY_ATTITUDE
 from core.quaternion import to_matrix_array
 from benchmarks.options import git_rev, jsonable, out_dir
 from benchmarks.real_walks import STRAIGHT_MIN, reversed_steps, run_default, stability, step_arrays
@@ -213,13 +216,14 @@ def evaluate_walk(walk: TruthWalk) -> dict:
             row["failed"] = "no steps"
             return row
         st_t, heading, device = step_arrays(res, pipe)
-        if rec.has(TRUTH_ATTITUDE):
+        truth_att = device_attitude(rec)
+        if truth_att is not None:
             probe_log = getattr(pipe.walkdir, "log", {})
             axes = [probe_log.get(s.heading_rad, {}).get("axis") for s in res.steps]
-            att = rec.streams[TRUTH_ATTITUDE]
             pos = rec.streams["posi"]
-            row["offset_truth"] = truth_offset(att.t_ns, att.values, pos.t_ns, pos.values[:, :2], st_t, heading, device,
-                                               axes)
+            row["offset_truth"] = truth_offset(truth_att[0], truth_att[1], pos.t_ns, pos.values[:, :2], st_t, heading,
+                                               device, axes)
+            row["offset_truth"]["attitude_fit"] = truth_att[2]
         modes = [s.carry_mode for s in res.steps]
         row["steps_per_mode"] = {m: modes.count(m) for m in sorted(set(modes))}
         posi = rec.streams["posi"]
@@ -255,13 +259,41 @@ def evaluate_walk(walk: TruthWalk) -> dict:
     return row
 
 
-def truth_offset(att_t_ns, att_q, pos_t_ns, pos_xy, st_t, heading, device, axes) -> dict:
-    """The offset each step used against the true offset from the truth's attitude (module doc).  ``att_q``: (n, 4)
-    quaternions w, x, y, z, device -> the frame of ``pos_xy``; ``axes``: per step the smoothed device axis (a 3-tuple
-    in device coordinates, None: ``y``).  Returns the counts, the true offset's circular mean and the absolute
-    errors' median / p90 (deg) and the share of steps more than 90 deg off (%)."""
+def device_attitude(rec):
+    """``(t_ns, R (n, 3, 3) device -> the truth's frame, fit)`` from the recording's truth attitude: RIDI's
+    ``truth_attitude`` as it is (fit None); OxIOD's ``truth_body_attitude`` turned by the constant body-to-device
+    rotation ``A`` (``v_device = A v_body``) that fits the phone's gyroscope to the body's rates from consecutive
+    rotations best (least squares over every pair of rows, the Kabsch solution; fit: the median residual in rad/s).
+    None without either."""
+    if rec.has(TRUTH_ATTITUDE):
+        att = rec.streams[TRUTH_ATTITUDE]
+        return att.t_ns, to_matrix_array(att.values), None
+    if not (rec.has(TRUTH_BODY_ATTITUDE) and rec.has(GYRO)):
+        return None
+    att, gyro = rec.streams[TRUTH_BODY_ATTITUDE], rec.streams[GYRO]
+    r = to_matrix_array(att.values)  # body -> truth frame
+    dt = np.diff(att.t_ns) * 1e-9
+    d = np.einsum("nji,njk->nik", r[:-1], r[1:])  # R_k^T R_k+1 = I + [w_body dt]x for a short dt
+    w_body = np.stack([d[:, 2, 1] - d[:, 1, 2], d[:, 0, 2] - d[:, 2, 0], d[:, 1, 0] - d[:, 0, 1]], axis=1)
+    w_body /= 2.0 * np.maximum(dt, 1e-9)[:, None]
+    mid = att.t_ns[:-1] + (att.t_ns[1:] - att.t_ns[:-1]) // 2
+    w_dev = np.column_stack([np.interp(mid, gyro.t_ns, gyro.values[:, i]) for i in range(3)])
+    ok = (dt > 0) & (dt < 0.1) & np.all(np.isfinite(w_body), axis=1) & (np.linalg.norm(w_body, axis=1) < 20.0)
+    if ok.sum() < 100:
+        return None
+    u, _, vt = np.linalg.svd(w_dev[ok].T @ w_body[ok])
+    a = u @ np.diag([1.0, 1.0, float(np.sign(np.linalg.det(u @ vt)))]) @ vt
+    resid = float(np.median(np.linalg.norm(w_dev[ok] - w_body[ok] @ a.T, axis=1)))
+    return att.t_ns, np.einsum("nij,kj->nik", r, a), {"residual_rad_s": resid}
+
+
+def truth_offset(att_t_ns, att_r, pos_t_ns, pos_xy, st_t, heading, device, axes) -> dict:
+    """The offset each step used against the true offset from the truth's attitude (module doc).  ``att_r``: (n, 3,
+    3) rotation matrices device -> the frame of ``pos_xy`` (:func:`device_attitude`); ``axes``: per step the smoothed
+    device axis (a 3-tuple in device coordinates, None: ``y``).  Returns the counts, the true offset's circular mean
+    and the absolute errors' median / p90 (deg) and the share of steps more than 90 deg off (%)."""
     att_t_ns = np.asarray(att_t_ns, dtype=np.int64)
-    mats = to_matrix_array(np.asarray(att_q, dtype=float))  # (n, 3, 3)
+    mats = np.asarray(att_r, dtype=float)
     half = int(TRUE_OFFSET_HALF_S * 1e9)
     lo_a, hi_a = np.searchsorted(att_t_ns, st_t - half), np.searchsorted(att_t_ns, st_t + half, side="right")
     lo_p = np.searchsorted(pos_t_ns, st_t - half)
@@ -339,7 +371,7 @@ def summarize(rows: list[dict]) -> dict:
                 "reversed_pct_median": median_present([(r.get("reversed") or {}).get("reversed_pct") for r in ok]
                                                       + inf),
                 "windows": int(sum(r["stability"]["n_windows"] for r in ok)),
-                # against the truth's attitude (RIDI only; a walk without it is no walk of this median)
+                # against the truth's attitude (a walk without one is no walk of this median)
                 "offset_truth_err_deg_median": median_present(
                     [r["offset_truth"]["abs_err_deg_median"] for r in ok if r.get("offset_truth")]
                     + (inf if any(r.get("offset_truth") for r in ok) else [])),
@@ -357,8 +389,9 @@ def _f(x, nd=1):
 def _truth_cells(o) -> str:
     if not o or not o.get("n"):
         return "- | -"
+    fit = o.get("attitude_fit")
     return (f"{_f(o['true_offset_deg'])} | {_f(o['abs_err_deg_median'])} / {_f(o['abs_err_deg_p90'])} "
-            f"({_f(o['wrong_pct'])})")
+            f"({_f(o['wrong_pct'])})" + (f"; body fit {fit['residual_rad_s']:.2f} rad/s" if fit else ""))
 
 
 def markdown(rows: list[dict], summ: dict, meta: dict) -> str:

@@ -114,13 +114,13 @@ def test_the_offset_is_scored_against_the_truth_attitude_whatever_the_frames():
     100 deg right of the walk: the right offset scores ~0, a constant -150 deg (dan_bag1's) 110 deg on every step,
     the device axis alone 100 deg; the smoothed device heading may be in any frame; a vertical axis is not scored."""
     rng = np.random.default_rng(8)
-    from core.quaternion import about_axis_array
+    from core.quaternion import about_axis_array, to_matrix_array
 
     t, xy = _square_walk()
     d = np.diff(xy, axis=0, append=xy[-1:] + (xy[-1:] - xy[-2:-1]))
     course = np.arctan2(d[:, 1], d[:, 0])
     psi = course - math.radians(100.0) - math.pi / 2  # yaw: the device y axis 100 deg clockwise of the course
-    att = about_axis_array(2, psi)
+    att = to_matrix_array(about_axis_array(2, psi))
     st_t = t[::50][2:-2]  # a step every 0.5 s
     device = rng.uniform(-math.pi, math.pi) + np.zeros(len(st_t))  # the EKF's frame: unrelated to the truth's
     axes = [None] * len(st_t)
