@@ -136,3 +136,32 @@ def test_the_offset_is_scored_against_the_truth_attitude_whatever_the_frames():
     assert abs(device_only["abs_err_deg_median"] - 100.0) < 1.0 and device_only["wrong_pct"] == 100.0
     upright = TW.truth_offset(t, att, t, xy, st_t, device, device, [(0.0, 0.0, -1.0)] * len(st_t))
     assert upright["n"] == 0 and upright["wrong_pct"] is None  # the back of a flat phone has no heading
+
+
+def test_the_marker_body_is_turned_onto_the_phone_by_its_gyroscope():
+    """OxIOD's Vicon quaternion is of the marker body, not the phone: :func:`device_attitude` fits the constant
+    body-to-phone rotation from the gyroscope (issue #25, h13/bagsign).  A body turning at smooth random rates, a
+    phone fixed to it 170 deg about z and 20 deg about x (OxIOD's copies fit about 170 deg about z), its gyroscope
+    the body's rates in its own axes: the phone's attitude comes back within 0.5 deg."""
+    from core import quaternion as Q
+    from core.recording import Recording, make_stream
+
+    rng = np.random.default_rng(4)
+    n, dt = 1500, 0.01
+    tt = np.arange(n) * dt
+    w_body = sum(rng.normal(scale=1.0, size=3) * np.sin(2 * math.pi * f * tt + p)[:, None]
+                 for f, p in zip((0.4, 0.9, 1.7), rng.uniform(0, 6, 3)))
+    q = [(1.0, 0.0, 0.0, 0.0)]
+    for k in range(n - 1):  # body rates: q_k+1 = q_k (x) exp(w dt / 2), at the interval's midpoint rate
+        q.append(Q.normalize(Q.multiply(q[-1], Q.from_rotation_vector(0.5 * (w_body[k] + w_body[k + 1]) * dt))))
+    a = Q.to_matrix_array(Q.multiply(Q.from_axis_angle((0, 0, 1), math.radians(170.0)),
+                                     Q.from_axis_angle((1, 0, 0), math.radians(20.0))))  # v_phone = A v_body
+    t_ns = np.round(tt * 1e9).astype(np.int64)
+    rec = Recording({"gyro": make_stream("gyro", t_ns, w_body @ a.T),
+                     "truth_body_attitude": make_stream("truth_body_attitude", t_ns, np.array(q), ["w", "x", "y", "z"],
+                                                        "1")})
+    t_out, r_dev, fit = TW.device_attitude(rec)
+    want = np.einsum("nij,kj->nik", Q.to_matrix_array(np.array(q)), a)
+    cos = (np.einsum("nij,nij->n", r_dev, want) - 1.0) / 2.0
+    assert np.array_equal(t_out, t_ns) and fit["residual_rad_s"] < 0.01
+    assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max() < 0.5
