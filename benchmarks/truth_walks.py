@@ -35,6 +35,19 @@ Walking-direction stability against the truth
     or after a reset, before the offset applies) holds the whole offset as a jump, and a 180 deg offset then dominates a walk's SD of eight windows (issue #25: the
     tuning pocket and bag walks); its mean offset is in the truth's unknown frame, so neither SD can tell a
     right constant offset from a wrong one.
+Offset against the truth's own attitude (RIDI)
+    Where the recording has the truth's attitude of the same device (``truth_attitude``: RIDI's Tango pose), the
+    true offset of each step is known in the truth's frame: the truth's course over :data:`TRUE_OFFSET_HALF_S` s
+    either side of the step (a chord of at least :data:`TRUE_OFFSET_MIN_CHORD_M`) minus the mean heading, over the
+    same samples, of the device axis the step's heading follows (the smoother's ``y`` or ``-z``).  The offset the
+    step used (its heading minus the smoothed device heading: 0 where the offset does not apply) against it:
+    median and p90 of the absolute error, and the share of steps more than 90 deg off (**wrong**: a sign or axis
+    error that the SD cannot see, since it removes the walk's mean).  :func:`truth_offset`.  OxIOD's Vicon
+    quaternion is of the marker body, not the phone (its tilt disagrees with Core Motion's gravity by 45-170 deg):
+    the constant rotation from the body to the phone is fitted per walk from the gyroscope
+    (:func:`device_attitude`: the body's rates from consecutive Vicon rotations against the phone's gyroscope,
+    least squares; on the tuning and report copies it puts the phone's vertical within 1.2-4.7 deg of Core
+    Motion's gravity, a residual of 0.12-0.21 rad/s, and a hand-held top edge 9-12 deg off the walk).
 Reversed steps
     As :func:`benchmarks.real_walks.reversed_steps`, the truth (every :data:`PATH_EVERY_S` s) standing in for the
     GPS fixes: the share of steps more than 90 deg from the truth's chord within 5 s of the step (at least 6 m long),
@@ -61,6 +74,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.metrics import median_present
+from core.conventions import GYRO, wrap_angle
+from core.importers._common import TRUTH_ATTITUDE, TRUTH_BODY_ATTITUDE
+from core.quaternion import to_matrix_array
 from benchmarks.options import git_rev, out_dir, write_json
 from benchmarks.real_walks import STRAIGHT_MIN, reversed_steps, run_default, stability, step_arrays
 from benchmarks.splits import OXIOD_TRUTH_DATASET, REPORT, RIDI_TRUTH_DATASET, TUNING, split_of
@@ -73,6 +89,12 @@ PATH_EVERY_S = 0.5
 MIN_SPEED_M_S = 0.5
 MIN_STEPS = 4
 PER_MODE_SHARE = 0.8
+#: the true offset per step: the truth's course and the device axis's heading over this many seconds either side
+TRUE_OFFSET_HALF_S = 1.0
+#: ... from a chord of the truth at least this long (m); shorter: the step is not scored
+TRUE_OFFSET_MIN_CHORD_M = 1.0
+#: a device axis whose horizontal part (mean over the window) is shorter than this has no heading: not scored
+TRUE_OFFSET_MIN_HORIZONTAL = 0.2
 
 
 @dataclass
@@ -193,6 +215,14 @@ def evaluate_walk(walk: TruthWalk) -> dict:
             row["failed"] = "no steps"
             return row
         st_t, heading, device = step_arrays(res, pipe)
+        truth_att = device_attitude(rec)
+        if truth_att is not None:
+            probe_log = getattr(pipe.walkdir, "log", {})
+            axes = [probe_log.get(s.heading_rad, {}).get("axis") for s in res.steps]
+            pos = rec.streams["posi"]
+            row["offset_truth"] = truth_offset(truth_att[0], truth_att[1], pos.t_ns, pos.values[:, :2], st_t, heading,
+                                               device, axes)
+            row["offset_truth"]["attitude_fit"] = truth_att[2]
         modes = [s.carry_mode for s in res.steps]
         row["steps_per_mode"] = {m: modes.count(m) for m in sorted(set(modes))}
         posi = rec.streams["posi"]
@@ -226,6 +256,74 @@ def evaluate_walk(walk: TruthWalk) -> dict:
         row["failed"] = f"{type(e).__name__}: {e}"
         row["traceback"] = traceback.format_exc(limit=3)
     return row
+
+
+def device_attitude(rec):
+    """``(t_ns, R (n, 3, 3) device -> the truth's frame, fit)`` from the recording's truth attitude: RIDI's
+    ``truth_attitude`` as it is (fit None); OxIOD's ``truth_body_attitude`` turned by the constant body-to-device
+    rotation ``A`` (``v_device = A v_body``) that fits the phone's gyroscope to the body's rates from consecutive
+    rotations best (least squares over every pair of rows, the Kabsch solution; fit: the median residual in rad/s).
+    None without either."""
+    if rec.has(TRUTH_ATTITUDE):
+        att = rec.streams[TRUTH_ATTITUDE]
+        return att.t_ns, to_matrix_array(att.values), None
+    if not (rec.has(TRUTH_BODY_ATTITUDE) and rec.has(GYRO)):
+        return None
+    att, gyro = rec.streams[TRUTH_BODY_ATTITUDE], rec.streams[GYRO]
+    r = to_matrix_array(att.values)  # body -> truth frame
+    dt = np.diff(att.t_ns) * 1e-9
+    d = np.einsum("nji,njk->nik", r[:-1], r[1:])  # R_k^T R_k+1 = I + [w_body dt]x for a short dt
+    w_body = np.stack([d[:, 2, 1] - d[:, 1, 2], d[:, 0, 2] - d[:, 2, 0], d[:, 1, 0] - d[:, 0, 1]], axis=1)
+    w_body /= 2.0 * np.maximum(dt, 1e-9)[:, None]
+    mid = att.t_ns[:-1] + (att.t_ns[1:] - att.t_ns[:-1]) // 2
+    w_dev = np.column_stack([np.interp(mid, gyro.t_ns, gyro.values[:, i]) for i in range(3)])
+    ok = (dt > 0) & (dt < 0.1) & np.all(np.isfinite(w_body), axis=1) & (np.linalg.norm(w_body, axis=1) < 20.0)
+    if ok.sum() < 100:
+        return None
+    u, _, vt = np.linalg.svd(w_dev[ok].T @ w_body[ok])
+    a = u @ np.diag([1.0, 1.0, float(np.sign(np.linalg.det(u @ vt)))]) @ vt
+    resid = float(np.median(np.linalg.norm(w_dev[ok] - w_body[ok] @ a.T, axis=1)))
+    return att.t_ns, np.einsum("nij,kj->nik", r, a), {"residual_rad_s": resid}
+
+
+def truth_offset(att_t_ns, att_r, pos_t_ns, pos_xy, st_t, heading, device, axes) -> dict:
+    """The offset each step used against the true offset from the truth's attitude (module doc).  ``att_r``: (n, 3,
+    3) rotation matrices device -> the frame of ``pos_xy`` (:func:`device_attitude`); ``axes``: per step the smoothed
+    device axis (a 3-tuple in device coordinates, None: ``y``).  Returns the counts, the true offset's circular mean
+    and the absolute errors' median / p90 (deg) and the share of steps more than 90 deg off (%)."""
+    att_t_ns = np.asarray(att_t_ns, dtype=np.int64)
+    mats = np.asarray(att_r, dtype=float)
+    half = int(TRUE_OFFSET_HALF_S * 1e9)
+    lo_a, hi_a = np.searchsorted(att_t_ns, st_t - half), np.searchsorted(att_t_ns, st_t + half, side="right")
+    lo_p = np.searchsorted(pos_t_ns, st_t - half)
+    hi_p = np.searchsorted(pos_t_ns, st_t + half, side="right") - 1
+    cums: dict = {}
+    errs, trues = [], []
+    for k in range(len(st_t)):
+        a, b, pa, pb = lo_a[k], hi_a[k], lo_p[k], hi_p[k]
+        if b <= a or pb <= pa or not (np.isfinite(heading[k]) and np.isfinite(device[k])):
+            continue
+        d = pos_xy[pb] - pos_xy[pa]
+        if math.hypot(d[0], d[1]) < TRUE_OFFSET_MIN_CHORD_M:
+            continue
+        ax = tuple(axes[k]) if axes[k] is not None else (0.0, 1.0, 0.0)
+        if ax not in cums:  # the axis's horizontal components in the truth frame, cumulated over the samples
+            v = mats @ np.asarray(ax, dtype=float)
+            cums[ax] = np.vstack([np.zeros(2), np.cumsum(v[:, :2], axis=0)])
+        c = cums[ax]
+        h = (c[b] - c[a]) / (b - a)
+        if math.hypot(h[0], h[1]) < TRUE_OFFSET_MIN_HORIZONTAL:
+            continue
+        true = wrap_angle(math.atan2(d[1], d[0]) - math.atan2(h[1], h[0]))
+        trues.append(true)
+        errs.append(abs(wrap_angle(wrap_angle(heading[k] - device[k]) - true)))
+    if not errs:
+        return {"n": 0, "true_offset_deg": None, "abs_err_deg_median": None, "abs_err_deg_p90": None,
+                "wrong_pct": None}
+    e = np.degrees(np.asarray(errs))
+    return {"n": len(e), "true_offset_deg": math.degrees(math.atan2(np.mean(np.sin(trues)), np.mean(np.cos(trues)))),
+            "abs_err_deg_median": float(np.median(e)), "abs_err_deg_p90": float(np.percentile(e, 90)),
+            "wrong_pct": float(100.0 * np.mean(e > 90.0))}
 
 
 def unmixed_windows(wins, st_t, heading, device) -> list:
@@ -272,12 +370,27 @@ def summarize(rows: list[dict]) -> dict:
                 "reversed_pct_median": median_present([(r.get("reversed") or {}).get("reversed_pct") for r in ok]
                                                       + inf),
                 "windows": int(sum(r["stability"]["n_windows"] for r in ok)),
+                # against the truth's attitude (a walk without one is no walk of this median)
+                "offset_truth_err_deg_median": median_present(
+                    [r["offset_truth"]["abs_err_deg_median"] for r in ok if r.get("offset_truth")]
+                    + (inf if any(r.get("offset_truth") for r in ok) else [])),
+                "offset_truth_wrong_pct_median": median_present(
+                    [r["offset_truth"]["wrong_pct"] for r in ok if r.get("offset_truth")]
+                    + (inf if any(r.get("offset_truth") for r in ok) else [])),
             }
     return out
 
 
 def _f(x, nd=1):
     return "-" if x is None else f"{x:.{nd}f}"
+
+
+def _truth_cells(o) -> str:
+    if not o or not o.get("n"):
+        return "- | -"
+    fit = o.get("attitude_fit")
+    return (f"{_f(o['true_offset_deg'])} | {_f(o['abs_err_deg_median'])} / {_f(o['abs_err_deg_p90'])} "
+            f"({_f(o['wrong_pct'])})" + (f"; body fit {fit['residual_rad_s']:.2f} rad/s" if fit else ""))
 
 
 def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
@@ -293,8 +406,9 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
          f"({PATH_EVERY_S:g}-s samples). End error: after the best rotation of the whole track about its first step.",
          "", "## Per split and placement (medians)", "",
          "| split | dataset: placement | walks | failed | windows | SD deg | abs drift deg/min | device SD deg | "
-         "SD unmixed deg | distance err % | end err % of path | reversed steps % |",
-         "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+         "SD unmixed deg | distance err % | end err % of path | reversed steps % | offset err vs truth attitude deg "
+         "| steps > 90 deg off truth % |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for split, by in summ.items():
         label = "report, seen once" if split == REPORT else "tuning"
         for pl, s in by.items():
@@ -302,15 +416,16 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
                      f" | {_f(s['abs_drift_deg_min_median'], 2)} | {_f(s['device_sd_deg_median'])} | "
                      f"{_f(s['unmixed_sd_deg_median'])} | "
                      f"{_f(s['distance_error_pct_median'])} | {_f(s['end_error_pct_median'])} | "
-                     f"{_f(s['reversed_pct_median'])} |")
+                     f"{_f(s['reversed_pct_median'])} | {_f(s.get('offset_truth_err_deg_median'))} | "
+                     f"{_f(s.get('offset_truth_wrong_pct_median'))} |")
     L += ["", "## Per walk", "",
           "| split | walk | s | steps | carry share (detector) | windows | SD deg | drift deg/min | offset deg | "
           "device SD deg | SD unmixed deg (windows) | per mode SD deg | PDR m / truth m (err %) | end err m (% of path) | "
-          "reversed % (steps) |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "reversed % (steps) | true offset deg | offset err vs truth deg, median / p90 (> 90 deg %) |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r.get("failed"):
-            L.append(f"| {r['split']} | {r['name']} | | | | | FAILED: {r['failed']} | | | | | | | | |")
+            L.append(f"| {r['split']} | {r['name']} | | | | | FAILED: {r['failed']} | | | | | | | | | | |")
             continue
         st, dv, um = r["stability"], r["stability_device"], r.get("stability_unmixed") or {}
         share = ", ".join(f"{m} {100 * v:.0f}%" for m, v in r["carry_share"].items())
@@ -320,7 +435,7 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
                  f"{_f(st['mean_offset_deg'])} | "
                  f"{_f(dv['sd_deg'])} | {_f(um.get('sd_deg'))} ({um.get('n_windows', 0)}) | {pm} | {r['pdr_distance_m']:.0f} / {r['truth_path_m']:.0f} "
                  f"({_f(r['distance_error_pct'])}) | {r['end_error_m']:.1f} ({_f(r['end_error_pct'])}) | "
-                 f"{_f(r['reversed']['reversed_pct'])} ({r['reversed']['n']}) |")
+                 f"{_f(r['reversed']['reversed_pct'])} ({r['reversed']['n']}) | {_truth_cells(r.get('offset_truth'))} |")
     return "\n".join(L) + "\n"
 
 

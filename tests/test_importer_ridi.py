@@ -65,6 +65,22 @@ def test_ridi_round_trip(tmp_path, form):
     assert np.allclose(rec.streams["mag"].values, table[:, 8:11])
     assert np.allclose(rec.streams["posi"].values, table[:, 11:14])
     assert abs(rec.streams["acc"].rate_hz - 200.0) < 1.0
+    assert "truth_attitude" not in rec.streams  # ori_w alone: no attitude
+
+
+def test_ridi_reads_the_tango_orientation_as_the_truth_attitude(tmp_path):
+    """``ori_w, ori_x, ori_y, ori_z`` (the Tango pose, device -> Tango frame) become ``truth_attitude`` (w, x, y, z):
+    the true heading of the device's axes in the frame of ``posi`` (issue #25, h13/bagsign)."""
+    header = HEADER[:-2] + ["ori_w", "ori_x", "ori_y", "ori_z"]
+    table = _table()
+    q = np.random.default_rng(2).normal(size=(len(table), 4))
+    table = np.column_stack([table[:, :len(HEADER) - 2], q / np.linalg.norm(q, axis=1, keepdims=True)])
+    path = tmp_path / "data.csv"
+    _write_csv(path, table, header)
+    rec = read_ridi(str(path), warn=False)
+    assert rec.streams["truth_attitude"].columns == ("w", "x", "y", "z")
+    assert np.allclose(rec.streams["truth_attitude"].values, table[:, 14:18])
+    assert not any(c.startswith("ori_") for c in rec.metadata["columns_ignored"])
 
 
 def test_ridi_data_csv_in_nanoseconds_and_a_last_line_without_its_newline(tmp_path):

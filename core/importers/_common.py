@@ -28,6 +28,13 @@ ZIP_EMPTY_MAGIC = b"PK\x05\x06"
 
 #: extra stream names the importers may add besides those of :mod:`core.conventions`
 POSI = "posi"  #: ground-truth landmarks (GetSensorData POSI lines)
+#: ground-truth attitude of the device as a quaternion (w, x, y, z), device -> the truth's own frame (gravity-aligned,
+#: z up, the same horizontal frame as its ``posi``; RIDI's Google Tango pose): the true heading of any device axis
+TRUTH_ATTITUDE = "truth_attitude"
+#: ground-truth attitude of a rigid body fixed to the device whose axes are not the device's (w, x, y, z, body -> the
+#: truth's frame; OxIOD's Vicon marker body): the constant body-to-device rotation is unknown (to be fitted, e.g. from
+#: the gyroscope: :func:`benchmarks.truth_walks.device_attitude`)
+TRUTH_BODY_ATTITUDE = "truth_body_attitude"
 PRESSURE = "pressure"  #: barometer, hPa (= mbar, as Android reports it)
 MAG_UNCAL = "mag_uncal"  #: uncalibrated magnetometer, uT, device axes (hard iron not removed)
 GYRO_UNCAL = "gyro_uncal"  #: uncalibrated gyroscope, rad/s, device axes (bias not removed)

@@ -41,7 +41,11 @@ Truth
     ``posi`` (columns ``east_m, north_m, up_m``): the Vicon translation ``(x, y, z)`` of every row.  The Vicon
     frame has z up (the phone's height in a trouser pocket reads about 0.9 m); its x and y are taken as a
     right-handed horizontal pair in an unknown rotation about the vertical (not geographic East and North):
-    compare headings through offsets and tracks after a rotation.  The Vicon quaternion is not read.
+    compare headings through offsets and tracks after a rotation.  ``truth_body_attitude``
+    (:data:`core.importers._common.TRUTH_BODY_ATTITUDE`, ``w, x, y, z``): the Vicon quaternion ``rotation.x/y/z/w``
+    of the marker body (a row whose norm is not within 1 % of 1 is dropped).  The marker body's axes are not the
+    phone's (its tilt disagrees with Core Motion's gravity by 45-170 deg on the copies); the constant rotation
+    between them is fitted where needed (:func:`benchmarks.truth_walks.device_attitude`, issue #25).
 
 Both files are read as a stream (:func:`core.importers._csv.fixed_rows`).  A row of either file that is not 16 (9)
 numbers is a bad line: it stays in place as a gap (the rows must stay aligned) and is counted in ``repairs``; more
@@ -49,7 +53,7 @@ than :func:`core.recording.bad_lines_tolerated` allows is a :class:`RecordingErr
 newline is read when it has all its fields, else it is a gap (a file cut off mid-write, said in ``repairs``).
 Files of different row counts are a :class:`RecordingError`.
 
-Streams: ``acc``, ``gyro``, ``mag``, ``posi``.
+Streams: ``acc``, ``gyro``, ``mag``, ``posi``, ``truth_body_attitude``.
 
 Detection (:func:`core.importers.detect_format`)
 ================================================
@@ -77,7 +81,7 @@ from core.recording import (
     MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
 )
 from core.importers._common import (
-    POSI, acceleration_in_m_s2, feed_lines, finish, head_bytes, head_lines, open_text,
+    POSI, TRUTH_BODY_ATTITUDE, acceleration_in_m_s2, feed_lines, finish, head_bytes, head_lines, open_text,
 )
 from core.importers._csv import ColumnBuffer, fixed_rows
 
@@ -91,8 +95,9 @@ ROTATION_RATE = slice(4, 7)
 GRAVITY = slice(7, 10)
 USER_ACC = slice(10, 13)
 MAGNETIC_FIELD = slice(13, 16)
-#: column slice of viK.csv: the translation
+#: column slices of viK.csv: the translation and the rotation (quaternion x, y, z, w: scalar last)
 TRANSLATION = slice(2, 5)
+ROTATION_XYZW = slice(5, 9)
 POSI_COLUMNS = ["east_m", "north_m", "up_m"]
 _IMU_NAME = re.compile(r"^imu(\d+)\.csv(\.gz)?$", re.IGNORECASE)
 _VI_NAME = re.compile(r"^vi(\d+)\.csv(\.gz)?$", re.IGNORECASE)
@@ -254,6 +259,12 @@ def read_oxiod(path: str, *, rate_hz: float = RATE_HZ, warn: bool = True,
         streams[POSI] = make_stream(POSI, t_ns[good], vi[good, TRANSLATION], POSI_COLUMNS, "m,m,m",
                                     "ground truth: Vicon translation of the phone at every row (x, y, z); z up, "
                                     "x and y a horizontal pair in the room's frame, not geographic")
+        q = vi[:, ROTATION_XYZW][:, [3, 0, 1, 2]]  # w, x, y, z
+        good = np.all(np.isfinite(q), axis=1) & (np.abs(np.linalg.norm(q, axis=1) - 1.0) < 0.01)
+        streams[TRUTH_BODY_ATTITUDE] = make_stream(TRUTH_BODY_ATTITUDE, t_ns[good], q[good], ["w", "x", "y", "z"], "1",
+                                                   "ground truth: the Vicon rotation (x, y, z, w) of the marker body, "
+                                                   "body -> the frame of posi; the body's axes are not the phone's "
+                                                   "(their tilt disagrees with Core Motion's gravity by 45-170 deg)")
     meta = {
         "source_format": FORMAT,
         "app": "OxIOD (Core Motion device motion, iPhone; Vicon truth)",

@@ -4,21 +4,26 @@ processed table, as its ``processed/data.csv`` or as an Excel sheet (``.xlsx``) 
 Format
 ======
 One row per sample, a header naming the columns (a first unnamed column is pandas' row index and is ignored).
-The columns read (RIDI's names; other columns, e.g. ``linacce_*``, ``grav_*``, ``rv_*``, ``ori_*`` or a copy's
-added ``Estimated X`` / ``Distance Error``, are not)::
+The columns read (RIDI's names; other columns, e.g. ``linacce_*``, ``grav_*``, ``rv_*`` or a copy's added
+``Estimated X`` / ``Distance Error``, are not)::
 
     time                       s, the Android sensor clock (``SensorEvent.timestamp`` / 1e9)
     acce_x, acce_y, acce_z     m/s^2, Android TYPE_ACCELEROMETER (gravity included), device axes
     gyro_x, gyro_y, gyro_z     rad/s, Android TYPE_GYROSCOPE, device axes
     magnet_x, magnet_y, magnet_z   uT, Android TYPE_MAGNETIC_FIELD (optional)
     pos_x, pos_y, pos_z        m, the Google Tango device's position (the truth; optional)
+    ori_w, ori_x, ori_y, ori_z the Tango pose's orientation, device -> Tango frame (the truth; optional)
 
 The values are Android's, in this project's units and axes already: kept as they are, ``t_ns = round(time *
 1e9)`` (``time`` in nanoseconds, as RIDI's own ``processed/data.csv`` has it, is told by its step:
 :func:`time_unit_s`); the acceleration passes the importers' unit check
 (:func:`core.importers._common.acceleration_in_m_s2`: about 9.8 is m/s^2, about 1 is g and converted).  The Tango frame is gravity-aligned with z up; its x and y are a horizontal pair in the frame Tango started
 in (not geographic East and North): ``posi`` (``east_m, north_m, up_m``) is ``(pos_x, pos_y, pos_z)``, to be compared
-through offsets and after a rotation.
+through offsets and after a rotation.  ``truth_attitude`` (:data:`core.importers._common.TRUTH_ATTITUDE`, ``w, x, y,
+z``) is ``(ori_w, ori_x, ori_y, ori_z)``: the same device's attitude in that frame, so the true heading of any device
+axis is known in the frame of ``posi`` (issue #25: checked on the copies in ``/work/extra_data2``, its tilt agrees with
+Android's ``grav_*`` within 1 deg (median) on the bag and leg walks; the true offset of a hand-held phone's top edge is
+0 +- 8 deg).
 
 The CSV is read as a stream (:class:`core.importers._csv.Table`): a field read that is not a number, or a line
 without its time or acceleration fields, is a bad line; an empty or absent gyroscope, magnetometer or position field
@@ -28,7 +33,7 @@ is a gap; a last line without its newline is a row when it has the header's fiel
 is not a number is a gap.  In both, a row without a usable time or acceleration is a bad line (skipped and counted,
 or, past what :func:`core.recording.bad_lines_tolerated` allows, a :class:`RecordingError`).
 
-Streams: ``acc``, ``gyro``, ``mag`` and ``posi`` where present.
+Streams: ``acc``, ``gyro``, ``mag``, ``posi`` and ``truth_attitude`` where present.
 
 Detection (:func:`core.importers.detect_format`)
 ================================================
@@ -54,7 +59,7 @@ from core.conventions import ACC, GYRO, MAG
 from core.recording import (
     MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
 )
-from core.importers._common import POSI, acceleration_in_m_s2, finish, first_bad_time, head_bytes, open_text
+from core.importers._common import POSI, TRUTH_ATTITUDE, acceleration_in_m_s2, finish, first_bad_time, head_bytes, open_text
 from core.importers._csv import Table
 
 FORMAT = "ridi"
@@ -64,6 +69,7 @@ COLUMNS = {
     GYRO: ("gyro_x", "gyro_y", "gyro_z"),
     MAG: ("magnet_x", "magnet_y", "magnet_z"),
     POSI: ("pos_x", "pos_y", "pos_z"),
+    TRUTH_ATTITUDE: ("ori_w", "ori_x", "ori_y", "ori_z"),
 }
 REQUIRED = ("time", *COLUMNS[ACC])
 #: the columns detection requires (RIDI always logs the gyroscope; the reader itself needs only REQUIRED)
@@ -289,6 +295,10 @@ def read_ridi(path: str, *, warn: bool = True,
             streams[POSI] = make_stream(POSI, t_ns[ok], vals[ok], POSI_COLUMNS, "m,m,m",
                                         "ground truth: Google Tango position (pos_x, pos_y, pos_z), z up, x and y "
                                         "in Tango's start frame, not geographic")
+        elif name == TRUTH_ATTITUDE:
+            streams[name] = make_stream(name, t_ns[ok], vals[ok], ["w", "x", "y", "z"], "1",
+                                        "ground truth: Google Tango orientation (ori_w, ori_x, ori_y, ori_z), device "
+                                        "-> the frame of posi")
         elif name == ACC:
             streams[ACC] = make_stream(ACC, t_ns, acceleration_in_m_s2(vals, "acce_x/y/z", path, repairs, notes))
         else:
