@@ -59,7 +59,9 @@ from core.conventions import ACC, GYRO, MAG
 from core.recording import (
     MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
 )
-from core.importers._common import POSI, TRUTH_ATTITUDE, acceleration_in_m_s2, finish, first_bad_time, head_bytes, open_text
+from core.importers._common import (
+    POSI, TRUTH_ATTITUDE, acceleration_in_m_s2, finish, first_bad_time, head_bytes, open_text,
+)
 from core.importers._csv import Table
 
 FORMAT = "ridi"
