@@ -173,7 +173,7 @@ def test_fix_predictions_do_not_snap_back_to_the_last_step():
 
     c = GpsFusion()
     c.run(_steps([0.5 * i for i in range(1, 11)]))
-    pred = [PdrEkf.fix_prediction(c.ekf.x, c._fraction(c._last_step_ns + int(s * 1e9)))[0]
+    pred = [PdrEkf.fix_prediction(c.ekf.x, c._fraction(c.last_step_ns + int(s * 1e9)))[0]
             for s in np.arange(0.0, 3.0, 0.05)]
     assert np.max(np.abs(np.diff(pred))) < 0.1
     assert np.all(np.diff(pred) >= -1e-9)
@@ -191,7 +191,7 @@ def test_the_gps_course_is_compared_with_the_heading_of_its_time():
     f = KubrakFusion(course_latency_s=1.5)
     for s in _steps([0.5 * i for i in range(1, 25)], heading_rad=heading):
         f.add_step(s)
-    t = f._last_step_ns
+    t = f.last_step_ns
     c = f.course_now(t, heading(t * 1e-9 - 1.5))
     assert c == pytest.approx(heading(t * 1e-9), abs=1e-9)
     off = KubrakFusion(course_latency_s=0.0)

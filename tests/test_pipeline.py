@@ -176,3 +176,20 @@ def test_a_step_released_as_a_stale_short_bout_is_dropped_is_released_once():
     first = p._release(int(20e9))
     assert [s.t_ns for s in first] == [int(1e9)] and p._candidates == []
     assert p._release(int(21e9)) == [] and p.n_rejected_bout == 1
+
+
+def test_fast_path_entry_points():
+    """The desktop fast path's way in: ``count_walk_start_step`` counts a walk's first step once however often a
+    recount inserts it; ``set_carry_state`` takes the pipeline's own step detectors only."""
+    from core.pdr.steps import StepDetector
+
+    p = Pipeline()
+    p.count_walk_start_step(5_000_000_000)
+    p.count_walk_start_step(5_000_000_000)
+    p.count_walk_start_step(6_000_000_000)
+    assert p.n_walk_start_steps == 2
+    p.set_carry_state("pocket", p.detector)
+    with pytest.raises(ValueError):
+        p.set_carry_state("pocket", StepDetector())
+    p.reset()
+    assert p.n_walk_start_steps == 0

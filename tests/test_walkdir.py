@@ -201,3 +201,27 @@ def test_gap_keeps_turning_holds_the_estimate_through_a_long_turn():
     assert after.n_used >= 8 and all(o == held for o in off)
     assert abs(math.degrees(wrap_angle(held + math.radians(110.0)))) < 8.0
     assert all(o == 0.0 for t, o in seen[False][1] if 22.5 <= t <= 25.7)  # forgotten: no estimate
+
+
+def test_fast_path_entry_points_change_only_what_they_say():
+    """The desktop fast path's way in (``set_axis``, ``estimate_with``, ``restore_state``): ``set_axis`` makes the
+    axis current with those accumulators alone, ``estimate_with`` leaves the object as it was, ``restore_state`` sets
+    state by name and refuses a setting or an unknown name (instead of writing the private fields)."""
+    from core.pdr.walkdir import _AxisState
+
+    wd = WalkingDirection(grid_rate_hz=50.0)
+    st = _AxisState.from_values([0.6, 0.8, 1.0, 1.0, 0.5, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, math.nan], 4)
+    wd.set_axis((1, 0), st)
+    assert wd.axis_key == (1, 0) and wd.axis_state((1, 0)) is st and wd.axis_states() == {(1, 0): st}
+    want = wd.estimate()
+    assert want["n_used"] == 4 and want["offset_rad"] != 0.0
+    wd.set_axis((0, 1), None)
+    assert wd.axis_states() == {} and wd.estimate()["n_used"] == 0
+    assert wd.estimate_with((1, 0), st) == want
+    assert wd.axis_key == (0, 1) and wd.axis_states() == {}  # unchanged
+    wd.restore_state({"n_strides": 3, "_vz": 0.25})
+    assert wd.n_strides == 3 and wd._vz == 0.25
+    for bad in ({"grid_rate_hz": 10.0}, {"_no_such_state": 1}):
+        with pytest.raises(AttributeError):
+            wd.restore_state(bad)
+    assert wd.grid_rate_hz == 50.0

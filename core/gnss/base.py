@@ -53,6 +53,13 @@ History (issue #30)
     (relocks, the subclass's) keep the last :data:`EVENTS_KEEP_LAST`; the algorithms only ever use
     their own windows, so both give the same track.
 
+State
+    Settings are the constructor's keywords; everything a run changes is one :class:`FixFusionState` (its outputs,
+    the judge, and three groups: :class:`FixScreening`, what the fix handling remembers of its streams;
+    :class:`RelockMemory`, the outage and relock bookkeeping; :class:`FixCounts`), made afresh by ``reset()``
+    with the subclass's own (:class:`core.gnss.fusion.ChenFusionState`, :class:`core.gnss.kubrak.KubrakFusionState`)
+    and its filter; other code reads it through read-only properties (``origin_lat_lon``, ``fixes``, ``n_gated``, ...).
+
 Everything is in the walk's local ENU frame of :mod:`core` (metres about the
 start point); latitude/longitude only at the edges (fix input, FusedStep
 output, exports) through :mod:`core.geodesy`.
@@ -156,6 +163,92 @@ class _Window:
     sigma_m: float = math.nan
     fix_t_ns: int | None = None
     done: bool = False
+
+
+@dataclass(slots=True)
+class FixCounts:
+    """How the fixes went and what GPS did to the track (:meth:`FixFusion.counters`); read from outside through
+    :class:`FixFusion`'s ``n_*``, ``fused_walked_m`` and ``moves``."""
+
+    accepted: int = 0  #: ``n_fixes_accepted``
+    hidden: int = 0  #: ``n_fixes_hidden``: inside a hidden window
+    screened_out: int = 0  #: ``n_screened_out``: by the screening, the C/N0 rule or the anchor's wait
+    cn0: int = 0  #: ``n_cn0``: by Kubrak et al.'s C/N0 rule
+    judged_out: int = 0  #: ``n_judged_out``: held back by the usability judge
+    filter_rejected: int = 0  #: ``n_filter_rejected``: the subclass filter's own verdict
+    gated: int = 0  #: ``n_gated``: refused by the position update's gate
+    relocked: int = 0  #: ``n_relocked``: taken by a relock
+    nis_sum: float = 0.0  #: the accepted updates' NIS, summed (``position_nis_mean``)
+    nis_n: int = 0
+    fused_walked_m: float = 0.0  #: distance of the fused steps a fix was accepted shortly before (m)
+    #: how far GPS moved the fused position, by kind of event (:meth:`FixFusion._count_move`)
+    moves: dict = field(default_factory=dict)
+    first_move: dict | None = None  #: the first such event
+    largest_move: dict | None = None  #: the largest
+
+
+@dataclass(slots=True)
+class FixScreening:
+    """What the fix handling remembers of its input streams between events."""
+
+    queue: deque  #: fixes waiting for the first step after them: (t_ns, values)
+    last_step_ns: int | None  #: the last step's time (None before any)
+    last_step_dur_ns: int  #: its duration
+    t_first_ns: int | None  #: the first sensor event's time (:meth:`FixFusion.set_time_zero`)
+    status: tuple | None  #: the last ``gnss_status``: (t_ns, n_used, cn0_4th_dbhz)
+    headings: deque  #: (t_ns, step heading unwrapped) of the last few seconds (:meth:`FixFusion.course_now`)
+    pdr: deque  #: (t_ns, east, north) of the pipeline's dead-reckoned steps, the last few seconds
+    anchor_waits: int  #: screened fixes too coarse to anchor the walk so far
+    pending_learning: list  #: fixes the judge has not judged yet, for training once it has
+    quality_failed: bool  #: the judge failed on the stream's quality since its last usable verdict
+
+    @classmethod
+    def initial(cls) -> FixScreening:
+        return cls(queue=deque(), last_step_ns=None, last_step_dur_ns=int(0.55e9), t_first_ns=None, status=None,
+                   headings=deque(), pdr=deque(), anchor_waits=0, pending_learning=[], quality_failed=False)
+
+
+@dataclass(slots=True)
+class RelockMemory:
+    """The outage and relock bookkeeping: what the filter last took, the gated run, the hidden windows."""
+
+    last_accept_ns: int | None  #: the filter's last accepted fix
+    first_inconsistent_ns: int | None  #: the judge's first inconsistent window since then
+    memory_ended_by_lock: bool  #: the last :meth:`FixFusion._stream_jumped` said no jump because the lock held
+    walked_since_accept_m: float  #: distance the filter walked since its last accepted fix (m)
+    rejected_run: deque  #: the gated fixes since the last accepted one: (t_ns, innovation E, N)
+    windows: list  #: the hidden windows (:class:`_Window`), as they are measured
+
+    @classmethod
+    def initial(cls, hidden_ns) -> RelockMemory:
+        return cls(last_accept_ns=None, first_inconsistent_ns=None, memory_ended_by_lock=False,
+                   walked_since_accept_m=0.0, rejected_run=deque(), windows=[_Window(a, b) for a, b in hidden_ns])
+
+
+@dataclass(slots=True)
+class FixFusionState:
+    """Everything :class:`FixFusion` changes as steps and fixes come (the subclass's filter apart), made by
+    :meth:`initial` in :meth:`FixFusion.reset`; its outputs are read through :class:`FixFusion`'s read-only
+    properties of the same names (``origin_lat_lon``, ``anchor``, ``fixes``, ``steps``, ``outages``, ``relocks``,
+    ``judge``)."""
+
+    origin_lat_lon: tuple | None  #: the walk's start (lat_deg, lon_deg); None before it is anchored
+    #: the fix that anchored the walk (or the first used, after a known start): (t_ns, lat, lon, alt); None before
+    anchor: tuple | None
+    fixes: list  #: every fix's :class:`FixRecord` (a list, or a record file without ``keep_history``)
+    steps: list  #: every :class:`FusedStep` (the same)
+    outages: list  #: the hidden windows' :class:`OutageResult`
+    relocks: list  #: when the filter re-locked to GPS, by how far, by which rule (the last few without history)
+    judge: GpsJudge | None  #: the usability judge (None: none)
+    screen: FixScreening
+    lock: RelockMemory
+    counts: FixCounts
+
+    @classmethod
+    def initial(cls, *, fixes, steps, relocks, judge, start, hidden_ns) -> FixFusionState:
+        return cls(origin_lat_lon=(start[0], start[1]) if start is not None else None, anchor=None, fixes=fixes,
+                   steps=steps, outages=[], relocks=relocks, judge=judge, screen=FixScreening.initial(),
+                   lock=RelockMemory.initial(hidden_ns), counts=FixCounts())
 
 
 @dataclass
@@ -456,54 +549,47 @@ class FixFusion:
         return [] if self.keep_history else deque(maxlen=EVENTS_KEEP_LAST)
 
     def reset(self) -> None:
+        """A new run: the whole :class:`FixFusionState` made afresh (the history files of the last closed), then the
+        subclass's filter (:meth:`_reset_filter`)."""
         for old in (getattr(self, "fixes", None), getattr(self, "steps", None)):
             if hasattr(old, "close"):
                 old.close()
-        self.origin_lat_lon: tuple[float, float] | None = None
-        #: the fix that anchored the walk (or the first used, after a known start): (t_ns, lat, lon, alt); None before
-        self.anchor: tuple | None = None
-        self.fixes: list[FixRecord] = self._history(FixRecord)
-        self.steps: list[FusedStep] = self._history(FusedStep)
-        self.n_fixes_accepted = 0
-        self.n_fixes_hidden = 0
-        #: distance of the fused steps a fix was accepted shortly before (m)
-        self.fused_walked_m = 0.0
-        self.outages: list[OutageResult] = []
-        self._queue: deque = deque()
-        self._last_step_ns: int | None = None
-        self._last_step_dur_ns = int(0.55e9)
-        self._last_accept_ns: int | None = None
-        self._first_inconsistent_ns: int | None = None  # the judge's first inconsistent window since then
-        self._memory_ended_by_lock = False  # the last :meth:`_stream_jumped` said no jump because the lock held
-        self._walked_since_accept_m = 0.0
-        self._windows = [_Window(a, b) for a, b in self.hidden_ns]
-        self._t_first_ns: int | None = None
-        self.n_screened_out = 0
-        self.n_gated = 0
-        self.n_relocked = 0
-        self.n_cn0 = 0
-        self.n_filter_rejected = 0
-        self._anchor_waits = 0
-        self._rejected_run: deque = deque()
-        self._nis_sum = 0.0
-        self._nis_n = 0
-        self._status: tuple | None = None  # last gnss_status: (t_ns, n_used, cn0_4th_dbhz)
-        self._headings: deque = deque()  # (t_ns, step heading unwrapped) of the last few seconds
-        self._pdr: deque = deque()  # (t_ns, east, north) of the pipeline's dead-reckoned steps, last few seconds
-        self.judge = GpsJudge(self.judge_settings) if self.judge_settings is not None else None
-        if self.judge is not None and self.start is not None:
-            self.judge.known_start(self.start[2])
-        self.n_judged_out = 0
-        self._pending_learning: list = []  # fixes the judge has not judged yet, for training once it has
-        self._quality_failed = False  # the judge failed on the stream's quality since its last usable verdict
-        self.relocks: list[dict] = self._events()  #: when the filter re-locked to GPS, by how far, by which rule
-        #: how far GPS moved the fused position, by kind of event (:meth:`_count_move`; :meth:`counters`' ``gps_moves``)
-        self.moves: dict = {}
-        self._first_move: dict | None = None
-        self._largest_move: dict | None = None
-        if self.start is not None:
-            self.origin_lat_lon = (self.start[0], self.start[1])
+        fixes, steps = self._history(FixRecord), self._history(FusedStep)
+        judge = GpsJudge(self.judge_settings) if self.judge_settings is not None else None
+        if judge is not None and self.start is not None:
+            judge.known_start(self.start[2])
+        self._state = FixFusionState.initial(fixes=fixes, steps=steps, relocks=self._events(), judge=judge,
+                                             start=self.start, hidden_ns=self.hidden_ns)
         self._reset_filter()
+
+    # -- read-only views of the state (it changes only through the fixes and steps; a new run: reset()) -----------
+    origin_lat_lon = property(lambda self: self._state.origin_lat_lon,
+                              doc="The walk's start (lat_deg, lon_deg); None before it is anchored.")
+    anchor = property(lambda self: self._state.anchor,
+                      doc="The fix that anchored the walk (or the first used, after a known start): (t_ns, lat, lon, "
+                          "alt); None before.")
+    fixes = property(lambda self: self._state.fixes, doc="Every fix's :class:`FixRecord` (a list, or a "
+                                                         ":class:`core.export.RecordFile` without ``keep_history``).")
+    steps = property(lambda self: self._state.steps, doc="Every :class:`FusedStep` (as ``fixes``).")
+    outages = property(lambda self: self._state.outages, doc="The hidden windows' :class:`OutageResult`.")
+    relocks = property(lambda self: self._state.relocks,
+                       doc="When the filter re-locked to GPS, by how far, by which rule (the last few without "
+                           "history).")
+    judge = property(lambda self: self._state.judge, doc="The usability judge (None: built without one).")
+    moves = property(lambda self: self._state.counts.moves,
+                     doc="How far GPS moved the fused position, by kind of event (:meth:`gps_moves` gives a copy).")
+    fused_walked_m = property(lambda self: self._state.counts.fused_walked_m,
+                              doc="Distance of the fused steps a fix was accepted shortly before (m).")
+    n_fixes_accepted = property(lambda self: self._state.counts.accepted)
+    n_fixes_hidden = property(lambda self: self._state.counts.hidden)
+    n_screened_out = property(lambda self: self._state.counts.screened_out)
+    n_cn0 = property(lambda self: self._state.counts.cn0)
+    n_judged_out = property(lambda self: self._state.counts.judged_out)
+    n_filter_rejected = property(lambda self: self._state.counts.filter_rejected)
+    n_gated = property(lambda self: self._state.counts.gated)
+    n_relocked = property(lambda self: self._state.counts.relocked)
+    last_step_ns = property(lambda self: self._state.screen.last_step_ns,
+                            doc="The last step's time (None before any).")
 
     # -- the subclass's filter -----------------------------------------------------
     def _reset_filter(self) -> None:
@@ -564,23 +650,23 @@ class FixFusion:
     # -- input ------------------------------------------------------------------------
     def add_fix(self, t_ns: int, values) -> None:
         """A GPS event (``values`` as the ``gps`` stream: lat, lon, alt, hacc, speed, course)."""
-        self._queue.append((int(t_ns), tuple(float(v) for v in values)))
-        last = self._last_step_ns
-        while self._queue and ((last is not None and self._queue[0][0] <= last)
-                               or self._queue[0][0] < int(t_ns) - self.hold_ns):
-            self._fix(*self._queue.popleft())
+        queue = self._state.screen.queue
+        queue.append((int(t_ns), tuple(float(v) for v in values)))
+        last = self._state.screen.last_step_ns
+        while queue and ((last is not None and queue[0][0] <= last) or queue[0][0] < int(t_ns) - self.hold_ns):
+            self._fix(*queue.popleft())
 
     def add_status(self, t_ns: int, values) -> None:
         """A ``gnss_status`` event: satellites used, C/N0 of the 4th strongest (dB-Hz)."""
         n_used = float(values[0]) if len(values) > 0 else math.nan
         cn0 = float(values[1]) if len(values) > 1 else math.nan
-        self._status = (int(t_ns), n_used, cn0)
+        self._state.screen.status = (int(t_ns), n_used, cn0)
 
     def _step_times(self, step) -> tuple[int, int]:
         """(start of the step's interval, its duration) in ns."""
-        prev = self._last_step_ns
+        prev = self._state.screen.last_step_ns
         d = step.features.duration_s
-        dur = int(d * 1e9) if d == d else self._last_step_dur_ns
+        dur = int(d * 1e9) if d == d else self._state.screen.last_step_dur_ns
         if prev is None or step.t_ns - prev > self.pause_ns:
             # the first step, or the first after a pause: its own duration (issue #26: it covered three)
             return step.t_ns - dur, dur
@@ -590,7 +676,7 @@ class FixFusion:
     def _remember_heading(self, t_ns: int, heading_rad: float) -> None:
         if not math.isfinite(heading_rad):
             return
-        h = self._headings
+        h = self._state.screen.headings
         if h:
             heading_rad = h[-1][1] + wrap_angle(heading_rad - h[-1][1])  # unwrapped
         h.append((int(t_ns), float(heading_rad)))
@@ -601,7 +687,7 @@ class FixFusion:
         """A GPS course at fix time ``t_ns`` (rad, CCW from East) as a measurement of the heading of the last
         step: the course describes the walking direction ``course_latency_s`` earlier (the receiver's
         smoothing), so the turn our steps made since then is added."""
-        h = self._headings
+        h = self._state.screen.headings
         if not h or self.course_latency_ns <= 0 or not math.isfinite(course_rad):
             return course_rad
         t = np.array([x[0] for x in h], dtype=np.int64)
@@ -619,7 +705,7 @@ class FixFusion:
 
     def _pdr_at(self, t_ns: int) -> tuple[float, float]:
         """The pipeline's dead-reckoned position at ``t_ns`` (between the steps around it; nan before any)."""
-        p = self._pdr
+        p = self._state.screen.pdr
         if not p:
             return math.nan, math.nan
         t = np.array([x[0] for x in p], dtype=np.int64)
@@ -645,14 +731,15 @@ class FixFusion:
 
     def add_step(self, step) -> FusedStep:
         """A completed :class:`core.pdr.pipeline.Step`; returns its fused counterpart."""
+        state = self._state
         t_prev, dur = self._step_times(step)
         self._before_fixes(step, t_prev)
-        pdr = self._pdr
+        pdr = state.screen.pdr
         pdr.append((int(step.t_ns), float(step.east_m), float(step.north_m)))
         while len(pdr) > 2 and pdr[1][0] < step.t_ns - self.hold_ns - int(5e9):
             pdr.popleft()
-        while self._queue and self._queue[0][0] <= step.t_ns:
-            self._fix(*self._queue.popleft())
+        while state.screen.queue and state.screen.queue[0][0] <= step.t_ns:
+            self._fix(*state.screen.queue.popleft())
         if self.trusting_gps:
             walked = self._step(step, t_prev, dur)
         else:
@@ -660,22 +747,23 @@ class FixFusion:
         self._remember_heading(step.t_ns, step.heading_rad)
         if self.judge is not None:  # the drift check's dead reckoning: the step as this filter walked it
             self.judge.add_step(step.t_ns, *self._step_output())
-        self._walked_since_accept_m += walked
-        self._last_step_ns = step.t_ns
-        self._last_step_dur_ns = dur
-        for w in self._windows:
+        state.lock.walked_since_accept_m += walked
+        state.screen.last_step_ns = step.t_ns
+        state.screen.last_step_dur_ns = dur
+        for w in state.lock.windows:
             if w.start_ns <= step.t_ns < w.end_ns:
                 w.walked_m += walked
         fused = self._emit(step.index, step.t_ns)
         self.steps.append(fused)
         if fused.source == "fused":
-            self.fused_walked_m += fused.length_m
+            state.counts.fused_walked_m += fused.length_m
         return fused
 
     def finish(self) -> None:
-        while self._queue:
-            self._fix(*self._queue.popleft())
-        for w in self._windows:
+        state = self._state
+        while state.screen.queue:
+            self._fix(*state.screen.queue.popleft())
+        for w in state.lock.windows:
             if w.fix_t_ns is not None and not w.done:
                 self._close_window(w, math.nan, None)
 
@@ -694,7 +782,7 @@ class FixFusion:
 
     def _cn0_verdict(self, t_ns: int) -> str:
         """Kubrak et al.'s C/N0 rule on the receiver status of this fix ("" when none or when it passes)."""
-        st = self._status
+        st = self._state.screen.status
         if st is None or self.min_cn0_4th_dbhz <= 0 or abs(t_ns - st[0]) > self.status_max_age_ns:
             return ""
         n_used, cn0 = st[1], st[2]
@@ -705,13 +793,14 @@ class FixFusion:
         return ""
 
     def _record(self, t_ns, v, east, north, accepted, reason, nis=math.nan, moved=0.0) -> None:
-        self.n_fixes_accepted += bool(accepted)
-        self.n_fixes_hidden += reason == HIDDEN
+        self._state.counts.accepted += bool(accepted)
+        self._state.counts.hidden += reason == HIDDEN
         self.fixes.append(FixRecord(t_ns, v[0], v[1], east, north, v[3] if len(v) > 3 else math.nan,
                                     v[4] if len(v) > 4 else math.nan, v[5] if len(v) > 5 else math.nan,
                                     accepted, reason, nis, moved))
 
     def _fix(self, t_ns: int, v: tuple) -> None:
+        state = self._state
         lat, lon = v[0], v[1]
         hacc = v[3] if len(v) > 3 else math.nan
         speed = v[4] if len(v) > 4 else math.nan
@@ -725,36 +814,36 @@ class FixFusion:
         judged = None
         if not reason:
             reason = self._cn0_verdict(t_ns)
-            self.n_cn0 += bool(reason)
+            state.counts.cn0 += bool(reason)
             if self.judge is not None:
-                st = self._status
+                st = state.screen.status
                 fresh = st is not None and self.min_cn0_4th_dbhz > 0 and abs(t_ns - st[0]) <= self.status_max_age_ns
                 sats = st[1] if st is not None and abs(t_ns - st[0]) <= self.status_max_age_ns else math.nan
                 judged = self.judge.add_fix(t_ns, lat, lon, hacc_eff, self._pdr_at(t_ns), (not reason) if fresh else None,
                                             speed, sats)
-                if self.judge.last_inconsistent_ns == t_ns and self._first_inconsistent_ns is None:
-                    self._first_inconsistent_ns = int(t_ns)
+                if self.judge.last_inconsistent_ns == t_ns and state.lock.first_inconsistent_ns is None:
+                    state.lock.first_inconsistent_ns = int(t_ns)
         elif self.judge is not None and reason != "no position":
             self.judge.add_screened_out(t_ns)  # too coarse or too fast: the stream is bad, not merely absent
         if reason:
-            self.n_screened_out += 1
+            state.counts.screened_out += 1
             self._record(t_ns, v, nan, nan, False, reason)
             return
         filt = self.filt
         sigma = max(hacc_eff * self.hacc_scale / HACC_PER_SIGMA, self.min_sigma_m)
         if self.origin_lat_lon is None and hacc_eff > self.anchor_max_hacc_m and \
-                self._anchor_waits < self.anchor_max_waits:
+                state.screen.anchor_waits < self.anchor_max_waits:
             # a phone's first fixes are often coarse (the ETH walk's first three are 65 m off): wait for a good one
-            self._anchor_waits += 1
-            self.n_screened_out += 1
+            state.screen.anchor_waits += 1
+            state.counts.screened_out += 1
             self._record(t_ns, v, nan, nan, False, f"waiting for a first fix within {self.anchor_max_hacc_m:.0f} m")
             return
         if self.origin_lat_lon is None:
             # anchor: the walk's start lies where dead reckoning says, seen from this fix
             e0, n0 = (float(filt.x[0]), float(filt.x[1])) if filt.initialized else (0.0, 0.0)
             lat0, lon0 = enu_to_geodetic(-e0, -n0, (lat, lon))
-            self.origin_lat_lon = (float(lat0), float(lon0))
-            self.anchor = (int(t_ns), float(lat), float(lon), float(v[2]) if len(v) > 2 else math.nan)
+            state.origin_lat_lon = (float(lat0), float(lon0))
+            state.anchor = (int(t_ns), float(lat), float(lon), float(v[2]) if len(v) > 2 else math.nan)
             if not filt.initialized:
                 self._init_filter_at(sigma)
                 filt = self.filt
@@ -772,16 +861,16 @@ class FixFusion:
             if not self.learn_held_back:
                 if judged.verdict is GpsVerdict.UNKNOWN:
                     # not yet judged (too few fixes, settling): what it teaches waits for the verdict
-                    self._pending_learning.append((t_ns, east, north, hacc_eff, speed, course))
+                    state.screen.pending_learning.append((t_ns, east, north, hacc_eff, speed, course))
                 else:
-                    self._pending_learning.clear()
+                    state.screen.pending_learning.clear()
             elif not set(judged.causes) <= _HELD_BACK_ONLY:
                 # the stream's own quality failed (accuracy, signal, pace, drift, NIS): nothing held back since the
                 # last usable verdict teaches (on the real tuning walk a cold start's converging fixes, 12-19 m
                 # reported, then 10 s settling, taught a wrong stride: Chen's leave-out ratio 0.43 -> 0.59)
-                self._quality_failed = True
-                self._pending_learning.clear()
-            elif not self._quality_failed:
+                state.screen.quality_failed = True
+                state.screen.pending_learning.clear()
+            elif not state.screen.quality_failed:
                 # held back (too few fixes, settling, or a window that still holds a jump): what it teaches waits
                 # for the verdict.  Kept while a window that first passes could still cover it: since the first
                 # fix of the passing windows, or within the last window while the judge fails (issue #26: clearing
@@ -789,18 +878,18 @@ class FixFusion:
                 # simulator's tuning seeds 1 and 7 the good fixes before the noisy minute taught nothing)
                 since = self.judge.consistent_since_ns
                 keep = since if since is not None else t_ns - int(self.judge.settings.window_s * 1e9)
-                self._pending_learning = [p for p in self._pending_learning if p[0] >= keep]
-                self._pending_learning.append((t_ns, east, north, hacc_eff, speed, course))
-            self.n_judged_out += 1
+                state.screen.pending_learning = [p for p in state.screen.pending_learning if p[0] >= keep]
+                state.screen.pending_learning.append((t_ns, east, north, hacc_eff, speed, course))
+            state.counts.judged_out += 1
             self._record(t_ns, v, east, north, False,
                          f"GPS judged {judged.verdict.value}: " + "; ".join(c.value for c in judged.causes))
             return
-        self._quality_failed = False
-        if self._pending_learning:
+        state.screen.quality_failed = False
+        if state.screen.pending_learning:
             self._learn_pending()
         reason = self._filter_verdict(t_ns)
         if reason:
-            self.n_filter_rejected += 1
+            state.counts.filter_rejected += 1
             self._record(t_ns, v, east, north, False, reason)
             self._filter_rejected(t_ns, east, north, sigma, speed, course)
             return
@@ -820,24 +909,24 @@ class FixFusion:
             else:
                 self._widen_position(d)
                 res = self._update_position(t_ns, east, north, sigma, False)
-            self.n_relocked += 1
+            state.counts.relocked += 1
             relocked = True
-            self._after_relock(float(np.hypot(*d)), self._walked_since_accept_m)
+            self._after_relock(float(np.hypot(*d)), state.lock.walked_since_accept_m)
         if not res.accepted:
-            self.n_gated += 1
+            state.counts.gated += 1
             self._record(t_ns, v, east, north, False, res.reason, res.nis)
             return
-        self._rejected_run.clear()
+        state.lock.rejected_run.clear()
         if res.nis == res.nis:
-            self._nis_sum += res.nis
-            self._nis_n += 1
+            state.counts.nis_sum += res.nis
+            state.counts.nis_n += 1
             if self.judge is not None:
                 self.judge.add_nis(res.nis)
         self._outage_jump(t_ns, res.correction_m, relocked, res.sigma_before_m)
         self._count_move(f"relock ({self.relocks[-1]['rule']})" if relocked else "update", t_ns, res.correction_m,
                          res.sigma_before_m)
         if self.anchor is None:
-            self.anchor = (int(t_ns), float(lat), float(lon), float(v[2]) if len(v) > 2 else math.nan)
+            state.anchor = (int(t_ns), float(lat), float(lon), float(v[2]) if len(v) > 2 else math.nan)
         self._accepted(t_ns, v, east, north, hacc, speed, course, res.nis, res.correction_m)
 
     def _relock(self, t_ns: int, innovation, sigma_m: float) -> bool:
@@ -849,7 +938,7 @@ class FixFusion:
         that formed a smooth path were rejected).  Otherwise they must agree among themselves for ``relock_s``
         and, with ``relock_max_drift``, by no more than the track can have drifted.
         """
-        run = self._rejected_run
+        run = self._state.lock.rejected_run
         run.append((t_ns, innovation[0], innovation[1]))
         while run and run[0][0] < t_ns - 2 * self.relock_ns:
             run.popleft()
@@ -861,7 +950,7 @@ class FixFusion:
                                  "stream_lock": [c.value for c in self.judge.last.locked_over],
                                  # the jump memory would still hold it back, but the stream lock held over a whole
                                  # window since its last inconsistent one (``JudgeSettings.lock_ends_jump_memory``)
-                                 "jump_memory_ended_by_lock": self._memory_ended_by_lock})
+                                 "jump_memory_ended_by_lock": self._state.lock.memory_ended_by_lock})
             run.clear()
             return True
         if len(run) < 3 or t_ns - run[0][0] < self.relock_ns:
@@ -870,7 +959,7 @@ class FixFusion:
         if float(np.max(np.std(d, axis=0))) > 2.0 * sigma_m:
             return False  # they disagree with each other too: bad GPS, keep rejecting
         if self.relock_max_drift is not None and float(np.hypot(*np.mean(d, axis=0))) > \
-                self.relock_max_drift * self._walked_since_accept_m + 3.0 * sigma_m:
+                self.relock_max_drift * self._state.lock.walked_since_accept_m + 3.0 * sigma_m:
             return False  # more than the track can have drifted since its last fix: a steady multipath
         self.relocks.append({"t_ns": int(t_ns), "offset_m": float(np.hypot(*np.mean(d, axis=0))),
                              "rule": "gated fixes agree", "consistent_s": (t_ns - run[0][0]) * 1e-9})
@@ -905,14 +994,14 @@ class FixFusion:
         says nothing of where the track is (it has drifted since), and a stream consistent for
         ``relock_jump_hold_s`` after its jump is taken back whatever it jumped from (before: blocked until another
         fix was accepted, which the gate could refuse for ever: on one phone walk 837 s of good fixes)."""
-        last, first = self.judge.last_inconsistent_ns, self._first_inconsistent_ns
-        self._memory_ended_by_lock = False
+        last, first = self.judge.last_inconsistent_ns, self._state.lock.first_inconsistent_ns
+        self._state.lock.memory_ended_by_lock = False
         if last is None or first is None or t_ns - last >= self.relock_jump_hold_ns:
             return False
         if self.judge.lock_holds_since(last, first):  # the stream lock's whole window since: no jump (``lock_ends_jump_memory``)
-            self._memory_ended_by_lock = True
+            self._state.lock.memory_ended_by_lock = True
             return False
-        accept = self._last_accept_ns if last_accept_ns is None else last_accept_ns
+        accept = self._state.lock.last_accept_ns if last_accept_ns is None else last_accept_ns
         if accept is None:
             return True
         return first - accept <= int(self.judge.settings.window_s * 1e9) + self.relock_ns
@@ -923,7 +1012,7 @@ class FixFusion:
         time order.  Without this a walk's first 15-20 s of good GPS taught nothing (a straight 140-m walk
         then learnt too little stride for the profile: 79 m of the 100 m needed)."""
         j = self.judge
-        pending, self._pending_learning = self._pending_learning, []
+        pending, self._state.screen.pending_learning = self._state.screen.pending_learning, []
         if j is None or j.passing_since_ns is None:
             return
         # the first fix of the window that first passed (``learn_held_back``), or that window's start
@@ -945,15 +1034,15 @@ class FixFusion:
     def _accepted(self, t_ns, v, east, north, hacc, speed, course, nis, moved) -> None:
         if self.judge is not None:
             self.judge.fix_used(t_ns)
-        self._last_accept_ns = t_ns
-        self._first_inconsistent_ns = None
-        self._walked_since_accept_m = 0.0
+        self._state.lock.last_accept_ns = t_ns
+        self._state.lock.first_inconsistent_ns = None
+        self._state.lock.walked_since_accept_m = 0.0
         self._record(t_ns, v, east, north, True, "", nis, moved)
         self._after_accept(t_ns, east, north, hacc if hacc > 0 else self.default_hacc_m, speed, course)
 
     def _outage_end(self, t_ns, east, north, pred, sigma) -> None:
         """The first screened fix after a hidden window: the error before the update."""
-        for w in self._windows:
+        for w in self._state.lock.windows:
             if w.end_error_m is None and t_ns >= w.end_ns:
                 w.end_error_m = math.hypot(east - pred[0], north - pred[1])
                 w.sigma_m = sigma
@@ -962,7 +1051,7 @@ class FixFusion:
     def _outage_jump(self, t_ns, moved, relocked: bool = False, sigma_before_m: float = math.nan) -> None:
         """... and the jump at the first fix after it that the filter accepts (the track rejoining GPS), saying
         whether that fix came through a relock."""
-        for w in self._windows:
+        for w in self._state.lock.windows:
             if w.fix_t_ns is not None and not w.done:
                 self._close_window(w, moved, t_ns, relocked, sigma_before_m)
 
@@ -979,16 +1068,16 @@ class FixFusion:
         m["moved_m"] += float(moved_m)
         m["max_m"] = max(m["max_m"], float(moved_m))
         event = {"t_ns": int(t_ns), "kind": kind, "moved_m": float(moved_m), "sigma_before_m": float(sigma_before_m)}
-        self._first_move = self._first_move or event
-        if self._largest_move is None or moved_m > self._largest_move["moved_m"]:
-            self._largest_move = event
+        self._state.counts.first_move = self._state.counts.first_move or event
+        if self._state.counts.largest_move is None or moved_m > self._state.counts.largest_move["moved_m"]:
+            self._state.counts.largest_move = event
 
     def gps_moves(self) -> dict:
         """How far GPS moved the fused position (:meth:`_count_move`): ``{"by_kind": {kind: {n, moved_m, max_m}},
         "first": event, "largest": event}`` (an event: ``t_ns``, ``kind``, ``moved_m``, ``sigma_before_m``; None
         before any)."""
-        return {"by_kind": {k: dict(v) for k, v in self.moves.items()}, "first": self._first_move,
-                "largest": self._largest_move}
+        return {"by_kind": {k: dict(v) for k, v in self.moves.items()}, "first": self._state.counts.first_move,
+                "largest": self._state.counts.largest_move}
 
     def _after_relock(self, offset_m: float, walked_m: float) -> None:
         """A relock moved the position by ``offset_m`` after ``walked_m`` of walking since the last accepted
@@ -997,7 +1086,7 @@ class FixFusion:
     def _close_window(self, w, jump_m: float, accept_t_ns: int | None, relocked: bool = False,
                       sigma_before_m: float = math.nan) -> None:
         w.done = True
-        t0 = self._t_first_ns if self._t_first_ns is not None else 0
+        t0 = self._state.screen.t_first_ns if self._state.screen.t_first_ns is not None else 0
         pct = 100.0 * w.end_error_m / w.walked_m if w.walked_m > 0 else math.nan
         self.outages.append(OutageResult((w.start_ns - t0) * 1e-9, (w.end_ns - w.start_ns) * 1e-9, w.walked_m,
                                          w.end_error_m, pct, w.sigma_m, jump_m, w.fix_t_ns,
@@ -1007,7 +1096,7 @@ class FixFusion:
 
     def set_time_zero(self, t0_ns: int) -> None:
         """The first sensor event's time, for outage start times in seconds."""
-        self._t_first_ns = int(t0_ns)
+        self._state.screen.t_first_ns = int(t0_ns)
 
     # -- output ------------------------------------------------------------------------------
     def _emit(self, index: int, t_ns: int) -> FusedStep:
@@ -1016,7 +1105,8 @@ class FixFusion:
         lat = lon = math.nan
         if self.origin_lat_lon is not None:
             lat, lon = enu_to_geodetic(e, n, self.origin_lat_lon)
-        fused = self._last_accept_ns is not None and t_ns - self._last_accept_ns <= self.fused_timeout_ns
+        last = self._state.lock.last_accept_ns
+        fused = last is not None and t_ns - last <= self.fused_timeout_ns
         P = self._reported_cov()
         length, heading = self._step_output()
         return FusedStep(index, t_ns, e, n, float(lat), float(lon), float(length), float(heading),
@@ -1031,12 +1121,13 @@ class FixFusion:
                 "anchored": self.origin_lat_lon is not None, "filter": self.name}
 
     def counters(self) -> dict:
+        counts = self._state.counts
         return {"fixes": len(self.fixes), "fixes_accepted": self.n_fixes_accepted,
                 "fixes_screened_out": self.n_screened_out,
                 "fixes_cn0": self.n_cn0, "fixes_filter_rejected": self.n_filter_rejected,
                 "fixes_gated": self.n_gated, "fixes_relocked": self.n_relocked,
                 "fixes_hidden": self.n_fixes_hidden,
-                "position_nis_mean": self._nis_sum / self._nis_n if self._nis_n else math.nan,
+                "position_nis_mean": counts.nis_sum / counts.nis_n if counts.nis_n else math.nan,
                 "fixes_judged_out": self.n_judged_out, "relocks": list(self.relocks), "gps_moves": self.gps_moves(),
                 "gps_judge": self.judge.summary() if self.judge is not None else None,
                 "fusion": self.name}

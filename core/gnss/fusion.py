@@ -35,6 +35,7 @@ from __future__ import annotations
 import copy
 import math
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -49,6 +50,31 @@ from core.gnss.training import OnlineTrainer
 FILTERS = ("ekf", "reset")
 #: heading samples the heading model learns after a relock before the relock's heading SD is dropped
 RELOCK_HEADING_SAMPLES = 3
+
+
+@dataclass(slots=True)
+class ChenFusionState:
+    """What :class:`GpsFusion` remembers besides :class:`core.gnss.base.FixFusionState` and its components' own
+    states (the EKF, the trainer, the fix decorrelation, the lagged regressors): made by :meth:`initial` in
+    ``reset()``."""
+
+    relock_heading_sd_rad: float  #: heading SD a relock showed the heading model did not know (rad)
+    relock_heading_until: int  #: ... until the heading model has this many samples
+    course_used: bool  #: a GPS course has been used (ends ``untrained_until_course``'s honest SD)
+    course_innov: deque  #: the last ``course_scatter_n`` course innovations: (rad, the heading state's variance)
+    course_sd_sum: float  #: the SDs the courses were used with (rad): their sum, count and largest
+    course_sd_n: int
+    course_sd_max: float
+    fix_bias_t_ns: int | None  #: the fix the fixes' correlated error was last propagated to
+    #: the heading model's regressors at the current step, lagged with ``heading_lag_s`` (None without a lag: the
+    #: model then takes its heading's own)
+    x: np.ndarray | None
+
+    @classmethod
+    def initial(cls, course_scatter_n: int) -> ChenFusionState:
+        return cls(relock_heading_sd_rad=0.0, relock_heading_until=0, course_used=False,
+                   course_innov=deque(maxlen=max(course_scatter_n, 1)), course_sd_sum=0.0, course_sd_n=0,
+                   course_sd_max=0.0, fix_bias_t_ns=None, x=None)
 
 
 class GpsFusion(FixFusion):
@@ -191,24 +217,12 @@ class GpsFusion(FixFusion):
         self.reset()
 
     def _reset_filter(self) -> None:
-        #: heading SD a relock showed the heading model did not know (rad), and the heading samples it lasts for
-        self._relock_heading_sd_rad = 0.0
-        self._relock_heading_until = 0
-        self._course_used = False  # a GPS course has been used (ends ``untrained_until_course``'s honest SD)
-        #: the last ``course_scatter_n`` course innovations (rad) and the SDs the courses were used with
-        self._course_innov: deque = deque(maxlen=max(self.course_scatter_n, 1))
-        self._course_sd_sum = 0.0
-        self._course_sd_n = 0
-        self._course_sd_max = 0.0
+        self._chen = ChenFusionState.initial(self.course_scatter_n)
         # the given filter is a prototype of settings: each run starts a copy of it afresh
         self.ekf = PdrEkf() if self._ekf_proto is None else copy.copy(self._ekf_proto)
         self.ekf.reset()
-        self._fix_bias_t_ns: int | None = None  # the fix the fixes' correlated error was last propagated to
         self.decorrelation = FixDecorrelation(self.gps_error_correlation_s)
         self.lagged.reset()
-        #: the heading model's regressors at the current step, lagged with ``heading_lag_s`` (None without a lag: the
-        #: model then takes its heading's own)
-        self._x = None
         if self._trainer_proto is not None:
             self.trainer = self._trainer_proto
             self.trainer.reset()
@@ -243,7 +257,7 @@ class GpsFusion(FixFusion):
         if self.learn_heading or self._heading_model0 is not None:
             hm = self.heading_model
             if self._heading_model0 is None and hm.n_accepted == 0 and self.untrained_heading_sd_rad is not None \
-                    and not (self.untrained_until_course and self._course_used):
+                    and not (self.untrained_until_course and self._chen.course_used):
                 return self.untrained_heading_sd_rad
             return self._model_heading_sd(heading_rad)
         return self.uncalibrated_heading_sd_rad
@@ -253,12 +267,12 @@ class GpsFusion(FixFusion):
         prior while it has no sample)."""
         hm = self.heading_model
         res = hm.residual_sd_rad()
-        return math.hypot(hm.correction_sd_rad(heading_rad, self._x), res if math.isfinite(res) else 0.0)
+        return math.hypot(hm.correction_sd_rad(heading_rad, self._chen.x), res if math.isfinite(res) else 0.0)
 
     def compensated_heading(self, heading_rad: float) -> float:
         """Our heading plus the eq.-12 correction (only when the model is learnt or was given)."""
         if self.learn_heading or self._heading_model0 is not None:
-            return heading_rad + self.heading_model.correction_rad(heading_rad, self._x)
+            return heading_rad + self.heading_model.correction_rad(heading_rad, self._chen.x)
         return heading_rad
 
     # -- the filter's hooks -----------------------------------------------------------
@@ -267,8 +281,8 @@ class GpsFusion(FixFusion):
         # interval must count the part of the step before the fix (without it the model distance of every
         # window missed half a step on average, and the stride scale came out 2.4 % long on the simulator)
         if self.heading_lag_s > 0.0:  # (off by default: no regressors built per step then)
-            self._x = self.lagged.update(step.t_ns, step.heading_rad)
-        self.trainer.add_step(step.t_ns, t_prev_ns, step.length_m, step.heading_rad, self._x)
+            self._chen.x = self.lagged.update(step.t_ns, step.heading_rad)
+        self.trainer.add_step(step.t_ns, t_prev_ns, step.length_m, step.heading_rad, self._chen.x)
 
     def _init_filter_at(self, sigma_m: float) -> None:
         self.ekf.initialize(0.0, 0.0, sigma_m, 0.7, 0.0, heading_sd_rad=math.pi)
@@ -279,10 +293,10 @@ class GpsFusion(FixFusion):
         ekf = self.ekf
         if not ekf.initialized:
             ekf.initialize(0.0, 0.0, self.start[2] if self.start is not None else 0.1, length, heading)
-        if self._relock_heading_sd_rad and self.trainer.n_heading_samples >= self._relock_heading_until:
-            self._relock_heading_sd_rad = 0.0
+        if self._chen.relock_heading_sd_rad and self.trainer.n_heading_samples >= self._chen.relock_heading_until:
+            self._chen.relock_heading_sd_rad = 0.0
         ekf.set_consider_sd(math.hypot(self._heading_sd(step.heading_rad), self.heading_floor_sd_rad,
-                                       self._relock_heading_sd_rad),
+                                       self._chen.relock_heading_sd_rad),
                             self.trainer.stride_scale_sd if self.learn_stride else self.trainer.prior_scale_sd)
         ekf.step(length, heading)
         return length
@@ -295,9 +309,9 @@ class GpsFusion(FixFusion):
         sigma grows as the track can drift (issue #26: on liatoutou_walk2 the track was 200 m off again 90 s
         after each relock with a reported sigma of 3-15 m)."""
         angle = relock_heading_error_rad(offset_m, walked_m)
-        if angle > self._relock_heading_sd_rad:
-            self._relock_heading_sd_rad = angle
-        self._relock_heading_until = self.trainer.n_heading_samples + RELOCK_HEADING_SAMPLES
+        if angle > self._chen.relock_heading_sd_rad:
+            self._chen.relock_heading_sd_rad = angle
+        self._chen.relock_heading_until = self.trainer.n_heading_samples + RELOCK_HEADING_SAMPLES
 
     def _step_output(self) -> tuple[float, float]:
         return float(self.ekf.x[2]), float(self.ekf.x[3])
@@ -314,10 +328,10 @@ class GpsFusion(FixFusion):
     def _fraction(self, t_ns: int) -> float:
         """The part of the next step already walked at a fix's time: at most the whole step (a pause: the walker
         stands there; before issue #26 the prediction snapped back to the last step after two durations)."""
-        if self._last_step_ns is None or not self._last_step_dur_ns:
+        if self._state.screen.last_step_ns is None or not self._state.screen.last_step_dur_ns:
             return 0.0
-        since = t_ns - self._last_step_ns
-        return min(since / self._last_step_dur_ns, 1.0) if since > 0 else 0.0
+        since = t_ns - self._state.screen.last_step_ns
+        return min(since / self._state.screen.last_step_dur_ns, 1.0) if since > 0 else 0.0
 
     def _predict_fix(self, t_ns: int):
         return PdrEkf.fix_prediction(self.ekf.x, self._fraction(t_ns))
@@ -329,29 +343,30 @@ class GpsFusion(FixFusion):
             innov = (float(east - ekf.x[0]), float(north - ekf.x[1]))  # before the reset (issue #26: it was after)
             ekf.reset_position(east, north, sigma_m)
             return UpdateResult(True, innov, math.nan, math.hypot(*innov), before)
-        if self._fix_bias_t_ns != t_ns:  # once per fix (a relock updates twice with the same one)
-            dt = (t_ns - self._fix_bias_t_ns) * 1e-9 if self._fix_bias_t_ns is not None else math.inf
+        if self._chen.fix_bias_t_ns != t_ns:  # once per fix (a relock updates twice with the same one)
+            dt = (t_ns - self._chen.fix_bias_t_ns) * 1e-9 if self._chen.fix_bias_t_ns is not None else math.inf
             ekf.propagate_fix_bias(dt, sigma_m)
-            self._fix_bias_t_ns = int(t_ns)
+            self._chen.fix_bias_t_ns = int(t_ns)
         return ekf.update_position(east, north, sigma_m, self._fraction(t_ns), gate=gate,
                                    noise_scale=self.decorrelation.noise_scale(t_ns))
 
     def _placed_on_fix(self, t_ns: int, sigma_m: float, relock: bool = False) -> None:
         self.ekf.place_on_fix(sigma_m)
-        self._fix_bias_t_ns = int(t_ns)
+        self._chen.fix_bias_t_ns = int(t_ns)
 
     def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
         self.decorrelation.used(t_ns)
         if self.filter == "ekf" and self.origin_lat_lon is not None and self.use_course and \
                 speed >= self.course_min_speed_m_s and math.isfinite(course) and self.anchor[0] != t_ns:
-            if self.untrained_until_course and not self._course_used and self.untrained_heading_sd_rad is not None \
-                    and self._heading_model0 is None and self.heading_model.n_accepted == 0 and self.learn_heading:
+            if self.untrained_until_course and not self._chen.course_used and \
+                    self.untrained_heading_sd_rad is not None and self._heading_model0 is None and \
+                    self.heading_model.n_accepted == 0 and self.learn_heading:
                 # the first course: the heading state gets the model's prior spread back before it is measured
-                hdg = self._headings[-1][1] if self._headings else float(self.ekf.x[3])
+                hdg = self._state.screen.headings[-1][1] if self._state.screen.headings else float(self.ekf.x[3])
                 self.ekf.set_consider_sd(math.hypot(self._model_heading_sd(hdg), self.heading_floor_sd_rad,
-                                                    self._relock_heading_sd_rad),
+                                                    self._chen.relock_heading_sd_rad),
                                          self.trainer.stride_scale_sd if self.learn_stride else self.trainer.prior_scale_sd)
-            self._course_used = True
+            self._chen.course_used = True
             c = self.course_now(t_ns, heading_from_bearing_deg(course))
             self.ekf.update_course(c, self._course_sd(c))
         self._learn_from_fix(t_ns, east, north, hacc, speed, course)
@@ -363,7 +378,7 @@ class GpsFusion(FixFusion):
         larger, once ``course_scatter_min_n`` are in."""
         sd = self.course_sd_rad
         if self.course_scatter_n > 0 and math.isfinite(course_rad):
-            q = self._course_innov
+            q = self._chen.course_innov
             q.append((wrap_angle(course_rad - float(self.ekf.x[3])), float(self.ekf.P[3, 3])))
             if len(q) >= self.course_scatter_min_n:
                 a = np.array([v[0] for v in q])
@@ -372,9 +387,9 @@ class GpsFusion(FixFusion):
                 spread = 1.4826 * float(np.median(np.abs(d - np.median(d))))  # robust: a turn's spike is not noise
                 var = spread ** 2 - float(np.mean([v[1] for v in q]))
                 sd = max(sd, math.sqrt(max(var, 0.0)))
-        self._course_sd_sum += sd
-        self._course_sd_n += 1
-        self._course_sd_max = max(self._course_sd_max, sd)
+        self._chen.course_sd_sum += sd
+        self._chen.course_sd_n += 1
+        self._chen.course_sd_max = max(self._chen.course_sd_max, sd)
         return sd
 
     def _learn_from_fix(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
@@ -386,9 +401,9 @@ class GpsFusion(FixFusion):
         return {**super().status(), "stride_scale": self.stride_scale}
 
     def counters(self) -> dict:
+        c = self._chen
         return {**super().counters(), "filter": self.filter, "training": self.trainer.counters(),
-                "course_sd_deg": {"courses": self._course_sd_n,  # the SDs the GPS courses were used with
-                                  "mean": math.degrees(self._course_sd_sum / self._course_sd_n)
-                                  if self._course_sd_n else math.nan,
-                                  "max": math.degrees(self._course_sd_max) if self._course_sd_n else math.nan},
+                "course_sd_deg": {"courses": c.course_sd_n,  # the SDs the GPS courses were used with
+                                  "mean": math.degrees(c.course_sd_sum / c.course_sd_n) if c.course_sd_n else math.nan,
+                                  "max": math.degrees(c.course_sd_max) if c.course_sd_n else math.nan},
                 "fix_decorrelation": self.decorrelation.summary()}

@@ -453,6 +453,39 @@ class KubrakKf(kalman.StateSnapshots):
         P[DPSI, DPSI] = sd_rad ** 2
 
 
+@dataclass(slots=True)
+class KubrakFusionState:
+    """What :class:`KubrakFusion` remembers besides :class:`core.gnss.base.FixFusionState` and its filters' own
+    states: made by :meth:`initial` in ``reset()``; read from outside through :class:`KubrakFusion`'s read-only
+    properties of the public names (``shadow``, ``shadow_events``, ``unreliable_until_ns``, ``n_variability``,
+    ``n_velocity_used``, ``n_velocity_gated``, ``variability_events``, ``aligned``)."""
+
+    shadow: KubrakKf | None  #: the filter run on without the unreliable stream's fixes (None: no hold)
+    shadow_gated_since_ns: int | None  #: the shadow's first gated fix since it last took one
+    shadow_accept_ns: int | None  #: the shadow's last accepted fix (or its start)
+    shadow_events: list  #: the shadow's consistent-stream relocks and the holds it ended by handing over (issue #26)
+    #: (t_ns, coefficients (3,), their covariance (3, 3)) after every GPS update, the last few minutes
+    coef_hist: deque
+    shadow_hist: deque  #: the same of the shadow
+    reg_hist: deque  #: (t_ns, regressors) of the walking epochs, last mean_window_s
+    unreliable_until_ns: int | None  #: the variability test's hold on GPS lasts until then (None: no hold)
+    n_variability: int  #: times the variability test fired
+    n_velocity_used: int
+    n_velocity_gated: int
+    variability_events: list  #: when, how much, what the coefficients became
+    last_walked: float  #: the last epoch's distance (m)
+    last_verdict: str  #: the variability test's last reason (the filter's verdict while the hold lasts)
+    aligned: bool  #: the coarse heading alignment is done
+    align: deque  #: (course - PDR heading) of moving fixes until it is done; only the last 2 align_fixes count
+
+    @classmethod
+    def initial(cls, *, shadow_events, variability_events, align_fixes: int) -> KubrakFusionState:
+        return cls(shadow=None, shadow_gated_since_ns=None, shadow_accept_ns=None, shadow_events=shadow_events,
+                   coef_hist=deque(), shadow_hist=deque(), reg_hist=deque(), unreliable_until_ns=None,
+                   n_variability=0, n_velocity_used=0, n_velocity_gated=0, variability_events=variability_events,
+                   last_walked=0.0, last_verdict="", aligned=False, align=deque(maxlen=2 * max(align_fixes, 1)))
+
+
 class KubrakFusion(FixFusion):
     """The real-time GPS/PNS fusion of Kubrak et al. (2006) as a streaming stage (see the module docstring).
 
@@ -573,29 +606,26 @@ class KubrakFusion(FixFusion):
             self.speed_trainer.reference = ChordReference.DOPPLER
             self.speed_trainer.learn_heading = False
             self.speed_trainer.reset()
-        self.shadow: KubrakKf | None = None
-        self._shadow_gated_since_ns: int | None = None  # the shadow's first gated fix since it last took one
-        self._shadow_accept_ns: int | None = None  # the shadow's last accepted fix (or its start)
-        #: the shadow's consistent-stream relocks and the holds it ended by handing its state over (issue #26)
-        self.shadow_events: list[dict] = self._events()
-        #: (t_ns, coefficients (3,), their covariance (3, 3)) after every GPS update, the last few minutes
-        self._coef_hist: deque = deque()
-        self._shadow_hist: deque = deque()
-        self._reg_hist: deque = deque()  # (t_ns, regressors) of the walking epochs, last mean_window_s
-        self.unreliable_until_ns: int | None = None
-        self.n_variability = 0  #: times the variability test fired
-        self.n_velocity_used = 0
-        self.n_velocity_gated = 0
-        self.variability_events: list[dict] = self._events()  #: when, how much, what the coefficients became
-        self._last_walked = 0.0
-        self._last_verdict = ""
-        #: coarse heading alignment: (course - PDR heading) of moving fixes until it is done
-        self.aligned = False
-        self._align: deque = deque(maxlen=2 * max(self.align_fixes, 1))  # only the last 2 align_fixes count
+        self._kub = KubrakFusionState.initial(shadow_events=self._events(), variability_events=self._events(),
+                                              align_fixes=self.align_fixes)
 
     @property
     def filt(self) -> KubrakKf:
         return self.kf
+
+    # -- read-only views of the state -----------------------------------------------------------------------
+    shadow = property(lambda self: self._kub.shadow, doc="The filter run on without the unreliable stream's fixes "
+                                                         "while the variability hold lasts (None: none).")
+    shadow_events = property(lambda self: self._kub.shadow_events, doc="The shadow's consistent-stream relocks and "
+                                                                       "the holds it ended by handing its state over.")
+    unreliable_until_ns = property(lambda self: self._kub.unreliable_until_ns,
+                                   doc="The variability test's hold on GPS lasts until then (None: no hold).")
+    n_variability = property(lambda self: self._kub.n_variability, doc="Times the variability test fired.")
+    n_velocity_used = property(lambda self: self._kub.n_velocity_used)
+    n_velocity_gated = property(lambda self: self._kub.n_velocity_gated)
+    variability_events = property(lambda self: self._kub.variability_events,
+                                  doc="When the variability test fired, how much, what the coefficients became.")
+    aligned = property(lambda self: self._kub.aligned, doc="The coarse heading alignment is done.")
 
     def _init_filter_at(self, sigma_m: float) -> None:
         self.kf.initialize(0.0, 0.0, sigma_m)
@@ -619,19 +649,19 @@ class KubrakFusion(FixFusion):
             kf.dead_reckon(step.t_ns, walked, step.heading_rad)
         else:
             walked = kf.epoch(step.t_ns, dt, reg, step.heading_rad)
-            self._reg_hist.append((step.t_ns, reg))
-            while self._reg_hist[0][0] < step.t_ns - self.mean_window_ns:
-                self._reg_hist.popleft()
-            if self.shadow is not None:
-                self.shadow.epoch(step.t_ns, dt, reg, step.heading_rad)
-        self._last_walked = walked
+            self._kub.reg_hist.append((step.t_ns, reg))
+            while self._kub.reg_hist[0][0] < step.t_ns - self.mean_window_ns:
+                self._kub.reg_hist.popleft()
+            if self._kub.shadow is not None:
+                self._kub.shadow.epoch(step.t_ns, dt, reg, step.heading_rad)
+        self._kub.last_walked = walked
         return walked
 
     def _step_output(self) -> tuple[float, float]:
-        return self._last_walked, self.kf.heading()
+        return self._kub.last_walked, self.kf.heading()
 
     def _dead_reckoned_step(self, step) -> tuple[float, float]:
-        self._last_walked = step.length_m
+        self._kub.last_walked = step.length_m
         return step.length_m, wrap_angle(step.heading_rad + float(self.kf.x[DPSI]))
 
     # -- fixes ------------------------------------------------------------------------------
@@ -640,7 +670,7 @@ class KubrakFusion(FixFusion):
 
     def _update_position(self, t_ns: int, east: float, north: float, sigma_m: float, gate: bool) -> UpdateResult:
         # before the coarse alignment the heading error may be anything: fixes move the position only
-        frozen = () if self.aligned else (DV, DPSI, A, B, C)
+        frozen = () if self._kub.aligned else (DV, DPSI, A, B, C)
         return self.kf.update_position(t_ns, east, north, sigma_m, gate=gate, frozen=frozen)
 
     def _try_align(self, speed: float, course: float) -> None:  # course: rad, CCW from East, as of now
@@ -649,40 +679,40 @@ class KubrakFusion(FixFusion):
         kf = self.kf
         if not (math.isfinite(course) and speed >= self.align_min_speed_m_s and math.isfinite(kf.psi_pdr)):
             return
-        self._align.append(wrap_angle(course - kf.psi_pdr))
-        if len(self._align) < self.align_fixes:
+        self._kub.align.append(wrap_angle(course - kf.psi_pdr))
+        if len(self._kub.align) < self.align_fixes:
             return
-        a = np.array(self._align)
+        a = np.array(self._kub.align)
         r = math.hypot(float(np.mean(np.cos(a))), float(np.mean(np.sin(a))))
         sd = math.sqrt(-2.0 * math.log(max(min(r, 1.0), 1e-12)))
         if sd > self.align_max_sd_rad:
             return  # turning, or courses that scatter (indoors): wait for a steadier stretch, never guess
         kf.align_heading(math.atan2(float(np.mean(np.sin(a))), float(np.mean(np.cos(a)))),
                          max(sd / math.sqrt(len(a)) * 3.0, kf.heading_bias_sd_rad / 3.0))
-        self.aligned = True
+        self._kub.aligned = True
 
     def _filter_verdict(self, t_ns: int) -> str:
         """GPS declared unreliable by the coefficient test: the shadow filter takes the fix instead."""
-        until = self.unreliable_until_ns
+        until = self._kub.unreliable_until_ns
         if until is None:
             return ""
         if t_ns >= until:
-            self.unreliable_until_ns = None
-            sh = self.shadow
-            if self.adopt_shadow and sh is not None and self._shadow_accept_ns is not None and \
-                    t_ns - self._shadow_accept_ns <= self.relock_ns:
+            self._kub.unreliable_until_ns = None
+            sh = self._kub.shadow
+            if self.adopt_shadow and sh is not None and self._kub.shadow_accept_ns is not None and \
+                    t_ns - self._kub.shadow_accept_ns <= self.relock_ns:
                 # the shadow follows the fixes (it took one within relock_s): its state, learnt from them while the
                 # main filter waited with the reverted coefficients, becomes the filter's
                 self._count_move("shadow adopted", t_ns, float(np.hypot(*(sh.x[:2] - self.kf.x[:2]))),
                                  self.kf.position_sigma_m())
                 self.kf = sh
-                self._coef_hist.clear()
-                self._record_coef(self._coef_hist, t_ns, sh)
-                self.shadow_events.append({"t_ns": int(t_ns), "event": "adopted"})
-            self._shadow_hist.clear()
-            self.shadow = None
+                self._kub.coef_hist.clear()
+                self._record_coef(self._kub.coef_hist, t_ns, sh)
+                self._kub.shadow_events.append({"t_ns": int(t_ns), "event": "adopted"})
+            self._kub.shadow_hist.clear()
+            self._kub.shadow = None
             return ""
-        return self._last_verdict
+        return self._kub.last_verdict
 
     def _learn_from_fix(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
         if self.speed_trainer is not None:
@@ -704,24 +734,24 @@ class KubrakFusion(FixFusion):
     def _after_accept(self, t_ns: int, east: float, north: float, hacc: float, speed: float, course: float) -> None:
         kf = self.kf
         self._learn_from_fix(t_ns, east, north, hacc, speed, course)
-        if not self.aligned:
+        if not self._kub.aligned:
             self._try_align(speed, self.course_now(t_ns, heading_from_bearing_deg(course)) if math.isfinite(course)
                             else math.nan)
             return
         if self.use_velocity and math.isfinite(speed) and self.anchor is not None and self.anchor[0] != t_ns:
             res = self._velocity(kf, t_ns, speed, course)
             if res.accepted:
-                self.n_velocity_used += 1
+                self._kub.n_velocity_used += 1
             elif res.nis == res.nis:
-                self.n_velocity_gated += 1
+                self._kub.n_velocity_gated += 1
         if self.detect_variability:
             self._check_variability(t_ns)
 
     # -- the coefficient test --------------------------------------------------------------------
     def _reference_regressors(self) -> np.ndarray | None:
-        if not self._reg_hist:
+        if not self._kub.reg_hist:
             return None
-        return np.mean(np.array([r for _, r in self._reg_hist]), axis=0)
+        return np.mean(np.array([r for _, r in self._kub.reg_hist]), axis=0)
 
     def _variability(self, hist: deque, t_ns: int, ref: np.ndarray, kf: KubrakKf) -> tuple[float, float]:
         """(change of the predicted speed over the window (m/s), its chi-square against what the filter expected).
@@ -755,16 +785,16 @@ class KubrakFusion(FixFusion):
 
     def _check_variability(self, t_ns: int) -> None:
         kf = self.kf
-        self._record_coef(self._coef_hist, t_ns, kf)
+        self._record_coef(self._kub.coef_hist, t_ns, kf)
         ref = self._reference_regressors()
         if ref is None:
             return
-        dv, chi2 = self._variability(self._coef_hist, t_ns, ref, kf)
+        dv, chi2 = self._variability(self._kub.coef_hist, t_ns, ref, kf)
         if abs(dv) <= self.max_speed_change_m_s or chi2 <= self.variability_gate:
             return
         # the paper's correction: the coefficients' mean over the minute before the window
         limit = t_ns - self.variability_window_ns
-        before = [(c, P) for t, c, P in self._coef_hist if limit - self.mean_window_ns <= t < limit]
+        before = [(c, P) for t, c, P in self._kub.coef_hist if limit - self.mean_window_ns <= t < limit]
         if before:
             coef = np.mean(np.array([c for c, _ in before]), axis=0)
             Pc = before[-1][1]
@@ -772,23 +802,23 @@ class KubrakFusion(FixFusion):
             m = kf.model
             coef, Pc = m.coefficients, np.diag(np.square(m.sd))
         self._revert_coefficients(coef, Pc, bool(before))
-        self.n_variability += 1
-        self._last_verdict = (f"GPS unreliable: the velocity model's coefficients changed the walker's speed by "
+        self._kub.n_variability += 1
+        self._kub.last_verdict = (f"GPS unreliable: the velocity model's coefficients changed the walker's speed by "
                               f"{dv:+.2f} m/s in {self.variability_window_ns * 1e-9:.0f} s")
-        self.variability_events.append({"t_ns": int(t_ns), "speed_change_m_s": dv, "chi2": chi2,
+        self._kub.variability_events.append({"t_ns": int(t_ns), "speed_change_m_s": dv, "chi2": chi2,
                                         "coefficients": [float(c) for c in coef]})
-        self.unreliable_until_ns = t_ns + self.unreliable_hold_ns
-        self._coef_hist.clear()
-        self._record_coef(self._coef_hist, t_ns, kf)
+        self._kub.unreliable_until_ns = t_ns + self.unreliable_hold_ns
+        self._kub.coef_hist.clear()
+        self._record_coef(self._kub.coef_hist, t_ns, kf)
         self._start_shadow(t_ns)
 
     def _start_shadow(self, t_ns: int) -> None:
         """A shadow copy of the filter (as it is now) that keeps taking the fixes while GPS is unreliable."""
-        self.shadow = copy.deepcopy(self.kf)
-        self._shadow_hist.clear()
-        self._record_coef(self._shadow_hist, t_ns, self.shadow)
-        self._shadow_gated_since_ns = None
-        self._shadow_accept_ns = t_ns
+        self._kub.shadow = copy.deepcopy(self.kf)
+        self._kub.shadow_hist.clear()
+        self._record_coef(self._kub.shadow_hist, t_ns, self._kub.shadow)
+        self._kub.shadow_gated_since_ns = None
+        self._kub.shadow_accept_ns = t_ns
 
     def _revert_coefficients(self, coef: np.ndarray, Pc: np.ndarray, cover: bool) -> None:
         """The coefficients set to ``coef`` with covariance ``Pc`` (``cover``: at least the current one too, in
@@ -810,48 +840,48 @@ class KubrakFusion(FixFusion):
     def _filter_rejected(self, t_ns: int, east: float, north: float, sigma_m: float, speed: float,
                          course: float) -> None:
         """While GPS is unreliable the shadow filter takes the fixes; if its coefficients vary too, the hold goes on."""
-        sh = self.shadow
+        sh = self._kub.shadow
         if sh is None:
             return
         res = sh.update_position(t_ns, east, north, sigma_m)
         if not res.accepted:
-            if self._shadow_gated_since_ns is None:
-                self._shadow_gated_since_ns = t_ns
+            if self._kub.shadow_gated_since_ns is None:
+                self._kub.shadow_gated_since_ns = t_ns
             if not (self.adopt_shadow and
-                    self._consistent_stream(t_ns, self._shadow_gated_since_ns, self._shadow_accept_ns)):
-                self.unreliable_until_ns = max(self.unreliable_until_ns, t_ns + self.unreliable_hold_ns // 2)
+                    self._consistent_stream(t_ns, self._kub.shadow_gated_since_ns, self._kub.shadow_accept_ns)):
+                self._kub.unreliable_until_ns = max(self._kub.unreliable_until_ns, t_ns + self.unreliable_hold_ns // 2)
                 return
             # the base class's consistent-stream relock, for the shadow: it lost the track, not GPS
             sh.restart_position(res.innovation, sigma_m)
             sh.place_on_fix(sigma_m)
-            self.shadow_events.append({"t_ns": int(t_ns), "event": "relocked",
+            self._kub.shadow_events.append({"t_ns": int(t_ns), "event": "relocked",
                                        "offset_m": float(math.hypot(*res.innovation)),
                                        "consistent_s": self._consistent_s(t_ns)})
             if self.adopt_on_relock:
-                self.unreliable_until_ns = t_ns  # the hold ends: the next fix hands the shadow's state over
-        self._shadow_gated_since_ns = None
-        self._shadow_accept_ns = t_ns
+                self._kub.unreliable_until_ns = t_ns  # the hold ends: the next fix hands the shadow's state over
+        self._kub.shadow_gated_since_ns = None
+        self._kub.shadow_accept_ns = t_ns
         if self.use_velocity and math.isfinite(speed):
             self._velocity(sh, t_ns, speed, course)
-        self._record_coef(self._shadow_hist, t_ns, sh)
+        self._record_coef(self._kub.shadow_hist, t_ns, sh)
         ref = self._reference_regressors()
         if ref is None:
             return
-        dv, chi2 = self._variability(self._shadow_hist, t_ns, ref, sh)
+        dv, chi2 = self._variability(self._kub.shadow_hist, t_ns, ref, sh)
         if abs(dv) > self.max_speed_change_m_s and chi2 > self.variability_gate:
-            self.unreliable_until_ns = t_ns + self.unreliable_hold_ns
+            self._kub.unreliable_until_ns = t_ns + self.unreliable_hold_ns
             self._start_shadow(t_ns)
 
     # -- output ------------------------------------------------------------------------------------
     def status(self) -> dict:
         kf = self.kf
         return {**super().status(), "speed_model_m_s": kf.speed(kf.x, kf.reg) if kf.initialized else math.nan,
-                "gps_unreliable": self.unreliable_until_ns is not None}
+                "gps_unreliable": self._kub.unreliable_until_ns is not None}
 
     def counters(self) -> dict:
         kf = self.kf
-        return {**super().counters(), "variability_detections": self.n_variability,
-                "velocity_used": self.n_velocity_used, "velocity_gated": self.n_velocity_gated,
+        return {**super().counters(), "variability_detections": self._kub.n_variability,
+                "velocity_used": self._kub.n_velocity_used, "velocity_gated": self._kub.n_velocity_gated,
                 "doppler_speed": self.doppler_speed.value,
                 "doppler_scale": self.speed_trainer.stride_scale if self.speed_trainer is not None else None,
                 "doppler_scale_samples": self.speed_trainer.n_stride_samples if self.speed_trainer is not None else 0,

@@ -1067,10 +1067,25 @@ class Pipeline:
                 return
             if ev.t_ns <= hi and rot <= self._rotation_limit_rad_s():
                 self._candidates.insert(k, StepCandidate(ev, None, True, regs))
-                if ev.t_ns != self._start_counted_ns:  # a recount inserts the same one again: counted once
-                    self.n_walk_start_steps += 1
-                    self._start_counted_ns = ev.t_ns
+                self.count_walk_start_step(ev.t_ns)
                 return
+
+    def count_walk_start_step(self, t_ns: int) -> None:
+        """A walk's first step (peak at ``t_ns``) was inserted by ``walk_start_step``: counted in
+        ``n_walk_start_steps`` once (a recount inserts the same one again).  :meth:`_walk_start_step` and the desktop
+        fast path's mirror of it (``desktop/fast/gates.py``) both count through here."""
+        if t_ns != self._start_counted_ns:
+            self.n_walk_start_steps += 1
+            self._start_counted_ns = t_ns
+
+    def set_carry_state(self, mode: str, detector: StepDetector) -> None:
+        """The carry mode and the step detector (one of the mode detectors) in force: how the desktop fast path,
+        which runs the carry detector over the whole recording at once, leaves the pipeline as its last grid sample
+        would (``desktop/fast/pipeline.py``)."""
+        if not any(detector is d for d in self._mode_detectors):
+            raise ValueError("set_carry_state takes one of the pipeline's own step detectors")
+        self._carry_mode = mode
+        self._active_det = detector
 
     def _drop_unconfirmed(self) -> None:
         kept = [c for c in self._candidates if c.confirmed]

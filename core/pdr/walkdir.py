@@ -349,7 +349,10 @@ class WalkingDirection:
         self._mean_alpha = 1.0 - math.exp(-dt / self.mean_time_s)
         self._forget = math.exp(-1.0 / self.memory_strides)
         self._delay_n = max(0, int(round(self.delay_s * self.grid_rate_hz)))
+        settings = set(vars(self))
         self.reset()
+        #: the names of the state :meth:`reset` makes (what :meth:`restore_state` may set)
+        self._state_names = frozenset(vars(self)) - settings
 
     def reset(self) -> None:
         #: running mean of the vertical acceleration and the leaky vertical velocity
@@ -679,6 +682,45 @@ class WalkingDirection:
     def _state(self):
         st = self._states.get(self._axis_key)
         return st if st is not None and st.n else None
+
+    # -- the desktop fast path's way in and out (desktop/fast/walkdir.py: it runs the updates as one kernel) ----------
+    @property
+    def axis_key(self):
+        """The device axis the current offset belongs to (the smoother's ``forward_b`` key; None before any)."""
+        return self._axis_key
+
+    def axis_state(self, axis):
+        """The accumulators of ``axis`` (an ``_AxisState``, the object itself: read it, do not change it), or None."""
+        return self._states.get(axis)
+
+    def axis_states(self) -> dict:
+        """Every axis's accumulators, ``{axis: _AxisState}`` (a new dict of the same objects)."""
+        return dict(self._states)
+
+    def set_axis(self, axis, state) -> None:
+        """Make ``axis`` current with ``state`` (an ``_AxisState``, or None: no accepted stride) as its only
+        accumulators: what :attr:`offset_rad`, :meth:`estimate` and :meth:`step_heading` read (the fast path's state at
+        one grid sample, which keeps only the current axis)."""
+        self._axis_key = axis
+        self._states = {axis: state} if state is not None else {}
+
+    def estimate_with(self, axis, state) -> dict:
+        """:meth:`estimate` as it would be after :meth:`set_axis` ``(axis, state)``; this object is left as it was."""
+        saved = self._axis_key, self._states
+        self.set_axis(axis, state)
+        try:
+            return self.estimate()
+        finally:
+            self._axis_key, self._states = saved
+
+    def restore_state(self, values: dict) -> None:
+        """Set attributes :meth:`reset` makes, by name (``{name: value}``; the fast path's state after its last grid
+        sample, with the same types as :meth:`update` leaves); a name reset() does not make raises."""
+        unknown = [n for n in values if n not in self._state_names]
+        if unknown:
+            raise AttributeError(f"restore_state: {unknown} are not WalkingDirection state")
+        for name, value in values.items():
+            setattr(self, name, value)
 
     @property
     def offset_rad(self) -> float:

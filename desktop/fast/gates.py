@@ -270,9 +270,7 @@ class StepRelease:
             if tm <= hi and float(rms[m]) <= self._rotation_limit():
                 self.cands.insert(k, StepCandidate(StepEvent(tm, *feats[m].tolist()), None, True,
                                                    tuple(regs[m].tolist())))
-                if tm != p._start_counted_ns:  # a recount inserts the same one again (Pipeline._walk_start_step)
-                    p.n_walk_start_steps += 1
-                    p._start_counted_ns = tm
+                p.count_walk_start_step(tm)  # a recount inserts the same one again: counted once
                 return
 
     def drop_unconfirmed(self) -> None:

@@ -202,8 +202,8 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         if GENTLE in p._det_of:  # a gentle walk in a trunk mode: the gentle detector (Pipeline._carry_steps)
             gentle_mode = np.array([p._gentle_applies(m) for m in CARRY_MODES], dtype=bool)
             det_at = np.where(track.gentle & gentle_mode[track.mode], index[p._det_of[GENTLE]], det_at)
-        p._carry_mode = CARRY_MODES[int(track.mode[-1])] if n_ticks else p._carry_mode
-        p._active_det = p._mode_detectors[int(det_at[-1])] if n_ticks else p._active_det
+        if n_ticks:
+            p.set_carry_state(CARRY_MODES[int(track.mode[-1])], p._mode_detectors[int(det_at[-1])])
     # the smoother's exit of the upright state per grid sample (Pipeline(limb_upright_exit), issue #25)
     exit_at = None
     if p.limb_upright_exit is not None:

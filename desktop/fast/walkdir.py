@@ -398,15 +398,12 @@ class WalkdirTrace:
         version = int(self._version[j - self.j_init]) if j >= self.j_init else 0
         if self._written is not None and self._written[0] is wd and self._written[1] == version:
             return
-        key, st = self.offset_state(j)
-        wd._axis_key = key
-        wd._states = {key: st} if st is not None else {}
+        wd.set_axis(*self.offset_state(j))
         self._written = (wd, version)
 
     def finish(self, wd) -> None:
         """The state ``WalkingDirection.update`` leaves after every grid sample (``n_steps_offset`` kept)."""
-        for name, value in self._final.items():
-            setattr(wd, name, value() if callable(value) else value)
+        wd.restore_state({name: value() if callable(value) else value for name, value in self._final.items()})
         self._written = None
 
 
@@ -499,15 +496,15 @@ def _fed(wd, t, q, acc, fe, fn, step, ids, keys, j_init) -> WalkdirTrace:
     for j in range(n):
         a = al[j]
         upd(tl[j], tuple(ql[j]), a[0], a[1], a[2], el[j], nl[j], sl[j], keys[il[j]])
-        key = wd._axis_key
+        key = wd.axis_key
         if key is not None:
             cur_key[j] = index[key]
-            st = wd._states.get(key)
+            st = wd.axis_state(key)
             if st is not None and st.n:
                 cur[j] = st.values()
                 cur_n[j] = st.n
-    states = dict(wd._states)  # at() replaces the dict: the final one is kept here (its states no longer change)
-    return WalkdirTrace(j_init, keys, cur_key, cur, cur_n, {"_axis_key": wd._axis_key, "_states": states})
+    states = wd.axis_states()  # at() replaces the dict: the final one is kept here (its states no longer change)
+    return WalkdirTrace(j_init, keys, cur_key, cur, cur_n, {"_axis_key": wd.axis_key, "_states": states})
 
 
 def _final_state(wd, keys, t, step, fs, is_, ax, ax_n, ax_order, smp, fifo, rec_i, rec_f, est) -> dict:
@@ -535,14 +532,7 @@ def _final_state(wd, keys, t, step, fs, is_, ax, ax_n, ax_order, smp, fifo, rec_
     def last_estimate():
         if not is_[I_HAS_EST]:
             return None
-        k = int(is_[I_EST_KEY])
-        saved = wd._axis_key, wd._states
-        wd._axis_key = key_of(k)
-        wd._states = {wd._axis_key: _axis_state(est[:6], est[6])} if est[6] > 0 else {}
-        try:
-            return wd.estimate()
-        finally:
-            wd._axis_key, wd._states = saved
+        return wd.estimate_with(key_of(int(is_[I_EST_KEY])), _axis_state(est[:6], est[6]) if est[6] > 0 else None)
 
     s = [float(x) for x in fs[F_SUMS:F_SUMS + 14]]
     final = {
