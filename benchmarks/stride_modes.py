@@ -24,13 +24,14 @@ from __future__ import annotations
 
 import argparse
 import math
-import pickle
+import json
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.datasets.base import default_data_root
 from core.conventions import CARRY_HANDHELD
 
 MIN_SHARE = 0.8
@@ -105,6 +106,21 @@ def truth_mode_walks(extra2: Path, split: str) -> list[ModeWalk]:
         print(f"  {w.name}: {len(res.steps)} steps, {mw.mode_share()}", file=sys.stderr)
     return out
 
+
+
+def save_walks(path: Path, walks: list) -> None:
+    """The collected walks as JSON (no pickle: benchmarks read nothing that can run code)."""
+    rows = [{"name": w.name, "source": w.source, "walker": w.walker, "split": w.split, "truth": w.truth,
+             "stretches": [[[float(x) for x in lens], list(modes), float(t)] for lens, modes, t in w.stretches]}
+            for w in walks]
+    Path(path).write_text(json.dumps(rows))
+
+
+def load_walks(path: Path) -> list:
+    """What :func:`save_walks` wrote."""
+    return [ModeWalk(r["name"], r["source"], r["walker"], r["split"], r["truth"],
+                     [(np.array(lens, float), tuple(modes), float(t)) for lens, modes, t in r["stretches"]])
+            for r in json.loads(Path(path).read_text())]
 
 def ipin_mode_walks(data_root: Path, split: str) -> list[ModeWalk]:
     from benchmarks.datasets import ipin2023
@@ -250,28 +266,26 @@ def markdown(res: dict, split: str, fitted_on: str = "") -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--split", default="tuning", choices=("tuning", "report"))
-    ap.add_argument("--data", type=Path, default=Path("/work/shared/data"))
+    ap.add_argument("--data", type=Path, default=None, help="the data root (default: ../shared/data beside the repo)")
     ap.add_argument("--extra", type=Path, default=None, help="the extra corpus (default: stride_eval's)")
     ap.add_argument("--extra2", type=Path, default=None, help="the truth walks' folder (benchmarks.truth_walks)")
-    ap.add_argument("--cache", type=Path, default=None, help="pickle the collected walks here / read them from here")
+    ap.add_argument("--cache", type=Path, default=None, help="keep the collected walks here (JSON) / read them from here")
     ap.add_argument("--fit-cache", type=Path, default=None,
                     help="the tuning split's cache: fit the scales there and apply them, fixed, to --split's walks")
     args = ap.parse_args(argv)
     if args.cache is not None and args.cache.exists():
-        walks = pickle.loads(args.cache.read_bytes())
+        walks = load_walks(args.cache)
     else:
-        walks = collect(args.data, args.extra, args.extra2, args.split)
+        walks = collect(args.data or default_data_root(), args.extra, args.extra2, args.split)
         if args.cache is not None:
-            args.cache.write_bytes(pickle.dumps(walks))
+            save_walks(args.cache, walks)
     if args.fit_cache is not None:
-        fit_on = [w for w in pickle.loads(args.fit_cache.read_bytes()) if w.stretches]
+        fit_on = [w for w in load_walks(args.fit_cache) if w.stretches]
         print(markdown(apply_study(walks, fit_scales(fit_on)), args.split, fit_on[0].split if fit_on else "?"))
     else:
         print(markdown(study(walks), args.split))
     return 0
 
 
-if __name__ == "__main__":  # run through the module's own name, so a cache pickles benchmarks.stride_modes.ModeWalk
-    from benchmarks.stride_modes import main as _main
-
-    raise SystemExit(_main())
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -55,3 +55,16 @@ def test_mixed_walk_scale_needed_and_leave_one_out():
 def test_failed_walk_is_counted():
     st = stats([1.0, -3.0, math.nan])
     assert st["n"] == 3 and st["median_abs"] == 3.0 and st["mean_signed"] == -1.0
+
+
+def test_the_walk_cache_round_trips_as_json(tmp_path):
+    # the cache was a pickle (tests/test_no_unsafe_loading.py refuses one in benchmarks/); now JSON, same walks back
+    from benchmarks.stride_modes import load_walks, save_walks
+
+    ws = [_walk("a", "oxiod", "x", "pocket", 10.0, other=("handheld", 5)), _walk("b", "ridi", "y", "bag", -3.0)]
+    save_walks(tmp_path / "c.json", ws)
+    back = load_walks(tmp_path / "c.json")
+    assert [w.error_pct({"pocket": 0.9}) for w in back] == [w.error_pct({"pocket": 0.9}) for w in ws]
+    assert [(w.name, w.source, w.walker, w.split, w.truth) for w in back] == [
+        (w.name, w.source, w.walker, w.split, w.truth) for w in ws]
+    assert back[0].stretches[0][1] == ws[0].stretches[0][1]
