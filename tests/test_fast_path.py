@@ -132,7 +132,7 @@ def _assert_same(rec, make=None, **params):
                 "sensor_health", "mag_all_rejected", "carry"):
         assert ca.get(key) == cb.get(key), key
     aa, ab = ca["attitude"], cb["attitude"]
-    for key in ("mag_reasons", "zero_rate_updates", "heading_relocks", "numerical_rejects", "mag_calibration"):
+    for key in ("mag_reasons", "zero_rate_updates", "heading_relocks", "numerical_rejects", "mag_calibration", "holes"):
         assert aa.get(key) == ab.get(key), key  # mag_calibration: only with a calibrator (off by default, #27)
     assert ab["gyro_bias_rad_s"] == pytest.approx(aa["gyro_bias_rad_s"], abs=TOL)
     return plain, pipe
@@ -266,6 +266,7 @@ def test_fast_equals_plain_on_the_simulator():
     rec = _joined(rec.slice_time(rec.t0_ns, cut), after, 1_000_000_000)
     plain, pipe = _assert_same(rec)
     assert pipe.walkdir.n_steps_offset > 10
+    assert plain.counters["attitude"]["holes"] == 1  # the 1 s hole in every stream (AttitudeEKF._bridge_hole)
     modes = [s.carry_mode for s in plain.steps]
     assert max(set(modes), key=modes.count) == CARRY_POCKET
 

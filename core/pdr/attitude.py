@@ -200,6 +200,17 @@ given, :meth:`AttitudeEKF.set_site_field`) the state is dropped: no building
 bends the field there.  The fast path mirrors it
 (its kernel's covariance is 7 x 7 then).
 
+A hole in the recording (issue #27, h13/gapatt): when every stream has been silent for longer than
+``max_gyro_gap_s`` (a logger that stalled; RIDI's ``huayi_bag2`` has 4.4 s), nothing measured how the phone
+turned.  The first event after it grows the tilt and heading variance once over the real elapsed time
+(``no_gyro_random_walk_rad_sqrt_s``; the offset state decays over it) and drops what was collected before: the open
+accelerometer and magnetometer intervals, whose readings were of the phone before the hole, rotated into the
+navigation frame with the attitude it had then (closed by the first reading after it, eleven of them to one at
+200 Hz, they measured the old attitude again as if new and took the hole's uncertainty back at once, so a phone
+that had turned far in the hole had its first fresh magnetometer readings gated until the relock), and the relock's
+gated innovations.  A gap of the gyroscope alone grows the variance only over the time the other streams' events
+have not (it grew twice before).  :attr:`AttitudeEKF.counters` counts the holes.  No hole, no change.
+
 Replays (issue #27): ``AttitudeEKF(keep_history=True)`` keeps what the RTS
 smoother needs (:mod:`core.pdr.heading_smoother`, ``Pipeline(heading_smoother=...)``);
 the forward filter is the same bit for bit, and :meth:`AttitudeEKF.smoothed_heading`
@@ -429,7 +440,8 @@ class AttitudeSettings:
     #: (0.17, 120) 2.73 / 4.11, (0.26, 20) 3.00 / 5.94, (0.26, 60) 3.35 / 4.03, (0.35, 10) 3.54 / 6.20
     mag_offset_sd_rad: float = 0.1
     mag_offset_time_s: float = 30.0
-    #: gyroscope gaps longer than this are not integrated, only the uncertainty grows (s)
+    #: gyroscope gaps longer than this are not integrated, only the uncertainty grows (s); every stream silent
+    #: this long is a hole in the recording (see the module docstring): the open intervals are dropped too
     max_gyro_gap_s: float = 0.5
     #: attitude random walk assumed while no gyroscope event comes (rad/sqrt(s))
     no_gyro_random_walk_rad_sqrt_s: float = 0.5
@@ -619,6 +631,7 @@ class AttitudeState(AttitudeBaseState):
     mag_sum: IntervalSum
     gated: list  #: (t_ns, innovation) of heading updates gated since the last one used
     n_heading_relocks: int
+    n_holes: int  #: holes in the recording bridged (every stream silent for over ``max_gyro_gap_s``)
     #: no magnetometer reading has corrected the heading since the start without one (see AttitudeEKF._correct)
     yaw_unobserved: bool
     acc_sigma2: float  #: diagnostics: the last measurement variances (eqs. 17-18)
@@ -663,7 +676,7 @@ class AttitudeState(AttitudeBaseState):
             vo_active=False, raw_dip_med=RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1)),
             raw_norm_med=RunningMedian(0.0, 200.0, 0.1), vertical_offset_uT=(0.0, 0.0, 0.0),
             h_ref=(0.0, 1.0, 0.0), alpha_ref=math.pi / 2, w2=0.0, w2_mean=0.0, swing_s=0.0,
-            acc_sum=IntervalSum.empty(), mag_sum=IntervalSum.empty(), gated=[], n_heading_relocks=0,
+            acc_sum=IntervalSum.empty(), mag_sum=IntervalSum.empty(), gated=[], n_heading_relocks=0, n_holes=0,
             yaw_unobserved=False, acc_sigma2=math.nan, mag_sigma2=math.nan, mag_rejected=False,
             acc_rejected=False, last_acc=UpdateFlags("acc", 0, False, Outcome.NONE_YET.value, outcome=Outcome.NONE_YET),
             last_mag=UpdateFlags("mag", 0, False, Outcome.NONE_YET.value, outcome=Outcome.NONE_YET),
@@ -1012,6 +1025,7 @@ class AttitudeEKF(AttitudeFilterBase, kalman.StateSnapshots):
              "acc_rejected": self.n_acc_rejected, "zero_rate_updates": self._state.n_zero_rate,
              "nonfinite_skipped_by_filter": self._state.n_skipped_nonfinite,
              "numerical_rejects": self._state.n_numerical_rejects, "heading_relocks": self._state.n_heading_relocks,
+             "holes": self._state.n_holes,
              "mag_reasons": dict(self._state.mag_reasons), "mean_nis": self.mean_nis(),
              "gyro_bias_rad_s": list(self._state.b), "vertical_offset_uT": list(self._state.vertical_offset_uT), "heading_sd_rad": math.sqrt(max(float(self.P[2, 2]), 0.0))}
         if self.mag_calibrator is not None:
@@ -1084,13 +1098,18 @@ class AttitudeEKF(AttitudeFilterBase, kalman.StateSnapshots):
             state.t_gyro_ns = t_ns
             return
         s = self.settings
+        self._bridge_hole(t_ns)
         t_prev = state.t_gyro_ns if state.t_gyro_ns is not None else state.t_ns
         state.t_gyro_ns = t_ns
         dt = (t_ns - t_prev) * 1e-9
         if dt <= 0.0:
             return
         if dt > s.max_gyro_gap_s:  # a gap: do not integrate a stale rate over it
-            self._random_walk(dt)
+            # the uncertainty grows over the time not yet propagated (the accelerometer and magnetometer events in
+            # the gap, or a hole, grew it up to state.t_ns already): once over the real elapsed time
+            rest = (t_ns - state.t_ns) * 1e-9
+            if rest > 0.0:
+                self._random_walk(rest)
             state.t_ns = t_ns
             return
         b = state.b
@@ -1126,6 +1145,27 @@ class AttitudeEKF(AttitudeFilterBase, kalman.StateSnapshots):
         if self.history is not None:
             self.history.add_prediction(Rdt, phi if s.mag_offset_sd_rad > 0.0 else 1.0)
         state.t_ns = t_ns
+
+    def _bridge_hole(self, t_ns: int) -> None:
+        """A hole in the recording: every stream silent for longer than ``max_gyro_gap_s`` before ``t_ns``.
+
+        The phone may have turned any way in it, and nothing measured how: the attitude's uncertainty grows
+        over the real elapsed time (``no_gyro_random_walk_rad_sqrt_s``, once), and what was collected before
+        the hole is dropped -- the open accelerometer and magnetometer intervals (readings of the phone before
+        the hole, rotated into the navigation frame with the attitude it had then: closed by the first reading
+        after it, they would measure the old attitude again as if it were new, and at 200 Hz with eleven
+        readings to one) and the relock's gated innovations (of the heading before the hole).  The first
+        readings after the hole then meet an honest covariance.  No hole: nothing happens.
+        """
+        state = self._state
+        if state.t_ns is None or (t_ns - state.t_ns) * 1e-9 <= self.settings.max_gyro_gap_s:
+            return
+        self._random_walk((t_ns - state.t_ns) * 1e-9)
+        state.t_ns = t_ns
+        state.acc_sum = IntervalSum.empty()
+        state.mag_sum = IntervalSum.empty()
+        state.gated = []
+        state.n_holes += 1
 
     def _random_walk(self, dt: float) -> None:
         P = self.P
@@ -1242,6 +1282,7 @@ class AttitudeEKF(AttitudeFilterBase, kalman.StateSnapshots):
         if not state.initialized:
             self._try_initialize(t_ns)
             return self._acc_flags(t_ns, False, Outcome.INITIALISING)
+        self._bridge_hole(t_ns)
         self._propagate_without_gyro(t_ns)
         self._maybe_zero_rate(t_ns)
         var = state.acc_var.update(t_ns, na)
@@ -1354,6 +1395,7 @@ class AttitudeEKF(AttitudeFilterBase, kalman.StateSnapshots):
         if not state.initialized:
             self._try_initialize(t_ns)
             return self._mag_flags(t_ns, False, Outcome.INITIALISING)
+        self._bridge_hole(t_ns)
         self._propagate_without_gyro(t_ns)
         var = state.mag_var.update(t_ns, nm)
         dev = abs(nm - state.field_uT)
