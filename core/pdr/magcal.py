@@ -171,6 +171,8 @@ MAGCAL_STATES = ("collecting", "calibrated", "rejected fit")
 QSF_REASONS = ("invalid input", "warming up", "norm moving", "direction moving", "norm off", "dip off", "steady")
 
 _IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+#: what :meth:`MagCalibrator.reset` derives from the settings for the per-reading path (not run state)
+_DERIVED = frozenset(("_max_nrm2", "_bootstrap_ns", "_r_min", "_sector_scale"))
 _RECENT_DT_NS = 100_000_000  # bootstrap reservoir: one reading per 0.1 s
 
 
@@ -416,7 +418,11 @@ class MagCalibrator:
         self.max_raw_norm_uT = float(max_raw_norm_uT)
         self.n_sectors = 2 * self.bin_bands
         self.n_bins = self.bin_bands * self.n_sectors
+        settings = set(vars(self))
         self.reset()
+        #: the names of the run state :meth:`reset` makes (what :meth:`state` gives and :meth:`restore_state` may
+        #: set); the settings as the per-reading path uses them (:data:`_DERIVED`) are not state
+        self._state_names = frozenset(vars(self)) - settings - _DERIVED
 
     def reset(self) -> None:
         # the settings as the per-reading path uses them (read here: a setting changed later takes effect at reset)
@@ -459,6 +465,35 @@ class MagCalibrator:
         self.n_fits = 0
         self.n_accepted = 0
         self._fits: list[MagCalStatus] = []
+
+    # -- the desktop fast path's way in and out (desktop/fast/magcal.py: it runs the updates as one kernel) -----------
+    @property
+    def kernel_settings(self) -> dict:
+        """The settings as the per-reading path uses them (made by :meth:`reset`): ``max_nrm2`` (uT^2, the largest
+        squared norm of a valid reading), ``bootstrap_ns`` (the reservoir's span), ``r_min_uT`` (the least distance
+        from the centre of a binned reading), ``sector_scale`` (azimuth sectors per radian)."""
+        return {"max_nrm2": self._max_nrm2, "bootstrap_ns": self._bootstrap_ns, "r_min_uT": self._r_min,
+                "sector_scale": self._sector_scale}
+
+    def state(self) -> dict:
+        """The run state :meth:`reset` makes, ``{name: value}`` (the objects themselves: read them, do not change
+        them; the store's typed arrays, the reservoir, the centre, the calibration in force, the attempt counters)."""
+        return {name: getattr(self, name) for name in self._state_names}
+
+    def restore_state(self, values: dict) -> None:
+        """Set run state by name (``{name: value}``, names as :meth:`state` gives them, values of the types
+        :meth:`update` leaves: the fast path's state before an attempt and after its last reading).  A name
+        :meth:`reset` does not make as state (a setting, what it derives from them, an unknown name), or a store
+        of another size, raises."""
+        unknown = [n for n in values if n not in self._state_names]
+        if unknown:
+            raise AttributeError(f"restore_state: {unknown} are not MagCalibrator state")
+        nslots = self.n_bins * self.samples_per_bin
+        for name, size in (("_slot_t", nslots), ("_slot_m", 3 * nslots), ("_bin_count", self.n_bins)):
+            if name in values and len(values[name]) != size:
+                raise ValueError(f"restore_state: {name} holds {len(values[name])} values, the store {size}")
+        for name, value in values.items():
+            setattr(self, name, value)
 
     # -- applying the calibration ---------------------------------------------
     def apply(self, m_raw) -> np.ndarray:
