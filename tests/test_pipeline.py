@@ -193,3 +193,28 @@ def test_fast_path_entry_points():
         p.set_carry_state("pocket", StepDetector())
     p.reset()
     assert p.n_walk_start_steps == 0
+
+
+def test_sensor_health_skip_quiet_is_the_state_quiet_updates_leave():
+    """``SensorHealth.skip_quiet`` (the desktop fast path's ``health_of``): a new detector set to the state after
+    readings off the rails and never repeated goes on as the one fed them, through a rail run and a dead run;
+    it refuses a used detector, no readings and a last reading on a rail."""
+    from core.pdr.pipeline import SensorHealth
+
+    rng = np.random.default_rng(3)
+    quiet = rng.normal(size=(50, 3))
+    t = (np.arange(200) * 20_000_000).tolist()
+    fed, skipped = SensorHealth(4.0), SensorHealth(4.0)
+    for ti, (x, y, z) in zip(t, quiet.tolist()):
+        fed.update(ti, x, y, z)
+    skipped.skip_quiet(50, t[49], quiet[-1])
+    rest = [(5.0, 0.1 * k, 0.0) for k in range(10)] + [(0.5, 0.5, 0.5)] * 140  # a rail on x, then a dead sensor
+    for ti, v in zip(t[50:], rest):
+        fed.update(ti, *v)
+        skipped.update(ti, *v)
+    assert fed.n == skipped.n == 200 and fed.as_dict() == skipped.as_dict()
+    assert fed.saturated_runs == 1 and fed.dead_runs == 1
+    for h, args in ((fed, (5, 0, (0.0, 0.0, 0.0))), (SensorHealth(4.0), (0, 0, (0.0, 0.0, 0.0))),
+                    (SensorHealth(4.0), (5, 0, (0.0, -4.0, 0.0)))):
+        with pytest.raises(ValueError):
+            h.skip_quiet(*args)

@@ -153,6 +153,19 @@ class SensorHealth:
             self._same_t0 = None
         self._prev, self._prev_t = v, t_ns
 
+    def skip_quiet(self, n: int, t_ns: int, last) -> None:
+        """A new detector's state after ``n`` readings none of which is on a rail (every component under ``floor``
+        in magnitude) or equal to the one before, the last ``last`` (3 floats) at ``t_ns``: only the count and the
+        last reading move (what :meth:`update` leaves; the caller checked the readings: the desktop fast path's
+        ``health_of``).  Refuses a detector that has seen readings, ``n < 1`` and a ``last`` on a rail."""
+        if self.n:
+            raise ValueError("skip_quiet sets a new detector's state only")
+        last = tuple(float(x) for x in last)
+        if n < 1 or len(last) != 3 or any(x >= self.floor or -x >= self.floor for x in last):
+            raise ValueError("skip_quiet takes n >= 1 readings off the rails")
+        self.n = int(n)
+        self._prev, self._prev_t = last, int(t_ns)
+
     def _rails(self, t_ns: int, v, prev, dt: float) -> None:
         for i in range(3):
             vi = v[i]

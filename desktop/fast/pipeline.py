@@ -92,8 +92,7 @@ def health_of(floor: float, t_ns: np.ndarray, v: np.ndarray) -> SensorHealth:
         for ti, (x, y, z) in zip(t_ns.tolist(), v.tolist()):
             h.update(ti, x, y, z)
         return h
-    h.n = n
-    h._prev, h._prev_t = tuple(float(x) for x in v[-1]), int(t_ns[-1])
+    h.skip_quiet(n, int(t_ns[-1]), v[-1])
     return h
 
 
