@@ -218,3 +218,23 @@ def test_sensor_health_skip_quiet_is_the_state_quiet_updates_leave():
                     (SensorHealth(4.0), (5, 0, (0.0, -4.0, 0.0)))):
         with pytest.raises(ValueError):
             h.skip_quiet(*args)
+
+
+def test_fast_path_read_only_views_of_the_step_detectors():
+    """What the desktop fast path reads (instead of the private fields): the step detectors in feeding order, which
+    counts in which mode (read-only), the active one (moved by ``set_carry_state`` only), the walk-start detector,
+    the smoother's own upright exit and the rotation window in ns."""
+    from core.pdr.steps import GENTLE
+
+    p = Pipeline(carry=True, walk_start_step=True)
+    dets = p.mode_detectors
+    assert isinstance(dets, tuple) and dets[0] is p.detector and len(dets) >= 2
+    assert set(map(id, p.detector_of.values())) <= set(map(id, dets)) and p.detector_of["handheld"] is p.detector
+    with pytest.raises(TypeError):
+        p.detector_of["pocket"] = p.detector
+    assert p.active_detector is p.detector and p.walk_start_detector is p.detector_of[GENTLE]
+    p.set_carry_state("pocket", p.detector_of[GENTLE])
+    assert p.active_detector is p.detector_of[GENTLE] is not p.detector
+    assert p.rotation_window_ns == int(p.rotation_window_s * 1e9) and p.base_upright_exit == p.smoother.upright_exit
+    q = Pipeline(carry=False)
+    assert q.mode_detectors == (q.detector,) and dict(q.detector_of) == {} and q.walk_start_detector is None

@@ -61,6 +61,7 @@ import math
 from array import array
 from collections import deque
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 
@@ -1099,6 +1100,39 @@ class Pipeline:
             raise ValueError("set_carry_state takes one of the pipeline's own step detectors")
         self._carry_mode = mode
         self._active_det = detector
+
+    @property
+    def mode_detectors(self) -> tuple:
+        """The step detectors, one per distinct gates of ``step_gates`` (the hand-held one, :attr:`detector`,
+        first; it alone without carry detection), in the order the pipeline feeds them (a new tuple)."""
+        return tuple(self._mode_detectors)
+
+    @property
+    def detector_of(self) -> MappingProxyType:
+        """``{gates key: step detector}`` (a carry mode, or GENTLE / GENTLE_SWING / UNEVEN_POCKET where those gates
+        are set; empty without carry detection): which of :attr:`mode_detectors` counts the steps (read-only)."""
+        return MappingProxyType(self._det_of)
+
+    @property
+    def active_detector(self):
+        """The step detector whose peaks are candidates now (one of :attr:`mode_detectors`)."""
+        return self._active_det
+
+    @property
+    def walk_start_detector(self):
+        """The gentle gait's detector that looks back for a walk's first step (``walk_start_step``; None: off)."""
+        return self._start_det
+
+    @property
+    def base_upright_exit(self) -> float:
+        """The smoother's own exit threshold of the upright state, in force outside a limb mode
+        (``limb_upright_exit``)."""
+        return self._upright_exit
+
+    @property
+    def rotation_window_ns(self) -> int:
+        """``rotation_window_s`` in ns: the window of the rotation RMS gate."""
+        return self._rot_window_ns
 
     def _drop_unconfirmed(self) -> None:
         kept = [c for c in self._candidates if c.confirmed]

@@ -81,8 +81,8 @@ class StepRelease:
         #: ``Pipeline(recount_at_settle=True)``: where the settling ends on the same detector, its held peaks recount
         self.recount = self.settle_hold and bool(getattr(pipe, "recount_at_settle", False))
         #: ``Pipeline(walk_start_step=True)``: the index of the gentle detector that looks back (None: off)
-        start_det = getattr(pipe, "_start_det", None)
-        self.start_d = next(i for i, d in enumerate(pipe._mode_detectors) if d is start_det) \
+        start_det = getattr(pipe, "walk_start_detector", None)
+        self.start_d = next(i for i, d in enumerate(pipe.mode_detectors) if d is start_det) \
             if start_det is not None else None
         self.active_d = 0  # the detector whose peaks are candidates at the grid sample being processed
         self.carry = None  # the carry detector's per-sample track (desktop.fast.carry.CarryTrack), when it runs
@@ -118,7 +118,7 @@ class StepRelease:
     def run(self, peaks: list, carry=None, det_at=None) -> None:
         """All the candidates, then the end.
 
-        ``peaks``: per step detector of the pipeline (``pipe._mode_detectors``' order; one without carry
+        ``peaks``: per step detector of the pipeline (``pipe.mode_detectors``' order; one without carry
         detection) ``(ev_tick, ev_t, ev_f, rms, regressors)``: the grid samples at which its peaks are found, the
         :class:`StepEvent` fields of each (its time; the rest, in order), the rotation RMS and the speed regressors
         there.  With carry detection,
@@ -322,7 +322,7 @@ class StepRelease:
         if getattr(p, "flush_at_end", False) and len(self.grid_t):  # Pipeline._flush_detector: the active detector's
             n_grid = len(self.grid_t)                                 # steps found at the end (grid sample n_grid)
             # the detector in force after the last sample (the fast pipeline set the pipeline's from det_at[-1])
-            self.active_d = next(i for i, d in enumerate(p._mode_detectors) if d is p._active_det) \
+            self.active_d = next(i for i, d in enumerate(p.mode_detectors) if d is p.active_detector) \
                 if getattr(p, "carry", None) is not None else 0
             tk = self.peaks[self.active_d][0]
             self.k = n_grid - 1  # the state after the last sample (the rotation gate, a walk-start look-back)

@@ -189,31 +189,32 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         has_gyro = g >= 0
         gyro_at = np.where(has_gyro[:, None], ev.v[gyro_pos[np.maximum(g, 0)]] if len(gyro_pos) else 0.0, 0.0)
         track = run_carry(p.carry, gt, acc_at, gyro_at, has_gyro, restart)
-        index = {d: i for i, d in enumerate(p._mode_detectors)}
-        det_of_mode = np.array([index[p._det_of[m]] for m in CARRY_MODES], dtype=np.int64)
+        index = {d: i for i, d in enumerate(p.mode_detectors)}
+        det_of = p.detector_of
+        det_of_mode = np.array([index[det_of[m]] for m in CARRY_MODES], dtype=np.int64)
         det_at = det_of_mode[track.mode]
-        if UNEVEN_POCKET in p._det_of:  # a pocket with very unlike half-strides: the limb gates (Pipeline._gates_key)
+        if UNEVEN_POCKET in det_of:  # a pocket with very unlike half-strides: the limb gates (Pipeline._gates_key)
             pocket = CARRY_MODES.index(CARRY_POCKET)
-            det_at = np.where(track.uneven & (track.mode == pocket), index[p._det_of[UNEVEN_POCKET]], det_at)
-        if GENTLE_SWING in p._det_of:  # a gentle walk in a swinging hand (Pipeline._gates_key)
+            det_at = np.where(track.uneven & (track.mode == pocket), index[det_of[UNEVEN_POCKET]], det_at)
+        if GENTLE_SWING in det_of:  # a gentle walk in a swinging hand (Pipeline._gates_key)
             swinging = CARRY_MODES.index(CARRY_SWINGING)
-            det_at = np.where(track.gentle & (track.mode == swinging), index[p._det_of[GENTLE_SWING]], det_at)
-        if GENTLE in p._det_of:  # a gentle walk in a trunk mode: the gentle detector (Pipeline._carry_steps)
+            det_at = np.where(track.gentle & (track.mode == swinging), index[det_of[GENTLE_SWING]], det_at)
+        if GENTLE in det_of:  # a gentle walk in a trunk mode: the gentle detector (Pipeline._carry_steps)
             gentle_mode = np.array([p._gentle_applies(m) for m in CARRY_MODES], dtype=bool)
-            det_at = np.where(track.gentle & gentle_mode[track.mode], index[p._det_of[GENTLE]], det_at)
+            det_at = np.where(track.gentle & gentle_mode[track.mode], index[det_of[GENTLE]], det_at)
         if n_ticks:
-            p.set_carry_state(CARRY_MODES[int(track.mode[-1])], p._mode_detectors[int(det_at[-1])])
+            p.set_carry_state(CARRY_MODES[int(track.mode[-1])], p.mode_detectors[int(det_at[-1])])
     # the smoother's exit of the upright state per grid sample (Pipeline(limb_upright_exit), issue #25)
     exit_at = None
     if p.limb_upright_exit is not None:
-        exit_at = np.full(n_ticks, p._upright_exit)
+        exit_at = np.full(n_ticks, p.base_upright_exit)
         if track is not None:
             limb = np.isin(track.mode, [CARRY_MODES.index(CARRY_SWINGING), CARRY_MODES.index(CARRY_POCKET)])
             exit_at[limb] = p.limb_upright_exit
     clock("carry-mode detector", 0.35)
     # 5. every step detector (one per distinct gates), the speed window at their peaks
     found = []
-    for det in p._mode_detectors:
+    for det in p.mode_detectors:
         det.n_grid = n_ticks
         ev_tick, ev_t, ev_f = detect_steps(det, gt, gx, restart, det.gates,
                                            None if track is None else track.step_period_s, p.flush_at_end,
@@ -226,7 +227,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     clock("steps, speed window", 0.40)
     rot_sum = np.empty(len(gyro_pos))
     rot_n = np.empty(len(gyro_pos), dtype=np.int64)
-    rotation_sums(ev.t[gyro_pos], np.ascontiguousarray(ev.v[gyro_pos]), p._rot_window_ns, rot_sum, rot_n)
+    rotation_sums(ev.t[gyro_pos], np.ascontiguousarray(ev.v[gyro_pos]), p.rotation_window_ns, rot_sum, rot_n)
     peaks = []
     for ev_tick, ev_t, ev_f in found:
         at = np.minimum(ev_tick, n_ticks - 1)
