@@ -238,3 +238,17 @@ def test_fast_path_read_only_views_of_the_step_detectors():
     assert p.rotation_window_ns == int(p.rotation_window_s * 1e9) and p.base_upright_exit == p.smoother.upright_exit
     q = Pipeline(carry=False)
     assert q.mode_detectors == (q.detector,) and dict(q.detector_of) == {} and q.walk_start_detector is None
+
+
+def test_fast_path_calls_public_methods():
+    """The methods the desktop fast path calls (one implementation, the pipeline's own): which modes count a gentle
+    walk with the GENTLE gates, a step's carry-mode label, and the anchoring fix's site (without a date: no WMM
+    field, the walk outdoors)."""
+    from core.pdr.steps import GENTLE
+
+    p = Pipeline(carry=True)
+    assert GENTLE in p.step_gates and p.gentle_applies("handheld") and not p.gentle_applies("still")
+    assert p.step_carry_mode(1_000_000_000) == "handheld"
+    assert Pipeline(carry=False).step_carry_mode(0, [], "pocket") == "handheld"
+    p.apply_site((0, 47.0, 8.0, 400.0))
+    assert p.site == {"applied": False, "why": "no date for the magnetic model", "outdoors": True}

@@ -741,7 +741,7 @@ class Pipeline:
             if stream == GPS and self.gnss is not None:
                 self.gnss.add_fix(t_ns, values)
                 if self.site is None and self.site_from_gps and self.gnss.anchor is not None:
-                    self._apply_site(self.gnss.anchor)
+                    self.apply_site(self.gnss.anchor)
             elif stream == GNSS_STATUS and self.gnss is not None:
                 self.gnss.add_status(t_ns, values)
             return []  # rotvec, ...: not used by the core PDR
@@ -817,13 +817,15 @@ class Pipeline:
         feats = StepFeatures(t_ns=s.t_ns, duration_s=s.period_s, acc_max_m_s2=math.nan, acc_min_m_s2=math.nan,
                              acc_var_m2_s4=math.nan, height_m=self.height_m)
         step = self._append_step(s.t_ns, length, heading, feats, self.attitude.mag_rejected,
-                                 self._step_carry_mode(s.t_ns), estimated=True)
+                                 self.step_carry_mode(s.t_ns), estimated=True)
         if self.gnss is not None:
             self.fused.append(self.gnss.add_step(step))
         return step
 
-    def _apply_site(self, anchor) -> None:
-        """The anchoring fix's magnetic declination and field for the attitude filter (see ``site_from_gps``)."""
+    def apply_site(self, anchor) -> None:
+        """The anchoring fix's (``(t_ns, lat, lon, alt)``) magnetic declination and field for the attitude filter
+        (see ``site_from_gps``); what was applied in :attr:`site`.  The pipeline calls it at the first anchoring fix,
+        the desktop fast path at the same event."""
         t_ns, lat, lon, alt = anchor
         if self.unix_offset_ns is None:
             # no WMM field without a date, but a good fix still says the walk is outdoors, as a dated one does
@@ -932,10 +934,10 @@ class Pipeline:
         return out
 
     def _gates_key(self, mode: str, gentle: bool, uneven: bool) -> str:
-        """The key of ``step_gates`` in force: the mode's, a gentle walk's (:meth:`_gentle_applies`) or, in a pocket
+        """The key of ``step_gates`` in force: the mode's, a gentle walk's (:meth:`gentle_applies`) or, in a pocket
         whose two half-strides are very unlike (the carry detector's ``uneven``), the limb gates of
         ``UNEVEN_POCKET`` (issue #25)."""
-        if gentle and self._gentle_applies(mode):
+        if gentle and self.gentle_applies(mode):
             return GENTLE
         if gentle and mode == CARRY_SWINGING and GENTLE_SWING in self._det_of:  # a gently swung hand (issue #25)
             return GENTLE_SWING
@@ -943,7 +945,7 @@ class Pipeline:
             return UNEVEN_POCKET
         return mode
 
-    def _gentle_applies(self, mode: str) -> bool:
+    def gentle_applies(self, mode: str) -> bool:
         """A gentle walk (the carry detector's ``gentle``) is counted with the ``GENTLE`` gates in the modes that
         count with the hand-held gates (the trunk's) while walking; a limb's gates stay, and "not walking" keeps the
         hand-held gates (standing, turning on the spot: weak peaks there are no steps)."""
@@ -977,7 +979,7 @@ class Pipeline:
                 if c.heading_rad is None:
                     c.heading_rad = headings.get(heading_key(c.event))
 
-    def _step_carry_mode(self, t_ns: int, changes: list[CarryChange] | None = None, mode: str | None = None) -> str:
+    def step_carry_mode(self, t_ns: int, changes: list[CarryChange] | None = None, mode: str | None = None) -> str:
         """The carry mode a step is labelled with: the mode in force at its peak, except that a counted step is
         never "not walking" (the detector's hysteresis lags the first steps of a walk): then the walking mode
         that follows, or the one before, or hand-held.  ``changes`` and ``mode``: the detector's change log and
@@ -1217,7 +1219,7 @@ class Pipeline:
 
     def _complete(self, ev: StepEvent, heading: float, regressors: tuple) -> Step:
         self._completed_ns = ev.t_ns
-        step = self.add_step(ev, heading, regressors, self.attitude.mag_rejected, self._step_carry_mode(ev.t_ns))
+        step = self.add_step(ev, heading, regressors, self.attitude.mag_rejected, self.step_carry_mode(ev.t_ns))
         if self.gnss is not None:
             self.fused.append(self.gnss.add_step(step))
         return step

@@ -15,7 +15,7 @@ core's own classes.  With carry-mode detection (issue #17) the candidates
 are the peaks of the detector of the mode in force; at a change to a mode with
 another detector its held peaks (the last ``rotation_hold_s``) replace the
 unconfirmed candidates, as ``Pipeline._switch_detector`` does, and every step
-is labelled with its carry mode (``Pipeline._step_carry_mode`` on the detector's
+is labelled with its carry mode (``Pipeline.step_carry_mode`` on the detector's
 state at the step's completion).
 """
 
@@ -341,11 +341,11 @@ class StepRelease:
 
     def _carry_mode_of(self, t_ns: int) -> str:
         """The carry mode a step completed now is labelled with: the pipeline's rule
-        (``Pipeline._step_carry_mode``) on the detector's state at the current grid sample."""
+        (``Pipeline.step_carry_mode``) on the detector's state at the current grid sample."""
         c = self.carry
         if c is None or self.k is None:  # no detector, or the end: the detector's final state
-            return self.p._step_carry_mode(t_ns)
-        return self.p._step_carry_mode(t_ns, c.changes[:int(c.n_changes[self.k])], CARRY_MODES[int(c.mode[self.k])])
+            return self.p.step_carry_mode(t_ns)
+        return self.p.step_carry_mode(t_ns, c.changes[:int(c.n_changes[self.k])], CARRY_MODES[int(c.mode[self.k])])
 
     def complete(self, ev: StepEvent, heading: float, regressors: tuple, mag_rejected: bool) -> Step:
         """The step completed with the pipeline's own :meth:`core.pdr.pipeline.Pipeline.add_step` (eqs. 4, 1)."""

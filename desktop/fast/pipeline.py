@@ -22,7 +22,7 @@ first):
    window at their peaks (compiled);
 6. with a GPS fusion (``Pipeline(gnss=...)``) and ``site_from_gps``: the
    sensor event before which the reference gives the attitude filter the
-   site's WMM declination and field (``Pipeline._apply_site`` at the GPS event
+   site's WMM declination and field (``Pipeline.apply_site`` at the GPS event
    where the fusion first has an anchor).  Nothing else of the fusion feeds
    back into the PDR, and neither the anchoring fix nor the moment the fusion
    gets to it depends on the attitude (they depend on the fixes, the receiver
@@ -200,7 +200,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
             swinging = CARRY_MODES.index(CARRY_SWINGING)
             det_at = np.where(track.gentle & (track.mode == swinging), index[det_of[GENTLE_SWING]], det_at)
         if GENTLE in det_of:  # a gentle walk in a trunk mode: the gentle detector (Pipeline._carry_steps)
-            gentle_mode = np.array([p._gentle_applies(m) for m in CARRY_MODES], dtype=bool)
+            gentle_mode = np.array([p.gentle_applies(m) for m in CARRY_MODES], dtype=bool)
             det_at = np.where(track.gentle & gentle_mode[track.mode], index[det_of[GENTLE]], det_at)
         if n_ticks:
             p.set_carry_state(CARRY_MODES[int(track.mode[-1])], p.mode_detectors[int(det_at[-1])])
@@ -314,7 +314,7 @@ class _Attitude:
 def _attitude_and_smoother(p: Pipeline, ev: _Events, v, cal_ok, tick_event, site_at: int, anchor,
                            exit_at=None) -> _Attitude:
     """The attitude filter over all events, taken at each grid sample (``tick_event[j]``: the event behind sample
-    ``j``), the site given before event ``site_at`` (``Pipeline._apply_site(anchor)``; -1: none); then the
+    ``j``), the site given before event ``site_at`` (``Pipeline.apply_site(anchor)``; -1: none); then the
     rotation smoother over the grid's attitudes (section 4.3), its final state into ``p.smoother``."""
     ekf = p.attitude
     n_ticks = len(tick_event)
@@ -324,9 +324,9 @@ def _attitude_and_smoother(p: Pipeline, ev: _Events, v, cal_ok, tick_event, site
     applied = []
 
     def give_site():
-        """The reference's ``Pipeline._apply_site`` at the anchoring fix (once)."""
+        """The reference's ``Pipeline.apply_site`` at the anchoring fix (once)."""
         applied.append(True)
-        p._apply_site(anchor)
+        p.apply_site(anchor)
 
     calibrator = ekf.mag_calibrator
     ekf.mag_calibrator = None
@@ -422,7 +422,7 @@ class _FusionEvents:
         The fix that anchors the walk and the moment the fusion gets to it (a fix waits for the first step after
         it) depend on the fixes, the receiver status and the steps' times and completion, none of which depends on
         the attitude.  So a copy of the pipeline runs the gates and the steps' completion without any heading,
-        feeding a copy of the fusion, up to the GPS event where the reference would call ``_apply_site``.  With a
+        feeding a copy of the fusion, up to the GPS event where the reference would call ``apply_site``.  With a
         known ``start`` the anchor is the first fix the fused track accepts: then the copy runs with the headings
         of the attitude without the site (``att``, an :class:`_Attitude`; the same as the reference's up to there).
         """
@@ -498,7 +498,7 @@ class _Feed:
                 continue
             g.add_fix(int(ev.t[m]), ev.values(m))
             if not self.anchored and p.site_from_gps and g.anchor is not None:
-                self.anchored = True  # where Pipeline.update calls _apply_site
+                self.anchored = True  # where Pipeline.update calls apply_site
                 if self.scout:
                     raise _SiteDue(int(ev.ins[m]), g.anchor)
                 if int(ev.ins[m]) != self.site_at:
