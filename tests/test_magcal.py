@@ -553,3 +553,17 @@ def test_fast_path_entry_points_state_and_restore_state():
     with pytest.raises(ValueError):
         b.restore_state({"_bin_count": [0] * 3})
     assert b.min_samples == 30 and b.kernel_settings == a.kernel_settings
+
+
+def test_attempt_and_apply_tuple_are_public():
+    """``attempt`` (what ``update`` calls when a fit is due; the fast path calls it where its kernel hands over) and
+    ``apply_tuple`` (the calibrated reading on floats): an attempt on a tumble's store accepts a fit, and
+    ``apply_tuple`` then equals ``apply``."""
+    t, m = tumbling_recording(22, duration_s=8.0)
+    cal = MagCalibrator(refit_interval_s=1e9)  # update never attempts
+    for ti, row in zip(t.tolist(), m.tolist()):
+        cal.update(ti, *row)
+    assert cal.n_fits == 0 and cal.apply_tuple(1.0, 2.0, 3.0) == (1.0, 2.0, 3.0)
+    cal.attempt(int(t[-1]))
+    assert cal.calibrated and cal.n_fits == 1 and cal.status.reason == "accepted"
+    assert np.allclose(cal.apply_tuple(*m[0].tolist()), cal.apply(m[0]), rtol=0, atol=1e-12)

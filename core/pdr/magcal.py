@@ -503,7 +503,9 @@ class MagCalibrator:
             return m.copy()
         return (m - np.asarray(self._b)) @ np.asarray(self._a).T
 
-    def _apply_tuple(self, mx: float, my: float, mz: float) -> tuple:
+    def apply_tuple(self, mx: float, my: float, mz: float) -> tuple:
+        """:meth:`apply` of one reading on floats (3 floats; the identity before a fit), as :meth:`update` returns
+        it."""
         if not self._calibrated:
             return (mx, my, mz)
         bx, by, bz = self._b
@@ -599,13 +601,13 @@ class MagCalibrator:
         calibration in force.
         """
         # the per-reading path (the phone runs it at 50-100 Hz): binning and storing written out on locals, the
-        # same float operations as _bin_of and _store; the fits happen in _attempt, at most every refit_interval_s
+        # same float operations as _bin_of and _store; the fits happen in attempt, at most every refit_interval_s
         t_ns = int(t_ns)
         mx, my, mz = float(mx), float(my), float(mz)
         nrm2 = mx * mx + my * my + mz * mz
         if not (math.isfinite(nrm2) and nrm2 <= self._max_nrm2):
             self.n_invalid += 1
-            return self._apply_tuple(mx, my, mz)
+            return self.apply_tuple(mx, my, mz)
         self.n_valid += 1
         m = (mx, my, mz)
         if not self._calibrated:
@@ -659,7 +661,7 @@ class MagCalibrator:
             self._t_last_attempt = t_ns
         elif ((self._new_since >= self.refit_min_new_samples or self._new_bins_since > 0 or centre is None)
               and (t_ns - self._t_last_attempt) * 1e-9 >= self.refit_interval_s):
-            self._attempt(t_ns)
+            self.attempt(t_ns)
         if not self._calibrated:
             return m
         bx, by, bz = self._b
@@ -678,8 +680,9 @@ class MagCalibrator:
         sector = np.minimum(((np.arctan2(d[:, 1], d[:, 0]) + np.pi) * (ns / (2.0 * np.pi))).astype(np.int64), ns - 1)
         return len(np.unique(band * ns + sector)) / self.n_bins
 
-    def _attempt(self, t_ns: int) -> None:
-        """One fit attempt on the store (the expensive part; at most every refit_interval_s)."""
+    def attempt(self, t_ns: int) -> None:
+        """One fit attempt on the store at ``t_ns`` (the expensive part): :meth:`update` makes it when one is due (at
+        most every refit_interval_s), the desktop fast path where its kernel hands an attempt over."""
         self._t_last_attempt = t_ns
         self._new_since = 0
         self._new_bins_since = 0

@@ -20,7 +20,7 @@ pairwise summation reproduced; the least squares by a Householder QR instead
 of LAPACK's SVD, :func:`_lstsq4`, so the sphere's centre differs from core's
 by rounding only, about 1e-15 relative, and the rest -- every calibrated
 reading, the store, the decisions -- is equal on every recording tried).  An
-attempt that reaches a fit is core's own ``_attempt`` (ellipsoid and sphere
+attempt that reaches a fit is core's own ``attempt`` (ellipsoid and sphere
 fits, acceptance): the kernel stops there, :class:`_Handover` writes its
 state into the calibrator, the attempt runs, and the state is read back
 before the kernel goes on.
@@ -132,7 +132,7 @@ def calibrate_readings(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring, out, o
 
 
 # ---------------------------------------------------------------------------
-# the bootstrap attempt, compiled: core's ``_attempt`` while no fit is in force, up to where a fit is due
+# the bootstrap attempt, compiled: core's ``attempt`` while no fit is in force, up to where a fit is due
 
 
 @kernel
@@ -384,7 +384,7 @@ def _trimmed_sphere(t, m, k, min_samples, limit, out):
 
 @kernel
 def attempt_to_fit(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring):
-    """``MagCalibrator._attempt`` at reading ``i``, compiled as far as the rejections before a fit.
+    """``MagCalibrator.attempt`` at reading ``i``, compiled as far as the rejections before a fit.
 
     Before the first accepted fit: the store (samples younger than ``sample_max_age_s``) and the bootstrap
     reservoir, merged by time (a stored sample wins a tie), the trimmed sphere centres the bins (where it is
@@ -581,7 +581,7 @@ def calibrate_stream(cal, t_ns: np.ndarray, mag_b: np.ndarray, compiled_attempts
 
     ``compiled_attempts`` (default: where numba is installed) runs the fit attempts with
     :func:`attempt_to_fit` as far as it goes (to a rejection before a fit, or to a fit, which is core's);
-    without it every attempt is core's ``_attempt`` (numpy, faster than the kernel run as plain Python).
+    without it every attempt is core's ``attempt`` (numpy, faster than the kernel run as plain Python).
     """
     if compiled_attempts is None:
         compiled_attempts = HAVE_NUMBA
@@ -598,10 +598,10 @@ def calibrate_stream(cal, t_ns: np.ndarray, mag_b: np.ndarray, compiled_attempts
         if i >= len(t):
             break
         h.write(cal)
-        cal._attempt(int(t[i]))
+        cal.attempt(int(t[i]))
         h.read(cal)
         h.is_[I_REASON] = -1  # core's attempt set the reason
-        out[i] = cal._apply_tuple(float(v[i, 0]), float(v[i, 1]), float(v[i, 2]))
+        out[i] = cal.apply_tuple(float(v[i, 0]), float(v[i, 1]), float(v[i, 2]))
         ok[i] = cal.calibrated
         i += 1
     code, count = int(h.is_[I_REASON]), int(h.is_[I_REASON_N])
