@@ -543,6 +543,7 @@ def test_fast_path_entry_points_state_and_restore_state():
     assert {"_slot_t", "_bin_count", "_centre", "_recent", "_t_prev", "n_valid"} <= set(st)
     assert not {"_r_min", "_max_nrm2", "min_samples", "n_bins"} & set(st)
     assert b.kernel_settings == a.kernel_settings and a.kernel_settings["r_min_uT"] == 5.0
+    assert a.kernel_settings["recent_dt_ns"] == 100_000_000
     b.restore_state({k: (v[:] if isinstance(v, (array, list)) else v) for k, v in st.items()})  # copies: own store
     for ti, row in zip(t[400:].tolist(), m[400:].tolist()):
         assert a.update(ti, *row) == b.update(ti, *row)

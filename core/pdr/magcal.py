@@ -471,9 +471,10 @@ class MagCalibrator:
     def kernel_settings(self) -> dict:
         """The settings as the per-reading path uses them (made by :meth:`reset`): ``max_nrm2`` (uT^2, the largest
         squared norm of a valid reading), ``bootstrap_ns`` (the reservoir's span), ``r_min_uT`` (the least distance
-        from the centre of a binned reading), ``sector_scale`` (azimuth sectors per radian)."""
+        from the centre of a binned reading), ``sector_scale`` (azimuth sectors per radian), and the reservoir's
+        spacing ``recent_dt_ns`` (a constant)."""
         return {"max_nrm2": self._max_nrm2, "bootstrap_ns": self._bootstrap_ns, "r_min_uT": self._r_min,
-                "sector_scale": self._sector_scale}
+                "sector_scale": self._sector_scale, "recent_dt_ns": _RECENT_DT_NS}
 
     def state(self) -> dict:
         """The run state :meth:`reset` makes, ``{name: value}`` (the objects themselves: read them, do not change

@@ -39,7 +39,6 @@ from array import array
 
 import numpy as np
 
-from core.pdr import magcal as core_magcal
 from desktop.fast.jit import HAVE_NUMBA, kernel
 
 # float state: the centre, its soft iron, the offset and soft iron in force, settings
@@ -521,7 +520,7 @@ class _Handover:
             cal.sample_max_age_s, cal.outlier_fraction, cal.min_coverage)
         self.is_[[I_NB, I_NS, I_PER, I_MIN_NEW, I_BOOT_NS, I_RECENT_NS, I_MIN_SAMPLES, I_NBINS]] = (
             cal.bin_bands, cal.n_sectors, cal.samples_per_bin, cal.refit_min_new_samples, ks["bootstrap_ns"],
-            core_magcal._RECENT_DT_NS, cal.min_samples, cal.n_bins)
+            ks["recent_dt_ns"], cal.min_samples, cal.n_bins)
         self.read(cal)
 
     def read(self, cal) -> None:
