@@ -57,7 +57,7 @@ def eth(root: Path) -> None:
     cal = MagCalibrator()
     cov_max = 0.0
     reasons: dict[str, int] = {}
-    attempt = cal._attempt
+    attempt = cal.attempt
 
     def watched(t_ns):  # record the coverage and the reason of every attempt
         nonlocal cov_max
@@ -67,7 +67,7 @@ def eth(root: Path) -> None:
         key = st.reason.split(" ")[0]
         reasons[key] = reasons.get(key, 0) + 1
 
-    cal._attempt = watched
+    cal.attempt = watched
     cal.run(mu.t_ns, mu.values)
     st = cal.status
     print(f"- online MagCalibrator on mag_uncal ({len(mu)} readings, {mu.duration_s:.0f} s): state '{st.state}', "

@@ -748,3 +748,21 @@ def test_stride_comb_reaches_a_slow_step():
     n = sum(d.update_grid(t, x) is not None
             for t, x in zip(acc.t_ns.tolist(), np.linalg.norm(acc.values, axis=1).tolist()))
     assert abs(n - w.truth.n_steps) <= 2, (n, w.truth.n_steps)
+
+
+def test_fast_path_entry_points_gyro_seen_and_kernel_settings():
+    """The desktop fast path's way in: ``set_gyro_seen`` sets :attr:`has_gyro` (as ``update_grid`` with a gyro
+    sample does) and takes a bool only; ``kernel_settings`` gives the grid lengths reset() derives (read-only: a
+    copy)."""
+    det = CarryModeDetector(grid_rate_hz=50.0, window_s=4.0, hop_s=0.5)
+    assert det.has_gyro is False
+    det.update_grid(0, 0.0, 0.0, 9.81, 0.1, 0.0, 0.0)
+    assert det.has_gyro is True
+    det.set_gyro_seen(False)
+    assert det.has_gyro is False
+    with pytest.raises(TypeError):
+        det.set_gyro_seen(np.bool_(True))
+    ks = det.kernel_settings
+    assert (ks["window_n"], ks["hop_n"], ks["dt_s"]) == (200, 25, 0.02) and ks["nfft"] >= 2 * ks["long_window_n"]
+    ks["window_n"] = 3
+    assert det.kernel_settings["window_n"] == 200

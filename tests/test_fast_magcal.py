@@ -3,7 +3,7 @@
 :func:`desktop.fast.magcal.calibrate_stream` with ``compiled_attempts=True`` runs the fit attempts in
 :func:`desktop.fast.magcal.attempt_to_fit` (before a fit is in force the bootstrap sphere with trimming, then
 the re-binning) as far as the rejections before a fit, and hands the attempts that reach a fit to core's
-``_attempt``.  Held here to
+``attempt``.  Held here to
 ``core.pdr.magcal.MagCalibrator.update`` fed reading by reading: every calibrated reading and the fit parameters
 within ``TOL`` (relative; the bootstrap centre differs from core's by rounding, about 1e-15 relative, as the
 least squares is a QR and not LAPACK's SVD), the same accept and reject decisions (reasons, states, counters),

@@ -47,6 +47,15 @@ def test_feature_window_standing_still_has_no_frequency_and_nan_until_full():
     assert freq == 0.0 and sd < 0.1
 
 
+def test_feature_window_lowpass_ba_is_its_filters():
+    """``lowpass_ba`` (read by the desktop fast path instead of the private field): the Butterworth of
+    ``cutoff_hz`` at the grid rate, as core.dsp gives it."""
+    from core.dsp import butter2_lowpass
+
+    w = SpeedFeatureWindow(grid_rate_hz=50.0, cutoff_hz=3.0)
+    assert w.lowpass_ba == butter2_lowpass(3.0, 50.0) and w.lowpass_ba != SpeedFeatureWindow(cutoff_hz=5.0).lowpass_ba
+
+
 def test_pipeline_steps_carry_the_walkers_cadence():
     """On the simulator (an inverted-pendulum gait, not eq. 1) FREQ is the true step frequency within 5 %."""
     from desktop.simulator import simulate_walk

@@ -526,3 +526,45 @@ def test_qsf_batch_equals_streaming_in_chunks():
         np.testing.assert_array_equal(np.concatenate([getattr(x, name) for x in traces]), getattr(whole, name))
     _astuple_equal(chunked.status, whole.status)
     assert {"steady", "direction moving", "warming up", "invalid input"} <= set(whole.reason)
+
+
+def test_fast_path_entry_points_state_and_restore_state():
+    """The desktop fast path's way in and out (``kernel_settings``, ``state``, ``restore_state``): ``state`` gives
+    the run state a further update starts from, ``restore_state`` puts it into another calibrator (which then goes
+    on as the first does, reading for reading) and refuses a setting, what reset derives from them, an unknown
+    name and a store of another size (instead of the fast path writing the private fields)."""
+    from array import array
+
+    t, m = tumbling_recording(21, duration_s=12.0)
+    a, b = MagCalibrator(), MagCalibrator()
+    for ti, row in zip(t[:400].tolist(), m[:400].tolist()):
+        a.update(ti, *row)
+    st = a.state()
+    assert {"_slot_t", "_bin_count", "_centre", "_recent", "_t_prev", "n_valid"} <= set(st)
+    assert not {"_r_min", "_max_nrm2", "min_samples", "n_bins"} & set(st)
+    assert b.kernel_settings == a.kernel_settings and a.kernel_settings["r_min_uT"] == 5.0
+    assert a.kernel_settings["recent_dt_ns"] == 100_000_000
+    b.restore_state({k: (v[:] if isinstance(v, (array, list)) else v) for k, v in st.items()})  # copies: own store
+    for ti, row in zip(t[400:].tolist(), m[400:].tolist()):
+        assert a.update(ti, *row) == b.update(ti, *row)
+    assert a.status == b.status and a.n_accepted >= 1
+    for bad in ({"min_samples": 9}, {"_r_min": 1.0}, {"_no_such_state": 1}):
+        with pytest.raises(AttributeError):
+            b.restore_state(bad)
+    with pytest.raises(ValueError):
+        b.restore_state({"_bin_count": [0] * 3})
+    assert b.min_samples == 30 and b.kernel_settings == a.kernel_settings
+
+
+def test_attempt_and_apply_tuple_are_public():
+    """``attempt`` (what ``update`` calls when a fit is due; the fast path calls it where its kernel hands over) and
+    ``apply_tuple`` (the calibrated reading on floats): an attempt on a tumble's store accepts a fit, and
+    ``apply_tuple`` then equals ``apply``."""
+    t, m = tumbling_recording(22, duration_s=8.0)
+    cal = MagCalibrator(refit_interval_s=1e9)  # update never attempts
+    for ti, row in zip(t.tolist(), m.tolist()):
+        cal.update(ti, *row)
+    assert cal.n_fits == 0 and cal.apply_tuple(1.0, 2.0, 3.0) == (1.0, 2.0, 3.0)
+    cal.attempt(int(t[-1]))
+    assert cal.calibrated and cal.n_fits == 1 and cal.status.reason == "accepted"
+    assert np.allclose(cal.apply_tuple(*m[0].tolist()), cal.apply(m[0]), rtol=0, atol=1e-12)

@@ -193,3 +193,62 @@ def test_fast_path_entry_points():
         p.set_carry_state("pocket", StepDetector())
     p.reset()
     assert p.n_walk_start_steps == 0
+
+
+def test_sensor_health_skip_quiet_is_the_state_quiet_updates_leave():
+    """``SensorHealth.skip_quiet`` (the desktop fast path's ``health_of``): a new detector set to the state after
+    readings off the rails and never repeated goes on as the one fed them, through a rail run and a dead run;
+    it refuses a used detector, no readings and a last reading on a rail."""
+    from core.pdr.pipeline import SensorHealth
+
+    rng = np.random.default_rng(3)
+    quiet = rng.normal(size=(50, 3))
+    t = (np.arange(200) * 20_000_000).tolist()
+    fed, skipped = SensorHealth(4.0), SensorHealth(4.0)
+    for ti, (x, y, z) in zip(t, quiet.tolist()):
+        fed.update(ti, x, y, z)
+    skipped.skip_quiet(50, t[49], quiet[-1])
+    rest = [(5.0, 0.1 * k, 0.0) for k in range(10)] + [(0.5, 0.5, 0.5)] * 140  # a rail on x, then a dead sensor
+    for ti, v in zip(t[50:], rest):
+        fed.update(ti, *v)
+        skipped.update(ti, *v)
+    assert fed.n == skipped.n == 200 and fed.as_dict() == skipped.as_dict()
+    assert fed.saturated_runs == 1 and fed.dead_runs == 1
+    for h, args in ((fed, (5, 0, (0.0, 0.0, 0.0))), (SensorHealth(4.0), (0, 0, (0.0, 0.0, 0.0))),
+                    (SensorHealth(4.0), (5, 0, (0.0, -4.0, 0.0)))):
+        with pytest.raises(ValueError):
+            h.skip_quiet(*args)
+
+
+def test_fast_path_read_only_views_of_the_step_detectors():
+    """What the desktop fast path reads (instead of the private fields): the step detectors in feeding order, which
+    counts in which mode (read-only), the active one (moved by ``set_carry_state`` only), the walk-start detector,
+    the smoother's own upright exit and the rotation window in ns."""
+    from core.pdr.steps import GENTLE
+
+    p = Pipeline(carry=True, walk_start_step=True)
+    dets = p.mode_detectors
+    assert isinstance(dets, tuple) and dets[0] is p.detector and len(dets) >= 2
+    assert set(map(id, p.detector_of.values())) <= set(map(id, dets)) and p.detector_of["handheld"] is p.detector
+    with pytest.raises(TypeError):
+        p.detector_of["pocket"] = p.detector
+    assert p.active_detector is p.detector and p.walk_start_detector is p.detector_of[GENTLE]
+    p.set_carry_state("pocket", p.detector_of[GENTLE])
+    assert p.active_detector is p.detector_of[GENTLE] is not p.detector
+    assert p.rotation_window_ns == int(p.rotation_window_s * 1e9) and p.base_upright_exit == p.smoother.upright_exit
+    q = Pipeline(carry=False)
+    assert q.mode_detectors == (q.detector,) and dict(q.detector_of) == {} and q.walk_start_detector is None
+
+
+def test_fast_path_calls_public_methods():
+    """The methods the desktop fast path calls (one implementation, the pipeline's own): which modes count a gentle
+    walk with the GENTLE gates, a step's carry-mode label, and the anchoring fix's site (without a date: no WMM
+    field, the walk outdoors)."""
+    from core.pdr.steps import GENTLE
+
+    p = Pipeline(carry=True)
+    assert GENTLE in p.step_gates and p.gentle_applies("handheld") and not p.gentle_applies("still")
+    assert p.step_carry_mode(1_000_000_000) == "handheld"
+    assert Pipeline(carry=False).step_carry_mode(0, [], "pocket") == "handheld"
+    p.apply_site((0, 47.0, 8.0, 400.0))
+    assert p.site == {"applied": False, "why": "no date for the magnetic model", "outdoors": True}

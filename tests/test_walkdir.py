@@ -225,3 +225,12 @@ def test_fast_path_entry_points_change_only_what_they_say():
         with pytest.raises(AttributeError):
             wd.restore_state(bad)
     assert wd.grid_rate_hz == 50.0
+
+
+def test_kernel_settings_are_what_init_derives():
+    """``kernel_settings`` (read by the desktop fast path instead of the private fields): the grid period, the
+    leaks and the forgetting factor, the delay in samples and the gap in ns, from the settings."""
+    wd = WalkingDirection(grid_rate_hz=50.0, delay_s=0.3, reset_after_gap_s=1.5, memory_strides=8.0)
+    ks = wd.kernel_settings
+    assert ks["dt_s"] == 0.02 and ks["delay_n"] == 15 and ks["gap_ns"] == 1_500_000_000
+    assert ks["forget"] == math.exp(-1.0 / 8.0) and 0.0 < ks["leak"] < 1.0 and 0.0 < ks["mean_alpha"] < 1.0

@@ -583,6 +583,29 @@ class CarryModeDetector:
         self._filled = 0
         self._since_hop = 0
 
+    # -- the desktop fast path's way in (desktop/fast/carry.py: it computes every hop's features at once) ----------
+    @property
+    def kernel_settings(self) -> dict:
+        """The grid lengths :meth:`reset` derives from the settings: ``window_n`` and ``long_window_n`` (samples of
+        the window and of the slow walk's long one), ``hop_n``, ``smooth_n`` (the tilt's smoothing), ``recent_n``
+        (the hold's recent part), ``lag_lo_n``, ``lag_hi_n``, ``lag_short_n`` (stride lags), ``nfft`` (the
+        autocorrelation's FFT length) and ``dt_s`` (the grid period)."""
+        return {"window_n": self._n, "long_window_n": self._n_long, "hop_n": self._hop, "smooth_n": self._smooth,
+                "recent_n": self._recent, "lag_lo_n": self._lag_lo, "lag_hi_n": self._lag_hi,
+                "lag_short_n": self._lag_short, "nfft": self._nfft, "dt_s": self._dt}
+
+    @property
+    def has_gyro(self) -> bool:
+        """Whether a grid sample with the gyroscope came in since :meth:`reset` (the features then use it)."""
+        return self._has_gyro
+
+    def set_gyro_seen(self, seen: bool) -> None:
+        """Set :attr:`has_gyro` (a bool): the fast path, which feeds no grid samples, sets it as they would have
+        left it at each hop and after the last sample.  :meth:`update_grid` sets it on the per-sample path itself."""
+        if not isinstance(seen, bool):
+            raise TypeError(f"set_gyro_seen takes a bool, not {type(seen).__name__}")
+        self._has_gyro = seen
+
     # -- features ---------------------------------------------------------------
     def _autocorr(self, x: np.ndarray) -> np.ndarray:
         """Autocorrelation at lags 0..n-1 of each row of ``x`` (zero-mean signals, 2-D), normalised by its

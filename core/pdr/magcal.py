@@ -171,6 +171,8 @@ MAGCAL_STATES = ("collecting", "calibrated", "rejected fit")
 QSF_REASONS = ("invalid input", "warming up", "norm moving", "direction moving", "norm off", "dip off", "steady")
 
 _IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+#: what :meth:`MagCalibrator.reset` derives from the settings for the per-reading path (not run state)
+_DERIVED = frozenset(("_max_nrm2", "_bootstrap_ns", "_r_min", "_sector_scale"))
 _RECENT_DT_NS = 100_000_000  # bootstrap reservoir: one reading per 0.1 s
 
 
@@ -416,7 +418,11 @@ class MagCalibrator:
         self.max_raw_norm_uT = float(max_raw_norm_uT)
         self.n_sectors = 2 * self.bin_bands
         self.n_bins = self.bin_bands * self.n_sectors
+        settings = set(vars(self))
         self.reset()
+        #: the names of the run state :meth:`reset` makes (what :meth:`state` gives and :meth:`restore_state` may
+        #: set); the settings as the per-reading path uses them (:data:`_DERIVED`) are not state
+        self._state_names = frozenset(vars(self)) - settings - _DERIVED
 
     def reset(self) -> None:
         # the settings as the per-reading path uses them (read here: a setting changed later takes effect at reset)
@@ -460,6 +466,36 @@ class MagCalibrator:
         self.n_accepted = 0
         self._fits: list[MagCalStatus] = []
 
+    # -- the desktop fast path's way in and out (desktop/fast/magcal.py: it runs the updates as one kernel) -----------
+    @property
+    def kernel_settings(self) -> dict:
+        """The settings as the per-reading path uses them (made by :meth:`reset`): ``max_nrm2`` (uT^2, the largest
+        squared norm of a valid reading), ``bootstrap_ns`` (the reservoir's span), ``r_min_uT`` (the least distance
+        from the centre of a binned reading), ``sector_scale`` (azimuth sectors per radian), and the reservoir's
+        spacing ``recent_dt_ns`` (a constant)."""
+        return {"max_nrm2": self._max_nrm2, "bootstrap_ns": self._bootstrap_ns, "r_min_uT": self._r_min,
+                "sector_scale": self._sector_scale, "recent_dt_ns": _RECENT_DT_NS}
+
+    def state(self) -> dict:
+        """The run state :meth:`reset` makes, ``{name: value}`` (the objects themselves: read them, do not change
+        them; the store's typed arrays, the reservoir, the centre, the calibration in force, the attempt counters)."""
+        return {name: getattr(self, name) for name in self._state_names}
+
+    def restore_state(self, values: dict) -> None:
+        """Set run state by name (``{name: value}``, names as :meth:`state` gives them, values of the types
+        :meth:`update` leaves: the fast path's state before an attempt and after its last reading).  A name
+        :meth:`reset` does not make as state (a setting, what it derives from them, an unknown name), or a store
+        of another size, raises."""
+        unknown = [n for n in values if n not in self._state_names]
+        if unknown:
+            raise AttributeError(f"restore_state: {unknown} are not MagCalibrator state")
+        nslots = self.n_bins * self.samples_per_bin
+        for name, size in (("_slot_t", nslots), ("_slot_m", 3 * nslots), ("_bin_count", self.n_bins)):
+            if name in values and len(values[name]) != size:
+                raise ValueError(f"restore_state: {name} holds {len(values[name])} values, the store {size}")
+        for name, value in values.items():
+            setattr(self, name, value)
+
     # -- applying the calibration ---------------------------------------------
     def apply(self, m_raw) -> np.ndarray:
         """Calibrated field ``A (m_raw - b)`` of one reading (3,) or many (n, 3); identity before a fit."""
@@ -468,7 +504,9 @@ class MagCalibrator:
             return m.copy()
         return (m - np.asarray(self._b)) @ np.asarray(self._a).T
 
-    def _apply_tuple(self, mx: float, my: float, mz: float) -> tuple:
+    def apply_tuple(self, mx: float, my: float, mz: float) -> tuple:
+        """:meth:`apply` of one reading on floats (3 floats; the identity before a fit), as :meth:`update` returns
+        it."""
         if not self._calibrated:
             return (mx, my, mz)
         bx, by, bz = self._b
@@ -564,13 +602,13 @@ class MagCalibrator:
         calibration in force.
         """
         # the per-reading path (the phone runs it at 50-100 Hz): binning and storing written out on locals, the
-        # same float operations as _bin_of and _store; the fits happen in _attempt, at most every refit_interval_s
+        # same float operations as _bin_of and _store; the fits happen in attempt, at most every refit_interval_s
         t_ns = int(t_ns)
         mx, my, mz = float(mx), float(my), float(mz)
         nrm2 = mx * mx + my * my + mz * mz
         if not (math.isfinite(nrm2) and nrm2 <= self._max_nrm2):
             self.n_invalid += 1
-            return self._apply_tuple(mx, my, mz)
+            return self.apply_tuple(mx, my, mz)
         self.n_valid += 1
         m = (mx, my, mz)
         if not self._calibrated:
@@ -624,7 +662,7 @@ class MagCalibrator:
             self._t_last_attempt = t_ns
         elif ((self._new_since >= self.refit_min_new_samples or self._new_bins_since > 0 or centre is None)
               and (t_ns - self._t_last_attempt) * 1e-9 >= self.refit_interval_s):
-            self._attempt(t_ns)
+            self.attempt(t_ns)
         if not self._calibrated:
             return m
         bx, by, bz = self._b
@@ -643,8 +681,9 @@ class MagCalibrator:
         sector = np.minimum(((np.arctan2(d[:, 1], d[:, 0]) + np.pi) * (ns / (2.0 * np.pi))).astype(np.int64), ns - 1)
         return len(np.unique(band * ns + sector)) / self.n_bins
 
-    def _attempt(self, t_ns: int) -> None:
-        """One fit attempt on the store (the expensive part; at most every refit_interval_s)."""
+    def attempt(self, t_ns: int) -> None:
+        """One fit attempt on the store at ``t_ns`` (the expensive part): :meth:`update` makes it when one is due (at
+        most every refit_interval_s), the desktop fast path where its kernel hands an attempt over."""
         self._t_last_attempt = t_ns
         self._new_since = 0
         self._new_bins_since = 0

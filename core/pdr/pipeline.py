@@ -61,6 +61,7 @@ import math
 from array import array
 from collections import deque
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 
@@ -152,6 +153,19 @@ class SensorHealth:
         else:
             self._same_t0 = None
         self._prev, self._prev_t = v, t_ns
+
+    def skip_quiet(self, n: int, t_ns: int, last) -> None:
+        """A new detector's state after ``n`` readings none of which is on a rail (every component under ``floor``
+        in magnitude) or equal to the one before, the last ``last`` (3 floats) at ``t_ns``: only the count and the
+        last reading move (what :meth:`update` leaves; the caller checked the readings: the desktop fast path's
+        ``health_of``).  Refuses a detector that has seen readings, ``n < 1`` and a ``last`` on a rail."""
+        if self.n:
+            raise ValueError("skip_quiet sets a new detector's state only")
+        last = tuple(float(x) for x in last)
+        if n < 1 or len(last) != 3 or any(x >= self.floor or -x >= self.floor for x in last):
+            raise ValueError("skip_quiet takes n >= 1 readings off the rails")
+        self.n = int(n)
+        self._prev, self._prev_t = last, int(t_ns)
 
     def _rails(self, t_ns: int, v, prev, dt: float) -> None:
         for i in range(3):
@@ -727,7 +741,7 @@ class Pipeline:
             if stream == GPS and self.gnss is not None:
                 self.gnss.add_fix(t_ns, values)
                 if self.site is None and self.site_from_gps and self.gnss.anchor is not None:
-                    self._apply_site(self.gnss.anchor)
+                    self.apply_site(self.gnss.anchor)
             elif stream == GNSS_STATUS and self.gnss is not None:
                 self.gnss.add_status(t_ns, values)
             return []  # rotvec, ...: not used by the core PDR
@@ -803,13 +817,15 @@ class Pipeline:
         feats = StepFeatures(t_ns=s.t_ns, duration_s=s.period_s, acc_max_m_s2=math.nan, acc_min_m_s2=math.nan,
                              acc_var_m2_s4=math.nan, height_m=self.height_m)
         step = self._append_step(s.t_ns, length, heading, feats, self.attitude.mag_rejected,
-                                 self._step_carry_mode(s.t_ns), estimated=True)
+                                 self.step_carry_mode(s.t_ns), estimated=True)
         if self.gnss is not None:
             self.fused.append(self.gnss.add_step(step))
         return step
 
-    def _apply_site(self, anchor) -> None:
-        """The anchoring fix's magnetic declination and field for the attitude filter (see ``site_from_gps``)."""
+    def apply_site(self, anchor) -> None:
+        """The anchoring fix's (``(t_ns, lat, lon, alt)``) magnetic declination and field for the attitude filter
+        (see ``site_from_gps``); what was applied in :attr:`site`.  The pipeline calls it at the first anchoring fix,
+        the desktop fast path at the same event."""
         t_ns, lat, lon, alt = anchor
         if self.unix_offset_ns is None:
             # no WMM field without a date, but a good fix still says the walk is outdoors, as a dated one does
@@ -918,10 +934,10 @@ class Pipeline:
         return out
 
     def _gates_key(self, mode: str, gentle: bool, uneven: bool) -> str:
-        """The key of ``step_gates`` in force: the mode's, a gentle walk's (:meth:`_gentle_applies`) or, in a pocket
+        """The key of ``step_gates`` in force: the mode's, a gentle walk's (:meth:`gentle_applies`) or, in a pocket
         whose two half-strides are very unlike (the carry detector's ``uneven``), the limb gates of
         ``UNEVEN_POCKET`` (issue #25)."""
-        if gentle and self._gentle_applies(mode):
+        if gentle and self.gentle_applies(mode):
             return GENTLE
         if gentle and mode == CARRY_SWINGING and GENTLE_SWING in self._det_of:  # a gently swung hand (issue #25)
             return GENTLE_SWING
@@ -929,7 +945,7 @@ class Pipeline:
             return UNEVEN_POCKET
         return mode
 
-    def _gentle_applies(self, mode: str) -> bool:
+    def gentle_applies(self, mode: str) -> bool:
         """A gentle walk (the carry detector's ``gentle``) is counted with the ``GENTLE`` gates in the modes that
         count with the hand-held gates (the trunk's) while walking; a limb's gates stay, and "not walking" keeps the
         hand-held gates (standing, turning on the spot: weak peaks there are no steps)."""
@@ -963,7 +979,7 @@ class Pipeline:
                 if c.heading_rad is None:
                     c.heading_rad = headings.get(heading_key(c.event))
 
-    def _step_carry_mode(self, t_ns: int, changes: list[CarryChange] | None = None, mode: str | None = None) -> str:
+    def step_carry_mode(self, t_ns: int, changes: list[CarryChange] | None = None, mode: str | None = None) -> str:
         """The carry mode a step is labelled with: the mode in force at its peak, except that a counted step is
         never "not walking" (the detector's hysteresis lags the first steps of a walk): then the walking mode
         that follows, or the one before, or hand-held.  ``changes`` and ``mode``: the detector's change log and
@@ -1087,6 +1103,39 @@ class Pipeline:
         self._carry_mode = mode
         self._active_det = detector
 
+    @property
+    def mode_detectors(self) -> tuple:
+        """The step detectors, one per distinct gates of ``step_gates`` (the hand-held one, :attr:`detector`,
+        first; it alone without carry detection), in the order the pipeline feeds them (a new tuple)."""
+        return tuple(self._mode_detectors)
+
+    @property
+    def detector_of(self) -> MappingProxyType:
+        """``{gates key: step detector}`` (a carry mode, or GENTLE / GENTLE_SWING / UNEVEN_POCKET where those gates
+        are set; empty without carry detection): which of :attr:`mode_detectors` counts the steps (read-only)."""
+        return MappingProxyType(self._det_of)
+
+    @property
+    def active_detector(self):
+        """The step detector whose peaks are candidates now (one of :attr:`mode_detectors`)."""
+        return self._active_det
+
+    @property
+    def walk_start_detector(self):
+        """The gentle gait's detector that looks back for a walk's first step (``walk_start_step``; None: off)."""
+        return self._start_det
+
+    @property
+    def base_upright_exit(self) -> float:
+        """The smoother's own exit threshold of the upright state, in force outside a limb mode
+        (``limb_upright_exit``)."""
+        return self._upright_exit
+
+    @property
+    def rotation_window_ns(self) -> int:
+        """``rotation_window_s`` in ns: the window of the rotation RMS gate."""
+        return self._rot_window_ns
+
     def _drop_unconfirmed(self) -> None:
         kept = [c for c in self._candidates if c.confirmed]
         self.n_rejected_bout += len(self._candidates) - len(kept)
@@ -1170,7 +1219,7 @@ class Pipeline:
 
     def _complete(self, ev: StepEvent, heading: float, regressors: tuple) -> Step:
         self._completed_ns = ev.t_ns
-        step = self.add_step(ev, heading, regressors, self.attitude.mag_rejected, self._step_carry_mode(ev.t_ns))
+        step = self.add_step(ev, heading, regressors, self.attitude.mag_rejected, self.step_carry_mode(ev.t_ns))
         if self.gnss is not None:
             self.fused.append(self.gnss.add_step(step))
         return step

@@ -77,6 +77,11 @@ class SpeedFeatureWindow:
         self._ba = butter2_lowpass(cutoff_hz, grid_rate_hz)
         self.reset()
 
+    @property
+    def lowpass_ba(self) -> tuple:
+        """The low-pass filter's coefficients ``(b, a)`` (:func:`core.dsp.butter2_lowpass` of ``cutoff_hz``)."""
+        return self._ba
+
     def reset(self) -> None:
         self._window_ns = int(self.window_s * 1e9)
         self._buf: deque = deque()

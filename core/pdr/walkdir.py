@@ -685,6 +685,15 @@ class WalkingDirection:
 
     # -- the desktop fast path's way in and out (desktop/fast/walkdir.py: it runs the updates as one kernel) ----------
     @property
+    def kernel_settings(self) -> dict:
+        """What ``__init__`` derives from the settings for the per-sample path: ``dt_s`` (grid period), ``leak``
+        (the vertical velocity's per-sample leak), ``mean_alpha`` (the vertical mean's per-sample weight),
+        ``forget`` (the per-stride forgetting factor), ``delay_n`` (the delay in grid samples), ``gap_ns``
+        (``reset_after_gap_s`` in ns)."""
+        return {"dt_s": self._dt, "leak": self._leak, "mean_alpha": self._mean_alpha, "forget": self._forget,
+                "delay_n": self._delay_n, "gap_ns": self._gap_ns}
+
+    @property
     def axis_key(self):
         """The device axis the current offset belongs to (the smoother's ``forward_b`` key; None before any)."""
         return self._axis_key

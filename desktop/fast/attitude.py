@@ -21,7 +21,7 @@ the reference does after its start:
 * the vertical hard-iron offset from an outdoor site's field (the WMM
   strength and dip a GPS fix gives, ``set_site_field``), and a site's
   settings changed between two events (:meth:`KernelState.new_settings`: the
-  pipeline's ``_apply_site`` at its first anchoring fix).
+  pipeline's ``apply_site`` at its first anchoring fix).
 
 What it does not re-implement, and why:
 
@@ -1099,7 +1099,7 @@ def start_with_reference(ekf, kind, t, v, cal_ok, tick_event, out_q, out_acc_s2,
 
     Returns ``(i0, j0, j_init)``: the first event and the first grid tick the kernel takes over, and the
     first grid tick taken with the filter started (the smoother's first).  ``hook()``, if given, is called
-    before event ``hook_at`` (a GPS site given to the filter, :meth:`core.pdr.pipeline.Pipeline._apply_site`)
+    before event ``hook_at`` (a GPS site given to the filter, :meth:`core.pdr.pipeline.Pipeline.apply_site`)
     when that comes before the hand-over.
     """
     j = 0

@@ -35,9 +35,9 @@ HOP_CHUNK = 512
 
 def _autocorr(det, x: np.ndarray) -> np.ndarray:
     """Unbiased normalised autocorrelation of each zero-mean row of ``x`` (m, n) at lags 0..n-1 (the detector's
-    zero-padded FFT length ``det._nfft``); a row without energy gives zeros."""
+    zero-padded FFT length ``nfft``, :attr:`CarryModeDetector.kernel_settings`); a row without energy gives zeros."""
     m, n = x.shape
-    nfft = det._nfft
+    nfft = det.kernel_settings["nfft"]
     f = np.fft.rfft(x, nfft, axis=1)
     r = np.fft.irfft(f * np.conj(f), nfft, axis=1)[:, :n]
     r0 = r[:, :1]
@@ -78,16 +78,17 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray, hi: int | None = N
     u = np.where(ok[:, None], mean / np.where(ok, m_norm, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
     x = norm - mean_norm[:, None]
     std = np.sqrt(np.mean(x * x, axis=1))
-    xr = norm[:, n - min(det._recent, n):]
+    lengths = det.kernel_settings
+    xr = norm[:, n - min(lengths["recent_n"], n):]
     xr = xr - xr.mean(axis=1)[:, None]
     recent_std = np.sqrt(np.mean(xr * xr, axis=1))
-    lo = det._lag_lo
+    lo = lengths["lag_lo_n"]
     r = _autocorr(det, x)
     rows = np.arange(m_w)
     seg = r[:, lo:hi + 1]
     top = seg.max(axis=1)
     # a slow stride only without a peak near the best at a normal cadence's (CarryModeDetector.slow_stride_s)
-    hs = det._lag_short
+    hs = lengths["lag_short_n"]
     short_top = seg[:, :hs - lo + 1].max(axis=1)
     use_short = short_top >= det.slow_stride_margin * top
     lags = np.arange(hi - lo + 1)[None, :]
@@ -121,8 +122,8 @@ def window_features(det, w: np.ndarray, has_gyro: np.ndarray, hi: int | None = N
         j = np.argmax(vals, axis=1)
         ok = ~use_short & has_peak & (half >= lo) & (j > 0) & (j < 4) & (vals[rows, j] >= det.half_stride_ratio * r[rows, k2])
         k2 = np.where(ok, idx[rows, j], k2)
-    # the specific force smoothed over det._smooth samples, its angle from the mean direction
-    s = det._smooth
+    # the specific force smoothed over smooth_n samples, its angle from the mean direction
+    s = lengths["smooth_n"]
     c = np.cumsum(np.concatenate([np.zeros((m_w, 1, 3)), acc], axis=1), axis=1)
     sm = (c[:, s:] - c[:, :-s]) / s
     smn = np.sqrt(np.einsum("hij,hij->hi", sm, sm))
@@ -194,7 +195,8 @@ def hop_samples(det, restart: np.ndarray) -> np.ndarray:
     if n_grid and (not len(starts) or starts[0] != 0):
         starts = np.concatenate([[0], starts])
     ends = np.append(starts[1:], n_grid)
-    out = [np.arange(a + det._n - 1, b, det._hop) for a, b in zip(starts.tolist(), ends.tolist())]
+    lengths = det.kernel_settings
+    out = [np.arange(a + lengths["window_n"] - 1, b, lengths["hop_n"]) for a, b in zip(starts.tolist(), ends.tolist())]
     return np.concatenate(out).astype(np.int64) if out else np.zeros(0, np.int64)
 
 
@@ -231,7 +233,8 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     hops = hop_samples(det, restart)
     rows = np.ascontiguousarray(np.concatenate([acc, gyro], axis=1), dtype=np.float64)
     seen_gyro = np.logical_or.accumulate(has_gyro) if n_grid else has_gyro
-    n = det._n
+    lengths = det.kernel_settings
+    n = lengths["window_n"]
     mode_idx = {m: i for i, m in enumerate(CARRY_MODES)}
     modes = [mode_idx[det.mode]]
     periods = [det.step_period_s]
@@ -246,7 +249,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     view = np.lib.stride_tricks.sliding_window_view(rows, n, axis=0) if n_grid >= n else None
     # a very slow walk's hops take the long window (CarryModeDetector.slow_window): full once n_long samples of
     # the hop's grid segment are in
-    n_long = det._n_long
+    n_long = lengths["long_window_n"]
     view_long = (np.lib.stride_tricks.sliding_window_view(rows, n_long, axis=0)
                  if n_long > n and n_grid >= n_long else None)
     starts = np.flatnonzero(restart)
@@ -266,7 +269,7 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
                 longs = dict(zip(slow, window_features(det, view_long[hl - (n_long - 1)].transpose(0, 2, 1),
                                                        seen_gyro[hl])))
         for i, (k, f) in enumerate(zip(h.tolist(), feats)):
-            det._has_gyro = bool(seen_gyro[k])
+            det.set_gyro_seen(bool(seen_gyro[k]))
             if i in longs:  # core's choice of the long window (it reads the mode in force)
                 f = det.take_slow_window(f, longs[i])
             det.decide(int(t_ns[k]), f)  # core's decision, on these features
@@ -292,11 +295,11 @@ def run_carry(det, t_ns: np.ndarray, acc: np.ndarray, gyro: np.ndarray, has_gyro
     # time per mode: the mode in force before each sample, added one grid period at a time as the detector does
     before = np.concatenate([[modes[0]], track.mode[:-1]]).astype(np.int64) if n_grid else np.zeros(0, np.int64)
     counts = np.bincount(before, minlength=len(CARRY_MODES))
-    dt = det._dt
+    dt = lengths["dt_s"]
     for i, m in enumerate(CARRY_MODES):
         s = det.time_s[m]
         for _ in range(int(counts[i])):
             s += dt
         det.time_s[m] = s
-    det._has_gyro = bool(seen_gyro[-1]) if n_grid else False
+    det.set_gyro_seen(bool(seen_gyro[-1]) if n_grid else False)
     return track

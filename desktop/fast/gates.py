@@ -15,7 +15,7 @@ core's own classes.  With carry-mode detection (issue #17) the candidates
 are the peaks of the detector of the mode in force; at a change to a mode with
 another detector its held peaks (the last ``rotation_hold_s``) replace the
 unconfirmed candidates, as ``Pipeline._switch_detector`` does, and every step
-is labelled with its carry mode (``Pipeline._step_carry_mode`` on the detector's
+is labelled with its carry mode (``Pipeline.step_carry_mode`` on the detector's
 state at the step's completion).
 """
 
@@ -81,8 +81,8 @@ class StepRelease:
         #: ``Pipeline(recount_at_settle=True)``: where the settling ends on the same detector, its held peaks recount
         self.recount = self.settle_hold and bool(getattr(pipe, "recount_at_settle", False))
         #: ``Pipeline(walk_start_step=True)``: the index of the gentle detector that looks back (None: off)
-        start_det = getattr(pipe, "_start_det", None)
-        self.start_d = next(i for i, d in enumerate(pipe._mode_detectors) if d is start_det) \
+        start_det = getattr(pipe, "walk_start_detector", None)
+        self.start_d = next(i for i, d in enumerate(pipe.mode_detectors) if d is start_det) \
             if start_det is not None else None
         self.active_d = 0  # the detector whose peaks are candidates at the grid sample being processed
         self.carry = None  # the carry detector's per-sample track (desktop.fast.carry.CarryTrack), when it runs
@@ -118,7 +118,7 @@ class StepRelease:
     def run(self, peaks: list, carry=None, det_at=None) -> None:
         """All the candidates, then the end.
 
-        ``peaks``: per step detector of the pipeline (``pipe._mode_detectors``' order; one without carry
+        ``peaks``: per step detector of the pipeline (``pipe.mode_detectors``' order; one without carry
         detection) ``(ev_tick, ev_t, ev_f, rms, regressors)``: the grid samples at which its peaks are found, the
         :class:`StepEvent` fields of each (its time; the rest, in order), the rotation RMS and the speed regressors
         there.  With carry detection,
@@ -322,7 +322,7 @@ class StepRelease:
         if getattr(p, "flush_at_end", False) and len(self.grid_t):  # Pipeline._flush_detector: the active detector's
             n_grid = len(self.grid_t)                                 # steps found at the end (grid sample n_grid)
             # the detector in force after the last sample (the fast pipeline set the pipeline's from det_at[-1])
-            self.active_d = next(i for i, d in enumerate(p._mode_detectors) if d is p._active_det) \
+            self.active_d = next(i for i, d in enumerate(p.mode_detectors) if d is p.active_detector) \
                 if getattr(p, "carry", None) is not None else 0
             tk = self.peaks[self.active_d][0]
             self.k = n_grid - 1  # the state after the last sample (the rotation gate, a walk-start look-back)
@@ -341,11 +341,11 @@ class StepRelease:
 
     def _carry_mode_of(self, t_ns: int) -> str:
         """The carry mode a step completed now is labelled with: the pipeline's rule
-        (``Pipeline._step_carry_mode``) on the detector's state at the current grid sample."""
+        (``Pipeline.step_carry_mode``) on the detector's state at the current grid sample."""
         c = self.carry
         if c is None or self.k is None:  # no detector, or the end: the detector's final state
-            return self.p._step_carry_mode(t_ns)
-        return self.p._step_carry_mode(t_ns, c.changes[:int(c.n_changes[self.k])], CARRY_MODES[int(c.mode[self.k])])
+            return self.p.step_carry_mode(t_ns)
+        return self.p.step_carry_mode(t_ns, c.changes[:int(c.n_changes[self.k])], CARRY_MODES[int(c.mode[self.k])])
 
     def complete(self, ev: StepEvent, heading: float, regressors: tuple, mag_rejected: bool) -> Step:
         """The step completed with the pipeline's own :meth:`core.pdr.pipeline.Pipeline.add_step` (eqs. 4, 1)."""

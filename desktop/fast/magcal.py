@@ -20,7 +20,7 @@ pairwise summation reproduced; the least squares by a Householder QR instead
 of LAPACK's SVD, :func:`_lstsq4`, so the sphere's centre differs from core's
 by rounding only, about 1e-15 relative, and the rest -- every calibrated
 reading, the store, the decisions -- is equal on every recording tried).  An
-attempt that reaches a fit is core's own ``_attempt`` (ellipsoid and sphere
+attempt that reaches a fit is core's own ``attempt`` (ellipsoid and sphere
 fits, acceptance): the kernel stops there, :class:`_Handover` writes its
 state into the calibrator, the attempt runs, and the state is read back
 before the kernel goes on.
@@ -39,7 +39,6 @@ from array import array
 
 import numpy as np
 
-from core.pdr import magcal as core_magcal
 from desktop.fast.jit import HAVE_NUMBA, kernel
 
 # float state: the centre, its soft iron, the offset and soft iron in force, settings
@@ -132,7 +131,7 @@ def calibrate_readings(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring, out, o
 
 
 # ---------------------------------------------------------------------------
-# the bootstrap attempt, compiled: core's ``_attempt`` while no fit is in force, up to where a fit is due
+# the bootstrap attempt, compiled: core's ``attempt`` while no fit is in force, up to where a fit is due
 
 
 @kernel
@@ -384,7 +383,7 @@ def _trimmed_sphere(t, m, k, min_samples, limit, out):
 
 @kernel
 def attempt_to_fit(t, v, i, fs, is_, slot_t, slot_m, bin_count, ring):
-    """``MagCalibrator._attempt`` at reading ``i``, compiled as far as the rejections before a fit.
+    """``MagCalibrator.attempt`` at reading ``i``, compiled as far as the rejections before a fit.
 
     Before the first accepted fit: the store (samples younger than ``sample_max_age_s``) and the bootstrap
     reservoir, merged by time (a stored sample wins a tie), the trimmed sphere centres the bins (where it is
@@ -514,57 +513,64 @@ class _Handover:
         self.fs = np.zeros(N_F)
         self.is_ = np.zeros(N_I, dtype=np.int64)
         self.ring = np.zeros(max(len(t), 1), dtype=np.int64)
-        self.fs[F_R_MIN], self.fs[F_SECTOR], self.fs[F_MAX_NRM2] = cal._r_min, cal._sector_scale, cal._max_nrm2
+        ks = cal.kernel_settings
+        self.fs[F_R_MIN], self.fs[F_SECTOR], self.fs[F_MAX_NRM2] = ks["r_min_uT"], ks["sector_scale"], ks["max_nrm2"]
         self.fs[F_REFIT_S] = cal.refit_interval_s
         self.fs[F_MAX_AGE_S], self.fs[F_OUTLIER], self.fs[F_MIN_COV] = (
             cal.sample_max_age_s, cal.outlier_fraction, cal.min_coverage)
         self.is_[[I_NB, I_NS, I_PER, I_MIN_NEW, I_BOOT_NS, I_RECENT_NS, I_MIN_SAMPLES, I_NBINS]] = (
-            cal.bin_bands, cal.n_sectors, cal.samples_per_bin, cal.refit_min_new_samples, cal._bootstrap_ns,
-            core_magcal._RECENT_DT_NS, cal.min_samples, cal.n_bins)
+            cal.bin_bands, cal.n_sectors, cal.samples_per_bin, cal.refit_min_new_samples, ks["bootstrap_ns"],
+            ks["recent_dt_ns"], cal.min_samples, cal.n_bins)
         self.read(cal)
 
     def read(self, cal) -> None:
-        """The calibrator's state into the kernel's (after its reset or an attempt)."""
-        fs, is_ = self.fs, self.is_
-        self.slot_t = np.array(cal._slot_t, dtype=np.int64)
-        self.slot_m = np.array(cal._slot_m, dtype=np.float64)
-        self.bin_count = np.array(cal._bin_count, dtype=np.int64)
-        is_[I_HAS_C] = cal._centre is not None
-        if cal._centre is not None:
-            fs[F_C:F_C + 3] = cal._centre
-        is_[I_HAS_CA] = cal._centre_a is not None
-        if cal._centre_a is not None:
-            fs[F_CA:F_CA + 9] = _flat(cal._centre_a)
-        is_[I_CAL] = cal._calibrated
-        fs[F_B:F_B + 3] = cal._b
-        fs[F_A:F_A + 9] = _flat(cal._a)
-        is_[I_HAS_LAST] = cal._t_last_attempt is not None
-        is_[I_T_LAST] = cal._t_last_attempt or 0
-        is_[I_NEW], is_[I_NEW_BINS] = cal._new_since, cal._new_bins_since
-        is_[I_STORED], is_[I_OCCUPIED] = cal._n_stored, cal._occupied
-        is_[I_VALID], is_[I_INVALID] = cal.n_valid, cal.n_invalid
-        is_[I_HAS_PREV] = cal._t_prev is not None
-        is_[I_T_PREV] = cal._t_prev or 0
-        if len(cal._recent) == 0:  # emptied by an accepted fit (or a reset); else the attempt left it as it was
+        """The calibrator's state (:meth:`MagCalibrator.state`) into the kernel's (after its reset or an attempt)."""
+        fs, is_, st = self.fs, self.is_, cal.state()
+        self.slot_t = np.array(st["_slot_t"], dtype=np.int64)
+        self.slot_m = np.array(st["_slot_m"], dtype=np.float64)
+        self.bin_count = np.array(st["_bin_count"], dtype=np.int64)
+        centre, centre_a = st["_centre"], st["_centre_a"]
+        is_[I_HAS_C] = centre is not None
+        if centre is not None:
+            fs[F_C:F_C + 3] = centre
+        is_[I_HAS_CA] = centre_a is not None
+        if centre_a is not None:
+            fs[F_CA:F_CA + 9] = _flat(centre_a)
+        is_[I_CAL] = st["_calibrated"]
+        fs[F_B:F_B + 3] = st["_b"]
+        fs[F_A:F_A + 9] = _flat(st["_a"])
+        is_[I_HAS_LAST] = st["_t_last_attempt"] is not None
+        is_[I_T_LAST] = st["_t_last_attempt"] or 0
+        is_[I_NEW], is_[I_NEW_BINS] = st["_new_since"], st["_new_bins_since"]
+        is_[I_STORED], is_[I_OCCUPIED] = st["_n_stored"], st["_occupied"]
+        is_[I_VALID], is_[I_INVALID] = st["n_valid"], st["n_invalid"]
+        is_[I_HAS_PREV] = st["_t_prev"] is not None
+        is_[I_T_PREV] = st["_t_prev"] or 0
+        if len(st["_recent"]) == 0:  # emptied by an accepted fit (or a reset); else the attempt left it as it was
             is_[I_HEAD] = is_[I_TAIL]
 
-    def write(self, cal) -> None:
-        """The kernel's state into the calibrator (before an attempt, and at the end)."""
+    def write(self, cal, reason: str | None = None) -> None:
+        """The kernel's state into the calibrator (before an attempt, and at the end, with the kernel's ``reason``
+        of its last attempt), through :meth:`MagCalibrator.restore_state`."""
         is_ = self.is_
-        cal._centre = tuple(float(x) for x in self.fs[F_C:F_C + 3]) if is_[I_HAS_C] else None  # bootstrap attempts
-        cal._slot_t, cal._slot_m = array("q", self.slot_t.tobytes()), array("d", self.slot_m.tobytes())
-        cal._bin_count = self.bin_count.tolist()
-        if cal._calibrated:
-            cal._recent, cal._recent_m = array("q"), array("d")
+        values = {
+            "_centre": tuple(float(x) for x in self.fs[F_C:F_C + 3]) if is_[I_HAS_C] else None,  # bootstrap attempts
+            "_slot_t": array("q", self.slot_t.tobytes()), "_slot_m": array("d", self.slot_m.tobytes()),
+            "_bin_count": self.bin_count.tolist()}
+        if cal.calibrated:
+            values["_recent"], values["_recent_m"] = array("q"), array("d")
         else:
             idx = self.ring[is_[I_HEAD]:is_[I_TAIL]]
-            cal._recent = array("q", self.t[idx].tobytes())
-            cal._recent_m = array("d", np.ascontiguousarray(self.v[idx]).tobytes())
-        cal._t_last_attempt = int(is_[I_T_LAST]) if is_[I_HAS_LAST] else None
-        cal._new_since, cal._new_bins_since = int(is_[I_NEW]), int(is_[I_NEW_BINS])
-        cal._n_stored, cal._occupied = int(is_[I_STORED]), int(is_[I_OCCUPIED])
-        cal.n_valid, cal.n_invalid = int(is_[I_VALID]), int(is_[I_INVALID])
-        cal._t_prev = int(is_[I_T_PREV]) if is_[I_HAS_PREV] else None
+            values["_recent"] = array("q", self.t[idx].tobytes())
+            values["_recent_m"] = array("d", np.ascontiguousarray(self.v[idx]).tobytes())
+        values["_t_last_attempt"] = int(is_[I_T_LAST]) if is_[I_HAS_LAST] else None
+        values["_new_since"], values["_new_bins_since"] = int(is_[I_NEW]), int(is_[I_NEW_BINS])
+        values["_n_stored"], values["_occupied"] = int(is_[I_STORED]), int(is_[I_OCCUPIED])
+        values["n_valid"], values["n_invalid"] = int(is_[I_VALID]), int(is_[I_INVALID])
+        values["_t_prev"] = int(is_[I_T_PREV]) if is_[I_HAS_PREV] else None
+        if reason is not None:
+            values["_reason"] = reason
+        cal.restore_state(values)
 
 
 def calibrate_stream(cal, t_ns: np.ndarray, mag_b: np.ndarray, compiled_attempts: bool | None = None):
@@ -574,7 +580,7 @@ def calibrate_stream(cal, t_ns: np.ndarray, mag_b: np.ndarray, compiled_attempts
 
     ``compiled_attempts`` (default: where numba is installed) runs the fit attempts with
     :func:`attempt_to_fit` as far as it goes (to a rejection before a fit, or to a fit, which is core's);
-    without it every attempt is core's ``_attempt`` (numpy, faster than the kernel run as plain Python).
+    without it every attempt is core's ``attempt`` (numpy, faster than the kernel run as plain Python).
     """
     if compiled_attempts is None:
         compiled_attempts = HAVE_NUMBA
@@ -591,16 +597,17 @@ def calibrate_stream(cal, t_ns: np.ndarray, mag_b: np.ndarray, compiled_attempts
         if i >= len(t):
             break
         h.write(cal)
-        cal._attempt(int(t[i]))
+        cal.attempt(int(t[i]))
         h.read(cal)
         h.is_[I_REASON] = -1  # core's attempt set the reason
-        out[i] = cal._apply_tuple(float(v[i, 0]), float(v[i, 1]), float(v[i, 2]))
+        out[i] = cal.apply_tuple(float(v[i, 0]), float(v[i, 1]), float(v[i, 2]))
         ok[i] = cal.calibrated
         i += 1
-    h.write(cal)
     code, count = int(h.is_[I_REASON]), int(h.is_[I_REASON_N])
+    reason = None  # -1: core's attempt set it (or none was made)
     if code == 2:
-        cal._reason = f"coverage {count / cal.n_bins:.2f} < {cal.min_coverage:.2f}"
+        reason = f"coverage {count / cal.n_bins:.2f} < {cal.min_coverage:.2f}"
     elif code >= 0:
-        cal._reason = f"too few samples ({count} < {cal.min_samples})"
+        reason = f"too few samples ({count} < {cal.min_samples})"
+    h.write(cal, reason)
     return out, ok

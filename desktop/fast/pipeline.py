@@ -22,7 +22,7 @@ first):
    window at their peaks (compiled);
 6. with a GPS fusion (``Pipeline(gnss=...)``) and ``site_from_gps``: the
    sensor event before which the reference gives the attitude filter the
-   site's WMM declination and field (``Pipeline._apply_site`` at the GPS event
+   site's WMM declination and field (``Pipeline.apply_site`` at the GPS event
    where the fusion first has an anchor).  Nothing else of the fusion feeds
    back into the PDR, and neither the anchoring fix nor the moment the fusion
    gets to it depends on the attitude (they depend on the fixes, the receiver
@@ -92,8 +92,7 @@ def health_of(floor: float, t_ns: np.ndarray, v: np.ndarray) -> SensorHealth:
         for ti, (x, y, z) in zip(t_ns.tolist(), v.tolist()):
             h.update(ti, x, y, z)
         return h
-    h.n = n
-    h._prev, h._prev_t = tuple(float(x) for x in v[-1]), int(t_ns[-1])
+    h.skip_quiet(n, int(t_ns[-1]), v[-1])
     return h
 
 
@@ -190,31 +189,32 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
         has_gyro = g >= 0
         gyro_at = np.where(has_gyro[:, None], ev.v[gyro_pos[np.maximum(g, 0)]] if len(gyro_pos) else 0.0, 0.0)
         track = run_carry(p.carry, gt, acc_at, gyro_at, has_gyro, restart)
-        index = {d: i for i, d in enumerate(p._mode_detectors)}
-        det_of_mode = np.array([index[p._det_of[m]] for m in CARRY_MODES], dtype=np.int64)
+        index = {d: i for i, d in enumerate(p.mode_detectors)}
+        det_of = p.detector_of
+        det_of_mode = np.array([index[det_of[m]] for m in CARRY_MODES], dtype=np.int64)
         det_at = det_of_mode[track.mode]
-        if UNEVEN_POCKET in p._det_of:  # a pocket with very unlike half-strides: the limb gates (Pipeline._gates_key)
+        if UNEVEN_POCKET in det_of:  # a pocket with very unlike half-strides: the limb gates (Pipeline._gates_key)
             pocket = CARRY_MODES.index(CARRY_POCKET)
-            det_at = np.where(track.uneven & (track.mode == pocket), index[p._det_of[UNEVEN_POCKET]], det_at)
-        if GENTLE_SWING in p._det_of:  # a gentle walk in a swinging hand (Pipeline._gates_key)
+            det_at = np.where(track.uneven & (track.mode == pocket), index[det_of[UNEVEN_POCKET]], det_at)
+        if GENTLE_SWING in det_of:  # a gentle walk in a swinging hand (Pipeline._gates_key)
             swinging = CARRY_MODES.index(CARRY_SWINGING)
-            det_at = np.where(track.gentle & (track.mode == swinging), index[p._det_of[GENTLE_SWING]], det_at)
-        if GENTLE in p._det_of:  # a gentle walk in a trunk mode: the gentle detector (Pipeline._carry_steps)
-            gentle_mode = np.array([p._gentle_applies(m) for m in CARRY_MODES], dtype=bool)
-            det_at = np.where(track.gentle & gentle_mode[track.mode], index[p._det_of[GENTLE]], det_at)
+            det_at = np.where(track.gentle & (track.mode == swinging), index[det_of[GENTLE_SWING]], det_at)
+        if GENTLE in det_of:  # a gentle walk in a trunk mode: the gentle detector (Pipeline._carry_steps)
+            gentle_mode = np.array([p.gentle_applies(m) for m in CARRY_MODES], dtype=bool)
+            det_at = np.where(track.gentle & gentle_mode[track.mode], index[det_of[GENTLE]], det_at)
         if n_ticks:
-            p.set_carry_state(CARRY_MODES[int(track.mode[-1])], p._mode_detectors[int(det_at[-1])])
+            p.set_carry_state(CARRY_MODES[int(track.mode[-1])], p.mode_detectors[int(det_at[-1])])
     # the smoother's exit of the upright state per grid sample (Pipeline(limb_upright_exit), issue #25)
     exit_at = None
     if p.limb_upright_exit is not None:
-        exit_at = np.full(n_ticks, p._upright_exit)
+        exit_at = np.full(n_ticks, p.base_upright_exit)
         if track is not None:
             limb = np.isin(track.mode, [CARRY_MODES.index(CARRY_SWINGING), CARRY_MODES.index(CARRY_POCKET)])
             exit_at[limb] = p.limb_upright_exit
     clock("carry-mode detector", 0.35)
     # 5. every step detector (one per distinct gates), the speed window at their peaks
     found = []
-    for det in p._mode_detectors:
+    for det in p.mode_detectors:
         det.n_grid = n_ticks
         ev_tick, ev_t, ev_f = detect_steps(det, gt, gx, restart, det.gates,
                                            None if track is None else track.step_period_s, p.flush_at_end,
@@ -227,7 +227,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     clock("steps, speed window", 0.40)
     rot_sum = np.empty(len(gyro_pos))
     rot_n = np.empty(len(gyro_pos), dtype=np.int64)
-    rotation_sums(ev.t[gyro_pos], np.ascontiguousarray(ev.v[gyro_pos]), p._rot_window_ns, rot_sum, rot_n)
+    rotation_sums(ev.t[gyro_pos], np.ascontiguousarray(ev.v[gyro_pos]), p.rotation_window_ns, rot_sum, rot_n)
     peaks = []
     for ev_tick, ev_t, ev_f in found:
         at = np.minimum(ev_tick, n_ticks - 1)
@@ -314,7 +314,7 @@ class _Attitude:
 def _attitude_and_smoother(p: Pipeline, ev: _Events, v, cal_ok, tick_event, site_at: int, anchor,
                            exit_at=None) -> _Attitude:
     """The attitude filter over all events, taken at each grid sample (``tick_event[j]``: the event behind sample
-    ``j``), the site given before event ``site_at`` (``Pipeline._apply_site(anchor)``; -1: none); then the
+    ``j``), the site given before event ``site_at`` (``Pipeline.apply_site(anchor)``; -1: none); then the
     rotation smoother over the grid's attitudes (section 4.3), its final state into ``p.smoother``."""
     ekf = p.attitude
     n_ticks = len(tick_event)
@@ -324,9 +324,9 @@ def _attitude_and_smoother(p: Pipeline, ev: _Events, v, cal_ok, tick_event, site
     applied = []
 
     def give_site():
-        """The reference's ``Pipeline._apply_site`` at the anchoring fix (once)."""
+        """The reference's ``Pipeline.apply_site`` at the anchoring fix (once)."""
         applied.append(True)
-        p._apply_site(anchor)
+        p.apply_site(anchor)
 
     calibrator = ekf.mag_calibrator
     ekf.mag_calibrator = None
@@ -422,7 +422,7 @@ class _FusionEvents:
         The fix that anchors the walk and the moment the fusion gets to it (a fix waits for the first step after
         it) depend on the fixes, the receiver status and the steps' times and completion, none of which depends on
         the attitude.  So a copy of the pipeline runs the gates and the steps' completion without any heading,
-        feeding a copy of the fusion, up to the GPS event where the reference would call ``_apply_site``.  With a
+        feeding a copy of the fusion, up to the GPS event where the reference would call ``apply_site``.  With a
         known ``start`` the anchor is the first fix the fused track accepts: then the copy runs with the headings
         of the attitude without the site (``att``, an :class:`_Attitude`; the same as the reference's up to there).
         """
@@ -498,7 +498,7 @@ class _Feed:
                 continue
             g.add_fix(int(ev.t[m]), ev.values(m))
             if not self.anchored and p.site_from_gps and g.anchor is not None:
-                self.anchored = True  # where Pipeline.update calls _apply_site
+                self.anchored = True  # where Pipeline.update calls apply_site
                 if self.scout:
                     raise _SiteDue(int(ev.ins[m]), g.anchor)
                 if int(ev.ins[m]) != self.site_at:

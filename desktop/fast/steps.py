@@ -343,7 +343,7 @@ def speed_features(t_ns, x, restart, c, window_ns, full_ns, min_hyst, at_tick, o
 
 def speed_at(window, t_ns, x, restart, at_tick):
     """The reference ``window``'s (its settings) features at the grid samples ``at_tick`` (sorted), (m, 3)."""
-    b, a = window._ba
+    b, a = window.lowpass_ba
     c = np.array([b[0] / a[0], b[1] / a[0], b[2] / a[0], a[1] / a[0], a[2] / a[0]])
     window_ns = int(window.window_s * 1e9)
     out = np.empty((len(at_tick), 3))

@@ -454,14 +454,15 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
     if not compiled:
         return _fed(wd, t, qq, aa, fe, fn, step, ids, keys, j_init)
     fs = np.zeros(N_F)
+    ks = wd.kernel_settings
     fs[[F_DT, F_LEAK, F_ALPHA, F_FORGET, F_MIN_FWD, F_MIN_STRIDE, F_MAX_STRIDE, F_RATE, F_MAX_TURN, F_MIN_TR,
         F_PCA_ANISO, F_MIN_COH, F_MIN_ANISO]] = (
-        wd._dt, wd._leak, wd._mean_alpha, wd._forget, wd.min_forward_norm, wd.min_stride_s, wd.max_stride_s,
+        ks["dt_s"], ks["leak"], ks["mean_alpha"], ks["forget"], wd.min_forward_norm, wd.min_stride_s, wd.max_stride_s,
         wd.grid_rate_hz, wd.max_stride_turn_rad, wd.min_horizontal_std_m_s2 ** 2, wd.pca_min_anisotropy,
         wd.min_coherence, wd.min_anisotropy)
     fs[F_MEAN_U] = math.nan
     is_ = np.zeros(N_I, dtype=np.int64)
-    is_[I_DELAY_N], is_[I_GAP_NS], is_[I_METHOD] = wd._delay_n, wd._gap_ns, _METHODS.index(wd.axis_method)
+    is_[I_DELAY_N], is_[I_GAP_NS], is_[I_METHOD] = ks["delay_n"], ks["gap_ns"], _METHODS.index(wd.axis_method)
     is_[I_KEY], is_[I_STEPS], is_[I_EST_KEY] = -1, -1, -1
     nk = max(len(keys), 1)
     ax = np.zeros((nk, 6))
