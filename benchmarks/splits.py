@@ -142,6 +142,20 @@ Truth walks: RIDI copies with a Tango track (``ridi_truth_walks``, :mod:`benchma
     handheld ``dan_handheld1``, ``ma_handheld3``, ``xiaojing_handheld2``; leg ``dan_leg1`` (11 of 28); every other
     sequence report.  Honest caveat: split by sequence, not by walker, so a walker (``dan`` most) is on both sides.
 
+Truth walks: Tyrex attitude benchmark with a Qualisys track (``tyrex_truth_walks``, :mod:`benchmarks.truth_walks`,
+issue #25)
+    Declared 2026-12-07 (an eighth search, h13/datahunt), **before any benchmark number was seen on them** (only
+    the files' sizes, the Qualisys frame counts, the share of lost frames and the truth's path length and extent
+    were read, to check the copy).  ``tyrex-team/benchmarks-attitude-smartphones`` (CeCILL; Michel et al., "On
+    attitude estimation with smartphones", PerCom 2017) holds 2-minute walks in a ~5 x 5 m motion-capture room
+    (Qualisys, 60 Hz) with a Nexus 5, three walkers (Guillaume, Jakob, Thibaud), each with and without magnetic
+    perturbations (``Dist`` / ``NoDist``).  Copied: the three carries this issue lacks, ``FrontPocket``,
+    ``BackPocket`` (trouser pockets) and ``Swinging`` (hand swinging): 18 walks.  Split **by walker** (so tuning
+    and report never share a walker): **Jakob's 6 walks tuning**, Guillaume's and Thibaud's 12 report (a third).
+    The walker was chosen by name before any number, as the one in the middle of the sorted three.  Not
+    copied: the hand-held carries (Texting, Phoning, AR), running, the iPhone 4S / 5 recordings (another file
+    layout) and ``Jakob_Nexus5_Dist_Swinging_old`` (a superseded take).  A Tyrex walk this does not name is report.
+
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
 named.
@@ -220,6 +234,24 @@ RIDI_DECLARED_SEQUENCES = RIDI_TUNING_SEQUENCES | frozenset({
 })
 
 
+#: the Tyrex attitude benchmark's truth walks' dataset name (:mod:`benchmarks.truth_walks`)
+TYREX_TRUTH_DATASET = "tyrex_truth_walks"
+#: Tyrex walkers declared tuning, 2026-12-07 before any number was seen (their declared walks are tuning)
+TYREX_TUNING_WALKERS = frozenset({"Jakob"})
+#: the Tyrex walks the declaration names (both splits): ``<walker>_Nexus5_<Dist|NoDist>_<carry>``
+TYREX_DECLARED_SEQUENCES = frozenset(
+    f"{w}_Nexus5_{d}_{c}" for w in ("Guillaume", "Jakob", "Thibaud") for d in ("Dist", "NoDist")
+    for c in ("FrontPocket", "BackPocket", "Swinging"))
+
+
+def tyrex_split(sequence: str) -> str:
+    """A Tyrex truth walk by its name (``Jakob_Nexus5_NoDist_Swinging``): tuning only if declared and its walker is
+    a tuning walker."""
+    if sequence in TYREX_DECLARED_SEQUENCES and sequence.split("_")[0] in TYREX_TUNING_WALKERS:
+        return TUNING
+    return REPORT
+
+
 def oxiod_split(placement: str, data_folder: str, sequence: int) -> str:
     """An OxIOD truth walk by (placement folder, ``dataN`` folder, sequence number): tuning only if declared so."""
     return TUNING if (placement, data_folder, int(sequence)) in OXIOD_TUNING_SEQUENCES else REPORT
@@ -269,6 +301,8 @@ def split_of(dataset: str, info: dict | None = None) -> str:
         return oxiod_split(info.get("placement", ""), info.get("data_folder", ""), info["sequence"])
     if dataset == RIDI_TRUTH_DATASET and "sequence" in info:
         return TUNING if info["sequence"] in RIDI_TUNING_SEQUENCES else REPORT
+    if dataset == TYREX_TRUTH_DATASET and "sequence" in info:
+        return tyrex_split(info["sequence"])
     if dataset == "ms_indoor_location_2020" and "file_no" in info:
         return ms_indoor_split(info["file_no"])
     if "repository" in info:
@@ -291,6 +325,8 @@ def declared(dataset: str, info: dict | None = None) -> bool:
         return info.get("walk") in PHONE_WALKS_MORE_REPOS
     if dataset == RIDI_TRUTH_DATASET:
         return info.get("sequence") in RIDI_DECLARED_SEQUENCES
+    if dataset == TYREX_TRUTH_DATASET:
+        return info.get("sequence") in TYREX_DECLARED_SEQUENCES
     if dataset == OXIOD_TRUTH_DATASET:
         return (info.get("placement"), info.get("data_folder"), int(info.get("sequence", -1))) in OXIOD_DECLARED_SEQUENCES
     return "repository" in info

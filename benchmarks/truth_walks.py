@@ -8,7 +8,10 @@ user gives (as ``real_walks --extra``), e.g. ``/work/extra_data2`` (its REBUILD.
   room of about 3.5 x 6 m; :mod:`core.importers.oxiod`), and
 * RIDI tables ``<owner>__<repo>/**/<name>_data_with_errors.xlsx`` or ``<name>/processed/data.csv`` (Android, Google
   Tango truth, the placement the name's second word: leg = trouser pocket, bag, body, handheld;
-  :mod:`core.importers.ridi`).
+  :mod:`core.importers.ridi`), and
+* Tyrex attitude-benchmark walks ``<owner>__<repo>/datasets/android/<name>/`` + ``datasets/qualisys/<name>.mat``
+  (Nexus 5, Qualisys truth in a room of about 5 x 5 m; FrontPocket / BackPocket = trouser pocket, Swinging = hand
+  swinging; :mod:`core.importers.tyrex`; the handler's rotation fitted to the phone as OxIOD's).
 
 Without the folder the benchmark says "not available" and writes nothing (CI has no such folder).
 
@@ -79,7 +82,7 @@ from core.importers._common import TRUTH_ATTITUDE, TRUTH_BODY_ATTITUDE
 from core.quaternion import to_matrix_array
 from benchmarks.options import git_rev, out_dir, write_json
 from benchmarks.real_walks import STRAIGHT_MIN, reversed_steps, run_default, stability, step_arrays
-from benchmarks.splits import OXIOD_TRUTH_DATASET, REPORT, RIDI_TRUTH_DATASET, TUNING, split_of
+from benchmarks.splits import OXIOD_TRUTH_DATASET, REPORT, RIDI_TRUTH_DATASET, TUNING, TYREX_TRUTH_DATASET, split_of
 
 RESULTS_MD = Path(__file__).with_name("TRUTH_WALKS_RESULTS.md")
 RESULTS_JSON = Path(__file__).with_name("truth_walks_results.json")
@@ -108,6 +111,8 @@ class TruthWalk:
 
 
 RIDI_SUFFIX = "_data_with_errors.xlsx"
+#: a Tyrex walk's placement by its name's last word (the walking carries only; hand-held and running are not read)
+TYREX_PLACEMENTS = {"FrontPocket": "pocket", "BackPocket": "backpocket", "Swinging": "swinging"}
 
 
 def truth_walks(root: Path | None) -> list[TruthWalk]:
@@ -136,6 +141,14 @@ def truth_walks(root: Path | None) -> list[TruthWalk]:
         repo_dir = table.relative_to(root).parts[0]
         out.append(TruthWalk(f"ridi_{seq}", table, RIDI_TRUTH_DATASET, repo_dir.replace("__", "/", 1), placement,
                              split_of(RIDI_TRUTH_DATASET, {"sequence": seq})))
+    for align in root.glob("*/datasets/android/*/timeAlignment.txt"):
+        folder = align.parent
+        carry = folder.name.split("_")[-1]
+        if carry not in TYREX_PLACEMENTS or not (folder.parents[1] / "qualisys" / f"{folder.name}.mat").is_file():
+            continue
+        repo_dir = folder.relative_to(root).parts[0]
+        out.append(TruthWalk(f"tyrex_{folder.name}", folder, TYREX_TRUTH_DATASET, repo_dir.replace("__", "/", 1),
+                             TYREX_PLACEMENTS[carry], split_of(TYREX_TRUTH_DATASET, {"sequence": folder.name})))
     return sorted(out, key=lambda w: w.name)
 
 
@@ -145,6 +158,10 @@ def read_walk(walk: TruthWalk):
         from core.importers.oxiod import read_oxiod
 
         return read_oxiod(str(walk.path), warn=False)
+    if walk.dataset == TYREX_TRUTH_DATASET:
+        from core.importers.tyrex import read_tyrex
+
+        return read_tyrex(str(walk.path), warn=False)
     from core.importers.ridi import read_ridi
 
     return read_ridi(str(walk.path), warn=False)
@@ -450,7 +467,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     walks = truth_walks(a.extra2)
     if not walks:
-        print(f"truth walks not available: no OxIOD syn pair or RIDI table under {a.extra2} (give --extra2 DIR)")
+        print(f"truth walks not available: no OxIOD syn pair, RIDI table or Tyrex walk under {a.extra2} (give --extra2 DIR)")
         return 0
     if a.split != "all":
         walks = [w for w in walks if w.split == a.split]

@@ -80,6 +80,14 @@ def looks_like(head: bytes) -> bool:
     return len(head) >= HEADER_BYTES and head.startswith(TEXT_MAGIC) and head[126:128] in (b"IM", b"MI")
 
 
+def level5_header(head: bytes) -> bool:
+    """True if ``head`` has a level-5 header's binary end (version 0x0100 and ``IM``/``MI`` at bytes 124-127)
+    whatever its text: some writers put their own there (Qualisys Track Manager: ``QTM_ver 2.10 ...``).  Only
+    :func:`read_mat` accepts such a file (it is asked to read a MAT-file); detection keeps :func:`looks_like`."""
+    return (len(head) >= HEADER_BYTES and head[126:128] in (b"IM", b"MI")
+            and head[124:126] == (b"\x00\x01" if head[126:128] == b"IM" else b"\x01\x00"))
+
+
 class _Reader:
     """Exact reads of ``n`` bytes from a stream of chunks (at most ``budget`` bytes in all)."""
 
@@ -153,7 +161,7 @@ def read_mat(f, source: str, *, max_uncompressed_bytes: int | None = MAX_UNCOMPR
     chunks = ByteChunks(f, source, limit=limit)
     r = _Reader(chunks, source)
     head = r.read(HEADER_BYTES, "the 128-byte header") if not r.at_end() else b""
-    if not looks_like(head):
+    if not (looks_like(head) or level5_header(head)):
         if head.startswith(b"MATLAB 7.3 MAT-file") or head[:4] == b"\x89HDF":
             raise RecordingError("a MAT-file of version 7.3 (HDF5): not read here (save with -v7)", source)
         raise RecordingError("not a level-5 MAT-file (no 'MATLAB 5.0 MAT-file' header ending in IM or MI)", source)

@@ -1,0 +1,168 @@
+"""Reader for an Android walk of the Tyrex attitude benchmark with its Qualisys truth (Michel, Genevès, Fourati &
+Layaïda, "On attitude estimation with smartphones", PerCom 2017; ``tyrex-team/benchmarks-attitude-smartphones``).
+
+Format
+======
+A walk is a folder ``datasets/android/<name>/`` (``<name>`` as ``Jakob_Nexus5_NoDist_Swinging``) and the motion
+capture of the same walk, ``datasets/qualisys/<name>.mat`` (found two folders up, or given).  The folder's text files
+have one sample a line, numbers separated by spaces, the first the time in s (the phone's clock, from the start of
+the recording), no header::
+
+    accelerometer.txt              t, x, y, z   m/s^2, Android TYPE_ACCELEROMETER (gravity included), device axes
+    gyroscope-calibrated.txt       t, x, y, z   rad/s, Android TYPE_GYROSCOPE (the benchmark's own choice)
+    magnetometer-calibrated.txt    t, x, y, z   uT, Android TYPE_MAGNETIC_FIELD (optional)
+    timeAlignment.txt              one number, s: phone time + it = Qualisys time (the benchmark's alignment of the
+                                   acceleration norms, its ``findTimeDiffBetweenQualisysAndSmartphone.m``)
+
+Extra columns on a line are ignored (the benchmark drops them too); a line with fewer than four numbers is a bad
+line (skipped and counted, or past :func:`core.recording.bad_lines_tolerated` a :class:`RecordingError`).
+
+The ``.mat`` is Qualisys Track Manager's MAT export (level 5 with QTM's own header text; read with
+:mod:`core.importers.matv5`): one structure with ``Frames``, ``FrameRate`` (Hz) and ``RigidBodies``, whose first
+body's ``Positions`` (1 x 3 x N, mm) and ``Rotations`` (1 x 9 x N: a 3 x 3 matrix column-major, body -> the room, as
+the benchmark's ``loadQualisysDataset.m`` reads it) are the truth; a lost frame is NaN (dropped).  Frame ``k`` is at
+Qualisys time ``k / FrameRate``, so at phone time ``k / FrameRate - timeAlignment``.  The room frame is z up (the
+phone is at 0.8-1.3 m), x and y a horizontal pair, not geographic.  The rigid body is the marker handler the phone
+is fixed in, whose axes are not promised to be the phone's: its rotation is ``truth_body_attitude``
+(:data:`core.importers._common.TRUTH_BODY_ATTITUDE`, ``w, x, y, z``, body -> the frame of ``posi``), the positions
+``posi`` (``east_m, north_m, up_m`` = the room's x, y, z in m).
+
+Streams: ``acc``, ``gyro``, ``mag`` where present, ``posi`` and ``truth_body_attitude``.  Not registered in
+:func:`core.importers.detect_format` (a walk is two files in two folders): call :func:`read_tyrex`.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+
+import numpy as np
+
+from core import quaternion as quat
+from core.conventions import ACC, GYRO, MAG
+from core.importers._common import (
+    POSI, TRUTH_BODY_ATTITUDE, acceleration_in_m_s2, feed_lines, finish, first_bad_time, open_text,
+)
+from core.importers.matv5 import read_mat
+from core.recording import (
+    MAX_UNCOMPRESSED_BYTES, DamagedFileWarning, Recording, RecordingError, make_stream, skip_bad_lines,
+)
+
+FORMAT = "tyrex"
+POSI_COLUMNS = ["east_m", "north_m", "up_m"]
+FILES = {ACC: "accelerometer.txt", GYRO: "gyroscope-calibrated.txt", MAG: "magnetometer-calibrated.txt"}
+ALIGNMENT_FILE = "timeAlignment.txt"
+
+
+def _table(path: str, repairs: list[str], limit: int | None) -> np.ndarray:
+    """The ``(n, 4)`` numbers (t, x, y, z) of one sensor file, bad lines skipped (module doc)."""
+    rows, bad, count = [], [], [0]
+
+    def line_of(n: int, line: str) -> None:
+        count[0] = n
+        f = line.split()
+        if not f:
+            return
+        try:
+            v = [float(x) for x in f[:4]]
+        except ValueError:
+            v = []
+        if len(v) < 4 or not all(np.isfinite(v)):
+            bad.append(RecordingError("not four numbers (t, x, y, z)", path, n))
+        else:
+            rows.append(v)
+
+    def chunk(first: int, lines) -> None:
+        for i, line in enumerate(lines):
+            line_of(first + i, line)
+
+    with open_text(path, repairs, limit) as text:
+        feed_lines(text, path, repairs, chunk, bad, line_of)
+    skip_bad_lines(bad, count[0], path, repairs)
+    if not rows:
+        raise RecordingError("no samples", path)
+    return np.asarray(rows, dtype=float)
+
+
+def _alignment_s(path: str) -> float:
+    with open(path, encoding="latin-1") as f:
+        words = f.read().split()
+    try:
+        value = float(words[0])
+    except (IndexError, ValueError):
+        raise RecordingError("not one number (the phone-to-Qualisys time offset, s)", path) from None
+    if not np.isfinite(value) or abs(value) > 3600.0:
+        raise RecordingError(f"time offset {value!r} s is not usable", path)
+    return value
+
+
+def qualisys_truth(mat_path: str, limit: int | None = MAX_UNCOMPRESSED_BYTES):
+    """``(t_s, positions_m (n, 3), rotations (n, 3, 3))`` of a QTM MAT export's first rigid body, Qualisys time,
+    lost frames dropped (module doc)."""
+    with open(mat_path, "rb") as f:
+        m = read_mat(f, mat_path, max_uncompressed_bytes=limit, objects=True)
+    if not m.names():
+        raise RecordingError("no variable", mat_path)
+    d = m[m.names()[0]]
+    if not isinstance(d, dict) or "RigidBodies" not in d or "FrameRate" not in d:
+        raise RecordingError("not a Qualisys export (a structure with RigidBodies and FrameRate)", mat_path)
+    rb = d["RigidBodies"]
+    rb = rb[0] if isinstance(rb, list) and rb else rb
+    if not isinstance(rb, dict) or "Positions" not in rb or "Rotations" not in rb:
+        raise RecordingError("RigidBodies has no Positions and Rotations", mat_path)
+    rate = float(np.asarray(d["FrameRate"]).ravel()[0])
+    pos = np.asarray(rb["Positions"], dtype=float)
+    rot = np.asarray(rb["Rotations"], dtype=float)
+    if pos.ndim != 3 or pos.shape[:2] != (1, 3) or rot.shape != (1, 9, pos.shape[2]) or not rate > 0:
+        raise RecordingError(f"rigid body of shapes {pos.shape} / {rot.shape} at {rate} Hz: expected 1 x 3 x N and "
+                             "1 x 9 x N at a positive rate", mat_path)
+    pos = pos[0].T / 1000.0
+    r = rot[0].T.reshape(-1, 3, 3).transpose(0, 2, 1)  # column-major 3 x 3: r[k][:, j] = column j
+    t = np.arange(len(pos)) / rate
+    ok = np.all(np.isfinite(pos), axis=1) & np.all(np.isfinite(r), axis=(1, 2))
+    ok &= np.abs(np.linalg.det(np.where(ok[:, None, None], r, np.eye(3)))) > 0.9
+    return t[ok], pos[ok], r[ok]
+
+
+def read_tyrex(folder: str, *, mat_path: str | None = None, warn: bool = True,
+               max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
+    """Read one Tyrex Android walk folder and its Qualisys truth (module doc)."""
+    folder = str(folder).rstrip("/")
+    name = os.path.basename(folder)
+    if mat_path is None:
+        mat_path = os.path.join(os.path.dirname(os.path.dirname(folder)), "qualisys", name + ".mat")
+    repairs: list[str] = []
+    notes: dict = {}
+    streams = {}
+    for stream, fname in FILES.items():
+        path = os.path.join(folder, fname)
+        if not os.path.isfile(path):
+            if stream == MAG:
+                continue
+            raise RecordingError(f"no {fname}", folder)
+        v = _table(path, repairs, max_uncompressed_bytes)
+        j = first_bad_time(v[:, 0])
+        if j is not None:
+            raise RecordingError(f"time value {j + 1} is not a usable time: {float(v[j, 0])!r}", path)
+        v = v[np.argsort(v[:, 0], kind="stable")]
+        t_ns = np.round(v[:, 0] * 1e9).astype(np.int64)
+        xyz = acceleration_in_m_s2(v[:, 1:], fname, path, repairs, notes) if stream == ACC else v[:, 1:]
+        streams[stream] = make_stream(stream, t_ns, xyz)
+    offset_s = _alignment_s(os.path.join(folder, ALIGNMENT_FILE))
+    t_q, pos, r = qualisys_truth(mat_path, max_uncompressed_bytes)
+    t_ns = np.round((t_q - offset_s) * 1e9).astype(np.int64)
+    streams[POSI] = make_stream(POSI, t_ns, pos, POSI_COLUMNS, "m,m,m",
+                                "ground truth: Qualisys position of the phone's marker handler (the room's x, y, z); "
+                                "z up, x and y a horizontal pair in the room's frame, not geographic")
+    q = np.array([quat.from_matrix(m) for m in r]).reshape(-1, 4)
+    streams[TRUTH_BODY_ATTITUDE] = make_stream(TRUTH_BODY_ATTITUDE, t_ns, q, ["w", "x", "y", "z"], "1",
+                                               "ground truth: the Qualisys rotation of the marker handler, body -> "
+                                               "the frame of posi; the handler's axes are not promised to be the "
+                                               "phone's")
+    meta = {"source_format": FORMAT, "app": "Tyrex attitude benchmark (Android; Qualisys truth)", "walk": name,
+            "time_base": f"t_ns = round(time * 1e9): the phone's time in s; Qualisys frame k at k / rate minus "
+                         f"{offset_s:g} s (timeAlignment.txt)", **notes}
+    if warn and repairs:
+        warnings.warn("; ".join(repairs), DamagedFileWarning, stacklevel=2)
+    return finish(Recording(streams, device={"app": "Tyrex benchmark", "platform": "android"}, metadata=meta,
+                            repairs=repairs, source=folder), warn=warn)
