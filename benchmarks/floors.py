@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.options import add_common, data_root, only_keys, out_dir, selected, writes_committed
+from benchmarks.options import add_common, data_root, only_keys, out_dir, selected, write_json, writes_committed
 from benchmarks.splits import REPORT, TUNING, ipin_split
 from core.floors import FloorEstimator, FloorSettings
 from desktop.simulator import BarometerModel, floor_profile, simulate_pressure
@@ -253,14 +253,14 @@ def main(argv=None) -> int:
         print(f"floors: {len(bad)} failed: " + "; ".join(f"{r['dataset']}/{r['recording']} ({r['error']})"
                                                           for r in bad), file=sys.stderr)
     if args.write_results:
-        RESULTS_JSON.write_text(json.dumps(out, indent=1, default=float) + "\n")
+        write_json(RESULTS_JSON, out, digits=None)
         write_markdown(out)
         from benchmarks.report import refresh_sections
 
         refresh_sections()
     else:
         d = out_dir("floors")
-        (d / RESULTS_JSON.name).write_text(json.dumps(out, indent=1, default=float) + "\n")
+        write_json(d / RESULTS_JSON.name, out, digits=None)
         try:
             write_markdown(out, d / RESULTS_MD.name)
             print(f"floors: wrote {d / RESULTS_MD.name}", file=sys.stderr)

@@ -51,7 +51,7 @@ import numpy as np
 from benchmarks import splits as S
 from benchmarks.datasets import ipin2023, ms_indoor
 from benchmarks.options import (add_common, data_root, failed_row, failures_line, median_inf, only_keys,
-                                result_path, selected)
+                                result_path, selected, write_json)
 from core.indoor import ParticleConfig, StepArrays, map_match, read_ms_floor
 from core.metrics import landmark_errors
 
@@ -612,7 +612,7 @@ def main(argv=None) -> int:
     if out["failed"]:
         print("indoor: " + failures_line(out["failed"]), file=sys.stderr)
     res_json, res_md = result_path(a, RESULTS_JSON, "indoor"), result_path(a, RESULTS_MD, "indoor")
-    res_json.write_text(json.dumps(out, indent=1, default=float) + "\n")
+    write_json(res_json, out, digits=None)
     write_md(out, res_md)
     print(f"indoor: wrote {res_md}", file=sys.stderr)
     return 0

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import json
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.datasets.base import default_data_root
+from benchmarks.options import read_json, write_json
 from core.conventions import CARRY_HANDHELD
 
 MIN_SHARE = 0.8
@@ -110,17 +110,16 @@ def truth_mode_walks(extra2: Path, split: str) -> list[ModeWalk]:
 
 def save_walks(path: Path, walks: list) -> None:
     """The collected walks as JSON (no pickle: benchmarks read nothing that can run code)."""
-    rows = [{"name": w.name, "source": w.source, "walker": w.walker, "split": w.split, "truth": w.truth,
-             "stretches": [[[float(x) for x in lens], list(modes), float(t)] for lens, modes, t in w.stretches]}
-            for w in walks]
-    Path(path).write_text(json.dumps(rows))
+    write_json(path, [{"name": w.name, "source": w.source, "walker": w.walker, "split": w.split, "truth": w.truth,
+                       "stretches": [[lens, list(modes), t] for lens, modes, t in w.stretches]} for w in walks],
+               digits=None, indent=None)
 
 
 def load_walks(path: Path) -> list:
     """What :func:`save_walks` wrote."""
     return [ModeWalk(r["name"], r["source"], r["walker"], r["split"], r["truth"],
                      [(np.array(lens, float), tuple(modes), float(t)) for lens, modes, t in r["stretches"]])
-            for r in json.loads(Path(path).read_text())]
+            for r in read_json(path)]
 
 def ipin_mode_walks(data_root: Path, split: str) -> list[ModeWalk]:
     from benchmarks.datasets import ipin2023
@@ -279,8 +278,12 @@ def main(argv=None) -> int:
         walks = collect(args.data or default_data_root(), args.extra, args.extra2, args.split)
         if args.cache is not None:
             save_walks(args.cache, walks)
+    if {w.split for w in walks} - {args.split}:  # a cache of another split would be labelled with this one
+        ap.error(f"--cache {args.cache} holds {sorted({w.split for w in walks})} walks, not --split {args.split}'s")
     if args.fit_cache is not None:
         fit_on = [w for w in load_walks(args.fit_cache) if w.stretches]
+        if {w.split for w in fit_on} - {"tuning"}:
+            ap.error(f"--fit-cache {args.fit_cache} must hold tuning walks only (the scales are fitted there)")
         print(markdown(apply_study(walks, fit_scales(fit_on)), args.split, fit_on[0].split if fit_on else "?"))
     else:
         print(markdown(study(walks), args.split))

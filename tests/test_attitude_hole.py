@@ -93,3 +93,21 @@ def test_a_hole_grows_the_uncertainty_once_over_its_length_and_forgets_the_open_
     assert st.acc_sum.n == 1 and st.mag_sum.n == 1  # fresh intervals: no reading from before the hole is in them
     assert flags.outcome.value == "used" and math.isnan(flags.nis)  # pending in its interval, no update yet
     assert ekf.counters()["holes"] == 1
+
+
+def test_a_magnetometer_alone_at_1_hz_after_the_other_streams_stop_still_updates():
+    # review finding: every 1-s gap of a magnetometer read alone was a new hole that dropped its open interval,
+    # so it never updated (10 readings: 10 holes, no update); gaps one after another are one hole
+    e = AttitudeEKF()
+    t = 0
+    for _ in range(200):  # 4 s at 50 Hz, the phone flat and still
+        e.predict(t, 0.0, 0.0, 0.0)
+        e.update_acc(t, 0.0, 0.0, 9.81)
+        e.update_mag(t, 0.0, 20.0, -44.0)
+        t += 20_000_000
+    outcomes = []
+    for _ in range(10):  # the accelerometer and gyroscope stop, the magnetometer goes on at 1 Hz
+        t += 1_000_000_000
+        outcomes.append(e.update_mag(t, 0.0, 20.0, -44.0).outcome.value)
+    assert e.counters()["holes"] == 1
+    assert outcomes.count("used") >= 4, outcomes

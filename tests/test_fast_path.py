@@ -264,9 +264,14 @@ def test_fast_equals_plain_on_the_simulator():
     g = after.streams["gyro"]
     after.streams["gyro"] = Stream("gyro", g.t_ns[:0], g.values[:0], g.columns, g.unit, g.note)
     rec = _joined(rec.slice_time(rec.t0_ns, cut), after, 1_000_000_000)
+    # and at the end the magnetometer alone at 1 Hz for 6 s (gaps one after another: one hole, still updating)
+    m = rec.streams["mag"]
+    tail = m.t_ns[-1] + np.arange(1, 7) * 1_000_000_000
+    rec.streams["mag"] = Stream("mag", np.concatenate([m.t_ns, tail]), np.concatenate([m.values, m.values[-6:]]),
+                                m.columns, m.unit, m.note)
     plain, pipe = _assert_same(rec)
     assert pipe.walkdir.n_steps_offset > 10
-    assert plain.counters["attitude"]["holes"] == 1  # the 1 s hole in every stream (AttitudeEKF._bridge_hole)
+    assert plain.counters["attitude"]["holes"] == 2  # the 1 s hole in every stream (AttitudeEKF._bridge_hole), the tail
     modes = [s.carry_mode for s in plain.steps]
     assert max(set(modes), key=modes.count) == CARRY_POCKET
 

@@ -68,3 +68,12 @@ def test_the_walk_cache_round_trips_as_json(tmp_path):
     assert [(w.name, w.source, w.walker, w.split, w.truth) for w in back] == [
         (w.name, w.source, w.walker, w.split, w.truth) for w in ws]
     assert back[0].stretches[0][1] == ws[0].stretches[0][1]
+
+
+def test_a_cache_of_another_split_is_refused_not_mislabelled(tmp_path):
+    # review finding: a cache of tuning walks printed under "report split"
+    from benchmarks.stride_modes import main, save_walks
+
+    save_walks(tmp_path / "c.json", [_walk("a", "oxiod", "x", "pocket", 10.0)])  # a tuning walk
+    with pytest.raises(SystemExit):
+        main(["--split", "report", "--cache", str(tmp_path / "c.json")])

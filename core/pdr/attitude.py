@@ -632,6 +632,9 @@ class AttitudeState(AttitudeBaseState):
     gated: list  #: (t_ns, innovation) of heading updates gated since the last one used
     n_heading_relocks: int
     n_holes: int  #: holes in the recording bridged (every stream silent for over ``max_gyro_gap_s``)
+    #: the last event came after a hole or a stretch of such gaps (a magnetometer alone at 1 Hz): the intervals
+    #: opened since hold readings of the phone after the hole, kept
+    hole_open: bool
     #: no magnetometer reading has corrected the heading since the start without one (see AttitudeEKF._correct)
     yaw_unobserved: bool
     acc_sigma2: float  #: diagnostics: the last measurement variances (eqs. 17-18)
@@ -676,7 +679,7 @@ class AttitudeState(AttitudeBaseState):
             vo_active=False, raw_dip_med=RunningMedian(-math.pi / 2, math.pi / 2, math.radians(0.1)),
             raw_norm_med=RunningMedian(0.0, 200.0, 0.1), vertical_offset_uT=(0.0, 0.0, 0.0),
             h_ref=(0.0, 1.0, 0.0), alpha_ref=math.pi / 2, w2=0.0, w2_mean=0.0, swing_s=0.0,
-            acc_sum=IntervalSum.empty(), mag_sum=IntervalSum.empty(), gated=[], n_heading_relocks=0, n_holes=0,
+            acc_sum=IntervalSum.empty(), mag_sum=IntervalSum.empty(), gated=[], n_heading_relocks=0, n_holes=0, hole_open=False,
             yaw_unobserved=False, acc_sigma2=math.nan, mag_sigma2=math.nan, mag_rejected=False,
             acc_rejected=False, last_acc=UpdateFlags("acc", 0, False, Outcome.NONE_YET.value, outcome=Outcome.NONE_YET),
             last_mag=UpdateFlags("mag", 0, False, Outcome.NONE_YET.value, outcome=Outcome.NONE_YET),
@@ -1155,13 +1158,22 @@ class AttitudeEKF(AttitudeFilterBase, kalman.StateSnapshots):
         the hole, rotated into the navigation frame with the attitude it had then: closed by the first reading
         after it, they would measure the old attitude again as if it were new, and at 200 Hz with eleven
         readings to one) and the relock's gated innovations (of the heading before the hole).  The first
-        readings after the hole then meet an honest covariance.  No hole: nothing happens.
+        readings after the hole then meet an honest covariance.  No hole: nothing happens.  Gaps that follow one
+        another (a magnetometer alone at 1 Hz while the other streams are silent) are one hole: after the first,
+        the uncertainty still grows over each, but the intervals (of readings since the hole) are kept, so such a
+        stream still closes its intervals and updates.
         """
         state = self._state
-        if state.t_ns is None or (t_ns - state.t_ns) * 1e-9 <= self.settings.max_gyro_gap_s:
+        if state.t_ns is None:
+            return
+        if (t_ns - state.t_ns) * 1e-9 <= self.settings.max_gyro_gap_s:
+            state.hole_open = False
             return
         self._random_walk((t_ns - state.t_ns) * 1e-9)
         state.t_ns = t_ns
+        if state.hole_open:
+            return
+        state.hole_open = True
         state.acc_sum = IntervalSum.empty()
         state.mag_sum = IntervalSum.empty()
         state.gated = []

@@ -113,7 +113,7 @@ STATE_USE = {
     "next_zero_rate_ns": "i?", "ref_still_next_ns": "i?", "vo_S": "own", "vo_r": "own", "vo_next_ns": "vo?",
     "vo_t0_ns": "vo?", "vo_active": "vo", "raw_dip_med": "own", "raw_norm_med": "own", "vertical_offset_uT": "own",
     "h_ref": "mag_mode='full' only (refused)", "alpha_ref": "f", "w2": "f", "w2_mean": "f", "swing_s": "f", "acc_sum": "sum", "mag_sum": "sum",
-    "gated": "own", "n_heading_relocks": "i", "n_holes": "i", "yaw_unobserved": "i", "acc_sigma2": "f", "mag_sigma2": "f",
+    "gated": "own", "n_heading_relocks": "i", "n_holes": "i", "hole_open": "i", "yaw_unobserved": "i", "acc_sigma2": "f", "mag_sigma2": "f",
     "mag_rejected": "i", "acc_rejected": "not kept by the kernel (the pipeline reads mag_rejected)",
     "last_acc": "one event's flags: not made by the kernel", "last_mag": "one event's flags: not made by the kernel",
     "mag_reasons": "own", "acc_reasons": "own", "n_gyro": "i", "n_zero_rate": "i", "n_numerical_rejects": "i",
@@ -196,12 +196,12 @@ SI_REF_UPDATE_NS, SI_STILL_REF_NS, SI_USE_MAG, SI_REQUIRE_CAL, SI_VAR_WIN_NS, SI
                                                      "acc_reading.2", "acc_sum.x", "mag_sum.x", "noise_scale"))
 (I_TNS, I_TGYRO, I_HAS_TGYRO, I_REF_NEXT, I_HAS_REF_NEXT, I_ZR_NEXT, I_HAS_ZR_NEXT, I_STILL_NEXT, I_HAS_STILL_NEXT,
  I_ACC_N, I_ACC_T0, I_MAG_N, I_MAG_T0, I_GATED_N, I_YAW_UNOBS, I_MAG_REJ, I_N_ZR, I_N_NUM, I_N_RELOCK, I_N_GYRO,
- I_HAS_LAST_ACC, I_N_HOLES) = (IS[n] for n in (
+ I_HAS_LAST_ACC, I_N_HOLES, I_HOLE_OPEN) = (IS[n] for n in (
     "t_ns", "t_gyro_ns", "has:t_gyro_ns", "ref_next_ns", "has:ref_next_ns", "next_zero_rate_ns",
     "has:next_zero_rate_ns", "ref_still_next_ns", "has:ref_still_next_ns", "acc_sum.n", "acc_sum.t0_ns", "mag_sum.n",
     "mag_sum.t0_ns", "gated.n",
     "yaw_unobserved", "mag_rejected", "n_zero_rate", "n_numerical_rejects", "n_heading_relocks", "n_gyro",
-    "has:acc_reading", "n_holes"))
+    "has:acc_reading", "n_holes", "hole_open"))
 VO_NEXT, VO_HAS_NEXT, VO_T0, VO_HAS_T0, VO_ACTIVE = (VO[n] for n in (
     "vo_next_ns", "has:vo_next_ns", "vo_t0_ns", "has:vo_t0_ns", "vo_active"))
 # the interval sums' floats are consecutive (x, y, z, sigma2), as interval_add reads them
@@ -680,9 +680,13 @@ def bridge_hole(P, is_, rw2, ti, fs, sf):
     """A hole in the recording (every stream silent for over ``max_gyro_gap_s``): the reference's ``_bridge_hole``
     -- the uncertainty grown once over the elapsed time, the open intervals and the gated innovations dropped."""
     if (ti - is_[I_TNS]) * 1e-9 <= sf[S_MAX_GAP]:
+        is_[I_HOLE_OPEN] = 0
         return
     random_walk(P, rw2, (ti - is_[I_TNS]) * 1e-9, fs, sf)
     is_[I_TNS] = ti
+    if is_[I_HOLE_OPEN]:  # gaps one after another: one hole, the intervals since it kept
+        return
+    is_[I_HOLE_OPEN] = 1
     for k in range(4):
         fs[F_ASUM0 + k] = 0.0
         fs[F_MSUM0 + k] = 0.0
