@@ -75,11 +75,12 @@ def test_ridi_reads_the_tango_orientation_as_the_truth_attitude(tmp_path):
     table = _table()
     q = np.random.default_rng(2).normal(size=(len(table), 4))
     table = np.column_stack([table[:, :len(HEADER) - 2], q / np.linalg.norm(q, axis=1, keepdims=True)])
+    table[5, 14:18] *= 1.5  # a row that is not a unit quaternion is not an attitude: dropped, as OxIOD's
     path = tmp_path / "data.csv"
     _write_csv(path, table, header)
     rec = read_ridi(str(path), warn=False)
     assert rec.streams["truth_attitude"].columns == ("w", "x", "y", "z")
-    assert np.allclose(rec.streams["truth_attitude"].values, table[:, 14:18])
+    assert np.allclose(rec.streams["truth_attitude"].values, np.delete(table[:, 14:18], 5, axis=0))
     assert not any(c.startswith("ori_") for c in rec.metadata["columns_ignored"])
 
 

@@ -298,6 +298,7 @@ def read_ridi(path: str, *, warn: bool = True,
                                         "ground truth: Google Tango position (pos_x, pos_y, pos_z), z up, x and y "
                                         "in Tango's start frame, not geographic")
         elif name == TRUTH_ATTITUDE:
+            ok = ok & (np.abs(np.linalg.norm(np.where(np.isfinite(vals), vals, 0.0), axis=1) - 1.0) < 0.01)  # unit
             streams[name] = make_stream(name, t_ns[ok], vals[ok], ["w", "x", "y", "z"], "1",
                                         "ground truth: Google Tango orientation (ori_w, ori_x, ori_y, ori_z), device "
                                         "-> the frame of posi")
