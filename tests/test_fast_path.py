@@ -475,6 +475,19 @@ def test_fast_equals_plain_when_a_swinging_hand_keeps_the_back_of_the_phone():
     for exit_ in (0.85, None):
         plain, _ = _assert_same(walk.recording, limb_upright_exit=exit_)
         assert CARRY_SWINGING in {s.carry_mode for s in plain.steps}
+    # the modes in which it holds (Pipeline(limb_upright_modes), h13/tyrexswing): the same walk taken for the ear (a
+    # detector that scores only the ear; the ear's steps under the swing's wide rotation gate), the ear among the modes
+    from core.conventions import CARRY_BAG, CARRY_EAR, CARRY_MODES, CARRY_POCKET
+    from core.pdr.carry import CarryModeDetector
+
+    class EarOnly(CarryModeDetector):
+        def mode_scores(self, f, walking=False):
+            return {m: (1.0 if m == CARRY_EAR else 0.0) for m in CARRY_MODES}
+
+    modes = (CARRY_SWINGING, CARRY_POCKET, CARRY_EAR)
+    plain, _ = _assert_same(walk.recording, lambda: Pipeline(carry=EarOnly(), limb_upright_modes=modes,
+                                                            wide_rotation_modes=modes + (CARRY_BAG,)))
+    assert {s.carry_mode for s in plain.steps[3:]} == {CARRY_EAR}
 
 
 def test_fast_equals_plain_on_a_soft_soled_pocket_walk():

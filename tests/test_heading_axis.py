@@ -74,3 +74,53 @@ def test_a_swinging_hand_keeps_the_back_of_the_phone():
     err = [abs(math.degrees(wrap_angle(s.heading_rad - walk.truth.heading_at(np.array([s.t_ns]))[0])))
            for s in steps]
     assert max(err) < 15.0  # 9 deg; 34 with the smoother's own threshold
+
+
+def _pitched_phone_recording(pitches_deg, seconds_each: float, turn_s: float = 1.0, rate_hz: float = 50.0):
+    """Accelerometer and gyroscope of a phone held at each pitch in turn (``_phone``'s pitch: 90 upright) for
+    ``seconds_each``, turned from one to the next at a constant rate over ``turn_s`` (about the device x axis)."""
+    from core.recording import Recording, make_stream
+
+    hold, turn = int(round(seconds_each * rate_hz)), int(round(turn_s * rate_hz))
+    pitch, rate = [], []
+    for k, p in enumerate(pitches_deg):
+        if k:
+            step = math.radians(p - pitches_deg[k - 1]) / turn
+            pitch += list(math.radians(pitches_deg[k - 1]) + step * np.arange(1, turn + 1))
+            rate += [step * rate_hz] * turn
+        pitch += [math.radians(p)] * hold
+        rate += [0.0] * hold
+    t = np.arange(len(pitch)) * int(1e9 / rate_hz)
+    acc = [np.array(_phone(0.7, a)).T @ np.array([0.0, 0.0, 9.81]) for a in pitch]  # +g up, device frame
+    gyro = [(w, 0.0, 0.0) for w in rate]
+    return Recording({"acc": make_stream("acc", t, np.array(acc)), "gyro": make_stream("gyro", t, np.array(gyro))})
+
+
+def test_the_ear_mode_can_keep_the_back_of_the_phone():
+    """Issue #25 (h13/tyrexswing): on the Tyrex tuning walk ``Jakob_Nexus5_NoDist_Swinging`` the carry detector
+    took a gently swinging hand, the phone top up, for the ear on 55 % of the steps (no stride share: the arm's
+    centripetal acceleration is the same at both passes; a rotation of 2.5 rad/s, at ``hard_arm_gyro_rad_s``), and
+    there the smoother kept its own exit of the upright state (0.65): the axis flickered between the back and the
+    top edge.  ``Pipeline(limb_upright_modes)`` says in which carry modes ``limb_upright_exit`` holds; with the ear
+    in it a phone whose top edge leans 53 deg from the vertical (between the two thresholds) stays on its back.
+    The carry mode is forced to the ear (a detector that scores only the ear) on a still phone: upright (pitch 80),
+    then leaning (pitch 37: the top edge 53 deg from the vertical)."""
+    from core.conventions import CARRY_EAR, CARRY_MODES, CARRY_POCKET, CARRY_SWINGING
+    from core.pdr.carry import CarryModeDetector
+    from core.pdr.pipeline import Pipeline
+
+    class EarOnly(CarryModeDetector):
+        def mode_scores(self, f, walking=False):
+            return {m: (1.0 if m == CARRY_EAR else 0.0) for m in CARRY_MODES}
+
+    rec = _pitched_phone_recording([80.0, 37.0], 4.5)
+    modes = {}
+    for name, limb_modes in (("limbs", (CARRY_SWINGING, CARRY_POCKET)), ("ear", (CARRY_SWINGING, CARRY_POCKET,
+                                                                                  CARRY_EAR))):
+        pipe = Pipeline(carry=EarOnly(), limb_upright_modes=limb_modes)
+        pipe.run(rec)
+        assert pipe.carry_mode_at(rec.t1_ns) == CARRY_EAR
+        modes[name] = (pipe.smoother.upright, pipe.smoother.n_axis_switches)
+    assert modes["limbs"] == (False, 2)  # into the upright state, out of it at 53 deg
+    assert modes["ear"] == (True, 1)  # into it, and kept
+    assert CARRY_EAR in Pipeline().limb_upright_modes  # the default (TUNING: benchmarks/discussion.md)

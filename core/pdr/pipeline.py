@@ -537,6 +537,21 @@ class Pipeline:
         edge's does not) got worse with 0.85 everywhere.  TUNING: the real walks and every guard recording
         identical (no tuning walk swings a phone that switches axis), so on by the bar for defect fixes.  The fast
         path mirrors it (the exit per grid sample from the carry track).
+    limb_upright_modes : tuple of carry modes
+        The carry modes in which ``limb_upright_exit`` holds (the smoother's own exit in the others).  Default
+        swinging, pocket and ear (h13/tyrexswing; before: swinging and pocket).  On the Tyrex tuning walk
+        ``Jakob_Nexus5_NoDist_Swinging`` the carry detector took a gently swinging hand, phone top up, for the ear
+        on 55 % of the time (the arm's centripetal acceleration the same at both passes: no stride share; a rotation
+        of 2.5 rad/s, at ``hard_arm_gyro_rad_s``); there the smoothed top edge crossed the ear's exit (0.65, 49 deg
+        from the vertical) again and again: 78 axis switches in 140 steps (14 with the ear here): the open stride of
+        the walking-direction estimate restarted at each switch and the top edge's offset never got three strides,
+        so most steps had no offset.  A phone really at the ear stands upright too (``upright_y``), so the wider
+        band keeps its back as well.  TUNING, offset error against the truth attitude (median / p90 deg, steps > 90
+        deg off): ``NoDist_Swinging`` 96.5 / 142.4 (54 %) -> 14.5 / 108.4 (17.5 %), ``Dist_Swinging`` 118.8 / 173.5
+        (74 %) -> 107.9 / 168.5 (64 %) (its end error after the best rotation 20.3 -> 25.9 % of the path, 1.2 -> 1.8
+        % on ``NoDist``); every other tuning walk identical: the other Tyrex, RIDI and OxIOD truth walks, the 28
+        real walks (``sensibility_testbed/hand_1_28_21_44`` has 16.5 s of ear) and the main benchmark's 92 (IPIN,
+        Microsoft, IPOL).  ``benchmarks/discussion.md``.  The fast path mirrors it.
     """
 
     def __init__(self, *, height_m: float | None = None, stride_model: StrideModel | None = None,
@@ -553,7 +568,8 @@ class Pipeline:
                  hold_while_settling: bool = True, recount_at_settle: bool = True, walk_start_step: bool = False,
                  walk_start_cadence_frac: float = 0.3, flush_at_end: bool = True,
                  acc_gap_bridge: bool | AccGapBridge = True, heading_smoother: str = HEADING_SMOOTHER_OFF,
-                 limb_upright_exit: float | None = 0.85):
+                 limb_upright_exit: float | None = 0.85,
+                 limb_upright_modes: tuple = (CARRY_SWINGING, CARRY_POCKET, CARRY_EAR)):
         self.keep_steps = keep_steps
         if acc_gap_bridge is True:
             acc_gap_bridge = AccGapBridge()
@@ -573,6 +589,7 @@ class Pipeline:
         self.walk_start_cadence_frac = float(walk_start_cadence_frac)
         self.flush_at_end = bool(flush_at_end)
         self.limb_upright_exit = None if limb_upright_exit is None else float(limb_upright_exit)
+        self.limb_upright_modes = tuple(limb_upright_modes)
         self.gnss = gnss
         self.site_from_gps = bool(site_from_gps)
         self.unix_offset_ns = unix_offset_ns
@@ -768,7 +785,7 @@ class Pipeline:
                 ev = self._carry_steps(tg, x, ax, ay, az)
             if att.initialized:
                 if self.limb_upright_exit is not None:  # the exit of the upright state on a limb (issue #25)
-                    sm.upright_exit = (self.limb_upright_exit if self._carry_mode in (CARRY_SWINGING, CARRY_POCKET)
+                    sm.upright_exit = (self.limb_upright_exit if self._carry_mode in self.limb_upright_modes
                                        else self._upright_exit)
                 heading = sm.update(att.matrix())
                 fe, fn = sm.forward_east, sm.forward_north

@@ -209,7 +209,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     if p.limb_upright_exit is not None:
         exit_at = np.full(n_ticks, p.base_upright_exit)
         if track is not None:
-            limb = np.isin(track.mode, [CARRY_MODES.index(CARRY_SWINGING), CARRY_MODES.index(CARRY_POCKET)])
+            limb = np.isin(track.mode, [CARRY_MODES.index(m) for m in p.limb_upright_modes])
             exit_at[limb] = p.limb_upright_exit
     clock("carry-mode detector", 0.35)
     # 5. every step detector (one per distinct gates), the speed window at their peaks
