@@ -123,4 +123,5 @@ def test_the_ear_mode_can_keep_the_back_of_the_phone():
         modes[name] = (pipe.smoother.upright, pipe.smoother.n_axis_switches)
     assert modes["limbs"] == (False, 2)  # into the upright state, out of it at 53 deg
     assert modes["ear"] == (True, 1)  # into it, and kept
-    assert CARRY_EAR in Pipeline().limb_upright_modes  # the default (TUNING: benchmarks/discussion.md)
+    # the default leaves the ear out: on the two tuning walks it changes, the end error got worse (discussion.md)
+    assert Pipeline().limb_upright_modes == (CARRY_SWINGING, CARRY_POCKET)
