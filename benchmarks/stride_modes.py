@@ -93,7 +93,7 @@ def truth_mode_walks(extra2: Path, split: str) -> list[ModeWalk]:
             continue
         rec = read_walk(w)
         res, pipe, _ = run_default(rec, w.path.parent)
-        walker = (w.name.split("_")[1] if w.dataset.startswith("ridi")
+        walker = (w.name.split("_")[1] if w.dataset.startswith(("ridi", "tyrex"))  # ridi_<walker>_..., tyrex_<walker>_...
                   else f"oxiod {w.path.parents[2].name}/{w.path.parents[1].name}")
         mw = ModeWalk(w.name, w.dataset, walker, split, "truth path")
         if len(res.steps) >= 2:
