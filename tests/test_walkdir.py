@@ -22,14 +22,16 @@ STEP_HZ = 1.8
 
 def _feed(wd: WalkingDirection, *, offset_deg: float, seconds: float = 30.0, heading_deg=lambda t: 30.0,
           forward_sign: float = 1.0, vertical_m: float = 0.03, forward_m_s2: float = 1.5, sway_m_s2: float = 0.8,
-          noise_m_s2: float = 0.05, seed: int = 0, lag_s: float | None = None, samples=None):
+          noise_m_s2: float = 0.05, seed: int = 0, lag_s: float | None = None, samples=None,
+          in_phase_m_s2: tuple = (0.0, 0.0)):
     """A synthetic gait on the grid: the trunk's pendulum (a_f = -k v_z, the relation of the module docstring),
     a lateral sway at the stride frequency, the phone flat with its y axis ``offset_deg`` clockwise of the walk.
 
     ``heading_deg(t)``: the walking heading; the smoothed device forward vector handed to the stage lags
     the device by ``lag_s`` (the smoother's delay: ``wd.delay_s`` unless given).  ``forward_sign=-1`` makes
     the forward acceleration lead the wrong way (a walk backwards, for the sign test).  Returns the offsets
-    seen after every sample.
+    seen after every sample.  ``in_phase_m_s2``: (forward, left) amplitudes of a horizontal acceleration in
+    phase with the vertical one (the back pocket's sideways pull, issue #25).
     """
     rng = np.random.default_rng(seed)
     w = 2.0 * math.pi * STEP_HZ
@@ -44,6 +46,8 @@ def _feed(wd: WalkingDirection, *, offset_deg: float, seconds: float = 30.0, hea
         a_up = vertical_m * w * w * math.cos(w * t)
         a_f = -forward_sign * forward_m_s2 * math.sin(w * t)  # forward deceleration while rising
         a_l = sway_m_s2 * math.sin(0.5 * w * t)
+        a_f += in_phase_m_s2[0] * math.cos(w * t)
+        a_l += in_phase_m_s2[1] * math.cos(w * t)
         a_n = (a_f * math.cos(h) - a_l * math.sin(h), a_f * math.sin(h) + a_l * math.cos(h), a_up)
         a_n = [a + noise_m_s2 * rng.standard_normal() for a in a_n]
         q = quat.from_axis_angle((0.0, 0.0, 1.0), dev - 0.5 * math.pi)  # y axis at heading dev, screen up
@@ -201,6 +205,29 @@ def test_gap_keeps_turning_holds_the_estimate_through_a_long_turn():
     assert after.n_used >= 8 and all(o == held for o in off)
     assert abs(math.degrees(wrap_angle(held + math.radians(110.0)))) < 8.0
     assert all(o == 0.0 for t, o in seen[False][1] if 22.5 <= t <= 25.7)  # forgotten: no estimate
+
+
+def test_phase_axis_below_ratio_takes_the_phase_axis_under_a_sideways_pull():
+    """A trunk gait with a horizontal acceleration in phase with the vertical one, mostly sideways (the back
+    pocket of issue #25): the coherent axis is pulled ~90 deg off (89 here); with ``phase_axis_below_ratio``
+    the strides whose raw covariance along the phase axis is under 1.2 times the one across it take the phase
+    axis (27 deg off here: the pull leaks into it through the leaky vertical velocity's phase, as on the real
+    back pockets, 31 deg).  On the plain trunk gait (forward variance 3.5 times the sideways) nothing changes."""
+    pull = (0.3, 2.0)
+    off = {}
+    for ratio in (0.0, 1.2):
+        wd = WalkingDirection(phase_axis_below_ratio=ratio)
+        _feed(wd, offset_deg=50.0, seconds=14.0, in_phase_m_s2=pull)
+        assert wd.n_used >= 5
+        off[ratio] = abs(math.degrees(wrap_angle(wd.offset_rad - math.radians(50.0))))
+        methods = {s["method"] for s in wd.strides if s["accepted"]}
+        assert methods == ({"coherent"} if ratio == 0.0 else {"phase"})
+    assert off[0.0] > 80.0 and off[1.2] < 30.0
+    plain = []
+    for ratio in (0.0, 1.2):
+        wd = WalkingDirection(phase_axis_below_ratio=ratio)
+        plain.append(_feed(wd, offset_deg=50.0, seconds=14.0))
+    assert plain[0] == plain[1]
 
 
 def test_fast_path_entry_points_change_only_what_they_say():

@@ -289,6 +289,16 @@ class WalkingDirection:
         as an accepted one does: the walker walks on, turning, and the phone stays where it is (issue #25:
         on the tuning walk ``oxiod_pocket_data1_seq5``, in a 3.5 x 6 m room, 98 of 173 strides turned and the
         estimate was forgotten after 205 s of walking).  False: only an accepted stride does (the rule before).
+    phase_axis_below_ratio : float
+        A stride that would take the coherent axis takes the phase axis (the direction of ``-cov(a_h, v_z)``)
+        instead where the raw horizontal covariance along that phase axis is below this many times the one
+        across it (the phase axis lies along the raw ellipse's minor side: the in-phase term that pulls the
+        coherent axis rides a larger sideways motion).  0: off (the rule before).  Issue #25, h13/backpocket:
+        on the tuning Tyrex back-pocket walks (one walker) the coherent axis was 49-71 deg off per stride
+        (median) and the phase axis 31, the raw ratio (median per walk) 0.93-1.09 there and 1.23-3.55 on every
+        other tuning truth walk.  OFF by default: at 1.2 the back pockets' offset error vs the truth 66.3 -> 19.9
+        and 64.3 -> 41.0 deg, but the same walker's front pocket 9.7 -> 18.3 (its switched strides' phase axis is
+        worse), and the RIDI walks that move are not the mechanism's (``benchmarks/discussion.md``).
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, delay_s: float = 0.45, vz_leak_time_s: float = 1.0,
@@ -303,7 +313,8 @@ class WalkingDirection:
                  pca_min_anisotropy: float = 8.0, min_coherence: float = 0.0, reset_after_gap_s: float = 10.0,
                  sign_method: str = "auto", velocity_leak_time_s: float = 0.5, skew_scale: float = 1.0,
                  limb_enter_share: float = 0.5, limb_exit_share: float = 0.25, limb_raw_axis: bool = True,
-                 limb_sign_margin: float = 0.1, gap_keeps_turning: bool = False):
+                 limb_sign_margin: float = 0.1, gap_keeps_turning: bool = False,
+                 phase_axis_below_ratio: float = 0.0):
         self.grid_rate_hz = float(grid_rate_hz)
         self.delay_s = float(delay_s)
         self.vz_leak_time_s = float(vz_leak_time_s)
@@ -329,6 +340,7 @@ class WalkingDirection:
         self.min_coherence = float(min_coherence)
         self.reset_after_gap_s = float(reset_after_gap_s)
         self.gap_keeps_turning = bool(gap_keeps_turning)
+        self.phase_axis_below_ratio = float(phase_axis_below_ratio)
         if sign_method not in SIGN_METHODS:
             raise ValueError(f"sign_method must be one of {SIGN_METHODS}, got {sign_method!r}")
         self.sign_method = sign_method
@@ -571,6 +583,12 @@ class WalkingDirection:
         method = self.axis_method
         if method == "auto":
             method = "pca" if raw_aniso >= self.pca_min_anisotropy else "coherent"
+        if method == "coherent" and self.phase_axis_below_ratio > 0.0 and (gx or gy):
+            # the raw covariance along the phase axis against across it (the phase axis on the ellipse's minor side)
+            g2 = gx * gx + gy * gy
+            along_g = (cxx * gx * gx + 2.0 * cxy * gx * gy + cyy * gy * gy) / g2
+            if along_g < self.phase_axis_below_ratio * (tr - along_g):
+                method = "phase"
         rec["method"] = method
         theta_raw = 0.5 * math.atan2(2.0 * cxy, cxx - cyy)  # the raw covariance's axis, from the device heading
         if method == "pca":
