@@ -93,7 +93,8 @@ def truth_mode_walks(extra2: Path, split: str) -> list[ModeWalk]:
             continue
         rec = read_walk(w)
         res, pipe, _ = run_default(rec, w.path.parent)
-        walker = (w.name.split("_")[1] if w.dataset.startswith(("ridi", "tyrex"))  # ridi_<walker>_..., tyrex_<walker>_...
+        # ridi_<walker>_..., tyrex_<walker>_...
+        walker = (w.name.split("_")[1] if w.dataset.startswith(("ridi", "tyrex"))
                   else f"oxiod {w.path.parents[2].name}/{w.path.parents[1].name}")
         mw = ModeWalk(w.name, w.dataset, walker, split, "truth path")
         if len(res.steps) >= 2:
@@ -268,7 +269,7 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=None, help="the data root (default: ../shared/data beside the repo)")
     ap.add_argument("--extra", type=Path, default=None, help="the extra corpus (default: stride_eval's)")
     ap.add_argument("--extra2", type=Path, default=None, help="the truth walks' folder (benchmarks.truth_walks)")
-    ap.add_argument("--cache", type=Path, default=None, help="keep the collected walks here (JSON) / read them from here")
+    ap.add_argument("--cache", type=Path, default=None, help="the collected walks (JSON): kept here / read from here")
     ap.add_argument("--fit-cache", type=Path, default=None,
                     help="the tuning split's cache: fit the scales there and apply them, fixed, to --split's walks")
     args = ap.parse_args(argv)

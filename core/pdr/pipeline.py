@@ -541,8 +541,8 @@ class Pipeline:
         The carry modes in which ``limb_upright_exit`` holds (the smoother's own exit in the others).  Default
         swinging and pocket, as before; adding the ear (built by h13/tyrexswing) is **off by default**: on the two
         tuning walks it changes, the offset against the truth got better and the track (end error after the best
-        rotation) worse, from one walker in a 5 x 5 m room; the report walks are identical either way (seen once).  On the Tyrex tuning walk
-        ``Jakob_Nexus5_NoDist_Swinging`` the carry detector took a gently swinging hand, phone top up, for the ear
+        rotation) worse, from one walker in a 5 x 5 m room; the report walks are identical either way (seen
+        once).  On the Tyrex tuning walk ``Jakob_Nexus5_NoDist_Swinging`` the carry detector took a gently swinging hand, phone top up, for the ear
         on 55 % of the time (the arm's centripetal acceleration the same at both passes: no stride share; a rotation
         of 2.5 rad/s, at ``hard_arm_gyro_rad_s``); there the smoothed top edge crossed the ear's exit (0.65, 49 deg
         from the vertical) again and again: 78 axis switches in 140 steps (14 with the ear here): the open stride of
