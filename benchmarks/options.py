@@ -97,20 +97,22 @@ def git_rev() -> str:
 NONFINITE_TEXT = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
 
 
-def jsonable(x, digits: int | None = 4):
+def jsonable(x, digits: int | None = 4, nonfinite_as_null: bool = False):
     """Results as JSON can hold them: dict keys as strings, numpy numbers as Python's, floats rounded to
     ``digits`` decimals (None: as they are), a non-finite float as the string ``"nan"``, ``"inf"`` or ``"-inf"``
-    (:func:`read_json` turns them back; ``None`` stays ``null``).  Standard JSON that other tools open."""
+    (:func:`read_json` turns them back; ``None`` stays ``null``).  Standard JSON that other tools open.
+    ``nonfinite_as_null``: a non-finite float as ``None`` instead (what :mod:`benchmarks.walkdir` hands its own
+    markdown, which has no failure medians to tell apart)."""
     if isinstance(x, dict):
-        return {str(k): jsonable(v, digits) for k, v in x.items()}
+        return {str(k): jsonable(v, digits, nonfinite_as_null) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [jsonable(v, digits) for v in x]
+        return [jsonable(v, digits, nonfinite_as_null) for v in x]
     if isinstance(x, np.ndarray):
-        return jsonable(x.tolist(), digits)
+        return jsonable(x.tolist(), digits, nonfinite_as_null)
     if isinstance(x, (np.floating, float)):
         v = float(x)
         if not math.isfinite(v):
-            return "nan" if math.isnan(v) else "inf" if v > 0 else "-inf"
+            return None if nonfinite_as_null else "nan" if math.isnan(v) else "inf" if v > 0 else "-inf"
         return v if digits is None else round(v, digits)
     if isinstance(x, (np.integer,)):
         return int(x)

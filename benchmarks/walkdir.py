@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.options import (Guarded, add_common, data_root, failures_line, failures_markdown, only_keys,
-                                result_path, selected, split_failed)
+                                jsonable, result_path, selected, split_failed)
 from benchmarks.splits import REPORT, SIM_CARRY_SEEDS, TUNING, split_of
 from core.conventions import CARRY_BAG, CARRY_EAR, CARRY_HANDHELD, CARRY_POCKET, CARRY_SWINGING, GPS, wrap_angle
 from core.metrics import circular_mean
@@ -395,13 +395,8 @@ def likely_placement(mean_acc_b, upright_share: float, carry) -> str:
 
 
 def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    return x
+    """Results as this module's markdown reads them: non-finite as None (:func:`benchmarks.options.jsonable`)."""
+    return jsonable(x, digits=None, nonfinite_as_null=True)
 
 
 # -- cost ---------------------------------------------------------------------------------------------------

@@ -78,6 +78,8 @@ def test_shared_result_helpers():
 
     assert jsonable({1: [np.float64(1.234567), math.nan, np.int64(3), (math.inf, "a", None)]}) == {
         "1": [1.2346, "nan", 3, ["inf", "a", None]]}
+    # walkdir's own markdown reads None for a non-finite value (its private copy of this function, before)
+    assert jsonable([np.float32(0.5), math.nan, -math.inf], digits=None, nonfinite_as_null=True) == [0.5, None, None]
     assert median_present([None, math.nan, 1.0, math.inf, 2.0]) == 2.0 and median_present([None, math.nan]) is None
     assert isinstance(git_rev(), str)
 
