@@ -483,10 +483,40 @@ def _carry_expectation() -> str | None:
     if not med or "swinging" not in med:
         return None
     rest = ", ".join(f"{WHERE[m]} {med[m]:.0f} deg" for m in ("pocket", "bag", "ear") if m in med)
-    return ("**Wherever the phone is carried** (simulated walks; real walks do not say where the phone was "
-            f"pointing): the step heading's median error is {rest}, found from the acceleration; a phone swung "
-            f"in the hand is the weak case ({med['swinging']:.0f} deg), and without a gyroscope its steps are "
-            "undercounted by about 7 %.")
+    text = ("**Wherever the phone is carried** (simulated walks): the step heading's median error is "
+            f"{rest}, found from the acceleration; a phone swung in the hand is the weak case "
+            f"({med['swinging']:.0f} deg), and without a gyroscope its steps are undercounted by about 7 %.")
+    real = _truth_walk_offsets()
+    if real:
+        text += (" On real walks with a motion-capture truth of the phone's attitude (report split, "
+                 "`TRUTH_WALKS_RESULTS.md`) the walking direction's median error per walk is " + real + ".")
+    return text
+
+
+#: the truth walks' placements in "What to expect", pooled over datasets (RIDI's leg is a trouser pocket)
+TRUTH_GROUPS = {"a trouser pocket": ("pocket", "backpocket", "leg"), "a bag": ("bag",),
+                "a swinging hand": ("swinging",)}
+
+
+def _truth_walk_offsets(path: Path | None = None) -> str | None:
+    """Per group of placements, the median over the truth walks of the report split of each walk's median error of
+    the walking-direction offset against the truth attitude, and the walks counted (None: no results file)."""
+    try:
+        walks = read_json(path or Path(__file__).with_name("truth_walks_results.json")).get("walks", [])
+    except (OSError, ValueError):
+        return None
+    parts = []
+    for label, places in TRUTH_GROUPS.items():
+        group = [w for w in walks if w.get("split") == "report" and w.get("placement") in places]
+        # a walk that failed, or gave no offset to score, counts as the worst (never dropped)
+        errs = [(w.get("offset_truth") or {}).get("abs_err_deg_median") for w in group]
+        errs = [math.inf if w.get("failed") or e is None else float(e) for w, e in zip(group, errs)]
+        if errs:
+            med = float(np.median(errs))
+            n = f"{len(errs)} walk" + ("s" if len(errs) != 1 else "")
+            parts.append(f"in {label} {med:.0f} deg ({n})" if math.isfinite(med) else
+                         f"in {label}: most of its {n} failed")
+    return ", ".join(parts) or None
 
 
 #: the carry modes in "What to expect"

@@ -65,3 +65,20 @@ def test_a_subset_that_matches_nothing_is_an_error_not_an_empty_report(tmp_path,
     err = capsys.readouterr().err
     assert "matched no recording" in err and "ipin2023" in err
     assert not out.exists()
+
+
+def test_what_to_expect_counts_a_failed_truth_walk_as_the_worst(tmp_path):
+    # the real truth walks' walking-direction error in "What to expect": a report walk that failed is counted
+    from benchmarks.options import write_json
+    from benchmarks.report import _truth_walk_offsets
+
+    def walk(place, err, split="report", failed=None):
+        w = {"split": split, "placement": place, "offset_truth": {"abs_err_deg_median": err}}
+        return {**w, "failed": failed} if failed else w
+
+    write_json(tmp_path / "t.json", {"walks": [walk("leg", 10.0), walk("backpocket", 30.0), walk("pocket", None,
+                                                                                                   failed="no steps"),
+                                               walk("bag", 50.0), walk("bag", 5.0, split="tuning")]})
+    text = _truth_walk_offsets(tmp_path / "t.json")
+    assert "in a trouser pocket 30 deg (3 walks)" in text  # median of 10, 30 and the failure (inf)
+    assert "in a bag 50 deg (1 walk)" in text and "swinging" not in text  # tuning walks left out
