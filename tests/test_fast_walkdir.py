@@ -135,7 +135,8 @@ def _settings(wd: WalkingDirection) -> dict:
              "min_horizontal_std_m_s2", "min_anisotropy", "max_stride_turn_rad", "min_forward_norm",
              "memory_strides", "confident_strides", "confident_sigma_rad", "confident_sign", "auto_min_strides",
              "auto_far_min_strides", "auto_min_offset_rad", "max_strides_kept", "axis_method", "pca_min_anisotropy",
-             "min_coherence", "reset_after_gap_s", "sign_method", "phase_axis_below_ratio")
+             "min_coherence", "reset_after_gap_s", "sign_method", "phase_axis_below_ratio",
+             "quadrature_phase")
     return {k: getattr(wd, k) for k in names}
 
 
@@ -159,7 +160,7 @@ def test_ipin_cut_equals_core():
 SETTINGS = (dict(max_strides_kept=8), dict(axis_method="pca", max_strides_kept=0),
             dict(axis_method="coherent", min_coherence=0.79), dict(axis_method="phase", min_anisotropy=1.05),
             dict(pca_min_anisotropy=3.0, memory_strides=4.0, reset_after_gap_s=5.0, delay_s=0.0),
-            dict(phase_axis_below_ratio=10.0))
+            dict(phase_axis_below_ratio=10.0), dict(quadrature_phase=True, axis_method="phase"))
 
 
 @cache

@@ -127,6 +127,23 @@ stride's raw-covariance axis: the coherent axis of a limb's less anisotropic str
 side of the raw one on that walk (the trunk's rule for the trunk's motion), and mixing them pulled the offset
 by about 8 deg.  On the trunk nothing changes (the flag stays off: the phase rule and each stride's axis).
 
+The quadrature phase (issue #25, h13/quadrature)
+------------------------------------------------
+The leaky integrator and the mean removal turn ``a_z`` by about 82 deg, not 90: ``v_z = c a_z + v_perp``
+per stride, ``c = cov(a_z, v_z) / var(a_z)`` (a small in-phase part; ``v_perp`` uncorrelated with ``a_z``
+over the stride).  So ``cov(a_h, v_z) = cov(a_h, v_perp) + c cov(a_h, a_z)``: where the horizontal
+acceleration has a large in-phase term ``cov(a_h, a_z)`` (the ``h`` vector: a back pocket, a bag swinging
+sideways) ``g`` leans towards it (27 deg in the synthetic back pocket of the tests).  With
+``quadrature_phase`` each stride projects it out (one more running sum, ``sum a_z v_z``):
+
+    ``g' = -(cov(a_h, v_z) - cov(a_h, a_z) cov(a_z, v_z) / var(a_z)) / sqrt(var_h var(v_perp))``,
+    ``var(v_perp) = var(v_z) - cov(a_z, v_z)^2 / var(a_z)``,
+
+the covariance with the part of ``v_z`` in exact quadrature with ``a_z`` (the least-squares residual of
+``v_z`` on ``a_z``), normalised to a correlation as ``g`` is.  ``g'`` replaces ``g`` everywhere: the phase
+axis, the sign evidence and the coherent axis's ``g g'`` term (``h h'`` stays).  For the pendulum's pure
+quadrature ``a_f`` nothing changes but the normalisation; only the in-phase leak goes.
+
 Smoothing: circular means with forgetting
 -----------------------------------------
 Turns rotate the walk and the device together, so the offset is a constant
@@ -299,6 +316,12 @@ class WalkingDirection:
         other tuning truth walk.  OFF by default: at 1.2 the back pockets' offset error vs the truth 66.3 -> 19.9
         and 64.3 -> 41.0 deg, but the same walker's front pocket 9.7 -> 18.3 (its switched strides' phase axis is
         worse), and the RIDI walks that move are not the mechanism's (``benchmarks/discussion.md``).
+    quadrature_phase : bool
+        The forward evidence ``g`` (phase axis, sign evidence, the coherent axis's ``g g'`` term) is the pure
+        quadrature covariance: the part of ``v_z`` in phase with ``a_z`` projected out per stride (module
+        docstring, "The quadrature phase").  False: ``-cov(a_h, v_z)`` through the leaky ``v_z`` (the rule before).
+        OFF by default pending the lead's decision (issue #25, h13/quadrature; numbers in
+        ``benchmarks/discussion.md``).
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, delay_s: float = 0.45, vz_leak_time_s: float = 1.0,
@@ -314,7 +337,7 @@ class WalkingDirection:
                  sign_method: str = "auto", velocity_leak_time_s: float = 0.5, skew_scale: float = 1.0,
                  limb_enter_share: float = 0.5, limb_exit_share: float = 0.25, limb_raw_axis: bool = True,
                  limb_sign_margin: float = 0.1, gap_keeps_turning: bool = False,
-                 phase_axis_below_ratio: float = 0.0):
+                 phase_axis_below_ratio: float = 0.0, quadrature_phase: bool = False):
         self.grid_rate_hz = float(grid_rate_hz)
         self.delay_s = float(delay_s)
         self.vz_leak_time_s = float(vz_leak_time_s)
@@ -341,6 +364,9 @@ class WalkingDirection:
         self.reset_after_gap_s = float(reset_after_gap_s)
         self.gap_keeps_turning = bool(gap_keeps_turning)
         self.phase_axis_below_ratio = float(phase_axis_below_ratio)
+        self.quadrature_phase = bool(quadrature_phase)
+        #: the open stride's running sums: 14, and sum a_z v_z with ``quadrature_phase``
+        self._n_sums = 15 if self.quadrature_phase else 14
         if sign_method not in SIGN_METHODS:
             raise ValueError(f"sign_method must be one of {SIGN_METHODS}, got {sign_method!r}")
         self.sign_method = sign_method
@@ -372,7 +398,8 @@ class WalkingDirection:
         self._vz = 0.0
         #: samples waiting for their delayed device heading: (t_ns, a_east, a_north, a_up, v_z, step)
         self._buf = deque()
-        self._sums = [0.0] * 14  # n, sx, sy, sxx, syy, sxy, sv, sxv, syv, svv, su, sxu, syu, suu (open stride)
+        # n, sx, sy, sxx, syy, sxy, sv, sxv, syv, svv, su, sxu, syu, suu (, suv with quadrature_phase): open stride
+        self._sums = [0.0] * self._n_sums
         #: the horizontal velocity along / left of the device heading (leaky, its running mean removed) and
         #: the open stride's moments of it up to the third: n, vx, vy, vxx, vxy, vyy, vxxx, vxxy, vxyy, vyyy
         self._hmx = self._hmy = self._vx = self._vy = 0.0
@@ -476,6 +503,8 @@ class WalkingDirection:
         s[11] += x * au
         s[12] += y * au
         s[13] += au * au
+        if self.quadrature_phase:
+            s[14] += au * vz
 
     def _velocity(self, x: float, y: float) -> None:
         """The phone's horizontal velocity in the device-heading frame (leaky integral of the acceleration, its
@@ -523,7 +552,7 @@ class WalkingDirection:
             self._stride_t0 = t_ns
             self._stride_fwd0 = (fe / norm, fn / norm) if norm >= self.min_forward_norm else None
             self._stride_skipped = 0
-            self._sums = [0.0] * 14
+            self._sums = [0.0] * self._n_sums
             if self.sign_method != "phase":
                 self._vm = [0.0] * 10
         else:
@@ -569,11 +598,18 @@ class WalkingDirection:
             return "still"
         raw_aniso = _anisotropy(cxx, cyy, cxy)
         rec["anisotropy"] = raw_aniso
+        mu = s[10] * inv
+        cuu = max(s[13] * inv - mu * mu, 0.0)
+        if self.quadrature_phase and cuu > 1e-12:
+            # the pure quadrature covariance: v_z's part in phase with a_z projected out (module docstring)
+            cxu, cyu = s[11] * inv - mx * mu, s[12] * inv - my * mu
+            c = (s[14] * inv - mu * mv) / cuu  # cov(a_z, v_z) / var(a_z)
+            cxv -= c * cxu
+            cyv -= c * cyu
+            cvv = max(cvv - c * c * cuu, 0.0)  # var(v_perp) = var(v_z) - cov(a_z, v_z)^2 / var(a_z)
         # forward evidence: -cov(a_h, v_z), normalised to a correlation
         den = math.sqrt(tr * cvv)
         gx, gy = (-cxv / den, -cyv / den) if den > 1e-12 else (0.0, 0.0)
-        mu = s[10] * inv
-        cuu = max(s[13] * inv - mu * mu, 0.0)
         du = math.sqrt(tr * cuu)
         hx, hy = ((s[11] * inv - mx * mu) / du, (s[12] * inv - my * mu) / du) if du > 1e-12 else (0.0, 0.0)
         # the part of the horizontal acceleration that moves with the vertical: covariance g g' + h h'

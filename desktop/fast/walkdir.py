@@ -421,8 +421,8 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
     ``compiled`` (default: where numba is installed) runs :func:`walk_kernel`; without it ``wd.update`` itself
     is fed every sample and the estimate recorded after each (the kernel run as plain Python is slower than
     core's update), so the trace is the same either way.  The kernel implements ``sign_method="phase"``
-    only, and the gap clock of accepted strides only: any other sign method, ``gap_keeps_turning`` (issue #25) and
-    ``phase_axis_below_ratio`` > 0 are fed through ``wd.update``, whatever ``compiled`` says.
+    only, and the gap clock of accepted strides only: any other sign method, ``gap_keeps_turning`` (issue #25),
+    ``phase_axis_below_ratio`` > 0 and ``quadrature_phase`` are fed through ``wd.update``, whatever ``compiled`` says.
     """
     if compiled is None:
         compiled = HAVE_NUMBA
@@ -432,6 +432,8 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
         compiled = False  # the kernel's gap clock restarts at accepted strides only: core's update keeps turning
     if getattr(wd, "phase_axis_below_ratio", 0.0) > 0.0:
         compiled = False  # the kernel has the coherent / raw axis choice only: core's update takes the phase axis
+    if getattr(wd, "quadrature_phase", False):
+        compiled = False  # the kernel keeps the leaky v_z's covariance: core's update projects the in-phase part out
     wd.reset()
     grid_t = np.asarray(grid_t, dtype=np.int64)
     n = len(grid_t) - j_init
