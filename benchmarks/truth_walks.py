@@ -77,6 +77,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.metrics import median_present
+from core.metrics import proper_rotation
 from core.conventions import GYRO, wrap_angle
 from core.importers._common import TRUTH_ATTITUDE, TRUTH_BODY_ATTITUDE
 from core.quaternion import to_matrix_array
@@ -297,8 +298,7 @@ def device_attitude(rec):
     ok = (dt > 0) & (dt < 0.1) & np.all(np.isfinite(w_body), axis=1) & (np.linalg.norm(w_body, axis=1) < 20.0)
     if ok.sum() < 100:
         return None
-    u, _, vt = np.linalg.svd(w_dev[ok].T @ w_body[ok])
-    a = u @ np.diag([1.0, 1.0, float(np.sign(np.linalg.det(u @ vt)))]) @ vt
+    a, _ = proper_rotation(w_dev[ok].T @ w_body[ok])  # w_body a^T fits w_dev (Kabsch)
     resid = float(np.median(np.linalg.norm(w_dev[ok] - w_body[ok] @ a.T, axis=1)))
     return att.t_ns, np.einsum("nij,kj->nik", r, a), {"residual_rad_s": resid}
 

@@ -135,6 +135,20 @@ def best_fit_rotation(est_xy, ref_xy) -> float:
     return math.atan2(s, c)
 
 
+def proper_rotation(h) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation ``R = U D V^T`` (``h = U S V^T``, its SVD; ``D = diag(1, .., d)``, ``d = sign det(U V^T)``)
+    that maximises ``trace(R^T h)`` among rotations (no reflection): with ``h = B^T A`` for point sets (rows)
+    ``A`` and ``B``, ``B R`` fits ``A`` best in least squares (Kabsch 1976; Umeyama 1991 for the sign), in any
+    dimension.  Returns ``R`` and the singular values with the last one's sign times ``d`` (their sum is
+    ``trace(R^T h)``, what a scale fit needs)."""
+    u, sv, vt = np.linalg.svd(np.asarray(h, dtype=float))
+    d = 1.0 if np.linalg.det(u @ vt) >= 0 else -1.0  # a reflection is not a motion
+    u[:, -1] *= d
+    sv = sv.copy()
+    sv[-1] *= d
+    return u @ vt, sv
+
+
 def rotate(xy, theta: float) -> np.ndarray:
     """Rotate points ``(n, 2)`` by ``theta`` (rad, CCW) about the origin."""
     c, s = math.cos(theta), math.sin(theta)

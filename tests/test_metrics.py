@@ -159,3 +159,19 @@ def test_reference_track_errors_time_aligned_and_rotation_fitted():
     te = m.reference_track_errors(t_steps, east, north, [0, 2_500_000_000], [0.0, 0.0], [0.0, 0.0])
     assert te.errors_m[0] == pytest.approx(2.5)
     assert math.isnan(m.reference_track_errors(t_steps, east, north, [0], [0.0], [0.0]).median_m)
+
+
+def test_proper_rotation_recovers_a_3d_rotation_and_never_a_reflection():
+    # the one Kabsch fit (core.metrics.proper_rotation: the judge's shape test, the truth walks' body-to-phone fit)
+    from core import quaternion as quat
+    from core.metrics import proper_rotation
+
+    rng = np.random.default_rng(7)
+    b = rng.normal(size=(50, 3))
+    r_true = np.array(quat.to_matrix(quat.from_axis_angle((0.3, -0.5, 0.8), 1.1)))
+    a = b @ r_true + 1e-6 * rng.normal(size=(50, 3))
+    r, sv = proper_rotation(b.T @ a)
+    assert np.allclose(r, r_true, atol=1e-5) and np.linalg.det(r) == pytest.approx(1.0)
+    assert float(np.sum(sv)) == pytest.approx(float(np.trace(r.T @ (b.T @ a))))
+    mirror = a * [1.0, 1.0, -1.0]  # a reflection of a: the best rotation still has det +1
+    assert np.linalg.det(proper_rotation(b.T @ mirror)[0]) == pytest.approx(1.0)

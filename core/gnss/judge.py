@@ -102,6 +102,7 @@ from enum import Enum
 import numpy as np
 
 from core.geodesy import geodetic_to_enu
+from core.metrics import proper_rotation
 from core.gnss.accuracy import HACC_PER_SIGMA
 from core.gnss.drift import DriftSettings, StreamDriftCheck
 from core.gnss.pace import PaceSettings, ReceiverPaceCheck
@@ -455,12 +456,7 @@ def shape_residual_m(a: np.ndarray, b: np.ndarray, scale_limits=(1.0, 1.0)) -> f
     (within ``scale_limits``) of ``b`` that fit ``a`` best (Procrustes; no reflection)."""
     a0 = a - a.mean(axis=0)
     b0 = b - b.mean(axis=0)
-    u, sv, vt = np.linalg.svd(b0.T @ a0)
-    d = 1.0 if np.linalg.det(u @ vt) >= 0 else -1.0  # a reflection is not a motion
-    u[:, -1] *= d
-    sv = sv.copy()
-    sv[-1] *= d
-    r = u @ vt
+    r, sv = proper_rotation(b0.T @ a0)  # no reflection: a mirror image is not the same walk
     bb = float(np.sum(b0 * b0))
     scale = float(np.sum(sv)) / bb if bb > 0 else 1.0
     scale = min(max(scale, scale_limits[0]), scale_limits[1])
