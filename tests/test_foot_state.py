@@ -10,7 +10,7 @@ import pytest
 from core.foot.ins import InsState, ZuptEKF
 from core.foot.navigator import FootNavigator, FootSettings
 from desktop.foot_simulator import footprints, simulate_foot
-from tests._state_helpers import scalar_attributes
+from tests._state_helpers import differences, scalar_attributes
 
 
 def _walk():
@@ -18,21 +18,6 @@ def _walk():
     w = simulate_foot(footprints([(2.8, 0.0), (1.4, math.pi / 2)]), rate_hz=100.0, acc_noise_m_s2=0.05,
                       gyro_noise_rad_s=0.005, gyro_bias_rad_s=(0.002, -0.001, 0.003), first_still_s=1.0, seed=11)
     return w
-
-
-def _same(a, b) -> bool:
-    """Equal values: arrays element by element (nan equal to nan), dataclasses field by field."""
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.shape == b.shape
-                and np.array_equal(a, b, equal_nan=True))
-    if dataclasses.is_dataclass(a) and not isinstance(a, type):
-        return type(a) is type(b) and all(_same(getattr(a, f.name), getattr(b, f.name))
-                                          for f in dataclasses.fields(a))
-    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
-        return True
-    if isinstance(a, (tuple, list)):
-        return type(a) is type(b) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
-    return type(a) is type(b) and a == b
 
 
 class _Run:
@@ -71,10 +56,10 @@ def test_ins_reset_is_a_new_filter():
     ekf.align(run.acc_mean, run.gyro_mean)
     run.steps(ekf, run.k0, len(w.t_ns))
     new = ZuptEKF(ekf.settings)
-    assert not _same(ekf.snapshot(), new.snapshot())
+    assert differences(ekf.snapshot(), new.snapshot())
     ekf.reset()
     assert vars(ekf).keys() == vars(new).keys()
-    differ = [k for k in vars(new) if not _same(vars(ekf)[k], vars(new)[k])]
+    differ = [k for k in vars(new) if differences(vars(ekf)[k], vars(new)[k])]
     assert differ == [], differ
     assert [f.name for f in dataclasses.fields(InsState)] == list(InsState.__slots__)
 
@@ -121,7 +106,7 @@ def test_navigator_reset_sets_every_attribute():
     nav.reset()
     assert vars(nav).keys() == vars(new).keys(), set(vars(nav)) ^ set(vars(new))
     assert {k: type(v) for k, v in vars(nav).items()} == {k: type(v) for k, v in vars(new).items()}
-    assert _same(nav.ins.snapshot(), new.ins.snapshot())
+    assert not differences(nav.ins.snapshot(), new.ins.snapshot())
     assert scalar_attributes(nav) == scalar_attributes(new)  # plain values as a new one's (nan equal to nan)
     # ... and its values: the reset navigator walks the same walk again to the same track as a new one
     a, b = nav.run(w.recording, stance=w.stance), new.run(w.recording, stance=w.stance)

@@ -4,10 +4,7 @@ value, its filter, trainer and judge included -- and the public names of the sta
 
 from __future__ import annotations
 
-import dataclasses
-import enum
 import math
-from collections import deque
 
 import numpy as np
 import pytest
@@ -18,6 +15,7 @@ from core.gnss.fusion import ChenFusionState, GpsFusion
 from core.gnss.kubrak import KubrakFusion, KubrakFusionState
 from core.pdr.pipeline import Step
 from core.pdr.stride import StepFeatures
+from tests._state_helpers import differences
 
 ORIGIN = (47.37, 8.54)
 T0 = 1_000_000_000_000
@@ -58,37 +56,6 @@ def _feed(f, events) -> None:
     f.finish()
 
 
-def _same(a, b, path="", seen=None) -> list:
-    """Where ``a`` and ``b`` differ in value (attributes, slots, dataclass fields, containers, arrays by their bytes,
-    nan equal to nan): a list of paths, empty when equal."""
-    seen = set() if seen is None else seen
-    if type(a) is not type(b):
-        return [f"{path}: {type(a).__name__} != {type(b).__name__}"]
-    if isinstance(a, np.ndarray):
-        return [] if a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes() else [path]
-    if isinstance(a, float):
-        return [] if a == b or (math.isnan(a) and math.isnan(b)) else [f"{path}: {a} != {b}"]
-    if a is None or isinstance(a, (bool, int, str, bytes, enum.Enum, type)) or callable(a):
-        return [] if a == b or callable(a) else [f"{path}: {a!r} != {b!r}"]
-    if (id(a), id(b)) in seen:
-        return []
-    seen.add((id(a), id(b)))
-    if isinstance(a, dict):
-        if list(a) != list(b):
-            return [f"{path}: keys {list(a)} != {list(b)}"]
-        return [d for k in a for d in _same(a[k], b[k], f"{path}[{k!r}]", seen)]
-    if isinstance(a, (list, tuple, deque)):
-        if len(a) != len(b) or (isinstance(a, deque) and a.maxlen != b.maxlen):
-            return [f"{path}: length {len(a)} != {len(b)}"]
-        return [d for i, (x, y) in enumerate(zip(a, b)) for d in _same(x, y, f"{path}[{i}]", seen)]
-    names = [f.name for f in dataclasses.fields(a)] if dataclasses.is_dataclass(a) else []
-    names += [n for n in getattr(a, "__dict__", {}) if n not in names]
-    names += [n for c in type(a).__mro__ for n in getattr(c, "__slots__", ()) if n not in names and hasattr(a, n)]
-    if not names:
-        return [] if a == b else [f"{path}: {a!r} != {b!r}"]
-    return [d for n in names for d in _same(getattr(a, n), getattr(b, n), f"{path}.{n}", seen)]
-
-
 @pytest.fixture(scope="module")
 def events():
     return _walk()
@@ -110,9 +77,9 @@ def test_reset_leaves_every_value_of_a_new_fusion(events, make, state_type, own,
     assert used.gps_moves()["by_kind"] and used.origin_lat_lon is not None
     assert type(used._state) is FixFusionState and type(getattr(used, own)) is state_type
     fresh = make(**kw)
-    assert _same(vars(used), vars(fresh)) != []  # the comparison sees a used fusion
+    assert differences(vars(used), vars(fresh)) != []  # the comparison sees a used fusion
     used.reset()
-    assert _same(vars(used), vars(fresh)) == []
+    assert differences(vars(used), vars(fresh)) == []
 
 
 @pytest.mark.parametrize("make", [GpsFusion, KubrakFusion])
