@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.datasets.base import default_data_root
+from benchmarks.metrics import median_counting_failures
 
 REPO = Path(__file__).resolve().parent.parent
 HERE = REPO / "benchmarks"
@@ -155,14 +156,9 @@ def failures_line(rows) -> str:
     return "" if not bad else f"{len(bad)} failed: " + "; ".join(f"{r['name']} ({r['failed']})" for r in bad)
 
 
-def median_inf(values) -> float:
-    """The median with failures as +inf (never dropped); nan only when there is nothing."""
-    v = [math.inf if x is None or (isinstance(x, float) and math.isnan(x)) else float(x) for x in values]
-    if not v:
-        return math.nan
-    v.sort()
-    n = len(v)
-    return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2.0
+#: the median with failures (None, nan) as +inf, never dropped; nan only when there is nothing: the one in
+#: :mod:`benchmarks.metrics`, under the name the indoor benchmark has used
+median_inf = median_counting_failures
 
 
 def task_name(task) -> str:
