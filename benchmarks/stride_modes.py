@@ -199,6 +199,9 @@ def fit_scales(walks: list[ModeWalk], min_share: float = MIN_SHARE, min_walks: i
 
 
 def stats(errors) -> dict:
+    """Count, median absolute and mean signed error (%).  A walk that failed (no steps or no truth: nan) counts
+    in the median as +inf, never dropped; the mean is over the walks with an error (a failure has no sign), and
+    the count says how many there were."""
     e = np.array([x if math.isfinite(x) else math.inf for x in errors], float)
     fin = e[np.isfinite(e)]
     return {"n": int(e.size), "median_abs": float(np.median(np.abs(e))) if e.size else math.nan,
