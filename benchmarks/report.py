@@ -509,10 +509,9 @@ def _truth_walk_offsets(path: Path | None = None) -> str | None:
     for label, places in TRUTH_GROUPS.items():
         group = [w for w in walks if w.get("split") == "report" and w.get("placement") in places]
         # a walk that failed, or gave no offset to score, counts as the worst (never dropped)
-        errs = [(w.get("offset_truth") or {}).get("abs_err_deg_median") for w in group]
-        errs = [math.inf if w.get("failed") or e is None else float(e) for w, e in zip(group, errs)]
+        errs = [None if w.get("failed") else (w.get("offset_truth") or {}).get("abs_err_deg_median") for w in group]
         if errs:
-            med = float(np.median(errs))
+            med = M.median_counting_failures(errs)
             n = f"{len(errs)} walk" + ("s" if len(errs) != 1 else "")
             parts.append(f"in {label} {med:.0f} deg ({n})" if math.isfinite(med) else
                          f"in {label}: most of its {n} failed")
