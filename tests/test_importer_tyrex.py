@@ -10,6 +10,7 @@ import pytest
 import scipy.io as scipy_io
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from core.importers import TYREX, detect_format, load_recording
 from core.importers import tyrex as _tyrex
@@ -95,14 +96,12 @@ def tyrex_walks(draw):
     """A walk's accelerometer and gyroscope rows (t s, x, y, z), its time offset, extra columns or not, and the
     path a user gives (the folder, or one of its files)."""
     n = draw(st.integers(3, 30))
-    steps = draw(st.lists(st.floats(0.001, 0.05), min_size=n - 1, max_size=n - 1))
+    steps = draw(arrays(np.float64, n - 1, elements=st.floats(0.001, 0.05)))
     t = draw(st.floats(0.0, 100.0)) + np.concatenate([[0.0], np.cumsum(steps)])
     gravity = draw(st.tuples(*[st.floats(-1.0, 1.0)] * 3).filter(lambda u: np.linalg.norm(u) > 0.1))
     g = 9.81 * np.asarray(gravity) / np.linalg.norm(gravity)
-    shake = np.asarray(draw(st.lists(st.tuples(*[st.floats(-1.5, 1.5)] * 3), min_size=n, max_size=n)))
-    acc = np.column_stack([t, g + shake])
-    gyro = np.column_stack([t, np.asarray(draw(st.lists(st.tuples(*[st.floats(-10.0, 10.0)] * 3), min_size=n,
-                                                        max_size=n)))])
+    acc = np.column_stack([t, g + draw(arrays(np.float64, (n, 3), elements=st.floats(-1.5, 1.5)))])
+    gyro = np.column_stack([t, draw(arrays(np.float64, (n, 3), elements=st.floats(-10.0, 10.0)))])
     offset_s = -float(t[0] + draw(st.floats(-0.3, 0.3)))  # the truth's 0.5 s overlap the phone's (else it is dropped)
     extra = draw(st.booleans())
     given_as = draw(st.sampled_from(["folder", "folder/", *_tyrex.WALK_FILES]))
