@@ -18,6 +18,7 @@ import pytest
 from core import quaternion as quat
 from core.conventions import wrap_angle
 from core.pdr.attitude import AttitudeEKF
+from core.pdr.attitude_qekf import QuaternionEKF
 from core.recording import Recording, Stream
 from desktop.simulator import simulate_walk
 
@@ -59,7 +60,7 @@ def test_a_turn_inside_a_hole_is_taken_from_the_first_readings_after_it(seed):
     assert c["mag_reasons"].get("gate", 0) == 0 and c["heading_relocks"] == 0
 
 
-def _still(ekf: AttitudeEKF, t0_ns: int, n: int, dt_ns: int = 20_000_000) -> int:
+def _still(ekf: AttitudeEKF | QuaternionEKF, t0_ns: int, n: int, dt_ns: int = 20_000_000) -> int:
     """``n`` events of each stream of a still, level phone facing north (gyroscope, accelerometer, magnetometer)."""
     t = t0_ns
     for _ in range(n):
@@ -111,3 +112,52 @@ def test_a_magnetometer_alone_at_1_hz_after_the_other_streams_stop_still_updates
         outcomes.append(e.update_mag(t, 0.0, 20.0, -44.0).outcome.value)
     assert e.counters()["holes"] == 1
     assert outcomes.count("used") >= 4, outcomes
+
+
+# ---------------------------------------------------------------------------
+# the paper's quaternion EKF (core.pdr.attitude_qekf, the ablation's peer): the same growth, once
+
+def _qekf_growth_s(q_ekf: QuaternionEKF, P0: np.ndarray) -> np.ndarray:
+    """``P - P0`` in seconds of the no-gyroscope random walk: ``(P - P0) / (sigma^2 / 4 Xi Xi^T)``, element-wise
+    where that is not zero (the attitude did not change, so ``Xi(q)`` is the same)."""
+    w, x, y, z = q_ekf.q
+    xi = np.array([[-x, -y, -z], [w, -z, y], [z, w, -x], [-y, x, w]])
+    per_s = q_ekf.no_gyro_random_walk_rad_sqrt_s ** 2 * 0.25 * (xi @ xi.T)
+    big = np.abs(per_s) > 1e-6
+    return (q_ekf.P - P0)[big] / per_s[big]
+
+
+#: an accelerometer reading far from |g| (a jolt): rejected, so the covariance shows the growth alone
+_JOLT = (0.0, 0.0, 30.0)
+
+
+@pytest.mark.parametrize("acc_first", [False, True])
+def test_the_quaternion_ekf_grows_once_over_a_hole_whichever_stream_comes_first(acc_first):
+    # before the fix the accelerometer's event after a 4-s hole grew P over the hole (no gyroscope for 0.1 s) and
+    # the gyroscope's event then grew it again over the same 4 s: 8 s of growth
+    f = QuaternionEKF()
+    t = _still(f, 0, 101)
+    P0 = f.P.copy()
+    t_after = t - 20_000_000 + 4_000_000_000
+    if acc_first:
+        f.update_acc(t_after, *_JOLT)
+        f.predict(t_after, 0.0, 0.0, 0.0)
+    else:
+        f.predict(t_after, 0.0, 0.0, 0.0)
+        f.update_acc(t_after, *_JOLT)
+    assert f.acc_rejected
+    np.testing.assert_allclose(_qekf_growth_s(f, P0), 4.0, rtol=1e-9)
+
+
+def test_the_quaternion_ekf_grows_once_over_a_gyroscope_gap_while_the_accelerometer_runs_on():
+    # the gyroscope silent for 2 s, the accelerometer on at 50 Hz: before the fix its events grew P over the gap
+    # and the gyroscope's first event again over all of it (3.88 s); now once, but for the 0.1 s after the last
+    # gyroscope reading, in which another stream's events do not grow it (as in AttitudeEKF): 1.9 s
+    f = QuaternionEKF()
+    t = _still(f, 0, 101)
+    P0 = f.P.copy()
+    t_gyro = t - 20_000_000
+    for k in range(1, 100):
+        f.update_acc(t_gyro + k * 20_000_000, *_JOLT)
+    f.predict(t_gyro + 2_000_000_000, 0.0, 0.0, 0.0)
+    np.testing.assert_allclose(_qekf_growth_s(f, P0), 1.9, rtol=1e-9)

@@ -1,4 +1,5 @@
-"""Detection of the OxIOD and RIDI formats does not take the other formats' files (synthetic heads written here).
+"""Detection of the OxIOD, RIDI and Tyrex formats does not take the other formats' files (synthetic heads written
+here).
 
 OxIOD's files have no header: they are recognised by 16 numbers a line, the attitude ranges and Core Motion's
 unit gravity (:func:`core.importers.oxiod.looks_like`); RIDI's by its header (``time``, ``acce_*``, ``gyro_*``).
@@ -12,6 +13,7 @@ import pytest
 from core.importers import OXIOD, RIDI, _half_match, detect_format
 from core.importers import oxiod as _oxi
 from core.importers import ridi as _ridi
+from core.importers import tyrex as _tyrex
 from core.recording import MAGIC, RecordingError
 
 
@@ -46,12 +48,13 @@ OTHER_HEADS = {
 
 
 @pytest.mark.parametrize("fmt", sorted(OTHER_HEADS))
-def test_other_formats_heads_are_not_taken_for_oxiod_or_ridi(tmp_path, fmt):
+def test_other_formats_heads_are_not_taken_for_oxiod_ridi_or_tyrex(tmp_path, fmt):
     name, head = OTHER_HEADS[fmt]
     p = tmp_path / name
     p.write_text(head)
     assert detect_format(str(p)) == fmt
     assert not _oxi.looks_like(head) and not _oxi.looks_like_vicon(head) and not _ridi.looks_like_csv(head)
+    assert not _tyrex.looks_like(head)
     assert _half_match(str(p), head) is None
 
 

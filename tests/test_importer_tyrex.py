@@ -1,15 +1,24 @@
 """The Tyrex attitude benchmark's walk reader (core.importers.tyrex) on a tiny synthetic walk: a QTM MAT export
-(QTM's own header text) and the phone's text files."""
+(QTM's own header text) and the phone's text files; its detection (``pdr replay`` given the walk's folder or one of
+its files)."""
 
 import io
+import os
 
 import numpy as np
 import pytest
 import scipy.io as scipy_io
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
+from core.importers import TYREX, detect_format, load_recording
+from core.importers import tyrex as _tyrex
 from core.importers._common import POSI, TRUTH_BODY_ATTITUDE
 from core.importers.tyrex import read_tyrex
 from core.recording import RecordingError
+from desktop.cli import collect_recordings
+from test_bad_input_fuzz import FUZZ_EXAMPLES, _fresh
 
 RATE_HZ = 60.0
 
@@ -65,5 +74,108 @@ def test_a_bad_line_is_skipped_and_counted_and_a_missing_truth_is_one_line(tmp_p
     rec = read_tyrex(str(folder), warn=False)
     assert len(rec.streams["acc"].t_ns) == 400 and any("skipped 1 bad line" in r for r in rec.repairs)
     (tmp_path / "datasets" / "qualisys" / "Anna_Nexus5_NoDist_Swinging.mat").unlink()
-    with pytest.raises((RecordingError, OSError)):
+    with pytest.raises(RecordingError, match="no Qualisys truth for this Tyrex walk: .*qualisys.Anna_Nexus5_NoDist_"
+                                             "Swinging.mat is missing"):
         read_tyrex(str(folder), warn=False)
+
+
+# ---------------------------------------------------------------------------
+# detection: what a user points ``pdr replay`` at
+
+#: examples of the property test: a tenth of PDR_FUZZ_EXAMPLES (20 in CI), seeded unless a long fuzz run
+EXAMPLES = max(10, FUZZ_EXAMPLES // 10)
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    return str(tmp_path_factory.mktemp("tyrex"))
+
+
+@st.composite
+def tyrex_walks(draw):
+    """A walk's accelerometer and gyroscope rows (t s, x, y, z), its time offset, extra columns or not, and the
+    path a user gives (the folder, or one of its files)."""
+    n = draw(st.integers(3, 30))
+    steps = draw(arrays(np.float64, n - 1, elements=st.floats(0.001, 0.05)))
+    t = draw(st.floats(0.0, 100.0)) + np.concatenate([[0.0], np.cumsum(steps)])
+    gravity = draw(st.tuples(*[st.floats(-1.0, 1.0)] * 3).filter(lambda u: np.linalg.norm(u) > 0.1))
+    g = 9.81 * np.asarray(gravity) / np.linalg.norm(gravity)
+    acc = np.column_stack([t, g + draw(arrays(np.float64, (n, 3), elements=st.floats(-1.5, 1.5)))])
+    gyro = np.column_stack([t, draw(arrays(np.float64, (n, 3), elements=st.floats(-10.0, 10.0)))])
+    offset_s = -float(t[0] + draw(st.floats(-0.3, 0.3)))  # the truth's 0.5 s overlap the phone's (else it is dropped)
+    extra = draw(st.booleans())
+    given_as = draw(st.sampled_from(["folder", "folder/", *_tyrex.WALK_FILES]))
+    return acc, gyro, offset_s, extra, given_as
+
+
+def _write_walk(root: str, acc, gyro, offset_s: float, extra: bool, mag: bool = True) -> str:
+    folder = os.path.join(root, "datasets", "android", "Bo_Nexus5_Dist_FrontPocket")
+    os.makedirs(folder)
+    os.makedirs(os.path.join(root, "datasets", "qualisys"))
+    from pathlib import Path
+
+    _qtm_mat(Path(root) / "datasets" / "qualisys" / "Bo_Nexus5_Dist_FrontPocket.mat", 30, 0.2, lost=3)
+
+    def text(rows):
+        return "".join(" ".join(repr(float(x)) for x in r) + (" 3" if extra else "") + "\n" for r in rows)
+
+    with open(os.path.join(folder, "accelerometer.txt"), "w") as f:
+        f.write(text(acc))
+    with open(os.path.join(folder, "gyroscope-calibrated.txt"), "w") as f:
+        f.write(text(gyro))
+    if mag:
+        with open(os.path.join(folder, "magnetometer-calibrated.txt"), "w") as f:
+            f.write(text(np.column_stack([acc[:, 0], np.tile([20.0, 0.0, -40.0], (len(acc), 1))])))
+    with open(os.path.join(folder, "timeAlignment.txt"), "w") as f:
+        f.write(f"  {offset_s!r}\n")
+    with open(os.path.join(folder, "record.properties"), "w") as f:
+        f.write("[Device]\nModel = Nexus 5\n")
+    return folder
+
+
+@settings(max_examples=EXAMPLES, deadline=None, derandomize=FUZZ_EXAMPLES <= 200,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(walk=tyrex_walks())
+def test_a_walk_given_as_its_folder_or_one_of_its_files_is_detected_and_read_back(workdir, walk):
+    acc, gyro, offset_s, extra, given_as = walk
+    folder = _write_walk(_fresh(workdir), acc, gyro, offset_s, extra)
+    path = folder + "/" if given_as == "folder/" else folder if given_as == "folder" else os.path.join(folder, given_as)
+    assert detect_format(path) == TYREX
+    rec = load_recording(path, warn=False)
+    np.testing.assert_array_equal(rec.streams["acc"].t_ns, np.round(acc[:, 0] * 1e9).astype(np.int64))
+    np.testing.assert_array_equal(rec.streams["acc"].values, acc[:, 1:])  # written with repr: exact
+    np.testing.assert_array_equal(rec.streams["gyro"].values, gyro[:, 1:])
+    k = np.array([i for i in range(30) if i != 3])  # the truth on the phone's clock: Qualisys time - offset
+    np.testing.assert_array_equal(rec.streams[POSI].t_ns, np.round((k / RATE_HZ - offset_s) * 1e9).astype(np.int64))
+    assert rec.metadata["source_format"] == TYREX and rec.metadata["walk"] == "Bo_Nexus5_Dist_FrontPocket"
+
+
+def test_a_walk_without_its_truth_is_one_clear_line_and_its_truth_points_at_the_walk(tmp_path):
+    t = np.arange(20) * 0.005
+    acc = np.column_stack([t, np.tile([0.1, 0.2, 9.8], (20, 1))])
+    folder = _write_walk(str(tmp_path), acc, acc, -1.5, False, mag=False)
+    mat = tmp_path / "datasets" / "qualisys" / "Bo_Nexus5_Dist_FrontPocket.mat"
+    with pytest.raises(RecordingError, match="the Qualisys truth of the Tyrex walk Bo_Nexus5_Dist_FrontPocket: "
+                                             "replay its folder .*android.Bo_Nexus5_Dist_FrontPocket"):
+        detect_format(str(mat))
+    found, _ = collect_recordings([str(tmp_path)])  # the whole dataset: each walk once, not its truth too
+    assert found == [folder]
+    assert set(load_recording(os.path.join(folder, "gyroscope-calibrated.txt"), warn=False).streams) == {
+        "acc", "gyro", POSI, TRUTH_BODY_ATTITUDE}  # no magnetometer file: no mag stream
+    mat.unlink()
+    assert detect_format(folder) == TYREX  # the folder is still a Tyrex walk; reading it says what is missing
+    with pytest.raises(RecordingError, match="no Qualisys truth for this Tyrex walk: .*Bo_Nexus5_Dist_FrontPocket."
+                                             "mat is missing .*two folders above"):
+        load_recording(os.path.join(folder, "accelerometer.txt"), warn=False)
+    os.remove(os.path.join(folder, "timeAlignment.txt"))  # a needed file gone: not a Tyrex walk any more
+    with pytest.raises(RecordingError, match="unrecognised recording format"):
+        detect_format(folder)
+
+
+def test_other_space_separated_numbers_are_not_a_tyrex_accelerometer():
+    rows = "".join(f"{1_000_000_000_000 + i * 5_000_000} 1 0.1 0.2 9.8\n" for i in range(20))  # Brajdic & Harle
+    assert not _tyrex.looks_like(rows)
+    assert not _tyrex.looks_like("".join(f"{i * 0.005} 0.01 0.02 0.99\n" for i in range(20)))  # g, not m/s^2
+    assert not _tyrex.looks_like("".join(f"{1.0 - i * 0.005} 0.1 0.2 9.8\n" for i in range(20)))  # time goes back
+    assert not _tyrex.looks_like("".join(f"{i * 0.005},0.1,0.2,9.8\n" for i in range(20)))  # commas
+    assert _tyrex.looks_like("".join(f"{i * 0.005} 0.1 0.2 9.8\n" for i in range(20)))

@@ -46,6 +46,9 @@ Formats (name: input -> reader):
   folder holding one such pair -> :func:`read_oxiod`
 * ``ridi``: a RIDI processed table, ``data.csv`` or an ``.xlsx`` of the same columns (``time``, ``acce_x/y/z``,
   ``gyro_x/y/z`` in its header), Tango truth as ``posi``, or a folder holding one -> :func:`read_ridi`
+* ``tyrex``: a Tyrex attitude-benchmark walk, its folder ``datasets/android/<name>/`` or one of its text files
+  (``accelerometer.txt`` ...; recognised by the folder's files and the accelerometer's space-separated numbers),
+  with its Qualisys truth ``datasets/qualisys/<name>.mat`` as ``posi`` -> :func:`read_tyrex`
 
 The format is recognised by content (magic line, record tags, CSV headers,
 binary record layout, archive members), never by the file name alone.  Every reader raises
@@ -112,6 +115,7 @@ from core.importers import sensorlogger as _sl
 from core.importers import pyshoe as _ps
 from core.importers import ridi as _ridi
 from core.importers import trundle as _tw
+from core.importers import tyrex as _tyrex
 from core.importers import xio as _xio
 from core.importers import xsens as _xs
 from core.importers.matv5 import looks_like as _looks_like_mat
@@ -132,6 +136,7 @@ from core.importers.pyshoe import read_pyshoe
 from core.importers.trundle import read_trundle
 from core.importers.oxiod import read_oxiod
 from core.importers.ridi import read_ridi
+from core.importers.tyrex import read_tyrex
 from core.importers.xio import read_xio
 from core.importers.xsens import read_xsens
 
@@ -154,6 +159,7 @@ MATLAB_MOBILE = _mm.FORMAT
 MATLAB_MOBILE_CSV = _mm.CSV_FORMAT
 OXIOD = _oxi.FORMAT
 RIDI = _ridi.FORMAT
+TYREX = _tyrex.FORMAT
 
 #: format name -> what it is (for messages and the CLI's help)
 FORMATS = {
@@ -191,6 +197,9 @@ FORMATS = {
            "with its Vicon truth vi<K>.csv beside it (.csv or .gz), or a folder holding one pair",
     RIDI: "RIDI processed table: data.csv or an .xlsx of its columns ('time', 'acce_x/y/z', 'gyro_x/y/z', ... "
           "'pos_x/y/z' the Tango truth), or a folder holding one",
+    TYREX: "Tyrex attitude-benchmark walk: its folder datasets/android/<name>/ (accelerometer.txt, "
+           "gyroscope-calibrated.txt, timeAlignment.txt: 't x y z' lines) or one of its files, with its Qualisys "
+           "truth datasets/qualisys/<name>.mat",
 }
 
 
@@ -214,6 +223,7 @@ _SHORT = {
     MATLAB_MOBILE_CSV: "matlab-mobile-csv (MATLAB Mobile accelerometer CSV, Acceleration_Timestamp,X,Y,Z)",
     OXIOD: "oxiod (OxIOD syn imu<K>.csv with vi<K>.csv)",
     RIDI: "ridi (RIDI data.csv or .xlsx)",
+    TYREX: "tyrex (Tyrex attitude-benchmark walk folder with its Qualisys .mat)",
 }
 
 
@@ -329,11 +339,13 @@ def detect_format(path) -> str:
         with FileSet(path) as fs:
             fmt = _detect_fileset(fs)
         if fmt is None:
+            if _tyrex.looks_like_folder(path):
+                return TYREX
             inner = _folder_file(path)
             if inner is not None:
                 return detect_format(inner)
-            raise _unknown(path, "a folder without Sensor Logger, phyphox, Oxford step-counter, NGIMU, OxIOD or "
-                                 "RIDI files")
+            raise _unknown(path, "a folder without Sensor Logger, phyphox, Oxford step-counter, NGIMU, OxIOD, "
+                                 "RIDI or Tyrex files")
         return fmt
     try:
         head = head_bytes(path, 65536)
@@ -361,8 +373,14 @@ def detect_format(path) -> str:
             raise _unknown(path, "a zip archive without Sensor Logger, phyphox, Oxford step-counter or NGIMU CSV "
                                  "files")
         return fmt
+    if _tyrex.walk_folder(path) is not None:
+        return TYREX  # one of a Tyrex walk's files: the folder is the recording
     if not head.strip():
         raise _unknown(path, "empty file")
+    walk = _tyrex.walk_of_truth(path, head)
+    if walk is not None:
+        raise RecordingError(f"the Qualisys truth of the Tyrex walk {os.path.basename(walk)}: replay its folder "
+                             f"{walk}, which reads this file as its truth", path)
     if _bh.looks_like_binary(head):
         return BRAJDIC
     if _looks_like_mat(head):
@@ -413,6 +431,8 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
     path = _single_mat(path) or path  # a folder holding one MAT-file is read through it
     if fmt in (OXIOD, RIDI):
         path = _folder_file(path) or path  # and one holding one OxIOD pair or RIDI table through that
+    if fmt == TYREX:
+        return read_tyrex(_tyrex.walk_folder(path) or path, warn=warn, max_uncompressed_bytes=limit)
     if fmt == PDR_RECORDING:
         rec = read_recording(path, warn=warn, max_uncompressed_bytes=limit)  # gzip or not by content
         rec.metadata.setdefault("source_format", PDR_RECORDING)
@@ -432,6 +452,6 @@ def load_recording(path, *, warn: bool = True, platform: str | None = None,
 
 __all__ = ["FORMATS", "detect_format", "load_recording", "read_getsensordata", "read_sensorlogger",
            "read_phyphox", "read_msindoor", "read_brajdic", "read_oxford", "read_trundle", "read_xio", "read_xsens",
-           "read_pyshoe", "read_physicstoolbox", "read_accelcsv", "read_sensibility", "read_sensorlog", "read_oxiod", "read_ridi", "read_matlabmobile", "read_matlabmobile_csv", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
+           "read_pyshoe", "read_physicstoolbox", "read_accelcsv", "read_sensibility", "read_sensorlog", "read_oxiod", "read_ridi", "read_tyrex", "read_matlabmobile", "read_matlabmobile_csv", "PDR_RECORDING", "GETSENSORDATA", "SENSORLOGGER", "PHYPHOX",
            "MSINDOOR", "BRAJDIC", "OXFORD", "TRUNDLE", "XIO", "XSENS", "PYSHOE", "PHYSICS_TOOLBOX",
-           "ACCEL_CSV", "SENSIBILITY", "SENSORLOG", "MATLAB_MOBILE", "MATLAB_MOBILE_CSV", "OXIOD", "RIDI"]
+           "ACCEL_CSV", "SENSIBILITY", "SENSORLOG", "MATLAB_MOBILE", "MATLAB_MOBILE_CSV", "OXIOD", "RIDI", "TYREX"]

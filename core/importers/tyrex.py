@@ -27,8 +27,22 @@ is fixed in, whose axes are not promised to be the phone's: its rotation is ``tr
 (:data:`core.importers._common.TRUTH_BODY_ATTITUDE`, ``w, x, y, z``, body -> the frame of ``posi``), the positions
 ``posi`` (``east_m, north_m, up_m`` = the room's x, y, z in m).
 
-Streams: ``acc``, ``gyro``, ``mag`` where present, ``posi`` and ``truth_body_attitude``.  Not registered in
-:func:`core.importers.detect_format` (a walk is two files in two folders): call :func:`read_tyrex`.
+Streams: ``acc``, ``gyro``, ``mag`` where present, ``posi`` and ``truth_body_attitude``.
+
+Detection (:func:`core.importers.detect_format`)
+================================================
+A walk is what a user points at: its folder ``datasets/android/<name>/``, or one of its files
+(``accelerometer.txt``, ``gyroscope-calibrated.txt``, ``magnetometer-calibrated.txt``, ``timeAlignment.txt``):
+either reads the folder, and the folder finds its truth ``../../qualisys/<name>.mat``.  The files have no header,
+so the folder is tested by its content (:func:`looks_like_folder`): ``accelerometer.txt``,
+``gyroscope-calibrated.txt`` and ``timeAlignment.txt`` are there, and the accelerometer's first lines are
+(:func:`looks_like`) at least 3, and nine in ten, lines of 4-8 numbers separated by spaces (the first line too),
+times in s from the start (0 to a day, not decreasing), a median ``|a|`` of 5-15 m/s^2 (gravity included).  No
+other format read here has such lines (Brajdic & Harle's text has the time in ns and a type; the others separate
+with commas, tabs or ``;``).  A missing truth is a :class:`RecordingError` saying where it was looked for (the
+dataset's layout).  The ``.mat`` itself (QTM's MAT export, its header text ``QTM_ver``) is refused pointing at
+the walk folder when that is there (:func:`walk_of_truth`), so a folder of the whole dataset replays each walk
+once.  Zip archives and gzip files are not read.
 """
 
 from __future__ import annotations
@@ -41,7 +55,8 @@ import numpy as np
 from core import quaternion as quat
 from core.conventions import ACC, GYRO, MAG
 from core.importers._common import (
-    POSI, TRUTH_BODY_ATTITUDE, acceleration_in_m_s2, feed_lines, finish, first_bad_time, open_text,
+    POSI, TRUTH_BODY_ATTITUDE, acceleration_in_m_s2, feed_lines, finish, first_bad_time, head_bytes, head_lines,
+    open_text,
 )
 from core.importers.matv5 import read_mat
 from core.recording import (
@@ -52,6 +67,78 @@ FORMAT = "tyrex"
 POSI_COLUMNS = ["east_m", "north_m", "up_m"]
 FILES = {ACC: "accelerometer.txt", GYRO: "gyroscope-calibrated.txt", MAG: "magnetometer-calibrated.txt"}
 ALIGNMENT_FILE = "timeAlignment.txt"
+
+
+#: the walk's files a user may point at (each reads its folder)
+WALK_FILES = (*FILES.values(), ALIGNMENT_FILE)
+#: files a walk folder must hold (the magnetometer is optional)
+NEEDED = (FILES[ACC], FILES[GYRO], ALIGNMENT_FILE)
+#: the text at the start of a QTM MAT export's header
+QTM_MAGIC = b"QTM_ver"
+
+
+def looks_like(head: str) -> bool:
+    """True if the first lines of a text are ``accelerometer.txt`` lines of a Tyrex walk (module doc, *Detection*)."""
+    lines = head_lines(head)
+    rows = []
+    for i, ln in enumerate(lines):
+        f = ln.split()
+        try:
+            if not 4 <= len(f) <= 8 or "," in ln or ";" in ln:
+                raise ValueError
+            rows.append([float(x) for x in f[:4]])
+        except ValueError:
+            if i == 0:
+                return False
+    if len(rows) < max(3, 0.9 * len(lines)):
+        return False
+    v = np.asarray(rows, dtype=float)
+    if not np.all(np.isfinite(v)):
+        return False
+    t = v[:, 0]
+    norm = float(np.median(np.linalg.norm(v[:, 1:4], axis=1)))
+    return bool(np.all((t >= 0.0) & (t < 86400.0)) and np.all(np.diff(t) >= 0.0) and 5.0 <= norm <= 15.0)
+
+
+def looks_like_folder(path: str) -> bool:
+    """True if ``path`` is a Tyrex walk folder: its needed files there, the accelerometer's content right."""
+    path = str(path)
+    if not os.path.isdir(path) or not all(os.path.isfile(os.path.join(path, n)) for n in NEEDED):
+        return False
+    try:
+        head = head_bytes(os.path.join(path, FILES[ACC]), 65536)
+    except OSError:
+        return False
+    return looks_like(head.decode("latin-1"))
+
+
+def walk_folder(path: str) -> str | None:
+    """The walk folder ``path`` stands for -- itself, or the folder of one of its :data:`WALK_FILES` -- when that
+    is a Tyrex walk (:func:`looks_like_folder`), else None."""
+    path = str(path).rstrip("/") or "/"
+    if os.path.isfile(path):
+        if os.path.basename(path) not in WALK_FILES:
+            return None
+        path = os.path.dirname(path) or "."
+    return path if looks_like_folder(path) else None
+
+
+def truth_path(folder: str) -> str:
+    """Where a walk folder's Qualisys truth is in the dataset's layout: ``../../qualisys/<name>.mat``."""
+    folder = str(folder).rstrip("/")
+    return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(folder))), "qualisys",
+                        os.path.basename(os.path.abspath(folder)) + ".mat")
+
+
+def walk_of_truth(path: str, head: bytes) -> str | None:
+    """The walk folder ``../../android/<name>/`` of a Qualisys export ``qualisys/<name>.mat`` when it is there."""
+    if not head.startswith(QTM_MAGIC):
+        return None
+    stem = os.path.basename(str(path))
+    if not stem.lower().endswith(".mat"):
+        return None
+    folder = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(str(path)))), "android", stem[:-4])
+    return folder if looks_like_folder(folder) else None
 
 
 def _table(path: str, repairs: list[str], limit: int | None) -> np.ndarray:
@@ -128,9 +215,15 @@ def read_tyrex(folder: str, *, mat_path: str | None = None, warn: bool = True,
                max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
     """Read one Tyrex Android walk folder and its Qualisys truth (module doc)."""
     folder = str(folder).rstrip("/")
-    name = os.path.basename(folder)
+    name = os.path.basename(os.path.abspath(folder))
     if mat_path is None:
-        mat_path = os.path.join(os.path.dirname(os.path.dirname(folder)), "qualisys", name + ".mat")
+        mat_path = truth_path(folder)
+        if not os.path.isfile(mat_path):
+            raise RecordingError(f"no Qualisys truth for this Tyrex walk: {mat_path} is missing (the dataset keeps "
+                                 "a walk's motion capture in qualisys/<walk>.mat, two folders above the walk's "
+                                 "folder android/<walk>/)", folder)
+    elif not os.path.isfile(mat_path):
+        raise RecordingError("cannot open the Qualisys truth: no such file", str(mat_path))
     repairs: list[str] = []
     notes: dict = {}
     streams = {}

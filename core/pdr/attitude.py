@@ -213,7 +213,9 @@ have not (it grew twice before); the events within 0.1 s of the last gyroscope r
 two gyroscope readings), so up to 0.1 s of such a gap is not grown (a 2-s gap: about 5 % less than the random walk
 over it, where the double count made 94 % more).  Gaps one after another (a magnetometer alone at 1 Hz) are one
 hole: the intervals opened after the first are kept.  :attr:`AttitudeEKF.counters` counts the holes.  No hole, no
-change.
+change.  The growth is :class:`AttitudeFilterBase`'s, shared with the paper's
+:class:`core.pdr.attitude_qekf.QuaternionEKF` (which grew twice too: a hole met first by the accelerometer, and a gap
+of the gyroscope alone; it keeps no intervals to drop).
 
 Replays (issue #27): ``AttitudeEKF(keep_history=True)`` keeps what the RTS
 smoother needs (:mod:`core.pdr.heading_smoother`, ``Pipeline(heading_smoother=...)``);
@@ -699,7 +701,7 @@ class AttitudeFilterBase:
     """What both attitude filters share: the start from TRIAD, the field references, time keeping, ``run``.
 
     A subclass provides ``_param(name)`` (its setting ``mag_wait_s``,
-    ``reference_update_s``, ``initial_yaw_rad``, ``use_magnetometer``),
+    ``reference_update_s``, ``initial_yaw_rad``, ``use_magnetometer``, ``max_gyro_gap_s``),
     ``_random_walk(dt)`` (covariance growth without a gyroscope),
     ``_set_field_reference()`` (its reference field from ``field_uT`` and
     ``dip_rad``) and may override ``_start_heading(q, from_mag)`` and
@@ -800,6 +802,29 @@ class AttitudeFilterBase:
             if dt > 0:
                 self._random_walk(dt)
         state.t_ns = max(state.t_ns, t_ns)
+
+    def _grow_over_hole(self, t_ns: int) -> bool:
+        """A hole in the recording before ``t_ns`` -- every stream silent for longer than ``max_gyro_gap_s`` --
+        grows the uncertainty once over the real elapsed time (``_random_walk``) and moves the state's time to
+        ``t_ns``, whichever stream's event comes first after it (the others then find nothing left to grow).
+        True if it was a hole (see the module docstring)."""
+        state = self._state
+        if state.t_ns is None or (t_ns - state.t_ns) * 1e-9 <= self._param("max_gyro_gap_s"):
+            return False
+        self._random_walk((t_ns - state.t_ns) * 1e-9)
+        state.t_ns = t_ns
+        return True
+
+    def _grow_over_gyro_gap(self, t_ns: int) -> None:
+        """A gyroscope event after a gap of its own (longer than ``max_gyro_gap_s``): no stale rate is integrated,
+        the uncertainty grows over the time not yet propagated -- the other streams' events in the gap (or a hole)
+        grew it up to the state's time already -- so once over the real elapsed time, but for the events within
+        0.1 s of the last gyroscope reading, which moved the state's time without growing it
+        (:meth:`_propagate_without_gyro`)."""
+        rest = (t_ns - self._state.t_ns) * 1e-9
+        if rest > 0.0:
+            self._random_walk(rest)
+        self._state.t_ns = t_ns
 
     def run(self, recording) -> tuple[np.ndarray, np.ndarray]:
         """Attitude after every event of a :class:`core.recording.Recording` (gyro, acc, mag in time order).
@@ -1112,14 +1137,8 @@ class AttitudeEKF(AttitudeFilterBase, kalman.StateSnapshots):
         dt = (t_ns - t_prev) * 1e-9
         if dt <= 0.0:
             return
-        if dt > s.max_gyro_gap_s:  # a gap: do not integrate a stale rate over it
-            # the uncertainty grows over the time not yet propagated (the accelerometer and magnetometer events in
-            # the gap, or a hole, grew it up to state.t_ns already): once over the real elapsed time, but for the
-            # events within 0.1 s of the last gyroscope reading, which moved state.t_ns without growing it
-            rest = (t_ns - state.t_ns) * 1e-9
-            if rest > 0.0:
-                self._random_walk(rest)
-            state.t_ns = t_ns
+        if dt > s.max_gyro_gap_s:  # a gap: do not integrate a stale rate over it, grow the uncertainty once
+            self._grow_over_gyro_gap(t_ns)
             return
         b = state.b
         w = ((wx - b[0]) * dt, (wy - b[1]) * dt, (wz - b[2]) * dt)
@@ -1172,11 +1191,9 @@ class AttitudeEKF(AttitudeFilterBase, kalman.StateSnapshots):
         state = self._state
         if state.t_ns is None:
             return
-        if (t_ns - state.t_ns) * 1e-9 <= self.settings.max_gyro_gap_s:
+        if not self._grow_over_hole(t_ns):
             state.hole_open = False
             return
-        self._random_walk((t_ns - state.t_ns) * 1e-9)
-        state.t_ns = t_ns
         if state.hole_open:
             return
         state.hole_open = True

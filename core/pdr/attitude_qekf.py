@@ -177,6 +177,13 @@ class QuaternionEKF(AttitudeFilterBase):
         Thresholds of the stillness test (m/s^2, rad/s, rad/s).
     no_gyro_random_walk_rad_sqrt_s : float
         Attitude random walk assumed between measurements when no gyroscope event has come for 0.1 s.
+    max_gyro_gap_s : float
+        A gyroscope gap longer than this (s) is not integrated, only the uncertainty grows; every stream silent
+        this long is a hole in the recording.  Either grows the covariance once over the real elapsed time,
+        whichever stream's event comes first after it (the growth shared with
+        :class:`core.pdr.attitude.AttitudeEKF`: :meth:`AttitudeFilterBase._grow_over_hole`,
+        :meth:`AttitudeFilterBase._grow_over_gyro_gap`; before, an accelerometer event after a hole grew it over
+        the hole and the gyroscope's event again).  This filter keeps no intervals: nothing else is dropped.
     """
 
     def __init__(self, *, gyro_noise_rad_sqrt_s: float = 0.015, acc_noise_base: float = 0.05, k_a1: float = 0.02,
@@ -187,7 +194,7 @@ class QuaternionEKF(AttitudeFilterBase):
                  declination_rad: float = 0.0, initial_yaw_rad: float = math.pi / 2,
                  use_magnetometer: bool = True, mag_wait_s: float = 1.0, still_window_s: float = 1.0,
                  still_acc_sd_m_s2: float = 0.1, still_gyro_sd_rad_s: float = 0.02, max_gyro_bias_rad_s: float = 0.05,
-                 no_gyro_random_walk_rad_sqrt_s: float = 0.5):
+                 no_gyro_random_walk_rad_sqrt_s: float = 0.5, max_gyro_gap_s: float = 0.5):
         self.gyro_noise_rad_sqrt_s = gyro_noise_rad_sqrt_s
         self.acc_noise_base = acc_noise_base
         self.k_a1, self.k_a2 = k_a1, k_a2
@@ -209,6 +216,7 @@ class QuaternionEKF(AttitudeFilterBase):
         self.still_gyro_sd_rad_s = still_gyro_sd_rad_s
         self.max_gyro_bias_rad_s = max_gyro_bias_rad_s
         self.no_gyro_random_walk_rad_sqrt_s = no_gyro_random_walk_rad_sqrt_s
+        self.max_gyro_gap_s = max_gyro_gap_s
         self.reset()
 
     def reset(self) -> None:
@@ -267,14 +275,14 @@ class QuaternionEKF(AttitudeFilterBase):
         if not self._state.initialized:
             self._state.t_gyro_ns = t_ns
             return
+        self._grow_over_hole(t_ns)
         t_prev = self._state.t_gyro_ns if self._state.t_gyro_ns is not None else self._state.t_ns
         self._state.t_gyro_ns = t_ns
         dt = (t_ns - t_prev) * 1e-9
         if dt <= 0.0:
             return
-        if dt > 0.5:  # a gap: do not integrate a stale rate over it, only grow the uncertainty
-            self._random_walk(dt)
-            self._state.t_ns = t_ns
+        if dt > self.max_gyro_gap_s:  # a gap: do not integrate a stale rate over it, grow the uncertainty once
+            self._grow_over_gyro_gap(t_ns)
             return
         F = transition_matrix(wx, wy, wz, dt)
         q = F @ np.array(self._state.q)
@@ -331,6 +339,7 @@ class QuaternionEKF(AttitudeFilterBase):
         if not self._state.initialized:
             self._try_initialize(t_ns)
             return
+        self._grow_over_hole(t_ns)
         self._propagate_without_gyro(t_ns)
         na = math.sqrt(ax * ax + ay * ay + az * az)
         var = self._acc_var.update(t_ns, na)
@@ -363,6 +372,7 @@ class QuaternionEKF(AttitudeFilterBase):
         if not self._state.initialized:
             self._try_initialize(t_ns)
             return
+        self._grow_over_hole(t_ns)
         self._propagate_without_gyro(t_ns)
         var = self._mag_var.update(t_ns, nm)
         dev = abs(nm - self._state.field_uT)
