@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from core import __version__
+from core.importers import FORMATS as _IMPORT_FORMATS
 from core.recording import Recording, RecordingError, read_recording, write_recording
 from core.pdr.heading_smoother import HEADING_SMOOTHERS
 from desktop.engine import ENGINES, run_pipeline
@@ -1541,15 +1542,18 @@ def make_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("replay", help="run the pipeline on recordings and print a summary",
-                       description="Run the PDR pipeline on a recording (pdr-recording, GetSensorData, Sensor Logger "
-                                   "or phyphox; detected from the content) and print a summary, with the error "
+                       description="Run the PDR pipeline on a recording (pdr-recording, GetSensorData, Sensor Logger, "
+                                   "phyphox or one of the research formats listed below; detected from the content) "
+                                   "and print a summary, with the error "
                                    "against the ground truth the recording carries (landmarks, simulator truth, "
                                    "GPS). Without RECORDING, replays the bundled simulated demo walk (a closed "
                                    "loop). With several recordings or a folder of them, replays them all on all "
                                    "cores and prints one table (exports per recording with --out-dir).",
                        epilog="Outputs are checked before the run: one that cannot be written exits 2. The user "
                               "profile of `pdr calibrate` (the app's, or --profile) sets the stride factor and "
-                              "height unless --no-profile, --stride-c, --stride-model or --height say otherwise.")
+                              "height unless --no-profile, --stride-c, --stride-model or --height say otherwise. "
+                              "Formats read: " + ", ".join(sorted(_IMPORT_FORMATS)) + " (pdr info FILE says which "
+                              "one a file is).")
     r.add_argument("recording", nargs="*", help="recording files or folders; a folder that is no recording itself "
                    "is searched for recordings (default: the bundled demo walk)")
     r.add_argument("--csv", metavar="PATH", help="write the track as CSV, one row per step (local metres, and "

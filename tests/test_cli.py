@@ -101,6 +101,10 @@ def test_help_explains_every_option(capsys):
                 "--aid", "--detector", "--foot-device", "--waist-device", "--gyro-delay-ms", "--out-dir", "--export",
                 "--jobs", "--no-profile"):
         assert opt in r.stdout
+    from core.importers import FORMATS
+    flat = " ".join(r.stdout.split()).replace("- ", "-")  # argparse wraps at a hyphen
+    missing = [name for name in FORMATS if name not in flat]
+    assert not missing, missing  # every format replay detects is named (the help named four of twenty)
 
 
 def test_simulate_then_replay_round_trip(tmp_path, capsys):
