@@ -155,6 +155,14 @@ issue #25)
     The walker was chosen by name before any number, as the one in the middle of the sorted three.  Not
     copied: the hand-held carries (Texting, Phoning, AR), running, the iPhone 4S / 5 recordings (another file
     layout) and ``Jakob_Nexus5_Dist_Swinging_old`` (a superseded take).  A Tyrex walk this does not name is report.
+    Declared 2026-12-07 (a ninth search, h14/datahunt), **before any number was seen on them** (only the files' names,
+    sizes and sha256 and the Qualisys files' header dates were read, to check the copy and that no walk is another's
+    double): the same repository's **iPhone 4S and iPhone 5** walks of the same three carries (``datasets/ios/``, 36
+    walks, ``<walker>_<iPhone4S|iPhone5>_<Dist|NoDist>_<carry>``; the folder ``Jakob_iPhone4S_NoDist_Backpocket`` is
+    named ``..._BackPocket`` as its ``.mat``).  Separate recordings (their Qualisys exports are of other days than the
+    Nexus 5 walks').  No new walker: the same three, so each walk goes to its walker's split -- **Jakob's 12 tuning**,
+    Guillaume's and Thibaud's 24 report.  Honest caveat: the tuning pocket walks are still one walker's (now on three
+    phones).
 
 A recording the declarations do not name (a dataset, an IPIN route or a repository not listed here)
 has never been tuned on: it counts as **report** (issue #29), and :func:`declared` says whether it was
@@ -238,10 +246,11 @@ RIDI_DECLARED_SEQUENCES = RIDI_TUNING_SEQUENCES | frozenset({
 TYREX_TRUTH_DATASET = "tyrex_truth_walks"
 #: Tyrex walkers declared tuning, 2026-12-07 before any number was seen (their declared walks are tuning)
 TYREX_TUNING_WALKERS = frozenset({"Jakob"})
-#: the Tyrex walks the declaration names (both splits): ``<walker>_Nexus5_<Dist|NoDist>_<carry>``
+#: the Tyrex walks the declaration names (both splits): ``<walker>_<Nexus5|iPhone4S|iPhone5>_<Dist|NoDist>_<carry>``
 TYREX_DECLARED_SEQUENCES = frozenset(
-    f"{w}_Nexus5_{d}_{c}" for w in ("Guillaume", "Jakob", "Thibaud") for d in ("Dist", "NoDist")
-    for c in ("FrontPocket", "BackPocket", "Swinging"))
+    f"{w}_{phone}_{d}_{c}" for w in ("Guillaume", "Jakob", "Thibaud")
+    for phone in ("Nexus5", "iPhone4S", "iPhone5")  # the iPhones declared later the same day (the docstring)
+    for d in ("Dist", "NoDist") for c in ("FrontPocket", "BackPocket", "Swinging"))
 
 
 def tyrex_split(sequence: str) -> str:

@@ -9,8 +9,8 @@ user gives (as ``real_walks --extra``), e.g. ``/work/extra_data2`` (its REBUILD.
 * RIDI tables ``<owner>__<repo>/**/<name>_data_with_errors.xlsx`` or ``<name>/processed/data.csv`` (Android, Google
   Tango truth, the placement the name's second word: leg = trouser pocket, bag, body, handheld;
   :mod:`core.importers.ridi`), and
-* Tyrex attitude-benchmark walks ``<owner>__<repo>/datasets/android/<name>/`` + ``datasets/qualisys/<name>.mat``
-  (Nexus 5, Qualisys truth in a room of about 5 x 5 m; FrontPocket / BackPocket = trouser pocket, Swinging = hand
+* Tyrex attitude-benchmark walks ``<owner>__<repo>/datasets/{android,ios}/<name>/`` + ``qualisys/<name>.mat``
+  (Nexus 5, iPhone 4S and 5, Qualisys truth in a room of about 5 x 5 m; FrontPocket / BackPocket = trouser pocket, Swinging = hand
   swinging; :mod:`core.importers.tyrex`; the handler's rotation fitted to the phone as OxIOD's).
 
 Without the folder the benchmark says "not available" and writes nothing (CI has no such folder).
@@ -142,14 +142,17 @@ def truth_walks(root: Path | None) -> list[TruthWalk]:
         repo_dir = table.relative_to(root).parts[0]
         out.append(TruthWalk(f"ridi_{seq}", table, RIDI_TRUTH_DATASET, repo_dir.replace("__", "/", 1), placement,
                              split_of(RIDI_TRUTH_DATASET, {"sequence": seq})))
-    for align in root.glob("*/datasets/android/*/timeAlignment.txt"):
+    aligns = [*root.glob("*/datasets/android/*/timeAlignment.txt"), *root.glob("*/datasets/ios/*/timeAlignment.txt")]
+    for align in aligns:
         folder = align.parent
-        carry = folder.name.split("_")[-1]
-        if carry not in TYREX_PLACEMENTS or not (folder.parents[1] / "qualisys" / f"{folder.name}.mat").is_file():
+        # the walk is named by its .mat (``Jakob_iPhone4S_NoDist_Backpocket`` has ``..._BackPocket.mat``)
+        mats = {m.stem.lower(): m.stem for m in (folder.parents[1] / "qualisys").glob("*.mat")}
+        name = mats.get(folder.name.lower())
+        if name is None or name.split("_")[-1] not in TYREX_PLACEMENTS:
             continue
         repo_dir = folder.relative_to(root).parts[0]
-        out.append(TruthWalk(f"tyrex_{folder.name}", folder, TYREX_TRUTH_DATASET, repo_dir.replace("__", "/", 1),
-                             TYREX_PLACEMENTS[carry], split_of(TYREX_TRUTH_DATASET, {"sequence": folder.name})))
+        out.append(TruthWalk(f"tyrex_{name}", folder, TYREX_TRUTH_DATASET, repo_dir.replace("__", "/", 1),
+                             TYREX_PLACEMENTS[name.split("_")[-1]], split_of(TYREX_TRUTH_DATASET, {"sequence": name})))
     return sorted(out, key=lambda w: w.name)
 
 

@@ -179,3 +179,24 @@ def test_other_space_separated_numbers_are_not_a_tyrex_accelerometer():
     assert not _tyrex.looks_like("".join(f"{1.0 - i * 0.005} 0.1 0.2 9.8\n" for i in range(20)))  # time goes back
     assert not _tyrex.looks_like("".join(f"{i * 0.005},0.1,0.2,9.8\n" for i in range(20)))  # commas
     assert _tyrex.looks_like("".join(f"{i * 0.005} 0.1 0.2 9.8\n" for i in range(20)))
+
+
+def test_an_iphone_walk_is_read_in_g_with_the_android_sign_on_the_boot_clock_and_its_mat_found_by_any_case(tmp_path):
+    folder = tmp_path / "datasets" / "ios" / "Anna_iPhone5_NoDist_Backpocket"  # the repository's one odd spelling
+    folder.mkdir(parents=True)
+    (tmp_path / "datasets" / "qualisys").mkdir()
+    _qtm_mat(tmp_path / "datasets" / "qualisys" / "Anna_iPhone5_NoDist_BackPocket.mat", 120, 0.5, lost=7)
+    t = 1000.5 + np.arange(400) / 100.0
+    (folder / "accelerometer.txt").write_text("\n".join(f"{x:.4f} 0.0100 -0.0200 -1.0000" for x in t) + "\n")
+    (folder / "gyroscope.txt").write_text("\n".join(f"{x:.4f} 0.1 0 0.5" for x in t) + "\n")
+    (folder / "magnetometer-calibrated.txt").write_text("\n".join(f"{x:.4f} -28.5 -21.7 14.8 2" for x in t[::4]))
+    (folder / "timeAlignment.txt").write_text("  -2.0000000e+00\n")
+    (folder / "description.txt").write_text("[Time]\nBootTime = 1000.0")
+    rec = read_tyrex(str(folder), warn=False)
+    acc = rec.streams["acc"]
+    np.testing.assert_allclose(acc.values[0], [-0.0980665, 0.196133, 9.80665], atol=1e-12)  # g, negated
+    np.testing.assert_array_equal(acc.t_ns[:2], [500_000_000, 510_000_000])  # minus BootTime
+    np.testing.assert_allclose(rec.streams["gyro"].values[0], [0.1, 0, 0.5])
+    assert len(rec.streams["mag"].t_ns) == 100 and rec.device["platform"] == "ios"
+    k = np.array([i for i in range(120) if i != 7])
+    np.testing.assert_array_equal(rec.streams[POSI].t_ns, np.round((k / RATE_HZ + 2.0) * 1e9).astype(np.int64))

@@ -60,9 +60,22 @@ def test_walks_are_found_and_split_as_declared(tmp_path):
     err.mkdir(parents=True)
     for n in ("dan_leg1", "hao_leg2"):
         (err / f"{n}_data_with_errors.xlsx").write_text("")
+    ds = tmp_path / "t__b" / "datasets"
+    for folder in ("android/Jakob_Nexus5_Dist_Swinging", "ios/Jakob_iPhone4S_NoDist_Backpocket",
+                   "ios/Thibaud_iPhone5_Dist_FrontPocket", "ios/Jakob_iPhone5_Dist_Texting"):
+        (ds / folder).mkdir(parents=True)
+        (ds / folder / "timeAlignment.txt").write_text("0")
+    (ds / "qualisys").mkdir()
+    for mat in ("Jakob_Nexus5_Dist_Swinging", "Jakob_iPhone4S_NoDist_BackPocket", "Thibaud_iPhone5_Dist_FrontPocket",
+                "Jakob_iPhone5_Dist_Texting"):
+        (ds / "qualisys" / f"{mat}.mat").write_text("")
     walks = {w.name: (w.placement, w.split, w.repository) for w in TW.truth_walks(tmp_path)}
     assert walks == {"oxiod_pocket_data1_seq5": ("pocket", "tuning", "o/r"), "ridi_dan_leg1": ("leg", "tuning", "w/p"),
-                     "ridi_hao_leg2": ("leg", "report", "w/p")}
+                     "ridi_hao_leg2": ("leg", "report", "w/p"),
+                     "tyrex_Jakob_Nexus5_Dist_Swinging": ("swinging", "tuning", "t/b"),
+                     # an iPhone folder named as its .mat whatever the case; a walker's iPhone walks in his split
+                     "tyrex_Jakob_iPhone4S_NoDist_BackPocket": ("backpocket", "tuning", "t/b"),
+                     "tyrex_Thibaud_iPhone5_Dist_FrontPocket": ("pocket", "report", "t/b")}
 
 
 def test_a_failed_walk_counts_in_every_median_never_dropped():

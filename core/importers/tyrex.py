@@ -1,5 +1,6 @@
-"""Reader for an Android walk of the Tyrex attitude benchmark with its Qualisys truth (Michel, Genevès, Fourati &
-Layaïda, "On attitude estimation with smartphones", PerCom 2017; ``tyrex-team/benchmarks-attitude-smartphones``).
+"""Reader for an Android or iPhone walk of the Tyrex attitude benchmark with its Qualisys truth (Michel, Genevès,
+Fourati & Layaïda, "On attitude estimation with smartphones", PerCom 2017;
+``tyrex-team/benchmarks-attitude-smartphones``).
 
 Format
 ======
@@ -16,6 +17,19 @@ the recording), no header::
 
 Extra columns on a line are ignored (the benchmark drops them too); a line with fewer than four numbers is a bad
 line (skipped and counted, or past :func:`core.recording.bad_lines_tolerated` a :class:`RecordingError`).
+
+An iPhone walk (``datasets/ios/<name>/``, ``Jakob_iPhone5_NoDist_FrontPocket``) is told by its ``description.txt``
+and differs as the benchmark's ``loadiOSDataset.m`` reads it::
+
+    accelerometer.txt              t, x, y, z   g, CoreMotion's raw accelerometer: the inertial force, so the values
+                                   are multiplied by -9.80665 (the Android sign and unit, gravity included)
+    gyroscope.txt                  t, x, y, z   rad/s, CoreMotion's raw gyroscope
+    magnetometer-calibrated.txt    t, x, y, z, accuracy   uT (optional)
+    description.txt                ``[Time]`` ``BootTime = <s>``: the times above minus it are the phone's time
+                                   that ``timeAlignment.txt`` aligns
+
+The ``.mat`` is found by the folder's name without regard to case (the repository's folder
+``Jakob_iPhone4S_NoDist_Backpocket`` has ``Jakob_iPhone4S_NoDist_BackPocket.mat``).
 
 The ``.mat`` is Qualisys Track Manager's MAT export (level 5 with QTM's own header text; read with
 :mod:`core.importers.matv5`): one structure with ``Frames``, ``FrameRate`` (Hz) and ``RigidBodies``, whose first
@@ -53,7 +67,7 @@ import warnings
 import numpy as np
 
 from core import quaternion as quat
-from core.conventions import ACC, GYRO, MAG
+from core.conventions import ACC, GYRO, MAG, STANDARD_GRAVITY_M_S2
 from core.importers._common import (
     POSI, TRUTH_BODY_ATTITUDE, acceleration_in_m_s2, feed_lines, finish, first_bad_time, head_bytes, head_lines,
     open_text,
@@ -66,6 +80,9 @@ from core.recording import (
 FORMAT = "tyrex"
 POSI_COLUMNS = ["east_m", "north_m", "up_m"]
 FILES = {ACC: "accelerometer.txt", GYRO: "gyroscope-calibrated.txt", MAG: "magnetometer-calibrated.txt"}
+#: an iPhone walk's files (module doc)
+IOS_FILES = {ACC: "accelerometer.txt", GYRO: "gyroscope.txt", MAG: "magnetometer-calibrated.txt"}
+IOS_DESCRIPTION_FILE = "description.txt"
 ALIGNMENT_FILE = "timeAlignment.txt"
 
 
@@ -124,10 +141,18 @@ def walk_folder(path: str) -> str | None:
 
 
 def truth_path(folder: str) -> str:
-    """Where a walk folder's Qualisys truth is in the dataset's layout: ``../../qualisys/<name>.mat``."""
-    folder = str(folder).rstrip("/")
-    return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(folder))), "qualisys",
-                        os.path.basename(os.path.abspath(folder)) + ".mat")
+    """Where a walk folder's Qualisys truth is in the dataset's layout: ``../../qualisys/<name>.mat``, the name
+    matched without regard to case where the exact one is missing (module doc)."""
+    folder = os.path.abspath(str(folder).rstrip("/"))
+    name = os.path.basename(folder)
+    qdir = os.path.join(os.path.dirname(os.path.dirname(folder)), "qualisys")
+    exact = os.path.join(qdir, name + ".mat")
+    if os.path.isfile(exact) or not os.path.isdir(qdir):
+        return exact
+    for f in sorted(os.listdir(qdir)):
+        if f.lower() == name.lower() + ".mat":
+            return os.path.join(qdir, f)
+    return exact
 
 
 def walk_of_truth(path: str, head: bytes) -> str | None:
@@ -183,6 +208,22 @@ def _alignment_s(path: str) -> float:
     return value
 
 
+def _boot_time_s(path: str) -> float:
+    """``BootTime`` of an iPhone walk's ``description.txt`` (module doc)."""
+    with open(path, encoding="latin-1") as f:
+        for line in f:
+            key, _, value = line.partition("=")
+            if key.strip() == "BootTime":
+                try:
+                    t = float(value)
+                except ValueError:
+                    break
+                if np.isfinite(t):
+                    return t
+                break
+    raise RecordingError("no usable BootTime = <s> line", path)
+
+
 def qualisys_truth(mat_path: str, limit: int | None = MAX_UNCOMPRESSED_BYTES):
     """``(t_s, positions_m (n, 3), rotations (n, 3, 3))`` of a QTM MAT export's first rigid body, Qualisys time,
     lost frames dropped (module doc)."""
@@ -213,7 +254,8 @@ def qualisys_truth(mat_path: str, limit: int | None = MAX_UNCOMPRESSED_BYTES):
 
 def read_tyrex(folder: str, *, mat_path: str | None = None, warn: bool = True,
                max_uncompressed_bytes: int | None = MAX_UNCOMPRESSED_BYTES) -> Recording:
-    """Read one Tyrex Android walk folder and its Qualisys truth (module doc)."""
+    """Read one Tyrex walk folder (Android, or iPhone when it has a ``description.txt``) and its Qualisys truth
+    (module doc)."""
     folder = str(folder).rstrip("/")
     name = os.path.basename(os.path.abspath(folder))
     if mat_path is None:
@@ -221,13 +263,15 @@ def read_tyrex(folder: str, *, mat_path: str | None = None, warn: bool = True,
         if not os.path.isfile(mat_path):
             raise RecordingError(f"no Qualisys truth for this Tyrex walk: {mat_path} is missing (the dataset keeps "
                                  "a walk's motion capture in qualisys/<walk>.mat, two folders above the walk's "
-                                 "folder android/<walk>/)", folder)
+                                 "folder android/<walk>/ or ios/<walk>/)", folder)
     elif not os.path.isfile(mat_path):
         raise RecordingError("cannot open the Qualisys truth: no such file", str(mat_path))
+    ios = os.path.isfile(os.path.join(folder, IOS_DESCRIPTION_FILE))
+    boot_s = _boot_time_s(os.path.join(folder, IOS_DESCRIPTION_FILE)) if ios else 0.0
     repairs: list[str] = []
     notes: dict = {}
     streams = {}
-    for stream, fname in FILES.items():
+    for stream, fname in (IOS_FILES if ios else FILES).items():
         path = os.path.join(folder, fname)
         if not os.path.isfile(path):
             if stream == MAG:
@@ -238,8 +282,13 @@ def read_tyrex(folder: str, *, mat_path: str | None = None, warn: bool = True,
         if j is not None:
             raise RecordingError(f"time value {j + 1} is not a usable time: {float(v[j, 0])!r}", path)
         v = v[np.argsort(v[:, 0], kind="stable")]
-        t_ns = np.round(v[:, 0] * 1e9).astype(np.int64)
-        xyz = acceleration_in_m_s2(v[:, 1:], fname, path, repairs, notes) if stream == ACC else v[:, 1:]
+        t_ns = np.round((v[:, 0] - boot_s) * 1e9).astype(np.int64)
+        if stream == ACC and ios:
+            xyz = -STANDARD_GRAVITY_M_S2 * v[:, 1:]  # CoreMotion's g, inertial force -> the Android sign, m/s^2
+        elif stream == ACC:
+            xyz = acceleration_in_m_s2(v[:, 1:], fname, path, repairs, notes)
+        else:
+            xyz = v[:, 1:]
         streams[stream] = make_stream(stream, t_ns, xyz)
     offset_s = _alignment_s(os.path.join(folder, ALIGNMENT_FILE))
     t_q, pos, r = qualisys_truth(mat_path, max_uncompressed_bytes)
@@ -252,10 +301,13 @@ def read_tyrex(folder: str, *, mat_path: str | None = None, warn: bool = True,
                                                "ground truth: the Qualisys rotation of the marker handler, body -> "
                                                "the frame of posi; the handler's axes are not promised to be the "
                                                "phone's")
-    meta = {"source_format": FORMAT, "app": "Tyrex attitude benchmark (Android; Qualisys truth)", "walk": name,
-            "time_base": f"t_ns = round(time * 1e9): the phone's time in s; Qualisys frame k at k / rate minus "
-                         f"{offset_s:g} s (timeAlignment.txt)", **notes}
+    platform = "ios" if ios else "android"
+    meta = {"source_format": FORMAT, "app": f"Tyrex attitude benchmark ({'iPhone' if ios else 'Android'}; Qualisys "
+            "truth)", "walk": name,
+            "time_base": (f"t_ns = round((time - {boot_s:g}) * 1e9)" if ios else "t_ns = round(time * 1e9)")
+                         + f": the phone's time in s; Qualisys frame k at k / rate minus {offset_s:g} s "
+                         "(timeAlignment.txt)", **notes}
     if warn and repairs:
         warnings.warn("; ".join(repairs), DamagedFileWarning, stacklevel=2)
-    return finish(Recording(streams, device={"app": "Tyrex benchmark", "platform": "android"}, metadata=meta,
+    return finish(Recording(streams, device={"app": "Tyrex benchmark", "platform": platform}, metadata=meta,
                             repairs=repairs, source=folder), warn=warn)
