@@ -36,7 +36,9 @@ from desktop.fast.jit import HAVE_NUMBA, kernel
  F_PCA_ANISO, F_MIN_COH, F_MIN_ANISO) = range(13)
 # float state: the mean of the vertical, v_z, the open stride's sums (14) and its first forward unit vector
 F_MEAN_U, F_VZ, F_SUMS, F_FWD0 = 13, 14, 15, 29
-N_F = 31
+# a float setting added after the state (issue #25): core's ``phase_axis_below_ratio``
+F_PHASE_RATIO = 31
+N_F = 32
 # int settings, then int state
 (I_DELAY_N, I_GAP_NS, I_METHOD, I_HAS_LAST, I_LAST_NS, I_KEY, I_STEPS, I_T0, I_SKIPPED, I_HAS_FWD0, I_N_GAP,
  I_N_STRIDES, I_N_ACCEPTED, I_N_SIGN, I_N_NONFINITE, I_HEAD, I_TAIL, I_N_REC, I_NEXT_ORDER, I_HAS_EST,
@@ -186,6 +188,12 @@ def _judge(t_s, fe, fn, norm, fs, is_, ax, ax_n, ax_order, rec_i, rec_f, r):
     method = is_[I_METHOD]
     if method == 0:  # auto
         method = 1 if raw_aniso >= fs[F_PCA_ANISO] else 2
+    if method == 2 and fs[F_PHASE_RATIO] > 0.0 and (gx != 0.0 or gy != 0.0):
+        # core's phase_axis_below_ratio: the phase axis where it lies on the raw ellipse's minor side
+        g2 = gx * gx + gy * gy
+        along_g = (cxx * gx * gx + 2.0 * cxy * gx * gy + cyy * gy * gy) / g2
+        if along_g < fs[F_PHASE_RATIO] * (tr - along_g):
+            method = 3
     rec_i[r, R_METHOD] = method
     if method == 1:  # pca
         theta = 0.5 * math.atan2(2.0 * cxy, cxx - cyy)
@@ -421,8 +429,9 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
     ``compiled`` (default: where numba is installed) runs :func:`walk_kernel`; without it ``wd.update`` itself
     is fed every sample and the estimate recorded after each (the kernel run as plain Python is slower than
     core's update), so the trace is the same either way.  The kernel implements ``sign_method="phase"``
-    only, and the gap clock of accepted strides only: any other sign method, ``gap_keeps_turning`` (issue #25),
-    ``phase_axis_below_ratio`` > 0 and ``quadrature_phase`` are fed through ``wd.update``, whatever ``compiled`` says.
+    only, and the gap clock of accepted strides only: any other sign method, ``gap_keeps_turning`` (issue #25)
+    and ``quadrature_phase`` are fed through ``wd.update``, whatever ``compiled`` says (``phase_axis_below_ratio``
+    is the kernel's too).
     """
     if compiled is None:
         compiled = HAVE_NUMBA
@@ -430,8 +439,6 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
         compiled = False  # the kernel mirrors the phase rule only: the skew sign (issue #25) runs core's update
     if getattr(wd, "gap_keeps_turning", False):
         compiled = False  # the kernel's gap clock restarts at accepted strides only: core's update keeps turning
-    if getattr(wd, "phase_axis_below_ratio", 0.0) > 0.0:
-        compiled = False  # the kernel has the coherent / raw axis choice only: core's update takes the phase axis
     if getattr(wd, "quadrature_phase", False):
         compiled = False  # the kernel keeps the leaky v_z's covariance: core's update projects the in-phase part out
     wd.reset()
@@ -465,6 +472,7 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
         wd.grid_rate_hz, wd.max_stride_turn_rad, wd.min_horizontal_std_m_s2 ** 2, wd.pca_min_anisotropy,
         wd.min_coherence, wd.min_anisotropy)
     fs[F_MEAN_U] = math.nan
+    fs[F_PHASE_RATIO] = wd.phase_axis_below_ratio
     is_ = np.zeros(N_I, dtype=np.int64)
     is_[I_DELAY_N], is_[I_GAP_NS], is_[I_METHOD] = ks["delay_n"], ks["gap_ns"], _METHODS.index(wd.axis_method)
     is_[I_KEY], is_[I_STEPS], is_[I_EST_KEY] = -1, -1, -1
