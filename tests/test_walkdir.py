@@ -164,22 +164,34 @@ def test_handheld_auto_is_device_exactly():
 
 @pytest.mark.parametrize("placement", ["pocket", "bag"])
 def test_simulator_placements(placement):
-    """The placements of desktop.placements (one seed each, short): offset within 5 deg of the truth."""
+    """The placements of desktop.placements (one seed each, short): offset within 5 deg of the truth with the
+    coherent axis alone (``phase_axis_below_ratio=0``).  The default (1.2, chosen on the real tuning truth walks,
+    issue #25) switches some of the simulated pocket's strides to the phase axis, which leans towards the pocket's
+    sideways motion through the leaky vertical velocity: this walk's pocket is then 9.4 deg off (over seeds 0-11
+    of a 130-m walk the median step-heading error goes 5.7 -> 6.3 deg); the bag does not switch.  Tolerance for
+    the default: 12 deg."""
     from desktop.simulator import simulate_walk
 
     try:
         walk = simulate_walk([(0.0, 0.0), (25.0, 0.0), (25.0, 15.0)], placement=placement, seed=1, rate_hz=50.0)
     except TypeError:
         pytest.skip("the simulator has no placements")
-    pipe = Pipeline(walking_direction="acceleration")
-    _, after = _sim_errors(walk, pipe)
-    assert pipe.walkdir.confident
-    # the offset against the truth: walking heading minus the true heading of the smoother's axis
-    axis = np.asarray(pipe.smoother.forward_b, dtype=float)
-    t = np.linspace(walk.truth.walk_start_t_ns, walk.truth.walk_end_t_ns, 50).astype(np.int64)[25:45]
-    v = quat.to_matrix_array(walk.truth.attitude_at(t))[:, :2, :] @ axis
-    true = circular_mean(walk.truth.heading_at(t) - np.arctan2(v[:, 1], v[:, 0]))
-    assert abs(math.degrees(wrap_angle(pipe.walkdir.offset_rad - true))) < 5.0
+    errors = {}
+    for ratio in (0.0, WalkingDirection().phase_axis_below_ratio):
+        base = Pipeline(walking_direction="acceleration")
+        pipe = Pipeline(walking_direction="acceleration", walkdir=WalkingDirection(
+            grid_rate_hz=base.grid_rate_hz, delay_s=base.heading_delay_s, phase_axis_below_ratio=ratio))
+        _, after = _sim_errors(walk, pipe)
+        assert pipe.walkdir.confident
+        # the offset against the truth: walking heading minus the true heading of the smoother's axis
+        axis = np.asarray(pipe.smoother.forward_b, dtype=float)
+        t = np.linspace(walk.truth.walk_start_t_ns, walk.truth.walk_end_t_ns, 50).astype(np.int64)[25:45]
+        v = quat.to_matrix_array(walk.truth.attitude_at(t))[:, :2, :] @ axis
+        true = circular_mean(walk.truth.heading_at(t) - np.arctan2(v[:, 1], v[:, 0]))
+        errors[ratio] = abs(math.degrees(wrap_angle(pipe.walkdir.offset_rad - true)))
+    ratio_off, ratio_default = errors
+    assert errors[ratio_off] < 5.0, errors
+    assert errors[ratio_default] < (5.0 if placement == "bag" else 12.0), errors
 
 
 def test_gap_keeps_turning_holds_the_estimate_through_a_long_turn():
