@@ -16,6 +16,7 @@ from core.pdr.pipeline import Pipeline
 from core.pdr.steps import GENTLE, POCKET_GATES, STEP_GATES, StepDetector
 from core.recording import Recording
 from desktop.placements import simulate_still
+from tests._sim_helpers import upright_pendulum
 from desktop.simulator import simulate_walk
 
 PATH = [(0.0, 0.0), (22.0, 0.0), (22.0, 8.0)]
@@ -769,31 +770,6 @@ def test_fast_path_entry_points_gyro_seen_and_kernel_settings():
 
 
 # -- issue #25: a hand swung with the phone upright was taken for the ear (h14/swingear) ----------------------------
-def _upright_pendulum(swing_deg, stride_s=1.64, incline_deg=25.0, seconds=16.0, rate_hz=50.0, seed=0):
-    """Grid samples (n, 6: acc, gyro) of a phone held upright in a hand that swings as a pendulum from the shoulder
-    by ``+-swing_deg`` at the stride period, the phone inclined ``incline_deg`` in its screen plane (the screen
-    faces the thigh: the swing turns it about its z axis), the body bouncing 1.5 m/s^2 at the step frequency.  The
-    pendulum's length is the one that swings freely at the stride (``g / w^2``): its specific force stays along the
-    arm, so the phone barely tilts and its norm (gravity plus the centripetal term) repeats every step, as at the
-    ear; only the rotation tells the hand.  ``swing_deg`` 3: the head's few degrees of a phone at the ear."""
-    rng = np.random.default_rng(seed)
-    g = 9.81
-    t = np.arange(int(seconds * rate_hz)) / rate_hz
-    w = 2.0 * math.pi / stride_s
-    a = math.radians(swing_deg)
-    phi, dphi, ddphi = a * np.sin(w * t), a * w * np.cos(w * t), -a * w * w * np.sin(w * t)
-    arm = g / w ** 2
-    bounce = 1.5 * np.cos(2.0 * w * t)
-    along = g * np.cos(phi) + arm * dphi ** 2 + bounce * np.cos(phi)  # towards the shoulder (the phone's top)
-    tang = g * np.sin(phi) + arm * ddphi + bounce * np.sin(phi)
-    psi = math.radians(incline_deg)
-    noise = 0.3 * rng.standard_normal((len(t), 3))
-    acc = np.stack([along * math.sin(psi) + tang * math.cos(psi), along * math.cos(psi) - tang * math.sin(psi),
-                    np.zeros_like(t)], axis=1) + noise
-    gyro = np.stack([np.zeros_like(t), np.zeros_like(t), dphi], axis=1) + 0.05 * rng.standard_normal((len(t), 3))
-    return t, np.hstack([acc, gyro])
-
-
 @pytest.mark.parametrize("swing_deg,setting,mode", ((45.0, None, CARRY_EAR), (45.0, 20.0, CARRY_SWINGING),
                                                    (30.0, 20.0, CARRY_SWINGING), (3.0, 20.0, CARRY_EAR),
                                                    (10.0, 20.0, CARRY_EAR)))
@@ -804,7 +780,7 @@ def test_hand_swung_upright_is_no_ear(swing_deg, setting, mode):
     A pendulum that swings +-45 deg is the ear without ``ear_max_swing_deg`` (the diagnosis), a swinging hand with
     it (20 deg; at 30 deg too); a phone that turns by 3-10 deg per stride (a head's) stays at the ear.  The swing the
     detector reads (:meth:`CarryModeDetector.stride_swing_deg`) is the pendulum's within 1 deg."""
-    t, s = _upright_pendulum(swing_deg)
+    t, s = upright_pendulum(swing_deg)
     det = CarryModeDetector(ear_max_swing_deg=setting)
     for k in range(len(t)):
         det.update_grid(int(t[k] * 1e9), *s[k])
