@@ -412,14 +412,14 @@ class CarryModeDetector:
     ear_max_swing_deg : float or None
         Issue #25 (h14/swingear), with a gyroscope: the rotation's swing per stride (:meth:`stride_swing_deg`, deg)
         above which a phone that stands upright as at the ear (``upright_y``, ``ear_incline_x``) is on a limb, not at
-        the ear: the ear's score goes to the swinging hand; width 2 deg.  A phone pressed to the ear turns with the head, a few degrees
-        per stride (the simulator's ear +-2 deg of yaw, +-1.5 of pitch); a hand swung with the phone upright turns
-        about the shoulder by tens of degrees, and a pendulum's specific force stays along the arm, so the tilt
-        (``tilt_rms_rad`` 0.19 rad) and the norm (the centripetal term the same at both passes: stride share 0) read
-        as a trunk's and only the gyroscope sees the limb.  The TUNING Tyrex walks ``Jakob_Nexus5_*_Swinging``:
+        the ear: the ear's score goes to the swinging hand; width 2 deg.  A phone pressed to the ear turns with the
+        head, a few degrees per stride (the simulator's ear +-2 deg of yaw, +-1.5 of pitch); a hand swung with the
+        phone upright turns about the shoulder by tens of degrees, and a pendulum's specific force stays along the
+        arm, so the tilt (``tilt_rms_rad`` 0.19 rad) and the norm (the centripetal term the same at both passes:
+        stride share 0) read as a trunk's and only the gyroscope sees the limb.  The TUNING Tyrex walks ``Jakob_Nexus5_*_Swinging``:
         their hops called "ear" swing 44-45 deg per stride (median; 10th percentile 23-29) at 2.5 rad/s RMS, on the
-        edge of ``hard_arm_gyro_rad_s``; the simulator's ear reads 3.0 (at most 3.8), the truth walks' pockets and bags
-        that score some ear at most 20-27 (hops the hysteresis never keeps).  **Off by default** (None; 20 turns it
+        edge of ``hard_arm_gyro_rad_s``; the simulator's ear reads 3.0 (at most 3.8), the other tuning truth walks' raw
+        "ear" hops (OxIOD and Jakob's pockets, a RIDI bag) at most 10-27.  **Off by default** (None; 20 turns it
         on): on the TUNING split it changes one walker's two walks only.  With 20 (15 and 25 give the same): Jakob's
         swinging walks called "ear" 55 -> 0 % and 10 -> 0 % of the time, the offset error against the truth attitude
         96.5 -> 15.3 and 118.8 -> 99.8 deg (median; steps over 90 deg off 54 -> 23 %, 74 -> 58 %), end error after the
