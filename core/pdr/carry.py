@@ -76,6 +76,8 @@ Features and the physics they come from
     rotation over two axes (main-axis share 0.5-0.7) but keeps it periodic at
     the stride; a rotation periodic at the stride while the norm is periodic
     is a gait's, whatever its axes.
+    The swing per stride (:meth:`CarryModeDetector.stride_swing_deg`, derived from these): a phone at the ear
+    turns with the head by a few degrees per stride, a swung hand by tens (``ear_max_swing_deg``, off by default).
 
 Decision
 ========
