@@ -559,3 +559,17 @@ def test_fast_release_of_a_step_as_a_stale_short_bout_is_dropped_is_once():
         sr.k = k
         sr.release(k)
     assert [s.t_ns for s in p.steps] == [int(1e9)] and sr.cands == [] and p.n_rejected_bout == 1
+
+
+def test_fast_equals_plain_on_a_hand_swung_upright():
+    # a phone swung upright as a pendulum (tests/_sim_helpers.upright_pendulum, issue #25, h14/swingear): the ear
+    # without CarryModeDetector(ear_max_swing_deg), a swinging hand with it; the fast path hands every hop's features
+    # to the reference's scoring, so it follows the setting
+    from core.conventions import CARRY_EAR
+    from core.pdr.carry import CarryModeDetector
+    from tests._sim_helpers import upright_pendulum_recording
+
+    rec = upright_pendulum_recording(45.0, seconds=9.0)
+    for setting, mode in ((None, CARRY_EAR), (20.0, CARRY_SWINGING)):
+        plain, _ = _assert_same(rec, lambda: Pipeline(carry=CarryModeDetector(ear_max_swing_deg=setting)))
+        assert plain.steps and plain.steps[-1].carry_mode == mode, (setting, plain.counters["carry"])

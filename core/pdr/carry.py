@@ -76,6 +76,8 @@ Features and the physics they come from
     rotation over two axes (main-axis share 0.5-0.7) but keeps it periodic at
     the stride; a rotation periodic at the stride while the norm is periodic
     is a gait's, whatever its axes.
+    The swing per stride (:meth:`CarryModeDetector.stride_swing_deg`, derived from these): a phone at the ear
+    turns with the head by a few degrees per stride, a swung hand by tens (``ear_max_swing_deg``, off by default).
 
 Decision
 ========
@@ -409,6 +411,23 @@ class CarryModeDetector:
         whenever the step lag dipped under -0.2 (10 of 34 steps).  With ``max_stride_s`` (2.5 s) as the bound, a
         trunk at 0.8 steps/s (its step 1.25-1.3 s) was taken for a limb (the simulator's ear, 26 -> 24 of 26 steps).
         False: as before.
+    ear_max_swing_deg : float or None
+        Issue #25 (h14/swingear), with a gyroscope: the rotation's swing per stride (:meth:`stride_swing_deg`, deg)
+        above which a phone that stands upright as at the ear (``upright_y``, ``ear_incline_x``) is on a limb, not at
+        the ear: the ear's score goes to the swinging hand; width 2 deg.  A phone pressed to the ear turns with the
+        head, a few degrees per stride (the simulator's ear +-2 deg of yaw, +-1.5 of pitch); a hand swung with the
+        phone upright turns about the shoulder by tens of degrees, and a pendulum's specific force stays along the
+        arm, so the tilt (``tilt_rms_rad`` 0.19 rad) and the norm (the centripetal term the same at both passes:
+        stride share 0) read as a trunk's and only the gyroscope sees the limb.  The TUNING Tyrex walks ``Jakob_Nexus5_*_Swinging``:
+        their hops called "ear" swing 44-45 deg per stride (median; 10th percentile 23-29) at 2.5 rad/s RMS, on the
+        edge of ``hard_arm_gyro_rad_s``; the simulator's ear reads 3.0 (at most 3.8), the other tuning truth walks' raw
+        "ear" hops (OxIOD and Jakob's pockets, a RIDI bag) at most 10-27.  **Off by default** (None; 20 turns it
+        on): on the TUNING split it changes one walker's two walks only.  With 20 (15 and 25 give the same): Jakob's
+        swinging walks called "ear" 55 -> 0 % and 10 -> 0 % of the time, the offset error against the truth attitude
+        96.5 -> 15.3 and 118.8 -> 99.8 deg (median; steps over 90 deg off 54 -> 23 %, 74 -> 58 %), end error after the
+        best rotation 1.2 -> 1.2 and 20.3 -> 10.8 % of the path, distance -23.9 -> -21.0 and -15.2 -> -13.9 %; every
+        other tuning truth walk (22), the 28 real walks, the carry benchmark's tuning recordings (simulator, IPOL,
+        IPIN) and the main benchmark's 92 (IPIN, Microsoft, IPOL) identical (``benchmarks/discussion.md``).
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
@@ -432,7 +451,8 @@ class CarryModeDetector:
                  uneven_on_share: float = math.inf, uneven_off_share: float = 0.6,
                  switch_s: float = 3.0, switch_still_s: float = 2.0, hold_periodicity: float = 0.2, hold_recent_s: float = 1.0,
                  hold_min_std_m_s2: float = 0.3, settle_while_still: bool = False, settle_walk_s: float = 1.0,
-                 sway_min_gyro_periodicity: float | None = 0.9, antiphase_in_range: bool = True):
+                 sway_min_gyro_periodicity: float | None = 0.9, antiphase_in_range: bool = True,
+                 ear_max_swing_deg: float | None = None):
         self.grid_rate_hz = float(grid_rate_hz)
         self.window_s = float(window_s)
         self.hop_s = float(hop_s)
@@ -491,6 +511,7 @@ class CarryModeDetector:
         self.sway_min_gyro_periodicity = (None if sway_min_gyro_periodicity is None
                                           else float(sway_min_gyro_periodicity))
         self.antiphase_in_range = bool(antiphase_in_range)
+        self.ear_max_swing_deg = None if ear_max_swing_deg is None else float(ear_max_swing_deg)
         self.reset()
 
     def reset(self) -> None:
@@ -880,14 +901,35 @@ class CarryModeDetector:
         # at the ear: upright, the long axis inclined from the ear towards the mouth in the screen's plane
         ear = _sig(gy, self.upright_y, 0.08) * _sig(abs(gx), self.ear_incline_x, 0.05)
         trunk = 1.0 - limb
+        at_ear = walk * trunk * (1.0 - hand) * ear
+        swung = 0.0
+        if self.ear_max_swing_deg is not None and "gyro_rms_rad_s" in f:
+            # an upright phone that swings by tens of degrees per stride is a swung hand, not at the ear (the head
+            # turns it by a few): the ear's score goes to the swinging hand
+            swung = at_ear * _sig(self.stride_swing_deg(f), self.ear_max_swing_deg, 2.0)
+            at_ear -= swung
         return {
             CARRY_HANDHELD: walk * trunk * hand,
-            CARRY_EAR: walk * trunk * (1.0 - hand) * ear,
+            CARRY_EAR: at_ear,
             CARRY_BAG: walk * trunk * (1.0 - hand) * (1.0 - ear),
             CARRY_POCKET: walk * limb * (1.0 - arm),
-            CARRY_SWINGING: walk * limb * arm,
+            CARRY_SWINGING: walk * limb * arm + swung,
             CARRY_STILL: 1.0 - walk,
         }
+
+    @staticmethod
+    def stride_swing_deg(f: dict) -> float:
+        """The phone's swing per stride from one window's gyroscope features ``f`` (deg; 0 without a gyroscope): the
+        amplitude of a sinusoid at the stride period ``T`` (``stride_period_s``) whose RMS rate is the rotation's
+        share that is about its main axis and periodic at the stride, ``sqrt(2) w T / (2 pi)`` with
+        ``w = gyro_rms sqrt(gyro_axis_share * clip(gyro_periodicity, 0, 1))`` (rad/s): the autocorrelation at the
+        period is the periodic part's share of the variance.  A phone at the ear turns with the head by a few
+        degrees per stride; a swung hand and a thigh by tens (``ear_max_swing_deg``)."""
+        if "gyro_rms_rad_s" not in f:
+            return 0.0
+        share = f["gyro_axis_share"] * min(max(f["gyro_periodicity"], 0.0), 1.0)
+        w = f["gyro_rms_rad_s"] * math.sqrt(share)
+        return math.degrees(math.sqrt(2.0) * w * f["stride_period_s"] / (2.0 * math.pi))
 
     @property
     def pending_mode(self) -> str | None:
