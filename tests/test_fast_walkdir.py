@@ -26,7 +26,9 @@ from desktop.simulator import simulate_walk
 from test_fast_path import REAL, _real  # tests/ is on sys.path: the IPIN cut, skipped where absent
 
 TOL = 1e-9  # on every float (rad, m/s^2 and the accumulators); in practice they are bit for bit equal
-FIELDS = ("c2", "s2", "w", "w2", "gx", "gy")
+#: the accumulators an estimate reads (with ``symmetric_axis_below_ratio`` also the symmetric axes and the flag; 0.0
+#: in the kernel's rows and in core's state without it)
+FIELDS = ("c2", "s2", "w", "w2", "gx", "gy", "c2s", "s2s", "sym")
 
 
 def _phase_wd(**kw) -> WalkingDirection:
@@ -120,7 +122,8 @@ def _check(ref: WalkingDirection, inputs, after, fresh: WalkingDirection, compil
         shadow._axis_key = want_key
         if want is not None:
             st = shadow._states[want_key] = type(probe._states[want_key])()
-            st.c2, st.s2, st.w, st.w2, st.gx, st.gy, st.n = want
+            for f, v in zip(FIELDS + ("n",), want):
+                setattr(st, f, v)
         for setting, mode in (("auto", None), ("auto", "pocket"), ("auto", "handheld"), ("acceleration", None)):
             assert _close(probe.step_heading(0.3, setting, mode), shadow.step_heading(0.3, setting, mode))
         assert _close(probe.estimate(), shadow.estimate())
@@ -136,7 +139,7 @@ def _settings(wd: WalkingDirection) -> dict:
              "memory_strides", "confident_strides", "confident_sigma_rad", "confident_sign", "auto_min_strides",
              "auto_far_min_strides", "auto_min_offset_rad", "max_strides_kept", "axis_method", "pca_min_anisotropy",
              "min_coherence", "reset_after_gap_s", "sign_method", "phase_axis_below_ratio",
-             "quadrature_phase")
+             "quadrature_phase", "symmetric_axis_below_ratio")
     return {k: getattr(wd, k) for k in names}
 
 
@@ -160,7 +163,8 @@ def test_ipin_cut_equals_core():
 SETTINGS = (dict(max_strides_kept=8), dict(axis_method="pca", max_strides_kept=0),
             dict(axis_method="coherent", min_coherence=0.79), dict(axis_method="phase", min_anisotropy=1.05),
             dict(pca_min_anisotropy=3.0, memory_strides=4.0, reset_after_gap_s=5.0, delay_s=0.0),
-            dict(phase_axis_below_ratio=10.0), dict(quadrature_phase=True, axis_method="phase"))
+            dict(phase_axis_below_ratio=10.0), dict(quadrature_phase=True, axis_method="phase"),
+            dict(symmetric_axis_below_ratio=5.0))
 
 
 @cache
