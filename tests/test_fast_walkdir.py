@@ -32,10 +32,11 @@ FIELDS = ("c2", "s2", "w", "w2", "gx", "gy", "c2s", "s2s", "sym")
 
 
 def _phase_wd(**kw) -> WalkingDirection:
-    """The stage with the sign rule the compiled kernel implements (``sign_method="phase"``; the default
-    ``"auto"`` is fed through ``update``, :func:`test_skew_sign_runs_core_update_and_equals_pipeline_run`)."""
+    """The stage with the rules the compiled kernel implements (``sign_method="phase"``, no symmetric axis; the
+    defaults ``"auto"`` and ``symmetric_axis_below_ratio`` are fed through ``update``,
+    :func:`test_skew_sign_runs_core_update_and_equals_pipeline_run`)."""
     return WalkingDirection(**{"grid_rate_hz": 50.0, "delay_s": Pipeline().heading_delay_s, "sign_method": "phase",
-                               **kw})
+                               "symmetric_axis_below_ratio": 0.0, **kw})
 
 
 def _record(rec, **params):
@@ -170,7 +171,7 @@ SETTINGS = (dict(max_strides_kept=8), dict(axis_method="pca", max_strides_kept=0
 @cache
 def _synthetic(i: int) -> WalkingDirection:
     """The synthetic stream with ``SETTINGS[i]``, checked: the reference (once per test session)."""
-    settings = {"sign_method": "phase", **SETTINGS[i]}
+    settings = {"sign_method": "phase", "symmetric_axis_below_ratio": 0.0, **SETTINGS[i]}
     # 60 s at 50 Hz of a walk-like acceleration (steps every 0.54 s) whose forward axis is 70 deg off the device
     # heading, with a device turning slowly and once quickly; non-finite samples, axis switches, strides with a
     # vertical axis, a pause of 15 s (steps standing still for 4 s of it, then the gap's reset); each axis

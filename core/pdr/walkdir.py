@@ -359,9 +359,11 @@ class WalkingDirection:
         The placement's axis is the symmetric axis (the motion alike in both steps less the alternating one) while
         the remembered strides' geometric-mean periodicity ratio (across the coherent axis over along it,
         stride-to-step harmonic amplitude; a stride that is not coherent counts as 3) is below this, until it rises above its reciprocal (module docstring,
-        "The symmetric axis").  0: off (the rule before).  Issue #25, h14/bagaxis: at 0.8 on the tuning truth walks
-        RIDI ``dan_bag1`` 100.3 -> 8.5 deg off the truth (median), Tyrex back pockets 66.3 -> 42.3 and 64.3 -> 13.0,
-        every other tuning walk identical; OFF by default (numbers in ``benchmarks/discussion.md``).
+        "The symmetric axis").  0: off (the rule before).  Issue #25, h14/bagaxis: at 0.8 (the default) on the
+        tuning truth walks RIDI ``dan_bag1`` 100.3 -> 8.5 deg off the truth (median), Tyrex back pockets 66.3 -> 42.3
+        and 64.3 -> 13.0 (two walkers), every other tuning truth walk, the real GPS walks, the main benchmark, IPOL
+        and the simulator identical (0.7: 8.5, 66.3, 13.6; 0.9: 8.5, 26.4, 12.6 with ``dan_leg1``'s p90 17.9 -> 28.1;
+        numbers in ``benchmarks/discussion.md``).
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, delay_s: float = 0.45, vz_leak_time_s: float = 1.0,
@@ -378,7 +380,7 @@ class WalkingDirection:
                  limb_enter_share: float = 0.5, limb_exit_share: float = 0.25, limb_raw_axis: bool = True,
                  limb_sign_margin: float = 0.1, gap_keeps_turning: bool = False,
                  phase_axis_below_ratio: float = 0.0, quadrature_phase: bool = False,
-                 symmetric_axis_below_ratio: float = 0.0):
+                 symmetric_axis_below_ratio: float = 0.8):
         self.grid_rate_hz = float(grid_rate_hz)
         self.delay_s = float(delay_s)
         self.vz_leak_time_s = float(vz_leak_time_s)
