@@ -156,16 +156,17 @@ stride frequency) and second (the step frequency) of the horizontal acceleration
 
     ``ratio = (across_1 / across_2) / (along_1 / along_2)``
 
-(below 1: the motion across the axis is the more step-periodic, so the axis lies across the walk), and its
+(below 1: the motion across the axis is the more step-periodic, so the axis lies across the walk; a stride that
+took the phase axis is tested on its coherent axis too), and its
 **symmetric axis** is the principal axis of ``sum_i a_i a_(i+n/2)'`` over the stride's ``n`` samples (each sample
 against the one half a stride later, the other step: the covariance of the part alike in both steps, ``(a + b) /
 2``, less that of the alternating part, ``(a - b) / 2``, is half of it).  Per stride the ratio is not reliable (a
 trouser pocket's thigh swings forward at the stride frequency: RIDI ``dan_leg1`` has 30 % of its strides below 1,
 and its symmetric axis is wrong there), so the decision is per placement, as the limb's: the forgetting-weighted
-mean of each stride's log ratio (clipped to +-log 3; a stride that is not coherent counts as +log 3) below
+mean of each stride's log ratio (clipped to +-log 3; a stride of the raw axis counts as +log 3) below
 ``log(symmetric_axis_below_ratio)`` (after ``auto_min_strides`` strides) turns it on, above its negative off;
-while on, the offset's axis is the circular mean of every stride's symmetric axis (a stride that is not coherent:
-its own).  The sign evidence is unchanged.  The stride's samples are kept (at most ``max_stride_s`` of the grid)
+while on, the offset's axis is the circular mean of every stride's symmetric axis (a stride of the raw axis: its
+own).  The sign evidence is unchanged.  The stride's samples are kept (at most ``max_stride_s`` of the grid)
 and the harmonics summed at its close.
 
 Smoothing: circular means with forgetting
@@ -358,7 +359,7 @@ class WalkingDirection:
     symmetric_axis_below_ratio : float
         The placement's axis is the symmetric axis (the motion alike in both steps less the alternating one) while
         the remembered strides' geometric-mean periodicity ratio (across the coherent axis over along it,
-        stride-to-step harmonic amplitude; a stride that is not coherent counts as 3) is below this, until it rises above its reciprocal (module docstring,
+        stride-to-step harmonic amplitude; a stride of the raw axis counts as 3) is below this, until it rises above its reciprocal (module docstring,
         "The symmetric axis").  0: off (the rule before).  Issue #25, h14/bagaxis: at 0.8 (the default) on the
         tuning truth walks RIDI ``dan_bag1`` 100.3 -> 8.5 deg off the truth (median), Tyrex back pockets 66.3 -> 42.3
         and 64.3 -> 13.0 (two walkers), every other tuning truth walk, the real GPS walks, the main benchmark, IPOL
@@ -733,9 +734,13 @@ class WalkingDirection:
         if aniso < self.min_anisotropy:
             return "isotropic"
         theta_sym, log_ratio = theta, _LOG_RATIO_CLIP
-        if method == "coherent" and self.symmetric_axis_below_ratio > 0.0:
-            # the walk is alike in the left and the right step, the sway alternates (module docstring)
-            ratio, theta_sym = self._step_periodicity(theta)
+        if method != "pca" and self.symmetric_axis_below_ratio > 0.0:
+            # the walk is alike in the left and the right step, the sway alternates (module docstring); the test
+            # is of the coherent axis, also where a stride took the phase axis (phase_axis_below_ratio)
+            theta_coh = theta if method == "coherent" else 0.5 * math.atan2(2.0 * kxy, kxx - kyy)
+            ratio, theta_sym = self._step_periodicity(theta_coh)
+            if method != "coherent":
+                theta_sym = theta  # the phase axis is that stride's answer to the pull already
             rec["periodicity_ratio"] = ratio
             rec["symmetric_axis_rad"] = theta_sym
             log_ratio = max(-_LOG_RATIO_CLIP, min(_LOG_RATIO_CLIP, math.log(ratio))) if ratio > 0.0 else -_LOG_RATIO_CLIP
