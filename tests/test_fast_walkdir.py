@@ -26,14 +26,17 @@ from desktop.simulator import simulate_walk
 from test_fast_path import REAL, _real  # tests/ is on sys.path: the IPIN cut, skipped where absent
 
 TOL = 1e-9  # on every float (rad, m/s^2 and the accumulators); in practice they are bit for bit equal
-FIELDS = ("c2", "s2", "w", "w2", "gx", "gy")
+#: the accumulators an estimate reads (with ``symmetric_axis_below_ratio`` also the symmetric axes and the flag; 0.0
+#: in the kernel's rows and in core's state without it)
+FIELDS = ("c2", "s2", "w", "w2", "gx", "gy", "c2s", "s2s", "sym")
 
 
 def _phase_wd(**kw) -> WalkingDirection:
-    """The stage with the sign rule the compiled kernel implements (``sign_method="phase"``; the default
-    ``"auto"`` is fed through ``update``, :func:`test_skew_sign_runs_core_update_and_equals_pipeline_run`)."""
+    """The stage with the rules the compiled kernel implements (``sign_method="phase"``, no symmetric axis; the
+    default ``"auto"`` and ``symmetric_axis_below_ratio`` > 0 are fed through ``update``,
+    :func:`test_skew_sign_runs_core_update_and_equals_pipeline_run`)."""
     return WalkingDirection(**{"grid_rate_hz": 50.0, "delay_s": Pipeline().heading_delay_s, "sign_method": "phase",
-                               **kw})
+                               "symmetric_axis_below_ratio": 0.0, **kw})
 
 
 def _record(rec, **params):
@@ -120,7 +123,8 @@ def _check(ref: WalkingDirection, inputs, after, fresh: WalkingDirection, compil
         shadow._axis_key = want_key
         if want is not None:
             st = shadow._states[want_key] = type(probe._states[want_key])()
-            st.c2, st.s2, st.w, st.w2, st.gx, st.gy, st.n = want
+            for f, v in zip(FIELDS + ("n",), want):
+                setattr(st, f, v)
         for setting, mode in (("auto", None), ("auto", "pocket"), ("auto", "handheld"), ("acceleration", None)):
             assert _close(probe.step_heading(0.3, setting, mode), shadow.step_heading(0.3, setting, mode))
         assert _close(probe.estimate(), shadow.estimate())
@@ -136,7 +140,7 @@ def _settings(wd: WalkingDirection) -> dict:
              "memory_strides", "confident_strides", "confident_sigma_rad", "confident_sign", "auto_min_strides",
              "auto_far_min_strides", "auto_min_offset_rad", "max_strides_kept", "axis_method", "pca_min_anisotropy",
              "min_coherence", "reset_after_gap_s", "sign_method", "phase_axis_below_ratio",
-             "quadrature_phase")
+             "quadrature_phase", "symmetric_axis_below_ratio")
     return {k: getattr(wd, k) for k in names}
 
 
@@ -161,13 +165,13 @@ SETTINGS = (dict(max_strides_kept=8), dict(axis_method="pca", max_strides_kept=0
             dict(axis_method="coherent", min_coherence=0.79), dict(axis_method="phase", min_anisotropy=1.05),
             dict(pca_min_anisotropy=3.0, memory_strides=4.0, reset_after_gap_s=5.0, delay_s=0.0),
             dict(phase_axis_below_ratio=10.0), dict(phase_axis_below_ratio=5.0),  # all strides switched; 3 of 32
-            dict(quadrature_phase=True, axis_method="phase"))
+            dict(quadrature_phase=True, axis_method="phase"), dict(symmetric_axis_below_ratio=5.0))
 
 
 @cache
 def _synthetic(i: int) -> WalkingDirection:
     """The synthetic stream with ``SETTINGS[i]``, checked: the reference (once per test session)."""
-    settings = {"sign_method": "phase", **SETTINGS[i]}
+    settings = {"sign_method": "phase", "symmetric_axis_below_ratio": 0.0, **SETTINGS[i]}
     # 60 s at 50 Hz of a walk-like acceleration (steps every 0.54 s) whose forward axis is 70 deg off the device
     # heading, with a device turning slowly and once quickly; non-finite samples, axis switches, strides with a
     # vertical axis, a pause of 15 s (steps standing still for 4 s of it, then the gap's reset); each axis

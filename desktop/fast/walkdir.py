@@ -368,7 +368,7 @@ def _axis_state(row, n) -> _AxisState:
 
 class WalkdirTrace:
     """The stage's run over a grid (:func:`walking_direction_over_grid`): the estimate after each grid sample
-    (the current axis ``key`` and its accumulators ``acc`` (n, 6: c2, s2, w, w2, gx, gy; n, 12: every field of core's ``_AxisState.FIELDS``
+    (the current axis ``key`` and its accumulators ``acc`` (n, 6: c2, s2, w, w2, gx, gy; n, len(FIELDS): every field of core's ``_AxisState.FIELDS``
     when fed through ``update``), ``n_used`` (0: no
     estimate)), from ``j_init`` on, and the final state."""
 
@@ -429,9 +429,9 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
     ``compiled`` (default: where numba is installed) runs :func:`walk_kernel`; without it ``wd.update`` itself
     is fed every sample and the estimate recorded after each (the kernel run as plain Python is slower than
     core's update), so the trace is the same either way.  The kernel implements ``sign_method="phase"``
-    only, and the gap clock of accepted strides only: any other sign method, ``gap_keeps_turning`` (issue #25)
-    and ``quadrature_phase`` are fed through ``wd.update``, whatever ``compiled`` says (``phase_axis_below_ratio``
-    is the kernel's too).
+    only, and the gap clock of accepted strides only: any other sign method, ``gap_keeps_turning`` (issue #25),
+    ``quadrature_phase`` and ``symmetric_axis_below_ratio`` > 0 are fed through ``wd.update``, whatever
+    ``compiled`` says (``phase_axis_below_ratio`` is the kernel's too).
     """
     if compiled is None:
         compiled = HAVE_NUMBA
@@ -441,6 +441,8 @@ def walking_direction_over_grid(wd, grid_t, q, acc, fwd_e, fwd_n, step_ticks, ax
         compiled = False  # the kernel's gap clock restarts at accepted strides only: core's update keeps turning
     if getattr(wd, "quadrature_phase", False):
         compiled = False  # the kernel keeps the leaky v_z's covariance: core's update projects the in-phase part out
+    if getattr(wd, "symmetric_axis_below_ratio", 0.0) > 0.0:
+        compiled = False  # the kernel keeps no stride's samples: core's update finds the symmetric axis (issue #25)
     wd.reset()
     grid_t = np.asarray(grid_t, dtype=np.int64)
     n = len(grid_t) - j_init
