@@ -78,7 +78,9 @@ class _Probe(WalkingDirection):
         super().reset()
         self.log = {}
 
-    def step_heading(self, device_heading_rad: float, setting: str = "auto", carry_mode=None) -> float:
+    def step_heading(self, device_heading_rad: float, setting: str = "auto", carry_mode=None, axis=None) -> float:
+        if axis is not None and axis != self.axis_key:  # the estimate makes that axis current and calls back
+            return super().step_heading(device_heading_rad, setting, carry_mode, axis=axis)
         n0 = self.n_steps_offset
         out = {s: super(_Probe, self).step_heading(device_heading_rad, s, carry_mode) for s in SETTINGS}
         self.n_steps_offset = n0 + (1 if out[setting] is not device_heading_rad else 0)

@@ -314,3 +314,70 @@ def test_kernel_settings_are_what_init_derives():
     ks = wd.kernel_settings
     assert ks["dt_s"] == 0.02 and ks["delay_n"] == 15 and ks["gap_ns"] == 1_500_000_000
     assert ks["forget"] == math.exp(-1.0 / 8.0) and 0.0 < ks["leak"] < 1.0 and 0.0 < ks["mean_alpha"] < 1.0
+
+
+def _two_axis_estimate(top_n: int, top_deg: float, back_n: int, back_deg: float) -> WalkingDirection:
+    """A walking-direction stage whose current axis is the top edge ``y`` with ``top_n`` strides at ``top_deg``
+    and whose back ``-z`` has ``back_n`` strides at ``back_deg`` (trunk states: axis and phase sign alike)."""
+    from core.pdr.walkdir import _AxisState
+
+    def state(n, deg):
+        a = math.radians(deg)
+        return _AxisState.from_values((math.cos(2 * a), math.sin(2 * a), 1.0, 1.0, math.cos(a), math.sin(a)), n)
+
+    wd = WalkingDirection()
+    wd.restore_state({"_states": {(0.0, 1.0, 0.0): state(top_n, top_deg), (0.0, 0.0, -1.0): state(back_n, back_deg)},
+                      "_axis_key": (0.0, 1.0, 0.0)})
+    return wd
+
+
+def test_step_heading_on_another_axis_takes_that_axis_offset():
+    """Issue #25 (h14/swinglimb): ``step_heading(..., axis=)`` applies the offset of the axis the device heading
+    belongs to (the back's 100 deg, 5 strides), not the current top edge's (1 stride: no offset yet), and leaves the
+    current axis as it was."""
+    wd = _two_axis_estimate(1, 30.0, 5, 100.0)
+    assert wd.step_heading(0.2, "auto", "swinging") == 0.2  # the top edge: 1 stride < auto_min_strides
+    h = wd.step_heading(0.2, "auto", "swinging", axis=(0.0, 0.0, -1.0))
+    assert abs(wrap_angle(h - (0.2 + math.radians(100.0)))) < 1e-12
+    assert wd.axis_key == (0.0, 1.0, 0.0)
+
+
+def test_cross_axis_modes_give_a_step_the_other_axis_heading_and_offset():
+    """Issue #25 (h14/swinglimb): a swinging step on the top edge ``y`` (no offset yet: 1 stride) takes, with
+    ``Pipeline(cross_axis_modes=("swinging",))``, the back's smoothed heading over the step (40 deg) plus the
+    back's offset (100 deg, 5 strides): 140 deg; without it the top edge's raw heading (-70 deg); never in a mode
+    not listed; and the fast path refuses the setting."""
+    from core.pdr.steps import StepEvent
+    from desktop.fast.pipeline import _check_swinging_offset
+
+    top, back = math.radians(-70.0), math.radians(40.0)
+    out = {}
+    for modes, mode in (((), "swinging"), (("swinging",), "swinging"), (("swinging",), "pocket")):
+        pipe = Pipeline(cross_axis_modes=modes)
+        pipe.walkdir = _two_axis_estimate(1, 30.0, 5, 100.0)
+        pipe._carry_mode = mode
+        for k in range(50):
+            t = 10**12 + k * 20_000_000
+            pipe._fwd.append((t, math.cos(top), math.sin(top)))
+            pipe._fwd_axes.append((t, ((math.cos(top), math.sin(top)), (0.5 * math.cos(back), 0.5 * math.sin(back)))))
+        ev = StepEvent(t_ns=10**12 + 400_000_000, acc_max_m_s2=11.0, acc_min_m_s2=9.0, acc_var_m2_s4=1.0,
+                       duration_s=0.5, gravity_m_s2=9.81)
+        out[(modes, mode)] = math.degrees(pipe._step_heading(ev))
+    assert abs(out[((), "swinging")] + 70.0) < 1e-9
+    assert abs(out[(("swinging",), "swinging")] - 140.0) < 1e-9
+    assert abs(out[(("swinging",), "pocket")] + 70.0) < 1e-9
+    with pytest.raises(NotImplementedError):
+        _check_swinging_offset(Pipeline(turning_keeps_modes=("swinging",)))
+    _check_swinging_offset(Pipeline())  # the default runs fast
+
+
+def test_turning_keeps_modes_set_the_gap_rule_by_carry_mode():
+    """Issue #25 (h14/swinglimb): ``Pipeline(turning_keeps_modes=("swinging",))`` turns the estimate's
+    ``gap_keeps_turning`` on while the carry mode is swinging and off in the others."""
+    pipe = Pipeline(turning_keeps_modes=("swinging",))
+    seen = []
+    for mode in ("swinging", "pocket", "swinging"):
+        pipe._carry_mode = mode
+        pipe._sync_turning_rule()
+        seen.append(pipe.walkdir.gap_keeps_turning)
+    assert seen == [True, False, True]

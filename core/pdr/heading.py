@@ -61,6 +61,10 @@ def interval_heading(t_ns, east, north, t0_ns: int, t1_ns: int) -> float:
     return math.atan2(n, e)
 
 
+#: ``forward_b="auto"``'s two candidate axes, in the order of :attr:`RotationSmoother.axis_forward`: the top edge, the back
+SMOOTHER_AXES = ((0.0, 1.0, 0.0), (0.0, 0.0, -1.0))
+
+
 class RotationSmoother:
     """Second-order Butterworth low-pass on the rotation matrix, run on a uniform grid.
 
@@ -122,6 +126,7 @@ class RotationSmoother:
         self.upright = False
         self.n_axis_switches = 0
         self.n_upright = 0
+        self.axis_forward = None
         if self.auto_axis:
             self.forward_b = (0.0, 1.0, 0.0)
 
@@ -144,6 +149,8 @@ class RotationSmoother:
                 self.upright, self.forward_b = False, (0.0, 1.0, 0.0)
                 self.n_axis_switches += 1
             self.n_upright += self.upright
+            #: the horizontal (East, North) parts of both candidate axes, the top edge ``y`` and the back ``-z``
+            self.axis_forward = ((y[1], y[4]), (-y[2], -y[5]))
         fx, fy, fz = self.forward_b
         east = y[0] * fx + y[1] * fy + y[2] * fz
         north = y[3] * fx + y[4] * fy + y[5] * fz

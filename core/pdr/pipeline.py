@@ -72,7 +72,7 @@ from core.pdr.attitude import AttitudeEKF
 from core.pdr.carry import CarryChange, CarryModeDetector
 from core.pdr.deadreckoning import DeadReckoner
 from core.pdr.gapbridge import AccGapBridge, EstimatedStep, GapVerdict
-from core.pdr.heading import RotationSmoother, interval_heading
+from core.pdr.heading import SMOOTHER_AXES, RotationSmoother, interval_heading
 from core.pdr.heading_smoother import (HEADING_SMOOTHER_OFF, HEADING_SMOOTHER_RTS, HEADING_SMOOTHER_START,
                                       HEADING_SMOOTHERS, SmootherVerdict, StartHeading, smooth_steps)
 from core.pdr.steps import GENTLE, GENTLE_SWING, STEP_GATES, UNEVEN_POCKET, StepDetector, StepEvent
@@ -554,6 +554,22 @@ class Pipeline:
         % on ``NoDist``); every other tuning walk identical: the other Tyrex, RIDI and OxIOD truth walks, the 28
         real walks (``sensibility_testbed/hand_1_28_21_44`` has 16.5 s of ear) and the main benchmark's 92 (IPIN,
         Microsoft, IPOL).  ``benchmarks/discussion.md``.  The fast path mirrors it.
+    cross_axis_modes : tuple of carry modes
+        Issue #25 (h14/swinglimb), **off by default** (empty).  In these modes a step whose smoothed device axis
+        (``forward_b="auto"``: the top edge ``y`` or the back ``-z``) has fewer than the walking-direction
+        estimate's ``auto_min_strides`` accepted strides, while the other candidate axis has enough, takes the
+        other axis's smoothed heading over the step plus that axis's offset: the walking direction is the
+        walker's, whichever axis it is measured from.  Without it such a step keeps its axis's raw heading: on
+        Jakob's Tyrex swinging walks (TUNING) the axis flickered between the back and the top edge, up to every
+        step (76 switches in 131 steps on ``iPhone4S_NoDist_Swinging``), and every top-edge step went without an
+        offset, 80-115 deg off the steps beside it.  The fast path refuses it (the reference runs).
+    turning_keeps_modes : tuple of carry modes
+        Issue #25 (h14/swinglimb), **off by default** (empty).  In these modes the walking-direction estimate's
+        ``gap_keeps_turning`` holds (a stride rejected only for turning restarts its forgetting clock: the walker
+        walks on, turning, and the phone stays where it is), in the others not (the estimate's own setting is
+        overwritten on every grid sample while this is not empty).  In the 5 x 5 m Tyrex room 53-75 % of a
+        swinging hand's strides turn more than 30 deg and the estimate was forgotten mid-walk.  The fast path
+        refuses it.
     """
 
     def __init__(self, *, height_m: float | None = None, stride_model: StrideModel | None = None,
@@ -571,7 +587,8 @@ class Pipeline:
                  walk_start_cadence_frac: float = 0.3, flush_at_end: bool = True,
                  acc_gap_bridge: bool | AccGapBridge = True, heading_smoother: str = HEADING_SMOOTHER_OFF,
                  limb_upright_exit: float | None = 0.85,
-                 limb_upright_modes: tuple = (CARRY_SWINGING, CARRY_POCKET)):
+                 limb_upright_modes: tuple = (CARRY_SWINGING, CARRY_POCKET), cross_axis_modes: tuple = (),
+                 turning_keeps_modes: tuple = ()):
         self.keep_steps = keep_steps
         if acc_gap_bridge is True:
             acc_gap_bridge = AccGapBridge()
@@ -591,6 +608,8 @@ class Pipeline:
         self.walk_start_cadence_frac = float(walk_start_cadence_frac)
         self.flush_at_end = bool(flush_at_end)
         self.limb_upright_exit = None if limb_upright_exit is None else float(limb_upright_exit)
+        self.cross_axis_modes = tuple(cross_axis_modes)
+        self.turning_keeps_modes = tuple(turning_keeps_modes)
         self.limb_upright_modes = tuple(limb_upright_modes)
         self.gnss = gnss
         self.site_from_gps = bool(site_from_gps)
@@ -697,6 +716,8 @@ class Pipeline:
             self.gnss.reset()
         #: smoothed forward vector on the grid, (t_ns, east, north), the last few seconds
         self._fwd = deque()
+        #: ``cross_axis_modes``: both candidate axes' smoothed forward vectors, (t_ns, (top (e, n), back (e, n)))
+        self._fwd_axes = deque()
         self._fwd_keep_ns = self._bout_gap_ns + self._delay_ns + 1_000_000_000
         if self.carry is not None:  # peaks replayed at a mode change are up to rotation_hold_s old
             self._fwd_keep_ns += int(self.rotation_hold_s * 1e9)
@@ -795,7 +816,14 @@ class Pipeline:
                 fwd.append((tg, fe, fn))
                 while fwd[0][0] < tg - self._fwd_keep_ns:
                     fwd.popleft()
+                if self.cross_axis_modes and sm.axis_forward is not None:
+                    fa = self._fwd_axes
+                    fa.append((tg, sm.axis_forward))
+                    while fa[0][0] < tg - self._fwd_keep_ns:
+                        fa.popleft()
                 if self.walkdir is not None:
+                    if self.turning_keeps_modes:
+                        self._sync_turning_rule()
                     self.walkdir.update(tg, att.q, ax, ay, az, fe, fn, ev is not None, sm.forward_b)
             else:
                 heading = math.nan
@@ -1196,7 +1224,34 @@ class Pipeline:
             return heading
         # the carry mode in force, when a carry-mode detector runs (core.pdr.carry); None without one
         mode = self._carry_mode if self.carry is not None else None
+        if mode in self.cross_axis_modes and self._fwd_axes:
+            other = self._other_axis_heading(t0, t1, mode)
+            if other is not None:
+                return self.walkdir.step_heading(other[1], self.walking_direction, mode, axis=other[0])
         return self.walkdir.step_heading(heading, self.walking_direction, mode)
+
+    def _sync_turning_rule(self) -> None:
+        """``turning_keeps_modes``: the walking-direction estimate's ``gap_keeps_turning`` for the carry mode now."""
+        self.walkdir.gap_keeps_turning = self._carry_mode in self.turning_keeps_modes
+
+    def _other_axis_heading(self, t0_ns: int, t1_ns: int, mode):
+        """``cross_axis_modes``: ``(axis, its smoothed heading over the step)`` of the other candidate axis where
+        the current axis has fewer than ``auto_min_strides`` accepted strides and the other has enough; else None."""
+        wd = self.walkdir
+        if self.walking_direction == "device" or wd.n_used >= wd.auto_min_strides:
+            return None
+        for i, axis in enumerate(SMOOTHER_AXES):
+            if axis == wd.axis_key:
+                continue
+            st = wd.axis_state(axis)
+            if st is not None and st.n >= wd.auto_min_strides:
+                t = [x[0] for x in self._fwd_axes]
+                e = [x[1][i][0] for x in self._fwd_axes]
+                n = [x[1][i][1] for x in self._fwd_axes]
+                h = interval_heading(t, e, n, t0_ns, t1_ns)
+                if h == h:
+                    return axis, h
+        return None
 
     def finish(self) -> list[Step]:
         """End of data: complete the confirmed steps still waiting for their heading; drop an unconfirmed bout.

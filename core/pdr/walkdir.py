@@ -991,12 +991,21 @@ class WalkingDirection:
         return (self.n_used >= self.auto_far_min_strides and self.confident
                 and abs(self.offset_rad) > self.auto_min_offset_rad)
 
-    def step_heading(self, device_heading_rad: float, setting: str = "auto", carry_mode: str | None = None) -> float:
+    def step_heading(self, device_heading_rad: float, setting: str = "auto", carry_mode: str | None = None,
+                     axis=None) -> float:
         """A step's heading: the smoothed device heading, plus the offset where :meth:`applies` says so.
 
         Returns ``device_heading_rad`` itself (bit for bit) where the offset does not apply, and counts
-        the steps that got it in :attr:`n_steps_offset`.
+        the steps that got it in :attr:`n_steps_offset`.  ``axis``: the device axis ``device_heading_rad`` is the
+        heading of, when it is not the current one (its own offset applies; ``Pipeline(cross_axis_offset)``).
         """
+        if axis is not None and axis != self._axis_key:
+            saved = self._axis_key
+            self._axis_key = axis
+            try:
+                return self.step_heading(device_heading_rad, setting, carry_mode)
+            finally:
+                self._axis_key = saved
         if device_heading_rad != device_heading_rad or not self.applies(setting, carry_mode):
             return device_heading_rad
         self.n_steps_offset += 1

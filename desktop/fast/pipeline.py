@@ -163,6 +163,7 @@ def run_fast(recording: Recording, *, timings: dict | None = None, pipeline: Pip
     fatt.check_supported(ekf)
     _check_no_acc_gap(recording, p)
     _check_gates(p)
+    _check_swinging_offset(p)
     ev = _Events(recording, p)
     fusion = _FusionEvents(recording, p, ev) if p.gnss is not None else None
     clock("events", 0.10)
@@ -277,6 +278,13 @@ def _check_gates(p: Pipeline) -> None:
     if any(math.isfinite(g.rescue_min_periodicity) for g in p.step_gates.values()):
         raise NotImplementedError("the periodic weak-step rescue (StepGates.rescue_min_periodicity) runs on the "
                                   "reference only")
+
+
+def _check_swinging_offset(p: Pipeline) -> None:
+    """Refuse ``Pipeline(cross_axis_modes)`` and ``Pipeline(turning_keeps_modes)`` (issue #25, off by default): the
+    fast walking-direction kernel does not mirror them."""
+    if p.cross_axis_modes or p.turning_keeps_modes:
+        raise NotImplementedError("Pipeline(cross_axis_modes, turning_keeps_modes) run on the reference only")
 
 
 def _check_no_acc_gap(recording: Recording, p: Pipeline) -> None:
