@@ -997,7 +997,7 @@ class WalkingDirection:
 
         Returns ``device_heading_rad`` itself (bit for bit) where the offset does not apply, and counts
         the steps that got it in :attr:`n_steps_offset`.  ``axis``: the device axis ``device_heading_rad`` is the
-        heading of, when it is not the current one (its own offset applies; ``Pipeline(cross_axis_offset)``).
+        heading of, when it is not the current one (its own offset applies; ``Pipeline(cross_axis_modes)``).
         """
         if axis is not None and axis != self._axis_key:
             saved = self._axis_key
