@@ -154,7 +154,7 @@ issue #25)
     and report never share a walker): **Jakob's 6 walks tuning**, Guillaume's and Thibaud's 12 report (a third).
     The walker was chosen by name before any number, as the one in the middle of the sorted three.  Not
     copied: the hand-held carries (Texting, Phoning, AR), running, the iPhone 4S / 5 recordings (another file
-    layout) and ``Jakob_Nexus5_Dist_Swinging_old`` (a superseded take).  A Tyrex walk this does not name is report.
+    layout; copied since, below) and ``Jakob_Nexus5_Dist_Swinging_old`` (a superseded take).  A Tyrex walk this does not name is report.
     Declared 2026-12-07 (a ninth search, h14/datahunt), **before any number was seen on them** (only the files' names,
     sizes and sha256 and the Qualisys files' header dates were read, to check the copy and that no walk is another's
     double): the same repository's **iPhone 4S and iPhone 5** walks of the same three carries (``datasets/ios/``, 36

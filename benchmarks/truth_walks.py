@@ -80,6 +80,7 @@ from benchmarks.metrics import median_present
 from core.metrics import proper_rotation
 from core.conventions import GYRO, wrap_angle
 from core.importers._common import TRUTH_ATTITUDE, TRUTH_BODY_ATTITUDE
+from core.importers import tyrex as _tyrex
 from core.quaternion import to_matrix_array
 from benchmarks.options import git_rev, out_dir, write_json
 from benchmarks.real_walks import STRAIGHT_MIN, reversed_steps, run_default, stability, step_arrays
@@ -146,8 +147,8 @@ def truth_walks(root: Path | None) -> list[TruthWalk]:
     for align in aligns:
         folder = align.parent
         # the walk is named by its .mat (``Jakob_iPhone4S_NoDist_Backpocket`` has ``..._BackPocket.mat``)
-        mats = {m.stem.lower(): m.stem for m in (folder.parents[1] / "qualisys").glob("*.mat")}
-        name = mats.get(folder.name.lower())
+        mat = Path(_tyrex.truth_path(str(folder)))
+        name = mat.stem if mat.is_file() else None
         if name is None or name.split("_")[-1] not in TYREX_PLACEMENTS:
             continue
         repo_dir = folder.relative_to(root).parts[0]

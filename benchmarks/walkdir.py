@@ -444,7 +444,7 @@ def markdown(res: dict) -> str:
         L += ["### Simulator: |step heading - true walking heading| after 10 steps (deg)", "",
               f"Target: median <= {TARGET_DEG:g} deg in every placement (\"after\").  Walks over 90: walks whose own "
               "median error is above 90 deg (a sign error).", "",
-              "The step heading's error is the sum of two: the offset's (the estimator of `core.pdr.walkdir`: "
+              "The step heading's error comes from two sources: the offset's (the estimator of `core.pdr.walkdir`: "
               "its offset against the true angle from the smoother's device axis to the walk, averaged over the stride: "
               "one estimate per stride) and the device axis' own heading error over the step (the attitude filter "
               "and the smoother: the same before and after).", "",

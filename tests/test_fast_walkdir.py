@@ -165,7 +165,7 @@ SETTINGS = (dict(max_strides_kept=8), dict(axis_method="pca", max_strides_kept=0
             dict(axis_method="coherent", min_coherence=0.79), dict(axis_method="phase", min_anisotropy=1.05),
             dict(pca_min_anisotropy=3.0, memory_strides=4.0, reset_after_gap_s=5.0, delay_s=0.0),
             dict(phase_axis_below_ratio=10.0), dict(phase_axis_below_ratio=5.0),  # all strides switched; 3 of 32
-            dict(quadrature_phase=True, axis_method="phase"), dict(symmetric_axis_below_ratio=5.0))
+            dict(quadrature_phase=True, axis_method="phase"), dict(symmetric_axis_below_ratio=0.8))
 
 
 @cache

@@ -172,6 +172,16 @@ def test_a_walk_without_its_truth_is_one_clear_line_and_its_truth_points_at_the_
         detect_format(folder)
 
 
+def test_a_walk_without_its_clock_offset_is_one_clear_line(tmp_path):
+    """``read_tyrex`` on a walk folder whose timeAlignment.txt is gone (review, 2026-12-08: a bare FileNotFoundError)."""
+    t = np.arange(20) * 0.005
+    acc = np.column_stack([t, np.tile([0.1, 0.2, 9.8], (20, 1))])
+    folder = _write_walk(str(tmp_path), acc, acc, -1.5, False, mag=False)
+    os.remove(os.path.join(folder, "timeAlignment.txt"))
+    with pytest.raises(RecordingError, match="no timeAlignment.txt in this Tyrex walk's folder"):
+        read_tyrex(folder, warn=False)
+
+
 def test_other_space_separated_numbers_are_not_a_tyrex_accelerometer():
     rows = "".join(f"{1_000_000_000_000 + i * 5_000_000} 1 0.1 0.2 9.8\n" for i in range(20))  # Brajdic & Harle
     assert not _tyrex.looks_like(rows)

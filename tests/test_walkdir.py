@@ -189,9 +189,9 @@ def test_simulator_placements(placement):
         v = quat.to_matrix_array(walk.truth.attitude_at(t))[:, :2, :] @ axis
         true = circular_mean(walk.truth.heading_at(t) - np.arctan2(v[:, 1], v[:, 0]))
         errors[ratio] = abs(math.degrees(wrap_angle(pipe.walkdir.offset_rad - true)))
-    ratio_off, ratio_default = errors
-    assert errors[ratio_off] < 5.0, errors
-    assert errors[ratio_default] < (5.0 if placement == "bag" else 12.0), errors
+    default = WalkingDirection().phase_axis_below_ratio
+    assert errors[0.0] < 5.0, errors
+    assert errors[default] < (5.0 if placement == "bag" else 12.0), errors
 
 
 def test_gap_keeps_turning_holds_the_estimate_through_a_long_turn():
@@ -381,3 +381,37 @@ def test_turning_keeps_modes_set_the_gap_rule_by_carry_mode():
         pipe._sync_turning_rule()
         seen.append(pipe.walkdir.gap_keeps_turning)
     assert seen == [True, False, True]
+    pipe.reset()  # the estimate's own rule is back after a reset (review, 2026-12-08: it stayed overwritten)
+    assert pipe.walkdir.gap_keeps_turning is False
+    own = WalkingDirection(gap_keeps_turning=True)
+    pipe = Pipeline(turning_keeps_modes=("swinging",), walkdir=own)
+    pipe._carry_mode = "pocket"
+    pipe._sync_turning_rule()
+    pipe.reset()
+    assert own.gap_keeps_turning is True
+
+
+def test_smoother_axis_forward_is_the_forward_vector_of_each_candidate_axis():
+    """``RotationSmoother.axis_forward`` (``Pipeline(cross_axis_modes)``): entry i is the smoothed forward vector the
+    smoother reports when ``forward_b`` is ``SMOOTHER_AXES[i]``, for a phone flat and one standing upright."""
+    from core.pdr.heading import SMOOTHER_AXES, RotationSmoother
+
+    flat = ((0.6, -0.8, 0.0), (0.8, 0.6, 0.0), (0.0, 0.0, 1.0))  # body -> ENU, yawed
+    upright = ((0.6, 0.0, 0.8), (0.8, 0.0, -0.6), (0.0, 1.0, 0.0))  # top edge up, back horizontal
+    for mat, want in ((flat, 0), (upright, 1)):
+        sm = RotationSmoother(forward_b="auto")
+        assert sm.axis_forward is None
+        for _ in range(200):
+            sm.update(mat)
+        assert sm.forward_b == SMOOTHER_AXES[want]
+        got = sm.axis_forward[want]
+        assert abs(got[0] - sm.forward_east) < 1e-12 and abs(got[1] - sm.forward_north) < 1e-12
+
+
+def test_symmetric_axis_ratio_of_one_or_more_is_refused():
+    """At 1 or more the symmetric axis's on threshold lies above its off one, so it flipped every stride (review,
+    2026-12-08): refused."""
+    for bad in (1.0, 5.0, -0.1):
+        with pytest.raises(ValueError, match="symmetric_axis_below_ratio"):
+            WalkingDirection(symmetric_axis_below_ratio=bad)
+    assert WalkingDirection(symmetric_axis_below_ratio=0.8).symmetric_axis_below_ratio == 0.8

@@ -290,7 +290,11 @@ def read_tyrex(folder: str, *, mat_path: str | None = None, warn: bool = True,
         else:
             xyz = v[:, 1:]
         streams[stream] = make_stream(stream, t_ns, xyz)
-    offset_s = _alignment_s(os.path.join(folder, ALIGNMENT_FILE))
+    align = os.path.join(folder, ALIGNMENT_FILE)
+    if not os.path.isfile(align):
+        raise RecordingError(f"no {ALIGNMENT_FILE} in this Tyrex walk's folder (the phone-to-Qualisys clock offset)",
+                             folder)
+    offset_s = _alignment_s(align)
     t_q, pos, r = qualisys_truth(mat_path, max_uncompressed_bytes)
     t_ns = np.round((t_q - offset_s) * 1e9).astype(np.int64)
     streams[POSI] = make_stream(POSI, t_ns, pos, POSI_COLUMNS, "m,m,m",

@@ -108,6 +108,14 @@ class RotationSmoother:
         self.reset()
 
     @property
+    def axis_forward(self):
+        """``forward_b="auto"``: the horizontal (East, North) parts of both candidate axes after the last update,
+        in the order of :data:`SMOOTHER_AXES` (the top edge ``y``, the back ``-z``); None before one or with a fixed
+        axis."""
+        y = self._y
+        return None if y is None else ((y[1], y[4]), (-y[2], -y[5]))
+
+    @property
     def delay_s(self) -> float:
         """Low-frequency group delay of the smoother (s)."""
         return butter2_group_delay_s(self.cutoff_hz)
@@ -126,9 +134,9 @@ class RotationSmoother:
         self.upright = False
         self.n_axis_switches = 0
         self.n_upright = 0
-        self.axis_forward = None
+        self._y = None  # the filtered rows of the last update (``axis_forward``)
         if self.auto_axis:
-            self.forward_b = (0.0, 1.0, 0.0)
+            self.forward_b = SMOOTHER_AXES[0]
 
     def update(self, mat_nb) -> float:
         """Filter one rotation matrix (3 row tuples, body -> ENU); returns the smoothed heading (rad)."""
@@ -143,14 +151,13 @@ class RotationSmoother:
         if self.auto_axis:
             y_norm = math.hypot(y[1], y[4])
             if not self.upright and y_norm < self.upright_enter:
-                self.upright, self.forward_b = True, (0.0, 0.0, -1.0)
+                self.upright, self.forward_b = True, SMOOTHER_AXES[1]
                 self.n_axis_switches += 1
             elif self.upright and y_norm > self.upright_exit:
-                self.upright, self.forward_b = False, (0.0, 1.0, 0.0)
+                self.upright, self.forward_b = False, SMOOTHER_AXES[0]
                 self.n_axis_switches += 1
             self.n_upright += self.upright
-            #: the horizontal (East, North) parts of both candidate axes, the top edge ``y`` and the back ``-z``
-            self.axis_forward = ((y[1], y[4]), (-y[2], -y[5]))
+            self._y = y  # a reference only: ``axis_forward`` is built when asked (Pipeline(cross_axis_modes))
         fx, fy, fz = self.forward_b
         east = y[0] * fx + y[1] * fy + y[2] * fz
         north = y[3] * fx + y[4] * fy + y[5] * fz

@@ -647,6 +647,8 @@ class Pipeline:
         #: the walking-direction stage (None with walking_direction="device")
         self.walkdir = None if walking_direction == "device" else (
             walkdir or WalkingDirection(grid_rate_hz=self.grid_rate_hz, delay_s=self.heading_delay_s))
+        #: the walking-direction estimate's own ``gap_keeps_turning`` (``turning_keeps_modes`` overrides it per mode)
+        self._walkdir_keeps_turning = bool(getattr(self.walkdir, "gap_keeps_turning", False))
         self.log = log
         self.reset()
 
@@ -731,6 +733,8 @@ class Pipeline:
         self.t_ns = 0
         self.seen: dict[str, int] = {}
         if self.walkdir is not None:
+            if self.turning_keeps_modes:  # the estimate's own rule back (``_sync_turning_rule`` overwrites it)
+                self.walkdir.gap_keeps_turning = self._walkdir_keeps_turning
             self.walkdir.reset()
         self._log: list[tuple] = []
         if self.bridge is not None:
@@ -1225,7 +1229,7 @@ class Pipeline:
         # the carry mode in force, when a carry-mode detector runs (core.pdr.carry); None without one
         mode = self._carry_mode if self.carry is not None else None
         if mode in self.cross_axis_modes and self._fwd_axes:
-            other = self._other_axis_heading(t0, t1, mode)
+            other = self._other_axis_heading(t0, t1)
             if other is not None:
                 return self.walkdir.step_heading(other[1], self.walking_direction, mode, axis=other[0])
         return self.walkdir.step_heading(heading, self.walking_direction, mode)
@@ -1234,7 +1238,7 @@ class Pipeline:
         """``turning_keeps_modes``: the walking-direction estimate's ``gap_keeps_turning`` for the carry mode now."""
         self.walkdir.gap_keeps_turning = self._carry_mode in self.turning_keeps_modes
 
-    def _other_axis_heading(self, t0_ns: int, t1_ns: int, mode):
+    def _other_axis_heading(self, t0_ns: int, t1_ns: int):
         """``cross_axis_modes``: ``(axis, its smoothed heading over the step)`` of the other candidate axis where
         the current axis has fewer than ``auto_min_strides`` accepted strides and the other has enough; else None."""
         wd = self.walkdir

@@ -351,8 +351,8 @@ class WalkingDirection:
         66.3 -> 19.9 and 64.3 -> 41.0 deg, but the same walker's front pocket 9.7 -> 18.3, one walker).  **1.2 by
         default** since 2026-12-07 (fourteenth session): with the Tyrex benchmark's iPhone walks (h14/datahunt) the
         tuning split holds 36 truth walks, Jakob's 18 on three phones, 4 back pockets and 4 front pockets that 1.2
-        was not chosen on: their back pockets 55-73 -> 10-28 deg, no front pocket worse.  Over the 33 scored tuning
-        walks, off -> 1.2: median offset error 17.4 -> 16.4 deg, mean 35.4 -> 27.3, one walk worse by > 0.5 deg (the
+        was not chosen on: their back pockets 55-73 -> 10-28 deg, none of the new front pockets worse.  Over the 33
+        scored tuning walks, off -> 1.2: median offset error 17.4 -> 16.4 deg, mean 35.4 -> 27.3, one walk worse by > 0.5 deg (the
         Nexus 5 front pocket above); the track's end error after the best rotation median 7.5 -> 7.3 %, mean 8.9 ->
         8.1; the real GPS tuning walks identical.  Leave one walk out picks 1.5 (mean 27.0, end error 7.0 / 7.9 %),
         within 0.3 deg of 1.2 on the real walks, but the simulator's pocket (truth known; seeds 0-11, a 130-m walk)
@@ -422,6 +422,12 @@ class WalkingDirection:
         self.phase_axis_below_ratio = float(phase_axis_below_ratio)
         self.quadrature_phase = bool(quadrature_phase)
         self.symmetric_axis_below_ratio = float(symmetric_axis_below_ratio)
+        if not 0.0 <= self.symmetric_axis_below_ratio < 1.0:
+            # at 1 or more its on threshold (the ratio) lies above its off one (the reciprocal): a flip every stride
+            raise ValueError("symmetric_axis_below_ratio must be 0 (off) or in (0, 1), "
+                             f"got {symmetric_axis_below_ratio!r}")
+        #: keep the open stride's samples (the symmetric axis), at most a longest stride's worth
+        self._xy_max = int(self.max_stride_s * self.grid_rate_hz) + 2
         self._log_sym_ratio = math.log(self.symmetric_axis_below_ratio) if self.symmetric_axis_below_ratio > 0 else 0.0
         #: the open stride's running sums: 14, and sum a_z v_z with ``quadrature_phase``
         self._n_sums = 15 if self.quadrature_phase else 14
@@ -565,8 +571,8 @@ class WalkingDirection:
         s[13] += au * au
         if self.quadrature_phase:
             s[14] += au * vz
-        if self.symmetric_axis_below_ratio > 0.0:
-            self._xy.append((x, y))
+        if self.symmetric_axis_below_ratio > 0.0 and len(self._xy) < self._xy_max:
+            self._xy.append((x, y))  # a longer stride is rejected for its duration anyway
 
     def _velocity(self, x: float, y: float) -> None:
         """The phone's horizontal velocity in the device-heading frame (leaky integral of the acceleration, its
@@ -609,8 +615,9 @@ class WalkingDirection:
         """The open stride's test of its axis ``theta`` (rad from the device heading) for a sideways pull, and the
         symmetric axis (module docstring, "The symmetric axis"): ``(ratio, theta_sym)``.  ``ratio``: the stride-to-step
         harmonic amplitude ratio of the horizontal acceleration across ``theta`` over the one along it (inf where
-        undefined); ``theta_sym``: the minor axis of the covariance of the stride's alternating part (one step's
-        samples minus the next step's, half a stride later)."""
+        undefined); ``theta_sym``: the symmetric axis, the principal axis of the symmetrised sum of the stride's
+        samples times the samples half a stride later (the motion alike in both steps less the alternating one; module
+        docstring)."""
         xy = self._xy
         n = len(xy)
         if n < 8:
