@@ -210,3 +210,13 @@ def test_an_iphone_walk_is_read_in_g_with_the_android_sign_on_the_boot_clock_and
     assert len(rec.streams["mag"].t_ns) == 100 and rec.device["platform"] == "ios"
     k = np.array([i for i in range(120) if i != 7])
     np.testing.assert_array_equal(rec.streams[POSI].t_ns, np.round((k / RATE_HZ + 2.0) * 1e9).astype(np.int64))
+    # pdr replay detects it from its folder or any of its files; its truth points at it (the case differs)
+    for given in (str(folder), str(folder / "accelerometer.txt"), str(folder / "gyroscope.txt"),
+                  str(folder / "description.txt")):
+        assert detect_format(given) == TYREX
+    assert set(load_recording(str(folder / "gyroscope.txt"), warn=False).streams) == set(rec.streams)
+    with pytest.raises(RecordingError, match="replay its folder .*ios.Anna_iPhone5_NoDist_Backpocket"):
+        detect_format(str(tmp_path / "datasets" / "qualisys" / "Anna_iPhone5_NoDist_BackPocket.mat"))
+    # in m/s^2 it is no iPhone walk (g is the iPhone layout's unit), and an Android walk stays one
+    assert not _tyrex.looks_like("".join(f"{1000 + i * 0.01} 0.1 0.2 9.8\n" for i in range(20)), ios=True)
+    assert _tyrex.looks_like("".join(f"{100000 + i * 0.01} 0.01 -0.02 -1.0\n" for i in range(20)), ios=True)

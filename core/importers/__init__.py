@@ -46,7 +46,7 @@ Formats (name: input -> reader):
   folder holding one such pair -> :func:`read_oxiod`
 * ``ridi``: a RIDI processed table, ``data.csv`` or an ``.xlsx`` of the same columns (``time``, ``acce_x/y/z``,
   ``gyro_x/y/z`` in its header), Tango truth as ``posi``, or a folder holding one -> :func:`read_ridi`
-* ``tyrex``: a Tyrex attitude-benchmark walk, its folder ``datasets/android/<name>/`` or one of its text files
+* ``tyrex``: a Tyrex attitude-benchmark walk, its folder ``datasets/android/<name>/`` (or ``datasets/ios/<name>/``) or one of its text files
   (``accelerometer.txt`` ...; recognised by the folder's files and the accelerometer's space-separated numbers),
   with its Qualisys truth ``datasets/qualisys/<name>.mat`` as ``posi`` -> :func:`read_tyrex`
 
@@ -198,8 +198,9 @@ FORMATS = {
     RIDI: "RIDI processed table: data.csv or an .xlsx of its columns ('time', 'acce_x/y/z', 'gyro_x/y/z', ... "
           "'pos_x/y/z' the Tango truth), or a folder holding one",
     TYREX: "Tyrex attitude-benchmark walk: its folder datasets/android/<name>/ (accelerometer.txt, "
-           "gyroscope-calibrated.txt, timeAlignment.txt: 't x y z' lines) or one of its files, with its Qualisys "
-           "truth datasets/qualisys/<name>.mat",
+           "gyroscope-calibrated.txt, timeAlignment.txt: 't x y z' lines) or datasets/ios/<name>/ (gyroscope.txt, "
+           "description.txt, the accelerometer in g) or one of its files, with its Qualisys truth "
+           "datasets/qualisys/<name>.mat",
 }
 
 

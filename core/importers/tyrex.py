@@ -51,7 +51,10 @@ either reads the folder, and the folder finds its truth ``../../qualisys/<name>.
 so the folder is tested by its content (:func:`looks_like_folder`): ``accelerometer.txt``,
 ``gyroscope-calibrated.txt`` and ``timeAlignment.txt`` are there, and the accelerometer's first lines are
 (:func:`looks_like`) at least 3, and nine in ten, lines of 4-8 numbers separated by spaces (the first line too),
-times in s from the start (0 to a day, not decreasing), a median ``|a|`` of 5-15 m/s^2 (gravity included).  No
+times in s from the start (0 to a day, not decreasing), a median ``|a|`` of 5-15 m/s^2 (gravity included).  An
+iPhone walk (``datasets/ios/<name>/``) holds ``accelerometer.txt``, ``gyroscope.txt``, ``timeAlignment.txt`` and
+``description.txt``; its accelerometer is in g (a median ``|a|`` of 0.5-1.5) on the phone's boot clock (no upper
+bound on the times).  No
 other format read here has such lines (Brajdic & Harle's text has the time in ns and a type; the others separate
 with commas, tabs or ``;``).  A missing truth is a :class:`RecordingError` saying where it was looked for (the
 dataset's layout).  The ``.mat`` itself (QTM's MAT export, its header text ``QTM_ver``) is refused pointing at
@@ -88,14 +91,19 @@ ALIGNMENT_FILE = "timeAlignment.txt"
 
 #: the walk's files a user may point at (each reads its folder)
 WALK_FILES = (*FILES.values(), ALIGNMENT_FILE)
+#: and an iPhone walk's own
+IOS_WALK_FILES = (IOS_FILES[GYRO], IOS_DESCRIPTION_FILE)
 #: files a walk folder must hold (the magnetometer is optional)
 NEEDED = (FILES[ACC], FILES[GYRO], ALIGNMENT_FILE)
+#: files an iPhone walk folder must hold
+IOS_NEEDED = (IOS_FILES[ACC], IOS_FILES[GYRO], ALIGNMENT_FILE, IOS_DESCRIPTION_FILE)
 #: the text at the start of a QTM MAT export's header
 QTM_MAGIC = b"QTM_ver"
 
 
-def looks_like(head: str) -> bool:
-    """True if the first lines of a text are ``accelerometer.txt`` lines of a Tyrex walk (module doc, *Detection*)."""
+def looks_like(head: str, ios: bool = False) -> bool:
+    """True if the first lines of a text are ``accelerometer.txt`` lines of a Tyrex walk (module doc, *Detection*);
+    ``ios``: an iPhone walk's (g, times from the phone's boot: no upper bound)."""
     lines = head_lines(head)
     rows = []
     for i, ln in enumerate(lines):
@@ -114,19 +122,24 @@ def looks_like(head: str) -> bool:
         return False
     t = v[:, 0]
     norm = float(np.median(np.linalg.norm(v[:, 1:4], axis=1)))
+    if ios:
+        return bool(np.all(t >= 0.0) and np.all(np.diff(t) >= 0.0) and 0.5 <= norm <= 1.5)
     return bool(np.all((t >= 0.0) & (t < 86400.0)) and np.all(np.diff(t) >= 0.0) and 5.0 <= norm <= 15.0)
 
 
 def looks_like_folder(path: str) -> bool:
     """True if ``path`` is a Tyrex walk folder: its needed files there, the accelerometer's content right."""
     path = str(path)
-    if not os.path.isdir(path) or not all(os.path.isfile(os.path.join(path, n)) for n in NEEDED):
+    if not os.path.isdir(path):
+        return False
+    ios = all(os.path.isfile(os.path.join(path, n)) for n in IOS_NEEDED)
+    if not ios and not all(os.path.isfile(os.path.join(path, n)) for n in NEEDED):
         return False
     try:
         head = head_bytes(os.path.join(path, FILES[ACC]), 65536)
     except OSError:
         return False
-    return looks_like(head.decode("latin-1"))
+    return looks_like(head.decode("latin-1"), ios=ios)
 
 
 def walk_folder(path: str) -> str | None:
@@ -134,7 +147,7 @@ def walk_folder(path: str) -> str | None:
     is a Tyrex walk (:func:`looks_like_folder`), else None."""
     path = str(path).rstrip("/") or "/"
     if os.path.isfile(path):
-        if os.path.basename(path) not in WALK_FILES:
+        if os.path.basename(path) not in WALK_FILES + IOS_WALK_FILES:
             return None
         path = os.path.dirname(path) or "."
     return path if looks_like_folder(path) else None
@@ -156,14 +169,22 @@ def truth_path(folder: str) -> str:
 
 
 def walk_of_truth(path: str, head: bytes) -> str | None:
-    """The walk folder ``../../android/<name>/`` of a Qualisys export ``qualisys/<name>.mat`` when it is there."""
+    """The walk folder ``../../android/<name>/`` (or ``../../ios/<name>/``, the name matched without regard to
+    case) of a Qualisys export ``qualisys/<name>.mat`` when it is there."""
     if not head.startswith(QTM_MAGIC):
         return None
     stem = os.path.basename(str(path))
     if not stem.lower().endswith(".mat"):
         return None
-    folder = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(str(path)))), "android", stem[:-4])
-    return folder if looks_like_folder(folder) else None
+    root = os.path.dirname(os.path.dirname(os.path.abspath(str(path))))
+    for platform in ("android", "ios"):
+        pdir = os.path.join(root, platform)
+        if not os.path.isdir(pdir):
+            continue
+        for name in sorted(os.listdir(pdir)):
+            if name.lower() == stem[:-4].lower() and looks_like_folder(os.path.join(pdir, name)):
+                return os.path.join(pdir, name)
+    return None
 
 
 def _table(path: str, repairs: list[str], limit: int | None) -> np.ndarray:
