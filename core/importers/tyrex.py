@@ -153,19 +153,24 @@ def walk_folder(path: str) -> str | None:
     return path if looks_like_folder(path) else None
 
 
+def _same_name(directory: str, name: str) -> list[str]:
+    """The entries of ``directory`` named ``name`` without regard to case, the exact spelling first (the dataset
+    spells one walk ``..._Backpocket`` beside its ``..._BackPocket.mat``); none where the directory is missing."""
+    if not os.path.isdir(directory):
+        return []
+    return sorted((f for f in os.listdir(directory) if f.lower() == name.lower()), key=lambda f: (f != name, f))
+
+
 def truth_path(folder: str) -> str:
     """Where a walk folder's Qualisys truth is in the dataset's layout: ``../../qualisys/<name>.mat``, the name
     matched without regard to case where the exact one is missing (module doc)."""
     folder = os.path.abspath(str(folder).rstrip("/"))
     name = os.path.basename(folder)
     qdir = os.path.join(os.path.dirname(os.path.dirname(folder)), "qualisys")
-    exact = os.path.join(qdir, name + ".mat")
-    if os.path.isfile(exact) or not os.path.isdir(qdir):
-        return exact
-    for f in sorted(os.listdir(qdir)):
-        if f.lower() == name.lower() + ".mat":
+    for f in _same_name(qdir, name + ".mat"):
+        if os.path.isfile(os.path.join(qdir, f)):
             return os.path.join(qdir, f)
-    return exact
+    return os.path.join(qdir, name + ".mat")
 
 
 def walk_of_truth(path: str, head: bytes) -> str | None:
@@ -179,10 +184,8 @@ def walk_of_truth(path: str, head: bytes) -> str | None:
     root = os.path.dirname(os.path.dirname(os.path.abspath(str(path))))
     for platform in ("android", "ios"):
         pdir = os.path.join(root, platform)
-        if not os.path.isdir(pdir):
-            continue
-        for name in sorted(os.listdir(pdir)):
-            if name.lower() == stem[:-4].lower() and looks_like_folder(os.path.join(pdir, name)):
+        for name in _same_name(pdir, stem[:-4]):
+            if looks_like_folder(os.path.join(pdir, name)):
                 return os.path.join(pdir, name)
     return None
 
