@@ -299,6 +299,9 @@ class FusionResult:
 #: a hidden fix's verdict (:class:`FixRecord` ``reason``)
 HIDDEN = "hidden (outage)"
 
+#: when the consistent-stream relock obeys the drift limit (:class:`FixFusion`'s ``relock_stream_drift_limit``)
+RELOCK_STREAM_DRIFT_LIMITS = ("never", "known_start", "always")
+
 #: a fix this accurate (reported 68 % radius, m) may place a walk on the map: the first one is the origin
 ANCHOR_MAX_HACC_M = 12.0
 
@@ -437,6 +440,21 @@ class FixFusion:
         A jump in the fix stream right after the filter's last accepted fix (a multipath episode) blocks the
         "consistent stream" relock for at most this long after the judge last saw it (s); a stream consistent
         that long afterwards is taken back (:meth:`FixFusion._stream_jumped`).
+    relock_stream_drift_limit : {"never", "known_start", "always"}
+        When the "consistent stream" relock obeys ``relock_max_drift`` too (:meth:`FixFusion._within_drift`): it
+        moves the track onto the fix only if the fix's innovation is one dead reckoning can have built up since the
+        filter's last accepted fix (or the start): ``relock_max_drift`` times the distance walked since then plus
+        three SDs of the fix.  ``"known_start"``: on a walk with a known ``start`` (indoors: the user or the
+        competition gives it); ``"always"``; ``"never"``: the rule before (the consistent stream whatever its
+        offset; ``relock_max_drift`` for the "gated fixes agree" rule only).  Why (issue #26, indoors): the judge's
+        tests are translation-free (the fixes' shape against the steps', among themselves), so an indoor stream
+        25 m off that moves as the walker does passes them, and the relock then put the track on it whatever dead
+        reckoning from the known start said (IPIN tuning T22r03 with the judge's pace check off, a proxy for an
+        indoor receiver whose pace passes: one relock 28 s after the start, 25.6 m after 31 m walked, dead
+        reckoning 1.1 m off: the landmark error 2.0 -> 16.5 m; with the limit 6.0 m).  Not ``"always"``: outdoors
+        the relock is how a filter whose dead reckoning went wrong takes a good stream back (a phone turned 45 deg
+        in the hand during an outage: 70 m off after 140 m walked; steps counted 0.4x or 2.4x), the issue's "never
+        lose a consistent stream", and six tests of it fail with the limit there.
     anchor_max_hacc_m, anchor_max_waits : float, int
         The first fix used (the anchor) must report at most this accuracy (m), unless this
         many screened fixes came without one (then any fix within ``max_hacc_m`` anchors).
@@ -490,7 +508,7 @@ class FixFusion:
                  hold_s: float = 3.0, hidden_ns=(), relock_s: float = 8.0, anchor_max_hacc_m: float = ANCHOR_MAX_HACC_M,
                  anchor_max_waits: int = 30, start: tuple | None = None, min_cn0_4th_dbhz: float = 25.0,
                  status_max_age_s: float = 2.0, relock_max_drift: float | None = None, relock_jump_hold_s: float = 60.0,
-                 relock_gated_s: float | None = 5.0,
+                 relock_gated_s: float | None = 5.0, relock_stream_drift_limit: str = "known_start",
                  pause_s: float = 1.5,
                  course_latency_s: float = 1.5, judge: JudgeSettings | None = JudgeSettings(),
                  keep_history: bool = True, history_dir: str | None = None, learn_held_back: bool = False):
@@ -506,6 +524,10 @@ class FixFusion:
         self.relock_max_drift = None if relock_max_drift is None else float(relock_max_drift)
         self.relock_jump_hold_ns = int(relock_jump_hold_s * 1e9)
         self.relock_gated_ns = None if relock_gated_s is None else int(relock_gated_s * 1e9)
+        if relock_stream_drift_limit not in RELOCK_STREAM_DRIFT_LIMITS:
+            raise ValueError(f"relock_stream_drift_limit must be one of {RELOCK_STREAM_DRIFT_LIMITS}, "
+                             f"got {relock_stream_drift_limit!r}")
+        self.relock_stream_drift_limit = relock_stream_drift_limit
         self.anchor_max_hacc_m = float(anchor_max_hacc_m)
         self.anchor_max_waits = int(anchor_max_waits)
         self.hidden_ns = [(int(a), int(b)) for a, b in hidden_ns]
@@ -942,7 +964,10 @@ class FixFusion:
         run.append((t_ns, innovation[0], innovation[1]))
         while run and run[0][0] < t_ns - 2 * self.relock_ns:
             run.popleft()
-        if self._consistent_stream(t_ns, run[0][0]):  # gated, and judged consistent, for relock_s
+        if self._consistent_stream(t_ns, run[0][0]) and \
+                (not self._stream_drift_limited() or self._within_drift(math.hypot(*innovation[:2]), sigma_m)):
+            # gated, and judged consistent, for relock_s (where ``relock_stream_drift_limit`` applies: no further off
+            # than dead reckoning can have drifted)
             self.relocks.append({"t_ns": int(t_ns), "offset_m": float(math.hypot(innovation[0], innovation[1])),
                                  "rule": "consistent stream", "consistent_s": self._consistent_s(t_ns),
                                  "gated_s": (t_ns - run[0][0]) * 1e-9,
@@ -958,13 +983,24 @@ class FixFusion:
         d = np.array([(r[1], r[2]) for r in run])
         if float(np.max(np.std(d, axis=0))) > 2.0 * sigma_m:
             return False  # they disagree with each other too: bad GPS, keep rejecting
-        if self.relock_max_drift is not None and float(np.hypot(*np.mean(d, axis=0))) > \
-                self.relock_max_drift * self._state.lock.walked_since_accept_m + 3.0 * sigma_m:
+        if not self._within_drift(float(np.hypot(*np.mean(d, axis=0))), sigma_m):
             return False  # more than the track can have drifted since its last fix: a steady multipath
         self.relocks.append({"t_ns": int(t_ns), "offset_m": float(np.hypot(*np.mean(d, axis=0))),
                              "rule": "gated fixes agree", "consistent_s": (t_ns - run[0][0]) * 1e-9})
         run.clear()
         return True
+
+    def _stream_drift_limited(self) -> bool:
+        """Whether the consistent-stream relock obeys ``relock_max_drift`` (``relock_stream_drift_limit``)."""
+        mode = self.relock_stream_drift_limit
+        return mode == "always" or (mode == "known_start" and self.start is not None)
+
+    def _within_drift(self, offset_m: float, sigma_m: float) -> bool:
+        """Whether a relock's offset ``offset_m`` (m) is one the track can have drifted since the filter's last
+        accepted fix (or its start): at most ``relock_max_drift`` times the distance walked since then plus three
+        of the fix's per-axis SD ``sigma_m`` (always, with ``relock_max_drift`` None)."""
+        return self.relock_max_drift is None or \
+            offset_m <= self.relock_max_drift * self._state.lock.walked_since_accept_m + 3.0 * sigma_m
 
     def _consistent_stream(self, t_ns: int, gated_since_ns: int, last_accept_ns: int | None = None) -> bool:
         """The "consistent stream" relock rule: the judge finds the stream usable, with no jump away from a track
