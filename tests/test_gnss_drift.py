@@ -115,3 +115,50 @@ def test_the_judge_refuses_a_drifting_stream_and_says_why():
         assert all(jd.verdict is GpsVerdict.USABLE for t, jd in out if 30.0 < t < DRIFT_START_S), seed
     _, good = _judged(False)
     assert all(jd.verdict is GpsVerdict.USABLE for t, jd in good if t > 30.0)
+
+
+def test_an_untrained_stride_is_not_taken_for_a_drift():
+    """Issue #26 (h15/drift): the check held the fusion's dead reckoning to a 2 % stride error whatever the fusion
+    knew of its stride; on a phone whose stride GPS never taught (the real tuning walk: 0 chords in 300 s) dead
+    reckoning 10 % long made a good stream "drift".  With ``scale_sd_from_filter`` the fusion's own posterior SD of its
+    stride scale (the prior's 8 % here) counts: the good stream stays steady, while the same check with a trained
+    stride (2 %) still calls it drifting (a good stream, dead reckoning 10 % long, 300 s, one seed)."""
+    def run(scale_sd, from_filter):
+        chk = StreamDriftCheck(DriftSettings(scale_sd_from_filter=from_filter))
+        out = []
+        for t, new, fe, fn in _stream(False, 300.0, 2):
+            for st in new:
+                chk.add_step(st.t_ns, 1.10 * st.length_m, st.heading_rad, scale_sd)
+            state = chk.add_fix(int(t * 1e9), fe, fn, 5.0)
+            if not state.drifting:
+                chk.fix_used(int(t * 1e9))
+            out.append(state)
+        return out
+
+    untrained = run(0.08, True)
+    assert any(st.verdict is DriftVerdict.STEADY for st in untrained)
+    assert not any(st.drifting for st in untrained)
+    assert any(st.drifting for st in run(0.02, True))  # a trained stride: the 10 % is found
+    assert any(st.drifting for st in run(0.08, False))  # the rule before: 2 % whatever the fusion knows
+
+
+def test_a_multipath_jump_is_not_taken_for_a_drift():
+    """Issue #26 (h15/drift): a 20-m multipath episode of 30 s in a good stream moved the offset at once; the check
+    took it for a drift (the rate over its 90-180 s span is slow) and held its reference on.  With ``onset_lag_s``
+    the offset must have grown steadily over the last 30 s: the jump is the judge's window's business (300 s, one
+    seed)."""
+    def run(onset_lag_s):
+        chk = StreamDriftCheck(DriftSettings(onset_lag_s=onset_lag_s))
+        out = []
+        for t, new, fe, fn in _stream(False, 300.0, 1):
+            for st in new:
+                chk.add_step(st.t_ns, st.length_m, st.heading_rad)
+            jump = 20.0 if 200.0 <= t < 230.0 else 0.0
+            state = chk.add_fix(int(t * 1e9), fe + 0.6 * jump, fn + 0.8 * jump, 5.0)
+            if not state.drifting:
+                chk.fix_used(int(t * 1e9))
+            out.append(state)
+        return out
+
+    assert not any(st.drifting for st in run(30.0))
+    assert any(st.drifting for st in run(None))  # the rule before: found, and held

@@ -660,6 +660,11 @@ class FixFusion:
         """(length_m, heading_rad) of the step just filtered, for the fused track."""
         raise NotImplementedError
 
+    def _stride_scale_sd(self) -> float:
+        """The filter's posterior SD (relative) of the stride scale it walks with (the drift check's
+        ``scale_sd_from_filter``); nan: the subclass does not learn one."""
+        return math.nan
+
     def _reported_cov(self) -> np.ndarray:
         """The covariance the fused track reports (its ``[:2, :2]``): the filter's ``P`` unless the subclass keeps
         one that models what its gain does not (Chen's: :attr:`core.gnss.ekf.PdrEkf.reported_cov`)."""
@@ -768,7 +773,7 @@ class FixFusion:
             walked = self._dead_reckon(step, t_prev, dur)
         self._remember_heading(step.t_ns, step.heading_rad)
         if self.judge is not None:  # the drift check's dead reckoning: the step as this filter walked it
-            self.judge.add_step(step.t_ns, *self._step_output())
+            self.judge.add_step(step.t_ns, *self._step_output(), self._stride_scale_sd())
         state.lock.walked_since_accept_m += walked
         state.screen.last_step_ns = step.t_ns
         state.screen.last_step_dur_ns = dur

@@ -328,6 +328,9 @@ class GpsFusion(FixFusion):
     def _reported_cov(self):
         return self.ekf.reported_cov
 
+    def _stride_scale_sd(self) -> float:
+        return self.trainer.stride_scale_sd if self.learn_stride else self.trainer.prior_scale_sd
+
     def _dead_reckoned_step(self, step) -> tuple[float, float]:
         length, heading = self.stride_scale * step.length_m, self.compensated_heading(step.heading_rad)
         if math.isfinite(length) and math.isfinite(heading):

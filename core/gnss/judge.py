@@ -196,7 +196,10 @@ class JudgeSettings:
     #: default: on the real tuning walk (thomasdingemanse_lopen) it only costs -- the fused dead reckoning of a phone
     #: is 10 % off over two minutes there, not the simulator's 1-2 %, and the check refused a good stream (Chen's
     #: leave-out ratio 0.43 -> 1.73, longest good stretch lost 16 -> 151 s; Kubrak's 1.44 -> 1.50, 57 s either
-    #: way); on the simulator's tuning fault walks it helps (bad fixes taken: Chen 5 -> 2, Kubrak 5 -> 4)
+    #: way); on the simulator's tuning fault walks it helps (bad fixes taken: Chen 5 -> 2, Kubrak 5 -> 4).  With the
+    #: fusion's own stride SD and the steady-onset rule (``DriftSettings.scale_sd_from_filter``, ``onset_lag_s``; issue
+    #: #26, h15/drift) the real tuning walk and IPIN tuning are identical with the check on, bad fixes 5 -> 4 / 5 -> 4:
+    #: still off (no real tuning walk can show a gain; :mod:`core.gnss.drift` has the numbers)
     drift: DriftSettings | None = None
     #: require positive evidence before a stream becomes usable at the walk's start and after a gap of more than
     #: ``resume_max_gap_s`` (:meth:`GpsJudge._evidence_now`): where the receiver reports speeds, a pace window
@@ -579,11 +582,12 @@ class GpsJudge:
         self._dr_ref_m: float | None = None  # dead reckoning's 68 % radius at its last reference (None: no reference)
         self._dr_walked_m = 0.0  # walked since that reference (m)
 
-    def add_step(self, t_ns: int, length_m: float, heading_rad: float) -> None:
-        """A step as the fusion dead-reckons it (its length and heading with what GPS taught): the drift check's
-        reference (:mod:`core.gnss.drift`) and the distance dead reckoning's own error grows with."""
+    def add_step(self, t_ns: int, length_m: float, heading_rad: float, scale_sd: float = math.nan) -> None:
+        """A step as the fusion dead-reckons it (its length and heading with what GPS taught; ``scale_sd`` the
+        fusion's posterior stride-scale SD): the drift check's reference (:mod:`core.gnss.drift`) and the distance
+        dead reckoning's own error grows with."""
         if self.drift is not None:
-            self.drift.add_step(t_ns, length_m, heading_rad)
+            self.drift.add_step(t_ns, length_m, heading_rad, scale_sd)
         if math.isfinite(length_m):
             self._dr_walked_m += abs(float(length_m))
 
