@@ -61,6 +61,34 @@ Distance and shape
     fits the whole PDR track to the truth at the step times (least squares, no scale), in m and in % of the
     truth's path.
 
+Steps against a truth (Tyrex only, issue #25, h15/swingsteps)
+    The Qualisys track is of the phone's own marker body, so the truth's step count comes from the phone's motion by
+    a fixed rule (:func:`step_truth`), the same for every placement: the **step frequency** is the dominant frequency
+    in :data:`STEP_TRUTH_BAND_HZ` (0.8-2.6 Hz: 0.8-2.6 steps/s) of the marker's vertical acceleration (its height
+    differentiated twice on a 60-Hz grid, Hann window), over consecutive :data:`STEP_TRUTH_WINDOW_S`-s windows
+    (8 s, hop :data:`STEP_TRUTH_HOP_S` = 2 s), counted (``frequency x hop``) where the marker's horizontal speed
+    (its velocity's mean over 2 s) has a median above :data:`STEP_TRUTH_MIN_SPEED_M_S` (0.2 m/s: walking) in the
+    hop; the count is the sum.  Our steps are counted over the same hops (their centre +-1 s).  Why: in a front pocket the
+    body's bounce at each footfall dominates the marker's vertical acceleration (Jakob's tuning front pocket: a peak
+    at 1.6-1.8 Hz, the 0.85-Hz stride a quarter of it, the phone's own acceleration norm peaking with it); in a
+    swinging hand the
+    arm is a pendulum, its height lowest at the middle of each swing, so its vertical acceleration is at twice the
+    arm's frequency, which is the step frequency as long as the arm swings once per stride (the natural coupling,
+    and what the spectra show: Jakob's six swinging walks have no energy at the 1.7-1.9 Hz of his pocket walks,
+    their along-track velocity peaks at 0.55-0.65 Hz and the vertical acceleration at 1.1-1.25 Hz).  Cross-check
+    (not the truth): one cycle of the along-track velocity in 0.3-1.3 Hz = one stride gave, on those six walks,
+    126-150 steps, 3-10 % above this rule.  The rule cannot see steps taken while the arm stops, nor an arm
+    swung at its own rhythm (then it counts the swing): it is a truth of the gait's periodicity, not of footfalls.
+    Validation on Jakob's tuning walks (the counter believed right there): front pocket within 0.1-7.7 % of our
+    counts (median 2.7 %).  **Not valid in a back pocket** (:data:`STEP_TRUTH_INVALID`): the buttock's vertical
+    acceleration peaks at the third stride harmonic (1.5 steps' frequency, 2.4-2.9 Hz) more than at the step
+    (Jakob's six: the strongest bins at 2.46-2.81 Hz, the step's at 1.7-1.9 Hz at 0.2-0.7 of it), so the rule reads
+    up to 1.5 x the steps where that harmonic falls inside the band (four of six, 28-34 % over our count); shown,
+    marked, not a truth.  How it was chosen (h15/swingsteps, TUNING walks only): among three candidates (cycles of
+    the along-track velocity x 2; the vertical position's stride frequency x 2; this) by the truth's spectra and
+    by the agreement with our counts on the front pockets (the along-track one read 20-50 % under them there);
+    its settings were not changed after it was first run, and before any change of the step counter.
+
 A walk that fails (an exception, no steps) is counted and listed, never dropped.
 """
 
@@ -100,6 +128,15 @@ TRUE_OFFSET_HALF_S = 1.0
 TRUE_OFFSET_MIN_CHORD_M = 1.0
 #: a device axis whose horizontal part (mean over the window) is shorter than this has no heading: not scored
 TRUE_OFFSET_MIN_HORIZONTAL = 0.2
+#: the step truth (Tyrex, :func:`step_truth`): the band of the step frequency (Hz), the window and hop (s), the speed
+#: above which a hop is walking (m/s, the 2-s mean of the marker's horizontal velocity) and the grid rate (Hz)
+STEP_TRUTH_BAND_HZ = (0.8, 2.6)
+STEP_TRUTH_WINDOW_S = 8.0
+STEP_TRUTH_HOP_S = 2.0
+STEP_TRUTH_MIN_SPEED_M_S = 0.2
+STEP_TRUTH_GRID_HZ = 60.0
+#: placements where the step truth's rule does not hold (module doc): shown, marked, not a truth
+STEP_TRUTH_INVALID = {"backpocket": "not a truth: the buttock's 3rd stride harmonic"}
 
 
 @dataclass
@@ -237,6 +274,8 @@ def evaluate_walk(walk: TruthWalk) -> dict:
             row["failed"] = "no steps"
             return row
         st_t, heading, device = step_arrays(res, pipe)
+        if walk.dataset == TYREX_TRUTH_DATASET:
+            row["steps_truth"] = steps_vs_truth(rec, st_t)
         truth_att = device_attitude(rec)
         if truth_att is not None:
             probe_log = getattr(pipe.walkdir, "log", {})
@@ -347,6 +386,46 @@ def truth_offset(att_t_ns, att_r, pos_t_ns, pos_xy, st_t, heading, device, axes)
             "wrong_pct": float(100.0 * np.mean(e > 90.0))}
 
 
+def step_truth(t_ns: np.ndarray, xyz: np.ndarray) -> tuple[float, list[tuple[int, int]]]:
+    """``(steps, hops)``: the truth's step count and the walking hops ``(a_ns, b_ns)`` it counted (module doc,
+    *Steps against a truth*): per :data:`STEP_TRUTH_WINDOW_S`-s window, the dominant frequency in
+    :data:`STEP_TRUTH_BAND_HZ` of the marker's vertical acceleration, times the hop, where the marker walks."""
+    fs = STEP_TRUTH_GRID_HZ
+    grid = np.arange(t_ns[0], t_ns[-1], int(round(1e9 / fs)), dtype=np.int64)
+    v = np.column_stack([np.interp(grid, t_ns, xyz[:, i]) for i in range(3)])
+    vel = np.gradient(v[:, :2], axis=0) * fs
+    k = np.ones(int(round(2.0 * fs))) / round(2.0 * fs)
+    speed = np.hypot(np.convolve(vel[:, 0], k, "same"), np.convolve(vel[:, 1], k, "same"))
+    az = np.gradient(np.gradient(v[:, 2])) * fs * fs
+    n, hop = int(round(STEP_TRUTH_WINDOW_S * fs)), int(round(STEP_TRUTH_HOP_S * fs))
+    nfft = 8 * n  # zero padding: 1/64 Hz bins
+    f = np.fft.rfftfreq(nfft, 1.0 / fs)
+    band = (f >= STEP_TRUTH_BAND_HZ[0]) & (f <= STEP_TRUTH_BAND_HZ[1])
+    win = np.hanning(n)
+    total, hops = 0.0, []
+    for i in range(0, len(az) - n + 1, hop):
+        c = i + n // 2
+        if np.median(speed[c - hop // 2:c + hop // 2]) <= STEP_TRUTH_MIN_SPEED_M_S:
+            continue
+        seg = az[i:i + n]
+        p = np.abs(np.fft.rfft((seg - seg.mean()) * win, nfft)) ** 2
+        total += float(f[band][np.argmax(p[band])]) * STEP_TRUTH_HOP_S
+        hops.append((int(grid[c - hop // 2]), int(grid[c - hop // 2] + int(STEP_TRUTH_HOP_S * 1e9))))
+    return total, hops
+
+
+def steps_vs_truth(rec, st_t: np.ndarray) -> dict | None:
+    """Our steps against :func:`step_truth` over its walking hops, or None (no walking hop).  For the Tyrex walks
+    only, whose truth is the phone's own marker (OxIOD's and RIDI's are not counted so)."""
+    pos = rec.streams["posi"]
+    truth, hops = step_truth(pos.t_ns, pos.values[:, :3])
+    if not hops or truth <= 0:
+        return None
+    st_t = np.asarray(st_t, dtype=np.int64)
+    ours = int(sum(int(np.count_nonzero((st_t >= a) & (st_t < b))) for a, b in hops))
+    return {"steps": ours, "truth": truth, "error_pct": 100.0 * (ours - truth) / truth, "hops": len(hops)}
+
+
 def unmixed_windows(wins, st_t, heading, device) -> list:
     """The windows whose steps are all in the walk's usual state: all with the walking-direction offset where
     most of the walk's steps got it, all without it where most did not (module doc, issue #25).  A window with
@@ -399,6 +478,15 @@ def summarize(rows: list[dict]) -> dict:
                     [r["offset_truth"]["wrong_pct"] for r in ok if r.get("offset_truth")]
                     + (inf if any(r.get("offset_truth") for r in ok) else [])),
             }
+            st = [r["steps_truth"] for r in ok if r.get("steps_truth")]
+            if st or any(r["dataset"] == TYREX_TRUTH_DATASET for r in rs):
+                # steps against the step truth (Tyrex): a failed walk counts as -100 % (no steps), never dropped
+                errs = [x["error_pct"] for x in st] + [-100.0] * len(inf)
+                out[split][f"{pl[0]}: {pl[1]}"]["steps_truth"] = {
+                    "walks": len(errs), "invalid": STEP_TRUTH_INVALID.get(pl[1]), "steps": int(sum(x["steps"] for x in st)),
+                    "truth": float(sum(x["truth"] for x in st)),
+                    "abs_err_pct_median": median_present([abs(e) for e in errs]),
+                    "err_pct_mean": float(np.mean(errs)) if errs else None}
     return out
 
 
@@ -412,6 +500,18 @@ def _truth_cells(o) -> str:
     fit = o.get("attitude_fit")
     return (f"{_f(o['true_offset_deg'])} | {_f(o['abs_err_deg_median'])} / {_f(o['abs_err_deg_p90'])} "
             f"({_f(o['wrong_pct'])})" + (f"; body fit {fit['residual_rad_s']:.2f} rad/s" if fit else ""))
+
+
+def _steps_cell(o) -> str:
+    return "-" if not o else f"{o['steps']} / {o['truth']:.0f} ({o['error_pct']:+.1f})"
+
+
+def _steps_summary_cell(o) -> str:
+    if not o:
+        return "-"
+    return (f"{o['steps']} / {o['truth']:.0f}, {_f(o['abs_err_pct_median'])}, "
+            f"{'-' if o['err_pct_mean'] is None else format(o['err_pct_mean'], '+.1f')}"
+            + (f" ({o['invalid']})" if o.get("invalid") else ""))
 
 
 def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
@@ -428,8 +528,8 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
          "", "## Per split and placement (medians)", "",
          "| split | dataset: placement | walks | failed | windows | SD deg | abs drift deg/min | device SD deg | "
          "SD unmixed deg | distance err % | end err % of path | reversed steps % | offset err vs truth attitude deg "
-         "| steps > 90 deg off truth % |",
-         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+         "| steps > 90 deg off truth % | steps / step truth (Tyrex): sum, median abs err %, mean err % |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for split, by in summ.items():
         label = "report, seen once" if split == REPORT else "tuning"
         for pl, s in by.items():
@@ -438,15 +538,16 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
                      f"{_f(s['unmixed_sd_deg_median'])} | "
                      f"{_f(s['distance_error_pct_median'])} | {_f(s['end_error_pct_median'])} | "
                      f"{_f(s['reversed_pct_median'])} | {_f(s.get('offset_truth_err_deg_median'))} | "
-                     f"{_f(s.get('offset_truth_wrong_pct_median'))} |")
+                     f"{_f(s.get('offset_truth_wrong_pct_median'))} | {_steps_summary_cell(s.get('steps_truth'))} |")
     L += ["", "## Per walk", "",
           "| split | walk | s | steps | carry share (detector) | windows | SD deg | drift deg/min | offset deg | "
           "device SD deg | SD unmixed deg (windows) | per mode SD deg | PDR m / truth m (err %) | end err m (% of path) | "
-          "reversed % (steps) | true offset deg | offset err vs truth deg, median / p90 (> 90 deg %) |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "reversed % (steps) | true offset deg | offset err vs truth deg, median / p90 (> 90 deg %) | "
+          "steps / step truth (err %) |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r.get("failed"):
-            L.append(f"| {r['split']} | {r['name']} | | | | | FAILED: {r['failed']} | | | | | | | | | | |")
+            L.append(f"| {r['split']} | {r['name']} | | | | | FAILED: {r['failed']} | | | | | | | | | | | |")
             continue
         st, dv, um = r["stability"], r["stability_device"], r.get("stability_unmixed") or {}
         share = ", ".join(f"{m} {100 * v:.0f}%" for m, v in r["carry_share"].items())
@@ -456,7 +557,8 @@ def markdown(rows: list[dict], summ: dict, meta: dict) -> str:
                  f"{_f(st['mean_offset_deg'])} | "
                  f"{_f(dv['sd_deg'])} | {_f(um.get('sd_deg'))} ({um.get('n_windows', 0)}) | {pm} | {r['pdr_distance_m']:.0f} / {r['truth_path_m']:.0f} "
                  f"({_f(r['distance_error_pct'])}) | {r['end_error_m']:.1f} ({_f(r['end_error_pct'])}) | "
-                 f"{_f(r['reversed']['reversed_pct'])} ({r['reversed']['n']}) | {_truth_cells(r.get('offset_truth'))} |")
+                 f"{_f(r['reversed']['reversed_pct'])} ({r['reversed']['n']}) | {_truth_cells(r.get('offset_truth'))} | "
+                 f"{_steps_cell(r.get('steps_truth'))} |")
     return "\n".join(L) + "\n"
 
 

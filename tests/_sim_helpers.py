@@ -21,19 +21,22 @@ def scale_acc_motion(rec: Recording, spans, scale: float) -> Recording:
     return Recording(streams, dict(rec.device), dict(rec.metadata))
 
 
-def upright_pendulum(swing_deg, stride_s=1.64, incline_deg=25.0, seconds=16.0, rate_hz=50.0, seed=0):
+def upright_pendulum(swing_deg, stride_s=1.64, incline_deg=25.0, seconds=16.0, rate_hz=50.0, seed=0,
+                     swing_beat_deg=0.0, swing_beat_s=8.0):
     """Grid samples (n, 6: acc, gyro) of a phone held upright in a hand that swings as a pendulum from the shoulder
     by ``+-swing_deg`` at the stride period, the phone inclined ``incline_deg`` in its screen plane (the screen
     faces the thigh: the swing turns it about its z axis), the body bouncing 1.5 m/s^2 at the step frequency.  The
     pendulum's length is the one that swings freely at the stride (``g / w^2``): its specific force stays along the
     arm, so the phone barely tilts and its norm (gravity plus the centripetal term) repeats every step, as at the
     ear; only the rotation tells the hand (issue #25: the TUNING Tyrex walks Jakob_Nexus5_*_Swinging).  ``swing_deg``
-    3: the head's few degrees of a phone at the ear.  Returns ``(t_s (n,), rows (n, 6))``."""
+    3: the head's few degrees of a phone at the ear.  ``swing_beat_deg``: the swing's amplitude varies by
+    ``+-swing_beat_deg`` about ``swing_deg`` over ``swing_beat_s`` (a real hand swings harder on some strides than on
+    others, issue #25 h15/swingsteps).  Returns ``(t_s (n,), rows (n, 6))``."""
     rng = np.random.default_rng(seed)
     g = 9.81
     t = np.arange(int(seconds * rate_hz)) / rate_hz
     w = 2.0 * math.pi / stride_s
-    a = math.radians(swing_deg)
+    a = math.radians(swing_deg) + math.radians(swing_beat_deg) * np.sin(2.0 * math.pi * t / swing_beat_s)
     phi, dphi, ddphi = a * np.sin(w * t), a * w * np.cos(w * t), -a * w * w * np.sin(w * t)
     arm = g / w ** 2
     bounce = 1.5 * np.cos(2.0 * w * t)

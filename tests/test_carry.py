@@ -16,7 +16,7 @@ from core.pdr.pipeline import Pipeline
 from core.pdr.steps import GENTLE, POCKET_GATES, STEP_GATES, StepDetector
 from core.recording import Recording
 from desktop.placements import simulate_still
-from tests._sim_helpers import upright_pendulum
+from tests._sim_helpers import upright_pendulum, upright_pendulum_recording
 from desktop.simulator import simulate_walk
 
 PATH = [(0.0, 0.0), (22.0, 0.0), (22.0, 8.0)]
@@ -787,3 +787,19 @@ def test_hand_swung_upright_is_no_ear(swing_deg, setting, mode):
     assert det.mode == mode and det.time_s[mode] >= 10.0, det.time_s
     assert CarryModeDetector.stride_swing_deg(det.features) == pytest.approx(swing_deg, abs=1.0)
     assert CarryModeDetector.stride_swing_deg({"gravity_y": 1.0}) == 0.0  # no gyroscope: no swing read
+
+
+def test_hand_swung_upright_counts_its_steps():
+    """Issue #25 (h15/swingsteps): on the TUNING Tyrex walks ``Jakob_*_Swinging`` the steps lost were peaks the
+    3 rad/s rotation gate refused while the hand was called "ear" (1-s rotation RMS 3.0-3.5 rad/s at those peaks,
+    periodic at the stride; gyro p95 3.8-4.3 rad/s over the walks, a 1.6-1.8-s stride): the ear is no limb, so
+    its gate stays narrow.  A pendulum swung upright by +-50 deg, harder and softer by +-15 deg over 8 s, at a
+    1.7-s stride for 16 s (gyro RMS 2.4 rad/s, p95 3.9, 1-s RMS up to 3.2): without ``ear_max_swing_deg`` 13 of its
+    18.8 steps (called "ear", 4 refused by the gate); by default (20 deg) a swinging hand and 18."""
+    rec = upright_pendulum_recording(50.0, stride_s=1.7, seconds=16.0, swing_beat_deg=15.0)
+    n = 2 * 16.0 / 1.7  # two steps a stride (the bounce at twice the swing)
+    res = Pipeline().run(rec)
+    assert abs(len(res.steps) - n) <= 1.5, len(res.steps)
+    assert CARRY_EAR not in {s.carry_mode for s in res.steps}
+    before = Pipeline(carry=CarryModeDetector(ear_max_swing_deg=None)).run(rec)
+    assert len(before.steps) <= 0.75 * n  # the diagnosis: the ear's gate drops a quarter of the steps

@@ -573,3 +573,28 @@ def test_fast_equals_plain_on_a_hand_swung_upright():
     for setting, mode in ((None, CARRY_EAR), (20.0, CARRY_SWINGING)):
         plain, _ = _assert_same(rec, lambda: Pipeline(carry=CarryModeDetector(ear_max_swing_deg=setting)))
         assert plain.steps and plain.steps[-1].carry_mode == mode, (setting, plain.counters["carry"])
+
+
+def test_wide_gate_while_a_limb_mode_is_pending_is_mirrored():
+    """``Pipeline(wide_while_pending_limb)`` (issue #25, h15/swingsteps): in a bag with "swinging" pending and a
+    periodic rotation the gate is 3 rad/s without it (as before), 12 with it; "handheld" pending (no limb; given
+    gates of its own here) keeps it closed either way; the fast path's gate (per grid sample) is the reference's."""
+    from types import SimpleNamespace
+
+    from core.conventions import CARRY_BAG, CARRY_HANDHELD, CARRY_MODES
+    from core.pdr.steps import STEP_GATES, StepGates
+    from desktop.fast.gates import StepRelease
+
+    gates = dict(STEP_GATES, **{CARRY_HANDHELD: StepGates(min_peak_height_m_s2=0.7)})
+    for setting in (False, True):
+        for pending, wide in ((CARRY_SWINGING, setting), (CARRY_HANDHELD, False)):
+            p = Pipeline(wide_while_pending_limb=setting, step_gates=gates)
+            p.reset()
+            p.carry = SimpleNamespace(rotation_periodic=True, pending_mode=pending)
+            p._carry_mode = CARRY_BAG
+            assert p._rotation_limit_rad_s() == (12.0 if wide else 3.0), (setting, pending)
+            sr = StepRelease.__new__(StepRelease)
+            sr.p, sr.k = p, 0
+            sr.carry = SimpleNamespace(rotation_periodic=np.array([True]), mode=np.array([CARRY_MODES.index(CARRY_BAG)]),
+                                       pending=np.array([CARRY_MODES.index(pending)]))
+            assert sr._rotation_limit() == p._rotation_limit_rad_s()

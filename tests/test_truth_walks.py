@@ -3,6 +3,7 @@
 import math
 
 import numpy as np
+import pytest
 
 from benchmarks import truth_walks as TW
 
@@ -178,3 +179,29 @@ def test_the_marker_body_is_turned_onto_the_phone_by_its_gyroscope():
     cos = (np.einsum("nij,nij->n", r_dev, want) - 1.0) / 2.0
     assert np.array_equal(t_out, t_ns) and fit["residual_rad_s"] < 0.01
     assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max() < 0.5
+
+
+def test_step_truth_reads_the_step_frequency_of_the_marker_where_it_walks():
+    """The Tyrex step truth (issue #25, h15/swingsteps): the dominant 0.8-2.6 Hz frequency of the marker's vertical
+    acceleration, over the hops where it walks.  A trunk bouncing 2 cm at 1.8 steps/s, and a hand swung +-30 cm
+    along the walk at 0.6 Hz whose height (a pendulum's) moves at 1.2 Hz, each walking 1 m/s with a 10-s stop:
+    1.8 and 1.2 steps per walking second within 2 %, the stop's hops left out."""
+    fs = 60.0
+    t = np.arange(0.0, 60.0, 1.0 / fs)
+    walking = (t < 25.0) | (t >= 35.0)
+    x = np.cumsum(np.where(walking, 1.0, 0.0)) / fs
+    t_ns = (1_000_000_000_000 + np.round(t * 1e9)).astype(np.int64)
+    for step_hz, along, height in ((1.8, 0.0 * t, 0.02 * np.sin(2 * math.pi * 1.8 * t)),
+                                   (1.2, 0.3 * np.sin(2 * math.pi * 0.6 * t), -0.05 * np.cos(2 * math.pi * 1.2 * t))):
+        xyz = np.column_stack([x + along * walking, np.zeros_like(t), 1.0 + height * walking])
+        truth, hops = TW.step_truth(t_ns, xyz)
+        walk_s = len(hops) * TW.STEP_TRUTH_HOP_S
+        assert 40.0 <= walk_s <= 46.0, walk_s  # 27 hops, the 10-s stop's 4-5 out
+        assert not any(a > t_ns[0] + 26e9 and b < t_ns[0] + 34e9 for a, b in hops)
+        assert truth == pytest.approx(step_hz * walk_s, rel=0.02)
+    rows = [{"name": n, "dataset": TW.TYREX_TRUTH_DATASET, "placement": "backpocket", "split": "tuning",
+             "stability": {"sd_deg": 1.0, "drift_deg_min": 1.0, "n_windows": 3}, "stability_device": {"sd_deg": 1.0},
+             "steps_truth": {"steps": 90, "truth": 100.0, "error_pct": -10.0, "hops": 5}} for n in ("a", "b")]
+    s = TW.summarize(rows + [dict(rows[0], name="c", failed="no steps")])["tuning"]["tyrex_truth_walks: backpocket"]
+    assert s["steps_truth"]["err_pct_mean"] == pytest.approx(-40.0)  # (-10, -10, -100: a failed walk, no steps)
+    assert s["steps_truth"]["invalid"]  # the back pocket's rule is marked

@@ -193,7 +193,8 @@ class StepRelease:
         if mode not in p.wide_rotation_modes:
             return p.max_rotation_rms_rad_s
         pending = int(c.pending[k])
-        wide = mode == CARRY_SWINGING or pending < 0 or p.step_gates.get(CARRY_MODES[pending]) == p.step_gates.get(mode)
+        wide = (mode == CARRY_SWINGING or pending < 0 or p.step_gates.get(CARRY_MODES[pending]) == p.step_gates.get(mode)
+                or (p.wide_while_pending_limb and CARRY_MODES[pending] in p.wide_rotation_modes))
         return max(p.max_rotation_rms_rad_s, p.swinging_max_rotation_rms_rad_s) if wide else p.max_rotation_rms_rad_s
 
     def switch(self, d: int, k: int) -> None:
