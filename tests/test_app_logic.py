@@ -42,8 +42,9 @@ GPS_GAP_S = (50.0, 75.0)
 def gps_walk(seed: int = 1, minutes: float = 2.0, gap_s=GPS_GAP_S):
     """A simulated outdoor walk with GPS (:func:`desktop.simulator.outdoor_walk`) with the fixes of ``gap_s``
     removed.  Seed 1: its first fix is good, a multipath episode near the end makes the fusion reject
-    fixes, and the gap gives a dead-reckoning stretch in the middle."""
-    w = outdoor_walk(seed, minutes=minutes)
+    fixes, and the gap gives a dead-reckoning stretch in the middle.  At 50 Hz (the simulator's 100 is not the
+    subject: the pipeline and the app replay it in several tests)."""
+    w = outdoor_walk(seed, minutes=minutes, rate_hz=50.0)
     rec = w.recording
     g = rec.streams["gps"]
     t_s = (g.t_ns - rec.t0_ns) * 1e-9
