@@ -67,8 +67,9 @@ def stats_walks():
 
 @pytest.fixture(scope="module")
 def outdoor():
-    """A 10-minute outdoor walk with the default GPS; the IMU at 20 Hz (the tests here read its GPS and truth, which
-    do not depend on the IMU's rate: the same 597 fixes bit for bit as at the default 100 Hz; 0.3 s instead of 0.9 s)."""
+    """A 10-minute outdoor walk with the default GPS; the IMU at 20 Hz (the tests here read its GPS and truth,
+    which do not depend on the IMU's rate: the same 597 fixes bit for bit as at the default 100 Hz; 0.3 s of CPU
+    instead of 0.9 s)."""
     return outdoor_walk(7, minutes=10, rate_hz=20.0)
 
 
