@@ -303,7 +303,8 @@ def test_the_app_opens_through_the_picker_and_exports_into_downloads(tmp_path):
     from core.recording import write_recording
     from desktop.simulator import simulate_walk
 
-    w = simulate_walk(((0.0, 0.0), (20.0, 0.0)), seed=3, still_start_s=1.0, still_end_s=1.0)
+    # 50 Hz: the rate is not the subject
+    w = simulate_walk(((0.0, 0.0), (20.0, 0.0)), seed=3, rate_hz=50.0, still_start_s=1.0, still_end_s=1.0)
     walk = tmp_path / "walk.csv"
     write_recording(str(walk), w.recording)
     report = tmp_path / "files.json"

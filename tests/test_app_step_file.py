@@ -85,7 +85,7 @@ def test_the_session_keeps_its_steps_on_disk_and_exports_all_of_them(tmp_path):
     from desktop.simulator import simulate_walk
     from tests._session_helpers import replay_session
 
-    rec = simulate_walk([(0, 0), (25, 0), (25, 10)], seed=2).recording
+    rec = simulate_walk([(0, 0), (25, 0), (25, 10)], seed=2, rate_hz=50.0).recording  # the rate is not the subject
     batch = Pipeline().run(rec)
     ses = replay_session(rec, lambda: Pipeline(keep_steps=False))
     assert isinstance(ses.steps, StepFile) and len(ses.steps) == len(batch.steps) > 40

@@ -43,7 +43,7 @@ def test_a_long_session_keeps_bounded_view_lists_and_exports_every_step(monkeypa
     monkeypatch.setattr(S, "VIEW_MAX_POINTS", 60)
     monkeypatch.setattr(S, "VIEW_RECENT_POINTS", 10)
     monkeypatch.setattr(S, "VIEW_MAX_FIXES", 20)
-    w = outdoor_walk(1, minutes=2.0)
+    w = outdoor_walk(1, minutes=2.0, rate_hz=50.0)  # 50 Hz: the rate is not the subject
     ses = S.Session(ReplaySource(w.recording, speed=math.inf, max_chunk=500),
                     pipeline_factory=Settings().pipeline_factory())
     ses.start()
@@ -88,7 +88,7 @@ def test_the_service_ui_follows_the_thinned_lists(monkeypatch, tmp_path):
     monkeypatch.setattr(S, "VIEW_MAX_POINTS", 60)
     monkeypatch.setattr(S, "VIEW_RECENT_POINTS", 10)
     monkeypatch.setattr(S, "VIEW_MAX_FIXES", 20)
-    w = outdoor_walk(2, minutes=1.5)
+    w = outdoor_walk(2, minutes=1.5, rate_hz=50.0)
     data = tmp_path / "data"
     data.mkdir()
     Settings(use_gps=True).save(str(data / "settings.json"))

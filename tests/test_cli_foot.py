@@ -18,7 +18,7 @@ from tests._demo_helpers import demo_replay_json
 def foot_file(tmp_path_factory):
     """A simulated foot walk: 20 m East, a left turn, 10 m North, written in the project format."""
     prints = footprints([(20.0, 0.0), (10.0, math.pi / 2)])
-    walk = simulate_foot(prints, rate_hz=200.0, acc_noise_m_s2=0.02, gyro_noise_rad_s=0.002, seed=3)
+    walk = simulate_foot(prints, rate_hz=100.0, acc_noise_m_s2=0.02, gyro_noise_rad_s=0.002, seed=3)
     path = tmp_path_factory.mktemp("foot") / "foot.csv"
     write_recording(str(path), walk.recording)
     return str(path), walk

@@ -163,7 +163,7 @@ def test_declination_comes_from_the_magnetic_model_at_the_first_good_fix(tmp_pat
     from desktop.cli import main
     from desktop.simulator import outdoor_walk
 
-    w = outdoor_walk(2, minutes=0.5)  # the declination is set at the first good fix, seconds in
+    w = outdoor_walk(2, minutes=0.5, rate_hz=50.0)  # the declination is set at the first good fix, seconds in
     rec = w.recording
     g = rec.streams["gps"]
     vals = g.values.copy()

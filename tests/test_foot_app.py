@@ -23,7 +23,7 @@ LEGS = [(8.4, 0.0), (5.6, math.pi / 2), (4.2, math.pi / 2)]
 
 @pytest.fixture(scope="module")
 def foot_walk():
-    return simulate_foot(footprints(LEGS), rate_hz=200.0, acc_noise_m_s2=0.05, gyro_noise_rad_s=0.005,
+    return simulate_foot(footprints(LEGS), rate_hz=100.0, acc_noise_m_s2=0.05, gyro_noise_rad_s=0.005,
                          waist=True, seed=3)
 
 

@@ -115,23 +115,25 @@ def test_keep_steps_false_streams_the_same_steps_as_the_batch_run():
     assert again == batch.steps
 
 
-def test_ten_minutes_of_streaming_keep_the_filter_sound_the_memory_flat_and_the_heading_bounded():
-    """Ten minutes at 50 Hz along city streets (the 24-hour walk: benchmarks/long_walk.py; the test was half
-    an hour, then a quarter (issue #29), now ten minutes, for CI's time): quaternion unit, covariance symmetric
-    positive definite at every 100-s checkpoint, no container growing with the walk, heading error as the
-    magnetometer bounds it (the same in the last 200 s as in the first)."""
+def test_six_minutes_of_streaming_keep_the_filter_sound_the_memory_flat_and_the_heading_bounded():
+    """Six minutes at 50 Hz along city streets (the 24-hour walk: benchmarks/long_walk.py; the test was half
+    an hour, then a quarter (issue #29), then ten minutes, now six, for CI's time): quaternion unit, covariance
+    symmetric positive definite at every 60-s checkpoint, no container growing with the walk, heading error as the
+    magnetometer bounds it (the same in the last 120 s as in the first).  Measured (2026-12-08): held items
+    4290-4498 at the six checkpoints (a container growing one item a step would add about 500 from the second
+    checkpoint on, beyond the 325 allowed); p95 4.4-4.7 deg, median 2.7-3.1 deg per block, heading sd 4.1 deg."""
     from core.pdr.attitude import AttitudeEKF
 
-    walk = simulate_walk(street_route(1.26 * 600.0, seed=7), rate_hz=50.0, seed=7)
-    assert walk.recording.duration_s > 580.0
+    walk = simulate_walk(street_route(1.26 * 360.0, seed=7), rate_hz=50.0, seed=7)
+    assert walk.recording.duration_s > 350.0
     p = Pipeline(keep_steps=False)
     assert isinstance(p.attitude, AttitudeEKF)
     steps, sizes = [], []
-    next_check = walk.recording.streams["acc"].t_ns[0] + 100_000_000_000
+    next_check = walk.recording.streams["acc"].t_ns[0] + 60_000_000_000
     for name, t, v in walk.recording.events(["gyro", "acc", "mag"]):
         steps.extend(p.update(name, t, v))
         if t >= next_check:
-            next_check += 100_000_000_000
+            next_check += 60_000_000_000
             a = p.attitude
             assert abs(math.sqrt(sum(c * c for c in a.q)) - 1.0) < 1e-9
             P = a.P
@@ -140,21 +142,22 @@ def test_ten_minutes_of_streaming_keep_the_filter_sound_the_memory_flat_and_the_
             sizes.append(p.held_items())
     steps.extend(p.finish())
     assert len(sizes) >= 5
-    # memory flat: what the pipeline holds after ten minutes is what it held after 200 s (within noise)
+    # memory flat: what the pipeline holds after six minutes is what it held after 120 s (within noise)
     assert max(sizes[2:]) <= 1.05 * sizes[1] + 100, sizes
     assert len(p.steps) == 0 and p.n_steps == len(steps)
     assert len(steps) == pytest.approx(len(walk.truth.step_t_ns), rel=0.01)
-    # heading error against the true walking direction, per 200-s block (the phone points 3 deg off it)
+    # heading error against the true walking direction, per 120-s block (the phone points 3 deg off it)
     t = np.array([s.t_ns for s in steps])
     err = np.degrees(np.angle(np.exp(1j * (np.array([s.heading_rad for s in steps]) - walk.truth.heading_at(t)))))
-    block = (t - t[0]) // 200_000_000_000
+    block = (t - t[0]) // 120_000_000_000
     p95 = [np.percentile(np.abs(err[block == b]), 95) for b in np.unique(block)]
     med = [np.median(np.abs(err[block == b])) for b in np.unique(block)]
     assert len(p95) == 3
     assert max(p95) < 7.0 and max(med) < 4.5, (p95, med)
     assert p95[-1] < p95[0] + 1.5 and med[-1] < med[0] + 1.0
     # the heading sd stays bounded: with the field's heading offset state (sd 0.1 rad, on by default since issue
-    # #27) the magnetometer fixes heading + offset, and the heading's sd settles at about 3.8 deg (2-3 deg without)
+    # #27) the magnetometer fixes heading + offset, and the heading's sd settles at about 3.8 deg after ten minutes
+    # (4.1 deg after these six; 2-3 deg without)
     assert p.attitude.counters()["heading_sd_rad"] < math.radians(5.0)
     assert not p.labels()
 
