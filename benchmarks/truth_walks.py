@@ -262,6 +262,9 @@ def evaluate_walk(walk: TruthWalk) -> dict:
            "repository": walk.repository, "file": str(walk.path)}
     try:
         rec = read_walk(walk)
+        if walk.dataset == TYREX_TRUTH_DATASET:
+            # the step truth needs only the marker track: a walk that fails below still counts its truth, with 0 steps
+            row["steps_truth"] = steps_vs_truth(rec, np.zeros(0, dtype=np.int64))
         res, pipe, engine = run_default(rec, walk.path.parent, probe=True)
         t0 = rec.t0_ns
         carry = (res.summary().get("carry") or {})
@@ -478,12 +481,16 @@ def summarize(rows: list[dict]) -> dict:
                     [r["offset_truth"]["wrong_pct"] for r in ok if r.get("offset_truth")]
                     + (inf if any(r.get("offset_truth") for r in ok) else [])),
             }
-            st = [r["steps_truth"] for r in ok if r.get("steps_truth")]
+            # steps against the step truth (Tyrex): a failed walk counts with 0 steps against its truth (-100 %), never
+            # dropped; a failed walk without a truth (unreadable) counts -100 % in the error medians; a walk whose
+            # marker never walks (no hop) has no truth and is listed
+            st = [r["steps_truth"] for r in rs if r.get("steps_truth")]
             if st or any(r["dataset"] == TYREX_TRUTH_DATASET for r in rs):
-                # steps against the step truth (Tyrex): a failed walk counts as -100 % (no steps), never dropped
-                errs = [x["error_pct"] for x in st] + [-100.0] * len(inf)
+                no_truth_failed = sum(1 for r in rs if r.get("failed") and not r.get("steps_truth"))
+                errs = [x["error_pct"] for x in st] + [-100.0] * no_truth_failed
                 out[split][f"{pl[0]}: {pl[1]}"]["steps_truth"] = {
                     "walks": len(errs), "invalid": STEP_TRUTH_INVALID.get(pl[1]), "steps": int(sum(x["steps"] for x in st)),
+                    "no_hop": [r["name"] for r in ok if r["dataset"] == TYREX_TRUTH_DATASET and not r.get("steps_truth")],
                     "truth": float(sum(x["truth"] for x in st)),
                     "abs_err_pct_median": median_present([abs(e) for e in errs]),
                     "err_pct_mean": float(np.mean(errs)) if errs else None}
@@ -511,7 +518,8 @@ def _steps_summary_cell(o) -> str:
         return "-"
     return (f"{o['steps']} / {o['truth']:.0f}, {_f(o['abs_err_pct_median'])}, "
             f"{'-' if o['err_pct_mean'] is None else format(o['err_pct_mean'], '+.1f')}"
-            + (f" ({o['invalid']})" if o.get("invalid") else ""))
+            + (f" ({o['invalid']})" if o.get("invalid") else "")
+            + (f"; no walking hop in the truth: {', '.join(o['no_hop'])}" if o.get("no_hop") else ""))
 
 
 def markdown(rows: list[dict], summ: dict, meta: dict) -> str:

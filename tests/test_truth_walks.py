@@ -202,6 +202,13 @@ def test_step_truth_reads_the_step_frequency_of_the_marker_where_it_walks():
     rows = [{"name": n, "dataset": TW.TYREX_TRUTH_DATASET, "placement": "backpocket", "split": "tuning",
              "stability": {"sd_deg": 1.0, "drift_deg_min": 1.0, "n_windows": 3}, "stability_device": {"sd_deg": 1.0},
              "steps_truth": {"steps": 90, "truth": 100.0, "error_pct": -10.0, "hops": 5}} for n in ("a", "b")]
-    s = TW.summarize(rows + [dict(rows[0], name="c", failed="no steps")])["tuning"]["tyrex_truth_walks: backpocket"]
-    assert s["steps_truth"]["err_pct_mean"] == pytest.approx(-40.0)  # (-10, -10, -100: a failed walk, no steps)
+    failed = dict(rows[0], name="c", failed="no steps",  # as evaluate_walk leaves it: its truth, 0 steps
+                  steps_truth={"steps": 0, "truth": 100.0, "error_pct": -100.0, "hops": 5})
+    unreadable = {k: v for k, v in rows[0].items() if k != "steps_truth"} | {"name": "d", "failed": "unreadable"}
+    no_hop = {k: v for k, v in rows[0].items() if k != "steps_truth"} | {"name": "e"}
+    s = TW.summarize(rows + [failed, unreadable, no_hop])["tuning"]["tyrex_truth_walks: backpocket"]
+    # (-10, -10, -100: a failed walk against its truth, -100: one without a truth); the sums keep the failed truth
+    assert s["steps_truth"]["err_pct_mean"] == pytest.approx(-55.0)
+    assert (s["steps_truth"]["steps"], s["steps_truth"]["truth"]) == (180, 300.0)
+    assert s["steps_truth"]["no_hop"] == ["e"]
     assert s["steps_truth"]["invalid"]  # the back pocket's rule is marked
