@@ -803,3 +803,10 @@ def test_hand_swung_upright_counts_its_steps():
     assert CARRY_EAR not in {s.carry_mode for s in res.steps}
     before = Pipeline(carry=CarryModeDetector(ear_max_swing_deg=None)).run(rec)
     assert len(before.steps) <= 0.75 * n  # the diagnosis: the ear's gate drops a quarter of the steps
+
+
+def test_ear_max_swing_deg_refuses_a_nonsense_angle():
+    for bad in (math.nan, 0.0, -20.0, math.inf):
+        with pytest.raises(ValueError, match="ear_max_swing_deg"):
+            CarryModeDetector(ear_max_swing_deg=bad)
+    assert CarryModeDetector(ear_max_swing_deg=None).ear_max_swing_deg is None

@@ -536,6 +536,14 @@ def test_fast_equals_plain_on_a_hard_swing_taken_for_a_pocket():
                          still_end_s=0.5, step_frequency_hz=1.5, placement_options={"swing_scale": 2.5})
     plain, _ = _assert_same(walk.recording)
     assert abs(len(plain.steps) - walk.truth.n_steps) <= 6, (len(plain.steps), walk.truth.n_steps)
+    # the wide gate also while such a mode is pending (``wide_while_pending_limb``, off by default): the fast path's
+    # per-sample pending mode against the reference's, end to end (a review's should-fix, h15), on a seed where the
+    # setting changes the steps (seed 7 above it does not)
+    walk5 = simulate_walk([(0.0, 0.0), (16.0, 0.0)], placement="swinging", seed=5, rate_hz=50.0, still_start_s=1.0,
+                          still_end_s=0.5, step_frequency_hz=1.5, placement_options={"swing_scale": 2.5})
+    off = Pipeline().run(walk5.recording)
+    on, _ = _assert_same(walk5.recording, wide_while_pending_limb=True)
+    assert [s.t_ns for s in on.steps] != [s.t_ns for s in off.steps]
 
 
 def test_fast_release_of_a_step_as_a_stale_short_bout_is_dropped_is_once():

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from core.gnss.drift import DriftSettings, DriftVerdict, StreamDriftCheck
 from core.gnss.judge import Cause, GpsJudge, GpsVerdict, JudgeSettings
@@ -162,3 +163,25 @@ def test_a_multipath_jump_is_not_taken_for_a_drift():
 
     assert not any(st.drifting for st in run(30.0))
     assert any(st.drifting for st in run(None))  # the rule before: found, and held
+
+
+def test_each_fusion_passes_the_drift_check_its_own_stride_sd():
+    """The fusion-to-judge hook of ``scale_sd_from_filter`` (issue #26, h15/drift, a review's should-fix): Chen's
+    filter, whose stride no fix taught yet, hands the check its prior's SD (8 %) with each step; Kubrak's, whose
+    dead reckoning has no stride scale of that kind, hands nan (the check keeps its own ``scale_sd``)."""
+    from core.gnss import make_fusion
+
+    steps = _walk(lambda t: 0.3, seconds=6.0)
+    for kind, want in (("chen", 0.08), ("kubrak", None)):
+        fusion = make_fusion(kind, judge=JudgeSettings(drift=DriftSettings()))
+        for st in steps:
+            fusion.add_step(st)
+        got = fusion.judge.drift._filter_scale_sd
+        assert (math.isnan(got) if want is None else got == pytest.approx(want, rel=1e-9)), (kind, got)
+
+
+def test_drift_settings_refuse_a_nonsense_onset_lag():
+    for bad in (math.nan, 0.0, -5.0, math.inf):
+        with pytest.raises(ValueError, match="onset_lag_s"):
+            DriftSettings(onset_lag_s=bad)
+    assert DriftSettings(onset_lag_s=None).onset_lag_s is None

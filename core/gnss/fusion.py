@@ -306,7 +306,7 @@ class GpsFusion(FixFusion):
             self._chen.relock_heading_sd_rad = 0.0
         ekf.set_consider_sd(math.hypot(self._heading_sd(step.heading_rad), self.heading_floor_sd_rad,
                                        self._chen.relock_heading_sd_rad),
-                            self.trainer.stride_scale_sd if self.learn_stride else self.trainer.prior_scale_sd)
+                            self._stride_scale_sd())
         ekf.step(length, heading)
         return length
 
@@ -377,7 +377,7 @@ class GpsFusion(FixFusion):
                 hdg = self._state.screen.headings[-1][1] if self._state.screen.headings else float(self.ekf.x[3])
                 self.ekf.set_consider_sd(math.hypot(self._model_heading_sd(hdg), self.heading_floor_sd_rad,
                                                     self._chen.relock_heading_sd_rad),
-                                         self.trainer.stride_scale_sd if self.learn_stride else self.trainer.prior_scale_sd)
+                                         self._stride_scale_sd())
             self._chen.course_used = True
             c = self.course_now(t_ns, heading_from_bearing_deg(course))
             self.ekf.update_course(c, self._course_sd(c))

@@ -660,9 +660,6 @@ class KubrakFusion(FixFusion):
     def _step_output(self) -> tuple[float, float]:
         return self._kub.last_walked, self.kf.heading()
 
-    def _stride_scale_sd(self) -> float:
-        return self.speed_trainer.stride_scale_sd if self.speed_trainer is not None else math.nan
-
     def _dead_reckoned_step(self, step) -> tuple[float, float]:
         self._kub.last_walked = step.length_m
         return step.length_m, wrap_angle(step.heading_rad + float(self.kf.x[DPSI]))

@@ -525,6 +525,8 @@ class CarryModeDetector:
         self.sway_min_gyro_periodicity = (None if sway_min_gyro_periodicity is None
                                           else float(sway_min_gyro_periodicity))
         self.antiphase_in_range = bool(antiphase_in_range)
+        if ear_max_swing_deg is not None and not (math.isfinite(ear_max_swing_deg) and ear_max_swing_deg > 0):
+            raise ValueError(f"ear_max_swing_deg must be None or a finite angle > 0 (deg), got {ear_max_swing_deg!r}")
         self.ear_max_swing_deg = None if ear_max_swing_deg is None else float(ear_max_swing_deg)
         self.reset()
 
