@@ -832,7 +832,8 @@ class Pipeline:
                 if self.limb_upright_exit is not None:  # the exit of the upright state on a limb (issue #25)
                     sm.upright_exit = (self.limb_upright_exit if self._carry_mode in self.limb_upright_modes
                                        else self._upright_exit)
-                heading = sm.update(att.matrix())
+                mat = att.matrix()
+                heading = sm.update(mat)
                 fe, fn = sm.forward_east, sm.forward_north
                 fwd = self._fwd
                 fwd.append((tg, fe, fn))
@@ -846,7 +847,7 @@ class Pipeline:
                 if self.walkdir is not None:
                     if self.turning_keeps_modes:
                         self._sync_turning_rule()
-                    self.walkdir.update(tg, att.q, ax, ay, az, fe, fn, ev is not None, sm.forward_b)
+                    self.walkdir.update(tg, att.q, ax, ay, az, fe, fn, ev is not None, sm.forward_b, mat)
             else:
                 heading = math.nan
             if self.log:
