@@ -1191,7 +1191,7 @@ class AttitudeEKF(AttitudeFilterBase, kalman.StateSnapshots):
         state = self._state
         if state.t_ns is None:
             return
-        if not self._grow_over_hole(t_ns):
+        if (t_ns - state.t_ns) * 1e-9 <= self.settings.max_gyro_gap_s or not self._grow_over_hole(t_ns):
             state.hole_open = False
             return
         if state.hole_open:
