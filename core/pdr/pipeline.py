@@ -1598,9 +1598,10 @@ def _event_chunks(recording: Recording, names: list[str], chunk: int = EVENT_CHU
         hi = [len(t) if b is None else int(np.searchsorted(t, b, side="left")) for t in times]
         t_all = np.concatenate([t[i:j] for t, i, j in zip(times, lo, hi)])
         s_all = np.concatenate([np.full(j - i, k, dtype=np.int64) for k, (i, j) in enumerate(zip(lo, hi))])
-        r_all = np.concatenate([np.arange(i, j, dtype=np.int64) for i, j in zip(lo, hi)])
+        r_all = np.concatenate([np.arange(j - i, dtype=np.int64) for i, j in zip(lo, hi)])  # rows in the slice
         idx = np.lexsort((s_all, t_all))
-        yield [(order[si], ti, tuple(vals[si][ri].tolist()))
+        rows = [v[i:j].tolist() for v, i, j in zip(vals, lo, hi)]  # one tolist a slice, not a numpy row an event
+        yield [(order[si], ti, tuple(rows[si][ri]))
                for ti, si, ri in zip(t_all[idx].tolist(), s_all[idx].tolist(), r_all[idx].tolist())]
         lo = hi
 
