@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from core.dsp import Biquad, GridResampler, butter2_group_delay_s, butter2_lowpass
+from core.dsp import Biquad, GridResampler, RunningMedian, butter2_group_delay_s, butter2_lowpass
 
 
 @pytest.mark.parametrize("fc,fs", [(3.0, 50.0), (0.5, 50.0), (3.0, 20.0), (10.0, 400.0), (0.2, 100.0)])
@@ -71,3 +71,27 @@ def test_grid_resampler_restarts_after_a_gap():
     r.update(10_000_000, 1.0)
     out = r.update(2_000_000_000, 2.0)
     assert r.restarted and out == [(2_000_000_000, 2.0)]
+
+
+def test_running_median_equals_the_histogram_bin_where_the_cumulative_count_reaches_half():
+    """The median kept between queries (it walks from the last median's bin) is the first bin whose cumulative
+    count reaches half, exactly (np.cumsum and searchsorted the oracle): for values drifting up and down, jumping,
+    outside the range, and for counts set from outside (the desktop fast path restores them)."""
+    rng = np.random.default_rng(7)
+    rm = RunningMedian(0.0, 40.0, 0.01)
+    centre, checked = 9.8, 0
+    for k in range(3000):
+        if k % 500 == 0:
+            centre = rng.uniform(-5.0, 45.0)  # a jump, sometimes outside the range (those values are not counted)
+        centre += rng.normal(0.0, 0.05)
+        rm.add(float(rng.normal(centre, rng.choice((0.005, 0.3, 3.0)))))
+        if k == 1700:
+            c = list(rm.counts)
+            c[:1000] = [0] * 1000  # set from outside: the values under 10 forgotten
+            rm.counts, rm.n = c, sum(c)
+        if k % 7 == 0 and rm.n:
+            cum = np.cumsum(rm.counts)
+            i = int(np.searchsorted(cum, 0.5 * rm.n, side="left"))
+            assert rm.median() == 0.0 + (i + 0.5) * 0.01, k
+            checked += 1
+    assert checked > 300 and rm.n < 3000  # some values fell outside the range

@@ -46,8 +46,8 @@ def _record(rec, **params):
     inputs, after = [], []
     orig = WalkingDirection.update
 
-    def update(self, t_ns, q, ax, ay, az, fe, fn, step=False, axis=None):
-        orig(self, t_ns, q, ax, ay, az, fe, fn, step, axis)
+    def update(self, t_ns, q, ax, ay, az, fe, fn, step=False, axis=None, mat_nb=None):
+        orig(self, t_ns, q, ax, ay, az, fe, fn, step, axis, mat_nb)
         inputs.append((t_ns, tuple(q), ax, ay, az, fe, fn, step, axis))
         after.append(_estimate_state(self))
 

@@ -832,7 +832,8 @@ class Pipeline:
                 if self.limb_upright_exit is not None:  # the exit of the upright state on a limb (issue #25)
                     sm.upright_exit = (self.limb_upright_exit if self._carry_mode in self.limb_upright_modes
                                        else self._upright_exit)
-                heading = sm.update(att.matrix())
+                mat = att.matrix()
+                heading = sm.update(mat)
                 fe, fn = sm.forward_east, sm.forward_north
                 fwd = self._fwd
                 fwd.append((tg, fe, fn))
@@ -846,7 +847,7 @@ class Pipeline:
                 if self.walkdir is not None:
                     if self.turning_keeps_modes:
                         self._sync_turning_rule()
-                    self.walkdir.update(tg, att.q, ax, ay, az, fe, fn, ev is not None, sm.forward_b)
+                    self.walkdir.update(tg, att.q, ax, ay, az, fe, fn, ev is not None, sm.forward_b, mat)
             else:
                 heading = math.nan
             if self.log:
@@ -1597,9 +1598,10 @@ def _event_chunks(recording: Recording, names: list[str], chunk: int = EVENT_CHU
         hi = [len(t) if b is None else int(np.searchsorted(t, b, side="left")) for t in times]
         t_all = np.concatenate([t[i:j] for t, i, j in zip(times, lo, hi)])
         s_all = np.concatenate([np.full(j - i, k, dtype=np.int64) for k, (i, j) in enumerate(zip(lo, hi))])
-        r_all = np.concatenate([np.arange(i, j, dtype=np.int64) for i, j in zip(lo, hi)])
+        r_all = np.concatenate([np.arange(j - i, dtype=np.int64) for i, j in zip(lo, hi)])  # rows in the slice
         idx = np.lexsort((s_all, t_all))
-        yield [(order[si], ti, tuple(vals[si][ri].tolist()))
+        rows = [v[i:j].tolist() for v, i, j in zip(vals, lo, hi)]  # one tolist a slice, not a numpy row an event
+        yield [(order[si], ti, tuple(rows[si][ri]))
                for ti, si, ri in zip(t_all[idx].tolist(), s_all[idx].tolist(), r_all[idx].tolist())]
         lo = hi
 

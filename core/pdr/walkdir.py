@@ -498,20 +498,21 @@ class WalkingDirection:
 
     # -- per sample ---------------------------------------------------------------
     def update(self, t_ns: int, q, ax: float, ay: float, az: float, fwd_east: float, fwd_north: float,
-               step: bool = False, axis=None) -> None:
+               step: bool = False, axis=None, mat_nb=None) -> None:
         """One grid sample.
 
         ``q``: attitude (w, x, y, z) body -> ENU; ``ax, ay, az``: the accelerometer (m/s^2, device
         frame); ``fwd_east, fwd_north``: the smoothed device forward vector now
         (:attr:`core.pdr.heading.RotationSmoother.forward_east`, ``forward_north``); ``step``: a step
         event at this sample; ``axis``: the device axis the smoother follows (its ``forward_b``), so
-        that each axis keeps its own offset.
+        that each axis keeps its own offset; ``mat_nb``: ``q``'s rotation matrix (:func:`core.quaternion.to_matrix`)
+        if the caller has it already (the pipeline: the attitude filter's), else it is made here.
         """
         if not (math.isfinite(ax) and math.isfinite(ay) and math.isfinite(az)
                 and math.isfinite(fwd_east) and math.isfinite(fwd_north)):
             self.n_nonfinite += 1
             return
-        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = to_matrix(q)
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = to_matrix(q) if mat_nb is None else mat_nb
         ae = r00 * ax + r01 * ay + r02 * az
         an = r10 * ax + r11 * ay + r12 * az
         au = r20 * ax + r21 * ay + r22 * az
