@@ -639,13 +639,19 @@ def strong_and_weak_strides(weak_scale: float = 0.4):
     ``weak_scale`` on every other stride: ``(walk, recording)``.  Its norm repeats best every two strides."""
     w = simulate_walk([(0.0, 0.0), (30.0, 0.0)], placement="handheld", seed=1, rate_hz=50.0, still_start_s=2.0,
                       still_end_s=1.0)
-    acc, steps = w.recording.streams[ACC], w.truth.step_t_ns
-    weak = (np.maximum(np.searchsorted(steps, acc.t_ns) - 1, 0) // 2) % 2 == 1  # every other stride
+    return w, weak_every_other(w, weak_scale, 2)
+
+
+def weak_every_other(w, weak_scale: float, steps: int):
+    """``w``'s recording with the acceleration's swing about its mean scaled by ``weak_scale`` on every other group
+    of ``steps`` steps (1: every other step, 2: every other stride)."""
+    acc, t_steps = w.recording.streams[ACC], w.truth.step_t_ns
+    weak = (np.maximum(np.searchsorted(t_steps, acc.t_ns) - 1, 0) // steps) % 2 == 1
     v = np.asarray(acc.values, dtype=float)
     g = v.mean(axis=0)
     streams = dict(w.recording.streams)
     streams[ACC] = dataclasses.replace(acc, values=g + np.where(weak, weak_scale, 1.0)[:, None] * (v - g))
-    return w, Recording(streams, dict(w.recording.device), dict(w.recording.metadata))
+    return Recording(streams, dict(w.recording.device), dict(w.recording.metadata))
 
 
 def test_step_period_is_one_step_when_two_strides_correlate_better():
@@ -810,3 +816,57 @@ def test_ear_max_swing_deg_refuses_a_nonsense_angle():
         with pytest.raises(ValueError, match="ear_max_swing_deg"):
             CarryModeDetector(ear_max_swing_deg=bad)
     assert CarryModeDetector(ear_max_swing_deg=None).ear_max_swing_deg is None
+
+
+def flat_hand_uneven_steps(weak_scale: float = 0.3, seed: int = 1):
+    """The simulator's hand-held walk (16 m, 50 Hz, no standing start, the phone flat: pitch 0) with the
+    acceleration's swing about its mean scaled by ``weak_scale`` on every other step: ``(walk, recording)``.  Its
+    norm repeats every stride, not every step (a stride share of 0.4, as a limb's), while the phone lies screen up
+    and hardly tilts (0.06 rad): the Microsoft TUNING traces' start (issue #25/#27)."""
+    w = simulate_walk([(0.0, 0.0), (16.0, 0.0)], placement="handheld", seed=seed, rate_hz=50.0, still_start_s=0.0,
+                      still_end_s=1.0, phone_pitch_deg=0.0)
+    return w, weak_every_other(w, weak_scale, 1)
+
+
+def test_flat_phone_with_uneven_steps_stays_hand_held():
+    """Issue #25/#27 (h15/handheld): the Microsoft TUNING traces (every one hand-held, the phone flat: gravity z
+    0.99-1.00, tilt 0.05-0.16 rad) had 31 of 711 steps called "pocket" (5dd39012: 8 of 23), the first window's call
+    held by the hysteresis: the norm's autocorrelation at the stride beat the step's (stride share 0.5-1.2), which
+    alone is a limb's evidence.  A phone lying screen up that hardly tilts is no limb's (``hand_limb_min_tilt_rad``,
+    0.2 by default): every step hand-held; without it (None, the diagnosis) most of them a pocket."""
+    w, rec = flat_hand_uneven_steps()
+    n = len(w.truth.step_t_ns)
+    res = Pipeline().run(rec)
+    assert abs(len(res.steps) - n) <= 1, (len(res.steps), n)
+    assert {s.carry_mode for s in res.steps} == {CARRY_HANDHELD}
+    before = Pipeline(carry=CarryModeDetector(hand_limb_min_tilt_rad=None)).run(rec)
+    assert sum(s.carry_mode == CARRY_POCKET for s in before.steps) >= 0.5 * n
+
+
+def test_hand_limb_min_tilt_rad_refuses_a_nonsense_angle():
+    for bad in (math.nan, 0.0, -0.2, math.inf):
+        with pytest.raises(ValueError, match="hand_limb_min_tilt_rad"):
+            CarryModeDetector(hand_limb_min_tilt_rad=bad)
+    assert CarryModeDetector(hand_limb_min_tilt_rad=None).hand_limb_min_tilt_rad is None
+
+
+def test_hand_swung_half_screen_up_stays_a_limb():
+    """The other side of ``hand_limb_min_tilt_rad``: the TUNING Tyrex walk Jakob_iPhone5_Dist_Swinging swings the
+    phone upright with its screen partly up (gravity about (-0.3, 0.86, 0.3-0.42): the hand's evidence 0.5-0.8), the
+    tilt as small as a hand-held phone's (0.16-0.25 rad: a pendulum's specific force stays along the arm) but turning
+    by 45-65 deg a stride; with the tilt rule alone 22 % of it was called hand-held (7 % before).  The swing
+    (``hand_limb_max_swing_deg``, 30 deg by default) keeps such a hop a limb; without it the hand.  A flat phone that
+    hardly turns is the hand by default, a limb without the tilt rule (the norm's stride share alone)."""
+    f = {"gravity_x": -0.25, "gravity_y": 0.86, "gravity_z": 0.44, "tilt_rms_rad": 0.16, "coherence": 0.97,
+         "acc_std_m_s2": 3.0, "recent_std_m_s2": 3.0, "periodicity": 0.8, "r_step": 0.3, "r_stride": 0.8,
+         "stride_share": 0.5, "stride_period_s": 1.7, "tilt_stride_corr": 0.5, "horizontal_ratio": 1.2,
+         "gyro_rms_rad_s": 2.5, "gyro_axis_share": 0.9, "gyro_periodicity": 0.9, "gyro_skew": 0.1}
+    assert CarryModeDetector.stride_swing_deg(f) == pytest.approx(49.3, abs=0.1)
+    best = lambda sc: max(sc, key=sc.get)  # noqa: E731
+    assert best(CarryModeDetector().mode_scores(f, True)) in (CARRY_POCKET, CARRY_SWINGING)  # a limb
+    assert best(CarryModeDetector(hand_limb_max_swing_deg=None).mode_scores(f, True)) == CARRY_HANDHELD
+    flat = dict(f, gravity_x=-0.05, gravity_y=0.05, gravity_z=0.99, gyro_rms_rad_s=0.9, gyro_periodicity=0.1)
+    assert best(CarryModeDetector().mode_scores(flat, True)) == CARRY_HANDHELD  # a flat phone that hardly turns
+    assert best(CarryModeDetector(hand_limb_min_tilt_rad=None).mode_scores(flat, True)) != CARRY_HANDHELD
+    with pytest.raises(ValueError, match="hand_limb_max_swing_deg"):
+        CarryModeDetector(hand_limb_max_swing_deg=math.nan)

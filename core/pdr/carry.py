@@ -82,7 +82,8 @@ Features and the physics they come from
 Decision
 ========
 Each mode gets a score in [0, 1] from soft thresholds (logistic functions of
-the features, settings below); the raw decision of a hop is the best score,
+the features, settings below; a phone read in the hand that neither tilts nor swings is no limb's, whatever the
+norm's stride share: ``hand_limb_min_tilt_rad``, ``hand_limb_max_swing_deg``); the raw decision of a hop is the best score,
 its confidence the best score's share of the total.  Hysteresis: a new mode
 replaces the current one only after it has been the raw decision for
 ``switch_s`` seconds without interruption (``still`` <-> walking after
@@ -442,6 +443,27 @@ class CarryModeDetector:
         on; out of sample for the setting): "ear" 0 / 61 / 43 / 78 % -> 0, offset error 8.9 / 89.9 / 67.8 / 91.8 ->
         8.5 / 75.8 / 31.6 / 17.7 deg, but end error 7.5 / 6.5 / 4.5 / 7.0 -> 6.9 / 7.7 / 5.3 / 10.7 %: mixed, then off
         (why the shape suffers: ``Pipeline(cross_axis_modes)``).
+    hand_limb_min_tilt_rad, hand_limb_max_swing_deg : float or None, float or None
+        Issue #25/#27 (h15/handheld), **on by default (0.2 rad, 30 deg)**; ``hand_limb_min_tilt_rad=None``: off, as
+        before.  A phone read in the hand (screen up, pitched towards the face: the hand's evidence of ``screen_up_z``
+        and the rest) that neither tilts (``tilt_rms_rad`` under ``hand_limb_min_tilt_rad``, width 0.03 rad) nor, with
+        a gyroscope, swings (:meth:`stride_swing_deg` under ``hand_limb_max_swing_deg``, width 2 deg; None: the tilt
+        alone) is held in front of the body, not on a limb: the limb evidence is multiplied by ``1 - hand * (1 -
+        sig(tilt)) * (1 - sig(swing))``.  Without it the limb evidence could come from the norm alone (``stride_share
+        / limb_stride_share``): the Microsoft TUNING traces (every one hand-held, the phone flat: gravity z
+        0.99-1.00, tilt 0.05-0.16 rad) had walks' first windows and stray hops whose norm repeats at two steps' lag
+        (stride share 0.5-1.2 at lags of 2.1-2.4 s) called "pocket", and the first window's call is taken at once and
+        held by the hysteresis for 3-4.5 s: 31 of their 711 steps (4.4 %; 5dd39012 8 of 23, the walking-direction
+        offset turning one step by 155 deg).  With it: 0 of 711 (0 raw hops off the hand, 56 before), the IPIN tuning
+        routes 3 of 2278 as before (a compass calibration's tilt of 0.4-0.7 rad at T01r01's start, left alone; raw hops
+        off the hand 115 -> 38, all waving at 0.3-0.7 rad), every step count identical.  The swing: a hand swung with
+        the phone upright and its screen partly up (the TUNING Tyrex walk Jakob_iPhone5_Dist_Swinging: the hand's
+        evidence 0.5-0.8, tilt 0.16-0.25 rad, as small as a pendulum's specific force allows) turns by 40-65 deg a
+        stride; with the tilt alone 22 % of that walk was hand-held (7 % before), 5 steps lost; with the swing
+        identical to before (the flat hand-held hops that the rule turns read 0-27 deg, median 0).  The simulator's
+        carry tuning seeds 0-9, the 28 real tuning walks and the Tyrex tuning walks identical; OxIOD's tuning
+        hand-held walks lose their 3-4 % of "pocket" (benchmarks/discussion.md, h15/handheld).  The simulator's
+        pocket reads the hand's evidence at most 0.09 (gravity z 0.12-0.16), its swinging hand 0.
     """
 
     def __init__(self, *, grid_rate_hz: float = 50.0, window_s: float = 4.0, hop_s: float = 0.5,
@@ -466,7 +488,8 @@ class CarryModeDetector:
                  switch_s: float = 3.0, switch_still_s: float = 2.0, hold_periodicity: float = 0.2, hold_recent_s: float = 1.0,
                  hold_min_std_m_s2: float = 0.3, settle_while_still: bool = False, settle_walk_s: float = 1.0,
                  sway_min_gyro_periodicity: float | None = 0.9, antiphase_in_range: bool = True,
-                 ear_max_swing_deg: float | None = 20.0):
+                 ear_max_swing_deg: float | None = 20.0, hand_limb_min_tilt_rad: float | None = 0.2,
+                 hand_limb_max_swing_deg: float | None = 30.0):
         self.grid_rate_hz = float(grid_rate_hz)
         self.window_s = float(window_s)
         self.hop_s = float(hop_s)
@@ -528,6 +551,16 @@ class CarryModeDetector:
         if ear_max_swing_deg is not None and not (math.isfinite(ear_max_swing_deg) and ear_max_swing_deg > 0):
             raise ValueError(f"ear_max_swing_deg must be None or a finite angle > 0 (deg), got {ear_max_swing_deg!r}")
         self.ear_max_swing_deg = None if ear_max_swing_deg is None else float(ear_max_swing_deg)
+        if hand_limb_min_tilt_rad is not None and not (math.isfinite(hand_limb_min_tilt_rad)
+                                                       and hand_limb_min_tilt_rad > 0):
+            raise ValueError(f"hand_limb_min_tilt_rad must be None or a finite angle > 0 (rad), "
+                             f"got {hand_limb_min_tilt_rad!r}")
+        self.hand_limb_min_tilt_rad = None if hand_limb_min_tilt_rad is None else float(hand_limb_min_tilt_rad)
+        if hand_limb_max_swing_deg is not None and not (math.isfinite(hand_limb_max_swing_deg)
+                                                        and hand_limb_max_swing_deg > 0):
+            raise ValueError(f"hand_limb_max_swing_deg must be None or a finite angle > 0 (deg), "
+                             f"got {hand_limb_max_swing_deg!r}")
+        self.hand_limb_max_swing_deg = None if hand_limb_max_swing_deg is None else float(hand_limb_max_swing_deg)
         self.reset()
 
     def reset(self) -> None:
@@ -890,6 +923,15 @@ class CarryModeDetector:
         ss = f["stride_share"]
         limb = (_sig(f["tilt_rms_rad"] / self.limb_tilt_rad + max(ss, 0.0) / self.limb_stride_share, 1.5, 0.12)
                 * _sig(ss, self.min_limb_stride_share, 0.03))
+        hand = _hand(f, self.screen_up_z)
+        if self.hand_limb_min_tilt_rad is not None:
+            # a phone read in the hand (screen up, pitched towards the face) that hardly tilts is held in front of the
+            # body whatever the norm's stride share: a limb carrying it screen up would swing it (issue #25/#27)
+            still = hand * (1.0 - _sig(f["tilt_rms_rad"], self.hand_limb_min_tilt_rad, 0.03))
+            if self.hand_limb_max_swing_deg is not None and "gyro_rms_rad_s" in f:
+                # ... nor swings: a hand swung with the phone upright, screen half up, turns by 40-65 deg a stride
+                still *= 1.0 - _sig(self.stride_swing_deg(f), self.hand_limb_max_swing_deg, 2.0)
+            limb *= 1.0 - still
         # the arm rather than the thigh: large horizontal (centripetal, tangential) acceleration, the norm's
         # stride share near 1; the gyroscope's rate adds to it
         arm_x = ss + 0.3 * f["horizontal_ratio"]
@@ -905,7 +947,7 @@ class CarryModeDetector:
             arm = max(arm, hard_swing)
             if self.hard_arm_gyro_rad_s is not None:  # a limb's periodic rotation faster than a thigh's (issue #25)
                 hard_arm = (gait_rotation * _sig(f["gyro_rms_rad_s"], self.hard_arm_gyro_rad_s, 0.3)
-                            * (1.0 - _hand(f, self.screen_up_z)))
+                            * (1.0 - hand))
                 if self.hard_arm_max_skew is not None and "gyro_skew" in f:  # a thigh's skewed rotation
                     hard_arm *= 1.0 - _sig(f["gyro_skew"], self.hard_arm_max_skew, 0.03)
                 limb = max(limb, hard_arm)
@@ -913,7 +955,6 @@ class CarryModeDetector:
             if self.thigh_min_skew is not None and "gyro_skew" in f:  # the thigh's skewed rotation is no arm's
                 arm *= 1.0 - _sig(f["gyro_skew"], self.thigh_min_skew, 0.03)
         gx, gy = f["gravity_x"], f["gravity_y"]
-        hand = _hand(f, self.screen_up_z)
         # at the ear: upright, the long axis inclined from the ear towards the mouth in the screen's plane
         ear = _sig(gy, self.upright_y, 0.08) * _sig(abs(gx), self.ear_incline_x, 0.05)
         trunk = 1.0 - limb
