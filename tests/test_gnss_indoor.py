@@ -223,3 +223,17 @@ def test_a_consistent_stream_25m_off_a_known_start_relocks_the_track_only_within
     else:  # the behaviour before: relocked onto the stream
         assert [r["rule"] for r in fr.counters["relocks"]] == ["consistent stream"]
         assert largest_jump > 20.0 and north[-1] > 23.0
+
+
+def test_relock_stream_drift_limit_refuses_what_it_cannot_obey():
+    """``relock_stream_drift_limit``: an unknown mode, and "always" without a ``relock_max_drift`` to obey (it would
+    silently limit nothing), are refused; both filters take the three modes with their own drift limit."""
+    from core.gnss import make_fusion
+
+    for kind in ("chen", "kubrak"):
+        with pytest.raises(ValueError, match="relock_stream_drift_limit"):
+            make_fusion(kind, relock_stream_drift_limit="sometimes")
+        with pytest.raises(ValueError, match="needs a relock_max_drift"):
+            make_fusion(kind, relock_stream_drift_limit="always", relock_max_drift=None)
+        for mode in ("never", "known_start", "always"):
+            assert make_fusion(kind, relock_stream_drift_limit=mode).relock_stream_drift_limit == mode

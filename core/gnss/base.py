@@ -445,7 +445,7 @@ class FixFusion:
         moves the track onto the fix only if the fix's innovation is one dead reckoning can have built up since the
         filter's last accepted fix (or the start): ``relock_max_drift`` times the distance walked since then plus
         three SDs of the fix.  ``"known_start"``: on a walk with a known ``start`` (indoors: the user or the
-        competition gives it); ``"always"``; ``"never"``: the rule before (the consistent stream whatever its
+        competition gives it); ``"always"`` (needs a ``relock_max_drift``: refused without one); ``"never"``: the rule before (the consistent stream whatever its
         offset; ``relock_max_drift`` for the "gated fixes agree" rule only).  Why (issue #26, indoors): the judge's
         tests are translation-free (the fixes' shape against the steps', among themselves), so an indoor stream
         25 m off that moves as the walker does passes them, and the relock then put the track on it whatever dead
@@ -527,6 +527,9 @@ class FixFusion:
         if relock_stream_drift_limit not in RELOCK_STREAM_DRIFT_LIMITS:
             raise ValueError(f"relock_stream_drift_limit must be one of {RELOCK_STREAM_DRIFT_LIMITS}, "
                              f"got {relock_stream_drift_limit!r}")
+        if relock_stream_drift_limit == "always" and self.relock_max_drift is None:
+            raise ValueError('relock_stream_drift_limit="always" needs a relock_max_drift (a share of the distance '
+                             'walked); without one there is no limit to obey')
         self.relock_stream_drift_limit = relock_stream_drift_limit
         self.anchor_max_hacc_m = float(anchor_max_hacc_m)
         self.anchor_max_waits = int(anchor_max_waits)
