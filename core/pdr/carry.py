@@ -111,6 +111,15 @@ class CarryChange(NamedTuple):
     confidence: float  #: the new mode's confidence 0..1 at the change
 
 
+def _optional_angle(name: str, value, unit: str) -> float | None:
+    """An optional angle setting: None (the rule off) or a finite angle > 0, as a float; else ValueError."""
+    if value is None:
+        return None
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be None or a finite angle > 0 ({unit}), got {value!r}")
+    return float(value)
+
+
 def _sig(x: float, x0: float, width: float) -> float:
     """Logistic membership: 0.5 at ``x0``, 0.73 at ``x0 + width``."""
     z = (x - x0) / width
@@ -548,19 +557,9 @@ class CarryModeDetector:
         self.sway_min_gyro_periodicity = (None if sway_min_gyro_periodicity is None
                                           else float(sway_min_gyro_periodicity))
         self.antiphase_in_range = bool(antiphase_in_range)
-        if ear_max_swing_deg is not None and not (math.isfinite(ear_max_swing_deg) and ear_max_swing_deg > 0):
-            raise ValueError(f"ear_max_swing_deg must be None or a finite angle > 0 (deg), got {ear_max_swing_deg!r}")
-        self.ear_max_swing_deg = None if ear_max_swing_deg is None else float(ear_max_swing_deg)
-        if hand_limb_min_tilt_rad is not None and not (math.isfinite(hand_limb_min_tilt_rad)
-                                                       and hand_limb_min_tilt_rad > 0):
-            raise ValueError(f"hand_limb_min_tilt_rad must be None or a finite angle > 0 (rad), "
-                             f"got {hand_limb_min_tilt_rad!r}")
-        self.hand_limb_min_tilt_rad = None if hand_limb_min_tilt_rad is None else float(hand_limb_min_tilt_rad)
-        if hand_limb_max_swing_deg is not None and not (math.isfinite(hand_limb_max_swing_deg)
-                                                        and hand_limb_max_swing_deg > 0):
-            raise ValueError(f"hand_limb_max_swing_deg must be None or a finite angle > 0 (deg), "
-                             f"got {hand_limb_max_swing_deg!r}")
-        self.hand_limb_max_swing_deg = None if hand_limb_max_swing_deg is None else float(hand_limb_max_swing_deg)
+        self.ear_max_swing_deg = _optional_angle("ear_max_swing_deg", ear_max_swing_deg, "deg")
+        self.hand_limb_min_tilt_rad = _optional_angle("hand_limb_min_tilt_rad", hand_limb_min_tilt_rad, "rad")
+        self.hand_limb_max_swing_deg = _optional_angle("hand_limb_max_swing_deg", hand_limb_max_swing_deg, "deg")
         self.reset()
 
     def reset(self) -> None:
