@@ -264,7 +264,8 @@ def evaluate_walk(walk: TruthWalk) -> dict:
         rec = read_walk(walk)
         if walk.dataset == TYREX_TRUTH_DATASET:
             # the step truth needs only the marker track: a walk that fails below still counts its truth, with 0 steps
-            row["steps_truth"] = steps_vs_truth(rec, np.zeros(0, dtype=np.int64))
+            truth_hops = step_truth(rec.streams["posi"].t_ns, rec.streams["posi"].values[:, :3])
+            row["steps_truth"] = steps_vs_truth(truth_hops, np.zeros(0, dtype=np.int64))
         res, pipe, engine = run_default(rec, walk.path.parent, probe=True)
         t0 = rec.t0_ns
         carry = (res.summary().get("carry") or {})
@@ -278,7 +279,7 @@ def evaluate_walk(walk: TruthWalk) -> dict:
             return row
         st_t, heading, device = step_arrays(res, pipe)
         if walk.dataset == TYREX_TRUTH_DATASET:
-            row["steps_truth"] = steps_vs_truth(rec, st_t)
+            row["steps_truth"] = steps_vs_truth(truth_hops, st_t)
         truth_att = device_attitude(rec)
         if truth_att is not None:
             probe_log = getattr(pipe.walkdir, "log", {})
@@ -417,11 +418,10 @@ def step_truth(t_ns: np.ndarray, xyz: np.ndarray) -> tuple[float, list[tuple[int
     return total, hops
 
 
-def steps_vs_truth(rec, st_t: np.ndarray) -> dict | None:
-    """Our steps against :func:`step_truth` over its walking hops, or None (no walking hop).  For the Tyrex walks
-    only, whose truth is the phone's own marker (OxIOD's and RIDI's are not counted so)."""
-    pos = rec.streams["posi"]
-    truth, hops = step_truth(pos.t_ns, pos.values[:, :3])
+def steps_vs_truth(truth_hops: tuple[float, list[tuple[int, int]]], st_t: np.ndarray) -> dict | None:
+    """Our steps ``st_t`` against :func:`step_truth`'s ``(steps, hops)`` over its walking hops, or None (no walking
+    hop).  For the Tyrex walks only, whose truth is the phone's own marker (OxIOD's and RIDI's are not counted so)."""
+    truth, hops = truth_hops
     if not hops or truth <= 0:
         return None
     st_t = np.asarray(st_t, dtype=np.int64)
